@@ -1,0 +1,18 @@
+"""measure — from stereo pixels to 3D points through a flat refractive port.
+
+The field library of the project: numpy, scipy and OpenCV only (no Mitsuba, no Open3D).
+Units are millimetres; the reference frame is the left camera's (OpenCV axes).
+"""
+
+from .camera import Camera
+from .lines import CommonPerpendicular, common_perpendicular
+from .port import FlatPort
+from .reasons import Reason, reason_counts
+from .refraction import WaterRays, intersect_plane, refract, trace_through_port
+from .triangulate import METHODS, StereoRig, Triangulation, triangulate, triangulate_rays
+
+__all__ = [
+    "Camera", "FlatPort", "StereoRig", "Triangulation", "triangulate", "triangulate_rays",
+    "METHODS", "Reason", "reason_counts", "refract", "intersect_plane", "trace_through_port",
+    "WaterRays", "common_perpendicular", "CommonPerpendicular",
+]

@@ -1,0 +1,243 @@
+"""Forward imaging through a flat port: where does a point in the water appear in a camera?
+
+Two independent solvers of the same refracted path, both vectorized over N points:
+
+* ``"fermat"`` — the paper's section 2.2: in the refraction plane (camera centre, point, port
+  normal) the light crosses interface k at ``I_k = J_k + μ_k ε``, where ``J_k`` is where the
+  straight line O→P crosses that interface and ``ε`` is the in-plane direction along the
+  interface. Fermat's principle: minimize the travel time ``t(μ) = Σ n_i |I_{i+1} − I_i|`` (times
+  1/c) by Newton's method on the analytic gradient and (tridiagonal) Hessian, to machine
+  precision; the minimum condition (det H > 0, ∂²t/∂μ1² > 0, i.e. H positive definite) is
+  reported per point.
+* ``"snell"`` — the 1D root of the Snell invariant: ``p = n_i sin θ_i`` is the same in every
+  medium and the lateral offsets ``h_i tan θ_i`` add up to the lateral distance of the point.
+  Solved with SciPy's vectorized bracketing root finder.
+
+Once the first refraction point ``I_1`` is known, the pixel is the pinhole projection of ``I_1``
+(with lens distortion, as ``cv2.projectPoints``). Units mm, reference frame, OpenCV pixels.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import elementwise
+
+from measure import Camera, FlatPort, Reason
+
+SOLVERS = ("fermat", "snell")
+
+
+@dataclass(frozen=True)
+class RefractedPaths:
+    """Light paths from points in the water to one camera centre.
+
+    ``pixels`` ``(N, 2)``; ``interface_points`` ``(K, N, 3)`` (I1, I2 … in mm, reference frame);
+    ``reason`` ``(N,)`` :class:`measure.Reason` codes; ``is_minimum`` ``(N,)`` whether the
+    Hessian of the travel time is positive definite at the solution (Fermat solver; the Snell
+    solver reports True where it converged); ``iterations`` used by the solver.
+    """
+
+    pixels: np.ndarray
+    interface_points: np.ndarray
+    reason: np.ndarray
+    is_minimum: np.ndarray
+    iterations: int
+
+
+@dataclass(frozen=True)
+class _PlaneProblem:
+    """The path problem reduced to the refraction plane.
+
+    ``heights`` ``(N, K+1)``: normal distances travelled in each medium (air gap, layers, water);
+    ``lateral`` ``(N,)``: distance of the point from the normal through the camera centre;
+    ``axis`` ``(N, 3)``: unit lateral direction from the camera towards the point (zero when the
+    point lies on the normal); ``indices`` ``(K+1,)``.
+    """
+
+    heights: np.ndarray
+    lateral: np.ndarray
+    axis: np.ndarray
+    indices: np.ndarray
+    reason: np.ndarray
+
+
+def _reduce_to_plane(center: np.ndarray, port: FlatPort, points: np.ndarray) -> _PlaneProblem:
+    n_points = points.shape[0]
+    reason = np.full(n_points, Reason.OK, dtype=np.int8)
+    reason[~np.all(np.isfinite(points), axis=1)] = Reason.INVALID_INPUT
+    offsets = port.offsets
+    relative = points - center
+    along = relative @ port.normal
+    lateral_vec = relative - along[:, None] * port.normal
+    lateral = np.linalg.norm(lateral_vec, axis=1)
+    water_height = points @ port.normal - offsets[-1]
+    with np.errstate(invalid="ignore"):
+        reason[(reason == Reason.OK) & ~(water_height > 0)] = Reason.NOT_IN_WATER
+    ok = reason == Reason.OK
+    heights = np.empty((n_points, port.n_interfaces + 1))
+    heights[:, 0] = offsets[0] - center @ port.normal
+    heights[:, 1:-1] = np.asarray(port.thicknesses)
+    heights[:, -1] = np.where(ok, water_height, np.nan)
+    lateral = np.where(ok, lateral, np.nan)
+    tiny = 1e-300
+    with np.errstate(invalid="ignore", divide="ignore"):
+        axis = np.where((lateral > tiny)[:, None], lateral_vec / np.maximum(lateral, tiny)[:, None], 0.0)
+    return _PlaneProblem(heights, lateral, axis, np.asarray(port.indices, dtype=float), reason)
+
+
+def _travel_time_terms(x: np.ndarray, problem: _PlaneProblem):
+    """Segment steps Δ ``(N, K+1)`` and lengths L for interface lateral positions x ``(N, K)``."""
+    n_points = x.shape[0]
+    positions = np.concatenate([np.zeros((n_points, 1)), x, problem.lateral[:, None]], axis=1)
+    steps = np.diff(positions, axis=1)
+    lengths = np.hypot(steps, problem.heights)
+    return steps, lengths
+
+
+def _travel_time(x, problem):
+    steps, lengths = _travel_time_terms(x, problem)
+    return lengths @ problem.indices
+
+
+def _solve_tridiagonal_spd(diag, off, rhs):
+    """Solve ``H s = rhs`` for symmetric tridiagonal H (vectorized over rows).
+
+    ``diag`` ``(N, K)``, ``off`` ``(N, K-1)`` (H[k, k+1]). Returns the solution and whether every
+    pivot is positive (H positive definite: the paper's det H > 0 and ∂²t/∂μ1² > 0 for K = 2).
+    """
+    n_rows, k = diag.shape
+    pivots = np.empty_like(diag)
+    y = np.empty_like(rhs)
+    pivots[:, 0] = diag[:, 0]
+    y[:, 0] = rhs[:, 0]
+    for i in range(1, k):
+        factor = off[:, i - 1] / pivots[:, i - 1]
+        pivots[:, i] = diag[:, i] - factor * off[:, i - 1]
+        y[:, i] = rhs[:, i] - factor * y[:, i - 1]
+    solution = np.empty_like(rhs)
+    solution[:, -1] = y[:, -1] / pivots[:, -1]
+    for i in range(k - 2, -1, -1):
+        solution[:, i] = (y[:, i] - off[:, i] * solution[:, i + 1]) / pivots[:, i]
+    return solution, np.all(pivots > 0, axis=1)
+
+
+def _fermat_gradient_hessian(x, problem):
+    """Analytic ∂t/∂x_k and the tridiagonal Hessian of the travel time (units of c = 1)."""
+    steps, lengths = _travel_time_terms(x, problem)
+    n = problem.indices
+    slope = n * steps / lengths  # n_i Δ_i / L_i = n_i sin θ_i
+    curvature = n * problem.heights ** 2 / lengths ** 3  # d²/dΔ² of n_i L_i
+    gradient = slope[:, :-1] - slope[:, 1:]
+    diag = curvature[:, :-1] + curvature[:, 1:]
+    off = -curvature[:, 1:-1]
+    return gradient, diag, off
+
+
+def _solve_fermat(problem: _PlaneProblem, max_iterations: int = 60):
+    """Damped Newton on μ (the offsets from J_k along ε); returns lateral positions x ``(N, K)``."""
+    heights = problem.heights
+    cumulative = np.cumsum(heights, axis=1)[:, :-1]
+    straight = problem.lateral[:, None] * cumulative / np.sum(heights, axis=1, keepdims=True)
+    mu = np.zeros_like(straight)  # μ_k = 0: the straight line O→P (the points J_k)
+    active = np.all(np.isfinite(straight), axis=1)
+    scale = 1.0 + np.abs(problem.lateral)
+    iterations = 0
+    for iterations in range(1, max_iterations + 1):
+        idx = np.flatnonzero(active)
+        if idx.size == 0:
+            break
+        sub = _PlaneProblem(heights[idx], problem.lateral[idx], problem.axis[idx],
+                            problem.indices, problem.reason[idx])
+        x = straight[idx] + mu[idx]
+        gradient, diag, off = _fermat_gradient_hessian(x, sub)
+        step, _ = _solve_tridiagonal_spd(diag, off, gradient)
+        time_now = _travel_time(x, sub)
+        damping = np.ones(idx.size)
+        for _ in range(40):  # halve steps that would increase the travel time
+            worse = _travel_time(x - damping[:, None] * step, sub) > time_now * (1 + 4e-16)
+            if not worse.any():
+                break
+            damping[worse] *= 0.5
+        step *= damping[:, None]
+        mu[idx] -= step
+        done = np.max(np.abs(step), axis=1) <= 1e-15 * scale[idx]
+        active[idx[done]] = False
+    x = straight + mu
+    _, diag, off = _fermat_gradient_hessian(np.nan_to_num(x), problem)
+    _, positive = _solve_tridiagonal_spd(diag, off, np.ones_like(diag))
+    converged = ~active
+    return x, positive & converged, converged, iterations
+
+
+def _solve_snell(problem: _PlaneProblem):
+    """Root of ``Σ h_i p / sqrt(n_i² − p²) = lateral`` for the invariant p = n_i sin θ_i."""
+    n = problem.indices
+    heights = problem.heights
+    upper = n.min() * (1.0 - 1e-13)
+
+    def residual(p, lateral, *heights_per_medium):
+        total = -lateral
+        for n_i, h_i in zip(n, heights_per_medium):
+            total = total + h_i * p / np.sqrt(n_i * n_i - p * p)
+        return total
+
+    lateral = problem.lateral
+    ok = np.isfinite(lateral)
+    p = np.full(lateral.shape, np.nan)
+    converged = np.zeros(lateral.shape, dtype=bool)
+    iterations = 0
+    if ok.any():
+        result = elementwise.find_root(
+            residual, (np.zeros(ok.sum()), np.full(ok.sum(), upper)),
+            args=(lateral[ok], *heights[ok].T),
+            tolerances=dict(xatol=1e-300, xrtol=2e-16, fatol=0.0, frtol=0.0),
+            maxiter=400)
+        p[ok] = result.x
+        converged[ok] = result.success | (result.x == 0)
+        iterations = int(np.max(result.nit, initial=0))
+    with np.errstate(invalid="ignore"):
+        offsets = heights * p[:, None] / np.sqrt(n * n - (p * p)[:, None])
+    x = np.cumsum(offsets, axis=1)[:, :-1]
+    return x, converged, iterations
+
+
+def solve_paths(camera: Camera, port: FlatPort, points, solver: str = "fermat") -> RefractedPaths:
+    """Refracted light paths from ``points (N, 3)`` in the water to ``camera``'s centre.
+
+    Raises ``ValueError`` for an unknown solver or a camera centre on the water side of the
+    port; per-point failures (a point not in the water, NaN input) are NaN rows with a reason.
+    """
+    if solver not in SOLVERS:
+        raise ValueError(f"solver must be one of {', '.join(SOLVERS)}, got {solver!r}")
+    points = np.asarray(points, dtype=np.float64)
+    if points.ndim != 2 or points.shape[1] != 3:
+        raise ValueError(f"points must have shape (N, 3), got {points.shape}")
+    port.check_camera(camera.center, "camera")
+    center = camera.center
+    problem = _reduce_to_plane(center, port, points)
+    reason = problem.reason.copy()
+    with np.errstate(invalid="ignore", divide="ignore"):
+        if solver == "fermat":
+            x, is_minimum, converged, iterations = _solve_fermat(problem)
+        else:
+            x, converged, iterations = _solve_snell(problem)
+            is_minimum = converged.copy()
+    reason[(reason == Reason.OK) & ~converged] = Reason.NOT_CONVERGED
+    bad = reason != Reason.OK
+    x = np.where(bad[:, None], np.nan, x)
+    heights_to = np.cumsum(problem.heights, axis=1)[:, :-1]
+    interface_points = (center + heights_to.T[:, :, None] * port.normal
+                        + x.T[:, :, None] * problem.axis[None])
+    pixels = camera.project(interface_points[0])
+    return RefractedPaths(pixels, interface_points, reason, is_minimum & ~bad, iterations)
+
+
+def project(camera: Camera, port: FlatPort, points, solver: str = "fermat") -> np.ndarray:
+    """Pixels ``(N, 2)`` of points ``(N, 3)`` in the water seen by ``camera`` through ``port``.
+
+    NaN where no path exists (e.g. a point on the camera side of the port). Lens distortion is
+    applied like ``cv2.projectPoints``. ``solver``: ``"fermat"`` (the paper) or ``"snell"``.
+    """
+    return solve_paths(camera, port, points, solver).pixels
