@@ -146,11 +146,15 @@ class Camera:
         Every ray starts at :attr:`center`. This is the paper's ζ1 / ξ1 (equations 1-2).
         """
         xy = self.normalized(uv)
+        inverse_norm = 1.0 / np.sqrt(1.0 + xy[:, 0] ** 2 + xy[:, 1] ** 2)
         d = np.empty((xy.shape[0], 3))
-        d[:, :2] = xy
-        d[:, 2] = 1.0
-        d /= np.linalg.norm(d, axis=1, keepdims=True)
-        return d @ self.R.T
+        d[:, :2] = xy * inverse_norm[:, None]
+        d[:, 2] = inverse_norm
+        return d if self._identity_rotation else d @ self.R.T
+
+    @property
+    def _identity_rotation(self) -> bool:
+        return bool(np.array_equal(self.R, np.eye(3)))
 
     def project(self, points_ref: np.ndarray) -> np.ndarray:
         """Pinhole projection (no refraction) of reference-frame points ``(N, 3)`` to pixels.

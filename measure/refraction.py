@@ -65,28 +65,53 @@ class WaterRays:
     reason: np.ndarray
 
 
-def trace_through_port(origins: np.ndarray, directions: np.ndarray, port: FlatPort) -> WaterRays:
+def trace_through_port(origins: np.ndarray, directions: np.ndarray, port: FlatPort,
+                       keep_interface_points: bool = True) -> WaterRays:
     """Trace rays from the camera side through every interface of ``port`` into the water.
 
-    ``origins`` may be ``(N, 3)`` or a single 3-vector (a camera centre). At each interface the
-    ray is intersected with the plane (equation 4) and refracted (equations 5-7, 9-10).
+    ``origins`` may be ``(N, 3)`` or a single 3-vector (a camera centre); ``directions`` are unit
+    vectors ``(N, 3)``. This is the paper's equations 3-10 applied at every interface in turn,
+    written in the closed form that parallel interfaces allow: equation 7 keeps the tangential
+    part ``T = ζ1 − (ζ1·N) N`` of the direction and only rescales it, ``ζ_k = (n_1/n_k) T +
+    cos α_k N`` with ``n_1 sin α_1 = n_k sin α_k``, so the k-th refraction point is
+    ``A_k = O + H_k N + a_k T`` with ``H_k`` the normal distance from O to interface k and
+    ``a_k = Σ_{j<k} h_j (n_1/n_j) / cos α_j``. Rows that never reach the port or that are totally
+    reflected are NaN with a reason code. ``keep_interface_points=False`` skips filling
+    ``interface_points`` (``None`` then) for speed.
     """
     directions = np.asarray(directions, dtype=np.float64)
     n_rays = directions.shape[0]
-    origins = np.broadcast_to(np.asarray(origins, dtype=np.float64), (n_rays, 3))
-    reason = np.full(n_rays, Reason.OK, dtype=np.int8)
-    reason[~np.all(np.isfinite(directions), axis=1)] = Reason.INVALID_INPUT
+    origins = np.asarray(origins, dtype=np.float64)
     normal = port.normal
-    points = np.empty((port.n_interfaces, n_rays, 3))
-    position, direction = origins, directions
-    for k, offset in enumerate(port.offsets):
-        position, h = intersect_plane(position, direction, normal, offset)
-        reason[(reason == Reason.OK) & np.isnan(h)] = Reason.MISSES_PORT
-        points[k] = position
-        direction, tir = refract(direction, normal, port.indices[k], port.indices[k + 1])
-        reason[(reason == Reason.OK) & tir] = Reason.TOTAL_INTERNAL_REFLECTION
+    indices = np.asarray(port.indices)
+    cos_first = directions @ normal
+    tangential = directions - cos_first[:, None] * normal
+    sin2_first = 1.0 - cos_first * cos_first
+    heights = port.offsets - (origins @ normal)[..., None]  # (K,) or (N, K): O to each interface
+    reason = np.zeros(n_rays, dtype=np.int8)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        eta = indices[0] / indices[1:]  # n_1 / n_k for every medium after the first
+        reason[(sin2_first * np.max(eta * eta)) > 1.0] = Reason.TOTAL_INTERNAL_REFLECTION
+        misses = ~(cos_first > 0) if heights.ndim == 1 else ~(cos_first > 0) | ~(heights[:, 0] > 0)
+        reason[misses] = Reason.MISSES_PORT
+        reason[~np.isfinite(cos_first)] = Reason.INVALID_INPUT
+        cos_media = [cos_first] + [np.sqrt(1.0 - e * e * sin2_first) for e in eta]
+        advance = [heights[..., 0] / cos_first]  # a_k for k = 0 … K-1
+        for k in range(1, port.n_interfaces):
+            step = heights[..., k] - heights[..., k - 1]
+            advance.append(advance[-1] + step * eta[k - 1] / cos_media[k])
+        water_dirs = eta[-1] * tangential
+        water_dirs += cos_media[-1][:, None] * normal
+        position = origins + heights[..., -1, None] * normal + advance[-1][:, None] * tangential
+        interface_points = None
+        if keep_interface_points:
+            interface_points = np.stack([origins + heights[..., k, None] * normal
+                                         + advance[k][:, None] * tangential
+                                         for k in range(port.n_interfaces)])
     bad = reason != Reason.OK
     if bad.any():
-        position = np.where(bad[:, None], np.nan, position)
-        direction = np.where(bad[:, None], np.nan, direction)
-    return WaterRays(position, direction, points, reason)
+        position[bad] = np.nan
+        water_dirs[bad] = np.nan
+        if interface_points is not None:
+            interface_points[:, bad] = np.nan
+    return WaterRays(position, water_dirs, interface_points, reason)

@@ -20,6 +20,7 @@ import numpy as np
 from .camera import Camera
 from .lines import common_perpendicular
 from .port import FlatPort
+from .batching import map_row_chunks
 from .reasons import Reason
 from .refraction import trace_through_port
 
@@ -113,8 +114,8 @@ def triangulate_rays(rig: StereoRig, rays_left: np.ndarray, rays_right: np.ndarr
         rays_left /= np.linalg.norm(rays_left, axis=1, keepdims=True)
         rays_right = virtual - o_right
         rays_right /= np.linalg.norm(rays_right, axis=1, keepdims=True)
-    water_left = trace_through_port(o_left, rays_left, rig.port)
-    water_right = trace_through_port(o_right, rays_right, rig.port)
+    water_left = trace_through_port(o_left, rays_left, rig.port, keep_interface_points=False)
+    water_right = trace_through_port(o_right, rays_right, rig.port, keep_interface_points=False)
     for water in (water_left, water_right):
         reason[reason == Reason.OK] = water.reason[reason == Reason.OK]
     perp = _midpoint(water_left.origins, water_left.directions,
@@ -136,5 +137,11 @@ def triangulate(rig: StereoRig, uv_left, uv_right, method: str = "optical_path")
     if uv_left.shape != uv_right.shape:
         raise ValueError(f"uv_left and uv_right must have the same shape, got "
                          f"{uv_left.shape} and {uv_right.shape}")
-    with np.errstate(invalid="ignore"):
-        return triangulate_rays(rig, rig.left.rays(uv_left), rig.right.rays(uv_right), method)
+
+    def solve(left, right):
+        with np.errstate(invalid="ignore"):
+            result = triangulate_rays(rig, rig.left.rays(left), rig.right.rays(right), method)
+        return result.points, result.gap, result.reason
+
+    points, gap, reason = map_row_chunks(solve, (uv_left, uv_right))
+    return Triangulation(points, gap, reason, method)

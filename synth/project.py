@@ -25,6 +25,7 @@ import numpy as np
 from scipy.optimize import elementwise
 
 from measure import Camera, FlatPort, Reason
+from measure.batching import map_row_chunks
 
 SOLVERS = ("fermat", "snell")
 
@@ -90,14 +91,17 @@ def _reduce_to_plane(center: np.ndarray, port: FlatPort, points: np.ndarray) -> 
 def _travel_time_terms(x: np.ndarray, problem: _PlaneProblem):
     """Segment steps Δ ``(N, K+1)`` and lengths L for interface lateral positions x ``(N, K)``."""
     n_points = x.shape[0]
-    positions = np.concatenate([np.zeros((n_points, 1)), x, problem.lateral[:, None]], axis=1)
-    steps = np.diff(positions, axis=1)
-    lengths = np.hypot(steps, problem.heights)
+    steps = np.empty((n_points, x.shape[1] + 1))
+    steps[:, 0] = x[:, 0]
+    steps[:, 1:-1] = x[:, 1:] - x[:, :-1]
+    steps[:, -1] = problem.lateral - x[:, -1]
+    lengths = np.sqrt(steps * steps + problem.heights * problem.heights)
     return steps, lengths
 
 
 def _travel_time(x, problem):
-    steps, lengths = _travel_time_terms(x, problem)
+    """Optical path length ``Σ n_i L_i`` (mm; the travel time times c)."""
+    _, lengths = _travel_time_terms(x, problem)
     return lengths @ problem.indices
 
 
@@ -124,51 +128,63 @@ def _solve_tridiagonal_spd(diag, off, rhs):
 
 
 def _fermat_gradient_hessian(x, problem):
-    """Analytic ∂t/∂x_k and the tridiagonal Hessian of the travel time (units of c = 1)."""
+    """Travel time, analytic ∂t/∂x_k and the tridiagonal Hessian (units of c = 1).
+
+    With ``Δ_i`` the lateral step and ``h_i`` the normal height of segment i (length
+    ``L_i = sqrt(Δ_i² + h_i²)``): ``t = Σ n_i L_i``, ``∂t/∂x_k = n_{k-1} Δ_{k-1}/L_{k-1} −
+    n_k Δ_k/L_k``, ``∂²t/∂x_k² = n_{k-1} h²_{k-1}/L³_{k-1} + n_k h²_k/L³_k`` and
+    ``∂²t/∂x_k∂x_{k+1} = −n_k h²_k/L³_k``.
+    """
     steps, lengths = _travel_time_terms(x, problem)
     n = problem.indices
     slope = n * steps / lengths  # n_i Δ_i / L_i = n_i sin θ_i
-    curvature = n * problem.heights ** 2 / lengths ** 3  # d²/dΔ² of n_i L_i
+    curvature = n * problem.heights ** 2 / lengths ** 3
     gradient = slope[:, :-1] - slope[:, 1:]
     diag = curvature[:, :-1] + curvature[:, 1:]
     off = -curvature[:, 1:-1]
-    return gradient, diag, off
+    return lengths @ n, gradient, diag, off
 
 
 def _solve_fermat(problem: _PlaneProblem, max_iterations: int = 60):
-    """Damped Newton on μ (the offsets from J_k along ε); returns lateral positions x ``(N, K)``."""
+    """Damped Newton on μ (offsets from J_k along ε); returns lateral positions x ``(N, K)``.
+
+    Starts from μ = 0, the straight line O→P; a step that would lengthen the travel time is
+    halved. Stops when no step exceeds 1e-15 of the lateral scale (machine precision).
+    """
     heights = problem.heights
     cumulative = np.cumsum(heights, axis=1)[:, :-1]
     straight = problem.lateral[:, None] * cumulative / np.sum(heights, axis=1, keepdims=True)
-    mu = np.zeros_like(straight)  # μ_k = 0: the straight line O→P (the points J_k)
-    active = np.all(np.isfinite(straight), axis=1)
-    scale = 1.0 + np.abs(problem.lateral)
+    finite = np.all(np.isfinite(straight), axis=1)
+    straight[~finite] = 0.0
+    mu = np.zeros_like(straight)
+    tolerance = 1e-15 * (1.0 + np.abs(np.nan_to_num(problem.lateral)))
+    converged = np.zeros(straight.shape[0], dtype=bool)
     iterations = 0
     for iterations in range(1, max_iterations + 1):
-        idx = np.flatnonzero(active)
-        if idx.size == 0:
-            break
-        sub = _PlaneProblem(heights[idx], problem.lateral[idx], problem.axis[idx],
-                            problem.indices, problem.reason[idx])
-        x = straight[idx] + mu[idx]
-        gradient, diag, off = _fermat_gradient_hessian(x, sub)
+        x = straight + mu
+        time_now, gradient, diag, off = _fermat_gradient_hessian(x, problem)
         step, _ = _solve_tridiagonal_spd(diag, off, gradient)
-        time_now = _travel_time(x, sub)
-        damping = np.ones(idx.size)
-        for _ in range(40):  # halve steps that would increase the travel time
-            worse = _travel_time(x - damping[:, None] * step, sub) > time_now * (1 + 4e-16)
+        step[~finite] = 0.0
+        worse = _travel_time(x - step, problem) > time_now * (1 + 4e-16)
+        for _ in range(40):  # halve the steps that would lengthen the travel time
             if not worse.any():
                 break
-            damping[worse] *= 0.5
-        step *= damping[:, None]
-        mu[idx] -= step
-        done = np.max(np.abs(step), axis=1) <= 1e-15 * scale[idx]
-        active[idx[done]] = False
+            step[worse] *= 0.5
+            worse[worse] = _travel_time(x[worse] - step[worse], _subset(problem, worse)) \
+                > time_now[worse] * (1 + 4e-16)
+        mu -= step
+        converged = np.max(np.abs(step), axis=1) <= tolerance
+        if converged.all():
+            break
     x = straight + mu
-    _, diag, off = _fermat_gradient_hessian(np.nan_to_num(x), problem)
+    _, _, diag, off = _fermat_gradient_hessian(x, problem)
     _, positive = _solve_tridiagonal_spd(diag, off, np.ones_like(diag))
-    converged = ~active
     return x, positive & converged, converged, iterations
+
+
+def _subset(problem: _PlaneProblem, rows) -> _PlaneProblem:
+    return _PlaneProblem(problem.heights[rows], problem.lateral[rows], problem.axis[rows],
+                         problem.indices, problem.reason[rows])
 
 
 def _solve_snell(problem: _PlaneProblem):
@@ -192,7 +208,7 @@ def _solve_snell(problem: _PlaneProblem):
         result = elementwise.find_root(
             residual, (np.zeros(ok.sum()), np.full(ok.sum(), upper)),
             args=(lateral[ok], *heights[ok].T),
-            tolerances=dict(xatol=1e-300, xrtol=2e-16, fatol=0.0, frtol=0.0),
+            tolerances=dict(xatol=1e-17, xrtol=1e-15, fatol=0.0, frtol=0.0),
             maxiter=400)
         p[ok] = result.x
         converged[ok] = result.success | (result.x == 0)
@@ -203,18 +219,7 @@ def _solve_snell(problem: _PlaneProblem):
     return x, converged, iterations
 
 
-def solve_paths(camera: Camera, port: FlatPort, points, solver: str = "fermat") -> RefractedPaths:
-    """Refracted light paths from ``points (N, 3)`` in the water to ``camera``'s centre.
-
-    Raises ``ValueError`` for an unknown solver or a camera centre on the water side of the
-    port; per-point failures (a point not in the water, NaN input) are NaN rows with a reason.
-    """
-    if solver not in SOLVERS:
-        raise ValueError(f"solver must be one of {', '.join(SOLVERS)}, got {solver!r}")
-    points = np.asarray(points, dtype=np.float64)
-    if points.ndim != 2 or points.shape[1] != 3:
-        raise ValueError(f"points must have shape (N, 3), got {points.shape}")
-    port.check_camera(camera.center, "camera")
+def _solve_paths_chunk(camera, port, points, solver):
     center = camera.center
     problem = _reduce_to_plane(center, port, points)
     reason = problem.reason.copy()
@@ -231,7 +236,27 @@ def solve_paths(camera: Camera, port: FlatPort, points, solver: str = "fermat") 
     interface_points = (center + heights_to.T[:, :, None] * port.normal
                         + x.T[:, :, None] * problem.axis[None])
     pixels = camera.project(interface_points[0])
-    return RefractedPaths(pixels, interface_points, reason, is_minimum & ~bad, iterations)
+    return (pixels, interface_points.transpose(1, 0, 2), reason, is_minimum & ~bad,
+            np.full(points.shape[0], iterations))
+
+
+def solve_paths(camera: Camera, port: FlatPort, points, solver: str = "fermat") -> RefractedPaths:
+    """Refracted light paths from ``points (N, 3)`` in the water to ``camera``'s centre.
+
+    Raises ``ValueError`` for an unknown solver or a camera centre on the water side of the
+    port; per-point failures (a point not in the water, NaN input) are NaN rows with a reason.
+    Large batches run in chunks on all cores (same result as one batch).
+    """
+    if solver not in SOLVERS:
+        raise ValueError(f"solver must be one of {', '.join(SOLVERS)}, got {solver!r}")
+    points = np.asarray(points, dtype=np.float64)
+    if points.ndim != 2 or points.shape[1] != 3:
+        raise ValueError(f"points must have shape (N, 3), got {points.shape}")
+    port.check_camera(camera.center, "camera")
+    pixels, interface_points, reason, is_minimum, iterations = map_row_chunks(
+        lambda chunk: _solve_paths_chunk(camera, port, chunk, solver), (points,))
+    return RefractedPaths(pixels, interface_points.transpose(1, 0, 2), reason, is_minimum,
+                          int(iterations.max(initial=0)))
 
 
 def project(camera: Camera, port: FlatPort, points, solver: str = "fermat") -> np.ndarray:
