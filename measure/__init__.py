@@ -5,6 +5,7 @@ Units are millimetres; the reference frame is the left camera's (OpenCV axes).
 """
 
 from .camera import Camera
+from .detect import REJECTION_REASONS, Detections, detect_targets
 from .lines import CommonPerpendicular, common_perpendicular
 from .port import FlatPort
 from .reasons import Reason, reason_counts
@@ -14,5 +15,6 @@ from .triangulate import METHODS, StereoRig, Triangulation, triangulate, triangu
 __all__ = [
     "Camera", "FlatPort", "StereoRig", "Triangulation", "triangulate", "triangulate_rays",
     "METHODS", "Reason", "reason_counts", "refract", "intersect_plane", "trace_through_port",
-    "WaterRays", "common_perpendicular", "CommonPerpendicular",
+    "WaterRays", "common_perpendicular", "CommonPerpendicular", "detect_targets", "Detections",
+    "REJECTION_REASONS",
 ]

@@ -113,8 +113,8 @@ class Camera:
         # OpenCV 4 names the iterative form undistortPointsIter; OpenCV 5 folds it into
         # undistortPoints with a criteria argument.
         undistort_iter = getattr(cv2, "undistortPointsIter", cv2.undistortPoints)
-        start = undistort_iter(xy_distorted.reshape(-1, 1, 2), np.eye(3), self.dist, None, None,
-                               criteria).reshape(-1, 2)
+        start = undistort_iter(xy_distorted.reshape(-1, 1, 2), np.eye(3), self.dist,
+                               R=np.eye(3), P=np.eye(3), criteria=criteria).reshape(-1, 2)
         xy = np.where(np.isfinite(start), start, xy_distorted)
         step = 1e-6
         ex, ey = np.array([step, 0.0]), np.array([0.0, step])

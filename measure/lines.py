@@ -24,24 +24,30 @@ class CommonPerpendicular:
     s2: np.ndarray
 
 
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    out = np.empty(np.broadcast_shapes(a.shape, b.shape))
+    out[..., 0] = a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1]
+    out[..., 1] = a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2]
+    out[..., 2] = a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
+    return out
+
+
 def common_perpendicular(p1, d1, p2, d2) -> CommonPerpendicular:
     """Solve ``(L1(s1) − L2(s2))·d1 = 0`` and ``(L1(s1) − L2(s2))·d2 = 0`` (equation 12).
 
-    All inputs broadcast to ``(N, 3)``; vectorized over N line pairs.
+    Written with the cross product ``n = d1 × d2`` (``s1 = ((p2 − p1) × d2)·n / |n|²``,
+    ``s2 = ((p2 − p1) × d1)·n / |n|²``), which keeps full precision for nearly parallel rays
+    where the textbook ``a c − b²`` loses digits. All inputs broadcast to ``(N, 3)``.
     """
-    p1, d1, p2, d2 = np.broadcast_arrays(*(np.asarray(a, dtype=np.float64) for a in (p1, d1, p2, d2)))
-    w = p1 - p2
-    a = np.einsum("ij,ij->i", d1, d1)
-    b = np.einsum("ij,ij->i", d1, d2)
-    c = np.einsum("ij,ij->i", d2, d2)
-    d = np.einsum("ij,ij->i", d1, w)
-    e = np.einsum("ij,ij->i", d2, w)
-    denominator = a * c - b * b
-    parallel = denominator <= 1e-14 * a * c
+    p1, d1, p2, d2 = (np.asarray(a, dtype=np.float64) for a in (p1, d1, p2, d2))
+    n = _cross(d1, d2)
+    w = p2 - p1
+    denominator = np.einsum("ij,ij->i", n, n)
+    parallel = ~(denominator > 1e-28 * np.einsum("ij,ij->i", d1, d1) * np.einsum("ij,ij->i", d2, d2))
     with np.errstate(divide="ignore", invalid="ignore"):
-        denominator = np.where(parallel, np.nan, denominator)
-        s1 = (b * e - c * d) / denominator
-        s2 = (a * e - b * d) / denominator
+        inverse = np.where(parallel, np.nan, 1.0 / denominator)
+        s1 = np.einsum("ij,ij->i", _cross(w, d2), n) * inverse
+        s2 = np.einsum("ij,ij->i", _cross(w, d1), n) * inverse
     foot1 = p1 + s1[:, None] * d1
     foot2 = p2 + s2[:, None] * d2
     return CommonPerpendicular(foot1, foot2, 0.5 * (foot1 + foot2),
