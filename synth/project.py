@@ -63,6 +63,9 @@ class _PlaneProblem:
     indices: np.ndarray
     reason: np.ndarray
 
+    heights_columns: list  # per medium: a scalar where all rows share it (air, layers), else (N,)
+    heights_squared: list
+
 
 def _reduce_to_plane(center: np.ndarray, port: FlatPort, points: np.ndarray) -> _PlaneProblem:
     n_points = points.shape[0]
@@ -77,114 +80,126 @@ def _reduce_to_plane(center: np.ndarray, port: FlatPort, points: np.ndarray) -> 
     with np.errstate(invalid="ignore"):
         reason[(reason == Reason.OK) & ~(water_height > 0)] = Reason.NOT_IN_WATER
     ok = reason == Reason.OK
-    heights = np.empty((n_points, port.n_interfaces + 1))
-    heights[:, 0] = offsets[0] - center @ port.normal
-    heights[:, 1:-1] = np.asarray(port.thicknesses)
-    heights[:, -1] = np.where(ok, water_height, np.nan)
+    # Normal distance travelled in each medium: the air gap and the layers are the same for
+    # every point (scalars), the water column differs.
+    columns = [float(offsets[0] - center @ port.normal), *port.thicknesses,
+               np.where(ok, water_height, np.nan)]
+    heights = np.column_stack([np.broadcast_to(c, (n_points,)) for c in columns])
     lateral = np.where(ok, lateral, np.nan)
     tiny = 1e-300
     with np.errstate(invalid="ignore", divide="ignore"):
         axis = np.where((lateral > tiny)[:, None], lateral_vec / np.maximum(lateral, tiny)[:, None], 0.0)
-    return _PlaneProblem(heights, lateral, axis, np.asarray(port.indices, dtype=float), reason)
+    return _PlaneProblem(heights, lateral, axis, np.asarray(port.indices, dtype=float), reason,
+                         columns, [h * h for h in columns])
 
 
-def _travel_time_terms(x: np.ndarray, problem: _PlaneProblem):
-    """Segment steps Δ ``(N, K+1)`` and lengths L for interface lateral positions x ``(N, K)``."""
-    n_points = x.shape[0]
-    steps = np.empty((n_points, x.shape[1] + 1))
-    steps[:, 0] = x[:, 0]
-    steps[:, 1:-1] = x[:, 1:] - x[:, :-1]
-    steps[:, -1] = problem.lateral - x[:, -1]
-    lengths = np.sqrt(steps * steps + problem.heights * problem.heights)
+def _segments(x, problem):
+    """Lateral steps Δ_i and lengths L_i of the K+1 path segments (lists of ``(N,)`` arrays).
+
+    ``x`` is the list of the K lateral positions of the interface points (mm from the camera's
+    normal foot). Column lists keep every operation on contiguous vectors.
+    """
+    steps = [x[0]] + [x[k] - x[k - 1] for k in range(1, len(x))] + [problem.lateral - x[-1]]
+    lengths = [np.sqrt(d * d + h2) for d, h2 in zip(steps, problem.heights_squared)]
     return steps, lengths
 
 
-def _travel_time(x, problem):
-    """Optical path length ``Σ n_i L_i`` (mm; the travel time times c)."""
-    _, lengths = _travel_time_terms(x, problem)
-    return lengths @ problem.indices
-
-
-def _solve_tridiagonal_spd(diag, off, rhs):
-    """Solve ``H s = rhs`` for symmetric tridiagonal H (vectorized over rows).
-
-    ``diag`` ``(N, K)``, ``off`` ``(N, K-1)`` (H[k, k+1]). Returns the solution and whether every
-    pivot is positive (H positive definite: the paper's det H > 0 and ∂²t/∂μ1² > 0 for K = 2).
-    """
-    n_rows, k = diag.shape
-    pivots = np.empty_like(diag)
-    y = np.empty_like(rhs)
-    pivots[:, 0] = diag[:, 0]
-    y[:, 0] = rhs[:, 0]
-    for i in range(1, k):
-        factor = off[:, i - 1] / pivots[:, i - 1]
-        pivots[:, i] = diag[:, i] - factor * off[:, i - 1]
-        y[:, i] = rhs[:, i] - factor * y[:, i - 1]
-    solution = np.empty_like(rhs)
-    solution[:, -1] = y[:, -1] / pivots[:, -1]
-    for i in range(k - 2, -1, -1):
-        solution[:, i] = (y[:, i] - off[:, i] * solution[:, i + 1]) / pivots[:, i]
-    return solution, np.all(pivots > 0, axis=1)
+def _optical_length(lengths, indices):
+    """Travel time times c: ``Σ n_i L_i`` (mm)."""
+    total = indices[0] * lengths[0]
+    for n_i, length in zip(indices[1:], lengths[1:]):
+        total = total + n_i * length
+    return total
 
 
 def _fermat_gradient_hessian(x, problem):
     """Travel time, analytic ∂t/∂x_k and the tridiagonal Hessian (units of c = 1).
 
     With ``Δ_i`` the lateral step and ``h_i`` the normal height of segment i (length
-    ``L_i = sqrt(Δ_i² + h_i²)``): ``t = Σ n_i L_i``, ``∂t/∂x_k = n_{k-1} Δ_{k-1}/L_{k-1} −
-    n_k Δ_k/L_k``, ``∂²t/∂x_k² = n_{k-1} h²_{k-1}/L³_{k-1} + n_k h²_k/L³_k`` and
-    ``∂²t/∂x_k∂x_{k+1} = −n_k h²_k/L³_k``.
+    ``L_i = sqrt(Δ_i² + h_i²)``): ``t = Σ n_i L_i``, ``∂t/∂x_k = n_k Δ_k/L_k −
+    n_{k+1} Δ_{k+1}/L_{k+1}``, ``∂²t/∂x_k² = n_k h²_k/L³_k + n_{k+1} h²_{k+1}/L³_{k+1}`` and
+    ``∂²t/∂x_k∂x_{k+1} = −n_{k+1} h²_{k+1}/L³_{k+1}``. Since ``x_k = x(J_k) + μ_k`` these are
+    also the derivatives with respect to the paper's μ_k (equations 23-24).
     """
-    steps, lengths = _travel_time_terms(x, problem)
+    steps, lengths = _segments(x, problem)
     n = problem.indices
-    slope = n * steps / lengths  # n_i Δ_i / L_i = n_i sin θ_i
-    curvature = n * problem.heights ** 2 / lengths ** 3
-    gradient = slope[:, :-1] - slope[:, 1:]
-    diag = curvature[:, :-1] + curvature[:, 1:]
-    off = -curvature[:, 1:-1]
-    return lengths @ n, gradient, diag, off
+    slope, curvature = [], []
+    for n_i, d, length, h2 in zip(n, steps, lengths, problem.heights_squared):
+        inverse = 1.0 / length
+        slope.append(n_i * d * inverse)  # n_i sin θ_i
+        curvature.append(n_i * h2 * inverse * inverse * inverse)
+    k = len(x)
+    gradient = [slope[i] - slope[i + 1] for i in range(k)]
+    diag = [curvature[i] + curvature[i + 1] for i in range(k)]
+    off = [-curvature[i + 1] for i in range(k - 1)]
+    return _optical_length(lengths, n), gradient, diag, off
+
+
+def _solve_tridiagonal_spd(diag, off, rhs):
+    """Solve ``H s = rhs`` for a symmetric tridiagonal H, vectorized over rows (Thomas).
+
+    ``diag``: K arrays, ``off``: K-1 arrays (H[k, k+1]), ``rhs``: K arrays. Returns the solution
+    (K arrays) and whether every pivot is positive, i.e. H is positive definite — for K = 2 the
+    paper's minimum condition det H > 0 and ∂²t/∂μ1² > 0.
+    """
+    k = len(diag)
+    pivots = [diag[0]]
+    y = [rhs[0]]
+    for i in range(1, k):
+        factor = off[i - 1] / pivots[i - 1]
+        pivots.append(diag[i] - factor * off[i - 1])
+        y.append(rhs[i] - factor * y[i - 1])
+    solution = [None] * k
+    solution[-1] = y[-1] / pivots[-1]
+    for i in range(k - 2, -1, -1):
+        solution[i] = (y[i] - off[i] * solution[i + 1]) / pivots[i]
+    positive = pivots[0] > 0
+    for pivot in pivots[1:]:
+        positive &= pivot > 0
+    return solution, positive
 
 
 def _solve_fermat(problem: _PlaneProblem, max_iterations: int = 60):
     """Damped Newton on μ (offsets from J_k along ε); returns lateral positions x ``(N, K)``.
 
-    Starts from μ = 0, the straight line O→P; a step that would lengthen the travel time is
-    halved. Stops when no step exceeds 1e-15 of the lateral scale (machine precision).
+    Starts from μ = 0, the straight line O→P through the points J_k; a step that would lengthen
+    the travel time is halved. Stops when no step exceeds 1e-15 of the lateral scale (machine
+    precision). Also returns whether the Hessian is positive definite at the solution.
     """
-    heights = problem.heights
-    cumulative = np.cumsum(heights, axis=1)[:, :-1]
-    straight = problem.lateral[:, None] * cumulative / np.sum(heights, axis=1, keepdims=True)
-    finite = np.all(np.isfinite(straight), axis=1)
-    straight[~finite] = 0.0
-    mu = np.zeros_like(straight)
-    tolerance = 1e-15 * (1.0 + np.abs(np.nan_to_num(problem.lateral)))
-    converged = np.zeros(straight.shape[0], dtype=bool)
+    lateral = problem.lateral
+    total_height = sum(problem.heights_columns)
+    cumulative = np.cumsum(problem.heights, axis=1)[:, :-1]
+    straight = [lateral * cumulative[:, k] / total_height for k in range(cumulative.shape[1])]
+    finite = np.isfinite(lateral)
+    x = [np.where(finite, column, 0.0) for column in straight]
+    tolerance = 1e-15 * (1.0 + np.abs(np.where(finite, lateral, 0.0)))
+    converged = np.zeros(lateral.shape, dtype=bool)
+    positive = converged
     iterations = 0
     for iterations in range(1, max_iterations + 1):
-        x = straight + mu
         time_now, gradient, diag, off = _fermat_gradient_hessian(x, problem)
-        step, _ = _solve_tridiagonal_spd(diag, off, gradient)
-        step[~finite] = 0.0
-        worse = _travel_time(x - step, problem) > time_now * (1 + 4e-16)
-        for _ in range(40):  # halve the steps that would lengthen the travel time
-            if not worse.any():
-                break
-            step[worse] *= 0.5
-            worse[worse] = _travel_time(x[worse] - step[worse], _subset(problem, worse)) \
-                > time_now[worse] * (1 + 4e-16)
-        mu -= step
-        converged = np.max(np.abs(step), axis=1) <= tolerance
+        step, positive = _solve_tridiagonal_spd(diag, off, gradient)
+        step = [np.where(finite, s, 0.0) for s in step]
+        largest = np.abs(step[0])
+        for s in step[1:]:
+            largest = np.maximum(largest, np.abs(s))
+        if np.any(largest > 1e-6 * (1.0 + np.abs(lateral))):
+            # Far from the minimum: halve the steps that would lengthen the travel time.
+            limit = time_now * (1 + 4e-16)
+            scale = np.ones_like(lateral)
+            for _ in range(40):
+                trial = [xi - scale * si for xi, si in zip(x, step)]
+                worse = _optical_length(_segments(trial, problem)[1], problem.indices) > limit
+                if not worse.any():
+                    break
+                scale[worse] *= 0.5
+            step = [scale * s for s in step]
+            largest *= scale
+        x = [xi - si for xi, si in zip(x, step)]
+        converged = largest <= tolerance
         if converged.all():
             break
-    x = straight + mu
-    _, _, diag, off = _fermat_gradient_hessian(x, problem)
-    _, positive = _solve_tridiagonal_spd(diag, off, np.ones_like(diag))
-    return x, positive & converged, converged, iterations
-
-
-def _subset(problem: _PlaneProblem, rows) -> _PlaneProblem:
-    return _PlaneProblem(problem.heights[rows], problem.lateral[rows], problem.axis[rows],
-                         problem.indices, problem.reason[rows])
+    return np.column_stack(x), positive & converged, converged, iterations
 
 
 def _solve_snell(problem: _PlaneProblem):
