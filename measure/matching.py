@@ -1,0 +1,141 @@
+"""Stereo matching of detected targets through a flat port, without ground truth.
+
+For every candidate pair (left detection i, right detection j) the two pixels are back-projected
+and traced into the water; a true pair's water rays meet (their common perpendicular is short:
+the refractive epipolar constraint) at a point inside the working depth range and in front of
+both cameras. A global one-to-one assignment (``scipy.optimize.linear_sum_assignment``) on the
+gap lengths picks the pairs among those that pass the gate; a pair is kept only if no other
+assignment explains the detections about as well (see :func:`match_targets`). Ambiguous pairs
+are dropped, never guessed.
+
+Units: mm; pixels in the OpenCV convention; reference frame = the left camera's.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import linear_sum_assignment
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+
+from .lines import common_perpendicular
+from .reasons import Reason
+from .refraction import trace_through_port
+from .triangulate import StereoRig
+
+_NO_PAIR = 1e12  # cost of an impossible pair in the assignment
+
+
+@dataclass(frozen=True)
+class Matches:
+    """Result of :func:`match_targets`.
+
+    ``left``, ``right``: ``(M,)`` indices into the two detection arrays, one row per accepted
+    pair; ``gap`` ``(M,)`` their common-perpendicular lengths (mm); ``n_candidates``: how many
+    (i, j) pairs passed the gate and the depth window; ``n_ambiguous``: assigned pairs dropped
+    because a competitor could not be ruled out; ``unmatched_left`` / ``unmatched_right``: indices
+    of detections left without a partner.
+    """
+
+    left: np.ndarray
+    right: np.ndarray
+    gap: np.ndarray
+    n_candidates: int
+    n_ambiguous: int
+    unmatched_left: np.ndarray
+    unmatched_right: np.ndarray
+
+
+def _water_rays(camera, port, uv):
+    water = trace_through_port(camera.center, camera.rays(uv), port, keep_interface_points=False)
+    return water.origins, water.directions, water.reason == Reason.OK
+
+
+def pair_gaps(rig: StereoRig, uv_left, uv_right, depth_range=(None, None)):
+    """Gap matrix ``(N_left, N_right)`` of every candidate pair (mm); ``inf`` where impossible.
+
+    A pair is impossible when a ray has no path into the water, the rays meet behind a camera,
+    or the midpoint's depth along the port normal (``normal · X``) is outside ``depth_range``.
+    """
+    uv_left = np.asarray(uv_left, dtype=float).reshape(-1, 2)
+    uv_right = np.asarray(uv_right, dtype=float).reshape(-1, 2)
+    o1, d1, ok1 = _water_rays(rig.left, rig.port, uv_left)
+    o2, d2, ok2 = _water_rays(rig.right, rig.port, uv_right)
+    n_left, n_right = len(uv_left), len(uv_right)
+    i, j = np.meshgrid(np.arange(n_left), np.arange(n_right), indexing="ij")
+    i, j = i.ravel(), j.ravel()
+    with np.errstate(invalid="ignore", divide="ignore"):
+        perp = common_perpendicular(o1[i], d1[i], o2[j], d2[j])
+        depth = perp.midpoint @ rig.port.normal
+        possible = ok1[i] & ok2[j] & (perp.s1 > 0) & (perp.s2 > 0)
+        near, far = depth_range
+        if near is not None:
+            possible &= depth >= near
+        if far is not None:
+            possible &= depth <= far
+    gaps = np.where(possible, perp.length, np.inf)
+    return gaps.reshape(n_left, n_right)
+
+
+def _assign(cost: np.ndarray, candidate: np.ndarray):
+    """Maximum-cardinality, then minimum-gap one-to-one assignment; returns rows, cols, total."""
+    rows, cols = linear_sum_assignment(np.where(candidate, cost, _NO_PAIR))
+    used = candidate[rows, cols]
+    rows, cols = rows[used], cols[used]
+    return rows, cols, float(cost[rows, cols].sum())
+
+
+def match_targets(rig: StereoRig, uv_left, uv_right, gate_mm: float = 0.5,
+                  depth_range=(None, None), ambiguity_margin_mm: float | None = None) -> Matches:
+    """Match left and right detections one to one with the refractive epipolar constraint.
+
+    ``gate_mm``: the largest common-perpendicular length of an accepted pair (mm); a few times
+    the gap that pixel noise produces at the working distance. ``depth_range``: ``(near, far)``
+    bounds on ``normal · X`` (mm) of the triangulated point, ``None`` for no bound.
+
+    The candidate pairs form a bipartite graph; within each connected group the assignment
+    explains as many detections as possible with the smallest total gap. An assigned pair is
+    ambiguous — and dropped — when forbidding it still leaves an assignment of the group with
+    as many pairs whose total gap is within ``ambiguity_margin_mm`` (default ``gate_mm / 2``)
+    of the best. A row of targets along the baseline (one epipolar plane) is resolved this way
+    when its shifted alternative must leave a detection unmatched.
+    """
+    if not gate_mm > 0:
+        raise ValueError(f"gate_mm must be positive, got {gate_mm}")
+    margin = 0.5 * gate_mm if ambiguity_margin_mm is None else float(ambiguity_margin_mm)
+    if not margin >= 0:
+        raise ValueError(f"ambiguity_margin_mm must be >= 0, got {ambiguity_margin_mm}")
+    gaps = pair_gaps(rig, uv_left, uv_right, depth_range)
+    n_left, n_right = gaps.shape
+    candidate = gaps <= gate_mm
+    graph = coo_matrix(np.block([[np.zeros((n_left, n_left)), candidate],
+                                 [candidate.T, np.zeros((n_right, n_right))]]))
+    _, component = connected_components(graph, directed=False)
+    keep_rows, keep_cols, n_ambiguous = [], [], 0
+    for label in np.unique(component[:n_left][candidate.any(axis=1)]):
+        rows_in = np.flatnonzero(component[:n_left] == label)
+        cols_in = np.flatnonzero(component[n_left:] == label)
+        sub_gaps = gaps[np.ix_(rows_in, cols_in)]
+        sub_candidate = candidate[np.ix_(rows_in, cols_in)]
+        rows, cols, total = _assign(sub_gaps, sub_candidate)
+        for r, c in zip(rows, cols):
+            clear = True
+            if sub_candidate.sum() > 1:
+                forbidden = sub_candidate.copy()
+                forbidden[r, c] = False
+                alt_rows, _, alt_total = _assign(sub_gaps, forbidden)
+                clear = len(alt_rows) < len(rows) or alt_total > total + margin
+            if clear:
+                keep_rows.append(rows_in[r])
+                keep_cols.append(cols_in[c])
+            else:
+                n_ambiguous += 1
+    keep_rows = np.asarray(keep_rows, dtype=int)
+    keep_cols = np.asarray(keep_cols, dtype=int)
+    order = np.argsort(keep_rows)
+    keep_rows, keep_cols = keep_rows[order], keep_cols[order]
+    return Matches(keep_rows, keep_cols, gaps[keep_rows, keep_cols], int(candidate.sum()),
+                   n_ambiguous, np.setdiff1d(np.arange(n_left), keep_rows),
+                   np.setdiff1d(np.arange(n_right), keep_cols))
