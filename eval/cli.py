@@ -21,7 +21,7 @@ import tempfile
 from pathlib import Path
 
 #: Subcommand modules, in the order ``--help`` lists them: ``eval.<name>``.
-SUBCOMMANDS = ("paper", "bench")
+SUBCOMMANDS = ("run", "paper", "bench")
 
 
 class CLIError(Exception):

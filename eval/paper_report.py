@@ -45,12 +45,12 @@ def atomic_write_text(path, text: str) -> Path:
     return atomic_write_bytes(path, text.encode("utf-8"))
 
 
-def _jsonable(value):
+def jsonable(value):
     """Plain JSON types; NaN/inf become null; numpy arrays are not expected here."""
     if isinstance(value, dict):
-        return {str(k): _jsonable(v) for k, v in value.items()}
+        return {str(k): jsonable(v) for k, v in value.items()}
     if isinstance(value, (list, tuple)):
-        return [_jsonable(v) for v in value]
+        return [jsonable(v) for v in value]
     if isinstance(value, (bool, np.bool_)):
         return bool(value)
     if isinstance(value, (int, np.integer)):
@@ -59,7 +59,7 @@ def _jsonable(value):
         value = float(value)
         return value if np.isfinite(value) else None
     if isinstance(value, np.ndarray):
-        return _jsonable(value.tolist())
+        return jsonable(value.tolist())
     return value
 
 
@@ -107,7 +107,7 @@ def build_report(results: dict, figures: dict | None = None) -> dict:
         "compute_seconds": results.get("compute_seconds"),
         "wall_seconds": results.get("wall_seconds"),
     }
-    return _jsonable(report)
+    return jsonable(report)
 
 
 def _num(x, digits=3) -> str:
