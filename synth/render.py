@@ -1,0 +1,189 @@
+"""Render both views of a scene with Mitsuba 3: linear single-channel float32 images.
+
+Images are in linear radiometric units of the scene (a target of radiance 1 seen in air through
+no glass gives 1.0 on a fully covered pixel; through a port, ``T / n_water²`` of it). Pixel
+``[v, u]`` is the box-filtered (exact pixel integral) radiance of the pixel whose centre is
+``(u, v)`` in OpenCV pixel coordinates.
+
+Lens distortion (a :class:`measure.Camera` with ``dist``): Mitsuba's sensor is a pinhole, so the
+view is rendered by an undistorted pinhole camera ``oversample`` times finer and covering the
+whole distorted field of view, pre-filtered with an ``oversample``-pixel box (one output pixel),
+and warped with ``cv2.remap`` (bilinear) to the distorted pixel grid; the map is the exact
+inverse of the OpenCV distortion (``Camera.undistort``, Newton to ~1e-16).
+
+Seeds: view ``i`` (0 left, 1 right) uses sampler seed ``seed + i``.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+
+import cv2
+import numpy as np
+
+from measure import Camera
+
+from .mitsuba_setup import import_mitsuba
+from .scene import SceneError, SceneSpec, load_scene
+
+#: Oversampling factor of the undistorted render behind a distorted view.
+DISTORTION_OVERSAMPLE = 2
+#: Extra border (output pixels) of the undistorted render around the distorted field of view.
+DISTORTION_MARGIN_PX = 3
+
+
+def load_mitsuba_scene(spec: SceneSpec, variant: str | None = None):
+    """``(mitsuba_scene, mi, variant)`` for a :class:`SceneSpec` (its resolved defaults)."""
+    mi, chosen = import_mitsuba(variant)
+    try:
+        scene = mi.load_file(spec.path, **spec.mitsuba_params)
+    except RuntimeError as exc:  # Mitsuba's loader: one line of its message
+        lines = [ln.strip() for ln in str(exc).splitlines() if ln.strip()]
+        raise SceneError(f"{spec.path}: Mitsuba cannot load the scene: "
+                         f"{' '.join(lines[:2])}") from None
+    if len(scene.sensors()) < 2:
+        raise ValueError(f"{spec.path}: Mitsuba found {len(scene.sensors())} sensors, need 2")
+    return scene, mi, chosen
+
+
+def _ideal_camera_for(camera: Camera, oversample: int, margin: float):
+    """Pinhole (K_ideal, size_ideal) covering the distorted view, and the remap grids."""
+    w, h = camera.size
+    f = camera.K[0, 0]
+    cx, cy = camera.K[0, 2], camera.K[1, 2]
+    u, v = np.meshgrid(np.arange(w, dtype=np.float64), np.arange(h, dtype=np.float64))
+    uv = np.column_stack([u.ravel(), v.ravel()])
+    x = camera.normalized(uv)  # undistorted normalized coordinates of every output pixel
+    if not np.all(np.isfinite(x)):
+        raise ValueError("the distortion model cannot be inverted over the whole image")
+    fi = f * oversample
+    lo = x.min(axis=0) * fi - margin * oversample
+    hi = x.max(axis=0) * fi + margin * oversample
+    wi, hi_ = int(math.ceil(hi[0] - lo[0])) + 1, int(math.ceil(hi[1] - lo[1])) + 1
+    K = np.array([[fi, 0.0, -lo[0]], [0.0, fi, -lo[1]], [0.0, 0.0, 1.0]])
+    map_xy = x * fi + K[:2, 2]
+    if oversample % 2 == 0:
+        map_xy += 0.5  # cv2.blur with an even box: value j is centred at j - 0.5
+    map_x = map_xy[:, 0].reshape(h, w).astype(np.float32)
+    map_y = map_xy[:, 1].reshape(h, w).astype(np.float32)
+    return K, (wi, hi_), map_x, map_y
+
+
+def _ideal_sensor(mi, template, camera: Camera, K, size):
+    """A Mitsuba pinhole sensor at ``camera``'s pose with intrinsics ``K`` and film ``size``."""
+    w, h = size
+    M = np.eye(4)
+    M[:3, :3] = camera.R @ np.diag([-1.0, -1.0, 1.0])  # OpenCV axes -> Mitsuba's (x left, y up)
+    M[:3, 3] = camera.t
+    fov = math.degrees(2.0 * math.atan(w / (2.0 * K[0, 0])))
+    return mi.load_dict({
+        "type": "perspective",
+        "fov": fov, "fov_axis": "x",
+        "principal_point_offset_x": (w / 2.0 - 0.5 - K[0, 2]) / w,
+        "principal_point_offset_y": (h / 2.0 - 0.5 - K[1, 2]) / h,
+        "near_clip": 1.0, "far_clip": 1e6,
+        "to_world": mi.ScalarTransform4f(M.tolist()),
+        "sampler": template.sampler(),
+        "film": {"type": "hdrfilm", "width": int(w), "height": int(h),
+                 "pixel_format": "luminance", "component_format": "float32",
+                 "rfilter": {"type": "box"}},
+    })
+
+
+def _develop(mi, image) -> np.ndarray:
+    a = np.array(image, dtype=np.float32)
+    if a.ndim == 3:
+        a = a[..., 0]
+    return np.ascontiguousarray(a)
+
+
+def render_view(scene, mi, index: int, camera: Camera, spp: int, seed: int,
+                oversample: int = DISTORTION_OVERSAMPLE) -> np.ndarray:
+    """One view as a float32 ``(H, W)`` linear image; distortion by oversampled render + warp."""
+    if camera.dist is None:
+        return _develop(mi, mi.render(scene, sensor=index, spp=spp, seed=seed))
+    K, size, map_x, map_y = _ideal_camera_for(camera, oversample, DISTORTION_MARGIN_PX)
+    sensor = _ideal_sensor(mi, scene.sensors()[index], camera, K, size)
+    ideal = _develop(mi, mi.render(scene, sensor=sensor, spp=spp, seed=seed))
+    if oversample > 1:
+        ideal = cv2.blur(ideal, (oversample, oversample), borderType=cv2.BORDER_CONSTANT)
+    return cv2.remap(ideal, map_x, map_y, interpolation=cv2.INTER_LINEAR,
+                     borderMode=cv2.BORDER_CONSTANT, borderValue=0.0)
+
+
+def render_stereo(scene, spp: int | None = None, variant: str | None = None,
+                  defines: dict | None = None, progress: bool = True, seed: int | None = None):
+    """Render the left and right views of a scene.
+
+    ``scene`` a :class:`SceneSpec` or a path (then ``defines`` are the ``-D`` overrides);
+    ``spp`` samples per pixel (default: the scene's ``spp``); ``variant`` a Mitsuba variant
+    (default: automatic, see :mod:`synth.mitsuba_setup`); ``seed`` (default: the scene's).
+    Returns ``(left, right, info)``: float32 ``(H, W)`` linear images and a dict with
+    ``variant``, ``spp`` (requested), ``spp_rendered`` (after the sampler's rounding), ``seed``,
+    ``size``, ``seconds`` (load, left, right), ``samples_per_second``.
+    """
+    from tqdm import tqdm
+
+    spec = scene if isinstance(scene, SceneSpec) else load_scene(scene, defines)
+    spp = spec.spp if spp is None else int(spp)
+    seed = spec.seed if seed is None else int(seed)
+    if spp <= 0:
+        raise ValueError(f"spp must be positive, got {spp}")
+    t0 = time.perf_counter()
+    mscene, mi, chosen = load_mitsuba_scene(spec, variant)
+    seconds = {"load": time.perf_counter() - t0}
+    images = []
+    names = ("left", "right")
+    bar = tqdm(names, desc=f"render {chosen} {spp} spp", unit="view", disable=not progress,
+               leave=False)
+    for i, (name, camera) in enumerate(zip(bar, spec.cameras)):
+        t = time.perf_counter()
+        images.append(render_view(mscene, mi, i, camera, spp, seed + i))
+        seconds[name] = time.perf_counter() - t
+    bar.close()
+    try:  # samplers may round spp (multijitter: to a product of two near-equal integers)
+        spp_rendered = int(mscene.sensors()[0].sampler().sample_count())
+    except (AttributeError, RuntimeError, TypeError):
+        spp_rendered = spp
+    w, h = spec.size
+    samples = 2 * w * h * spp_rendered
+    render_seconds = seconds["left"] + seconds["right"]
+    info = {"variant": chosen, "spp": spp, "spp_rendered": spp_rendered, "seed": seed,
+            "size": [w, h], "seconds": seconds,
+            "samples_per_second": samples / render_seconds if render_seconds > 0 else None}
+    return images[0], images[1], info
+
+
+# ---------------------------------------------------------------------------------------------
+# image files
+# ---------------------------------------------------------------------------------------------
+def png16_scale(*images, headroom: float = 1.0) -> float:
+    """Factor so that ``image * factor`` of the brightest pixel of all images is 65535 (linear)."""
+    peak = max(float(np.max(img)) for img in images)
+    return 65535.0 / (peak * headroom) if peak > 0 else 1.0
+
+
+def to_png16(image: np.ndarray, scale: float) -> np.ndarray:
+    """Linear float image to uint16 (``round(image * scale)``, clipped)."""
+    return np.clip(np.rint(image.astype(np.float64) * scale), 0, 65535).astype(np.uint16)
+
+
+def srgb_preview(image: np.ndarray, white: float | None = None) -> np.ndarray:
+    """8-bit sRGB-encoded preview of a linear image (``white`` maps to 255; default its max)."""
+    white = float(np.max(image)) if white is None else float(white)
+    x = np.clip(image.astype(np.float64) / (white if white > 0 else 1.0), 0.0, 1.0)
+    srgb = np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055)
+    return np.rint(srgb * 255.0).astype(np.uint8)
+
+
+def write_png(path, image: np.ndarray) -> None:
+    """Write a uint8/uint16 single-channel PNG; raise OSError if OpenCV cannot."""
+    if not cv2.imwrite(str(path), image):
+        raise OSError(f"cannot write {path}")
+
+
+def write_exr(path, image: np.ndarray, variant: str | None = None) -> None:
+    """Write a float32 single-channel OpenEXR image with Mitsuba's Bitmap (linear, no curve)."""
+    mi, _ = import_mitsuba(variant)
+    mi.Bitmap(np.ascontiguousarray(image, dtype=np.float32)).write(str(path))

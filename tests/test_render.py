@@ -1,0 +1,88 @@
+"""Rendering: the Mitsuba sensor reproduces measure.Camera; distortion by render + warp."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from measure import Camera
+from measure.detect import detect_targets
+from synth.layouts import grid_plane
+from synth.project import project
+from synth.render import png16_scale, render_stereo, srgb_preview, to_png16
+from synth.rig import paper_cameras
+from synth.scene import load_scene, write_scene
+
+SMALL = (320, 268)
+FOCAL = 150.0
+
+
+def _match(detected, expected):
+    d = np.linalg.norm(detected[:, None, :] - expected[None, :, :], axis=2)
+    j = d.argmin(axis=1)
+    return detected - expected[j], j
+
+
+def test_variant_selection_never_picks_llvm_15(monkeypatch, tmp_path):
+    from synth import mitsuba_setup as ms
+
+    assert ms.llvm_major_from_name("/usr/lib/x86_64-linux-gnu/libLLVM-15.so.1") == 15
+    assert ms.llvm_major_from_name("libLLVM.so.19.1") == 19
+    fake = tmp_path / "libLLVM-15.so"
+    fake.write_bytes(b"")
+    monkeypatch.setattr(ms, "_LLVM_DIRS", (str(tmp_path),))
+    monkeypatch.setenv("DRJIT_LIBLLVM_PATH", str(fake))
+    assert ms.find_libllvm() is None
+    good = tmp_path / "libLLVM-19.so"
+    good.write_bytes(b"")
+    assert ms.find_libllvm() == str(good)
+
+
+def test_sensor_matches_camera_pinhole_in_air(tmp_path):
+    """Disks of ~4 px radius in air, off-centre principal point: centroid within 0.02 px of K·X."""
+    left, right = paper_cameras(SMALL, FOCAL)
+    K = left.K.copy()
+    K[0, 2] += 6.3   # principal point away from the image centre
+    K[1, 2] -= 4.7
+    left = Camera(K, SMALL)
+    targets = grid_plane(1000.0, 420.0, 70.0) + np.array([0.37, -0.21, 0.0])
+    spec = load_scene(write_scene(tmp_path / "air.xml", (left, right), None, targets, 28.0))
+    img, _, info = render_stereo(spec, spp=256, progress=False)
+    assert img.dtype == np.float32 and img.shape == (SMALL[1], SMALL[0])
+    expected = left.project(targets)
+    inside = left.in_image(expected, margin=8)
+    det = detect_targets(img)
+    assert det.n_found == inside.sum()
+    err, j = _match(det.centers, expected)
+    assert set(j) == set(np.flatnonzero(inside))
+    assert np.abs(err).max() <= 0.02, np.abs(err).max()
+    assert info["variant"] in ("cuda_ad_rgb", "llvm_ad_rgb", "scalar_rgb")
+
+
+def test_distorted_camera_centroids_follow_synth_project(tmp_path):
+    dist = (-0.08, 0.015, 0.0008, -0.0005, 0.0)
+    left, right = paper_cameras(SMALL, FOCAL, dist=dist)
+    targets = grid_plane(1000.0, 560.0, 80.0)
+    spec = load_scene(write_scene(tmp_path / "d.xml", (left, right), None, targets, 16.0))
+    images = render_stereo(spec, spp=64, progress=False)[:2]
+    for img, cam in zip(images, spec.cameras):
+        expected = project(cam, spec.rig.port, targets)
+        assert np.allclose(expected, cam.project(targets), atol=1e-6)  # air: pinhole + dist
+        det = detect_targets(img)
+        inside = cam.in_image(expected, margin=8)
+        err, j = _match(det.centers, expected)
+        assert det.n_found >= inside.sum() and set(np.flatnonzero(inside)) <= set(j)
+        ok = np.isin(j, np.flatnonzero(inside))
+        dist_px = np.linalg.norm(err[ok], axis=1)
+        assert dist_px.max() <= 0.05, dist_px.max()
+        # the distortion is large enough to matter: the ideal pinhole is pixels away
+        ideal = Camera(cam.K, cam.size, R=cam.R, t=cam.t).project(targets)
+        assert np.abs(ideal - expected)[inside].max() > 2.0
+
+
+def test_image_encodings():
+    img = np.array([[0.0, 0.25], [0.5, 1.0]], dtype=np.float32)
+    scale = png16_scale(img, img * 0.5)
+    png = to_png16(img, scale)
+    assert png.dtype == np.uint16 and png.max() == 65535 and png[0, 1] == round(0.25 * 65535)
+    prev = srgb_preview(img)
+    assert prev.dtype == np.uint8 and prev[1, 1] == 255 and prev[1, 0] == 188  # sRGB(0.5)
