@@ -12,22 +12,11 @@ import pytest
 
 from synth.dataset import (PIXELS_HEADER, check_dataset, read_dataset, stereo_extrinsics,
                            write_dataset)
-from synth.layouts import grid_plane
 from synth.project import project
-from synth.rig import paper_cameras, paper_port
-from synth.scene import load_scene, write_scene
+from synth.scene import load_scene
 
-SMALL = (320, 268)
-SPP = 36
-
-
-@pytest.fixture(scope="module")
-def small_scene(tmp_path_factory):
-    """The paper's port, a 320x268 rig (f = 150 px), 9x9 targets 80 mm apart at 1 m."""
-    left, right = paper_cameras(SMALL, 150.0)
-    targets = grid_plane(1000.0, 320.0, 80.0) + np.array([3.0, -2.0, 0.0])
-    path = tmp_path_factory.mktemp("scene") / "small.xml"
-    return str(write_scene(path, (left, right), paper_port(), targets, 16.0, spp=SPP))
+from .conftest import SMALL_SCENE_SIZE as SMALL
+from .conftest import SMALL_SCENE_SPP as SPP
 
 
 @pytest.fixture(scope="module")

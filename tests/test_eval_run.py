@@ -1,0 +1,123 @@
+"""python -m eval run end to end on a small scene (a few targets, small images)."""
+
+from __future__ import annotations
+
+import json
+import os
+
+import numpy as np
+import open3d as o3d
+import pytest
+
+from eval.cli import main
+from synth.dataset import write_dataset
+
+SPP = 16
+
+
+@pytest.fixture(scope="module")
+def run_dir(small_scene, tmp_path_factory):
+    out = tmp_path_factory.mktemp("run") / "out"
+    assert main(["run", small_scene, "--out", str(out), "--spp", str(SPP), "--no-progress"]) == 0
+    return out
+
+
+def test_report_fields_and_numbers(run_dir):
+    report = json.loads((run_dir / "report.json").read_text())
+    assert report["targets"] == 81 and report["spp"] == SPP
+    for view in ("left", "right"):
+        assert set(report["detection"][view]) >= {"found", "rejected"}
+    matching = report["matching"]
+    # Every target wholly inside both images is matched, and no match is wrong.
+    assert matching["visible_in_both_matched"] == matching["visible_in_both"] > 0
+    assert matching["wrong"] == 0 and matching["pairs"] == matching["correct"]
+    assert report["crosscheck"]["rms_px"] < 0.1
+    methods = report["methods"]
+    assert set(methods) == {"optical_path", "su", "regular"}
+    for stats in methods.values():
+        assert set(stats) >= {"n", "rms_dp_mm", "max_dp_mm", "mean_dx_mm", "mean_dy_mm",
+                              "mean_dz_mm", "chamfer_mm", "fscore_1mm", "rms_dp_aligned_mm",
+                              "flatness_mm"}
+    # At f = 150 px a 0.05 px centroid error is ~0.5 mm of depth at 1 m: the optical path is
+    # accurate to a few mm, the regular method (which ignores the port) is off by ~300 mm.
+    assert methods["optical_path"]["rms_dp_mm"] < 3.0
+    assert methods["regular"]["rms_dp_mm"] > 50 * methods["optical_path"]["rms_dp_mm"]
+    assert methods["su"]["max_dp_mm"] > methods["optical_path"]["max_dp_mm"]
+    assert set(report["timings_s"]) >= {"render", "detect", "match", "triangulate", "evaluate", "total"}
+    assert report["variant"] and report["versions"]["numpy"]
+
+
+def test_figures_and_coloured_point_clouds(run_dir):
+    report = json.loads((run_dir / "report.json").read_text())
+    for name in ("report.md", "views.png", "error_maps.png", "histograms.png"):
+        assert (run_dir / name).stat().st_size > 1000
+    for method, ply in report["ply"].items():
+        cloud = o3d.io.read_point_cloud(str(run_dir / ply["file"]))
+        assert len(cloud.points) == ply["points"] == report["methods"][method]["n"]
+        assert cloud.has_colors() and ply["vmax_mm"] > 0
+
+
+def test_from_dataset_gives_the_same_measurement(small_scene, tmp_path, capsys):
+    data = tmp_path / "data"
+    write_dataset(small_scene, data, spp=SPP, progress=False)
+    out = tmp_path / "run"
+    assert main(["run", small_scene, "--from", str(data), "--out", str(out), "--json",
+                 "--no-progress", "--methods", "optical_path"]) == 0
+    printed = json.loads(capsys.readouterr().out)
+    assert printed["inputs"]["from"] == os.path.abspath(data)
+    assert printed["timings_s"]["render"] == 0.0 and list(printed["methods"]) == ["optical_path"]
+    assert printed["matching"]["wrong"] == 0
+
+
+def test_pixel_noise_option_is_seeded(small_scene, tmp_path):
+    reports = []
+    for name in ("a", "b"):
+        out = tmp_path / name
+        assert main(["run", small_scene, "--out", str(out), "--spp", "4", "--noise-px", "0.3",
+                     "--seed", "5", "--methods", "optical_path", "--no-progress"]) == 0
+        reports.append(json.loads((out / "report.json").read_text())["methods"]["optical_path"])
+    assert reports[0]["rms_dp_mm"] == reports[1]["rms_dp_mm"]
+
+
+@pytest.mark.parametrize("extra, fragment", [
+    (["--methods", "magic"], "magic"),
+    (["-D", "no_such_parameter=1"], "no_such_parameter"),
+    (["--depth-range", "5"], "--depth-range"),
+])
+def test_bad_arguments_exit_2_with_one_line(small_scene, tmp_path, capsys, extra, fragment):
+    out = tmp_path / "out"
+    assert main(["run", small_scene, "--out", str(out), "--no-progress", *extra]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("error:") and fragment in err[0]
+    assert not out.exists()
+
+
+def test_missing_or_malformed_scene(tmp_path, capsys):
+    bad = tmp_path / "bad.xml"
+    bad.write_text("<scene version='3.0.0'><sensor")
+    for scene in (str(tmp_path / "missing.xml"), str(bad)):
+        assert main(["run", scene, "--out", str(tmp_path / "out"), "--no-progress"]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and err[0].startswith("error:")
+    assert not (tmp_path / "out").exists()
+
+
+def test_unwritable_out(small_scene, tmp_path, capsys):
+    blocker = tmp_path / "file"
+    blocker.write_text("not a directory")
+    assert main(["run", small_scene, "--out", str(blocker / "out"), "--no-progress"]) == 2
+    assert capsys.readouterr().err.startswith("error: cannot write")
+
+
+def test_scene_with_no_visible_target(tmp_path, capsys):
+    from synth.rig import paper_cameras, paper_port
+    from synth.scene import write_scene
+
+    left, right = paper_cameras((320, 268), 150.0)
+    # Far off to the side: in the water, but in neither field of view.
+    scene = write_scene(tmp_path / "empty.xml", (left, right), paper_port(),
+                        np.array([[5000.0, 0.0, 1000.0]]), 10.0)
+    out = tmp_path / "out"
+    assert main(["run", str(scene), "--out", str(out), "--no-progress"]) == 2
+    assert "no target is visible" in capsys.readouterr().err
+    assert not out.exists()
