@@ -53,8 +53,9 @@ INDEX_METHODS = ("optical_path", "su")
 INDEX_SIDES = ("simulation", "measurement")
 COMPONENTS = ("dX", "dY", "dZ", "dP")
 
-PAPER_REFERENCE = ("G. Li et al., 'Underwater Stereo Vision Measurement Model Based on the Actual "
-                   "Light Propagation Path', J. Mar. Sci. Eng. 2024, 12, 1955")
+PAPER_REFERENCE = ("Li et al., 'Underwater Refractive Stereo Vision Measurement and Simulation "
+                   "Imaging Model Based on Optical Path', J. Mar. Sci. Eng. 2024, 12(11), 1955, "
+                   "doi:10.3390/jmse12111955")
 
 
 # --------------------------------------------------------------------------------------------

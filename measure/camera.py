@@ -136,9 +136,10 @@ class Camera:
         uv = np.asarray(uv, dtype=np.float64).reshape(-1, 2)
         fx, s, cx = self.K[0]
         fy, cy = self.K[1, 1], self.K[1, 2]
-        y = (uv[:, 1] - cy) / fy
-        x = (uv[:, 0] - cx - s * y) / fx
-        return self.undistort(np.stack([x, y], axis=1))
+        xy = np.empty_like(uv)
+        xy[:, 1] = (uv[:, 1] - cy) / fy
+        xy[:, 0] = (uv[:, 0] - cx - s * xy[:, 1]) / fx
+        return xy if self.dist is None else self.undistort(xy)
 
     def rays(self, uv: np.ndarray) -> np.ndarray:
         """Unit ray directions ``(N, 3)`` in the reference frame through pixels ``(N, 2)``.
@@ -146,9 +147,11 @@ class Camera:
         Every ray starts at :attr:`center`. This is the paper's ζ1 / ξ1 (equations 1-2).
         """
         xy = self.normalized(uv)
-        inverse_norm = 1.0 / np.sqrt(1.0 + xy[:, 0] ** 2 + xy[:, 1] ** 2)
+        x, y = xy[:, 0], xy[:, 1]
+        inverse_norm = 1.0 / np.sqrt(1.0 + x * x + y * y)
         d = np.empty((xy.shape[0], 3))
-        d[:, :2] = xy * inverse_norm[:, None]
+        np.multiply(x, inverse_norm, out=d[:, 0])
+        np.multiply(y, inverse_norm, out=d[:, 1])
         d[:, 2] = inverse_norm
         return d if self._identity_rotation else d @ self.R.T
 

@@ -85,7 +85,8 @@ def trace_through_port(origins: np.ndarray, directions: np.ndarray, port: FlatPo
     normal = port.normal
     indices = np.asarray(port.indices)
     cos_first = directions @ normal
-    tangential = directions - cos_first[:, None] * normal
+    tangential = np.multiply.outer(cos_first, normal)
+    np.subtract(directions, tangential, out=tangential)
     sin2_first = 1.0 - cos_first * cos_first
     heights = port.offsets - (origins @ normal)[..., None]  # (K,) or (N, K): O to each interface
     reason = np.zeros(n_rays, dtype=np.int8)
@@ -100,9 +101,10 @@ def trace_through_port(origins: np.ndarray, directions: np.ndarray, port: FlatPo
         for k in range(1, port.n_interfaces):
             step = heights[..., k] - heights[..., k - 1]
             advance.append(advance[-1] + step * eta[k - 1] / cos_media[k])
-        water_dirs = eta[-1] * tangential
-        water_dirs += cos_media[-1][:, None] * normal
-        position = origins + heights[..., -1, None] * normal + advance[-1][:, None] * tangential
+        water_dirs = np.multiply.outer(cos_media[-1], normal)
+        water_dirs += eta[-1] * tangential
+        position = advance[-1][:, None] * tangential
+        position += origins + heights[..., -1, None] * normal
         interface_points = None
         if keep_interface_points:
             interface_points = np.stack([origins + heights[..., k, None] * normal

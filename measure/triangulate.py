@@ -91,8 +91,10 @@ def _midpoint(origins1, dirs1, origins2, dirs2, reason):
 
 def _finish(perp, reason, method) -> Triangulation:
     bad = reason != Reason.OK
-    points = np.where(bad[:, None], np.nan, perp.midpoint)
-    gap = np.where(bad, np.nan, perp.length)
+    points, gap = perp.midpoint, perp.length
+    if bad.any():
+        points[bad] = np.nan
+        gap[bad] = np.nan
     return Triangulation(points, gap, reason, method)
 
 
@@ -103,7 +105,9 @@ def triangulate_rays(rig: StereoRig, rays_left: np.ndarray, rays_right: np.ndarr
         raise ValueError(f"method must be one of {', '.join(METHODS)}, got {method!r}")
     o_left, o_right = rig.left.center, rig.right.center
     reason = np.full(rays_left.shape[0], Reason.OK, dtype=np.int8)
-    invalid = ~(np.all(np.isfinite(rays_left), axis=1) & np.all(np.isfinite(rays_right), axis=1))
+    # A NaN or infinite component anywhere in a row makes the row's sum non-finite.
+    invalid = ~np.isfinite(rays_left[:, 0] + rays_left[:, 1] + rays_left[:, 2]
+                           + rays_right[:, 0] + rays_right[:, 1] + rays_right[:, 2])
     reason[invalid] = Reason.INVALID_INPUT
     if method == "regular":
         perp = _midpoint(o_left, rays_left, o_right, rays_right, reason)
