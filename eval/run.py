@@ -12,7 +12,7 @@ import os
 import sys
 import time
 
-from eval.cli import CLIError, prepare_output_dir
+from eval.cli import CLIError, positive_int, prepare_output_dir
 
 DEFAULT_METHODS = ("optical_path", "su", "regular")
 PLY_COLORMAP = "viridis"
@@ -27,7 +27,7 @@ def add_parser(subparsers):
     parser.add_argument("--out", default="out/run", help="output directory (default out/run)")
     parser.add_argument("--from", dest="from_dir", metavar="DIR",
                         help="reuse the images of a dataset written by python -m synth dataset")
-    parser.add_argument("--spp", type=int, help="samples per pixel (default: the scene's)")
+    parser.add_argument("--spp", type=positive_int, help="samples per pixel (default: the scene's)")
     parser.add_argument("--variant", help="Mitsuba variant (default: automatic)")
     parser.add_argument("--methods", default=",".join(DEFAULT_METHODS),
                         help="comma-separated triangulation methods (default: all three)")
@@ -98,8 +98,6 @@ def load_inputs(args, log):
                          {"from": os.path.abspath(args.from_dir)})
     from synth.render import render_stereo
 
-    if args.spp is not None and args.spp < 1:
-        raise CLIError(f"--spp must be a positive integer, got {args.spp}")
     log("render both views …")
     start = time.perf_counter()
     try:

@@ -14,6 +14,7 @@ import numpy as np
 from measure import detect_targets, triangulate
 from measure.matching import match_targets
 from synth.dataset import match_detections
+from synth.noise import add_pixel_noise
 from synth.project import project
 
 from .cloud_metrics import cloud_distances, flatness, rigid_alignment
@@ -105,7 +106,7 @@ def run_pipeline(inputs: RunInputs, methods, noise_px: float = 0.0, seed: int = 
     if noise_px > 0:
         rng = np.random.default_rng(seed)
         for name in ("left", "right"):
-            centers[name] = centers[name] + rng.normal(0.0, noise_px, centers[name].shape)
+            centers[name] = add_pixel_noise(centers[name], variance=noise_px ** 2, rng=rng)
 
     log("match left and right (refractive epipolar constraint) …")
     start = time.perf_counter()
