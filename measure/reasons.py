@@ -2,6 +2,8 @@
 
 from enum import IntEnum
 
+import numpy as np
+
 
 class Reason(IntEnum):
     """Why a row of a vectorized result is NaN. ``OK`` rows are valid."""
@@ -18,7 +20,5 @@ class Reason(IntEnum):
 
 def reason_counts(reasons) -> dict[str, int]:
     """Histogram of reason codes as ``{name: count}`` (names of the codes present only)."""
-    import numpy as np
-
     values, counts = np.unique(np.asarray(reasons), return_counts=True)
     return {Reason(int(v)).name: int(c) for v, c in zip(values, counts)}
