@@ -13,7 +13,7 @@ import numpy as np
 
 from measure import detect_targets, triangulate
 from measure.matching import match_targets
-from synth.dataset import match_detections
+from synth.dataset import match_detections, wholly_in_image
 from synth.noise import add_pixel_noise
 from synth.project import project
 
@@ -53,24 +53,10 @@ def default_depth_window(params: dict):
     return (DEPTH_WINDOW_FACTORS[0] * z, DEPTH_WINDOW_FACTORS[1] * z)
 
 
-def _image_margin(camera, points, radius_mm):
-    """How far (px) a target's image may reach from its centre: twice its pinhole radius + 2."""
-    z = camera.to_camera(points)[:, 2]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        radius_px = camera.K[0, 0] * radius_mm / np.where(z > 0, z, np.nan)
-    return 2.0 * np.nan_to_num(radius_px, nan=0.0) + 2.0
-
-
 def visible_targets(camera, port, targets, radius_mm):
     """Simulator pixels ``(N, 2)`` and whether each target lies wholly inside the image."""
     uv = project(camera, port, targets)
-    margin = _image_margin(camera, targets, radius_mm)
-    finite = np.all(np.isfinite(uv), axis=1)
-    inside = np.zeros(len(targets), dtype=bool)
-    w, h = camera.size
-    inside[finite] = ((uv[finite, 0] >= margin[finite] - 0.5) & (uv[finite, 0] <= w - 0.5 - margin[finite])
-                      & (uv[finite, 1] >= margin[finite] - 0.5) & (uv[finite, 1] <= h - 0.5 - margin[finite]))
-    return uv, inside
+    return uv, wholly_in_image(camera, uv, targets, radius_mm)
 
 
 def _error_stats(errors: np.ndarray) -> dict:

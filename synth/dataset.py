@@ -370,12 +370,22 @@ def match_detections(detected: np.ndarray, expected: np.ndarray, gate_px: float)
     return idx, dist
 
 
-def _expected_margin(camera: Camera, points: np.ndarray, radius_mm: float) -> np.ndarray:
-    """Pixels a target's image may reach from its centre: pinhole radius in air, doubled, +2."""
+def wholly_in_image(camera: Camera, uv: np.ndarray, points: np.ndarray,
+                    radius_mm: float) -> np.ndarray:
+    """Whether each target's image lies wholly inside the image, ``(N,)`` bool.
+
+    ``uv`` are the simulator's pixels of the target centres ``points`` (NaN where none). A
+    target's image may reach twice its pinhole radius (``f · radius / z``, the port magnifies it)
+    plus 2 px from its centre; it must stay that far from the border.
+    """
     z = camera.to_camera(points)[:, 2]
     with np.errstate(divide="ignore", invalid="ignore"):
-        r_px = camera.K[0, 0] * radius_mm / np.where(z > 0, z, np.nan)
-    return 2.0 * np.nan_to_num(r_px, nan=0.0) + 2.0
+        radius_px = camera.K[0, 0] * radius_mm / np.where(z > 0, z, np.nan)
+    margin = 2.0 * np.nan_to_num(radius_px, nan=0.0) + 2.0
+    w, h = camera.size
+    with np.errstate(invalid="ignore"):
+        return ((uv[:, 0] >= margin - 0.5) & (uv[:, 0] <= w - 0.5 - margin)
+                & (uv[:, 1] >= margin - 0.5) & (uv[:, 1] <= h - 0.5 - margin))
 
 
 def check_dataset(path, rms_px: float = CHECK_RMS_PX, max_px: float = CHECK_MAX_PX,
@@ -400,11 +410,7 @@ def check_dataset(path, rms_px: float = CHECK_RMS_PX, max_px: float = CHECK_MAX_
     for name, img, camera, expected in (("left", data.left, data.rig.left, data.pixels_left),
                                         ("right", data.right, data.rig.right, data.pixels_right)):
         det = detect_targets(img)
-        margin = _expected_margin(camera, data.targets, radius)
-        finite = np.all(np.isfinite(expected), axis=1)
-        inside = finite.copy()
-        inside[finite] = [camera.in_image(p[None], m)[0]
-                          for p, m in zip(expected[finite], margin[finite])]
+        inside = wholly_in_image(camera, expected, data.targets, radius)
         idx, dist = match_detections(det.centers, expected, gate_px)
         matched = idx >= 0
         found_ids = set(idx[matched].tolist())
