@@ -110,19 +110,6 @@ def load_inputs(args, log):
                      time.perf_counter() - start, {"render": info})
 
 
-def _versions() -> dict:
-    from importlib.metadata import PackageNotFoundError, version
-
-    out = {"python": sys.version.split()[0]}
-    for name in ("numpy", "scipy", "opencv-python-headless", "mitsuba", "drjit", "open3d-cpu",
-                 "open3d", "matplotlib"):
-        try:
-            out[name] = version(name)
-        except PackageNotFoundError:
-            pass
-    return out
-
-
 def _fmt(value, digits=3):
     if value is None or (isinstance(value, float) and value != value):
         return "–"
@@ -203,6 +190,7 @@ def main(args) -> int:
 
     import numpy as np
 
+    from synth.dataset import package_versions
     from synth.fileio import staged_dir
 
     from . import run_figures
@@ -232,7 +220,7 @@ def main(args) -> int:
             run_figures.histograms_figure(os.path.join(tmp, "histograms.png"), arrays["per_method"])
             report["timings_s"]["report"] = time.perf_counter() - t
             report["timings_s"]["total"] = time.perf_counter() - start
-            report["versions"] = _versions()
+            report["versions"] = package_versions()
             report["inputs"] = jsonable(inputs.extra)
             report = jsonable(report)
             with open(os.path.join(tmp, "report.json"), "w") as handle:

@@ -169,12 +169,13 @@ def read_pixels_csv(path) -> dict:
             "right": rows[:, 6:8]}
 
 
-def _versions() -> dict:
+def package_versions() -> dict:
+    """Versions of Python, the platform and the packages a result depends on (for manifests)."""
     import importlib.metadata as md
 
     out = {"python": platform.python_version(), "platform": platform.platform()}
     for dist in ("refractive-stereo", "numpy", "scipy", "opencv-python-headless",
-                 "opencv-python", "mitsuba", "drjit", "open3d-cpu", "open3d", "tqdm"):
+                 "opencv-python", "mitsuba", "drjit", "open3d-cpu", "open3d", "matplotlib", "tqdm"):
         try:
             out[dist] = md.version(dist)
         except md.PackageNotFoundError:
@@ -273,7 +274,7 @@ def write_dataset(scene, out_dir, spp: int | None = None, defines: dict | None =
             "format_version": FORMAT_VERSION,
             "created_utc": datetime.now(timezone.utc).isoformat(timespec="seconds"),
             "request_key": key,
-            "versions": _versions(),
+            "versions": package_versions(),
             "scene": {"path": spec.path, "sha256": spec.sha256, "params": spec.params,
                       "has_port": spec.has_port, "n_targets": int(spec.targets.shape[0]),
                       "target_radius_mm": spec.target_radius},
