@@ -8,14 +8,16 @@ directory appears whole or not at all. See the README for the report's fields.
 from __future__ import annotations
 
 import json
+import math
 import os
 import sys
 import time
 
-from eval.cli import CLIError, positive_int, prepare_output_dir
+from eval.cli import CLIError, non_negative_float, non_negative_int, positive_float, positive_int
 
 DEFAULT_METHODS = ("optical_path", "su", "regular")
 PLY_COLORMAP = "viridis"
+COMMAND = "eval run"
 
 
 def add_parser(subparsers):
@@ -24,17 +26,22 @@ def add_parser(subparsers):
         description="Render SCENE (or reuse --from DIR), detect and match the targets without "
                     "ground truth, triangulate with each method and score against the truth.")
     parser.add_argument("scene", help="Mitsuba scene file (e.g. scenes/paper_plane.xml)")
-    parser.add_argument("--out", default="out/run", help="output directory (default out/run)")
+    parser.add_argument("--out", default="out/run",
+                        help="output directory (default out/run); an existing one is replaced "
+                             "only if it is an earlier output of eval run")
     parser.add_argument("--from", dest="from_dir", metavar="DIR",
                         help="reuse the images of a dataset written by python -m synth dataset")
     parser.add_argument("--spp", type=positive_int, help="samples per pixel (default: the scene's)")
     parser.add_argument("--variant", help="Mitsuba variant (default: automatic)")
     parser.add_argument("--methods", default=",".join(DEFAULT_METHODS),
                         help="comma-separated triangulation methods (default: all three)")
-    parser.add_argument("--noise-px", type=float, default=0.0,
+    parser.add_argument("--noise-px", type=non_negative_float, default=0.0,
                         help="Gaussian noise σ (px) added to the detected centres (default 0)")
-    parser.add_argument("--seed", type=int, default=0, help="seed of the added noise and RANSAC")
-    parser.add_argument("--gate-mm", type=float, default=0.5,
+    parser.add_argument("--seed", type=non_negative_int, default=None,
+                        help="the run's one seed: the scene's seed (same as -D seed=S; with "
+                             "--from, the dataset's images are used as they are), the added "
+                             "noise and the plane fit (default: the scene's seed)")
+    parser.add_argument("--gate-mm", type=positive_float, default=0.5,
                         help="largest common-perpendicular length of a matched pair (mm, default 0.5)")
     parser.add_argument("--depth-range", metavar="NEAR,FAR",
                         help="working range along the port normal (mm); default: the scene's "
@@ -48,7 +55,7 @@ def add_parser(subparsers):
 def _parse_methods(text: str):
     from measure import METHODS
 
-    methods = tuple(m.strip() for m in text.split(",") if m.strip())
+    methods = tuple(dict.fromkeys(m.strip() for m in text.split(",") if m.strip()))
     unknown = [m for m in methods if m not in METHODS]
     if not methods or unknown:
         raise CLIError(f"unknown method {', '.join(unknown) or repr(text)} in --methods "
@@ -63,51 +70,82 @@ def _parse_range(text):
         near, far = (float(v) for v in text.split(","))
     except ValueError:
         raise CLIError(f"--depth-range must be NEAR,FAR in mm, got {text!r}") from None
-    if not 0 <= near < far:
-        raise CLIError(f"--depth-range must satisfy 0 <= NEAR < FAR, got {text!r}")
+    if not (math.isfinite(near) and math.isfinite(far) and 0 <= near < far):
+        raise CLIError(f"--depth-range must satisfy 0 <= NEAR < FAR (finite), got {text!r}")
     return near, far
+
+
+def _same_value(a: str, b: str) -> bool:
+    """Whether two parameter values (text) mean the same: equal numbers, or equal text."""
+    import numpy as np
+
+    try:
+        x = np.array([float(v) for v in str(a).replace(",", " ").split()])
+        y = np.array([float(v) for v in str(b).replace(",", " ").split()])
+        return x.shape == y.shape and bool(np.array_equal(x, y))
+    except ValueError:
+        return str(a).strip() == str(b).strip()
+
+
+def _dataset_params(args, defines: dict) -> dict:
+    """The parameters the dataset of ``--from`` was rendered with; a conflicting ``-D`` is an
+    error naming both values."""
+    from synth.dataset import read_manifest
+
+    params = {str(k): str(v) for k, v in read_manifest(args.from_dir)["scene"]["params"].items()}
+    for name, value in defines.items():
+        if name in params and not _same_value(value, params[name]):
+            raise CLIError(f"-D {name}={value} conflicts with --from {args.from_dir}, rendered "
+                           f"with {name}={params[name]}")
+    return params
 
 
 def load_inputs(args, log):
     """The scene (rig and truth) and its two images, rendered now or read from ``--from``."""
-    from synth.dataset import DatasetError, read_dataset
-    from synth.scene import SceneError, load_scene, parse_defines
+    from synth.dataset import read_dataset
+    from synth.scene import load_scene, parse_defines
 
     from .run_pipeline import RunInputs, visible_targets
 
-    try:
-        spec = load_scene(args.scene, parse_defines(args.defines))
-    except SceneError as exc:
-        raise CLIError(str(exc)) from None
+    defines = parse_defines(args.defines)
+    if args.seed is not None and "seed" in defines and not _same_value(defines["seed"], args.seed):
+        raise CLIError(f"--seed {args.seed} conflicts with -D seed={defines['seed']}")
+    if args.from_dir:
+        params = _dataset_params(args, defines)
+        spec = load_scene(args.scene, params)
+    else:
+        if args.seed is not None:
+            defines["seed"] = str(args.seed)
+        spec = load_scene(args.scene, defines)
+    seed = spec.seed if args.seed is None else args.seed
     in_left = visible_targets(spec.rig.left, spec.rig.port, spec.targets, spec.target_radius)[1]
     in_right = visible_targets(spec.rig.right, spec.rig.port, spec.targets, spec.target_radius)[1]
     if not (in_left & in_right).any():
         raise CLIError(f"{args.scene}: no target is visible in both views")
     if args.from_dir:
-        try:
-            data = read_dataset(args.from_dir)
-        except (DatasetError, OSError, KeyError) as exc:
-            raise CLIError(f"--from {args.from_dir}: {exc}") from None
-        if data.manifest.get("scene", {}).get("sha256") != spec.sha256:
+        data = read_dataset(args.from_dir)
+        if data.manifest["scene"].get("sha256") != spec.sha256:
             raise CLIError(f"--from {args.from_dir}: the dataset was rendered from another scene "
                            f"than {args.scene}")
         log(f"reusing the images of {args.from_dir}")
         return RunInputs(args.scene, spec.rig, spec.has_port, spec.targets, spec.target_ids,
                          spec.target_radius, data.left, data.right, spec.params,
                          data.manifest.get("variant", "?"), int(data.manifest.get("spp", 0)), 0.0,
-                         {"from": os.path.abspath(args.from_dir)})
-    from synth.render import render_stereo
+                         seed, {"from": os.path.abspath(args.from_dir),
+                                "from_seed": data.manifest.get("seed")})
+    from synth.render import check_render_request, render_stereo
 
+    check_render_request(spec, args.spp)
     log("render both views …")
     start = time.perf_counter()
-    try:
-        left, right, info = render_stereo(spec, spp=args.spp, variant=args.variant,
-                                          progress=not args.no_progress)
-    except (SceneError, ValueError) as exc:
-        raise CLIError(str(exc)) from None
+    left, right, info = render_stereo(spec, spp=args.spp, variant=args.variant,
+                                      progress=not args.no_progress)
+    timings = {"render_left": info["seconds"]["left"], "render_right": info["seconds"]["right"],
+               "render_samples_per_second": info["samples_per_second"]}
+    render = {k: v for k, v in info.items() if k not in ("seconds", "samples_per_second")}
     return RunInputs(args.scene, spec.rig, spec.has_port, spec.targets, spec.target_ids,
                      spec.target_radius, left, right, spec.params, info["variant"], info["spp"],
-                     time.perf_counter() - start, {"render": info})
+                     time.perf_counter() - start, seed, {"render": render, "timings": timings})
 
 
 def _fmt(value, digits=3):
@@ -172,64 +210,55 @@ def report_markdown(report: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
+def write_outputs(tmp: str, inputs, report: dict, arrays: dict) -> None:
+    """The PLY files (their entries go into ``report["ply"]``) and figures of a run, into
+    directory ``tmp``."""
+    import numpy as np
+
+    from . import run_figures
+    from .cloud_metrics import write_colored_ply
+
+    report["ply"] = {}
+    for method, data in arrays["per_method"].items():
+        dp = np.linalg.norm(data["errors"], axis=1)
+        vmax = float(dp.max()) if dp.size else 1.0
+        name = f"points_{method}.ply"
+        write_colored_ply(os.path.join(tmp, name), data["points"], dp, vmax, PLY_COLORMAP)
+        report["ply"][method] = {"file": name, "colormap": PLY_COLORMAP, "vmin_mm": 0.0,
+                                 "vmax_mm": vmax, "points": int(dp.size)}
+    run_figures.views_figure(os.path.join(tmp, "views.png"), inputs.left, inputs.right, arrays)
+    run_figures.error_maps_figure(os.path.join(tmp, "error_maps.png"), arrays["per_method"])
+    run_figures.histograms_figure(os.path.join(tmp, "histograms.png"), arrays["per_method"])
+
+
 def main(args) -> int:
-    from .paper_report import jsonable
+    from synth.fileio import OutputDir, atomic_write_json, atomic_write_text, jsonable
 
     quiet = args.no_progress
     log = (lambda text: None) if quiet else (lambda text: print(text, file=sys.stderr, flush=True))
     methods = _parse_methods(args.methods)
     depth_window = _parse_range(args.depth_range)
-    if not args.gate_mm > 0:
-        raise CLIError(f"--gate-mm must be positive, got {args.gate_mm}")
-    if args.noise_px < 0:
-        raise CLIError(f"--noise-px must be >= 0, got {args.noise_px}")
-    out = os.path.abspath(args.out)
-    prepare_output_dir(os.path.dirname(out))
+    output = OutputDir(args.out, COMMAND).claim()  # before any expensive work
     start = time.perf_counter()
     inputs = load_inputs(args, log)
 
-    import numpy as np
+    from synth.provenance import package_versions
 
-    from synth.dataset import package_versions
-    from synth.fileio import staged_dir
-
-    from . import run_figures
-    from .cloud_metrics import write_colored_ply
     from .run_pipeline import run_pipeline
 
-    report, arrays = run_pipeline(inputs, methods, args.noise_px, args.seed, args.gate_mm,
-                                  depth_window, log)
-    if report["matching"]["pairs"] == 0:
-        raise CLIError(f"{args.scene}: no target was matched between the views "
-                       f"(detected {report['detection']['left']['found']} left, "
-                       f"{report['detection']['right']['found']} right)")
+    report, arrays = run_pipeline(inputs, methods, args.noise_px, args.gate_mm, depth_window, log)
     log("write the report, figures and point clouds …")
     t = time.perf_counter()
-    try:
-        with staged_dir(out) as tmp:
-            report["ply"] = {}
-            for method, data in arrays["per_method"].items():
-                dp = np.linalg.norm(data["errors"], axis=1)
-                vmax = float(dp.max()) if dp.size else 1.0
-                name = f"points_{method}.ply"
-                write_colored_ply(os.path.join(tmp, name), data["points"], dp, vmax, PLY_COLORMAP)
-                report["ply"][method] = {"file": name, "colormap": PLY_COLORMAP, "vmin_mm": 0.0,
-                                         "vmax_mm": vmax, "points": int(dp.size)}
-            run_figures.views_figure(os.path.join(tmp, "views.png"), inputs.left, inputs.right, arrays)
-            run_figures.error_maps_figure(os.path.join(tmp, "error_maps.png"), arrays["per_method"])
-            run_figures.histograms_figure(os.path.join(tmp, "histograms.png"), arrays["per_method"])
-            report["timings_s"]["report"] = time.perf_counter() - t
-            report["timings_s"]["total"] = time.perf_counter() - start
-            report["versions"] = package_versions()
-            report["inputs"] = jsonable(inputs.extra)
-            report = jsonable(report)
-            with open(os.path.join(tmp, "report.json"), "w") as handle:
-                json.dump(report, handle, indent=2)
-                handle.write("\n")
-            with open(os.path.join(tmp, "report.md"), "w") as handle:
-                handle.write(report_markdown(report))
-    except OSError as exc:
-        raise CLIError(f"cannot write to --out {args.out!r}: {exc.strerror or exc}") from None
+    with output.staged() as tmp:
+        report["versions"] = package_versions()
+        report["inputs"] = inputs.extra
+        write_outputs(tmp, inputs, report, arrays)
+        report["timings_s"]["report"] = time.perf_counter() - t
+        report["timings_s"]["total"] = time.perf_counter() - start
+        report = jsonable(report)
+        atomic_write_json(os.path.join(tmp, "report.json"), report)
+        atomic_write_text(os.path.join(tmp, "report.md"), report_markdown(report))
+    out = output.path
     summary_stream = sys.stderr if args.json else sys.stdout
     m, c = report["matching"], report["crosscheck"]
     print(f"{report['scene']}: {m['visible_in_both']} targets visible in both views, "

@@ -10,8 +10,7 @@ import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
-METHOD_LABELS = {"optical_path": "optical path (Li et al.)", "su": "Su's method",
-                 "regular": "regular (ignores the port)"}
+from .results import method_label
 
 
 def _save(fig: Figure, path: str) -> None:
@@ -85,7 +84,7 @@ def error_maps_figure(path, per_method) -> None:
             fig.colorbar(area, ax=ax, label=f"{name} [mm]")
             ax.set_aspect("equal")
             ax.invert_yaxis()
-            ax.set_title(f"{METHOD_LABELS.get(method, method)}: {name}", fontsize=9)
+            ax.set_title(f"{method_label(method)}: {name}", fontsize=9)
             ax.set_xlabel("X [mm]")
             ax.set_ylabel("Y [mm] (down)")
     fig.tight_layout()
@@ -104,7 +103,7 @@ def histograms_figure(path, per_method) -> None:
             ax.hist(values, bins=40, density=True, color="C0" if method == "optical_path" else "C1")
             ax.axvline(values.mean(), color="k", linewidth=1,
                        label=f"mean {values.mean():+.3f} mm, σ {values.std():.3f} mm")
-            ax.set_title(f"{METHOD_LABELS.get(method, method)}: d{axis_name}", fontsize=9)
+            ax.set_title(f"{method_label(method)}: d{axis_name}", fontsize=9)
             ax.set_xlabel(f"d{axis_name} [mm]")
             ax.set_ylabel("density [1/mm]")
             ax.legend(fontsize=7)

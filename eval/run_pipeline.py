@@ -1,5 +1,8 @@
 """The stages of ``python -m eval run``: images → detections → matches → 3D → scores.
 
+Each stage is one function: :func:`detect_stage`, :func:`match_stage`,
+:func:`triangulate_stage`, :func:`score_stage`; :func:`run_pipeline` chains them.
+
 Frames and units: the reference frame is the left camera's (OpenCV axes), millimetres, pixels
 in the OpenCV convention. Ground truth is used only after matching, to score.
 """
@@ -13,21 +16,29 @@ import numpy as np
 
 from measure import detect_targets, triangulate
 from measure.matching import match_targets
-from synth.dataset import match_detections, wholly_in_image
+from synth.crosscheck import (ASSOCIATION_GATE_PX, associate_detections, distance_stats,
+                              wholly_in_image)
 from synth.noise import add_pixel_noise
 from synth.project import project
 
 from .cloud_metrics import cloud_distances, flatness, rigid_alignment
+from .results import ErrorStats
 
-#: Pixels between a detection and the simulator's pixel of a target for them to be associated.
-ASSOCIATION_GATE_PX = 2.0
 #: The default working range around the scene's ``target_z``: ``(near, far)`` factors.
 DEPTH_WINDOW_FACTORS = (0.8, 1.25)
 
 
+class NothingMatched(ValueError):
+    """No pair of detections passed the matching: nothing to measure (a user-facing error)."""
+
+
 @dataclass
 class RunInputs:
-    """What the pipeline starts from: a rig, two linear images, and (for scoring) the truth."""
+    """What the pipeline starts from: a rig, two linear images, and (for scoring) the truth.
+
+    ``rig`` is what the measurement believes; ``targets`` ``(N, 3)`` mm the true centres;
+    ``left``/``right`` float32 linear images ``(H, W)``; ``params`` the scene's resolved
+    parameters; ``seed`` the run's one seed (images, added noise, RANSAC)."""
 
     scene: str
     rig: object
@@ -41,7 +52,28 @@ class RunInputs:
     variant: str
     spp: int
     render_seconds: float
+    seed: int = 0
     extra: dict = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class MethodScores:
+    """How one triangulation method did. ``errors``: per-target error statistics over the
+    correctly matched targets (mm); ``cloud``: Open3D cloud distances (Chamfer mm, precision /
+    recall / F-score at 1 and 5 mm); ``alignment``: the errors left after the best rigid
+    alignment (mm, degrees); ``flatness``: RMS and peak-to-valley distance to the fitted plane
+    (mm); ``invalid``: matched pairs with no triangulation."""
+
+    errors: ErrorStats
+    cloud: dict
+    alignment: dict
+    flatness: dict
+    invalid: int
+
+    def to_json(self) -> dict:
+        flat = {k: v for k, v in self.flatness.items() if k != "plane"}
+        return {**self.errors.to_json(), **self.cloud, **self.alignment, **flat,
+                "plane": self.flatness.get("plane"), "invalid": self.invalid}
 
 
 def default_depth_window(params: dict):
@@ -59,75 +91,57 @@ def visible_targets(camera, port, targets, radius_mm):
     return uv, wholly_in_image(camera, uv, targets, radius_mm)
 
 
-def _error_stats(errors: np.ndarray) -> dict:
-    if len(errors) == 0:
-        nan = float("nan")
-        return {"n": 0, "rms_dp_mm": nan, "max_dp_mm": nan, "mean_dx_mm": nan, "mean_dy_mm": nan,
-                "mean_dz_mm": nan, "rms_dx_mm": nan, "rms_dy_mm": nan, "rms_dz_mm": nan}
-    dp = np.linalg.norm(errors, axis=1)
-    return {"n": int(len(errors)), "rms_dp_mm": float(np.sqrt(np.mean(dp ** 2))),
-            "max_dp_mm": float(dp.max()),
-            "mean_dx_mm": float(errors[:, 0].mean()), "mean_dy_mm": float(errors[:, 1].mean()),
-            "mean_dz_mm": float(errors[:, 2].mean()),
-            "rms_dx_mm": float(np.sqrt(np.mean(errors[:, 0] ** 2))),
-            "rms_dy_mm": float(np.sqrt(np.mean(errors[:, 1] ** 2))),
-            "rms_dz_mm": float(np.sqrt(np.mean(errors[:, 2] ** 2)))}
-
-
-def run_pipeline(inputs: RunInputs, methods, noise_px: float = 0.0, seed: int = 0,
-                 gate_mm: float = 0.5, depth_window=None, log=print):
-    """Run detection, matching, triangulation and scoring. Returns ``(report, arrays)``.
-
-    ``report`` is the JSON-ready dict (without versions and total timing); ``arrays`` holds what
-    the figures and PLY files need.
-    """
-    timings = {"render": inputs.render_seconds}
-    rig = inputs.rig
-
-    log("detect targets in both views …")
-    start = time.perf_counter()
+def detect_stage(inputs: RunInputs, noise_px: float):
+    """Detections per view and their centres ``(M, 2)`` px, with Gaussian noise of σ
+    ``noise_px`` added (seeded by ``inputs.seed``)."""
     detections = {"left": detect_targets(inputs.left), "right": detect_targets(inputs.right)}
-    timings["detect"] = time.perf_counter() - start
-    centers = {name: np.array(d.centers, dtype=float) for name, d in detections.items()}
+    centers = {name: np.array(d.centers, dtype=float).reshape(-1, 2)
+               for name, d in detections.items()}
     if noise_px > 0:
-        rng = np.random.default_rng(seed)
+        rng = np.random.default_rng(inputs.seed)
         for name in ("left", "right"):
             centers[name] = add_pixel_noise(centers[name], variance=noise_px ** 2, rng=rng)
+    return detections, centers
 
-    log("match left and right (refractive epipolar constraint) …")
-    start = time.perf_counter()
+
+def match_stage(inputs: RunInputs, centers, gate_mm: float, depth_window):
+    """Left–right pairs without ground truth (refractive epipolar gap, depth window)."""
     window = default_depth_window(inputs.params) if depth_window is None else tuple(depth_window)
-    matches = match_targets(rig, centers["left"], centers["right"], gate_mm=gate_mm,
+    matches = match_targets(inputs.rig, centers["left"], centers["right"], gate_mm=gate_mm,
                             depth_range=window)
-    timings["match"] = time.perf_counter() - start
+    return matches, window
 
-    log(f"triangulate {len(matches.left)} pairs with {', '.join(methods)} …")
-    start = time.perf_counter()
+
+def triangulate_stage(inputs: RunInputs, centers, matches, methods):
+    """``{method: Triangulation}`` of the matched pairs."""
     uv_left = centers["left"][matches.left]
     uv_right = centers["right"][matches.right]
-    results = {m: triangulate(rig, uv_left, uv_right, m) for m in methods}
-    timings["triangulate"] = time.perf_counter() - start
+    return {m: triangulate(inputs.rig, uv_left, uv_right, m) for m in methods}
 
-    log("score against the ground truth (Open3D) …")
-    start = time.perf_counter()
-    # Association with the truth, for scoring only: nearest simulator pixel per view.
-    simulated, inside, truth_of = {}, {}, {}
-    crosscheck, distances = {}, []
+
+def _associate_truth(inputs: RunInputs, detections):
+    """Per view: simulator pixels, visibility, truth index per detection, cross-check stats."""
+    simulated, inside, truth_of, crosscheck, distances = {}, {}, {}, {}, []
+    rig = inputs.rig
     for name, camera in (("left", rig.left), ("right", rig.right)):
         simulated[name], inside[name] = visible_targets(camera, rig.port, inputs.targets,
                                                         inputs.target_radius)
-        index, distance = match_detections(np.asarray(detections[name].centers),
-                                           simulated[name], ASSOCIATION_GATE_PX)
+        index, distance = associate_detections(np.asarray(detections[name].centers),
+                                               simulated[name], ASSOCIATION_GATE_PX)
         truth_of[name] = index
         d = distance[index >= 0]
         distances.append(d)
-        crosscheck[name] = {"associated": int(d.size),
-                            "rms_px": float(np.sqrt(np.mean(d ** 2))) if d.size else float("nan"),
-                            "max_px": float(d.max()) if d.size else float("nan")}
-    all_d = np.concatenate(distances)
-    crosscheck.update({"rms_px": float(np.sqrt(np.mean(all_d ** 2))) if all_d.size else float("nan"),
-                       "max_px": float(all_d.max()) if all_d.size else float("nan")})
+        stats = distance_stats(d)
+        crosscheck[name] = {"associated": stats["n"], "rms_px": stats["rms_px"],
+                            "max_px": stats["max_px"]}
+    both = distance_stats(np.concatenate(distances))
+    crosscheck.update({"rms_px": both["rms_px"], "max_px": both["max_px"]})
+    return simulated, inside, truth_of, crosscheck
 
+
+def score_stage(inputs: RunInputs, detections, matches, window, results, gate_mm: float):
+    """Associate detections with the truth (for scoring only) and score every method."""
+    simulated, inside, truth_of, crosscheck = _associate_truth(inputs, detections)
     pair_truth_left = truth_of["left"][matches.left]
     pair_truth_right = truth_of["right"][matches.right]
     correct = (pair_truth_left >= 0) & (pair_truth_left == pair_truth_right)
@@ -149,35 +163,84 @@ def run_pipeline(inputs: RunInputs, methods, noise_px: float = 0.0, seed: int = 
                   "in_neither": int((~inside["left"] & ~inside["right"]).sum())}
 
     truth_visible = inputs.targets[visible_both]
-    method_reports, per_method = {}, {}
+    scores, per_method = {}, {}
     for method, result in results.items():
         ok = correct & result.valid
         truth = inputs.targets[pair_truth_left[ok]]
         errors = result.points[ok] - truth
-        stats = _error_stats(errors)
         measured_all = result.points[result.valid]
-        stats.update(cloud_distances(measured_all, truth_visible))
-        stats.update(rigid_alignment(result.points[ok], truth))
-        stats.update(flatness(measured_all, seed=seed))
-        stats["invalid"] = int((~result.valid).sum())
-        method_reports[method] = stats
+        scores[method] = MethodScores(
+            errors=ErrorStats.of(errors), cloud=cloud_distances(measured_all, truth_visible),
+            alignment=rigid_alignment(result.points[ok], truth),
+            flatness=flatness(measured_all, seed=inputs.seed),
+            invalid=int((~result.valid).sum()))
         per_method[method] = {"points": result.points[ok], "truth": truth, "errors": errors,
                               "all_points": measured_all}
+    return {"matching": matching, "visibility": visibility, "crosscheck": crosscheck,
+            "scores": scores, "per_method": per_method, "correct": correct,
+            "simulated": simulated}
+
+
+def nothing_matched_message(inputs: RunInputs, detections, window) -> str:
+    near, far = window
+    window_text = ("no depth window" if near is None
+                   else f"the depth window {near:g}-{far:g} mm")
+    found = {name: detections[name].n_found for name in ("left", "right")}
+    if min(found.values()) == 0:
+        cause = ("check that targets are lit and large enough (target_radius), that the scene "
+                 "renders (max_depth >= 2 through a port) and spp")
+    else:
+        cause = (f"check the water index (n_water) and port the measurement assumes, "
+                 f"{window_text} (--depth-range) and --gate-mm")
+    return (f"{inputs.scene}: no target was matched between the views (detected {found['left']} "
+            f"left, {found['right']} right): {cause}")
+
+
+def run_pipeline(inputs: RunInputs, methods, noise_px: float = 0.0, gate_mm: float = 0.5,
+                 depth_window=None, log=print):
+    """Run detection, matching, triangulation and scoring. Returns ``(report, arrays)``.
+
+    Raises :class:`NothingMatched` when no pair is matched. ``report`` is the JSON-ready dict
+    (without versions and total timing); ``arrays`` holds what the figures and PLY files need.
+    """
+    timings = {"render": inputs.render_seconds, **inputs.extra.pop("timings", {})}
+
+    log("detect targets in both views …")
+    start = time.perf_counter()
+    detections, centers = detect_stage(inputs, noise_px)
+    timings["detect"] = time.perf_counter() - start
+
+    log("match left and right (refractive epipolar constraint) …")
+    start = time.perf_counter()
+    matches, window = match_stage(inputs, centers, gate_mm, depth_window)
+    timings["match"] = time.perf_counter() - start
+    if len(matches.left) == 0:
+        raise NothingMatched(nothing_matched_message(inputs, detections, window))
+
+    log(f"triangulate {len(matches.left)} pairs with {', '.join(methods)} …")
+    start = time.perf_counter()
+    results = triangulate_stage(inputs, centers, matches, methods)
+    timings["triangulate"] = time.perf_counter() - start
+
+    log("score against the ground truth (Open3D) …")
+    start = time.perf_counter()
+    scored = score_stage(inputs, detections, matches, window, results, gate_mm)
     timings["evaluate"] = time.perf_counter() - start
 
     report = {
         "scene": inputs.scene, "targets": int(len(inputs.targets)),
-        "visibility": visibility,
+        "visibility": scored["visibility"],
         "detection": {name: {"found": int(d.n_found), "rejected": int(d.n_rejected),
                              "rejected_by_reason": {k: int(v) for k, v in d.rejected.items()}}
                       for name, d in detections.items()},
-        "crosscheck": crosscheck,
-        "matching": matching,
-        "methods": method_reports,
-        "noise_px": noise_px, "seed": seed,
+        "crosscheck": scored["crosscheck"],
+        "matching": scored["matching"],
+        "methods": {m: s.to_json() for m, s in scored["scores"].items()},
+        "noise_px": noise_px, "seed": inputs.seed,
         "timings_s": timings,
         "variant": inputs.variant, "spp": inputs.spp,
     }
     arrays = {"detections": detections, "centers": centers, "matches": matches,
-              "correct": correct, "per_method": per_method, "simulated": simulated}
+              "correct": scored["correct"], "per_method": scored["per_method"],
+              "simulated": scored["simulated"], "scores": scored["scores"]}
     return report, arrays

@@ -7,36 +7,32 @@ Subcommands::
     python -m synth dataset SCENE --out DIR [--spp N] [--variant V] [--exr] [-D name=value ...]
     python -m synth check   DIR [--rms PX] [--max PX] [--json]
 
-Bad input (missing or malformed scene, wrong structure, unknown ``-D``, bad option) prints one
-line ``python -m synth <cmd>: error: ...`` and exits with code 2; ``check`` exits with 1 when the
-dataset is outside the bounds.
+Bad input (missing or malformed scene, wrong structure, unknown ``-D``, bad option, an ``--out``
+holding files this command did not write) prints one line ``error: ...`` and exits with code 2;
+``check`` exits with 1 when the dataset is outside the bounds; 130 when interrupted
+(:mod:`synth.cli`, shared with ``python -m eval``). Output directories follow
+:class:`synth.fileio.OutputDir`: whole or not at all, never over someone else's files.
 """
 
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import sys
 import time
 
+from .cli import (CLIError, Parser, any_float, non_negative_float, non_negative_int,
+                  positive_float, positive_int, run_command)
+
 PROG = "python -m synth"
-
-
-class _Fail(Exception):
-    """A user error: printed as one line, exit code 2."""
-
-
-class _Parser(argparse.ArgumentParser):
-    def error(self, message):  # one line instead of usage + error
-        raise _Fail(f"{self.prog}: error: {message}")
 
 
 def _add_render_options(p):
     p.add_argument("scene", help="Mitsuba 3 scene file written by `python -m synth scene`")
     p.add_argument("--out", required=True, help="output directory")
-    p.add_argument("--spp", type=int, help="samples per pixel (default: the scene's spp)")
-    p.add_argument("--seed", type=int, help="sampler seed (default: the scene's seed)")
+    p.add_argument("--spp", type=positive_int, help="samples per pixel (default: the scene's spp)")
+    p.add_argument("--seed", type=non_negative_int,
+                   help="the scene's seed, same as -D seed=S (default: the scene's seed)")
     p.add_argument("--variant", help="Mitsuba variant (default: cuda_ad_rgb > llvm_ad_rgb > "
                                      "scalar_rgb, whichever works here)")
     p.add_argument("--exr", action="store_true", help="also write float32 linear EXR images")
@@ -46,35 +42,35 @@ def _add_render_options(p):
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = _Parser(prog=PROG, description="Mitsuba scenes and datasets of a stereo rig "
-                                            "behind a flat port (units mm).")
-    sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
+    parser = Parser(prog=PROG, description="Mitsuba scenes and datasets of a stereo rig "
+                                           "behind a flat port (units mm).")
+    sub = parser.add_subparsers(dest="command", required=True, parser_class=Parser)
 
     p = sub.add_parser("scene", help="write a Mitsuba scene of the rig, the port and targets")
     p.add_argument("--out", required=True, help="scene file to write (.xml)")
     p.add_argument("--layout", choices=("paper", "grid", "random"), default="paper",
                    help="paper: 496 targets on concentric circles; grid; random volume")
-    p.add_argument("--z", type=float, default=1000.0, help="target plane Z, mm (paper, grid)")
-    p.add_argument("--spacing", type=float, default=50.0, help="grid spacing, mm")
-    p.add_argument("--half-width", type=float, default=500.0, help="grid half width, mm")
-    p.add_argument("--n", type=int, default=200, help="number of random targets")
-    p.add_argument("--z-range", type=float, nargs=2, default=(600.0, 2000.0),
+    p.add_argument("--z", type=positive_float, default=1000.0, help="target plane Z, mm (paper, grid)")
+    p.add_argument("--spacing", type=positive_float, default=50.0, help="grid spacing, mm")
+    p.add_argument("--half-width", type=non_negative_float, default=500.0, help="grid half width, mm")
+    p.add_argument("--n", type=positive_int, default=200, help="number of random targets")
+    p.add_argument("--z-range", type=positive_float, nargs=2, default=(600.0, 2000.0),
                    metavar=("ZMIN", "ZMAX"), help="random targets' depth range, mm")
-    p.add_argument("--layout-seed", type=int, default=0, help="seed of the random layout")
+    p.add_argument("--layout-seed", type=non_negative_int, default=0, help="seed of the random layout")
     p.add_argument("--port", choices=("paper", "none"), default="paper",
                    help="the paper's air-glass-water port, or none (all air)")
-    p.add_argument("--n-water", type=float, help="water index (default 1.33)")
-    p.add_argument("--n-glass", type=float, help="glass index (default 1.54)")
-    p.add_argument("--port-distance", type=float, help="D, mm (default 100)")
-    p.add_argument("--glass-thickness", type=float, help="d, mm (default 5)")
-    p.add_argument("--size", type=int, nargs=2, metavar=("W", "H"),
+    p.add_argument("--n-water", type=positive_float, help="water index (default 1.33)")
+    p.add_argument("--n-glass", type=positive_float, help="glass index (default 1.54)")
+    p.add_argument("--port-distance", type=positive_float, help="D, mm (default 100)")
+    p.add_argument("--glass-thickness", type=positive_float, help="d, mm (default 5)")
+    p.add_argument("--size", type=positive_int, nargs=2, metavar=("W", "H"),
                    help="image size, px (default 2448 2048); the focal length scales with W")
-    p.add_argument("--focal", type=float, help="focal length, px (default 1100·W/2448)")
-    p.add_argument("--dist", type=float, nargs="+", metavar="K",
+    p.add_argument("--focal", type=positive_float, help="focal length, px (default 1100·W/2448)")
+    p.add_argument("--dist", type=any_float, nargs="+", metavar="K",
                    help="OpenCV distortion coefficients of both cameras (4, 5 or 8)")
-    p.add_argument("--target-radius", type=float, help="target disk radius, mm (default 2.5)")
-    p.add_argument("--spp", type=int, help="default samples per pixel written into the scene")
-    p.add_argument("--seed", type=int, default=0, help="default sampler seed of the scene")
+    p.add_argument("--target-radius", type=positive_float, help="target disk radius, mm (default 2.5)")
+    p.add_argument("--spp", type=positive_int, help="default samples per pixel written into the scene")
+    p.add_argument("--seed", type=non_negative_int, default=0, help="default sampler seed of the scene")
 
     p = sub.add_parser("render", help="render both views to 16-bit linear PNGs (+ previews)")
     _add_render_options(p)
@@ -83,22 +79,43 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("check", help="detect targets in a dataset and compare with pixels.csv")
     p.add_argument("dir", help="dataset directory")
-    p.add_argument("--rms", type=float, default=None, help="RMS bound, px (default 0.05)")
-    p.add_argument("--max", type=float, default=None, help="max bound, px (default 0.15)")
+    p.add_argument("--rms", type=positive_float, default=None, help="RMS bound, px (default 0.05)")
+    p.add_argument("--max", type=positive_float, default=None, help="max bound, px (default 0.15)")
     p.add_argument("--json", action="store_true", help="print the report as JSON")
+    for name, subparser in sub.choices.items():
+        subparser.set_defaults(_main=lambda args, name=name: COMMANDS[name](args))
     return parser
 
 
 # ---------------------------------------------------------------------------------------------
+#: The first comment of every scene file ``python -m synth scene`` writes.
+SCENE_COMMENT_PREFIX = "written by python -m synth scene"
+
+
+def _is_our_scene(path: str) -> bool:
+    """Whether ``path`` is a scene file that ``python -m synth scene`` wrote (may be replaced)."""
+    try:
+        with open(path, "rb") as handle:
+            head = handle.read(400).decode("utf-8", "replace")
+    except OSError:
+        return False
+    return f"<!-- {SCENE_COMMENT_PREFIX}" in head
+
+
 def _cmd_scene(args) -> int:
     from measure import FlatPort
 
     from . import layouts, rig as rigs
+    from .fileio import check_file_output
     from .scene import DEFAULT_SPP, DEFAULT_TARGET_RADIUS_MM, write_scene
 
+    check_file_output(args.out, "--out", may_replace=_is_our_scene)
+    if args.layout == "random" and not args.z_range[0] < args.z_range[1]:
+        raise CLIError(f"--z-range must be ZMIN < ZMAX, got {args.z_range[0]:g} {args.z_range[1]:g}")
+    if args.layout == "grid" and args.half_width / args.spacing > 1000:
+        raise CLIError(f"--half-width / --spacing gives more than 2001 x 2001 grid targets "
+                       f"({args.half_width:g} / {args.spacing:g})")
     size = tuple(args.size) if args.size else rigs.PAPER_IMAGE_SIZE
-    if min(size) <= 0:
-        raise _Fail(f"{PROG} scene: error: --size must be positive")
     focal = args.focal if args.focal else rigs.PAPER_FOCAL_PX * size[0] / rigs.PAPER_IMAGE_SIZE[0]
     left, right = rigs.paper_cameras(size, focal, args.dist)
     port = None
@@ -120,7 +137,7 @@ def _cmd_scene(args) -> int:
     else:
         targets = layouts.random_volume(args.n, args.layout_seed, tuple(args.z_range))
     radius = args.target_radius if args.target_radius else DEFAULT_TARGET_RADIUS_MM
-    comment = (f"written by python -m synth scene: layout {args.layout}"
+    comment = (f"{SCENE_COMMENT_PREFIX}: layout {args.layout}"
                + (f", z {args.z:g} mm" if args.layout != "random" else "")
                + f", port {args.port}, target radius {radius:g} mm")
     write_scene(args.out, (left, right), port, targets, radius,
@@ -131,31 +148,36 @@ def _cmd_scene(args) -> int:
 
 
 def _spec(args):
+    """The scene with ``-D`` and ``--seed`` applied (``--seed S`` is ``-D seed=S``)."""
     from .scene import load_scene, parse_defines
 
-    return load_scene(args.scene, parse_defines(args.defines))
+    defines = parse_defines(args.defines)
+    if getattr(args, "seed", None) is not None:
+        if "seed" in defines and defines["seed"] != str(args.seed):
+            raise CLIError(f"--seed {args.seed} conflicts with -D seed={defines['seed']}")
+        defines["seed"] = str(args.seed)
+    return load_scene(args.scene, defines)
 
 
 def _cmd_render(args) -> int:
-    from .render import png16_scale, render_stereo, srgb_preview, to_png16, write_exr, write_png
+    from .fileio import OutputDir
+    from .render import (check_render_request, png16_scale, render_stereo, srgb_preview,
+                         to_png16, write_exr, write_png)
 
+    output = OutputDir(args.out, "synth render").claim()
     spec = _spec(args)
+    check_render_request(spec, args.spp)
     t0 = time.perf_counter()
     left, right, info = render_stereo(spec, spp=args.spp, variant=args.variant,
-                                      progress=not args.quiet, seed=args.seed)
-    os.makedirs(args.out, exist_ok=True)
+                                      progress=not args.quiet)
     scale = png16_scale(left, right)
     white = max(float(left.max()), float(right.max()))
-    for name, img in (("left", left), ("right", right)):
-        for suffix, data in (("", to_png16(img, scale)), ("_preview", srgb_preview(img, white))):
-            final = os.path.join(args.out, f"{name}{suffix}.png")
-            tmp = os.path.join(args.out, f".{name}{suffix}.tmp.png")
-            write_png(tmp, data)
-            os.replace(tmp, final)
-        if args.exr:
-            tmp = os.path.join(args.out, f".{name}.tmp.exr")
-            write_exr(tmp, img, info["variant"])
-            os.replace(tmp, os.path.join(args.out, f"{name}.exr"))
+    with output.staged() as tmp:
+        for name, img in (("left", left), ("right", right)):
+            write_png(os.path.join(tmp, f"{name}.png"), to_png16(img, scale))
+            write_png(os.path.join(tmp, f"{name}_preview.png"), srgb_preview(img, white))
+            if args.exr:
+                write_exr(os.path.join(tmp, f"{name}.exr"), img, info["variant"])
     print(f"rendered {spec.path} with {info['variant']}, {info['spp']} spp, "
           f"{info['size'][0]}x{info['size'][1]} px: left {info['seconds']['left']:.1f} s, "
           f"right {info['seconds']['right']:.1f} s, {info['samples_per_second'] / 1e6:.2f} M "
@@ -165,10 +187,11 @@ def _cmd_render(args) -> int:
 
 def _cmd_dataset(args) -> int:
     from .dataset import write_dataset
-    from .scene import parse_defines
+    from .fileio import OutputDir
 
-    manifest = write_dataset(args.scene, args.out, defines=parse_defines(args.defines), spp=args.spp, variant=args.variant, exr=args.exr,
-                             progress=not args.quiet, seed=args.seed)
+    OutputDir(args.out, "synth dataset").check()
+    manifest = write_dataset(_spec(args), args.out, spp=args.spp, variant=args.variant,
+                             exr=args.exr, progress=not args.quiet)
     if manifest.get("skipped"):
         print(f"{args.out}: up to date (same scene, parameters and options); nothing to do")
         return 0
@@ -180,12 +203,14 @@ def _cmd_dataset(args) -> int:
 
 
 def _cmd_check(args) -> int:
-    from .dataset import CHECK_MAX_PX, CHECK_RMS_PX, check_dataset
+    from .crosscheck import CHECK_MAX_PX, CHECK_RMS_PX, check_dataset
 
     report = check_dataset(args.dir, rms_px=args.rms if args.rms is not None else CHECK_RMS_PX,
                            max_px=args.max if args.max is not None else CHECK_MAX_PX)
     if args.json:
-        print(json.dumps(report, indent=2))
+        from .fileio import jsonable
+
+        print(json.dumps(jsonable(report), indent=2))
     else:
         for view in ("left", "right"):
             r = report[view]
@@ -208,25 +233,14 @@ COMMANDS = {"scene": _cmd_scene, "render": _cmd_render, "dataset": _cmd_dataset,
 
 
 def main(argv=None) -> int:
-    """Run the CLI; returns the exit code (2 on bad input, with one line on stderr)."""
-    from .dataset import DatasetError
-    from .scene import SceneError
+    """Run the CLI; returns the exit code (:mod:`synth.cli`: 2 on bad input, with one line
+    ``error: …`` on stderr; 1 when ``check`` fails; 130 when interrupted)."""
+    return run_command(build_parser(), argv)
 
-    parser = build_parser()
-    try:
-        args = parser.parse_args(argv)
-        return COMMANDS[args.command](args)
-    except _Fail as exc:
-        print(str(exc), file=sys.stderr)
-        return 2
-    except (SceneError, DatasetError, ValueError, OSError) as exc:
-        command = (argv if argv is not None else sys.argv[1:] or ["?"])[0]
-        message = " ".join(str(exc).split("\n")[0].split())
-        print(f"{PROG} {command}: error: {message}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        print(f"{PROG}: interrupted", file=sys.stderr)
-        return 130
+
+def console_main() -> None:
+    """Entry point of the ``refstereo-synth`` console script."""
+    sys.exit(main())
 
 
 if __name__ == "__main__":

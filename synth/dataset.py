@@ -27,7 +27,6 @@ import csv
 import hashlib
 import json
 import os
-import platform
 import time
 from dataclasses import dataclass
 from datetime import datetime, timezone
@@ -37,16 +36,14 @@ import numpy as np
 
 from measure import Camera, FlatPort, StereoRig
 
-from .fileio import staged_dir
+from .fileio import OutputDir, read_marker
 from .project import project
-from .render import png16_scale, render_stereo, srgb_preview, to_png16, write_exr, write_png
+from .provenance import package_versions
+from .render import check_render_request, png16_scale, render_stereo, srgb_preview, to_png16, write_exr, write_png
 from .scene import SceneError, SceneSpec, load_scene
 
 FORMAT_VERSION = 1
 PIXELS_HEADER = ["id", "x", "y", "z", "u_left", "v_left", "u_right", "v_right"]
-#: Bounds of ``python -m synth check`` (issue 3): RMS and max centre distance, px.
-CHECK_RMS_PX = 0.05
-CHECK_MAX_PX = 0.15
 
 
 class DatasetError(ValueError):
@@ -107,7 +104,20 @@ def _seq(node) -> list[float]:
 def read_calib(path) -> dict:
     """Read ``calib.yaml``: a dict with ``size``, ``K1``, ``D1``, ``K2``, ``D2``, ``R``, ``T``,
     ``port`` (:class:`measure.FlatPort`), ``has_port`` and ``rig`` (:class:`measure.StereoRig`,
-    the left camera at the reference origin)."""
+    the left camera at the reference origin). Anything unreadable or inconsistent raises
+    :class:`DatasetError` naming the file."""
+    try:
+        return _read_calib(path)
+    except DatasetError:
+        raise
+    except (cv2.error, SystemError, ValueError, TypeError, AttributeError) as exc:
+        message = " ".join(str(exc).split()) or type(exc).__name__
+        raise DatasetError(f"{path}: not a valid calibration file ({message[:200]})") from None
+
+
+def _read_calib(path) -> dict:
+    if not os.path.isfile(path):
+        raise DatasetError(f"{path}: no such file")
     fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_READ)
     if not fs.isOpened():
         raise DatasetError(f"{path}: cannot open as OpenCV FileStorage")
@@ -120,6 +130,8 @@ def read_calib(path) -> dict:
                 raise DatasetError(f"{path}: no matrix {name}")
             out[name] = np.asarray(mat, dtype=np.float64)
         pnode = fs.getNode("port")
+        if pnode.empty() or pnode.getNode("normal").mat() is None:
+            raise DatasetError(f"{path}: no port map (normal, distance, thicknesses, indices)")
         out["port"] = FlatPort(pnode.getNode("normal").mat().ravel(),
                                pnode.getNode("distance").real(),
                                tuple(_seq(pnode.getNode("thicknesses"))),
@@ -128,6 +140,8 @@ def read_calib(path) -> dict:
         out["has_port"] = bool(present.real()) if not present.empty() else True
     finally:
         fs.release()
+    if out["R"].shape != (3, 3) or out["T"].size != 3:
+        raise DatasetError(f"{path}: R must be 3x3 and T 3x1")
     left = Camera(out["K1"], out["size"], dist=out["D1"].ravel())
     R, T = out["R"], out["T"].ravel()
     right = Camera(out["K2"], out["size"], dist=out["D2"].ravel(), R=R.T, t=-R.T @ T)
@@ -169,21 +183,6 @@ def read_pixels_csv(path) -> dict:
             "right": rows[:, 6:8]}
 
 
-def package_versions() -> dict:
-    """Versions of Python, the platform and the packages a result depends on (for manifests)."""
-    import importlib.metadata as md
-
-    out = {"python": platform.python_version(), "platform": platform.platform()}
-    for dist in ("refractive-stereo", "numpy", "scipy", "opencv-python-headless",
-                 "opencv-python", "mitsuba", "drjit", "open3d-cpu", "open3d", "matplotlib", "tqdm"):
-        try:
-            out[dist] = md.version(dist)
-        except md.PackageNotFoundError:
-            pass
-    out["cv2"] = cv2.__version__
-    return out
-
-
 def _image_stats(image: np.ndarray) -> dict:
     return {"min": float(image.min()), "max": float(image.max()), "mean": float(image.mean()),
             "lit_fraction": float(np.mean(image > 0))}
@@ -206,8 +205,9 @@ def write_dataset(scene, out_dir, spp: int | None = None, defines: dict | None =
     """Render ``scene`` (a path or :class:`SceneSpec`) and write a dataset to ``out_dir``.
 
     Returns the manifest (dict); ``manifest["skipped"]`` is True when ``out_dir`` already held
-    the same request and nothing was done. An existing ``out_dir`` that is not a dataset of ours
-    (no ``manifest.json``) is an error; one with another request is replaced atomically.
+    the same request and nothing was done. ``out_dir`` follows the project's output rule
+    (:class:`synth.fileio.OutputDir`): a directory holding files this command did not write is
+    refused before rendering; an earlier dataset with another request is replaced atomically.
     """
     t_start = time.perf_counter()
     times = {}
@@ -222,25 +222,21 @@ def write_dataset(scene, out_dir, spp: int | None = None, defines: dict | None =
     seed = spec.seed if seed is None else int(seed)
     key = request_key(spec, spp, seed, variant, exr)
 
-    out_dir = os.path.abspath(os.fspath(out_dir))
-    manifest_path = os.path.join(out_dir, "manifest.json")
-    if os.path.exists(out_dir):
-        if not os.path.isdir(out_dir):
-            raise DatasetError(f"{out_dir}: exists and is not a directory")
-        if os.listdir(out_dir) and not os.path.isfile(manifest_path):
-            raise DatasetError(f"{out_dir}: exists, is not empty and holds no manifest.json; "
-                               f"refusing to replace it")
-        if os.path.isfile(manifest_path):
+    output = OutputDir(out_dir, "synth dataset")
+    if output.exists_as_output():
+        marker = read_marker(output.path) or {}
+        if marker.get("request_key") == key:
             try:
-                with open(manifest_path) as fh:
+                with open(os.path.join(output.path, "manifest.json")) as fh:
                     old = json.load(fh)
-            except (OSError, ValueError):
-                old = {}
-            if old.get("request_key") == key:
                 old["skipped"] = True
                 return old
+            except (OSError, ValueError):
+                pass  # a damaged earlier output: render it again
+    output.claim()
+    check_render_request(spec, spp)
 
-    with staged_dir(out_dir) as tmp:
+    with output.staged(extra={"request_key": key}) as tmp:
         left, right, info = render_stereo(spec, spp=spp, variant=variant, progress=progress,
                                           seed=seed)
         times["render_left"] = info["seconds"]["left"]
@@ -317,6 +313,8 @@ class Dataset:
 
 
 def _read_png16(path) -> np.ndarray:
+    if not os.path.isfile(path):
+        raise DatasetError(f"{path}: no such file")
     img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
     if img is None:
         raise DatasetError(f"{path}: cannot read image")
@@ -325,9 +323,11 @@ def _read_png16(path) -> np.ndarray:
     return img
 
 
-def read_dataset(path) -> Dataset:
-    """Read a dataset directory written by :func:`write_dataset`."""
+def read_manifest(path) -> dict:
+    """The ``manifest.json`` of dataset directory ``path`` (DatasetError if absent or malformed)."""
     path = os.fspath(path)
+    if not os.path.isdir(path):
+        raise DatasetError(f"{path}: not a dataset directory")
     manifest_path = os.path.join(path, "manifest.json")
     try:
         with open(manifest_path) as fh:
@@ -336,104 +336,43 @@ def read_dataset(path) -> Dataset:
         raise DatasetError(f"{path}: not a dataset ({exc.strerror or exc}: manifest.json)") from None
     except ValueError as exc:
         raise DatasetError(f"{manifest_path}: malformed JSON ({exc})") from None
-    scale = float(manifest["png_scale"])
+    if not isinstance(manifest, dict) or not isinstance(manifest.get("scene"), dict) \
+            or not isinstance(manifest["scene"].get("params"), dict):
+        raise DatasetError(f"{manifest_path}: not a dataset manifest (no scene parameters)")
+    return manifest
+
+
+def read_dataset(path) -> Dataset:
+    """Read a dataset directory written by :func:`write_dataset`; DatasetError names what is
+    missing or inconsistent."""
+    path = os.fspath(path)
+    manifest = read_manifest(path)
+    try:
+        scale = float(manifest["png_scale"])
+    except (KeyError, TypeError, ValueError):
+        raise DatasetError(f"{path}/manifest.json: no valid png_scale") from None
+    if not (np.isfinite(scale) and scale > 0):
+        raise DatasetError(f"{path}/manifest.json: png_scale must be positive, got {scale}")
     left = _read_png16(os.path.join(path, "left.png")).astype(np.float32) / np.float32(scale)
     right = _read_png16(os.path.join(path, "right.png")).astype(np.float32) / np.float32(scale)
     calib = read_calib(os.path.join(path, "calib.yaml"))
-    pixels = read_pixels_csv(os.path.join(path, "pixels.csv"))
+    for name, image in (("left.png", left), ("right.png", right)):
+        if image.shape[::-1] != tuple(calib["size"]):
+            raise DatasetError(f"{path}/{name}: {image.shape[1]}x{image.shape[0]} px, but "
+                               f"calib.yaml says {calib['size'][0]}x{calib['size'][1]}")
+    try:
+        pixels = read_pixels_csv(os.path.join(path, "pixels.csv"))
+    except (OSError, ValueError) as exc:
+        raise DatasetError(f"{path}/pixels.csv: {exc.strerror if isinstance(exc, OSError) else exc}") from None
+    targets_path = os.path.join(path, "targets.ply")
+    if not os.path.isfile(targets_path):
+        raise DatasetError(f"{targets_path}: no such file")
     import open3d as o3d
 
-    cloud = o3d.io.read_point_cloud(os.path.join(path, "targets.ply"))
-    targets = np.asarray(cloud.points, dtype=np.float64)
+    targets = np.asarray(o3d.io.read_point_cloud(targets_path).points, dtype=np.float64)
+    if targets.shape[0] != pixels["id"].shape[0]:
+        raise DatasetError(f"{path}: targets.ply has {targets.shape[0]} points but pixels.csv "
+                           f"{pixels['id'].shape[0]} rows")
     return Dataset(path=path, left=left, right=right, rig=calib["rig"],
                    has_port=calib["has_port"], targets=targets, ids=pixels["id"],
                    pixels_left=pixels["left"], pixels_right=pixels["right"], manifest=manifest)
-
-
-def match_detections(detected: np.ndarray, expected: np.ndarray, gate_px: float):
-    """Mutual nearest neighbours within ``gate_px``: ``(index_into_expected, distance)`` per
-    detection (-1 and inf where unmatched)."""
-    detected = np.asarray(detected, float).reshape(-1, 2)
-    expected = np.asarray(expected, float).reshape(-1, 2)
-    idx = np.full(detected.shape[0], -1)
-    dist = np.full(detected.shape[0], np.inf)
-    if detected.size == 0 or expected.size == 0:
-        return idx, dist
-    from scipy.spatial import cKDTree
-
-    finite = np.all(np.isfinite(expected), axis=1)
-    tree_e = cKDTree(np.where(finite[:, None], expected, 1e12))
-    d1, j = tree_e.query(detected)
-    tree_d = cKDTree(detected)
-    _, back = tree_d.query(np.where(finite[:, None], expected, 1e12))
-    ok = (d1 <= gate_px) & (back[j] == np.arange(detected.shape[0]))
-    idx[ok], dist[ok] = j[ok], d1[ok]
-    return idx, dist
-
-
-def wholly_in_image(camera: Camera, uv: np.ndarray, points: np.ndarray,
-                    radius_mm: float) -> np.ndarray:
-    """Whether each target's image lies wholly inside the image, ``(N,)`` bool.
-
-    ``uv`` are the simulator's pixels of the target centres ``points`` (NaN where none). A
-    target's image may reach twice its pinhole radius (``f · radius / z``, the port magnifies it)
-    plus 2 px from its centre; it must stay that far from the border.
-    """
-    z = camera.to_camera(points)[:, 2]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        radius_px = camera.K[0, 0] * radius_mm / np.where(z > 0, z, np.nan)
-    margin = 2.0 * np.nan_to_num(radius_px, nan=0.0) + 2.0
-    w, h = camera.size
-    with np.errstate(invalid="ignore"):
-        return ((uv[:, 0] >= margin - 0.5) & (uv[:, 0] <= w - 0.5 - margin)
-                & (uv[:, 1] >= margin - 0.5) & (uv[:, 1] <= h - 0.5 - margin))
-
-
-def check_dataset(path, rms_px: float = CHECK_RMS_PX, max_px: float = CHECK_MAX_PX,
-                  gate_px: float = 2.0) -> dict:
-    """Detect the targets in both images and compare them with ``pixels.csv``.
-
-    A target is *in the image* when its simulated pixel lies farther inside the image than its
-    image can reach (twice its pinhole radius + 2 px): those must all be found. Detections are
-    paired with simulated pixels as mutual nearest neighbours within ``gate_px``. Returns a dict:
-    per view (``left``, ``right``) ``in_image``, ``found``, ``missed`` (ids), ``detected``,
-    ``unmatched_detections``, ``rejected`` {reason: count}, ``rms_px``, ``max_px``, ``mean_px``
-    (mean offset detected − simulated, (du, dv)); overall ``rms_px``, ``max_px``; the bounds and
-    ``passed``.
-    """
-    from measure.detect import detect_targets
-
-    data = read_dataset(path)
-    radius = float(data.manifest.get("scene", {}).get("target_radius_mm", 0.0))
-    report = {"path": os.fspath(path), "bounds": {"rms_px": rms_px, "max_px": max_px}}
-    all_d = []
-    all_found = True
-    for name, img, camera, expected in (("left", data.left, data.rig.left, data.pixels_left),
-                                        ("right", data.right, data.rig.right, data.pixels_right)):
-        det = detect_targets(img)
-        inside = wholly_in_image(camera, expected, data.targets, radius)
-        idx, dist = match_detections(det.centers, expected, gate_px)
-        matched = idx >= 0
-        found_ids = set(idx[matched].tolist())
-        in_ids = np.flatnonzero(inside)
-        missed = [int(data.ids[i]) for i in in_ids if i not in found_ids]
-        d = dist[matched]
-        all_d.append(d)
-        offs = det.centers[matched] - expected[idx[matched]]
-        all_found &= not missed
-        report[name] = {
-            "in_image": int(inside.sum()), "found": int(sum(1 for i in in_ids if i in found_ids)),
-            "missed": missed, "detected": det.n_found,
-            "unmatched_detections": int((~matched).sum()),
-            "rejected": {k: int(v) for k, v in det.rejected.items()},
-            "rms_px": float(np.sqrt(np.mean(d ** 2))) if d.size else float("nan"),
-            "max_px": float(d.max()) if d.size else float("nan"),
-            "mean_px": offs.mean(axis=0).tolist() if d.size else [float("nan")] * 2,
-        }
-    d = np.concatenate(all_d)
-    report["rms_px"] = float(np.sqrt(np.mean(d ** 2))) if d.size else float("nan")
-    report["max_px"] = float(d.max()) if d.size else float("nan")
-    report["all_found"] = bool(all_found)
-    report["passed"] = bool(all_found and d.size and report["rms_px"] <= rms_px
-                            and report["max_px"] <= max_px)
-    return report

@@ -1,43 +1,287 @@
-"""Atomic output: a result directory appears whole or not at all."""
+"""Atomic output for the whole project: a result appears whole or not at all, and no command ever
+deletes or changes a file it did not write.
+
+Two tools:
+
+* :class:`OutputDir` — a command's output directory. :meth:`OutputDir.claim` checks the ``--out``
+  rule *before* any expensive work: the directory may be replaced only if it does not exist, is
+  empty, or is an earlier output of the same command — it holds the marker file
+  :data:`MARKER_NAME` that this module wrote (project name, schema version, command, the files
+  written) and nothing else. Anything else is refused with
+  ``--out DIR exists and holds files this command did not write``. :meth:`OutputDir.staged` then
+  yields a staging directory beside the output (``.NAME.staging-PID-XXXX``), writes the marker
+  into it and renames it into place; on an exception the staging directory is removed and the
+  output is left as it was. Staging and trash directories left by a process that died (``kill -9``)
+  are removed by the next claim of the same output: their names carry the owner's PID.
+* :func:`atomic_write_bytes` / :func:`atomic_write_text` — one file, written to a temporary file
+  beside it and renamed into place.
+"""
 
 from __future__ import annotations
 
+import json
 import os
+import re
 import shutil
 import tempfile
 from contextlib import contextmanager
+from pathlib import Path
+
+#: The marker file of every output directory this project writes.
+MARKER_NAME = ".refractive-stereo-output.json"
+#: The project name and the marker's schema version written into it.
+PROJECT_NAME = "refractive-stereo"
+MARKER_SCHEMA = 1
+
+_STAGING = re.compile(r"^\.(?P<name>.+)\.(?P<kind>staging|trash)-(?P<pid>\d+)-[A-Za-z0-9_]+$")
 
 
-def replace_dir(tmp: str, out_dir: str) -> None:
-    """Put directory ``tmp`` at ``out_dir``; an existing ``out_dir`` is moved aside, then deleted."""
-    if os.path.exists(out_dir):
-        if not os.listdir(out_dir):
-            os.rmdir(out_dir)
-            os.rename(tmp, out_dir)
+class OutputError(ValueError):
+    """An output path that cannot be used (a user error: the CLIs print it and exit with 2)."""
+
+
+def _pid_alive(pid: int) -> bool:
+    if pid <= 0:
+        return False
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # exists, owned by someone else
+        return True
+    return True
+
+
+def remove_stale_staging(out_dir) -> list[str]:
+    """Remove staging/trash directories of ``out_dir`` whose owner process is dead; return them."""
+    out_dir = os.path.abspath(os.fspath(out_dir))
+    parent, name = os.path.split(out_dir)
+    removed = []
+    try:
+        entries = os.listdir(parent)
+    except OSError:
+        return removed
+    for entry in entries:
+        match = _STAGING.match(entry)
+        if not match or match.group("name") != name:
+            continue
+        pid = int(match.group("pid"))
+        if pid == os.getpid() or _pid_alive(pid):
+            continue
+        shutil.rmtree(os.path.join(parent, entry), ignore_errors=True)
+        removed.append(entry)
+    return removed
+
+
+def read_marker(out_dir) -> dict | None:
+    """The marker of an output directory written by this project, or None."""
+    path = os.path.join(os.fspath(out_dir), MARKER_NAME)
+    try:
+        with open(path, encoding="utf-8") as handle:
+            marker = json.load(handle)
+    except (OSError, ValueError):
+        return None
+    if not isinstance(marker, dict) or marker.get("project") != PROJECT_NAME:
+        return None
+    return marker
+
+
+def _walk_files(directory: str) -> set[str]:
+    """Every file and directory below ``directory``, as paths relative to it."""
+    found = set()
+    for root, dirs, files in os.walk(directory):
+        rel = os.path.relpath(root, directory)
+        for item in dirs + files:
+            found.add(os.path.normpath(os.path.join(rel, item)))
+    return found
+
+
+class OutputDir:
+    """The output directory of one command (``command`` e.g. ``"eval run"``). See module docs."""
+
+    def __init__(self, path, command: str, option: str = "--out"):
+        self.path = os.path.abspath(os.fspath(path))
+        self.display = os.fspath(path)
+        self.command = command
+        self.option = option
+
+    # -- the rule -------------------------------------------------------------------------------
+    def _refuse(self, why: str):
+        raise OutputError(f"{self.option} {self.display} {why}")
+
+    def check(self) -> None:
+        """Raise :class:`OutputError` unless this command may write (or replace) the directory."""
+        path = self.path
+        if os.path.lexists(path) and not os.path.isdir(path):
+            self._refuse("exists and is not a directory")
+        parent = os.path.dirname(path)
+        probe = parent
+        while not os.path.exists(probe):
+            probe = os.path.dirname(probe)
+        if not os.path.isdir(probe):
+            self._refuse(f"cannot be created: {probe} is not a directory")
+        if not os.access(probe, os.W_OK | os.X_OK):
+            self._refuse(f"cannot be created: {probe} is not writable")
+        if not os.path.isdir(path):
             return
-        trash = tempfile.mkdtemp(prefix=f".{os.path.basename(out_dir)}.old-",
-                                 dir=os.path.dirname(out_dir))
-        os.rename(out_dir, os.path.join(trash, "old"))
-        os.rename(tmp, out_dir)
+        try:
+            contents = os.listdir(path)
+        except OSError as exc:
+            self._refuse(f"cannot be read ({exc.strerror or exc})")
+        if not contents:
+            return
+        marker = read_marker(path)
+        if marker is None or marker.get("command") != self.command:
+            self._refuse("exists and holds files this command did not write")
+        written = {os.path.normpath(f) for f in marker.get("files", [])} | {MARKER_NAME}
+        if not _walk_files(path) <= written:
+            self._refuse("exists and holds files this command did not write")
+        if not os.access(parent, os.W_OK | os.X_OK):
+            self._refuse(f"cannot be replaced: {parent} is not writable")
+
+    def claim(self) -> "OutputDir":
+        """Check the rule and clear dead processes' staging directories; returns ``self``."""
+        self.check()
+        if os.path.isdir(os.path.dirname(self.path)):
+            remove_stale_staging(self.path)
+        return self
+
+    def exists_as_output(self) -> bool:
+        """Whether the directory is an earlier output of this command."""
+        marker = read_marker(self.path)
+        return marker is not None and marker.get("command") == self.command
+
+    # -- writing --------------------------------------------------------------------------------
+    @contextmanager
+    def staged(self, extra: dict | None = None):
+        """Yield a staging directory; on success it becomes the output (with the marker).
+
+        ``extra`` is stored in the marker (e.g. a request key). The rule is checked again just
+        before the rename, so a file that appeared meanwhile is never deleted.
+        """
+        self.claim()
+        parent, name = os.path.split(self.path)
+        try:
+            os.makedirs(parent, exist_ok=True)
+            tmp = tempfile.mkdtemp(prefix=f".{name}.staging-{os.getpid()}-", dir=parent)
+        except OSError as exc:
+            self._refuse(f"cannot be created ({exc.strerror or exc})")
+        os.chmod(tmp, 0o755)
+        try:
+            yield tmp
+            files = sorted(_walk_files(tmp))
+            marker = {"project": PROJECT_NAME, "schema": MARKER_SCHEMA, "command": self.command,
+                      "files": files, **(extra or {})}
+            with open(os.path.join(tmp, MARKER_NAME), "w", encoding="utf-8") as handle:
+                json.dump(marker, handle, indent=1)
+                handle.write("\n")
+            self.check()
+            self._replace(tmp)
+        except BaseException:
+            shutil.rmtree(tmp, ignore_errors=True)
+            raise
+
+    def _replace(self, tmp: str) -> None:
+        path = self.path
+        parent, name = os.path.split(path)
+        if not os.path.exists(path):
+            os.rename(tmp, path)
+            return
+        if not os.listdir(path):
+            os.rmdir(path)
+            os.rename(tmp, path)
+            return
+        trash = tempfile.mkdtemp(prefix=f".{name}.trash-{os.getpid()}-", dir=parent)
+        os.rename(path, os.path.join(trash, "old"))
+        try:
+            os.rename(tmp, path)
+        except OSError:
+            os.rename(os.path.join(trash, "old"), path)  # put the old output back
+            shutil.rmtree(trash, ignore_errors=True)
+            raise
         shutil.rmtree(trash, ignore_errors=True)
-    else:
-        os.rename(tmp, out_dir)
 
 
 @contextmanager
-def staged_dir(out_dir):
-    """Yield a temporary directory beside ``out_dir``; on success it replaces ``out_dir``.
-
-    On an exception the temporary directory is removed and ``out_dir`` is left as it was.
-    """
-    out_dir = os.path.abspath(os.fspath(out_dir))
-    parent = os.path.dirname(out_dir)
-    os.makedirs(parent, exist_ok=True)
-    tmp = tempfile.mkdtemp(prefix=f".{os.path.basename(out_dir)}.tmp-", dir=parent)
-    os.chmod(tmp, 0o755)
-    try:
+def staged_dir(out_dir, command: str, extra: dict | None = None):
+    """``OutputDir(out_dir, command).staged(extra)`` — shorthand."""
+    with OutputDir(out_dir, command).staged(extra) as tmp:
         yield tmp
-        replace_dir(tmp, out_dir)
+
+
+def atomic_write_bytes(path, data: bytes, mode: int = 0o644) -> Path:
+    """Write ``data`` to a temporary file beside ``path``, then rename it into place."""
+    path = Path(path)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        os.fchmod(fd, mode)  # mkstemp makes 0600; outputs are meant to be read
+        with os.fdopen(fd, "wb") as handle:
+            handle.write(data)
+            handle.flush()
+            os.fsync(handle.fileno())
+        os.replace(tmp, path)
     except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
+        try:
+            os.unlink(tmp)
+        except OSError:
+            pass
         raise
+    return path
+
+
+def atomic_write_text(path, text: str) -> Path:
+    """:func:`atomic_write_bytes` of UTF-8 text."""
+    return atomic_write_bytes(path, text.encode("utf-8"))
+
+
+def atomic_write_json(path, value, **dump_args) -> Path:
+    """:func:`atomic_write_text` of ``json.dumps(jsonable(value), indent=2)`` plus a newline
+    (NaN is written as null: the file is strict JSON)."""
+    return atomic_write_text(path, json.dumps(jsonable(value), indent=2, allow_nan=False,
+                                              **dump_args) + "\n")
+
+
+def jsonable(value):
+    """Plain JSON types: dicts, lists, bools, ints, finite floats; NaN and ±inf become null;
+    numpy scalars and arrays become Python numbers and lists; objects with ``to_json()`` (typed
+    results) are converted."""
+    import numpy as np
+
+    if hasattr(value, "to_json"):
+        return jsonable(value.to_json())
+    if isinstance(value, dict):
+        return {str(k): jsonable(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [jsonable(v) for v in value]
+    if isinstance(value, (bool, np.bool_)):
+        return bool(value)
+    if isinstance(value, (int, np.integer)):
+        return int(value)
+    if isinstance(value, (float, np.floating)):
+        value = float(value)
+        return value if np.isfinite(value) else None
+    if isinstance(value, np.ndarray):
+        return jsonable(value.tolist())
+    return value
+
+
+def check_file_output(path, option: str, may_replace=None) -> str:
+    """Check a single output file before the work: its directory exists and is writable, and an
+    existing file is replaced only if ``may_replace(path)`` says it is ours. Returns the path."""
+    path = os.fspath(path)
+    full = os.path.abspath(path)
+    if os.path.isdir(full):
+        raise OutputError(f"{option} {path} is a directory")
+    parent = os.path.dirname(full)
+    if not os.path.isdir(parent):
+        raise OutputError(f"{option} {path}: directory {os.path.dirname(path) or '.'} does not exist")
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise OutputError(f"{option} {path}: directory {os.path.dirname(path) or '.'} is not writable")
+    if os.path.lexists(full) and may_replace is not None and not may_replace(full):
+        raise OutputError(f"{option} {path} exists and is not a file this command wrote")
+    return path
+
+
+__all__ = ["MARKER_NAME", "OutputDir", "OutputError", "atomic_write_bytes", "atomic_write_json",
+           "atomic_write_text", "check_file_output", "jsonable", "read_marker", "remove_stale_staging",
+           "staged_dir"]

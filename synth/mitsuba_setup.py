@@ -1,6 +1,6 @@
 """Pick a Mitsuba 3 variant and import Mitsuba safely.
 
-Order of preference (DESIGN.md, "Facts about the tools"):
+Order of preference (measured facts in docs/architecture.md, "Facts about the tools"):
 
 1. ``cuda_ad_rgb`` when an NVIDIA GPU is usable (``nvidia-smi -L`` lists one, or ``/dev/nvidia0``
    exists together with ``libcuda.so``);

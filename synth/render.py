@@ -11,7 +11,14 @@ whole distorted field of view, pre-filtered with an ``oversample``-pixel box (on
 and warped with ``cv2.remap`` (bilinear) to the distorted pixel grid; the map is the exact
 inverse of the OpenCV distortion (``Camera.undistort``, Newton to ~1e-16).
 
-Seeds: view ``i`` (0 left, 1 right) uses sampler seed ``seed + i``.
+Seeds: one seed, one meaning. The scene's ``seed`` parameter (``-D seed=S``, or ``--seed S``,
+which sets it) is the only seed: view ``i`` (0 left, 1 right) is rendered with
+``mi.render(seed=S + i)`` from a scene loaded with its sampler's own seed at 0 (Mitsuba adds the
+two), so ``--seed 7`` and ``-D seed=7`` render the same bytes.
+
+Before rendering, :func:`check_render_request` refuses what cannot work: an image whose
+wavefront would not fit in memory (the estimate is stated in the message) and a lens
+distortion that cannot be inverted over the image.
 """
 
 from __future__ import annotations
@@ -33,11 +40,61 @@ DISTORTION_OVERSAMPLE = 2
 DISTORTION_MARGIN_PX = 3
 
 
-def load_mitsuba_scene(spec: SceneSpec, variant: str | None = None):
-    """``(mitsuba_scene, mi, variant)`` for a :class:`SceneSpec` (its resolved defaults)."""
-    mi, chosen = import_mitsuba(variant)
+#: Memory (bytes) one sample of a ``mi.render`` call holds at once in the JIT variants (the whole
+#: wavefront is one call), measured on the paper scene with ``llvm_ad_rgb`` (docs/architecture.md).
+BYTES_PER_SAMPLE = 64
+#: Memory per output pixel besides the wavefront (film, develop, images), bytes.
+BYTES_PER_PIXEL = 64
+
+
+def available_memory_bytes() -> int | None:
+    """Memory available to this process (``MemAvailable`` of ``/proc/meminfo``), or None."""
     try:
-        scene = mi.load_file(spec.path, **spec.mitsuba_params)
+        with open("/proc/meminfo") as handle:
+            for line in handle:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    return None
+
+
+def render_memory_bytes(size, spp: int, oversample: int = 1) -> int:
+    """Estimated peak memory (bytes) of rendering one view of ``size`` (w, h) px at ``spp``."""
+    pixels = int(size[0]) * int(size[1]) * oversample * oversample
+    return pixels * (int(spp) * BYTES_PER_SAMPLE + BYTES_PER_PIXEL)
+
+
+def check_render_request(spec: SceneSpec, spp: int | None = None) -> None:
+    """Raise ``ValueError`` (one line) for a render that cannot work: a lens distortion that is
+    not invertible over the image, or an estimated memory need beyond what is available."""
+    spp = spec.spp if spp is None else int(spp)
+    if spp <= 0:
+        raise ValueError(f"spp must be positive, got {spp}")
+    for name, camera in zip(("left", "right"), spec.cameras):
+        if camera.dist is not None:
+            problem = camera.distortion_problem()
+            if problem:
+                raise ValueError(f"{spec.path}: {name}_dist: {problem}")
+    oversample = DISTORTION_OVERSAMPLE if any(c.dist is not None for c in spec.cameras) else 1
+    need = render_memory_bytes(spec.size, spp, oversample)
+    have = available_memory_bytes()
+    if have is not None and need > have:
+        w, h = spec.size
+        raise ValueError(f"{spec.path}: rendering {w}x{h} px at {spp} spp needs about "
+                         f"{need / 2**30:.1f} GiB of memory, {have / 2**30:.1f} GiB are available "
+                         f"(use a smaller image or fewer samples per pixel)")
+
+
+def load_mitsuba_scene(spec: SceneSpec, variant: str | None = None):
+    """``(mitsuba_scene, mi, variant)`` for a :class:`SceneSpec` (its resolved defaults), with
+    the sampler's own seed at 0 (the seed is given to ``mi.render``; see module docs)."""
+    mi, chosen = import_mitsuba(variant)
+    params = spec.mitsuba_params
+    if "seed" in params:
+        params["seed"] = "0"
+    try:
+        scene = mi.load_file(spec.path, **params)
     except RuntimeError as exc:  # Mitsuba's loader: one line of its message
         lines = [ln.strip() for ln in str(exc).splitlines() if ln.strip()]
         raise SceneError(f"{spec.path}: Mitsuba cannot load the scene: "
@@ -128,8 +185,7 @@ def render_stereo(scene, spp: int | None = None, variant: str | None = None,
     spec = scene if isinstance(scene, SceneSpec) else load_scene(scene, defines)
     spp = spec.spp if spp is None else int(spp)
     seed = spec.seed if seed is None else int(seed)
-    if spp <= 0:
-        raise ValueError(f"spp must be positive, got {spp}")
+    check_render_request(spec, spp)
     t0 = time.perf_counter()
     mscene, mi, chosen = load_mitsuba_scene(spec, variant)
     seconds = {"load": time.perf_counter() - t0}

@@ -10,6 +10,7 @@ left image height. Experiments, tests and scene files all take their numbers fro
 from __future__ import annotations
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from measure import Camera, FlatPort, StereoRig
 
@@ -24,8 +25,7 @@ PAPER_INDICES = (1.0, 1.54, 1.33)  # air, glass, water
 
 def rotation_y(angle_rad: float) -> np.ndarray:
     """Rotation matrix about the y axis (right-handed, OpenCV axes)."""
-    c, s = np.cos(angle_rad), np.sin(angle_rad)
-    return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
+    return Rotation.from_rotvec([0.0, angle_rad, 0.0]).as_matrix()
 
 
 def paper_intrinsics(size=PAPER_IMAGE_SIZE, focal_px=PAPER_FOCAL_PX) -> np.ndarray:

@@ -12,7 +12,7 @@ of ours), in millimetres, in the reference frame (the left camera's, OpenCV axes
   without a port declares ``<default name="port" value="none"/>``.
 * two ``perspective`` sensors, first the left, then the right: ``fov`` with ``fov_axis = x``,
   ``principal_point_offset_x/y`` (fractions of the film size), ``to_world`` =
-  ``lookat(origin = t, target = t + R·z, up = −R·y)`` which gives Mitsuba's sensor OpenCV's
+  ``lookat(origin = t, target = t + 1000·R·z, up = −R·y)`` which gives Mitsuba's sensor OpenCV's
   axes; an ``hdrfilm`` (luminance, float32) with a ``box`` reconstruction filter.
 * the port: one ``rectangle`` per interface with a ``dielectric`` BSDF, its normal (local +z)
   turned towards the cameras so that ``ext_ior`` is the camera-side index: air-glass
@@ -20,8 +20,9 @@ of ours), in millimetres, in the reference frame (the left camera's, OpenCV axes
 * the targets: ``disk`` shapes with an ``area`` emitter, facing the cameras (normal −z), shape
   ``id = "target_<k>"`` for target number ``k``; radius = the disk's scale.
 
-Reading back (:func:`load_scene`) uses ``xml.etree`` with Mitsuba's ``<default>`` / ``$name``
-substitution, so the rig, port and targets live only in the scene file. Conversions:
+Reading back (:func:`load_scene`) uses Mitsuba's own parser (``mitsuba.parser.parse_file``: ``<default>``,
+``$name`` substitution and transforms composed in double precision, no plugin built), so the rig,
+port and targets live only in the scene file. Conversions:
 ``f = (W/2) / tan(fov/2)`` px (fov along x), ``cx = W/2 − 0.5 − ppx·W``,
 ``cy = H/2 − 0.5 − ppy·H`` (Mitsuba's film pixel i covers [i, i+1); measured sign of the offset),
 ``R = M[:3, :3]·diag(−1, −1, 1)``, ``t = M[:3, 3]`` for the sensor's ``to_world`` matrix ``M``.
@@ -35,7 +36,7 @@ import os
 import re
 import tempfile
 import xml.etree.ElementTree as ET
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -43,6 +44,8 @@ from measure import Camera, FlatPort, StereoRig
 
 #: Half side (mm) of the square port interfaces: covers both fields of view far beyond 2 m.
 INTERFACE_HALF_SIZE_MM = 2000.0
+#: Distance (mm) of a sensor's ``lookat`` target from its origin (see :func:`_sensor_xml`).
+LOOKAT_DISTANCE_MM = 1000.0
 #: Defaults written into every scene unless given.
 DEFAULT_SPP = 36
 DEFAULT_SEED = 0
@@ -81,8 +84,6 @@ class SceneSpec:
     params: dict
     path: str | None
     sha256: str
-    sensor_ids: tuple = ("left", "right")
-    interface_ids: tuple = field(default_factory=tuple)
     referenced: frozenset = frozenset()
 
     @property
@@ -146,7 +147,9 @@ def _sensor_xml(name: str, camera: Camera, width_param: bool) -> str:
     ppx = (w / 2.0 - 0.5 - K[0, 2]) / w
     ppy = (h / 2.0 - 0.5 - K[1, 2]) / h
     R, t = camera.R, camera.t
-    target = t + R[:, 2]
+    # Mitsuba builds the sensor's lookat in float32: a target 1 mm from an origin 200 mm away
+    # loses ~2.4e-6 rad of direction (~0.003 px); LOOKAT_DISTANCE_MM away it loses ~6e-8 rad.
+    target = t + LOOKAT_DISTANCE_MM * R[:, 2]
     up = -R[:, 1]
     width = "$width" if width_param else str(w)
     height = "$height" if width_param else str(h)
@@ -300,6 +303,7 @@ def write_scene(path, cameras, port, targets, target_radius, **kwargs) -> str:
 # ---------------------------------------------------------------------------------------------
 # reading
 # ---------------------------------------------------------------------------------------------
+_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
 _SUBST = re.compile(r"\$([A-Za-z_][A-Za-z0-9_]*)")
 
 
@@ -309,7 +313,7 @@ def parse_defines(items) -> dict:
     for item in items or ():
         name, sep, value = str(item).partition("=")
         name = name.strip()
-        if not sep or not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", name):
+        if not sep or not _NAME.fullmatch(name):
             raise SceneError(f"malformed -D {item!r}: expected name=value")
         defines[name] = value.strip()
     return defines
@@ -317,152 +321,163 @@ def parse_defines(items) -> dict:
 
 def _floats(text: str, what: str) -> np.ndarray:
     try:
-        return np.array([float(v) for v in re.split(r"[,\s]+", text.strip()) if v], dtype=float)
+        values = np.array([float(v) for v in re.split(r"[,\s]+", str(text).strip()) if v],
+                          dtype=float)
     except ValueError:
         raise SceneError(f"{what}: not a list of numbers: {text!r}") from None
+    if not np.all(np.isfinite(values)):
+        raise SceneError(f"{what}: not finite: {text!r}")
+    return values
 
 
-def _float(text: str, what: str) -> float:
-    values = _floats(text, what)
-    if values.size != 1:
-        raise SceneError(f"{what}: expected one number, got {text!r}")
-    return float(values[0])
+def _declared_defaults(data: bytes, label: str):
+    """The ``<default name value>`` declarations of the scene's root (in order) and the names
+    the file references as ``$name`` — read, not interpreted: Mitsuba's parser does the rest."""
+    try:
+        root = ET.fromstring(data)
+    except ET.ParseError as exc:
+        raise SceneError(f"{label}: malformed XML ({exc})") from None
+    if root.tag != "scene":
+        raise SceneError(f"{label}: root element is <{root.tag}>, expected <scene>")
+    params = {}
+    for d in root.findall("default"):
+        name, value = d.get("name"), d.get("value")
+        if not name or value is None:
+            raise SceneError(f"{label}: <default> needs name and value")
+        params[name] = value
+    referenced = frozenset(name for elem in root.iter() for value in elem.attrib.values()
+                           for name in _SUBST.findall(value))
+    return params, referenced
 
 
-def _lookat(origin, target, up) -> np.ndarray:
-    """Mitsuba's look_at: columns (left, up', dir, origin)."""
-    direction = target - origin
-    direction = direction / np.linalg.norm(direction)
-    left = np.cross(up, direction)
-    norm = np.linalg.norm(left)
-    if norm < 1e-12:
-        raise SceneError("lookat: 'up' is parallel to the viewing direction")
-    left /= norm
-    new_up = np.cross(direction, left)
-    M = np.eye(4)
-    M[:3, 0], M[:3, 1], M[:3, 2], M[:3, 3] = left, new_up, direction, origin
-    return M
+#: Scene parameters that must be numbers, with their bounds: (kind, lower bound, strict).
+_NUMERIC_PARAMS = {"spp": ("int", 1, False), "seed": ("int", 0, False),
+                   "width": ("int", 1, False), "height": ("int", 1, False),
+                   "max_depth": ("int", 0, False), "n_water": ("float", 0.0, True),
+                   "target_radius": ("float", 0.0, True), "target_z": ("float", 0.0, True)}
 
 
-def _rotation(axis, angle_deg) -> np.ndarray:
-    axis = np.asarray(axis, dtype=float)
-    axis = axis / np.linalg.norm(axis)
-    a = math.radians(angle_deg)
-    c, s = math.cos(a), math.sin(a)
-    x, y, z = axis
-    K = np.array([[0, -z, y], [z, 0, -x], [-y, x, 0]])
-    M = np.eye(4)
-    M[:3, :3] = c * np.eye(3) + s * K + (1 - c) * np.outer(axis, axis)
-    return M
+def _check_params(params: dict, label: str) -> None:
+    """One-line errors for parameter values Mitsuba would reject or mis-render."""
+    for name, (kind, lower, strict) in _NUMERIC_PARAMS.items():
+        if name not in params:
+            continue
+        text = str(params[name]).strip()
+        try:
+            value = float(text)
+        except ValueError:
+            value = float("nan")
+        ok = math.isfinite(value) and (value > lower if strict else value >= lower)
+        if kind == "int":
+            ok = ok and value == int(value)
+        if not ok:
+            bound = f"> {lower:g}" if strict else f">= {lower:g}"
+            raise SceneError(f"{label}: parameter {name}={text!r} must be a finite "
+                             f"{'integer' if kind == 'int' else 'number'} {bound}")
+        if kind == "int":
+            params[name] = str(int(value))
 
 
-def _transform(elem, what: str) -> np.ndarray:
-    """4x4 matrix of a Mitsuba ``<transform>`` (each child left-multiplies, in order)."""
-    M = np.eye(4)
-    for op in elem:
-        a = op.attrib
-        T = np.eye(4)
-        if op.tag == "translate":
-            if "value" in a:
-                T[:3, 3] = _floats(a["value"], what)
-            else:
-                T[:3, 3] = [_float(a.get(k, "0"), what) for k in "xyz"]
-        elif op.tag == "scale":
-            if "value" in a:
-                v = _floats(a["value"], what)
-                v = np.repeat(v, 3) if v.size == 1 else v
-            else:
-                v = [_float(a.get(k, "1"), what) for k in "xyz"]
-            T[:3, :3] = np.diag(v)
-        elif op.tag == "rotate":
-            if "value" in a:
-                axis = _floats(a["value"], what)
-            else:
-                axis = [_float(a.get(k, "0"), what) for k in "xyz"]
-            T = _rotation(axis, _float(a.get("angle", "0"), what))
-        elif op.tag == "matrix":
-            v = _floats(a.get("value", ""), what)
-            if v.size == 16:
-                T = v.reshape(4, 4)
-            elif v.size == 9:
-                T[:3, :3] = v.reshape(3, 3)
-            else:
-                raise SceneError(f"{what}: a matrix needs 9 or 16 values")
-        elif op.tag == "lookat":
-            T = _lookat(*(_floats(a.get(k, ""), what) for k in ("origin", "target", "up")))
-        else:
-            raise SceneError(f"{what}: unsupported transform element <{op.tag}>")
-        M = T @ M
-    return M
+def _parse_with_mitsuba(path: str, params: dict, referenced, label: str):
+    """Mitsuba's own parser (``mitsuba.parser.parse_file``): ``$`` substitution, transforms
+    composed in double precision, references; no plugin is built."""
+    from .mitsuba_setup import import_mitsuba
+
+    mi, variant = import_mitsuba()
+    import mitsuba.parser as mp
+
+    config = mp.ParserConfig(variant)
+    used = {k: str(v) for k, v in params.items() if k in referenced}
+    try:
+        return mi, mp.parse_file(config, path, **used)
+    except RuntimeError as exc:
+        lines = [ln.strip() for ln in str(exc).splitlines() if ln.strip()]
+        message = re.sub(r"^\[[^\]]*\]\s*", "", " ".join(lines[:2]))
+        raise SceneError(f"{label}: Mitsuba cannot parse the scene: {message}") from None
 
 
-def _props(elem) -> dict:
-    """``{name: (tag, value-or-element)}`` of an element's direct property children."""
-    out = {}
-    for child in elem:
-        name = child.get("name")
-        if name is not None:
-            out[name] = (child.tag, child.get("value") if child.tag != "transform" else child)
-    return out
+class _Nodes:
+    """The parsed scene graph: typed property access and child lookup by reference."""
+
+    def __init__(self, mi, state):
+        self.mi, self.state = mi, state
+        self.types = mi.Properties.Type
+        self.by_id = dict(state.id_to_index)
+
+    def children(self, node):
+        for key in node.props.keys():
+            kind = node.props.type(key)
+            if kind == self.types.ResolvedReference:
+                yield self.state.nodes[node.props[key].index()]
+            elif kind == self.types.Reference:
+                index = self.by_id.get(node.props[key].id())
+                if index is not None:
+                    yield self.state.nodes[index]
+
+    def child(self, node, object_type):
+        return next((c for c in self.children(node) if c.type == object_type), None)
+
+    def value(self, node, name, default, what):
+        props = node.props
+        if name not in props:
+            return default
+        try:
+            return props[name]
+        except (RuntimeError, TypeError):
+            raise SceneError(f"{what}: property {name!r} has an unsupported type") from None
+
+    def matrix(self, node) -> np.ndarray:
+        if "to_world" not in node.props:
+            return np.eye(4)
+        return np.array(node.props["to_world"].matrix, dtype=np.float64).reshape(4, 4)
 
 
-def _substitute(root, params: dict, path_label: str) -> None:
-    for elem in root.iter():
-        for key, value in elem.attrib.items():
-            if "$" in value:
-                def repl(match):
-                    name = match.group(1)
-                    if name not in params:
-                        raise SceneError(f"{path_label}: ${name} is used but has no <default>")
-                    return params[name]
-                elem.set(key, _SUBST.sub(repl, value))
-
-
-def _read_sensor(elem, params, label) -> Camera:
-    sid = elem.get("id", "?")
+def _read_sensor(nodes: _Nodes, node, params, label) -> Camera:
+    ObjectType = nodes.mi.ObjectType
+    sid = node.props.id() or "?"
     what = f"{label}: sensor {sid!r}"
-    if elem.get("type") != "perspective":
-        raise SceneError(f"{what}: type {elem.get('type')!r}, expected 'perspective'")
-    props = _props(elem)
-    film = elem.find("film")
+    if node.props.plugin_name() != "perspective":
+        raise SceneError(f"{what}: type {node.props.plugin_name()!r}, expected 'perspective'")
+    film = nodes.child(node, ObjectType.Film)
     if film is None:
         raise SceneError(f"{what}: no <film>")
-    fprops = _props(film)
     try:
-        w = int(fprops.get("width", ("", "768"))[1])
-        h = int(fprops.get("height", ("", "576"))[1])
-    except ValueError:
+        w = int(nodes.value(film, "width", 768, what))
+        h = int(nodes.value(film, "height", 576, what))
+    except (TypeError, ValueError):
         raise SceneError(f"{what}: film width/height must be integers") from None
     if w <= 0 or h <= 0:
         raise SceneError(f"{what}: film size must be positive, got {w}x{h}")
-    if "fov" not in props:
+    if "fov" not in node.props:
         raise SceneError(f"{what}: needs a 'fov' (focal_length is not supported)")
-    fov = _float(props["fov"][1], what)
-    axis = props.get("fov_axis", ("", "x"))[1]
+    fov = float(nodes.value(node, "fov", 0.0, what))
+    if not 0 < fov < 180:
+        raise SceneError(f"{what}: fov must lie in (0, 180) degrees, got {fov}")
+    axis = str(nodes.value(node, "fov_axis", "x", what))
     if axis == "x":
         f = (w / 2.0) / math.tan(math.radians(fov) / 2.0)
     elif axis == "y":
         f = (h / 2.0) / math.tan(math.radians(fov) / 2.0)
     else:
         raise SceneError(f"{what}: fov_axis {axis!r} is not supported (use x or y)")
-    ppx = _float(props.get("principal_point_offset_x", ("", "0"))[1], what)
-    ppy = _float(props.get("principal_point_offset_y", ("", "0"))[1], what)
+    ppx = float(nodes.value(node, "principal_point_offset_x", 0.0, what))
+    ppy = float(nodes.value(node, "principal_point_offset_y", 0.0, what))
     K = np.array([[f, 0.0, w / 2.0 - 0.5 - ppx * w], [0.0, f, h / 2.0 - 0.5 - ppy * h],
                   [0.0, 0.0, 1.0]])
-    M = np.eye(4)
-    if "to_world" in props:
-        M = _transform(props["to_world"][1], what)
+    M = nodes.matrix(node)
     R = M[:3, :3] @ np.diag([-1.0, -1.0, 1.0])
     if not np.allclose(R @ R.T, np.eye(3), atol=1e-9) or np.linalg.det(R) < 0:
         raise SceneError(f"{what}: to_world must be a rigid motion (no scale or shear)")
     dist = None
     if f"{sid}_dist" in params:
-        dist = _floats(params[f"{sid}_dist"], f"{label}: default {sid}_dist")
+        dist = _floats(params[f"{sid}_dist"], f"{label}: parameter {sid}_dist")
         if dist.size not in (4, 5, 8):
-            raise SceneError(f"{label}: default {sid}_dist must hold 4, 5 or 8 OpenCV "
+            raise SceneError(f"{label}: parameter {sid}_dist must hold 4, 5 or 8 OpenCV "
                              f"distortion coefficients, got {dist.size}")
-    R = _orthonormalize(R)
-    return Camera(K, (w, h), dist=dist, R=R, t=M[:3, 3])
+    try:
+        return Camera(K, (w, h), dist=dist, R=_orthonormalize(R), t=M[:3, 3])
+    except ValueError as exc:
+        raise SceneError(f"{what}: {exc}") from None
 
 
 def _orthonormalize(R: np.ndarray) -> np.ndarray:
@@ -470,94 +485,86 @@ def _orthonormalize(R: np.ndarray) -> np.ndarray:
     return u @ vt
 
 
-def _find_bsdf(shape, refs, what):
-    bsdf = shape.find("bsdf")
-    if bsdf is None:
-        for ref in shape.findall("ref"):
-            target = refs.get(ref.get("id"))
-            if target is not None and target.tag == "bsdf":
-                bsdf = target
-                break
-    return bsdf
+def _read_shapes(nodes: _Nodes, label: str):
+    """``(interfaces, targets)`` of the parsed scene: interfaces ``(id, normal towards the
+    cameras' side reversed, centre, ext_ior, int_ior)``; targets ``(number, centre, radius,
+    normal)``."""
+    ObjectType = nodes.mi.ObjectType
+    interfaces, targets = [], []
+    for node in nodes.state.nodes:
+        if node.type != ObjectType.Shape:
+            continue
+        sid = node.props.id() or ""
+        kind = node.props.plugin_name()
+        what = f"{label}: shape {sid!r}"
+        M = nodes.matrix(node)
+        if nodes.child(node, ObjectType.Emitter) is not None:
+            if kind != "disk":
+                raise SceneError(f"{what}: targets must be disks, got {kind!r}")
+            if not sid.startswith(TARGET_ID_PREFIX) or not sid[len(TARGET_ID_PREFIX):].isdigit():
+                raise SceneError(f"{what}: target ids must be '{TARGET_ID_PREFIX}<number>'")
+            radius = float(np.linalg.norm(M[:3, 0]))
+            normal_length = float(np.linalg.norm(M[:3, 2]))
+            if not (radius > 0 and normal_length > 0 and np.all(np.isfinite(M))):
+                raise SceneError(f"{what}: the target radius (its scale) must be positive")
+            targets.append((int(sid[len(TARGET_ID_PREFIX):]), M[:3, 3].copy(), radius,
+                            M[:3, 2] / normal_length))
+            continue
+        if kind != "rectangle":
+            raise SceneError(f"{what}: port interfaces must be rectangles, got {kind!r}")
+        bsdf = nodes.child(node, ObjectType.BSDF)
+        if bsdf is None or bsdf.props.plugin_name() != "dielectric":
+            found = "none" if bsdf is None else repr(bsdf.props.plugin_name())
+            raise SceneError(f"{what}: port interface BSDF is {found}, expected 'dielectric'")
+        iors = []
+        for name, default in (("ext_ior", 1.000277), ("int_ior", 1.5046)):  # Mitsuba's defaults
+            value = nodes.value(bsdf, name, default, what)
+            if not isinstance(value, (int, float)) or not math.isfinite(value) or value < 1:
+                raise SceneError(f"{what}: {name} must be a number >= 1 (named media such as "
+                                 f"'water' are not supported), got {value!r}")
+            iors.append(float(value))
+        normal = M[:3, 2] / np.linalg.norm(M[:3, 2])
+        interfaces.append((sid, -normal, M[:3, 3].copy(), iors[0], iors[1]))
+    return interfaces, targets
 
 
 def load_scene(path, defines: dict | None = None) -> SceneSpec:
     """Read the rig, the port and the ground-truth targets from a scene file.
 
     ``defines`` overrides ``<default>`` values like Mitsuba's ``-D`` (values as strings or
-    numbers); a name with no ``<default>`` in the file is an error. Raises :class:`SceneError`
-    (a ``ValueError``) with one line naming the file for anything that makes the scene unusable.
+    numbers); a name with no ``<default>`` in the file is an error. The file is parsed by
+    Mitsuba's own parser (``mitsuba.parser.parse_file``: ``$`` substitution, transforms composed
+    in double precision). Raises :class:`SceneError` (a ``ValueError``) with one line naming the
+    file for anything that makes the scene unusable.
     """
     path = os.fspath(path)
     label = path
+    if os.path.isdir(path):
+        raise SceneError(f"{label}: is a directory, not a scene file")
     try:
         with open(path, "rb") as fh:
             data = fh.read()
     except OSError as exc:
         raise SceneError(f"{label}: cannot read scene file ({exc.strerror or exc})") from None
-    try:
-        root = ET.fromstring(data)
-    except ET.ParseError as exc:
-        raise SceneError(f"{label}: malformed XML ({exc})") from None
-    if root.tag != "scene":
-        raise SceneError(f"{label}: root element is <{root.tag}>, expected <scene>")
-
-    params = {}
-    for d in root.findall("default"):
-        name, value = d.get("name"), d.get("value")
-        if not name or value is None:
-            raise SceneError(f"{label}: <default> needs name and value")
-        params[name] = value
+    params, referenced = _declared_defaults(data, label)
     for name, value in (defines or {}).items():
         if name not in params:
             known = ", ".join(sorted(params)) or "none"
             raise SceneError(f"{label}: unknown parameter -D {name} (the scene's defaults: {known})")
         params[name] = str(value)
-    referenced = frozenset(name for elem in root.iter() for value in elem.attrib.values()
-                           for name in _SUBST.findall(value))
-    _substitute(root, params, label)
+    _check_params(params, label)
+    mi, state = _parse_with_mitsuba(path, params, referenced, label)
+    nodes = _Nodes(mi, state)
 
-    sensors = [s for s in root.findall("sensor")]
+    sensors = [n for n in state.nodes if n.type == mi.ObjectType.Sensor]
     if len(sensors) < 2:
         raise SceneError(f"{label}: a stereo scene needs two sensors (left, then right), "
                          f"found {len(sensors)}")
-    left = _read_sensor(sensors[0], params, label)
-    right = _read_sensor(sensors[1], params, label)
+    left = _read_sensor(nodes, sensors[0], params, label)
+    right = _read_sensor(nodes, sensors[1], params, label)
     if left.size != right.size:
         raise SceneError(f"{label}: the two sensors have different film sizes")
-
-    refs = {e.get("id"): e for e in root if e.get("id")}
-    interfaces, targets = [], []
-    for shape in root.findall("shape"):
-        sid = shape.get("id", "")
-        what = f"{label}: shape {sid!r}"
-        props = _props(shape)
-        M = _transform(props["to_world"][1], what) if "to_world" in props else np.eye(4)
-        if shape.find("emitter") is not None:
-            if shape.get("type") != "disk":
-                raise SceneError(f"{what}: targets must be disks, got {shape.get('type')!r}")
-            if not sid.startswith(TARGET_ID_PREFIX) or not sid[len(TARGET_ID_PREFIX):].isdigit():
-                raise SceneError(f"{what}: target ids must be '{TARGET_ID_PREFIX}<number>'")
-            radius = float(np.linalg.norm(M[:3, 0]))
-            normal = M[:3, 2] / np.linalg.norm(M[:3, 2])
-            targets.append((int(sid[len(TARGET_ID_PREFIX):]), M[:3, 3].copy(), radius, normal))
-            continue
-        bsdf = _find_bsdf(shape, refs, what)
-        if shape.get("type") != "rectangle":
-            raise SceneError(f"{what}: port interfaces must be rectangles, got "
-                             f"{shape.get('type')!r}")
-        if bsdf is None or bsdf.get("type") != "dielectric":
-            kind = "none" if bsdf is None else repr(bsdf.get("type"))
-            raise SceneError(f"{what}: port interface BSDF is {kind}, expected 'dielectric'")
-        bprops = _props(bsdf)
-        try:
-            ext = _float(bprops.get("ext_ior", ("", "1.000277"))[1], what)
-            inner = _float(bprops.get("int_ior", ("", "1.5046"))[1], what)
-        except SceneError:
-            raise SceneError(f"{what}: ext_ior/int_ior must be numbers (named media such as "
-                             f"'water' are not supported)") from None
-        normal = M[:3, 2] / np.linalg.norm(M[:3, 2])
-        interfaces.append((sid, -normal, M[:3, 3].copy(), ext, inner))
+    interfaces, targets = _read_shapes(nodes, label)
 
     if not targets:
         raise SceneError(f"{label}: no targets (disk shapes with an area emitter)")
@@ -593,9 +600,7 @@ def load_scene(path, defines: dict | None = None) -> SceneSpec:
         raise SceneError(f"{label}: targets {bad[:5].tolist()} do not face the cameras")
     return SceneSpec(rig=rig, has_port=has_port, targets=centres, target_ids=ids,
                      target_radii=radii, params=params, path=path,
-                     sha256=hashlib.sha256(data).hexdigest(),
-                     sensor_ids=(sensors[0].get("id", "left"), sensors[1].get("id", "right")),
-                     interface_ids=tuple(i[0] for i in interfaces), referenced=referenced)
+                     sha256=hashlib.sha256(data).hexdigest(), referenced=referenced)
 
 
 def _port_from_interfaces(interfaces, label) -> FlatPort:

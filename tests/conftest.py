@@ -45,8 +45,6 @@ def air_rig():
 
 def rotation(rx: float, ry: float, rz: float) -> np.ndarray:
     """Rotation matrix from small angles about x, y, z (radians), R = Rz Ry Rx."""
-    cx, sx, cy, sy, cz, sz = np.cos(rx), np.sin(rx), np.cos(ry), np.sin(ry), np.cos(rz), np.sin(rz)
-    Rx = np.array([[1, 0, 0], [0, cx, -sx], [0, sx, cx]])
-    Ry = np.array([[cy, 0, sy], [0, 1, 0], [-sy, 0, cy]])
-    Rz = np.array([[cz, -sz, 0], [sz, cz, 0], [0, 0, 1]])
-    return Rz @ Ry @ Rx
+    from scipy.spatial.transform import Rotation
+
+    return Rotation.from_euler("ZYX", [rz, ry, rx]).as_matrix()

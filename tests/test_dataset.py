@@ -10,8 +10,8 @@ import cv2
 import numpy as np
 import pytest
 
-from synth.dataset import (PIXELS_HEADER, check_dataset, read_dataset, stereo_extrinsics,
-                           write_dataset)
+from synth.crosscheck import check_dataset
+from synth.dataset import PIXELS_HEADER, read_dataset, stereo_extrinsics, write_dataset
 from synth.project import project
 from synth.scene import load_scene
 
@@ -131,13 +131,26 @@ def test_failed_write_leaves_nothing(small_scene, tmp_path, monkeypatch):
 
 
 def test_refuses_to_replace_a_foreign_directory(small_scene, tmp_path):
-    from synth.dataset import DatasetError
+    from synth.fileio import OutputError
 
     (tmp_path / "mine").mkdir()
     (tmp_path / "mine" / "notes.txt").write_text("keep me")
-    with pytest.raises(DatasetError, match="refusing"):
+    with pytest.raises(OutputError, match="holds files this command did not write"):
         write_dataset(small_scene, tmp_path / "mine", progress=False)
     assert (tmp_path / "mine" / "notes.txt").read_text() == "keep me"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["mine"]
+
+
+def test_refuses_an_earlier_dataset_that_someone_added_a_file_to(small_scene, tmp_path):
+    from synth.fileio import OutputError
+
+    out = tmp_path / "ds"
+    write_dataset(small_scene, out, spp=4, progress=False)
+    (out / "notes.txt").write_text("keep me")
+    with pytest.raises(OutputError, match="did not write"):
+        write_dataset(small_scene, out, spp=9, progress=False)
+    assert (out / "notes.txt").read_text() == "keep me"
+    assert json.loads((out / "manifest.json").read_text())["spp"] == 4
 
 
 def test_cli_dataset_and_check(small_scene, tmp_path, capsys):

@@ -106,7 +106,57 @@ def test_unwritable_out(small_scene, tmp_path, capsys):
     blocker = tmp_path / "file"
     blocker.write_text("not a directory")
     assert main(["run", small_scene, "--out", str(blocker / "out"), "--no-progress"]) == 2
-    assert capsys.readouterr().err.startswith("error: cannot write")
+    err = capsys.readouterr().err
+    assert err.startswith("error: --out") and "not a directory" in err
+
+
+def _without_timings(report: dict) -> dict:
+    report = dict(report)
+    report.pop("timings_s")
+    return report
+
+
+def test_identical_runs_give_identical_reports(small_scene, tmp_path):
+    """Same arguments, same numbers: five runs give byte-identical report.json apart from the
+    timings (the plane fit is seeded and single-threaded, the noise is seeded)."""
+    data = tmp_path / "data"
+    write_dataset(small_scene, data, spp=4, progress=False)
+    texts = []
+    for k in range(5):
+        out = tmp_path / f"run{k}"
+        assert main(["run", small_scene, "--from", str(data), "--out", str(out), "--noise-px",
+                     "0.2", "--seed", "3", "--no-progress"]) == 0
+        texts.append(json.dumps(_without_timings(json.loads((out / "report.json").read_text())),
+                                sort_keys=True).replace(str(out), "OUT"))
+    assert all(text == texts[0] for text in texts[1:])
+    assert json.loads(texts[0])["methods"]["optical_path"]["flatness_mm"] > 0
+
+
+def test_seed_option_and_scene_parameter_mean_the_same(small_scene, tmp_path):
+    """--seed 7 and -D seed=7 render the same images (one seed, one meaning)."""
+    from synth.__main__ import main as synth_main
+
+    for name, extra in (("a", ["--seed", "7"]), ("b", ["-D", "seed=7"]), ("c", [])):
+        assert synth_main(["render", small_scene, "--out", str(tmp_path / name), "--spp", "4",
+                           "--quiet", *extra]) == 0
+    a, b, c = ((tmp_path / n / "left.png").read_bytes() for n in "abc")
+    assert a == b and a != c
+
+
+def test_conflicting_define_with_from_dataset(small_scene, tmp_path, capsys):
+    data = tmp_path / "data"
+    write_dataset(small_scene, data, spp=4, progress=False, defines={"n_water": "1.34"})
+    out = tmp_path / "out"
+    assert main(["run", small_scene, "--from", str(data), "--out", str(out), "--no-progress",
+                 "-D", "n_water=1.36"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "n_water=1.36" in err[0] and "n_water=1.34" in err[0]
+    assert not out.exists()
+    # The dataset's own parameters are the truth: without -D, or with the same value, it runs.
+    assert main(["run", small_scene, "--from", str(data), "--out", str(out), "--no-progress",
+                 "-D", "n_water=1.34", "--methods", "optical_path"]) == 0
+    report = json.loads((out / "report.json").read_text())
+    assert report["matching"]["wrong"] == 0 and report["matching"]["pairs"] > 0
 
 
 def test_scene_with_no_visible_target(tmp_path, capsys):
