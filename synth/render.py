@@ -40,10 +40,9 @@ DISTORTION_OVERSAMPLE = 2
 DISTORTION_MARGIN_PX = 3
 
 
-#: Memory (bytes) one sample of a ``mi.render`` call holds at once in the JIT variants (the whole
-#: wavefront is one call), measured on the paper scene with ``llvm_ad_rgb`` (docs/architecture.md).
-BYTES_PER_SAMPLE = 64
-#: Memory per output pixel besides the wavefront (film, develop, images), bytes.
+#: Memory per rendered pixel (bytes), about twice what was measured with ``llvm_ad_rgb`` on the
+#: paper scene (peak RSS grew 32 bytes per pixel above ~190 MiB, the same at 4 and 16 spp:
+#: Mitsuba splits a wavefront of more than 2^32 samples into passes itself). docs/architecture.md
 BYTES_PER_PIXEL = 64
 
 
@@ -59,10 +58,10 @@ def available_memory_bytes() -> int | None:
     return None
 
 
-def render_memory_bytes(size, spp: int, oversample: int = 1) -> int:
-    """Estimated peak memory (bytes) of rendering one view of ``size`` (w, h) px at ``spp``."""
-    pixels = int(size[0]) * int(size[1]) * oversample * oversample
-    return pixels * (int(spp) * BYTES_PER_SAMPLE + BYTES_PER_PIXEL)
+def render_memory_bytes(size, oversample: int = 1) -> int:
+    """Estimated peak memory (bytes) of rendering one view of ``size`` (w, h) px (the render
+    of a distorted camera is ``oversample`` times finer in each direction)."""
+    return int(size[0]) * int(size[1]) * oversample * oversample * BYTES_PER_PIXEL
 
 
 def check_render_request(spec: SceneSpec, spp: int | None = None) -> None:
@@ -77,13 +76,12 @@ def check_render_request(spec: SceneSpec, spp: int | None = None) -> None:
             if problem:
                 raise ValueError(f"{spec.path}: {name}_dist: {problem}")
     oversample = DISTORTION_OVERSAMPLE if any(c.dist is not None for c in spec.cameras) else 1
-    need = render_memory_bytes(spec.size, spp, oversample)
+    need = render_memory_bytes(spec.size, oversample)
     have = available_memory_bytes()
     if have is not None and need > have:
         w, h = spec.size
-        raise ValueError(f"{spec.path}: rendering {w}x{h} px at {spp} spp needs about "
-                         f"{need / 2**30:.1f} GiB of memory, {have / 2**30:.1f} GiB are available "
-                         f"(use a smaller image or fewer samples per pixel)")
+        raise ValueError(f"{spec.path}: rendering {w}x{h} px needs about {need / 2**30:.1f} GiB "
+                         f"of memory, {have / 2**30:.1f} GiB are available (use a smaller image)")
 
 
 def load_mitsuba_scene(spec: SceneSpec, variant: str | None = None):
