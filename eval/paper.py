@@ -40,22 +40,11 @@ from synth.noise import deviate_port, pixel_noise
 from synth.project import project
 from synth.rig import paper_rig
 
-NAME = "paper"
-DISTANCES_MM = (1000.0, 2000.0)
-NOISE_VARIANCE_PX2 = 0.01
-INDEX_RELATIVE = 0.0015
-GAP_THRESHOLD_MM = 1e-6
-IDEAL_TOLERANCE_MM = 1e-9
-SEM_FACTOR = 3.0  # "near zero" / "beyond the noise": |mean| against 3 standard errors of the mean
-SHIFT_AGREEMENT_MM = 0.1  # optical_path and su index-deviation shifts "alike": within 0.1 mm
-NOISE_METHODS = ("optical_path", "su", "regular_in_air")
-INDEX_METHODS = ("optical_path", "su")
-INDEX_SIDES = ("simulation", "measurement")
-COMPONENTS = ("dX", "dY", "dZ", "dP")
-
-PAPER_REFERENCE = ("Li et al., 'Underwater Refractive Stereo Vision Measurement and Simulation "
-                   "Imaging Model Based on Optical Path', J. Mar. Sci. Eng. 2024, 12(11), 1955, "
-                   "doi:10.3390/jmse12111955")
+from eval.paper_settings import (COMPONENTS, DISTANCES_MM, GAP_THRESHOLD_MM,  # noqa: F401
+                                 IDEAL_TOLERANCE_MM, INDEX_METHODS, INDEX_RELATIVE, INDEX_SIDES,
+                                 NAME, NOISE_METHODS, NOISE_VARIANCE_PX2, PAPER_REFERENCE,
+                                 SEM_FACTOR, SHIFT_AGREEMENT_MM)
+from eval.results import ErrorStats
 
 
 # --------------------------------------------------------------------------------------------
@@ -69,28 +58,12 @@ def error_components(errors: np.ndarray) -> dict[str, np.ndarray]:
             "dP": np.linalg.norm(flat, axis=1)}
 
 
-def _component_stats(values: np.ndarray) -> dict:
-    finite = values[np.isfinite(values)]
-    n = int(finite.size)
-    if n == 0:
-        return {"n": 0, "n_invalid": int(values.size), "min": None, "max": None,
-                "max_abs": None, "mean": None, "std": None, "sem_pooled": None, "rms": None}
-    std = float(np.std(finite, ddof=1)) if n > 1 else 0.0
-    return {"n": n, "n_invalid": int(values.size - n),
-            "min": float(finite.min()), "max": float(finite.max()),
-            "max_abs": float(np.abs(finite).max()), "mean": float(finite.mean()),
-            "std": std, "sem_pooled": std / np.sqrt(n), "rms": float(np.sqrt(np.mean(finite ** 2)))}
-
-
-def error_stats(errors: np.ndarray) -> dict:
-    """Per component (dX, dY, dZ, dP): n, min, max, max_abs, mean, std, sem_pooled, rms (mm).
-
-    ``sem_pooled`` = std / sqrt(n) over all rows: it counts any deterministic per-target error
-    (Su's model error) as spread; the noise yardstick of the claims is ``noise_sem`` instead.
-
-    NaN rows (no answer) are left out and counted in ``n_invalid``.
-    """
-    return {name: _component_stats(values) for name, values in error_components(errors).items()}
+def error_stats(errors: np.ndarray) -> ErrorStats:
+    """:class:`eval.results.ErrorStats` of errors ``(..., 3)`` (measured − true, mm): per
+    component n, min, max, max_abs, mean, std, sem, rms. ``sem`` = std / sqrt(n) over all rows:
+    it counts any deterministic per-target error (Su's model error) as spread; the noise
+    yardstick of the claims is ``noise_sem`` instead. NaN rows are left out and counted."""
+    return ErrorStats.of(errors)
 
 
 # --------------------------------------------------------------------------------------------
@@ -292,8 +265,8 @@ def run_noise(rig: StereoRig, air_rig: StereoRig, trials: int, seed: int,
             errors = index_errors[side][method]
             stats[side][method] = error_stats(errors)
             delta = _mean_vector(errors) - _mean_vector(noise_errors[method])
-            mean_dp_shift = (stats[side][method]["dP"]["mean"]
-                             - noise_stats[method]["dP"]["mean"])
+            mean_dp_shift = (stats[side][method].dp.mean_mm
+                             - noise_stats[method].dp.mean_mm)
             shifts[side][method] = {"dX": float(delta[0]), "dY": float(delta[1]),
                                     "dZ": float(delta[2]), "dP": float(mean_dp_shift)}
     chosen, rule = choose_index_side(shifts, sem)
@@ -330,7 +303,7 @@ def run_experiments(trials: int = 100, seed: int = 0, *, variance: float = NOISE
     su_ideal = error_components(ideal[noise["z_mm"]]["errors"]["su"])["dP"]
     noise["su_ideal_mean_square_dP"] = float(np.mean(su_ideal ** 2))
     noise["su_model_error_share"] = float(
-        noise["su_ideal_mean_square_dP"] / noise["stats"]["su"]["dP"]["rms"] ** 2)
+        noise["su_ideal_mean_square_dP"] / noise["stats"]["su"].dp.rms_mm ** 2)
     results = {
         "settings": {"trials": int(trials), "seed": int(seed), "pixel_noise_variance_px2": variance,
                      "pixel_noise_sigma_px": float(np.sqrt(variance)),
@@ -400,7 +373,7 @@ def evaluate_claims(results: dict) -> list[dict]:
     for z, paper_words in ((1000.0, "order of 1e-11 mm"), (2000.0, "order of 1e-10 or 1e-11 mm")):
         for method, label in (("optical_path", "optical-path (new) model"),
                               ("regular_in_air", "regular triangulation in air")):
-            value = ideal[z]["stats"][method]["dP"]["max"]
+            value = ideal[z]["stats"][method].dp.max_mm
             claims.append(_claim(
                 f"ideal.{method}.{z / 1000:g}m.max_dP", "3.3.1",
                 f"{label}, no errors, {z / 1000:g} m: deviations of the {paper_words} "
@@ -409,7 +382,7 @@ def evaluate_claims(results: dict) -> list[dict]:
                 value is not None and value <= IDEAL_TOLERANCE_MM, max_dP_mm=value))
     for z, limit, words in ((1000.0, 50.0, "the maximum dP exceeds 50 mm"),
                             (2000.0, 7.0, "the maximum dP is still more than 7 mm")):
-        value = ideal[z]["stats"]["su"]["dP"]["max"]
+        value = ideal[z]["stats"]["su"].dp.max_mm
         claims.append(_claim(
             f"ideal.su.{z / 1000:g}m.max_dP", "3.3.1", f"Su's method, {z / 1000:g} m: {words}",
             f"max dP = {value:.4f} mm", f"max dP > {limit:g} mm", value > limit,
@@ -424,7 +397,7 @@ def evaluate_claims(results: dict) -> list[dict]:
         "Spearman rank correlation of Su's dP with the target's radius > 0.5", rho > 0.5,
         rho=rho))
     s1, s2 = ideal[1000.0]["su_share_dP_within_1mm"], ideal[2000.0]["su_share_dP_within_1mm"]
-    m1, m2 = ideal[1000.0]["stats"]["su"]["dP"]["max"], ideal[2000.0]["stats"]["su"]["dP"]["max"]
+    m1, m2 = ideal[1000.0]["stats"]["su"].dp.max_mm, ideal[2000.0]["stats"]["su"].dp.max_mm
     claims.append(_claim(
         "ideal.su.2m_better", "3.3.1",
         "at 2 m Su's results improve and the area inside the ±1 mm contour becomes larger",
@@ -435,7 +408,7 @@ def evaluate_claims(results: dict) -> list[dict]:
 
     noise = results["noise"]
     ns = noise["stats"]
-    rms = {m: ns[m]["dP"]["rms"] for m in NOISE_METHODS}
+    rms = {m: ns[m].dp.rms_mm for m in NOISE_METHODS}
     claims.append(_claim(
         "noise.optical_path_beats_su", "3.3.2",
         "with pixel noise (variance 0.01 px²) the new model is more accurate than Su's",
@@ -449,13 +422,13 @@ def evaluate_claims(results: dict) -> list[dict]:
         "RMS dP(optical_path) < RMS dP(regular in air)",
         rms["optical_path"] < rms["regular_in_air"],
         rms_optical_path=rms["optical_path"], rms_regular_in_air=rms["regular_in_air"]))
-    xyz_better = {c: ns["optical_path"][c]["rms"] < ns["regular_in_air"][c]["rms"]
+    xyz_better = {c: ns["optical_path"].component(c).rms_mm < ns["regular_in_air"].component(c).rms_mm
                   for c in ("dX", "dY", "dP")}
     claims.append(_claim(
         "noise.optical_path_xy_minimal", "3.3.2",
         "the deviations of the X, Y and total coordinates of the new method are minimal "
         "(compared with regular triangulation in air)",
-        ", ".join(f"{c} {ns['optical_path'][c]['rms']:.3f} vs {ns['regular_in_air'][c]['rms']:.3f}"
+        ", ".join(f"{c} {ns['optical_path'].component(c).rms_mm:.3f} vs {ns['regular_in_air'].component(c).rms_mm:.3f}"
                   for c in ("dX", "dY", "dP")) + " mm RMS",
         "RMS of dX, dY and dP each smaller for optical_path than for regular in air",
         all(xyz_better.values())))
@@ -464,45 +437,45 @@ def evaluate_claims(results: dict) -> list[dict]:
     claims.append(_claim(
         "noise.optical_path_x_within_1mm", "3.3.2",
         "the deviation in X was minimal, generally within ±1 mm",
-        f"{100 * within:.2f} % of |dX| <= 1 mm (σX = {op['dX']['std']:.3f} mm)",
+        f"{100 * within:.2f} % of |dX| <= 1 mm (σX = {op.dx.std_mm:.3f} mm)",
         "share of |dX| <= 1 mm >= 0.95 (optical_path)", within >= 0.95, share=within))
-    z_largest = op["dZ"]["std"] > max(op["dX"]["std"], op["dY"]["std"])
+    z_largest = op.dz.std_mm > max(op.dx.std_mm, op.dy.std_mm)
     claims.append(_claim(
         "noise.optical_path_z_largest", "3.3.2",
         "the deviation in Z was the largest, exceeding ±2 mm",
-        f"σ = {op['dX']['std']:.3f} / {op['dY']['std']:.3f} / {op['dZ']['std']:.3f} mm (X/Y/Z); "
-        f"max |dZ| = {op['dZ']['max_abs']:.2f} mm",
+        f"σ = {op.dx.std_mm:.3f} / {op.dy.std_mm:.3f} / {op.dz.std_mm:.3f} mm (X/Y/Z); "
+        f"max |dZ| = {op.dz.max_abs_mm:.2f} mm",
         "σZ > σX, σY and max |dZ| > 2 mm (optical_path)",
-        z_largest and op["dZ"]["max_abs"] > 2.0, max_abs_dZ=op["dZ"]["max_abs"]))
+        z_largest and op.dz.max_abs_mm > 2.0, max_abs_dZ=op.dz.max_abs_mm))
     nsem = noise["noise_sem"]
-    ratios = {c: abs(op[c]["mean"]) / nsem["optical_path"][c] for c in ("dX", "dY", "dZ")}
+    ratios = {c: abs(op.component(c).mean_mm) / nsem["optical_path"][c] for c in ("dX", "dY", "dZ")}
     claims.append(_claim(
         "noise.optical_path_mean_near_zero", "3.3.2",
         "the means of the three coordinate deviations of our model are all close to 0",
-        "mean " + " / ".join(f"{op[c]['mean']:+.4f}" for c in ("dX", "dY", "dZ"))
+        "mean " + " / ".join(f"{op.component(c).mean_mm:+.4f}" for c in ("dX", "dY", "dZ"))
         + " mm = " + " / ".join(f"{ratios[c]:.1f}" for c in ("dX", "dY", "dZ")) + " SEM",
         f"|mean| < {SEM_FACTOR:g} SEM for dX, dY and dZ",
         all(r < SEM_FACTOR for r in ratios.values()),
-        **{f"mean_{c}": op[c]["mean"] for c in ("dX", "dY", "dZ")},
+        **{f"mean_{c}": op.component(c).mean_mm for c in ("dX", "dY", "dZ")},
         **{f"sem_{c}": nsem["optical_path"][c] for c in ("dX", "dY", "dZ")}))
     su = ns["su"]
     claims.append(_claim(
         "noise.su_dZ_negative", "3.3.2",
         "Su's Z coordinate deviations are all negative (systematic)",
-        f"mean dZ = {su['dZ']['mean']:.3f} mm ({su['dZ']['mean'] / nsem['su']['dZ']:.0f} SEM); "
+        f"mean dZ = {su.dz.mean_mm:.3f} mm ({su.dz.mean_mm / nsem['su']['dZ']:.0f} SEM); "
         f"{100 * noise['su_share_dZ_negative']:.1f} % of dZ < 0",
         f"mean dZ < -{SEM_FACTOR:g} SEM (systematically negative)",
-        su["dZ"]["mean"] < -SEM_FACTOR * nsem["su"]["dZ"],
-        mean_dZ=su["dZ"]["mean"], share_negative=noise["su_share_dZ_negative"]))
-    su_ratios = {c: abs(su[c]["mean"]) / nsem["su"][c] for c in ("dX", "dY")}
+        su.dz.mean_mm < -SEM_FACTOR * nsem["su"]["dZ"],
+        mean_dZ=su.dz.mean_mm, share_negative=noise["su_share_dZ_negative"]))
+    su_ratios = {c: abs(su.component(c).mean_mm) / nsem["su"][c] for c in ("dX", "dY")}
     claims.append(_claim(
         "noise.su_xy_mean_near_zero", "3.3.2",
         "Su's X and Y coordinate deviations are also close to 0",
-        "mean " + " / ".join(f"{su[c]['mean']:+.3f}" for c in ("dX", "dY")) + " mm = "
+        "mean " + " / ".join(f"{su.component(c).mean_mm:+.3f}" for c in ("dX", "dY")) + " mm = "
         + " / ".join(f"{su_ratios[c]:.1f}" for c in ("dX", "dY")) + " SEM",
         f"|mean| < {SEM_FACTOR:g} SEM for dX and dY (su)",
         all(r < SEM_FACTOR for r in su_ratios.values()),
-        mean_dX=su["dX"]["mean"], mean_dY=su["dY"]["mean"]))
+        mean_dX=su.dx.mean_mm, mean_dY=su.dy.mean_mm))
     share = noise["su_model_error_share"]
     claims.append(_claim(
         "noise.su_dominated_by_model_error", "3.3.2",
@@ -550,16 +523,16 @@ def evaluate_claims(results: dict) -> list[dict]:
         + " / ".join(f"{diffs[a]:.3f}" for a in ("dX", "dY", "dZ")) + " mm (X/Y/Z)",
         f"mean shifts agree within {SHIFT_AGREEMENT_MM:g} mm in X, Y and Z",
         all(d <= SHIFT_AGREEMENT_MM for d in diffs.values()), **diffs))
-    op_rms_noise = ns["optical_path"]["dP"]["rms"]
-    op_rms_index = index["sides"][side]["stats"]["optical_path"]["dP"]["rms"]
+    op_rms_noise = ns["optical_path"].dp.rms_mm
+    op_rms_index = index["sides"][side]["stats"]["optical_path"].dp.rms_mm
     claims.append(_claim(
         "index.optical_path_error_increases", "3.3.3",
         "compared with Figure 7 the deviations of our model have (slightly) increased",
         f"{side_text} RMS dP {op_rms_noise:.3f} -> {op_rms_index:.3f} mm",
         "RMS dP with the deviation > RMS dP without (optical_path)",
         op_rms_index > op_rms_noise, before=op_rms_noise, after=op_rms_index))
-    su_rms_noise = ns["su"]["dP"]["rms"]
-    su_rms_index = index["sides"][side]["stats"]["su"]["dP"]["rms"]
+    su_rms_noise = ns["su"].dp.rms_mm
+    su_rms_index = index["sides"][side]["stats"]["su"].dp.rms_mm
     change = abs(su_rms_index / su_rms_noise - 1.0)
     claims.append(_claim(
         "index.su_basically_unchanged", "3.3.3",
@@ -593,19 +566,21 @@ def add_parser(subparsers) -> None:
 
 
 def main(args) -> int:
-    """Run the experiments and write the report and figures into ``args.out``."""
-    from eval.cli import prepare_output_dir
-    from eval.paper_figures import write_figures
+    """Run the experiments and write the report and figures into ``args.out`` (whole or not at
+    all; the ``--out`` rule of :class:`synth.fileio.OutputDir` is checked first)."""
+    from eval.paper_figures import write_figures  # matplotlib: only when needed
     from eval.paper_report import write_reports
+    from synth.fileio import OutputDir
 
     start = time.perf_counter()
-    out = prepare_output_dir(args.out)
+    output = OutputDir(args.out, f"eval {NAME}").claim()
     results = run_experiments(args.trials, args.seed, progress=not args.no_progress)
-    figures = write_figures(results, out)
-    results["wall_seconds"] = time.perf_counter() - start
-    paths = write_reports(results, out, figures)
+    with output.staged() as tmp:
+        figures = write_figures(results, tmp)
+        results["wall_seconds"] = time.perf_counter() - start
+        paths = write_reports(results, tmp, figures)
     held = sum(c["holds"] for c in results["claims"])
     print(f"paper: {held}/{len(results['claims'])} claims hold; wrote "
-          f"{', '.join(str(Path(p).name) for p in paths)} and {len(figures)} figures to {out} "
-          f"in {time.perf_counter() - start:.1f} s")
+          f"{', '.join(str(Path(p).name) for p in paths)} and {len(figures)} figures to "
+          f"{output.path} in {time.perf_counter() - start:.1f} s")
     return 0

@@ -18,12 +18,11 @@ from matplotlib.ticker import MaxNLocator
 from matplotlib.tri import Triangulation
 from scipy.stats import norm
 
-from eval.paper_report import atomic_write_bytes
+from eval.results import method_label
+from synth.fileio import atomic_write_bytes
 
 DPI = 110
 AXIS_NAMES = {"dX": "dX", "dY": "dY", "dZ": "dZ", "dP": "dP"}
-METHOD_TITLES = {"optical_path": "optical path (Li et al.)", "su": "Su's method",
-                 "regular_in_air": "regular triangulation, in air"}
 FIGURE_FILES = {
     "figure4": "figure4_gap.png", "figure5": "figure5_su_1m.png", "figure6": "figure6_su_2m.png",
     "figure7": "figure7_noise_maps.png", "figure8": "figure8_noise_hist.png",
@@ -113,9 +112,9 @@ def figure_su_ideal(results, z: float, number: int) -> Figure:
     axes = fig.subplots(2, 2)
     for ax, name in zip(axes.ravel(), ("dX", "dY", "dZ", "dP")):
         signed = name != "dP"
-        st = entry["stats"]["su"][name]
+        st = entry["stats"]["su"].component(name)
         _plane_map(fig, ax, entry["targets"], comps[name],
-                   f"{name} (max |{name}| = {st['max_abs']:.4g} mm)", f"{name} [mm]",
+                   f"{name} (max |{name}| = {st.max_abs_mm:.4g} mm)", f"{name} [mm]",
                    signed=signed, lines=(-1.0, 1.0) if signed else (1.0,))
     fig.suptitle(f"Figure {number} — Su's method, ideal conditions, Z = {z:g} mm "
                  "(measured − true; black lines: ±1 mm)")
@@ -131,7 +130,7 @@ def figure_maps(errors_by_method: dict, targets, trial: int, title: str) -> Figu
         for col, name in enumerate(("dX", "dY", "dZ")):
             values = comps[name]
             _plane_map(fig, axes[row, col], targets, values,
-                       f"{METHOD_TITLES[method]}\n{name}, max |{name}| = "
+                       f"{method_label(method)}\n{name}, max |{name}| = "
                        f"{np.nanmax(np.abs(values)):.3g} mm", f"{name} [mm]", signed=True,
                        lines=(-1.0, 1.0))
     fig.suptitle(title)
@@ -171,9 +170,9 @@ def figure_hist(errors_by_method: dict, title: str, reference: dict | None = Non
             if reference is not None:
                 ref = norm.fit(_components(reference[method])[name].ravel())
             ax = axes[row, col]
-            _hist_panel(ax, comps[name].ravel(), METHOD_TITLES[method], colors[method], ref)
+            _hist_panel(ax, comps[name].ravel(), method_label(method), colors[method], ref)
             ax.set_xlabel(f"{name} [mm]")
-            ax.set_title(f"{METHOD_TITLES[method]}: {name}", fontsize=10)
+            ax.set_title(f"{method_label(method)}: {name}", fontsize=10)
     fig.suptitle(title)
     return fig
 

@@ -9,58 +9,11 @@ claim of the paper with ``id``, ``section``, ``paper`` (the paper's words), ``me
 from __future__ import annotations
 
 import json
-import os
-import tempfile
 from pathlib import Path
 
-import numpy as np
-
-from eval.paper import COMPONENTS, INDEX_METHODS, INDEX_SIDES, NOISE_METHODS, PAPER_REFERENCE
-
-METHOD_LABELS = {"optical_path": "optical_path (Li et al.)", "su": "su (Su et al.)",
-                 "regular_in_air": "regular, all-air rig"}
-
-
-def atomic_write_bytes(path, data: bytes) -> Path:
-    """Write ``data`` to a temporary file beside ``path``, then ``os.replace`` it into place."""
-    path = Path(path)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        os.fchmod(fd, 0o644)  # mkstemp makes 0600; reports are meant to be read
-        with os.fdopen(fd, "wb") as handle:
-            handle.write(data)
-            handle.flush()
-            os.fsync(handle.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except OSError:
-            pass
-        raise
-    return path
-
-
-def atomic_write_text(path, text: str) -> Path:
-    return atomic_write_bytes(path, text.encode("utf-8"))
-
-
-def jsonable(value):
-    """Plain JSON types; NaN/inf become null; numpy arrays are not expected here."""
-    if isinstance(value, dict):
-        return {str(k): jsonable(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [jsonable(v) for v in value]
-    if isinstance(value, (bool, np.bool_)):
-        return bool(value)
-    if isinstance(value, (int, np.integer)):
-        return int(value)
-    if isinstance(value, (float, np.floating)):
-        value = float(value)
-        return value if np.isfinite(value) else None
-    if isinstance(value, np.ndarray):
-        return jsonable(value.tolist())
-    return value
+from eval.paper_settings import COMPONENTS, INDEX_METHODS, INDEX_SIDES, NOISE_METHODS, PAPER_REFERENCE
+from eval.results import jsonable, method_label
+from synth.fileio import atomic_write_text
 
 
 def _distance_key(z: float) -> str:
@@ -95,7 +48,7 @@ def build_report(results: dict, figures: dict | None = None) -> dict:
                                         "optical_path_share_abs_dX_within_1mm",
                                         "su_ideal_mean_square_dP", "su_model_error_share")}
         | {"methods": noise["stats"],
-           "rms_dP": {m: noise["stats"][m]["dP"]["rms"] for m in NOISE_METHODS}},
+           "rms_dP": {m: noise["stats"][m].dp.rms_mm for m in NOISE_METHODS}},
         "index_deviation": {
             "parameter": "n_water", "relative": index["relative"], "z_mm": index["z_mm"],
             "chosen_side": index["chosen_side"], "side_choice_rule": index["rule"],
@@ -174,10 +127,10 @@ def render_markdown(report: dict) -> str:
     for key, entry in report["ideal"].items():
         for method in NOISE_METHODS:
             st = entry["methods"][method]
-            lines.append(f"| {key} | {METHOD_LABELS[method]} | "
-                         + " | ".join(_num(st[c]["max_abs"]) for c in ("dX", "dY", "dZ"))
-                         + f" | {_num(st['dP']['max'])} | {_num(st['dP']['mean'])} | "
-                           f"{_num(st['dP']['rms'])} |")
+            lines.append(f"| {key} | {method_label(method)} | "
+                         + " | ".join(_num(st[f"max_abs_{c.lower()}_mm"]) for c in ("dX", "dY", "dZ"))
+                         + f" | {_num(st['max_dp_mm'])} | {_num(st['mean_dp_mm'])} | "
+                           f"{_num(st['rms_dp_mm'])} |")
     lines += ["", "![Figure 5](figure5_su_1m.png)", "", "![Figure 6](figure6_su_2m.png)", ""]
 
     noise = report["noise"]
@@ -187,10 +140,10 @@ def render_markdown(report: dict) -> str:
               "|---|---|---|---|---|---|---|---|---|"]
     for method in NOISE_METHODS:
         st = noise["methods"][method]
-        lines.append(f"| {METHOD_LABELS[method]} | "
-                     + " | ".join(f"{st[c]['mean']:+.4f}" for c in ("dX", "dY", "dZ")) + " | "
-                     + " | ".join(f"{st[c]['std']:.4f}" for c in ("dX", "dY", "dZ"))
-                     + f" | {st['dP']['rms']:.4f} | {st['dP']['max']:.3f} |")
+        lines.append(f"| {method_label(method)} | "
+                     + " | ".join(f"{st['mean_' + c.lower() + '_mm']:+.4f}" for c in ("dX", "dY", "dZ")) + " | "
+                     + " | ".join(f"{st['std_' + c.lower() + '_mm']:.4f}" for c in ("dX", "dY", "dZ"))
+                     + f" | {st['rms_dp_mm']:.4f} | {st['max_dp_mm']:.3f} |")
     nsem = noise["noise_sem"]
     lines += ["", "Noise standard errors of the mean (std of noisy − noise-free error / "
               "√samples), dX / dY / dZ: " + "; ".join(
@@ -216,7 +169,7 @@ def render_markdown(report: dict) -> str:
             lines.append(f"| {side} | {entry['n_water_true']:.7g} | "
                          f"{entry['n_water_assumed']:.7g} | {method} | "
                          + " | ".join(f"{sh[c]:+.4f}" for c in ("dX", "dY", "dZ"))
-                         + f" | {entry['stats'][method]['dP']['rms']:.4f} |")
+                         + f" | {entry['stats'][method]['rms_dp_mm']:.4f} |")
     sem = index["noise_only_sem"]["optical_path"]
     lines += ["", "Shifts are 'beyond the noise' when larger than 3 noise standard errors "
               f"(optical_path: " + ", ".join(f"{c} {sem[c]:.1e}" for c in ("dX", "dY", "dZ"))
@@ -234,10 +187,9 @@ def write_reports(results: dict, out, figures: dict | None = None) -> list[Path]
     """Write ``out/report.json`` and ``out/report.md`` atomically; return their paths."""
     out = Path(out)
     report = build_report(results, figures)
-    json_text = json.dumps(report, indent=2, allow_nan=False) + "\n"
+    json_text = json.dumps(report, indent=2, allow_nan=False) + "\n"  # strict JSON
     return [atomic_write_text(out / "report.json", json_text),
             atomic_write_text(out / "report.md", render_markdown(report))]
 
 
-__all__ = ["atomic_write_bytes", "atomic_write_text", "build_report", "claims_table",
-           "render_markdown", "write_reports", "COMPONENTS"]
+__all__ = ["build_report", "claims_table", "render_markdown", "write_reports", "COMPONENTS"]

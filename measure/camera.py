@@ -1,6 +1,6 @@
 """Pinhole camera with OpenCV intrinsics, lens distortion and a camera-to-reference pose.
 
-Conventions (see DESIGN.md): millimetres; OpenCV camera axes (x right, y down, z forward);
+Conventions (docs/architecture.md): millimetres; OpenCV camera axes (x right, y down, z forward);
 pixels in OpenCV convention (integer coordinates are pixel centres), arrays ``(N, 2)`` as
 ``(u, v)``; the pose maps camera coordinates to the reference frame, ``X_ref = R @ X_cam + t``.
 """
@@ -11,6 +11,15 @@ from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
+
+from .reasons import Reason
+
+#: Largest |distort(undistort(p)) − p| (px) of a pixel that counts as undistorted: 1000× below
+#: any centroid precision (~0.001 px), far above Newton's float64 floor (~1e-13 px).
+UNDISTORT_TOLERANCE_PX = 1e-6
+#: Pixels between the samples of the image border and interior grid that
+#: :meth:`Camera.distortion_problem` checks.
+DISTORTION_CHECK_STEP_PX = 4
 
 #: Numbers of OpenCV distortion coefficients this model evaluates:
 #: (k1, k2, p1, p2), (k1, k2, p1, p2, k3) and the rational (k1, k2, p1, p2, k3, k4, k5, k6).
@@ -26,8 +35,41 @@ def _as_rotation(R, name: str) -> np.ndarray:
     return R
 
 
-@dataclass(frozen=True)
-class Camera:
+def _arrays_equal(a, b) -> bool:
+    if a is None or b is None:
+        return a is None and b is None
+    return bool(np.array_equal(a, b))
+
+
+def _hash_value(value):
+    return value.tobytes() if isinstance(value, np.ndarray) else value
+
+
+class ValueEquality:
+    """``==`` and ``hash`` by value for frozen dataclasses with numpy array fields (exact
+    equality of the arrays)."""
+
+    __slots__ = ()
+
+    def __eq__(self, other):
+        if type(other) is not type(self):
+            return NotImplemented
+        for name in self.__dataclass_fields__:
+            a, b = getattr(self, name), getattr(other, name)
+            if isinstance(a, np.ndarray) or isinstance(b, np.ndarray):
+                if not _arrays_equal(a, b):
+                    return False
+            elif a != b:
+                return False
+        return True
+
+    def __hash__(self):
+        return hash((type(self).__name__,)
+                    + tuple(_hash_value(getattr(self, n)) for n in self.__dataclass_fields__))
+
+
+@dataclass(frozen=True, eq=False)
+class Camera(ValueEquality):
     """A calibrated camera.
 
     Parameters
@@ -51,16 +93,20 @@ class Camera:
         if K[0, 0] <= 0 or K[1, 1] <= 0 or not np.allclose(K[2], [0, 0, 1]) or K[1, 0] != 0:
             raise ValueError("K must be upper triangular with positive fx, fy and last row (0, 0, 1)")
         try:
-            width, height = (int(s) for s in size)
+            width, height = (float(s) for s in size)
         except (TypeError, ValueError):
             raise ValueError(f"size must be (width, height), got {size!r}") from None
-        if width <= 0 or height <= 0:
-            raise ValueError(f"size must be positive (width, height), got {size!r}")
+        if not all(np.isfinite(v) and v == int(v) and v > 0 for v in (width, height)):
+            raise ValueError(f"size must be positive whole numbers of pixels (width, height), "
+                             f"got {size!r}")
+        width, height = int(width), int(height)
         if dist is not None:
             dist = np.asarray(dist, dtype=np.float64).ravel()
-            if dist.size not in SUPPORTED_DISTORTION_LENGTHS or not np.all(np.isfinite(dist)):
+            if dist.size not in SUPPORTED_DISTORTION_LENGTHS:
                 raise ValueError(
-                    f"dist must hold 4, 5 or 8 finite OpenCV coefficients, got {dist.size}")
+                    f"dist must hold 4, 5 or 8 OpenCV coefficients, got {dist.size}")
+            if not np.all(np.isfinite(dist)):
+                raise ValueError(f"dist must be finite, got {dist.tolist()}")
             if not np.any(dist):
                 dist = None
         R = np.eye(3) if R is None else _as_rotation(R, "R")
@@ -106,9 +152,19 @@ class Camera:
         central-difference Jacobian of :meth:`distort` then converge to ~1e-16 in normalized
         coordinates (OpenCV's default 5 fixed-point iterations stop near 1e-6).
         """
-        xy_distorted = np.asarray(xy_distorted, dtype=np.float64)
-        if self.dist is None:
-            return xy_distorted.copy()
+        return self.undistort_with_reason(xy_distorted, iterations)[0]
+
+    def undistort_with_reason(self, xy_distorted: np.ndarray, iterations: int = 8):
+        """:meth:`undistort` and a ``(N,)`` :class:`Reason` array: ``NOT_CONVERGED`` (and NaN)
+        where the round trip ``distort(undistort(p))`` misses ``p`` by more than
+        :data:`UNDISTORT_TOLERANCE_PX` or the solution lies beyond a fold of the distortion
+        (its Jacobian determinant is not positive: another point maps to the same pixel);
+        ``INVALID_INPUT`` for non-finite input."""
+        xy_distorted = np.asarray(xy_distorted, dtype=np.float64).reshape(-1, 2)
+        reason = np.full(xy_distorted.shape[0], Reason.OK, dtype=np.int8)
+        reason[~np.all(np.isfinite(xy_distorted), axis=1)] = Reason.INVALID_INPUT
+        if self.dist is None or xy_distorted.shape[0] == 0:
+            return xy_distorted.copy(), reason
         criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 50, 1e-12)
         # OpenCV 4 names the iterative form undistortPointsIter; OpenCV 5 folds it into
         # undistortPoints with a criteria argument.
@@ -128,32 +184,75 @@ class Camera:
             xy = xy - np.stack([dx, dy], axis=1)
             if np.nanmax(np.abs(residual), initial=0.0) < 1e-15:
                 break
-        return xy
+        with np.errstate(invalid="ignore", over="ignore"):
+            miss_px = np.max(np.abs(self.distort(xy) - xy_distorted), axis=1) * np.max(
+                np.diag(self.K)[:2])
+            jx = (self.distort(xy + ex) - self.distort(xy - ex)) / (2 * step)
+            jy = (self.distort(xy + ey) - self.distort(xy - ey)) / (2 * step)
+            det = jx[:, 0] * jy[:, 1] - jy[:, 0] * jx[:, 1]
+            failed = ~((miss_px <= UNDISTORT_TOLERANCE_PX) & (det > 0))
+        failed &= reason == Reason.OK
+        reason[failed] = Reason.NOT_CONVERGED
+        xy[reason != Reason.OK] = np.nan
+        return xy, reason
+
+    def distortion_problem(self) -> str | None:
+        """Why the lens distortion cannot be inverted over the whole image, or None.
+
+        Checks every pixel :data:`DISTORTION_CHECK_STEP_PX` apart along the border and on an
+        interior grid (vectorized): each must undistort with a round trip within
+        :data:`UNDISTORT_TOLERANCE_PX` on the monotone side of the distortion."""
+        if self.dist is None:
+            return None
+        w, h = self.size
+        step = DISTORTION_CHECK_STEP_PX
+        us = np.unique(np.append(np.arange(0, w, step), w - 1)).astype(float)
+        vs = np.unique(np.append(np.arange(0, h, step), h - 1)).astype(float)
+        grid = np.stack(np.meshgrid(us, vs), axis=-1).reshape(-1, 2)
+        _, reason = self.normalized_with_reason(grid)
+        bad = np.flatnonzero(reason != Reason.OK)
+        if bad.size == 0:
+            return None
+        u, v = grid[bad[np.argmin(np.abs(grid[bad] - [(w - 1) / 2, (h - 1) / 2]).sum(axis=1))]]
+        return (f"the lens distortion {self.dist.tolist()} cannot be inverted over the "
+                f"{w}x{h} image: {bad.size} of {grid.shape[0]} checked pixels have no "
+                f"undistorted position (the nearest to the centre is ({u:g}, {v:g}))")
 
     # --- pixels <-> rays ----------------------------------------------------------------------
     def normalized(self, uv: np.ndarray) -> np.ndarray:
-        """Pixels ``(N, 2)`` to undistorted normalized image coordinates ``(N, 2)``."""
+        """Pixels ``(N, 2)`` to undistorted normalized image coordinates ``(N, 2)`` (NaN where
+        the distortion cannot be inverted, see :meth:`normalized_with_reason`)."""
+        return self.normalized_with_reason(uv)[0]
+
+    def normalized_with_reason(self, uv: np.ndarray):
+        """:meth:`normalized` and a ``(N,)`` :class:`Reason` array (``NOT_CONVERGED`` where
+        undistortion fails, ``INVALID_INPUT`` for non-finite pixels)."""
         uv = np.asarray(uv, dtype=np.float64).reshape(-1, 2)
         fx, s, cx = self.K[0]
         fy, cy = self.K[1, 1], self.K[1, 2]
         xy = np.empty_like(uv)
         xy[:, 1] = (uv[:, 1] - cy) / fy
         xy[:, 0] = (uv[:, 0] - cx - s * xy[:, 1]) / fx
-        return xy if self.dist is None else self.undistort(xy)
+        return self.undistort_with_reason(xy)
 
     def rays(self, uv: np.ndarray) -> np.ndarray:
         """Unit ray directions ``(N, 3)`` in the reference frame through pixels ``(N, 2)``.
 
-        Every ray starts at :attr:`center`. This is the paper's ζ1 / ξ1 (equations 1-2).
+        Every ray starts at :attr:`center`. This is the paper's ζ1 / ξ1 (equations 1-2). A pixel
+        whose undistortion fails gives NaN (:meth:`rays_with_reason` says why).
         """
-        xy = self.normalized(uv)
+        return self.rays_with_reason(uv)[0]
+
+    def rays_with_reason(self, uv: np.ndarray):
+        """:meth:`rays` and their ``(N,)`` :class:`Reason` codes."""
+        xy, reason = self.normalized_with_reason(uv)
         x, y = xy[:, 0], xy[:, 1]
         inverse_norm = 1.0 / np.sqrt(1.0 + x * x + y * y)
         d = np.empty((xy.shape[0], 3))
         np.multiply(x, inverse_norm, out=d[:, 0])
         np.multiply(y, inverse_norm, out=d[:, 1])
         d[:, 2] = inverse_norm
-        return d if self._identity_rotation else d @ self.R.T
+        return (d if self._identity_rotation else d @ self.R.T), reason
 
     @property
     def _identity_rotation(self) -> bool:
@@ -171,12 +270,14 @@ class Camera:
             xy = self.distort(X[:, :2] / z[:, None])
         return xy @ self.K[:2, :2].T + self.K[:2, 2]
 
-    def in_image(self, uv: np.ndarray, margin: float = 0.0) -> np.ndarray:
-        """Whether pixels ``(N, 2)`` lie inside the image, ``margin`` pixels from its border.
+    def in_image(self, uv: np.ndarray, margin_px=0.0) -> np.ndarray:
+        """Whether pixels ``(N, 2)`` lie inside the image, at least ``margin_px`` (a scalar or
+        ``(N,)``) pixels from its border; NaN pixels are outside.
 
         The image spans [-0.5, W - 0.5] x [-0.5, H - 0.5] in OpenCV pixel coordinates.
         """
         uv = np.asarray(uv, dtype=np.float64).reshape(-1, 2)
+        margin = np.asarray(margin_px, dtype=np.float64)
         w, h = self.size
         lo = -0.5 + margin
         return ((uv[:, 0] >= lo) & (uv[:, 0] <= w - 0.5 - margin)

@@ -6,7 +6,7 @@ faint ghost reflections from inside the glass, targets cut by the image border a
 targets crowd, several targets merged into one blob. :func:`detect_targets` finds the blobs,
 measures each one and rejects the ones whose centroid would not be a target's centre.
 
-Conventions (see DESIGN.md): pixels in OpenCV convention -- integer coordinates are pixel
+Conventions (docs/architecture.md): pixels in OpenCV convention -- integer coordinates are pixel
 centres, ``(0, 0)`` is the centre of the top-left pixel; arrays of pixels are ``(N, 2)`` as
 ``(u, v)`` = (column, row). Only numpy, scipy and OpenCV are used; nothing here looks at ground
 truth.

@@ -1,6 +1,6 @@
 """Flat refractive port: parallel plane interfaces between the cameras' air and the water.
 
-Conventions (see DESIGN.md): millimetres, reference frame = left camera frame. ``normal`` is a
+Conventions (docs/architecture.md): millimetres, reference frame = left camera frame. ``normal`` is a
 unit vector pointing from the cameras into the water. The first interface is the plane
 ``normal · X = distance``; interface k (k = 0 … K-1) is the plane
 ``normal · X = distance + sum(thicknesses[:k])``. ``indices`` run from the camera side,
@@ -13,9 +13,22 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .camera import ValueEquality
 
-@dataclass(frozen=True)
-class FlatPort:
+
+def _as_vector(value, name: str) -> tuple[float, ...]:
+    """A sequence of numbers as a tuple of floats; one-line ValueError naming ``name``."""
+    try:
+        array = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a sequence of numbers, got {value!r}") from None
+    if array.ndim > 1:
+        raise ValueError(f"{name} must be a flat sequence of numbers, got shape {array.shape}")
+    return tuple(float(v) for v in np.atleast_1d(array))
+
+
+@dataclass(frozen=True, eq=False)
+class FlatPort(ValueEquality):
     """A flat port of ``len(thicknesses)`` layers between air and water.
 
     Parameters
@@ -33,19 +46,22 @@ class FlatPort:
     indices: tuple[float, ...]
 
     def __init__(self, normal, distance, thicknesses, indices):
-        normal = np.asarray(normal, dtype=np.float64).reshape(-1)
+        normal = np.asarray(_as_vector(normal, "normal"))
         if normal.shape != (3,) or not np.all(np.isfinite(normal)):
-            raise ValueError(f"normal must be a finite 3-vector, got {normal!r}")
+            raise ValueError(f"normal must be a finite 3-vector, got {normal.tolist()}")
         length = np.linalg.norm(normal)
         if length < 1e-12:
             raise ValueError("normal must not be the zero vector")
-        distance = float(distance)
+        try:
+            distance = float(distance)
+        except (TypeError, ValueError):
+            raise ValueError(f"distance must be a number, got {distance!r}") from None
         if not np.isfinite(distance):
             raise ValueError(f"distance must be finite, got {distance}")
-        thicknesses = tuple(float(d) for d in np.atleast_1d(np.asarray(thicknesses, dtype=float)))
+        thicknesses = _as_vector(thicknesses, "thicknesses") if np.size(thicknesses) else ()
         if any(not np.isfinite(d) or d <= 0 for d in thicknesses):
             raise ValueError(f"thicknesses must be positive and finite, got {thicknesses}")
-        indices = tuple(float(n) for n in np.atleast_1d(np.asarray(indices, dtype=float)))
+        indices = _as_vector(indices, "indices")
         if len(indices) != len(thicknesses) + 2:
             raise ValueError(
                 f"indices must hold len(thicknesses) + 2 = {len(thicknesses) + 2} values "
@@ -90,3 +106,13 @@ class FlatPort:
     def water_side(self, points: np.ndarray) -> np.ndarray:
         """Whether points ``(N, 3)`` lie strictly beyond the last interface (in the water)."""
         return np.asarray(points, dtype=float) @ self.normal > self.offsets[-1]
+
+
+def index_matched_port(normal, camera_centres) -> FlatPort:
+    """A port that bends nothing (no layers, indices (1, 1)): the plane with unit ``normal``
+    1 mm beyond the farther of ``camera_centres`` ``(K, 3)``. Through it every trace and
+    projection reduces to the pinhole one — what ``port=None`` (no port, all air) means."""
+    normal = np.asarray(normal, dtype=np.float64)
+    normal = normal / np.linalg.norm(normal)
+    centres = np.asarray(camera_centres, dtype=np.float64).reshape(-1, 3)
+    return FlatPort(normal + 0.0, float(np.max(centres @ normal)) + 1.0, (), (1.0, 1.0))

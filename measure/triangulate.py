@@ -19,7 +19,8 @@ import numpy as np
 
 from .camera import Camera
 from .lines import common_perpendicular
-from .port import FlatPort
+from .camera import ValueEquality
+from .port import FlatPort, index_matched_port
 from .batching import map_row_chunks
 from .reasons import Reason
 from .refraction import trace_through_port
@@ -27,9 +28,12 @@ from .refraction import trace_through_port
 METHODS = ("optical_path", "su", "regular")
 
 
-@dataclass(frozen=True)
-class StereoRig:
-    """Two cameras behind one flat port. Both centres must be on the air side of the port."""
+@dataclass(frozen=True, eq=False)
+class StereoRig(ValueEquality):
+    """Two cameras behind one flat port. Both centres must be on the air side of the port.
+
+    ``port=None`` means no port (all air): it is replaced by :func:`index_matched_port` along
+    the left camera's optical axis, through which everything reduces to the pinhole model."""
 
     left: Camera
     right: Camera
@@ -38,8 +42,11 @@ class StereoRig:
     def __post_init__(self):
         if not isinstance(self.left, Camera) or not isinstance(self.right, Camera):
             raise ValueError("left and right must be measure.Camera instances")
+        if self.port is None:
+            object.__setattr__(self, "port", index_matched_port(
+                self.left.R[:, 2], np.stack([self.left.center, self.right.center])))
         if not isinstance(self.port, FlatPort):
-            raise ValueError("port must be a measure.FlatPort")
+            raise ValueError("port must be a measure.FlatPort or None")
         self.port.check_camera(self.left.center, "left camera")
         self.port.check_camera(self.right.center, "right camera")
 
@@ -103,6 +110,13 @@ def triangulate_rays(rig: StereoRig, rays_left: np.ndarray, rays_right: np.ndarr
     """Triangulate from unit camera rays ``(N, 3)`` (reference frame) instead of pixels."""
     if method not in METHODS:
         raise ValueError(f"method must be one of {', '.join(METHODS)}, got {method!r}")
+    rays_left = np.asarray(rays_left, dtype=np.float64).reshape(-1, 3)
+    rays_right = np.asarray(rays_right, dtype=np.float64).reshape(-1, 3)
+    if rays_left.shape != rays_right.shape:
+        raise ValueError(f"rays_left and rays_right must have the same shape, got "
+                         f"{rays_left.shape} and {rays_right.shape}")
+    if rays_left.shape[0] == 0:
+        return Triangulation(np.zeros((0, 3)), np.zeros(0), np.zeros(0, dtype=np.int8), method)
     o_left, o_right = rig.left.center, rig.right.center
     reason = np.full(rays_left.shape[0], Reason.OK, dtype=np.int8)
     # A NaN or infinite component anywhere in a row makes the row's sum non-finite.
@@ -143,9 +157,15 @@ def triangulate(rig: StereoRig, uv_left, uv_right, method: str = "optical_path")
                          f"{uv_left.shape} and {uv_right.shape}")
 
     def solve(left, right):
+        rays_left, reason_left = rig.left.rays_with_reason(left)
+        rays_right, reason_right = rig.right.rays_with_reason(right)
         with np.errstate(invalid="ignore"):
-            result = triangulate_rays(rig, rig.left.rays(left), rig.right.rays(right), method)
-        return result.points, result.gap, result.reason
+            result = triangulate_rays(rig, rays_left, rays_right, method)
+        reason = result.reason
+        for camera_reason in (reason_left, reason_right):  # say why a ray is missing
+            reason[(reason == Reason.INVALID_INPUT) & (camera_reason != Reason.OK)] = \
+                camera_reason[(reason == Reason.INVALID_INPUT) & (camera_reason != Reason.OK)]
+        return result.points, result.gap, reason
 
     points, gap, reason = map_row_chunks(solve, (uv_left, uv_right))
     return Triangulation(points, gap, reason, method)

@@ -110,7 +110,9 @@ def read_calib(path) -> dict:
         return _read_calib(path)
     except DatasetError:
         raise
-    except (cv2.error, SystemError, ValueError, TypeError, AttributeError) as exc:
+    except (cv2.error, SystemError) as exc:  # OpenCV's parser: not YAML/XML FileStorage
+        raise DatasetError(f"{path}: not a valid OpenCV FileStorage calibration file") from None
+    except (ValueError, TypeError, AttributeError) as exc:
         message = " ".join(str(exc).split()) or type(exc).__name__
         raise DatasetError(f"{path}: not a valid calibration file ({message[:200]})") from None
 

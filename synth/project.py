@@ -26,6 +26,7 @@ from scipy.optimize import elementwise
 
 from measure import Camera, FlatPort, Reason
 from measure.batching import map_row_chunks
+from measure.port import index_matched_port
 
 SOLVERS = ("fermat", "snell")
 
@@ -255,8 +256,9 @@ def _solve_paths_chunk(camera, port, points, solver):
             np.full(points.shape[0], iterations))
 
 
-def solve_paths(camera: Camera, port: FlatPort, points, solver: str = "fermat") -> RefractedPaths:
-    """Refracted light paths from ``points (N, 3)`` in the water to ``camera``'s centre.
+def solve_paths(camera: Camera, port: FlatPort | None, points, solver: str = "fermat") -> RefractedPaths:
+    """Refracted light paths from ``points (N, 3)`` (or one point ``(3,)``) in the water to
+    ``camera``'s centre. ``port=None`` means no port (all air).
 
     Raises ``ValueError`` for an unknown solver or a camera centre on the water side of the
     port; per-point failures (a point not in the water, NaN input) are NaN rows with a reason.
@@ -265,8 +267,12 @@ def solve_paths(camera: Camera, port: FlatPort, points, solver: str = "fermat") 
     if solver not in SOLVERS:
         raise ValueError(f"solver must be one of {', '.join(SOLVERS)}, got {solver!r}")
     points = np.asarray(points, dtype=np.float64)
+    if points.shape == (3,):
+        points = points[None]
     if points.ndim != 2 or points.shape[1] != 3:
-        raise ValueError(f"points must have shape (N, 3), got {points.shape}")
+        raise ValueError(f"points must have shape (N, 3) or (3,), got {points.shape}")
+    if port is None:  # no port: all air, the pinhole model through an index-matched plane
+        port = index_matched_port(camera.R[:, 2], camera.center)
     port.check_camera(camera.center, "camera")
     pixels, interface_points, reason, is_minimum, iterations = map_row_chunks(
         lambda chunk: _solve_paths_chunk(camera, port, chunk, solver), (points,))
@@ -274,8 +280,10 @@ def solve_paths(camera: Camera, port: FlatPort, points, solver: str = "fermat") 
                           int(iterations.max(initial=0)))
 
 
-def project(camera: Camera, port: FlatPort, points, solver: str = "fermat") -> np.ndarray:
-    """Pixels ``(N, 2)`` of points ``(N, 3)`` in the water seen by ``camera`` through ``port``.
+def project(camera: Camera, port: FlatPort | None, points, solver: str = "fermat") -> np.ndarray:
+    """Pixels ``(N, 2)`` of points ``(N, 3)`` in the water seen by ``camera`` through ``port``
+    (``None``: no port, all air). One point ``(3,)`` gives ``(1, 2)``, like :func:`triangulate`
+    gives ``(1, 3)`` for one pixel pair.
 
     NaN where no path exists (e.g. a point on the camera side of the port). Lens distortion is
     applied like ``cv2.projectPoints``. ``solver``: ``"fermat"`` (the paper) or ``"snell"``.

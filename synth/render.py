@@ -75,13 +75,36 @@ def check_render_request(spec: SceneSpec, spp: int | None = None) -> None:
             problem = camera.distortion_problem()
             if problem:
                 raise ValueError(f"{spec.path}: {name}_dist: {problem}")
-    oversample = DISTORTION_OVERSAMPLE if any(c.dist is not None for c in spec.cameras) else 1
-    need = render_memory_bytes(spec.size, oversample)
+    need = max(render_memory_bytes(_render_size(camera)) for camera in spec.cameras)
     have = available_memory_bytes()
     if have is not None and need > have:
         w, h = spec.size
         raise ValueError(f"{spec.path}: rendering {w}x{h} px needs about {need / 2**30:.1f} GiB "
-                         f"of memory, {have / 2**30:.1f} GiB are available (use a smaller image)")
+                         f"of memory, {have / 2**30:.1f} GiB are available (use a smaller image"
+                         f"{' or a milder lens distortion' if spec.cameras[0].dist is not None else ''})")
+
+
+def _render_size(camera: Camera) -> tuple[int, int]:
+    """The film size (w, h) px Mitsuba renders for ``camera``: its own, or for a distorted
+    camera the oversampled pinhole image that covers its field of view."""
+    if camera.dist is None:
+        return camera.size
+    w, h = camera.size
+    border = np.concatenate([np.stack([np.arange(w), np.zeros(w)], 1),
+                             np.stack([np.arange(w), np.full(w, h - 1)], 1),
+                             np.stack([np.zeros(h), np.arange(h)], 1),
+                             np.stack([np.full(h, w - 1), np.arange(h)], 1)]).astype(float)
+    return _ideal_extent(camera, camera.normalized(border), DISTORTION_OVERSAMPLE,
+                         DISTORTION_MARGIN_PX)[1]
+
+
+def _ideal_extent(camera: Camera, x: np.ndarray, oversample: int, margin: float):
+    """``(K_ideal, (w, h))`` of the pinhole image covering normalized coordinates ``x``."""
+    fi = camera.K[0, 0] * oversample
+    lo = x.min(axis=0) * fi - margin * oversample
+    hi = x.max(axis=0) * fi + margin * oversample
+    size = (int(math.ceil(hi[0] - lo[0])) + 1, int(math.ceil(hi[1] - lo[1])) + 1)
+    return np.array([[fi, 0.0, -lo[0]], [0.0, fi, -lo[1]], [0.0, 0.0, 1.0]]), size
 
 
 def load_mitsuba_scene(spec: SceneSpec, variant: str | None = None):
@@ -105,19 +128,14 @@ def load_mitsuba_scene(spec: SceneSpec, variant: str | None = None):
 def _ideal_camera_for(camera: Camera, oversample: int, margin: float):
     """Pinhole (K_ideal, size_ideal) covering the distorted view, and the remap grids."""
     w, h = camera.size
-    f = camera.K[0, 0]
-    cx, cy = camera.K[0, 2], camera.K[1, 2]
     u, v = np.meshgrid(np.arange(w, dtype=np.float64), np.arange(h, dtype=np.float64))
     uv = np.column_stack([u.ravel(), v.ravel()])
     x = camera.normalized(uv)  # undistorted normalized coordinates of every output pixel
     if not np.all(np.isfinite(x)):
-        raise ValueError("the distortion model cannot be inverted over the whole image")
-    fi = f * oversample
-    lo = x.min(axis=0) * fi - margin * oversample
-    hi = x.max(axis=0) * fi + margin * oversample
-    wi, hi_ = int(math.ceil(hi[0] - lo[0])) + 1, int(math.ceil(hi[1] - lo[1])) + 1
-    K = np.array([[fi, 0.0, -lo[0]], [0.0, fi, -lo[1]], [0.0, 0.0, 1.0]])
-    map_xy = x * fi + K[:2, 2]
+        raise ValueError(camera.distortion_problem() or
+                         "the distortion model cannot be inverted over the whole image")
+    K, (wi, hi_) = _ideal_extent(camera, x, oversample, margin)
+    map_xy = x * K[0, 0] + K[:2, 2]
     if oversample % 2 == 0:
         map_xy += 0.5  # cv2.blur with an even box: value j is centred at j - 0.5
     map_x = map_xy[:, 0].reshape(h, w).astype(np.float32)

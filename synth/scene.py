@@ -41,6 +41,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from measure import Camera, FlatPort, StereoRig
+from measure.port import index_matched_port
 
 #: Half side (mm) of the square port interfaces: covers both fields of view far beyond 2 m.
 INTERFACE_HALF_SIZE_MM = 2000.0
@@ -580,9 +581,7 @@ def load_scene(path, defines: dict | None = None) -> SceneSpec:
         if params.get("port") != "none":
             raise SceneError(f"{label}: no port (no dielectric rectangle); an all-air scene "
                              f"must declare <default name=\"port\" value=\"none\"/>")
-        normal = left.R[:, 2]
-        distance = max(float(normal @ left.t), float(normal @ right.t)) + 1.0
-        port = FlatPort(normal + 0.0, distance, (), (1.0, 1.0))
+        port = index_matched_port(left.R[:, 2], np.stack([left.center, right.center]))
     else:
         if params.get("port") == "none":
             raise SceneError(f"{label}: port=none but the scene has port interfaces")

@@ -14,6 +14,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from synth.fileio import MARKER_NAME
+
 from eval import cli
 from eval.paper import run_experiments
 from synth.noise import add_pixel_noise, deviate_port, pixel_noise
@@ -54,12 +56,13 @@ def test_report_structure(paper_run):
     for distance in ("1m", "2m"):
         for method in ("optical_path", "su", "regular_in_air"):
             stats = report["ideal"][distance]["methods"][method]
-            for component in ("dX", "dY", "dZ", "dP"):
-                assert {"max_abs", "mean", "rms"} <= set(stats[component])
-                assert stats[component]["n"] == 496
+            assert stats["n"] == 496 and stats["n_invalid"] == 0
+            for component in ("dx", "dy", "dz", "dp"):  # eval.results' flat schema
+                assert {f"max_abs_{component}_mm", f"mean_{component}_mm",
+                        f"rms_{component}_mm"} <= set(stats)
     assert report["noise"]["samples"] == TRIALS * 496
     for method in ("optical_path", "su", "regular_in_air"):
-        assert report["noise"]["methods"][method]["dP"]["n"] == TRIALS * 496
+        assert report["noise"]["methods"][method]["n"] == TRIALS * 496
     assert report["index_deviation"]["chosen_side"] in ("simulation", "measurement")
     for side in ("simulation", "measurement"):
         shift = report["index_deviation"]["sides"][side]["mean_shift"]
@@ -84,10 +87,10 @@ def test_claims_have_fields_and_computed_booleans(paper_run):
     ideal = report["ideal"]
     for distance in ("1m", "2m"):
         for method in ("optical_path", "regular_in_air"):
-            value = ideal[distance]["methods"][method]["dP"]["max"]
+            value = ideal[distance]["methods"][method]["max_dp_mm"]
             assert by_id[f"ideal.{method}.{distance}.max_dP"]["holds"] == (value <= 1e-9)
-    assert by_id["ideal.su.1m.max_dP"]["holds"] == (ideal["1m"]["methods"]["su"]["dP"]["max"] > 50)
-    su_2m = ideal["2m"]["methods"]["su"]["dP"]["max"]
+    assert by_id["ideal.su.1m.max_dP"]["holds"] == (ideal["1m"]["methods"]["su"]["max_dp_mm"] > 50)
+    su_2m = ideal["2m"]["methods"]["su"]["max_dp_mm"]
     assert by_id["ideal.su.2m.max_dP"]["holds"] == (su_2m > 7)
     rms = report["noise"]["rms_dP"]
     assert by_id["noise.optical_path_beats_su"]["holds"] == (rms["optical_path"] < rms["su"])
@@ -101,16 +104,16 @@ def test_paper_numbers(paper_run):
     _, report = paper_run
     ideal = report["ideal"]
     for distance in ("1m", "2m"):
-        assert ideal[distance]["methods"]["optical_path"]["dP"]["max"] <= 1e-9
-        assert ideal[distance]["methods"]["regular_in_air"]["dP"]["max"] <= 1e-9
-    assert ideal["1m"]["methods"]["su"]["dP"]["max"] > 50.0
+        assert ideal[distance]["methods"]["optical_path"]["max_dp_mm"] <= 1e-9
+        assert ideal[distance]["methods"]["regular_in_air"]["max_dp_mm"] <= 1e-9
+    assert ideal["1m"]["methods"]["su"]["max_dp_mm"] > 50.0
     # Su's model error at 2 m with this rig: 6.995 mm (the paper says > 7 mm)
-    assert 6.9 < ideal["2m"]["methods"]["su"]["dP"]["max"] < 7.1
+    assert 6.9 < ideal["2m"]["methods"]["su"]["max_dp_mm"] < 7.1
     assert report["gap"]["share_above_threshold"] > 0.9
     assert report["gap"]["count_above_threshold"] < 496  # targets on y = 0 intersect exactly
     noise = report["noise"]["methods"]
-    assert noise["optical_path"]["dP"]["rms"] < noise["regular_in_air"]["dP"]["rms"]
-    assert noise["su"]["dZ"]["mean"] < -1.0
+    assert noise["optical_path"]["rms_dp_mm"] < noise["regular_in_air"]["rms_dp_mm"]
+    assert noise["su"]["mean_dz_mm"] < -1.0
     # the index deviation moves mean dZ by ~1.7 mm, with opposite signs on the two sides
     sides = report["index_deviation"]["sides"]
     sim = sides["simulation"]["mean_shift"]["optical_path"]["dZ"]
@@ -127,8 +130,9 @@ def test_figures_are_png(paper_run):
         assert data.startswith(PNG_SIGNATURE)
         assert len(data) > 10_000
     assert sorted(report["figures"].values()) == sorted(FIGURES)
-    # atomic writes leave no temporary files behind
-    assert not [p.name for p in out.iterdir() if p.name.startswith(".")]
+    # atomic writes leave no temporary files behind, only the output marker
+    assert [p.name for p in out.iterdir() if p.name.startswith(".")] == [MARKER_NAME]
+    assert not [p.name for p in out.parent.iterdir() if p.name != out.name]
 
 
 def test_same_seed_same_numbers():
@@ -233,3 +237,18 @@ def test_deviate_port():
         deviate_port(port, "thickness", 0.1, layer=1)
     with pytest.raises(ValueError):
         deviate_port(port, "n_air", -0.01)  # an index below 1
+
+
+def test_out_rule_refuses_a_strangers_directory_and_replaces_its_own(tmp_path, capsys):
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "notes.txt").write_text("keep me")
+    assert cli.main(["paper", "--out", str(out), "--trials", "2", "--no-progress"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "exists and holds files this command did not write" in err[0]
+    assert sorted(p.name for p in out.iterdir()) == ["notes.txt"]
+    own = tmp_path / "own"
+    for _ in range(2):  # the second run replaces the first run's output
+        assert cli.main(["paper", "--out", str(own), "--trials", "2", "--no-progress"]) == 0
+    assert (own / "report.json").is_file() and sorted(p.name for p in tmp_path.iterdir()) == [
+        "out", "own"]

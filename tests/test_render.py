@@ -49,7 +49,7 @@ def test_sensor_matches_camera_pinhole_in_air(tmp_path):
     img, _, info = render_stereo(spec, spp=256, progress=False)
     assert img.dtype == np.float32 and img.shape == (SMALL[1], SMALL[0])
     expected = left.project(targets)
-    inside = left.in_image(expected, margin=8)
+    inside = left.in_image(expected, margin_px=8)
     det = detect_targets(img)
     assert det.n_found == inside.sum()
     err, j = _match(det.centers, expected)
@@ -68,7 +68,7 @@ def test_distorted_camera_centroids_follow_synth_project(tmp_path):
         expected = project(cam, spec.rig.port, targets)
         assert np.allclose(expected, cam.project(targets), atol=1e-6)  # air: pinhole + dist
         det = detect_targets(img)
-        inside = cam.in_image(expected, margin=8)
+        inside = cam.in_image(expected, margin_px=8)
         err, j = _match(det.centers, expected)
         assert det.n_found >= inside.sum() and set(np.flatnonzero(inside)) <= set(j)
         ok = np.isin(j, np.flatnonzero(inside))
