@@ -12,14 +12,13 @@ Speeds are measurements, printed and optionally written as JSON; nothing is asse
 
 from __future__ import annotations
 
-import json
 import os
 import platform
 import time
 
 import numpy as np
 
-from eval.cli import CLIError, positive_int
+from eval.cli import non_negative_int, positive_int
 
 ISSUE_TARGETS = {"triangulate_optical_path": 5e6, "project_fermat": 1e6}
 
@@ -31,7 +30,7 @@ def add_parser(subparsers):
     parser.add_argument("--reference-points", type=positive_int, default=2000,
                         help="points solved one by one with scipy.optimize (default 2000)")
     parser.add_argument("--repeat", type=positive_int, default=3, help="runs per measurement; best counts")
-    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--seed", type=non_negative_int, default=0, help="seed of the random points")
     parser.add_argument("--json", metavar="FILE", help="also write the results to FILE")
 
 
@@ -101,16 +100,13 @@ def format_table(results: dict) -> str:
 
 
 def main(args) -> int:
+    from synth.fileio import atomic_write_json, check_file_output
+
+    if args.json:
+        check_file_output(args.json, "--json")  # before the benchmark, not after
     results = run_bench(args.points, args.reference_points, args.repeat, args.seed,
                         progress=lambda text: print(text, flush=True))
     print(format_table(results))
     if args.json:
-        target = os.path.abspath(args.json)
-        temporary = target + ".tmp"
-        try:
-            with open(temporary, "w") as handle:
-                json.dump(results, handle, indent=2)
-            os.replace(temporary, target)
-        except OSError as exc:
-            raise CLIError(f"cannot write --json file {args.json!r}: {exc.strerror}") from None
+        atomic_write_json(args.json, results)
     return 0

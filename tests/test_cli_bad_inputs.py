@@ -1,0 +1,333 @@
+"""Bad input to either command line: exit 2, exactly one ``error:`` line, no traceback, and no
+file created, changed or deleted (a refused command leaves no staging directory either).
+
+Every case runs in a fresh directory holding a copy of the scene (and, where needed, a small
+dataset); the whole tree is snapshotted before and after the call.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from eval.cli import main as eval_main
+from synth.__main__ import main as synth_main
+
+REPO = Path(__file__).resolve().parent.parent
+SMALL = ["-D", "width=320", "-D", "height=268", "--spp", "4", "--no-progress"]
+
+
+def snapshot(root: Path) -> dict:
+    """Every path below ``root`` with its size, mtime and content hash (directories too)."""
+    out = {}
+    for path in sorted(root.rglob("*")):
+        rel = str(path.relative_to(root))
+        if path.is_dir():
+            out[rel] = "dir"
+        else:
+            stat = path.stat()
+            out[rel] = (stat.st_size, stat.st_mtime_ns,
+                        hashlib.sha256(path.read_bytes()).hexdigest())
+    return out
+
+
+@pytest.fixture(scope="session")
+def dataset_template(tmp_path_factory, small_scene):
+    """A valid dataset of the small scene (rendered once), and the scene beside it."""
+    root = tmp_path_factory.mktemp("template")
+    shutil.copy(small_scene, root / "small.xml")
+    assert synth_main(["dataset", str(root / "small.xml"), "--out", str(root / "ds"),
+                       "--spp", "4", "--quiet"]) == 0
+    return root
+
+
+@pytest.fixture
+def workdir(tmp_path, monkeypatch, dataset_template):
+    """A fresh directory with ``paper_plane.xml``, ``small.xml`` and a dataset ``ds``."""
+    shutil.copy(REPO / "scenes" / "paper_plane.xml", tmp_path / "paper_plane.xml")
+    shutil.copy(dataset_template / "small.xml", tmp_path / "small.xml")
+    shutil.copytree(dataset_template / "ds", tmp_path / "ds")
+    monkeypatch.chdir(tmp_path)
+    return tmp_path
+
+
+def _prepare(workdir: Path, setup: str | None):
+    if setup == "user_dir":
+        (workdir / "out").mkdir()
+        (workdir / "out" / "mine.txt").write_text("my notes")
+    elif setup == "out_file":
+        (workdir / "out").write_text("a file where a directory should go")
+    elif setup == "garbage_calib":
+        (workdir / "ds" / "calib.yaml").write_text("%YAML:1.0\nK1: [garbage\n")
+    elif setup == "no_left_png":
+        (workdir / "ds" / "left.png").unlink()
+    elif setup == "bad_manifest":
+        (workdir / "ds" / "manifest.json").write_text("{not json")
+    elif setup == "empty_scene":
+        (workdir / "empty.xml").write_text("")
+    elif setup == "not_xml":
+        (workdir / "bad.xml").write_text("<scene version='3.0.0'><sensor")
+    elif setup == "not_scene":
+        (workdir / "foo.xml").write_text("<foo/>")
+    elif setup == "scene_dir":
+        (workdir / "adir").mkdir()
+
+
+def _assert_refused(code, capsys, before, workdir, fragment=None):
+    err = capsys.readouterr().err
+    lines = [line for line in err.splitlines() if line.startswith("error:")]
+    assert code == 2, err
+    assert len(lines) == 1, err
+    assert "Traceback" not in err
+    if fragment:
+        assert fragment.lower() in lines[0].lower(), lines[0]
+    assert snapshot(workdir) == before
+    assert not [p for p in workdir.rglob(".*staging*")]
+
+
+RUN = ["run", "paper_plane.xml", "--out", "out", *SMALL]
+RUN_SMALL = ["run", "small.xml", "--out", "out", "--spp", "4", "--no-progress"]
+EVAL_CASES = [
+    # data loss
+    ("user_dir", RUN, "did not write"),
+    (None, ["run", "paper_plane.xml", "--out", ".", *SMALL], "did not write"),
+    ("out_file", RUN, "not a directory"),
+    ("user_dir", ["paper", "--out", "out", "--trials", "2", "--no-progress"], "did not write"),
+    (None, ["paper", "--out", ".", "--trials", "2", "--no-progress"], "did not write"),
+    ("out_file", ["paper", "--out", "out", "--trials", "2", "--no-progress"], "not a directory"),
+    # nothing matched
+    (None, RUN + ["-D", "max_depth=0"], "match"),
+    (None, RUN + ["--depth-range", "3000,4000"], "match"),
+    (None, RUN + ["-D", "target_radius=0"], "target_radius"),
+    # too large, distortion
+    (None, RUN + ["-D", "width=100000", "-D", "height=100000"], "GiB"),
+    (None, RUN + ["-D", "left_dist=-0.5 0 0 0 0"], "dist"),
+    (None, RUN + ["-D", "left_dist=nan 0 0 0 0"], "dist"),
+    (None, RUN + ["-D", "left_dist=1 2"], "dist"),
+    # options
+    (None, RUN + ["--gate-mm", "inf"], "--gate-mm"),
+    (None, RUN + ["--gate-mm", "nan"], "--gate-mm"),
+    (None, RUN + ["--gate-mm", "-1"], "--gate-mm"),
+    (None, RUN + ["--gate-mm", "0"], "--gate-mm"),
+    (None, RUN + ["--noise-px", "inf"], "--noise-px"),
+    (None, RUN + ["--noise-px", "nan"], "--noise-px"),
+    (None, RUN + ["--noise-px", "-1"], "--noise-px"),
+    (None, RUN + ["--spp", "0"], "--spp"),
+    (None, RUN + ["--spp", "abc"], "--spp"),
+    (None, RUN + ["--seed", "-3"], "--seed"),
+    (None, RUN + ["--seed", "3", "-D", "seed=4"], "seed"),
+    (None, RUN + ["--depth-range", "5"], "--depth-range"),
+    (None, RUN + ["--depth-range", "2,1"], "--depth-range"),
+    (None, RUN + ["--depth-range", "nan,5"], "--depth-range"),
+    (None, RUN + ["--methods", "bogus"], "bogus"),
+    (None, RUN + ["--methods", ""], "method"),
+    (None, RUN + ["--variant", "bogus_variant"], "bogus_variant"),
+    # scene parameters
+    (None, RUN + ["-D", "bogus=1"], "bogus"),
+    (None, RUN + ["-D", "novalue"], "novalue"),
+    (None, RUN + ["-D", "width=abc"], "width"),
+    (None, RUN + ["-D", "width=0"], "width"),
+    (None, RUN + ["-D", "width=-5"], "width"),
+    (None, RUN + ["-D", "width=320.5"], "width"),
+    (None, RUN + ["-D", "n_water=abc"], "n_water"),
+    (None, RUN + ["-D", "n_water=nan"], "n_water"),
+    (None, RUN + ["-D", "spp=0"], "spp"),
+    (None, RUN + ["-D", "target_z=-5"], "target_z"),
+    # scene files
+    (None, ["run", "missing.xml", "--out", "out", "--no-progress"], "missing.xml"),
+    ("not_xml", ["run", "bad.xml", "--out", "out", "--no-progress"], "bad.xml"),
+    ("not_scene", ["run", "foo.xml", "--out", "out", "--no-progress"], "foo.xml"),
+    ("empty_scene", ["run", "empty.xml", "--out", "out", "--no-progress"], "empty.xml"),
+    ("scene_dir", ["run", "adir", "--out", "out", "--no-progress"], "adir"),
+    # datasets
+    ("garbage_calib", RUN_SMALL + ["--from", "ds"], "calib.yaml"),
+    ("no_left_png", RUN_SMALL + ["--from", "ds"], "left.png"),
+    ("bad_manifest", RUN_SMALL + ["--from", "ds"], "manifest.json"),
+    (None, RUN_SMALL + ["--from", "ds", "-D", "width=640"], "640"),
+    (None, RUN_SMALL + ["--from", "ds", "-D", "n_water=1.36"], "n_water"),
+    (None, RUN_SMALL + ["--from", "missing_ds"], "missing_ds"),
+    (None, ["run", "paper_plane.xml", "--from", "ds", "--out", "out", "--no-progress"], "another scene"),
+    # bench and paper options
+    (None, ["bench", "--points", "0"], "--points"),
+    (None, ["bench", "--points", "abc"], "--points"),
+    (None, ["bench", "--json", "ds"], "directory"),
+    (None, ["bench", "--json", "missing_dir/x.json"], "missing_dir"),
+    (None, ["paper", "--trials", "0", "--out", "p"], "--trials"),
+    (None, ["paper", "--seed", "-1", "--out", "p"], "--seed"),
+    (None, ["no_such_command"], "no_such_command"),
+]
+
+SCENE = ["scene", "--out", "x.xml"]
+DATASET = ["dataset", "small.xml", "--out", "out", "--spp", "4", "--quiet"]
+RENDER = ["render", "small.xml", "--out", "out", "--spp", "4", "--quiet"]
+SYNTH_CASES = [
+    (None, SCENE + ["--layout", "grid", "--spacing", "0"], "--spacing"),
+    (None, SCENE + ["--layout", "grid", "--spacing", "-5"], "--spacing"),
+    (None, SCENE + ["--layout", "grid", "--spacing", "nan"], "--spacing"),
+    (None, SCENE + ["--layout", "grid", "--spacing", "0.001"], "grid"),
+    (None, SCENE + ["--z", "nan"], "--z"),
+    (None, SCENE + ["--z", "-100"], "--z"),
+    (None, SCENE + ["--size", "0", "10"], "--size"),
+    (None, SCENE + ["--focal", "0"], "--focal"),
+    (None, SCENE + ["--layout", "random", "--n", "0"], "--n"),
+    (None, SCENE + ["--layout", "random", "--z-range", "5", "1"], "--z-range"),
+    (None, SCENE + ["--target-radius", "-1"], "--target-radius"),
+    (None, SCENE + ["--n-water", "nan"], "--n-water"),
+    (None, SCENE + ["--n-water", "0.5"], "indices"),
+    (None, SCENE + ["--dist", "nan", "0", "0", "0", "0"], "--dist"),
+    (None, SCENE + ["--dist", "0.1", "0"], "dist"),
+    (None, ["scene", "--out", "missing_dir/x.xml"], "missing_dir"),
+    (None, ["scene", "--out", "paper_plane_copy.xml"], None),  # placeholder replaced below
+    (None, ["scene", "--out", "ds"], "directory"),
+    ("user_dir", DATASET, "did not write"),
+    (None, DATASET[:3] + ["."] + DATASET[4:], "did not write"),
+    ("out_file", DATASET, "not a directory"),
+    ("user_dir", RENDER, "did not write"),
+    ("out_file", RENDER, "not a directory"),
+    (None, DATASET + ["-D", "width=100000", "-D", "height=100000"], "GiB"),
+    (None, DATASET + ["--seed", "1", "-D", "seed=2"], "seed"),
+    (None, RENDER + ["-D", "left_dist=-0.5 0 0 0 0"], "dist"),
+    ("garbage_calib", ["check", "ds"], "calib.yaml"),
+    ("no_left_png", ["check", "ds"], "left.png"),
+    ("bad_manifest", ["check", "ds"], "manifest.json"),
+    (None, ["check", "missing_ds"], "missing_ds"),
+    (None, ["check", "small.xml"], "small.xml"),
+    (None, ["check", "ds", "--rms", "nan"], "--rms"),
+    (None, ["check", "ds", "--rms", "-1"], "--rms"),
+]
+# Overwriting a file that `synth scene` did not write (the scene file of someone else).
+SYNTH_CASES[16] = (None, ["scene", "--out", "small_copy_foreign.xml"], "not a file this command wrote")
+
+
+@pytest.mark.parametrize("setup, argv, fragment", EVAL_CASES,
+                         ids=[" ".join(a)[:70] + (f" [{s}]" if s else "") for s, a, _ in EVAL_CASES])
+def test_eval_bad_input(workdir, capsys, setup, argv, fragment):
+    _prepare(workdir, setup)
+    before = snapshot(workdir)
+    code = eval_main(list(argv))
+    _assert_refused(code, capsys, before, workdir, fragment)
+
+
+@pytest.mark.parametrize("setup, argv, fragment", SYNTH_CASES,
+                         ids=[" ".join(a)[:70] + (f" [{s}]" if s else "") for s, a, _ in SYNTH_CASES])
+def test_synth_bad_input(workdir, capsys, setup, argv, fragment):
+    _prepare(workdir, setup)
+    (workdir / "small_copy_foreign.xml").write_text("<scene version='3.0.0'/>\n")
+    before = snapshot(workdir)
+    code = synth_main(list(argv))
+    _assert_refused(code, capsys, before, workdir, fragment)
+
+
+def test_earlier_output_is_replaced_and_stale_staging_removed(workdir, capsys):
+    """Positive control: a second run over its own output succeeds; a staging directory of a
+    dead process (PID 999999 does not exist here) is cleaned up by the next run."""
+    argv = ["run", "small.xml", "--out", "out", "--from", "ds", "--methods", "optical_path",
+            "--no-progress"]
+    assert eval_main(argv) == 0
+    stale = workdir / ".out.staging-999999-abc"
+    stale.mkdir()
+    (stale / "partial.png").write_bytes(b"x")
+    assert eval_main(argv) == 0
+    assert not stale.exists() and (workdir / "out" / "report.json").is_file()
+    names = sorted(p.name for p in workdir.iterdir())
+    assert names == sorted(["ds", "out", "paper_plane.xml", "small.xml"])
+
+
+def test_from_dataset_with_its_own_parameters_runs(workdir):
+    assert eval_main(["run", "small.xml", "--from", "ds", "--out", "out", "-D", "width=320",
+                      "--methods", "optical_path", "--no-progress"]) == 0
+
+
+@pytest.mark.parametrize("module, argv", [
+    ("eval", ["run", "paper_plane.xml", "--out", "out", "--gate-mm", "inf"]),
+    ("eval", ["run", "missing.xml", "--out", "out"]),
+    ("synth", ["scene", "--layout", "grid", "--spacing", "0", "--out", "x.xml"]),
+    ("synth", ["check", "missing_ds"]),
+])
+def test_python_m_path(workdir, module, argv):
+    before = snapshot(workdir)
+    env = dict(os.environ, PYTHONPATH=str(REPO))
+    proc = subprocess.run([sys.executable, "-m", module, *argv], cwd=workdir, env=env,
+                          capture_output=True, text=True, timeout=120)
+    lines = [line for line in proc.stderr.splitlines() if line.startswith("error:")]
+    assert proc.returncode == 2 and len(lines) == 1 and "Traceback" not in proc.stderr
+    assert snapshot(workdir) == before
+
+
+@pytest.mark.parametrize("script", ["refstereo-eval", "refstereo-synth"])
+def test_console_scripts(workdir, script):
+    path = Path(sys.executable).parent / script
+    if not path.exists():
+        pytest.skip(f"{script} is not installed in this environment (pip install -e .)")
+    proc = subprocess.run([str(path), "--no-such-option"], cwd=workdir, capture_output=True,
+                          text=True, timeout=120)
+    assert proc.returncode == 2 and proc.stderr.startswith("error:")
+
+
+# --- random values ---------------------------------------------------------------------------
+BAD_TEXT = st.sampled_from(["nan", "inf", "-inf", "0", "-1", "1e308", "abc", "", " ", "1,2",
+                            "0x10", "1e-300", "-0"])
+SIZES = st.one_of(st.integers(64, 400).map(str), BAD_TEXT)
+NUMBERS = st.one_of(st.floats(allow_nan=True, allow_infinity=True).map(repr), BAD_TEXT,
+                    st.text(max_size=5))
+
+
+@settings(max_examples=25, deadline=None)
+@given(defines=st.dictionaries(
+    st.sampled_from(["width", "height", "n_water", "target_radius", "target_z", "max_depth",
+                     "spp", "left_dist"]),
+    st.one_of(SIZES, NUMBERS), max_size=3))
+def test_random_scene_parameters(small_scene, tmp_path_factory, defines):
+    root = tmp_path_factory.mktemp("random")
+    shutil.copy(small_scene, root / "small.xml")
+    before = snapshot(root)
+    argv = ["run", str(root / "small.xml"), "--out", str(root / "out"), "--spp", "1",
+            "--methods", "optical_path", "--no-progress"]
+    for name, value in defines.items():
+        argv += ["-D", f"{name}={value}"]
+    import contextlib
+    import io
+
+    err = io.StringIO()
+    with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
+        code = eval_main(argv)
+    text = err.getvalue()
+    assert code in (0, 2), text
+    assert "Traceback" not in text
+    after = snapshot(root)
+    if code == 2:
+        assert len([line for line in text.splitlines() if line.startswith("error:")]) == 1
+        assert after == before
+    else:
+        assert {k: v for k, v in after.items() if not k.startswith("out")} == before
+
+
+@settings(max_examples=25, deadline=None)
+@given(option=st.sampled_from(["--spacing", "--z", "--target-radius", "--n-water", "--focal",
+                               "--half-width", "--port-distance", "--glass-thickness"]),
+       value=NUMBERS)
+def test_random_scene_options(tmp_path_factory, option, value):
+    root = tmp_path_factory.mktemp("random_scene")
+    import contextlib
+    import io
+
+    err = io.StringIO()
+    with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
+        code = synth_main(["scene", "--layout", "grid", "--out", str(root / "s.xml"),
+                           "--size", "320", "268", option, value])
+    text = err.getvalue()
+    assert code in (0, 2), text
+    assert "Traceback" not in text
+    if code == 2:
+        assert len([line for line in text.splitlines() if line.startswith("error:")]) == 1
+        assert list(root.iterdir()) == []
+    else:
+        assert [p.name for p in root.iterdir()] == ["s.xml"]
