@@ -5,16 +5,16 @@ Units are millimetres; the reference frame is the left camera's (OpenCV axes).
 """
 
 from .camera import Camera
-from .detect import REJECTION_REASONS, Detections, detect_targets
+from .detect import REJECTION_REASONS, Detections, Rejection, detect_targets
 from .lines import CommonPerpendicular, common_perpendicular
 from .port import FlatPort
-from .reasons import Reason, reason_counts
+from .reasons import Reason
 from .refraction import WaterRays, intersect_plane, refract, trace_through_port
 from .triangulate import METHODS, StereoRig, Triangulation, triangulate, triangulate_rays
 
 __all__ = [
     "Camera", "FlatPort", "StereoRig", "Triangulation", "triangulate", "triangulate_rays",
-    "METHODS", "Reason", "reason_counts", "refract", "intersect_plane", "trace_through_port",
+    "METHODS", "Reason", "refract", "intersect_plane", "trace_through_port",
     "WaterRays", "common_perpendicular", "CommonPerpendicular", "detect_targets", "Detections",
-    "REJECTION_REASONS",
+    "REJECTION_REASONS", "Rejection",
 ]

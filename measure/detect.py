@@ -81,14 +81,27 @@ noise-free background (``sigma == 0``) ``snr`` is ``inf`` and its factor is 1.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from enum import IntEnum
 
 import cv2
 import numpy as np
 
-__all__ = ["Detections", "detect_targets", "REJECTION_REASONS"]
+__all__ = ["Detections", "Rejection", "detect_targets", "REJECTION_REASONS"]
 
-#: Rejection reasons, in the order in which they are tested.
-REJECTION_REASONS = ("small", "border", "ghost", "merged")
+
+class Rejection(IntEnum):
+    """Why a blob is not a target, in the order in which the reasons are tested."""
+
+    SMALL = 0
+    BORDER = 1
+    GHOST = 2
+    MERGED = 3
+
+
+#: Rejection reasons (names), in the order in which they are tested.
+REJECTION_REASONS = tuple(reason.name.lower() for reason in Rejection)
+#: Reason code of an accepted blob.
+_ACCEPTED = -1
 
 #: ``snr`` at which the SNR factor of ``quality`` is one half.
 _SNR_HALF_QUALITY = 10.0
@@ -145,7 +158,10 @@ class Detections:
 
 
 def _as_image(image) -> tuple[np.ndarray, bool]:
-    """The image as a C-contiguous float32 array, and whether its values are integer levels."""
+    """The image as a C-contiguous float32 array, and whether its values are integer levels.
+
+    Finite values beyond float32's range are refused (they would become infinite and the
+    target would be lost as 'non-finite')."""
     img = np.asarray(image)
     if img.ndim != 2:
         raise ValueError(
@@ -159,6 +175,12 @@ def _as_image(image) -> tuple[np.ndarray, bool]:
     if not (np.issubdtype(img.dtype, np.integer) or np.issubdtype(img.dtype, np.floating)):
         raise ValueError(f"image must have an integer or real floating dtype, got {img.dtype}")
     integer = bool(np.issubdtype(img.dtype, np.integer))
+    if np.issubdtype(img.dtype, np.floating) and np.finfo(img.dtype).max > np.finfo(np.float32).max:
+        with np.errstate(invalid="ignore"):
+            largest = np.nanmax(np.abs(np.where(np.isfinite(img), img, 0.0)))
+        if largest > np.finfo(np.float32).max:
+            raise ValueError(f"image values up to {largest:.3g} exceed float32's range "
+                             f"({np.finfo(np.float32).max:.3g}); scale the image first")
     f = np.ascontiguousarray(img, dtype=np.float32)
     return f, integer
 
@@ -206,65 +228,17 @@ def _sorted_vu(centers: np.ndarray) -> np.ndarray:
     return np.lexsort((centers[:, 0], centers[:, 1]))
 
 
-def detect_targets(
-    image,
-    *,
-    threshold: float | None = None,
-    background: float | None = None,
-    k_sigma: float = 5.0,
-    min_area: int = 4,
-    border_margin: int = 1,
-    window_pad: int = 2,
-    ghost_ratio: float = 0.2,
-    merge_area_ratio: float = 2.5,
-    merge_elongation: float = 1.6,
-    return_labels: bool = False,
-) -> Detections:
-    """Detect bright disk targets and measure their sub-pixel intensity centroids.
-
-    Parameters
-    ----------
-    image : (H, W) array, uint8 / uint16 / any integer or float dtype, linear radiometry.
-        Colour (H, W, 3) images are refused (ValueError): the channel weights are the caller's
-        choice. Non-finite pixels are treated as background.
-    threshold : absolute foreground level in image units (pixels ``> threshold`` are
-        foreground); default ``background + max(k_sigma * sigma, floor)`` (see module docs).
-    background : background level in image units; default the median of the image.
-    k_sigma : threshold in noise sigmas above the background when ``threshold`` is None.
-    min_area : blobs with fewer foreground pixels are rejected as ``"small"``.
-    border_margin : blobs with a foreground pixel within this many pixels of the image edge
-        (i.e. in rows/columns ``< border_margin`` or ``>= size - border_margin``) are rejected
-        as ``"border"``. 0 disables the test.
-    window_pad : the centroid window is the blob grown by this many pixels (0: blob only).
-    ghost_ratio : blobs with ``flux / area < ghost_ratio * reference`` are ``"ghost"``.
-    merge_area_ratio, merge_elongation : ``area > merge_area_ratio * reference_area`` or
-        ``elongation > merge_elongation`` means ``"merged"``.
-    return_labels : also return the label image (``Detections.labels``).
-
-    Returns
-    -------
-    Detections
-        Accepted targets sorted by ``v`` then ``u``, their measures, and the rejection counts.
-    """
-    f, integer = _as_image(image)
-    H, W = f.shape
-    if min_area < 1 or border_margin < 0 or window_pad < 0:
-        raise ValueError("min_area must be >= 1, border_margin and window_pad >= 0")
-    if not (k_sigma > 0 and ghost_ratio >= 0 and merge_area_ratio > 0 and merge_elongation >= 1):
-        raise ValueError(
-            "k_sigma and merge_area_ratio must be > 0, ghost_ratio >= 0, merge_elongation >= 1"
-        )
-
+def _levels(f, integer, background, threshold, k_sigma):
+    """Stage 1-2: background, noise sigma and threshold (image units); non-finite pixels set
+    to the background. Returns ``(f, bg, sigma, thr)``."""
     finite = np.isfinite(f)
-    all_finite = bool(finite.all())
     bg, sigma = _background_and_sigma(f, integer)
     if background is not None:
         bg = float(background)
         if not np.isfinite(bg):
             raise ValueError(f"background must be finite, got {background!r}")
-    if not all_finite:
+    if not bool(finite.all()):
         f = np.where(finite, f, np.float32(bg))
-
     if threshold is None:
         if integer:
             floor = 0.5
@@ -276,19 +250,36 @@ def detect_targets(
         thr = float(threshold)
         if not np.isfinite(thr):
             raise ValueError(f"threshold must be finite, got {threshold!r}")
+    return f, bg, sigma, thr
 
-    # --- blobs -------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class _Blobs:
+    """Stage 3: connected components of the foreground. Blob ``k`` has label ``k + 1``;
+    ``core`` is the label image without the ``small`` blobs."""
+
+    n_labels: int
+    labels: np.ndarray
+    core: np.ndarray
+    x0: np.ndarray
+    y0: np.ndarray
+    width: np.ndarray
+    height: np.ndarray
+    area: np.ndarray
+    small: np.ndarray
+    plain_centroids: np.ndarray
+
+    @property
+    def n(self) -> int:
+        return self.n_labels - 1
+
+
+def _label_blobs(f, thr, min_area) -> _Blobs:
     mask = (f > np.float32(thr)).view(np.uint8)
     n_lab, labels, stats, cv_centroids = cv2.connectedComponentsWithStats(
         mask, connectivity=8, ltype=cv2.CV_32S
     )
-    n = n_lab - 1  # blob k has label k + 1
-    x0 = stats[1:, cv2.CC_STAT_LEFT].astype(np.int64)
-    y0 = stats[1:, cv2.CC_STAT_TOP].astype(np.int64)
-    bw = stats[1:, cv2.CC_STAT_WIDTH].astype(np.int64)
-    bh = stats[1:, cv2.CC_STAT_HEIGHT].astype(np.int64)
     area = stats[1:, cv2.CC_STAT_AREA].astype(np.int64)
-
     small = area < min_area
     if small.any():
         lut = np.arange(n_lab, dtype=np.int32)
@@ -296,26 +287,48 @@ def detect_targets(
         core = lut[labels]
     else:
         core = labels
+    return _Blobs(n_lab, labels, core, stats[1:, cv2.CC_STAT_LEFT].astype(np.int64),
+                  stats[1:, cv2.CC_STAT_TOP].astype(np.int64),
+                  stats[1:, cv2.CC_STAT_WIDTH].astype(np.int64),
+                  stats[1:, cv2.CC_STAT_HEIGHT].astype(np.int64), area, small, cv_centroids[1:])
 
-    # --- centroid windows: blobs grown into the background ------------------------------
-    if window_pad > 0 and n > 0:
-        ksize = 2 * window_pad + 1
-        kernel = np.ones((ksize, ksize), np.uint8)
-        if n_lab <= 65535:
-            grown = cv2.dilate(core.astype(np.uint16), kernel).astype(np.int32)
-        else:  # float32 holds labels exactly up to 2**24
-            grown = cv2.dilate(core.astype(np.float32), kernel).astype(np.int32)
-        window = np.where(core > 0, core, grown)
-    else:
-        window = core
 
+def _centroid_windows(blobs: _Blobs, window_pad: int) -> np.ndarray:
+    """Stage 4: each blob grown by ``window_pad`` pixels into the background (label image)."""
+    core = blobs.core
+    if window_pad <= 0 or blobs.n <= 0:
+        return core
+    ksize = 2 * window_pad + 1
+    kernel = np.ones((ksize, ksize), np.uint8)
+    if blobs.n_labels <= 65535:
+        grown = cv2.dilate(core.astype(np.uint16), kernel).astype(np.int32)
+    else:  # float32 holds labels exactly up to 2**24
+        grown = cv2.dilate(core.astype(np.float32), kernel).astype(np.int32)
+    return np.where(core > 0, core, grown)
+
+
+@dataclass(frozen=True)
+class _Measures:
+    """Stage 5: per-blob measures over the centroid windows (see module docs)."""
+
+    centers: np.ndarray
+    flux: np.ndarray
+    peak: np.ndarray
+    snr: np.ndarray
+    elongation: np.ndarray
+    quality: np.ndarray
+    no_weight: np.ndarray
+
+
+def _measure_blobs(f, window, blobs: _Blobs, bg, sigma) -> _Measures:
+    n, W = blobs.n, f.shape[1]
     idx = np.flatnonzero(window)
     lab = window.ravel()[idx] - 1  # blob index 0..n-1
     val = f.ravel()[idx].astype(np.float64) - bg
     w = np.maximum(val, 0.0)
     # coordinates relative to each blob's bounding-box corner, for well-conditioned moments
-    du = (idx % W) - x0[lab]
-    dv = (idx // W) - y0[lab]
+    du = (idx % W) - blobs.x0[lab]
+    dv = (idx // W) - blobs.y0[lab]
 
     def per_blob(weights):
         return np.bincount(lab, weights=weights, minlength=n)[:n]
@@ -350,69 +363,131 @@ def detect_targets(
         snr_pos = np.clip(snr, 0.0, None)
         snr_factor = np.where(np.isinf(snr_pos), 1.0, snr_pos / (snr_pos + _SNR_HALF_QUALITY))
         quality = snr_factor / elongation
-    centers = np.column_stack([x0 + mu, y0 + mv])
+    centers = np.column_stack([blobs.x0 + mu, blobs.y0 + mv])
     # blobs without a weighted centroid (small blobs have no window): OpenCV's plain centroid
     no_weight = ~(s0 > 0)
-    centers[no_weight] = cv_centroids[1:][no_weight]
+    centers[no_weight] = blobs.plain_centroids[no_weight]
     peak[np.isinf(peak)] = np.nan
+    return _Measures(centers, flux, peak, snr, elongation, quality, no_weight)
 
-    # --- rejection -----------------------------------------------------------------------
-    reason = np.full(n, -1, dtype=np.int64)  # index into REJECTION_REASONS, -1 accepted
-    reason[small] = 0
+
+def _classify(blobs: _Blobs, measures: _Measures, shape, border_margin, ghost_ratio,
+              merge_area_ratio, merge_elongation) -> np.ndarray:
+    """Stage 6: the :class:`Rejection` code of each blob, ``-1`` for an accepted one."""
+    H, W = shape
+    area = blobs.area
+    reason = np.full(blobs.n, _ACCEPTED, dtype=np.int64)
+    reason[blobs.small] = Rejection.SMALL
     if border_margin > 0:
-        border = (
-            (x0 < border_margin)
-            | (y0 < border_margin)
-            | (x0 + bw > W - border_margin)
-            | (y0 + bh > H - border_margin)
-        )
-        reason[(reason < 0) & border] = 1
+        border = ((blobs.x0 < border_margin) | (blobs.y0 < border_margin)
+                  | (blobs.x0 + blobs.width > W - border_margin)
+                  | (blobs.y0 + blobs.height > H - border_margin))
+        reason[(reason == _ACCEPTED) & border] = Rejection.BORDER
     # a blob with no positive signal (only possible with a threshold below the background)
-    reason[(reason < 0) & no_weight] = 2
+    reason[(reason == _ACCEPTED) & measures.no_weight] = Rejection.GHOST
 
-    cand = reason < 0
-    brightness = flux / area  # mean background-subtracted intensity per foreground pixel
+    cand = reason == _ACCEPTED
+    brightness = measures.flux / area  # mean background-subtracted intensity per fg pixel
     ref_brightness = _bright_median(brightness[cand])
-    ghost = cand & (brightness < ghost_ratio * ref_brightness)
-    reason[ghost] = 2
+    reason[cand & (brightness < ghost_ratio * ref_brightness)] = Rejection.GHOST
 
-    cand = reason < 0
+    cand = reason == _ACCEPTED
     ref_area = float(np.median(area[cand])) if cand.any() else 0.0
-    merged = cand & ((area > merge_area_ratio * ref_area) | (elongation > merge_elongation))
-    reason[merged] = 3
+    merged = cand & ((area > merge_area_ratio * ref_area)
+                     | (measures.elongation > merge_elongation))
+    reason[merged] = Rejection.MERGED
+    return reason
 
-    accepted = np.flatnonzero(reason < 0)
+
+def _frozen(a):
+    a = np.ascontiguousarray(a)
+    a.flags.writeable = False
+    return a
+
+
+def detect_targets(
+    image,
+    *,
+    threshold: float | None = None,
+    background: float | None = None,
+    k_sigma: float = 5.0,
+    min_area: int = 4,
+    border_margin: int = 1,
+    window_pad: int = 2,
+    ghost_ratio: float = 0.2,
+    merge_area_ratio: float = 2.5,
+    merge_elongation: float = 1.6,
+    return_labels: bool = False,
+) -> Detections:
+    """Detect bright disk targets and measure their sub-pixel intensity centroids.
+
+    Parameters
+    ----------
+    image : (H, W) array, uint8 / uint16 / any integer or float dtype, linear radiometry.
+        Colour (H, W, 3) images are refused (ValueError): the channel weights are the caller's
+        choice. Non-finite pixels are treated as background; finite values beyond float32's
+        range are refused (ValueError).
+    threshold : absolute foreground level in image units (pixels ``> threshold`` are
+        foreground); default ``background + max(k_sigma * sigma, floor)`` (see module docs).
+    background : background level in image units; default the median of the image.
+    k_sigma : threshold in noise sigmas above the background when ``threshold`` is None.
+    min_area : blobs with fewer foreground pixels are rejected as ``"small"``.
+    border_margin : blobs with a foreground pixel within this many pixels of the image edge
+        (i.e. in rows/columns ``< border_margin`` or ``>= size - border_margin``) are rejected
+        as ``"border"``. 0 disables the test.
+    window_pad : the centroid window is the blob grown by this many pixels (0: blob only).
+    ghost_ratio : blobs with ``flux / area < ghost_ratio * reference`` are ``"ghost"``.
+    merge_area_ratio, merge_elongation : ``area > merge_area_ratio * reference_area`` or
+        ``elongation > merge_elongation`` means ``"merged"``.
+    return_labels : also return the label image (``Detections.labels``).
+
+    Returns
+    -------
+    Detections
+        Accepted targets sorted by ``v`` then ``u``, their measures, and the rejection counts.
+    """
+    f, integer = _as_image(image)
+    if min_area < 1 or border_margin < 0 or window_pad < 0:
+        raise ValueError("min_area must be >= 1, border_margin and window_pad >= 0")
+    if not (k_sigma > 0 and ghost_ratio >= 0 and merge_area_ratio > 0 and merge_elongation >= 1):
+        raise ValueError(
+            "k_sigma and merge_area_ratio must be > 0, ghost_ratio >= 0, merge_elongation >= 1"
+        )
+    f, bg, sigma, thr = _levels(f, integer, background, threshold, k_sigma)
+    blobs = _label_blobs(f, thr, min_area)
+    window = _centroid_windows(blobs, window_pad)
+    measures = _measure_blobs(f, window, blobs, bg, sigma)
+    reason = _classify(blobs, measures, f.shape, border_margin, ghost_ratio, merge_area_ratio,
+                       merge_elongation)
+
+    centers = measures.centers
+    accepted = np.flatnonzero(reason == _ACCEPTED)
     accepted = accepted[_sorted_vu(centers[accepted])]
-    rej = np.flatnonzero(reason >= 0)
+    rej = np.flatnonzero(reason != _ACCEPTED)
     rej = rej[_sorted_vu(centers[rej])]
-    counts = np.bincount(reason[rej], minlength=len(REJECTION_REASONS))
+    counts = np.bincount(reason[rej], minlength=len(Rejection))
     rejected = {name: int(c) for name, c in zip(REJECTION_REASONS, counts)}
 
     labels_out = None
     if return_labels:
-        lut = np.zeros(n_lab, dtype=np.int32)
+        lut = np.zeros(blobs.n_labels, dtype=np.int32)
         lut[1:][rej] = -1
         lut[1 + accepted] = np.arange(1, accepted.size + 1, dtype=np.int32)
         labels_out = lut[window]
-        if small.any():
-            labels_out[(labels > 0) & (window == 0)] = -1
-
-    def frozen(a):
-        a = np.ascontiguousarray(a)
-        a.flags.writeable = False
-        return a
+        if blobs.small.any():
+            labels_out[(blobs.labels > 0) & (window == 0)] = -1
 
     return Detections(
-        centers=frozen(centers[accepted].astype(np.float64)),
-        flux=frozen(flux[accepted]),
-        area=frozen(area[accepted]),
-        peak=frozen(peak[accepted]),
-        snr=frozen(snr[accepted]),
-        elongation=frozen(elongation[accepted]),
-        quality=frozen(quality[accepted]),
+        centers=_frozen(centers[accepted].astype(np.float64)),
+        flux=_frozen(measures.flux[accepted]),
+        area=_frozen(blobs.area[accepted]),
+        peak=_frozen(measures.peak[accepted]),
+        snr=_frozen(measures.snr[accepted]),
+        elongation=_frozen(measures.elongation[accepted]),
+        quality=_frozen(measures.quality[accepted]),
         rejected=rejected,
-        rejected_centers=frozen(centers[rej].astype(np.float64)),
-        rejected_reasons=frozen(np.array([REJECTION_REASONS[r] for r in reason[rej]], dtype=str)),
+        rejected_centers=_frozen(centers[rej].astype(np.float64)),
+        rejected_reasons=_frozen(np.array([REJECTION_REASONS[r] for r in reason[rej]], dtype=str)),
         background=bg,
         noise_sigma=sigma,
         threshold=thr,

@@ -2,8 +2,6 @@
 
 from enum import IntEnum
 
-import numpy as np
-
 
 class Reason(IntEnum):
     """Why a row of a vectorized result is NaN. ``OK`` rows are valid."""
@@ -16,9 +14,3 @@ class Reason(IntEnum):
     BEHIND_CAMERA = 5  # the solution lies behind a camera / on the wrong side of the port
     NOT_IN_WATER = 6  # a point to project is not beyond the port's last interface
     NOT_CONVERGED = 7  # an iterative solver did not reach its tolerance
-
-
-def reason_counts(reasons) -> dict[str, int]:
-    """Histogram of reason codes as ``{name: count}`` (names of the codes present only)."""
-    values, counts = np.unique(np.asarray(reasons), return_counts=True)
-    return {Reason(int(v)).name: int(c) for v, c in zip(values, counts)}

@@ -14,13 +14,6 @@ from .port import FlatPort
 from .reasons import Reason
 
 
-def dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Row-wise dot product of ``(N, 3)`` arrays (or an ``(N, 3)`` array and a 3-vector)."""
-    if b.ndim == 1:
-        return a @ b
-    return np.einsum("ij,ij->i", a, b)
-
-
 def refract(directions: np.ndarray, normal: np.ndarray, n_from: float, n_to: float):
     """Refract unit ``directions (N, 3)`` at a plane with unit ``normal`` (along propagation).
 

@@ -98,3 +98,14 @@ def test_no_port_means_all_air_and_single_points():
     assert air.port.indices == (1.0, 1.0)
     uv = [project(c, None, point)[0] for c in (rig.left, rig.right)]
     assert np.allclose(triangulate(air, uv[0], uv[1], "regular").points, point, atol=1e-9)
+
+
+def test_detector_refuses_values_beyond_float32():
+    from measure import detect_targets
+
+    image = np.zeros((60, 60))
+    image[20:30, 20:30] = 1e39  # finite in float64, infinite in float32
+    with pytest.raises(ValueError, match="float32"):
+        detect_targets(image)
+    image[20:30, 20:30] = 1e30  # large but representable: found
+    assert detect_targets(image).n_found == 1
