@@ -33,6 +33,7 @@ from measure import Camera
 
 from .mitsuba_setup import import_mitsuba
 from .scene import SceneError, SceneSpec, load_scene
+from .sensor import sensor_parameters
 
 #: Oversampling factor of the undistorted render behind a distorted view.
 DISTORTION_OVERSAMPLE = 2
@@ -145,20 +146,16 @@ def _ideal_camera_for(camera: Camera, oversample: int, margin: float):
 
 def _ideal_sensor(mi, template, camera: Camera, K, size):
     """A Mitsuba pinhole sensor at ``camera``'s pose with intrinsics ``K`` and film ``size``."""
-    w, h = size
-    M = np.eye(4)
-    M[:3, :3] = camera.R @ np.diag([-1.0, -1.0, 1.0])  # OpenCV axes -> Mitsuba's (x left, y up)
-    M[:3, 3] = camera.t
-    fov = math.degrees(2.0 * math.atan(w / (2.0 * K[0, 0])))
+    p = sensor_parameters(K, size, camera.R, camera.t)
     return mi.load_dict({
         "type": "perspective",
-        "fov": fov, "fov_axis": "x",
-        "principal_point_offset_x": (w / 2.0 - 0.5 - K[0, 2]) / w,
-        "principal_point_offset_y": (h / 2.0 - 0.5 - K[1, 2]) / h,
+        "fov": p["fov"], "fov_axis": "x",
+        "principal_point_offset_x": p["principal_point_offset_x"],
+        "principal_point_offset_y": p["principal_point_offset_y"],
         "near_clip": 1.0, "far_clip": 1e6,
-        "to_world": mi.ScalarTransform4f(M.tolist()),
+        "to_world": mi.ScalarTransform4f(p["to_world"].tolist()),
         "sampler": template.sampler(),
-        "film": {"type": "hdrfilm", "width": int(w), "height": int(h),
+        "film": {"type": "hdrfilm", "width": int(size[0]), "height": int(size[1]),
                  "pixel_format": "luminance", "component_format": "float32",
                  "rfilter": {"type": "box"}},
     })

@@ -43,6 +43,8 @@ import numpy as np
 from measure import Camera, FlatPort, StereoRig
 from measure.port import index_matched_port
 
+from .sensor import intrinsics_from_sensor, pose_from_to_world, sensor_parameters
+
 #: Half side (mm) of the square port interfaces: covers both fields of view far beyond 2 m.
 INTERFACE_HALF_SIZE_MM = 2000.0
 #: Distance (mm) of a sensor's ``lookat`` target from its origin (see :func:`_sensor_xml`).
@@ -138,15 +140,12 @@ def _vec(v) -> str:
 
 
 def _sensor_xml(name: str, camera: Camera, width_param: bool) -> str:
-    K = camera.K
+    try:
+        p = sensor_parameters(camera.K, camera.size, camera.R, camera.t)
+    except ValueError as exc:
+        raise ValueError(f"{name} camera: {exc}") from None
+    fov, ppx, ppy = p["fov"], p["principal_point_offset_x"], p["principal_point_offset_y"]
     w, h = camera.size
-    if abs(K[0, 0] - K[1, 1]) > 1e-9 * K[0, 0] or K[0, 1] != 0:
-        raise ValueError(f"{name} camera: Mitsuba's perspective sensor needs square pixels and no "
-                         f"skew (fx = fy, s = 0), got fx={K[0, 0]}, fy={K[1, 1]}, s={K[0, 1]}")
-    f = K[0, 0]
-    fov = math.degrees(2.0 * math.atan(w / (2.0 * f)))
-    ppx = (w / 2.0 - 0.5 - K[0, 2]) / w
-    ppy = (h / 2.0 - 0.5 - K[1, 2]) / h
     R, t = camera.R, camera.t
     # Mitsuba builds the sensor's lookat in float32: a target 1 mm from an origin 200 mm away
     # loses ~2.4e-6 rad of direction (~0.003 px); LOOKAT_DISTANCE_MM away it loses ~6e-8 rad.
@@ -455,18 +454,13 @@ def _read_sensor(nodes: _Nodes, node, params, label) -> Camera:
     if not 0 < fov < 180:
         raise SceneError(f"{what}: fov must lie in (0, 180) degrees, got {fov}")
     axis = str(nodes.value(node, "fov_axis", "x", what))
-    if axis == "x":
-        f = (w / 2.0) / math.tan(math.radians(fov) / 2.0)
-    elif axis == "y":
-        f = (h / 2.0) / math.tan(math.radians(fov) / 2.0)
-    else:
+    if axis not in ("x", "y"):
         raise SceneError(f"{what}: fov_axis {axis!r} is not supported (use x or y)")
-    ppx = float(nodes.value(node, "principal_point_offset_x", 0.0, what))
-    ppy = float(nodes.value(node, "principal_point_offset_y", 0.0, what))
-    K = np.array([[f, 0.0, w / 2.0 - 0.5 - ppx * w], [0.0, f, h / 2.0 - 0.5 - ppy * h],
-                  [0.0, 0.0, 1.0]])
-    M = nodes.matrix(node)
-    R = M[:3, :3] @ np.diag([-1.0, -1.0, 1.0])
+    K = intrinsics_from_sensor(fov, axis,
+                               float(nodes.value(node, "principal_point_offset_x", 0.0, what)),
+                               float(nodes.value(node, "principal_point_offset_y", 0.0, what)),
+                               (w, h))
+    R, t = pose_from_to_world(nodes.matrix(node))
     if not np.allclose(R @ R.T, np.eye(3), atol=1e-9) or np.linalg.det(R) < 0:
         raise SceneError(f"{what}: to_world must be a rigid motion (no scale or shear)")
     dist = None
@@ -476,7 +470,7 @@ def _read_sensor(nodes: _Nodes, node, params, label) -> Camera:
             raise SceneError(f"{label}: parameter {sid}_dist must hold 4, 5 or 8 OpenCV "
                              f"distortion coefficients, got {dist.size}")
     try:
-        return Camera(K, (w, h), dist=dist, R=_orthonormalize(R), t=M[:3, 3])
+        return Camera(K, (w, h), dist=dist, R=_orthonormalize(R), t=t)
     except ValueError as exc:
         raise SceneError(f"{what}: {exc}") from None
 
