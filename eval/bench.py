@@ -48,7 +48,7 @@ def run_bench(n_points: int, n_reference: int, repeat: int, seed: int, progress=
     from eval.fermat_reference import fermat_pixel_scipy
     from measure import triangulate
     from synth.layouts import random_volume
-    from synth.project import project
+    from measure.projection import project
     from synth.rig import paper_rig
 
     rig = paper_rig()

@@ -37,7 +37,7 @@ from scipy.stats import spearmanr
 from measure import Reason, StereoRig, triangulate
 from synth.layouts import paper_plane
 from synth.noise import deviate_port, pixel_noise
-from synth.project import project
+from measure.projection import project
 from synth.rig import paper_rig
 
 from eval.paper_settings import (COMPONENTS, DISTANCES_MM, GAP_THRESHOLD_MM,  # noqa: F401

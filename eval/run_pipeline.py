@@ -19,7 +19,7 @@ from measure.matching import match_targets
 from synth.crosscheck import (ASSOCIATION_GATE_PX, associate_detections, distance_stats,
                               wholly_in_image)
 from synth.noise import add_pixel_noise
-from synth.project import project
+from measure.projection import project
 
 from .cloud_metrics import cloud_distances, flatness, rigid_alignment
 from .results import ErrorStats

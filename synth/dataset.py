@@ -37,7 +37,7 @@ import numpy as np
 from measure import Camera, FlatPort, StereoRig
 
 from .fileio import OutputDir, read_marker
-from .project import project
+from measure.projection import project
 from .provenance import package_versions
 from .render import check_render_request, png16_scale, render_stereo, srgb_preview, to_png16, write_exr, write_png
 from .scene import SceneError, SceneSpec, load_scene

@@ -1,11 +1,11 @@
-"""The per-point SciPy baseline of the benchmark solves the same problem as synth.project."""
+"""The per-point SciPy baseline of the benchmark solves the same problem as measure.projection."""
 
 import numpy as np
 
 from eval.cli import main
 from eval.fermat_reference import fermat_pixel_scipy
 from synth.layouts import paper_plane
-from synth.project import project
+from measure.projection import project
 
 
 def test_scipy_reference_agrees_with_the_vectorized_fermat_solver(rig):

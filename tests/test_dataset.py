@@ -12,7 +12,7 @@ import pytest
 
 from synth.crosscheck import check_dataset
 from synth.dataset import PIXELS_HEADER, read_dataset, stereo_extrinsics, write_dataset
-from synth.project import project
+from measure.projection import project
 from synth.scene import load_scene
 
 from .conftest import SMALL_SCENE_SIZE as SMALL

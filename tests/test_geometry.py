@@ -9,7 +9,7 @@ from hypothesis import strategies as st
 from measure import (Camera, FlatPort, Reason, StereoRig, intersect_plane, refract,
                      trace_through_port, triangulate)
 from synth.layouts import paper_plane
-from synth.project import project, solve_paths
+from measure.projection import project, solve_paths
 
 from .conftest import rotation
 

@@ -5,7 +5,7 @@ import pytest
 
 from measure.matching import match_targets
 from synth.layouts import paper_plane
-from synth.project import project
+from measure.projection import project
 
 
 def _pixels(rig, points, sigma, seed):

@@ -8,7 +8,7 @@ import pytest
 
 from measure import Camera, FlatPort, Reason, StereoRig, triangulate
 from measure.matching import match_targets
-from synth.project import project
+from measure.projection import project
 from synth.rig import paper_rig
 
 METHODS = ("optical_path", "su", "regular")

@@ -7,7 +7,7 @@ import numpy as np
 from measure import Camera
 from measure.detect import detect_targets
 from synth.layouts import grid_plane
-from synth.project import project
+from measure.projection import project
 from synth.render import png16_scale, render_stereo, srgb_preview, to_png16
 from synth.rig import paper_cameras
 from synth.scene import load_scene, write_scene

@@ -24,9 +24,10 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import elementwise
 
-from measure import Camera, FlatPort, Reason
-from measure.batching import map_row_chunks
-from measure.port import index_matched_port
+from .batching import map_row_chunks
+from .camera import Camera
+from .port import FlatPort, index_matched_port
+from .reasons import Reason
 
 SOLVERS = ("fermat", "snell")
 
