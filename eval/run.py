@@ -48,6 +48,9 @@ def add_parser(subparsers):
                              "target_z × (0.8, 1.25)")
     parser.add_argument("-D", dest="defines", action="append", default=[], metavar="name=value",
                         help="override a scene default (repeatable)")
+    parser.add_argument("--eccentricity", action="store_true",
+                        help="also measure with the detected centres corrected for the disk "
+                             "targets' eccentricity (reported beside the uncorrected numbers)")
     parser.add_argument("--json", action="store_true", help="also print report.json to stdout")
     parser.add_argument("--no-progress", action="store_true", help="no progress output")
 
@@ -132,20 +135,28 @@ def load_inputs(args, log):
                          spec.target_radius, data.left, data.right, spec.params,
                          data.manifest.get("variant", "?"), int(data.manifest.get("spp", 0)), 0.0,
                          seed, {"from": os.path.abspath(args.from_dir),
-                                "from_seed": data.manifest.get("seed")})
+                                "from_seed": data.manifest.get("seed")}, spec.target_normals)
     from synth.render import check_render_request, render_stereo
 
     check_render_request(spec, args.spp)
-    log("render both views …")
+    log(f"render both views ({spec.size[0]}x{spec.size[1]} px, {args.spp or spec.spp} spp, in "
+        f"passes) …")
     start = time.perf_counter()
     left, right, info = render_stereo(spec, spp=args.spp, variant=args.variant,
                                       progress=not args.no_progress)
     timings = {"render_left": info["seconds"]["left"], "render_right": info["seconds"]["right"],
-               "render_samples_per_second": info["samples_per_second"]}
-    render = {k: v for k, v in info.items() if k not in ("seconds", "samples_per_second")}
+               "render_samples_per_second": info["samples_per_second"],
+               **{f"render_samples_per_second_{view}": speed
+                  for view, speed in info["samples_per_second_per_view"].items()}}
+    render = {k: v for k, v in info.items()
+              if k not in ("seconds", "samples_per_second", "samples_per_second_per_view")}
+    log("rendered: " + ", ".join(f"{view} {info['seconds'][view]:.1f} s at {speed / 1e6:.2f} M "
+                                 f"samples/s ({'+'.join(map(str, info['passes'][view]))} spp)"
+                                 for view, speed in info["samples_per_second_per_view"].items()))
     return RunInputs(args.scene, spec.rig, spec.has_port, spec.targets, spec.target_ids,
                      spec.target_radius, left, right, spec.params, info["variant"], info["spp"],
-                     time.perf_counter() - start, seed, {"render": render, "timings": timings})
+                     time.perf_counter() - start, seed, {"render": render, "timings": timings},
+                     spec.target_normals)
 
 
 def _fmt(value, digits=3):
@@ -165,12 +176,20 @@ SUMMARY_COLUMNS = (("n", "n", 0), ("rms_dp_mm", "RMS dP", 3), ("max_dp_mm", "max
 
 def summary_table(report: dict) -> str:
     """The per-method table (mm) as fixed-width text."""
-    header = f"{'method':<13}" + "".join(f"{title:>15}" for _, title, _ in SUMMARY_COLUMNS)
+    header = f"{'method':<17}" + "".join(f"{title:>15}" for _, title, _ in SUMMARY_COLUMNS)
     lines = [header]
-    for method, stats in report["methods"].items():
-        lines.append(f"{method:<13}" + "".join(f"{_fmt(stats.get(key), digits):>15}"
+    for method, stats in _method_rows(report):
+        lines.append(f"{method:<17}" + "".join(f"{_fmt(stats.get(key), digits):>15}"
                                                 for key, _, digits in SUMMARY_COLUMNS))
     return "\n".join(lines)
+
+
+def _method_rows(report: dict):
+    """``(label, stats)`` per method, then per method corrected for eccentricity (``+ecc``)."""
+    rows = list(report["methods"].items())
+    if report.get("eccentricity"):
+        rows += [(f"{m}+ecc", st) for m, st in report["eccentricity"]["methods"].items()]
+    return rows
 
 
 def report_markdown(report: dict) -> str:
@@ -190,11 +209,14 @@ def report_markdown(report: dict) -> str:
              f"({m['correct']} correct, {m['wrong']} wrong, {m['ambiguous_dropped']} ambiguous dropped); "
              f"visible-in-both targets matched: {m['visible_in_both_matched']}. Gate {m['gate_mm']} mm, "
              f"depth window {m['depth_window_mm']} mm. Cross-check of all detections against the "
-             f"Fermat simulator: RMS {_fmt(c['rms_px'], 4)} px, max {_fmt(c['max_px'], 4)} px.", "",
+             f"Fermat simulator: RMS {_fmt(c['rms_px'], 4)} px, max {_fmt(c['max_px'], 4)} px "
+             f"(against the image of each target's centre); RMS {_fmt(c['rms_px_outline'], 4)} px, "
+             f"max {_fmt(c['max_px_outline'], 4)} px against the area centroid of the image of its "
+             f"outline (the eccentricity removed).", "",
              "## Accuracy per method (mm)", "",
              "| method | " + " | ".join(title for _, title, _ in SUMMARY_COLUMNS) + " |",
              "|---" * (len(SUMMARY_COLUMNS) + 1) + "|"]
-    for method, stats in report["methods"].items():
+    for method, stats in _method_rows(report):
         lines.append(f"| {method} | " + " | ".join(_fmt(stats.get(k), d) for k, _, d in SUMMARY_COLUMNS) + " |")
     lines += ["", "dP = |measured − true| over correctly matched targets; Chamfer = mean "
               "measured→truth + mean truth→measured nearest-neighbour distance (all matched points "
@@ -246,7 +268,8 @@ def main(args) -> int:
 
     from .run_pipeline import run_pipeline
 
-    report, arrays = run_pipeline(inputs, methods, args.noise_px, args.gate_mm, depth_window, log)
+    report, arrays = run_pipeline(inputs, methods, args.noise_px, args.gate_mm, depth_window, log,
+                                  eccentricity=args.eccentricity)
     log("write the report, figures and point clouds …")
     t = time.perf_counter()
     with output.staged() as tmp:
@@ -263,7 +286,8 @@ def main(args) -> int:
     m, c = report["matching"], report["crosscheck"]
     print(f"{report['scene']}: {m['visible_in_both']} targets visible in both views, "
           f"{m['pairs']} matched ({m['correct']} correct, {m['wrong']} wrong), cross-check RMS "
-          f"{_fmt(c['rms_px'], 4)} px, max {_fmt(c['max_px'], 4)} px; "
+          f"{_fmt(c['rms_px'], 4)} px, max {_fmt(c['max_px'], 4)} px (outline centroid: RMS "
+          f"{_fmt(c['rms_px_outline'], 4)} px, max {_fmt(c['max_px_outline'], 4)} px); "
           f"{report['variant']} {report['spp']} spp; total {report['timings_s']['total']:.1f} s",
           file=summary_stream)
     print(summary_table(report), file=summary_stream)

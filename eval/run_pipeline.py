@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from measure import detect_targets, triangulate
+from measure.eccentricity import correct_eccentricity, outline_centroid_offsets
 from measure.matching import match_targets
 from synth.crosscheck import (ASSOCIATION_GATE_PX, associate_detections, distance_stats,
                               wholly_in_image)
@@ -54,6 +55,7 @@ class RunInputs:
     render_seconds: float
     seed: int = 0
     extra: dict = field(default_factory=dict)
+    target_normals: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -119,29 +121,46 @@ def triangulate_stage(inputs: RunInputs, centers, matches, methods):
     return {m: triangulate(inputs.rig, uv_left, uv_right, m) for m in methods}
 
 
-def _associate_truth(inputs: RunInputs, detections):
-    """Per view: simulator pixels, visibility, truth index per detection, cross-check stats."""
-    simulated, inside, truth_of, crosscheck, distances = {}, {}, {}, {}, []
+def crosscheck_stage(inputs: RunInputs, detections):
+    """Per view: simulator pixels, visibility, truth index per detection, cross-check stats.
+
+    The cross-check compares each detected centre with the simulator's pixel of its target's
+    centre (``rms_px``, ``max_px``) and with the area centroid of the image of its outline
+    (``rms_px_outline``, ``max_px_outline``: what remains is the renderer's noise alone)."""
+    simulated, inside, truth_of, crosscheck = {}, {}, {}, {}
+    distances, outline_distances = [], []
     rig = inputs.rig
+    normals = (inputs.target_normals if inputs.target_normals is not None
+               else np.array([0.0, 0.0, -1.0]))
     for name, camera in (("left", rig.left), ("right", rig.right)):
         simulated[name], inside[name] = visible_targets(camera, rig.port, inputs.targets,
                                                         inputs.target_radius)
-        index, distance = associate_detections(np.asarray(detections[name].centers),
-                                               simulated[name], ASSOCIATION_GATE_PX)
+        centers = np.asarray(detections[name].centers).reshape(-1, 2)
+        index, distance = associate_detections(centers, simulated[name], ASSOCIATION_GATE_PX)
         truth_of[name] = index
-        d = distance[index >= 0]
+        found = index >= 0
+        d = distance[found]
+        offsets = outline_centroid_offsets(camera, rig.port, inputs.targets[index[found]],
+                                           np.broadcast_to(normals, inputs.targets.shape)[index[found]],
+                                           inputs.target_radius)
+        d_outline = np.linalg.norm(centers[found] - simulated[name][index[found]] - offsets, axis=1)
         distances.append(d)
-        stats = distance_stats(d)
+        outline_distances.append(d_outline)
+        stats, outline = distance_stats(d), distance_stats(d_outline)
         crosscheck[name] = {"associated": stats["n"], "rms_px": stats["rms_px"],
-                            "max_px": stats["max_px"]}
+                            "max_px": stats["max_px"], "rms_px_outline": outline["rms_px"],
+                            "max_px_outline": outline["max_px"]}
     both = distance_stats(np.concatenate(distances))
-    crosscheck.update({"rms_px": both["rms_px"], "max_px": both["max_px"]})
+    both_outline = distance_stats(np.concatenate(outline_distances))
+    crosscheck.update({"rms_px": both["rms_px"], "max_px": both["max_px"],
+                       "rms_px_outline": both_outline["rms_px"],
+                       "max_px_outline": both_outline["max_px"]})
     return simulated, inside, truth_of, crosscheck
 
 
 def score_stage(inputs: RunInputs, detections, matches, window, results, gate_mm: float):
     """Associate detections with the truth (for scoring only) and score every method."""
-    simulated, inside, truth_of, crosscheck = _associate_truth(inputs, detections)
+    simulated, inside, truth_of, crosscheck = crosscheck_stage(inputs, detections)
     pair_truth_left = truth_of["left"][matches.left]
     pair_truth_right = truth_of["right"][matches.right]
     correct = (pair_truth_left >= 0) & (pair_truth_left == pair_truth_right)
@@ -181,6 +200,25 @@ def score_stage(inputs: RunInputs, detections, matches, window, results, gate_mm
             "simulated": simulated}
 
 
+def eccentricity_stage(inputs: RunInputs, centers, matches, methods, iterations: int = 2):
+    """Each method on detections corrected for the eccentricity of the disk targets (offsets
+    predicted with the measurement rig and the optical-path points, normals from neighbouring
+    targets, the scene's target radius). Returns ``({method: Triangulation}, summary)``."""
+    uv_left = centers["left"][matches.left]
+    uv_right = centers["right"][matches.right]
+    corr = correct_eccentricity(inputs.rig, uv_left, uv_right, inputs.target_radius,
+                                "optical_path", iterations=iterations)
+    results = {m: (corr.triangulation if m == "optical_path"
+                   else triangulate(inputs.rig, corr.uv_left, corr.uv_right, m)) for m in methods}
+    offsets = {}
+    for name, offset in (("left", corr.offset_left), ("right", corr.offset_right)):
+        length = np.linalg.norm(offset, axis=1)
+        offsets[name] = {"rms_px": float(np.sqrt(np.nanmean(length ** 2))) if length.size else None,
+                         "max_px": float(np.nanmax(length)) if length.size else None}
+    return results, {"iterations": iterations, "offset_px": offsets,
+                     "normals": "plane of the 8 nearest triangulated targets"}
+
+
 def nothing_matched_message(inputs: RunInputs, detections, window) -> str:
     near, far = window
     window_text = ("no depth window" if near is None
@@ -197,7 +235,7 @@ def nothing_matched_message(inputs: RunInputs, detections, window) -> str:
 
 
 def run_pipeline(inputs: RunInputs, methods, noise_px: float = 0.0, gate_mm: float = 0.5,
-                 depth_window=None, log=print):
+                 depth_window=None, log=print, eccentricity: bool = False):
     """Run detection, matching, triangulation and scoring. Returns ``(report, arrays)``.
 
     Raises :class:`NothingMatched` when no pair is matched. ``report`` is the JSON-ready dict
@@ -222,9 +260,18 @@ def run_pipeline(inputs: RunInputs, methods, noise_px: float = 0.0, gate_mm: flo
     results = triangulate_stage(inputs, centers, matches, methods)
     timings["triangulate"] = time.perf_counter() - start
 
+    corrected = None
+    if eccentricity:
+        log("correct the targets' eccentricity and triangulate again …")
+        start = time.perf_counter()
+        corrected, eccentricity_summary = eccentricity_stage(inputs, centers, matches, methods)
+        timings["eccentricity"] = time.perf_counter() - start
+
     log("score against the ground truth (Open3D) …")
     start = time.perf_counter()
     scored = score_stage(inputs, detections, matches, window, results, gate_mm)
+    if corrected is not None:
+        scored_corrected = score_stage(inputs, detections, matches, window, corrected, gate_mm)
     timings["evaluate"] = time.perf_counter() - start
 
     report = {
@@ -237,6 +284,9 @@ def run_pipeline(inputs: RunInputs, methods, noise_px: float = 0.0, gate_mm: flo
         "matching": scored["matching"],
         "methods": {m: s.to_json() for m, s in scored["scores"].items()},
         "noise_px": noise_px, "seed": inputs.seed,
+        "eccentricity": None if corrected is None else {
+            **eccentricity_summary,
+            "methods": {m: s.to_json() for m, s in scored_corrected["scores"].items()}},
         "timings_s": timings,
         "variant": inputs.variant, "spp": inputs.spp,
     }

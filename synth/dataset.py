@@ -35,11 +35,12 @@ import cv2
 import numpy as np
 
 from measure import Camera, FlatPort, StereoRig
+from measure.projection import project
 
 from .fileio import OutputDir, read_marker
-from measure.projection import project
 from .provenance import package_versions
-from .render import check_render_request, png16_scale, render_stereo, srgb_preview, to_png16, write_exr, write_png
+from .render import (check_render_request, pass_seed, png16_scale, render_stereo, srgb_preview,
+                     to_png16, write_exr, write_png)
 from .scene import SceneError, SceneSpec, load_scene
 
 FORMAT_VERSION = 1
@@ -278,11 +279,14 @@ def write_dataset(scene, out_dir, spp: int | None = None, defines: dict | None =
                       "target_radius_mm": spec.target_radius},
             "variant": info["variant"], "variant_requested": variant,
             "spp": spp, "spp_rendered": info["spp_rendered"], "seed": seed,
-            "seeds": {"left": seed, "right": seed + 1},
+            "seeds": {view: [pass_seed(seed, i, k) for k in range(len(info["passes"][view]))]
+                      for i, view in enumerate(("left", "right"))},
             "image_size": list(spec.size),
             "png_scale": scale,
             "images": {"left": _image_stats(left), "right": _image_stats(right)},
             "samples_per_second": info["samples_per_second"],
+            "samples_per_second_per_view": info["samples_per_second_per_view"],
+            "passes": info["passes"],
             "seconds": times,
             "files": sorted(os.listdir(tmp)) + ["manifest.json"],
         }

@@ -11,10 +11,16 @@ whole distorted field of view, pre-filtered with an ``oversample``-pixel box (on
 and warped with ``cv2.remap`` (bilinear) to the distorted pixel grid; the map is the exact
 inverse of the OpenCV distortion (``Camera.undistort``, Newton to ~1e-16).
 
+Passes: a view is rendered in as few ``mi.render`` calls as keep each call at most
+:data:`MAX_SAMPLES_PER_CALL` samples, and the passes are averaged, weighted by their samples.
+Large wavefronts are slower, but the sampler stratifies within one call only; the limit is the
+measured balance of the two (see the constant).
+
 Seeds: one seed, one meaning. The scene's ``seed`` parameter (``-D seed=S``, or ``--seed S``,
-which sets it) is the only seed: view ``i`` (0 left, 1 right) is rendered with
-``mi.render(seed=S + i)`` from a scene loaded with its sampler's own seed at 0 (Mitsuba adds the
-two), so ``--seed 7`` and ``-D seed=7`` render the same bytes.
+which sets it) is the only seed: pass ``k`` of view ``i`` (0 left, 1 right) is rendered with
+``mi.render(seed=S + i + 2^21·k)`` from a scene loaded with its sampler's own seed at 0 (Mitsuba
+adds the two), so ``--seed 7`` and ``-D seed=7`` render the same bytes, and a one-pass render
+uses ``S + i``.
 
 Before rendering, :func:`check_render_request` refuses what cannot work: an image whose
 wavefront would not fit in memory (the estimate is stated in the message) and a lens
@@ -41,6 +47,16 @@ DISTORTION_OVERSAMPLE = 2
 DISTORTION_MARGIN_PX = 3
 
 
+#: Largest number of samples (spp × film pixels) one ``mi.render`` call carries. Mitsuba's JIT
+#: variants trace the whole wavefront of a call at once and slow down above ~16 spp per call at
+#: 2448 × 2048 (7–8 M samples/s up to 16, 5.3 at 36, 3.8 at 48), but the multijitter sampler
+#: stratifies within one call only, so passes cost accuracy: at full size 36 spp in 3 passes took
+#: 59 s against 68 s in one call (1.15×) but left a cross-check RMS of 0.0254 px against 0.0226;
+#: 48 spp in 3 passes (72 s) matched one call of 36 (0.0229 px). Measured with
+#: ``python -m eval render-bench`` (docs/architecture.md): passes pay off only above 36 spp.
+MAX_SAMPLES_PER_CALL = 36 * 2448 * 2048
+#: Seed stride between the passes of one view (see :func:`pass_seed`).
+PASS_SEED_STRIDE = 1 << 21
 #: Memory per rendered pixel (bytes), about twice what was measured with ``llvm_ad_rgb`` on the
 #: paper scene (peak RSS grew 32 bytes per pixel above ~190 MiB, the same at 4 and 16 spp:
 #: Mitsuba splits a wavefront of more than 2^32 samples into passes itself). docs/architecture.md
@@ -168,14 +184,54 @@ def _develop(mi, image) -> np.ndarray:
     return np.ascontiguousarray(a)
 
 
+def pass_plan(spp: int, film_pixels: int, max_samples: int = None) -> list[int]:
+    """Samples per pixel of each ``mi.render`` call of one view: as few calls as keep every
+    call at most ``max_samples`` (default :data:`MAX_SAMPLES_PER_CALL`) samples, as equal as
+    possible (largest first)."""
+    max_samples = MAX_SAMPLES_PER_CALL if max_samples is None else int(max_samples)
+    per_call = max(1, max_samples // max(1, int(film_pixels)))
+    calls = -(-int(spp) // per_call)
+    base, extra = divmod(int(spp), calls)
+    return [base + 1] * extra + [base] * (calls - extra)
+
+
+def pass_seed(seed: int, view: int, k: int) -> int:
+    """Sampler seed of pass ``k`` of view ``view`` (0 left, 1 right) for the scene seed
+    ``seed``: ``seed + view + 2^21·k`` (mod 2^32). One pass is ``seed + view``, as before."""
+    return (int(seed) + int(view) + PASS_SEED_STRIDE * int(k)) % (1 << 32)
+
+
+def _render_passes(mi, scene, sensor, spp: int, seed: int, view: int, film_pixels: int):
+    """The average of the passes of :func:`pass_plan`, weighted by the samples each took."""
+    total, weight = None, 0
+    for k, pass_spp in enumerate(pass_plan(spp, film_pixels)):
+        image = _develop(mi, mi.render(scene, sensor=sensor, spp=pass_spp,
+                                       seed=pass_seed(seed, view, k)))
+        taken = _sample_count(scene, sensor, pass_spp)
+        total = image.astype(np.float64) * taken if total is None else total + image * taken
+        weight += taken
+    return (total / weight).astype(np.float32)
+
+
+def _sample_count(scene, sensor, requested: int) -> int:
+    """Samples per pixel the sampler really took (multijitter rounds to a near-square)."""
+    try:
+        chosen = scene.sensors()[sensor] if isinstance(sensor, int) else sensor
+        return int(chosen.sampler().sample_count())
+    except (AttributeError, RuntimeError, TypeError, IndexError):
+        return int(requested)
+
+
 def render_view(scene, mi, index: int, camera: Camera, spp: int, seed: int,
                 oversample: int = DISTORTION_OVERSAMPLE) -> np.ndarray:
-    """One view as a float32 ``(H, W)`` linear image; distortion by oversampled render + warp."""
+    """One view as a float32 ``(H, W)`` linear image, rendered in passes (:func:`pass_plan`);
+    distortion by oversampled render + warp. ``seed`` is the scene seed."""
     if camera.dist is None:
-        return _develop(mi, mi.render(scene, sensor=index, spp=spp, seed=seed))
+        w, h = camera.size
+        return _render_passes(mi, scene, index, spp, seed, index, w * h)
     K, size, map_x, map_y = _ideal_camera_for(camera, oversample, DISTORTION_MARGIN_PX)
     sensor = _ideal_sensor(mi, scene.sensors()[index], camera, K, size)
-    ideal = _develop(mi, mi.render(scene, sensor=sensor, spp=spp, seed=seed))
+    ideal = _render_passes(mi, scene, sensor, spp, seed, index, size[0] * size[1])
     if oversample > 1:
         ideal = cv2.blur(ideal, (oversample, oversample), borderType=cv2.BORDER_CONSTANT)
     return cv2.remap(ideal, map_x, map_y, interpolation=cv2.INTER_LINEAR,
@@ -206,10 +262,13 @@ def render_stereo(scene, spp: int | None = None, variant: str | None = None,
     names = ("left", "right")
     bar = tqdm(names, desc=f"render {chosen} {spp} spp", unit="view", disable=not progress,
                leave=False)
+    speeds = {}
     for i, (name, camera) in enumerate(zip(bar, spec.cameras)):
         t = time.perf_counter()
-        images.append(render_view(mscene, mi, i, camera, spp, seed + i))
+        images.append(render_view(mscene, mi, i, camera, spp, seed))
         seconds[name] = time.perf_counter() - t
+        speeds[name] = _render_size(camera)[0] * _render_size(camera)[1] * spp / seconds[name]
+        bar.set_postfix_str(f"{name} {speeds[name] / 1e6:.1f} M samples/s")
     bar.close()
     try:  # samplers may round spp (multijitter: to a product of two near-equal integers)
         spp_rendered = int(mscene.sensors()[0].sampler().sample_count())
@@ -218,9 +277,12 @@ def render_stereo(scene, spp: int | None = None, variant: str | None = None,
     w, h = spec.size
     samples = 2 * w * h * spp_rendered
     render_seconds = seconds["left"] + seconds["right"]
+    plans = {name: pass_plan(spp, _render_size(c)[0] * _render_size(c)[1])
+             for name, c in zip(names, spec.cameras)}
     info = {"variant": chosen, "spp": spp, "spp_rendered": spp_rendered, "seed": seed,
-            "size": [w, h], "seconds": seconds,
-            "samples_per_second": samples / render_seconds if render_seconds > 0 else None}
+            "size": [w, h], "seconds": seconds, "passes": plans,
+            "samples_per_second": samples / render_seconds if render_seconds > 0 else None,
+            "samples_per_second_per_view": speeds}
     return images[0], images[1], info
 
 

@@ -75,6 +75,7 @@ class SceneSpec:
     camera centre, no layers, indices (1, 1))``, through which every projection and triangulation
     reduces to the pinhole one. ``targets`` ``(N, 3)`` ground-truth centres (mm, reference frame)
     in target-number order; ``target_ids`` ``(N,)`` their numbers; ``target_radii`` ``(N,)`` mm;
+    ``target_normals`` ``(N, 3)`` the unit normals of the disks (their emitting side);
     ``params`` the resolved ``<default>`` values (strings) ; ``path`` the file; ``sha256`` of its
     bytes.
     """
@@ -88,6 +89,7 @@ class SceneSpec:
     path: str | None
     sha256: str
     referenced: frozenset = frozenset()
+    target_normals: np.ndarray | None = None
 
     @property
     def mitsuba_params(self) -> dict:
@@ -593,7 +595,8 @@ def load_scene(path, defines: dict | None = None) -> SceneSpec:
         raise SceneError(f"{label}: targets {bad[:5].tolist()} do not face the cameras")
     return SceneSpec(rig=rig, has_port=has_port, targets=centres, target_ids=ids,
                      target_radii=radii, params=params, path=path,
-                     sha256=hashlib.sha256(data).hexdigest(), referenced=referenced)
+                     sha256=hashlib.sha256(data).hexdigest(), referenced=referenced,
+                     target_normals=np.array([t[3] for t in targets]))
 
 
 def _port_from_interfaces(interfaces, label) -> FlatPort:

@@ -171,3 +171,20 @@ def test_scene_with_no_visible_target(tmp_path, capsys):
     assert main(["run", str(scene), "--out", str(out), "--no-progress"]) == 2
     assert "no target is visible" in capsys.readouterr().err
     assert not out.exists()
+
+
+def test_eccentricity_option_reports_before_and_after(small_scene, tmp_path):
+    data = tmp_path / "data"
+    write_dataset(small_scene, data, spp=16, progress=False)
+    out = tmp_path / "out"
+    assert main(["run", small_scene, "--from", str(data), "--out", str(out), "--eccentricity",
+                 "--no-progress"]) == 0
+    report = json.loads((out / "report.json").read_text())
+    ecc = report["eccentricity"]
+    assert set(ecc["methods"]) == set(report["methods"]) and ecc["iterations"] == 2
+    # 16 mm disks at f = 150 px: offsets of a few hundredths of a pixel, predicted in both views
+    for view in ("left", "right"):
+        assert 0.001 < ecc["offset_px"][view]["max_px"] < 0.5
+    assert ecc["methods"]["optical_path"]["n"] == report["methods"]["optical_path"]["n"]
+    assert report["crosscheck"]["rms_px_outline"] > 0
+    assert "optical_path+ecc" in (out / "report.md").read_text()
