@@ -56,6 +56,12 @@ class RunInputs:
     seed: int = 0
     extra: dict = field(default_factory=dict)
     target_normals: np.ndarray | None = None
+    truth_rig: object = None
+
+    @property
+    def true_rig(self):
+        """The rig the images were rendered with (``rig`` is what the measurement believes)."""
+        return self.rig if self.truth_rig is None else self.truth_rig
 
 
 @dataclass(frozen=True)
@@ -129,7 +135,7 @@ def crosscheck_stage(inputs: RunInputs, detections):
     (``rms_px_outline``, ``max_px_outline``: what remains is the renderer's noise alone)."""
     simulated, inside, truth_of, crosscheck = {}, {}, {}, {}
     distances, outline_distances = [], []
-    rig = inputs.rig
+    rig = inputs.true_rig  # the simulator predicts what was rendered
     normals = (inputs.target_normals if inputs.target_normals is not None
                else np.array([0.0, 0.0, -1.0]))
     for name, camera in (("left", rig.left), ("right", rig.right)):
@@ -234,6 +240,13 @@ def nothing_matched_message(inputs: RunInputs, detections, window) -> str:
             f"left, {found['right']} right): {cause}")
 
 
+def _rigs_report(inputs: RunInputs) -> dict:
+    from .assumption import describe_rig, rig_difference
+
+    return {"truth": describe_rig(inputs.true_rig), "assumed": describe_rig(inputs.rig),
+            "difference": rig_difference(inputs.true_rig, inputs.rig)}
+
+
 def run_pipeline(inputs: RunInputs, methods, noise_px: float = 0.0, gate_mm: float = 0.5,
                  depth_window=None, log=print, eccentricity: bool = False):
     """Run detection, matching, triangulation and scoring. Returns ``(report, arrays)``.
@@ -284,6 +297,7 @@ def run_pipeline(inputs: RunInputs, methods, noise_px: float = 0.0, gate_mm: flo
         "matching": scored["matching"],
         "methods": {m: s.to_json() for m, s in scored["scores"].items()},
         "noise_px": noise_px, "seed": inputs.seed,
+        "rigs": _rigs_report(inputs),
         "eccentricity": None if corrected is None else {
             **eccentricity_summary,
             "methods": {m: s.to_json() for m, s in scored_corrected["scores"].items()}},

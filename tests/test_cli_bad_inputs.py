@@ -155,6 +155,17 @@ EVAL_CASES = [
     (None, RUN_SMALL + ["--from", "ds", "-D", "n_water=1.36"], "n_water"),
     (None, RUN_SMALL + ["--from", "missing_ds"], "missing_ds"),
     (None, ["run", "paper_plane.xml", "--from", "ds", "--out", "out", "--no-progress"], "another scene"),
+    # truth and assumption
+    (None, RUN + ["--assume", "bogus=1"], "bogus"),
+    (None, RUN + ["--assume", "n_water"], "n_water"),
+    (None, RUN + ["--assume", "n_water=abc"], "n_water"),
+    (None, RUN + ["--assume", "n_water=0.9"], "indices"),
+    (None, RUN + ["--assume", "port_distance=-5"], "assume"),
+    (None, RUN + ["--assume", "port_normal=0 0"], "port_normal"),
+    (None, RUN + ["--assume", "focal=0"], "focal"),
+    (None, RUN + ["--calib", "missing.yaml"], "missing.yaml"),
+    ("garbage_calib", RUN + ["--calib", "ds/calib.yaml"], "calib.yaml"),
+    (None, RUN + ["--calib", "ds/calib.yaml", "-D", "width=640"], "image size"),
     # bench and paper options
     (None, ["bench", "--points", "0"], "--points"),
     (None, ["bench", "--points", "abc"], "--points"),

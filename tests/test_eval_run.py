@@ -188,3 +188,27 @@ def test_eccentricity_option_reports_before_and_after(small_scene, tmp_path):
     assert ecc["methods"]["optical_path"]["n"] == report["methods"]["optical_path"]["n"]
     assert report["crosscheck"]["rms_px_outline"] > 0
     assert "optical_path+ecc" in (out / "report.md").read_text()
+
+
+def test_truth_and_assumption(small_scene, tmp_path):
+    """Rendered with n_water = 1.34, measured assuming 1.33: the report records both rigs and
+    the difference, the cross-check still uses the truth, and the points move (mostly in Z)."""
+    data = tmp_path / "data"
+    write_dataset(small_scene, data, spp=16, progress=False, defines={"n_water": "1.34"})
+    reports = {}
+    for name, extra in (("exact", []), ("assumed", ["--assume", "n_water=1.33"]),
+                        ("calib", ["--calib", str(data / "calib.yaml")])):
+        out = tmp_path / name
+        assert main(["run", small_scene, "--from", str(data), "--out", str(out),
+                     "--methods", "optical_path", "--no-progress", *extra]) == 0
+        reports[name] = json.loads((out / "report.json").read_text())
+    exact, assumed, calib = (reports[k] for k in ("exact", "assumed", "calib"))
+    assert assumed["rigs"]["difference"] == {"index_2": pytest.approx(-0.01)}
+    assert assumed["rigs"]["truth"]["port"]["indices"][-1] == 1.34
+    assert exact["rigs"]["difference"] == {} and calib["rigs"]["difference"] == {}
+    for key in ("rms_dp_mm", "mean_dz_mm", "max_dp_mm"):  # the pose went through R, T and back
+        assert calib["methods"]["optical_path"][key] == pytest.approx(
+            exact["methods"]["optical_path"][key], abs=1e-9)
+    assert assumed["crosscheck"] == exact["crosscheck"]  # the simulator predicts the truth
+    shift = assumed["methods"]["optical_path"]["mean_dz_mm"] - exact["methods"]["optical_path"]["mean_dz_mm"]
+    assert abs(shift) > 5 * abs(exact["methods"]["optical_path"]["mean_dz_mm"]) and abs(shift) > 1.0

@@ -1,0 +1,151 @@
+"""What the measurement believes, separately from the truth that was rendered.
+
+The scene file (with ``-D``) is the truth. ``--calib FILE`` (a ``calib.yaml`` as datasets write
+it) and ``--assume name=value`` (repeatable) set the rig the measurement uses for matching,
+triangulation and the eccentricity correction; scoring compares with the true targets, and the
+cross-check with the simulator uses the true rig. Names (units mm, pixels; vectors as
+space-separated numbers):
+
+``n_water``, ``n_glass`` (the first layer's index), ``port_distance`` (D), ``glass_thickness``
+(the first layer), ``port_normal`` (3 values, normalized), ``focal`` (fx = fy of both cameras),
+``left_focal``, ``right_focal``, ``left_dist``, ``right_dist`` (4, 5 or 8 OpenCV coefficients).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from measure import Camera, FlatPort, StereoRig
+
+ASSUMABLE = ("n_water", "n_glass", "port_distance", "glass_thickness", "port_normal", "focal",
+             "left_focal", "right_focal", "left_dist", "right_dist")
+_PORT_NAMES = ("n_water", "n_glass", "port_distance", "glass_thickness", "port_normal")
+
+
+def parse_assumptions(items) -> dict:
+    """``["name=value", …]`` → ``{name: numpy array}``; ValueError naming a bad item."""
+    out = {}
+    for item in items or ():
+        name, sep, text = str(item).partition("=")
+        name = name.strip()
+        if not sep or name not in ASSUMABLE:
+            raise ValueError(f"--assume {item!r}: expected name=value with name one of "
+                             f"{', '.join(ASSUMABLE)}")
+        try:
+            value = np.array([float(v) for v in text.replace(",", " ").split()], dtype=float)
+        except ValueError:
+            value = np.array([])
+        expected = {"port_normal": (3,), "left_dist": (4, 5, 8), "right_dist": (4, 5, 8)}.get(
+            name, (1,))
+        if value.size not in expected or not np.all(np.isfinite(value)):
+            raise ValueError(f"--assume {item!r}: expected {' or '.join(map(str, expected))} "
+                             f"finite number(s)")
+        out[name] = value
+    return out
+
+
+def _with_focal(camera: Camera, focal: float) -> Camera:
+    if not focal > 0:
+        raise ValueError(f"--assume: focal length must be positive, got {focal:g}")
+    K = camera.K.copy()
+    K[0, 0] = K[1, 1] = focal
+    return Camera(K, camera.size, camera.dist, camera.R, camera.t)
+
+
+def assumed_rig(truth: StereoRig, has_port: bool, assumptions: dict,
+                base: StereoRig | None = None) -> StereoRig:
+    """The rig the measurement believes: ``base`` (default the truth; e.g. a ``--calib`` rig)
+    with ``assumptions`` (:func:`parse_assumptions`) applied."""
+    rig = truth if base is None else base
+    if not assumptions:
+        return rig
+    if not has_port and any(name in assumptions for name in _PORT_NAMES):
+        raise ValueError("--assume: the scene has no port (all air); port parameters cannot be "
+                         "assumed")
+    left, right, port = rig.left, rig.right, rig.port
+    indices, thicknesses = list(port.indices), list(port.thicknesses)
+    normal, distance = port.normal, port.distance
+    for name, value in assumptions.items():
+        v = float(value[0]) if value.size == 1 else value
+        if name == "n_water":
+            indices[-1] = v
+        elif name == "n_glass":
+            if not thicknesses:
+                raise ValueError("--assume n_glass: the port has no glass layer")
+            indices[1] = v
+        elif name == "glass_thickness":
+            if not thicknesses:
+                raise ValueError("--assume glass_thickness: the port has no glass layer")
+            thicknesses[0] = v
+        elif name == "port_distance":
+            distance = v
+        elif name == "port_normal":
+            normal = v
+        elif name in ("focal", "left_focal"):
+            left = _with_focal(left, v)
+        if name in ("focal", "right_focal"):
+            right = _with_focal(right, v)
+        elif name == "left_dist":
+            left = Camera(left.K, left.size, v, left.R, left.t)
+        elif name == "right_dist":
+            right = Camera(right.K, right.size, v, right.R, right.t)
+    try:
+        return StereoRig(left, right, FlatPort(normal, distance, tuple(thicknesses),
+                                               tuple(indices)))
+    except ValueError as exc:
+        raise ValueError(f"--assume: {exc}") from None
+
+
+def describe_rig(rig: StereoRig) -> dict:
+    """The rig as plain numbers: per camera ``K``, ``dist``, ``R``, ``t_mm``; the port."""
+    def camera(c: Camera):
+        return {"K": c.K.tolist(), "dist": None if c.dist is None else c.dist.tolist(),
+                "R": c.R.tolist(), "t_mm": c.t.tolist()}
+    p = rig.port
+    return {"left": camera(rig.left), "right": camera(rig.right),
+            "port": {"normal": p.normal.tolist(), "distance_mm": p.distance,
+                     "thicknesses_mm": list(p.thicknesses), "indices": list(p.indices)}}
+
+
+#: Differences at or below this (mm, px, rad, index units) are round-off — e.g. of a pose
+#: written to ``calib.yaml`` as OpenCV's stereo R, T and read back — and are not reported.
+ROUND_OFF = 1e-9
+
+
+def rig_difference(truth: StereoRig, assumed: StereoRig) -> dict:
+    """Assumed − true for every quantity that differs by more than :data:`ROUND_OFF`."""
+    diff = {}
+    def differs(a, b) -> bool:
+        return bool(np.max(np.abs(np.asarray(a, float) - np.asarray(b, float))) > ROUND_OFF)
+
+    if differs(assumed.port.distance, truth.port.distance):
+        diff["port_distance_mm"] = assumed.port.distance - truth.port.distance
+    if len(assumed.port.indices) == len(truth.port.indices):
+        for k, (a, b) in enumerate(zip(assumed.port.indices, truth.port.indices)):
+            if differs(a, b):
+                diff[f"index_{k}"] = a - b
+    else:
+        diff["indices"] = {"truth": list(truth.port.indices), "assumed": list(assumed.port.indices)}
+    if len(assumed.port.thicknesses) == len(truth.port.thicknesses):
+        for k, (a, b) in enumerate(zip(assumed.port.thicknesses, truth.port.thicknesses)):
+            if differs(a, b):
+                diff[f"thickness_{k}_mm"] = a - b
+    angle = float(np.degrees(np.arccos(np.clip(assumed.port.normal @ truth.port.normal, -1, 1))))
+    if differs(assumed.port.normal, truth.port.normal):
+        diff["port_normal_deg"] = angle
+    for view in ("left", "right"):
+        a, b = getattr(assumed, view), getattr(truth, view)
+        if differs(a.K, b.K):
+            diff[f"{view}_K"] = (a.K - b.K).tolist()
+        dist_a = np.zeros(8) if a.dist is None else np.pad(a.dist, (0, 8 - a.dist.size))
+        dist_b = np.zeros(8) if b.dist is None else np.pad(b.dist, (0, 8 - b.dist.size))
+        if differs(dist_a, dist_b):
+            diff[f"{view}_dist"] = {"truth": None if b.dist is None else b.dist.tolist(),
+                                    "assumed": None if a.dist is None else a.dist.tolist()}
+        if differs(a.R, b.R) or differs(a.t, b.t):
+            diff[f"{view}_pose"] = {"t_mm": (a.t - b.t).tolist(), "rotation_deg": float(
+                np.degrees(np.arccos(np.clip((np.trace(a.R.T @ b.R) - 1) / 2, -1, 1))))}
+    return diff
+
+
+__all__ = ["ASSUMABLE", "assumed_rig", "describe_rig", "parse_assumptions", "rig_difference"]
