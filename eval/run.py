@@ -56,6 +56,10 @@ def add_parser(subparsers):
     parser.add_argument("--calib", metavar="FILE",
                         help="measure with this calib.yaml (as datasets write it) instead of the "
                              "scene's rig; --assume applies on top")
+    parser.add_argument("--self-calibrate", metavar="NAMES", default="",
+                        help="estimate these port parameters from the matched targets "
+                             "(comma list of n_water, port_distance, port_normal), measure "
+                             "again with them and report before and after")
     parser.add_argument("--eccentricity", action="store_true",
                         help="also measure with the detected centres corrected for the disk "
                              "targets' eccentricity (reported beside the uncorrected numbers)")
@@ -72,6 +76,17 @@ def _parse_methods(text: str):
         raise CLIError(f"unknown method {', '.join(unknown) or repr(text)} in --methods "
                        f"(choose from {', '.join(METHODS)})")
     return methods
+
+
+def _parse_self_calibration(text: str) -> tuple:
+    from measure.selfcal import PARAMETERS
+
+    names = tuple(dict.fromkeys(n.strip() for n in (text or "").split(",") if n.strip()))
+    unknown = [n for n in names if n not in PARAMETERS]
+    if unknown:
+        raise CLIError(f"--self-calibrate {text!r}: unknown parameter {', '.join(unknown)} "
+                       f"(the refinement estimates {', '.join(PARAMETERS)})")
+    return names
 
 
 def _parse_range(text):
@@ -295,6 +310,7 @@ def main(args) -> int:
     log = (lambda text: None) if quiet else (lambda text: print(text, file=sys.stderr, flush=True))
     methods = _parse_methods(args.methods)
     depth_window = _parse_range(args.depth_range)
+    self_calibration = _parse_self_calibration(args.self_calibrate)
     output = OutputDir(args.out, COMMAND).claim()  # before any expensive work
     start = time.perf_counter()
     inputs = load_inputs(args, log)
@@ -304,7 +320,8 @@ def main(args) -> int:
     from .run_pipeline import run_pipeline
 
     report, arrays = run_pipeline(inputs, methods, args.noise_px, args.gate_mm, depth_window, log,
-                                  eccentricity=args.eccentricity)
+                                  eccentricity=args.eccentricity,
+                                  self_calibrate=self_calibration)
     log("write the report, figures and point clouds …")
     t = time.perf_counter()
     with output.staged() as tmp:
@@ -327,6 +344,19 @@ def main(args) -> int:
           file=summary_stream)
     print(summary_table(report), file=summary_stream)
     print(f"wrote {out}", file=summary_stream)
+    calibration = report.get("self_calibration")
+    if calibration:
+        if calibration.get("methods"):
+            for name, value in calibration["estimates"].items():
+                sigma = calibration["sigmas"][name]
+                print(f"self-calibrated {name}: {value} ± {sigma} (truth {calibration['truth'][name]}, "
+                      f"assumed {calibration['assumed'][name]}); reprojection RMS "
+                      f"{calibration['rms_px_before']:.4f} -> {calibration['rms_px_after']:.4f} px",
+                      file=summary_stream)
+            print(summary_table({"methods": calibration["methods"]}), file=summary_stream)
+        else:
+            print(f"self-calibration: no trusted estimate ({calibration['reason'] or calibration['message']})",
+                  file=summary_stream)
     if args.json:
         print(json.dumps(report, indent=2))
     return 0

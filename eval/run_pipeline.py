@@ -225,6 +225,44 @@ def eccentricity_stage(inputs: RunInputs, centers, matches, methods, iterations:
                      "normals": "plane of the 8 nearest triangulated targets"}
 
 
+def self_calibration_stage(inputs: RunInputs, centers, matches, parameters, methods, log):
+    """Estimate port ``parameters`` from the matched pixels (:func:`measure.selfcal.self_calibrate`)
+    and triangulate again with the refined rig. Returns ``(summary, {method: Triangulation} or
+    None)``: None when the refinement did not converge or the data do not determine the
+    parameters (then nothing is refined, and the summary says why)."""
+    from measure.selfcal import self_calibrate
+
+    uv_left = centers["left"][matches.left]
+    uv_right = centers["right"][matches.right]
+    start = time.perf_counter()
+    fit = self_calibrate(inputs.rig, uv_left, uv_right, parameters)
+    seconds = time.perf_counter() - start
+    truth = {"n_water": inputs.true_rig.port.n_water,
+             "port_distance": inputs.true_rig.port.distance,
+             "port_normal": inputs.true_rig.port.normal.tolist()}
+    assumed = {"n_water": inputs.rig.port.n_water, "port_distance": inputs.rig.port.distance,
+               "port_normal": inputs.rig.port.normal.tolist()}
+    summary = {"parameters": list(parameters), "targets": fit.n_points, "seconds": seconds,
+               "converged": fit.converged, "identifiable": fit.identifiable,
+               "reason": fit.reason, "message": fit.message,
+               "rms_px_before": fit.rms_px_before, "rms_px_after": fit.rms_px,
+               "assumed": {p: assumed[p] for p in parameters},
+               "truth": {p: truth[p] for p in parameters},
+               "estimates": fit.estimates, "sigmas": fit.sigmas,
+               "correlation": fit.correlation.tolist(), "labels": list(fit.labels)}
+    for name in ("n_water", "port_distance"):
+        if name in fit.estimates and fit.sigmas.get(name):
+            error = fit.estimates[name] - truth[name]
+            summary.setdefault("error", {})[name] = error
+            summary.setdefault("error_in_sigma", {})[name] = error / fit.sigmas[name]
+    if not (fit.converged and fit.identifiable):
+        log(f"self-calibration of {', '.join(parameters)} gave no trusted estimate: "
+            f"{fit.reason or fit.message}; the unrefined rig is kept")
+        return summary, None
+    refined = {m: triangulate(fit.rig, uv_left, uv_right, m) for m in methods}
+    return summary, refined
+
+
 def nothing_matched_message(inputs: RunInputs, detections, window) -> str:
     near, far = window
     window_text = ("no depth window" if near is None
@@ -248,7 +286,8 @@ def _rigs_report(inputs: RunInputs) -> dict:
 
 
 def run_pipeline(inputs: RunInputs, methods, noise_px: float = 0.0, gate_mm: float = 0.5,
-                 depth_window=None, log=print, eccentricity: bool = False):
+                 depth_window=None, log=print, eccentricity: bool = False,
+                 self_calibrate: tuple = ()):
     """Run detection, matching, triangulation and scoring. Returns ``(report, arrays)``.
 
     Raises :class:`NothingMatched` when no pair is matched. ``report`` is the JSON-ready dict
@@ -273,6 +312,14 @@ def run_pipeline(inputs: RunInputs, methods, noise_px: float = 0.0, gate_mm: flo
     results = triangulate_stage(inputs, centers, matches, methods)
     timings["triangulate"] = time.perf_counter() - start
 
+    calibration, refined = None, None
+    if self_calibrate:
+        log(f"estimate {', '.join(self_calibrate)} from the matched targets …")
+        start = time.perf_counter()
+        calibration, refined = self_calibration_stage(inputs, centers, matches, self_calibrate,
+                                                      methods, log)
+        timings["self_calibration"] = time.perf_counter() - start
+
     corrected = None
     if eccentricity:
         log("correct the targets' eccentricity and triangulate again …")
@@ -285,6 +332,9 @@ def run_pipeline(inputs: RunInputs, methods, noise_px: float = 0.0, gate_mm: flo
     scored = score_stage(inputs, detections, matches, window, results, gate_mm)
     if corrected is not None:
         scored_corrected = score_stage(inputs, detections, matches, window, corrected, gate_mm)
+    if refined is not None:
+        calibration["methods"] = {m: s.to_json() for m, s in score_stage(
+            inputs, detections, matches, window, refined, gate_mm)["scores"].items()}
     timings["evaluate"] = time.perf_counter() - start
 
     report = {
@@ -298,6 +348,7 @@ def run_pipeline(inputs: RunInputs, methods, noise_px: float = 0.0, gate_mm: flo
         "methods": {m: s.to_json() for m, s in scored["scores"].items()},
         "noise_px": noise_px, "seed": inputs.seed,
         "rigs": _rigs_report(inputs),
+        "self_calibration": calibration,
         "eccentricity": None if corrected is None else {
             **eccentricity_summary,
             "methods": {m: s.to_json() for m, s in scored_corrected["scores"].items()}},

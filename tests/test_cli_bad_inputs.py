@@ -166,6 +166,7 @@ EVAL_CASES = [
     (None, RUN + ["--calib", "missing.yaml"], "missing.yaml"),
     ("garbage_calib", RUN + ["--calib", "ds/calib.yaml"], "calib.yaml"),
     (None, RUN + ["--calib", "ds/calib.yaml", "-D", "width=640"], "image size"),
+    (None, RUN + ["--self-calibrate", "n_glass"], "n_glass"),
     # bench and paper options
     (None, ["bench", "--points", "0"], "--points"),
     (None, ["bench", "--points", "abc"], "--points"),
