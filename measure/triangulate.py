@@ -6,6 +6,9 @@
   the rays from each optical centre through Q are traced through the port; midpoint of the common
   perpendicular of the two water rays. Exact only where the camera rays intersect.
 * ``regular`` — pinhole triangulation that ignores the port (exact in an all-air scene).
+* ``reprojection`` — the point whose images through the port (the exact forward model) are
+  nearest the two pixels (least squares from the optical-path point; ``gap`` is the optical-path
+  gap of the pixels). Statistically optimal for Gaussian pixel noise; slower.
 
 Frames and units: reference frame = left camera frame (OpenCV axes), millimetres, pixels in the
 OpenCV convention.
@@ -25,7 +28,7 @@ from .batching import map_row_chunks
 from .reasons import Reason
 from .refraction import trace_through_port
 
-METHODS = ("optical_path", "su", "regular")
+METHODS = ("optical_path", "su", "regular", "reprojection")
 
 
 @dataclass(frozen=True, eq=False)
@@ -108,8 +111,8 @@ def _finish(perp, reason, method) -> Triangulation:
 def triangulate_rays(rig: StereoRig, rays_left: np.ndarray, rays_right: np.ndarray,
                      method: str = "optical_path") -> Triangulation:
     """Triangulate from unit camera rays ``(N, 3)`` (reference frame) instead of pixels."""
-    if method not in METHODS:
-        raise ValueError(f"method must be one of {', '.join(METHODS)}, got {method!r}")
+    if method not in METHODS or method == "reprojection":
+        raise ValueError(f"method must be one of {', '.join(METHODS[:3])} for rays, got {method!r}")
     rays_left = np.asarray(rays_left, dtype=np.float64).reshape(-1, 3)
     rays_right = np.asarray(rays_right, dtype=np.float64).reshape(-1, 3)
     if rays_left.shape != rays_right.shape:
@@ -167,5 +170,13 @@ def triangulate(rig: StereoRig, uv_left, uv_right, method: str = "optical_path")
                 camera_reason[(reason == Reason.INVALID_INPUT) & (camera_reason != Reason.OK)]
         return result.points, result.gap, reason
 
+    if method == "reprojection":
+        from .selfcal import reprojection_points
+
+        start = triangulate(rig, uv_left, uv_right, "optical_path")
+        points, _, _ = reprojection_points(rig, uv_left, uv_right, start.points)
+        reason = start.reason.copy()
+        points[reason != Reason.OK] = np.nan
+        return Triangulation(points, start.gap, reason, method)
     points, gap, reason = map_row_chunks(solve, (uv_left, uv_right))
     return Triangulation(points, gap, reason, method)

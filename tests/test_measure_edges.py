@@ -11,7 +11,7 @@ from measure.matching import match_targets
 from measure.projection import project
 from synth.rig import paper_rig
 
-METHODS = ("optical_path", "su", "regular")
+METHODS = ("optical_path", "su", "regular", "reprojection")
 
 
 def _distorted_rig(dist=(-0.02, 0.004, 0.0003, -0.0002, 0.0)):

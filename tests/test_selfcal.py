@@ -71,3 +71,22 @@ def test_bad_requests():
         self_calibrate(rig, uv[0], uv[1], ("n_glass",))
     with pytest.raises(ValueError, match="cannot determine"):
         self_calibrate(rig, uv[0], uv[1])
+
+
+def test_reprojection_method_is_exact_without_noise_and_not_worse_with_it():
+    from measure import triangulate
+
+    rig = paper_rig()
+    truth = paper_plane(1000.0)
+    uv = _pixels(rig, rig.port, truth, 0.0, None)
+    result = triangulate(rig, uv[0], uv[1], "reprojection")
+    assert np.max(np.abs(result.points - truth)) < 1e-9 and result.method == "reprojection"
+    rng = np.random.default_rng(11)
+    sq = {"optical_path": [], "reprojection": []}
+    for _ in range(5):
+        uv = _pixels(rig, rig.port, truth, 0.1, rng)
+        for method in sq:
+            sq[method].append(np.sum((triangulate(rig, uv[0], uv[1], method).points - truth) ** 2, 1))
+    rms = {m: np.sqrt(np.mean(np.concatenate(v))) for m, v in sq.items()}
+    # the maximum-likelihood point is at least as good on average (measured gain ~0.7 %)
+    assert rms["reprojection"] < rms["optical_path"]
