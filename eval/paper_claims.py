@@ -42,6 +42,7 @@ class _Context:
         self.shifts = self.index["sides"][self.side]["mean_shift"]
         self.index_stats = self.index["sides"][self.side]["stats"]
         self.sem = self.index["noise_sem"]
+        self.in_situ = results.get("in_situ")
         self.side_text = f"[{self.side} side]"
 
 
@@ -307,9 +308,45 @@ def _index_claims():
     ]
 
 
+# --- section 4 (future work): the water index estimated in situ ---------------------------------
+def _in_situ_claims():
+    def unbiased(c):
+        s = c.in_situ
+        return (f"bias {s['bias']:+.2e} over {s['trials']} trials (standard error "
+                f"{s['bias_sem']:.1e}); true {s['n_true']:.7g}, assumed {s['n_assumed']:.7g}",
+                abs(s["bias"]) < SEM_FACTOR * s["bias_sem"],
+                {"bias": s["bias"], "bias_sem": s["bias_sem"], "spread": s["spread"]})
+
+    def honest_sigma(c):
+        s = c.in_situ
+        ratio = s["mean_sigma"] / s["spread"]
+        return (f"mean reported σ {s['mean_sigma']:.2e} against the observed spread "
+                f"{s['spread']:.2e} (ratio {ratio:.2f})", abs(ratio - 1.0) <= 0.2,
+                {"mean_sigma": s["mean_sigma"], "spread": s["spread"], "ratio": ratio})
+
+    def removes_dz(c):
+        s = c.in_situ
+        return (f"mean dZ {s['mean_dz_before_mm']:+.3f} mm assuming {s['n_assumed']:g} -> "
+                f"{s['mean_dz_after_mm']:+.3f} mm with the estimated index",
+                abs(s["mean_dz_after_mm"]) < 0.1 * abs(s["mean_dz_before_mm"]),
+                {"before_mm": s["mean_dz_before_mm"], "after_mm": s["mean_dz_after_mm"]})
+
+    return [
+        Claim("in_situ.unbiased", "4",
+              "future work: estimate the water index during the measurement itself",
+              f"|mean estimate − truth| < {SEM_FACTOR:g} standard errors", unbiased),
+        Claim("in_situ.sigma_honest", "4",
+              "(this project) the reported uncertainty of the in-situ index is honest",
+              "mean reported σ within 20 % of the observed spread", honest_sigma),
+        Claim("in_situ.removes_depth_bias", "4",
+              "(this project) the estimated index removes the depth bias of a wrong index",
+              "|mean dZ| after < 10 % of before", removes_dz),
+    ]
+
+
 #: Every claim, in the order of the paper.
 CLAIMS: tuple[Claim, ...] = tuple(_gap_claims() + _ideal_claims() + _noise_claims()
-                                  + _index_claims())
+                                  + _index_claims() + _in_situ_claims())
 
 
 def evaluate_claims(results: dict) -> list[dict]:

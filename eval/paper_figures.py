@@ -27,6 +27,7 @@ FIGURE_FILES = {
     "figure4": "figure4_gap.png", "figure5": "figure5_su_1m.png", "figure6": "figure6_su_2m.png",
     "figure7": "figure7_noise_maps.png", "figure8": "figure8_noise_hist.png",
     "figure9": "figure9_index_maps.png", "figure10": "figure10_index_hist.png",
+    "figure11": "figure11_index_profile.png",
 }
 
 
@@ -177,6 +178,30 @@ def figure_hist(errors_by_method: dict, title: str, reference: dict | None = Non
     return fig
 
 
+def figure_index_profile(in_situ: dict) -> Figure:
+    """Reprojection RMS against the assumed water index (every point at its optimum), with the
+    in-situ estimates, the truth and the assumed value marked."""
+    fig = _new_figure(7.5, 4.5)
+    ax = fig.subplots()
+    profile = in_situ["profile"]
+    ax.plot(profile["n"], profile["rms_px"], "o-", ms=3, label="reprojection RMS (trial 0)")
+    ax.axvline(in_situ["n_true"], color="k", lw=1.5, label=f"truth {in_situ['n_true']:.7g}")
+    estimate = in_situ["estimates"][0]
+    ax.axvline(estimate, color="C3", ls="--",
+               label=f"estimate {estimate:.7g} ± {in_situ['sigmas'][0]:.1e}")
+    ax.axvspan(in_situ["n_true"] + in_situ["bias"] - in_situ["spread"],
+               in_situ["n_true"] + in_situ["bias"] + in_situ["spread"], color="C3", alpha=0.12,
+               label=f"±1 spread of {in_situ['trials']} trials")
+    ax.set_xlabel("assumed n_water")
+    ax.set_ylabel("reprojection RMS (px)")
+    ax.set_title(f"Figure 11 — the water index from the measurement itself (σ = "
+                 f"{in_situ['sigma_px']:g} px, assumed {in_situ['n_assumed']:g})", fontsize=9)
+    ax.ticklabel_format(axis="x", useOffset=False)
+    ax.legend(fontsize=8)
+    ax.grid(alpha=0.3)
+    return fig
+
+
 def write_figures(results: dict, out) -> dict[str, Path]:
     """Draw figures 4–10 into ``out`` (PNG, atomic); return ``{figureN: path}``."""
     out = Path(out)
@@ -211,6 +236,7 @@ def write_figures(results: dict, out) -> dict[str, Path]:
             f"Figure 10 — pixel noise and {100 * index['relative']:g} % water-index deviation "
             f"({side} side: {dev}): histograms over 496 × {trials}, dashed = Figure 8's fit",
             reference={m: noise["errors"][m] for m in ("optical_path", "su")}),
+        "figure11": figure_index_profile(results["in_situ"]),
     }
     paths = {}
     for key, fig in figures.items():

@@ -54,6 +54,7 @@ def build_report(results: dict, figures: dict | None = None) -> dict:
             "chosen_side": index["chosen_side"], "side_choice_rule": index["rule"],
             "noise_only_sem": index["noise_sem"],
             "sides": index["sides"]},
+        "index_in_situ": results["in_situ"],
         "claims": results["claims"],
         "claims_holding": f"{sum(c['holds'] for c in results['claims'])}/{len(results['claims'])}",
         "figures": {k: Path(v).name for k, v in (figures or {}).items()},
@@ -177,6 +178,17 @@ def render_markdown(report: dict) -> str:
                                          for c in ("dX", "dY", "dZ")) + " mm).", "",
               "![Figure 9](figure9_index_maps.png)", "", "![Figure 10](figure10_index_hist.png)",
               ""]
+    s = report["index_in_situ"]
+    lines += ["## 4 Future work: the water index estimated in situ", "",
+              f"True n_water {s['n_true']:.7g}, assumed {s['n_assumed']:.7g}; {s['trials']} trials "
+              f"with σ = {s['sigma_px']:g} px pixel noise at Z = {s['z_mm']:g} mm, each refined by "
+              "`measure.selfcal.self_calibrate` (the targets' positions and n_water, no "
+              "calibration object).", "",
+              "| bias | standard error | spread | mean reported σ | mean dZ assumed → estimated |",
+              "|---|---|---|---|---|",
+              f"| {s['bias']:+.2e} | {s['bias_sem']:.1e} | {s['spread']:.2e} | {s['mean_sigma']:.2e} "
+              f"| {s['mean_dz_before_mm']:+.3f} → {s['mean_dz_after_mm']:+.3f} mm |", "",
+              "![Figure 11](figure11_index_profile.png)", ""]
     if report.get("wall_seconds") is not None:
         lines += [f"Run time: {report['wall_seconds']:.1f} s (experiments "
                   f"{report['compute_seconds']:.1f} s).", ""]

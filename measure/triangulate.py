@@ -27,6 +27,7 @@ from .port import FlatPort, index_matched_port
 from .batching import map_row_chunks
 from .reasons import Reason
 from .refraction import trace_through_port
+from .reprojection import reprojection_points
 
 METHODS = ("optical_path", "su", "regular", "reprojection")
 
@@ -171,8 +172,6 @@ def triangulate(rig: StereoRig, uv_left, uv_right, method: str = "optical_path")
         return result.points, result.gap, reason
 
     if method == "reprojection":
-        from .selfcal import reprojection_points
-
         start = triangulate(rig, uv_left, uv_right, "optical_path")
         points, _, _ = reprojection_points(rig, uv_left, uv_right, start.points)
         reason = start.reason.copy()

@@ -24,7 +24,7 @@ from synth.rig import paper_port
 REPO = Path(__file__).resolve().parents[1]
 FIGURES = ("figure4_gap.png", "figure5_su_1m.png", "figure6_su_2m.png",
            "figure7_noise_maps.png", "figure8_noise_hist.png", "figure9_index_maps.png",
-           "figure10_index_hist.png")
+           "figure10_index_hist.png", "figure11_index_profile.png")
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 TRIALS = 5
 
