@@ -147,20 +147,16 @@ def _measurement_rig(args, spec):
 def load_inputs(args, log):
     """The scene (rig and truth) and its two images, rendered now or read from ``--from``."""
     from synth.dataset import read_dataset
-    from synth.scene import load_scene, parse_defines
+    from synth.scene import apply_seed, load_scene, parse_defines
 
     from .run_pipeline import RunInputs, visible_targets
 
     defines = parse_defines(args.defines)
-    if args.seed is not None and "seed" in defines and not _same_value(defines["seed"], args.seed):
-        raise CLIError(f"--seed {args.seed} conflicts with -D seed={defines['seed']}")
-    if args.from_dir:
-        params = _dataset_params(args, defines)
-        spec = load_scene(args.scene, params)
+    if args.from_dir:  # --seed seeds the noise only: the images are the dataset's
+        apply_seed(dict(defines), args.seed)  # still refuse a conflicting -D seed
+        spec = load_scene(args.scene, _dataset_params(args, defines))
     else:
-        if args.seed is not None:
-            defines["seed"] = str(args.seed)
-        spec = load_scene(args.scene, defines)
+        spec = load_scene(args.scene, apply_seed(defines, args.seed))
     seed = spec.seed if args.seed is None else args.seed
     measured_rig = _measurement_rig(args, spec)
     in_left = visible_targets(spec.rig.left, spec.rig.port, spec.targets, spec.target_radius)[1]
@@ -179,9 +175,8 @@ def load_inputs(args, log):
                          seed, {"from": os.path.abspath(args.from_dir),
                                 "from_seed": data.manifest.get("seed")}, spec.target_normals,
                          spec.rig)
-    from synth.render import check_render_request, render_stereo
+    from synth.render import render_stereo
 
-    check_render_request(spec, args.spp)
     log(f"render both views ({spec.size[0]}x{spec.size[1]} px, {args.spp or spec.spp} spp, in "
         f"passes) …")
     start = time.perf_counter()

@@ -11,6 +11,28 @@ from scipy.sparse import lil_matrix
 from .projection import project
 
 
+def stereo_residuals(rig, port, points, observed) -> np.ndarray:
+    """Reprojection residuals ``(4N,)`` px of ``points`` ``(N, 3)`` through ``port`` against
+    ``observed`` = rows ``(u_left, v_left, u_right, v_right)`` flattened; a point with no image
+    gets a large residual (1e3 px) instead of NaN, so the optimizer steers away from it."""
+    predicted = np.concatenate([project(rig.left, port, points),
+                                project(rig.right, port, points)], axis=1).ravel()
+    r = predicted - observed
+    return np.where(np.isfinite(r), r, 1e3)
+
+
+def point_block_sparsity(n: int, n_params: int = 0):
+    """Jacobian structure of :func:`stereo_residuals` over ``n_params`` shared parameters (all
+    rows) followed by the points' coordinates (each point's 3 columns touch its 4 rows)."""
+    sparsity = lil_matrix((4 * n, n_params + 3 * n), dtype=np.int8)
+    if n_params:
+        sparsity[:, :n_params] = 1
+    rows = np.repeat(np.arange(4 * n), 3)
+    cols = n_params + 3 * np.repeat(np.arange(n), 12) + np.tile(np.arange(3), 4 * n)
+    sparsity[rows, cols] = 1
+    return sparsity
+
+
 def reprojection_points(rig, uv_left, uv_right, start):
     """Reprojection-optimal points ``(N, 3)`` mm: each point minimizes its 4 reprojection
     residuals through ``rig.port`` (``least_squares``, a block-diagonal sparse Jacobian),
@@ -30,17 +52,9 @@ def reprojection_points(rig, uv_left, uv_right, start):
     observed = np.concatenate([uv_left[keep], uv_right[keep]], axis=1).ravel()
 
     def residuals(x):
-        pts = x.reshape(n, 3)
-        predicted = np.concatenate([project(rig.left, rig.port, pts),
-                                    project(rig.right, rig.port, pts)], axis=1).ravel()
-        r = predicted - observed
-        return np.where(np.isfinite(r), r, 1e3)
+        return stereo_residuals(rig, rig.port, x.reshape(n, 3), observed)
 
-    sparsity = lil_matrix((4 * n, 3 * n), dtype=np.int8)
-    rows = np.arange(4 * n).reshape(n, 4)
-    for j in range(3):
-        for k in range(4):
-            sparsity[rows[:, k], 3 * np.arange(n) + j] = 1
+    sparsity = point_block_sparsity(n)
     fit = least_squares(residuals, start[keep].ravel(), jac_sparsity=sparsity, method="trf",
                         x_scale="jac", xtol=1e-12, ftol=1e-12, gtol=1e-12, max_nfev=100,
                         tr_options={"atol": 1e-14, "btol": 1e-14})
@@ -49,4 +63,4 @@ def reprojection_points(rig, uv_left, uv_right, start):
     return points, rms, bool(fit.success)
 
 
-__all__ = ["reprojection_points"]
+__all__ = ["point_block_sparsity", "reprojection_points", "stereo_residuals"]

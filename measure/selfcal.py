@@ -23,10 +23,9 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.optimize import least_squares
-from scipy.sparse import lil_matrix
 
 from .port import FlatPort
-from .projection import project
+from .reprojection import point_block_sparsity, reprojection_points, stereo_residuals
 from .triangulate import StereoRig, triangulate
 
 #: Port parameters the refinement can estimate, and how many numbers each one is.
@@ -136,19 +135,9 @@ def self_calibrate(rig: StereoRig, uv_left, uv_right, parameters=("n_water",),
 
     def residuals(x):
         port = _port_from(port0, names, x[:n_free], basis)
-        pts = x[n_free:].reshape(n, 3)
-        predicted = np.concatenate([project(rig.left, port, pts), project(rig.right, port, pts)],
-                                   axis=1).ravel()
-        r = predicted - observed
-        return np.where(np.isfinite(r), r, 1e3)  # a point that loses its path: a large residual
+        return stereo_residuals(rig, port, x[n_free:].reshape(n, 3), observed)
 
-    sparsity = lil_matrix((4 * n, n_free + 3 * n), dtype=np.int8)
-    sparsity[:, :n_free] = 1
-    rows = np.arange(4 * n).reshape(n, 4)
-    for j in range(3):
-        cols = n_free + 3 * np.arange(n) + j
-        for k in range(4):
-            sparsity[rows[:, k], cols] = 1
+    sparsity = point_block_sparsity(n, n_free)
     x0 = np.concatenate([p0, start.ravel()])
     rms_before = float(np.sqrt(np.mean(residuals(x0) ** 2)))
     # Tight LSMR tolerances: with its defaults the trust-region steps stay inexact and the fit
@@ -194,9 +183,6 @@ def self_calibrate(rig: StereoRig, uv_left, uv_right, parameters=("n_water",),
         k += PARAMETERS[name]
     return SelfCalibration(estimates, sigmas, correlation, rig=refined, identifiable=True,
                            reason="", **base)
-
-
-from .reprojection import reprojection_points  # noqa: E402,F401  (re-exported)
 
 
 __all__ = ["PARAMETERS", "SelfCalibration", "reprojection_points", "self_calibrate"]

@@ -149,24 +149,17 @@ def _cmd_scene(args) -> int:
 
 def _spec(args):
     """The scene with ``-D`` and ``--seed`` applied (``--seed S`` is ``-D seed=S``)."""
-    from .scene import load_scene, parse_defines
+    from .scene import apply_seed, load_scene, parse_defines
 
-    defines = parse_defines(args.defines)
-    if getattr(args, "seed", None) is not None:
-        if "seed" in defines and defines["seed"] != str(args.seed):
-            raise CLIError(f"--seed {args.seed} conflicts with -D seed={defines['seed']}")
-        defines["seed"] = str(args.seed)
-    return load_scene(args.scene, defines)
+    return load_scene(args.scene, apply_seed(parse_defines(args.defines), args.seed))
 
 
 def _cmd_render(args) -> int:
     from .fileio import OutputDir
-    from .render import (check_render_request, png16_scale, render_stereo, srgb_preview,
-                         to_png16, write_exr, write_png)
+    from .render import png16_scale, render_stereo, srgb_preview, to_png16, write_exr, write_png
 
     output = OutputDir(args.out, "synth render").claim()
     spec = _spec(args)
-    check_render_request(spec, args.spp)
     t0 = time.perf_counter()
     left, right, info = render_stereo(spec, spp=args.spp, variant=args.variant,
                                       progress=not args.quiet)
@@ -187,9 +180,7 @@ def _cmd_render(args) -> int:
 
 def _cmd_dataset(args) -> int:
     from .dataset import write_dataset
-    from .fileio import OutputDir
 
-    OutputDir(args.out, "synth dataset").check()
     manifest = write_dataset(_spec(args), args.out, spp=args.spp, variant=args.variant,
                              exr=args.exr, progress=not args.quiet)
     if manifest.get("skipped"):

@@ -39,8 +39,8 @@ from measure.projection import project
 
 from .fileio import OutputDir, read_marker
 from .provenance import package_versions
-from .render import (check_render_request, pass_seed, png16_scale, render_stereo, srgb_preview,
-                     to_png16, write_exr, write_png)
+from .render import (pass_seed, png16_scale, render_stereo, srgb_preview, to_png16, write_exr,
+                     write_png)
 from .scene import SceneError, SceneSpec, load_scene
 
 FORMAT_VERSION = 1
@@ -237,7 +237,6 @@ def write_dataset(scene, out_dir, spp: int | None = None, defines: dict | None =
             except (OSError, ValueError):
                 pass  # a damaged earlier output: render it again
     output.claim()
-    check_render_request(spec, spp)
 
     with output.staged(extra={"request_key": key}) as tmp:
         left, right, info = render_stereo(spec, spp=spp, variant=variant, progress=progress,

@@ -202,13 +202,6 @@ class OutputDir:
         shutil.rmtree(trash, ignore_errors=True)
 
 
-@contextmanager
-def staged_dir(out_dir, command: str, extra: dict | None = None):
-    """``OutputDir(out_dir, command).staged(extra)`` — shorthand."""
-    with OutputDir(out_dir, command).staged(extra) as tmp:
-        yield tmp
-
-
 def atomic_write_bytes(path, data: bytes, mode: int = 0o644) -> Path:
     """Write ``data`` to a temporary file beside ``path``, then rename it into place."""
     path = Path(path)
@@ -283,5 +276,5 @@ def check_file_output(path, option: str, may_replace=None) -> str:
 
 
 __all__ = ["MARKER_NAME", "OutputDir", "OutputError", "atomic_write_bytes", "atomic_write_json",
-           "atomic_write_text", "check_file_output", "jsonable", "read_marker", "remove_stale_staging",
-           "staged_dir"]
+           "atomic_write_text", "check_file_output", "jsonable", "read_marker",
+           "remove_stale_staging"]

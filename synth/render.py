@@ -262,12 +262,13 @@ def render_stereo(scene, spp: int | None = None, variant: str | None = None,
     names = ("left", "right")
     bar = tqdm(names, desc=f"render {chosen} {spp} spp", unit="view", disable=not progress,
                leave=False)
+    film_pixels = {name: int(np.prod(_render_size(c))) for name, c in zip(names, spec.cameras)}
     speeds = {}
     for i, (name, camera) in enumerate(zip(bar, spec.cameras)):
         t = time.perf_counter()
         images.append(render_view(mscene, mi, i, camera, spp, seed))
         seconds[name] = time.perf_counter() - t
-        speeds[name] = _render_size(camera)[0] * _render_size(camera)[1] * spp / seconds[name]
+        speeds[name] = film_pixels[name] * spp / seconds[name]
         bar.set_postfix_str(f"{name} {speeds[name] / 1e6:.1f} M samples/s")
     bar.close()
     try:  # samplers may round spp (multijitter: to a product of two near-equal integers)
@@ -277,8 +278,7 @@ def render_stereo(scene, spp: int | None = None, variant: str | None = None,
     w, h = spec.size
     samples = 2 * w * h * spp_rendered
     render_seconds = seconds["left"] + seconds["right"]
-    plans = {name: pass_plan(spp, _render_size(c)[0] * _render_size(c)[1])
-             for name, c in zip(names, spec.cameras)}
+    plans = {name: pass_plan(spp, film_pixels[name]) for name in names}
     info = {"variant": chosen, "spp": spp, "spp_rendered": spp_rendered, "seed": seed,
             "size": [w, h], "seconds": seconds, "passes": plans,
             "samples_per_second": samples / render_seconds if render_seconds > 0 else None,

@@ -321,6 +321,22 @@ def parse_defines(items) -> dict:
     return defines
 
 
+def apply_seed(defines: dict, seed: int | None) -> dict:
+    """``--seed S`` is ``-D seed=S``: put it into ``defines`` (returned); a ``-D seed`` with
+    another value is an error naming both."""
+    if seed is None:
+        return defines
+    if "seed" in defines:
+        try:
+            same = float(defines["seed"]) == float(seed)
+        except ValueError:
+            same = False
+        if not same:
+            raise SceneError(f"--seed {seed} conflicts with -D seed={defines['seed']}")
+    defines["seed"] = str(seed)
+    return defines
+
+
 def _floats(text: str, what: str) -> np.ndarray:
     try:
         values = np.array([float(v) for v in re.split(r"[,\s]+", str(text).strip()) if v],
