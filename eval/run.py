@@ -56,6 +56,10 @@ def add_parser(subparsers):
     parser.add_argument("--calib", metavar="FILE",
                         help="measure with this calib.yaml (as datasets write it) instead of the "
                              "scene's rig; --assume applies on top")
+    parser.add_argument("--compare-calib", action="append", default=[], metavar="FILE",
+                        help="error budget: also measure the same detections with this "
+                             "calib.yaml (repeatable); with --calib or --assume the exact "
+                             "calibration is always compared")
     parser.add_argument("--self-calibrate", metavar="NAMES", default="",
                         help="estimate these port parameters from the matched targets "
                              "(comma list of n_water, port_distance, port_normal), measure "
@@ -142,6 +146,44 @@ def _measurement_rig(args, spec):
                            f"px, but the scene renders {spec.size[0]}x{spec.size[1]} px")
         base = calib["rig"]
     return assumed_rig(spec.rig, spec.has_port, assumptions, base)
+
+
+def _budget_rigs(args, inputs) -> dict:
+    """``{label: rig}`` of the error budget: the exact calibration (when the measurement's rig
+    differs from the truth) and every ``--compare-calib`` file."""
+    from synth.dataset import read_calib
+
+    from .assumption import rig_difference
+
+    rigs = {}
+    if args.compare_calib or rig_difference(inputs.true_rig, inputs.rig):
+        rigs["exact calibration"] = inputs.true_rig
+    for path in args.compare_calib:
+        calib = read_calib(path)
+        if tuple(calib["size"]) != tuple(inputs.true_rig.left.size):
+            raise CLIError(f"--compare-calib {path}: image size {calib['size'][0]}x"
+                           f"{calib['size'][1]} px, but the scene renders "
+                           f"{inputs.true_rig.left.size[0]}x{inputs.true_rig.left.size[1]} px")
+        rigs[path] = calib["rig"]
+    return rigs
+
+
+def budget_table(report: dict) -> str:
+    """The error budget as fixed-width text: one row per calibration, the first method."""
+    budget = report.get("budget") or {}
+    method = next(iter(report["methods"]))
+    rows = [(label, b) for label, b in budget.items()]
+    rows.append((f"this run ({report['rigs'].get('source', 'as measured')})",
+                 {"matching": report["matching"], "methods": report["methods"]}))
+    lines = [f"error budget ({method}): {'calibration':<44}{'pairs':>7}{'wrong':>7}"
+             f"{'RMS dP':>10}{'mean dZ':>10}{'max dP':>10}"]
+    for label, b in rows:
+        st = b["methods"].get(method, {})
+        lines.append(f"{'':<{len('error budget (' + method + '): ')}}{label[:43]:<44}"
+                     f"{b['matching']['pairs']:>7}{b['matching']['wrong']:>7}"
+                     f"{_fmt(st.get('rms_dp_mm')):>10}{_fmt(st.get('mean_dz_mm')):>10}"
+                     f"{_fmt(st.get('max_dp_mm')):>10}")
+    return "\n".join(lines)
 
 
 def load_inputs(args, log):
@@ -268,6 +310,9 @@ def report_markdown(report: dict) -> str:
               "against the targets visible in both views); F@τ = harmonic mean of precision and "
               "recall at τ; aligned = after the best rigid transform with known correspondences; "
               "flatness = RMS distance to the RANSAC plane.", "",
+              *(["## Error budget", "", "The same detections measured with each calibration "
+                 "(matching, triangulation and scoring repeated):", "", "```",
+                 budget_table(report), "```", ""] if report.get("budget") else []),
               "## Files", "",
               "- `views.png`, `error_maps.png`, `histograms.png`",
               *[f"- `{p['file']}`: colour = dP on `{p['colormap']}` from {p['vmin_mm']} mm to "
@@ -316,7 +361,10 @@ def main(args) -> int:
 
     report, arrays = run_pipeline(inputs, methods, args.noise_px, args.gate_mm, depth_window, log,
                                   eccentricity=args.eccentricity,
-                                  self_calibrate=self_calibration)
+                                  self_calibrate=self_calibration,
+                                  budget_rigs=_budget_rigs(args, inputs))
+    report["rigs"]["source"] = (f"--calib {args.calib}" if args.calib else "the scene's rig") + (
+        " with --assume" if args.assume else "")
     log("write the report, figures and point clouds …")
     t = time.perf_counter()
     with output.staged() as tmp:
@@ -339,6 +387,8 @@ def main(args) -> int:
           file=summary_stream)
     print(summary_table(report), file=summary_stream)
     print(f"wrote {out}", file=summary_stream)
+    if report.get("budget"):
+        print(budget_table(report), file=summary_stream)
     calibration = report.get("self_calibration")
     if calibration:
         if calibration.get("methods"):

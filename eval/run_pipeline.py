@@ -263,6 +263,29 @@ def self_calibration_stage(inputs: RunInputs, centers, matches, parameters, meth
     return summary, refined
 
 
+def budget_stage(inputs: RunInputs, detections, centers, rigs: dict, methods, gate_mm: float,
+                 depth_window):
+    """The error budget: the same detections matched, triangulated and scored with each rig of
+    ``rigs`` ``{label: StereoRig}`` (e.g. the exact calibration, the in-air calibration with the
+    design port). Returns ``{label: {"matching": …, "methods": {method: stats}}}``."""
+    from dataclasses import replace
+
+    budget = {}
+    for label, rig in rigs.items():
+        variant = replace(inputs, rig=rig, truth_rig=inputs.true_rig)
+        matches, window = match_stage(variant, centers, gate_mm, depth_window)
+        if len(matches.left) == 0:
+            budget[label] = {"matching": {"pairs": 0, "correct": 0, "wrong": 0}, "methods": {}}
+            continue
+        results = triangulate_stage(variant, centers, matches, methods)
+        scored = score_stage(variant, detections, matches, window, results, gate_mm)
+        m = scored["matching"]
+        budget[label] = {"matching": {k: m[k] for k in ("pairs", "correct", "wrong",
+                                                         "visible_in_both")},
+                         "methods": {k: v.to_json() for k, v in scored["scores"].items()}}
+    return budget
+
+
 def nothing_matched_message(inputs: RunInputs, detections, window) -> str:
     near, far = window
     window_text = ("no depth window" if near is None
@@ -287,9 +310,10 @@ def _rigs_report(inputs: RunInputs) -> dict:
 
 def run_pipeline(inputs: RunInputs, methods, noise_px: float = 0.0, gate_mm: float = 0.5,
                  depth_window=None, log=print, eccentricity: bool = False,
-                 self_calibrate: tuple = ()):
+                 self_calibrate: tuple = (), budget_rigs: dict | None = None):
     """Run detection, matching, triangulation and scoring. Returns ``(report, arrays)``.
 
+    ``budget_rigs`` ``{label: rig}``: also measure with these rigs (:func:`budget_stage`).
     Raises :class:`NothingMatched` when no pair is matched. ``report`` is the JSON-ready dict
     (without versions and total timing); ``arrays`` holds what the figures and PLY files need.
     """
@@ -327,6 +351,14 @@ def run_pipeline(inputs: RunInputs, methods, noise_px: float = 0.0, gate_mm: flo
         corrected, eccentricity_summary = eccentricity_stage(inputs, centers, matches, methods)
         timings["eccentricity"] = time.perf_counter() - start
 
+    budget = None
+    if budget_rigs:
+        log(f"error budget: measure again with {', '.join(budget_rigs)} …")
+        start = time.perf_counter()
+        budget = budget_stage(inputs, detections, centers, budget_rigs, methods, gate_mm,
+                              depth_window)
+        timings["budget"] = time.perf_counter() - start
+
     log("score against the ground truth (Open3D) …")
     start = time.perf_counter()
     scored = score_stage(inputs, detections, matches, window, results, gate_mm)
@@ -349,6 +381,7 @@ def run_pipeline(inputs: RunInputs, methods, noise_px: float = 0.0, gate_mm: flo
         "noise_px": noise_px, "seed": inputs.seed,
         "rigs": _rigs_report(inputs),
         "self_calibration": calibration,
+        "budget": budget,
         "eccentricity": None if corrected is None else {
             **eccentricity_summary,
             "methods": {m: s.to_json() for m, s in scored_corrected["scores"].items()}},

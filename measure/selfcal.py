@@ -62,7 +62,9 @@ class SelfCalibration:
     message: str
 
 
-def _tilt_basis(normal):
+def tilt_basis(normal):
+    """Two unit vectors perpendicular to ``normal`` and to each other: the axes of the two tilt
+    parameters of a port normal."""
     helper = np.array([1.0, 0.0, 0.0]) if abs(normal[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
     a = np.cross(normal, helper)
     a /= np.linalg.norm(a)
@@ -126,7 +128,7 @@ def self_calibrate(rig: StereoRig, uv_left, uv_right, parameters=("n_water",),
     if 4 * n <= 3 * n + n_free or n < 2:
         raise ValueError(f"{n} usable matched targets cannot determine {n_free} port "
                          f"parameter(s) and their own positions")
-    port0, basis = rig.port, _tilt_basis(rig.port.normal)
+    port0, basis = rig.port, tilt_basis(rig.port.normal)
     p0 = []
     for name in names:
         p0 += {"n_water": [port0.n_water], "port_distance": [port0.distance],

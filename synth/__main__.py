@@ -5,6 +5,8 @@ Subcommands::
     python -m synth scene   --layout paper --z 1000 --out scenes/paper_plane.xml [options]
     python -m synth render  SCENE --out DIR [--spp N] [--variant V] [--exr] [-D name=value ...]
     python -m synth dataset SCENE --out DIR [--spp N] [--variant V] [--exr] [-D name=value ...]
+    python -m synth boards  SCENE --out DIR [--poses 15] [--board chessboard|charuco]
+                            [--squares 11x8] [--square-mm 40] [--seed S] [--air]
     python -m synth check   DIR [--rms PX] [--max PX] [--json]
 
 Bad input (missing or malformed scene, wrong structure, unknown ``-D``, bad option, an ``--out``
@@ -63,6 +65,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--n-glass", type=positive_float, help="glass index (default 1.54)")
     p.add_argument("--port-distance", type=positive_float, help="D, mm (default 100)")
     p.add_argument("--glass-thickness", type=positive_float, help="d, mm (default 5)")
+    p.add_argument("--port-tilt", type=any_float, nargs=2, metavar=("ABOUT_X", "ABOUT_Y"),
+                   default=(0.0, 0.0), help="tilt of the port normal from the left optical axis, "
+                                            "degrees about x and about y (default 0 0)")
     p.add_argument("--size", type=positive_int, nargs=2, metavar=("W", "H"),
                    help="image size, px (default 2448 2048); the focal length scales with W")
     p.add_argument("--focal", type=positive_float, help="focal length, px (default 1100·W/2448)")
@@ -76,6 +81,29 @@ def build_parser() -> argparse.ArgumentParser:
     _add_render_options(p)
     p = sub.add_parser("dataset", help="render and write a benchmark dataset, atomically")
     _add_render_options(p)
+
+    p = sub.add_parser("boards", help="render stereo pairs of a calibration board at random poses")
+    p.add_argument("scene", help="scene file whose cameras and port see the board")
+    p.add_argument("--out", required=True, help="output directory")
+    p.add_argument("--poses", type=positive_int, default=None, help="number of poses (default 15)")
+    p.add_argument("--board", choices=("chessboard", "charuco"), default="chessboard",
+                   help="board kind (default chessboard)")
+    p.add_argument("--squares", default="11x8", help="squares COLSxROWS (default 11x8)")
+    p.add_argument("--square-mm", type=positive_float, default=40.0,
+                   help="square side, mm (default 40)")
+    p.add_argument("--distance", type=positive_float, nargs=2, metavar=("NEAR", "FAR"),
+                   default=None, help="board centre depth range along the port normal, mm "
+                                      "(default 700 1400)")
+    p.add_argument("--max-tilt", type=non_negative_float, default=None,
+                   help="largest tilt of the board, degrees (default 45)")
+    p.add_argument("--spp", type=positive_int, default=None, help="samples per pixel (default 16)")
+    p.add_argument("--seed", type=non_negative_int, default=0,
+                   help="seed of the poses and the renderer (default 0)")
+    p.add_argument("--air", action="store_true", help="the same cameras with no port (in air)")
+    p.add_argument("--variant", help="Mitsuba variant (default: automatic)")
+    p.add_argument("-D", dest="defines", action="append", default=[], metavar="NAME=VALUE",
+                   help="override a <default> of the scene (repeatable)")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
 
     p = sub.add_parser("check", help="detect targets in a dataset and compare with pixels.csv")
     p.add_argument("dir", help="dataset directory")
@@ -103,6 +131,9 @@ def _is_our_scene(path: str) -> bool:
 
 
 def _cmd_scene(args) -> int:
+    import numpy as np
+    from scipy.spatial.transform import Rotation
+
     from measure import FlatPort
 
     from . import layouts, rig as rigs
@@ -125,7 +156,12 @@ def _cmd_scene(args) -> int:
             n[1] = args.n_glass
         if args.n_water is not None:
             n[2] = args.n_water
-        port = FlatPort((0.0, 0.0, 1.0),
+        tilt = np.radians(args.port_tilt)
+        if np.any(np.abs(tilt) >= np.radians(30)):
+            raise CLIError(f"--port-tilt must stay below 30 degrees, got {args.port_tilt}")
+        normal = Rotation.from_rotvec([tilt[0], 0, 0]).apply(
+            Rotation.from_rotvec([0, tilt[1], 0]).apply([0.0, 0.0, 1.0]))
+        port = FlatPort(normal,
                         args.port_distance if args.port_distance is not None
                         else rigs.PAPER_PORT_DISTANCE_MM,
                         (args.glass_thickness if args.glass_thickness is not None
@@ -139,7 +175,10 @@ def _cmd_scene(args) -> int:
     radius = args.target_radius if args.target_radius else DEFAULT_TARGET_RADIUS_MM
     comment = (f"{SCENE_COMMENT_PREFIX}: layout {args.layout}"
                + (f", z {args.z:g} mm" if args.layout != "random" else "")
-               + f", port {args.port}, target radius {radius:g} mm")
+               + f", port {args.port}"
+               + (f" tilted {args.port_tilt[0]:g} deg about x, {args.port_tilt[1]:g} deg about y"
+                  if port is not None and any(args.port_tilt) else "")
+               + f", target radius {radius:g} mm")
     write_scene(args.out, (left, right), port, targets, radius,
                 spp=args.spp if args.spp else DEFAULT_SPP, seed=args.seed, comment=comment)
     print(f"wrote {args.out}: {targets.shape[0]} targets of radius {radius:g} mm, "
@@ -193,6 +232,35 @@ def _cmd_dataset(args) -> int:
     return 0
 
 
+def _cmd_boards(args) -> int:
+    from measure.board import Board
+    from . import boards as b
+    from .scene import load_scene, parse_defines
+
+    try:
+        cols, rows = (int(v) for v in args.squares.lower().split("x"))
+    except ValueError:
+        raise CLIError(f"--squares must be COLSxROWS (e.g. 11x8), got {args.squares!r}") from None
+    board = Board(args.board, (cols, rows), args.square_mm)
+    spec = load_scene(args.scene, parse_defines(args.defines))
+    manifest = b.write_boards(
+        spec, args.out, board, n_poses=args.poses or b.DEFAULT_POSES,
+        spp=args.spp or b.DEFAULT_SPP, seed=args.seed, air=args.air,
+        distance_range=tuple(args.distance) if args.distance else b.DEFAULT_DISTANCE_RANGE_MM,
+        max_tilt_deg=b.DEFAULT_MAX_TILT_DEG if args.max_tilt is None else args.max_tilt,
+        variant=args.variant, progress=not args.quiet)
+    if manifest.get("skipped"):
+        print(f"{args.out}: up to date (same scene, board and options); nothing to do")
+        return 0
+    w, h = manifest["image_size"]
+    print(f"wrote {args.out}: {manifest['poses']} stereo pairs of a {board.kind} "
+          f"{cols}x{rows} ({board.square_mm:g} mm) {'in air' if args.air else 'behind the port'}, "
+          f"{w}x{h} px, {manifest['spp']} spp with {manifest['variant']}: render "
+          f"{manifest['seconds']['render']:.1f} s ({manifest['samples_per_second'] / 1e6:.2f} M "
+          f"samples/s), total {manifest['seconds']['total']:.1f} s")
+    return 0
+
+
 def _cmd_check(args) -> int:
     from .crosscheck import CHECK_MAX_PX, CHECK_RMS_PX, check_dataset
 
@@ -220,7 +288,7 @@ def _cmd_check(args) -> int:
 
 
 COMMANDS = {"scene": _cmd_scene, "render": _cmd_render, "dataset": _cmd_dataset,
-            "check": _cmd_check}
+            "boards": _cmd_boards, "check": _cmd_check}
 
 
 def main(argv=None) -> int:

@@ -65,8 +65,26 @@ def _dist5(camera: Camera) -> np.ndarray:
     return np.zeros(5) if camera.dist is None else camera.dist.copy()
 
 
-def write_calib(path, rig: StereoRig, has_port: bool = True) -> None:
-    """Write ``calib.yaml`` (see module docs) with ``cv2.FileStorage``."""
+def _write_node(fs, name: str, value) -> None:
+    if isinstance(value, dict):
+        fs.startWriteStruct(name, cv2.FileNode_MAP)
+        for key, item in value.items():
+            _write_node(fs, str(key), item)
+        fs.endWriteStruct()
+    elif isinstance(value, (list, tuple)):
+        fs.startWriteStruct(name, cv2.FileNode_SEQ)
+        for item in value:
+            _write_node(fs, "", item)
+        fs.endWriteStruct()
+    elif isinstance(value, str):
+        fs.write(name, value)
+    else:
+        fs.write(name, float(value))
+
+
+def write_calib(path, rig: StereoRig, has_port: bool = True, extra: dict | None = None) -> None:
+    """Write ``calib.yaml`` (see module docs) with ``cv2.FileStorage``; ``extra`` adds maps
+    (e.g. ``uncertainty``) of numbers, strings, lists and maps after the standard nodes."""
     left, right = rig.left, rig.right
     R, T = stereo_extrinsics(left, right)
     fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_WRITE)
@@ -91,6 +109,8 @@ def write_calib(path, rig: StereoRig, has_port: bool = True) -> None:
                 fs.write("", float(v))
             fs.endWriteStruct()
         fs.endWriteStruct()
+        for name, value in (extra or {}).items():
+            _write_node(fs, name, value)
     finally:
         fs.release()
 

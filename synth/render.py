@@ -162,19 +162,29 @@ def _ideal_camera_for(camera: Camera, oversample: int, margin: float):
 
 def _ideal_sensor(mi, template, camera: Camera, K, size):
     """A Mitsuba pinhole sensor at ``camera``'s pose with intrinsics ``K`` and film ``size``."""
+    return mi.load_dict(sensor_dict(mi, camera, template.sampler(), K, size))
+
+
+def sensor_dict(mi, camera: Camera, sampler, K=None, size=None) -> dict:
+    """The ``mi.load_dict`` description of a pinhole sensor at ``camera``'s pose with
+    intrinsics ``K`` and film ``size`` (default: the camera's own; its lens distortion is not
+    part of it, see :func:`render_view`), a box-filtered luminance float32 film and ``sampler``
+    (a Mitsuba sampler object or its dict)."""
+    K = camera.K if K is None else K
+    size = camera.size if size is None else size
     p = sensor_parameters(K, size, camera.R, camera.t)
-    return mi.load_dict({
+    return {
         "type": "perspective",
         "fov": p["fov"], "fov_axis": "x",
         "principal_point_offset_x": p["principal_point_offset_x"],
         "principal_point_offset_y": p["principal_point_offset_y"],
         "near_clip": 1.0, "far_clip": 1e6,
         "to_world": mi.ScalarTransform4f(p["to_world"].tolist()),
-        "sampler": template.sampler(),
+        "sampler": sampler,
         "film": {"type": "hdrfilm", "width": int(size[0]), "height": int(size[1]),
                  "pixel_format": "luminance", "component_format": "float32",
                  "rfilter": {"type": "box"}},
-    })
+    }
 
 
 def _develop(mi, image) -> np.ndarray:

@@ -237,18 +237,14 @@ def scene_xml(cameras, port: FlatPort | None, targets, target_radius: float, *,
     parts.append(_sensor_xml("right", right, True))
 
     if port is not None:
-        N = port.normal
-        up = _perpendicular(N)
-        n = list(port.indices)
-        for k, offset in enumerate(port.offsets):
-            ext = _num(n[k])
-            inner = "$n_water" if k == port.n_interfaces - 1 else _num(n[k + 1])
-            centre = N * offset
+        for k, centre, target, up, ext_ior, int_ior in interface_placements(port):
+            ext = _num(ext_ior)
+            inner = "$n_water" if k == port.n_interfaces - 1 else _num(int_ior)
             parts.append(f"""
     <shape type="rectangle" id="interface_{k}">
         <transform name="to_world">
             <scale x="{_num(interface_half_size)}" y="{_num(interface_half_size)}"/>
-            <lookat origin="{_vec(centre)}" target="{_vec(centre - N)}" up="{_vec(up)}"/>
+            <lookat origin="{_vec(centre)}" target="{_vec(target)}" up="{_vec(up)}"/>
         </transform>
         <bsdf type="dielectric">
             <float name="ext_ior" value="{ext}"/>
@@ -273,6 +269,18 @@ def scene_xml(cameras, port: FlatPort | None, targets, target_radius: float, *,
     </shape>""")
     parts.append("</scene>\n")
     return "\n".join(parts)
+
+
+def interface_placements(port: FlatPort):
+    """Per interface of ``port``, camera side first: ``(k, centre, lookat target, up, ext_ior,
+    int_ior)`` of the ``rectangle`` that models it — centred on the reference normal, its local
+    +z turned towards the cameras so that ``ext_ior`` is the camera-side index."""
+    N = port.normal
+    up = _perpendicular(N)
+    n = list(port.indices)
+    for k, offset in enumerate(port.offsets):
+        centre = N * offset
+        yield k, centre, centre - N, up, n[k], n[k + 1]
 
 
 def _perpendicular(n) -> np.ndarray:

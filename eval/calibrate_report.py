@@ -1,0 +1,310 @@
+"""What ``python -m eval calibrate`` writes: estimates beside the truth, the files, the figures.
+
+Errors are estimate − truth; "in σ" divides by the estimate's standard deviation. Units mm,
+px, degrees where named ``_deg``; the reference frame is the left camera's.
+"""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+
+
+def _stats(errors: np.ndarray) -> dict:
+    errors = np.asarray(errors, float).reshape(-1, 2)
+    if errors.size == 0:
+        return {"n": 0, "rms_px": None, "max_px": None}
+    length = np.linalg.norm(errors, axis=1)
+    return {"n": int(length.size), "rms_px": float(np.sqrt(np.mean(length ** 2))),
+            "max_px": float(length.max()), "mean_px": errors.mean(axis=0).tolist()}
+
+
+def detection_errors(boards, detections, view: int) -> np.ndarray:
+    """Rows ``(pose, id, u, v, du, dv)``: detected corner and its offset from the forward
+    model's pixel of the true corner (``corners.csv``)."""
+    rows = []
+    for k in range(detections.n_poses):
+        ids, uv = detections.ids[k][view], detections.pixels[k][view]
+        if len(ids) == 0:
+            continue
+        truth = boards.corners[boards.corners[:, 0] == k]
+        lookup = {int(i): row for i, row in zip(truth[:, 1], truth)}
+        expected = np.array([lookup[int(i)][5 + 2 * view:7 + 2 * view] for i in ids])
+        rows.append(np.column_stack([np.full(len(ids), k), ids, uv, uv - expected]))
+    return np.concatenate(rows) if rows else np.empty((0, 6))
+
+
+def detection_accuracy(boards, detections) -> dict:
+    """Corner detection against the forward model's pixels, per view and both."""
+    per = {name: detection_errors(boards, detections, v) for v, name in enumerate(("left", "right"))}
+    out = {name: _stats(rows[:, 4:6]) for name, rows in per.items()}
+    out["both"] = _stats(np.concatenate([rows[:, 4:6] for rows in per.values()]))
+    out["corners_per_view"] = boards.board.n_corners
+    return out
+
+
+def _with_sigma(estimate, truth, sigma) -> dict:
+    error = float(estimate) - float(truth)
+    return {"estimate": float(estimate), "truth": float(truth), "error": error,
+            "sigma": None if sigma is None else float(sigma),
+            "error_in_sigma": (error / sigma) if sigma else None}
+
+
+def _rotation_deg(Ra, Rb) -> float:
+    return float(np.degrees(np.arccos(np.clip((np.trace(Ra.T @ Rb) - 1) / 2, -1, 1))))
+
+
+def air_summary(air, truth) -> dict:
+    """In-air calibration against the true rig: focal lengths, principal points, baseline."""
+    out = {"rms_px": air.rms_px, "stereo_rms_px": air.stereo_rms_px, "poses_used": air.poses_used,
+           "cameras": {}}
+    for name in ("left", "right"):
+        est, tru, sig = getattr(air.rig, name), getattr(truth, name), air.sigmas[name]
+        cam = {key: _with_sigma(est.K[i, j], tru.K[i, j], sig[key])
+               for key, (i, j) in (("fx", (0, 0)), ("fy", (1, 1)), ("cx", (0, 2)), ("cy", (1, 2)))}
+        for key in ("fx", "fy"):
+            cam[key]["error_percent"] = 100 * cam[key]["error"] / cam[key]["truth"]
+        cam["dist"] = None if est.dist is None else est.dist.tolist()
+        out["cameras"][name] = cam
+    baseline = np.linalg.norm(air.rig.right.t - air.rig.left.t)
+    true_baseline = np.linalg.norm(truth.right.t - truth.left.t)
+    out["baseline_mm"] = _with_sigma(baseline, true_baseline, None)
+    out["right_rotation_error_deg"] = _rotation_deg(air.rig.right.R, truth.right.R)
+    out["right_position_error_mm"] = float(np.linalg.norm(air.rig.right.t - truth.right.t))
+    return out
+
+
+def housing_summary(housing, truth, start_rig) -> dict:
+    """Every estimated housing parameter beside the truth, with its error in σ."""
+    out = {"free": list(dict.fromkeys(label.split("[")[0] for label in housing.labels)),
+           "labels": list(housing.labels), "correlation": housing.correlation.tolist(),
+           "rms_px": housing.rms_px, "rms_px_start": housing.rms_px_start,
+           "rms_px_per_pose_view": {f"{k}:{'left' if v == 0 else 'right'}": r
+                                    for (k, v), r in sorted(housing.rms_px_per.items())},
+           "observations": housing.n_observations, "poses_used": list(housing.pose_ids),
+           "evaluations": housing.nfev, "parameters": {}}
+    est, tru = housing.rig.port, truth.port
+    params = out["parameters"]
+    for name in housing.estimates:
+        sigma = housing.sigmas[name]
+        if name == "distance":
+            params[name] = _with_sigma(est.distance, tru.distance, sigma)
+        elif name == "thickness":
+            params[name] = _with_sigma(est.thicknesses[0], tru.thicknesses[0], sigma)
+        elif name == "n_water":
+            params[name] = _with_sigma(est.n_water, tru.n_water, sigma)
+        elif name == "normal":
+            a, b = (np.asarray(v) for v in housing.normal_axes)
+            tilt_error = [float((est.normal - tru.normal) @ a), float((est.normal - tru.normal) @ b)]
+            angle = float(np.degrees(np.arccos(np.clip(est.normal @ tru.normal, -1, 1))))
+            params[name] = {"estimate": est.normal.tolist(), "truth": tru.normal.tolist(),
+                            "error_deg": angle, "sigma_deg": np.degrees(sigma).tolist(),
+                            "tilt_error_rad": tilt_error,
+                            "error_in_sigma": [e / s for e, s in zip(tilt_error, sigma)]}
+        elif name == "extrinsics":
+            R, t = housing.rig.right.R, housing.rig.right.t
+            params[name] = {"rotation_error_deg": _rotation_deg(R, truth.right.R),
+                            "position_error_mm": (t - truth.right.t).tolist(),
+                            "sigma_rotation_deg": np.degrees(sigma[:3]).tolist(),
+                            "sigma_position_mm": list(sigma[3:]),
+                            "error_in_sigma": [float(e / s) for e, s in
+                                               zip(t - truth.right.t, sigma[3:])]}
+    out["start"] = {"distance": start_rig.port.distance, "normal": start_rig.port.normal.tolist(),
+                    "thickness": list(start_rig.port.thicknesses),
+                    "indices": list(start_rig.port.indices)}
+    zs = [abs(z) for p in params.values()
+          for z in np.atleast_1d(p.get("error_in_sigma") if p.get("error_in_sigma") is not None else [])]
+    out["max_abs_error_in_sigma"] = max(zs) if zs else None
+    return out
+
+
+def write_calibration(path, rig, has_port: bool, housing, report, single: bool = False) -> None:
+    """``calib.yaml`` (with an ``uncertainty`` map for the housing) and ``flatport.txt`` into
+    directory ``path``; with ``single`` just the calib file at ``path``."""
+    from measure.flatport_format import flatport_text
+    from synth.dataset import write_calib
+    from synth.fileio import atomic_write_text
+
+    extra = None
+    if housing is not None:
+        extra = {"uncertainty": {"labels": list(housing.labels),
+                                 "sigmas": [float(s) for s in np.concatenate(
+                                     [np.atleast_1d(housing.sigmas[n]) for n in housing.sigmas])],
+                                 "units": "mm, rad (normal tilts, rotation vector), index units"},
+                 "calibration": {"rms_px": housing.rms_px, "poses": len(housing.poses)}}
+    target = path if single else os.path.join(path, "calib.yaml")
+    write_calib(target, rig, has_port, extra)
+    if not single and has_port:
+        atomic_write_text(os.path.join(path, "flatport.txt"),
+                          flatport_text(rig.port, {"left": rig.left, "right": rig.right}))
+
+
+def figures(directory, boards, detections, housing, rig) -> None:
+    """``detections.png`` (detection errors against the forward model, per view),
+    ``residuals.png`` (housing: bundle-adjustment residuals per pose and view) and
+    ``poses.png`` (the boards in 3D, true and — underwater — estimated)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    w, h = boards.calib["size"]
+    fig, axes = plt.subplots(1, 2, figsize=(12, 5), constrained_layout=True)
+    for view, ax in enumerate(axes):
+        rows = detection_errors(boards, detections, view)
+        _quiver(ax, rows[:, 0], rows[:, 2:4], rows[:, 4:6], w, h,
+                f"{'left' if view == 0 else 'right'}: detected − forward model")
+    fig.savefig(os.path.join(directory, "detections.png"), dpi=110)
+    plt.close(fig)
+    if housing is not None:
+        fig, axes = plt.subplots(1, 2, figsize=(12, 5), constrained_layout=True)
+        for view, ax in enumerate(axes):
+            res = housing.residuals[view]
+            where = []
+            for k, i in res[:, :2].astype(int):
+                ids = detections.ids[k][view]
+                where.append(detections.pixels[k][view][int(np.flatnonzero(ids == i)[0])])
+            _quiver(ax, res[:, 0], np.asarray(where).reshape(-1, 2), -res[:, 2:4], w, h,
+                    f"{'left' if view == 0 else 'right'}: reprojection residual after the "
+                    f"adjustment")
+        fig.savefig(os.path.join(directory, "residuals.png"), dpi=110)
+        plt.close(fig)
+    fig = plt.figure(figsize=(7, 6), constrained_layout=True)
+    ax = fig.add_subplot(projection="3d")
+    outline = boards.board.outline()
+    for k, pose in enumerate(boards.poses):
+        p = pose.apply(np.vstack([outline, outline[:1]]))
+        ax.plot(p[:, 0], p[:, 2], -p[:, 1], color="C0", lw=1, label="truth" if k == 0 else None)
+    if housing is not None:
+        for j, (R, t) in enumerate(housing.poses):
+            p = np.vstack([outline, outline[:1]]) @ R.T + t
+            ax.plot(p[:, 0], p[:, 2], -p[:, 1], "--", color="C3", lw=1,
+                    label="estimated" if j == 0 else None)
+    for cam, name in zip(rig.cameras, ("left", "right")):
+        ax.scatter([cam.t[0]], [cam.t[2]], [-cam.t[1]], color="k", s=20)
+        ax.text(cam.t[0], cam.t[2], -cam.t[1], f" {name}")
+    ax.set_xlabel("X (mm)")
+    ax.set_ylabel("Z (mm)")
+    ax.set_zlabel("−Y (mm)")
+    ax.set_title(f"{len(boards.poses)} board poses ({'air' if boards.air else 'behind the port'})")
+    ax.legend(loc="upper left")
+    fig.savefig(os.path.join(directory, "poses.png"), dpi=110)
+    plt.close(fig)
+
+
+def _quiver(ax, pose, where, vectors, w, h, title) -> None:
+    length = np.linalg.norm(vectors, axis=1) if len(vectors) else np.zeros(0)
+    scale_px = float(np.percentile(length, 95)) if length.size else 1.0
+    gain = 0.04 * w / scale_px if scale_px > 0 else 1.0
+    if len(vectors):
+        ax.quiver(where[:, 0], where[:, 1], vectors[:, 0] * gain, vectors[:, 1] * gain, pose,
+                  angles="xy", scale_units="xy", scale=1, cmap="tab20", width=0.002)
+    ax.set_xlim(-0.5, w - 0.5)
+    ax.set_ylim(h - 0.5, -0.5)
+    ax.set_aspect("equal")
+    rms = float(np.sqrt(np.mean(length ** 2))) if length.size else float("nan")
+    ax.set_title(f"{title}\nRMS {rms:.4f} px; arrows × {gain:.0f}; colour = pose", fontsize=9)
+
+
+def _f(value, digits=4):
+    if value is None:
+        return "–"
+    if isinstance(value, (list, tuple)):
+        return "(" + ", ".join(_f(v, digits) for v in value) + ")"
+    return f"{value:.{digits}g}" if isinstance(value, float) else str(value)
+
+
+def markdown(report: dict) -> str:
+    d = report["detection"]
+    lines = [f"# Calibration report: `{report['boards']}`", "",
+             f"{report['poses']} poses of a {report['board']['kind']} "
+             f"{report['board']['squares'][0]}x{report['board']['squares'][1]}, "
+             f"{report['board']['square_mm']:g} mm squares, "
+             f"{'in air' if report['air'] else 'behind the port'}; board found in "
+             f"{report['found']['left']} left and {report['found']['right']} right images.", "",
+             "## Corner detection against the forward model", "",
+             "| view | corners | RMS (px) | max (px) |", "|---|---|---|---|"]
+    for view in ("left", "right", "both"):
+        lines.append(f"| {view} | {d[view]['n']} | {_f(d[view]['rms_px'])} | {_f(d[view]['max_px'])} |")
+    if "in_air" in report:
+        a = report["in_air"]
+        lines += ["", "## In-air calibration (OpenCV)", "",
+                  f"Reprojection RMS: left {a['rms_px']['left']:.4f} px, right "
+                  f"{a['rms_px']['right']:.4f} px, stereo {a['stereo_rms_px']:.4f} px.", "",
+                  "| camera | parameter | estimate | truth | error | σ | error / σ |",
+                  "|---|---|---|---|---|---|---|"]
+        for cam, values in a["cameras"].items():
+            for key in ("fx", "fy", "cx", "cy"):
+                v = values[key]
+                lines.append(f"| {cam} | {key} (px) | {v['estimate']:.4f} | {v['truth']:.4f} | "
+                             f"{v['error']:+.4f} | {_f(v['sigma'])} | {_f(v['error_in_sigma'], 3)} |")
+        b = a["baseline_mm"]
+        lines += ["", f"Baseline {b['estimate']:.4f} mm (truth {b['truth']:.4f}, error "
+                  f"{b['error']:+.4f} mm); right camera rotation error "
+                  f"{a['right_rotation_error_deg']:.5f}°, position error "
+                  f"{a['right_position_error_mm']:.4f} mm."]
+    if "housing" in report:
+        hs = report["housing"]
+        lines += ["", "## Housing calibration (refractive bundle adjustment)", "",
+                  f"Free: {', '.join(hs['free'])}; {hs['observations']} corner observations in "
+                  f"{len(hs['poses_used'])} poses; reprojection RMS {hs['rms_px_start']:.3f} px "
+                  f"at the start, {hs['rms_px']:.4f} px after ({hs['evaluations']} evaluations).",
+                  "", "| parameter | estimate | truth | error | σ | error / σ |",
+                  "|---|---|---|---|---|---|"]
+        for name, p in hs["parameters"].items():
+            if name == "normal":
+                lines.append(f"| normal | {_f(p['estimate'], 7)} | {_f(p['truth'], 7)} | "
+                             f"{p['error_deg'] * 3600:.2f}″ | {_f([s * 3600 for s in p['sigma_deg']], 3)}″ "
+                             f"(two tilts) | {_f(p['error_in_sigma'], 3)} |")
+            elif name == "extrinsics":
+                lines.append(f"| right camera | rotation error {p['rotation_error_deg']:.5f}° | "
+                             f"– | position {_f(p['position_error_mm'])} mm | "
+                             f"{_f(p['sigma_position_mm'])} mm | {_f(p['error_in_sigma'], 3)} |")
+            else:
+                lines.append(f"| {name} | {p['estimate']:.6f} | {p['truth']:.6f} | "
+                             f"{p['error']:+.6f} | {_f(p['sigma'])} | {_f(p['error_in_sigma'], 3)} |")
+        lines += ["", "Correlations of the free numbers (" + ", ".join(hs["labels"]) + "):", ""]
+        lines += ["    " + " ".join(f"{v:+.3f}" for v in row) for row in hs["correlation"]]
+    lines += ["", "## Files", "", "- `calib.yaml`: the calibration in the dataset format"
+              + (" (with an `uncertainty` map), `calib_in_air_only.yaml` (the in-air calibration "
+                 "with the design port), `flatport.txt` (FLATPORT per camera)"
+                 if "housing" in report else ""),
+              "- `detections.png`, " + ("`residuals.png`, " if "housing" in report else "")
+              + "`poses.png`", "", "## Timings (s)", "",
+              " · ".join(f"{k} {v:.2f}" for k, v in report["timings_s"].items())]
+    return "\n".join(lines) + "\n"
+
+
+def summary_lines(report: dict) -> str:
+    d = report["detection"]["both"]
+    lines = [f"{report['boards']}: board found in {report['found']['left']}/{report['poses']} "
+             f"left and {report['found']['right']}/{report['poses']} right images; corner "
+             f"detection vs forward model RMS {_f(d['rms_px'])} px, max {_f(d['max_px'])} px"]
+    if "in_air" in report:
+        a = report["in_air"]
+        for cam, v in a["cameras"].items():
+            lines.append(f"in air {cam}: fx {v['fx']['error_percent']:+.4f} %, fy "
+                         f"{v['fy']['error_percent']:+.4f} %, cx {v['cx']['error']:+.3f} px, cy "
+                         f"{v['cy']['error']:+.3f} px; RMS {a['rms_px'][cam]:.4f} px")
+        lines.append(f"in air baseline error {a['baseline_mm']['error']:+.4f} mm, stereo RMS "
+                     f"{a['stereo_rms_px']:.4f} px")
+    if "housing" in report:
+        hs = report["housing"]
+        for name, p in hs["parameters"].items():
+            if name == "normal":
+                lines.append(f"housing normal: error {p['error_deg'] * 3600:.2f}″ "
+                             f"({p['error_deg']:.5f}°), σ {_f([s * 3600 for s in p['sigma_deg']], 3)}″, "
+                             f"error/σ {_f(p['error_in_sigma'], 3)}")
+            elif name == "extrinsics":
+                lines.append(f"housing right camera: rotation error {p['rotation_error_deg']:.5f}°, "
+                             f"position error {_f(p['position_error_mm'])} mm, error/σ "
+                             f"{_f(p['error_in_sigma'], 3)}")
+            else:
+                lines.append(f"housing {name}: {p['estimate']:.6f} (truth {p['truth']:.6f}, error "
+                             f"{p['error']:+.6f}, σ {_f(p['sigma'])}, error/σ "
+                             f"{_f(p['error_in_sigma'], 3)})")
+        lines.append(f"housing reprojection RMS {hs['rms_px']:.4f} px ({hs['observations']} "
+                     f"corners, {len(hs['poses_used'])} poses, {hs['evaluations']} evaluations, "
+                     f"{report['timings_s'].get('bundle_adjustment', 0):.2f} s)")
+    return "\n".join(lines)

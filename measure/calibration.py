@@ -1,0 +1,410 @@
+"""Calibration from board images: OpenCV in air, then the housing by refractive bundle adjustment.
+
+In air (:func:`calibrate_in_air`): ``cv2.calibrateCameraExtended`` per camera (k1, k2, p1, p2;
+k3 fixed at 0) and ``cv2.stereoCalibrate`` with the intrinsics fixed give K1, D1, K2, D2 and the
+stereo pose — OpenCV does it, nothing is re-implemented.
+
+Underwater (:func:`calibrate_housing`): the cameras' intrinsics stay as calibrated in air; the
+unknowns are every board pose (6 each) and the free housing parameters
+(:data:`HOUSING_PARAMETERS`): ``distance`` (D, mm), ``normal`` (2 tilts, rad, about axes
+perpendicular to the starting normal), ``thickness`` (first layer, mm), ``n_water``, and
+``extrinsics`` (the right camera's pose: 3 rotation-vector and 3 translation increments, rad and
+mm). Residuals: every detected corner's reprojection through the port with the project's exact
+forward model (:func:`measure.projection.project`), px. ``scipy.optimize.least_squares`` with a
+sparse Jacobian structure (a pose's 6 columns touch only its own corners' rows). Starting poses:
+``cv2.solvePnP`` on the refracted images with the in-air intrinsics (a plain pinhole solve).
+
+Uncertainty: ``s² (JᵀJ)⁻¹`` with ``s² = Σr² / (m − n)``; a parameter is reported not
+identifiable when the column-scaled normal matrix is singular in its direction or two free
+parameters correlate at :data:`CORRELATION_LIMIT` or more (then no estimate is returned).
+Units mm, px (OpenCV convention); the reference frame is the left camera's.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+from scipy.optimize import least_squares
+from scipy.sparse import coo_matrix
+from scipy.spatial.transform import Rotation
+
+from .board import MIN_CORNERS, Board
+from .camera import Camera
+from .port import FlatPort, index_matched_port
+from .projection import project
+from .selfcal import tilt_basis
+from .triangulate import StereoRig
+
+#: Free housing parameters and how many numbers each is.
+HOUSING_PARAMETERS = {"distance": 1, "normal": 2, "thickness": 1, "n_water": 1, "extrinsics": 6}
+DEFAULT_FREE = ("distance", "normal")
+#: Fewest board poses a calibration accepts.
+MIN_POSES = 3
+#: Relative eigenvalue of the scaled normal matrix below which a direction is not determined.
+IDENTIFIABILITY_LIMIT = 1e-12
+#: |correlation| at which two free parameters cannot be told apart.
+CORRELATION_LIMIT = 0.9995
+#: A fit that leaves more reprojection RMS than this (px) has not found the housing.
+FIT_RMS_LIMIT_PX = 2.0
+#: Smallest port distance and layer thickness the adjustment may try (mm); largest index.
+MIN_LENGTH_MM, MAX_INDEX = 1e-3, 3.0
+
+
+class CalibrationError(ValueError):
+    """Board images that cannot calibrate what was asked (too few poses, boards not found)."""
+
+
+@dataclass(frozen=True)
+class Detections:
+    """Per pose and view the detected corners: ``ids[k][v]`` ``(M,)`` and ``pixels[k][v]``
+    ``(M, 2)`` for pose k, view v (0 left, 1 right); empty arrays where the board was not
+    found."""
+
+    ids: list
+    pixels: list
+
+    @property
+    def n_poses(self) -> int:
+        return len(self.ids)
+
+    def found(self, view: int) -> list[int]:
+        return [k for k in range(self.n_poses) if len(self.ids[k][view]) >= MIN_CORNERS]
+
+
+def detect_boards(board: Board, images) -> Detections:
+    """Detect ``board`` in every ``(left, right)`` image pair."""
+    ids, pixels = [], []
+    for pair in images:
+        found = [board.detect(img) for img in pair]
+        ids.append([f[0] for f in found])
+        pixels.append([f[1] for f in found])
+    return Detections(ids, pixels)
+
+
+# ---------------------------------------------------------------------------------------------
+# in air, with OpenCV
+# ---------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class AirCalibration:
+    """``rig`` (no port: index-matched), per camera ``rms_px`` and ``sigmas`` (fx, fy, cx, cy,
+    k1, k2, p1, p2 from ``calibrateCameraExtended``), the stereo ``stereo_rms_px`` and the
+    number of poses used per camera and for the pair."""
+
+    rig: StereoRig
+    rms_px: dict
+    sigmas: dict
+    stereo_rms_px: float
+    poses_used: dict
+
+
+def calibrate_in_air(board: Board, detections: Detections, size) -> AirCalibration:
+    """OpenCV calibration of both cameras and their stereo pose from in-air board images."""
+    corners = board.corners().astype(np.float32)
+    flags = cv2.CALIB_FIX_K3
+    criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 200, 1e-12)
+    cameras, rms, sigmas, used = [], {}, {}, {}
+    for view, name in enumerate(("left", "right")):
+        poses = detections.found(view)
+        if len(poses) < MIN_POSES:
+            raise CalibrationError(f"the board was found in {len(poses)} {name} image(s); an "
+                                   f"in-air calibration needs at least {MIN_POSES}")
+        obj = [corners[detections.ids[k][view]] for k in poses]
+        img = [detections.pixels[k][view].astype(np.float32) for k in poses]
+        out = cv2.calibrateCameraExtended(obj, img, tuple(size), None, None, flags=flags,
+                                          criteria=criteria)
+        rms[name], K, D, std = float(out[0]), out[1], out[2].ravel()[:5], out[5].ravel()
+        sigmas[name] = dict(zip(("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2"),
+                                (float(s) for s in std[:8])))
+        cameras.append((K, D))
+        used[name] = len(poses)
+    both = [k for k in detections.found(0) if k in set(detections.found(1))]
+    if len(both) < MIN_POSES:
+        raise CalibrationError(f"the board was found in both views of {len(both)} pose(s); the "
+                               f"stereo calibration needs at least {MIN_POSES}")
+    obj, img_l, img_r = [], [], []
+    for k in both:
+        common, il, ir = np.intersect1d(detections.ids[k][0], detections.ids[k][1],
+                                        return_indices=True)
+        obj.append(corners[common])
+        img_l.append(detections.pixels[k][0][il].astype(np.float32))
+        img_r.append(detections.pixels[k][1][ir].astype(np.float32))
+    (K1, D1), (K2, D2) = cameras
+    out = cv2.stereoCalibrate(obj, img_l, img_r, K1, D1, K2, D2, tuple(size),
+                              flags=cv2.CALIB_FIX_INTRINSIC, criteria=criteria)
+    stereo_rms, R, T = float(out[0]), out[5], out[6].ravel()
+    used["stereo"] = len(both)
+    left = Camera(K1, size, dist=D1)
+    right = Camera(K2, size, dist=D2, R=_orthonormal(R).T, t=-_orthonormal(R).T @ T)
+    port = index_matched_port(left.R[:, 2], np.stack([left.t, right.t]))
+    return AirCalibration(StereoRig(left, right, port), rms, sigmas, stereo_rms, used)
+
+
+def _orthonormal(R) -> np.ndarray:
+    u, _, vt = np.linalg.svd(np.asarray(R, dtype=np.float64))
+    return u @ vt
+
+
+# ---------------------------------------------------------------------------------------------
+# underwater: refractive bundle adjustment
+# ---------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class HousingCalibration:
+    """Result of :func:`calibrate_housing`.
+
+    ``rig`` the calibrated rig (the starting rig when not identifiable); ``estimates`` /
+    ``sigmas`` per free parameter (``normal``: the unit vector and two tilt sigmas in rad;
+    ``extrinsics``: the right camera's ``R``, ``t`` and six sigmas); ``labels`` and
+    ``correlation`` of the free numbers; ``poses`` ``[(R, t), …]`` of the boards;
+    ``rms_px`` overall and ``rms_px_per`` ``{(pose, view): rms}``; ``residuals`` per view
+    ``(pose, id, du, dv)`` rows; ``identifiable`` / ``reason``; ``pose_ids`` the numbers of
+    the poses used (``poses[i]`` is pose ``pose_ids[i]``). RMS values are per corner, of the
+    2D residual length."""
+
+    rig: StereoRig
+    estimates: dict
+    sigmas: dict
+    labels: tuple
+    correlation: np.ndarray
+    poses: list
+    rms_px: float
+    rms_px_start: float
+    rms_px_per: dict
+    residuals: dict
+    converged: bool
+    identifiable: bool
+    reason: str
+    n_observations: int
+    nfev: int
+    message: str = ""
+    normal_axes: tuple = field(default=())
+    pose_ids: tuple = field(default=())
+
+
+def _observations(board: Board, detections: Detections, views=(0, 1)):
+    corners = board.corners()
+    obs = []
+    for view in views:
+        pose_idx, ids, uv = [], [], []
+        for k in range(detections.n_poses):
+            if len(detections.ids[k][view]) >= MIN_CORNERS:
+                n = len(detections.ids[k][view])
+                pose_idx.append(np.full(n, k))
+                ids.append(detections.ids[k][view])
+                uv.append(detections.pixels[k][view])
+        if pose_idx:
+            obs.append((view, np.concatenate(pose_idx), np.concatenate(ids),
+                        np.concatenate(uv)))
+        else:
+            obs.append((view, np.empty(0, int), np.empty(0, int), np.empty((0, 2))))
+    return corners, obs
+
+
+def _start_poses(rig: StereoRig, board: Board, detections: Detections):
+    """Per pose (R, t) board-to-reference from ``cv2.solvePnP`` on the left view (the right
+    view, moved to the reference frame, where the left has no board)."""
+    corners = board.corners()
+    poses = []
+    for k in range(detections.n_poses):
+        for view, camera in enumerate(rig.cameras):
+            ids = detections.ids[k][view]
+            if len(ids) >= MIN_CORNERS:
+                ok, rvec, tvec = cv2.solvePnP(corners[ids], detections.pixels[k][view], camera.K,
+                                              camera.dist if camera.dist is not None else None,
+                                              flags=cv2.SOLVEPNP_ITERATIVE)
+                if ok:
+                    R_cam = Rotation.from_rotvec(rvec.ravel()).as_matrix()
+                    poses.append((camera.R @ R_cam, camera.R @ tvec.ravel() + camera.t))
+                    break
+        else:
+            poses.append(None)
+    return poses
+
+
+def calibrate_housing(rig: StereoRig, board: Board, detections: Detections,
+                      free=DEFAULT_FREE) -> HousingCalibration:
+    """Refractive bundle adjustment of the housing (module docs). ``rig``: the in-air cameras
+    with the starting port (its fixed parameters are the design values)."""
+    names = tuple(dict.fromkeys(free))
+    unknown = [n for n in names if n not in HOUSING_PARAMETERS]
+    if not names or unknown:
+        raise CalibrationError(f"--free {','.join(free) or '(nothing)'}: the housing calibration "
+                               f"estimates {', '.join(HOUSING_PARAMETERS)}")
+    if "thickness" in names and not rig.port.thicknesses:
+        raise CalibrationError("--free thickness: the port has no glass layer")
+    starts = _start_poses(rig, board, detections)
+    usable = [k for k, s in enumerate(starts) if s is not None]
+    if len(usable) < MIN_POSES:
+        raise CalibrationError(f"the board was found in {len(usable)} pose(s); the housing "
+                               f"calibration needs at least {MIN_POSES}")
+    detections = Detections([detections.ids[k] for k in usable],
+                            [detections.pixels[k] for k in usable])
+    starts = [starts[k] for k in usable]
+    P = len(starts)
+    n_global = sum(HOUSING_PARAMETERS[n] for n in names)
+    port0, basis = rig.port, tilt_basis(rig.port.normal)
+    corners, obs = _observations(board, detections)
+    m = sum(2 * o[1].size for o in obs)
+
+    def unpack(x):
+        indices, thick, distance = list(port0.indices), list(port0.thicknesses), port0.distance
+        normal, right = port0.normal, rig.right
+        k = 0
+        for name in names:
+            if name == "distance":
+                distance = x[k]
+            elif name == "normal":
+                normal = port0.normal + x[k] * basis[0] + x[k + 1] * basis[1]
+            elif name == "thickness":
+                thick[0] = x[k]
+            elif name == "n_water":
+                indices[-1] = x[k]
+            elif name == "extrinsics":
+                dR = Rotation.from_rotvec(x[k:k + 3]).as_matrix()
+                right = Camera(rig.right.K, rig.right.size, rig.right.dist,
+                               dR @ rig.right.R, rig.right.t + x[k + 3:k + 6])
+            k += HOUSING_PARAMETERS[name]
+        port = FlatPort(normal, distance, tuple(thick), tuple(indices))
+        Rs = Rotation.from_rotvec(x[n_global:].reshape(P, 6)[:, :3]).as_matrix()
+        ts = x[n_global:].reshape(P, 6)[:, 3:]
+        return port, (rig.left, right), Rs, ts
+
+    def residuals(x):
+        try:
+            port, cameras, Rs, ts = unpack(x)
+        except ValueError:  # e.g. a non-physical index or thickness on the way
+            return np.full(m, 1e3)
+        out = []
+        for view, pose_idx, ids, uv in obs:
+            world = np.einsum("nij,nj->ni", Rs[pose_idx], corners[ids]) + ts[pose_idx]
+            r = (project(cameras[view], port, world) - uv).ravel()
+            out.append(np.where(np.isfinite(r), r, 1e3))
+        return np.concatenate(out)
+
+    x0 = []
+    for name in names:
+        x0 += {"distance": [port0.distance], "normal": [0.0, 0.0],
+               "thickness": list(port0.thicknesses[:1]), "n_water": [port0.n_water],
+               "extrinsics": [0.0] * 6}[name]
+    for R, t in starts:
+        x0 += list(Rotation.from_matrix(R).as_rotvec()) + list(t)
+    x0 = np.asarray(x0, dtype=np.float64)
+    rows, cols = [], []
+    offset = 0
+    for view, pose_idx, ids, uv in obs:
+        r = offset + np.arange(2 * pose_idx.size)
+        pk = np.repeat(pose_idx, 2)
+        rows.append(np.repeat(r, 6))
+        cols.append((n_global + 6 * pk[:, None] + np.arange(6)).ravel())
+        offset += 2 * pose_idx.size
+    rows = np.concatenate(rows + [np.repeat(np.arange(m), n_global)])
+    cols = np.concatenate(cols + [np.tile(np.arange(n_global), m)])
+    sparsity = coo_matrix((np.ones(rows.size, np.int8), (rows, cols)),
+                          shape=(m, x0.size)).tocsr()
+    lower = np.full(x0.size, -np.inf)
+    upper = np.full(x0.size, np.inf)
+    k = 0
+    for name in names:  # keep the port physical on the way: a layer, indices >= 1
+        if name in ("distance", "thickness"):
+            lower[k] = MIN_LENGTH_MM
+        elif name == "n_water":
+            lower[k], upper[k] = 1.0, MAX_INDEX
+        k += HOUSING_PARAMETERS[name]
+    x0[:n_global] = np.clip(x0[:n_global], lower[:n_global] + 1e-9, upper[:n_global] - 1e-9)
+    rms_start = float(np.sqrt(np.mean(residuals(x0) ** 2)))
+    fit = least_squares(residuals, x0, jac_sparsity=sparsity, method="trf", x_scale="jac",
+                        bounds=(lower, upper), xtol=1e-12, ftol=1e-12, gtol=1e-12, max_nfev=300,
+                        tr_options={"atol": 1e-14, "btol": 1e-14})
+    r = fit.fun
+    J = fit.jac.toarray() if hasattr(fit.jac, "toarray") else np.asarray(fit.jac)
+    dof = max(r.size - x0.size, 1)
+    s2 = float(r @ r) / dof
+    N = J.T @ J
+    scale = np.sqrt(np.diag(N))
+    scale[scale == 0] = 1.0
+    Ns = N / np.outer(scale, scale)
+    eigval, eigvec = np.linalg.eigh(Ns)
+    labels = tuple(f"{n}[{k}]" if HOUSING_PARAMETERS[n] > 1 else n
+                   for n in names for k in range(HOUSING_PARAMETERS[n]))
+    port, cameras, Rs, ts = unpack(fit.x)
+    poses = [(Rs[k], ts[k]) for k in range(P)]
+    per, res = {}, {}
+    offset = 0
+    for view, pose_idx, ids, uv in obs:
+        rv = r[offset:offset + 2 * pose_idx.size].reshape(-1, 2)
+        offset += 2 * pose_idx.size
+        res[view] = np.column_stack([usable_index(usable, pose_idx), ids, rv])
+        for k in np.unique(pose_idx):
+            per[(usable[k], view)] = float(np.sqrt(np.mean(rv[pose_idx == k] ** 2) * 2))
+    base = dict(labels=labels, poses=poses, rms_px=float(np.sqrt(np.mean(r ** 2) * 2)),
+                rms_px_start=rms_start * np.sqrt(2), rms_px_per=per, residuals=res,
+                converged=bool(fit.status > 0), n_observations=m // 2, nfev=int(fit.nfev),
+                message=str(fit.message), normal_axes=tuple(b.tolist() for b in basis),
+                pose_ids=tuple(usable))
+    relative = eigval / eigval[-1] if eigval[-1] > 0 else np.zeros_like(eigval)
+    if relative[0] < IDENTIFIABILITY_LIMIT:
+        worst = int(np.argmax(np.abs(eigvec[:n_global, 0]))) if n_global else 0
+        name = labels[worst] if n_global else "a board pose"
+        return HousingCalibration(
+            rig=rig, estimates={}, sigmas={}, correlation=np.full((n_global, n_global), np.nan),
+            identifiable=False, reason=f"{name} is not determined by these boards (relative "
+                                       f"eigenvalue {relative[0]:.1e})", **base)
+    covariance = s2 * np.linalg.inv(N)
+    sig = np.sqrt(np.diag(covariance))
+    cov_g = covariance[:n_global, :n_global]
+    correlation = cov_g / np.outer(sig[:n_global], sig[:n_global])
+    off = np.abs(correlation - np.eye(n_global))
+    if n_global > 1 and off.max() >= CORRELATION_LIMIT:
+        i, j = np.unravel_index(np.argmax(off), off.shape)
+        return HousingCalibration(rig=rig, estimates={}, sigmas={}, correlation=correlation,
+                                  identifiable=False,
+                                  reason=f"{labels[i]} and {labels[j]} are correlated at "
+                                         f"{correlation[i, j]:+.4f}: these boards cannot tell "
+                                         f"them apart", **base)
+    if not base["converged"] or base["rms_px"] > FIT_RMS_LIMIT_PX:
+        return HousingCalibration(
+            rig=rig, estimates={}, sigmas={}, correlation=np.full((n_global, n_global), np.nan),
+            identifiable=False, reason=(
+                f"the adjustment did not converge within {fit.nfev} evaluations (reprojection "
+                f"RMS {base['rms_px']:.3g} px): the free parameters are barely determined by "
+                f"these boards (free fewer, or render more varied poses)"
+                if base["rms_px"] <= FIT_RMS_LIMIT_PX else
+                f"the adjustment stopped with a reprojection RMS of {base['rms_px']:.3g} px "
+                f"({fit.message.rstrip('.')}): it did not find a housing that fits the corners "
+                f"(check the design values, the starting distance and --free)"),
+            **{**base, "converged": False})
+    at_bound = np.flatnonzero(fit.active_mask[:n_global] != 0)
+    if at_bound.size:
+        return HousingCalibration(
+            rig=rig, estimates={}, sigmas={}, correlation=np.full((n_global, n_global), np.nan),
+            identifiable=False, reason=f"{labels[at_bound[0]]} ran into its physical bound: "
+                                       f"these boards do not determine it", **base)
+    estimates, sigmas, k = {}, {}, 0
+    for name in names:
+        w = HOUSING_PARAMETERS[name]
+        if name == "distance":
+            estimates[name] = port.distance
+        elif name == "normal":
+            estimates[name] = port.normal.tolist()
+        elif name == "thickness":
+            estimates[name] = port.thicknesses[0]
+        elif name == "n_water":
+            estimates[name] = port.n_water
+        else:
+            estimates[name] = {"R": cameras[1].R.tolist(), "t": cameras[1].t.tolist()}
+        sigmas[name] = float(sig[k]) if w == 1 else sig[k:k + w].tolist()
+        k += w
+    calibrated = StereoRig(cameras[0], cameras[1], port)
+    return HousingCalibration(rig=calibrated, estimates=estimates, sigmas=sigmas,
+                              correlation=correlation, identifiable=True, reason="", **base)
+
+
+def usable_index(usable, pose_idx) -> np.ndarray:
+    """Original pose numbers of compacted pose indices."""
+    return np.asarray(usable)[pose_idx]
+
+
+__all__ = ["AirCalibration", "CalibrationError", "DEFAULT_FREE", "Detections",
+           "HOUSING_PARAMETERS", "HousingCalibration", "MIN_POSES", "calibrate_housing",
+           "calibrate_in_air", "detect_boards"]
