@@ -28,6 +28,9 @@ import numpy as np
 
 BOARD_KINDS = ("chessboard", "charuco")
 CHARUCO_DICTIONARY = "DICT_5X5_1000"
+#: Texels per square of the printed pattern as renderers use it (ChArUco marker bits stay whole
+#: texels).
+PATTERN_TEXELS_PER_SQUARE = 140
 #: Corners fewer than this in a view do not count as a detection of the board.
 MIN_CORNERS = 6
 #: Chessboards are found on the image halved until it is at most this wide (OpenCV's search
@@ -199,28 +202,42 @@ SADDLE_BLUR, SADDLE_HALF_WINDOW, SADDLE_ITERATIONS = 0.15, 0.3, 8
 SADDLE_TOLERANCE_PX = 1e-3
 
 
-def refine_saddle_points(image: np.ndarray, uv: np.ndarray):
+def saddle_scales(uv: np.ndarray):
+    """``(spacing (N,), blur σ)`` of :func:`refine_saddle_points` for corners ``uv`` ``(N, 2)``:
+    each corner's distance to its nearest neighbour (px) and the blur, :data:`SADDLE_BLUR` ×
+    their median."""
+    uv = np.asarray(uv, dtype=np.float64).reshape(-1, 2)
+    gaps = np.linalg.norm(uv[:, None] - uv[None], axis=2)
+    np.fill_diagonal(gaps, np.inf)
+    spacing = gaps.min(axis=1)
+    return spacing, SADDLE_BLUR * float(np.median(spacing))
+
+
+def refine_saddle_points(image: np.ndarray, uv: np.ndarray, spacing=None, blur_sigma=None):
     """Chessboard corners ``(N, 2)`` refined to the saddle point of the blurred image, and
     whether each converged ``(N,)``.
 
     An X-junction of two straight edges is point-symmetric about the corner, and so is its image
     blurred with an isotropic Gaussian: the corner is the saddle point, whatever the angle
-    between the edges (perspective, refraction). Each corner's neighbourhood (half window
+    between the edges (perspective). Each corner's neighbourhood (half window
     :data:`SADDLE_HALF_WINDOW` × the distance to its nearest corner, Gaussian weights) is fitted
     with a quadratic by weighted least squares and the corner moved to its stationary point, a
-    few times (vectorized over corners). On rendered tilted boards this gave 0.02–0.03 px RMS
-    where ``findChessboardCornersSB`` gave 0.08–0.42 px and ``cornerSubPix`` 0.05–0.08 px
-    (docs/architecture.md). A corner converged when its last step is below
+    few times (vectorized over corners). On rendered tilted boards in air this gave 0.013 px
+    RMS where ``findChessboardCornersSB`` gave 0.08–0.42 px and ``cornerSubPix`` 0.05–0.08 px
+    (docs/architecture.md). Through a flat port the board's straight edges image as curves;
+    the rendered corners then sit 0.02–0.04 px outwards of the forward model (docs/architecture.md:
+    about half of it is the renderer's ray-spawn offset at the port). A corner converged when its last step is below
     :data:`SADDLE_TOLERANCE_PX` and it stayed within its window; others keep their input
-    position and are flagged (an outlier of the detector, or not a corner)."""
+    position and are flagged (an outlier of the detector, or not a corner). ``spacing`` and
+    ``blur_sigma`` default to :func:`saddle_scales` of ``uv``."""
     uv = np.asarray(uv, dtype=np.float64).reshape(-1, 2)
-    if uv.shape[0] < 2:
+    if uv.shape[0] < 2 and spacing is None:
         return uv.copy(), np.zeros(uv.shape[0], bool)
-    gaps = np.linalg.norm(uv[:, None] - uv[None], axis=2)
-    np.fill_diagonal(gaps, np.inf)
-    spacing = gaps.min(axis=1)
+    if spacing is None or blur_sigma is None:
+        spacing, blur_sigma = saddle_scales(uv)
+    spacing = np.asarray(spacing, dtype=np.float64)
     blurred = cv2.GaussianBlur(np.asarray(image, np.float32), (0, 0),
-                               SADDLE_BLUR * float(np.median(spacing))).astype(np.float64)
+                               float(blur_sigma)).astype(np.float64)
     h, w = blurred.shape
     half = SADDLE_HALF_WINDOW * spacing
     r = int(np.ceil(half.max()))
@@ -264,4 +281,5 @@ def to_uint8(image: np.ndarray) -> np.ndarray:
     return np.clip(np.rint(a * (255.0 / white)), 0, 255).astype(np.uint8)
 
 
-__all__ = ["BOARD_KINDS", "Board", "BoardError", "MIN_CORNERS", "to_uint8"]
+__all__ = ["BOARD_KINDS", "Board", "BoardError", "MIN_CORNERS", "PATTERN_TEXELS_PER_SQUARE",
+           "refine_saddle_points", "saddle_scales", "to_uint8"]

@@ -35,7 +35,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from measure import StereoRig
-from measure.board import Board, BoardError
+from measure.board import PATTERN_TEXELS_PER_SQUARE, Board, BoardError
 from measure.port import index_matched_port
 from measure.projection import project
 
@@ -56,8 +56,6 @@ DEFAULT_MAX_TILT_DEG = 45.0
 MAX_ROLL_DEG = 20.0
 #: Smallest distance (px) of any board point from the image border.
 IMAGE_MARGIN_PX = 10.0
-#: Texels per board square of the pattern texture (ChArUco marker bits stay whole texels).
-TEXELS_PER_SQUARE = 140
 #: Candidate poses tried per pose wanted before giving up.
 ATTEMPTS_PER_POSE = 400
 CORNERS_HEADER = ["pose", "id", "x", "y", "z", "u_left", "v_left", "u_right", "v_right"]
@@ -157,7 +155,8 @@ def build_board_scene(spec: SceneSpec, board: Board, air: bool, variant=None):
     from .mitsuba_setup import import_mitsuba
 
     mi, chosen = import_mitsuba(variant)
-    pattern = board.pattern(TEXELS_PER_SQUARE).astype(np.float32)[..., None] / np.float32(255)
+    pattern = board.pattern(PATTERN_TEXELS_PER_SQUARE).astype(np.float32)[..., None]
+    pattern /= np.float32(255)
     sampler = {"type": "multijitter", "sample_count": 4, "seed": 0}
     scene = {"type": "scene",
              "integrator": {"type": "path", "max_depth": int(float(spec.params.get("max_depth", 8)))},
