@@ -41,6 +41,7 @@ from measure.projection import project
 
 from .dataset import DatasetError, read_calib, write_calib
 from .fileio import OutputDir, atomic_write_json, read_marker
+from .integrator import RENDERER, integrator_name
 from .provenance import package_versions
 from .render import (check_render_request, load_mitsuba_scene, png16_scale, render_view,
                      sensor_dict, to_png16, write_png)
@@ -200,7 +201,8 @@ def request_key(spec: SceneSpec, board: Board, n_poses, spp, seed, air, distance
     blob = json.dumps({"format": FORMAT_VERSION, "scene": spec.sha256, "params": spec.params,
                        "board": board.to_dict(), "poses": n_poses, "spp": spp, "seed": seed,
                        "air": bool(air), "distance_range": list(distance_range),
-                       "max_tilt_deg": max_tilt_deg, "variant": variant}, sort_keys=True)
+                       "max_tilt_deg": max_tilt_deg, "variant": variant,
+                       "renderer": RENDERER}, sort_keys=True)
     return hashlib.sha256(blob.encode()).hexdigest()
 
 
@@ -258,7 +260,8 @@ def write_boards(spec: SceneSpec, out_dir, board: Board, n_poses: int = DEFAULT_
             "scene": {"path": spec.path, "sha256": spec.sha256, "params": spec.params},
             "air": bool(air), "board": board.to_dict(), "poses": n_poses,
             "distance_range_mm": list(distance_range), "max_tilt_deg": max_tilt_deg,
-            "variant": chosen, "spp": spp, "seed": seed, "image_size": [w, h],
+            "variant": chosen, "integrator": integrator_name(mi, mscene), "spp": spp,
+            "seed": seed, "image_size": [w, h],
             "png_scale": scale, "samples_per_second": samples / times["render"],
             "seconds": times,
         }

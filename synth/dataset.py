@@ -38,6 +38,7 @@ from measure import Camera, FlatPort, StereoRig
 from measure.projection import project
 
 from .fileio import OutputDir, read_marker
+from .integrator import RENDERER
 from .provenance import package_versions
 from .render import (pass_seed, png16_scale, render_stereo, srgb_preview, to_png16, write_exr,
                      write_png)
@@ -214,8 +215,8 @@ def _image_stats(image: np.ndarray) -> dict:
 def request_key(spec: SceneSpec, spp: int, seed: int, variant: str | None, exr: bool) -> str:
     """Hash of everything that determines a dataset's content."""
     blob = json.dumps({"format": FORMAT_VERSION, "scene": spec.sha256, "params": spec.params,
-                       "spp": spp, "seed": seed, "variant": variant, "exr": bool(exr)},
-                      sort_keys=True)
+                       "spp": spp, "seed": seed, "variant": variant, "exr": bool(exr),
+                       "renderer": RENDERER}, sort_keys=True)
     return hashlib.sha256(blob.encode()).hexdigest()
 
 
@@ -297,6 +298,7 @@ def write_dataset(scene, out_dir, spp: int | None = None, defines: dict | None =
                       "has_port": spec.has_port, "n_targets": int(spec.targets.shape[0]),
                       "target_radius_mm": spec.target_radius},
             "variant": info["variant"], "variant_requested": variant,
+            "integrator": info["integrator"],
             "spp": spp, "spp_rendered": info["spp_rendered"], "seed": seed,
             "seeds": {view: [pass_seed(seed, i, k) for k in range(len(info["passes"][view]))]
                       for i, view in enumerate(("left", "right"))},

@@ -37,6 +37,7 @@ import numpy as np
 
 from measure import Camera
 
+from .integrator import integrator_name, render_integrator
 from .mitsuba_setup import import_mitsuba
 from .scene import SceneError, SceneSpec, load_scene
 from .sensor import sensor_parameters
@@ -214,9 +215,10 @@ def pass_seed(seed: int, view: int, k: int) -> int:
 def _render_passes(mi, scene, sensor, spp: int, seed: int, view: int, film_pixels: int):
     """The average of the passes of :func:`pass_plan`, weighted by the samples each took."""
     total, weight = None, 0
+    integrator = render_integrator(mi, scene)
     for k, pass_spp in enumerate(pass_plan(spp, film_pixels)):
         image = _develop(mi, mi.render(scene, sensor=sensor, spp=pass_spp,
-                                       seed=pass_seed(seed, view, k)))
+                                       seed=pass_seed(seed, view, k), integrator=integrator))
         taken = _sample_count(scene, sensor, pass_spp)
         total = image.astype(np.float64) * taken if total is None else total + image * taken
         weight += taken
@@ -289,7 +291,8 @@ def render_stereo(scene, spp: int | None = None, variant: str | None = None,
     samples = 2 * w * h * spp_rendered
     render_seconds = seconds["left"] + seconds["right"]
     plans = {name: pass_plan(spp, film_pixels[name]) for name in names}
-    info = {"variant": chosen, "spp": spp, "spp_rendered": spp_rendered, "seed": seed,
+    info = {"variant": chosen, "integrator": integrator_name(mi, mscene), "spp": spp,
+            "spp_rendered": spp_rendered, "seed": seed,
             "size": [w, h], "seconds": seconds, "passes": plans,
             "samples_per_second": samples / render_seconds if render_seconds > 0 else None,
             "samples_per_second_per_view": speeds}
