@@ -250,7 +250,7 @@ def markdown(report: dict) -> str:
                   f"Free: {', '.join(hs['free'])}; {hs['observations']} corner observations in "
                   f"{len(hs['poses_used'])} poses; reprojection RMS {hs['rms_px_start']:.3f} px "
                   f"at the start, {hs['rms_px']:.4f} px after ({hs['evaluations']} evaluations).",
-                  "", "| parameter | estimate | truth | error | σ | error / σ |",
+                  "", SIGMA_NOTE, "", "| parameter | estimate | truth | error | σ | error / σ |",
                   "|---|---|---|---|---|---|"]
         for name, p in hs["parameters"].items():
             if name == "normal":
@@ -274,6 +274,14 @@ def markdown(report: dict) -> str:
               + "`poses.png`", "", "## Timings (s)", "",
               " · ".join(f"{k} {v:.2f}" for k, v in report["timings_s"].items())]
     return "\n".join(lines) + "\n"
+
+
+#: What the housing σ covers (said in every report).
+SIGMA_NOTE = ("σ is the housing calibration's own: its corners' scatter through the refractive "
+              "bundle adjustment, with the intrinsics (and the stereo extrinsics unless free) "
+              "held at the in-air calibration. Errors of the in-air calibration are not in it; "
+              "run again with `--intrinsics` the boards folder's own calib.yaml (the truth) "
+              "to see the two apart.")
 
 
 def summary_lines(report: dict) -> str:

@@ -35,7 +35,8 @@ PATTERN_TEXELS_PER_SQUARE = 140
 MIN_CORNERS = 6
 #: Chessboards are found on the image halved until it is at most this wide (OpenCV's search
 #: takes ~3 s on a 2448 px image with CALIB_CB_ACCURACY, 0.14 s at 1224 px without it); the
-#: corners are then refined on the full image (:func:`refine_saddle_points`).
+#: corners are then refined on the full image (:func:`refine_saddle_points`). Where nothing is
+#: found there, the full image is searched as well (small, steep boards).
 DETECTION_WIDTH_PX = 1300
 
 
@@ -168,6 +169,10 @@ class Board:
         if not found:  # the classic detector finds some steep views SB misses
             found, corners = cv2.findChessboardCorners(
                 small, pattern, flags=cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE)
+        if not found and levels:  # small, steep boards: the full image (about 1 s more)
+            found, corners = cv2.findChessboardCornersSB(gray, pattern,
+                                                         flags=cv2.CALIB_CB_EXHAUSTIVE)
+            levels = 0 if found else levels
         if not found:
             return np.empty(0, int), np.empty((0, 2))
         scale = 2.0 ** levels  # pyrDown: pixel i of the half image is centred on 2i + 0.5
