@@ -67,6 +67,11 @@ def add_parser(subparsers):
     parser.add_argument("--eccentricity", action="store_true",
                         help="also measure with the detected centres corrected for the disk "
                              "targets' eccentricity (reported beside the uncorrected numbers)")
+    parser.add_argument("--sensor", metavar="PRESET[,name=value…]",
+                        help="pass the rendered images through a camera sensor (exposure, shot "
+                             "and read noise, dark level, gain, bit depth), seeded: preset "
+                             "imx174; overrides full_well_e, read_noise_e, bit_depth, "
+                             "dark_level_dn, exposure")
     parser.add_argument("--json", action="store_true", help="also print report.json to stdout")
     parser.add_argument("--no-progress", action="store_true", help="no progress output")
 
@@ -91,6 +96,18 @@ def _parse_self_calibration(text: str) -> tuple:
         raise CLIError(f"--self-calibrate {text!r}: unknown parameter {', '.join(unknown)} "
                        f"(the refinement estimates {', '.join(PARAMETERS)})")
     return names
+
+
+def _parse_sensor(text):
+    """The ``--sensor`` model, or None; CLIError names what is wrong."""
+    if text is None:
+        return None
+    from synth.sensor_model import SensorError, sensor_from_spec
+
+    try:
+        return sensor_from_spec(text)
+    except SensorError as exc:
+        raise CLIError(f"--sensor {text}: {exc}") from None
 
 
 def _parse_range(text):
@@ -272,11 +289,25 @@ def _method_rows(report: dict):
     return rows
 
 
+def _sensor_lines(sensor) -> list:
+    """report.md's paragraph on the ``--sensor`` (none without one)."""
+    if not sensor:
+        return []
+    m = sensor["model"]
+    return [f"Sensor `{m['name']}`: full well {m['full_well_e']:g} e⁻, read noise "
+            f"{m['read_noise_e']:g} e⁻, {m['bit_depth']} bit, dark level {m['dark_level_dn']:g} DN, "
+            f"gain {m['gain_e_per_dn']:.4g} e⁻/DN, brightest pixel exposed to "
+            f"{m['exposure']:g} of the full well; saturated pixels left "
+            f"{sensor['left']['saturated_pixels']}, right {sensor['right']['saturated_pixels']}.",
+            ""]
+
+
 def report_markdown(report: dict) -> str:
     m, c, t = report["matching"], report["crosscheck"], report["timings_s"]
     lines = [f"# Run report: `{report['scene']}`", "",
              f"{report['targets']} targets; Mitsuba variant `{report['variant']}`, {report['spp']} spp; "
              f"added pixel noise σ = {report['noise_px']} px.", "",
+             *_sensor_lines(report.get("sensor")),
              "## Detection and matching", "",
              "| | left | right |", "|---|---|---|",
              f"| targets wholly in the image | {report['visibility']['in_both'] + report['visibility']['left_only']} "
@@ -322,22 +353,28 @@ def report_markdown(report: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
+def write_error_ply(directory: str, name: str, points, errors) -> dict:
+    """``points`` ``(N, 3)`` coloured by their dP (norm of ``errors`` ``(N, 3)``, mm) on
+    :data:`PLY_COLORMAP` from 0 to the largest, as ``directory/name``; returns the report entry."""
+    import numpy as np
+
+    from .cloud_metrics import write_colored_ply
+
+    dp = np.linalg.norm(errors, axis=1)
+    vmax = float(dp.max()) if dp.size else 1.0
+    write_colored_ply(os.path.join(directory, name), points, dp, vmax, PLY_COLORMAP)
+    return {"file": name, "colormap": PLY_COLORMAP, "vmin_mm": 0.0, "vmax_mm": vmax,
+            "points": int(dp.size)}
+
+
 def write_outputs(tmp: str, inputs, report: dict, arrays: dict) -> None:
     """The PLY files (their entries go into ``report["ply"]``) and figures of a run, into
     directory ``tmp``."""
-    import numpy as np
-
     from . import run_figures
-    from .cloud_metrics import write_colored_ply
 
-    report["ply"] = {}
-    for method, data in arrays["per_method"].items():
-        dp = np.linalg.norm(data["errors"], axis=1)
-        vmax = float(dp.max()) if dp.size else 1.0
-        name = f"points_{method}.ply"
-        write_colored_ply(os.path.join(tmp, name), data["points"], dp, vmax, PLY_COLORMAP)
-        report["ply"][method] = {"file": name, "colormap": PLY_COLORMAP, "vmin_mm": 0.0,
-                                 "vmax_mm": vmax, "points": int(dp.size)}
+    report["ply"] = {method: write_error_ply(tmp, f"points_{method}.ply", data["points"],
+                                             data["errors"])
+                     for method, data in arrays["per_method"].items()}
     run_figures.views_figure(os.path.join(tmp, "views.png"), inputs.left, inputs.right, arrays)
     run_figures.error_maps_figure(os.path.join(tmp, "error_maps.png"), arrays["per_method"])
     run_figures.histograms_figure(os.path.join(tmp, "histograms.png"), arrays["per_method"])
@@ -351,9 +388,18 @@ def main(args) -> int:
     methods = _parse_methods(args.methods)
     depth_window = _parse_range(args.depth_range)
     self_calibration = _parse_self_calibration(args.self_calibrate)
+    sensor = _parse_sensor(args.sensor)
     output = OutputDir(args.out, COMMAND).claim()  # before any expensive work
     start = time.perf_counter()
     inputs = load_inputs(args, log)
+    sensor_info = None
+    if sensor is not None:
+        from synth.sensor_model import sensor_views, to_radiance
+
+        log(f"expose both views on the {sensor.name} sensor …")
+        left, right, sensor_info = sensor_views(inputs.left, inputs.right, sensor, inputs.seed)
+        inputs.left, inputs.right = (to_radiance(codes, sensor, sensor_info["electrons_per_unit"])
+                                     for codes in (left, right))
 
     from synth.provenance import package_versions
 
@@ -363,6 +409,7 @@ def main(args) -> int:
                                   eccentricity=args.eccentricity,
                                   self_calibrate=self_calibration,
                                   budget_rigs=_budget_rigs(args, inputs))
+    report["sensor"] = sensor_info
     report["rigs"]["source"] = (f"--calib {args.calib}" if args.calib else "the scene's rig") + (
         " with --assume" if args.assume else "")
     log("write the report, figures and point clouds …")
@@ -383,7 +430,9 @@ def main(args) -> int:
           f"{m['pairs']} matched ({m['correct']} correct, {m['wrong']} wrong), cross-check RMS "
           f"{_fmt(c['rms_px'], 4)} px, max {_fmt(c['max_px'], 4)} px (outline centroid: RMS "
           f"{_fmt(c['rms_px_outline'], 4)} px, max {_fmt(c['max_px_outline'], 4)} px); "
-          f"{report['variant']} {report['spp']} spp; total {report['timings_s']['total']:.1f} s",
+          f"{report['variant']} {report['spp']} spp"
+          f"{'; sensor ' + report['sensor']['model']['name'] if report.get('sensor') else ''}; "
+          f"total {report['timings_s']['total']:.1f} s",
           file=summary_stream)
     print(summary_table(report), file=summary_stream)
     print(f"wrote {out}", file=summary_stream)

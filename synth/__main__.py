@@ -81,6 +81,10 @@ def build_parser() -> argparse.ArgumentParser:
     _add_render_options(p)
     p = sub.add_parser("dataset", help="render and write a benchmark dataset, atomically")
     _add_render_options(p)
+    p.add_argument("--sensor", metavar="PRESET[,name=value…]",
+                   help="store the images as a camera sensor's raw codes (exposure, shot and "
+                        "read noise, dark level, gain, bit depth; seeded): preset imx174; "
+                        "overrides full_well_e, read_noise_e, bit_depth, dark_level_dn, exposure")
 
     p = sub.add_parser("boards", help="render stereo pairs of a calibration board at random poses")
     p.add_argument("scene", help="scene file whose cameras and port see the board")
@@ -220,8 +224,14 @@ def _cmd_render(args) -> int:
 def _cmd_dataset(args) -> int:
     from .dataset import write_dataset
 
+    from .sensor_model import SensorError, sensor_from_spec
+
+    try:
+        sensor = None if args.sensor is None else sensor_from_spec(args.sensor)
+    except SensorError as exc:
+        raise CLIError(f"--sensor {args.sensor}: {exc}") from None
     manifest = write_dataset(_spec(args), args.out, spp=args.spp, variant=args.variant,
-                             exr=args.exr, progress=not args.quiet)
+                             exr=args.exr, progress=not args.quiet, sensor=sensor)
     if manifest.get("skipped"):
         print(f"{args.out}: up to date (same scene, parameters and options); nothing to do")
         return 0

@@ -4,17 +4,20 @@ A dataset directory holds (units mm, reference frame = the left camera's, OpenCV
 
 * ``left.png``, ``right.png`` -- 16-bit single-channel **linear** images,
   ``png = round(linear * png_scale)`` with one ``png_scale`` for both views (manifest) such that
-  the brightest pixel is 65535; ``left_preview.png``, ``right_preview.png`` -- 8-bit sRGB;
+  the brightest pixel is 65535 — or, with a sensor (``--sensor``), the sensor's raw codes:
+  ``linear ≈ (png − png_offset) / png_scale`` with its noise (``manifest["sensor"]``);
+  ``left_preview.png``, ``right_preview.png`` -- 8-bit sRGB;
   ``left.exr``, ``right.exr`` -- float32 linear, on request;
 * ``calib.yaml`` -- OpenCV FileStorage: ``image_width``, ``image_height``, ``K1``, ``D1``,
   ``K2``, ``D2``, ``R``, ``T`` (OpenCV stereo convention ``X_right = R·X_left + T``), ``units``
   and a map ``port`` {``normal`` (3x1), ``distance``, ``thicknesses`` (sequence),
   ``indices`` (sequence), ``present`` (0 for an all-air scene, whose port is index-matched)};
-* ``targets.ply`` -- ground-truth target centres in target order (Open3D, ASCII);
+* ``targets.ply`` -- ground-truth target centres in target order (Open3D, binary doubles);
 * ``pixels.csv`` -- ``id,x,y,z,u_left,v_left,u_right,v_right``: the Fermat simulator's pixel of
   every target in each view (NaN where it has none; pixels outside the image are kept);
 * ``manifest.json`` -- versions, scene hash and parameters, variant, spp, seed, image
-  statistics, ``png_scale``, the time of every stage, and the request key.
+  statistics, ``png_scale``, ``png_offset`` (0 without a sensor), ``sensor``, the time of every
+  stage, and the request key.
 
 Writing is atomic: everything goes to a temporary sibling directory that is renamed at the end.
 A rerun with the same request (scene bytes, resolved parameters, spp, seed, variant request,
@@ -44,7 +47,7 @@ from .render import (pass_seed, png16_scale, render_stereo, srgb_preview, to_png
                      write_png)
 from .scene import SceneError, SceneSpec, load_scene
 
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2  # 2: targets.ply in binary doubles (was ASCII, 6 digits)
 PIXELS_HEADER = ["id", "x", "y", "z", "u_left", "v_left", "u_right", "v_right"]
 
 
@@ -177,11 +180,12 @@ def _read_calib(path) -> dict:
 # small writers
 # ---------------------------------------------------------------------------------------------
 def write_targets_ply(path, points: np.ndarray) -> None:
-    """Ground-truth centres ``(N, 3)`` mm as an ASCII PLY point cloud written by Open3D."""
+    """Ground-truth centres ``(N, 3)`` mm as a binary PLY point cloud written by Open3D (doubles:
+    exact; Open3D's ASCII PLY keeps 6 significant digits, 5e-4 mm at 1 m)."""
     import open3d as o3d
 
     cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(np.asarray(points, np.float64)))
-    if not o3d.io.write_point_cloud(str(path), cloud, write_ascii=True):
+    if not o3d.io.write_point_cloud(str(path), cloud, write_ascii=False):
         raise OSError(f"Open3D could not write {path}")
 
 
@@ -212,10 +216,12 @@ def _image_stats(image: np.ndarray) -> dict:
             "lit_fraction": float(np.mean(image > 0))}
 
 
-def request_key(spec: SceneSpec, spp: int, seed: int, variant: str | None, exr: bool) -> str:
+def request_key(spec: SceneSpec, spp: int, seed: int, variant: str | None, exr: bool,
+                sensor=None) -> str:
     """Hash of everything that determines a dataset's content."""
     blob = json.dumps({"format": FORMAT_VERSION, "scene": spec.sha256, "params": spec.params,
                        "spp": spp, "seed": seed, "variant": variant, "exr": bool(exr),
+                       "sensor": None if sensor is None else sensor.to_dict(),
                        "renderer": RENDERER}, sort_keys=True)
     return hashlib.sha256(blob.encode()).hexdigest()
 
@@ -225,8 +231,12 @@ def request_key(spec: SceneSpec, spp: int, seed: int, variant: str | None, exr: 
 # ---------------------------------------------------------------------------------------------
 def write_dataset(scene, out_dir, spp: int | None = None, defines: dict | None = None,
                   variant: str | None = None, exr: bool = False, progress: bool = True,
-                  seed: int | None = None) -> dict:
+                  seed: int | None = None, sensor=None) -> dict:
     """Render ``scene`` (a path or :class:`SceneSpec`) and write a dataset to ``out_dir``.
+
+    ``sensor`` (a :class:`synth.sensor_model.SensorModel`): the PNGs hold that sensor's raw
+    codes of the render (seeded by the scene's seed), ``png_offset`` its dark level and
+    ``png_scale`` its DN per unit of radiance; the EXRs (``exr``) stay noise-free.
 
     Returns the manifest (dict); ``manifest["skipped"]`` is True when ``out_dir`` already held
     the same request and nothing was done. ``out_dir`` follows the project's output rule
@@ -244,7 +254,7 @@ def write_dataset(scene, out_dir, spp: int | None = None, defines: dict | None =
                          f"identity rotation (the reference frame is the left camera's)")
     spp = spec.spp if spp is None else int(spp)
     seed = spec.seed if seed is None else int(seed)
-    key = request_key(spec, spp, seed, variant, exr)
+    key = request_key(spec, spp, seed, variant, exr, sensor)
 
     output = OutputDir(out_dir, "synth dataset")
     if output.exists_as_output():
@@ -267,11 +277,20 @@ def write_dataset(scene, out_dir, spp: int | None = None, defines: dict | None =
         times["load_mitsuba"] = info["seconds"]["load"]
 
         t = time.perf_counter()
-        scale = png16_scale(left, right)
         white = max(float(left.max()), float(right.max()))
+        if sensor is None:
+            scale, offset, sensor_info = png16_scale(left, right), 0.0, None
+            pngs = {"left": to_png16(left, scale), "right": to_png16(right, scale)}
+        else:
+            from .sensor_model import sensor_views
+
+            codes_left, codes_right, sensor_info = sensor_views(left, right, sensor, seed)
+            scale, offset = sensor_info["dn_per_unit"], sensor.dark_level_dn
+            pngs = {"left": codes_left, "right": codes_right}
         for name, img in (("left", left), ("right", right)):
-            write_png(os.path.join(tmp, f"{name}.png"), to_png16(img, scale))
-            write_png(os.path.join(tmp, f"{name}_preview.png"), srgb_preview(img, white))
+            write_png(os.path.join(tmp, f"{name}.png"), pngs[name])
+            seen = img if sensor is None else (pngs[name] - offset) / scale
+            write_png(os.path.join(tmp, f"{name}_preview.png"), srgb_preview(seen, white))
             if exr:
                 write_exr(os.path.join(tmp, f"{name}.exr"), img, info["variant"])
         times["write_images"] = time.perf_counter() - t
@@ -304,6 +323,8 @@ def write_dataset(scene, out_dir, spp: int | None = None, defines: dict | None =
                       for i, view in enumerate(("left", "right"))},
             "image_size": list(spec.size),
             "png_scale": scale,
+            "png_offset": offset,
+            "sensor": sensor_info,
             "images": {"left": _image_stats(left), "right": _image_stats(right)},
             "samples_per_second": info["samples_per_second"],
             "samples_per_second_per_view": info["samples_per_second_per_view"],
@@ -320,7 +341,8 @@ def write_dataset(scene, out_dir, spp: int | None = None, defines: dict | None =
 
 @dataclass(frozen=True)
 class Dataset:
-    """A dataset read back. Images are float32 linear (``png / png_scale``), ``(H, W)``.
+    """A dataset read back. Images are float32 linear (``(png − png_offset) / png_scale``),
+    ``(H, W)``.
 
     ``rig`` from ``calib.yaml`` (left camera at the reference origin); ``targets`` ``(N, 3)`` mm
     from ``targets.ply``; ``ids`` and the simulator's ``pixels_left`` / ``pixels_right``
@@ -380,8 +402,12 @@ def read_dataset(path) -> Dataset:
         raise DatasetError(f"{path}/manifest.json: no valid png_scale") from None
     if not (np.isfinite(scale) and scale > 0):
         raise DatasetError(f"{path}/manifest.json: png_scale must be positive, got {scale}")
-    left = _read_png16(os.path.join(path, "left.png")).astype(np.float32) / np.float32(scale)
-    right = _read_png16(os.path.join(path, "right.png")).astype(np.float32) / np.float32(scale)
+    try:
+        offset = float(manifest.get("png_offset", 0.0))
+    except (TypeError, ValueError):
+        raise DatasetError(f"{path}/manifest.json: png_offset must be a number") from None
+    left, right = ((_read_png16(os.path.join(path, f"{view}.png")).astype(np.float32)
+                    - np.float32(offset)) / np.float32(scale) for view in ("left", "right"))
     calib = read_calib(os.path.join(path, "calib.yaml"))
     for name, image in (("left.png", left), ("right.png", right)):
         if image.shape[::-1] != tuple(calib["size"]):

@@ -213,7 +213,8 @@ def pass_seed(seed: int, view: int, k: int) -> int:
 
 
 def _render_passes(mi, scene, sensor, spp: int, seed: int, view: int, film_pixels: int):
-    """The average of the passes of :func:`pass_plan`, weighted by the samples each took."""
+    """The average of the passes of :func:`pass_plan`, weighted by the samples each took, and
+    the samples per pixel taken in all (the sampler may round each pass up)."""
     total, weight = None, 0
     integrator = render_integrator(mi, scene)
     for k, pass_spp in enumerate(pass_plan(spp, film_pixels)):
@@ -222,7 +223,7 @@ def _render_passes(mi, scene, sensor, spp: int, seed: int, view: int, film_pixel
         taken = _sample_count(scene, sensor, pass_spp)
         total = image.astype(np.float64) * taken if total is None else total + image * taken
         weight += taken
-    return (total / weight).astype(np.float32)
+    return (total / weight).astype(np.float32), weight
 
 
 def _sample_count(scene, sensor, requested: int) -> int:
@@ -238,16 +239,22 @@ def render_view(scene, mi, index: int, camera: Camera, spp: int, seed: int,
                 oversample: int = DISTORTION_OVERSAMPLE) -> np.ndarray:
     """One view as a float32 ``(H, W)`` linear image, rendered in passes (:func:`pass_plan`);
     distortion by oversampled render + warp. ``seed`` is the scene seed."""
+    return render_view_counted(scene, mi, index, camera, spp, seed, oversample)[0]
+
+
+def render_view_counted(scene, mi, index: int, camera: Camera, spp: int, seed: int,
+                        oversample: int = DISTORTION_OVERSAMPLE):
+    """:func:`render_view` and the samples per pixel the sampler took in all its passes."""
     if camera.dist is None:
         w, h = camera.size
         return _render_passes(mi, scene, index, spp, seed, index, w * h)
     K, size, map_x, map_y = _ideal_camera_for(camera, oversample, DISTORTION_MARGIN_PX)
     sensor = _ideal_sensor(mi, scene.sensors()[index], camera, K, size)
-    ideal = _render_passes(mi, scene, sensor, spp, seed, index, size[0] * size[1])
+    ideal, taken = _render_passes(mi, scene, sensor, spp, seed, index, size[0] * size[1])
     if oversample > 1:
         ideal = cv2.blur(ideal, (oversample, oversample), borderType=cv2.BORDER_CONSTANT)
     return cv2.remap(ideal, map_x, map_y, interpolation=cv2.INTER_LINEAR,
-                     borderMode=cv2.BORDER_CONSTANT, borderValue=0.0)
+                     borderMode=cv2.BORDER_CONSTANT, borderValue=0.0), taken
 
 
 def render_stereo(scene, spp: int | None = None, variant: str | None = None,
@@ -275,20 +282,19 @@ def render_stereo(scene, spp: int | None = None, variant: str | None = None,
     bar = tqdm(names, desc=f"render {chosen} {spp} spp", unit="view", disable=not progress,
                leave=False)
     film_pixels = {name: int(np.prod(_render_size(c))) for name, c in zip(names, spec.cameras)}
-    speeds = {}
+    speeds, taken = {}, {}
     for i, (name, camera) in enumerate(zip(bar, spec.cameras)):
         t = time.perf_counter()
-        images.append(render_view(mscene, mi, i, camera, spp, seed))
+        image, taken[name] = render_view_counted(mscene, mi, i, camera, spp, seed)
+        images.append(image)
         seconds[name] = time.perf_counter() - t
-        speeds[name] = film_pixels[name] * spp / seconds[name]
+        speeds[name] = film_pixels[name] * taken[name] / seconds[name]
         bar.set_postfix_str(f"{name} {speeds[name] / 1e6:.1f} M samples/s")
     bar.close()
-    try:  # samplers may round spp (multijitter: to a product of two near-equal integers)
-        spp_rendered = int(mscene.sensors()[0].sampler().sample_count())
-    except (AttributeError, RuntimeError, TypeError):
-        spp_rendered = spp
+    # Samplers may round each pass up (multijitter: to a product of two near-equal integers).
+    spp_rendered = int(taken["left"])
+    samples = sum(film_pixels[name] * taken[name] for name in names)
     w, h = spec.size
-    samples = 2 * w * h * spp_rendered
     render_seconds = seconds["left"] + seconds["right"]
     plans = {name: pass_plan(spp, film_pixels[name]) for name in names}
     info = {"variant": chosen, "integrator": integrator_name(mi, mscene), "spp": spp,

@@ -170,3 +170,14 @@ def test_cli_dataset_and_check(small_scene, tmp_path, capsys):
     code = main(["check", str(out)])
     text = capsys.readouterr().out
     assert code in (0, 1) and "left :" in text and "right:" in text
+
+
+def test_targets_ply_keeps_every_bit(tmp_path):
+    """The truth is stored exactly (Open3D's ASCII PLY would keep 6 significant digits)."""
+    from synth.dataset import write_targets_ply
+
+    points = np.random.default_rng(3).uniform(-700, 2000, (50, 3))
+    write_targets_ply(tmp_path / "t.ply", points)
+    import open3d as o3d
+    assert np.array_equal(np.asarray(o3d.io.read_point_cloud(str(tmp_path / "t.ply")).points),
+                          points)

@@ -1,0 +1,244 @@
+"""``python -m eval score DATASET``: score anyone's reconstruction against a rendered dataset.
+
+Users render a dataset (``python -m synth dataset``), run their own pipeline on its images and
+hand back either
+
+* ``--points THEIRS.ply`` — their 3D points (any point cloud Open3D reads; millimetres, the
+  dataset's reference frame: the left camera's, OpenCV axes), or
+* ``--pixels THEIRS.csv`` — matched pixel pairs (columns ``u_left, v_left, u_right, v_right``,
+  OpenCV pixel convention), triangulated here with ``--method`` and the dataset's
+  ``calib.yaml``,
+
+and get the same metrics as ``eval run``: each point is associated with the nearest true target
+within ``--gate-mm`` (default: half the smallest distance between two targets, so that the
+nearest target is the right one; one point per target, the nearest wins; the others count as
+``unassociated``), dX, dY, dZ, dP over the associated points, Open3D's cloud distances of all
+points against the targets visible in both views, the rigid alignment, and the flatness (seeded
+with the dataset's seed). ``eval score`` on an ``eval run --from DATASET`` output's own
+``points_<method>.ply`` reproduces that run's numbers.
+
+Writes to ``--out``: ``report.json``, ``report.md``, ``error_maps.png``, ``histograms.png`` and
+``points_scored.ply`` (the associated points coloured by dP).
+"""
+
+from __future__ import annotations
+
+import csv
+import os
+import sys
+import time
+
+import numpy as np
+
+from eval.cli import CLIError, positive_float
+
+COMMAND = "eval score"
+PIXEL_COLUMNS = ("u_left", "v_left", "u_right", "v_right")
+
+
+def add_parser(subparsers):
+    from measure.triangulate import METHODS
+
+    p = subparsers.add_parser(
+        "score", help="score an external reconstruction against a rendered dataset",
+        description="Score your own pipeline's points (or matched pixel pairs) against the "
+                    "truth of a python -m synth dataset, with eval run's metrics.")
+    p.add_argument("dataset", help="dataset folder (python -m synth dataset)")
+    source = p.add_mutually_exclusive_group(required=True)
+    source.add_argument("--points", metavar="THEIRS.ply",
+                        help="your 3D points, mm, in the dataset's reference frame")
+    source.add_argument("--pixels", metavar="THEIRS.csv",
+                        help="your matched pixel pairs: CSV with columns "
+                             + ", ".join(PIXEL_COLUMNS))
+    p.add_argument("--method", default="optical_path", choices=METHODS[:3],
+                   help="triangulation of --pixels (default optical_path)")
+    p.add_argument("--gate-mm", type=positive_float, default=None,
+                   help="largest distance of a point from its target, mm (default: half the "
+                        "smallest distance between two targets, where the nearest target is "
+                        "unambiguous)")
+    p.add_argument("--out", default=os.path.join("out", "score"), help="output directory")
+    p.add_argument("--json", action="store_true", help="also print report.json to stdout")
+
+
+def read_points(path) -> np.ndarray:
+    """``(N, 3)`` float64 points of a point-cloud file; CLIError when unreadable, empty or not
+    finite."""
+    import open3d as o3d
+
+    if not os.path.isfile(path):
+        raise CLIError(f"--points {path}: no such file")
+    if str(path).lower().endswith(".ply"):
+        with open(path, "rb") as fh:
+            if fh.read(3) != b"ply":  # Open3D's PLY reader would print its own complaint
+                raise CLIError(f"--points {path}: not a PLY file (it does not start with 'ply')")
+    with o3d.utility.VerbosityContextManager(o3d.utility.VerbosityLevel.Error):
+        cloud = o3d.io.read_point_cloud(os.fspath(path))
+    points = np.asarray(cloud.points, dtype=np.float64).reshape(-1, 3)
+    if points.shape[0] == 0:
+        raise CLIError(f"--points {path}: no points (not a point cloud Open3D can read, or empty)")
+    bad = ~np.all(np.isfinite(points), axis=1)
+    if bad.any():
+        raise CLIError(f"--points {path}: {int(bad.sum())} of {len(points)} points have NaN or "
+                       f"infinite coordinates (row {int(np.flatnonzero(bad)[0])} first)")
+    return points
+
+
+def read_pixel_pairs(path) -> np.ndarray:
+    """``(N, 4)`` ``u_left, v_left, u_right, v_right`` from a CSV with those columns (others
+    ignored); CLIError naming what is wrong."""
+    if not os.path.isfile(path):
+        raise CLIError(f"--pixels {path}: no such file")
+    with open(path, newline="") as fh:
+        reader = csv.DictReader(fh)
+        missing = [c for c in PIXEL_COLUMNS if c not in (reader.fieldnames or [])]
+        if missing:
+            raise CLIError(f"--pixels {path}: missing column(s) {', '.join(missing)} (needs "
+                           f"{', '.join(PIXEL_COLUMNS)})")
+        rows = []
+        for line, row in enumerate(reader, start=2):
+            try:
+                values = [float(row[c]) for c in PIXEL_COLUMNS]
+            except (TypeError, ValueError):
+                raise CLIError(f"--pixels {path}: line {line}: not a number in "
+                               f"{', '.join(PIXEL_COLUMNS)}") from None
+            if not np.all(np.isfinite(values)):
+                raise CLIError(f"--pixels {path}: line {line}: NaN or infinite pixel")
+            rows.append(values)
+    if not rows:
+        raise CLIError(f"--pixels {path}: no pixel pairs")
+    return np.asarray(rows, dtype=np.float64)
+
+
+def associate_points(points: np.ndarray, truth: np.ndarray, gate_mm: float) -> np.ndarray:
+    """Index of each point's true target ``(N,)``, −1 where none: the nearest target within
+    ``gate_mm``; when several points claim one target, the nearest keeps it."""
+    from scipy.spatial import cKDTree
+
+    distance, index = cKDTree(truth).query(points, distance_upper_bound=gate_mm)
+    order = np.argsort(distance, kind="stable")  # nearest first; misses (inf) last
+    order = order[np.isfinite(distance[order])]
+    winners = order[np.unique(index[order], return_index=True)[1]]
+    result = np.full(len(points), -1)
+    result[winners] = index[winners]
+    return result
+
+
+def default_gate_mm(truth: np.ndarray) -> float:
+    """Half the smallest distance between two of the targets ``truth`` ``(M, 3)`` (mm): a point
+    closer than that to a target is closer to it than to any other."""
+    from scipy.spatial import cKDTree
+
+    if len(truth) < 2:
+        return float("inf")
+    return float(cKDTree(truth).query(truth, k=2)[0][:, 1].min() / 2)
+
+
+def score_points(points: np.ndarray, truth: np.ndarray, visible_both: np.ndarray, gate_mm: float,
+                 seed: int):
+    """``(scores, per_method_arrays, association)`` of ``points`` against the true targets
+    ``truth`` ``(M, 3)``; Chamfer and F-scores against ``truth[visible_both]``."""
+    from .cloud_metrics import cloud_distances, flatness, rigid_alignment
+    from .results import ErrorStats
+    from .run_pipeline import MethodScores
+
+    target = associate_points(points, truth, gate_mm)
+    ok = target >= 0
+    errors = points[ok] - truth[target[ok]]
+    scores = MethodScores(errors=ErrorStats.of(errors),
+                          cloud=cloud_distances(points, truth[visible_both]),
+                          alignment=rigid_alignment(points[ok], truth[target[ok]]),
+                          flatness=flatness(points, seed=seed), invalid=0)
+    arrays = {"points": points[ok], "truth": truth[target[ok]], "errors": errors,
+              "all_points": points}
+    association = {"points": int(len(points)), "associated": int(ok.sum()),
+                   "unassociated": int((~ok).sum()), "gate_mm": gate_mm,
+                   "visible_in_both": int(visible_both.sum()),
+                   "visible_in_both_scored": int(np.isin(np.flatnonzero(visible_both),
+                                                         target[ok]).sum())}
+    return scores, arrays, association
+
+
+def main(args) -> int:
+    from measure import triangulate
+    from synth.dataset import DatasetError, read_dataset
+    from synth.fileio import OutputDir, atomic_write_json, atomic_write_text, jsonable
+
+    from .run import _fmt, write_error_ply
+    from .run_figures import error_maps_figure, histograms_figure
+    from .run_pipeline import visible_targets
+
+    log = lambda text: print(text, file=sys.stderr, flush=True)  # noqa: E731
+    start = time.perf_counter()
+    output = OutputDir(args.out, COMMAND).claim()
+    try:
+        data = read_dataset(args.dataset)
+    except DatasetError as exc:
+        raise CLIError(str(exc)) from None
+    if args.points:
+        points = read_points(args.points)
+        label, source = "theirs", {"points": os.path.abspath(args.points)}
+    else:
+        pairs = read_pixel_pairs(args.pixels)
+        result = triangulate(data.rig, pairs[:, :2], pairs[:, 2:], args.method)
+        if not result.valid.any():
+            raise CLIError(f"--pixels {args.pixels}: no pair triangulates with {args.method} "
+                           f"and the dataset's calibration")
+        points = result.points[result.valid]
+        label = args.method
+        source = {"pixels": os.path.abspath(args.pixels), "method": args.method,
+                  "pairs": int(len(pairs)), "invalid": int((~result.valid).sum())}
+    radius = float(data.manifest["scene"].get("target_radius_mm", 0.0))
+    inside = [visible_targets(camera, data.rig.port, data.targets, radius)[1]
+              for camera in (data.rig.left, data.rig.right)]
+    visible_both = inside[0] & inside[1]
+    seed = int(data.manifest.get("seed", 0))
+    gate = default_gate_mm(data.targets) if args.gate_mm is None else args.gate_mm
+    scores, arrays, association = score_points(points, data.targets, visible_both, gate, seed)
+    report = {"dataset": os.path.abspath(data.path), "source": source, "seed": seed,
+              "targets": int(len(data.targets)), "association": association,
+              "methods": {label: scores.to_json()}}
+    with output.staged() as tmp:
+        report["ply"] = write_error_ply(tmp, "points_scored.ply", arrays["points"],
+                                        arrays["errors"])
+        error_maps_figure(os.path.join(tmp, "error_maps.png"), {label: arrays})
+        histograms_figure(os.path.join(tmp, "histograms.png"), {label: arrays})
+        report["timings_s"] = {"total": time.perf_counter() - start}
+        report = jsonable(report)
+        atomic_write_json(os.path.join(tmp, "report.json"), report)
+        atomic_write_text(os.path.join(tmp, "report.md"), markdown(report))
+    st = report["methods"][label]
+    a = report["association"]
+    summary = (f"{data.path}: {a['associated']} of {a['points']} points within "
+               f"{a['gate_mm']:g} mm of a target ({a['unassociated']} not); "
+               f"{a['visible_in_both_scored']} of {a['visible_in_both']} targets visible in both "
+               f"views scored; RMS dP {_fmt(st['rms_dp_mm'])} mm, max dP "
+               f"{_fmt(st['max_dp_mm'])} mm, mean dZ {_fmt(st['mean_dz_mm'])} mm, Chamfer "
+               f"{_fmt(st['chamfer_mm'])} mm, F@1mm {_fmt(st['fscore_1mm'])}")
+    if args.json:
+        import json
+
+        log(summary)
+        print(json.dumps(report, indent=2, allow_nan=False))
+    else:
+        print(summary)
+    print(f"wrote {output.path}", file=sys.stderr if args.json else sys.stdout)
+    return 0
+
+
+def markdown(report: dict) -> str:
+    """``report.md``: the association and one table of the metrics."""
+    from .run import _fmt
+
+    a = report["association"]
+    label, st = next(iter(report["methods"].items()))
+    keys = ["n", "rms_dp_mm", "max_dp_mm", "mean_dx_mm", "mean_dy_mm", "mean_dz_mm",
+            "chamfer_mm", "fscore_1mm", "fscore_5mm", "rms_dp_aligned_mm", "flatness_mm"]
+    lines = [f"# Score of {label} against {report['dataset']}", "",
+             f"{a['associated']} of {a['points']} points associated with a target within "
+             f"{a['gate_mm']:g} mm ({a['unassociated']} not); {a['visible_in_both_scored']} of "
+             f"{a['visible_in_both']} targets visible in both views scored. Errors over the "
+             f"associated points (mm); Chamfer and F-scores of all points against the targets "
+             f"visible in both views.", "",
+             "| " + " | ".join(keys) + " |", "|" + "---|" * len(keys),
+             "| " + " | ".join(str(st[k]) if k == "n" else _fmt(st[k]) for k in keys) + " |"]
+    return "\n".join(lines) + "\n"

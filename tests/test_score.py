@@ -1,0 +1,109 @@
+"""python -m eval score: an external reconstruction scored against a rendered dataset."""
+
+from __future__ import annotations
+
+import csv
+import json
+
+import numpy as np
+import open3d as o3d
+import pytest
+
+from eval.cli import main
+from eval.score import associate_points, default_gate_mm
+from synth.dataset import write_dataset
+
+SPP = 16
+
+
+@pytest.fixture(scope="module")
+def scored_run(small_scene, tmp_path_factory):
+    root = tmp_path_factory.mktemp("score")
+    data, run = root / "data", root / "run"
+    write_dataset(small_scene, data, spp=SPP, progress=False)
+    assert main(["run", small_scene, "--from", str(data), "--out", str(run),
+                 "--no-progress"]) == 0
+    return data, run, json.loads((run / "report.json").read_text())
+
+
+@pytest.mark.parametrize("method, gate", [("optical_path", []), ("su", ["--gate-mm", "40"])])
+def test_scoring_a_runs_own_points_reproduces_its_numbers(scored_run, tmp_path, method, gate):
+    """Su's errors (up to ~5 mm here) exceed the default gate (half the 80 mm spacing is
+    40 mm; the default is that, computed from the truth) only if told otherwise."""
+    data, run, report = scored_run
+    assert report["matching"]["wrong"] == 0
+    out = tmp_path / "score"
+    assert main(["score", str(data), "--points", str(run / f"points_{method}.ply"),
+                 "--out", str(out)] + gate) == 0
+    scored = json.loads((out / "report.json").read_text())
+    theirs = scored["methods"]["theirs"]
+    ours = report["methods"][method]
+    assert set(ours) == set(theirs)
+    for key, value in ours.items():
+        assert theirs[key] == value, key
+    assert scored["association"]["unassociated"] == 0
+    assert (scored["association"]["visible_in_both_scored"]
+            == report["matching"]["visible_in_both_matched"])
+    for name in ("report.md", "error_maps.png", "histograms.png", "points_scored.ply"):
+        assert (out / name).stat().st_size > 200
+
+
+def test_matched_pixels_are_triangulated_with_the_datasets_calibration(scored_run, tmp_path):
+    data, _, _ = scored_run
+    rows = list(csv.DictReader(open(data / "pixels.csv")))
+    pairs = tmp_path / "pairs.csv"
+    with open(pairs, "w", newline="") as fh:
+        writer = csv.writer(fh)
+        writer.writerow(["u_left", "v_left", "u_right", "v_right", "note"])
+        for row in rows:  # the simulator's exact pixels of every target
+            writer.writerow([row["u_left"], row["v_left"], row["u_right"], row["v_right"], "x"])
+    out = tmp_path / "score"
+    assert main(["score", str(data), "--pixels", str(pairs), "--out", str(out)]) == 0
+    scored = json.loads((out / "report.json").read_text())
+    st = scored["methods"]["optical_path"]
+    assert st["n"] == len(rows) and scored["association"]["unassociated"] == 0
+    # Exact pixels through the exact model: round-off only.
+    assert st["rms_dp_mm"] < 1e-8
+
+
+def test_association_is_one_to_one_and_gated():
+    truth = np.array([[0.0, 0, 1000], [40, 0, 1000], [80, 0, 1000]])
+    points = np.array([[0.3, 0, 1000], [0.1, 0, 1000], [41, 0, 1000], [60, 0, 1000]])
+    assert associate_points(points, truth, 5.0).tolist() == [-1, 0, 1, -1]
+    assert associate_points(np.zeros((0, 3)), truth, 5.0).tolist() == []
+    assert default_gate_mm(truth) == 20.0
+
+
+def _fails(capsys, args, fragment):
+    assert main(args) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("error:") and fragment in err[0], err
+
+
+def test_bad_input_exits_2_and_writes_nothing(scored_run, tmp_path, capsys):
+    data, _, _ = scored_run
+    out = tmp_path / "out"
+    empty = tmp_path / "empty.ply"
+    empty.write_text("ply\nformat ascii 1.0\nelement vertex 0\nproperty double x\n"
+                     "property double y\nproperty double z\nend_header\n")
+    garbage = tmp_path / "garbage.ply"
+    garbage.write_text("not a point cloud\n")
+    nan = tmp_path / "nan.ply"
+    o3d.io.write_point_cloud(str(nan), o3d.geometry.PointCloud(
+        o3d.utility.Vector3dVector(np.array([[0.0, 0, 1000], [np.nan, 0, 1000]]))))
+    short = tmp_path / "short.csv"
+    short.write_text("u_left,v_left,u_right\n1,2,3\n")
+    text = tmp_path / "text.csv"
+    text.write_text("u_left,v_left,u_right,v_right\n1,2,three,4\n")
+    _fails(capsys, ["score", str(data), "--points", str(empty), "--out", str(out)], "no points")
+    _fails(capsys, ["score", str(data), "--points", str(garbage), "--out", str(out)],
+           "not a PLY file")
+    _fails(capsys, ["score", str(data), "--points", str(nan), "--out", str(out)], "NaN")
+    _fails(capsys, ["score", str(data), "--points", str(tmp_path / "none.ply"), "--out",
+                    str(out)], "no such file")
+    _fails(capsys, ["score", str(data), "--pixels", str(short), "--out", str(out)],
+           "missing column(s) v_right")
+    _fails(capsys, ["score", str(data), "--pixels", str(text), "--out", str(out)], "line 2")
+    _fails(capsys, ["score", str(tmp_path), "--points", str(nan), "--out", str(out)],
+           "manifest.json")
+    assert not out.exists()
