@@ -107,6 +107,13 @@ def write_colored_ply(path: str, points: np.ndarray, values: np.ndarray, vmax: f
     """Write points coloured by ``values`` on ``colormap`` over [0, vmax] (clipped) as PLY."""
     from matplotlib import colormaps
 
+    if len(points) == 0:  # Open3D refuses to write an empty cloud; an empty PLY is still valid
+        with open(path, "w") as fh:
+            fh.write("ply\nformat ascii 1.0\ncomment no points\nelement vertex 0\n"
+                     "property double x\nproperty double y\nproperty double z\n"
+                     "property uchar red\nproperty uchar green\nproperty uchar blue\n"
+                     "end_header\n")
+        return
     fraction = np.clip(np.asarray(values, dtype=float) / vmax if vmax > 0 else 0.0, 0.0, 1.0)
     colors = colormaps[colormap](fraction)[:, :3]
     if not o3d.io.write_point_cloud(str(path), point_cloud(points, colors), write_ascii=False):

@@ -26,6 +26,8 @@ from .refraction import trace_through_port
 from .triangulate import StereoRig
 
 _NO_PAIR = 1e12  # cost of an impossible pair in the assignment
+#: Candidate pairs evaluated at once (memory: about 200 bytes each).
+PAIRS_PER_CHUNK = 1 << 20
 
 
 @dataclass(frozen=True)
@@ -61,22 +63,43 @@ def pair_gaps(rig: StereoRig, uv_left, uv_right, depth_range=(None, None)):
     """
     uv_left = np.asarray(uv_left, dtype=float).reshape(-1, 2)
     uv_right = np.asarray(uv_right, dtype=float).reshape(-1, 2)
+    gaps = np.full((len(uv_left), len(uv_right)), np.inf)
+    i, j, gap = candidate_pairs(rig, uv_left, uv_right, np.inf, depth_range)
+    gaps[i, j] = gap
+    return gaps
+
+
+def candidate_pairs(rig: StereoRig, uv_left, uv_right, gate_mm: float,
+                    depth_range=(None, None)):
+    """``(i, j, gap)``: the pairs (left row i, right row j) whose gap (mm) is at most
+    ``gate_mm`` and that are possible (:func:`pair_gaps`), computed in chunks of
+    :data:`PAIRS_PER_CHUNK` pairs, so that memory stays bounded by the pairs kept."""
+    uv_left = np.asarray(uv_left, dtype=float).reshape(-1, 2)
+    uv_right = np.asarray(uv_right, dtype=float).reshape(-1, 2)
     o1, d1, ok1 = _water_rays(rig.left, rig.port, uv_left)
     o2, d2, ok2 = _water_rays(rig.right, rig.port, uv_right)
     n_left, n_right = len(uv_left), len(uv_right)
-    i, j = np.meshgrid(np.arange(n_left), np.arange(n_right), indexing="ij")
-    i, j = i.ravel(), j.ravel()
-    with np.errstate(invalid="ignore", divide="ignore"):
-        perp = common_perpendicular(o1[i], d1[i], o2[j], d2[j])
-        depth = perp.midpoint @ rig.port.normal
-        possible = ok1[i] & ok2[j] & (perp.s1 > 0) & (perp.s2 > 0)
-        near, far = depth_range
-        if near is not None:
-            possible &= depth >= near
-        if far is not None:
-            possible &= depth <= far
-    gaps = np.where(possible, perp.length, np.inf)
-    return gaps.reshape(n_left, n_right)
+    rows_per_chunk = max(1, PAIRS_PER_CHUNK // max(1, n_right))
+    found_i, found_j, found_gap = [], [], []
+    near, far = depth_range
+    for start in range(0, n_left, rows_per_chunk):
+        i, j = np.meshgrid(np.arange(start, min(n_left, start + rows_per_chunk)),
+                           np.arange(n_right), indexing="ij")
+        i, j = i.ravel(), j.ravel()
+        with np.errstate(invalid="ignore", divide="ignore"):
+            perp = common_perpendicular(o1[i], d1[i], o2[j], d2[j])
+            depth = perp.midpoint @ rig.port.normal
+            keep = ok1[i] & ok2[j] & (perp.s1 > 0) & (perp.s2 > 0) & (perp.length <= gate_mm)
+            if near is not None:
+                keep &= depth >= near
+            if far is not None:
+                keep &= depth <= far
+        found_i.append(i[keep])
+        found_j.append(j[keep])
+        found_gap.append(perp.length[keep])
+    if not found_i:
+        return np.zeros(0, int), np.zeros(0, int), np.zeros(0)
+    return np.concatenate(found_i), np.concatenate(found_j), np.concatenate(found_gap)
 
 
 def _assign(cost: np.ndarray, candidate: np.ndarray):
@@ -107,18 +130,23 @@ def match_targets(rig: StereoRig, uv_left, uv_right, gate_mm: float = 0.5,
     margin = 0.5 * gate_mm if ambiguity_margin_mm is None else float(ambiguity_margin_mm)
     if not margin >= 0:
         raise ValueError(f"ambiguity_margin_mm must be >= 0, got {ambiguity_margin_mm}")
-    gaps = pair_gaps(rig, uv_left, uv_right, depth_range)
-    n_left, n_right = gaps.shape
-    candidate = gaps <= gate_mm
-    graph = coo_matrix(np.block([[np.zeros((n_left, n_left)), candidate],
-                                 [candidate.T, np.zeros((n_right, n_right))]]))
+    n_left = len(np.asarray(uv_left).reshape(-1, 2))
+    n_right = len(np.asarray(uv_right).reshape(-1, 2))
+    pair_i, pair_j, pair_gap = candidate_pairs(rig, uv_left, uv_right, gate_mm, depth_range)
+    graph = coo_matrix((np.ones(len(pair_i)), (pair_i, n_left + pair_j)),
+                       shape=(n_left + n_right, n_left + n_right))
     _, component = connected_components(graph, directed=False)
-    keep_rows, keep_cols, n_ambiguous = [], [], 0
-    for label in np.unique(component[:n_left][candidate.any(axis=1)]):
-        rows_in = np.flatnonzero(component[:n_left] == label)
-        cols_in = np.flatnonzero(component[n_left:] == label)
-        sub_gaps = gaps[np.ix_(rows_in, cols_in)]
-        sub_candidate = candidate[np.ix_(rows_in, cols_in)]
+    keep_rows, keep_cols, kept_gaps, n_ambiguous = [], [], [], 0
+    pair_label = component[pair_i]
+    order_by_label = np.argsort(pair_label, kind="stable")
+    labels, starts = np.unique(pair_label[order_by_label], return_index=True)
+    for label, members in zip(labels, np.split(order_by_label, starts[1:])):
+        rows_in = np.unique(pair_i[members])
+        cols_in = np.unique(pair_j[members])
+        sub_gaps = np.full((len(rows_in), len(cols_in)), np.inf)
+        sub_gaps[np.searchsorted(rows_in, pair_i[members]),
+                 np.searchsorted(cols_in, pair_j[members])] = pair_gap[members]
+        sub_candidate = np.isfinite(sub_gaps)
         rows, cols, total = _assign(sub_gaps, sub_candidate)
         for r, c in zip(rows, cols):
             clear = True
@@ -130,12 +158,13 @@ def match_targets(rig: StereoRig, uv_left, uv_right, gate_mm: float = 0.5,
             if clear:
                 keep_rows.append(rows_in[r])
                 keep_cols.append(cols_in[c])
+                kept_gaps.append(sub_gaps[r, c])
             else:
                 n_ambiguous += 1
     keep_rows = np.asarray(keep_rows, dtype=int)
     keep_cols = np.asarray(keep_cols, dtype=int)
     order = np.argsort(keep_rows)
     keep_rows, keep_cols = keep_rows[order], keep_cols[order]
-    return Matches(keep_rows, keep_cols, gaps[keep_rows, keep_cols], int(candidate.sum()),
+    return Matches(keep_rows, keep_cols, np.asarray(kept_gaps, float)[order], int(len(pair_i)),
                    n_ambiguous, np.setdiff1d(np.arange(n_left), keep_rows),
                    np.setdiff1d(np.arange(n_right), keep_cols))

@@ -76,6 +76,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--target-radius", type=positive_float, help="target disk radius, mm (default 2.5)")
     p.add_argument("--spp", type=positive_int, help="default samples per pixel written into the scene")
     p.add_argument("--seed", type=non_negative_int, default=0, help="default sampler seed of the scene")
+    p.add_argument("--water", choices=("clear", "clear_ocean", "coastal", "turbid_harbor"),
+                   default="clear", help="water that absorbs and scatters (Petzold's "
+                                         "measurements; default clear: no medium)")
 
     p = sub.add_parser("render", help="render both views to 16-bit linear PNGs (+ previews)")
     _add_render_options(p)
@@ -183,8 +186,16 @@ def _cmd_scene(args) -> int:
                + (f" tilted {args.port_tilt[0]:g} deg about x, {args.port_tilt[1]:g} deg about y"
                   if port is not None and any(args.port_tilt) else "")
                + f", target radius {radius:g} mm")
+    from .water import PRESETS as WATERS
+
+    water = WATERS.get(args.water)
+    if water is not None and port is None:
+        raise CLIError(f"--water {args.water} needs a port (--port paper): the water is behind it")
+    if water is not None:
+        comment += f", water {args.water}"
     write_scene(args.out, (left, right), port, targets, radius,
-                spp=args.spp if args.spp else DEFAULT_SPP, seed=args.seed, comment=comment)
+                spp=args.spp if args.spp else DEFAULT_SPP, seed=args.seed, comment=comment,
+                water=water)
     print(f"wrote {args.out}: {targets.shape[0]} targets of radius {radius:g} mm, "
           f"{'port' if port else 'no port'}, {size[0]}x{size[1]} px")
     return 0

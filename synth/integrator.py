@@ -17,6 +17,12 @@ this project (emitting targets, dielectric interfaces, black backs: emitter samp
 contribute through delta BSDFs). Scene files keep ``<integrator type="path">`` so that they
 load in any Mitsuba; :mod:`synth.render` substitutes this integrator with the same
 ``max_depth``.
+
+Scenes with water that absorbs and scatters (``<integrator type="volpath">`` and a homogeneous
+medium behind the port, :mod:`synth.water`) get ``refracted_volpath``: the same ray starts, and
+free-flight sampling through Mitsuba's medium, next-event estimation towards the emitters and
+Henyey–Greenstein (phase function) sampling at scattering events, Russian roulette after
+:data:`RR_DEPTH` events.
 """
 
 from __future__ import annotations
@@ -25,9 +31,14 @@ import re
 
 #: Name under which the integrator is registered with Mitsuba.
 PLUGIN_NAME = "refracted_path"
+#: The same through participating media (in place of Mitsuba's ``volpath``).
+VOLUME_PLUGIN_NAME = "refracted_volpath"
 #: Renderer revision in the request keys of datasets and boards folders: outputs rendered before
 #: this integrator existed are not taken for current ones.
 RENDERER = PLUGIN_NAME
+#: Events after which ``refracted_volpath`` plays Russian roulette, and its largest survival
+#: probability (Mitsuba's ``volpath``: 5 and 0.95).
+RR_DEPTH, RR_MAX_Q = 5, 0.95
 #: Smallest ``|cos θ|`` the clearance is divided by (grazing rays start at most 10 clearances
 #: along their direction).
 MIN_COS = 0.1
@@ -88,24 +99,140 @@ def register(mitsuba) -> None:
         def to_string(self):
             return f"RefractedPathIntegrator[max_depth={self.max_depth}]"
 
+    class RefractedVolpathIntegrator(mi.SamplingIntegrator):
+        """:class:`RefractedPathIntegrator` through participating media: Mitsuba's ``volpath``
+        with free-flight distances from the medium, next-event estimation (one emitter sample,
+        homogeneous transmittance, a shadow ray) and phase function sampling at each scattering
+        event, BSDF sampling at surfaces, and every surface ray started on its direction.
+        The two estimates of an emitter seen from a scattering event are combined with the
+        balance heuristic (MIS), as ``volpath`` does. ``max_depth`` counts surface and medium
+        events."""
+
+        def __init__(self, props):
+            super().__init__(props)
+            depth = props.get("max_depth", 64)
+            self.max_depth = (1 << 31) - 1 if depth < 0 else int(depth)
+
+        @dr.syntax
+        def sample(self, scene, sampler, ray, medium=None, active=True):
+            ctx = mi.BSDFContext()
+            phase_ctx = mi.PhaseFunctionContext(sampler)
+            ray = mi.Ray3f(ray)
+            medium = mi.MediumPtr(medium)
+            radiance = mi.Spectrum(0.0)
+            throughput = mi.Spectrum(1.0)
+            depth = mi.UInt32(0)
+            active = mi.Bool(active)
+            channel = mi.UInt32(0)  # the project's media are grey
+            after_scatter = mi.Bool(False)  # the ray left a medium scattering event
+            scatter_p = mi.Point3f(0.0)  # ... at this point,
+            scatter_pdf = mi.Float(0.0)  # ... in a direction of this phase-function pdf
+            while dr.hint(active, max_iterations=self.max_depth, label="refracted_volpath"):
+                in_medium = active & (medium != None)  # noqa: E711 (a pointer array)
+                mei = medium.sample_interaction(ray, sampler.next_1d(in_medium), channel,
+                                                in_medium)
+                ray.maxt = dr.select(in_medium & mei.is_valid(), mei.t, ray.maxt)
+                si = scene.ray_intersect(ray, ray_flags=mi.RayFlags.All, coherent=depth == 0,
+                                         active=active)
+                mei.t = dr.select(in_medium & (si.t < mei.t), dr.inf, mei.t)
+                transmittance, free_flight_pdf = medium.transmittance_eval_pdf(mei, si,
+                                                                               in_medium)
+                pdf = free_flight_pdf[0]
+                throughput = dr.select(in_medium, throughput * dr.select(
+                    pdf > 0, transmittance / pdf, 0.0), throughput)
+                scatter = in_medium & mei.is_valid()
+                on_surface = active & ~scatter
+                # a scattering event in the medium
+                # (the free-flight weight above is transmittance / pdf = 1 / σt here)
+                throughput = dr.select(scatter, throughput * mei.sigma_s
+                                       * mei.combined_extinction[0] / mei.sigma_t[0], throughput)
+                phase = mei.medium.phase_function()
+                wo, phase_weight, _ = phase.sample(phase_ctx, mei, sampler.next_1d(scatter),
+                                                   sampler.next_2d(scatter), scatter)
+                # next-event estimation from the scattering event: one emitter point, its
+                # transmittance through the (homogeneous) medium, unless something is between
+                ds, emitter_weight = scene.sample_emitter_direction(
+                    mei, sampler.next_2d(scatter), False, scatter)
+                phase_value, phase_pdf = phase.eval_pdf(phase_ctx, mei, ds.d, scatter)
+                shadow = mi.Ray3f(mei.p, ds.d, ds.dist * (1.0 - mi.math.ShadowEpsilon), si.time,
+                                  si.wavelengths)
+                visible = scatter & (ds.pdf > 0) & ~scene.ray_test(shadow, scatter)
+                radiance += dr.select(visible, throughput * phase_value * emitter_weight
+                                      * dr.exp(-mei.sigma_t * ds.dist)
+                                      * _balance(ds.pdf, phase_pdf), 0.0)
+                throughput = dr.select(scatter, throughput * phase_weight, throughput)
+                scattered_ray = mi.Ray3f(mei.p, wo, si.time, si.wavelengths)
+                # a surface: its emission — after a medium event weighted against the
+                # next-event estimate of the same light (balance heuristic) — then a BSDF sample
+                reference = dr.zeros(mi.Interaction3f)
+                reference.p = scatter_p
+                emitter_pdf = scene.pdf_emitter_direction(
+                    reference, mi.DirectionSample3f(scene, si, reference),
+                    on_surface & after_scatter)
+                mis = dr.select(after_scatter, _balance(scatter_pdf, emitter_pdf), 1.0)
+                radiance += dr.select(on_surface, throughput * mis * si.emitter(scene).eval(
+                    si, on_surface), 0.0)
+                on_surface &= si.is_valid()
+                bsdf = si.bsdf(ray)
+                sample, weight = bsdf.sample(ctx, si, sampler.next_1d(on_surface),
+                                             sampler.next_2d(on_surface), on_surface)
+                throughput = dr.select(on_surface, throughput * weight, throughput)
+                direction = si.to_world(sample.wo)
+                clearance = (1.0 + dr.max(dr.abs(si.p))) * mi.math.RayEpsilon
+                cos_out = dr.maximum(dr.abs(dr.dot(si.n, direction)), MIN_COS)
+                surface_ray = mi.Ray3f(dr.fma(direction, clearance / cos_out, si.p), direction,
+                                       si.time, si.wavelengths)
+                crossing = on_surface & si.is_medium_transition()
+                medium = dr.select(crossing, si.target_medium(direction), medium)
+                ray = dr.select(scatter, scattered_ray, surface_ray)
+                after_scatter = dr.select(scatter, True, dr.select(on_surface, False,
+                                                                   after_scatter))
+                scatter_p = dr.select(scatter, mei.p, scatter_p)
+                _, sampled_pdf = phase.eval_pdf(phase_ctx, mei, wo, scatter)
+                scatter_pdf = dr.select(scatter, sampled_pdf, scatter_pdf)
+                depth += 1
+                active = (scatter | on_surface) & (depth < self.max_depth)
+                active &= dr.max(mi.unpolarized_spectrum(throughput)) > 0
+                # Russian roulette after RR_DEPTH events, as Mitsuba's volpath does
+                roulette = active & (depth >= RR_DEPTH)
+                survive = dr.minimum(dr.max(mi.unpolarized_spectrum(throughput)), RR_MAX_Q)
+                active &= ~roulette | (sampler.next_1d(roulette) < survive)
+                throughput = dr.select(roulette, throughput / survive, throughput)
+            return radiance, depth != 0, []
+
+        def aov_names(self):
+            return []
+
+        def to_string(self):
+            return f"RefractedVolpathIntegrator[max_depth={self.max_depth}]"
+
     mi.register_integrator(PLUGIN_NAME, lambda props: RefractedPathIntegrator(props))
+    mi.register_integrator(VOLUME_PLUGIN_NAME, lambda props: RefractedVolpathIntegrator(props))
     _registered_for.add(variant)
 
 
+def _balance(pdf_a, pdf_b):
+    """The balance heuristic's weight of the strategy with density ``pdf_a``."""
+    return dr.select(pdf_a > 0, pdf_a / (pdf_a + pdf_b), 0.0)
+
+
 def render_integrator(mitsuba, scene):
-    """The integrator to render ``scene`` with: this one in place of Mitsuba's ``path`` (same
-    ``max_depth``), ``None`` (the scene's own) for any other integrator."""
+    """The integrator to render ``scene`` with: :data:`PLUGIN_NAME` in place of Mitsuba's
+    ``path``, :data:`VOLUME_PLUGIN_NAME` in place of ``volpath`` (same ``max_depth``), ``None``
+    (the scene's own) for any other integrator."""
     described = str(scene.integrator())
-    if not described.startswith("PathIntegrator"):
+    plugin = {"PathIntegrator": PLUGIN_NAME, "VolumetricPathIntegrator": VOLUME_PLUGIN_NAME,
+              "VolumetricSimplePathIntegrator": VOLUME_PLUGIN_NAME}.get(described.split("[", 1)[0])
+    if plugin is None:
         return None
     match = re.search(r"max_depth\s*=\s*(-?\d+)", described)
     register(mitsuba)
-    return mitsuba.load_dict({"type": PLUGIN_NAME,
-                              "max_depth": int(match.group(1)) if match else 8})
+    return mitsuba.load_dict({"type": plugin, "max_depth": int(match.group(1)) if match else 8})
 
 
 def integrator_name(mitsuba, scene) -> str:
     """The plugin name :func:`render_integrator` renders ``scene`` with (for manifests)."""
-    if render_integrator(mitsuba, scene) is not None:
-        return PLUGIN_NAME
+    integrator = render_integrator(mitsuba, scene)
+    if integrator is not None:
+        return PLUGIN_NAME if str(integrator).startswith("RefractedPath") else VOLUME_PLUGIN_NAME
     return str(scene.integrator()).split("[", 1)[0]

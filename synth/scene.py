@@ -53,6 +53,8 @@ LOOKAT_DISTANCE_MM = 1000.0
 DEFAULT_SPP = 36
 DEFAULT_SEED = 0
 DEFAULT_MAX_DEPTH = 8
+#: Smallest max_depth of a scene with a participating medium (scattering events count).
+WATER_MAX_DEPTH = 32
 #: Target disk radius, mm: at 1 m behind the paper's port the innermost circle's neighbours
 #: (7.6 mm apart, ~10.8 px) keep a ~3.7 px gap, and each disk covers ~40-50 px.
 DEFAULT_TARGET_RADIUS_MM = 2.5
@@ -182,13 +184,17 @@ def _sensor_xml(name: str, camera: Camera, width_param: bool) -> str:
 
 def scene_xml(cameras, port: FlatPort | None, targets, target_radius: float, *,
               spp: int = DEFAULT_SPP, seed: int = DEFAULT_SEED, max_depth: int = DEFAULT_MAX_DEPTH,
-              interface_half_size: float = INTERFACE_HALF_SIZE_MM, comment: str = "") -> str:
+              interface_half_size: float = INTERFACE_HALF_SIZE_MM, comment: str = "",
+              water=None) -> str:
     """The text of a Mitsuba 3 scene of two cameras, a flat port (or none) and disk targets.
 
     ``cameras`` (left, right) :class:`measure.Camera` (same image size; square pixels);
     ``port`` a :class:`measure.FlatPort` or None for an all-air scene; ``targets`` ``(N, 3)`` mm,
     reference frame, all in the water; ``target_radius`` mm. When all targets share one ``z``,
     it becomes the ``target_z`` default. ``comment`` goes into an XML comment (for people only).
+    ``water`` (a :class:`synth.water.Water`, needs a port): the water behind the port becomes a
+    homogeneous participating medium (defaults ``water_c`` per metre, ``water_albedo``,
+    ``water_g``) and the integrator ``volpath``.
     """
     left, right = cameras
     if left.size != right.size:
@@ -213,6 +219,12 @@ def scene_xml(cameras, port: FlatPort | None, targets, target_radius: float, *,
         defaults.append(("n_water", _num(port.n_water)))
     else:
         defaults.append(("port", "none"))
+    if water is not None:
+        if port is None:
+            raise ValueError("a participating medium needs a port (the water is behind it)")
+        defaults += [("water_c", _num(water.c_per_m)), ("water_albedo", _num(water.albedo)),
+                     ("water_g", _num(water.g))]
+        max_depth = max(int(max_depth), WATER_MAX_DEPTH)
     defaults.append(("target_radius", _num(target_radius)))
     if plane:
         defaults.append(("target_z", _num(targets[0, 2])))
@@ -229,17 +241,31 @@ def scene_xml(cameras, port: FlatPort | None, targets, target_radius: float, *,
                  "z forward). Override any default with -D name=value. -->")
     for name, value in defaults:
         parts.append(f'    <default name="{name}" value="{value}"/>')
-    parts.append("""
-    <integrator type="path">
+    parts.append(f"""
+    <integrator type="{'path' if water is None else 'volpath'}">
         <integer name="max_depth" value="$max_depth"/>
     </integrator>""")
+    if water is not None:
+        parts.append(f"""
+    <!-- The water: {water.name}. Coefficients per metre (scale 0.001: the scene is in mm). -->
+    <medium type="homogeneous" id="water">
+        <float name="scale" value="0.001"/>
+        <float name="sigma_t" value="$water_c"/>
+        <float name="albedo" value="$water_albedo"/>
+        <phase type="hg">
+            <float name="g" value="$water_g"/>
+        </phase>
+    </medium>""")
     parts.append(_sensor_xml("left", left, True))
     parts.append(_sensor_xml("right", right, True))
 
     if port is not None:
         for k, centre, target, up, ext_ior, int_ior in interface_placements(port):
             ext = _num(ext_ior)
-            inner = "$n_water" if k == port.n_interfaces - 1 else _num(int_ior)
+            last = k == port.n_interfaces - 1
+            inner = "$n_water" if last else _num(int_ior)
+            medium = ('\n        <ref name="interior" id="water"/>'
+                      if last and water is not None else "")
             parts.append(f"""
     <shape type="rectangle" id="interface_{k}">
         <transform name="to_world">
@@ -249,7 +275,7 @@ def scene_xml(cameras, port: FlatPort | None, targets, target_radius: float, *,
         <bsdf type="dielectric">
             <float name="ext_ior" value="{ext}"/>
             <float name="int_ior" value="{inner}"/>
-        </bsdf>
+        </bsdf>{medium}
     </shape>""")
 
     parts.append(f"""
@@ -380,7 +406,11 @@ def _declared_defaults(data: bytes, label: str):
 _NUMERIC_PARAMS = {"spp": ("int", 1, False), "seed": ("int", 0, False),
                    "width": ("int", 1, False), "height": ("int", 1, False),
                    "max_depth": ("int", 0, False), "n_water": ("float", 0.0, True),
-                   "target_radius": ("float", 0.0, True), "target_z": ("float", 0.0, True)}
+                   "target_radius": ("float", 0.0, True), "target_z": ("float", 0.0, True),
+                   "water_c": ("float", 0.0, False), "water_albedo": ("float", 0.0, False),
+                   "water_g": ("float", -1.0, True)}
+#: Upper bounds (inclusive unless marked strict) of the water's parameters.
+_UPPER_BOUNDS = {"water_albedo": (1.0, False), "water_g": (1.0, True)}
 
 
 def _check_params(params: dict, label: str) -> None:
@@ -400,6 +430,11 @@ def _check_params(params: dict, label: str) -> None:
             bound = f"> {lower:g}" if strict else f">= {lower:g}"
             raise SceneError(f"{label}: parameter {name}={text!r} must be a finite "
                              f"{'integer' if kind == 'int' else 'number'} {bound}")
+        if name in _UPPER_BOUNDS:
+            upper, strict_upper = _UPPER_BOUNDS[name]
+            if not (value < upper if strict_upper else value <= upper):
+                raise SceneError(f"{label}: parameter {name}={text!r} must be "
+                                 f"{'<' if strict_upper else '<='} {upper:g}")
         if kind == "int":
             params[name] = str(int(value))
 

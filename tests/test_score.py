@@ -107,3 +107,12 @@ def test_bad_input_exits_2_and_writes_nothing(scored_run, tmp_path, capsys):
     _fails(capsys, ["score", str(tmp_path), "--points", str(nan), "--out", str(out)],
            "manifest.json")
     assert not out.exists()
+
+
+def test_an_empty_cloud_is_still_written(tmp_path):
+    """A method with no correctly matched target still gets its (empty, valid) PLY."""
+    from eval.cloud_metrics import write_colored_ply
+
+    write_colored_ply(tmp_path / "e.ply", np.zeros((0, 3)), np.zeros(0), 1.0)
+    text = (tmp_path / "e.ply").read_text()
+    assert text.startswith("ply\n") and "element vertex 0" in text and text.endswith("end_header\n")
