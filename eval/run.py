@@ -7,6 +7,7 @@ directory appears whole or not at all. See the README for the report's fields.
 
 from __future__ import annotations
 
+import argparse
 import json
 import math
 import os
@@ -67,6 +68,10 @@ def add_parser(subparsers):
     parser.add_argument("--eccentricity", action="store_true",
                         help="also measure with the detected centres corrected for the disk "
                              "targets' eccentricity (reported beside the uncorrected numbers)")
+    parser.add_argument("--threshold-fraction", type=_fraction, default=None, metavar="F",
+                        help="detect with a fixed threshold F of the way from the background "
+                             "(median) to the targets' level (99.99th percentile) instead of "
+                             "median + 5 noise sigmas; for speckled renders of scattering water")
     parser.add_argument("--sensor", metavar="PRESET[,name=value…]",
                         help="pass the rendered images through a camera sensor (exposure, shot "
                              "and read noise, dark level, gain, bit depth), seeded: preset "
@@ -96,6 +101,17 @@ def _parse_self_calibration(text: str) -> tuple:
         raise CLIError(f"--self-calibrate {text!r}: unknown parameter {', '.join(unknown)} "
                        f"(the refinement estimates {', '.join(PARAMETERS)})")
     return names
+
+
+def _fraction(text: str) -> float:
+    """argparse type: a number strictly between 0 and 1."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not 0 < value < 1:
+        raise argparse.ArgumentTypeError(f"must be between 0 and 1 (exclusive), got {text}")
+    return value
 
 
 def _parse_sensor(text):
@@ -408,7 +424,8 @@ def main(args) -> int:
     report, arrays = run_pipeline(inputs, methods, args.noise_px, args.gate_mm, depth_window, log,
                                   eccentricity=args.eccentricity,
                                   self_calibrate=self_calibration,
-                                  budget_rigs=_budget_rigs(args, inputs))
+                                  budget_rigs=_budget_rigs(args, inputs),
+                                  threshold_fraction=args.threshold_fraction)
     report["sensor"] = sensor_info
     report["rigs"]["source"] = (f"--calib {args.calib}" if args.calib else "the scene's rig") + (
         " with --assume" if args.assume else "")

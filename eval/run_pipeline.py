@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from measure import detect_targets, triangulate
+from measure.detect import fractional_threshold
 from measure.eccentricity import correct_eccentricity, outline_centroid_offsets
 from measure.matching import match_targets
 from synth.crosscheck import (ASSOCIATION_GATE_PX, associate_detections, distance_stats,
@@ -99,10 +100,15 @@ def visible_targets(camera, port, targets, radius_mm):
     return uv, wholly_in_image(camera, uv, targets, radius_mm)
 
 
-def detect_stage(inputs: RunInputs, noise_px: float):
+def detect_stage(inputs: RunInputs, noise_px: float, threshold_fraction: float | None = None):
     """Detections per view and their centres ``(M, 2)`` px, with Gaussian noise of σ
     ``noise_px`` added (seeded by ``inputs.seed``)."""
-    detections = {"left": detect_targets(inputs.left), "right": detect_targets(inputs.right)}
+    def detect(image):
+        if threshold_fraction is None:
+            return detect_targets(image)
+        return detect_targets(image, threshold=fractional_threshold(image, threshold_fraction))
+
+    detections = {"left": detect(inputs.left), "right": detect(inputs.right)}
     centers = {name: np.array(d.centers, dtype=float).reshape(-1, 2)
                for name, d in detections.items()}
     if noise_px > 0:
@@ -310,7 +316,8 @@ def _rigs_report(inputs: RunInputs) -> dict:
 
 def run_pipeline(inputs: RunInputs, methods, noise_px: float = 0.0, gate_mm: float = 0.5,
                  depth_window=None, log=print, eccentricity: bool = False,
-                 self_calibrate: tuple = (), budget_rigs: dict | None = None):
+                 self_calibrate: tuple = (), budget_rigs: dict | None = None,
+                 threshold_fraction: float | None = None):
     """Run detection, matching, triangulation and scoring. Returns ``(report, arrays)``.
 
     ``budget_rigs`` ``{label: rig}``: also measure with these rigs (:func:`budget_stage`).
@@ -321,7 +328,7 @@ def run_pipeline(inputs: RunInputs, methods, noise_px: float = 0.0, gate_mm: flo
 
     log("detect targets in both views …")
     start = time.perf_counter()
-    detections, centers = detect_stage(inputs, noise_px)
+    detections, centers = detect_stage(inputs, noise_px, threshold_fraction)
     timings["detect"] = time.perf_counter() - start
 
     log("match left and right (refractive epipolar constraint) …")
@@ -378,7 +385,7 @@ def run_pipeline(inputs: RunInputs, methods, noise_px: float = 0.0, gate_mm: flo
         "crosscheck": scored["crosscheck"],
         "matching": scored["matching"],
         "methods": {m: s.to_json() for m, s in scored["scores"].items()},
-        "noise_px": noise_px, "seed": inputs.seed,
+        "noise_px": noise_px, "seed": inputs.seed, "threshold_fraction": threshold_fraction,
         "rigs": _rigs_report(inputs),
         "self_calibration": calibration,
         "budget": budget,

@@ -86,7 +86,29 @@ from enum import IntEnum
 import cv2
 import numpy as np
 
-__all__ = ["Detections", "Rejection", "detect_targets", "REJECTION_REASONS"]
+__all__ = ["Detections", "Rejection", "detect_targets", "fractional_threshold",
+           "REJECTION_REASONS"]
+
+#: Percentile of the image taken as the targets' level by :func:`fractional_threshold` (robust
+#: to a few hot pixels).
+TARGET_LEVEL_PERCENTILE = 99.99
+
+
+def fractional_threshold(image, fraction: float) -> float:
+    """An absolute threshold (image units) ``fraction`` of the way from the background (the
+    image's median) to the targets' level (its :data:`TARGET_LEVEL_PERCENTILE` th percentile).
+
+    For images whose background is not Gaussian noise — e.g. renders of scattering water, where
+    the haze is sparse speckle on black and the automatic level (median + k·MAD) is zero."""
+    if not (np.isfinite(fraction) and 0 < fraction < 1):
+        raise ValueError(f"fraction must be in (0, 1), got {fraction!r}")
+    f = np.asarray(image, dtype=np.float32)
+    f = f[np.isfinite(f)]
+    if f.size == 0:
+        raise ValueError("the image has no finite pixel")
+    background = float(np.median(f))
+    return background + float(fraction) * (float(np.percentile(f, TARGET_LEVEL_PERCENTILE))
+                                            - background)
 
 
 class Rejection(IntEnum):

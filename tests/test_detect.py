@@ -268,3 +268,28 @@ def test_sorted_deterministic_labels_and_quality(field):
     _, j = centroid_errors(det, centers)
     np.testing.assert_allclose(det.flux[j], 1000.0 * np.pi * radii**2, rtol=0.01)
     assert detect_targets(img).labels is None
+
+
+def test_fractional_threshold_ignores_speckle():
+    """Sparse bright speckle on black (a render of scattering water): median + k·MAD is zero
+    and every speckle is a blob; a threshold a fraction of the way to the targets is not."""
+    from measure.detect import fractional_threshold
+
+    rng = np.random.default_rng(0)
+    image = np.zeros((200, 200), np.float32)
+    yy, xx = np.mgrid[:200, :200]
+    centres = [(50, 50), (50, 150), (150, 50), (150, 150)]
+    for cy, cx in centres:
+        image[(yy - cy) ** 2 + (xx - cx) ** 2 <= 36] = 1.0
+    speckle = rng.random((200, 200)) < 0.05
+    image[speckle] += rng.uniform(0, 0.15, speckle.sum()).astype(np.float32)
+    automatic = detect_targets(image)
+    assert automatic.threshold < 1e-3 and automatic.n_rejected > 100
+    level = fractional_threshold(image, 0.2)
+    assert 0.15 < level < 0.25
+    found = detect_targets(image, threshold=level)
+    assert found.n_found == 4
+    np.testing.assert_allclose(sorted(map(tuple, np.round(found.centers))),
+                               sorted((x, y) for y, x in centres), atol=0.5)
+    with pytest.raises(ValueError, match="fraction"):
+        fractional_threshold(image, 1.0)

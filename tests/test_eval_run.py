@@ -83,6 +83,8 @@ def test_pixel_noise_option_is_seeded(small_scene, tmp_path):
     (["--methods", "magic"], "magic"),
     (["-D", "no_such_parameter=1"], "no_such_parameter"),
     (["--depth-range", "5"], "--depth-range"),
+    (["--threshold-fraction", "1.5"], "--threshold-fraction"),
+    (["--sensor", "nikon"], "unknown sensor"),
 ])
 def test_bad_arguments_exit_2_with_one_line(small_scene, tmp_path, capsys, extra, fragment):
     out = tmp_path / "out"

@@ -92,3 +92,18 @@ def test_a_medium_needs_a_port():
     with pytest.raises(ValueError, match="needs a port"):
         write_scene("unused.xml", (left, right), None, grid_plane(1000.0, 80.0, 80.0), 16.0,
                     water=PRESETS["coastal"])
+
+
+def test_eval_run_in_coastal_water(coastal_scene, tmp_path):
+    """The whole pipeline through scattering water, with the speckle-proof threshold."""
+    import json
+
+    from eval.cli import main
+
+    out = tmp_path / "run"
+    assert main(["run", coastal_scene, "--out", str(out), "--spp", "64", "--no-progress",
+                 "--methods", "optical_path", "--threshold-fraction", "0.2"]) == 0
+    report = json.loads((out / "report.json").read_text())
+    m = report["matching"]
+    assert m["wrong"] == 0 and m["visible_in_both_matched"] == m["visible_in_both"] > 0
+    assert report["threshold_fraction"] == 0.2 and report["crosscheck"]["rms_px"] < 0.1
