@@ -55,25 +55,15 @@ def _water_rays(camera, port, uv):
     return water.origins, water.directions, water.reason == Reason.OK
 
 
-def pair_gaps(rig: StereoRig, uv_left, uv_right, depth_range=(None, None)):
-    """Gap matrix ``(N_left, N_right)`` of every candidate pair (mm); ``inf`` where impossible.
+def candidate_pairs(rig: StereoRig, uv_left, uv_right, gate_mm: float,
+                    depth_range=(None, None)):
+    """``(i, j, gap)``: the pairs (left row i, right row j) whose common-perpendicular length
+    (mm) is at most ``gate_mm`` and that are possible, computed in chunks of
+    :data:`PAIRS_PER_CHUNK` pairs, so that memory stays bounded by the pairs kept.
 
     A pair is impossible when a ray has no path into the water, the rays meet behind a camera,
     or the midpoint's depth along the port normal (``normal · X``) is outside ``depth_range``.
     """
-    uv_left = np.asarray(uv_left, dtype=float).reshape(-1, 2)
-    uv_right = np.asarray(uv_right, dtype=float).reshape(-1, 2)
-    gaps = np.full((len(uv_left), len(uv_right)), np.inf)
-    i, j, gap = candidate_pairs(rig, uv_left, uv_right, np.inf, depth_range)
-    gaps[i, j] = gap
-    return gaps
-
-
-def candidate_pairs(rig: StereoRig, uv_left, uv_right, gate_mm: float,
-                    depth_range=(None, None)):
-    """``(i, j, gap)``: the pairs (left row i, right row j) whose gap (mm) is at most
-    ``gate_mm`` and that are possible (:func:`pair_gaps`), computed in chunks of
-    :data:`PAIRS_PER_CHUNK` pairs, so that memory stays bounded by the pairs kept."""
     uv_left = np.asarray(uv_left, dtype=float).reshape(-1, 2)
     uv_right = np.asarray(uv_right, dtype=float).reshape(-1, 2)
     o1, d1, ok1 = _water_rays(rig.left, rig.port, uv_left)
@@ -139,8 +129,8 @@ def match_targets(rig: StereoRig, uv_left, uv_right, gate_mm: float = 0.5,
     keep_rows, keep_cols, kept_gaps, n_ambiguous = [], [], [], 0
     pair_label = component[pair_i]
     order_by_label = np.argsort(pair_label, kind="stable")
-    labels, starts = np.unique(pair_label[order_by_label], return_index=True)
-    for label, members in zip(labels, np.split(order_by_label, starts[1:])):
+    starts = np.unique(pair_label[order_by_label], return_index=True)[1]
+    for members in np.split(order_by_label, starts[1:]):
         rows_in = np.unique(pair_i[members])
         cols_in = np.unique(pair_j[members])
         sub_gaps = np.full((len(rows_in), len(cols_in)), np.inf)

@@ -147,8 +147,8 @@ def register(mitsuba) -> None:
                 throughput = dr.select(scatter, throughput * mei.sigma_s
                                        * mei.combined_extinction[0] / mei.sigma_t[0], throughput)
                 phase = mei.medium.phase_function()
-                wo, phase_weight, _ = phase.sample(phase_ctx, mei, sampler.next_1d(scatter),
-                                                   sampler.next_2d(scatter), scatter)
+                wo, phase_weight, sampled_pdf = phase.sample(
+                    phase_ctx, mei, sampler.next_1d(scatter), sampler.next_2d(scatter), scatter)
                 # next-event estimation from the scattering event: one emitter point, its
                 # transmittance through the (homogeneous) medium, unless something is between
                 ds, emitter_weight = scene.sample_emitter_direction(
@@ -188,7 +188,6 @@ def register(mitsuba) -> None:
                 after_scatter = dr.select(scatter, True, dr.select(on_surface, False,
                                                                    after_scatter))
                 scatter_p = dr.select(scatter, mei.p, scatter_p)
-                _, sampled_pdf = phase.eval_pdf(phase_ctx, mei, wo, scatter)
                 scatter_pdf = dr.select(scatter, sampled_pdf, scatter_pdf)
                 depth += 1
                 active = (scatter | on_surface) & (depth < self.max_depth)
@@ -211,6 +210,16 @@ def register(mitsuba) -> None:
     _registered_for.add(variant)
 
 
+#: Mitsuba integrators (class names) this module renders in place of, and with what.
+SUBSTITUTES = {"PathIntegrator": PLUGIN_NAME, "VolumetricPathIntegrator": VOLUME_PLUGIN_NAME,
+               "VolumetricSimplePathIntegrator": VOLUME_PLUGIN_NAME}
+
+
+def _substitute(scene):
+    """The plugin name that replaces ``scene``'s integrator, or None (rendered as it is)."""
+    return SUBSTITUTES.get(str(scene.integrator()).split("[", 1)[0])
+
+
 def _balance(pdf_a, pdf_b):
     """The balance heuristic's weight of the strategy with density ``pdf_a``."""
     return dr.select(pdf_a > 0, pdf_a / (pdf_a + pdf_b), 0.0)
@@ -220,19 +229,14 @@ def render_integrator(mitsuba, scene):
     """The integrator to render ``scene`` with: :data:`PLUGIN_NAME` in place of Mitsuba's
     ``path``, :data:`VOLUME_PLUGIN_NAME` in place of ``volpath`` (same ``max_depth``), ``None``
     (the scene's own) for any other integrator."""
-    described = str(scene.integrator())
-    plugin = {"PathIntegrator": PLUGIN_NAME, "VolumetricPathIntegrator": VOLUME_PLUGIN_NAME,
-              "VolumetricSimplePathIntegrator": VOLUME_PLUGIN_NAME}.get(described.split("[", 1)[0])
+    plugin = _substitute(scene)
     if plugin is None:
         return None
-    match = re.search(r"max_depth\s*=\s*(-?\d+)", described)
+    match = re.search(r"max_depth\s*=\s*(-?\d+)", str(scene.integrator()))
     register(mitsuba)
     return mitsuba.load_dict({"type": plugin, "max_depth": int(match.group(1)) if match else 8})
 
 
 def integrator_name(mitsuba, scene) -> str:
     """The plugin name :func:`render_integrator` renders ``scene`` with (for manifests)."""
-    integrator = render_integrator(mitsuba, scene)
-    if integrator is not None:
-        return PLUGIN_NAME if str(integrator).startswith("RefractedPath") else VOLUME_PLUGIN_NAME
-    return str(scene.integrator()).split("[", 1)[0]
+    return _substitute(scene) or str(scene.integrator()).split("[", 1)[0]
