@@ -46,7 +46,8 @@ def add_parser(subparsers):
                         help="largest common-perpendicular length of a matched pair (mm, default 0.5)")
     parser.add_argument("--depth-range", metavar="NEAR,FAR",
                         help="working range along the port normal (mm); default: the scene's "
-                             "target_z × (0.8, 1.25)")
+                             "target_z × (0.8, 1.25), or for targets in depth their nearest "
+                             "and farthest depths × (0.8, 1.25)")
     parser.add_argument("-D", dest="defines", action="append", default=[], metavar="name=value",
                         help="override a scene default (repeatable)")
     parser.add_argument("--assume", action="append", default=[], metavar="name=value",
@@ -72,6 +73,14 @@ def add_parser(subparsers):
                         help="detect with a fixed threshold F of the way from the background "
                              "(median) to the targets' level (99.99th percentile) instead of "
                              "median + 5 noise sigmas; for speckled renders of scattering water")
+    parser.add_argument("--max-elongation", type=_elongation, default=None, metavar="E",
+                        help="detected blobs more elongated than E (major/minor axis) are taken "
+                             "for merged targets (default 1.6); raise it (e.g. 3) for targets "
+                             "seen obliquely: tilted planes, cylinders, spheres")
+    parser.add_argument("--max-area-ratio", type=_elongation, default=None, metavar="A",
+                        help="detected blobs larger than A times the median blob are taken for "
+                             "merged targets (default 2.5); raise it (e.g. 6) when the targets "
+                             "span a wide range of depths (near ones image larger)")
     parser.add_argument("--sensor", metavar="PRESET[,name=value…]",
                         help="pass the rendered images through a camera sensor (exposure, shot "
                              "and read noise, dark level, gain, bit depth), seeded: preset "
@@ -101,6 +110,17 @@ def _parse_self_calibration(text: str) -> tuple:
         raise CLIError(f"--self-calibrate {text!r}: unknown parameter {', '.join(unknown)} "
                        f"(the refinement estimates {', '.join(PARAMETERS)})")
     return names
+
+
+def _elongation(text: str) -> float:
+    """argparse type: a finite number > 1 (a blob's major / minor axis, or an area ratio)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+    if not (math.isfinite(value) and value > 1):
+        raise argparse.ArgumentTypeError(f"must be a finite number > 1, got {text!r}")
+    return value
 
 
 def _fraction(text: str) -> float:
@@ -425,7 +445,9 @@ def main(args) -> int:
                                   eccentricity=args.eccentricity,
                                   self_calibrate=self_calibration,
                                   budget_rigs=_budget_rigs(args, inputs),
-                                  threshold_fraction=args.threshold_fraction)
+                                  threshold_fraction=args.threshold_fraction,
+                                  max_elongation=args.max_elongation,
+                                  max_area_ratio=args.max_area_ratio)
     report["sensor"] = sensor_info
     report["rigs"]["source"] = (f"--calib {args.calib}" if args.calib else "the scene's rig") + (
         " with --assume" if args.assume else "")

@@ -15,7 +15,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from measure import detect_targets, triangulate
-from measure.detect import fractional_threshold
+from measure.detect import (MERGE_AREA_RATIO as DEFAULT_MAX_AREA_RATIO,
+                            MERGE_ELONGATION as DEFAULT_MAX_ELONGATION, fractional_threshold)
 from measure.eccentricity import correct_eccentricity, outline_centroid_offsets
 from measure.matching import match_targets
 from synth.crosscheck import (ASSOCIATION_GATE_PX, associate_detections, distance_stats,
@@ -85,12 +86,19 @@ class MethodScores:
                 "plane": self.flatness.get("plane"), "invalid": self.invalid}
 
 
-def default_depth_window(params: dict):
-    """``(near, far)`` along the port normal from the scene's ``target_z`` (mm), or no bound."""
+def default_depth_window(params: dict, targets=None, port=None):
+    """``(near, far)`` along the port normal (mm): the scene's ``target_z`` × (0.8, 1.25) for a
+    plane facing the cameras; otherwise the targets' nearest and farthest depths along the
+    port normal × (0.8, 1.25) — the working range a user states for a layout in depth (the
+    matcher takes it as given, like the plane's distance); no bound without either."""
     try:
         z = float(params["target_z"])
     except (KeyError, TypeError, ValueError):
-        return (None, None)
+        if targets is None or port is None or len(targets) == 0:
+            return (None, None)
+        depth = np.asarray(targets, dtype=float) @ port.normal
+        return (DEPTH_WINDOW_FACTORS[0] * float(depth.min()),
+                DEPTH_WINDOW_FACTORS[1] * float(depth.max()))
     return (DEPTH_WINDOW_FACTORS[0] * z, DEPTH_WINDOW_FACTORS[1] * z)
 
 
@@ -100,13 +108,18 @@ def visible_targets(camera, port, targets, radius_mm):
     return uv, wholly_in_image(camera, uv, targets, radius_mm)
 
 
-def detect_stage(inputs: RunInputs, noise_px: float, threshold_fraction: float | None = None):
+def detect_stage(inputs: RunInputs, noise_px: float, threshold_fraction: float | None = None,
+                 max_elongation: float = DEFAULT_MAX_ELONGATION,
+                 max_area_ratio: float = DEFAULT_MAX_AREA_RATIO):
     """Detections per view and their centres ``(M, 2)`` px, with Gaussian noise of σ
-    ``noise_px`` added (seeded by ``inputs.seed``)."""
+    ``noise_px`` added (seeded by ``inputs.seed``). Blobs more elongated than
+    ``max_elongation``, or larger than ``max_area_ratio`` times the median blob, are taken for
+    merged targets (raise them for targets seen obliquely, or over a wide range of depths)."""
     def detect(image):
-        if threshold_fraction is None:
-            return detect_targets(image)
-        return detect_targets(image, threshold=fractional_threshold(image, threshold_fraction))
+        threshold = (None if threshold_fraction is None
+                     else fractional_threshold(image, threshold_fraction))
+        return detect_targets(image, threshold=threshold, merge_elongation=max_elongation,
+                              merge_area_ratio=max_area_ratio)
 
     detections = {"left": detect(inputs.left), "right": detect(inputs.right)}
     centers = {name: np.array(d.centers, dtype=float).reshape(-1, 2)
@@ -120,7 +133,8 @@ def detect_stage(inputs: RunInputs, noise_px: float, threshold_fraction: float |
 
 def match_stage(inputs: RunInputs, centers, gate_mm: float, depth_window):
     """Left–right pairs without ground truth (refractive epipolar gap, depth window)."""
-    window = default_depth_window(inputs.params) if depth_window is None else tuple(depth_window)
+    window = (default_depth_window(inputs.params, inputs.targets, inputs.true_rig.port)
+              if depth_window is None else tuple(depth_window))
     matches = match_targets(inputs.rig, centers["left"], centers["right"], gate_mm=gate_mm,
                             depth_range=window)
     return matches, window
@@ -317,7 +331,8 @@ def _rigs_report(inputs: RunInputs) -> dict:
 def run_pipeline(inputs: RunInputs, methods, noise_px: float = 0.0, gate_mm: float = 0.5,
                  depth_window=None, log=print, eccentricity: bool = False,
                  self_calibrate: tuple = (), budget_rigs: dict | None = None,
-                 threshold_fraction: float | None = None):
+                 threshold_fraction: float | None = None,
+                 max_elongation: float = None, max_area_ratio: float = None):
     """Run detection, matching, triangulation and scoring. Returns ``(report, arrays)``.
 
     ``budget_rigs`` ``{label: rig}``: also measure with these rigs (:func:`budget_stage`).
@@ -328,7 +343,10 @@ def run_pipeline(inputs: RunInputs, methods, noise_px: float = 0.0, gate_mm: flo
 
     log("detect targets in both views …")
     start = time.perf_counter()
-    detections, centers = detect_stage(inputs, noise_px, threshold_fraction)
+    max_elongation = DEFAULT_MAX_ELONGATION if max_elongation is None else max_elongation
+    max_area_ratio = DEFAULT_MAX_AREA_RATIO if max_area_ratio is None else max_area_ratio
+    detections, centers = detect_stage(inputs, noise_px, threshold_fraction, max_elongation,
+                                       max_area_ratio)
     timings["detect"] = time.perf_counter() - start
 
     log("match left and right (refractive epipolar constraint) …")
@@ -386,6 +404,7 @@ def run_pipeline(inputs: RunInputs, methods, noise_px: float = 0.0, gate_mm: flo
         "matching": scored["matching"],
         "methods": {m: s.to_json() for m, s in scored["scores"].items()},
         "noise_px": noise_px, "seed": inputs.seed, "threshold_fraction": threshold_fraction,
+        "max_elongation": max_elongation, "max_area_ratio": max_area_ratio,
         "rigs": _rigs_report(inputs),
         "self_calibration": calibration,
         "budget": budget,

@@ -89,6 +89,11 @@ import numpy as np
 __all__ = ["Detections", "Rejection", "detect_targets", "fractional_threshold",
            "REJECTION_REASONS"]
 
+#: Default largest elongation (major / minor axis) of a single target's blob; beyond it a blob
+#: is taken for merged targets (see the module docs; raise it for targets seen obliquely).
+MERGE_ELONGATION = 1.6
+#: Default largest area of a single target's blob, in medians of the blobs' areas.
+MERGE_AREA_RATIO = 2.5
 #: Percentile of the image taken as the targets' level by :func:`fractional_threshold` (robust
 #: to a few hot pixels).
 TARGET_LEVEL_PERCENTILE = 99.99
@@ -437,8 +442,8 @@ def detect_targets(
     border_margin: int = 1,
     window_pad: int = 2,
     ghost_ratio: float = 0.2,
-    merge_area_ratio: float = 2.5,
-    merge_elongation: float = 1.6,
+    merge_area_ratio: float = MERGE_AREA_RATIO,
+    merge_elongation: float = MERGE_ELONGATION,
     return_labels: bool = False,
 ) -> Detections:
     """Detect bright disk targets and measure their sub-pixel intensity centroids.

@@ -50,10 +50,24 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("scene", help="write a Mitsuba scene of the rig, the port and targets")
     p.add_argument("--out", required=True, help="scene file to write (.xml)")
-    p.add_argument("--layout", choices=("paper", "grid", "random"), default="paper",
-                   help="paper: 496 targets on concentric circles; grid; random volume")
-    p.add_argument("--z", type=positive_float, default=1000.0, help="target plane Z, mm (paper, grid)")
-    p.add_argument("--spacing", type=positive_float, default=50.0, help="grid spacing, mm")
+    p.add_argument("--layout", choices=("paper", "grid", "random", "tilted", "cylinder", "sphere"),
+                   default="paper",
+                   help="paper: 496 targets on concentric circles; grid; random volume; tilted: "
+                        "the paper's targets on a tilted plane; cylinder, sphere: targets on a "
+                        "convex surface facing the cameras")
+    p.add_argument("--z", type=positive_float, default=1000.0,
+                   help="target plane Z, mm (paper, grid; tilted: its centre; cylinder, "
+                        "sphere: the nearest point of the surface)")
+    p.add_argument("--spacing", type=positive_float, default=50.0,
+                   help="target spacing, mm (grid; cylinder and sphere: along the surface)")
+    p.add_argument("--tilt", type=any_float, nargs=2, metavar=("ABOUT_X", "ABOUT_Y"),
+                   default=(0.0, 30.0), help="tilt of the target plane, degrees (layout tilted; "
+                                             "default 0 30)")
+    p.add_argument("--surface-radius", type=positive_float, default=400.0,
+                   help="radius of the cylinder or sphere, mm (default 400)")
+    p.add_argument("--half-angle", type=positive_float, default=60.0,
+                   help="targets up to this angle from the line or point facing the cameras, "
+                        "degrees (cylinder, sphere; default 60)")
     p.add_argument("--half-width", type=non_negative_float, default=500.0, help="grid half width, mm")
     p.add_argument("--n", type=positive_int, default=200, help="number of random targets")
     p.add_argument("--z-range", type=positive_float, nargs=2, default=(600.0, 2000.0),
@@ -65,6 +79,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--n-glass", type=positive_float, help="glass index (default 1.54)")
     p.add_argument("--port-distance", type=positive_float, help="D, mm (default 100)")
     p.add_argument("--glass-thickness", type=positive_float, help="d, mm (default 5)")
+    p.add_argument("--layer", type=positive_float, nargs=2, action="append",
+                   metavar=("INDEX", "THICKNESS"),
+                   help="one layer of the port, camera side first: refractive index and "
+                        "thickness in mm (repeatable; replaces the glass of --n-glass and "
+                        "--glass-thickness; e.g. --layer 1.49 10 --layer 1.54 5)")
     p.add_argument("--port-tilt", type=any_float, nargs=2, metavar=("ABOUT_X", "ABOUT_Y"),
                    default=(0.0, 0.0), help="tilt of the port normal from the left optical axis, "
                                             "degrees about x and about y (default 0 0)")
@@ -79,6 +98,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--water", choices=("clear", "clear_ocean", "coastal", "turbid_harbor"),
                    default="clear", help="water that absorbs and scatters (Petzold's "
                                          "measurements; default clear: no medium)")
+    p.add_argument("--lighting", choices=("led", "lit"), default="led",
+                   help="led: self-luminous targets (default); lit: white diffuse targets lit by "
+                        "two spot lights beside the housing (backscatter in scattering water)")
+    p.add_argument("--aperture-radius", type=positive_float,
+                   help="thin lens: aperture radius, mm (Mitsuba thinlens; default: pinhole)")
+    p.add_argument("--focus-distance", type=positive_float,
+                   help="thin lens: focus distance of the lens in air, mm (default: where the "
+                        "targets' mean depth appears through the port, paraxially)")
 
     p = sub.add_parser("render", help="render both views to 16-bit linear PNGs (+ previews)")
     _add_render_options(p)
@@ -157,6 +184,15 @@ def _cmd_scene(args) -> int:
     focal = args.focal if args.focal else rigs.PAPER_FOCAL_PX * size[0] / rigs.PAPER_IMAGE_SIZE[0]
     left, right = rigs.paper_cameras(size, focal, args.dist)
     port = None
+    if args.layer and (args.n_glass is not None or args.glass_thickness is not None):
+        raise CLIError("--layer replaces --n-glass and --glass-thickness; give one or the other")
+    if args.layer and any(index < 1 for index, _ in args.layer):
+        raise CLIError(f"--layer: refractive indices must be >= 1, got "
+                       f"{[index for index, _ in args.layer]}")
+    if args.focus_distance is not None and args.aperture_radius is None:
+        raise CLIError("--focus-distance needs --aperture-radius (the thin lens)")
+    if args.port == "none" and (args.layer or args.lighting == "lit"):
+        raise CLIError(f"{'--layer' if args.layer else '--lighting lit'} needs a port (--port paper)")
     if args.port == "paper":
         n = list(rigs.PAPER_INDICES)
         if args.n_glass is not None:
@@ -168,24 +204,56 @@ def _cmd_scene(args) -> int:
             raise CLIError(f"--port-tilt must stay below 30 degrees, got {args.port_tilt}")
         normal = Rotation.from_rotvec([tilt[0], 0, 0]).apply(
             Rotation.from_rotvec([0, tilt[1], 0]).apply([0.0, 0.0, 1.0]))
-        port = FlatPort(normal,
-                        args.port_distance if args.port_distance is not None
-                        else rigs.PAPER_PORT_DISTANCE_MM,
-                        (args.glass_thickness if args.glass_thickness is not None
-                         else rigs.PAPER_GLASS_THICKNESS_MM,), tuple(n))
+        distance = (args.port_distance if args.port_distance is not None
+                    else rigs.PAPER_PORT_DISTANCE_MM)
+        if args.layer:
+            thicknesses = tuple(t for _, t in args.layer)
+            n = [n[0], *(index for index, _ in args.layer), n[2]]
+        else:
+            thicknesses = (args.glass_thickness if args.glass_thickness is not None
+                           else rigs.PAPER_GLASS_THICKNESS_MM,)
+        port = FlatPort(normal, distance, thicknesses, tuple(n))
+    normals = None
     if args.layout == "paper":
         targets = layouts.paper_plane(args.z)
     elif args.layout == "grid":
         targets = layouts.grid_plane(args.z, args.half_width, args.spacing)
-    else:
+    elif args.layout == "random":
         targets = layouts.random_volume(args.n, args.layout_seed, tuple(args.z_range))
+    else:
+        try:
+            if args.layout == "tilted":
+                if np.any(np.abs(args.tilt) >= 80):
+                    raise ValueError(f"--tilt must stay below 80 degrees, got {args.tilt}")
+                targets, normals = layouts.tilted_plane(args.z, args.tilt)
+            elif args.layout == "cylinder":
+                targets, normals = layouts.cylinder(args.z, args.surface_radius, args.half_angle,
+                                                    2 * args.surface_radius, args.spacing)
+            else:
+                targets, normals = layouts.sphere_cap(args.z, args.surface_radius,
+                                                      args.half_angle, args.spacing)
+        except ValueError as exc:
+            raise CLIError(str(exc).replace("half_angle_deg", "--half-angle")) from None
     radius = args.target_radius if args.target_radius else DEFAULT_TARGET_RADIUS_MM
+    _check_visible(left, right, port, targets, radius, args.layout)
+    thin_lens = None
+    if args.aperture_radius is not None:
+        focus = (args.focus_distance if args.focus_distance is not None
+                 else _apparent_distance(port, float(np.mean(targets[:, 2]))))
+        thin_lens = (args.aperture_radius, focus)
     comment = (f"{SCENE_COMMENT_PREFIX}: layout {args.layout}"
                + (f", z {args.z:g} mm" if args.layout != "random" else "")
+               + (f", tilt {args.tilt[0]:g} {args.tilt[1]:g} deg" if args.layout == "tilted" else "")
+               + (f", surface radius {args.surface_radius:g} mm"
+                  if args.layout in ("cylinder", "sphere") else "")
                + f", port {args.port}"
                + (f" tilted {args.port_tilt[0]:g} deg about x, {args.port_tilt[1]:g} deg about y"
                   if port is not None and any(args.port_tilt) else "")
-               + f", target radius {radius:g} mm")
+               + (f" of {len(args.layer)} layers" if args.layer else "")
+               + f", target radius {radius:g} mm"
+               + (", lit targets" if args.lighting == "lit" else "")
+               + (f", thin lens aperture {thin_lens[0]:g} mm focus {thin_lens[1]:.6g} mm"
+                  if thin_lens else ""))
     from .water import PRESETS as WATERS
 
     water = WATERS.get(args.water)
@@ -193,12 +261,44 @@ def _cmd_scene(args) -> int:
         raise CLIError(f"--water {args.water} needs a port (--port paper): the water is behind it")
     if water is not None:
         comment += f", water {args.water}"
-    write_scene(args.out, (left, right), port, targets, radius,
-                spp=args.spp if args.spp else DEFAULT_SPP, seed=args.seed, comment=comment,
-                water=water)
+    try:
+        write_scene(args.out, (left, right), port, targets, radius,
+                    spp=args.spp if args.spp else DEFAULT_SPP, seed=args.seed, comment=comment,
+                    water=water, target_normals=normals, lighting=args.lighting,
+                    thin_lens=thin_lens)
+    except ValueError as exc:
+        raise CLIError(str(exc)) from None
     print(f"wrote {args.out}: {targets.shape[0]} targets of radius {radius:g} mm, "
           f"{'port' if port else 'no port'}, {size[0]}x{size[1]} px")
     return 0
+
+
+def _check_visible(left, right, port, targets, radius: float, layout: str) -> None:
+    """CLIError unless some target lies wholly inside both images (in front of the cameras)."""
+    import numpy as np
+
+    from measure.projection import project
+
+    from .crosscheck import wholly_in_image
+
+    seen = np.ones(len(targets), dtype=bool)
+    for camera in (left, right):
+        uv = project(camera, port, targets)
+        seen &= wholly_in_image(camera, uv, targets, radius)
+    if not seen.any():
+        raise CLIError(f"--layout {layout}: none of the {len(targets)} targets is visible in both "
+                       f"views (move them with --z or make the layout smaller)")
+
+
+def _apparent_distance(port, depth_mm: float) -> float:
+    """Where a point ``depth_mm`` along the axis appears from the air side of ``port``,
+    paraxially: ``D + Σ t_i·n_air/n_i + (depth − last interface)·n_air/n_water`` (mm), the
+    focus distance of a lens in air that images it sharply; ``depth_mm`` itself without a port."""
+    if port is None:
+        return depth_mm
+    n = port.indices
+    apparent = port.distance + sum(t * n[0] / n[k + 1] for k, t in enumerate(port.thicknesses))
+    return apparent + (depth_mm - port.offsets[-1]) * n[0] / n[-1]
 
 
 def _spec(args):

@@ -66,6 +66,7 @@ def register(mitsuba) -> None:
             super().__init__(props)
             depth = props.get("max_depth", 8)
             self.max_depth = (1 << 31) - 1 if depth < 0 else int(depth)
+            self.surface_nee = bool(props.get("surface_nee", False))
 
         @dr.syntax
         def sample(self, scene, sampler, ray, medium=None, active=True):
@@ -75,12 +76,21 @@ def register(mitsuba) -> None:
             throughput = mi.Spectrum(1.0)
             depth = mi.UInt32(0)
             active = mi.Bool(active)
+            nee = mi.Bool(self.surface_nee)
+            after_nee = mi.Bool(False)  # the ray left a surface where an emitter was sampled
+            prev_p = mi.Point3f(0.0)  # ... at this point,
+            prev_pdf = mi.Float(0.0)  # ... in a direction of this BSDF pdf
             while dr.hint(active, max_iterations=self.max_depth, label="refracted_path"):
                 si = scene.ray_intersect(ray, ray_flags=mi.RayFlags.All, coherent=depth == 0,
                                          active=active)
-                radiance += throughput * si.emitter(scene).eval(si, active)
+                mis = _hit_weight(scene, si, prev_p, prev_pdf, active & after_nee,
+                                  self.surface_nee)
+                radiance += throughput * mis * si.emitter(scene).eval(si, active)
                 active &= si.is_valid() & (depth + 1 < self.max_depth)
                 bsdf = si.bsdf(ray)
+                smooth = active & nee & mi.has_flag(bsdf.flags(), mi.BSDFFlags.Smooth)
+                radiance += throughput * _surface_nee(scene, sampler, ctx, bsdf, si, 0.0,
+                                                      smooth, self.surface_nee)
                 sample, weight = bsdf.sample(ctx, si, sampler.next_1d(active),
                                              sampler.next_2d(active), active)
                 throughput *= weight
@@ -90,6 +100,9 @@ def register(mitsuba) -> None:
                 cos_out = dr.maximum(dr.abs(dr.dot(si.n, direction)), MIN_COS)
                 ray = mi.Ray3f(dr.fma(direction, clearance / cos_out, si.p), direction,
                                si.time, si.wavelengths)
+                after_nee = smooth & ~mi.has_flag(sample.sampled_type, mi.BSDFFlags.Delta)
+                prev_p = dr.select(smooth, si.p, prev_p)
+                prev_pdf = dr.select(smooth, sample.pdf, prev_pdf)
                 depth += 1
             return radiance, depth != 0, []
 
@@ -112,6 +125,7 @@ def register(mitsuba) -> None:
             super().__init__(props)
             depth = props.get("max_depth", 64)
             self.max_depth = (1 << 31) - 1 if depth < 0 else int(depth)
+            self.surface_nee = bool(props.get("surface_nee", False))
 
         @dr.syntax
         def sample(self, scene, sampler, ray, medium=None, active=True):
@@ -124,9 +138,12 @@ def register(mitsuba) -> None:
             depth = mi.UInt32(0)
             active = mi.Bool(active)
             channel = mi.UInt32(0)  # the project's media are grey
-            after_scatter = mi.Bool(False)  # the ray left a medium scattering event
-            scatter_p = mi.Point3f(0.0)  # ... at this point,
-            scatter_pdf = mi.Float(0.0)  # ... in a direction of this phase-function pdf
+            nee = mi.Bool(self.surface_nee)
+            # the ray left an event (medium scattering, or a smooth surface with surface_nee)
+            # where an emitter was sampled: at this point, in a direction of this pdf
+            after_scatter = mi.Bool(False)
+            scatter_p = mi.Point3f(0.0)
+            scatter_pdf = mi.Float(0.0)
             while dr.hint(active, max_iterations=self.max_depth, label="refracted_volpath"):
                 in_medium = active & (medium != None)  # noqa: E711 (a pointer array)
                 mei = medium.sample_interaction(ray, sampler.next_1d(in_medium), channel,
@@ -159,21 +176,21 @@ def register(mitsuba) -> None:
                 visible = scatter & (ds.pdf > 0) & ~scene.ray_test(shadow, scatter)
                 radiance += dr.select(visible, throughput * phase_value * emitter_weight
                                       * dr.exp(-mei.sigma_t * ds.dist)
-                                      * _balance(ds.pdf, phase_pdf), 0.0)
+                                      * dr.select(ds.delta, 1.0, _balance(ds.pdf, phase_pdf)),
+                                      0.0)
                 throughput = dr.select(scatter, throughput * phase_weight, throughput)
                 scattered_ray = mi.Ray3f(mei.p, wo, si.time, si.wavelengths)
-                # a surface: its emission — after a medium event weighted against the
+                # a surface: its emission — after a sampled event weighted against the
                 # next-event estimate of the same light (balance heuristic) — then a BSDF sample
-                reference = dr.zeros(mi.Interaction3f)
-                reference.p = scatter_p
-                emitter_pdf = scene.pdf_emitter_direction(
-                    reference, mi.DirectionSample3f(scene, si, reference),
-                    on_surface & after_scatter)
-                mis = dr.select(after_scatter, _balance(scatter_pdf, emitter_pdf), 1.0)
+                mis = _hit_weight(scene, si, scatter_p, scatter_pdf, on_surface & after_scatter)
                 radiance += dr.select(on_surface, throughput * mis * si.emitter(scene).eval(
                     si, on_surface), 0.0)
                 on_surface &= si.is_valid()
                 bsdf = si.bsdf(ray)
+                smooth = on_surface & nee & mi.has_flag(bsdf.flags(), mi.BSDFFlags.Smooth)
+                extinction = dr.select(in_medium, mei.combined_extinction[0], 0.0)
+                radiance += dr.select(smooth, throughput * _surface_nee(
+                    scene, sampler, ctx, bsdf, si, extinction, smooth, self.surface_nee), 0.0)
                 sample, weight = bsdf.sample(ctx, si, sampler.next_1d(on_surface),
                                              sampler.next_2d(on_surface), on_surface)
                 throughput = dr.select(on_surface, throughput * weight, throughput)
@@ -185,10 +202,12 @@ def register(mitsuba) -> None:
                 crossing = on_surface & si.is_medium_transition()
                 medium = dr.select(crossing, si.target_medium(direction), medium)
                 ray = dr.select(scatter, scattered_ray, surface_ray)
-                after_scatter = dr.select(scatter, True, dr.select(on_surface, False,
+                smooth_sampled = smooth & ~mi.has_flag(sample.sampled_type, mi.BSDFFlags.Delta)
+                after_scatter = dr.select(scatter, True, dr.select(on_surface, smooth_sampled,
                                                                    after_scatter))
-                scatter_p = dr.select(scatter, mei.p, scatter_p)
-                scatter_pdf = dr.select(scatter, sampled_pdf, scatter_pdf)
+                scatter_p = dr.select(scatter, mei.p, dr.select(smooth, si.p, scatter_p))
+                scatter_pdf = dr.select(scatter, sampled_pdf,
+                                        dr.select(smooth, sample.pdf, scatter_pdf))
                 depth += 1
                 active = (scatter | on_surface) & (depth < self.max_depth)
                 active &= dr.max(mi.unpolarized_spectrum(throughput)) > 0
@@ -220,6 +239,36 @@ def _substitute(scene):
     return SUBSTITUTES.get(str(scene.integrator()).split("[", 1)[0])
 
 
+def _hit_weight(scene, si, prev_p, prev_pdf, active, enabled: bool = True):
+    """MIS weight (balance heuristic) of an emitter hit by a ray sampled at ``prev_p`` with
+    density ``prev_pdf`` (solid angle) where next-event estimation also sampled the emitters;
+    1 where ``active`` is false (no next-event estimate covered this path), and 1 everywhere
+    when ``enabled`` is False (nothing is traced: the integrator does no such estimate)."""
+    if not enabled:
+        return 1.0
+    reference = dr.zeros(mi.Interaction3f)
+    reference.p = prev_p
+    emitter_pdf = scene.pdf_emitter_direction(reference, mi.DirectionSample3f(scene, si, reference),
+                                              active)
+    return dr.select(active, _balance(prev_pdf, emitter_pdf), 1.0)
+
+
+def _surface_nee(scene, sampler, ctx, bsdf, si, extinction, active, enabled: bool = True):
+    """Next-event estimate at a smooth (non-delta) surface point ``si``: one emitter sample,
+    the BSDF's value towards it, a shadow ray, the transmittance ``exp(−extinction·distance)``
+    of a homogeneous medium (``extinction`` per scene unit; 0 in clear water or air), and the
+    balance heuristic against BSDF sampling (weight 1 for delta lights such as spots). Returns
+    the radiance to add, before the path throughput; 0 without tracing anything when
+    ``enabled`` is False (scenes whose lights BSDF sampling reaches, such as LED targets)."""
+    if not enabled:
+        return 0.0
+    ds, emitter_weight = scene.sample_emitter_direction(si, sampler.next_2d(active), True, active)
+    value, pdf = bsdf.eval_pdf(ctx, si, si.to_local(ds.d), active)
+    mis = dr.select(ds.delta, 1.0, _balance(ds.pdf, pdf))
+    return dr.select(active & (ds.pdf > 0), value * emitter_weight * mis
+                     * dr.exp(-extinction * ds.dist), 0.0)
+
+
 def _balance(pdf_a, pdf_b):
     """The balance heuristic's weight of the strategy with density ``pdf_a``."""
     return dr.select(pdf_a > 0, pdf_a / (pdf_a + pdf_b), 0.0)
@@ -234,7 +283,15 @@ def render_integrator(mitsuba, scene):
         return None
     match = re.search(r"max_depth\s*=\s*(-?\d+)", str(scene.integrator()))
     register(mitsuba)
-    return mitsuba.load_dict({"type": plugin, "max_depth": int(match.group(1)) if match else 8})
+    return mitsuba.load_dict({"type": plugin, "max_depth": int(match.group(1)) if match else 8,
+                              "surface_nee": has_point_lights(mitsuba, scene)})
+
+
+def has_point_lights(mitsuba, scene) -> bool:
+    """Whether ``scene`` has emitters at a point (spot, point lights: lit targets), which only
+    next-event estimation at the surfaces they light can reach."""
+    return any(mitsuba.has_flag(e.flags(), mitsuba.EmitterFlags.DeltaPosition)
+               for e in scene.emitters())
 
 
 def integrator_name(mitsuba, scene) -> str:

@@ -93,6 +93,9 @@ def check_render_request(spec: SceneSpec, spp: int | None = None) -> None:
             problem = camera.distortion_problem()
             if problem:
                 raise ValueError(f"{spec.path}: {name}_dist: {problem}")
+            if "aperture_radius" in spec.params:
+                raise ValueError(f"{spec.path}: {name}_dist: a thin-lens camera is rendered "
+                                 f"without lens distortion (set the coefficients to 0)")
     need = max(render_memory_bytes(_render_size(camera)) for camera in spec.cameras)
     have = available_memory_bytes()
     if have is not None and need > have:

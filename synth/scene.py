@@ -60,6 +60,19 @@ WATER_MAX_DEPTH = 32
 DEFAULT_TARGET_RADIUS_MM = 2.5
 #: Radiance of the target emitters (linear units; only the ratios in an image matter).
 TARGET_RADIANCE = 1.0
+#: How targets are seen: self-luminous disks (LED targets), or white diffuse disks lit by
+#: lights beside the housing.
+LIGHTINGS = ("led", "lit")
+#: Reflectance of lit targets (white paint), default of ``target_albedo``.
+LIT_TARGET_ALBEDO = 0.9
+#: Intensity of each spot light (radiant intensity, linear units, default ``light_intensity``):
+#: a white disk at 1 m in clear water is about as bright as an LED target of radiance 1.
+LIGHT_INTENSITY = 3.0e6
+#: The spot lights: beam half-angle where the falloff starts, and the cut-off, degrees.
+LIGHT_BEAM_WIDTH_DEG, LIGHT_CUTOFF_DEG = 45.0, 60.0
+#: Where the lights are, mm: this far to each side of the rig's centre along the baseline, and
+#: this far beyond the port's last interface (in the water, like strobes on arms).
+LIGHT_SIDE_OFFSET_MM, LIGHT_DEPTH_BEYOND_PORT_MM = 400.0, 20.0
 #: Prefix of the target shapes' ids.
 TARGET_ID_PREFIX = "target_"
 
@@ -143,7 +156,7 @@ def _vec(v) -> str:
     return ", ".join(_num(x) for x in v)
 
 
-def _sensor_xml(name: str, camera: Camera, width_param: bool) -> str:
+def _sensor_xml(name: str, camera: Camera, width_param: bool, thin_lens: bool = False) -> str:
     try:
         p = sensor_parameters(camera.K, camera.size, camera.R, camera.t)
     except ValueError as exc:
@@ -157,12 +170,21 @@ def _sensor_xml(name: str, camera: Camera, width_param: bool) -> str:
     up = -R[:, 1]
     width = "$width" if width_param else str(w)
     height = "$height" if width_param else str(h)
-    return f"""
-    <sensor type="perspective" id="{name}">
-        <float name="fov" value="{_num(fov)}"/>
-        <string name="fov_axis" value="x"/>
+    if thin_lens:
+        if ppx != 0 or ppy != 0:
+            raise ValueError(f"{name} camera: a thin lens needs the principal point at the "
+                             f"image centre (Mitsuba's thinlens has no principal point offset)")
+        lens = """
+        <float name="aperture_radius" value="$aperture_radius"/>
+        <float name="focus_distance" value="$focus_distance"/>"""
+    else:
+        lens = f"""
         <float name="principal_point_offset_x" value="{_num(ppx)}"/>
-        <float name="principal_point_offset_y" value="{_num(ppy)}"/>
+        <float name="principal_point_offset_y" value="{_num(ppy)}"/>"""
+    return f"""
+    <sensor type="{'thinlens' if thin_lens else 'perspective'}" id="{name}">
+        <float name="fov" value="{_num(fov)}"/>
+        <string name="fov_axis" value="x"/>{lens}
         <float name="near_clip" value="1"/>
         <float name="far_clip" value="1000000"/>
         <transform name="to_world">
@@ -185,7 +207,8 @@ def _sensor_xml(name: str, camera: Camera, width_param: bool) -> str:
 def scene_xml(cameras, port: FlatPort | None, targets, target_radius: float, *,
               spp: int = DEFAULT_SPP, seed: int = DEFAULT_SEED, max_depth: int = DEFAULT_MAX_DEPTH,
               interface_half_size: float = INTERFACE_HALF_SIZE_MM, comment: str = "",
-              water=None) -> str:
+              water=None, target_normals=None, lighting: str = "led",
+              thin_lens=None) -> str:
     """The text of a Mitsuba 3 scene of two cameras, a flat port (or none) and disk targets.
 
     ``cameras`` (left, right) :class:`measure.Camera` (same image size; square pixels);
@@ -195,6 +218,14 @@ def scene_xml(cameras, port: FlatPort | None, targets, target_radius: float, *,
     ``water`` (a :class:`synth.water.Water`, needs a port): the water behind the port becomes a
     homogeneous participating medium (defaults ``water_c`` per metre, ``water_albedo``,
     ``water_g``) and the integrator ``volpath``.
+    ``target_normals`` ``(N, 3)``: the direction each disk faces (default: all face the cameras,
+    ``(0, 0, -1)``); each must point back towards the cameras' side of its target.
+    ``lighting``: ``"led"`` (self-luminous disks, the default) or ``"lit"`` (white diffuse disks,
+    reflectance ``$target_albedo``, lit by two ``spot`` lights beside the housing in the water —
+    :func:`light_placements` — so that scattering water shows backscatter).
+    ``thin_lens`` ``(aperture_radius_mm, focus_distance_mm)``: Mitsuba ``thinlens`` sensors in
+    place of the pinholes (defaults ``aperture_radius``, ``focus_distance``); needs the
+    principal point at the image centre (Mitsuba's thin lens has no offset).
     """
     left, right = cameras
     if left.size != right.size:
@@ -205,12 +236,24 @@ def scene_xml(cameras, port: FlatPort | None, targets, target_radius: float, *,
         raise ValueError("targets must be a non-empty finite (N, 3) array")
     if not (target_radius > 0 and np.isfinite(target_radius)):
         raise ValueError(f"target_radius must be positive, got {target_radius}")
+    if lighting not in LIGHTINGS:
+        raise ValueError(f"lighting must be one of {', '.join(LIGHTINGS)}, got {lighting!r}")
+    if lighting == "lit" and port is None:
+        raise ValueError("lit targets need a port: the lights are in the water beside the housing")
+    if target_normals is None:
+        target_normals = np.tile([0.0, 0.0, -1.0], (targets.shape[0], 1))
+    target_normals = np.asarray(target_normals, dtype=np.float64).reshape(-1, 3)
+    if target_normals.shape != targets.shape or not np.all(np.isfinite(target_normals)):
+        raise ValueError("target_normals must be a finite (N, 3) array like targets")
+    target_normals = target_normals / np.linalg.norm(target_normals, axis=1, keepdims=True)
     if port is not None:
         StereoRig(left, right, port)  # cameras on the air side
         if not np.all(port.water_side(targets)):
             raise ValueError("every target must lie in the water, beyond the port's last interface")
         if np.any(targets @ port.normal - port.offsets[-1] <= target_radius):
             raise ValueError("targets closer to the port than their radius")
+        if np.any(target_normals @ port.normal >= 0):
+            raise ValueError("every target must face the cameras (its normal towards the port)")
     w, h = left.size
     plane = bool(np.all(targets[:, 2] == targets[0, 2]))
     defaults = [("spp", str(int(spp))), ("seed", str(int(seed))), ("width", str(w)),
@@ -226,6 +269,15 @@ def scene_xml(cameras, port: FlatPort | None, targets, target_radius: float, *,
                      ("water_g", _num(water.g))]
         max_depth = max(int(max_depth), WATER_MAX_DEPTH)
     defaults.append(("target_radius", _num(target_radius)))
+    if lighting == "lit":
+        defaults += [("target_albedo", _num(LIT_TARGET_ALBEDO)),
+                     ("light_intensity", _num(LIGHT_INTENSITY))]
+    if thin_lens is not None:
+        aperture, focus = (float(v) for v in thin_lens)
+        if not (aperture > 0 and focus > 0 and np.isfinite(aperture) and np.isfinite(focus)):
+            raise ValueError(f"thin lens aperture radius and focus distance must be positive, "
+                             f"got {thin_lens}")
+        defaults += [("aperture_radius", _num(aperture)), ("focus_distance", _num(focus))]
     if plane:
         defaults.append(("target_z", _num(targets[0, 2])))
     defaults.append(("max_depth", str(int(max_depth))))
@@ -256,8 +308,19 @@ def scene_xml(cameras, port: FlatPort | None, targets, target_radius: float, *,
             <float name="g" value="$water_g"/>
         </phase>
     </medium>""")
-    parts.append(_sensor_xml("left", left, True))
-    parts.append(_sensor_xml("right", right, True))
+    parts.append(_sensor_xml("left", left, True, thin_lens is not None))
+    parts.append(_sensor_xml("right", right, True, thin_lens is not None))
+    if lighting == "lit":
+        for k, (origin, target) in enumerate(light_placements(left, right, port, targets)):
+            parts.append(f"""
+    <emitter type="spot" id="light_{k}">
+        <transform name="to_world">
+            <lookat origin="{_vec(origin)}" target="{_vec(target)}" up="{_vec(_perpendicular(target - origin))}"/>
+        </transform>
+        <rgb name="intensity" value="$light_intensity"/>
+        <float name="cutoff_angle" value="{_num(LIGHT_CUTOFF_DEG)}"/>
+        <float name="beam_width" value="{_num(LIGHT_BEAM_WIDTH_DEG)}"/>
+    </emitter>""")
 
     if port is not None:
         for k, centre, target, up, ext_ior, int_ior in interface_placements(port):
@@ -278,23 +341,56 @@ def scene_xml(cameras, port: FlatPort | None, targets, target_radius: float, *,
         </bsdf>{medium}
     </shape>""")
 
-    parts.append(f"""
+    if lighting == "led":
+        parts.append(f"""
     <bsdf type="diffuse" id="target_back">
         <rgb name="reflectance" value="0"/>
     </bsdf>""")
+        surface = ("        <ref id=\"target_back\"/>\n        <emitter type=\"area\"><rgb "
+                   f"name=\"radiance\" value=\"{_num(TARGET_RADIANCE)}\"/></emitter>")
+    else:
+        parts.append("""
+    <bsdf type="diffuse" id="target_white">
+        <rgb name="reflectance" value="$target_albedo"/>
+    </bsdf>""")
+        surface = "        <ref id=\"target_white\"/>"
+    facing = np.all(target_normals == [0.0, 0.0, -1.0], axis=1)
     for k, (x, y, z) in enumerate(targets):
         zval = "$target_z" if plane else _num(z)
+        if facing[k]:
+            orient = '<rotate x="1" angle="180"/>\n            <scale value="$target_radius"/>'
+        else:
+            n = target_normals[k]
+            orient = (f'<scale value="$target_radius"/>\n            <lookat origin="0, 0, 0" '
+                      f'target="{_vec(n)}" up="{_vec(_perpendicular(n))}"/>')
         parts.append(f"""    <shape type="disk" id="{TARGET_ID_PREFIX}{k}">
         <transform name="to_world">
-            <rotate x="1" angle="180"/>
-            <scale value="$target_radius"/>
+            {orient}
             <translate x="{_num(x)}" y="{_num(y)}" z="{zval}"/>
         </transform>
-        <ref id="target_back"/>
-        <emitter type="area"><rgb name="radiance" value="{_num(TARGET_RADIANCE)}"/></emitter>
+{surface}
     </shape>""")
     parts.append("</scene>\n")
     return "\n".join(parts)
+
+
+def light_placements(left: Camera, right: Camera, port: FlatPort, targets):
+    """The two spot lights of a lit scene: ``[(origin, aim point), …]``, mm, reference frame.
+
+    Each light sits :data:`LIGHT_SIDE_OFFSET_MM` to one side of the rig's centre along the
+    baseline (projected onto the port's plane) and :data:`LIGHT_DEPTH_BEYOND_PORT_MM` beyond
+    the port's last interface, in the water; both aim at the point of the rig's axis (through
+    its centre along the port normal) at the targets' mean depth.
+    """
+    N = port.normal
+    centre = 0.5 * (left.center + right.center)
+    baseline = right.center - left.center
+    side = baseline - N * (baseline @ N)
+    side = side / np.linalg.norm(side)
+    depth = port.offsets[-1] + LIGHT_DEPTH_BEYOND_PORT_MM
+    foot = centre - N * (centre @ N)
+    aim = foot + N * float(np.mean(np.asarray(targets) @ N))
+    return [(foot + N * depth + sign * LIGHT_SIDE_OFFSET_MM * side, aim) for sign in (-1.0, 1.0)]
 
 
 def interface_placements(port: FlatPort):
@@ -408,9 +504,12 @@ _NUMERIC_PARAMS = {"spp": ("int", 1, False), "seed": ("int", 0, False),
                    "max_depth": ("int", 0, False), "n_water": ("float", 0.0, True),
                    "target_radius": ("float", 0.0, True), "target_z": ("float", 0.0, True),
                    "water_c": ("float", 0.0, False), "water_albedo": ("float", 0.0, False),
-                   "water_g": ("float", -1.0, True)}
+                   "water_g": ("float", -1.0, True), "target_albedo": ("float", 0.0, False),
+                   "light_intensity": ("float", 0.0, False),
+                   "aperture_radius": ("float", 0.0, True), "focus_distance": ("float", 0.0, True)}
 #: Upper bounds (inclusive unless marked strict) of the water's parameters.
-_UPPER_BOUNDS = {"water_albedo": (1.0, False), "water_g": (1.0, True)}
+_UPPER_BOUNDS = {"water_albedo": (1.0, False), "water_g": (1.0, True),
+                 "target_albedo": (1.0, False)}
 
 
 def _check_params(params: dict, label: str) -> None:
@@ -497,8 +596,9 @@ def _read_sensor(nodes: _Nodes, node, params, label) -> Camera:
     ObjectType = nodes.mi.ObjectType
     sid = node.props.id() or "?"
     what = f"{label}: sensor {sid!r}"
-    if node.props.plugin_name() != "perspective":
-        raise SceneError(f"{what}: type {node.props.plugin_name()!r}, expected 'perspective'")
+    if node.props.plugin_name() not in ("perspective", "thinlens"):
+        raise SceneError(f"{what}: type {node.props.plugin_name()!r}, expected 'perspective' "
+                         f"or 'thinlens'")
     film = nodes.child(node, ObjectType.Film)
     if film is None:
         raise SceneError(f"{what}: no <film>")
@@ -554,7 +654,7 @@ def _read_shapes(nodes: _Nodes, label: str):
         kind = node.props.plugin_name()
         what = f"{label}: shape {sid!r}"
         M = nodes.matrix(node)
-        if nodes.child(node, ObjectType.Emitter) is not None:
+        if nodes.child(node, ObjectType.Emitter) is not None or sid.startswith(TARGET_ID_PREFIX):
             if kind != "disk":
                 raise SceneError(f"{what}: targets must be disks, got {kind!r}")
             if not sid.startswith(TARGET_ID_PREFIX) or not sid[len(TARGET_ID_PREFIX):].isdigit():
@@ -623,7 +723,8 @@ def load_scene(path, defines: dict | None = None) -> SceneSpec:
     interfaces, targets = _read_shapes(nodes, label)
 
     if not targets:
-        raise SceneError(f"{label}: no targets (disk shapes with an area emitter)")
+        raise SceneError(f"{label}: no targets (disk shapes with an area emitter, "
+                         f"or with ids '{TARGET_ID_PREFIX}<number>')")
     targets.sort(key=lambda item: item[0])
     ids = np.array([t[0] for t in targets])
     if np.unique(ids).size != ids.size:

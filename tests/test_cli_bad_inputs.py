@@ -127,6 +127,8 @@ EVAL_CASES = [
     (None, RUN + ["--depth-range", "5"], "--depth-range"),
     (None, RUN + ["--depth-range", "2,1"], "--depth-range"),
     (None, RUN + ["--depth-range", "nan,5"], "--depth-range"),
+    (None, RUN + ["--max-elongation", "1"], "--max-elongation"),
+    (None, RUN + ["--max-elongation", "inf"], "--max-elongation"),
     (None, RUN + ["--methods", "bogus"], "bogus"),
     (None, RUN + ["--methods", ""], "method"),
     (None, RUN + ["--variant", "bogus_variant"], "bogus_variant"),
@@ -214,6 +216,15 @@ SYNTH_CASES = [
     (None, ["check", "small.xml"], "small.xml"),
     (None, ["check", "ds", "--rms", "nan"], "--rms"),
     (None, ["check", "ds", "--rms", "-1"], "--rms"),
+    (None, SCENE + ["--layer", "1.49", "10", "--n-glass", "1.5"], "--layer"),
+    (None, SCENE + ["--layer", "0.9", "10"], "--layer"),
+    (None, SCENE + ["--layer", "1.5", "-1"], "--layer"),
+    (None, SCENE + ["--port", "none", "--lighting", "lit"], "needs a port"),
+    (None, SCENE + ["--focus-distance", "800"], "--aperture-radius"),
+    (None, SCENE + ["--aperture-radius", "nan"], "--aperture-radius"),
+    (None, SCENE + ["--z", "5000", "--target-radius", "4000"], "visible"),
+    (None, SCENE + ["--layout", "cylinder", "--half-angle", "95"], "--half-angle"),
+    (None, SCENE + ["--layout", "tilted", "--tilt", "0", "85"], "--tilt"),
 ]
 # Overwriting a file that `synth scene` did not write (the scene file of someone else).
 SYNTH_CASES[16] = (None, ["scene", "--out", "small_copy_foreign.xml"], "not a file this command wrote")
