@@ -25,8 +25,6 @@ rebuilt from the cell files every few seconds and at the end; figures go into ``
 from __future__ import annotations
 
 import argparse
-import csv
-import io
 import json
 import os
 import re
@@ -274,9 +272,8 @@ def table_columns(spec, rows: list) -> list:
 def write_tables(directory: str, spec, records: dict) -> int:
     """``results.parquet`` and ``results.csv`` from the records; returns the number of rows."""
     import pyarrow as pa
+    import pyarrow.csv as pa_csv
     import pyarrow.parquet as pq
-
-    from synth.fileio import atomic_write_text
 
     rows = table_rows(spec, records)
     columns = table_columns(spec, rows)
@@ -290,22 +287,12 @@ def write_tables(directory: str, spec, records: dict) -> int:
             values = [None if v is None else str(v) for v in values]
         arrays[name] = pa.array(values, type=None if kinds else pa.null())
     table = pa.table(arrays)
-    tmp = os.path.join(directory, f".results.parquet.{os.getpid()}.tmp")
-    pq.write_table(table, tmp)
-    os.replace(tmp, os.path.join(directory, "results.parquet"))
-    buffer = io.StringIO()
-    writer = csv.writer(buffer, lineterminator="\n")
-    writer.writerow(columns)
-    for row in rows:
-        writer.writerow(["" if row.get(c) is None else _csv_text(row.get(c)) for c in columns])
-    atomic_write_text(os.path.join(directory, "results.csv"), buffer.getvalue())
+    for name, writer in (("results.parquet", pq.write_table), ("results.csv", pa_csv.write_csv)):
+        tmp = os.path.join(directory, f".{name}.{os.getpid()}.tmp")
+        writer(table, tmp)
+        os.chmod(tmp, 0o644)
+        os.replace(tmp, os.path.join(directory, name))
     return len(rows)
-
-
-def _csv_text(value):
-    if isinstance(value, float):
-        return repr(value)
-    return value
 
 
 # ------------------------------------------------------------------------------------------------
@@ -358,7 +345,7 @@ def connect(args):
         return client, None, f"{n} worker(s) of {args.scheduler}"
     workers = args.workers or default_workers()
     cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                           dashboard_address=None, silence_logs=logging.CRITICAL)
+                           dashboard_address=":0", silence_logs=logging.CRITICAL)
     client = Client(cluster, set_as_default=False)
     return client, cluster, f"{workers} local single-threaded worker(s)"
 
@@ -406,7 +393,7 @@ def execute(client, spec, todo: list, out: SweepDir, records: dict, run_id: str,
         futures[future] = batch
     bar = tqdm(total=len(todo), unit="cell", desc="sweep", file=sys.stderr,
                disable=True if not progress else None, smoothing=0.05)
-    ran, last_table = 0, time.monotonic()
+    ran, last_table, interval = 0, time.monotonic(), TABLE_INTERVAL_S
     try:
         for future in as_completed(futures, loop=client.loop):
             batch = futures.pop(future)
@@ -429,9 +416,12 @@ def execute(client, spec, todo: list, out: SweepDir, records: dict, run_id: str,
             failed = sum(r["status"] != "ok" for r in records.values())
             if failed:
                 bar.set_postfix_str(f"{failed} failed")
-            if time.monotonic() - last_table > TABLE_INTERVAL_S:
+            if time.monotonic() - last_table > interval:
+                took = time.monotonic()
                 write_tables(out.path, spec, records)
                 last_table = time.monotonic()
+                # rebuilding a large table costs seconds: keep it under a tenth of the time
+                interval = max(TABLE_INTERVAL_S, 10 * (last_table - took))
     finally:
         bar.close()
         for future in futures:

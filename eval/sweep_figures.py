@@ -61,23 +61,53 @@ def _x_axis(rows, param):
     return order, False
 
 
-def _panel(ax, rows, param, series, column_of, x_values, numeric):
-    """Draw one metric: ``series`` ``{label: filter(row) -> bool}``, ``column_of(label)`` the
-    column of that line."""
+class _Columns:
+    """Numeric columns of the rows as float arrays (NaN where missing), built once each."""
+
+    def __init__(self, rows):
+        self.rows, self.cache = rows, {}
+
+    def __getitem__(self, column):
+        import numpy as np
+
+        if column not in self.cache:
+            self.cache[column] = np.array([row.get(column) if _number(row.get(column))
+                                           else np.nan for row in self.rows], dtype=float)
+        return self.cache[column]
+
+
+def _groups(rows, param, others, split, x_values, numeric) -> dict:
+    """``{combo or None: [(x position, row indices)]}``: the rows of each point of each line."""
     import numpy as np
 
-    for k, (label, keep) in enumerate(series.items()):
-        column = column_of(label)
+    where = {x: i for i, x in enumerate(x_values)}
+    found = {}
+    for index, row in enumerate(rows):
+        x = row.get(param) if numeric else _label(row.get(param))
+        combo = _series_key(row, others) if split else None
+        found.setdefault(combo, {}).setdefault(where[x], []).append(index)
+    return {combo: [(x_values[i] if numeric else i, np.array(found[combo][i]))
+                    for i in sorted(found[combo])] for combo in found}
+
+
+def _panel(ax, lines: dict, groups: dict, columns: _Columns, x_values, numeric):
+    """One metric: ``lines`` ``{label: (combo, column)}``; a point is the mean of the column
+    over its rows, the error bar ± one standard deviation."""
+    import numpy as np
+
+    for label, (combo, column) in lines.items():
+        values = columns[column]
         xs, means, stds = [], [], []
-        for i, x in enumerate(x_values):
-            ys = [row[column] for row in rows if keep(row) and _number(row.get(column))
-                  and (row.get(param) == x if numeric else _label(row.get(param)) == x)]
-            if ys:
-                xs.append(x if numeric else i)
-                means.append(float(np.mean(ys)))
-                stds.append(float(np.std(ys, ddof=1)) if len(ys) > 1 else 0.0)
+        for x, index in groups.get(combo, []):
+            ys = values[index]
+            ys = ys[np.isfinite(ys)]
+            if ys.size:
+                xs.append(x)
+                means.append(float(ys.mean()))
+                stds.append(float(ys.std(ddof=1)) if ys.size > 1 else 0.0)
         if xs:
-            ax.errorbar(xs, means, yerr=stds, marker="o", ms=3, capsize=2, lw=1, label=label)
+            ax.errorbar(xs, means, yerr=stds, marker="o", ms=3, capsize=0, lw=1, elinewidth=0.8,
+                        label=label)
     if not numeric:
         ax.set_xticks(range(len(x_values)))
         ax.set_xticklabels(x_values, rotation=30, fontsize=7)
@@ -110,7 +140,7 @@ def _figure(path, title, panels, draw, columns: int = 4):
                         top=1 - 0.6 / (2.6 * lines + 0.6), hspace=0.55, wspace=0.35)
     directory, name = os.path.split(path)
     tmp = os.path.join(directory, f".{name}.{os.getpid()}.tmp")
-    fig.savefig(tmp, dpi=80, format="png")
+    fig.savefig(tmp, dpi=72, format="png")
     plt.close(fig)
     os.replace(tmp, path)
 
@@ -134,47 +164,45 @@ def write_figures(directory: str, spec, rows: list) -> list:
                      and c not in params and not c.startswith("timings_s.")
                      and _varying(rows, c)]
     paths = []
+    values = _Columns(rows)
     for param in swept:
         others = [p for p in swept if p != param]
         combos = sorted({_series_key(row, others) for row in rows})
-        split = others and len(combos) <= MAX_SERIES_COMBINATIONS
+        split = bool(others) and len(combos) <= MAX_SERIES_COMBINATIONS
         note = ("" if not others else
                 f"; one line per {', '.join(others)}" if split else
                 f"; averaged over {', '.join(others)}")
         x_values, numeric = _x_axis(rows, param)
-        metrics = list(method_columns)
-        if metrics:
-            def draw(ax, metric, param=param, combos=combos, split=split, others=others,
-                     x_values=x_values, numeric=numeric):
-                series, column_of = {}, {}
-                for label, column in method_columns[metric].items():
-                    for combo in (combos if split else [None]):
-                        name = label if combo is None else (
-                            label + " | " + ", ".join(f"{k}={v}" for k, v in combo))
-                        series[name] = (lambda row, combo=combo: combo is None
-                                        or _series_key(row, others) == combo)
-                        column_of[name] = column
-                _panel(ax, rows, param, series, column_of.get, x_values, numeric)
-                ax.set_xlabel(param, fontsize=8)
+        groups = _groups(rows, param, others, split, x_values, numeric)
+        line_combos = combos if split else [None]
 
-            path = os.path.join(directory, f"{_safe(param)}__methods.png")
-            _figure(path, f"{spec.name}: method metrics against {param} (mean ± 1 std over "
-                          f"repeats{note})", metrics, draw)
-            paths.append(path)
-        if other_columns:
-            def draw_cell(ax, column, param=param, combos=combos, split=split, others=others,
-                          x_values=x_values, numeric=numeric):
-                series = {}
-                for combo in (combos if split else [None]):
-                    name = "all" if combo is None else ", ".join(f"{k}={v}" for k, v in combo)
-                    series[name] = (lambda row, combo=combo: combo is None
-                                    or _series_key(row, others) == combo)
-                _panel(ax, rows, param, series, lambda _: column, x_values, numeric)
-                ax.set_xlabel(param, fontsize=8)
+        def name_of(label, combo):
+            parts = [] if label is None else [label]
+            if combo is not None:
+                parts.append(", ".join(f"{k}={v}" for k, v in combo))
+            return " | ".join(parts) or "all"
 
-            path = os.path.join(directory, f"{_safe(param)}__cell.png")
-            _figure(path, f"{spec.name}: cell metrics against {param} (mean ± 1 std over "
-                          f"repeats{note})", other_columns, draw_cell)
+        def draw(ax, metric, groups=groups, x_values=x_values, numeric=numeric,
+                 line_combos=line_combos, param=param):
+            lines = {name_of(label, combo): (combo, column)
+                     for label, column in method_columns[metric].items()
+                     for combo in line_combos}
+            _panel(ax, lines, groups, values, x_values, numeric)
+            ax.set_xlabel(param, fontsize=8)
+
+        def draw_cell(ax, column, groups=groups, x_values=x_values, numeric=numeric,
+                      line_combos=line_combos, param=param):
+            lines = {name_of(None, combo): (combo, column) for combo in line_combos}
+            _panel(ax, lines, groups, values, x_values, numeric)
+            ax.set_xlabel(param, fontsize=8)
+
+        for suffix, panels, drawer, what in (("methods", list(method_columns), draw, "method"),
+                                             ("cell", other_columns, draw_cell, "cell")):
+            if not panels:
+                continue
+            path = os.path.join(directory, f"{_safe(param)}__{suffix}.png")
+            _figure(path, f"{spec.name}: {what} metrics against {param} (mean ± 1 std over "
+                          f"repeats{note})", panels, drawer)
             paths.append(path)
     return paths
 
