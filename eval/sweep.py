@@ -380,11 +380,13 @@ def batches(spec, cells: list, workers: int) -> list:
 
 def execute(client, spec, todo: list, out: SweepDir, records: dict, run_id: str, progress: bool,
             workers: int) -> int:
-    """Run ``todo`` cells; write each record as it arrives; returns how many ran."""
+    """Run ``todo`` cells; write each record as it arrives. Returns ``(cells run, seconds from
+    the first submission to the last result)``."""
     from distributed import as_completed
     from tqdm import tqdm
 
     tasks = batches(spec, todo, workers)
+    started = time.perf_counter()
     futures = {}
     for batch in tasks:
         payload = [_cell_payload(spec, c) for c in batch]
@@ -426,7 +428,7 @@ def execute(client, spec, todo: list, out: SweepDir, records: dict, run_id: str,
         bar.close()
         for future in futures:
             future.cancel()
-    return ran
+    return ran, time.perf_counter() - started
 
 
 def _run_batch(cells, scenes, save):
@@ -467,10 +469,10 @@ def main(args) -> int:
                      "cells_to_run": len(todo), "where": where})
         out.write_state(spec, runs)
         records = dict(on_disk)
-        ran = 0
+        ran, compute = 0, 0.0
         if todo:
             try:
-                ran = execute(client, spec, todo, out, records, run_id, progress, workers)
+                ran, compute = execute(client, spec, todo, out, records, run_id, progress, workers)
             except ValueError as exc:  # from Dask: a bug, not bad input (exit 1, not 2)
                 raise RuntimeError(f"{type(exc).__name__}: {exc}") from exc
     finally:
@@ -480,7 +482,7 @@ def main(args) -> int:
             cluster.close()
     rows = write_tables(out.path, spec, records)
     elapsed = time.perf_counter() - start
-    runs[-1].update({"cells_ran": ran, "seconds": elapsed})
+    runs[-1].update({"cells_ran": ran, "seconds": elapsed, "compute_seconds": compute})
     out.write_state(spec, runs)
     figures = []
     if not args.no_figures and rows:
@@ -489,7 +491,8 @@ def main(args) -> int:
         figures = write_figures(os.path.join(out.path, "figures"), spec,
                                 table_rows(spec, records))
     failed = sum(1 for c in spec.cells if records.get(c.key, {}).get("status") == "failed")
-    per_cell = f", {elapsed / ran:.3f} s per cell" if ran else ""
+    per_cell = (f" ({compute:.1f} s from the first cell submitted to the last result, "
+                f"{compute / ran:.3f} s per cell)" if ran else "")
     print(f"sweep {spec.name}: {len(spec.cells)} cells: {len(spec.cells) - len(todo)} done "
           f"before, {ran} ran now on {where} in {elapsed:.1f} s{per_cell}; {failed} failed"
           f"{' (see the error column)' if failed else ''}; wrote {out.display}/results.parquet, "

@@ -73,7 +73,8 @@ def spec_file(small_scene, tmp_path_factory):
 @pytest.fixture(scope="module")
 def local_run(spec_file, tmp_path_factory):
     out = tmp_path_factory.mktemp("local") / "out"
-    code = main(["sweep", str(spec_file), "--out", str(out), "--workers", "2", "--no-progress"])
+    code = main(["sweep", str(spec_file), "--out", str(out), "--workers", "2", "--no-progress",
+                 "--no-figures"])
     return out, code
 
 
@@ -215,11 +216,17 @@ def test_rerun_does_nothing_and_changed_spec_is_refused(local_run, spec_file, sm
     assert (out / "completions.log").read_text() == before
 
 
-def test_figures(local_run):
+def test_figures(local_run, spec_file, tmp_path):
+    from eval.sweep import SweepDir, table_rows
+    from eval.sweep_figures import write_figures
+
     out, _ = local_run
-    names = sorted(p.name for p in (out / "figures").iterdir())
-    assert "noise_px__methods.png" in names and "kind__methods.png" in names
-    assert all((out / "figures" / n).stat().st_size > 5000 for n in names)
+    spec = load_spec(spec_file)
+    rows = table_rows(spec, SweepDir(out).load_records([c.key for c in spec.cells]))
+    spec.grid = {"noise_px": spec.grid["noise_px"]}  # one swept parameter: two figures
+    paths = write_figures(str(tmp_path), spec, rows)
+    assert sorted(Path(p).name for p in paths) == ["noise_px__cell.png", "noise_px__methods.png"]
+    assert all(Path(p).stat().st_size > 5000 for p in paths)
 
 
 def test_foreign_directory_is_refused(spec_file, tmp_path, capsys):
@@ -263,7 +270,7 @@ def dask_cluster(tmp_path_factory):
             process.terminate()
         for process in reversed(processes):
             try:
-                process.wait(timeout=20)
+                process.wait(timeout=5)
             except subprocess.TimeoutExpired:
                 os.killpg(process.pid, signal.SIGKILL)
                 process.wait()
