@@ -21,7 +21,7 @@ from synth.cli import (CLIError, Parser, non_negative_float, non_negative_int, p
                        positive_int, run_command)
 
 #: Subcommand modules, in the order ``--help`` lists them: ``eval.<name>``.
-SUBCOMMANDS = ("run", "score", "paper", "calibrate", "bench", "render_bench")
+SUBCOMMANDS = ("run", "score", "paper", "sweep", "calibrate", "bench", "render_bench")
 
 
 def build_parser() -> Parser:

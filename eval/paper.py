@@ -90,12 +90,16 @@ def rig_description(rig: StereoRig, air_rig: StereoRig) -> dict:
     }
 
 
-def _project_pair(rig: StereoRig, points: np.ndarray, port=None):
+def project_pair(rig: StereoRig, points: np.ndarray, port=None):
+    """The forward model: the pixels ``(left, right)`` of ``points`` ``(..., 3)`` mm through
+    ``port`` (default the rig's). Shared with the analytic cells of ``eval sweep``."""
     port = rig.port if port is None else port
     return project(rig.left, port, points), project(rig.right, port, points)
 
 
-def _errors(rig: StereoRig, uv_left, uv_right, method: str, truth: np.ndarray):
+def triangulation_errors(rig: StereoRig, uv_left, uv_right, method: str, truth: np.ndarray):
+    """``(errors, Triangulation)``: ``method`` on pixels ``(..., 2)``, errors measured − true
+    ``(..., 3)`` mm. Shared with the analytic cells of ``eval sweep``."""
     result = triangulate(rig, uv_left.reshape(-1, 2), uv_right.reshape(-1, 2), method)
     shape = uv_left.shape[:-1] + (3,)
     errors = (result.points - truth.reshape(-1, 3)).reshape(shape)
@@ -105,7 +109,7 @@ def _errors(rig: StereoRig, uv_left, uv_right, method: str, truth: np.ndarray):
 def run_gap(rig: StereoRig, z: float = DISTANCES_MM[0]) -> dict:
     """Section 3.2: the gap between rays O_L A1 and O_R B1 for the 496 targets at ``z`` mm."""
     targets = paper_plane(z)
-    uv_left, uv_right = _project_pair(rig, targets)
+    uv_left, uv_right = project_pair(rig, targets)
     result = triangulate(rig, uv_left, uv_right, "regular")
     gap = result.gap
     radius = np.hypot(targets[:, 0], targets[:, 1])
@@ -131,12 +135,14 @@ def run_ideal(rig: StereoRig, air_rig: StereoRig, distances=DISTANCES_MM) -> dic
     out = {}
     for z in distances:
         targets = paper_plane(z)
-        uv_left, uv_right = _project_pair(rig, targets)
-        air_left, air_right = _project_pair(air_rig, targets)
+        uv_left, uv_right = project_pair(rig, targets)
+        air_left, air_right = project_pair(air_rig, targets)
         errors = {
-            "optical_path": _errors(rig, uv_left, uv_right, "optical_path", targets)[0],
-            "su": _errors(rig, uv_left, uv_right, "su", targets)[0],
-            "regular_in_air": _errors(air_rig, air_left, air_right, "regular", targets)[0],
+            "optical_path": triangulation_errors(rig, uv_left, uv_right, "optical_path",
+                                                 targets)[0],
+            "su": triangulation_errors(rig, uv_left, uv_right, "su", targets)[0],
+            "regular_in_air": triangulation_errors(air_rig, air_left, air_right, "regular",
+                                                   targets)[0],
         }
         radius = np.hypot(targets[:, 0], targets[:, 1])
         su_dp = np.linalg.norm(errors["su"], axis=1)
@@ -200,8 +206,8 @@ def run_noise(rig: StereoRig, air_rig: StereoRig, trials: int, seed: int,
     offset_left = pixel_noise((trials, n, 2), variance, rng)
     offset_right = pixel_noise((trials, n, 2), variance, rng)
 
-    water_left, water_right = _project_pair(rig, targets)
-    air_left, air_right = _project_pair(air_rig, targets)
+    water_left, water_right = project_pair(rig, targets)
+    air_left, air_right = project_pair(air_rig, targets)
     true_port = {"simulation": deviate_port(rig.port, "n_water", index_relative),
                  "measurement": rig.port}
     assumed_rig = {"simulation": rig,
@@ -216,20 +222,22 @@ def run_noise(rig: StereoRig, air_rig: StereoRig, trials: int, seed: int,
         for method in NOISE_METHODS:
             bar.set_postfix_str(f"noise {method}")
             if method == "regular_in_air":
-                noise_errors[method] = _errors(air_rig, air_left + offset_left,
-                                               air_right + offset_right, "regular", truth)[0]
+                noise_errors[method] = triangulation_errors(
+                    air_rig, air_left + offset_left, air_right + offset_right, "regular",
+                    truth)[0]
             else:
-                noise_errors[method] = _errors(rig, water_left + offset_left,
-                                               water_right + offset_right, method, truth)[0]
+                noise_errors[method] = triangulation_errors(
+                    rig, water_left + offset_left, water_right + offset_right, method, truth)[0]
             bar.update(trials)
         index_errors = {}
         for side in INDEX_SIDES:
-            sim_left, sim_right = _project_pair(rig, targets, true_port[side])
+            sim_left, sim_right = project_pair(rig, targets, true_port[side])
             index_errors[side] = {}
             for method in INDEX_METHODS:
                 bar.set_postfix_str(f"index {side} {method}")
-                index_errors[side][method] = _errors(assumed_rig[side], sim_left + offset_left,
-                                                     sim_right + offset_right, method, truth)[0]
+                index_errors[side][method] = triangulation_errors(
+                    assumed_rig[side], sim_left + offset_left, sim_right + offset_right, method,
+                    truth)[0]
                 bar.update(trials)
 
     noise_stats = {m: error_stats(e) for m, e in noise_errors.items()}
@@ -237,9 +245,11 @@ def run_noise(rig: StereoRig, air_rig: StereoRig, trials: int, seed: int,
     # errors over targets × trials, / sqrt(samples). The per-target noise-free error (Su's model
     # error) is the same in every run and is not noise, so it is left out of this yardstick.
     noise_free = {
-        "optical_path": _errors(rig, water_left, water_right, "optical_path", targets)[0],
-        "su": _errors(rig, water_left, water_right, "su", targets)[0],
-        "regular_in_air": _errors(air_rig, air_left, air_right, "regular", targets)[0]}
+        "optical_path": triangulation_errors(rig, water_left, water_right, "optical_path",
+                                             targets)[0],
+        "su": triangulation_errors(rig, water_left, water_right, "su", targets)[0],
+        "regular_in_air": triangulation_errors(air_rig, air_left, air_right, "regular",
+                                               targets)[0]}
     noise_sem = {}
     for method in NOISE_METHODS:
         noisy = error_components(noise_errors[method])
@@ -309,7 +319,7 @@ def run_index_in_situ(rig: StereoRig, trials: int, seed: int,
 
     truth = paper_plane(z)
     true_port = deviate_port(rig.port, "n_water", index_relative)
-    clean = _project_pair(rig, truth, true_port)
+    clean = project_pair(rig, truth, true_port)
     rng = np.random.default_rng([seed, 1])
     sigma = float(np.sqrt(variance))
     estimates, sigmas, dz_before, dz_after, first = [], [], [], [], None

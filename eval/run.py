@@ -13,6 +13,7 @@ import math
 import os
 import sys
 import time
+from dataclasses import dataclass
 
 from eval.cli import CLIError, non_negative_float, non_negative_int, positive_float, positive_int
 
@@ -416,34 +417,45 @@ def write_outputs(tmp: str, inputs, report: dict, arrays: dict) -> None:
     run_figures.histograms_figure(os.path.join(tmp, "histograms.png"), arrays["per_method"])
 
 
-def main(args) -> int:
-    from synth.fileio import OutputDir, atomic_write_json, atomic_write_text, jsonable
+@dataclass(frozen=True)
+class RunOptions:
+    """The checked options of a run (:func:`check_options`)."""
 
-    quiet = args.no_progress
-    log = (lambda text: None) if quiet else (lambda text: print(text, file=sys.stderr, flush=True))
-    methods = _parse_methods(args.methods)
-    depth_window = _parse_range(args.depth_range)
-    self_calibration = _parse_self_calibration(args.self_calibrate)
-    sensor = _parse_sensor(args.sensor)
-    output = OutputDir(args.out, COMMAND).claim()  # before any expensive work
-    start = time.perf_counter()
+    methods: tuple
+    depth_window: tuple | None
+    self_calibration: tuple
+    sensor: object
+
+
+def check_options(args) -> RunOptions:
+    """Parse and check the options of ``args`` that need more than argparse (CLIError names
+    the bad one) — before any expensive work."""
+    return RunOptions(_parse_methods(args.methods), _parse_range(args.depth_range),
+                      _parse_self_calibration(args.self_calibrate), _parse_sensor(args.sensor))
+
+
+def measure(args, options: RunOptions, log):
+    """Everything of ``eval run`` but the output: load or render the images, expose them on the
+    sensor, detect, match, triangulate, score. Returns ``(report, arrays, inputs)``; the report
+    lacks ``versions``, ``inputs``, ``ply`` and the ``report`` / ``total`` timings. ``eval
+    sweep`` runs its render cells through this function, in its workers."""
     inputs = load_inputs(args, log)
     sensor_info = None
-    if sensor is not None:
+    if options.sensor is not None:
         from synth.sensor_model import sensor_views, to_radiance
 
-        log(f"expose both views on the {sensor.name} sensor …")
-        left, right, sensor_info = sensor_views(inputs.left, inputs.right, sensor, inputs.seed)
-        inputs.left, inputs.right = (to_radiance(codes, sensor, sensor_info["electrons_per_unit"])
+        log(f"expose both views on the {options.sensor.name} sensor …")
+        left, right, sensor_info = sensor_views(inputs.left, inputs.right, options.sensor,
+                                                inputs.seed)
+        inputs.left, inputs.right = (to_radiance(codes, options.sensor,
+                                                 sensor_info["electrons_per_unit"])
                                      for codes in (left, right))
-
-    from synth.provenance import package_versions
 
     from .run_pipeline import run_pipeline
 
-    report, arrays = run_pipeline(inputs, methods, args.noise_px, args.gate_mm, depth_window, log,
-                                  eccentricity=args.eccentricity,
-                                  self_calibrate=self_calibration,
+    report, arrays = run_pipeline(inputs, options.methods, args.noise_px, args.gate_mm,
+                                  options.depth_window, log, eccentricity=args.eccentricity,
+                                  self_calibrate=options.self_calibration,
                                   budget_rigs=_budget_rigs(args, inputs),
                                   threshold_fraction=args.threshold_fraction,
                                   max_elongation=args.max_elongation,
@@ -451,6 +463,19 @@ def main(args) -> int:
     report["sensor"] = sensor_info
     report["rigs"]["source"] = (f"--calib {args.calib}" if args.calib else "the scene's rig") + (
         " with --assume" if args.assume else "")
+    return report, arrays, inputs
+
+
+def main(args) -> int:
+    from synth.fileio import OutputDir, atomic_write_json, atomic_write_text, jsonable
+    from synth.provenance import package_versions
+
+    quiet = args.no_progress
+    log = (lambda text: None) if quiet else (lambda text: print(text, file=sys.stderr, flush=True))
+    options = check_options(args)
+    output = OutputDir(args.out, COMMAND).claim()  # before any expensive work
+    start = time.perf_counter()
+    report, arrays, inputs = measure(args, options, log)
     log("write the report, figures and point clouds …")
     t = time.perf_counter()
     with output.staged() as tmp:

@@ -1,0 +1,335 @@
+"""What a worker of ``python -m eval sweep`` does with a batch of cells (imported on the workers).
+
+* A **render cell** is ``eval run`` in-process: the cell's parameters become the arguments of
+  ``python -m eval run`` (:func:`run_arguments`), parsed by the same parser and measured by
+  :func:`eval.run.measure` — render, detect, match, triangulate, score. Its report is
+  ``eval run``'s ``report.json`` (without versions and output files).
+* An **analytic cell** is the forward model plus noise, like ``eval paper``'s Monte Carlo: the
+  scene's targets projected through the true rig (:func:`eval.paper.project_pair`), Gaussian
+  pixel noise of σ ``noise_px`` drawn from the cell's seed (:func:`synth.noise.pixel_noise`),
+  triangulated with the assumed rig (:func:`eval.paper.triangulation_errors`, numpy over all
+  targets at once) and summarized with :class:`eval.results.ErrorStats` (the schema of ``eval
+  run``'s ``methods``). ``regular_in_air`` triangulates the all-air copy of the rig (indices 1),
+  as section 3.3 of the paper does.
+
+Every cell returns a record (key, status, error, report, row) and never raises: a cell that
+fails records its error. A worker process keeps Mitsuba imported, its JIT kernels, the parsed
+scenes and the projections of their targets between cells (:data:`_CACHE`). The scene files
+travel with the tasks (bytes), so a cluster needs no shared file system.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import tempfile
+import time
+import traceback
+
+#: Per worker process: scene files written, scenes parsed, projections computed.
+_CACHE: dict = {}
+_SETUP_DONE = False
+
+
+def _setup_worker() -> None:
+    """Once per process: as many Dr.Jit and OpenCV threads as the Dask worker has (1 in the
+    local cluster: one single-threaded worker process per core, no oversubscription)."""
+    global _SETUP_DONE
+    if _SETUP_DONE:
+        return
+    threads = 1
+    try:
+        from distributed import get_worker
+
+        threads = max(1, int(get_worker().state.nthreads))
+    except (ImportError, ValueError, AttributeError):
+        pass
+    import cv2
+
+    cv2.setNumThreads(threads)
+    try:
+        from synth.mitsuba_setup import import_mitsuba
+
+        import_mitsuba()
+        import drjit
+
+        drjit.set_thread_count(threads)
+    except Exception:  # no Mitsuba here: analytic cells still run (scene parsing will say why)
+        pass
+    _SETUP_DONE = True
+
+
+def scene_file(sha: str, data: bytes, original: str) -> str:
+    """A path on this machine holding the scene bytes: the original path when it holds the same
+    bytes, else a copy in the temporary directory named by the hash."""
+    cached = _CACHE.get(("file", sha))
+    if cached:
+        return cached
+    path = original
+    try:
+        with open(original, "rb") as handle:
+            same = hashlib.sha256(handle.read()).hexdigest() == sha
+    except OSError:
+        same = False
+    if not same:
+        directory = os.path.join(tempfile.gettempdir(), "refstereo-sweep-scenes")
+        os.makedirs(directory, exist_ok=True)
+        path = os.path.join(directory, f"{sha}.xml")
+        if not os.path.exists(path):
+            fd, tmp = tempfile.mkstemp(dir=directory, suffix=".tmp")
+            with os.fdopen(fd, "wb") as handle:
+                handle.write(data)
+            os.replace(tmp, path)
+    _CACHE[("file", sha)] = path
+    return path
+
+
+def _d_items(cell: dict):
+    return [(k[2:], v) for k, v in cell["defines"].items()]
+
+
+def _value_text(value) -> str:
+    if isinstance(value, list):
+        return " ".join(repr(float(v)) if isinstance(v, float) else str(v) for v in value)
+    if isinstance(value, float):
+        return repr(value)
+    return str(value)
+
+
+def run_arguments(cell: dict, scene_path: str) -> list:
+    """The ``python -m eval run`` arguments of a render cell (without ``--out``)."""
+    p = cell["params"]
+    argv = [scene_path, "--no-progress", "--seed", str(cell["seed"]),
+            "--methods", ",".join(cell["methods"])]
+    for name, value in sorted(cell["defines"].items()):
+        argv += ["-D", f"{name}={value}"]
+    for key, value in p.items():
+        if key.startswith("assume."):
+            argv += ["--assume", f"{key[7:]}={_value_text(value)}"]
+    if "noise_px" in p:
+        argv += ["--noise-px", _value_text(p["noise_px"])]
+    if "spp" in p:
+        argv += ["--spp", str(p["spp"])]
+    if "gate_mm" in p:
+        argv += ["--gate-mm", _value_text(p["gate_mm"])]
+    if p.get("self_calibrate"):
+        argv += ["--self-calibrate", p["self_calibrate"]]
+    if p.get("eccentricity"):
+        argv += ["--eccentricity"]
+    if "threshold_fraction" in p:
+        argv += ["--threshold-fraction", _value_text(p["threshold_fraction"])]
+    return argv
+
+
+def _run_parser():
+    parser = _CACHE.get("parser")
+    if parser is None:
+        from eval.cli import build_parser
+
+        parser = _CACHE["parser"] = build_parser()
+    return parser
+
+
+def render_cell(cell: dict, scene_path: str, save: tuple):
+    """``(report, files)``: ``eval run`` on the cell, in this process; ``files`` ``{name:
+    bytes}`` holds what ``save`` asks for (``images``, ``ply``, ``figures``)."""
+    from synth.fileio import jsonable
+
+    from eval import run
+
+    args = _run_parser().parse_args(["run", *run_arguments(cell, scene_path), "--out", "-"])
+    options = run.check_options(args)
+    start = time.perf_counter()
+    report, arrays, inputs = run.measure(args, options, lambda text: None)
+    files = {}
+    if save:
+        files = _saved_files(inputs, report, arrays, save)
+    report["scene"] = cell["scene"]
+    report["timings_s"]["total"] = time.perf_counter() - start
+    report.pop("versions", None)
+    return jsonable(report), files
+
+
+def _saved_files(inputs, report, arrays, save) -> dict:
+    from synth.render import png16_scale, to_png16, write_png
+
+    from eval.run import write_outputs
+
+    files = {}
+    with tempfile.TemporaryDirectory(prefix="refstereo-cell-") as tmp:
+        if "ply" in save or "figures" in save:
+            write_outputs(tmp, inputs, report, arrays)
+        if "images" in save:
+            scale = png16_scale(inputs.left, inputs.right)
+            for view in ("left", "right"):
+                write_png(os.path.join(tmp, f"{view}.png"), to_png16(getattr(inputs, view), scale))
+        for name in sorted(os.listdir(tmp)):
+            kind = ("ply" if name.endswith(".ply") else
+                    "images" if name in ("left.png", "right.png") else "figures")
+            if kind in save:
+                with open(os.path.join(tmp, name), "rb") as handle:
+                    files[name] = handle.read()
+    return files
+
+
+# ------------------------------------------------------------------------------------------------
+# analytic cells
+
+
+def _scene_spec(scene_path: str, defines: dict):
+    key = ("scene", scene_path, tuple(sorted(defines.items())))
+    spec = _CACHE.get(key)
+    if spec is None:
+        from synth.scene import load_scene
+
+        spec = _CACHE[key] = load_scene(scene_path, dict(defines))
+    return spec
+
+
+def _projections(scene_path: str, defines: dict, spec, in_air: bool):
+    key = ("projection", scene_path, tuple(sorted(defines.items())), in_air)
+    uv = _CACHE.get(key)
+    if uv is None:
+        from eval.paper import project_pair
+
+        rig = _air_copy(spec.rig) if in_air else spec.rig
+        uv = _CACHE[key] = project_pair(rig, spec.targets)
+    return uv
+
+
+def _air_copy(rig):
+    """The same cameras behind an index-matched port (every index 1): the paper's all-air rig."""
+    return rig.with_port(rig.port.replace(indices=(1.0,) * len(rig.port.indices)))
+
+
+def analytic_cell(cell: dict, scene_path: str) -> dict:
+    """The report of an analytic cell (see module docs)."""
+    import numpy as np
+
+    from eval.assumption import assumed_rig, parse_assumptions, rig_difference
+    from eval.paper import triangulation_errors
+    from eval.results import ErrorStats
+    from synth.noise import pixel_noise
+
+    start = time.perf_counter()
+    p = cell["params"]
+    spec = _scene_spec(scene_path, cell["defines"])
+    assumptions = parse_assumptions([f"{k[7:]}={_value_text(v)}" for k, v in p.items()
+                                     if k.startswith("assume.")])
+    truth = spec.rig
+    believed = assumed_rig(truth, spec.has_port, assumptions)
+    targets = spec.targets
+    n = targets.shape[0]
+    sigma = float(p.get("noise_px", 0.0))
+    rng = np.random.default_rng(cell["seed"])
+    offset_left = pixel_noise((n, 2), sigma ** 2, rng)
+    offset_right = pixel_noise((n, 2), sigma ** 2, rng)
+    clean_left, clean_right = _projections(scene_path, cell["defines"], spec, False)
+    uv_left, uv_right = clean_left + offset_left, clean_right + offset_right
+    methods = {}
+    for method in cell["methods"]:
+        if method == "regular_in_air":
+            air_left, air_right = _projections(scene_path, cell["defines"], spec, True)
+            errors = triangulation_errors(_air_copy(believed), air_left + offset_left,
+                                          air_right + offset_right, "regular", targets)[0]
+        else:
+            errors = triangulation_errors(believed, uv_left, uv_right, method, targets)[0]
+        methods[method] = ErrorStats.of(errors).to_json()
+    calibration = None
+    names = tuple(n for n in p.get("self_calibrate", "").split(",") if n)
+    if names:
+        calibration = _self_calibration(truth, believed, uv_left, uv_right, names, cell, targets)
+    return {"scene": cell["scene"], "kind": "analytic", "targets": int(n), "noise_px": sigma,
+            "seed": cell["seed"], "methods": methods, "self_calibration": calibration,
+            "rigs": {"difference": rig_difference(truth, believed)},
+            "timings_s": {"total": time.perf_counter() - start}}
+
+
+def _self_calibration(truth, believed, uv_left, uv_right, names, cell, targets) -> dict:
+    from measure.selfcal import self_calibrate
+
+    from eval.paper import triangulation_errors
+    from eval.results import ErrorStats
+
+    fit = self_calibrate(believed, uv_left, uv_right, names)
+    true_values = {"n_water": truth.port.n_water, "port_distance": truth.port.distance,
+                   "port_normal": truth.port.normal.tolist()}
+    summary = {"parameters": list(names), "converged": fit.converged,
+               "identifiable": fit.identifiable, "reason": fit.reason,
+               "rms_px_before": fit.rms_px_before, "rms_px_after": fit.rms_px,
+               "estimates": fit.estimates, "sigmas": fit.sigmas,
+               "truth": {k: true_values[k] for k in names}, "methods": None}
+    for name in ("n_water", "port_distance"):
+        if name in fit.estimates:
+            summary.setdefault("error", {})[name] = fit.estimates[name] - true_values[name]
+    if fit.converged and fit.identifiable:
+        summary["methods"] = {
+            m: ErrorStats.of(triangulation_errors(fit.rig, uv_left, uv_right, m, targets)[0])
+            .to_json() for m in cell["methods"] if m != "regular_in_air"}
+    return summary
+
+
+# ------------------------------------------------------------------------------------------------
+# rows and batches
+
+#: Parts of a report that are not one number per cell (left out of the table's row).
+_NOT_IN_ROW = ("rigs", "versions", "inputs", "budget", "ply", "sensor", "plane")
+
+
+def flatten(report: dict, prefix: str = "") -> dict:
+    """The scalar leaves of a report as ``{"a.b.c": value}`` (lists and rigs left out)."""
+    out = {}
+    for key, value in report.items():
+        if key in _NOT_IN_ROW:
+            continue
+        name = f"{prefix}{key}"
+        if isinstance(value, dict):
+            out.update(flatten(value, f"{name}."))
+        elif isinstance(value, (bool, int, float, str)) or value is None:
+            out[name] = value
+    return out
+
+
+def run_cell(cell: dict, scenes: dict, save: tuple) -> dict:
+    """One cell's record; a failure is recorded (``status`` ``failed``, ``error``), never
+    raised."""
+    scene_sha = cell["scene_sha"]
+    start = time.perf_counter()
+    files = {}
+    try:
+        path = scene_file(scene_sha, scenes[scene_sha], cell["scene_path"])
+        if cell["kind"] == "render":
+            report, files = render_cell(cell, path, save)
+        else:
+            from synth.fileio import jsonable
+
+            report = jsonable(analytic_cell(cell, path))
+        status, error = "ok", None
+    except Exception as exc:  # the cell failed: its row says why, the sweep goes on
+        report, status = None, "failed"
+        error = f"{type(exc).__name__}: {' '.join(str(exc).split())}"
+        if os.environ.get("REFSTEREO_TRACEBACK"):
+            error += "\n" + traceback.format_exc()
+    metrics = flatten({k: v for k, v in (report or {}).items()
+                       if k not in ("scene", "seed", "kind", "noise_px")})
+    return {"key": cell["key"], "status": status, "error": error, "report": report,
+            "metrics": metrics, "seconds": time.perf_counter() - start, "files": files,
+            "worker_pid": os.getpid()}
+
+
+def run_batch(cells: list, scenes: dict, save: tuple = ()) -> list:
+    """The Dask task: every cell of ``cells`` (dicts), in order; ``scenes`` ``{sha: bytes}``."""
+    _setup_worker()
+    return [run_cell(cell, scenes, tuple(save)) for cell in cells]
+
+
+def probe() -> dict:
+    """What a worker reports before a sweep: its project files and Python (a check that the
+    workers can import this module at all)."""
+    import sys
+
+    return {"module": __file__, "python": sys.version.split()[0]}
+
+
+__all__ = ["analytic_cell", "flatten", "probe", "render_cell", "run_arguments", "run_batch",
+           "run_cell", "scene_file"]
