@@ -354,7 +354,7 @@ def calibrate_housing(rig: StereoRig, board: Board, detections: Detections,
     sig = np.sqrt(np.diag(covariance))
     cov_g = covariance[:n_global, :n_global]
     correlation = cov_g / np.outer(sig[:n_global], sig[:n_global])
-    off = np.abs(correlation - np.eye(n_global))
+    off = np.abs(np.triu(correlation, 1))  # each pair once, named in the order of labels
     if n_global > 1 and off.max() >= CORRELATION_LIMIT:
         i, j = np.unravel_index(np.argmax(off), off.shape)
         return HousingCalibration(rig=rig, estimates={}, sigmas={}, correlation=correlation,
