@@ -513,17 +513,16 @@ def _jacobians(camera, frame, problem, points, x1, ratio, l1, l2, inverse_z, xn,
             q = [mr0 * ph + mr1 * ps for ph, ps in zip(phi, psi)]
         qn, q1, q2 = q
         rows_nea.append(q)
+        # d I1 / d P = α a aᵀ + (x1/ℓ) b bᵀ + β_w a Nᵀ with b = N × a, and a aᵀ + b bᵀ = e1 e1ᵀ +
+        # e2 e2ᵀ: the row is (x1/ℓ)(q1 e1 + q2 e2) + (α − x1/ℓ)(q·a) a + β_w (q·a) N.
         qa = a1 * q1
         qa += a2 * q2
-        qb = a1 * q2
-        qb -= a2 * q1
         c_normal = beta_water * qa
-        along_a = alpha * qa
-        across = ratio * qb
-        c1 = along_a * a1
-        c1 -= across * a2
-        c2 = along_a * a2
-        c2 += across * a1
+        qa *= alpha - ratio
+        c1 = ratio * q1
+        c1 += qa * a1
+        c2 = ratio * q2
+        c2 += qa * a2
         for j in range(3):
             column = d_points[:, r, j]
             np.multiply(c_normal, frame.normal[j], out=column)
