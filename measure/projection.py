@@ -224,19 +224,23 @@ def _snell_start(problem: _PlaneProblem, max_iterations: int = START_ITERATIONS)
     The lateral distance ``ℓ = h_w τ + Σ_{i<w} h_i tan θ_i(τ)`` with ``p = n_w τ / sqrt(1 + τ²)``
     and ``tan θ_i = p / sqrt(n_i² − p²)``: the water column, which is the longest, is linear in
     τ, so Newton's method from the paraxial start ``τ0 = ℓ / (h_w + Σ h_i n_w / n_i)`` converges
-    in a few steps. Stops when no step exceeds 1e-9 of τ (the next error is then far below
-    rounding). Returns the lateral positions of the interface points (list of K ``(N,)``
-    arrays), a mask of the rows that converged (NaN-free, Snell's invariant below every
-    index) and the number of steps.
+    in a few steps. A row stops when the error its last step leaves, estimated from the
+    quadratic convergence as ``|δ_k|³ / δ_{k−1}²``, is below 1e-16 of τ, or when the step is
+    below 1e-15 of τ (the rounding floor); the Fermat step that follows checks it. A stopped
+    row is not moved again, and once few rows are left the iteration continues on those only.
+    Returns the lateral positions of the interface points (list of K ``(N,)`` arrays), a mask
+    of the rows that converged (NaN-free, Snell's invariant below every index) and the number
+    of steps.
     """
     n = problem.indices
     n_water = n[-1]
-    media = list(zip(n[:-1], problem.heights_columns[:-1]))  # (index, height) before the water
-    water = problem.heights_columns[-1]
-    lateral = problem.lateral
-    paraxial = water + sum(h * (n_water / n_i) for n_i, h in media)
-    tau = lateral / paraxial
-    frozen = None
+    media = [(n_i, h, h * n_i * n_i) for n_i, h in zip(n[:-1], problem.heights_columns[:-1])]
+    water_all = problem.heights_columns[-1]
+    lateral_all = problem.lateral
+    tau_all = lateral_all / (water_all + sum(h * (n_water / n_i) for n_i, h, _ in media))
+    rows = None  # indices of the working rows (None: all)
+    tau, water, lateral = tau_all, water_all, lateral_all
+    frozen = previous = None
     iterations = 0
     for iterations in range(1, max_iterations + 1):
         cos_water = 1.0 / np.sqrt(1.0 + tau * tau)
@@ -246,12 +250,16 @@ def _snell_start(problem: _PlaneProblem, max_iterations: int = START_ITERATIONS)
         residual = water * tau
         residual -= lateral
         slope = None
-        for n_i, h in media:
+        for n_i, h, weight in media:
             inverse_cos = 1.0 / np.sqrt(n_i * n_i - p2)  # 1 / (n_i cos θ_i)
             residual += (h * p) * inverse_cos
             term = inverse_cos * inverse_cos
             term *= inverse_cos
-            slope = term * (h * n_i * n_i) if slope is None else slope + term * (h * n_i * n_i)
+            if slope is None:
+                slope = term * weight
+            else:
+                term *= weight
+                slope += term
         if slope is None:  # no medium before the water (not a FlatPort): the line is exact
             step = residual / water
         else:
@@ -263,17 +271,42 @@ def _snell_start(problem: _PlaneProblem, max_iterations: int = START_ITERATIONS)
         if frozen is not None:
             step[frozen] = 0.0
         tau -= step
-        small = np.abs(step) <= 1e-9 * np.abs(tau)
+        size = np.abs(step)
+        scale = np.abs(tau)
+        small = size <= 1e-15 * scale  # at the rounding floor
+        if previous is not None:
+            # Quadratic convergence: the error left after this step is about κ·δ_k² with
+            # κ ≈ |δ_k| / δ_{k−1}²; done when that is below 1e-16 of τ.
+            small |= size * size * size <= (1e-16 * scale) * (previous * previous)
+        previous = size
         frozen = small if frozen is None else frozen | small
-        if frozen.all():
+        active = np.count_nonzero(~frozen)
+        if active == 0:
             break
-    p = n_water * tau / np.sqrt(1.0 + tau * tau)
+        if active * 4 <= frozen.size:  # go on with the rows that are left
+            keep = np.flatnonzero(~frozen)
+            if rows is None:
+                tau_all = tau.copy()
+                rows = keep
+            else:
+                tau_all[rows] = tau
+                rows = rows[keep]
+            tau, water, lateral, previous = tau[keep], water[keep], lateral[keep], previous[keep]
+            frozen = np.zeros(keep.size, dtype=bool)
+    converged = np.ones(lateral_all.shape, dtype=bool)
+    if rows is None:
+        tau_all = tau
+        converged = frozen
+    else:
+        tau_all[rows] = tau
+        converged[rows] = frozen
+    p = n_water * tau_all / np.sqrt(1.0 + tau_all * tau_all)
     p2 = p * p
     x, position = [], 0.0
-    for n_i, h in media:
+    for n_i, h, _ in media:
         position = position + (h * p) / np.sqrt(n_i * n_i - p2)
         x.append(position)
-    ok = frozen & np.isfinite(position) if media else frozen
+    ok = converged & np.isfinite(position) if media else converged
     return x, ok, iterations
 
 
@@ -471,6 +504,26 @@ def _interface_points(camera, frame, problem, x, l1, l2, bad):
     return points
 
 
+def _combine(terms, out=None):
+    """``Σ array · coefficient`` over ``(array, coefficient)`` terms (``None`` as the array: the
+    constant coefficient), skipping exact zero coefficients; into ``out`` if given."""
+    terms = [(a, c) for a, c in terms if c != 0.0]
+    constant = sum(c for a, c in terms if a is None)
+    terms = [(a, c) for a, c in terms if a is not None]
+    if not terms:
+        if out is None:
+            return constant
+        out[...] = constant
+        return out
+    first, coefficient = terms[0]
+    out = np.multiply(first, coefficient, out=out)
+    for array, coefficient in terms[1:]:
+        out += array * coefficient
+    if constant != 0.0:
+        out += constant
+    return out
+
+
 def _jacobians(camera, frame, problem, points, x1, ratio, l1, l2, inverse_z, xn, yn, distortion,
                bad, parameters: bool):
     """d pixel / d point ``(N, 2, 3)`` and, with ``parameters``, the :class:`ParameterJacobian`
@@ -498,10 +551,10 @@ def _jacobians(camera, frame, problem, points, x1, ratio, l1, l2, inverse_z, xn,
               (K[0, 0] * dxy + K[0, 1] * dyy) * inverse_z],
              [K[1, 1] * dxy * inverse_z, K[1, 1] * dyy * inverse_z]]
     # Projections of the rows onto the basis N, e1, e2 (in the camera frame).
-    phi = [vec[0] - xn * vec[2] for vec in frame.camera_basis]
-    psi = [vec[1] - yn * vec[2] for vec in frame.camera_basis]
+    phi = [_combine([(None, vec[0]), (xn, -vec[2])]) for vec in frame.camera_basis]
+    psi = [_combine([(None, vec[1]), (yn, -vec[2])]) for vec in frame.camera_basis]
     n_rows = points.shape[0]
-    d_points = np.empty((n_rows, 2, 3))
+    columns = np.empty((2, 3, n_rows))  # contiguous while computing, (N, 2, 3) at the end
     rows_nea = []
     for r in range(2):
         mr0, mr1 = m[r]
@@ -524,10 +577,9 @@ def _jacobians(camera, frame, problem, points, x1, ratio, l1, l2, inverse_z, xn,
         c2 = ratio * q2
         c2 += qa * a2
         for j in range(3):
-            column = d_points[:, r, j]
-            np.multiply(c_normal, frame.normal[j], out=column)
-            column += c1 * frame.e1[j]
-            column += c2 * frame.e2[j]
+            _combine([(c_normal, frame.normal[j]), (c1, frame.e1[j]), (c2, frame.e2[j])],
+                     out=columns[r, j])
+    d_points = np.ascontiguousarray(columns.transpose(2, 0, 1))
     if bad.any():
         d_points[bad] = np.nan
     if not parameters:
