@@ -116,3 +116,6 @@ def test_analytic_jacobian_of_the_refinement_matches_finite_differences():
         error = np.linalg.norm(analytic[:, block] - numeric[:, block])
         assert error <= 1e-6 * np.linalg.norm(analytic[:, block])
     assert np.count_nonzero(analytic[:, 4:]) == 4 * len(truth) * 3
+    from measure.reprojection import point_block_sparsity  # the structure it promises
+
+    assert np.all((analytic != 0) <= (point_block_sparsity(len(truth), 4).toarray() != 0))
