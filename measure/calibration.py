@@ -10,8 +10,10 @@ unknowns are every board pose (6 each) and the free housing parameters
 perpendicular to the starting normal), ``thickness`` (first layer, mm), ``n_water``, and
 ``extrinsics`` (the right camera's pose: 3 rotation-vector and 3 translation increments, rad and
 mm). Residuals: every detected corner's reprojection through the port with the project's exact
-forward model (:func:`measure.projection.project`), px. ``scipy.optimize.least_squares`` with a
-sparse Jacobian structure (a pose's 6 columns touch only its own corners' rows). Starting poses:
+forward model (:func:`measure.projection.project`), px. ``scipy.optimize.least_squares`` with the
+analytic Jacobian (``project(..., parameters=True)``: the implicit function theorem on the
+travel time's stationarity, chained with the board poses and SO(3)'s left Jacobian) in its
+sparse structure (a pose's 6 columns touch only its own corners' rows). Starting poses:
 ``cv2.solvePnP`` on the refracted images with the in-air intrinsics (a plain pinhole solve).
 
 Uncertainty: ``s² (JᵀJ)⁻¹`` with ``s² = Σr² / (m − n)``; a parameter is reported not
@@ -23,11 +25,12 @@ Units mm, px (OpenCV convention); the reference frame is the left camera's.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from types import SimpleNamespace
 
 import cv2
 import numpy as np
 from scipy.optimize import least_squares
-from scipy.sparse import coo_matrix
+from scipy.sparse import csr_matrix
 from scipy.spatial.transform import Rotation
 
 from .board import MIN_CORNERS, Board
@@ -222,17 +225,10 @@ def _start_poses(rig: StereoRig, board: Board, detections: Detections):
     return poses
 
 
-def calibrate_housing(rig: StereoRig, board: Board, detections: Detections,
-                      free=DEFAULT_FREE) -> HousingCalibration:
-    """Refractive bundle adjustment of the housing (module docs). ``rig``: the in-air cameras
-    with the starting port (its fixed parameters are the design values)."""
-    names = tuple(dict.fromkeys(free))
-    unknown = [n for n in names if n not in HOUSING_PARAMETERS]
-    if not names or unknown:
-        raise CalibrationError(f"--free {','.join(free) or '(nothing)'}: the housing calibration "
-                               f"estimates {', '.join(HOUSING_PARAMETERS)}")
-    if "thickness" in names and not rig.port.thicknesses:
-        raise CalibrationError("--free thickness: the port has no glass layer")
+def _housing_problem(rig: StereoRig, board: Board, detections: Detections, names):
+    """The bundle adjustment of :func:`calibrate_housing` as functions of the unknowns ``x``
+    (free housing numbers, then 6 per usable pose): ``residuals``, its analytic ``jacobian``,
+    ``unpack``, the start ``x0`` and its ``lower`` / ``upper`` bounds, and the bookkeeping."""
     starts = _start_poses(rig, board, detections)
     usable = [k for k, s in enumerate(starts) if s is not None]
     if len(usable) < MIN_POSES:
@@ -282,6 +278,46 @@ def calibrate_housing(rig: StereoRig, board: Board, detections: Detections,
             out.append(np.where(np.isfinite(r), r, 1e3))
         return np.concatenate(out)
 
+    def jacobian(x):
+        """Analytic (:func:`measure.projection.project` with ``parameters=True``): a row touches
+        the free housing numbers and its pose's 6 columns (rotation vector, translation)."""
+        width = n_global + 6
+        try:
+            port, cameras, Rs, ts = unpack(x)
+        except ValueError:  # the residuals are constant there
+            return _rows_jacobian(np.zeros((m, width)), np.zeros(m, int), n_global, x.size)
+        turn = _left_jacobian(x[n_global:].reshape(P, 6)[:, :3])
+        blocks, poses = [], []
+        for view, pose_idx, ids, uv in obs:
+            rotated = np.einsum("nij,nj->ni", Rs[pose_idx], corners[ids])
+            _, d_points, jac = project(cameras[view], port, rotated + ts[pose_idx],
+                                       parameters=True)
+            columns = []
+            for name in names:
+                if name == "distance":
+                    columns.append(jac.distance[..., None])
+                elif name == "normal":  # normal = m / |m|, m = N0 + a·x_a + b·x_b
+                    k = _offset(names, name)
+                    length = np.linalg.norm(port0.normal + x[k] * basis[0] + x[k + 1] * basis[1])
+                    columns.append(np.stack([jac.normal @ axis / length for axis in basis], -1))
+                elif name == "thickness":
+                    columns.append(jac.thicknesses[..., :1])
+                elif name == "n_water":
+                    columns.append(jac.indices[..., -1:])
+                elif view == 1:  # the right camera: R = exp(ω) R0, t = t0 + δt
+                    k = _offset(names, name)
+                    columns.append(jac.rotation @ _left_jacobian(x[None, k:k + 3])[0])
+                    columns.append(jac.center)
+                else:
+                    columns.append(np.zeros(d_points.shape[:2] + (6,)))
+            # a pose: X = exp(ω) c + t, so dX/dω = −[R c]× J_l(ω) and dX/dt = I
+            d_turn = np.einsum("nrj,njk->nrk", np.cross(rotated[:, None, :], d_points),
+                               turn[pose_idx])
+            columns += [d_turn, d_points]
+            blocks.append(np.concatenate(columns, axis=-1).reshape(-1, width))
+            poses.append(np.repeat(pose_idx, 2))
+        return _rows_jacobian(np.concatenate(blocks), np.concatenate(poses), n_global, x.size)
+
     x0 = []
     for name in names:
         x0 += {"distance": [port0.distance], "normal": [0.0, 0.0],
@@ -290,18 +326,6 @@ def calibrate_housing(rig: StereoRig, board: Board, detections: Detections,
     for R, t in starts:
         x0 += list(Rotation.from_matrix(R).as_rotvec()) + list(t)
     x0 = np.asarray(x0, dtype=np.float64)
-    rows, cols = [], []
-    offset = 0
-    for view, pose_idx, ids, uv in obs:
-        r = offset + np.arange(2 * pose_idx.size)
-        pk = np.repeat(pose_idx, 2)
-        rows.append(np.repeat(r, 6))
-        cols.append((n_global + 6 * pk[:, None] + np.arange(6)).ravel())
-        offset += 2 * pose_idx.size
-    rows = np.concatenate(rows + [np.repeat(np.arange(m), n_global)])
-    cols = np.concatenate(cols + [np.tile(np.arange(n_global), m)])
-    sparsity = coo_matrix((np.ones(rows.size, np.int8), (rows, cols)),
-                          shape=(m, x0.size)).tocsr()
     lower = np.full(x0.size, -np.inf)
     upper = np.full(x0.size, np.inf)
     k = 0
@@ -312,10 +336,31 @@ def calibrate_housing(rig: StereoRig, board: Board, detections: Detections,
             lower[k], upper[k] = 1.0, MAX_INDEX
         k += HOUSING_PARAMETERS[name]
     x0[:n_global] = np.clip(x0[:n_global], lower[:n_global] + 1e-9, upper[:n_global] - 1e-9)
+    return SimpleNamespace(residuals=residuals, jacobian=jacobian, unpack=unpack, x0=x0,
+                           lower=lower, upper=upper, obs=obs, usable=usable, P=P,
+                           n_global=n_global, basis=basis, m=m)
+
+
+def calibrate_housing(rig: StereoRig, board: Board, detections: Detections,
+                      free=DEFAULT_FREE) -> HousingCalibration:
+    """Refractive bundle adjustment of the housing (module docs). ``rig``: the in-air cameras
+    with the starting port (its fixed parameters are the design values)."""
+    names = tuple(dict.fromkeys(free))
+    unknown = [n for n in names if n not in HOUSING_PARAMETERS]
+    if not names or unknown:
+        raise CalibrationError(f"--free {','.join(free) or '(nothing)'}: the housing calibration "
+                               f"estimates {', '.join(HOUSING_PARAMETERS)}")
+    if "thickness" in names and not rig.port.thicknesses:
+        raise CalibrationError("--free thickness: the port has no glass layer")
+    problem = _housing_problem(rig, board, detections, names)
+    residuals, unpack, x0, lower, upper = (problem.residuals, problem.unpack, problem.x0,
+                                           problem.lower, problem.upper)
+    obs, usable, P, n_global, basis, m = (problem.obs, problem.usable, problem.P,
+                                          problem.n_global, problem.basis, problem.m)
     rms_start = float(np.sqrt(np.mean(residuals(x0) ** 2)))
-    fit = least_squares(residuals, x0, jac_sparsity=sparsity, method="trf", x_scale="jac",
+    fit = least_squares(residuals, x0, jac=problem.jacobian, method="trf", x_scale="jac",
                         bounds=(lower, upper), xtol=1e-12, ftol=1e-12, gtol=1e-12, max_nfev=300,
-                        tr_options={"atol": 1e-14, "btol": 1e-14})
+                        tr_solver="lsmr", tr_options={"atol": 1e-14, "btol": 1e-14})
     r = fit.fun
     J = fit.jac.toarray() if hasattr(fit.jac, "toarray") else np.asarray(fit.jac)
     dof = max(r.size - x0.size, 1)
@@ -354,7 +399,7 @@ def calibrate_housing(rig: StereoRig, board: Board, detections: Detections,
     sig = np.sqrt(np.diag(covariance))
     cov_g = covariance[:n_global, :n_global]
     correlation = cov_g / np.outer(sig[:n_global], sig[:n_global])
-    off = np.abs(correlation - np.eye(n_global))
+    off = np.abs(np.triu(correlation, 1))  # each pair once, named in the order of labels
     if n_global > 1 and off.max() >= CORRELATION_LIMIT:
         i, j = np.unravel_index(np.argmax(off), off.shape)
         return HousingCalibration(rig=rig, estimates={}, sigmas={}, correlation=correlation,
@@ -398,6 +443,37 @@ def calibrate_housing(rig: StereoRig, board: Board, detections: Detections,
     calibrated = StereoRig(cameras[0], cameras[1], port)
     return HousingCalibration(rig=calibrated, estimates=estimates, sigmas=sigmas,
                               correlation=correlation, identifiable=True, reason="", **base)
+
+
+def _offset(names, name) -> int:
+    """Position of a free housing parameter's first number in the unknowns."""
+    return sum(HOUSING_PARAMETERS[n] for n in names[:names.index(name)])
+
+
+def _left_jacobian(rotvecs) -> np.ndarray:
+    """SO(3)'s left Jacobian ``(P, 3, 3)`` of rotation vectors ``(P, 3)``: ``exp(ω + δ) ≈
+    exp([J_l(ω) δ]×) exp(ω)``, ``J_l = I + (1 − cos θ)/θ² [ω]× + (θ − sin θ)/θ³ [ω]×²``."""
+    rotvecs = np.asarray(rotvecs, dtype=np.float64)
+    theta = np.linalg.norm(rotvecs, axis=1)
+    small = theta < 1e-6
+    t = np.where(small, 1.0, theta)
+    a = np.where(small, 0.5 - theta ** 2 / 24, (1 - np.cos(t)) / t ** 2)
+    b = np.where(small, 1 / 6 - theta ** 2 / 120, (t - np.sin(t)) / t ** 3)
+    skew = np.zeros((len(rotvecs), 3, 3))
+    skew[:, 0, 1], skew[:, 0, 2], skew[:, 1, 2] = -rotvecs[:, 2], rotvecs[:, 1], -rotvecs[:, 0]
+    skew -= skew.transpose(0, 2, 1)
+    return np.eye(3) + a[:, None, None] * skew + b[:, None, None] * (skew @ skew)
+
+
+def _rows_jacobian(values, pose_idx, n_global: int, n_columns: int):
+    """CSR Jacobian from per-row values ``(m, n_global + 6)``: the free housing numbers, then
+    the row's pose's 6 columns. Non-finite values (corners with no image) become 0."""
+    m, width = values.shape
+    columns = np.concatenate([np.broadcast_to(np.arange(n_global), (m, n_global)),
+                              n_global + 6 * pose_idx[:, None] + np.arange(6)], axis=1)
+    data = np.where(np.isfinite(values), values, 0.0).ravel()
+    return csr_matrix((data, columns.ravel(), np.arange(0, m * width + 1, width)),
+                      shape=(m, n_columns))
 
 
 def usable_index(usable, pose_idx) -> np.ndarray:

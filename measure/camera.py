@@ -135,15 +135,35 @@ class Camera(ValueEquality):
         xy = np.asarray(xy, dtype=np.float64)
         if self.dist is None:
             return xy.copy()
+        return np.stack(self.distort_columns(xy[:, 0], xy[:, 1]), axis=1)
+
+    def distort_columns(self, x: np.ndarray, y: np.ndarray, jacobian: bool = False):
+        """:meth:`distort` on columns: normalized ``x, y`` ``(N,)`` to distorted ``(xd, yd)``.
+
+        With ``jacobian=True`` also the analytic derivatives ``∂xd/∂x``, ``∂xd/∂y`` (which
+        equals ``∂yd/∂x``) and ``∂yd/∂y``: ``(xd, yd, dxx, dxy, dyy)``. Without distortion
+        ``x, y`` are returned as they are (and the Jacobian is the identity: only two values).
+        """
+        if self.dist is None:
+            return x, y
         c = np.zeros(8)
         c[: self.dist.size] = self.dist
         k1, k2, p1, p2, k3, k4, k5, k6 = c
-        x, y = xy[:, 0], xy[:, 1]
         r2 = x * x + y * y
-        radial = (1 + r2 * (k1 + r2 * (k2 + r2 * k3))) / (1 + r2 * (k4 + r2 * (k5 + r2 * k6)))
+        numerator = 1 + r2 * (k1 + r2 * (k2 + r2 * k3))
+        denominator = 1 + r2 * (k4 + r2 * (k5 + r2 * k6))
+        radial = numerator / denominator
         xd = x * radial + 2 * p1 * x * y + p2 * (r2 + 2 * x * x)
         yd = y * radial + p1 * (r2 + 2 * y * y) + 2 * p2 * x * y
-        return np.stack([xd, yd], axis=1)
+        if not jacobian:
+            return xd, yd
+        # d radial / d r2 by the quotient rule
+        slope = ((k1 + r2 * (2 * k2 + 3 * k3 * r2)) * denominator
+                 - numerator * (k4 + r2 * (2 * k5 + 3 * k6 * r2))) / (denominator * denominator)
+        dxx = radial + 2 * x * x * slope + 2 * p1 * y + 6 * p2 * x
+        dxy = 2 * x * y * slope + 2 * p1 * x + 2 * p2 * y
+        dyy = radial + 2 * y * y * slope + 6 * p1 * y + 2 * p2 * x
+        return xd, yd, dxx, dxy, dyy
 
     def undistort(self, xy_distorted: np.ndarray, iterations: int = 8) -> np.ndarray:
         """Invert :meth:`distort` to machine precision.

@@ -8,13 +8,19 @@ Two independent solvers of the same refracted path, both vectorized over N point
   interface. Fermat's principle: minimize the travel time ``t(μ) = Σ n_i |I_{i+1} − I_i|`` (times
   1/c) by Newton's method on the analytic gradient and (tridiagonal) Hessian, to machine
   precision; the minimum condition (det H > 0, ∂²t/∂μ1² > 0, i.e. H positive definite) is
-  reported per point.
+  reported per point. The Newton iteration starts from the paraxial path refined by a few
+  scalar Newton steps on Snell's invariant (:func:`_snell_start`), so that one Fermat step
+  normally confirms the minimum; points where that start fails fall back to the damped Newton
+  iteration from the straight line O→P.
 * ``"snell"`` — the 1D root of the Snell invariant: ``p = n_i sin θ_i`` is the same in every
   medium and the lateral offsets ``h_i tan θ_i`` add up to the lateral distance of the point.
-  Solved with SciPy's vectorized bracketing root finder.
+  Solved with SciPy's vectorized bracketing root finder (independent of the Fermat solver and
+  its start).
 
 Once the first refraction point ``I_1`` is known, the pixel is the pinhole projection of ``I_1``
-(with lens distortion, as ``cv2.projectPoints``). Units mm, reference frame, OpenCV pixels.
+(with lens distortion, as ``cv2.projectPoints``). :func:`project` with ``jacobian=True`` also
+returns the analytic derivatives of the pixels (see :func:`project`). Units mm, reference frame,
+OpenCV pixels.
 """
 
 from __future__ import annotations
@@ -31,6 +37,10 @@ from .reasons import Reason
 
 SOLVERS = ("fermat", "snell")
 
+#: Newton steps on Snell's invariant tried for the start of the Fermat iteration; points that
+#: have not converged by then start from the straight line instead (damped Newton).
+START_ITERATIONS = 12
+
 
 @dataclass(frozen=True)
 class RefractedPaths:
@@ -39,7 +49,8 @@ class RefractedPaths:
     ``pixels`` ``(N, 2)``; ``interface_points`` ``(K, N, 3)`` (I1, I2 … in mm, reference frame);
     ``reason`` ``(N,)`` :class:`measure.Reason` codes; ``is_minimum`` ``(N,)`` whether the
     Hessian of the travel time is positive definite at the solution (Fermat solver; the Snell
-    solver reports True where it converged); ``iterations`` used by the solver.
+    solver reports True where it converged); ``iterations`` used by the solver (Fermat: the
+    Newton steps of its start plus the Fermat Newton steps, the largest over the chunks).
     """
 
     pixels: np.ndarray
@@ -50,49 +61,82 @@ class RefractedPaths:
 
 
 @dataclass(frozen=True)
+class ParameterJacobian:
+    """Derivatives of pixels ``(N, 2)`` (px) with respect to the port and camera parameters, by
+    the implicit function theorem on the stationarity condition of the travel time.
+
+    * ``distance`` ``(N, 2)``: px/mm, d pixel / d D (the port's first interface ``N·X = D``).
+    * ``normal`` ``(N, 2, 3)``: px per unit, d pixel / d N for a change of the unit normal
+      tangent to the unit sphere (D fixed); the component along N is zero. For a normal
+      ``m / |m|`` built from an unnormalized vector m, d pixel / d m = ``normal / |m|``.
+    * ``indices`` ``(N, 2, K+1)``: d pixel / d n_i, air first, water last.
+    * ``thicknesses`` ``(N, 2, K-1)``: px/mm, d pixel / d d_j of each layer (the water column
+      shortens by the same amount; D fixed).
+    * ``center`` ``(N, 2, 3)``: px/mm, d pixel / d t of the camera centre (reference frame; R,
+      the port and the point fixed).
+    * ``rotation`` ``(N, 2, 3)``: px/rad, d pixel / d φ for the camera rotation
+      ``R → exp([φ]×) R`` (a small rotation about reference-frame axes, applied on the left).
+    """
+
+    distance: np.ndarray
+    normal: np.ndarray
+    indices: np.ndarray
+    thicknesses: np.ndarray
+    center: np.ndarray
+    rotation: np.ndarray
+
+
+@dataclass(frozen=True)
 class _PlaneProblem:
     """The path problem reduced to the refraction plane.
 
-    ``heights`` ``(N, K+1)``: normal distances travelled in each medium (air gap, layers, water);
-    ``lateral`` ``(N,)``: distance of the point from the normal through the camera centre;
-    ``axis`` ``(N, 3)``: unit lateral direction from the camera towards the point (zero when the
-    point lies on the normal); ``indices`` ``(K+1,)``.
+    ``lateral`` ``(N,)``: distance of the point from the normal through the camera centre (mm);
+    ``indices`` ``(K+1,)``; ``heights_columns``: per medium the normal distance travelled in it
+    (mm; a scalar where all rows share it — air gap, layers — the water column ``(N,)``), and
+    their squares.
     """
 
-    heights: np.ndarray
     lateral: np.ndarray
-    axis: np.ndarray
     indices: np.ndarray
-    reason: np.ndarray
-
-    heights_columns: list  # per medium: a scalar where all rows share it (air, layers), else (N,)
+    heights_columns: list
     heights_squared: list
 
+    @property
+    def heights(self) -> np.ndarray:
+        """``(N, K+1)`` normal distances travelled in each medium (air gap, layers, water)."""
+        n_rows = self.lateral.shape[0]
+        return np.column_stack([np.broadcast_to(c, (n_rows,)) for c in self.heights_columns])
 
-def _reduce_to_plane(center: np.ndarray, port: FlatPort, points: np.ndarray) -> _PlaneProblem:
-    n_points = points.shape[0]
-    reason = np.full(n_points, Reason.OK, dtype=np.int8)
-    reason[~np.all(np.isfinite(points), axis=1)] = Reason.INVALID_INPUT
-    offsets = port.offsets
-    relative = points - center
-    along = relative @ port.normal
-    lateral_vec = relative - along[:, None] * port.normal
-    lateral = np.linalg.norm(lateral_vec, axis=1)
-    water_height = points @ port.normal - offsets[-1]
-    with np.errstate(invalid="ignore"):
-        reason[(reason == Reason.OK) & ~(water_height > 0)] = Reason.NOT_IN_WATER
-    ok = reason == Reason.OK
-    # Normal distance travelled in each medium: the air gap and the layers are the same for
-    # every point (scalars), the water column differs.
-    columns = [float(offsets[0] - center @ port.normal), *port.thicknesses,
-               np.where(ok, water_height, np.nan)]
-    heights = np.column_stack([np.broadcast_to(c, (n_points,)) for c in columns])
-    lateral = np.where(ok, lateral, np.nan)
-    tiny = 1e-300
-    with np.errstate(invalid="ignore", divide="ignore"):
-        axis = np.where((lateral > tiny)[:, None], lateral_vec / np.maximum(lateral, tiny)[:, None], 0.0)
-    return _PlaneProblem(heights, lateral, axis, np.asarray(port.indices, dtype=float), reason,
-                         columns, [h * h for h in columns])
+
+@dataclass(frozen=True)
+class _Frame:
+    """Constants of one camera behind one port: the orthonormal basis ``(N, e1, e2)`` of the
+    reference frame with the port normal first, the camera centre's coordinates in it, the air
+    gap and layer heights (mm) and the same basis in the camera frame."""
+
+    normal: np.ndarray
+    e1: np.ndarray
+    e2: np.ndarray
+    center_e: tuple  # (C·e1, C·e2)
+    water_offset: float  # N·X of the last interface
+    heights: tuple  # air gap, layers (mm)
+    indices: np.ndarray
+    camera_basis: tuple  # R^T N, R^T e1, R^T e2 (camera frame)
+
+
+def _frame(camera: Camera, port: FlatPort) -> _Frame:
+    normal = port.normal
+    nx, ny, nz = (float(v) for v in normal)
+    # e1 = N × x̂ (or N × ŷ when N is near x̂), e2 = N × e1 (np.cross costs ~0.1 ms here)
+    e1 = np.array([0.0, nz, -ny]) if abs(nx) < 0.9 else np.array([-nz, 0.0, nx])
+    e1 /= np.sqrt(e1 @ e1)
+    e2 = np.array([ny * e1[2] - nz * e1[1], nz * e1[0] - nx * e1[2], nx * e1[1] - ny * e1[0]])
+    center = camera.center
+    heights = (port.distance - float(center @ normal), *port.thicknesses)
+    water_offset = port.distance + sum(port.thicknesses)
+    Rt = camera.R.T
+    return _Frame(normal, e1, e2, (float(center @ e1), float(center @ e2)), water_offset,
+                  heights, np.asarray(port.indices, dtype=float), (Rt @ normal, Rt @ e1, Rt @ e2))
 
 
 def _segments(x, problem):
@@ -115,7 +159,7 @@ def _optical_length(lengths, indices):
 
 
 def _fermat_gradient_hessian(x, problem):
-    """Travel time, analytic ∂t/∂x_k and the tridiagonal Hessian (units of c = 1).
+    """Analytic ∂t/∂x_k and the tridiagonal Hessian of the travel time (units of c = 1).
 
     With ``Δ_i`` the lateral step and ``h_i`` the normal height of segment i (length
     ``L_i = sqrt(Δ_i² + h_i²)``): ``t = Σ n_i L_i``, ``∂t/∂x_k = n_k Δ_k/L_k −
@@ -124,17 +168,18 @@ def _fermat_gradient_hessian(x, problem):
     also the derivatives with respect to the paper's μ_k (equations 23-24).
     """
     steps, lengths = _segments(x, problem)
-    n = problem.indices
     slope, curvature = [], []
-    for n_i, d, length, h2 in zip(n, steps, lengths, problem.heights_squared):
+    for n_i, d, length, h2 in zip(problem.indices, steps, lengths, problem.heights_squared):
         inverse = 1.0 / length
-        slope.append(n_i * d * inverse)  # n_i sin θ_i
-        curvature.append(n_i * h2 * inverse * inverse * inverse)
+        slope.append((n_i * d) * inverse)  # n_i sin θ_i
+        inverse *= inverse * inverse
+        inverse *= n_i * h2
+        curvature.append(inverse)
     k = len(x)
     gradient = [slope[i] - slope[i + 1] for i in range(k)]
     diag = [curvature[i] + curvature[i + 1] for i in range(k)]
     off = [-curvature[i + 1] for i in range(k - 1)]
-    return _optical_length(lengths, n), gradient, diag, off
+    return gradient, diag, off
 
 
 def _solve_tridiagonal_spd(diag, off, rhs):
@@ -157,51 +202,161 @@ def _solve_tridiagonal_spd(diag, off, rhs):
         solution[i] = (y[i] - off[i] * solution[i + 1]) / pivots[i]
     positive = pivots[0] > 0
     for pivot in pivots[1:]:
-        positive &= pivot > 0
+        positive = positive & (pivot > 0)
     return solution, positive
 
 
-def _solve_fermat(problem: _PlaneProblem, max_iterations: int = 60):
-    """Damped Newton on μ (offsets from J_k along ε); returns lateral positions x ``(N, K)``.
-
-    Starts from μ = 0, the straight line O→P through the points J_k; a step that would lengthen
-    the travel time is halved. Stops when no step exceeds 1e-15 of the lateral scale (machine
-    precision). Also returns whether the Hessian is positive definite at the solution.
-    """
+def _straight_start(problem: _PlaneProblem):
+    """Lateral positions of the points J_k where the straight line O→P crosses the interfaces."""
     lateral = problem.lateral
     total_height = sum(problem.heights_columns)
-    cumulative = np.cumsum(problem.heights, axis=1)[:, :-1]
-    straight = [lateral * cumulative[:, k] / total_height for k in range(cumulative.shape[1])]
-    finite = np.isfinite(lateral)
-    x = [np.where(finite, column, 0.0) for column in straight]
-    tolerance = 1e-15 * (1.0 + np.abs(np.where(finite, lateral, 0.0)))
-    converged = np.zeros(lateral.shape, dtype=bool)
-    positive = converged
+    x, cumulative = [], 0.0
+    for height in problem.heights_columns[:-1]:
+        cumulative = cumulative + height
+        x.append(lateral * (cumulative / total_height))
+    return x
+
+
+def _snell_start(problem: _PlaneProblem, max_iterations: int = START_ITERATIONS):
+    """A start for the Fermat iteration: the path that obeys Snell's law, by Newton's method on
+    one unknown per point, ``τ = tan θ_water``.
+
+    The lateral distance ``ℓ = h_w τ + Σ_{i<w} h_i tan θ_i(τ)`` with ``p = n_w τ / sqrt(1 + τ²)``
+    and ``tan θ_i = p / sqrt(n_i² − p²)``: the water column, which is the longest, is linear in
+    τ, so Newton's method from the paraxial start ``τ0 = ℓ / (h_w + Σ h_i n_w / n_i)`` converges
+    in a few steps. A row stops when the error its last step leaves, estimated from the
+    quadratic convergence as ``|δ_k|³ / δ_{k−1}²``, is below 1e-16 of τ, or when the step is
+    below 1e-15 of τ (the rounding floor); the Fermat step that follows checks it. A stopped
+    row is not moved again, and once few rows are left the iteration continues on those only.
+    Returns the lateral positions of the interface points (list of K ``(N,)`` arrays), a mask
+    of the rows that converged (NaN-free, Snell's invariant below every index) and the number
+    of steps.
+    """
+    n = problem.indices
+    n_water = n[-1]
+    media = [(n_i, h, h * n_i * n_i) for n_i, h in zip(n[:-1], problem.heights_columns[:-1])]
+    water_all = problem.heights_columns[-1]
+    lateral_all = problem.lateral
+    tau_all = lateral_all / (water_all + sum(h * (n_water / n_i) for n_i, h, _ in media))
+    rows = None  # indices of the working rows (None: all)
+    tau, water, lateral = tau_all, water_all, lateral_all
+    frozen = previous = None
     iterations = 0
     for iterations in range(1, max_iterations + 1):
-        time_now, gradient, diag, off = _fermat_gradient_hessian(x, problem)
+        cos_water = 1.0 / np.sqrt(1.0 + tau * tau)
+        p = tau * cos_water
+        p *= n_water
+        p2 = p * p
+        residual = water * tau
+        residual -= lateral
+        slope = None
+        for n_i, h, weight in media:
+            inverse_cos = 1.0 / np.sqrt(n_i * n_i - p2)  # 1 / (n_i cos θ_i)
+            residual += (h * p) * inverse_cos
+            term = inverse_cos * inverse_cos
+            term *= inverse_cos
+            if slope is None:
+                slope = term * weight
+            else:
+                term *= weight
+                slope += term
+        if slope is None:  # no medium before the water (not a FlatPort): the line is exact
+            step = residual / water
+        else:
+            cos_water *= cos_water * cos_water
+            slope *= cos_water
+            slope *= n_water
+            slope += water
+            step = residual / slope
+        if frozen is not None:
+            step[frozen] = 0.0
+        tau -= step
+        size = np.abs(step)
+        scale = np.abs(tau)
+        small = size <= 1e-15 * scale  # at the rounding floor
+        if previous is not None:
+            # Quadratic convergence: the error left after this step is about κ·δ_k² with
+            # κ ≈ |δ_k| / δ_{k−1}²; done when that is below 1e-16 of τ.
+            small |= size * size * size <= (1e-16 * scale) * (previous * previous)
+        previous = size
+        frozen = small if frozen is None else frozen | small
+        active = np.count_nonzero(~frozen)
+        if active == 0:
+            break
+        if active * 4 <= frozen.size:  # go on with the rows that are left
+            keep = np.flatnonzero(~frozen)
+            if rows is None:
+                tau_all = tau.copy()
+                rows = keep
+            else:
+                tau_all[rows] = tau
+                rows = rows[keep]
+            tau, water, lateral, previous = tau[keep], water[keep], lateral[keep], previous[keep]
+            frozen = np.zeros(keep.size, dtype=bool)
+    converged = np.ones(lateral_all.shape, dtype=bool)
+    if rows is None:
+        tau_all = tau
+        converged = frozen
+    else:
+        tau_all[rows] = tau
+        converged[rows] = frozen
+    p = n_water * tau_all / np.sqrt(1.0 + tau_all * tau_all)
+    p2 = p * p
+    x, position = [], 0.0
+    for n_i, h, _ in media:
+        position = position + (h * p) / np.sqrt(n_i * n_i - p2)
+        x.append(position)
+    ok = converged & np.isfinite(position) if media else converged
+    return x, ok, iterations
+
+
+def _solve_fermat(problem: _PlaneProblem, start=None, max_iterations: int = 60):
+    """Newton on μ (offsets from J_k along ε); returns lateral positions x (list of K ``(N,)``).
+
+    Starts from ``start`` (K arrays) or μ = 0, the straight line O→P through the points J_k.
+    While a step is large (more than 1e-6 of the lateral scale), a step that would lengthen the
+    travel time is halved. Stops when no step exceeds 1e-15 of the lateral scale (machine
+    precision); a row that has converged is not moved again, so the result of a row does not
+    depend on the other rows of its batch. Also returns whether the Hessian is positive
+    definite at the solution, the converged mask and the iterations.
+    """
+    lateral = problem.lateral
+    x = list(_straight_start(problem) if start is None else start)
+    tolerance = 1e-15 * (1.0 + np.abs(lateral))
+    converged = None
+    positive = np.zeros(lateral.shape, dtype=bool)
+    iterations = 0
+    for iterations in range(1, max_iterations + 1):
+        gradient, diag, off = _fermat_gradient_hessian(x, problem)
         step, positive = _solve_tridiagonal_spd(diag, off, gradient)
-        step = [np.where(finite, s, 0.0) for s in step]
+        if converged is not None:
+            for s in step:
+                s[converged] = 0.0
         largest = np.abs(step[0])
         for s in step[1:]:
-            largest = np.maximum(largest, np.abs(s))
-        if np.any(largest > 1e-6 * (1.0 + np.abs(lateral))):
-            # Far from the minimum: halve the steps that would lengthen the travel time.
-            limit = time_now * (1 + 4e-16)
+            np.maximum(largest, np.abs(s), out=largest)
+        now = largest <= tolerance  # judged on the full Newton step, never on a damped one
+        far = largest > 1e-6 * (1.0 + np.abs(lateral))
+        if np.any(far):
+            # Far from the minimum: halve the steps that would lengthen the travel time (only
+            # in the rows that are far: near the minimum the travel time is flat to rounding,
+            # and halving there would stall a row short of it).
+            limit = _optical_length(_segments(x, problem)[1], problem.indices) * (1 + 4e-16)
             scale = np.ones_like(lateral)
             for _ in range(40):
                 trial = [xi - scale * si for xi, si in zip(x, step)]
-                worse = _optical_length(_segments(trial, problem)[1], problem.indices) > limit
+                worse = far & (_optical_length(_segments(trial, problem)[1], problem.indices)
+                               > limit)
                 if not worse.any():
                     break
                 scale[worse] *= 0.5
             step = [scale * s for s in step]
-            largest *= scale
-        x = [xi - si for xi, si in zip(x, step)]
-        converged = largest <= tolerance
+        for xi, si in zip(x, step):
+            xi -= si
+        converged = now if converged is None else converged | now
         if converged.all():
             break
-    return np.column_stack(x), positive & converged, converged, iterations
+    return x, positive & converged, converged, iterations
 
 
 def _solve_snell(problem: _PlaneProblem):
@@ -233,38 +388,247 @@ def _solve_snell(problem: _PlaneProblem):
     with np.errstate(invalid="ignore"):
         offsets = heights * p[:, None] / np.sqrt(n * n - (p * p)[:, None])
     x = np.cumsum(offsets, axis=1)[:, :-1]
-    return x, converged, iterations
+    return list(x.T), converged, iterations
 
 
-def _solve_paths_chunk(camera, port, points, solver):
-    center = camera.center
-    problem = _reduce_to_plane(center, port, points)
-    reason = problem.reason.copy()
-    with np.errstate(invalid="ignore", divide="ignore"):
+def _reduce(frame: _Frame, points: np.ndarray):
+    """The plane problem of ``points`` ``(N, 3)``: per point the water column ``h_w`` (mm), the
+    lateral coordinates ``l1, l2`` (mm, along e1, e2 from the camera's normal foot) and the
+    lateral distance ``ℓ``; rows that are not in the water get ``ℓ = 0, h_w = 1`` (a harmless
+    problem) and a reason."""
+    water = points @ frame.normal
+    water -= frame.water_offset
+    l1 = points @ frame.e1
+    l1 -= frame.center_e[0]
+    l2 = points @ frame.e2
+    l2 -= frame.center_e[1]
+    lateral = np.sqrt(l1 * l1 + l2 * l2)
+    with np.errstate(invalid="ignore"):
+        ok = (water > 0) & (water < np.inf) & (lateral < np.inf)
+    reason = np.zeros(points.shape[0], dtype=np.int8)
+    if not ok.all():
+        finite = np.isfinite(water) & np.isfinite(lateral)
+        reason[~finite] = Reason.INVALID_INPUT
+        reason[finite & ~ok] = Reason.NOT_IN_WATER
+        lateral[~ok] = 0.0
+        water[~ok] = 1.0
+        l1[~ok] = 0.0
+        l2[~ok] = 0.0
+    columns = [*frame.heights, water]
+    problem = _PlaneProblem(lateral, frame.indices, columns, [h * h for h in columns])
+    return problem, l1, l2, reason
+
+
+def _path_derivatives(frame: _Frame, problem: _PlaneProblem, x1):
+    """Derivatives of the first interface point's lateral position ``x1`` (implicit function
+    theorem on Snell's invariant, equivalent to the Fermat stationarity ∂t/∂x = 0).
+
+    With ``p = n_0 x1 / L_0`` and ``c_i = sqrt(n_i² − p²)``, the condition is ``F(p) = Σ h_i p
+    / c_i − ℓ = 0`` and ``x1 = h_0 p / c_0``; ``F_p = Σ h_i n_i² / c_i³``, ``A = ∂x1/∂p =
+    h_0 n_0² / c_0³``. Returns ``p``, ``c`` (list per medium), ``A`` and ``F_p``."""
+    n = frame.indices
+    h0 = problem.heights_columns[0]
+    p = n[0] * x1 / np.sqrt(x1 * x1 + h0 * h0)
+    p2 = p * p
+    c = [np.sqrt(n_i * n_i - p2) for n_i in n]
+    slope = 0.0
+    for n_i, h, c_i in zip(n, problem.heights_columns, c):
+        slope = slope + (h * n_i * n_i) / (c_i * c_i * c_i)
+    a = (h0 * n[0] * n[0]) / (c[0] * c[0] * c[0])
+    return p, c, a, slope
+
+
+def _chunk(camera: Camera, frame: _Frame, points, solver: str, paths: bool, jacobian: int):
+    """Pixels (and on request the paths and derivatives) of one chunk of points."""
+    problem, l1, l2, reason = _reduce(frame, points)
+    lateral = problem.lateral
+    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
         if solver == "fermat":
-            x, is_minimum, converged, iterations = _solve_fermat(problem)
+            start, started, start_iterations = _snell_start(problem)
+            if not started.all():  # the damped iteration from the straight line for the rest
+                straight = _straight_start(problem)
+                start = [np.where(started, s, t) for s, t in zip(start, straight)]
+            x, is_minimum, converged, iterations = _solve_fermat(problem, start)
+            iterations += start_iterations
         else:
             x, converged, iterations = _solve_snell(problem)
             is_minimum = converged.copy()
-    reason[(reason == Reason.OK) & ~converged] = Reason.NOT_CONVERGED
-    bad = reason != Reason.OK
-    x = np.where(bad[:, None], np.nan, x)
-    heights_to = np.cumsum(problem.heights, axis=1)[:, :-1]
-    interface_points = (center + heights_to.T[:, :, None] * port.normal
-                        + x.T[:, :, None] * problem.axis[None])
-    pixels = camera.project(interface_points[0])
-    return (pixels, interface_points.transpose(1, 0, 2), reason, is_minimum & ~bad,
-            np.full(points.shape[0], iterations))
+        reason[(reason == Reason.OK) & ~converged] = Reason.NOT_CONVERGED
+        bad = reason != Reason.OK
+        x1 = x[0]
+        ratio = np.divide(x1, lateral, out=np.zeros_like(x1), where=lateral > 0)  # x1 / ℓ
+        s1 = ratio * l1
+        s2 = ratio * l2
+        # I1 − C = h0 N + (x1/ℓ)(l1 e1 + l2 e2); in the camera frame with R^T N, R^T e1, R^T e2.
+        h0 = frame.heights[0]
+        nc, e1c, e2c = frame.camera_basis
+        xyz = []
+        for j in range(3):
+            column = s1 * e1c[j]
+            column += s2 * e2c[j]
+            column += h0 * nc[j]
+            xyz.append(column)
+        X, Y, Z = xyz
+        inverse_z = 1.0 / Z
+        front = Z > 0
+        if not front.all():
+            inverse_z[~front] = np.nan
+        xn = X * inverse_z
+        yn = Y * inverse_z
+        distortion = camera.distort_columns(xn, yn, jacobian=jacobian > 0)
+        K = camera.K
+        pixels = np.empty((points.shape[0], 2))
+        np.multiply(distortion[0], K[0, 0], out=pixels[:, 0])
+        if K[0, 1] != 0.0:
+            pixels[:, 0] += K[0, 1] * distortion[1]
+        pixels[:, 0] += K[0, 2]
+        np.multiply(distortion[1], K[1, 1], out=pixels[:, 1])
+        pixels[:, 1] += K[1, 2]
+        if bad.any():
+            pixels[bad] = np.nan
+        out = [pixels, reason, is_minimum & ~bad, np.full(points.shape[0], iterations)]
+        if paths:
+            out.append(_interface_points(camera, frame, problem, x, l1, l2, bad))
+        if jacobian:
+            out.extend(_jacobians(camera, frame, problem, points, x1, ratio, l1, l2, inverse_z,
+                                  xn, yn, distortion, bad, jacobian > 1))
+    return tuple(out)
 
 
-def solve_paths(camera: Camera, port: FlatPort | None, points, solver: str = "fermat") -> RefractedPaths:
-    """Refracted light paths from ``points (N, 3)`` (or one point ``(3,)``) in the water to
-    ``camera``'s centre. ``port=None`` means no port (all air).
+def _interface_points(camera, frame, problem, x, l1, l2, bad):
+    """``(N, K, 3)`` refraction points in the reference frame."""
+    lateral = problem.lateral
+    inverse = np.divide(1.0, lateral, out=np.zeros_like(lateral), where=lateral > 0)
+    axis = np.multiply.outer(l1 * inverse, frame.e1) + np.multiply.outer(l2 * inverse, frame.e2)
+    heights_to = np.cumsum(frame.heights)
+    points = np.stack([camera.center + h * frame.normal + xk[:, None] * axis
+                       for h, xk in zip(heights_to, x)], axis=1)
+    points[bad] = np.nan
+    return points
 
-    Raises ``ValueError`` for an unknown solver or a camera centre on the water side of the
-    port; per-point failures (a point not in the water, NaN input) are NaN rows with a reason.
-    Large batches run in chunks on all cores (same result as one batch).
-    """
+
+def _combine(terms, out=None):
+    """``Σ array · coefficient`` over ``(array, coefficient)`` terms (``None`` as the array: the
+    constant coefficient), skipping exact zero coefficients; into ``out`` if given."""
+    terms = [(a, c) for a, c in terms if c != 0.0]
+    constant = sum(c for a, c in terms if a is None)
+    terms = [(a, c) for a, c in terms if a is not None]
+    if not terms:
+        if out is None:
+            return constant
+        out[...] = constant
+        return out
+    first, coefficient = terms[0]
+    out = np.multiply(first, coefficient, out=out)
+    for array, coefficient in terms[1:]:
+        out += array * coefficient
+    if constant != 0.0:
+        out += constant
+    return out
+
+
+def _jacobians(camera, frame, problem, points, x1, ratio, l1, l2, inverse_z, xn, yn, distortion,
+               bad, parameters: bool):
+    """d pixel / d point ``(N, 2, 3)`` and, with ``parameters``, the :class:`ParameterJacobian`
+    fields (module docs of :func:`project`)."""
+    lateral = problem.lateral
+    p, c, a_p, f_p = _path_derivatives(frame, problem, x1)
+    tan_water = p / c[-1]
+    alpha = a_p / f_p  # d x1 / d ℓ
+    beta_water = -alpha * tan_water  # d x1 / d h_w
+    on_axis = ~(lateral > 0)
+    if on_axis.any():
+        ratio = np.where(on_axis, alpha, ratio)  # x1/ℓ → dx1/dℓ on the normal
+    inverse = np.divide(1.0, lateral, out=np.zeros_like(lateral), where=lateral > 0)
+    a1 = l1 * inverse  # in-plane axis a = a1 e1 + a2 e2 (zero on the normal)
+    a2 = l2 * inverse
+    # Rows of d pixel / d (x, y, z)_camera: M (2x2: K's upper block times the distortion
+    # Jacobian) times (1/Z) [[1, 0, −x], [0, 1, −y]].
+    K = camera.K
+    skew = K[0, 1] * inverse_z if K[0, 1] != 0.0 else None
+    if len(distortion) == 2:
+        m = [[K[0, 0] * inverse_z, skew], [None, K[1, 1] * inverse_z]]
+    else:
+        _, _, dxx, dxy, dyy = distortion
+        m = [[(K[0, 0] * dxx + K[0, 1] * dxy) * inverse_z,
+              (K[0, 0] * dxy + K[0, 1] * dyy) * inverse_z],
+             [K[1, 1] * dxy * inverse_z, K[1, 1] * dyy * inverse_z]]
+    # Projections of the rows onto the basis N, e1, e2 (in the camera frame).
+    phi = [_combine([(None, vec[0]), (xn, -vec[2])]) for vec in frame.camera_basis]
+    psi = [_combine([(None, vec[1]), (yn, -vec[2])]) for vec in frame.camera_basis]
+    n_rows = points.shape[0]
+    columns = np.empty((2, 3, n_rows))  # contiguous while computing, (N, 2, 3) at the end
+    rows_nea = []
+    for r in range(2):
+        mr0, mr1 = m[r]
+        if mr0 is None:
+            q = [mr1 * ps for ps in psi]
+        elif mr1 is None:
+            q = [mr0 * ph for ph in phi]
+        else:
+            q = [mr0 * ph + mr1 * ps for ph, ps in zip(phi, psi)]
+        qn, q1, q2 = q
+        rows_nea.append(q)
+        # d I1 / d P = α a aᵀ + (x1/ℓ) b bᵀ + β_w a Nᵀ with b = N × a, and a aᵀ + b bᵀ = e1 e1ᵀ +
+        # e2 e2ᵀ: the row is (x1/ℓ)(q1 e1 + q2 e2) + (α − x1/ℓ)(q·a) a + β_w (q·a) N.
+        qa = a1 * q1
+        qa += a2 * q2
+        c_normal = beta_water * qa
+        qa *= alpha - ratio
+        c1 = ratio * q1
+        c1 += qa * a1
+        c2 = ratio * q2
+        c2 += qa * a2
+        for j in range(3):
+            _combine([(c_normal, frame.normal[j]), (c1, frame.e1[j]), (c2, frame.e2[j])],
+                     out=columns[r, j])
+    d_points = np.ascontiguousarray(columns.transpose(2, 0, 1))
+    if bad.any():
+        d_points[bad] = np.nan
+    if not parameters:
+        return (d_points,)
+    # --- port and camera parameters: general (N, 2, 3) algebra --------------------------------
+    n = frame.indices
+    N, e1, e2 = frame.normal, frame.e1, frame.e2
+    q = np.stack([np.stack(rows, axis=-1) for rows in rows_nea], axis=1)  # (n, 2, 3) in N,e1,e2
+    q = q[..., :1] * N + q[..., 1:2] * e1 + q[..., 2:] * e2  # d pixel / d I1, reference frame
+    axis = a1[:, None] * e1 + a2[:, None] * e2
+    qa = np.einsum("nrj,nj->nr", q, axis)
+    qn = q @ N
+    h0 = frame.heights[0]
+    heights = problem.heights_columns
+    tans = [p / c_i for c_i in c]
+    beta = [-alpha * t for t in tans]  # d x1 / d h_i through p ...
+    beta[0] = beta[0] + tans[0]  # ... and directly
+    gamma = [alpha * (h * p * n_i) / (c_i * c_i * c_i) for n_i, h, c_i in zip(n, heights, c)]
+    gamma[0] = gamma[0] - (h0 * p * n[0]) / (c[0] * c[0] * c[0])
+    d_distance = qn + qa * (beta[0] - beta[-1])[:, None]
+    d_thick = np.stack([qa * (beta[j] - beta[-1])[:, None] for j in range(1, len(n) - 1)],
+                       axis=-1) if len(n) > 2 else np.zeros((n_rows, 2, 0))
+    d_indices = np.stack([qa * g[:, None] for g in gamma], axis=-1)
+    center = camera.center
+    relative = points - center
+    along = relative @ N
+    first = (h0 * N + x1[:, None] * axis)[:, None, :]  # I1 − C
+    d_normal = (-qn[..., None] * center + h0 * q
+                + qa[..., None] * (-beta[0][:, None, None] * center
+                                   + beta[-1][:, None, None] * points[:, None, :]
+                                   - (alpha * along)[:, None, None] * axis[:, None, :])
+                - (ratio[:, None, None] * qn[..., None]) * relative[:, None, :]
+                - (ratio * along)[:, None, None] * (q - qa[..., None] * axis[:, None, :]))
+    d_normal -= (d_normal @ N)[..., None] * N
+    d_center = -d_points - d_distance[..., None] * N
+    d_rotation = np.cross(q, first)
+    jac = ParameterJacobian(d_distance, d_normal, d_indices, d_thick, d_center, d_rotation)
+    if bad.any():
+        for value in (jac.distance, jac.normal, jac.indices, jac.thicknesses, jac.center,
+                      jac.rotation):
+            value[bad] = np.nan
+    return (d_points, jac.distance, jac.normal, jac.indices, jac.thicknesses, jac.center,
+            jac.rotation)
+
+
+def _run(camera, port, points, solver, paths: bool, jacobian: int):
     if solver not in SOLVERS:
         raise ValueError(f"solver must be one of {', '.join(SOLVERS)}, got {solver!r}")
     points = np.asarray(points, dtype=np.float64)
@@ -275,18 +639,49 @@ def solve_paths(camera: Camera, port: FlatPort | None, points, solver: str = "fe
     if port is None:  # no port: all air, the pinhole model through an index-matched plane
         port = index_matched_port(camera.R[:, 2], camera.center)
     port.check_camera(camera.center, "camera")
-    pixels, interface_points, reason, is_minimum, iterations = map_row_chunks(
-        lambda chunk: _solve_paths_chunk(camera, port, chunk, solver), (points,))
+    frame = _frame(camera, port)
+    return map_row_chunks(lambda chunk: _chunk(camera, frame, chunk, solver, paths, jacobian),
+                          (points,))
+
+
+def solve_paths(camera: Camera, port: FlatPort | None, points, solver: str = "fermat") -> RefractedPaths:
+    """Refracted light paths from ``points (N, 3)`` (or one point ``(3,)``) in the water to
+    ``camera``'s centre. ``port=None`` means no port (all air).
+
+    Raises ``ValueError`` for an unknown solver or a camera centre on the water side of the
+    port; per-point failures (a point not in the water, NaN input) are NaN rows with a reason.
+    Large batches run in chunks on all cores (same result as one batch).
+    """
+    pixels, reason, is_minimum, iterations, interface_points = _run(camera, port, points, solver,
+                                                                    True, 0)
     return RefractedPaths(pixels, interface_points.transpose(1, 0, 2), reason, is_minimum,
                           int(iterations.max(initial=0)))
 
 
-def project(camera: Camera, port: FlatPort | None, points, solver: str = "fermat") -> np.ndarray:
+def project(camera: Camera, port: FlatPort | None, points, solver: str = "fermat", *,
+            jacobian: bool = False, parameters: bool = False):
     """Pixels ``(N, 2)`` of points ``(N, 3)`` in the water seen by ``camera`` through ``port``
     (``None``: no port, all air). One point ``(3,)`` gives ``(1, 2)``, like :func:`triangulate`
     gives ``(1, 3)`` for one pixel pair.
 
     NaN where no path exists (e.g. a point on the camera side of the port). Lens distortion is
     applied like ``cv2.projectPoints``. ``solver``: ``"fermat"`` (the paper) or ``"snell"``.
+
+    ``jacobian=True`` returns ``(pixels, d_points)`` with ``d_points`` ``(N, 2, 3)`` the
+    analytic derivatives of each pixel with respect to its point (px/mm, reference frame);
+    ``parameters=True`` as well returns ``(pixels, d_points, ParameterJacobian)`` with the
+    derivatives with respect to the port (D, normal, indices, thicknesses) and the camera pose.
+    They come from the implicit function theorem on the stationarity of the travel time (at
+    the solution, Snell's invariant ``p = n_i sin θ_i`` is the same in every medium: one
+    equation ``F(p; ℓ, h, n) = 0`` per point) chained with the pinhole and distortion model —
+    no finite differences. Rows without a pixel are NaN in every output.
     """
-    return solve_paths(camera, port, points, solver).pixels
+    if parameters:
+        jacobian = True
+    pixels, _, _, _, *rest = _run(camera, port, points, solver, False,
+                                  2 if parameters else int(bool(jacobian)))
+    if not jacobian:
+        return pixels
+    if not parameters:
+        return pixels, rest[0]
+    return pixels, rest[0], ParameterJacobian(*rest[1:])

@@ -145,6 +145,148 @@ def triangulate_rays(rig: StereoRig, rays_left: np.ndarray, rays_right: np.ndarr
     return _finish(perp, reason, method)
 
 
+def _port_basis(normal):
+    """Rows N, e1, e2: an orthonormal basis of the reference frame with the port normal first."""
+    nx, ny, nz = (float(v) for v in normal)
+    e1 = np.array([0.0, nz, -ny]) if abs(nx) < 0.9 else np.array([-nz, 0.0, nx])
+    e1 /= np.sqrt(e1 @ e1)
+    e2 = np.array([ny * e1[2] - nz * e1[1], nz * e1[0] - nx * e1[2], nx * e1[1] - ny * e1[0]])
+    return np.stack([np.asarray(normal, dtype=float), e1, e2])
+
+
+def _combine(terms):
+    """``Σ array · coefficient`` over ``(array, coefficient)`` terms (``None``: a constant),
+    skipping exact zero coefficients."""
+    total = None
+    constant = 0.0
+    for array, coefficient in terms:
+        if coefficient == 0.0:
+            continue
+        if array is None:
+            constant += coefficient
+        elif total is None:
+            total = array * coefficient
+        else:
+            total += array * coefficient
+    if total is None:
+        return constant
+    if constant:
+        total += constant
+    return total
+
+
+def _water_line(camera: Camera, port: FlatPort, basis, uv):
+    """The water ray of pixels ``uv`` ``(N, 2)`` through ``port``, in the port basis (N, e1,
+    e2): origin and direction as 3 columns each (the direction unnormalized), the normal
+    component of the camera ray (> 0 where it reaches the port) and the camera's reason codes.
+
+    The camera ray is ``w = B R (x, y, 1)`` (normalized image coordinates, not normalized);
+    with ``t² = w1² + w2²`` and ``ρ = |w|²`` the direction in medium k is ``(c_k, η_k w1,
+    η_k w2)`` with ``η_k = n_0/n_k`` and ``c_k = sqrt(ρ − η_k² t²)`` (Snell's law, equation 7
+    in closed form for parallel interfaces), and the ray advances ``Δh_k η_k / c_k`` times
+    ``(w1, w2)`` across medium k."""
+    if camera.dist is None:
+        fx, skew, cx = camera.K[0]
+        fy, cy = camera.K[1, 1], camera.K[1, 2]
+        y = (uv[:, 1] - cy) * (1.0 / fy)
+        x = uv[:, 0] - cx
+        if skew != 0.0:
+            x -= skew * y
+        x *= 1.0 / fx
+        reason = None
+    else:
+        xy, reason = camera.normalized_with_reason(uv)
+        x, y = xy[:, 0], xy[:, 1]
+    M = basis @ camera.R
+    w = [_combine([(x, M[j, 0]), (y, M[j, 1]), (None, M[j, 2])]) for j in range(3)]
+    w_n, w1, w2 = w
+    t2 = w1 * w1
+    t2 += w2 * w2
+    rho = w_n * w_n
+    rho += t2
+    indices = port.indices
+    heights = [port.distance - float(camera.center @ port.normal), *port.thicknesses]
+    advance = heights[0] / w_n
+    cosine = None
+    for n_k, h in zip(indices[1:], heights[1:] + [None]):
+        eta = indices[0] / n_k
+        cosine = np.sqrt(rho - (eta * eta) * t2)
+        if h is not None:
+            advance += (h * eta) / cosine
+    eta = indices[0] / indices[-1]
+    center = basis @ camera.center
+    origin = (port.distance + sum(port.thicknesses), center[1] + advance * w1,
+              center[2] + advance * w2)
+    direction = (cosine, eta * w1, eta * w2)
+    return origin, direction, w_n, reason
+
+
+def _dot3(a, b):
+    total = a[0] * b[0]
+    total += a[1] * b[1]
+    total += a[2] * b[2]
+    return total
+
+
+def _optical_path_rows(rig: StereoRig, uv_left, uv_right):
+    """The optical-path triangulation of pixel rows, column by column in the port basis (the
+    same equations as :func:`triangulate_rays`, fused); rows that are not plainly valid (a
+    camera reason, a ray that misses the port or is reflected, parallel rays, a point behind a
+    ray start) are recomputed by :func:`triangulate_rays` for their reason codes."""
+    basis = _port_basis(rig.port.normal)
+    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+        p1, d1, n1, reason1 = _water_line(rig.left, rig.port, basis, uv_left)
+        p2, d2, n2, reason2 = _water_line(rig.right, rig.port, basis, uv_right)
+        # common perpendicular (lines.common_perpendicular): Δ = |d1 × d2|²
+        w = [a - b for a, b in zip(p1, p2)]
+        cross = [d1[1] * d2[2] - d1[2] * d2[1], d1[2] * d2[0] - d1[0] * d2[2],
+                 d1[0] * d2[1] - d1[1] * d2[0]]
+        determinant = _dot3(cross, cross)
+        a, b, c = _dot3(d1, d1), _dot3(d1, d2), _dot3(d2, d2)
+        d, e = _dot3(d1, w), _dot3(d2, w)
+        parallel = ~(determinant > 1e-28 * a * c)
+        inverse = 1.0 / determinant
+        s1 = b * e
+        s1 -= c * d
+        s1 *= inverse
+        s2 = a * e
+        s2 -= b * d
+        s2 *= inverse
+        foot1 = [p + s1 * q for p, q in zip(p1, d1)]
+        foot2 = [p + s2 * q for p, q in zip(p2, d2)]
+        gap = [f - g for f, g in zip(foot1, foot2)]
+        length = np.sqrt(_dot3(gap, gap))
+        middle = [0.5 * (f + g) for f, g in zip(foot1, foot2)]
+        n_rows = uv_left.shape[0]
+        points = np.empty((n_rows, 3))
+        for j in range(3):
+            points[:, j] = _combine([(middle[0], basis[0, j]), (middle[1], basis[1, j]),
+                                     (middle[2], basis[2, j])])
+        good = (n1 > 0) & (n2 > 0) & (s1 >= 0) & (s2 >= 0) & ~parallel & np.isfinite(length)
+    for camera_reason in (reason1, reason2):
+        if camera_reason is not None:
+            good &= camera_reason == Reason.OK
+    reason = np.zeros(n_rows, dtype=np.int8)
+    if not good.all():
+        bad = np.flatnonzero(~good)
+        slow_points, slow_gap, slow_reason = _triangulate_pixels(rig, uv_left[bad], uv_right[bad],
+                                                                 "optical_path")
+        points[bad], length[bad], reason[bad] = slow_points, slow_gap, slow_reason
+    return points, length, reason
+
+
+def _triangulate_pixels(rig, left, right, method):
+    rays_left, reason_left = rig.left.rays_with_reason(left)
+    rays_right, reason_right = rig.right.rays_with_reason(right)
+    with np.errstate(invalid="ignore"):
+        result = triangulate_rays(rig, rays_left, rays_right, method)
+    reason = result.reason
+    for camera_reason in (reason_left, reason_right):  # say why a ray is missing
+        reason[(reason == Reason.INVALID_INPUT) & (camera_reason != Reason.OK)] = \
+            camera_reason[(reason == Reason.INVALID_INPUT) & (camera_reason != Reason.OK)]
+    return result.points, result.gap, reason
+
+
 def triangulate(rig: StereoRig, uv_left, uv_right, method: str = "optical_path") -> Triangulation:
     """Triangulate matched pixels ``(N, 2)`` of the left and right images.
 
@@ -161,15 +303,9 @@ def triangulate(rig: StereoRig, uv_left, uv_right, method: str = "optical_path")
                          f"{uv_left.shape} and {uv_right.shape}")
 
     def solve(left, right):
-        rays_left, reason_left = rig.left.rays_with_reason(left)
-        rays_right, reason_right = rig.right.rays_with_reason(right)
-        with np.errstate(invalid="ignore"):
-            result = triangulate_rays(rig, rays_left, rays_right, method)
-        reason = result.reason
-        for camera_reason in (reason_left, reason_right):  # say why a ray is missing
-            reason[(reason == Reason.INVALID_INPUT) & (camera_reason != Reason.OK)] = \
-                camera_reason[(reason == Reason.INVALID_INPUT) & (camera_reason != Reason.OK)]
-        return result.points, result.gap, reason
+        if method == "optical_path":
+            return _optical_path_rows(rig, left, right)
+        return _triangulate_pixels(rig, left, right, method)
 
     if method == "reprojection":
         start = triangulate(rig, uv_left, uv_right, "optical_path")

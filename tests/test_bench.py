@@ -21,3 +21,17 @@ def test_bench_rejects_bad_arguments(capsys):
     assert main(["bench", "--points", "0"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("error:") and "--points" in err[0]
+
+
+def test_bench_sizes_option_and_a_small_run(capsys, tmp_path):
+    from eval.bench import batch_sizes, format_table, run_bench
+
+    assert batch_sizes("1e3,10^4,100000") == (1000, 10000, 100000)
+    assert main(["bench", "--sizes", "1e8"]) == 2
+    assert "--sizes" in capsys.readouterr().err
+    results = run_bench(200, 5, 1, 0, progress=lambda text: None, sizes=(100,))
+    rows = {(r["measurement"], r["port"]) for r in results["per_size"]}
+    assert ("project_fermat_jacobian", "air-water") in rows
+    assert ("triangulate_optical_path", "air-glass-water") in rows
+    text = format_table(results)
+    assert "machine:" in text and "load average" in text and "× project" in text

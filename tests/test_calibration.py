@@ -128,3 +128,32 @@ def test_in_air_opencv_calibration_from_corners():
     with pytest.raises(CalibrationError, match="at least 3"):
         calibrate_in_air(BOARD, Detections(detections.ids[:2], detections.pixels[:2]),
                          truth.left.size)
+
+
+def test_housing_analytic_jacobian_matches_finite_differences():
+    """The Jacobian handed to least_squares, with every housing parameter free (distance, the
+    two tilts, thickness, n_water, the right camera's extrinsics) away from the start: against
+    SciPy's central differences of the residuals (steps of 1e-3 mm, 1e-6 rad, 1e-4 for the
+    index), norm-relative 1e-6 per parameter group (the housing numbers one by one, all pose
+    columns together)."""
+    from scipy.optimize._numdiff import approx_derivative
+
+    from measure.calibration import HOUSING_PARAMETERS, _housing_problem
+
+    truth = _tilted_rig()
+    poses = sample_poses(truth, BOARD, 3, seed=2, water=True)
+    detections = _observe(truth, poses, 0.05, np.random.default_rng(4))
+    names = tuple(HOUSING_PARAMETERS)
+    problem = _housing_problem(truth, BOARD, detections, names)
+    rng = np.random.default_rng(5)
+    x = problem.x0 + np.concatenate([[0.3, 0.004, -0.003, 0.2, 0.002],
+                                     rng.normal(0, 2e-3, 3), rng.normal(0, 0.3, 3),
+                                     rng.normal(0, [2e-3] * 3 + [1.0] * 3, (problem.P, 6)).ravel()])
+    analytic = problem.jacobian(x).toarray()
+    # steps as in tests/test_jacobian.py: 1e-3 mm, 1e-6 rad, 1e-4 for the index
+    steps = np.concatenate([[1e-3, 1e-6, 1e-6, 1e-3, 1e-4], [1e-6] * 3, [1e-3] * 3,
+                            np.tile([1e-6] * 3 + [1e-3] * 3, problem.P)])
+    numeric = approx_derivative(problem.residuals, x, method="3-point", abs_step=steps)
+    for block in [slice(k, k + 1) for k in range(problem.n_global)] + [slice(problem.n_global, None)]:
+        error = np.linalg.norm(analytic[:, block] - numeric[:, block])
+        assert error <= 1e-6 * np.linalg.norm(analytic[:, block]), block

@@ -110,11 +110,17 @@ def test_snell_invariant_at_every_interface(data):
         vertices = np.concatenate([np.broadcast_to(rig.left.center, (1, ok.sum(), 3)),
                                    paths.interface_points[:, ok], points[None, ok]])
         segments = np.diff(vertices, axis=0)
-        directions = segments / np.linalg.norm(segments, axis=2, keepdims=True)
+        lengths = np.linalg.norm(segments, axis=2)
+        directions = segments / lengths[..., None]
         normal = rig.port.normal
         sines = np.linalg.norm(np.cross(directions, normal), axis=2)
         invariant = np.asarray(rig.port.indices)[:, None] * sines
-        assert np.max(np.abs(invariant - invariant[0])) < 1e-12
+        # A direction taken from a segment shorter than 1 mm carries the rounding of its end
+        # points (~3e-14 mm at 100 mm) amplified beyond 1e-12 (hypothesis found a point 0.04 mm
+        # behind the port: 5.6e-12 with the solvers of every version); such points are covered
+        # by the round trips and the solver agreement, not by this check.
+        conditioned = lengths.min(axis=0) >= 1.0
+        assert np.max(np.abs(invariant - invariant[0])[:, conditioned], initial=0.0) < 1e-12
         # Each refraction point lies on its interface plane ...
         np.testing.assert_allclose(paths.interface_points[:, ok] @ normal,
                                    np.broadcast_to(rig.port.offsets[:, None], (rig.port.n_interfaces, ok.sum())),
