@@ -127,8 +127,9 @@ def test_lit_renders_agree_with_mitsubas_own_integrators(lit_scenes, water):
     Mitsuba's ``path`` / ``volpath`` on the same lit scene: the image energies agree."""
     spec = load_scene(lit_scenes[water])
     mscene, mi, _ = load_mitsuba_scene(spec)
-    ours = [render_view(mscene, mi, 0, spec.rig.left, 64, 10 * s).sum() for s in range(3)]
-    theirs = [_develop(mi, mi.render(mscene, sensor=0, spp=64, seed=s)).sum() for s in range(3)]
+    spp = 64 if water == "clear" else 32  # Mitsuba's volpath is slow here; its spread counts
+    ours = [render_view(mscene, mi, 0, spec.rig.left, spp, 10 * s).sum() for s in range(3)]
+    theirs = [_develop(mi, mi.render(mscene, sensor=0, spp=spp, seed=s)).sum() for s in range(3)]
     sem = np.sqrt(np.var(ours, ddof=1) / 3 + np.var(theirs, ddof=1) / 3)
     assert abs(np.mean(ours) - np.mean(theirs)) < 4 * sem + 2e-3 * np.mean(theirs), (ours, theirs)
 
