@@ -78,6 +78,10 @@ def add_parser(subparsers):
                         help="detected blobs more elongated than E (major/minor axis) are taken "
                              "for merged targets (default 1.6); raise it (e.g. 3) for targets "
                              "seen obliquely: tilted planes, cylinders, spheres")
+    parser.add_argument("--median-filter", type=int, choices=(3, 5), default=0, metavar="K",
+                        help="median-filter each view (K×K, 3 or 5) before detection: removes "
+                             "the fireflies of lights seen through scattering water (lit "
+                             "targets) that pull the centroids; default: no filter")
     parser.add_argument("--max-area-ratio", type=_elongation, default=None, metavar="A",
                         help="detected blobs larger than A times the median blob are taken for "
                              "merged targets (default 2.5); raise it (e.g. 6) when the targets "
@@ -459,7 +463,8 @@ def measure(args, options: RunOptions, log):
                                   budget_rigs=_budget_rigs(args, inputs),
                                   threshold_fraction=args.threshold_fraction,
                                   max_elongation=args.max_elongation,
-                                  max_area_ratio=args.max_area_ratio)
+                                  max_area_ratio=args.max_area_ratio,
+                                  median_filter=args.median_filter)
     report["sensor"] = sensor_info
     report["rigs"]["source"] = (f"--calib {args.calib}" if args.calib else "the scene's rig") + (
         " with --assume" if args.assume else "")

@@ -110,12 +110,19 @@ def visible_targets(camera, port, targets, radius_mm):
 
 def detect_stage(inputs: RunInputs, noise_px: float, threshold_fraction: float | None = None,
                  max_elongation: float = DEFAULT_MAX_ELONGATION,
-                 max_area_ratio: float = DEFAULT_MAX_AREA_RATIO):
+                 max_area_ratio: float = DEFAULT_MAX_AREA_RATIO, median_filter: int = 0):
     """Detections per view and their centres ``(M, 2)`` px, with Gaussian noise of σ
     ``noise_px`` added (seeded by ``inputs.seed``). Blobs more elongated than
     ``max_elongation``, or larger than ``max_area_ratio`` times the median blob, are taken for
-    merged targets (raise them for targets seen obliquely, or over a wide range of depths)."""
+    merged targets (raise them for targets seen obliquely, or over a wide range of depths).
+    ``median_filter`` 3 or 5: each view is median-filtered first (``cv2.medianBlur``), which
+    removes isolated bright pixels — the fireflies of lights seen through scattering water —
+    that would otherwise pull the centroids; 0 (default): no filter."""
     def detect(image):
+        if median_filter:
+            import cv2
+
+            image = cv2.medianBlur(np.asarray(image, dtype=np.float32), int(median_filter))
         threshold = (None if threshold_fraction is None
                      else fractional_threshold(image, threshold_fraction))
         return detect_targets(image, threshold=threshold, merge_elongation=max_elongation,
@@ -332,7 +339,8 @@ def run_pipeline(inputs: RunInputs, methods, noise_px: float = 0.0, gate_mm: flo
                  depth_window=None, log=print, eccentricity: bool = False,
                  self_calibrate: tuple = (), budget_rigs: dict | None = None,
                  threshold_fraction: float | None = None,
-                 max_elongation: float = None, max_area_ratio: float = None):
+                 max_elongation: float = None, max_area_ratio: float = None,
+                 median_filter: int = 0):
     """Run detection, matching, triangulation and scoring. Returns ``(report, arrays)``.
 
     ``budget_rigs`` ``{label: rig}``: also measure with these rigs (:func:`budget_stage`).
@@ -346,7 +354,7 @@ def run_pipeline(inputs: RunInputs, methods, noise_px: float = 0.0, gate_mm: flo
     max_elongation = DEFAULT_MAX_ELONGATION if max_elongation is None else max_elongation
     max_area_ratio = DEFAULT_MAX_AREA_RATIO if max_area_ratio is None else max_area_ratio
     detections, centers = detect_stage(inputs, noise_px, threshold_fraction, max_elongation,
-                                       max_area_ratio)
+                                       max_area_ratio, median_filter)
     timings["detect"] = time.perf_counter() - start
 
     log("match left and right (refractive epipolar constraint) …")
@@ -405,6 +413,7 @@ def run_pipeline(inputs: RunInputs, methods, noise_px: float = 0.0, gate_mm: flo
         "methods": {m: s.to_json() for m, s in scored["scores"].items()},
         "noise_px": noise_px, "seed": inputs.seed, "threshold_fraction": threshold_fraction,
         "max_elongation": max_elongation, "max_area_ratio": max_area_ratio,
+        "median_filter": median_filter,
         "rigs": _rigs_report(inputs),
         "self_calibration": calibration,
         "budget": budget,

@@ -129,6 +129,7 @@ EVAL_CASES = [
     (None, RUN + ["--depth-range", "nan,5"], "--depth-range"),
     (None, RUN + ["--max-elongation", "1"], "--max-elongation"),
     (None, RUN + ["--max-elongation", "inf"], "--max-elongation"),
+    (None, RUN + ["--median-filter", "4"], "--median-filter"),
     (None, RUN + ["--methods", "bogus"], "bogus"),
     (None, RUN + ["--methods", ""], "method"),
     (None, RUN + ["--variant", "bogus_variant"], "bogus_variant"),

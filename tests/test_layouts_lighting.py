@@ -213,3 +213,27 @@ def test_eval_run_on_a_cylinder_matches_every_target(tmp_path):
     assert report["crosscheck"]["rms_px_outline"] < 0.03
     lo, hi = m["depth_window_mm"]
     assert 0.8 * 1000.0 - 1e-6 <= lo and hi <= 1.25 * 1400.0 + 1e-6
+
+
+def test_median_filter_removes_a_firefly_beside_a_target():
+    """A lone saturated pixel (a firefly of a light seen through scattering water) inside a
+    disk's centroid window pulls its centroid; ``median_filter=3`` removes it and leaves a
+    symmetric disk's centre where it was."""
+    from eval.run_pipeline import RunInputs, detect_stage
+
+    yy, xx = np.mgrid[0:64, 0:80]
+    disk = ((xx - 40.3) ** 2 + (yy - 31.6) ** 2 <= 5.0 ** 2).astype(np.float32)
+    noisy = disk.copy()
+    noisy[31, 47] = 20.0  # two pixels outside the disk's edge, inside its window
+    centres = {}
+    for name, image in (("clean", disk), ("firefly", noisy)):
+        for k in (0, 3):
+            inputs = RunInputs("synthetic", None, True, np.zeros((1, 3)), np.zeros(1), 5.0,
+                               image, image, {}, "none", 1, 0.0)
+            _, found = detect_stage(inputs, 0.0, median_filter=k)
+            assert found["left"].shape == (1, 2)
+            centres[name, k] = found["left"][0]
+    # unfiltered, the firefly pulls the centroid by more than a pixel; filtered, the centroid
+    # is the filtered clean disk's (the filter leaves nothing of the firefly)
+    assert np.linalg.norm(centres["firefly", 0] - centres["clean", 0]) > 1.0
+    np.testing.assert_allclose(centres["firefly", 3], centres["clean", 3], atol=1e-12)
