@@ -118,6 +118,11 @@ def run_arguments(cell: dict, scene_path: str) -> list:
         argv += ["--eccentricity"]
     if "threshold_fraction" in p:
         argv += ["--threshold-fraction", _value_text(p["threshold_fraction"])]
+    for key in ("max_elongation", "max_area_ratio"):
+        if key in p:
+            argv += [f"--{key.replace('_', '-')}", _value_text(p[key])]
+    if p.get("median_filter"):
+        argv += ["--median-filter", str(p["median_filter"])]
     return argv
 
 

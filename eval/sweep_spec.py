@@ -37,7 +37,9 @@ Parameters (in ``fixed``, ``grid``, ``zip`` or ``random``; each in one section o
 * ``noise_px`` (σ of the Gaussian noise added to the pixels, ≥ 0), ``spp`` (render cells),
   ``self_calibrate`` (``""`` off, ``true`` = ``"n_water"``, or a comma list of ``n_water``,
   ``port_distance``, ``port_normal``), ``gate_mm`` (> 0), ``eccentricity`` (bool, render cells),
-  ``threshold_fraction`` (0 < F < 1, render cells).
+  ``threshold_fraction`` (0 < F < 1, render cells), ``max_elongation`` and ``max_area_ratio``
+  (> 1, render cells), ``median_filter`` (0, 3 or 5, render cells) — ``eval run``'s detection
+  options of the same names.
 
 A cell is keyed by the hash of its kind, scene (the file's SHA-256, not its path), parameters,
 methods, repeat and the sweep seed (:func:`cell_key`); its seed is derived from the sweep seed
@@ -58,9 +60,10 @@ KINDS = ("render", "analytic")
 TOP_KEYS = ("name", "description", "seed", "repeats", "scenes", "methods", "render_width", "save",
             "cells_per_task", "fixed", "grid", "zip", "random")
 PLAIN_PARAMETERS = ("kind", "noise_px", "spp", "self_calibrate", "gate_mm", "eccentricity",
-                    "threshold_fraction")
+                    "threshold_fraction", "max_elongation", "max_area_ratio", "median_filter")
 #: Parameters that only render cells use.
-RENDER_ONLY = ("spp", "eccentricity", "threshold_fraction")
+RENDER_ONLY = ("spp", "eccentricity", "threshold_fraction", "max_elongation", "max_area_ratio",
+               "median_filter")
 SAVE_CHOICES = ("images", "ply", "figures")
 DISTRIBUTIONS = ("uniform", "loguniform", "integers", "choice")
 DEFAULT_RENDER_WIDTH = 320
@@ -397,6 +400,14 @@ def _check_value(key: str, value, label: str):
         if not (_number(value) and 0 < value < 1):
             bad("a number between 0 and 1 (exclusive)")
         return float(value)
+    if key in ("max_elongation", "max_area_ratio"):
+        if not (_number(value) and value > 1):
+            bad("a finite number > 1")
+        return float(value)
+    if key == "median_filter":
+        if value not in (0, 3, 5) or isinstance(value, bool):
+            bad("0 (none), 3 or 5")
+        return int(value)
     if key == "eccentricity":
         if not isinstance(value, bool):
             bad("true or false")

@@ -122,6 +122,20 @@ gate_mm = [0.5, 1.0]
     assert load_spec(tmp_path / "spec.toml").cells == spec.cells
 
 
+def test_detection_options_reach_eval_run(small_scene, tmp_path):
+    """The detection options of a spec become eval run's options of the same names."""
+    from eval.sweep_cells import run_arguments
+
+    text = ('scenes = ["{scene}"]\n[fixed]\nkind = "render"\nmax_elongation = 3\n'
+            'max_area_ratio = 6\nmedian_filter = 3\n')
+    cell = load_spec(_spec(tmp_path, small_scene, text)).cells[0]
+    argv = run_arguments({"params": cell.params, "seed": 1, "methods": ["optical_path"],
+                          "defines": {}}, "scene.xml")
+    joined = " ".join(argv)
+    assert "--max-elongation 3" in joined and "--max-area-ratio 6" in joined
+    assert "--median-filter 3" in joined
+
+
 @pytest.mark.parametrize("text, fragment", [
     ("scenes = [", "not a valid TOML"),
     ('scenes = ["{scene}"]\n[fixed]\nkind = "render"\n[grid]\nfoo = [1]', "unknown parameter 'foo'"),
@@ -137,6 +151,8 @@ gate_mm = [0.5, 1.0]
     ('scenes = ["missing.xml"]\n[fixed]\nkind = "render"', "missing.xml"),
     ('scenes = ["{scene}"]\nrepeats = 0\n[fixed]\nkind = "render"', "repeats"),
     ('scenes = ["{scene}"]\n[random]\nnoise_px = { normal = [0, 1] }', "uniform"),
+    ('scenes = ["{scene}"]\n[fixed]\nkind = "render"\nmedian_filter = 4', "median_filter"),
+    ('scenes = ["{scene}"]\n[fixed]\nkind = "render"\nmax_elongation = 1', "max_elongation"),
 ])
 def test_bad_specs_exit_2_with_one_line(small_scene, tmp_path, capsys, text, fragment):
     spec = _spec(tmp_path, small_scene, text)
