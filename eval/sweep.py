@@ -305,6 +305,22 @@ def _check_address(address: str) -> str:
     return address
 
 
+#: Largest local cluster, in single-threaded workers per usable core (more only costs memory).
+MAX_WORKERS_PER_CORE = 4
+
+
+def _ignore_client_finalizer_errors() -> None:
+    """Silence the 'Exception ignored in Client.__del__' report of a client whose connection
+    failed half-way (the command is about to exit with its one error line)."""
+    previous = sys.unraisablehook
+
+    def hook(unraisable):
+        if "Client.__del__" not in getattr(getattr(unraisable, "object", None), "__qualname__", ""):
+            previous(unraisable)
+
+    sys.unraisablehook = hook
+
+
 def default_workers() -> int:
     try:
         return max(1, len(os.sched_getaffinity(0)))
@@ -328,6 +344,12 @@ def connect(args):
         except (OSError, TimeoutError) as exc:
             raise CLIError(f"--scheduler {args.scheduler}: no Dask scheduler answered within "
                            f"{timeout:g} s ({' '.join(str(exc).split())[:160]})") from None
+        except (MemoryError, ValueError, TypeError, EOFError) as exc:
+            # something answered, but not in Dask's protocol (its bytes read as a message
+            # length ask for exabytes); the half-built client complains again when collected
+            _ignore_client_finalizer_errors()
+            raise CLIError(f"--scheduler {args.scheduler}: what answers there is not a Dask "
+                           f"scheduler ({type(exc).__name__})") from None
         try:
             client.wait_for_workers(1, timeout=max(timeout, 30.0))
         except (OSError, TimeoutError):
@@ -344,6 +366,10 @@ def connect(args):
         n = len(client.scheduler_info(n_workers=-1)["workers"])
         return client, None, f"{n} worker(s) of {args.scheduler}"
     workers = args.workers or default_workers()
+    if workers > MAX_WORKERS_PER_CORE * default_workers():
+        raise CLIError(f"--workers {workers}: at most {MAX_WORKERS_PER_CORE} single-threaded "
+                       f"workers per core ({MAX_WORKERS_PER_CORE * default_workers()} here); "
+                       f"for more, run a cluster and pass --scheduler")
     cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
                            dashboard_address=":0", silence_logs=logging.CRITICAL)
     client = Client(cluster, set_as_default=False)

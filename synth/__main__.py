@@ -177,6 +177,10 @@ def _cmd_scene(args) -> int:
     check_file_output(args.out, "--out", may_replace=_is_our_scene)
     if args.layout == "random" and not args.z_range[0] < args.z_range[1]:
         raise CLIError(f"--z-range must be ZMIN < ZMAX, got {args.z_range[0]:g} {args.z_range[1]:g}")
+    _check_target_count(args)
+    if args.aperture_radius is not None and args.dist and any(args.dist):
+        raise CLIError("--aperture-radius (a thin lens) is rendered without lens distortion: "
+                       "drop --dist or the thin lens")
     if args.layout == "grid" and args.half_width / args.spacing > 1000:
         raise CLIError(f"--half-width / --spacing gives more than 2001 x 2001 grid targets "
                        f"({args.half_width:g} / {args.spacing:g})")
@@ -223,8 +227,12 @@ def _cmd_scene(args) -> int:
     else:
         try:
             if args.layout == "tilted":
-                if np.any(np.abs(args.tilt) >= 80):
-                    raise ValueError(f"--tilt must stay below 80 degrees, got {args.tilt}")
+                ax, ay = np.radians(args.tilt)
+                combined = np.degrees(np.arccos(np.clip(np.cos(ax) * np.cos(ay), -1.0, 1.0)))
+                if np.any(np.abs(args.tilt) >= 80) or combined >= 80:
+                    raise ValueError(f"--tilt must keep the plane within 80 degrees of facing the "
+                                     f"cameras, got {args.tilt[0]:g} {args.tilt[1]:g} "
+                                     f"({combined:.1f} degrees in all)")
                 targets, normals = layouts.tilted_plane(args.z, args.tilt)
             elif args.layout == "cylinder":
                 targets, normals = layouts.cylinder(args.z, args.surface_radius, args.half_angle,
@@ -271,6 +279,30 @@ def _cmd_scene(args) -> int:
     print(f"wrote {args.out}: {targets.shape[0]} targets of radius {radius:g} mm, "
           f"{'port' if port else 'no port'}, {size[0]}x{size[1]} px")
     return 0
+
+
+#: Most targets a scene may hold (its XML grows by ~400 bytes per target).
+MAX_TARGETS = 100_000
+
+
+def _check_target_count(args) -> None:
+    """CLIError naming the options when a layout would hold more than :data:`MAX_TARGETS`."""
+    import math
+
+    if args.layout == "random":
+        count, names = args.n, "--n"
+    elif args.layout in ("cylinder", "sphere"):
+        arc = math.radians(min(args.half_angle, 90.0)) * args.surface_radius / args.spacing
+        if args.layout == "cylinder":
+            count = (2 * math.floor(arc) + 1) * (2 * math.floor(args.surface_radius / args.spacing) + 1)
+        else:  # rings of at most 2πR / spacing targets each
+            count = 1 + math.floor(arc) * 2 * math.pi * args.surface_radius / args.spacing
+        names = "--surface-radius / --spacing"
+    else:
+        return
+    if count > MAX_TARGETS:
+        raise CLIError(f"{names}: the {args.layout} layout would hold about {count:.3g} targets, "
+                       f"more than {MAX_TARGETS}")
 
 
 def _check_visible(left, right, port, targets, radius: float, layout: str) -> None:

@@ -268,6 +268,8 @@ def scene_xml(cameras, port: FlatPort | None, targets, target_radius: float, *,
         defaults += [("water_c", _num(water.c_per_m)), ("water_albedo", _num(water.albedo)),
                      ("water_g", _num(water.g))]
         max_depth = max(int(max_depth), WATER_MAX_DEPTH)
+    if port is not None:  # a path crosses every interface once: room for them and a few more
+        max_depth = max(int(max_depth), 2 * port.n_interfaces + 4)
     defaults.append(("target_radius", _num(target_radius)))
     if lighting == "lit":
         defaults += [("target_albedo", _num(LIT_TARGET_ALBEDO)),

@@ -226,6 +226,10 @@ SYNTH_CASES = [
     (None, SCENE + ["--z", "5000", "--target-radius", "4000"], "visible"),
     (None, SCENE + ["--layout", "cylinder", "--half-angle", "95"], "--half-angle"),
     (None, SCENE + ["--layout", "tilted", "--tilt", "0", "85"], "--tilt"),
+    (None, SCENE + ["--layout", "tilted", "--tilt", "79.9", "79.9"], "--tilt"),
+    (None, SCENE + ["--layout", "random", "--n", "100000000"], "--n"),
+    (None, SCENE + ["--layout", "sphere", "--surface-radius", "1e12"], "--surface-radius"),
+    (None, SCENE + ["--aperture-radius", "1", "--dist", "0.1", "0", "0", "0"], "--dist"),
 ]
 # Overwriting a file that `synth scene` did not write (the scene file of someone else).
 SYNTH_CASES[16] = (None, ["scene", "--out", "small_copy_foreign.xml"], "not a file this command wrote")

@@ -305,6 +305,40 @@ def test_cluster_run_equals_local_run_cell_by_cell(local_run, spec_file, dask_cl
         assert a == b
 
 
+def test_a_service_that_is_not_a_scheduler(spec_file, tmp_path, capsys):
+    """Something answers at the address, but not in Dask's protocol: one error line, exit 2,
+    no traceback (Dask reads the reply as an exabyte message length: a MemoryError)."""
+    import socket
+    import threading
+
+    server = socket.socket()
+    server.bind(("127.0.0.1", 0))
+    server.listen(4)
+    port = server.getsockname()[1]
+
+    def answer():
+        while True:
+            try:
+                connection, _ = server.accept()
+            except OSError:
+                return
+            try:
+                connection.sendall(b"HTTP/1.1 400 Bad Request\r\nContent-Length: 0\r\n\r\n" * 4)
+            except OSError:
+                pass
+
+    threading.Thread(target=answer, daemon=True).start()
+    out = tmp_path / "out"
+    try:
+        code = main(["sweep", str(spec_file), "--out", str(out), "--no-progress",
+                     "--scheduler", f"tcp://127.0.0.1:{port}", "--connect-timeout", "2"])
+    finally:
+        server.close()
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1 and err[0].startswith("error:"), err
+    assert "Dask" in err[0] and not out.exists()
+
+
 def test_unreachable_scheduler_fails_fast(spec_file, tmp_path, capsys):
     with socket.socket() as s:  # a port where nothing listens
         s.bind(("127.0.0.1", 0))
@@ -323,6 +357,7 @@ def test_unreachable_scheduler_fails_fast(spec_file, tmp_path, capsys):
     (["--scheduler", "not an address"], "tcp://HOST:PORT"),
     (["--scheduler", "tcp://127.0.0.1:1", "--workers", "2"], "--workers"),
     (["--workers", "0"], "--workers"),
+    (["--workers", "100000"], "per core"),
 ])
 def test_bad_options(spec_file, tmp_path, capsys, extra, fragment):
     out = tmp_path / "out"
