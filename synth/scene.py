@@ -503,7 +503,7 @@ def _declared_defaults(data: bytes, label: str):
 #: Scene parameters that must be numbers, with their bounds: (kind, lower bound, strict).
 _NUMERIC_PARAMS = {"spp": ("int", 1, False), "seed": ("int", 0, False),
                    "width": ("int", 1, False), "height": ("int", 1, False),
-                   "max_depth": ("int", 0, False), "n_water": ("float", 0.0, True),
+                   "max_depth": ("int", 0, False), "n_water": ("float", 1.0, False),
                    "target_radius": ("float", 0.0, True), "target_z": ("float", 0.0, True),
                    "water_c": ("float", 0.0, False), "water_albedo": ("float", 0.0, False),
                    "water_g": ("float", -1.0, True), "target_albedo": ("float", 0.0, False),
