@@ -16,6 +16,10 @@ import time
 from dataclasses import dataclass
 
 from eval.cli import CLIError, non_negative_float, non_negative_int, positive_float, positive_int
+from synth.cli import finite_float
+
+#: argparse type of --max-elongation and --max-area-ratio (a blob's axis or area ratio).
+_ABOVE_ONE = finite_float(1.0, strict=True, description="finite (> 1)")
 
 DEFAULT_METHODS = ("optical_path", "su", "regular")
 PLY_COLORMAP = "viridis"
@@ -74,7 +78,7 @@ def add_parser(subparsers):
                         help="detect with a fixed threshold F of the way from the background "
                              "(median) to the targets' level (99.99th percentile) instead of "
                              "median + 5 noise sigmas; for speckled renders of scattering water")
-    parser.add_argument("--max-elongation", type=_elongation, default=None, metavar="E",
+    parser.add_argument("--max-elongation", type=_ABOVE_ONE, default=None, metavar="E",
                         help="detected blobs more elongated than E (major/minor axis) are taken "
                              "for merged targets (default 1.6); raise it (e.g. 3) for targets "
                              "seen obliquely: tilted planes, cylinders, spheres")
@@ -82,7 +86,7 @@ def add_parser(subparsers):
                         help="median-filter each view (K×K, 3 or 5) before detection: removes "
                              "the fireflies of lights seen through scattering water (lit "
                              "targets) that pull the centroids; default: no filter")
-    parser.add_argument("--max-area-ratio", type=_elongation, default=None, metavar="A",
+    parser.add_argument("--max-area-ratio", type=_ABOVE_ONE, default=None, metavar="A",
                         help="detected blobs larger than A times the median blob are taken for "
                              "merged targets (default 2.5); raise it (e.g. 6) when the targets "
                              "span a wide range of depths (near ones image larger)")
@@ -115,17 +119,6 @@ def _parse_self_calibration(text: str) -> tuple:
         raise CLIError(f"--self-calibrate {text!r}: unknown parameter {', '.join(unknown)} "
                        f"(the refinement estimates {', '.join(PARAMETERS)})")
     return names
-
-
-def _elongation(text: str) -> float:
-    """argparse type: a finite number > 1 (a blob's major / minor axis, or an area ratio)."""
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
-    if not (math.isfinite(value) and value > 1):
-        raise argparse.ArgumentTypeError(f"must be a finite number > 1, got {text!r}")
-    return value
 
 
 def _fraction(text: str) -> float:

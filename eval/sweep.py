@@ -93,18 +93,14 @@ class SweepDir:
 
     def check(self) -> dict | None:
         """The rule (no writes): returns the earlier sweep's ``sweep.json`` or None."""
-        from synth.fileio import MARKER_NAME, read_marker
+        from synth.fileio import directory_problem, read_marker
 
         path = self.path
-        if os.path.lexists(path) and not os.path.isdir(path):
-            self._refuse("exists and is not a directory")
-        probe = path
-        while not os.path.exists(probe):
-            probe = os.path.dirname(probe)
-        if not os.path.isdir(probe):
-            self._refuse(f"cannot be created: {probe} is not a directory")
-        if not os.access(probe, os.W_OK | os.X_OK):
-            self._refuse(f"cannot be written: {probe} is not writable")
+        problem = directory_problem(path)
+        if problem:
+            self._refuse(problem)
+        if os.path.isdir(path) and not os.access(path, os.W_OK | os.X_OK):
+            self._refuse(f"cannot be written: {path} is not writable")  # updated in place
         if not os.path.isdir(path) or not os.listdir(path):
             return None
         marker = read_marker(path)

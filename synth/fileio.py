@@ -96,6 +96,22 @@ def _walk_files(directory: str) -> set[str]:
     return found
 
 
+def directory_problem(path) -> str | None:
+    """Why the output directory ``path`` cannot be created or written (``"exists and is not a
+    directory"``, ``"cannot be created: … is not a directory / is not writable"``), or None:
+    the nearest existing ancestor must be a writable directory."""
+    if os.path.lexists(path) and not os.path.isdir(path):
+        return "exists and is not a directory"
+    probe = os.path.dirname(path)
+    while not os.path.exists(probe):
+        probe = os.path.dirname(probe)
+    if not os.path.isdir(probe):
+        return f"cannot be created: {probe} is not a directory"
+    if not os.access(probe, os.W_OK | os.X_OK):
+        return f"cannot be created: {probe} is not writable"
+    return None
+
+
 class OutputDir:
     """The output directory of one command (``command`` e.g. ``"eval run"``). See module docs."""
 
@@ -112,16 +128,9 @@ class OutputDir:
     def check(self) -> None:
         """Raise :class:`OutputError` unless this command may write (or replace) the directory."""
         path = self.path
-        if os.path.lexists(path) and not os.path.isdir(path):
-            self._refuse("exists and is not a directory")
-        parent = os.path.dirname(path)
-        probe = parent
-        while not os.path.exists(probe):
-            probe = os.path.dirname(probe)
-        if not os.path.isdir(probe):
-            self._refuse(f"cannot be created: {probe} is not a directory")
-        if not os.access(probe, os.W_OK | os.X_OK):
-            self._refuse(f"cannot be created: {probe} is not writable")
+        problem = directory_problem(path)
+        if problem:
+            self._refuse(problem)
         if not os.path.isdir(path):
             return
         try:
@@ -136,6 +145,7 @@ class OutputDir:
         written = {os.path.normpath(f) for f in marker.get("files", [])} | {MARKER_NAME}
         if not _walk_files(path) <= written:
             self._refuse("exists and holds files this command did not write")
+        parent = os.path.dirname(path)
         if not os.access(parent, os.W_OK | os.X_OK):
             self._refuse(f"cannot be replaced: {parent} is not writable")
 
