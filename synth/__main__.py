@@ -50,11 +50,30 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("scene", help="write a Mitsuba scene of the rig, the port and targets")
     p.add_argument("--out", required=True, help="scene file to write (.xml)")
-    p.add_argument("--layout", choices=("paper", "grid", "random", "tilted", "cylinder", "sphere"),
+    p.add_argument("--layout", choices=("paper", "grid", "random", "tilted", "cylinder", "sphere",
+                                        "surface"),
                    default="paper",
                    help="paper: 496 targets on concentric circles; grid; random volume; tilted: "
                         "the paper's targets on a tilted plane; cylinder, sphere: targets on a "
-                        "convex surface facing the cameras")
+                        "convex surface facing the cameras; surface: a speckled surface (mesh) "
+                        "for dense matching, see --surface")
+    p.add_argument("--surface", choices=("plane", "tilted", "cylinder", "sphere", "wavy", "mesh"),
+                   default="plane",
+                   help="layout surface: plane facing the cameras at --z; tilted (--tilt); "
+                        "cylinder, sphere (--surface-radius, --half-angle); wavy "
+                        "(--wave-amplitude, --wavelength); mesh (--mesh FILE)")
+    p.add_argument("--mesh", help="layout surface, --surface mesh: a PLY or OBJ file, mm, in the "
+                                  "left camera's frame")
+    p.add_argument("--speckle-size", type=positive_float, default=2.5,
+                   help="layout surface: speckle dot diameter, mm (default 2.5)")
+    p.add_argument("--speckle-coverage", type=_coverage, default=0.5,
+                   help="layout surface: dark fraction of the speckle pattern (default 0.5)")
+    p.add_argument("--speckle-seed", type=non_negative_int, default=0,
+                   help="layout surface: seed of the speckle pattern (default 0)")
+    p.add_argument("--wave-amplitude", type=positive_float, default=20.0,
+                   help="--surface wavy: amplitude, mm (default 20)")
+    p.add_argument("--wavelength", type=positive_float, default=300.0,
+                   help="--surface wavy: wavelength, mm (default 300)")
     p.add_argument("--z", type=positive_float, default=1000.0,
                    help="target plane Z, mm (paper, grid; tilted: its centre; cylinder, "
                         "sphere: the nearest point of the surface)")
@@ -98,9 +117,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--water", choices=("clear", "clear_ocean", "coastal", "turbid_harbor"),
                    default="clear", help="water that absorbs and scatters (Petzold's "
                                          "measurements; default clear: no medium)")
-    p.add_argument("--lighting", choices=("led", "lit"), default="led",
-                   help="led: self-luminous targets (default); lit: white diffuse targets lit by "
-                        "two spot lights beside the housing (backscatter in scattering water)")
+    p.add_argument("--lighting", choices=("led", "lit"), default=None,
+                   help="led: self-luminous targets (default for targets); lit: white diffuse "
+                        "targets lit by two spot lights beside the housing (backscatter in "
+                        "scattering water; default for --layout surface, whose speckle is then "
+                        "the reflectance; led makes the speckle self-luminous)")
     p.add_argument("--aperture-radius", type=positive_float,
                    help="thin lens: aperture radius, mm (Mitsuba thinlens; default: pinhole)")
     p.add_argument("--focus-distance", type=positive_float,
@@ -164,6 +185,15 @@ def _is_our_scene(path: str) -> bool:
     return f"<!-- {SCENE_COMMENT_PREFIX}" in head
 
 
+def _coverage(text: str) -> float:
+    import argparse
+
+    value = positive_float(text)
+    if not value < 1:
+        raise argparse.ArgumentTypeError(f"expected a fraction in (0, 1), got {text!r}")
+    return value
+
+
 def _cmd_scene(args) -> int:
     import numpy as np
     from scipy.spatial.transform import Rotation
@@ -175,6 +205,8 @@ def _cmd_scene(args) -> int:
     from .scene import DEFAULT_SPP, DEFAULT_TARGET_RADIUS_MM, write_scene
 
     check_file_output(args.out, "--out", may_replace=_is_our_scene)
+    if args.lighting is None:
+        args.lighting = "lit" if args.layout == "surface" else "led"
     if args.layout == "random" and not args.z_range[0] < args.z_range[1]:
         raise CLIError(f"--z-range must be ZMIN < ZMAX, got {args.z_range[0]:g} {args.z_range[1]:g}")
     _check_target_count(args)
@@ -217,6 +249,8 @@ def _cmd_scene(args) -> int:
             thicknesses = (args.glass_thickness if args.glass_thickness is not None
                            else rigs.PAPER_GLASS_THICKNESS_MM,)
         port = FlatPort(normal, distance, thicknesses, tuple(n))
+    if args.layout == "surface":
+        return _surface_scene(args, left, right, port)
     normals = None
     if args.layout == "paper":
         targets = layouts.paper_plane(args.z)
@@ -278,6 +312,41 @@ def _cmd_scene(args) -> int:
         raise CLIError(str(exc)) from None
     print(f"wrote {args.out}: {targets.shape[0]} targets of radius {radius:g} mm, "
           f"{'port' if port else 'no port'}, {size[0]}x{size[1]} px")
+    return 0
+
+
+def _surface_scene(args, left, right, port) -> int:
+    """``--layout surface``: see :mod:`synth.surface_scene`."""
+    from .scene import DEFAULT_SPP
+    from .surface_scene import write_surface_scene
+    from .water import PRESETS as WATERS
+
+    if args.lighting == "lit" and port is None:
+        raise CLIError("--lighting lit needs a port (the lights are in the water); use "
+                       "--lighting led for a self-luminous surface in air")
+    if args.aperture_radius is not None:
+        raise CLIError("--layout surface is rendered with pinhole cameras: drop --aperture-radius")
+    water = WATERS.get(args.water)
+    if water is not None and port is None:
+        raise CLIError(f"--water {args.water} needs a port (--port paper): the water is behind it")
+    comment = (f"{SCENE_COMMENT_PREFIX}: layout surface {args.surface}, z {args.z:g} mm"
+               + (f", tilt {args.tilt[0]:g} {args.tilt[1]:g} deg" if args.surface == "tilted" else "")
+               + (f", surface radius {args.surface_radius:g} mm, half angle {args.half_angle:g} deg"
+                  if args.surface in ("cylinder", "sphere") else "")
+               + (f", amplitude {args.wave_amplitude:g} mm, wavelength {args.wavelength:g} mm"
+                  if args.surface == "wavy" else "")
+               + (f", mesh {os.path.basename(args.mesh)}" if args.surface == "mesh" and args.mesh
+                  else "")
+               + f", speckle {args.speckle_size:g} mm coverage {args.speckle_coverage:g} seed "
+                 f"{args.speckle_seed}, port {args.port}, "
+               + ("lit by two spot lights" if args.lighting == "lit" else "self-luminous")
+               + (f", water {args.water}" if water is not None else ""))
+    try:
+        print(write_surface_scene(args.out, args, left, right, port,
+                                  spp=args.spp if args.spp else DEFAULT_SPP, seed=args.seed,
+                                  comment=comment, water=water, lighting=args.lighting))
+    except ValueError as exc:
+        raise CLIError(str(exc)) from None
     return 0
 
 
@@ -416,6 +485,11 @@ def _cmd_boards(args) -> int:
 
 def _cmd_check(args) -> int:
     from .crosscheck import CHECK_MAX_PX, CHECK_RMS_PX, check_dataset
+    from .dataset import read_dataset
+
+    data = read_dataset(args.dir)
+    if data.is_surface:
+        return _check_surface(args, data)
 
     report = check_dataset(args.dir, rms_px=args.rms if args.rms is not None else CHECK_RMS_PX,
                            max_px=args.max if args.max is not None else CHECK_MAX_PX)
@@ -437,6 +511,28 @@ def _cmd_check(args) -> int:
               f"{report['max_px']:.4f} px (<= {b['max_px']}), all found: "
               f"{'yes' if report['all_found'] else 'no'} -> "
               f"{'PASS' if report['passed'] else 'FAIL'}")
+    return 0 if report["passed"] else 1
+
+
+def _check_surface(args, data) -> int:
+    """``check`` of a surface dataset: the truth maps (see synth.truth_maps.check_truth_maps)."""
+    from .truth_maps import check_truth_maps
+
+    report = check_truth_maps(data)
+    if args.json:
+        from .fileio import jsonable
+
+        print(json.dumps(jsonable(report), indent=2))
+        return 0 if report["passed"] else 1
+    for view in ("left", "right"):
+        r = report[view]
+        print(f"{view:5s}: {r['valid_pixels']} pixels see the surface, {r['overlap_pixels']} of "
+              f"them seen by the other camera too; truth points' Fermat projection to their "
+              f"pixel centres: max {r['round_trip_max_px']:.2e} px; renderer lit "
+              f"{r['lit_outside_surface']} pixels off the surface, left "
+              f"{r['black_on_surface']} on it black")
+    print(f"truth maps: max round trip <= {report['bound_px']:g} px -> "
+          f"{'PASS' if report['passed'] else 'FAIL'}")
     return 0 if report["passed"] else 1
 
 

@@ -12,6 +12,11 @@ A dataset directory holds (units mm, reference frame = the left camera's, OpenCV
   ``K2``, ``D2``, ``R``, ``T`` (OpenCV stereo convention ``X_right = R·X_left + T``), ``units``
   and a map ``port`` {``normal`` (3x1), ``distance``, ``thicknesses`` (sequence),
   ``indices`` (sequence), ``present`` (0 for an all-air scene, whose port is index-matched)};
+* surface scenes (``python -m synth scene --layout surface``) instead of targets:
+  ``surface.ply`` (the mesh) and per-view truth maps (:mod:`synth.truth_maps`):
+  ``{left,right}_truth_points.npy`` (H, W, 3) float64 mm, ``{left,right}_truth_depth.npy``
+  (H, W) float32 mm along the port normal, ``{left,right}_truth_valid.png`` and
+  ``{left,right}_truth_overlap.png`` (8-bit masks);
 * ``targets.ply`` -- ground-truth target centres in target order (Open3D, binary doubles);
 * ``pixels.csv`` -- ``id,x,y,z,u_left,v_left,u_right,v_right``: the Fermat simulator's pixel of
   every target in each view (NaN where it has none; pixels outside the image are kept);
@@ -295,16 +300,26 @@ def write_dataset(scene, out_dir, spp: int | None = None, defines: dict | None =
                 write_exr(os.path.join(tmp, f"{name}.exr"), img, info["variant"])
         times["write_images"] = time.perf_counter() - t
 
-        t = time.perf_counter()
-        uv_left = project(spec.rig.left, spec.rig.port, spec.targets)
-        uv_right = project(spec.rig.right, spec.rig.port, spec.targets)
-        times["project"] = time.perf_counter() - t
+        truth_counts = None
+        if spec.surface is not None:
+            from .truth_maps import write_truth_maps
+
+            t = time.perf_counter()
+            truth_counts = write_truth_maps(tmp, spec.rig, spec.surface.mesh_path,
+                                            spec.surface.vertices, spec.surface.triangles)
+            times["truth_maps"] = time.perf_counter() - t
+        else:
+            t = time.perf_counter()
+            uv_left = project(spec.rig.left, spec.rig.port, spec.targets)
+            uv_right = project(spec.rig.right, spec.rig.port, spec.targets)
+            times["project"] = time.perf_counter() - t
 
         t = time.perf_counter()
         write_calib(os.path.join(tmp, "calib.yaml"), spec.rig, spec.has_port)
-        write_targets_ply(os.path.join(tmp, "targets.ply"), spec.targets)
-        write_pixels_csv(os.path.join(tmp, "pixels.csv"), spec.target_ids, spec.targets,
-                         uv_left, uv_right)
+        if spec.surface is None:
+            write_targets_ply(os.path.join(tmp, "targets.ply"), spec.targets)
+            write_pixels_csv(os.path.join(tmp, "pixels.csv"), spec.target_ids, spec.targets,
+                             uv_left, uv_right)
         times["write_files"] = time.perf_counter() - t
         times["total"] = time.perf_counter() - t_start
 
@@ -315,7 +330,12 @@ def write_dataset(scene, out_dir, spp: int | None = None, defines: dict | None =
             "versions": package_versions(),
             "scene": {"path": spec.path, "sha256": spec.sha256, "params": spec.params,
                       "has_port": spec.has_port, "n_targets": int(spec.targets.shape[0]),
-                      "target_radius_mm": spec.target_radius},
+                      "target_radius_mm": spec.target_radius,
+                      "surface": (None if spec.surface is None else
+                                  {"mesh": os.path.basename(spec.surface.mesh_path),
+                                   "texture": os.path.basename(spec.surface.texture_path),
+                                   "triangles": int(spec.surface.triangles.shape[0]),
+                                   "truth_pixels": truth_counts})},
             "variant": info["variant"], "variant_requested": variant,
             "integrator": info["integrator"],
             "spp": spp, "spp_rendered": info["spp_rendered"], "seed": seed,
@@ -359,6 +379,11 @@ class Dataset:
     pixels_left: np.ndarray
     pixels_right: np.ndarray
     manifest: dict
+
+    @property
+    def is_surface(self) -> bool:
+        """A surface (dense) dataset: truth maps and ``surface.ply`` instead of targets."""
+        return bool(self.manifest["scene"].get("surface"))
 
 
 def _read_png16(path) -> np.ndarray:
@@ -413,6 +438,12 @@ def read_dataset(path) -> Dataset:
         if image.shape[::-1] != tuple(calib["size"]):
             raise DatasetError(f"{path}/{name}: {image.shape[1]}x{image.shape[0]} px, but "
                                f"calib.yaml says {calib['size'][0]}x{calib['size'][1]}")
+    if manifest["scene"].get("surface"):
+        empty = np.zeros((0, 2))
+        return Dataset(path=path, left=left, right=right, rig=calib["rig"],
+                       has_port=calib["has_port"], targets=np.zeros((0, 3)),
+                       ids=np.zeros(0, dtype=int), pixels_left=empty, pixels_right=empty,
+                       manifest=manifest)
     try:
         pixels = read_pixels_csv(os.path.join(path, "pixels.csv"))
     except (OSError, ValueError) as exc:

@@ -75,6 +75,31 @@ LIGHT_BEAM_WIDTH_DEG, LIGHT_CUTOFF_DEG = 45.0, 60.0
 LIGHT_SIDE_OFFSET_MM, LIGHT_DEPTH_BEYOND_PORT_MM = 400.0, 20.0
 #: Prefix of the target shapes' ids.
 TARGET_ID_PREFIX = "target_"
+#: Id of the surface mesh shape of a dense (surface) scene, and of its speckle texture.
+SURFACE_ID, SPECKLE_ID = "surface", "speckle"
+
+
+@dataclass(frozen=True)
+class SurfaceFiles:
+    """The files of a surface scene, as the XML names them (relative to the scene file's
+    directory): ``mesh`` a PLY of :func:`synth.surfaces.write_ply`, ``texture`` an 8-bit grey
+    speckle PNG (linear reflectance, or radiance when self-luminous)."""
+
+    mesh: str
+    texture: str
+
+
+@dataclass(frozen=True)
+class SceneSurface:
+    """The surface of a scene read back: ``mesh_path`` and ``texture_path`` (resolved),
+    ``vertices`` ``(V, 3)`` mm (float32 values widened: what the renderer sees), ``triangles``
+    ``(T, 3)``, ``sha256`` of the mesh and texture bytes together."""
+
+    mesh_path: str
+    texture_path: str
+    vertices: np.ndarray
+    triangles: np.ndarray
+    sha256: str
 
 
 class SceneError(ValueError):
@@ -105,6 +130,7 @@ class SceneSpec:
     sha256: str
     referenced: frozenset = frozenset()
     target_normals: np.ndarray | None = None
+    surface: SceneSurface | None = None
 
     @property
     def mitsuba_params(self) -> dict:
@@ -208,7 +234,7 @@ def scene_xml(cameras, port: FlatPort | None, targets, target_radius: float, *,
               spp: int = DEFAULT_SPP, seed: int = DEFAULT_SEED, max_depth: int = DEFAULT_MAX_DEPTH,
               interface_half_size: float = INTERFACE_HALF_SIZE_MM, comment: str = "",
               water=None, target_normals=None, lighting: str = "led",
-              thin_lens=None) -> str:
+              thin_lens=None, surface: SurfaceFiles | None = None) -> str:
     """The text of a Mitsuba 3 scene of two cameras, a flat port (or none) and disk targets.
 
     ``cameras`` (left, right) :class:`measure.Camera` (same image size; square pixels);
@@ -226,6 +252,11 @@ def scene_xml(cameras, port: FlatPort | None, targets, target_radius: float, *,
     ``thin_lens`` ``(aperture_radius_mm, focus_distance_mm)``: Mitsuba ``thinlens`` sensors in
     place of the pinholes (defaults ``aperture_radius``, ``focus_distance``); needs the
     principal point at the image centre (Mitsuba's thin lens has no offset).
+    ``surface`` (:class:`SurfaceFiles`): a dense scene — one textured mesh instead of disks;
+    ``targets`` are then the mesh's vertices (for the checks and the lights' aim) and
+    ``target_radius`` is ignored; ``lighting`` ``"lit"`` makes the speckle texture the
+    reflectance of a diffuse surface lit by the spot lights, ``"led"`` its radiance
+    (self-luminous).
     """
     left, right = cameras
     if left.size != right.size:
@@ -234,7 +265,9 @@ def scene_xml(cameras, port: FlatPort | None, targets, target_radius: float, *,
     targets = np.asarray(targets, dtype=np.float64).reshape(-1, 3)
     if not np.all(np.isfinite(targets)) or targets.shape[0] == 0:
         raise ValueError("targets must be a non-empty finite (N, 3) array")
-    if not (target_radius > 0 and np.isfinite(target_radius)):
+    if surface is not None:
+        target_radius = 0.0
+    elif not (target_radius > 0 and np.isfinite(target_radius)):
         raise ValueError(f"target_radius must be positive, got {target_radius}")
     if lighting not in LIGHTINGS:
         raise ValueError(f"lighting must be one of {', '.join(LIGHTINGS)}, got {lighting!r}")
@@ -252,10 +285,10 @@ def scene_xml(cameras, port: FlatPort | None, targets, target_radius: float, *,
             raise ValueError("every target must lie in the water, beyond the port's last interface")
         if np.any(targets @ port.normal - port.offsets[-1] <= target_radius):
             raise ValueError("targets closer to the port than their radius")
-        if np.any(target_normals @ port.normal >= 0):
+        if surface is None and np.any(target_normals @ port.normal >= 0):
             raise ValueError("every target must face the cameras (its normal towards the port)")
     w, h = left.size
-    plane = bool(np.all(targets[:, 2] == targets[0, 2]))
+    plane = surface is None and bool(np.all(targets[:, 2] == targets[0, 2]))
     defaults = [("spp", str(int(spp))), ("seed", str(int(seed))), ("width", str(w)),
                 ("height", str(h))]
     if port is not None:
@@ -270,7 +303,8 @@ def scene_xml(cameras, port: FlatPort | None, targets, target_radius: float, *,
         max_depth = max(int(max_depth), WATER_MAX_DEPTH)
     if port is not None:  # a path crosses every interface once: room for them and a few more
         max_depth = max(int(max_depth), 2 * port.n_interfaces + 4)
-    defaults.append(("target_radius", _num(target_radius)))
+    if surface is None:
+        defaults.append(("target_radius", _num(target_radius)))
     if lighting == "lit":
         defaults += [("target_albedo", _num(LIT_TARGET_ALBEDO)),
                      ("light_intensity", _num(LIGHT_INTENSITY))]
@@ -343,6 +377,10 @@ def scene_xml(cameras, port: FlatPort | None, targets, target_radius: float, *,
         </bsdf>{medium}
     </shape>""")
 
+    if surface is not None:
+        parts.append(_surface_xml(surface, lighting))
+        parts.append("</scene>\n")
+        return "\n".join(parts)
     if lighting == "led":
         parts.append(f"""
     <bsdf type="diffuse" id="target_back">
@@ -374,6 +412,34 @@ def scene_xml(cameras, port: FlatPort | None, targets, target_radius: float, *,
     </shape>""")
     parts.append("</scene>\n")
     return "\n".join(parts)
+
+
+def _surface_xml(surface: SurfaceFiles, lighting: str) -> str:
+    """The speckle texture and the mesh of a surface scene (see :func:`scene_xml`)."""
+    if lighting == "lit":
+        look = f"""<bsdf type="diffuse">
+            <ref name="reflectance" id="{SPECKLE_ID}"/>
+        </bsdf>"""
+    else:
+        look = f"""<bsdf type="diffuse">
+            <rgb name="reflectance" value="0"/>
+        </bsdf>
+        <emitter type="area">
+            <ref name="radiance" id="{SPECKLE_ID}"/>
+        </emitter>"""
+    return f"""
+    <!-- The speckle pattern (8-bit grey, linear: {'reflectance' if lighting == 'lit' else 'radiance'} = value / 255). -->
+    <texture type="bitmap" id="{SPECKLE_ID}">
+        <string name="filename" value="{surface.texture}"/>
+        <boolean name="raw" value="true"/>
+        <string name="filter_type" value="bilinear"/>
+    </texture>
+
+    <!-- The surface: a triangle mesh in the reference frame (mm), texture coordinates per vertex. -->
+    <shape type="ply" id="{SURFACE_ID}">
+        <string name="filename" value="{surface.mesh}"/>
+        {look}
+    </shape>"""
 
 
 def light_placements(left: Camera, right: Camera, port: FlatPort, targets):
@@ -646,9 +712,9 @@ def _orthonormalize(R: np.ndarray) -> np.ndarray:
 def _read_shapes(nodes: _Nodes, label: str):
     """``(interfaces, targets)`` of the parsed scene: interfaces ``(id, normal towards the
     cameras' side reversed, centre, ext_ior, int_ior)``; targets ``(number, centre, radius,
-    normal)``."""
+    normal)``; surfaces ``(id, mesh filename as written, texture filename or None)``."""
     ObjectType = nodes.mi.ObjectType
-    interfaces, targets = [], []
+    interfaces, targets, surfaces = [], [], []
     for node in nodes.state.nodes:
         if node.type != ObjectType.Shape:
             continue
@@ -656,6 +722,17 @@ def _read_shapes(nodes: _Nodes, label: str):
         kind = node.props.plugin_name()
         what = f"{label}: shape {sid!r}"
         M = nodes.matrix(node)
+        if sid == SURFACE_ID or kind in ("ply", "obj"):
+            if kind != "ply" or sid != SURFACE_ID:
+                raise SceneError(f"{what}: a surface must be the ply shape with id "
+                                 f"'{SURFACE_ID}' (written by python -m synth scene --layout "
+                                 f"surface), got a {kind!r} shape")
+            if not np.allclose(M, np.eye(4)):
+                raise SceneError(f"{what}: the surface mesh must have no to_world transform "
+                                 f"(its vertices are in the reference frame)")
+            surfaces.append((sid, str(nodes.value(node, "filename", "", what)),
+                             _texture_filename(nodes, what)))
+            continue
         if nodes.child(node, ObjectType.Emitter) is not None or sid.startswith(TARGET_ID_PREFIX):
             if kind != "disk":
                 raise SceneError(f"{what}: targets must be disks, got {kind!r}")
@@ -683,7 +760,44 @@ def _read_shapes(nodes: _Nodes, label: str):
             iors.append(float(value))
         normal = M[:3, 2] / np.linalg.norm(M[:3, 2])
         interfaces.append((sid, -normal, M[:3, 3].copy(), iors[0], iors[1]))
-    return interfaces, targets
+    return interfaces, targets, surfaces
+
+
+def _texture_filename(nodes: _Nodes, what: str) -> str | None:
+    """The filename of the speckle bitmap of the scene (None if there is none)."""
+    for node in nodes.state.nodes:
+        if node.type == nodes.mi.ObjectType.Texture and node.props.id() == SPECKLE_ID:
+            return str(nodes.value(node, "filename", "", what))
+    return None
+
+
+def _read_surface(surfaces, scene_path: str, label: str) -> SceneSurface:
+    """The scene's one surface, its files resolved next to the scene file and the mesh read."""
+    from .surfaces import read_ply
+
+    if len(surfaces) != 1:
+        raise SceneError(f"{label}: a surface scene holds exactly one surface, found "
+                         f"{len(surfaces)}")
+    _, mesh_name, texture_name = surfaces[0]
+    base = os.path.dirname(os.path.abspath(scene_path))
+    paths = []
+    for kind, name in (("mesh", mesh_name), ("speckle texture", texture_name)):
+        if not name:
+            raise SceneError(f"{label}: the surface has no {kind} file")
+        full = name if os.path.isabs(name) else os.path.join(base, name)
+        if not os.path.isfile(full):
+            raise SceneError(f"{label}: the surface's {kind} {name!r} does not exist "
+                             f"(looked for {os.path.relpath(full)})")
+        paths.append(full)
+    try:
+        vertices, triangles = read_ply(paths[0])
+    except (OSError, ValueError) as exc:
+        raise SceneError(f"{label}: surface mesh: {exc}") from None
+    digest = hashlib.sha256()
+    for full in paths:
+        with open(full, "rb") as handle:
+            digest.update(handle.read())
+    return SceneSurface(paths[0], paths[1], vertices, triangles, digest.hexdigest())
 
 
 def load_scene(path, defines: dict | None = None) -> SceneSpec:
@@ -722,17 +836,20 @@ def load_scene(path, defines: dict | None = None) -> SceneSpec:
     right = _read_sensor(nodes, sensors[1], params, label)
     if left.size != right.size:
         raise SceneError(f"{label}: the two sensors have different film sizes")
-    interfaces, targets = _read_shapes(nodes, label)
+    interfaces, targets, surfaces = _read_shapes(nodes, label)
+    surface = _read_surface(surfaces, path, label) if surfaces else None
+    if surface is not None and targets:
+        raise SceneError(f"{label}: a scene holds targets or a surface, not both")
 
-    if not targets:
+    if not targets and surface is None:
         raise SceneError(f"{label}: no targets (disk shapes with an area emitter, "
                          f"or with ids '{TARGET_ID_PREFIX}<number>')")
     targets.sort(key=lambda item: item[0])
-    ids = np.array([t[0] for t in targets])
+    ids = np.array([t[0] for t in targets], dtype=int)
     if np.unique(ids).size != ids.size:
         raise SceneError(f"{label}: duplicate target ids")
-    centres = np.array([t[1] for t in targets])
-    radii = np.array([t[2] for t in targets])
+    centres = np.array([t[1] for t in targets]).reshape(-1, 3)
+    radii = np.array([t[2] for t in targets], dtype=float)
 
     has_port = bool(interfaces)
     if not interfaces:
@@ -748,17 +865,21 @@ def load_scene(path, defines: dict | None = None) -> SceneSpec:
         rig = StereoRig(left, right, port)
     except ValueError as exc:
         raise SceneError(f"{label}: {exc}") from None
+    if surface is not None and has_port and not np.all(port.water_side(surface.vertices)):
+        raise SceneError(f"{label}: the surface mesh reaches out of the water (through the port)")
     if has_port and not np.all(port.water_side(centres)):
         bad = ids[~port.water_side(centres)]
         raise SceneError(f"{label}: targets {bad[:5].tolist()} are not in the water")
-    facing = np.einsum("ij,j->i", np.array([t[3] for t in targets]), port.normal)
+    normals = np.array([t[3] for t in targets]).reshape(-1, 3)
+    facing = normals @ port.normal
     if np.any(facing >= 0):
         bad = ids[facing >= 0]
         raise SceneError(f"{label}: targets {bad[:5].tolist()} do not face the cameras")
     return SceneSpec(rig=rig, has_port=has_port, targets=centres, target_ids=ids,
                      target_radii=radii, params=params, path=path,
-                     sha256=hashlib.sha256(data).hexdigest(), referenced=referenced,
-                     target_normals=np.array([t[3] for t in targets]))
+                     sha256=(hashlib.sha256(data).hexdigest() if surface is None else
+                             hashlib.sha256(data + surface.sha256.encode()).hexdigest()),
+                     referenced=referenced, target_normals=normals, surface=surface)
 
 
 def _port_from_interfaces(interfaces, label) -> FlatPort:

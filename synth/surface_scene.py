@@ -1,0 +1,184 @@
+"""``python -m synth scene --layout surface``: a speckled surface behind the port, as three
+files — the scene XML, its mesh (``<scene stem>_surface.ply``) and its speckle texture
+(``speckle_<dot>mm_<coverage>_<seed>_<W>x<H>mm.png``, named by what determines its bytes, so
+scenes with the same pattern share one file) — in the scene file's directory.
+
+Texture space: the surface's texture coordinates (mm of surface, :mod:`synth.surfaces`)
+centred on the texture, which covers at least :data:`MIN_TEXTURE_EXTENT_MM` (rounded up to
+200 mm steps), so all the default surfaces at 1 m share one texture.
+"""
+
+from __future__ import annotations
+
+import os
+
+import cv2
+import numpy as np
+
+from . import speckle, surfaces
+from .scene import SurfaceFiles, write_scene
+
+#: Smallest extent of a speckle texture, mm (width, height).
+MIN_TEXTURE_EXTENT_MM = (2000.0, 1600.0)
+#: Surfaces are written only when at least this many pixels of a coarse grid (every
+#: :data:`CHECK_STEP_PX`) of the left image see them and the right camera sees them there too.
+CHECK_STEP_PX, MIN_OVERLAP_SAMPLES = 8, 20
+#: Finest speckle that renders without aliasing: a dot at least this many pixels wide at the
+#: surface's nearest depth (the warning threshold).
+MIN_DOT_PX = 1.0
+
+
+def build_mesh(args, port_normal) -> surfaces.SurfaceMesh:
+    """The mesh that the ``--surface`` options describe (ValueError, one line, on bad input)."""
+    kind = args.surface
+    if kind == "plane":
+        return surfaces.plane(args.z)
+    if kind == "tilted":
+        return surfaces.plane(args.z, tilt_deg=tuple(args.tilt))
+    if kind == "cylinder":
+        return surfaces.cylinder(args.z, args.surface_radius, args.half_angle)
+    if kind == "sphere":
+        return surfaces.sphere_cap(args.z, args.surface_radius, args.half_angle)
+    if kind == "wavy":
+        return surfaces.wavy(args.z, args.wave_amplitude, args.wavelength)
+    if not args.mesh:
+        raise ValueError("--surface mesh needs --mesh FILE (PLY or OBJ, mm, reference frame)")
+    vertices, triangles = read_user_mesh(args.mesh)
+    return surfaces.from_arrays(vertices, triangles, port_normal,
+                                f"user mesh {os.path.basename(args.mesh)}")
+
+
+def read_user_mesh(path) -> tuple[np.ndarray, np.ndarray]:
+    """Vertices ``(V, 3)`` and triangles ``(T, 3)`` of a PLY or OBJ file, read by Mitsuba's
+    own loaders (what the renderer would read). ValueError naming the file otherwise."""
+    from .mitsuba_setup import import_mitsuba
+
+    path = os.fspath(path)
+    extension = os.path.splitext(path)[1].lower()
+    if extension not in (".ply", ".obj"):
+        raise ValueError(f"--mesh {path}: expected a .ply or .obj file")
+    if not os.path.isfile(path):
+        raise ValueError(f"--mesh {path}: no such file")
+    if os.path.getsize(path) == 0:
+        raise ValueError(f"--mesh {path}: the file is empty")
+    mi, _ = import_mitsuba()
+    try:
+        mesh = mi.load_dict({"type": extension[1:], "filename": os.path.abspath(path)})
+    except Exception as exc:  # Mitsuba raises RuntimeError with a multi-line message
+        first = str(exc).strip().splitlines()[-1] if str(exc).strip() else type(exc).__name__
+        raise ValueError(f"--mesh {path}: Mitsuba cannot read it ({first.strip()})") from None
+    vertices = np.array(mesh.vertex_positions_buffer(), dtype=np.float64).reshape(-1, 3)
+    triangles = np.array(mesh.faces_buffer(), dtype=np.int64).reshape(-1, 3)
+    if triangles.shape[0] == 0:
+        raise ValueError(f"--mesh {path}: the mesh has no triangles")
+    return vertices, triangles
+
+
+def texture_extent(mesh: surfaces.SurfaceMesh) -> np.ndarray:
+    """The speckle texture's extent (width, height), mm, for ``mesh`` (see the module)."""
+    lower, upper = mesh.uv_extent
+    needed = np.maximum(upper - lower, MIN_TEXTURE_EXTENT_MM)
+    return np.ceil(needed / 200.0) * 200.0
+
+
+def texture_name(dot_mm: float, coverage: float, seed: int, extent) -> str:
+    return (f"speckle_{dot_mm:g}mm_{coverage:g}_{seed}_{extent[0]:.0f}x{extent[1]:.0f}mm.png")
+
+
+def companion_paths(scene_path: str) -> str:
+    """The mesh file written beside ``scene_path``."""
+    stem, _ = os.path.splitext(scene_path)
+    return stem + "_surface.ply"
+
+
+def write_texture(path: str, dot_mm: float, coverage: float, seed: int, extent) -> bool:
+    """Write the speckle texture unless ``path`` already holds it (same name = same bytes);
+    returns whether it was written."""
+    from .fileio import atomic_write_bytes
+
+    if os.path.isfile(path):
+        existing = cv2.imread(path, cv2.IMREAD_UNCHANGED)
+        rows, cols, _ = speckle.texture_shape(extent, dot_mm)
+        if existing is not None and existing.shape == (rows, cols):
+            return False
+    image = speckle.speckle_texture(extent, dot_mm, coverage, seed)
+    ok, data = cv2.imencode(".png", image, [cv2.IMWRITE_PNG_COMPRESSION, 9])
+    if not ok:
+        raise OSError(f"cannot encode the speckle texture {path}")
+    atomic_write_bytes(path, data.tobytes())
+    return True
+
+
+def overlap_samples(mesh_path: str, mesh, left, right, port) -> int:
+    """How many pixels of a coarse grid of the left image see the surface where the right
+    camera sees it too."""
+    from .truth_maps import MeshTracer, hits_of_pixels, seen_by
+
+    tracer = MeshTracer(mesh_path, mesh.vertices.astype(np.float32).astype(np.float64),
+                        mesh.triangles)
+    w, h = left.size
+    uu, vv = np.meshgrid(np.arange(0, w, CHECK_STEP_PX, dtype=float),
+                         np.arange(0, h, CHECK_STEP_PX, dtype=float))
+    points = hits_of_pixels(tracer, left, port, np.column_stack([uu.ravel(), vv.ravel()]))
+    return int(seen_by(tracer, right, port, points).sum())
+
+
+def dot_pixels(mesh, left, port, dot_mm: float) -> float:
+    """About how many pixels a speckle dot spans where the surface is nearest (px)."""
+    from measure.projection import project
+
+    nearest = mesh.vertices[np.argmin(mesh.vertices @ port.normal)]
+    pair = np.array([nearest, nearest + [dot_mm, 0.0, 0.0]])
+    uv = project(left, port, pair)
+    return float(np.linalg.norm(uv[1] - uv[0]))
+
+
+def write_surface_scene(out: str, args, left, right, port, **scene_options) -> str:
+    """Write the scene ``out``, its mesh and (unless present) its texture; returns the summary
+    line. ``port`` None: an all-air scene. Nothing is left behind on failure."""
+    import sys
+    import tempfile
+
+    from measure import StereoRig
+
+    geometry_port = StereoRig(left, right, port).port
+    mesh = build_mesh(args, geometry_port.normal)
+    if port is not None and not np.all(port.water_side(mesh.vertices)):
+        raise ValueError("the surface reaches out of the water: every vertex must lie beyond the "
+                         "port's last interface (move it with --z)")
+    extent = texture_extent(mesh)
+    speckle.texture_shape(extent, args.speckle_size)  # refuses an oversized texture early
+    lower = (mesh.uv_extent[0] + mesh.uv_extent[1]) / 2 - extent / 2
+    directory = os.path.dirname(os.path.abspath(out))
+    mesh_path = companion_paths(out)
+    texture_file = texture_name(args.speckle_size, args.speckle_coverage, args.speckle_seed, extent)
+    fd, tmp_mesh = tempfile.mkstemp(prefix=".surface-", suffix=".ply", dir=directory)
+    os.close(fd)
+    written = []
+    try:
+        surfaces.write_ply(tmp_mesh, mesh, lower, lower + extent)
+        if overlap_samples(tmp_mesh, mesh, left, right, geometry_port) < MIN_OVERLAP_SAMPLES:
+            raise ValueError(f"--surface {args.surface}: the surface is not seen by both cameras "
+                             f"(fewer than {MIN_OVERLAP_SAMPLES} samples of the left image every "
+                             f"{CHECK_STEP_PX} px; move it with --z or make it larger)")
+        dot_px = dot_pixels(mesh, left, geometry_port, args.speckle_size)
+        if dot_px < MIN_DOT_PX:
+            print(f"warning: --speckle-size {args.speckle_size:g} mm is {dot_px:.2f} px at the "
+                  f"surface's nearest point: below one pixel the speckle aliases", file=sys.stderr)
+        texture_path = os.path.join(directory, texture_file)
+        if write_texture(texture_path, args.speckle_size, args.speckle_coverage,
+                         args.speckle_seed, extent):
+            written.append(texture_path)
+        os.replace(tmp_mesh, mesh_path)
+        written.append(mesh_path)
+        files = SurfaceFiles(mesh=os.path.basename(mesh_path), texture=texture_file)
+        write_scene(out, (left, right), port, mesh.vertices, 1.0, surface=files, **scene_options)
+    except BaseException:
+        for path in [tmp_mesh, *written]:
+            if os.path.exists(path):
+                os.unlink(path)
+        raise
+    return (f"wrote {out}: {mesh.description}, {mesh.triangles.shape[0]} triangles "
+            f"({os.path.basename(mesh_path)}), speckle {args.speckle_size:g} mm dots "
+            f"(~{dot_px:.1f} px) at {args.speckle_coverage:g} coverage ({texture_file}), "
+            f"{'port' if port else 'no port'}, {left.size[0]}x{left.size[1]} px")
