@@ -128,16 +128,18 @@ def mesh_is_planar(vertices, tolerance_mm: float = PLANAR_TOLERANCE_MM) -> bool:
     return bool(np.abs(fit_plane(vertices)[2]).max() < tolerance_mm)
 
 
-def _stats(values: np.ndarray, prefix: str) -> dict:
-    """``{prefix}_count/_rms_mm/_mean_mm/_median_mm/_p95_mm/_max_mm`` of non-negative values."""
-    if values.size == 0:
-        nan = float("nan")
-        return {f"{prefix}_count": 0, **{f"{prefix}_{k}_mm": nan
-                                          for k in ("rms", "mean", "median", "p95", "max")}}
-    return {f"{prefix}_count": int(values.size),
-            f"{prefix}_rms_mm": float(np.sqrt(np.mean(values ** 2))),
-            f"{prefix}_mean_mm": float(values.mean()), f"{prefix}_median_mm": float(np.median(values)),
-            f"{prefix}_p95_mm": float(np.percentile(values, 95)), f"{prefix}_max_mm": float(values.max())}
+_REDUCERS = {"rms": lambda v: np.sqrt(np.mean(v ** 2)), "mean": np.mean, "std": np.std,
+             "median": np.median, "p95": lambda v: np.percentile(v, 95), "max": np.max,
+             "max_abs": lambda v: np.max(np.abs(v))}
+
+
+def _stats(values: np.ndarray, prefix: str, names, count: bool = True) -> dict:
+    """``{prefix}_count`` (if ``count``) and ``{prefix}_{name}_mm`` for each of ``names`` (keys
+    of :data:`_REDUCERS`; NaN when ``values`` is empty)."""
+    out = {f"{prefix}_count": int(values.size)} if count else {}
+    for name in names:
+        out[f"{prefix}_{name}_mm"] = float(_REDUCERS[name](values)) if values.size else float("nan")
+    return out
 
 
 def surface_arrays(case: SurfaceCase) -> dict:
@@ -187,7 +189,8 @@ def score_surface(case: SurfaceCase, thresholds=THRESHOLDS_MM, plane: bool | Non
     * ``planar``; for planes only (``plane=True``, or ``None`` and :func:`mesh_is_planar`):
       ``flatness_rms_mm`` and ``flatness_pv_mm`` (max − min) of the residuals of the measured
       points to their least-squares plane (every point counts, outliers too), and
-      ``normal_angle_deg`` between that plane's normal and the mesh's ([0°, 90°]).
+      ``normal_angle_deg`` between that plane's normal and the mesh's ([0°, 90°]; for a forced
+      ``plane=True`` on a curved mesh, the normal of its vertices' least-squares plane).
 
     ``arrays``: the output of :func:`surface_arrays` for this case, to avoid computing it twice.
     """
@@ -200,10 +203,9 @@ def score_surface(case: SurfaceCase, thresholds=THRESHOLDS_MM, plane: bool | Non
            "measured_fraction": float((measured_mask & overlap).sum() / overlap.sum())
            if overlap.any() else nan,
            "measured_outside_overlap": int((measured_mask & ~overlap).sum())}
-    out.update(_stats(distance, "p2m"))
-    out.update({"p2m_signed_mean_mm": float(signed.mean()) if signed.size else nan,
-                "p2m_signed_std_mm": float(signed.std()) if signed.size else nan,
-                "distance_resolution_mm": arrays["resolution_mm"], "truth_count": int(t_to_m.size)})
+    out.update(_stats(distance, "p2m", ("rms", "mean", "median", "p95", "max")))
+    out.update(_stats(signed, "p2m_signed", ("mean", "std"), count=False))
+    out.update({"distance_resolution_mm": arrays["resolution_mm"], "truth_count": int(t_to_m.size)})
     for tau in thresholds:
         precision = float(np.mean(distance < tau)) if distance.size else nan
         recall = float(np.mean(t_to_m < tau)) if t_to_m.size else nan
@@ -215,18 +217,12 @@ def score_surface(case: SurfaceCase, thresholds=THRESHOLDS_MM, plane: bool | Non
     t_to_m_mean = float(t_to_m.mean()) if t_to_m.size else nan
     out.update({"mean_measured_to_mesh_mm": m_to_mesh, "mean_truth_to_measured_mm": t_to_m_mean,
                 "chamfer_mm": 0.5 * (m_to_mesh + t_to_m_mean)})
-    depth, error_3d = arrays["depth_error"], arrays["error_3d"]
-    both = np.isfinite(depth)
-    depth, error_3d = depth[both], error_3d[both]
-    lateral = np.sqrt(np.maximum(error_3d ** 2 - depth ** 2, 0.0))
-    rms = (lambda v: float(np.sqrt(np.mean(v ** 2))) if v.size else nan)
-    out.update({"depth_count": int(depth.size), "depth_rms_mm": rms(depth),
-                "depth_mean_mm": float(depth.mean()) if depth.size else nan,
-                "depth_max_abs_mm": float(np.abs(depth).max()) if depth.size else nan,
-                "error3d_rms_mm": rms(error_3d),
-                "error3d_mean_mm": float(error_3d.mean()) if depth.size else nan,
-                "error3d_max_mm": float(error_3d.max()) if depth.size else nan,
-                "lateral_rms_mm": rms(lateral)})
+    both = np.isfinite(arrays["depth_error"])
+    depth, error_3d = arrays["depth_error"][both], arrays["error_3d"][both]
+    out.update(_stats(depth, "depth", ("rms", "mean", "max_abs")))
+    out.update(_stats(error_3d, "error3d", ("rms", "mean", "max"), count=False))
+    out.update(_stats(np.sqrt(np.maximum(error_3d ** 2 - depth ** 2, 0.0)), "lateral", ("rms",),
+                      count=False))
     planar = mesh_is_planar(case.mesh_vertices) if plane is None else bool(plane)
     out["planar"] = planar
     if planar:
