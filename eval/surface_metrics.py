@@ -1,0 +1,272 @@
+"""Scoring of a dense surface reconstruction against the true mesh (pure functions of arrays).
+
+Units mm; reference frame = the left camera's (x right, y down, z forward into the water; the
+camera centre is the origin); images ``(H, W)``, pixel ``(u, v)`` = (column, row); NaN = no value.
+
+Inputs (:class:`SurfaceCase`): the true surface as a triangle mesh, and in the left image grid
+the measured point of each pixel (NaN where the matcher gave nothing), the true point its
+refracted ray meets (NaN where it misses), the overlap mask (pixels whose true point the right
+camera also sees: the ones a stereo method can measure) and the port normal (depth = n · X).
+
+Point-to-mesh distances come from Open3D's ``RaycastingScene``, which works in float32. All
+coordinates are first shifted by the mean of the mesh vertices (in float64), so the resolution
+is a few float32 ulps of the largest *centred* coordinate: ~1e-4 mm for coordinates 1 m from the
+centre, ~1e-5 mm for a 200 mm object; ``distance_resolution_mm`` reports one ulp of it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import open3d as o3d
+from scipy.spatial import cKDTree
+
+#: Distance thresholds τ (mm) of precision / recall / F-score.
+THRESHOLDS_MM = (0.5, 1.0, 5.0)
+#: A mesh whose vertices all lie within this distance (mm) of their least-squares plane is planar.
+PLANAR_TOLERANCE_MM = 1e-6
+
+
+@dataclass(frozen=True)
+class SurfaceCase:
+    """One scored reconstruction. ``mesh_vertices`` ``(V, 3)`` mm, ``mesh_triangles`` ``(T, 3)``
+    int; ``measured_points`` and ``truth_points`` ``(H, W, 3)`` mm (NaN = none); ``overlap_mask``
+    ``(H, W)`` bool; ``port_normal`` ``(3,)`` (normalized here; pointing into the water, a
+    positive depth error means measured too deep). Arrays are converted and checked on creation."""
+
+    mesh_vertices: np.ndarray
+    mesh_triangles: np.ndarray
+    measured_points: np.ndarray
+    truth_points: np.ndarray
+    overlap_mask: np.ndarray
+    port_normal: np.ndarray
+
+    def __post_init__(self):
+        put = lambda name, value: object.__setattr__(self, name, value)  # noqa: E731 (frozen)
+        vertices = np.asarray(self.mesh_vertices, dtype=np.float64)
+        triangles = np.asarray(self.mesh_triangles)
+        if vertices.ndim != 2 or vertices.shape[1] != 3 or not np.isfinite(vertices).all():
+            raise ValueError("mesh_vertices must be a finite (V, 3) array")
+        if (triangles.ndim != 2 or triangles.shape[1] != 3 or len(triangles) == 0
+                or not np.issubdtype(triangles.dtype, np.integer)
+                or triangles.min() < 0 or triangles.max() >= len(vertices)):
+            raise ValueError("mesh_triangles must be a non-empty (T, 3) int array of vertex indices")
+        measured = np.asarray(self.measured_points, dtype=np.float64)
+        truth = np.asarray(self.truth_points, dtype=np.float64)
+        overlap = np.asarray(self.overlap_mask, dtype=bool)
+        if measured.ndim != 3 or measured.shape[2] != 3:
+            raise ValueError("measured_points must be an (H, W, 3) array")
+        if truth.shape != measured.shape or overlap.shape != measured.shape[:2]:
+            raise ValueError("truth_points must match measured_points (H, W, 3), overlap_mask (H, W)")
+        normal = np.asarray(self.port_normal, dtype=np.float64).reshape(-1)
+        if normal.shape != (3,) or not np.isfinite(normal).all() or np.linalg.norm(normal) == 0:
+            raise ValueError("port_normal must be a finite non-zero 3-vector")
+        for name, value in (("mesh_vertices", vertices), ("mesh_triangles", triangles.astype(np.int64)),
+                            ("measured_points", measured), ("truth_points", truth),
+                            ("overlap_mask", overlap), ("port_normal", normal / np.linalg.norm(normal))):
+            put(name, value)
+
+    @property
+    def measured_mask(self) -> np.ndarray:
+        """``(H, W)`` bool: pixels with a finite measured point."""
+        return np.isfinite(self.measured_points).all(axis=2)
+
+    @property
+    def measured_valid(self) -> np.ndarray:
+        """``(N, 3)`` mm: the finite measured points, in row-major pixel order."""
+        return self.measured_points[self.measured_mask]
+
+
+def point_to_mesh(vertices, triangles, points) -> tuple[np.ndarray, np.ndarray, float]:
+    """Distances (mm) of ``points`` ``(N, 3)`` to the mesh: ``(unsigned, signed, resolution)``.
+
+    Unsigned: ``RaycastingScene.compute_distance``. Signed: the unsigned distance times the sign
+    of ``(p − closest) · n``, ``n`` the closest triangle's normal turned away from the camera
+    centre (the origin) — positive = beyond the surface as seen from the left camera. (Not
+    ``compute_signed_distance``: it needs a watertight mesh, ours are open sheets.) The sign is
+    ill-defined where the view grazes the surface. ``resolution``: one float32 ulp of the largest
+    centred coordinate (see the module docs).
+    """
+    vertices = np.asarray(vertices, dtype=np.float64)
+    triangles = np.asarray(triangles, dtype=np.int64)
+    points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    origin = vertices.mean(axis=0)
+    scale = max(np.abs(vertices - origin).max(), np.abs(points - origin).max() if len(points) else 0)
+    resolution = float(np.spacing(np.float32(scale)))
+    if len(points) == 0:
+        return np.zeros(0), np.zeros(0), resolution
+    scene = o3d.t.geometry.RaycastingScene()
+    scene.add_triangles(o3d.core.Tensor((vertices - origin).astype(np.float32)),
+                        o3d.core.Tensor(triangles.astype(np.uint32)))
+    query = o3d.core.Tensor((points - origin).astype(np.float32))
+    unsigned = scene.compute_distance(query).numpy().astype(np.float64)
+    closest = scene.compute_closest_points(query)
+    foot = closest["points"].numpy().astype(np.float64) + origin
+    corners = vertices[triangles[closest["primitive_ids"].numpy().astype(np.int64)]]
+    normals = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    normals *= np.where(np.einsum("ij,ij->i", normals, foot) < 0, -1.0, 1.0)[:, None]
+    signed = unsigned * np.sign(np.einsum("ij,ij->i", points - foot, normals))
+    return unsigned, signed, resolution
+
+
+def fit_plane(points) -> tuple[np.ndarray, float, np.ndarray]:
+    """Least-squares plane of ``(N, 3)`` points (SVD of the centred points, every point counts):
+    ``(unit normal, d, signed residuals)`` with ``n · X + d = residual`` (mm); the normal's sign is
+    chosen with a positive z (towards the water)."""
+    points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    centroid = points.mean(axis=0)
+    normal = np.linalg.svd(points - centroid, full_matrices=False)[2][-1]
+    if normal[2] < 0 or (normal[2] == 0 and normal[np.argmax(np.abs(normal))] < 0):
+        normal = -normal
+    d = -float(normal @ centroid)
+    return normal, d, points @ normal + d
+
+
+def mesh_is_planar(vertices, tolerance_mm: float = PLANAR_TOLERANCE_MM) -> bool:
+    """Whether every vertex lies within ``tolerance_mm`` of the vertices' least-squares plane."""
+    return bool(np.abs(fit_plane(vertices)[2]).max() < tolerance_mm)
+
+
+_REDUCERS = {"rms": lambda v: np.sqrt(np.mean(v ** 2)), "mean": np.mean, "std": np.std,
+             "median": np.median, "p95": lambda v: np.percentile(v, 95), "max": np.max,
+             "max_abs": lambda v: np.max(np.abs(v))}
+
+
+def _stats(values: np.ndarray, prefix: str, names, count: bool = True) -> dict:
+    """``{prefix}_count`` (if ``count``) and ``{prefix}_{name}_mm`` for each of ``names`` (keys
+    of :data:`_REDUCERS`; NaN when ``values`` is empty)."""
+    out = {f"{prefix}_count": int(values.size)} if count else {}
+    for name in names:
+        out[f"{prefix}_{name}_mm"] = float(_REDUCERS[name](values)) if values.size else float("nan")
+    return out
+
+
+def surface_arrays(case: SurfaceCase) -> dict:
+    """The per-point and per-pixel arrays behind :func:`score_surface` (for figures and PLYs):
+    ``measured`` ``(N, 3)``, ``distance`` / ``signed_distance`` ``(N,)`` point-to-mesh (mm, same
+    order as ``measured``), ``truth_to_measured`` ``(M,)`` (mm, truth points at overlap pixels),
+    ``depth_error`` / ``error_3d`` ``(H, W)`` (mm, NaN where either point is missing),
+    ``resolution_mm``."""
+    measured = case.measured_valid
+    distance, signed, resolution = point_to_mesh(case.mesh_vertices, case.mesh_triangles, measured)
+    truth = case.truth_points[case.overlap_mask]
+    truth = truth[np.isfinite(truth).all(axis=1)]
+    if len(truth) and len(measured):
+        truth_to_measured = cKDTree(measured).query(truth)[0]
+    else:
+        truth_to_measured = np.full(len(truth), np.inf)
+    difference = case.measured_points - case.truth_points  # NaN where either is missing
+    return {"measured": measured, "distance": distance, "signed_distance": signed,
+            "truth_to_measured": truth_to_measured, "resolution_mm": resolution,
+            "depth_error": difference @ case.port_normal,
+            "error_3d": np.linalg.norm(difference, axis=2)}
+
+
+def score_surface(case: SurfaceCase, thresholds=THRESHOLDS_MM, plane: bool | None = None,
+                  arrays: dict | None = None) -> dict:
+    """Scores of one reconstruction: a flat dict of ints, floats (NaN when undefined; the
+    project's ``jsonable`` writes null) and one bool. All lengths mm. Keys:
+
+    * coverage — ``overlap_pixels``, ``measured_pixels``, ``measured_fraction`` (share of overlap
+      pixels with a measured point), ``measured_outside_overlap`` (pixels; should be ~0);
+    * point-to-mesh of every measured point — ``p2m_count``, ``p2m_rms_mm``, ``p2m_mean_mm``,
+      ``p2m_median_mm``, ``p2m_p95_mm`` (linear interpolation), ``p2m_max_mm``;
+      ``p2m_signed_mean_mm`` / ``p2m_signed_std_mm`` (+ = beyond the surface seen from the left
+      camera, see :func:`point_to_mesh`); ``distance_resolution_mm`` (float32, module docs);
+    * Tanks-and-Temples style, for each τ in ``thresholds`` (key part ``f"{τ:g}"``):
+      ``precision_{τ}mm`` = share of measured points with point-to-mesh distance < τ,
+      ``recall_{τ}mm`` = share of truth points (``truth_points`` at overlap pixels, ``truth_count``
+      of them) within < τ of the measured cloud (nearest neighbour, scipy ``cKDTree``, float64),
+      ``fscore_{τ}mm`` = 2PR / (P + R) (0 when both are 0);
+    * ``mean_measured_to_mesh_mm``, ``mean_truth_to_measured_mm`` and ``chamfer_mm`` = their
+      *average* (half the sum; ``cloud_metrics.cloud_distances`` reports the sum);
+    * per pixel where both points exist — ``depth_count``, ``depth_rms_mm``, ``depth_mean_mm``,
+      ``depth_max_abs_mm`` of (measured − truth) · port_normal; ``error3d_rms_mm``,
+      ``error3d_mean_mm``, ``error3d_max_mm`` of |measured − truth|: the measured point need not
+      lie on the pixel's own ray (it does for a triangulator along the left ray), so this holds
+      lateral error as well as depth; ``lateral_rms_mm`` = RMS of sqrt(|e|² − depth²);
+    * ``planar``; for planes only (``plane=True``, or ``None`` and :func:`mesh_is_planar`):
+      ``flatness_rms_mm`` and ``flatness_pv_mm`` (max − min) of the residuals of the measured
+      points to their least-squares plane (every point counts, outliers too), and
+      ``normal_angle_deg`` between that plane's normal and the mesh's ([0°, 90°]; for a forced
+      ``plane=True`` on a curved mesh, the normal of its vertices' least-squares plane).
+
+    ``arrays``: the output of :func:`surface_arrays` for this case, to avoid computing it twice.
+    """
+    arrays = surface_arrays(case) if arrays is None else arrays
+    distance, signed = arrays["distance"], arrays["signed_distance"]
+    t_to_m = arrays["truth_to_measured"]
+    measured_mask, overlap = case.measured_mask, case.overlap_mask
+    nan = float("nan")
+    out = {"overlap_pixels": int(overlap.sum()), "measured_pixels": int(measured_mask.sum()),
+           "measured_fraction": float((measured_mask & overlap).sum() / overlap.sum())
+           if overlap.any() else nan,
+           "measured_outside_overlap": int((measured_mask & ~overlap).sum())}
+    out.update(_stats(distance, "p2m", ("rms", "mean", "median", "p95", "max")))
+    out.update(_stats(signed, "p2m_signed", ("mean", "std"), count=False))
+    out.update({"distance_resolution_mm": arrays["resolution_mm"], "truth_count": int(t_to_m.size)})
+    for tau in thresholds:
+        precision = float(np.mean(distance < tau)) if distance.size else nan
+        recall = float(np.mean(t_to_m < tau)) if t_to_m.size else nan
+        total = precision + recall
+        out.update({f"precision_{tau:g}mm": precision, f"recall_{tau:g}mm": recall,
+                    f"fscore_{tau:g}mm": 2 * precision * recall / total if total > 0 else
+                    (0.0 if total == 0 else nan)})
+    m_to_mesh = float(distance.mean()) if distance.size else nan
+    t_to_m_mean = float(t_to_m.mean()) if t_to_m.size else nan
+    out.update({"mean_measured_to_mesh_mm": m_to_mesh, "mean_truth_to_measured_mm": t_to_m_mean,
+                "chamfer_mm": 0.5 * (m_to_mesh + t_to_m_mean)})
+    both = np.isfinite(arrays["depth_error"])
+    depth, error_3d = arrays["depth_error"][both], arrays["error_3d"][both]
+    out.update(_stats(depth, "depth", ("rms", "mean", "max_abs")))
+    out.update(_stats(error_3d, "error3d", ("rms", "mean", "max"), count=False))
+    out.update(_stats(np.sqrt(np.maximum(error_3d ** 2 - depth ** 2, 0.0)), "lateral", ("rms",),
+                      count=False))
+    planar = mesh_is_planar(case.mesh_vertices) if plane is None else bool(plane)
+    out["planar"] = planar
+    if planar:
+        out.update(plane_scores(arrays["measured"], fit_plane(case.mesh_vertices)[0]))
+    return out
+
+
+def plane_scores(points, true_normal) -> dict:
+    """``flatness_rms_mm``, ``flatness_pv_mm`` (mm) of ``(N, 3)`` points about their
+    least-squares plane and ``normal_angle_deg`` to ``true_normal`` (NaN below 3 points)."""
+    points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    if len(points) < 3:
+        return {"flatness_rms_mm": float("nan"), "flatness_pv_mm": float("nan"),
+                "normal_angle_deg": float("nan")}
+    normal, _, residual = fit_plane(points)
+    true_normal = np.asarray(true_normal, dtype=np.float64) / np.linalg.norm(true_normal)
+    # the angle from the cross product's length: accurate near 0, unlike arccos of the dot
+    sine, cosine = np.linalg.norm(np.cross(normal, true_normal)), abs(float(normal @ true_normal))
+    return {"flatness_rms_mm": float(np.sqrt(np.mean(residual ** 2))),
+            "flatness_pv_mm": float(residual.max() - residual.min()),
+            "normal_angle_deg": float(np.degrees(np.arctan2(sine, cosine)))}
+
+
+def surface_table(scores_by_method: dict, thresholds=THRESHOLDS_MM) -> str:
+    """A fixed-width text table of :func:`score_surface` dicts, one row per method: measured %,
+    point-to-mesh RMS / median / max (mm), F-score at each τ, depth RMS (mm), flatness RMS (mm,
+    planes only; "-" where a value is missing or NaN)."""
+    columns = [("method", None, "{}"), ("meas %", "measured_fraction", "{:.1f}"),
+               ("RMS mm", "p2m_rms_mm", "{:.4f}"), ("med mm", "p2m_median_mm", "{:.4f}"),
+               ("max mm", "p2m_max_mm", "{:.3f}")]
+    columns += [(f"F@{tau:g}", f"fscore_{tau:g}mm", "{:.3f}") for tau in thresholds]
+    columns += [("depth RMS", "depth_rms_mm", "{:.4f}"), ("flat RMS", "flatness_rms_mm", "{:.4f}")]
+    rows = [[c[0] for c in columns]]
+    for method, scores in scores_by_method.items():
+        row = [str(method)]
+        for _, key, form in columns[1:]:
+            value = scores.get(key)
+            if value is None or not np.isfinite(value):
+                row.append("-")
+            else:
+                row.append(form.format(100 * value if key == "measured_fraction" else value))
+        rows.append(row)
+    widths = [max(len(r[i]) for r in rows) for i in range(len(columns))]
+    lines = ["  ".join(cell.ljust(w) if i == 0 else cell.rjust(w)
+                       for i, (cell, w) in enumerate(zip(row, widths))) for row in rows]
+    lines.insert(1, "  ".join("-" * w for w in widths))
+    return "\n".join(line.rstrip() for line in lines) + "\n"
