@@ -29,6 +29,7 @@ from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
+from scipy import ndimage
 
 from .dense_warp import MODELS, PlaneWarp
 from .triangulate import StereoRig
@@ -232,6 +233,16 @@ def _refine(warp: PlaneWarp, left, right, start, candidate, window, depth_range)
     kernel = np.ones((window, window), np.uint8)
     active = cv2.dilate(candidate.astype(np.uint8), kernel).astype(bool)
     rows, cols = np.nonzero(active)
+    # Pixels in the windows of candidates that are no candidates themselves follow their
+    # nearest candidate's depth: their own sweep answer may be anything, and through
+    # g(d_p) ≈ g(d_q) + ∂g/∂d (d_p − d_q) a wrong d_q would spoil their neighbours' windows.
+    if not candidate.any():
+        empty = np.full(left.shape, np.nan)
+        return empty, empty, np.full(left.shape + (2,), np.nan), np.zeros(left.shape, bool)
+    nearest = ndimage.distance_transform_edt(~candidate, return_distances=False,
+                                             return_indices=True)
+    followers = np.nonzero(active & ~candidate)
+    leaders = (nearest[0][followers], nearest[1][followers])
     origins, directions = warp.water_rays(np.stack([cols, rows], axis=1).astype(np.float64))
     gradient_u = cv2.Scharr(right, cv2.CV_32F, 1, 0, scale=1.0 / 32.0)
     gradient_v = cv2.Scharr(right, cv2.CV_32F, 0, 1, scale=1.0 / 32.0)
@@ -239,6 +250,7 @@ def _refine(warp: PlaneWarp, left, right, start, candidate, window, depth_range)
     mean_f = _box(f, window)
     var_f = _box(f * f, window) - mean_f * mean_f
     depth = start.astype(np.float64).copy()
+    depth[followers] = depth[leaders]
     reference = float(np.median(depth[active])) if rows.size else 0.0
     step_px = np.full((height, width), np.inf)
     uv_right = np.full((height, width, 2), np.nan)
@@ -282,6 +294,7 @@ def _refine(warp: PlaneWarp, left, right, start, candidate, window, depth_range)
             change = np.clip(np.nan_to_num(change, nan=0.0), -limit, limit)
         change[~active] = 0.0
         depth += change
+        depth[followers] = depth[leaders]
         step_px = np.abs(change) * speed
         if not np.any(step_px[candidate] > REFINE_TOLERANCE_PX):
             pixels, _ = warp.right_pixels_at_depth(origins, directions, depth[rows, cols])
