@@ -1,0 +1,309 @@
+"""Dense stereo matching through a flat port: a refractive plane sweep and a sub-pixel refinement.
+
+1. Plane sweep (:mod:`measure.dense_warp`): for depth planes ``N·(X − C_left) = d`` spaced so
+   that right pixels move about ``step_px`` between planes, the right image is resampled onto
+   the left grid (``cv2.remap``) and compared with the left image by zero-normalised
+   cross-correlation over ``window × window`` pixels (box filters). A running argmax keeps the
+   best score, its plane and the scores of the two neighbouring planes (no cost volume).
+2. A parabola through those three scores gives a first sub-plane depth.
+3. Gauss–Newton refinement along the refractive epipolar curve, vectorised over all pixels: the
+   right position of every left pixel at depth d is the exact forward projection
+   (:func:`measure.projection.project`) of its water ray's point at depth d, with the analytic
+   derivative along the curve. Every pixel's window is evaluated at the centre pixel's depth,
+   using each neighbour's own sample to first order (``g(d_p) ≈ g(d_q) + ∂g/∂d (d_p − d_q)``),
+   so all window sums are box filters; the affine photometric model (gain, offset) makes the
+   least-squares step the ZNCC maximiser.
+
+The result per pixel is the refined depth parameter d (the depth map, mm along the port normal
+from the left camera centre) and the exact right pixel of the left ray's point at that depth;
+triangulating the pair with the same model (``optical_path`` for ``"refractive"``, ``regular``
+for ``"pinhole"``) gives back that point.
+
+Units mm; reference frame = left camera frame; OpenCV pixels ``(u, v)``, integer = pixel centre.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+from scipy import ndimage
+
+from .dense_warp import MODELS, PlaneWarp
+from .triangulate import StereoRig
+
+#: Gauss–Newton iterations of the refinement (it stops earlier once every step is below
+#: :data:`REFINE_TOLERANCE_PX` along the epipolar curve).
+REFINE_ITERATIONS = 6
+REFINE_TOLERANCE_PX = 1e-3
+#: Variance floor of a window (intensity units², images scaled to [0, 1]): flat windows fail.
+MIN_WINDOW_VARIANCE = 1e-8
+#: Pixels kept clear of the right image border by the interpolated samples (cubic: 2 px).
+RIGHT_MARGIN_PX = 2.0
+
+
+@dataclass(frozen=True)
+class DenseMatches:
+    """Result of :func:`match_dense`.
+
+    ``uv_left`` ``(N, 2)`` left pixel centres that got a match; ``uv_right`` ``(N, 2)`` their
+    sub-pixel right pixels; ``score`` ``(N,)`` the ZNCC of the refined match; ``depth_map``
+    ``(H, W)`` the refined depth ``N·(X − C_left)`` (mm), NaN where unmatched; ``timings``
+    seconds per stage; ``n_planes`` the number of sweep planes.
+    """
+
+    uv_left: np.ndarray
+    uv_right: np.ndarray
+    score: np.ndarray
+    depth_map: np.ndarray
+    timings: dict = field(default_factory=dict)
+    n_planes: int = 0
+
+
+def _as_image(image, name: str, size) -> np.ndarray:
+    image = np.asarray(image)
+    if image.ndim != 2:
+        raise ValueError(f"{name} must be a 2D (grey) image, got shape {image.shape}")
+    if (image.shape[1], image.shape[0]) != tuple(size):
+        raise ValueError(f"{name} is {image.shape[1]}x{image.shape[0]} px but the camera is "
+                         f"{size[0]}x{size[1]} px")
+    if not np.issubdtype(image.dtype, np.number) or np.iscomplexobj(image):
+        raise ValueError(f"{name} must hold real numbers, got dtype {image.dtype}")
+    image = image.astype(np.float32)
+    if not np.all(np.isfinite(image)):
+        raise ValueError(f"{name} holds NaN or infinite values")
+    return image
+
+
+def _check_depth_range(rig: StereoRig, depth_range) -> tuple[float, float]:
+    try:
+        near, far = (float(v) for v in depth_range)
+    except (TypeError, ValueError):
+        raise ValueError(f"depth_range must be (near, far) in mm, got {depth_range!r}") from None
+    if not (np.isfinite(near) and np.isfinite(far)) or near >= far:
+        raise ValueError(f"depth_range must be finite with near < far, got ({near}, {far})")
+    water_depth = rig.port.offsets[-1] - float(rig.port.normal @ rig.left.center)
+    if near <= water_depth:
+        raise ValueError(f"depth_range starts at {near} mm, not beyond the port's last interface "
+                         f"({water_depth:g} mm from the left camera along the port normal)")
+    return near, far
+
+
+def _box(image: np.ndarray, window: int) -> np.ndarray:
+    return cv2.boxFilter(image, -1, (window, window), normalize=True,
+                         borderType=cv2.BORDER_REFLECT)
+
+
+def _window_inside(mask: np.ndarray, window: int) -> np.ndarray:
+    """Pixels whose whole window lies where ``mask`` (bool ``(H, W)``) holds."""
+    kernel = np.ones((window, window), np.uint8)
+    return cv2.erode(mask.astype(np.uint8), kernel, borderType=cv2.BORDER_CONSTANT,
+                     borderValue=0).astype(bool)
+
+
+def _right_inside(map_u, map_v, size) -> np.ndarray:
+    width, height = size
+    m = RIGHT_MARGIN_PX
+    with np.errstate(invalid="ignore"):
+        return (map_u >= m) & (map_u <= width - 1 - m) & (map_v >= m) & (map_v <= height - 1 - m)
+
+
+def _sweep(warp: PlaneWarp, left, right, depths, window, progress):
+    """Running argmax of the ZNCC over the planes: best score, best plane, the scores of the
+    planes before and after the best (−inf where missing)."""
+    shape = left.shape
+    mean_l = _box(left, window)
+    sigma_l = np.sqrt(np.maximum(_box(left * left, window) - mean_l * mean_l, 0.0))
+    left_ok = sigma_l > np.sqrt(MIN_WINDOW_VARIANCE)
+    best = np.full(shape, -np.inf, np.float32)
+    best_index = np.full(shape, -1, np.int32)
+    before = np.full(shape, -np.inf, np.float32)
+    after = np.full(shape, -np.inf, np.float32)
+    previous = np.full(shape, -np.inf, np.float32)
+    times = {"warp maps": 0.0, "remap": 0.0, "zncc": 0.0}
+    for k, depth in enumerate(depths):
+        t0 = time.perf_counter()
+        map_u, map_v = warp.right_map(depth)
+        t1 = time.perf_counter()
+        warped = cv2.remap(right, map_u, map_v, cv2.INTER_CUBIC, borderMode=cv2.BORDER_REFLECT)
+        valid = _window_inside(_right_inside(map_u, map_v, warp.rig.right.size), window)
+        t2 = time.perf_counter()
+        mean_r = _box(warped, window)
+        var_r = _box(warped * warped, window)
+        var_r -= mean_r * mean_r
+        cov = _box(left * warped, window)
+        cov -= mean_l * mean_r
+        np.maximum(var_r, MIN_WINDOW_VARIANCE, out=var_r)
+        score = cov / (sigma_l * np.sqrt(var_r))
+        score[~(valid & left_ok)] = -np.inf
+        after[best_index == k - 1] = score[best_index == k - 1]
+        better = score > best
+        before[better] = previous[better]
+        best[better] = score[better]
+        best_index[better] = k
+        after[better] = -np.inf
+        previous = score
+        times["remap"] += t2 - t1
+        times["warp maps"] += t1 - t0
+        times["zncc"] += time.perf_counter() - t2
+        if progress is not None:
+            progress(k + 1, len(depths))
+    return best, best_index, before, after, times
+
+
+def match_dense(rig: StereoRig, left, right, depth_range, *, model: str = "refractive",
+                window: int = 11, min_score: float = 0.8, step_px: float = 0.5, roi=None,
+                progress=None) -> DenseMatches:
+    """Dense matches of a rectification-free stereo pair through the rig's port.
+
+    ``left``, ``right``: 2D grey images of the cameras' sizes (any real dtype; scaled to
+    [0, 1] float32 together). ``depth_range``: (near, far) in mm along the port normal from the
+    left camera centre, beyond the port. ``model``: ``"refractive"`` (through ``rig.port``) or
+    ``"pinhole"`` (the port ignored: straight rays). ``window``: odd side of the square ZNCC
+    window (px). ``min_score``: the least ZNCC kept. ``step_px``: right-pixel motion between
+    sweep planes. ``roi``: optional ``(u0, v0, u1, v1)`` left-image box (px, end exclusive)
+    outside which nothing is matched. ``progress``: optional callable ``(done, total)`` per
+    sweep plane. Rejected: score below ``min_score``, best plane at an end of the range, a
+    window leaving either image, a right pixel leaving the right image, a refinement that does
+    not converge.
+    """
+    if model not in MODELS:
+        raise ValueError(f"model must be one of {', '.join(MODELS)}, got {model!r}")
+    if int(window) != window or window < 3 or window % 2 == 0:
+        raise ValueError(f"window must be an odd whole number >= 3, got {window!r}")
+    if not (np.isfinite(step_px) and step_px > 0):
+        raise ValueError(f"step_px must be a positive number, got {step_px!r}")
+    window = int(window)
+    near, far = _check_depth_range(rig, depth_range)
+    left = _as_image(left, "left", rig.left.size)
+    right = _as_image(right, "right", rig.right.size)
+    scale = max(float(left.max()), float(right.max()), 1e-30)
+    left /= scale
+    right /= scale
+    timings = {}
+    t0 = time.perf_counter()
+    warp = PlaneWarp(rig, model)
+    depths = warp.sweep_depths(near, far, step_px)
+    timings["plane spacing"] = time.perf_counter() - t0
+
+    best, best_index, before, after, sweep_times = _sweep(warp, left, right, depths, window,
+                                                          progress)
+    timings.update(sweep_times)
+    t0 = time.perf_counter()
+    candidate = (best_index > 0) & (best_index < len(depths) - 1) & np.isfinite(before) \
+        & np.isfinite(after) & (best > 0)
+    if roi is not None:
+        u0, v0, u1, v1 = (int(v) for v in roi)
+        inside = np.zeros_like(candidate)
+        inside[max(v0, 0):max(v1, 0), max(u0, 0):max(u1, 0)] = True
+        candidate &= inside
+    start = _start_depth(depths, best_index, best, before, after)
+    timings["parabola"] = time.perf_counter() - t0
+
+    t0 = time.perf_counter()
+    depth, score, uv_right, converged = _refine(warp, left, right, start, candidate, window,
+                                                (near, far))
+    timings["refinement"] = time.perf_counter() - t0
+    keep = candidate & converged & (score >= min_score)
+    rows, cols = np.nonzero(keep)
+    depth_map = np.where(keep, depth, np.nan)
+    return DenseMatches(np.stack([cols, rows], axis=1).astype(np.float64), uv_right[keep],
+                        score[keep].astype(np.float64), depth_map, timings, len(depths))
+
+
+def _start_depth(depths, best_index, best, before, after):
+    """Depth from the parabola through the best plane's score and its neighbours' (mm)."""
+    with np.errstate(invalid="ignore", divide="ignore"):
+        curvature = before - 2.0 * best + after
+        offset = np.where(curvature < 0, 0.5 * (before - after) / curvature, 0.0)
+    offset = np.clip(np.nan_to_num(offset, nan=0.0, posinf=0.0, neginf=0.0), -0.5, 0.5)
+    position = np.clip(best_index + offset, 0, len(depths) - 1)
+    return np.interp(position, np.arange(len(depths)), depths)
+
+
+def _refine(warp: PlaneWarp, left, right, start, candidate, window, depth_range):
+    """Gauss–Newton along the epipolar curve (see the module docstring), all pixels at once.
+
+    Returns the refined depth ``(H, W)``, the ZNCC at it, the right pixels ``(H, W, 2)`` and
+    whether the pixel converged (last step below 0.01 px, depth inside ``depth_range``, whole
+    right window inside the right image)."""
+    height, width = left.shape
+    kernel = np.ones((window, window), np.uint8)
+    active = cv2.dilate(candidate.astype(np.uint8), kernel).astype(bool)
+    rows, cols = np.nonzero(active)
+    # Pixels in the windows of candidates that are no candidates themselves follow their
+    # nearest candidate's depth: their own sweep answer may be anything, and through
+    # g(d_p) ≈ g(d_q) + ∂g/∂d (d_p − d_q) a wrong d_q would spoil their neighbours' windows.
+    if not candidate.any():
+        empty = np.full(left.shape, np.nan)
+        return empty, empty, np.full(left.shape + (2,), np.nan), np.zeros(left.shape, bool)
+    nearest = ndimage.distance_transform_edt(~candidate, return_distances=False,
+                                             return_indices=True)
+    followers = np.nonzero(active & ~candidate)
+    leaders = (nearest[0][followers], nearest[1][followers])
+    origins, directions = warp.water_rays(np.stack([cols, rows], axis=1).astype(np.float64))
+    gradient_u = cv2.Scharr(right, cv2.CV_32F, 1, 0, scale=1.0 / 32.0)
+    gradient_v = cv2.Scharr(right, cv2.CV_32F, 0, 1, scale=1.0 / 32.0)
+    f = left.astype(np.float64)
+    mean_f = _box(f, window)
+    var_f = _box(f * f, window) - mean_f * mean_f
+    depth = start.astype(np.float64).copy()
+    depth[followers] = depth[leaders]
+    reference = float(np.median(depth[active])) if rows.size else 0.0
+    step_px = np.full((height, width), np.inf)
+    uv_right = np.full((height, width, 2), np.nan)
+    for iteration in range(REFINE_ITERATIONS + 1):
+        pixels, rate = warp.right_pixels_at_depth(origins, directions, depth[rows, cols])
+        map_u = np.full((height, width), -1e6, np.float32)
+        map_v = np.full((height, width), -1e6, np.float32)
+        map_u[rows, cols], map_v[rows, cols] = pixels[:, 0], pixels[:, 1]
+        uv_right[rows, cols] = pixels
+        rate_u = np.zeros((height, width))
+        rate_v = np.zeros((height, width))
+        rate_u[rows, cols], rate_v[rows, cols] = rate[:, 0], rate[:, 1]
+        g = cv2.remap(right, map_u, map_v, cv2.INTER_CUBIC,
+                      borderMode=cv2.BORDER_CONSTANT).astype(np.float64)
+        h = cv2.remap(gradient_u, map_u, map_v, cv2.INTER_CUBIC,
+                      borderMode=cv2.BORDER_CONSTANT) * rate_u
+        h += cv2.remap(gradient_v, map_u, map_v, cv2.INTER_CUBIC,
+                       borderMode=cv2.BORDER_CONSTANT) * rate_v
+        # g'(q) = g(q) + h(q) (d_p − d_q) = u(q) + h(q) δ_p, with δ = d − reference
+        delta = depth - reference
+        u = g - h * delta
+        m_u, m_h = _box(u, window), _box(h, window)
+        m_uu, m_uh, m_hh = _box(u * u, window), _box(u * h, window), _box(h * h, window)
+        m_fu, m_fh = _box(f * u, window), _box(f * h, window)
+        mean_g = m_u + delta * m_h
+        c_gg = m_uu + 2 * delta * m_uh + delta * delta * m_hh - mean_g * mean_g
+        c_gh = m_uh + delta * m_hh - mean_g * m_h
+        c_hh = m_hh - m_h * m_h
+        c_fg = m_fu + delta * m_fh - mean_f * mean_g
+        c_fh = m_fh - mean_f * m_h
+        with np.errstate(invalid="ignore", divide="ignore"):
+            score = c_fg / np.sqrt(var_f * np.maximum(c_gg, MIN_WINDOW_VARIANCE))
+            if iteration == REFINE_ITERATIONS:
+                break
+            determinant = c_gg * c_hh - c_gh * c_gh
+            gain = (c_fg * c_hh - c_fh * c_gh) / determinant
+            slope = (c_gg * c_fh - c_gh * c_fg) / determinant
+            change = slope / gain
+            speed = np.hypot(rate_u, rate_v)
+            limit = 1.0 / np.maximum(speed, 1e-12)  # at most 1 px along the curve per step
+            change = np.clip(np.nan_to_num(change, nan=0.0), -limit, limit)
+        change[~active] = 0.0
+        depth += change
+        depth[followers] = depth[leaders]
+        step_px = np.abs(change) * speed
+        if not np.any(step_px[candidate] > REFINE_TOLERANCE_PX):
+            pixels, _ = warp.right_pixels_at_depth(origins, directions, depth[rows, cols])
+            uv_right[rows, cols] = pixels
+            map_u[rows, cols], map_v[rows, cols] = pixels[:, 0], pixels[:, 1]
+            break
+    inside = _window_inside(_right_inside(map_u, map_v, warp.rig.right.size), window)
+    near, far = depth_range
+    with np.errstate(invalid="ignore"):
+        converged = inside & (step_px < 0.01) & (depth >= near) & (depth <= far) \
+            & np.isfinite(score)
+    return depth, score, uv_right, converged
