@@ -470,6 +470,12 @@ def main(args) -> int:
 
     quiet = args.no_progress
     log = (lambda text: None) if quiet else (lambda text: print(text, file=sys.stderr, flush=True))
+    from .dense_run import is_surface_scene
+
+    if is_surface_scene(args.scene):
+        from . import dense_run
+
+        return dense_run.main(args, log)
     options = check_options(args)
     output = OutputDir(args.out, COMMAND).claim()  # before any expensive work
     start = time.perf_counter()

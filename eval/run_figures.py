@@ -58,6 +58,18 @@ def views_figure(path, left, right, arrays) -> None:
     _save(fig, path)
 
 
+def views_pair(path, left, right) -> None:
+    """Both views side by side (a surface scene: nothing detected to mark)."""
+    fig = Figure(figsize=(16, 7.2))
+    ax = fig.add_subplot()
+    ax.imshow(np.hstack([_display(left), _display(right)]), cmap="gray", interpolation="nearest")
+    ax.set_title("left | right")
+    ax.set_xlabel("u [px]")
+    ax.set_ylabel("v [px]")
+    fig.tight_layout()
+    _save(fig, path)
+
+
 def error_maps_figure(path, per_method) -> None:
     """Per method: dX, dY, dZ, dP (mm) over the true target positions (X, Y in mm)."""
     methods = [m for m in per_method if len(per_method[m]["truth"])]

@@ -88,6 +88,14 @@ class FlatPort(ValueEquality):
         """Refractive index of the last medium (the water)."""
         return self.indices[-1]
 
+    def apparent_depth(self, depth_mm: float) -> float:
+        """Where a point at ``depth_mm`` along the normal appears from the air side, paraxially
+        (a pinhole that ignores the port sees it there; a lens in air focused there images it
+        sharply): ``D + Σ t_i·n_air/n_i + (depth − last interface)·n_air/n_water`` (mm)."""
+        n = self.indices
+        layers = sum(t * n[0] / n[k + 1] for k, t in enumerate(self.thicknesses))
+        return float(self.distance + layers + (depth_mm - self.offsets[-1]) * n[0] / n[-1])
+
     def replace(self, **changes) -> "FlatPort":
         """A copy with some parameters changed (e.g. ``indices=...``)."""
         values = dict(normal=self.normal, distance=self.distance,

@@ -392,14 +392,9 @@ def _check_visible(left, right, port, targets, radius: float, layout: str) -> No
 
 
 def _apparent_distance(port, depth_mm: float) -> float:
-    """Where a point ``depth_mm`` along the axis appears from the air side of ``port``,
-    paraxially: ``D + Σ t_i·n_air/n_i + (depth − last interface)·n_air/n_water`` (mm), the
-    focus distance of a lens in air that images it sharply; ``depth_mm`` itself without a port."""
-    if port is None:
-        return depth_mm
-    n = port.indices
-    apparent = port.distance + sum(t * n[0] / n[k + 1] for k, t in enumerate(port.thicknesses))
-    return apparent + (depth_mm - port.offsets[-1]) * n[0] / n[-1]
+    """The focus distance of a lens in air that images a point ``depth_mm`` along the axis
+    sharply: :meth:`measure.FlatPort.apparent_depth`, or ``depth_mm`` itself without a port."""
+    return depth_mm if port is None else port.apparent_depth(depth_mm)
 
 
 def _spec(args):

@@ -109,9 +109,9 @@ def write_texture(path: str, dot_mm: float, coverage: float, seed: int, extent) 
     return True
 
 
-def overlap_samples(mesh_path: str, mesh, left, right, port) -> int:
-    """How many pixels of a coarse grid of the left image see the surface where the right
-    camera sees it too."""
+def overlap_samples(mesh_path: str, mesh, left, right, port) -> np.ndarray:
+    """The surface points ``(M, 3)`` that pixels of a coarse grid of the left image see where
+    the right camera sees them too."""
     from .truth_maps import MeshTracer, hits_of_pixels, seen_by
 
     tracer = MeshTracer(mesh_path, mesh.vertices.astype(np.float32).astype(np.float64),
@@ -120,17 +120,16 @@ def overlap_samples(mesh_path: str, mesh, left, right, port) -> int:
     uu, vv = np.meshgrid(np.arange(0, w, CHECK_STEP_PX, dtype=float),
                          np.arange(0, h, CHECK_STEP_PX, dtype=float))
     points = hits_of_pixels(tracer, left, port, np.column_stack([uu.ravel(), vv.ravel()]))
-    return int(seen_by(tracer, right, port, points).sum())
+    return points[seen_by(tracer, right, port, points)]
 
 
-def dot_pixels(mesh, left, port, dot_mm: float) -> float:
-    """About how many pixels a speckle dot spans where the surface is nearest (px)."""
+def dot_pixels(points, left, port, dot_mm: float) -> np.ndarray:
+    """About how many pixels of the left image a speckle dot spans at each surface point
+    ``(M, 3)`` (its width along x, px)."""
     from measure.projection import project
 
-    nearest = mesh.vertices[np.argmin(mesh.vertices @ port.normal)]
-    pair = np.array([nearest, nearest + [dot_mm, 0.0, 0.0]])
-    uv = project(left, port, pair)
-    return float(np.linalg.norm(uv[1] - uv[0]))
+    shifted = points + [dot_mm, 0.0, 0.0]
+    return np.linalg.norm(project(left, port, shifted) - project(left, port, points), axis=1)
 
 
 def write_surface_scene(out: str, args, left, right, port, **scene_options) -> str:
@@ -157,14 +156,16 @@ def write_surface_scene(out: str, args, left, right, port, **scene_options) -> s
     written = []
     try:
         surfaces.write_ply(tmp_mesh, mesh, lower, lower + extent)
-        if overlap_samples(tmp_mesh, mesh, left, right, geometry_port) < MIN_OVERLAP_SAMPLES:
+        seen = overlap_samples(tmp_mesh, mesh, left, right, geometry_port)
+        if seen.shape[0] < MIN_OVERLAP_SAMPLES:
             raise ValueError(f"--surface {args.surface}: the surface is not seen by both cameras "
                              f"(fewer than {MIN_OVERLAP_SAMPLES} samples of the left image every "
                              f"{CHECK_STEP_PX} px; move it with --z or make it larger)")
-        dot_px = dot_pixels(mesh, left, geometry_port, args.speckle_size)
-        if dot_px < MIN_DOT_PX:
-            print(f"warning: --speckle-size {args.speckle_size:g} mm is {dot_px:.2f} px at the "
-                  f"surface's nearest point: below one pixel the speckle aliases", file=sys.stderr)
+        dot_px = dot_pixels(seen, left, geometry_port, args.speckle_size)
+        if dot_px.min() < MIN_DOT_PX:
+            print(f"warning: --speckle-size {args.speckle_size:g} mm is down to "
+                  f"{dot_px.min():.2f} px on the surface: below one pixel the speckle aliases",
+                  file=sys.stderr)
         texture_path = os.path.join(directory, texture_file)
         if write_texture(texture_path, args.speckle_size, args.speckle_coverage,
                          args.speckle_seed, extent):
@@ -180,5 +181,5 @@ def write_surface_scene(out: str, args, left, right, port, **scene_options) -> s
         raise
     return (f"wrote {out}: {mesh.description}, {mesh.triangles.shape[0]} triangles "
             f"({os.path.basename(mesh_path)}), speckle {args.speckle_size:g} mm dots "
-            f"(~{dot_px:.1f} px) at {args.speckle_coverage:g} coverage ({texture_file}), "
+            f"({np.min(dot_px):.1f}-{np.max(dot_px):.1f} px) at {args.speckle_coverage:g} coverage ({texture_file}), "
             f"{'port' if port else 'no port'}, {left.size[0]}x{left.size[1]} px")

@@ -1,0 +1,129 @@
+"""``python -m eval run`` on a surface scene: dense matching through the port, scored against
+the mesh; and the bad inputs of surface scenes.
+
+The small rig (320 x 268 px, f = 144 px) has 7.7x the full-size pixel footprint, so its depth
+errors are several times the full-size ones; the bounds below come from measuring this very
+case (numbers in the comments) with margin for the renderer's seed, not from the issue's
+full-size targets (measured by the benchmarks, README)."""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+
+import numpy as np
+import pytest
+
+from eval.__main__ import main as eval_main
+from synth.__main__ import main as synth_main
+from synth.dataset import write_dataset
+
+SMALL = ("--size", "320", "268")
+DOTS = ("--speckle-size", "12")  # 2.2-4.1 px at 1 m in the small image
+
+
+@pytest.fixture(scope="module")
+def plane_case(tmp_path_factory):
+    root = tmp_path_factory.mktemp("dense")
+    scene = str(root / "plane.xml")
+    assert synth_main(["scene", "--layout", "surface", "--surface", "plane", *SMALL, *DOTS,
+                       "--out", scene]) == 0
+    write_dataset(scene, root / "ds", spp=16, progress=False)
+    return root, scene, str(root / "ds")
+
+
+def _snapshot(root):
+    return sorted(os.path.relpath(os.path.join(d, f), root) for d, _, files in os.walk(root)
+                  for f in files)
+
+
+def test_dense_run_measures_the_plane_and_shows_what_ignoring_refraction_costs(plane_case):
+    root, scene, ds = plane_case
+    out = str(root / "run")
+    assert eval_main(["run", scene, "--from", ds, "--out", out, "--no-progress"]) == 0
+    report = json.load(open(os.path.join(out, "report.json")))
+    refractive, pinhole = report["methods"]["optical_path"], report["methods"]["regular"]
+    # measured here: 91.0 % of the overlap, RMS 0.53 mm, F@1mm 0.88, flatness 0.53 mm
+    assert refractive["measured_fraction"] >= 0.85
+    assert refractive["p2m_rms_mm"] <= 0.8
+    assert refractive["fscore_1mm"] >= 0.8
+    assert refractive["measured_outside_overlap"] <= 0.001 * refractive["measured_pixels"]
+    # ignoring the port puts the plane where it appears (~250 mm nearer) and bends it
+    assert pinhole["p2m_median_mm"] > 100 and pinhole["fscore_5mm"] < 0.01
+    for name in ("report.md", "views.png", "distances.png", "depth_error_optical_path.png",
+                 "points_optical_path.ply", "points_regular.ply"):
+        assert os.path.getsize(os.path.join(out, name)) > 0
+
+
+@pytest.mark.parametrize("argv, fragment", [
+    (["--eccentricity"], "applies to target scenes"),
+    (["--methods", "su"], "surface scene is measured with"),
+    (["--depth-range", "2000,2100"], "excludes the surface"),
+])
+def test_dense_run_bad_options(plane_case, capsys, argv, fragment):
+    root, scene, ds = plane_case
+    before = _snapshot(root)
+    code = eval_main(["run", scene, "--from", ds, "--out", str(root / "bad"), "--no-progress",
+                      *argv])
+    err = capsys.readouterr().err
+    assert code == 2 and fragment in err and "Traceback" not in err
+    assert len([line for line in err.splitlines() if line.startswith("error:")]) == 1
+    assert _snapshot(root) == before
+
+
+def test_scene_whose_mesh_is_missing(plane_case, tmp_path, capsys):
+    _, scene, _ = plane_case
+    copy = tmp_path / "plane.xml"
+    shutil.copy(scene, copy)  # the mesh and texture stay behind
+    code = eval_main(["run", str(copy), "--out", str(tmp_path / "out"), "--no-progress"])
+    err = capsys.readouterr().err
+    assert code == 2 and "plane_surface.ply" in err and "does not exist" in err
+    assert not (tmp_path / "out").exists()
+
+
+def _write_obj(path, vertices, faces):
+    lines = [f"v {x} {y} {z}" for x, y, z in vertices] + [f"f {a + 1} {b + 1} {c + 1}"
+                                                          for a, b, c in faces]
+    path.write_text("\n".join(lines) + "\n")
+
+
+@pytest.mark.parametrize("setup, fragment", [
+    ("missing", "no such file"),
+    ("empty", "is empty"),
+    ("behind", "out of the water"),
+    ("aside", "not seen by both cameras"),
+    ("txt", "expected a .ply or .obj"),
+])
+def test_bad_user_meshes(tmp_path, capsys, setup, fragment):
+    mesh = tmp_path / ("mesh.txt" if setup == "txt" else "mesh.obj")
+    quad = np.array([[-100.0, -100, 0], [100, -100, 0], [100, 100, 0], [-100, 100, 0]])
+    faces = [(0, 1, 2), (0, 2, 3)]
+    if setup == "empty":
+        mesh.write_text("")
+    elif setup == "behind":  # a square straddling the port
+        _write_obj(mesh, quad + [0, 0, 90], faces)
+    elif setup == "aside":  # 5 m to the side: in the water, seen by neither camera
+        _write_obj(mesh, quad + [5000, 0, 1000], faces)
+    elif setup == "txt":
+        mesh.write_text("v 0 0 1000\n")
+    before = _snapshot(tmp_path)
+    code = synth_main(["scene", "--layout", "surface", "--surface", "mesh", "--mesh", str(mesh),
+                       *SMALL, *DOTS, "--out", str(tmp_path / "s.xml")])
+    err = capsys.readouterr().err
+    assert code == 2 and fragment in err and "Traceback" not in err, err
+    assert _snapshot(tmp_path) == before
+
+
+def test_user_mesh_and_fine_speckle_warning(tmp_path, capsys):
+    """A user's OBJ becomes a scene (planar texture coordinates); dots below a pixel warn
+    (12 mm dots on a sheet 5 m away: ~0.5 px in the small image)."""
+    mesh = tmp_path / "mesh.obj"
+    quad = np.array([[-1500.0, -1000, 5000], [1700, -1000, 5000], [1700, 1000, 5200],
+                     [-1500, 1000, 5200]])
+    _write_obj(mesh, quad, [(0, 1, 2), (0, 2, 3)])
+    code = synth_main(["scene", "--layout", "surface", "--surface", "mesh", "--mesh", str(mesh),
+                       *SMALL, *DOTS, "--out", str(tmp_path / "s.xml")])
+    captured = capsys.readouterr()
+    assert code == 0 and "warning: --speckle-size 12 mm" in captured.err, captured.err
+    assert (tmp_path / "s_surface.ply").exists()
