@@ -10,7 +10,7 @@
    right position of every left pixel at depth d is the exact forward projection
    (:func:`measure.projection.project`) of its water ray's point at depth d, with the analytic
    derivative along the curve. Every pixel's window is evaluated at the centre pixel's depth,
-   using each neighbour's own sample to first order (``g(d_p) ≈ g(d_q) + ∂g/∂d (d_p − d_q)``),
+   using each neighbour's own sample to first order (``g(d_p) ≈ g(d_q) + g'(d_q) (d_p − d_q)``),
    so all window sums are box filters; the affine photometric model (gain, offset) makes the
    least-squares step the ZNCC maximiser.
 
