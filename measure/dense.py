@@ -10,7 +10,7 @@
    right position of every left pixel at depth d is the exact forward projection
    (:func:`measure.projection.project`) of its water ray's point at depth d, with the analytic
    derivative along the curve. Every pixel's window is evaluated at the centre pixel's depth,
-   using each neighbour's own sample to first order (``g(d_p) ≈ g(d_q) + ∂g/∂d (d_p − d_q)``),
+   using each neighbour's own sample to first order (``g(d_p) ≈ g(d_q) + g'(d_q) (d_p − d_q)``),
    so all window sums are box filters; the affine photometric model (gain, offset) makes the
    least-squares step the ZNCC maximiser.
 
@@ -38,6 +38,10 @@ from .triangulate import StereoRig
 #: :data:`REFINE_TOLERANCE_PX` along the epipolar curve).
 REFINE_ITERATIONS = 6
 REFINE_TOLERANCE_PX = 1e-3
+#: Largest distance (px along the epipolar curve) the refinement may move a match from the
+#: parabola's start: the sweep's peak is within half a plane step (``step_px`` / 2) of the
+#: truth when it found the right peak; farther moves are drifts into another peak.
+MAX_REFINE_MOVE_PX = 1.0
 #: Variance floor of a window (intensity units², images scaled to [0, 1]): flat windows fail.
 MIN_WINDOW_VARIANCE = 1e-8
 #: Pixels kept clear of the right image border by the interpolated samples (cubic: 2 px).
@@ -136,7 +140,8 @@ def _sweep(warp: PlaneWarp, left, right, depths, window, progress):
         cov = _box(left * warped, window)
         cov -= mean_l * mean_r
         np.maximum(var_r, MIN_WINDOW_VARIANCE, out=var_r)
-        score = cov / (sigma_l * np.sqrt(var_r))
+        with np.errstate(invalid="ignore", divide="ignore"):
+            score = cov / (sigma_l * np.sqrt(var_r))
         score[~(valid & left_ok)] = -np.inf
         after[best_index == k - 1] = score[best_index == k - 1]
         better = score > best
@@ -304,6 +309,7 @@ def _refine(warp: PlaneWarp, left, right, start, candidate, window, depth_range)
     inside = _window_inside(_right_inside(map_u, map_v, warp.rig.right.size), window)
     near, far = depth_range
     with np.errstate(invalid="ignore"):
+        moved_px = np.abs(depth - start) * speed
         converged = inside & (step_px < 0.01) & (depth >= near) & (depth <= far) \
-            & np.isfinite(score)
+            & np.isfinite(score) & (moved_px <= MAX_REFINE_MOVE_PX)
     return depth, score, uv_right, converged

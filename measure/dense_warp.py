@@ -1,4 +1,4 @@
-"""Plane-sweep warps for dense stereo through a flat port: left pixel → right pixel via a depth plane.
+"""Plane-sweep warps for dense stereo through a flat port: left pixel → right pixel via a plane.
 
 A depth plane is ``N · (X − C_left) = d`` (N the port normal, C_left the left camera centre, d in
 mm). For one plane the warp map sends every left pixel along its water ray (``Camera.rays`` →
@@ -6,8 +6,8 @@ mm). For one plane the warp map sends every left pixel along its water ray (``Ca
 the port (:func:`project`, the exact Fermat forward model). The map is smooth, so it is computed
 exactly on a coarse grid of left pixels and interpolated to full resolution (``cv2.resize``,
 bilinear: OpenCV's bicubic kernel (a = −0.75) does not even reproduce a linear ramp and misses
-by ~0.07 px per grid step, bilinear's error falls as step² / f); ``model="pinhole"`` runs the same code with straight rays and pinhole projection (the
-port ignored).
+by ~0.07 px per grid step, bilinear's error falls as step² / f); ``model="pinhole"`` runs the
+same code with straight rays and pinhole projection (the port ignored).
 
 Units mm; reference frame = left camera frame; OpenCV pixels ``(u, v)``, integer = pixel centre.
 """
