@@ -24,7 +24,9 @@ Units mm; reference frame = left camera frame; OpenCV pixels ``(u, v)``, integer
 
 from __future__ import annotations
 
+import os
 import time
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import cv2
@@ -114,48 +116,105 @@ def _right_inside(map_u, map_v, size) -> np.ndarray:
         return (map_u >= m) & (map_u <= width - 1 - m) & (map_v >= m) & (map_v <= height - 1 - m)
 
 
+def _row_bands(height: int, halo: int, workers: int):
+    """Row bands ``(r0, r1, lo, hi)`` covering ``height`` rows: band rows ``[r0, r1)`` and the
+    rows ``[lo, hi)`` their window filters read (``halo`` rows more on each side, clipped)."""
+    count = min(height, max(1, 4 * workers))
+    edges = np.linspace(0, height, count + 1).round().astype(int)
+    return [(r0, r1, max(r0 - halo, 0), min(r1 + halo, height))
+            for r0, r1 in zip(edges[:-1], edges[1:]) if r1 > r0]
+
+
+def _workers() -> int:
+    return max(1, os.cpu_count() or 1)
+
+
+class _SweepBand:
+    """Running-argmax state of one row band of the sweep (see :func:`_sweep`)."""
+
+    def __init__(self, left, mean_l, inv_sigma_l, r0, r1, lo, hi):
+        self.r0, self.r1, self.lo, self.hi = r0, r1, lo, hi
+        self.left = left[lo:hi]
+        self.mean_l = mean_l[r0:r1]
+        self.inv_sigma_l = inv_sigma_l[r0:r1]
+        shape = (r1 - r0, left.shape[1])
+        self.best = np.full(shape, -np.inf, np.float32)
+        self.best_index = np.full(shape, -1, np.int32)
+        self.before = np.full(shape, -np.inf, np.float32)
+        self.after = np.full(shape, -np.inf, np.float32)
+        self.previous = np.full(shape, -np.inf, np.float32)
+        self.score = np.empty(shape, np.float32)
+        self.mask = np.empty(shape, bool)
+
+    def plane(self, k, warp, right, depth_map, window):
+        """Score plane ``k`` (maps ``depth_map`` = full-image ``(map_u, map_v)``) on this band
+        and update the running argmax; returns the seconds spent in remap and in ZNCC."""
+        t0 = time.perf_counter()
+        map_u, map_v = depth_map
+        map_u, map_v = map_u[self.lo:self.hi], map_v[self.lo:self.hi]
+        warped = cv2.remap(right, map_u, map_v, cv2.INTER_CUBIC, borderMode=cv2.BORDER_REFLECT)
+        valid = _window_inside(_right_inside(map_u, map_v, warp.rig.right.size), window)
+        t1 = time.perf_counter()
+        inner = slice(self.r0 - self.lo, self.r1 - self.lo)
+        mean_r = _box(warped, window)[inner]
+        var_r = _box(warped * warped, window)[inner]
+        cov = _box(self.left * warped, window)[inner]
+        var_r -= mean_r * mean_r
+        np.maximum(var_r, MIN_WINDOW_VARIANCE, out=var_r)
+        np.sqrt(var_r, out=var_r)
+        mean_r *= self.mean_l
+        cov -= mean_r
+        cov *= self.inv_sigma_l  # 0 where the left window is flat (masked below)
+        score = self.score
+        np.divide(cov, var_r, out=score)
+        np.logical_and(valid[inner], self.inv_sigma_l > 0, out=self.mask)
+        np.copyto(score, -np.inf, where=~self.mask)
+        np.equal(self.best_index, k - 1, out=self.mask)
+        np.copyto(self.after, score, where=self.mask)
+        better = np.greater(score, self.best, out=self.mask)
+        np.copyto(self.before, self.previous, where=better)
+        np.copyto(self.best, score, where=better)
+        np.copyto(self.best_index, k, where=better)
+        np.copyto(self.after, -np.inf, where=better)
+        self.previous, self.score = score, self.previous
+        return t1 - t0, time.perf_counter() - t1
+
+
 def _sweep(warp: PlaneWarp, left, right, depths, window, progress):
     """Running argmax of the ZNCC over the planes: best score, best plane, the scores of the
-    planes before and after the best (−inf where missing)."""
-    shape = left.shape
+    planes before and after the best (−inf where missing).
+
+    The left window statistics are computed once; per plane, the warp map is built in full,
+    then row bands (each with the window's halo rows) are remapped, scored and merged into
+    their share of the running argmax on a thread pool (NumPy and OpenCV release the GIL)."""
     mean_l = _box(left, window)
     sigma_l = np.sqrt(np.maximum(_box(left * left, window) - mean_l * mean_l, 0.0))
     left_ok = sigma_l > np.sqrt(MIN_WINDOW_VARIANCE)
-    best = np.full(shape, -np.inf, np.float32)
-    best_index = np.full(shape, -1, np.int32)
-    before = np.full(shape, -np.inf, np.float32)
-    after = np.full(shape, -np.inf, np.float32)
-    previous = np.full(shape, -np.inf, np.float32)
+    inv_sigma_l = np.zeros_like(sigma_l)
+    np.divide(1.0, sigma_l, out=inv_sigma_l, where=left_ok)
+    workers = _workers()
+    bands = [_SweepBand(left, mean_l, inv_sigma_l, *band)
+             for band in _row_bands(left.shape[0], window // 2, workers)]
     times = {"warp maps": 0.0, "remap": 0.0, "zncc": 0.0}
-    for k, depth in enumerate(depths):
-        t0 = time.perf_counter()
-        map_u, map_v = warp.right_map(depth)
-        t1 = time.perf_counter()
-        warped = cv2.remap(right, map_u, map_v, cv2.INTER_CUBIC, borderMode=cv2.BORDER_REFLECT)
-        valid = _window_inside(_right_inside(map_u, map_v, warp.rig.right.size), window)
-        t2 = time.perf_counter()
-        mean_r = _box(warped, window)
-        var_r = _box(warped * warped, window)
-        var_r -= mean_r * mean_r
-        cov = _box(left * warped, window)
-        cov -= mean_l * mean_r
-        np.maximum(var_r, MIN_WINDOW_VARIANCE, out=var_r)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            score = cov / (sigma_l * np.sqrt(var_r))
-        score[~(valid & left_ok)] = -np.inf
-        after[best_index == k - 1] = score[best_index == k - 1]
-        better = score > best
-        before[better] = previous[better]
-        best[better] = score[better]
-        best_index[better] = k
-        after[better] = -np.inf
-        previous = score
-        times["remap"] += t2 - t1
-        times["warp maps"] += t1 - t0
-        times["zncc"] += time.perf_counter() - t2
-        if progress is not None:
-            progress(k + 1, len(depths))
-    return best, best_index, before, after, times
+    with ThreadPoolExecutor(max_workers=workers) as pool:
+        for k, depth in enumerate(depths):
+            t0 = time.perf_counter()
+            maps = warp.right_map(depth)
+            t1 = time.perf_counter()
+            parts = list(pool.map(lambda band: band.plane(k, warp, right, maps, window), bands))
+            elapsed = time.perf_counter() - t1
+            # wall time of the banded stage, shared out by the bands' own remap / ZNCC split
+            remap, zncc = (sum(column) for column in zip(*parts))
+            times["remap"] += elapsed * remap / max(remap + zncc, 1e-12)
+            times["zncc"] += elapsed * zncc / max(remap + zncc, 1e-12)
+            times["warp maps"] += t1 - t0
+            if progress is not None:
+                progress(k + 1, len(depths))
+
+    def gather(name):
+        return np.concatenate([getattr(band, name) for band in bands])
+
+    return gather("best"), gather("best_index"), gather("before"), gather("after"), times
 
 
 def match_dense(rig: StereoRig, left, right, depth_range, *, model: str = "refractive",
