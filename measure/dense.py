@@ -287,8 +287,70 @@ def _start_depth(depths, best_index, best, before, after):
     return np.interp(position, np.arange(len(depths)), depths)
 
 
+def _gauss_newton_band(band, window, f, mean_f, var_f, g, h, rate_u, rate_v, delta, score,
+                       change, speed, final):
+    """One Gauss–Newton step on the row band ``band`` = ``(r0, r1, lo, hi)``: writes rows
+    ``[r0, r1)`` of ``score`` (ZNCC at the current depths) and, unless ``final``, of ``change``
+    (the depth step, mm, clipped to 1 px along the curve) and ``speed`` (px/mm)."""
+    r0, r1, lo, hi = band
+    inner = slice(r0 - lo, r1 - lo)
+    rows = slice(r0, r1)
+
+    def box(image):
+        return _box(image, window)[inner]
+
+    g, h, f = g[lo:hi], h[lo:hi], f[lo:hi]
+    # g'(q) = g(q) + h(q) (d_p − d_q) = u(q) + h(q) δ_p, with δ = d − reference
+    u = g - h * delta[lo:hi]
+    m_u, m_h = box(u), box(h)
+    m_uu, m_uh, m_hh = box(u * u), box(u * h), box(h * h)
+    m_fu, m_fh = box(f * u), box(f * h)
+    delta, mean_f, var_f = delta[rows], mean_f[rows], var_f[rows]
+    mean_g = m_u + delta * m_h
+    c_gg = m_uu + 2 * delta * m_uh + delta * delta * m_hh - mean_g * mean_g
+    c_fg = m_fu + delta * m_fh - mean_f * mean_g
+    with np.errstate(invalid="ignore", divide="ignore"):
+        score[rows] = c_fg / np.sqrt(var_f * np.maximum(c_gg, MIN_WINDOW_VARIANCE))
+        if final:
+            return
+        c_gh = m_uh + delta * m_hh - mean_g * m_h
+        c_hh = m_hh - m_h * m_h
+        c_fh = m_fh - mean_f * m_h
+        determinant = c_gg * c_hh - c_gh * c_gh
+        gain = (c_fg * c_hh - c_fh * c_gh) / determinant
+        slope = (c_gg * c_fh - c_gh * c_fg) / determinant
+        step = slope / gain
+        band_speed = np.hypot(rate_u[rows], rate_v[rows])
+        limit = 1.0 / np.maximum(band_speed, 1e-12)  # at most 1 px along the curve per step
+        change[rows] = np.clip(np.nan_to_num(step, nan=0.0), -limit, limit)
+        speed[rows] = band_speed
+
+
+#: Largest map width (px) handed to ``cv2.remap``, which needs maps under 32767 px a side.
+_SAMPLE_COLUMNS = 16384
+
+
+def _sample(image, u, v):
+    """``cv2.remap`` (bicubic, constant 0 outside) of ``image`` at the points ``(u, v)`` (each
+    ``(N,)``): the same values a full-image map holding these points gives."""
+    n = u.size
+    rows = max(1, -(-n // _SAMPLE_COLUMNS))
+    columns = min(max(n, 1), _SAMPLE_COLUMNS)
+    map_u = np.full(rows * columns, -1e6, np.float32)
+    map_v = np.full(rows * columns, -1e6, np.float32)
+    map_u[:n], map_v[:n] = u, v
+    sampled = cv2.remap(image, map_u.reshape(rows, columns), map_v.reshape(rows, columns),
+                        cv2.INTER_CUBIC, borderMode=cv2.BORDER_CONSTANT)
+    return sampled.reshape(-1)[:n]
+
+
 def _refine(warp: PlaneWarp, left, right, start, candidate, window, depth_range):
     """Gauss–Newton along the epipolar curve (see the module docstring), all pixels at once.
+
+    A pixel whose step falls to :data:`REFINE_TOLERANCE_PX` or below keeps its depth (its step
+    is not applied), so its projection and samples stay valid; only pixels whose depth moved
+    are projected and sampled again, while every window's sums are recomputed from all samples
+    (a kept pixel moves again if its neighbours' moves push its step above the tolerance).
 
     Returns the refined depth ``(H, W)``, the ZNCC at it, the right pixels ``(H, W, 2)`` and
     whether the pixel converged (last step below 0.01 px, depth inside ``depth_range``, whole
@@ -318,53 +380,50 @@ def _refine(warp: PlaneWarp, left, right, start, candidate, window, depth_range)
     reference = float(np.median(depth[active])) if rows.size else 0.0
     step_px = np.full((height, width), np.inf)
     uv_right = np.full((height, width, 2), np.nan)
-    for iteration in range(REFINE_ITERATIONS + 1):
-        pixels, rate = warp.right_pixels_at_depth(origins, directions, depth[rows, cols])
-        map_u = np.full((height, width), -1e6, np.float32)
-        map_v = np.full((height, width), -1e6, np.float32)
-        map_u[rows, cols], map_v[rows, cols] = pixels[:, 0], pixels[:, 1]
-        uv_right[rows, cols] = pixels
-        rate_u = np.zeros((height, width))
-        rate_v = np.zeros((height, width))
-        rate_u[rows, cols], rate_v[rows, cols] = rate[:, 0], rate[:, 1]
-        g = cv2.remap(right, map_u, map_v, cv2.INTER_CUBIC,
-                      borderMode=cv2.BORDER_CONSTANT).astype(np.float64)
-        h = cv2.remap(gradient_u, map_u, map_v, cv2.INTER_CUBIC,
-                      borderMode=cv2.BORDER_CONSTANT) * rate_u
-        h += cv2.remap(gradient_v, map_u, map_v, cv2.INTER_CUBIC,
-                       borderMode=cv2.BORDER_CONSTANT) * rate_v
-        # g'(q) = g(q) + h(q) (d_p − d_q) = u(q) + h(q) δ_p, with δ = d − reference
-        delta = depth - reference
-        u = g - h * delta
-        m_u, m_h = _box(u, window), _box(h, window)
-        m_uu, m_uh, m_hh = _box(u * u, window), _box(u * h, window), _box(h * h, window)
-        m_fu, m_fh = _box(f * u, window), _box(f * h, window)
-        mean_g = m_u + delta * m_h
-        c_gg = m_uu + 2 * delta * m_uh + delta * delta * m_hh - mean_g * mean_g
-        c_gh = m_uh + delta * m_hh - mean_g * m_h
-        c_hh = m_hh - m_h * m_h
-        c_fg = m_fu + delta * m_fh - mean_f * mean_g
-        c_fh = m_fh - mean_f * m_h
-        with np.errstate(invalid="ignore", divide="ignore"):
-            score = c_fg / np.sqrt(var_f * np.maximum(c_gg, MIN_WINDOW_VARIANCE))
-            if iteration == REFINE_ITERATIONS:
+    # samples of the right image (g), of its derivative along the epipolar curve (h) and the
+    # curve's rate (px/mm) at every active pixel's depth; 0 elsewhere, like a map off the image
+    map_u = np.full((height, width), -1e6, np.float32)
+    map_v = np.full((height, width), -1e6, np.float32)
+    g = np.zeros((height, width))
+    h = np.zeros((height, width))
+    rate_u = np.zeros((height, width))
+    rate_v = np.zeros((height, width))
+    moved = np.arange(rows.size)  # active pixels (indices into rows, cols) to project again
+    position = np.full((height, width), -1, np.int64)
+    position[rows, cols] = np.arange(rows.size)
+    score = np.empty((height, width))
+    change = np.empty((height, width))
+    speed = np.zeros((height, width))
+    bands = _row_bands(height, window // 2, _workers())
+    with ThreadPoolExecutor(max_workers=_workers()) as pool:
+        for iteration in range(REFINE_ITERATIONS + 1):
+            if moved.size:
+                r, c = rows[moved], cols[moved]
+                pixels, rate = warp.right_pixels_at_depth(origins[moved], directions[moved],
+                                                          depth[r, c])
+                uv_right[r, c] = pixels
+                map_u[r, c], map_v[r, c] = pixels[:, 0], pixels[:, 1]
+                rate_u[r, c], rate_v[r, c] = rate[:, 0], rate[:, 1]
+                u_m, v_m = map_u[r, c], map_v[r, c]
+                g[r, c] = _sample(right, u_m, v_m)
+                h[r, c] = _sample(gradient_u, u_m, v_m) * rate[:, 0]
+                h[r, c] += _sample(gradient_v, u_m, v_m) * rate[:, 1]
+            final = iteration == REFINE_ITERATIONS
+            delta = depth - reference
+            list(pool.map(lambda band: _gauss_newton_band(
+                band, window, f, mean_f, var_f, g, h, rate_u, rate_v, delta, score, change, speed,
+                final), bands))
+            if final:
                 break
-            determinant = c_gg * c_hh - c_gh * c_gh
-            gain = (c_fg * c_hh - c_fh * c_gh) / determinant
-            slope = (c_gg * c_fh - c_gh * c_fg) / determinant
-            change = slope / gain
-            speed = np.hypot(rate_u, rate_v)
-            limit = 1.0 / np.maximum(speed, 1e-12)  # at most 1 px along the curve per step
-            change = np.clip(np.nan_to_num(change, nan=0.0), -limit, limit)
-        change[~active] = 0.0
-        depth += change
-        depth[followers] = depth[leaders]
-        step_px = np.abs(change) * speed
-        if not np.any(step_px[candidate] > REFINE_TOLERANCE_PX):
-            pixels, _ = warp.right_pixels_at_depth(origins, directions, depth[rows, cols])
-            uv_right[rows, cols] = pixels
-            map_u[rows, cols], map_v[rows, cols] = pixels[:, 0], pixels[:, 1]
-            break
+            change[~active] = 0.0
+            step_px = np.abs(change) * speed
+            change[step_px <= REFINE_TOLERANCE_PX] = 0.0  # converged: keep depth and samples
+            previous = depth.copy()
+            depth += change
+            depth[followers] = depth[leaders]
+            moved = position[active & (depth != previous)]
+            if not np.any(step_px[candidate] > REFINE_TOLERANCE_PX):
+                break
     inside = _window_inside(_right_inside(map_u, map_v, warp.rig.right.size), window)
     near, far = depth_range
     with np.errstate(invalid="ignore"):

@@ -72,7 +72,8 @@ def main(argv=None) -> int:
     parser.add_argument("--supersample", type=int, default=3)
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--models", nargs="+", default=["refractive", "pinhole"])
-    parser.add_argument("--cache", nargs="?", const=str(Path(tempfile.gettempdir()) / "dense_bench"),
+    parser.add_argument("--cache", nargs="?",
+                        const=str(Path(tempfile.gettempdir()) / "dense_bench"),
                         default=None, metavar="DIR",
                         help="keep/reuse the rendered pair as .npy in DIR")
     args = parser.parse_args(argv)
