@@ -130,13 +130,20 @@ def _workers() -> int:
 
 
 class _SweepBand:
-    """Running-argmax state of one row band of the sweep (see :func:`_sweep`)."""
+    """Running-argmax state of one row band of the sweep (see :func:`_sweep`).
 
-    def __init__(self, left, mean_l, inv_sigma_l, r0, r1, lo, hi):
+    The per-pixel selections use OpenCV's masked copies (``cv2.compare`` masks, ``cv2.copyTo``),
+    many times faster than NumPy's masked assignment on masks as mixed as these."""
+
+    def __init__(self, left, mean_l, inv_sigma_l, r0, r1, lo, hi, window):
         self.r0, self.r1, self.lo, self.hi = r0, r1, lo, hi
+        self.window = window
+        self.kernel = np.ones((window, window), np.uint8)
+        self.inner = slice(r0 - lo, r1 - lo)
         self.left = left[lo:hi]
         self.mean_l = mean_l[r0:r1]
         self.inv_sigma_l = inv_sigma_l[r0:r1]
+        self.left_ok = cv2.compare(self.inv_sigma_l, 0.0, cv2.CMP_GT)
         shape = (r1 - r0, left.shape[1])
         self.best = np.full(shape, -np.inf, np.float32)
         self.best_index = np.full(shape, -1, np.int32)
@@ -144,18 +151,23 @@ class _SweepBand:
         self.after = np.full(shape, -np.inf, np.float32)
         self.previous = np.full(shape, -np.inf, np.float32)
         self.score = np.empty(shape, np.float32)
-        self.mask = np.empty(shape, bool)
+        self.minus_inf = np.full(shape, -np.inf, np.float32)
+        self.index = np.empty(shape, np.int32)
 
-    def plane(self, k, warp, right, depth_map, window):
-        """Score plane ``k`` (maps ``depth_map`` = full-image ``(map_u, map_v)``) on this band
-        and update the running argmax; returns the seconds spent in remap and in ZNCC."""
+    def plane(self, k, warp, right, coarse):
+        """Score plane ``k`` (``coarse``: its coarse-grid right pixels) on this band and update
+        the running argmax; returns the seconds spent on the warp map, remap and ZNCC."""
         t0 = time.perf_counter()
-        map_u, map_v = depth_map
-        map_u, map_v = map_u[self.lo:self.hi], map_v[self.lo:self.hi]
-        warped = cv2.remap(right, map_u, map_v, cv2.INTER_CUBIC, borderMode=cv2.BORDER_REFLECT)
-        valid = _window_inside(_right_inside(map_u, map_v, warp.rig.right.size), window)
+        maps = warp.right_map_rows(coarse, self.lo, self.hi)
         t1 = time.perf_counter()
-        inner = slice(self.r0 - self.lo, self.r1 - self.lo)
+        warped = cv2.remap(right, maps, None, cv2.INTER_CUBIC, borderMode=cv2.BORDER_REFLECT)
+        width, height = warp.rig.right.size
+        m = RIGHT_MARGIN_PX
+        inside = cv2.inRange(maps, (m, m), (width - 1 - m, height - 1 - m))
+        valid = cv2.erode(inside, self.kernel, borderType=cv2.BORDER_CONSTANT,
+                          borderValue=0)[self.inner]
+        t2 = time.perf_counter()
+        window, inner = self.window, self.inner
         mean_r = _box(warped, window)[inner]
         var_r = _box(warped * warped, window)[inner]
         cov = _box(self.left * warped, window)[inner]
@@ -167,47 +179,54 @@ class _SweepBand:
         cov *= self.inv_sigma_l  # 0 where the left window is flat (masked below)
         score = self.score
         np.divide(cov, var_r, out=score)
-        np.logical_and(valid[inner], self.inv_sigma_l > 0, out=self.mask)
-        np.copyto(score, -np.inf, where=~self.mask)
-        np.equal(self.best_index, k - 1, out=self.mask)
-        np.copyto(self.after, score, where=self.mask)
-        better = np.greater(score, self.best, out=self.mask)
-        np.copyto(self.before, self.previous, where=better)
-        np.copyto(self.best, score, where=better)
-        np.copyto(self.best_index, k, where=better)
-        np.copyto(self.after, -np.inf, where=better)
+        rejected = cv2.compare(cv2.bitwise_and(valid, self.left_ok), 0, cv2.CMP_EQ)
+        cv2.copyTo(self.minus_inf, rejected, score)
+        cv2.copyTo(score, cv2.compare(self.best_index, k - 1, cv2.CMP_EQ), self.after)
+        better = cv2.compare(score, self.best, cv2.CMP_GT)
+        cv2.copyTo(self.previous, better, self.before)
+        cv2.copyTo(score, better, self.best)
+        self.index.fill(k)
+        cv2.copyTo(self.index, better, self.best_index)
+        cv2.copyTo(self.minus_inf, better, self.after)
         self.previous, self.score = score, self.previous
-        return t1 - t0, time.perf_counter() - t1
+        return t1 - t0, t2 - t1, time.perf_counter() - t2
 
 
 def _sweep(warp: PlaneWarp, left, right, depths, window, progress):
     """Running argmax of the ZNCC over the planes: best score, best plane, the scores of the
     planes before and after the best (−inf where missing).
 
-    The left window statistics are computed once; per plane, the warp map is built in full,
-    then row bands (each with the window's halo rows) are remapped, scored and merged into
-    their share of the running argmax on a thread pool (NumPy and OpenCV release the GIL)."""
+    The left window statistics are computed once. Per plane, the coarse-grid right pixels
+    are computed (the next plane's while the bands work on this one), then row bands (each
+    with the window's halo rows) interpolate their rows of the warp map, remap, score and merge
+    into their share of the running argmax on a thread pool (NumPy and OpenCV release the
+    GIL). Stage times: the wall time of the banded work shared out in proportion to the bands'
+    own warp map / remap / ZNCC times, plus the wait for the coarse grid under warp maps."""
     mean_l = _box(left, window)
     sigma_l = np.sqrt(np.maximum(_box(left * left, window) - mean_l * mean_l, 0.0))
     left_ok = sigma_l > np.sqrt(MIN_WINDOW_VARIANCE)
     inv_sigma_l = np.zeros_like(sigma_l)
     np.divide(1.0, sigma_l, out=inv_sigma_l, where=left_ok)
     workers = _workers()
-    bands = [_SweepBand(left, mean_l, inv_sigma_l, *band)
+    bands = [_SweepBand(left, mean_l, inv_sigma_l, *band, window)
              for band in _row_bands(left.shape[0], window // 2, workers)]
     times = {"warp maps": 0.0, "remap": 0.0, "zncc": 0.0}
-    with ThreadPoolExecutor(max_workers=workers) as pool:
-        for k, depth in enumerate(depths):
+    with ThreadPoolExecutor(max_workers=workers) as pool, \
+            ThreadPoolExecutor(max_workers=1) as ahead:
+        upcoming = ahead.submit(warp.grid_right_pixels, depths[0])
+        for k in range(len(depths)):
             t0 = time.perf_counter()
-            maps = warp.right_map(depth)
+            coarse = upcoming.result().astype(np.float32)
+            if k + 1 < len(depths):
+                upcoming = ahead.submit(warp.grid_right_pixels, depths[k + 1])
             t1 = time.perf_counter()
-            parts = list(pool.map(lambda band: band.plane(k, warp, right, maps, window), bands))
+            parts = list(pool.map(lambda band: band.plane(k, warp, right, coarse), bands))
             elapsed = time.perf_counter() - t1
-            # wall time of the banded stage, shared out by the bands' own remap / ZNCC split
-            remap, zncc = (sum(column) for column in zip(*parts))
-            times["remap"] += elapsed * remap / max(remap + zncc, 1e-12)
-            times["zncc"] += elapsed * zncc / max(remap + zncc, 1e-12)
-            times["warp maps"] += t1 - t0
+            spent = [sum(column) for column in zip(*parts)]
+            total = max(sum(spent), 1e-12)
+            times["warp maps"] += t1 - t0 + elapsed * spent[0] / total
+            times["remap"] += elapsed * spent[1] / total
+            times["zncc"] += elapsed * spent[2] / total
             if progress is not None:
                 progress(k + 1, len(depths))
 
@@ -267,9 +286,11 @@ def match_dense(rig: StereoRig, left, right, depth_range, *, model: str = "refra
     timings["parabola"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
+    refine_times = {}
     depth, score, uv_right, converged = _refine(warp, left, right, start, candidate, window,
-                                                (near, far))
+                                                (near, far), refine_times)
     timings["refinement"] = time.perf_counter() - t0
+    timings.update(refine_times)
     keep = candidate & converged & (score >= min_score)
     rows, cols = np.nonzero(keep)
     depth_map = np.where(keep, depth, np.nan)
@@ -344,7 +365,7 @@ def _sample(image, u, v):
     return sampled.reshape(-1)[:n]
 
 
-def _refine(warp: PlaneWarp, left, right, start, candidate, window, depth_range):
+def _refine(warp: PlaneWarp, left, right, start, candidate, window, depth_range, times=None):
     """Gauss–Newton along the epipolar curve (see the module docstring), all pixels at once.
 
     A pixel whose step falls to :data:`REFINE_TOLERANCE_PX` or below keeps its depth (its step
@@ -354,7 +375,11 @@ def _refine(warp: PlaneWarp, left, right, start, candidate, window, depth_range)
 
     Returns the refined depth ``(H, W)``, the ZNCC at it, the right pixels ``(H, W, 2)`` and
     whether the pixel converged (last step below 0.01 px, depth inside ``depth_range``, whole
-    right window inside the right image)."""
+    right window inside the right image). ``times`` (a dict), if given, receives the seconds
+    spent in the set-up (rays, nearest candidates), in projecting and sampling, and in the
+    window sums and steps."""
+    t_start = time.perf_counter()
+    t_project = t_sums = 0.0
     height, width = left.shape
     kernel = np.ones((window, window), np.uint8)
     active = cv2.dilate(candidate.astype(np.uint8), kernel).astype(bool)
@@ -396,7 +421,9 @@ def _refine(warp: PlaneWarp, left, right, start, candidate, window, depth_range)
     speed = np.zeros((height, width))
     bands = _row_bands(height, window // 2, _workers())
     with ThreadPoolExecutor(max_workers=_workers()) as pool:
+        t_setup = time.perf_counter() - t_start
         for iteration in range(REFINE_ITERATIONS + 1):
+            t0 = time.perf_counter()
             if moved.size:
                 r, c = rows[moved], cols[moved]
                 pixels, rate = warp.right_pixels_at_depth(origins[moved], directions[moved],
@@ -408,12 +435,15 @@ def _refine(warp: PlaneWarp, left, right, start, candidate, window, depth_range)
                 g[r, c] = _sample(right, u_m, v_m)
                 h[r, c] = _sample(gradient_u, u_m, v_m) * rate[:, 0]
                 h[r, c] += _sample(gradient_v, u_m, v_m) * rate[:, 1]
+            t1 = time.perf_counter()
             final = iteration == REFINE_ITERATIONS
             delta = depth - reference
             list(pool.map(lambda band: _gauss_newton_band(
                 band, window, f, mean_f, var_f, g, h, rate_u, rate_v, delta, score, change, speed,
                 final), bands))
             if final:
+                t_project += t1 - t0
+                t_sums += time.perf_counter() - t1
                 break
             change[~active] = 0.0
             step_px = np.abs(change) * speed
@@ -422,6 +452,8 @@ def _refine(warp: PlaneWarp, left, right, start, candidate, window, depth_range)
             depth += change
             depth[followers] = depth[leaders]
             moved = position[active & (depth != previous)]
+            t_project += t1 - t0
+            t_sums += time.perf_counter() - t1
             if not np.any(step_px[candidate] > REFINE_TOLERANCE_PX):
                 break
     inside = _window_inside(_right_inside(map_u, map_v, warp.rig.right.size), window)
@@ -430,4 +462,8 @@ def _refine(warp: PlaneWarp, left, right, start, candidate, window, depth_range)
         moved_px = np.abs(depth - start) * speed
         converged = inside & (step_px < 0.01) & (depth >= near) & (depth <= far) \
             & np.isfinite(score) & (moved_px <= MAX_REFINE_MOVE_PX)
+    if times is not None:
+        times.update({"refine set-up": t_setup, "refine projection": t_project,
+                      "refine sums": t_sums, "refine checks": time.perf_counter() - t_start
+                      - t_setup - t_project - t_sums})
     return depth, score, uv_right, converged

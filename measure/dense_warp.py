@@ -111,13 +111,23 @@ class PlaneWarp:
     def right_map(self, depth: float):
         """Full-resolution warp map at one depth plane: ``(map_u, map_v)``, each ``(H, W)``
         float32 (the right pixel of every left pixel), for ``cv2.remap``."""
-        coarse = self.grid_right_pixels(depth).astype(np.float32)
+        full = self.right_map_rows(self.grid_right_pixels(depth), 0, self.rig.left.size[1])
+        return np.ascontiguousarray(full[..., 0]), np.ascontiguousarray(full[..., 1])
+
+    def right_map_rows(self, coarse: np.ndarray, lo: int, hi: int) -> np.ndarray:
+        """Rows ``[lo, hi)`` of the full-resolution warp map interpolated from the coarse grid's
+        right pixels ``coarse`` (:meth:`grid_right_pixels`): ``(hi − lo, W, 2)`` float32, a
+        two-channel map for ``cv2.remap``. Only the coarse rows these rows need are resized (one
+        more on each side, so the band's rows get the same weights as in the whole map)."""
         step, pad = self.grid_step, GRID_PAD_NODES
         rows, cols = self.grid_shape
-        full = cv2.resize(coarse, (cols * step, rows * step), interpolation=cv2.INTER_LINEAR)
-        width, height = self.rig.left.size
-        full = full[pad * step:pad * step + height, pad * step:pad * step + width]
-        return np.ascontiguousarray(full[..., 0]), np.ascontiguousarray(full[..., 1])
+        top, bottom = lo + pad * step, hi + pad * step  # rows of the padded fine grid
+        first = max(top // step - 1, 0)
+        last = min(-(-bottom // step) + 1, rows)
+        fine = cv2.resize(np.asarray(coarse[first:last], dtype=np.float32),
+                          (cols * step, (last - first) * step), interpolation=cv2.INTER_LINEAR)
+        width = self.rig.left.size[0]
+        return fine[top - first * step:bottom - first * step, pad * step:pad * step + width]
 
     def sweep_depths(self, near: float, far: float, step_px: float) -> np.ndarray:
         """Depth planes from ``near`` to ``far`` (mm), spaced so that no in-image left pixel's
