@@ -12,7 +12,13 @@
    derivative along the curve. Every pixel's window is evaluated at the centre pixel's depth,
    using each neighbour's own sample to first order (``g(d_p) ≈ g(d_q) + g'(d_q) (d_p − d_q)``),
    so all window sums are box filters; the affine photometric model (gain, offset) makes the
-   least-squares step the ZNCC maximiser.
+   least-squares step the ZNCC maximiser. A pixel whose step is at most
+   :data:`REFINE_TOLERANCE_PX` keeps its depth, so only the pixels that moved are projected
+   again; the window sums are recomputed everywhere each step.
+
+The heavy per-pixel work runs in row bands on a thread pool (NumPy and OpenCV release the GIL);
+a band's window filters also read the halo rows half a window beyond it, so the bands give the
+whole image's result (up to the rounding of the filters' running sums).
 
 The result per pixel is the refined depth parameter d (the depth map, mm along the port normal
 from the left camera centre) and the exact right pixel of the left ray's point at that depth;
@@ -37,7 +43,8 @@ from .dense_warp import MODELS, PlaneWarp
 from .triangulate import StereoRig
 
 #: Gauss–Newton iterations of the refinement (it stops earlier once every step is below
-#: :data:`REFINE_TOLERANCE_PX` along the epipolar curve).
+#: :data:`REFINE_TOLERANCE_PX` along the epipolar curve; a pixel whose step is at most that
+#: keeps its depth meanwhile).
 REFINE_ITERATIONS = 6
 REFINE_TOLERANCE_PX = 1e-3
 #: Largest distance (px along the epipolar curve) the refinement may move a match from the
