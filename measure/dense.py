@@ -45,8 +45,13 @@ from .triangulate import StereoRig
 #: Gauss–Newton iterations of the refinement (it stops earlier once every step is below
 #: :data:`REFINE_TOLERANCE_PX` along the epipolar curve; a pixel whose step is at most that
 #: keeps its depth meanwhile).
-REFINE_ITERATIONS = 6
+REFINE_ITERATIONS = 10
 REFINE_TOLERANCE_PX = 1e-3
+#: Fraction applied of a Gauss–Newton step that reverses the pixel's previous step.
+REFINE_DAMPING = 0.5
+#: A match counts as converged when its last Gauss–Newton step along the epipolar curve is
+#: below this (px).
+CONVERGED_STEP_PX = 0.01
 #: Largest distance (px along the epipolar curve) the refinement may move a match from the
 #: parabola's start: the sweep's peak is within half a plane step (``step_px`` / 2) of the
 #: truth when it found the right peak; farther moves are drifts into another peak.
@@ -425,6 +430,7 @@ def _refine(warp: PlaneWarp, left, right, start, candidate, window, depth_range,
     position[rows, cols] = np.arange(rows.size)
     score = np.empty((height, width))
     change = np.empty((height, width))
+    last_change = np.zeros((height, width))
     speed = np.zeros((height, width))
     bands = _row_bands(height, window // 2, _workers())
     with ThreadPoolExecutor(max_workers=_workers()) as pool:
@@ -456,6 +462,9 @@ def _refine(warp: PlaneWarp, left, right, start, candidate, window, depth_range,
             step_px = np.abs(change) * speed
             change[step_px <= REFINE_TOLERANCE_PX] = 0.0  # converged: keep depth and samples
             previous = depth.copy()
+            # a step against the previous one (an oscillation of the coupled windows) is damped
+            change[change * last_change < 0] *= REFINE_DAMPING
+            last_change = change.copy()
             depth += change
             depth[followers] = depth[leaders]
             moved = position[active & (depth != previous)]
@@ -467,7 +476,7 @@ def _refine(warp: PlaneWarp, left, right, start, candidate, window, depth_range,
     near, far = depth_range
     with np.errstate(invalid="ignore"):
         moved_px = np.abs(depth - start) * speed
-        converged = inside & (step_px < 0.01) & (depth >= near) & (depth <= far) \
+        converged = inside & (step_px < CONVERGED_STEP_PX) & (depth >= near) & (depth <= far) \
             & np.isfinite(score) & (moved_px <= MAX_REFINE_MOVE_PX)
     if times is not None:
         times.update({"refine set-up": t_setup, "refine projection": t_project,
