@@ -37,9 +37,9 @@ from .reasons import Reason
 
 SOLVERS = ("fermat", "snell")
 
-#: Newton steps on Snell's invariant tried for the start of the Fermat iteration; points that
-#: have not converged by then start from the straight line instead (damped Newton).
-START_ITERATIONS = 12
+#: Newton steps on Snell's invariant that make the start of the Fermat iteration (points whose
+#: start is not finite start from the straight line instead: damped Newton).
+START_STEPS = 3
 
 
 @dataclass(frozen=True)
@@ -217,145 +217,136 @@ def _straight_start(problem: _PlaneProblem):
     return x
 
 
-def _snell_start(problem: _PlaneProblem, max_iterations: int = START_ITERATIONS):
-    """A start for the Fermat iteration: the path that obeys Snell's law, by Newton's method on
-    one unknown per point, ``τ = tan θ_water``.
+def _snell_start(problem: _PlaneProblem, steps: int = START_STEPS):
+    """A start for the Fermat iteration: the path that obeys Snell's law, by a fixed number of
+    Newton steps on one unknown per point, ``τ = tan θ_water``.
 
-    The lateral distance ``ℓ = h_w τ + Σ_{i<w} h_i tan θ_i(τ)`` with ``p = n_w τ / sqrt(1 + τ²)``
-    and ``tan θ_i = p / sqrt(n_i² − p²)``: the water column, which is the longest, is linear in
-    τ, so Newton's method from the paraxial start ``τ0 = ℓ / (h_w + Σ h_i n_w / n_i)`` converges
-    in a few steps. A row stops when the error its last step leaves, estimated from the
-    quadratic convergence as ``|δ_k|³ / δ_{k−1}²``, is below 1e-16 of τ, or when the step is
-    below 1e-15 of τ (the rounding floor); the Fermat step that follows checks it. A stopped
-    row is not moved again, and once few rows are left the iteration continues on those only.
-    Returns the lateral positions of the interface points (list of K ``(N,)`` arrays), a mask
-    of the rows that converged (NaN-free, Snell's invariant below every index) and the number
-    of steps.
+    Snell's invariant ``n_i sin θ_i = n_w sin θ_w`` written with τ gives ``tan θ_i = n_w τ /
+    sqrt(q_i)`` with ``q_i = n_i² + (n_i² − n_w²) τ²`` (one square root per medium), so the
+    lateral distance is ``F(τ) = h_w τ + Σ_{i<w} h_i n_w τ / sqrt(q_i) = ℓ`` and ``F'(τ) = h_w +
+    Σ h_i n_w n_i² / q_i^{3/2}``. The water column, which is the longest, is linear in τ, so
+    Newton's method from the paraxial start ``τ0 = ℓ / (h_w + Σ h_i n_w / n_i)`` converges fast:
+    on the paper's volume (rays up to 30° in the water) the relative error of τ goes 3e-2, 1e-4,
+    2e-9, 4e-16 in three steps. No convergence test here: the Fermat iteration that follows
+    judges convergence (to its own tolerance) and goes on where the start has not got there.
+    Returns the lateral positions of the interface points (list of K ``(N,)`` arrays), a mask of
+    the rows whose start is finite (not finite: Snell's invariant at or above an index on the
+    way, e.g. beyond the critical angle) and the number of steps.
     """
     n = problem.indices
     n_water = n[-1]
-    media = [(n_i, h, h * n_i * n_i) for n_i, h in zip(n[:-1], problem.heights_columns[:-1])]
-    water_all = problem.heights_columns[-1]
-    lateral_all = problem.lateral
-    tau_all = lateral_all / (water_all + sum(h * (n_water / n_i) for n_i, h, _ in media))
-    rows = None  # indices of the working rows (None: all)
-    tau, water, lateral = tau_all, water_all, lateral_all
-    frozen = previous = None
-    iterations = 0
-    for iterations in range(1, max_iterations + 1):
-        cos_water = 1.0 / np.sqrt(1.0 + tau * tau)
-        p = tau * cos_water
-        p *= n_water
-        p2 = p * p
+    water = problem.heights_columns[-1]
+    lateral = problem.lateral
+    # per medium before the water: (n_i², n_i² − n_w², h_i n_w, h_i n_w n_i²)
+    media = [(n_i * n_i, n_i * n_i - n_water * n_water, h * n_water, h * n_water * n_i * n_i)
+             for n_i, h in zip(n[:-1], problem.heights_columns[:-1])]
+    tau = lateral / (water + sum(h * (n_water / n_i)
+                                 for n_i, h in zip(n[:-1], problem.heights_columns[:-1])))
+    if not media:  # no medium before the water (not a FlatPort): the paraxial line is exact
+        steps = 0
+    for _ in range(steps):
+        tau2 = tau * tau
         residual = water * tau
         residual -= lateral
         slope = None
-        for n_i, h, weight in media:
-            inverse_cos = 1.0 / np.sqrt(n_i * n_i - p2)  # 1 / (n_i cos θ_i)
-            residual += (h * p) * inverse_cos
-            term = inverse_cos * inverse_cos
-            term *= inverse_cos
+        for n2, b, weight, weight_slope in media:
+            inverse = b * tau2
+            inverse += n2
+            np.sqrt(inverse, out=inverse)
+            np.divide(1.0, inverse, out=inverse)  # 1 / sqrt(q_i)
+            term = inverse * tau
+            term *= weight
+            residual += term  # h_i tan θ_i
+            np.multiply(inverse, inverse, out=term)
+            term *= inverse
+            term *= weight_slope
             if slope is None:
-                slope = term * weight
+                slope = term
+                slope += water
             else:
-                term *= weight
                 slope += term
-        if slope is None:  # no medium before the water (not a FlatPort): the line is exact
-            step = residual / water
-        else:
-            cos_water *= cos_water * cos_water
-            slope *= cos_water
-            slope *= n_water
-            slope += water
-            step = residual / slope
-        if frozen is not None:
-            step[frozen] = 0.0
-        tau -= step
-        size = np.abs(step)
-        scale = np.abs(tau)
-        small = size <= 1e-15 * scale  # at the rounding floor
-        if previous is not None:
-            # Quadratic convergence: the error left after this step is about κ·δ_k² with
-            # κ ≈ |δ_k| / δ_{k−1}²; done when that is below 1e-16 of τ.
-            small |= size * size * size <= (1e-16 * scale) * (previous * previous)
-        previous = size
-        frozen = small if frozen is None else frozen | small
-        active = np.count_nonzero(~frozen)
-        if active == 0:
-            break
-        if active * 4 <= frozen.size:  # go on with the rows that are left
-            keep = np.flatnonzero(~frozen)
-            if rows is None:
-                tau_all = tau.copy()
-                rows = keep
-            else:
-                tau_all[rows] = tau
-                rows = rows[keep]
-            tau, water, lateral, previous = tau[keep], water[keep], lateral[keep], previous[keep]
-            frozen = np.zeros(keep.size, dtype=bool)
-    converged = np.ones(lateral_all.shape, dtype=bool)
-    if rows is None:
-        tau_all = tau
-        converged = frozen
-    else:
-        tau_all[rows] = tau
-        converged[rows] = frozen
-    p = n_water * tau_all / np.sqrt(1.0 + tau_all * tau_all)
-    p2 = p * p
-    x, position = [], 0.0
-    for n_i, h, _ in media:
-        position = position + (h * p) / np.sqrt(n_i * n_i - p2)
+        residual /= slope
+        tau -= residual
+    x, position = [], None
+    tau2 = tau * tau
+    for n2, b, weight, _ in media:
+        term = b * tau2
+        term += n2
+        np.sqrt(term, out=term)
+        term = (weight * tau) / term
+        position = position + term if x else term
         x.append(position)
-    ok = converged & np.isfinite(position) if media else converged
-    return x, ok, iterations
+    ok = np.isfinite(position) if media else np.ones(lateral.shape, dtype=bool)
+    return x, ok, steps
+
+
+def _rows_of(problem: _PlaneProblem, rows) -> _PlaneProblem:
+    """The plane problem of a subset of its rows (index array)."""
+    def pick(column):
+        return column[rows] if isinstance(column, np.ndarray) and column.ndim else column
+
+    return _PlaneProblem(problem.lateral[rows], problem.indices,
+                         [pick(c) for c in problem.heights_columns],
+                         [pick(c) for c in problem.heights_squared])
 
 
 def _solve_fermat(problem: _PlaneProblem, start=None, max_iterations: int = 60):
     """Newton on μ (offsets from J_k along ε); returns lateral positions x (list of K ``(N,)``).
 
-    Starts from ``start`` (K arrays) or μ = 0, the straight line O→P through the points J_k.
-    While a step is large (more than 1e-6 of the lateral scale), a step that would lengthen the
-    travel time is halved. Stops when no step exceeds 1e-15 of the lateral scale (machine
-    precision); a row that has converged is not moved again, so the result of a row does not
-    depend on the other rows of its batch. Also returns whether the Hessian is positive
-    definite at the solution, the converged mask and the iterations.
+    Starts from ``start`` (K arrays, modified in place) or μ = 0, the straight line O→P through
+    the points J_k. While a step is large (more than 1e-6 of the lateral scale), a step that
+    would lengthen the travel time is halved. A row has converged when its full Newton step is
+    at most 1e-15 of the lateral scale (machine precision); that step is taken and the row is
+    not moved again (the next iterations work on the rows that are left), so the result of a
+    row does not depend on the other rows of its batch. Also returns whether the Hessian is
+    positive definite at the solution (evaluated at the last step a row takes), the converged
+    mask and the iterations.
     """
     lateral = problem.lateral
     x = list(_straight_start(problem) if start is None else start)
-    tolerance = 1e-15 * (1.0 + np.abs(lateral))
-    converged = None
-    positive = np.zeros(lateral.shape, dtype=bool)
+    scale = np.abs(lateral)
+    scale += 1.0
+    rows = None  # indices of the working rows (None: all)
+    work, xs = problem, x
+    positive = converged = None
     iterations = 0
     for iterations in range(1, max_iterations + 1):
-        gradient, diag, off = _fermat_gradient_hessian(x, problem)
-        step, positive = _solve_tridiagonal_spd(diag, off, gradient)
-        if converged is not None:
-            for s in step:
-                s[converged] = 0.0
+        gradient, diag, off = _fermat_gradient_hessian(xs, work)
+        step, definite = _solve_tridiagonal_spd(diag, off, gradient)
         largest = np.abs(step[0])
         for s in step[1:]:
             np.maximum(largest, np.abs(s), out=largest)
-        now = largest <= tolerance  # judged on the full Newton step, never on a damped one
-        far = largest > 1e-6 * (1.0 + np.abs(lateral))
+        now = largest <= 1e-15 * scale  # judged on the full Newton step, never on a damped one
+        far = largest > 1e-6 * scale
         if np.any(far):
             # Far from the minimum: halve the steps that would lengthen the travel time (only
             # in the rows that are far: near the minimum the travel time is flat to rounding,
             # and halving there would stall a row short of it).
-            limit = _optical_length(_segments(x, problem)[1], problem.indices) * (1 + 4e-16)
-            scale = np.ones_like(lateral)
+            limit = _optical_length(_segments(xs, work)[1], work.indices) * (1 + 4e-16)
+            factor = np.ones_like(work.lateral)
             for _ in range(40):
-                trial = [xi - scale * si for xi, si in zip(x, step)]
-                worse = far & (_optical_length(_segments(trial, problem)[1], problem.indices)
-                               > limit)
+                trial = [xi - factor * si for xi, si in zip(xs, step)]
+                worse = far & (_optical_length(_segments(trial, work)[1], work.indices) > limit)
                 if not worse.any():
                     break
-                scale[worse] *= 0.5
-            step = [scale * s for s in step]
-        for xi, si in zip(x, step):
+                factor[worse] *= 0.5
+            step = [factor * s for s in step]
+        for xi, si in zip(xs, step):
             xi -= si
-        converged = now if converged is None else converged | now
-        if converged.all():
+        if rows is None:
+            positive, converged = definite, now
+        else:
+            positive[rows] = definite
+            converged[rows] = now
+            for xi, xw in zip(x, xs):
+                xi[rows] = xw
+        if now.all():
             break
+        keep = np.flatnonzero(~now)  # go on with the rows that are left
+        rows = keep if rows is None else rows[keep]
+        work = _rows_of(work, keep)
+        xs = [xi[keep] for xi in xs]
+        scale = scale[keep]
     return x, positive & converged, converged, iterations
 
 
