@@ -429,8 +429,27 @@ def _path_derivatives(frame: _Frame, problem: _PlaneProblem, x1):
     return p, c, a, slope
 
 
-def _chunk(camera: Camera, frame: _Frame, points, solver: str, paths: bool, jacobian: int):
-    """Pixels (and on request the paths and derivatives) of one chunk of points."""
+def _outputs(n_rows: int, port: FlatPort, paths: bool, jacobian: int) -> list:
+    """The arrays :func:`_chunk` fills (all rows): pixels; with ``paths`` the reasons, minimum
+    flags and interface points; with ``jacobian`` d pixel / d point; with ``jacobian > 1`` the
+    :class:`ParameterJacobian` fields."""
+    k = len(port.thicknesses) + 1
+    out = [np.empty((n_rows, 2))]
+    if paths:
+        out += [np.empty(n_rows, dtype=np.int8), np.empty(n_rows, dtype=bool),
+                np.empty((n_rows, k, 3))]
+    if jacobian:
+        out.append(np.empty((n_rows, 2, 3)))
+    if jacobian > 1:
+        out += [np.empty((n_rows, 2)), np.empty((n_rows, 2, 3)), np.empty((n_rows, 2, k + 1)),
+                np.empty((n_rows, 2, k - 1)), np.empty((n_rows, 2, 3)), np.empty((n_rows, 2, 3))]
+    return out
+
+
+def _chunk(camera: Camera, frame: _Frame, points, solver: str, paths: bool, jacobian: int,
+           iterations_used: list, out: list):
+    """Fill ``out`` (this chunk's rows of :func:`_outputs`) for one chunk of points; append the
+    solver's iterations to ``iterations_used``."""
     problem, l1, l2, reason = _reduce(frame, points)
     lateral = problem.lateral
     with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
@@ -444,23 +463,21 @@ def _chunk(camera: Camera, frame: _Frame, points, solver: str, paths: bool, jaco
         else:
             x, converged, iterations = _solve_snell(problem)
             is_minimum = converged.copy()
-        reason[(reason == Reason.OK) & ~converged] = Reason.NOT_CONVERGED
+        iterations_used.append(iterations)
+        if not converged.all():
+            reason[(reason == Reason.OK) & ~converged] = Reason.NOT_CONVERGED
         bad = reason != Reason.OK
         x1 = x[0]
-        ratio = np.divide(x1, lateral, out=np.zeros_like(x1), where=lateral > 0)  # x1 / ℓ
+        inverse_lateral = np.divide(1.0, lateral, out=np.zeros_like(lateral), where=lateral > 0)
+        ratio = x1 * inverse_lateral  # x1 / ℓ (0 on the normal through the camera)
         s1 = ratio * l1
         s2 = ratio * l2
-        # I1 − C = h0 N + (x1/ℓ)(l1 e1 + l2 e2); in the camera frame with R^T N, R^T e1, R^T e2.
+        # I1 − C = h0 N + (x1/ℓ)(l1 e1 + l2 e2); in the camera frame with R^T N, R^T e1, R^T e2
+        # (exact zeros of these constant vectors skipped).
         h0 = frame.heights[0]
         nc, e1c, e2c = frame.camera_basis
-        xyz = []
-        for j in range(3):
-            column = s1 * e1c[j]
-            column += s2 * e2c[j]
-            column += h0 * nc[j]
-            xyz.append(column)
-        X, Y, Z = xyz
-        inverse_z = 1.0 / Z
+        X, Y, Z = (_combine([(s1, e1c[j]), (s2, e2c[j]), (None, h0 * nc[j])]) for j in range(3))
+        inverse_z = np.full(lateral.shape, 1.0 / Z) if np.ndim(Z) == 0 else 1.0 / Z
         front = Z > 0
         if not front.all():
             inverse_z[~front] = np.nan
@@ -468,7 +485,7 @@ def _chunk(camera: Camera, frame: _Frame, points, solver: str, paths: bool, jaco
         yn = Y * inverse_z
         distortion = camera.distort_columns(xn, yn, jacobian=jacobian > 0)
         K = camera.K
-        pixels = np.empty((points.shape[0], 2))
+        pixels = out[0]
         np.multiply(distortion[0], K[0, 0], out=pixels[:, 0])
         if K[0, 1] != 0.0:
             pixels[:, 0] += K[0, 1] * distortion[1]
@@ -477,13 +494,13 @@ def _chunk(camera: Camera, frame: _Frame, points, solver: str, paths: bool, jaco
         pixels[:, 1] += K[1, 2]
         if bad.any():
             pixels[bad] = np.nan
-        out = [pixels, reason, is_minimum & ~bad, np.full(points.shape[0], iterations)]
         if paths:
-            out.append(_interface_points(camera, frame, problem, x, l1, l2, bad))
+            out[1][...] = reason
+            np.logical_and(is_minimum, ~bad, out=out[2])
+            out[3][...] = _interface_points(camera, frame, problem, x, l1, l2, bad)
         if jacobian:
-            out.extend(_jacobians(camera, frame, problem, points, x1, ratio, l1, l2, inverse_z,
-                                  xn, yn, distortion, bad, jacobian > 1))
-    return tuple(out)
+            _jacobians(camera, frame, problem, points, x, ratio, inverse_lateral, l1, l2,
+                       inverse_z, xn, yn, distortion, bad, out[4 if paths else 1:])
 
 
 def _interface_points(camera, frame, problem, x, l1, l2, bad):
@@ -518,23 +535,117 @@ def _combine(terms, out=None):
     return out
 
 
-def _jacobians(camera, frame, problem, points, x1, ratio, l1, l2, inverse_z, xn, yn, distortion,
-               bad, parameters: bool):
-    """d pixel / d point ``(N, 2, 3)`` and, with ``parameters``, the :class:`ParameterJacobian`
-    fields (module docs of :func:`project`)."""
+def _sum_of_products(pairs):
+    """``Σ u·v`` over pairs of ``(N,)`` arrays or floats, skipping pairs with an exact float
+    zero and not multiplying by a float 1 (the frame vectors of a port square to the camera
+    have many); an array or a float (0.0 when every pair is skipped). Inputs are never
+    modified; an input array may be returned as it is."""
+    total, owned = 0.0, False
+    for u, v in pairs:
+        if np.ndim(u) == 0 and np.ndim(v) != 0:
+            u, v = v, u
+        if np.ndim(v) == 0:
+            if v == 0.0:
+                continue
+            if np.ndim(u) == 0:
+                term = u * v
+            else:
+                term = u if v == 1.0 else u * v
+        else:
+            term = u * v
+        if np.ndim(total) == 0 and total == 0.0:
+            total, owned = term, term is not u and term is not v
+        elif owned and np.ndim(total) != 0:
+            total += term
+        else:
+            total, owned = total + term, np.ndim(total) != 0 or np.ndim(term) != 0
+    return total
+
+
+def _point_jacobian(camera, frame, problem, x, ratio, inverse, l1, l2, inverse_z, xn, yn,
+                    distortion, d_points):
+    """d pixel / d point into ``d_points`` ``(N, 2, 3)`` (module docs of :func:`project`).
+
+    The implicit function theorem on Snell's invariant (:func:`_path_derivatives`) gives
+    ``α = ∂x1/∂ℓ = (h_0 n_0² / c_0³) / Σ h_i n_i² / c_i³`` with ``c_i = n_i cos θ_i = n_i h_i /
+    L_i``, i.e. ``α = w_0 / Σ w_i`` with ``w_i = L_i³ / (n_i h_i²)`` from the segment lengths
+    of the solved path, and ``β_w = ∂x1/∂h_w = −α tan θ_w = −α Δ_w / h_w``. Returns α, β_w and
+    the in-plane axis ``(a1, a2)`` (components along e1, e2; zero on the normal through the
+    camera) and ``ratio`` (x1/ℓ, α on that normal)."""
     lateral = problem.lateral
-    p, c, a_p, f_p = _path_derivatives(frame, problem, x1)
-    tan_water = p / c[-1]
-    alpha = a_p / f_p  # d x1 / d ℓ
-    beta_water = -alpha * tan_water  # d x1 / d h_w
-    on_axis = ~(lateral > 0)
-    if on_axis.any():
-        ratio = np.where(on_axis, alpha, ratio)  # x1/ℓ → dx1/dℓ on the normal
-    inverse = np.divide(1.0, lateral, out=np.zeros_like(lateral), where=lateral > 0)
+    steps = [x[0]] + [x[k] - x[k - 1] for k in range(1, len(x))] + [lateral - x[-1]]
+    alpha = total = None
+    for n_i, d, h2 in zip(problem.indices, steps, problem.heights_squared):
+        weight = d * d
+        weight += h2
+        weight *= np.sqrt(weight)  # L_i³
+        weight /= n_i * h2
+        if alpha is None:
+            alpha, total = weight, weight.copy()
+        else:
+            total += weight
+    alpha /= total  # d x1 / d ℓ
+    beta_water = alpha * steps[-1]
+    beta_water /= problem.heights_columns[-1]
+    np.negative(beta_water, out=beta_water)  # d x1 / d h_w
+    if not lateral.min(initial=1.0) > 0:
+        ratio = np.where(lateral > 0, ratio, alpha)  # x1/ℓ → dx1/dℓ on the normal
     a1 = l1 * inverse  # in-plane axis a = a1 e1 + a2 e2 (zero on the normal)
     a2 = l2 * inverse
+    gain = alpha - ratio
+    # Row r of d pixel / d I1 is scale_r (ρ_r · (e1, e2)) on the interface: d pixel / d (x, y,
+    # z)_camera = M (1/Z) [[1, 0, −x], [0, 1, −y]] (M: K's upper block times the distortion
+    # Jacobian), with φ, ψ its two rows projected onto R^T e1, R^T e2.
+    _, e1c, e2c = frame.camera_basis
+    phi = [_combine([(None, vec[0]), (xn, -vec[2])]) for vec in (e1c, e2c)]
+    psi = [_combine([(None, vec[1]), (yn, -vec[2])]) for vec in (e1c, e2c)]
+    K = camera.K
+    if len(distortion) == 2:
+        skew = K[0, 1] / K[0, 0]
+        rho = [[_sum_of_products([(f, 1.0), (s, skew)]) for f, s in zip(phi, psi)], psi]
+        scales = [K[0, 0] * inverse_z, K[1, 1] * inverse_z]
+    else:
+        _, _, dxx, dxy, dyy = distortion
+        m = [[K[0, 0] * dxx + K[0, 1] * dxy, K[0, 0] * dxy + K[0, 1] * dyy],
+             [K[1, 1] * dxy, K[1, 1] * dyy]]
+        rho = [[_sum_of_products([(f, mr[0]), (s, mr[1])]) for f, s in zip(phi, psi)]
+               for mr in m]
+        scales = [inverse_z, inverse_z]
+    column = np.empty(lateral.shape)
+    for r in range(2):
+        rho1, rho2 = rho[r]
+        # d I1 / d P = α a aᵀ + (x1/ℓ) b bᵀ + β_w a Nᵀ with b = N × a, and a aᵀ + b bᵀ = e1 e1ᵀ +
+        # e2 e2ᵀ: the row is (x1/ℓ)(ρ1 e1 + ρ2 e2) + (α − x1/ℓ)(ρ·a) a + β_w (ρ·a) N.
+        along = _sum_of_products([(a1, rho1), (a2, rho2)])
+        c_normal = _sum_of_products([(beta_water, along)])
+        tilt = _sum_of_products([(gain, along)])
+        c1 = _sum_of_products([(ratio, rho1), (tilt, a1)])
+        c2 = _sum_of_products([(ratio, rho2), (tilt, a2)])
+        for j in range(3):
+            value = _sum_of_products([(c_normal, frame.normal[j]), (c1, frame.e1[j]),
+                                      (c2, frame.e2[j])])
+            np.multiply(value, scales[r], out=d_points[:, r, j])
+    return alpha, beta_water, ratio, a1, a2
+
+
+def _jacobians(camera, frame, problem, points, x, ratio, inverse, l1, l2, inverse_z, xn, yn,
+               distortion, bad, out):
+    """Fill ``out``: d pixel / d point ``(N, 2, 3)`` and, if ``out`` has room for them, the
+    :class:`ParameterJacobian` fields (module docs of :func:`project`); ``x`` the solved path
+    (lateral positions of the interface points), ``inverse`` 1/ℓ (0 on the normal through the
+    camera)."""
+    d_points = out[0]
+    alpha, beta_water, ratio, a1, a2 = _point_jacobian(camera, frame, problem, x, ratio, inverse,
+                                                       l1, l2, inverse_z, xn, yn, distortion,
+                                                       d_points)
+    if bad.any():
+        d_points[bad] = np.nan
+    if len(out) == 1:
+        return
+    x1 = x[0]
+    p, c, _, _ = _path_derivatives(frame, problem, x1)
     # Rows of d pixel / d (x, y, z)_camera: M (2x2: K's upper block times the distortion
-    # Jacobian) times (1/Z) [[1, 0, −x], [0, 1, −y]].
+    # Jacobian) times (1/Z) [[1, 0, −x], [0, 1, −y]], projected onto the basis N, e1, e2.
     K = camera.K
     skew = K[0, 1] * inverse_z if K[0, 1] != 0.0 else None
     if len(distortion) == 2:
@@ -544,40 +655,17 @@ def _jacobians(camera, frame, problem, points, x1, ratio, l1, l2, inverse_z, xn,
         m = [[(K[0, 0] * dxx + K[0, 1] * dxy) * inverse_z,
               (K[0, 0] * dxy + K[0, 1] * dyy) * inverse_z],
              [K[1, 1] * dxy * inverse_z, K[1, 1] * dyy * inverse_z]]
-    # Projections of the rows onto the basis N, e1, e2 (in the camera frame).
     phi = [_combine([(None, vec[0]), (xn, -vec[2])]) for vec in frame.camera_basis]
     psi = [_combine([(None, vec[1]), (yn, -vec[2])]) for vec in frame.camera_basis]
-    n_rows = points.shape[0]
-    columns = np.empty((2, 3, n_rows))  # contiguous while computing, (N, 2, 3) at the end
     rows_nea = []
-    for r in range(2):
-        mr0, mr1 = m[r]
+    for mr0, mr1 in m:
         if mr0 is None:
-            q = [mr1 * ps for ps in psi]
+            rows_nea.append([mr1 * ps for ps in psi])
         elif mr1 is None:
-            q = [mr0 * ph for ph in phi]
+            rows_nea.append([mr0 * ph for ph in phi])
         else:
-            q = [mr0 * ph + mr1 * ps for ph, ps in zip(phi, psi)]
-        qn, q1, q2 = q
-        rows_nea.append(q)
-        # d I1 / d P = α a aᵀ + (x1/ℓ) b bᵀ + β_w a Nᵀ with b = N × a, and a aᵀ + b bᵀ = e1 e1ᵀ +
-        # e2 e2ᵀ: the row is (x1/ℓ)(q1 e1 + q2 e2) + (α − x1/ℓ)(q·a) a + β_w (q·a) N.
-        qa = a1 * q1
-        qa += a2 * q2
-        c_normal = beta_water * qa
-        qa *= alpha - ratio
-        c1 = ratio * q1
-        c1 += qa * a1
-        c2 = ratio * q2
-        c2 += qa * a2
-        for j in range(3):
-            _combine([(c_normal, frame.normal[j]), (c1, frame.e1[j]), (c2, frame.e2[j])],
-                     out=columns[r, j])
-    d_points = np.ascontiguousarray(columns.transpose(2, 0, 1))
-    if bad.any():
-        d_points[bad] = np.nan
-    if not parameters:
-        return (d_points,)
+            rows_nea.append([mr0 * ph + mr1 * ps for ph, ps in zip(phi, psi)])
+    n_rows = points.shape[0]
     # --- port and camera parameters: general (N, 2, 3) algebra --------------------------------
     n = frame.indices
     N, e1, e2 = frame.normal, frame.e1, frame.e2
@@ -610,13 +698,11 @@ def _jacobians(camera, frame, problem, points, x1, ratio, l1, l2, inverse_z, xn,
     d_normal -= (d_normal @ N)[..., None] * N
     d_center = -d_points - d_distance[..., None] * N
     d_rotation = np.cross(q, first)
-    jac = ParameterJacobian(d_distance, d_normal, d_indices, d_thick, d_center, d_rotation)
-    if bad.any():
-        for value in (jac.distance, jac.normal, jac.indices, jac.thicknesses, jac.center,
-                      jac.rotation):
-            value[bad] = np.nan
-    return (d_points, jac.distance, jac.normal, jac.indices, jac.thicknesses, jac.center,
-            jac.rotation)
+    for target, value in zip(out[1:], (d_distance, d_normal, d_indices, d_thick, d_center,
+                                       d_rotation)):
+        target[...] = value
+        if bad.any():
+            target[bad] = np.nan
 
 
 def _run(camera, port, points, solver, paths: bool, jacobian: int):
@@ -631,8 +717,11 @@ def _run(camera, port, points, solver, paths: bool, jacobian: int):
         port = index_matched_port(camera.R[:, 2], camera.center)
     port.check_camera(camera.center, "camera")
     frame = _frame(camera, port)
-    return map_row_chunks(lambda chunk: _chunk(camera, frame, chunk, solver, paths, jacobian),
-                          (points,))
+    iterations = []
+    outputs = _outputs(points.shape[0], port, paths, jacobian)
+    map_row_chunks(lambda chunk, out: _chunk(camera, frame, chunk, solver, paths, jacobian,
+                                             iterations, out), (points,), outputs=outputs)
+    return outputs, max(iterations, default=0)
 
 
 def solve_paths(camera: Camera, port: FlatPort | None, points, solver: str = "fermat") -> RefractedPaths:
@@ -643,10 +732,10 @@ def solve_paths(camera: Camera, port: FlatPort | None, points, solver: str = "fe
     port; per-point failures (a point not in the water, NaN input) are NaN rows with a reason.
     Large batches run in chunks on all cores (same result as one batch).
     """
-    pixels, reason, is_minimum, iterations, interface_points = _run(camera, port, points, solver,
-                                                                    True, 0)
+    (pixels, reason, is_minimum, interface_points), iterations = _run(camera, port, points,
+                                                                      solver, True, 0)
     return RefractedPaths(pixels, interface_points.transpose(1, 0, 2), reason, is_minimum,
-                          int(iterations.max(initial=0)))
+                          int(iterations))
 
 
 def project(camera: Camera, port: FlatPort | None, points, solver: str = "fermat", *,
@@ -669,8 +758,8 @@ def project(camera: Camera, port: FlatPort | None, points, solver: str = "fermat
     """
     if parameters:
         jacobian = True
-    pixels, _, _, _, *rest = _run(camera, port, points, solver, False,
-                                  2 if parameters else int(bool(jacobian)))
+    (pixels, *rest), _ = _run(camera, port, points, solver, False,
+                              2 if parameters else int(bool(jacobian)))
     if not jacobian:
         return pixels
     if not parameters:
