@@ -165,7 +165,8 @@ def _fermat_gradient_hessian(x, problem):
     ``L_i = sqrt(Δ_i² + h_i²)``): ``t = Σ n_i L_i``, ``∂t/∂x_k = n_k Δ_k/L_k −
     n_{k+1} Δ_{k+1}/L_{k+1}``, ``∂²t/∂x_k² = n_k h²_k/L³_k + n_{k+1} h²_{k+1}/L³_{k+1}`` and
     ``∂²t/∂x_k∂x_{k+1} = −n_{k+1} h²_{k+1}/L³_{k+1}``. Since ``x_k = x(J_k) + μ_k`` these are
-    also the derivatives with respect to the paper's μ_k (equations 23-24).
+    also the derivatives with respect to the paper's μ_k (equations 23-24). Also returns the
+    K+1 segment curvatures ``n_i h²_i/L³_i``.
     """
     steps, lengths = _segments(x, problem)
     slope, curvature = [], []
@@ -179,7 +180,7 @@ def _fermat_gradient_hessian(x, problem):
     gradient = [slope[i] - slope[i + 1] for i in range(k)]
     diag = [curvature[i] + curvature[i + 1] for i in range(k)]
     off = [-curvature[i + 1] for i in range(k - 1)]
-    return gradient, diag, off
+    return gradient, diag, off, curvature
 
 
 def _solve_tridiagonal_spd(diag, off, rhs):
@@ -299,8 +300,9 @@ def _solve_fermat(problem: _PlaneProblem, start=None, max_iterations: int = 60):
     at most 1e-15 of the lateral scale (machine precision); that step is taken and the row is
     not moved again (the next iterations work on the rows that are left), so the result of a
     row does not depend on the other rows of its batch. Also returns whether the Hessian is
-    positive definite at the solution (evaluated at the last step a row takes), the converged
-    mask and the iterations.
+    positive definite at the solution, the converged mask, the iterations and the segment
+    curvatures ``n_i h²_i/L³_i`` (both evaluated where a row takes its last step, at most 1e-15
+    of the lateral scale from the solution).
     """
     lateral = problem.lateral
     x = list(_straight_start(problem) if start is None else start)
@@ -308,10 +310,10 @@ def _solve_fermat(problem: _PlaneProblem, start=None, max_iterations: int = 60):
     scale += 1.0
     rows = None  # indices of the working rows (None: all)
     work, xs = problem, x
-    positive = converged = None
+    positive = converged = curvature = None
     iterations = 0
     for iterations in range(1, max_iterations + 1):
-        gradient, diag, off = _fermat_gradient_hessian(xs, work)
+        gradient, diag, off, segment_curvature = _fermat_gradient_hessian(xs, work)
         step, definite = _solve_tridiagonal_spd(diag, off, gradient)
         largest = np.abs(step[0])
         for s in step[1:]:
@@ -334,10 +336,12 @@ def _solve_fermat(problem: _PlaneProblem, start=None, max_iterations: int = 60):
         for xi, si in zip(xs, step):
             xi -= si
         if rows is None:
-            positive, converged = definite, now
+            positive, converged, curvature = definite, now, segment_curvature
         else:
             positive[rows] = definite
             converged[rows] = now
+            for full, part in zip(curvature, segment_curvature):
+                full[rows] = part
             for xi, xw in zip(x, xs):
                 xi[rows] = xw
         if now.all():
@@ -347,7 +351,7 @@ def _solve_fermat(problem: _PlaneProblem, start=None, max_iterations: int = 60):
         work = _rows_of(work, keep)
         xs = [xi[keep] for xi in xs]
         scale = scale[keep]
-    return x, positive & converged, converged, iterations
+    return x, positive & converged, converged, iterations, curvature
 
 
 def _solve_snell(problem: _PlaneProblem):
@@ -458,11 +462,12 @@ def _chunk(camera: Camera, frame: _Frame, points, solver: str, paths: bool, jaco
             if not started.all():  # the damped iteration from the straight line for the rest
                 straight = _straight_start(problem)
                 start = [np.where(started, s, t) for s, t in zip(start, straight)]
-            x, is_minimum, converged, iterations = _solve_fermat(problem, start)
+            x, is_minimum, converged, iterations, curvature = _solve_fermat(problem, start)
             iterations += start_iterations
         else:
             x, converged, iterations = _solve_snell(problem)
             is_minimum = converged.copy()
+            curvature = None
         iterations_used.append(iterations)
         if not converged.all():
             reason[(reason == Reason.OK) & ~converged] = Reason.NOT_CONVERGED
@@ -499,8 +504,8 @@ def _chunk(camera: Camera, frame: _Frame, points, solver: str, paths: bool, jaco
             np.logical_and(is_minimum, ~bad, out=out[2])
             out[3][...] = _interface_points(camera, frame, problem, x, l1, l2, bad)
         if jacobian:
-            _jacobians(camera, frame, problem, points, x, ratio, inverse_lateral, l1, l2,
-                       inverse_z, xn, yn, distortion, bad, out[4 if paths else 1:])
+            _jacobians(camera, frame, problem, points, x, curvature, ratio, inverse_lateral, l1,
+                       l2, inverse_z, xn, yn, distortion, bad, out[4 if paths else 1:])
 
 
 def _interface_points(camera, frame, problem, x, l1, l2, bad):
@@ -562,30 +567,40 @@ def _sum_of_products(pairs):
     return total
 
 
-def _point_jacobian(camera, frame, problem, x, ratio, inverse, l1, l2, inverse_z, xn, yn,
-                    distortion, d_points):
+def _point_jacobian(camera, frame, problem, x, curvature, ratio, inverse, l1, l2, inverse_z, xn,
+                    yn, distortion, d_points):
     """d pixel / d point into ``d_points`` ``(N, 2, 3)`` (module docs of :func:`project`).
 
     The implicit function theorem on Snell's invariant (:func:`_path_derivatives`) gives
     ``α = ∂x1/∂ℓ = (h_0 n_0² / c_0³) / Σ h_i n_i² / c_i³`` with ``c_i = n_i cos θ_i = n_i h_i /
     L_i``, i.e. ``α = w_0 / Σ w_i`` with ``w_i = L_i³ / (n_i h_i²)`` from the segment lengths
-    of the solved path, and ``β_w = ∂x1/∂h_w = −α tan θ_w = −α Δ_w / h_w``. Returns α, β_w and
+    of the solved path — the reciprocals of the segment curvatures of the Fermat solver's last
+    step (for one interface ``α = κ_1 / (κ_0 + κ_1)``) — and ``β_w = ∂x1/∂h_w = −α tan θ_w =
+    −α Δ_w / h_w``. Returns α, β_w and
     the in-plane axis ``(a1, a2)`` (components along e1, e2; zero on the normal through the
     camera) and ``ratio`` (x1/ℓ, α on that normal)."""
     lateral = problem.lateral
-    steps = [x[0]] + [x[k] - x[k - 1] for k in range(1, len(x))] + [lateral - x[-1]]
-    alpha = total = None
-    for n_i, d, h2 in zip(problem.indices, steps, problem.heights_squared):
-        weight = d * d
-        weight += h2
-        weight *= np.sqrt(weight)  # L_i³
-        weight /= n_i * h2
-        if alpha is None:
-            alpha, total = weight, weight.copy()
-        else:
-            total += weight
-    alpha /= total  # d x1 / d ℓ
-    beta_water = alpha * steps[-1]
+    water_step = lateral - x[-1]
+    if curvature is not None and len(curvature) == 2:
+        alpha = curvature[0] + curvature[1]
+        np.divide(curvature[1], alpha, out=alpha)
+    elif curvature is not None:
+        weights = [1.0 / k for k in curvature]
+        alpha = weights[0] / sum(weights[1:], weights[0])
+    else:
+        steps = [x[0]] + [x[k] - x[k - 1] for k in range(1, len(x))] + [water_step]
+        alpha = total = None
+        for n_i, d, h2 in zip(problem.indices, steps, problem.heights_squared):
+            weight = d * d
+            weight += h2
+            weight *= np.sqrt(weight)  # L_i³
+            weight /= n_i * h2
+            if alpha is None:
+                alpha, total = weight, weight.copy()
+            else:
+                total += weight
+        alpha /= total  # d x1 / d ℓ
+    beta_water = alpha * water_step
     beta_water /= problem.heights_columns[-1]
     np.negative(beta_water, out=beta_water)  # d x1 / d h_w
     if not lateral.min(initial=1.0) > 0:
@@ -628,16 +643,16 @@ def _point_jacobian(camera, frame, problem, x, ratio, inverse, l1, l2, inverse_z
     return alpha, beta_water, ratio, a1, a2
 
 
-def _jacobians(camera, frame, problem, points, x, ratio, inverse, l1, l2, inverse_z, xn, yn,
-               distortion, bad, out):
+def _jacobians(camera, frame, problem, points, x, curvature, ratio, inverse, l1, l2, inverse_z,
+               xn, yn, distortion, bad, out):
     """Fill ``out``: d pixel / d point ``(N, 2, 3)`` and, if ``out`` has room for them, the
     :class:`ParameterJacobian` fields (module docs of :func:`project`); ``x`` the solved path
-    (lateral positions of the interface points), ``inverse`` 1/ℓ (0 on the normal through the
-    camera)."""
+    (lateral positions of the interface points), ``curvature`` its segment curvatures if the
+    solver gives them (else None), ``inverse`` 1/ℓ (0 on the normal through the camera)."""
     d_points = out[0]
-    alpha, beta_water, ratio, a1, a2 = _point_jacobian(camera, frame, problem, x, ratio, inverse,
-                                                       l1, l2, inverse_z, xn, yn, distortion,
-                                                       d_points)
+    alpha, beta_water, ratio, a1, a2 = _point_jacobian(camera, frame, problem, x, curvature,
+                                                       ratio, inverse, l1, l2, inverse_z, xn, yn,
+                                                       distortion, d_points)
     if bad.any():
         d_points[bad] = np.nan
     if len(out) == 1:
