@@ -181,48 +181,48 @@ def _combine(terms, out=None):
 def _water_line(camera: Camera, port: FlatPort, basis, uv):
     """The water ray of pixels ``uv`` ``(N, 2)`` through ``port``, in the port basis (N, e1,
     e2): its origin on the last interface (3 columns; the normal one is the interface's offset,
-    a float, the same for every camera), its direction (3 columns, unnormalized), ``t² = w1² +
-    w2²``, the normal component ``w_n`` of the camera ray (> 0 where it reaches the port) and
-    the camera's reason codes.
+    a float, the same for every camera), its direction (3 columns, unnormalized) and its
+    squared length, the normal component ``w_n`` of the camera ray (> 0 where it reaches the
+    port) and the camera's reason codes.
 
-    The camera ray is ``w = B R (x, y, 1)`` (normalized image coordinates, not normalized);
-    with ``ρ = |w|²`` and ``η_k = n_0/n_k`` the direction in medium k is ``(c_k, η_k w1, η_k
-    w2)`` with ``c_k = sqrt(ρ − η_k² t²)`` (Snell's law, equation 7 in closed form for parallel
-    interfaces), i.e. ``(A_k, w1, w2)`` times η_k with ``A_k = c_k / η_k = sqrt(μ_k w_n² + (μ_k
-    − 1) t²)``, ``μ_k = 1/η_k²``; the ray advances ``Δh_k / A_k`` times ``(w1, w2)`` across
-    medium k. The water direction returned is ``(A_w, w1, w2)``."""
+    The camera ray is ``w = B R (x, y, 1)`` (normalized image coordinates, not normalized;
+    without lens distortion ``(x, y, 1) = K⁻¹ (u, v, 1)``, so each component is one linear
+    function of the pixel); with ``ρ = |w|²`` and ``η_k = n_0/n_k`` the direction in medium k is
+    ``(c_k, η_k w1, η_k w2)`` with ``c_k = sqrt(ρ − η_k² t²)`` (Snell's law, equation 7 in
+    closed form for parallel interfaces), i.e. ``(A_k, w1, w2)`` times η_k with ``A_k = c_k /
+    η_k = sqrt(μ_k w_n² + (μ_k − 1) t²)``, ``μ_k = 1/η_k²``; the ray advances ``Δh_k / A_k``
+    times ``(w1, w2)`` across medium k. The water direction returned is ``(A_w, w1, w2)``."""
+    M = basis @ camera.R
     if camera.dist is None:
-        fx, skew, cx = camera.K[0]
-        fy, cy = camera.K[1, 1], camera.K[1, 2]
-        y = (uv[:, 1] - cy) * (1.0 / fy)
-        x = uv[:, 0] - cx
-        if skew != 0.0:
-            x -= skew * y
-        x *= 1.0 / fx
+        (fx, skew, cx), (fy, cy) = camera.K[0], camera.K[1, 1:]
+        inverse_k = np.array([[1.0 / fx, -skew / (fx * fy), (skew * cy - cx * fy) / (fx * fy)],
+                              [0.0, 1.0 / fy, -cy / fy], [0.0, 0.0, 1.0]])
+        M = M @ inverse_k
+        u, v = uv[:, 0], uv[:, 1]
         reason = None
     else:
         xy, reason = camera.normalized_with_reason(uv)
-        x, y = xy[:, 0], xy[:, 1]
-    M = basis @ camera.R
-    w_n, w1, w2 = (_combine([(x, M[j, 0]), (y, M[j, 1]), (None, M[j, 2])]) for j in range(3))
+        u, v = xy[:, 0], xy[:, 1]
+    w_n, w1, w2 = (_combine([(u, M[j, 0]), (v, M[j, 1]), (None, M[j, 2])]) for j in range(3))
     t2 = w1 * w1
     t2 += w2 * w2
     normal2 = w_n * w_n
     indices = port.indices
     heights = [port.distance - float(camera.center @ port.normal), *port.thicknesses]
     advance = heights[0] / w_n
-    along = None
+    along = square = None
     for n_k, h in zip(indices[1:], heights[1:] + [None]):
         mu = (n_k / indices[0]) ** 2
-        along = (mu - 1.0) * t2
-        along += mu * normal2
-        np.sqrt(along, out=along)
+        square = (mu - 1.0) * t2
+        square += mu * normal2  # A_k²
+        along = np.sqrt(square)
         if h is not None:
             advance = advance + h / along
     center = basis @ camera.center
     origin = (port.distance + sum(port.thicknesses), center[1] + advance * w1,
               center[2] + advance * w2)
-    return origin, (along, w1, w2), t2, w_n, reason
+    square += t2  # |(A_w, w1, w2)|²
+    return origin, (along, w1, w2), square, w_n, reason
 
 
 def _optical_path_rows(rig: StereoRig, uv_left, uv_right):
@@ -252,8 +252,6 @@ def _optical_path_rows(rig: StereoRig, uv_left, uv_right):
         determinant = k0 * k0
         determinant += k1 * k1
         determinant += k2 * k2
-        a = a + A1 * A1  # |d1|² = A1² + t1²
-        c = c + A2 * A2
         b = A1 * A2
         b += u1 * u2
         b += v1 * v2
@@ -261,9 +259,6 @@ def _optical_path_rows(rig: StereoRig, uv_left, uv_right):
         d += v1 * w2
         e = u2 * w1
         e += v2 * w2
-        margin = a * c
-        margin *= -1e-28
-        margin += determinant  # > 0: not parallel
         half = 0.5 / determinant
         h1 = b * e
         h1 -= c * d
@@ -291,15 +286,18 @@ def _optical_path_rows(rig: StereoRig, uv_left, uv_right):
         for j in range(3):
             _combine([(middle0, basis[0, j]), (middle1, basis[1, j]), (middle2, basis[2, j])],
                      out=points[:, j])
-        # one pass each (NaN anywhere fails them): the mask only where something is wrong
+        # one pass each (NaN anywhere fails them; not parallel: Δ > 1e-28 |d1|² |d2|², here
+        # with the largest |d1|², |d2|²): the row mask only where something may be wrong
         plain = (min(np.min(n1, initial=1.0), np.min(n2, initial=1.0)) > 0
                  and min(h1.min(initial=0.0), h2.min(initial=0.0)) >= 0
-                 and margin.min(initial=1.0) > 0 and np.isfinite(length.sum()))
+                 and determinant.min(initial=np.inf) > 1e-28 * (a.max(initial=0.0)
+                                                                * c.max(initial=0.0))
+                 and np.isfinite(length.sum()))
         if plain:
             good = None
         else:
-            good = ((n1 > 0) & (n2 > 0) & (h1 >= 0) & (h2 >= 0) & (margin > 0)
-                    & np.isfinite(length))
+            good = ((n1 > 0) & (n2 > 0) & (h1 >= 0) & (h2 >= 0)
+                    & (determinant > 1e-28 * a * c) & np.isfinite(length))
     for camera_reason in (reason1, reason2):
         if camera_reason is not None and (good is not None or np.any(camera_reason)):
             camera_ok = camera_reason == Reason.OK
