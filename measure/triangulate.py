@@ -225,15 +225,19 @@ def _water_line(camera: Camera, port: FlatPort, basis, uv):
     return origin, (along, w1, w2), square, w_n, reason
 
 
-def _optical_path_rows(rig: StereoRig, uv_left, uv_right):
+def _optical_path_rows(rig: StereoRig, uv_left, uv_right, out=None):
     """The optical-path triangulation of pixel rows, column by column in the port basis (the
     same equations as :func:`triangulate_rays`, fused: both water rays start on the last
     interface, so their difference has no normal component; the gap is ``|w·(d1×d2)| /
     |d1×d2|``); rows that are not plainly valid (a camera reason, a ray that misses the port or
     is reflected, parallel rays, a point behind a ray start) are recomputed by
-    :func:`triangulate_rays` for their reason codes."""
+    :func:`triangulate_rays` for their reason codes. Returns points, gap and reason codes; into
+    ``out`` (those three arrays) if given."""
     basis = _port_basis(rig.port.normal)
     n_rows = uv_left.shape[0]
+    if out is None:
+        out = (np.empty((n_rows, 3)), np.empty(n_rows), np.empty(n_rows, dtype=np.int8))
+    points, length, reason = out
     with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
         (offset, o11, o12), (A1, u1, v1), a, n1, reason1 = _water_line(rig.left, rig.port, basis,
                                                                        uv_left)
@@ -266,7 +270,7 @@ def _optical_path_rows(rig: StereoRig, uv_left, uv_right):
         h2 = a * e
         h2 -= b * d
         h2 *= half  # s2 / 2
-        length = k1 * w1
+        np.multiply(k1, w1, out=length)
         length += k2 * w2
         np.abs(length, out=length)
         length /= np.sqrt(determinant)
@@ -282,7 +286,6 @@ def _optical_path_rows(rig: StereoRig, uv_left, uv_right):
         middle2 *= 0.5
         middle2 += h1 * v1
         middle2 += h2 * v2
-        points = np.empty((n_rows, 3))
         for j in range(3):
             _combine([(middle0, basis[0, j]), (middle1, basis[1, j]), (middle2, basis[2, j])],
                      out=points[:, j])
@@ -302,7 +305,7 @@ def _optical_path_rows(rig: StereoRig, uv_left, uv_right):
         if camera_reason is not None and (good is not None or np.any(camera_reason)):
             camera_ok = camera_reason == Reason.OK
             good = camera_ok if good is None else good & camera_ok
-    reason = np.zeros(n_rows, dtype=np.int8)
+    reason[...] = Reason.OK
     if good is not None and not good.all():
         bad = np.flatnonzero(~good)
         slow_points, slow_gap, slow_reason = _triangulate_pixels(rig, uv_left[bad], uv_right[bad],
@@ -339,8 +342,6 @@ def triangulate(rig: StereoRig, uv_left, uv_right, method: str = "optical_path")
                          f"{uv_left.shape} and {uv_right.shape}")
 
     def solve(left, right):
-        if method == "optical_path":
-            return _optical_path_rows(rig, left, right)
         return _triangulate_pixels(rig, left, right, method)
 
     if method == "reprojection":
@@ -349,5 +350,12 @@ def triangulate(rig: StereoRig, uv_left, uv_right, method: str = "optical_path")
         reason = start.reason.copy()
         points[reason != Reason.OK] = np.nan
         return Triangulation(points, start.gap, reason, method)
-    points, gap, reason = map_row_chunks(solve, (uv_left, uv_right))
+    if method == "optical_path":
+        n_rows = uv_left.shape[0]
+        points, gap, reason = map_row_chunks(
+            lambda left, right, out: _optical_path_rows(rig, left, right, out),
+            (uv_left, uv_right),
+            outputs=[np.empty((n_rows, 3)), np.empty(n_rows), np.empty(n_rows, dtype=np.int8)])
+    else:
+        points, gap, reason = map_row_chunks(solve, (uv_left, uv_right))
     return Triangulation(points, gap, reason, method)
