@@ -154,9 +154,9 @@ def _port_basis(normal):
     return np.stack([np.asarray(normal, dtype=float), e1, e2])
 
 
-def _combine(terms):
+def _combine(terms, out=None):
     """``Σ array · coefficient`` over ``(array, coefficient)`` terms (``None``: a constant),
-    skipping exact zero coefficients."""
+    skipping exact zero coefficients; into ``out`` if given (then at least one array term)."""
     total = None
     constant = 0.0
     for array, coefficient in terms:
@@ -165,10 +165,13 @@ def _combine(terms):
         if array is None:
             constant += coefficient
         elif total is None:
-            total = array * coefficient
+            total = np.multiply(array, coefficient, out=out)
         else:
             total += array * coefficient
     if total is None:
+        if out is not None:
+            out[...] = constant
+            return out
         return constant
     if constant:
         total += constant
@@ -177,97 +180,133 @@ def _combine(terms):
 
 def _water_line(camera: Camera, port: FlatPort, basis, uv):
     """The water ray of pixels ``uv`` ``(N, 2)`` through ``port``, in the port basis (N, e1,
-    e2): origin and direction as 3 columns each (the direction unnormalized), the normal
-    component of the camera ray (> 0 where it reaches the port) and the camera's reason codes.
+    e2): its origin on the last interface (3 columns; the normal one is the interface's offset,
+    a float, the same for every camera), its direction (3 columns, unnormalized) and its
+    squared length, the normal component ``w_n`` of the camera ray (> 0 where it reaches the
+    port) and the camera's reason codes.
 
-    The camera ray is ``w = B R (x, y, 1)`` (normalized image coordinates, not normalized);
-    with ``t² = w1² + w2²`` and ``ρ = |w|²`` the direction in medium k is ``(c_k, η_k w1,
-    η_k w2)`` with ``η_k = n_0/n_k`` and ``c_k = sqrt(ρ − η_k² t²)`` (Snell's law, equation 7
-    in closed form for parallel interfaces), and the ray advances ``Δh_k η_k / c_k`` times
-    ``(w1, w2)`` across medium k."""
+    The camera ray is ``w = B R (x, y, 1)`` (normalized image coordinates, not normalized;
+    without lens distortion ``(x, y, 1) = K⁻¹ (u, v, 1)``, so each component is one linear
+    function of the pixel); with ``ρ = |w|²`` and ``η_k = n_0/n_k`` the direction in medium k is
+    ``(c_k, η_k w1, η_k w2)`` with ``c_k = sqrt(ρ − η_k² t²)`` (Snell's law, equation 7 in
+    closed form for parallel interfaces), i.e. ``(A_k, w1, w2)`` times η_k with ``A_k = c_k /
+    η_k = sqrt(μ_k w_n² + (μ_k − 1) t²)``, ``μ_k = 1/η_k²``; the ray advances ``Δh_k / A_k``
+    times ``(w1, w2)`` across medium k. The water direction returned is ``(A_w, w1, w2)``."""
+    M = basis @ camera.R
     if camera.dist is None:
-        fx, skew, cx = camera.K[0]
-        fy, cy = camera.K[1, 1], camera.K[1, 2]
-        y = (uv[:, 1] - cy) * (1.0 / fy)
-        x = uv[:, 0] - cx
-        if skew != 0.0:
-            x -= skew * y
-        x *= 1.0 / fx
+        (fx, skew, cx), (fy, cy) = camera.K[0], camera.K[1, 1:]
+        inverse_k = np.array([[1.0 / fx, -skew / (fx * fy), (skew * cy - cx * fy) / (fx * fy)],
+                              [0.0, 1.0 / fy, -cy / fy], [0.0, 0.0, 1.0]])
+        M = M @ inverse_k
+        u, v = uv[:, 0], uv[:, 1]
         reason = None
     else:
         xy, reason = camera.normalized_with_reason(uv)
-        x, y = xy[:, 0], xy[:, 1]
-    M = basis @ camera.R
-    w = [_combine([(x, M[j, 0]), (y, M[j, 1]), (None, M[j, 2])]) for j in range(3)]
-    w_n, w1, w2 = w
+        u, v = xy[:, 0], xy[:, 1]
+    w_n, w1, w2 = (_combine([(u, M[j, 0]), (v, M[j, 1]), (None, M[j, 2])]) for j in range(3))
     t2 = w1 * w1
     t2 += w2 * w2
-    rho = w_n * w_n
-    rho += t2
+    normal2 = w_n * w_n
     indices = port.indices
     heights = [port.distance - float(camera.center @ port.normal), *port.thicknesses]
     advance = heights[0] / w_n
-    cosine = None
+    along = square = None
     for n_k, h in zip(indices[1:], heights[1:] + [None]):
-        eta = indices[0] / n_k
-        cosine = np.sqrt(rho - (eta * eta) * t2)
+        mu = (n_k / indices[0]) ** 2
+        square = (mu - 1.0) * t2
+        square += mu * normal2  # A_k²
+        along = np.sqrt(square)
         if h is not None:
-            advance += (h * eta) / cosine
-    eta = indices[0] / indices[-1]
+            advance = advance + h / along
     center = basis @ camera.center
     origin = (port.distance + sum(port.thicknesses), center[1] + advance * w1,
               center[2] + advance * w2)
-    direction = (cosine, eta * w1, eta * w2)
-    return origin, direction, w_n, reason
+    square += t2  # |(A_w, w1, w2)|²
+    return origin, (along, w1, w2), square, w_n, reason
 
 
-def _dot3(a, b):
-    total = a[0] * b[0]
-    total += a[1] * b[1]
-    total += a[2] * b[2]
-    return total
-
-
-def _optical_path_rows(rig: StereoRig, uv_left, uv_right):
+def _optical_path_rows(rig: StereoRig, uv_left, uv_right, out=None):
     """The optical-path triangulation of pixel rows, column by column in the port basis (the
-    same equations as :func:`triangulate_rays`, fused); rows that are not plainly valid (a
-    camera reason, a ray that misses the port or is reflected, parallel rays, a point behind a
-    ray start) are recomputed by :func:`triangulate_rays` for their reason codes."""
+    same equations as :func:`triangulate_rays`, fused: both water rays start on the last
+    interface, so their difference has no normal component; the gap is ``|w·(d1×d2)| /
+    |d1×d2|``); rows that are not plainly valid (a camera reason, a ray that misses the port or
+    is reflected, parallel rays, a point behind a ray start) are recomputed by
+    :func:`triangulate_rays` for their reason codes. Returns points, gap and reason codes; into
+    ``out`` (those three arrays) if given."""
     basis = _port_basis(rig.port.normal)
+    n_rows = uv_left.shape[0]
+    if out is None:
+        out = (np.empty((n_rows, 3)), np.empty(n_rows), np.empty(n_rows, dtype=np.int8))
+    points, length, reason = out
     with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
-        p1, d1, n1, reason1 = _water_line(rig.left, rig.port, basis, uv_left)
-        p2, d2, n2, reason2 = _water_line(rig.right, rig.port, basis, uv_right)
-        # common perpendicular (lines.common_perpendicular): Δ = |d1 × d2|²
-        w = [a - b for a, b in zip(p1, p2)]
-        cross = [d1[1] * d2[2] - d1[2] * d2[1], d1[2] * d2[0] - d1[0] * d2[2],
-                 d1[0] * d2[1] - d1[1] * d2[0]]
-        determinant = _dot3(cross, cross)
-        a, b, c = _dot3(d1, d1), _dot3(d1, d2), _dot3(d2, d2)
-        d, e = _dot3(d1, w), _dot3(d2, w)
-        parallel = ~(determinant > 1e-28 * a * c)
-        inverse = 1.0 / determinant
-        s1 = b * e
-        s1 -= c * d
-        s1 *= inverse
-        s2 = a * e
-        s2 -= b * d
-        s2 *= inverse
-        foot1 = [p + s1 * q for p, q in zip(p1, d1)]
-        foot2 = [p + s2 * q for p, q in zip(p2, d2)]
-        gap = [f - g for f, g in zip(foot1, foot2)]
-        length = np.sqrt(_dot3(gap, gap))
-        middle = [0.5 * (f + g) for f, g in zip(foot1, foot2)]
-        n_rows = uv_left.shape[0]
-        points = np.empty((n_rows, 3))
+        (offset, o11, o12), (A1, u1, v1), a, n1, reason1 = _water_line(rig.left, rig.port, basis,
+                                                                       uv_left)
+        (_, o21, o22), (A2, u2, v2), c, n2, reason2 = _water_line(rig.right, rig.port, basis,
+                                                                  uv_right)
+        w1 = o11 - o21  # origin difference (its normal component is 0)
+        w2 = o12 - o22
+        # common perpendicular (lines.common_perpendicular) of p1 + s1 d1 and p2 + s2 d2:
+        # k = d1 × d2, Δ = |k|², s1 = (b e − c d)/Δ, s2 = (a e − b d)/Δ
+        k0 = u1 * v2
+        k0 -= v1 * u2
+        k1 = v1 * A2
+        k1 -= A1 * v2
+        k2 = A1 * u2
+        k2 -= u1 * A2
+        determinant = k0 * k0
+        determinant += k1 * k1
+        determinant += k2 * k2
+        b = A1 * A2
+        b += u1 * u2
+        b += v1 * v2
+        d = u1 * w1
+        d += v1 * w2
+        e = u2 * w1
+        e += v2 * w2
+        half = 0.5 / determinant
+        h1 = b * e
+        h1 -= c * d
+        h1 *= half  # s1 / 2
+        h2 = a * e
+        h2 -= b * d
+        h2 *= half  # s2 / 2
+        np.multiply(k1, w1, out=length)
+        length += k2 * w2
+        np.abs(length, out=length)
+        length /= np.sqrt(determinant)
+        # midpoint (p1 + s1 d1 + p2 + s2 d2) / 2
+        middle0 = h1 * A1
+        middle0 += h2 * A2
+        middle0 += offset
+        middle1 = o11 + o21
+        middle1 *= 0.5
+        middle1 += h1 * u1
+        middle1 += h2 * u2
+        middle2 = o12 + o22
+        middle2 *= 0.5
+        middle2 += h1 * v1
+        middle2 += h2 * v2
         for j in range(3):
-            points[:, j] = _combine([(middle[0], basis[0, j]), (middle[1], basis[1, j]),
-                                     (middle[2], basis[2, j])])
-        good = (n1 > 0) & (n2 > 0) & (s1 >= 0) & (s2 >= 0) & ~parallel & np.isfinite(length)
+            _combine([(middle0, basis[0, j]), (middle1, basis[1, j]), (middle2, basis[2, j])],
+                     out=points[:, j])
+        # one pass each (NaN anywhere fails them; not parallel: Δ > 1e-28 |d1|² |d2|², here
+        # with the largest |d1|², |d2|²): the row mask only where something may be wrong
+        plain = (min(np.min(n1, initial=1.0), np.min(n2, initial=1.0)) > 0
+                 and min(h1.min(initial=0.0), h2.min(initial=0.0)) >= 0
+                 and determinant.min(initial=np.inf) > 1e-28 * (a.max(initial=0.0)
+                                                                * c.max(initial=0.0))
+                 and np.isfinite(length.sum()))
+        if plain:
+            good = None
+        else:
+            good = ((n1 > 0) & (n2 > 0) & (h1 >= 0) & (h2 >= 0)
+                    & (determinant > 1e-28 * a * c) & np.isfinite(length))
     for camera_reason in (reason1, reason2):
-        if camera_reason is not None:
-            good &= camera_reason == Reason.OK
-    reason = np.zeros(n_rows, dtype=np.int8)
-    if not good.all():
+        if camera_reason is not None and (good is not None or np.any(camera_reason)):
+            camera_ok = camera_reason == Reason.OK
+            good = camera_ok if good is None else good & camera_ok
+    reason[...] = Reason.OK
+    if good is not None and not good.all():
         bad = np.flatnonzero(~good)
         slow_points, slow_gap, slow_reason = _triangulate_pixels(rig, uv_left[bad], uv_right[bad],
                                                                  "optical_path")
@@ -303,8 +342,6 @@ def triangulate(rig: StereoRig, uv_left, uv_right, method: str = "optical_path")
                          f"{uv_left.shape} and {uv_right.shape}")
 
     def solve(left, right):
-        if method == "optical_path":
-            return _optical_path_rows(rig, left, right)
         return _triangulate_pixels(rig, left, right, method)
 
     if method == "reprojection":
@@ -313,5 +350,12 @@ def triangulate(rig: StereoRig, uv_left, uv_right, method: str = "optical_path")
         reason = start.reason.copy()
         points[reason != Reason.OK] = np.nan
         return Triangulation(points, start.gap, reason, method)
-    points, gap, reason = map_row_chunks(solve, (uv_left, uv_right))
+    if method == "optical_path":
+        n_rows = uv_left.shape[0]
+        points, gap, reason = map_row_chunks(
+            lambda left, right, out: _optical_path_rows(rig, left, right, out),
+            (uv_left, uv_right),
+            outputs=[np.empty((n_rows, 3)), np.empty(n_rows), np.empty(n_rows, dtype=np.int8)])
+    else:
+        points, gap, reason = map_row_chunks(solve, (uv_left, uv_right))
     return Triangulation(points, gap, reason, method)
