@@ -9,6 +9,11 @@ gets who folds nothing for the port. Scores (:mod:`eval.surface_metrics`): point
 distance, precision/recall/F at 0.5, 1 and 5 mm, Chamfer, per-pixel depth error against the
 truth maps, the fraction of overlap pixels measured, flatness of planes.
 
+Options that apply: ``--from``, ``--spp``, ``--variant``, ``--seed``, ``-D``, ``--depth-range``,
+``--assume`` / ``--calib`` (what the measurement believes), ``--sensor`` and ``--median-filter``
+(the images the matcher sees), ``--methods`` (``optical_path``, ``regular``), ``--json``; the
+target-only options are refused with one ``error:`` line.
+
 Writes ``report.json``, ``report.md``, ``views.png`` (both images), per method
 ``depth_error_<method>.png`` and ``points_<method>.ply`` (coloured by point-to-mesh distance),
 and ``distances.png`` (histograms).
@@ -53,9 +58,9 @@ def is_surface_scene(path: str) -> bool:
 
 
 def check_dense_options(args) -> tuple:
-    """The dense methods of ``--methods`` (default: both) and the depth range; CLIError names an
-    option that does not apply to a surface scene."""
-    from .run import DEFAULT_METHODS, _parse_range
+    """The dense methods of ``--methods`` (default: both), the depth range and the sensor model;
+    CLIError names an option that does not apply to a surface scene."""
+    from .run_options import DEFAULT_METHODS, _parse_range, _parse_sensor
 
     for name, default in TARGET_ONLY_OPTIONS.items():
         if getattr(args, name, default) != default:
@@ -69,7 +74,25 @@ def check_dense_options(args) -> tuple:
         if unknown or not methods:
             raise CLIError(f"--methods: a surface scene is measured with "
                            f"{' and '.join(DENSE_METHODS)}, got {args.methods!r}")
-    return methods, _parse_range(args.depth_range)
+    return methods, _parse_range(args.depth_range), _parse_sensor(args.sensor)
+
+
+def _develop(args, sensor, left, right, seed):
+    """The images the matcher sees: through the ``--sensor`` model (seeded) and the
+    ``--median-filter``, if given; returns ``(left, right, sensor report or None)``."""
+    import cv2
+
+    sensor_info = None
+    if sensor is not None:
+        from synth.sensor_model import sensor_views, to_radiance
+
+        codes_left, codes_right, sensor_info = sensor_views(left, right, sensor, seed)
+        left, right = (to_radiance(codes, sensor, sensor_info["electrons_per_unit"])
+                       for codes in (codes_left, codes_right))
+    if args.median_filter:
+        left, right = (cv2.medianBlur(np.asarray(image, dtype=np.float32), int(args.median_filter))
+                       for image in (left, right))
+    return left, right, sensor_info
 
 
 def _inputs(args, log):
@@ -78,7 +101,7 @@ def _inputs(args, log):
     from synth.scene import apply_seed, load_scene, parse_defines
     from synth.truth_maps import MeshTracer, read_truth_maps, truth_maps
 
-    from .run import _dataset_params, _measurement_rig
+    from .run_options import _dataset_params, _measurement_rig
 
     defines = parse_defines(args.defines)
     if args.from_dir:
@@ -132,7 +155,7 @@ def default_depth_range(truth) -> tuple[float, float]:
     return float(depth.min()) - margin, float(depth.max()) + margin
 
 
-def measure_surface(args, methods, depth_range, log):
+def measure_surface(args, methods, depth_range, log, sensor=None):
     """Match, triangulate and score every method; returns ``(report, arrays)``."""
     from measure.dense import match_dense
     from measure.triangulate import triangulate
@@ -140,6 +163,8 @@ def measure_surface(args, methods, depth_range, log):
     from .surface_metrics import SurfaceCase, score_surface, surface_arrays
 
     spec, rig, left, right, truth, provenance = _inputs(args, log)
+    left, right, sensor_info = _develop(args, sensor, left, right,
+                                        spec.seed if args.seed is None else args.seed)
     if depth_range is None:
         depth_range = default_depth_range(truth)
     else:
@@ -154,6 +179,7 @@ def measure_surface(args, methods, depth_range, log):
               "depth_range_mm": list(depth_range),
               "truth": {"valid_pixels": int(truth.valid.sum()),
                         "overlap_pixels": int(truth.overlap.sum())},
+              "sensor": sensor_info, "median_filter": int(args.median_filter or 0),
               "methods": {}, "matching": {}, "timings_s": dict(provenance["timings"]),
               "inputs": {k: v for k, v in provenance.items() if k == "from"}}
     arrays = {"left": left, "right": right, "per_method": {}}
@@ -231,7 +257,7 @@ def write_outputs(tmp: str, report: dict, arrays: dict) -> None:
 
 
 def report_markdown(report: dict) -> str:
-    from .run import _fmt
+    from .run_options import _fmt
     from .surface_metrics import surface_table
 
     t = report["timings_s"]
@@ -265,7 +291,7 @@ def report_markdown(report: dict) -> str:
 
 
 def summary_line(report: dict) -> str:
-    from .run import _fmt
+    from .run_options import _fmt
 
     parts = []
     for method, s in report["methods"].items():
@@ -283,13 +309,13 @@ def main(args, log) -> int:
     from synth.fileio import OutputDir, atomic_write_json, atomic_write_text, jsonable
     from synth.provenance import package_versions
 
-    from .run import COMMAND
+    from .run_options import COMMAND
     from .surface_metrics import surface_table
 
-    methods, depth_range = check_dense_options(args)
+    methods, depth_range, sensor = check_dense_options(args)
     output = OutputDir(args.out, COMMAND).claim()
     start = time.perf_counter()
-    report, arrays = measure_surface(args, methods, depth_range, log)
+    report, arrays = measure_surface(args, methods, depth_range, log, sensor)
     log("write the report, figures and point clouds …")
     with output.staged() as tmp:
         t = time.perf_counter()

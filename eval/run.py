@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import os
 import sys
 import time
@@ -18,12 +17,13 @@ from dataclasses import dataclass
 from eval.cli import CLIError, non_negative_float, non_negative_int, positive_float, positive_int
 from synth.cli import finite_float
 
+from .run_options import (COMMAND, DEFAULT_METHODS, _dataset_params, _fmt,  # noqa: F401
+                          _measurement_rig, _parse_range, _parse_sensor)
+
 #: argparse type of --max-elongation and --max-area-ratio (a blob's axis or area ratio).
 _ABOVE_ONE = finite_float(1.0, strict=True, description="finite (> 1)")
 
-DEFAULT_METHODS = ("optical_path", "su", "regular")
 PLY_COLORMAP = "viridis"
-COMMAND = "eval run"
 
 
 def add_parser(subparsers):
@@ -132,71 +132,8 @@ def _fraction(text: str) -> float:
     return value
 
 
-def _parse_sensor(text):
-    """The ``--sensor`` model, or None; CLIError names what is wrong."""
-    if text is None:
-        return None
-    from synth.sensor_model import SensorError, sensor_from_spec
-
-    try:
-        return sensor_from_spec(text)
-    except SensorError as exc:
-        raise CLIError(f"--sensor {text}: {exc}") from None
 
 
-def _parse_range(text):
-    if text is None:
-        return None
-    try:
-        near, far = (float(v) for v in text.split(","))
-    except ValueError:
-        raise CLIError(f"--depth-range must be NEAR,FAR in mm, got {text!r}") from None
-    if not (math.isfinite(near) and math.isfinite(far) and 0 <= near < far):
-        raise CLIError(f"--depth-range must satisfy 0 <= NEAR < FAR (finite), got {text!r}")
-    return near, far
-
-
-def _same_value(a: str, b: str) -> bool:
-    """Whether two parameter values (text) mean the same: equal numbers, or equal text."""
-    import numpy as np
-
-    try:
-        x = np.array([float(v) for v in str(a).replace(",", " ").split()])
-        y = np.array([float(v) for v in str(b).replace(",", " ").split()])
-        return x.shape == y.shape and bool(np.array_equal(x, y))
-    except ValueError:
-        return str(a).strip() == str(b).strip()
-
-
-def _dataset_params(args, defines: dict) -> dict:
-    """The parameters the dataset of ``--from`` was rendered with; a conflicting ``-D`` is an
-    error naming both values."""
-    from synth.dataset import read_manifest
-
-    params = {str(k): str(v) for k, v in read_manifest(args.from_dir)["scene"]["params"].items()}
-    for name, value in defines.items():
-        if name in params and not _same_value(value, params[name]):
-            raise CLIError(f"-D {name}={value} conflicts with --from {args.from_dir}, rendered "
-                           f"with {name}={params[name]}")
-    return params
-
-
-def _measurement_rig(args, spec):
-    """The rig the measurement believes: the scene's (the truth), or ``--calib``, with
-    ``--assume`` applied."""
-    from synth.dataset import read_calib
-
-    from .assumption import assumed_rig, parse_assumptions
-
-    assumptions = parse_assumptions(args.assume)
-    base = None
-    if args.calib:
-        calib = read_calib(args.calib)
-        if tuple(calib["size"]) != tuple(spec.size):
-            raise CLIError(f"--calib {args.calib}: image size {calib['size'][0]}x{calib['size'][1]} "
-                           f"px, but the scene renders {spec.size[0]}x{spec.size[1]} px")
-        base = calib["rig"]
-    return assumed_rig(spec.rig, spec.has_port, assumptions, base)
 
 
 def _budget_rigs(args, inputs) -> dict:
@@ -289,13 +226,6 @@ def load_inputs(args, log):
                      time.perf_counter() - start, seed, {"render": render, "timings": timings},
                      spec.target_normals, spec.rig)
 
-
-def _fmt(value, digits=3):
-    if value is None or (isinstance(value, float) and value != value):
-        return "–"
-    if isinstance(value, float):
-        return f"{value:.{digits}f}"
-    return str(value)
 
 
 SUMMARY_COLUMNS = (("n", "n", 0), ("rms_dp_mm", "RMS dP", 3), ("max_dp_mm", "max dP", 3),
