@@ -174,6 +174,9 @@ def main(args) -> int:
         data = read_dataset(args.dataset)
     except DatasetError as exc:
         raise CLIError(str(exc)) from None
+    if data.is_surface:
+        raise CLIError(f"{args.dataset}: a surface dataset (per-pixel truth maps, no targets); "
+                       f"eval score scores target datasets")
     if args.points:
         points = read_points(args.points)
         label, source = "theirs", {"points": os.path.abspath(args.points)}

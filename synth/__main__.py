@@ -207,6 +207,8 @@ def _cmd_scene(args) -> int:
     check_file_output(args.out, "--out", may_replace=_is_our_scene)
     if args.lighting is None:
         args.lighting = "lit" if args.layout == "surface" else "led"
+    if args.mesh and (args.layout != "surface" or args.surface != "mesh"):
+        raise CLIError("--mesh needs --layout surface --surface mesh")
     if args.layout == "random" and not args.z_range[0] < args.z_range[1]:
         raise CLIError(f"--z-range must be ZMIN < ZMAX, got {args.z_range[0]:g} {args.z_range[1]:g}")
     _check_target_count(args)

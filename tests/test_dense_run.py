@@ -140,3 +140,16 @@ def test_dense_run_through_a_sensor_and_a_median_filter(plane_case):
     assert report["sensor"]["model"]["name"] == "imx174" and report["median_filter"] == 3
     assert list(report["methods"]) == ["optical_path"]
     assert report["methods"]["optical_path"]["measured_fraction"] >= 0.85
+
+
+def test_mesh_without_surface_mesh_and_score_of_a_surface_dataset(plane_case, tmp_path, capsys):
+    root, _, ds = plane_case
+    mesh = tmp_path / "mesh.obj"
+    _write_obj(mesh, [[0, 0, 1000], [10, 0, 1000], [0, 10, 1000]], [(0, 1, 2)])
+    code = synth_main(["scene", "--layout", "surface", "--mesh", str(mesh), *SMALL,
+                       "--out", str(tmp_path / "s.xml")])
+    assert code == 2 and "--mesh needs --layout surface --surface mesh" in capsys.readouterr().err
+    code = eval_main(["score", ds, "--points", str(mesh), "--out", str(tmp_path / "score")])
+    err = capsys.readouterr().err
+    assert code == 2 and "a surface dataset" in err and "Traceback" not in err
+    assert not (tmp_path / "score").exists()
