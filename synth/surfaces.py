@@ -25,6 +25,9 @@ import numpy as np
 
 #: Largest distance (mm) of a generated mesh from the ideal shape it tessellates.
 MAX_CHORD_ERROR_MM = 0.01
+#: Most triangles a generated mesh may have (finer tessellations are refused before anything
+#: is allocated: a tiny wavelength or a huge radius would otherwise exhaust the memory).
+MAX_TRIANGLES = 10_000_000
 #: Kinds of surface :func:`make_surface` knows.
 SURFACE_KINDS = ("plane", "tilted", "cylinder", "sphere", "wavy", "mesh")
 
@@ -59,9 +62,15 @@ def _grid(s, t, point_of):
     return vertices, triangles, ss.ravel(), tt.ravel()
 
 
-def _steps(length: float, spacing: float) -> np.ndarray:
-    """``n + 1`` evenly spaced values over ``[-length/2, length/2]``, at most ``spacing`` apart."""
-    n = max(int(np.ceil(length / spacing)), 1)
+def _steps(length: float, spacing: float, other_cells: int = 1, hint: str = "") -> np.ndarray:
+    """``n + 1`` evenly spaced values over ``[-length/2, length/2]``, at most ``spacing`` apart;
+    ValueError (``hint`` says what to change) if ``n × other_cells`` cells would exceed
+    :data:`MAX_TRIANGLES` triangles."""
+    cells = length / spacing
+    if not np.isfinite(cells) or 2 * max(cells, 1.0) * other_cells > MAX_TRIANGLES:
+        raise ValueError(f"the surface would need more than {MAX_TRIANGLES} triangles to stay "
+                         f"within {MAX_CHORD_ERROR_MM:g} mm of its shape{hint}")
+    n = max(int(np.ceil(cells)), 1)
     return np.linspace(-length / 2, length / 2, n + 1)
 
 
@@ -106,7 +115,7 @@ def cylinder(z: float = 1000.0, radius: float = 400.0, half_angle_deg: float = 6
     # sagitta of a chord of angle Δ: r(1 − cos(Δ/2)) ≈ rΔ²/8 ≤ MAX_CHORD_ERROR_MM
     step = np.sqrt(8 * MAX_CHORD_ERROR_MM / radius)
     arc = 2 * np.radians(half_angle_deg) * radius
-    s = _steps(arc, step * radius)
+    s = _steps(arc, step * radius, hint=" (use a smaller --surface-radius or --half-angle)")
     t = np.array([-height / 2, height / 2])
     axis_z = z + radius
 
@@ -132,7 +141,9 @@ def sphere_cap(z: float = 1000.0, radius: float = 400.0, half_angle_deg: float =
     # the triangle's circumscribed circle (side δ·√2 for the diagonal): δ²/(4r)
     spacing = np.sqrt(4 * MAX_CHORD_ERROR_MM * radius)
     extent = np.radians(half_angle_deg) * radius
-    s = _steps(2 * extent, spacing)
+    cells = 2 * extent / spacing
+    s = _steps(2 * extent, spacing, int(min(np.ceil(cells), MAX_TRIANGLES)),
+               hint=" (use a smaller --surface-radius or --half-angle)")
     centre = np.array([0.0, 0.0, z + radius])
 
     def point_of(ss, tt):
@@ -163,7 +174,8 @@ def wavy(z: float = 1000.0, amplitude: float = 20.0, wavelength: float = 300.0,
     k = 2 * np.pi / wavelength
     # chord error of a step δ on a curve of curvature ≤ A k²: A k² δ² / 8
     step = np.sqrt(8 * MAX_CHORD_ERROR_MM / (amplitude * k * k))
-    x = _steps(2 * half_size[0], step)
+    x = _steps(2 * half_size[0], step,
+               hint=" (use a longer --wavelength or a smaller --wave-amplitude)")
     profile = amplitude * np.sin(k * x)
     arc = np.concatenate([[0.0], np.cumsum(np.hypot(np.diff(x), np.diff(profile)))])
     arc -= np.interp(0.0, x, arc)

@@ -138,3 +138,17 @@ def test_rendered_surface_covers_the_truth_mask(tilted_dataset):
         outer = cv2.dilate(maps.valid.astype(np.uint8), kernel) > 0
         assert np.all(image[inner] > 0)
         assert np.all(image[~outer] == 0)
+
+
+@pytest.mark.parametrize("argv, fragment", [
+    (["--surface", "wavy", "--wavelength", "0.001"], "--wavelength"),  # 1.8e8 cells: no OOM
+    (["--surface", "sphere", "--surface-radius", "1e9"], "--surface-radius"),
+])
+def test_bad_surface_scene_options(tmp_path, capsys, argv, fragment):
+    """Hostile surface options: one ``error:`` line naming the option, exit 2, nothing written."""
+    code = synth_main(["scene", "--layout", "surface", *SMALL, *BIG_DOTS, *argv,
+                       "--out", str(tmp_path / "s.xml")])
+    err = capsys.readouterr().err
+    assert code == 2 and fragment in err and "Traceback" not in err, err
+    assert [line for line in err.splitlines() if line.strip()] == [err.strip()]
+    assert err.startswith("error:") and os.listdir(tmp_path) == []
