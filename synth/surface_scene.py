@@ -123,6 +123,31 @@ def overlap_samples(mesh_path: str, mesh, left, right, port) -> np.ndarray:
     return points[seen_by(tracer, right, port, points)]
 
 
+def back_facing_fraction(mesh_path: str, mesh, camera, port) -> float:
+    """The fraction of a coarse grid of ``camera``'s pixels that meet the surface whose first
+    hit is the *back* of a triangle (the side its winding turns away; Mitsuba's diffuse and
+    area-light surfaces are one-sided, so the back renders black). 0 if no pixel meets it."""
+    from measure.refraction import trace_through_port
+
+    from .truth_maps import MeshTracer
+
+    tracer = MeshTracer(mesh_path, mesh.vertices.astype(np.float32).astype(np.float64),
+                        mesh.triangles)
+    w, h = camera.size
+    uu, vv = np.meshgrid(np.arange(0, w, CHECK_STEP_PX, dtype=float),
+                         np.arange(0, h, CHECK_STEP_PX, dtype=float))
+    water = trace_through_port(camera.center, camera.rays(np.column_stack([uu.ravel(),
+                                                                            vv.ravel()])),
+                               port, keep_interface_points=False)
+    hit = tracer.first_triangles(water.origins, water.directions)
+    seen = hit >= 0
+    if not seen.any():
+        return 0.0
+    v = tracer.vertices[tracer.triangles[hit[seen]]]
+    normal = np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])
+    return float(np.mean(np.einsum("ij,ij->i", normal, water.directions[seen]) > 0))
+
+
 def dot_pixels(points, left, port, dot_mm: float) -> np.ndarray:
     """About how many pixels of the left image a speckle dot spans at each surface point
     ``(M, 3)`` (its width along x, px)."""
@@ -161,6 +186,19 @@ def write_surface_scene(out: str, args, left, right, port, **scene_options) -> s
             raise ValueError(f"--surface {args.surface}: the surface is not seen by both cameras "
                              f"(fewer than {MIN_OVERLAP_SAMPLES} samples of the left image every "
                              f"{CHECK_STEP_PX} px; move it with --z or make it larger)")
+        back = max(back_facing_fraction(tmp_mesh, mesh, camera, geometry_port)
+                   for camera in (left, right))
+        if back > 0.5:
+            what = (f"--mesh {args.mesh}: its triangles are wound the other way (reverse their "
+                    f"vertex order); " if args.surface == "mesh" else
+                    f"--tilt {args.tilt[0]:g} {args.tilt[1]:g}: " if args.surface == "tilted"
+                    else f"--surface {args.surface}: ")
+            raise ValueError(f"{what}the cameras see the back of the surface, which renders "
+                             f"black ({100 * back:.0f} % of the pixels that see it)")
+        if back > 0:
+            print(f"warning: --surface {args.surface}: the cameras see the back of the surface "
+                  f"in {100 * back:.1f} % of the pixels that see it (black in the images)",
+                  file=sys.stderr)
         dot_px = dot_pixels(seen, left, geometry_port, args.speckle_size)
         if dot_px.min() < MIN_DOT_PX:
             print(f"warning: --speckle-size {args.speckle_size:g} mm is down to "

@@ -71,7 +71,16 @@ class MeshTracer:
             out[rows] = self._chunk(origins[rows], directions[rows])
         return out
 
-    def _chunk(self, origins, directions):
+    def first_triangles(self, origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
+        """Index of the triangle each ray first meets, ``(N,)``; -1 where it misses."""
+        out = np.full(origins.shape[0], -1, dtype=np.int64)
+        for start in range(0, origins.shape[0], CHUNK_RAYS):
+            rows = slice(start, start + CHUNK_RAYS)
+            valid, prim = self._triangles(origins[rows], directions[rows])
+            out[rows] = np.where(valid, prim, -1)
+        return out
+
+    def _triangles(self, origins, directions):
         mi = self.mi
         finite = np.all(np.isfinite(origins), axis=1) & np.all(np.isfinite(directions), axis=1)
         o = np.where(finite[:, None], origins, 0.0).astype(np.float32)
@@ -79,8 +88,11 @@ class MeshTracer:
         ray = mi.Ray3f(mi.Point3f(o[:, 0], o[:, 1], o[:, 2]),
                        mi.Vector3f(d[:, 0], d[:, 1], d[:, 2]))
         hit = self.scene.ray_intersect_preliminary(ray)
-        valid = np.array(hit.is_valid(), dtype=bool) & finite
-        prim = np.array(hit.prim_index, dtype=np.int64)
+        return np.array(hit.is_valid(), dtype=bool) & finite, np.array(hit.prim_index,
+                                                                        dtype=np.int64)
+
+    def _chunk(self, origins, directions):
+        valid, prim = self._triangles(origins, directions)
         points = np.full(origins.shape, np.nan)
         if not valid.any():
             return points

@@ -94,6 +94,7 @@ def _write_obj(path, vertices, faces):
     ("behind", "out of the water"),
     ("aside", "not seen by both cameras"),
     ("txt", "expected a .ply or .obj"),
+    ("wound", "wound the other way"),  # the cameras see the back: it would render black
 ])
 def test_bad_user_meshes(tmp_path, capsys, setup, fragment):
     mesh = tmp_path / ("mesh.txt" if setup == "txt" else "mesh.obj")
@@ -105,6 +106,8 @@ def test_bad_user_meshes(tmp_path, capsys, setup, fragment):
         _write_obj(mesh, quad + [0, 0, 90], faces)
     elif setup == "aside":  # 5 m to the side: in the water, seen by neither camera
         _write_obj(mesh, quad + [5000, 0, 1000], faces)
+    elif setup == "wound":
+        _write_obj(mesh, quad * 5 + [0, 0, 1000], faces)  # normal +z: away from the cameras
     elif setup == "txt":
         mesh.write_text("v 0 0 1000\n")
     before = _snapshot(tmp_path)
@@ -121,7 +124,7 @@ def test_user_mesh_and_fine_speckle_warning(tmp_path, capsys):
     mesh = tmp_path / "mesh.obj"
     quad = np.array([[-1500.0, -1000, 5000], [1700, -1000, 5000], [1700, 1000, 5200],
                      [-1500, 1000, 5200]])
-    _write_obj(mesh, quad, [(0, 1, 2), (0, 2, 3)])
+    _write_obj(mesh, quad, [(0, 2, 1), (0, 3, 2)])  # wound to face the cameras (-z)
     code = synth_main(["scene", "--layout", "surface", "--surface", "mesh", "--mesh", str(mesh),
                        *SMALL, *DOTS, "--out", str(tmp_path / "s.xml")])
     captured = capsys.readouterr()

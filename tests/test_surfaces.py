@@ -143,6 +143,7 @@ def test_rendered_surface_covers_the_truth_mask(tilted_dataset):
 @pytest.mark.parametrize("argv, fragment", [
     (["--surface", "wavy", "--wavelength", "0.001"], "--wavelength"),  # 1.8e8 cells: no OOM
     (["--surface", "sphere", "--surface-radius", "1e9"], "--surface-radius"),
+    (["--surface", "tilted", "--tilt", "0", "180"], "see the back"),  # would render black
 ])
 def test_bad_surface_scene_options(tmp_path, capsys, argv, fragment):
     """Hostile surface options: one ``error:`` line naming the option, exit 2, nothing written."""
