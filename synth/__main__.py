@@ -205,6 +205,9 @@ def _cmd_scene(args) -> int:
     from .scene import DEFAULT_SPP, DEFAULT_TARGET_RADIUS_MM, write_scene
 
     check_file_output(args.out, "--out", may_replace=_is_our_scene)
+    if args.lighting is None and args.layout == "surface" and args.port == "none":
+        raise CLIError("--port none: a surface in air needs --lighting led (the default, lit, "
+                       "puts the spot lights in the water)")
     if args.lighting is None:
         args.lighting = "lit" if args.layout == "surface" else "led"
     if args.mesh and (args.layout != "surface" or args.surface != "mesh"):

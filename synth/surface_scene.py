@@ -35,10 +35,15 @@ def build_mesh(args, port_normal) -> surfaces.SurfaceMesh:
         return surfaces.plane(args.z)
     if kind == "tilted":
         return surfaces.plane(args.z, tilt_deg=tuple(args.tilt))
-    if kind == "cylinder":
-        return surfaces.cylinder(args.z, args.surface_radius, args.half_angle)
-    if kind == "sphere":
-        return surfaces.sphere_cap(args.z, args.surface_radius, args.half_angle)
+    if kind in ("cylinder", "sphere"):
+        if not args.half_angle < 90:
+            raise ValueError(f"--half-angle must lie in (0, 90) degrees, got {args.half_angle:g}")
+        mesh = (surfaces.cylinder if kind == "cylinder" else surfaces.sphere_cap)(
+            args.z, args.surface_radius, args.half_angle)
+        if mesh.triangles.shape[0] == 0:
+            raise ValueError(f"--half-angle {args.half_angle:g}: the {kind} is too small to "
+                             f"hold a triangle")
+        return mesh
     if kind == "wavy":
         return surfaces.wavy(args.z, args.wave_amplitude, args.wavelength)
     if not args.mesh:

@@ -144,6 +144,9 @@ def test_rendered_surface_covers_the_truth_mask(tilted_dataset):
     (["--surface", "wavy", "--wavelength", "0.001"], "--wavelength"),  # 1.8e8 cells: no OOM
     (["--surface", "sphere", "--surface-radius", "1e9"], "--surface-radius"),
     (["--surface", "tilted", "--tilt", "0", "180"], "see the back"),  # would render black
+    (["--surface", "cylinder", "--half-angle", "90"], "--half-angle"),
+    (["--surface", "sphere", "--half-angle", "1e-9"], "--half-angle"),  # no triangle left
+    (["--port", "none"], "--lighting led"),  # the default lighting needs the water
 ])
 def test_bad_surface_scene_options(tmp_path, capsys, argv, fragment):
     """Hostile surface options: one ``error:`` line naming the option, exit 2, nothing written."""
