@@ -167,6 +167,9 @@ def measure_surface(args, methods, depth_range, log, sensor=None):
                                         spec.seed if args.seed is None else args.seed)
     if depth_range is None:
         depth_range = default_depth_range(truth)
+    elif depth_range[0] <= rig.port.offsets[-1]:
+        raise CLIError(f"--depth-range {depth_range[0]:g},{depth_range[1]:g}: NEAR must lie beyond "
+                       f"the port (the water starts at {rig.port.offsets[-1]:g} mm)")
     else:
         seen = truth.depth[truth.overlap]
         if seen.size and (depth_range[1] < seen.min() or depth_range[0] > seen.max()):

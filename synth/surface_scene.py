@@ -172,11 +172,19 @@ def write_surface_scene(out: str, args, left, right, port, **scene_options) -> s
 
     geometry_port = StereoRig(left, right, port).port
     mesh = build_mesh(args, geometry_port.normal)
+    move = "move the mesh" if args.surface == "mesh" else "move it with --z"
     if port is not None and not np.all(port.water_side(mesh.vertices)):
-        raise ValueError("the surface reaches out of the water: every vertex must lie beyond the "
-                         "port's last interface (move it with --z)")
+        raise ValueError(f"the surface reaches out of the water: every vertex must lie beyond the "
+                         f"port's last interface ({move})")
     extent = texture_extent(mesh)
-    speckle.texture_shape(extent, args.speckle_size)  # refuses an oversized texture early
+    try:  # refuses an oversized texture early
+        rows, cols, _ = speckle.texture_shape(extent, args.speckle_size)
+    except ValueError as exc:
+        raise ValueError(f"--speckle-size {args.speckle_size:g}: {exc}") from None
+    if min(rows, cols) < 4 * speckle.TEXELS_PER_DOT:
+        print(f"warning: --speckle-size {args.speckle_size:g} mm: fewer than 4 dots across the "
+              f"surface's texture ({extent[0]:.0f} x {extent[1]:.0f} mm), nothing to match",
+              file=sys.stderr)
     lower = (mesh.uv_extent[0] + mesh.uv_extent[1]) / 2 - extent / 2
     directory = os.path.dirname(os.path.abspath(out))
     mesh_path = companion_paths(out)
@@ -190,7 +198,7 @@ def write_surface_scene(out: str, args, left, right, port, **scene_options) -> s
         if seen.shape[0] < MIN_OVERLAP_SAMPLES:
             raise ValueError(f"--surface {args.surface}: the surface is not seen by both cameras "
                              f"(fewer than {MIN_OVERLAP_SAMPLES} samples of the left image every "
-                             f"{CHECK_STEP_PX} px; move it with --z or make it larger)")
+                             f"{CHECK_STEP_PX} px; {move} or make it larger)")
         back = max(back_facing_fraction(tmp_mesh, mesh, camera, geometry_port)
                    for camera in (left, right))
         if back > 0.5:

@@ -202,6 +202,10 @@ def read_truth_maps(directory: str, view: str, size) -> TruthMaps:
         if value.shape != expected:
             raise ValueError(f"{path}: shape {value.shape}, expected {expected}")
         arrays[name] = value
+    valid_points = np.all(np.isfinite(arrays["points"]), axis=2)
+    if not np.array_equal(valid_points, arrays["valid"]) or np.any(arrays["overlap"] & ~arrays["valid"]):
+        raise ValueError(f"{directory}: the {view} truth maps disagree (finite points, valid and "
+                         f"overlap masks): damaged or edited files")
     return TruthMaps(arrays["points"], arrays["depth"].astype(np.float64), arrays["valid"],
                      arrays["overlap"])
 

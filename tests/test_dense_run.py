@@ -60,6 +60,7 @@ def test_dense_run_measures_the_plane_and_shows_what_ignoring_refraction_costs(p
     (["--eccentricity"], "applies to target scenes"),
     (["--methods", "su"], "surface scene is measured with"),
     (["--depth-range", "2000,2100"], "excludes the surface"),
+    (["--depth-range", "50,2000"], "NEAR must lie beyond the port"),
 ])
 def test_dense_run_bad_options(plane_case, capsys, argv, fragment):
     root, scene, ds = plane_case
@@ -156,3 +157,17 @@ def test_mesh_without_surface_mesh_and_score_of_a_surface_dataset(plane_case, tm
     err = capsys.readouterr().err
     assert code == 2 and "a surface dataset" in err and "Traceback" not in err
     assert not (tmp_path / "score").exists()
+
+
+def test_damaged_truth_maps_are_refused(plane_case, tmp_path, capsys):
+    """Truth points that are NaN where the valid mask says the surface is hit: refused."""
+    _, scene, ds = plane_case
+    copy = tmp_path / "ds"
+    shutil.copytree(ds, copy)
+    points = np.load(copy / "left_truth_points.npy")
+    np.save(copy / "left_truth_points.npy", np.full_like(points, np.nan))
+    code = eval_main(["run", scene, "--from", str(copy), "--out", str(tmp_path / "out"),
+                      "--no-progress"])
+    err = capsys.readouterr().err
+    assert code == 2 and "truth maps disagree" in err and "Traceback" not in err
+    assert not (tmp_path / "out").exists()

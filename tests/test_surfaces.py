@@ -147,6 +147,7 @@ def test_rendered_surface_covers_the_truth_mask(tilted_dataset):
     (["--surface", "cylinder", "--half-angle", "90"], "--half-angle"),
     (["--surface", "sphere", "--half-angle", "1e-9"], "--half-angle"),  # no triangle left
     (["--port", "none"], "--lighting led"),  # the default lighting needs the water
+    (["--speckle-size", "0.01"], "--speckle-size 0.01: a speckle texture"),  # 4e10 texels
 ])
 def test_bad_surface_scene_options(tmp_path, capsys, argv, fragment):
     """Hostile surface options: one ``error:`` line naming the option, exit 2, nothing written."""
