@@ -193,8 +193,12 @@ def measure_surface(args, methods, depth_range, log, sensor=None):
         log(f"{method}: dense matching ({model} model, depth {search[0]:.0f}-"
             f"{search[1]:.0f} mm) …")
         t = time.perf_counter()
-        matches = match_dense(rig, left, right, search, model=model,
-                              progress=_progress(args, method))
+        try:
+            matches = match_dense(rig, left, right, search, model=model,
+                                  progress=_progress(args, method))
+        except ValueError as exc:
+            raise CLIError(f"--depth-range ({method}, searched {search[0]:.0f}-{search[1]:.0f} "
+                           f"mm): {exc}") from None
         match_seconds = time.perf_counter() - t
         t = time.perf_counter()
         result = triangulate(rig, matches.uv_left, matches.uv_right, triangulation)

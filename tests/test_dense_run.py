@@ -171,3 +171,18 @@ def test_damaged_truth_maps_are_refused(plane_case, tmp_path, capsys):
     err = capsys.readouterr().err
     assert code == 2 and "truth maps disagree" in err and "Traceback" not in err
     assert not (tmp_path / "out").exists()
+
+
+def test_depth_range_needing_too_many_planes(plane_case, monkeypatch, capsys):
+    """A search that needs more sweep planes than measure.dense.MAX_PLANES is refused before
+    any image work (at full size 200-1e9 mm needs thousands; here the cap is lowered to 20)."""
+    import measure.dense
+
+    root, scene, ds = plane_case
+    monkeypatch.setattr(measure.dense, "MAX_PLANES", 20)
+    before = _snapshot(root)
+    code = eval_main(["run", scene, "--from", ds, "--out", str(root / "bad"), "--no-progress",
+                      "--depth-range", "200,1e9"])
+    err = capsys.readouterr().err
+    assert code == 2 and "sweep planes, more than 20: narrow it" in err and "--depth-range" in err
+    assert _snapshot(root) == before
