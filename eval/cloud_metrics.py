@@ -114,7 +114,8 @@ def write_colored_ply(path: str, points: np.ndarray, values: np.ndarray, vmax: f
                      "property uchar red\nproperty uchar green\nproperty uchar blue\n"
                      "end_header\n")
         return
-    fraction = np.clip(np.asarray(values, dtype=float) / vmax if vmax > 0 else 0.0, 0.0, 1.0)
+    values = np.asarray(values, dtype=float)
+    fraction = np.clip(values / vmax if vmax > 0 else np.zeros_like(values), 0.0, 1.0)
     colors = colormaps[colormap](fraction)[:, :3]
     if not o3d.io.write_point_cloud(str(path), point_cloud(points, colors), write_ascii=False):
         raise OSError(f"Open3D could not write {path}")

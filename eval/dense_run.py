@@ -97,24 +97,14 @@ def _develop(args, sensor, left, right, seed):
 
 def _inputs(args, log):
     """``(spec, measured rig, left, right, truth maps of the left view, provenance)``."""
-    from synth.dataset import read_dataset
-    from synth.scene import apply_seed, load_scene, parse_defines
     from synth.truth_maps import MeshTracer, read_truth_maps, truth_maps
 
-    from .run_options import _dataset_params, _measurement_rig
+    from .run_options import _measurement_rig, load_run_scene, read_run_dataset
 
-    defines = parse_defines(args.defines)
-    if args.from_dir:
-        apply_seed(dict(defines), args.seed)
-        spec = load_scene(args.scene, _dataset_params(args, defines))
-    else:
-        spec = load_scene(args.scene, apply_seed(defines, args.seed))
+    spec = load_run_scene(args)
     rig = _measurement_rig(args, spec)
     if args.from_dir:
-        data = read_dataset(args.from_dir)
-        if data.manifest["scene"].get("sha256") != spec.sha256:
-            raise CLIError(f"--from {args.from_dir}: the dataset was rendered from another scene "
-                           f"than {args.scene}")
+        data = read_run_dataset(args, spec)
         try:
             truth = read_truth_maps(args.from_dir, "left", spec.size)
         except ValueError as exc:

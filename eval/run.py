@@ -17,8 +17,8 @@ from dataclasses import dataclass
 from eval.cli import CLIError, non_negative_float, non_negative_int, positive_float, positive_int
 from synth.cli import finite_float
 
-from .run_options import (COMMAND, DEFAULT_METHODS, _dataset_params, _fmt,  # noqa: F401
-                          _measurement_rig, _parse_range, _parse_sensor)
+from .run_options import (COMMAND, DEFAULT_METHODS, _fmt, _measurement_rig, _parse_range,
+                          _parse_sensor)
 
 #: argparse type of --max-elongation and --max-area-ratio (a blob's axis or area ratio).
 _ABOVE_ONE = finite_float(1.0, strict=True, description="finite (> 1)")
@@ -176,17 +176,10 @@ def budget_table(report: dict) -> str:
 
 def load_inputs(args, log):
     """The scene (rig and truth) and its two images, rendered now or read from ``--from``."""
-    from synth.dataset import read_dataset
-    from synth.scene import apply_seed, load_scene, parse_defines
-
+    from .run_options import load_run_scene, read_run_dataset
     from .run_pipeline import RunInputs, visible_targets
 
-    defines = parse_defines(args.defines)
-    if args.from_dir:  # --seed seeds the noise only: the images are the dataset's
-        apply_seed(dict(defines), args.seed)  # still refuse a conflicting -D seed
-        spec = load_scene(args.scene, _dataset_params(args, defines))
-    else:
-        spec = load_scene(args.scene, apply_seed(defines, args.seed))
+    spec = load_run_scene(args)
     seed = spec.seed if args.seed is None else args.seed
     measured_rig = _measurement_rig(args, spec)
     in_left = visible_targets(spec.rig.left, spec.rig.port, spec.targets, spec.target_radius)[1]
@@ -194,10 +187,7 @@ def load_inputs(args, log):
     if not (in_left & in_right).any():
         raise CLIError(f"{args.scene}: no target is visible in both views")
     if args.from_dir:
-        data = read_dataset(args.from_dir)
-        if data.manifest["scene"].get("sha256") != spec.sha256:
-            raise CLIError(f"--from {args.from_dir}: the dataset was rendered from another scene "
-                           f"than {args.scene}")
+        data = read_run_dataset(args, spec)
         log(f"reusing the images of {args.from_dir}")
         return RunInputs(args.scene, measured_rig, spec.has_port, spec.targets, spec.target_ids,
                          spec.target_radius, data.left, data.right, spec.params,

@@ -85,3 +85,27 @@ def _fmt(value, digits=3):
     if isinstance(value, float):
         return f"{value:.{digits}f}"
     return str(value)
+
+
+def load_run_scene(args):
+    """The scene of a run with ``-D`` and ``--seed`` applied. With ``--from`` the dataset's own
+    parameters are used (a conflicting ``-D`` is an error) and ``--seed`` seeds only the
+    run's noise, but a ``-D seed`` contradicting it is still refused."""
+    from synth.scene import apply_seed, load_scene, parse_defines
+
+    defines = parse_defines(args.defines)
+    if args.from_dir:
+        apply_seed(dict(defines), args.seed)
+        return load_scene(args.scene, _dataset_params(args, defines))
+    return load_scene(args.scene, apply_seed(defines, args.seed))
+
+
+def read_run_dataset(args, spec):
+    """The ``--from`` dataset, refused when it was rendered from another scene than ``spec``."""
+    from synth.dataset import read_dataset
+
+    data = read_dataset(args.from_dir)
+    if data.manifest["scene"].get("sha256") != spec.sha256:
+        raise CLIError(f"--from {args.from_dir}: the dataset was rendered from another scene "
+                       f"than {args.scene}")
+    return data

@@ -12,14 +12,13 @@ import os
 import tempfile
 
 import numpy as np
-import open3d as o3d
 from matplotlib import colormaps
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
-from synth.fileio import atomic_write_bytes, atomic_write_text
+from synth.fileio import atomic_write_bytes
 
-from .cloud_metrics import point_cloud
+from .cloud_metrics import write_colored_ply
 from .results import method_label
 
 DPI = 110
@@ -110,9 +109,9 @@ def write_colored_cloud(path, points: np.ndarray, distances: np.ndarray, vmax: f
                         colormap: str = "viridis") -> dict:
     """Binary PLY of ``(N, 3)`` points (mm, reference frame; rows with a non-finite point or
     distance left out) coloured by ``distances`` (mm) on ``colormap`` over [0, ``vmax``],
-    clipped. Open3D writes to a temporary ``.ply`` beside ``path`` (it picks the format from the
-    extension), renamed into place. Returns ``{"file", "points", "colormap", "vmin_mm",
-    "vmax_mm"}``."""
+    clipped (:func:`eval.cloud_metrics.write_colored_ply`, to a temporary ``.ply`` beside
+    ``path`` — Open3D picks the format from the extension — renamed into place). Returns
+    ``{"file", "points", "colormap", "vmin_mm", "vmax_mm"}``."""
     points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     distances = np.asarray(distances, dtype=np.float64).reshape(-1)
     if len(points) != len(distances):
@@ -121,20 +120,11 @@ def write_colored_cloud(path, points: np.ndarray, distances: np.ndarray, vmax: f
     points, distances = points[keep], distances[keep]
     entry = {"file": os.path.basename(os.fspath(path)), "points": int(len(points)),
              "colormap": colormap, "vmin_mm": 0.0, "vmax_mm": float(vmax)}
-    if len(points) == 0:  # Open3D refuses to write an empty cloud; an empty PLY is still valid
-        atomic_write_text(path, "ply\nformat ascii 1.0\ncomment no points\nelement vertex 0\n"
-                          "property double x\nproperty double y\nproperty double z\n"
-                          "property uchar red\nproperty uchar green\nproperty uchar blue\n"
-                          "end_header\n")
-        return entry
-    fraction = np.clip(distances / vmax if vmax > 0 else np.zeros_like(distances), 0.0, 1.0)
-    colors = colormaps[colormap](fraction)[:, :3]
     directory, name = os.path.split(os.path.abspath(os.fspath(path)))
     fd, tmp = tempfile.mkstemp(dir=directory, prefix=f".{name}.", suffix=".tmp.ply")
     os.close(fd)
     try:
-        if not o3d.io.write_point_cloud(tmp, point_cloud(points, colors), write_ascii=False):
-            raise OSError(f"Open3D could not write {path}")
+        write_colored_ply(tmp, points, distances, vmax, colormap)
         os.chmod(tmp, 0o644)  # mkstemp makes 0600; outputs are meant to be read
         os.replace(tmp, path)
     except BaseException:

@@ -114,35 +114,24 @@ def write_texture(path: str, dot_mm: float, coverage: float, seed: int, extent) 
     return True
 
 
-def overlap_samples(mesh_path: str, mesh, left, right, port) -> np.ndarray:
+def overlap_samples(tracer, left, right, port) -> np.ndarray:
     """The surface points ``(M, 3)`` that pixels of a coarse grid of the left image see where
-    the right camera sees them too."""
-    from .truth_maps import MeshTracer, hits_of_pixels, seen_by
+    the right camera sees them too (``tracer`` a :class:`synth.truth_maps.MeshTracer`)."""
+    from .truth_maps import hits_of_pixels, pixel_grid, seen_by
 
-    tracer = MeshTracer(mesh_path, mesh.vertices.astype(np.float32).astype(np.float64),
-                        mesh.triangles)
-    w, h = left.size
-    uu, vv = np.meshgrid(np.arange(0, w, CHECK_STEP_PX, dtype=float),
-                         np.arange(0, h, CHECK_STEP_PX, dtype=float))
-    points = hits_of_pixels(tracer, left, port, np.column_stack([uu.ravel(), vv.ravel()]))
+    points = hits_of_pixels(tracer, left, port, pixel_grid(left.size, CHECK_STEP_PX))
     return points[seen_by(tracer, right, port, points)]
 
 
-def back_facing_fraction(mesh_path: str, mesh, camera, port) -> float:
+def back_facing_fraction(tracer, camera, port) -> float:
     """The fraction of a coarse grid of ``camera``'s pixels that meet the surface whose first
     hit is the *back* of a triangle (the side its winding turns away; Mitsuba's diffuse and
     area-light surfaces are one-sided, so the back renders black). 0 if no pixel meets it."""
     from measure.refraction import trace_through_port
 
-    from .truth_maps import MeshTracer
+    from .truth_maps import pixel_grid
 
-    tracer = MeshTracer(mesh_path, mesh.vertices.astype(np.float32).astype(np.float64),
-                        mesh.triangles)
-    w, h = camera.size
-    uu, vv = np.meshgrid(np.arange(0, w, CHECK_STEP_PX, dtype=float),
-                         np.arange(0, h, CHECK_STEP_PX, dtype=float))
-    water = trace_through_port(camera.center, camera.rays(np.column_stack([uu.ravel(),
-                                                                            vv.ravel()])),
+    water = trace_through_port(camera.center, camera.rays(pixel_grid(camera.size, CHECK_STEP_PX)),
                                port, keep_interface_points=False)
     hit = tracer.first_triangles(water.origins, water.directions)
     seen = hit >= 0
@@ -167,6 +156,8 @@ def write_surface_scene(out: str, args, left, right, port, **scene_options) -> s
     line. ``port`` None: an all-air scene. Nothing is left behind on failure."""
     import sys
     import tempfile
+
+    from .truth_maps import MeshTracer
 
     from measure import StereoRig
 
@@ -194,12 +185,13 @@ def write_surface_scene(out: str, args, left, right, port, **scene_options) -> s
     written = []
     try:
         surfaces.write_ply(tmp_mesh, mesh, lower, lower + extent)
-        seen = overlap_samples(tmp_mesh, mesh, left, right, geometry_port)
+        tracer = MeshTracer(tmp_mesh, *surfaces.read_ply(tmp_mesh))
+        seen = overlap_samples(tracer, left, right, geometry_port)
         if seen.shape[0] < MIN_OVERLAP_SAMPLES:
             raise ValueError(f"--surface {args.surface}: the surface is not seen by both cameras "
                              f"(fewer than {MIN_OVERLAP_SAMPLES} samples of the left image every "
                              f"{CHECK_STEP_PX} px; {move} or make it larger)")
-        back = max(back_facing_fraction(tmp_mesh, mesh, camera, geometry_port)
+        back = max(back_facing_fraction(tracer, camera, geometry_port)
                    for camera in (left, right))
         if back > 0.5:
             what = (f"--mesh {args.mesh}: its triangles are wound the other way (reverse their "

@@ -104,10 +104,12 @@ class MeshTracer:
         return points
 
 
-def pixel_grid(size) -> np.ndarray:
-    """Every pixel centre of an image of ``size`` = (W, H), row by row: ``(H·W, 2)`` (u, v)."""
+def pixel_grid(size, step: int = 1) -> np.ndarray:
+    """Every ``step``-th pixel centre of an image of ``size`` = (W, H) in both directions, row
+    by row: ``(N, 2)`` (u, v)."""
     w, h = size
-    uu, vv = np.meshgrid(np.arange(w, dtype=np.float64), np.arange(h, dtype=np.float64))
+    uu, vv = np.meshgrid(np.arange(0, w, step, dtype=np.float64),
+                         np.arange(0, h, step, dtype=np.float64))
     return np.column_stack([uu.ravel(), vv.ravel()])
 
 
