@@ -8,7 +8,7 @@ Measures (best of ``--repeat`` runs, wall clock):
   the paper's air–glass–water and a bare air–water interface: ``project`` (Fermat), ``project``
   with ``jacobian=True`` (d pixel / d point) and with ``parameters=True`` (also the port and
   camera parameters), and ``triangulate`` (``optical_path``);
-* the per-point SciPy minimization of the same travel time (:mod:`eval.fermat_reference`) on a
+* the per-point SciPy minimization of the same travel time (:mod:`eval.core.fermat_reference`) on a
   subset of the same points, and the speed-up of the vectorized Fermat solver over it.
 
 Everything is pure NumPy (no just-in-time compilation: the first call costs nothing extra; it is
@@ -27,6 +27,9 @@ import time
 import numpy as np
 
 from eval.cli import non_negative_int, positive_int
+from synth.cli import add_json_option, add_out_option, add_progress_option
+
+COMMAND = "eval bench"
 
 #: Issue 12's targets: (measurement, port, batch size) → points per second (the Jacobian: at
 #: most this many times the projection's time).
@@ -67,7 +70,11 @@ def add_parser(subparsers):
                         help="points solved one by one with scipy.optimize (default 2000)")
     parser.add_argument("--repeat", type=positive_int, default=3, help="runs per measurement; best counts")
     parser.add_argument("--seed", type=non_negative_int, default=0, help="seed of the random points")
-    parser.add_argument("--json", metavar="FILE", help="also write the results to FILE")
+    add_out_option(parser, COMMAND, what="file", required=False,
+                   rule="the results as JSON; an existing file is replaced only if it is an "
+                        "earlier output of eval bench")
+    add_json_option(parser)
+    add_progress_option(parser)
 
 
 def _best_time(function, repeat: int) -> float:
@@ -115,7 +122,7 @@ def _ports():
 def run_bench(n_points: int, n_reference: int, repeat: int, seed: int, progress=print,
               sizes=DEFAULT_SIZES) -> dict:
     """Run the measurements; returns a dict of seconds and points per second."""
-    from eval.fermat_reference import fermat_pixel_scipy
+    from eval.core.fermat_reference import fermat_pixel_scipy
     from measure import StereoRig, triangulate
     from measure.projection import project
     from synth.layouts import random_volume
@@ -226,14 +233,33 @@ def format_table(results: dict) -> str:
     return "\n".join(lines)
 
 
+def is_bench_output(path: str) -> bool:
+    """Whether ``path`` is a JSON file that ``eval bench --out`` wrote (its ``command`` key)."""
+    import json
+
+    try:
+        with open(path, encoding="utf-8") as handle:
+            return json.load(handle).get("command") == COMMAND
+    except (OSError, ValueError, AttributeError):
+        return False
+
+
 def main(args) -> int:
+    import json
+    import sys
+
     from synth.fileio import atomic_write_json, check_file_output
 
-    if args.json:
-        check_file_output(args.json, "--json")  # before the benchmark, not after
+    if args.out:  # before the benchmark, not after
+        check_file_output(args.out, "--out", may_replace=is_bench_output)
+    progress = ((lambda text: None) if args.no_progress
+                else (lambda text: print(text, file=sys.stderr, flush=True)))
     results = run_bench(args.points, args.reference_points, args.repeat, args.seed,
-                        progress=lambda text: print(text, flush=True), sizes=args.sizes)
-    print(format_table(results))
+                        progress=progress, sizes=args.sizes)
+    results = {"command": COMMAND, **results}
+    print(format_table(results), file=sys.stderr if args.json else sys.stdout)
+    if args.out:
+        atomic_write_json(args.out, results)
     if args.json:
-        atomic_write_json(args.json, results)
+        print(json.dumps(results, indent=2))
     return 0

@@ -1,11 +1,12 @@
 """The ``python -m eval`` dispatcher: argparse with one subparser per subcommand module.
 
-Adding a subcommand: create ``eval/<name>.py`` exposing
+Adding a subcommand: create its module — ``eval/<name>.py`` for a single-file command, or a
+package ``eval/<name>/`` whose ``command.py`` is the command — exposing
 
 * ``add_parser(subparsers)`` — ``subparsers.add_parser("<name>", …)`` and its arguments,
 * ``main(args) -> int`` — run it; raise :class:`CLIError` for a user error,
 
-and add the module name to :data:`SUBCOMMANDS`. Keep heavy imports (Open3D, Mitsuba,
+and add the module to :data:`SUBCOMMANDS`. Keep heavy imports (Open3D, Mitsuba,
 matplotlib) inside ``main`` so that ``--help`` and the other subcommands stay fast.
 
 Errors and exit codes follow :mod:`synth.cli`, shared with ``python -m synth``: one line
@@ -20,8 +21,9 @@ import sys
 from synth.cli import (CLIError, Parser, non_negative_float, non_negative_int, positive_float,
                        positive_int, run_command)
 
-#: Subcommand modules, in the order ``--help`` lists them: ``eval.<name>``.
-SUBCOMMANDS = ("run", "score", "paper", "sweep", "calibrate", "bench", "render_bench")
+#: The module of each subcommand, in the order ``--help`` lists them.
+SUBCOMMANDS = ("eval.run.command", "eval.score", "eval.paper.command", "eval.sweep.command",
+               "eval.calibrate.command", "eval.bench", "eval.render_bench")
 
 
 def build_parser() -> Parser:
@@ -30,7 +32,7 @@ def build_parser() -> Parser:
     subparsers = parser.add_subparsers(dest="command", metavar="command", required=True,
                                        parser_class=Parser)
     for name in SUBCOMMANDS:
-        module = importlib.import_module(f"eval.{name}")
+        module = importlib.import_module(name)
         before = set(subparsers.choices)
         module.add_parser(subparsers)
         for added in set(subparsers.choices) - before:

@@ -24,6 +24,7 @@ import sys
 import time
 
 from eval.cli import CLIError, positive_int
+from synth.cli import add_define_option, add_out_option, add_progress_option, add_scene_argument
 
 COMMAND = "eval render-bench"
 
@@ -33,18 +34,17 @@ def add_parser(subparsers):
         "render-bench", help="measure render throughput and the accuracy-versus-time curve",
         description="Measure Mitsuba's samples/s against the spp per mi.render call, and the "
                     "cross-check RMS against render time for several spp.")
-    parser.add_argument("--scene", default="scenes/paper_plane.xml", help="scene file")
-    parser.add_argument("--out", default="out/render_bench", help="output directory")
+    add_scene_argument(parser, default="scenes/paper_plane.xml")
+    add_out_option(parser, COMMAND, "out/render_bench")
     parser.add_argument("--per-call", default="4,8,12,16,24,36",
                         help="spp per mi.render call to time (comma-separated)")
     parser.add_argument("--throughput-spp", type=positive_int, default=48,
                         help="total spp of each throughput measurement (default 48)")
     parser.add_argument("--spp", default="8,16,24,36,48,64",
                         help="total spp of the accuracy curve (comma-separated)")
-    parser.add_argument("-D", dest="defines", action="append", default=[], metavar="name=value",
-                        help="override a scene default (repeatable)")
+    add_define_option(parser)
     parser.add_argument("--variant", help="Mitsuba variant (default: automatic)")
-    parser.add_argument("--no-progress", action="store_true", help="no progress output")
+    add_progress_option(parser)
 
 
 def _int_list(text: str, option: str) -> list[int]:
@@ -109,7 +109,8 @@ def measure_side_by_side(mscene, mi, spec, spp: int, log) -> dict:
 
 def measure_accuracy(spec, spp_list, variant, log):
     """``[{spp, seconds, crosscheck…}]``: both views rendered in passes, detected, compared."""
-    from eval.run_pipeline import RunInputs, crosscheck_stage
+    from eval.run.inputs import RunInputs
+    from eval.run.pipeline import crosscheck_stage
     from measure import detect_targets
     from synth.render import render_stereo
 

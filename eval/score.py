@@ -31,6 +31,8 @@ import time
 import numpy as np
 
 from eval.cli import CLIError, positive_float
+from synth.cli import add_json_option, add_out_option
+from eval.core.formatting import format_number
 
 COMMAND = "eval score"
 PIXEL_COLUMNS = ("u_left", "v_left", "u_right", "v_right")
@@ -56,8 +58,8 @@ def add_parser(subparsers):
                    help="largest distance of a point from its target, mm (default: half the "
                         "smallest distance between two targets, where the nearest target is "
                         "unambiguous)")
-    p.add_argument("--out", default=os.path.join("out", "score"), help="output directory")
-    p.add_argument("--json", action="store_true", help="also print report.json to stdout")
+    add_out_option(p, COMMAND, "out/score")
+    add_json_option(p)
 
 
 def read_points(path) -> np.ndarray:
@@ -137,9 +139,8 @@ def score_points(points: np.ndarray, truth: np.ndarray, visible_both: np.ndarray
                  seed: int):
     """``(scores, per_method_arrays, association)`` of ``points`` against the true targets
     ``truth`` ``(M, 3)``; Chamfer and F-scores against ``truth[visible_both]``."""
-    from .cloud_metrics import cloud_distances, flatness, rigid_alignment
-    from .results import ErrorStats
-    from .run_pipeline import MethodScores
+    from eval.core.cloud_metrics import cloud_distances, flatness, rigid_alignment
+    from eval.core.results import ErrorStats, MethodScores
 
     target = associate_points(points, truth, gate_mm)
     ok = target >= 0
@@ -163,9 +164,9 @@ def main(args) -> int:
     from synth.dataset import DatasetError, read_dataset
     from synth.fileio import OutputDir, atomic_write_json, atomic_write_text, jsonable
 
-    from .run import _fmt, write_error_ply
-    from .run_figures import error_maps_figure, histograms_figure
-    from .run_pipeline import visible_targets
+    from eval.core.analytic import visible_targets
+    from eval.core.cloud_metrics import write_error_ply
+    from eval.core.figures import error_maps_figure, histograms_figure
 
     log = lambda text: print(text, file=sys.stderr, flush=True)  # noqa: E731
     start = time.perf_counter()
@@ -214,9 +215,9 @@ def main(args) -> int:
     summary = (f"{data.path}: {a['associated']} of {a['points']} points within "
                f"{a['gate_mm']:g} mm of a target ({a['unassociated']} not); "
                f"{a['visible_in_both_scored']} of {a['visible_in_both']} targets visible in both "
-               f"views scored; RMS dP {_fmt(st['rms_dp_mm'])} mm, max dP "
-               f"{_fmt(st['max_dp_mm'])} mm, mean dZ {_fmt(st['mean_dz_mm'])} mm, Chamfer "
-               f"{_fmt(st['chamfer_mm'])} mm, F@1mm {_fmt(st['fscore_1mm'])}")
+               f"views scored; RMS dP {format_number(st['rms_dp_mm'])} mm, max dP "
+               f"{format_number(st['max_dp_mm'])} mm, mean dZ {format_number(st['mean_dz_mm'])} mm, Chamfer "
+               f"{format_number(st['chamfer_mm'])} mm, F@1mm {format_number(st['fscore_1mm'])}")
     if args.json:
         import json
 
@@ -230,7 +231,6 @@ def main(args) -> int:
 
 def markdown(report: dict) -> str:
     """``report.md``: the association and one table of the metrics."""
-    from .run import _fmt
 
     a = report["association"]
     label, st = next(iter(report["methods"].items()))
@@ -243,5 +243,5 @@ def markdown(report: dict) -> str:
              f"associated points (mm); Chamfer and F-scores of all points against the targets "
              f"visible in both views.", "",
              "| " + " | ".join(keys) + " |", "|" + "---|" * len(keys),
-             "| " + " | ".join(str(st[k]) if k == "n" else _fmt(st[k]) for k in keys) + " |"]
+             "| " + " | ".join(str(st[k]) if k == "n" else format_number(st[k]) for k in keys) + " |"]
     return "\n".join(lines) + "\n"

@@ -225,7 +225,7 @@ def _start_poses(rig: StereoRig, board: Board, detections: Detections):
     return poses
 
 
-def _housing_problem(rig: StereoRig, board: Board, detections: Detections, names):
+def housing_problem(rig: StereoRig, board: Board, detections: Detections, names):
     """The bundle adjustment of :func:`calibrate_housing` as functions of the unknowns ``x``
     (free housing numbers, then 6 per usable pose): ``residuals``, its analytic ``jacobian``,
     ``unpack``, the start ``x0`` and its ``lower`` / ``upper`` bounds, and the bookkeeping."""
@@ -352,7 +352,7 @@ def calibrate_housing(rig: StereoRig, board: Board, detections: Detections,
                                f"estimates {', '.join(HOUSING_PARAMETERS)}")
     if "thickness" in names and not rig.port.thicknesses:
         raise CalibrationError("--free thickness: the port has no glass layer")
-    problem = _housing_problem(rig, board, detections, names)
+    problem = housing_problem(rig, board, detections, names)
     residuals, unpack, x0, lower, upper = (problem.residuals, problem.unpack, problem.x0,
                                            problem.lower, problem.upper)
     obs, usable, P, n_global, basis, m = (problem.obs, problem.usable, problem.P,
@@ -483,4 +483,4 @@ def usable_index(usable, pose_idx) -> np.ndarray:
 
 __all__ = ["AirCalibration", "CalibrationError", "DEFAULT_FREE", "Detections",
            "HOUSING_PARAMETERS", "HousingCalibration", "MIN_POSES", "calibrate_housing",
-           "calibrate_in_air", "detect_boards"]
+           "calibrate_in_air", "detect_boards", "housing_problem"]

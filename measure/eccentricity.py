@@ -38,7 +38,7 @@ OUTLINE_POINTS = 128
 NORMAL_NEIGHBOURS = 8
 
 
-def _disk_basis(normals: np.ndarray):
+def disk_basis(normals: np.ndarray):
     """Two unit vectors ``(N, 3)`` spanning each disk's plane."""
     n = normals / np.linalg.norm(normals, axis=1, keepdims=True)
     helper = np.where(np.abs(n[:, [0]]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
@@ -58,7 +58,7 @@ def outline_centroid_offsets(camera: Camera, port: FlatPort | None, centres, nor
     n = centres.shape[0]
     if n == 0:
         return np.zeros((0, 2))
-    u, v = _disk_basis(normals)
+    u, v = disk_basis(normals)
     angle = 2.0 * np.pi * np.arange(n_points) / n_points
     outline = (centres[:, None, :] + radius[:, None, None]
                * (np.cos(angle)[None, :, None] * u[:, None, :]
@@ -146,5 +146,5 @@ def correct_eccentricity(rig: StereoRig, uv_left, uv_right, radius_mm, method: s
                                   offset_right, np.asarray(used), iterations)
 
 
-__all__ = ["EccentricityCorrection", "OUTLINE_POINTS", "correct_eccentricity", "local_normals",
+__all__ = ["EccentricityCorrection", "OUTLINE_POINTS", "correct_eccentricity", "disk_basis", "local_normals",
            "outline_centroid_offsets"]

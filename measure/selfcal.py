@@ -108,7 +108,7 @@ def _parameter_normal_matrix(jacobian, n: int, n_free: int) -> np.ndarray:
     return Jp.T @ Jp - np.einsum("nki,nkj->ij", B, np.linalg.solve(A, B))
 
 
-def _residuals(rig, port0, names, basis, observed, x) -> np.ndarray:
+def refinement_residuals(rig, port0, names, basis, observed, x) -> np.ndarray:
     """The 4N reprojection residuals (px) of the unknowns ``x`` (free port numbers, then the
     points' coordinates)."""
     n_free = sum(PARAMETERS[p] for p in names)
@@ -116,8 +116,8 @@ def _residuals(rig, port0, names, basis, observed, x) -> np.ndarray:
     return stereo_residuals(rig, port, x[n_free:].reshape(-1, 3), observed)
 
 
-def _jacobian(rig, port0, names, basis, x):
-    """The analytic Jacobian of :func:`_residuals` (:func:`measure.projection.project` with
+def refinement_jacobian(rig, port0, names, basis, x):
+    """The analytic Jacobian of :func:`refinement_residuals` (:func:`measure.projection.project` with
     ``parameters=True``) in its sparse block-arrow structure: each point's 3 columns touch its 4
     rows, the port parameters touch all."""
     n_free = sum(PARAMETERS[p] for p in names)
@@ -170,10 +170,10 @@ def self_calibrate(rig: StereoRig, uv_left, uv_right, parameters=("n_water",),
     observed = np.concatenate([uv_left, uv_right], axis=1).ravel()
 
     def residuals(x):
-        return _residuals(rig, port0, names, basis, observed, x)
+        return refinement_residuals(rig, port0, names, basis, observed, x)
 
     def jacobian(x):
-        return _jacobian(rig, port0, names, basis, x)
+        return refinement_jacobian(rig, port0, names, basis, x)
 
     x0 = np.concatenate([p0, start.ravel()])
     rms_before = float(np.sqrt(np.mean(residuals(x0) ** 2)))
@@ -222,4 +222,5 @@ def self_calibrate(rig: StereoRig, uv_left, uv_right, parameters=("n_water",),
                            reason="", **base)
 
 
-__all__ = ["PARAMETERS", "SelfCalibration", "reprojection_points", "self_calibrate"]
+__all__ = ["PARAMETERS", "SelfCalibration", "refinement_jacobian", "refinement_residuals",
+           "reprojection_points", "self_calibrate"]

@@ -6,6 +6,11 @@
   stderr), 130 interrupted. An unexpected exception (a bug) prints one line
   ``error: internal error: …`` and exits with 1; set ``REFSTEREO_TRACEBACK=1`` to see the traceback.
 * The same ``--out`` rule (:mod:`synth.fileio`).
+* The same vocabulary, added by the helpers below: a scene is the positional ``scene``;
+  ``--out`` says what it writes and the rule; ``-D NAME=VALUE`` overrides a scene default;
+  ``--no-progress`` (alias ``--quiet``) silences progress output; ``--json`` prints the report
+  as JSON to stdout (the human summary then goes to stderr). ``tests/test_cli_vocabulary.py``
+  walks every subcommand of both command lines and checks it.
 """
 
 from __future__ import annotations
@@ -70,6 +75,58 @@ positive_float = finite_float(0.0, strict=True, description="positive finite")
 non_negative_float = finite_float(0.0, description="non-negative finite")
 
 
+#: Help of ``--json`` everywhere.
+JSON_HELP = "print the report as JSON to stdout (the summary then goes to stderr)"
+#: Help of ``-D`` everywhere.
+DEFINE_HELP = "override a <default> of the scene (repeatable)"
+#: Help of ``--no-progress`` everywhere.
+NO_PROGRESS_HELP = "no progress output"
+#: Help of the scene positional everywhere.
+SCENE_HELP = "Mitsuba scene file (e.g. scenes/paper_plane.xml)"
+
+
+def add_scene_argument(parser, default: str | None = None) -> None:
+    """The positional ``scene`` (optional when ``default`` is given)."""
+    if default is None:
+        parser.add_argument("scene", help=SCENE_HELP)
+    else:
+        parser.add_argument("scene", nargs="?", default=default,
+                            help=f"{SCENE_HELP}; default {default}")
+
+
+def add_out_option(parser, command: str, default: str | None = None, *, what: str = "directory",
+                   rule: str | None = None, required: bool | None = None) -> None:
+    """``--out``: the output ``what`` (directory or file) of ``command`` and the rule that
+    guards it — by default the project's: written whole or not at all, and an existing one is
+    replaced only if ``command`` wrote it (:class:`synth.fileio.OutputDir`). ``required``
+    (default: when there is no ``default``): False makes it an optional extra output."""
+    rule = rule or (f"written whole or not at all; an existing one is replaced only if it is an "
+                    f"earlier output of {command}")
+    required = default is None if required is None else required
+    where = ("required" if required else "optional" if default is None
+             else f"default {default}")
+    parser.add_argument("--out", default=default, required=required,
+                        metavar="FILE" if what == "file" else "DIR",
+                        help=f"output {what} ({where}); {rule}")
+
+
+def add_define_option(parser) -> None:
+    """``-D NAME=VALUE`` (repeatable) into ``args.defines``."""
+    parser.add_argument("-D", dest="defines", action="append", default=[], metavar="NAME=VALUE",
+                        help=DEFINE_HELP)
+
+
+def add_progress_option(parser) -> None:
+    """``--no-progress`` (alias ``--quiet``) into ``args.no_progress``."""
+    parser.add_argument("--no-progress", "--quiet", dest="no_progress", action="store_true",
+                        help=NO_PROGRESS_HELP)
+
+
+def add_json_option(parser) -> None:
+    """``--json``: print the report as JSON to stdout."""
+    parser.add_argument("--json", action="store_true", help=JSON_HELP)
+
+
 def one_line(message) -> str:
     """``message`` as one line (whitespace, including newlines, collapsed)."""
     return " ".join(str(message).split())
@@ -105,6 +162,8 @@ def run_command(parser: argparse.ArgumentParser, argv=None) -> int:
         return EXIT_CHECK_FAILED
 
 
-__all__ = ["CLIError", "EXIT_BAD_INPUT", "EXIT_CHECK_FAILED", "EXIT_INTERRUPTED", "EXIT_OK",
-           "Parser", "any_float", "finite_float", "int_at_least", "non_negative_float",
-           "non_negative_int", "one_line", "positive_float", "positive_int", "run_command"]
+__all__ = ["CLIError", "DEFINE_HELP", "EXIT_BAD_INPUT", "EXIT_CHECK_FAILED", "EXIT_INTERRUPTED",
+           "EXIT_OK", "JSON_HELP", "NO_PROGRESS_HELP", "Parser", "SCENE_HELP", "add_define_option",
+           "add_json_option", "add_out_option", "add_progress_option", "add_scene_argument",
+           "any_float", "finite_float", "int_at_least", "non_negative_float", "non_negative_int",
+           "one_line", "positive_float", "positive_int", "run_command"]

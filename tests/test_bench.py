@@ -3,7 +3,7 @@
 import numpy as np
 
 from eval.cli import main
-from eval.fermat_reference import fermat_pixel_scipy
+from eval.core.fermat_reference import fermat_pixel_scipy
 from synth.layouts import paper_plane
 from measure.projection import project
 

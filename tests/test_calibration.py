@@ -138,13 +138,13 @@ def test_housing_analytic_jacobian_matches_finite_differences():
     columns together)."""
     from scipy.optimize._numdiff import approx_derivative
 
-    from measure.calibration import HOUSING_PARAMETERS, _housing_problem
+    from measure.calibration import HOUSING_PARAMETERS, housing_problem
 
     truth = _tilted_rig()
     poses = sample_poses(truth, BOARD, 3, seed=2, water=True)
     detections = _observe(truth, poses, 0.05, np.random.default_rng(4))
     names = tuple(HOUSING_PARAMETERS)
-    problem = _housing_problem(truth, BOARD, detections, names)
+    problem = housing_problem(truth, BOARD, detections, names)
     rng = np.random.default_rng(5)
     x = problem.x0 + np.concatenate([[0.3, 0.004, -0.003, 0.2, 0.002],
                                      rng.normal(0, 2e-3, 3), rng.normal(0, 0.3, 3),

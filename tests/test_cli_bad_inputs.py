@@ -79,6 +79,8 @@ def _prepare(workdir: Path, setup: str | None):
         (workdir / "foo.xml").write_text("<foo/>")
     elif setup == "scene_dir":
         (workdir / "adir").mkdir()
+    elif setup == "foreign_file":
+        (workdir / "notes.txt").write_text("a user's notes, not written by eval bench")
 
 
 def _assert_refused(code, capsys, before, workdir, fragment=None):
@@ -173,8 +175,9 @@ EVAL_CASES = [
     # bench and paper options
     (None, ["bench", "--points", "0"], "--points"),
     (None, ["bench", "--points", "abc"], "--points"),
-    (None, ["bench", "--json", "ds"], "directory"),
-    (None, ["bench", "--json", "missing_dir/x.json"], "missing_dir"),
+    (None, ["bench", "--out", "ds"], "directory"),
+    (None, ["bench", "--out", "missing_dir/x.json"], "missing_dir"),
+    ("foreign_file", ["bench", "--out", "notes.txt"], "not a file this command wrote"),
     (None, ["paper", "--trials", "0", "--out", "p"], "--trials"),
     (None, ["paper", "--seed", "-1", "--out", "p"], "--seed"),
     (None, ["no_such_command"], "no_such_command"),

@@ -42,9 +42,9 @@ def test_tilted_disk_in_air_matches_the_ellipse_centre():
     normal = np.array([0.3, -0.2, -1.0]) / np.linalg.norm([0.3, -0.2, -1.0])
     points = np.array([[0.0, 0.0, 1000.0], [400.0, 300.0, 1000.0], [-560.0, 0.0, 1000.0]])
     offsets = outline_centroid_offsets(rig.left, None, points, normal, 40.0, n_points=512)
-    from measure.eccentricity import _disk_basis
+    from measure.eccentricity import disk_basis
 
-    u, v = _disk_basis(np.tile(normal, (3, 1)))
+    u, v = disk_basis(np.tile(normal, (3, 1)))
     angle = np.linspace(0, 2 * np.pi, 50, endpoint=False)
     for i, centre in enumerate(points):
         outline = centre + 40.0 * (np.cos(angle)[:, None] * u[i] + np.sin(angle)[:, None] * v[i])

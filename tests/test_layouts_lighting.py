@@ -219,7 +219,8 @@ def test_median_filter_removes_a_firefly_beside_a_target():
     """A lone saturated pixel (a firefly of a light seen through scattering water) inside a
     disk's centroid window pulls its centroid; ``median_filter=3`` removes it and leaves a
     symmetric disk's centre where it was."""
-    from eval.run_pipeline import RunInputs, detect_stage
+    from eval.run.inputs import RunInputs
+    from eval.run.pipeline import detect_stage
 
     yy, xx = np.mgrid[0:64, 0:80]
     disk = ((xx - 40.3) ** 2 + (yy - 31.6) ** 2 <= 5.0 ** 2).astype(np.float32)

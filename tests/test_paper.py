@@ -17,7 +17,7 @@ import pytest
 from synth.fileio import MARKER_NAME
 
 from eval import cli
-from eval.paper import run_experiments
+from eval.paper.experiments import run_experiments
 from synth.noise import add_pixel_noise, deviate_port, pixel_noise
 from synth.rig import paper_port
 
@@ -57,7 +57,7 @@ def test_report_structure(paper_run):
         for method in ("optical_path", "su", "regular_in_air"):
             stats = report["ideal"][distance]["methods"][method]
             assert stats["n"] == 496 and stats["n_invalid"] == 0
-            for component in ("dx", "dy", "dz", "dp"):  # eval.results' flat schema
+            for component in ("dx", "dy", "dz", "dp"):  # eval.core.results' flat schema
                 assert {f"max_abs_{component}_mm", f"mean_{component}_mm",
                         f"rms_{component}_mm"} <= set(stats)
     assert report["noise"]["samples"] == TRIALS * 496

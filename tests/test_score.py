@@ -111,7 +111,7 @@ def test_bad_input_exits_2_and_writes_nothing(scored_run, tmp_path, capsys):
 
 def test_an_empty_cloud_is_still_written(tmp_path):
     """A method with no correctly matched target still gets its (empty, valid) PLY."""
-    from eval.cloud_metrics import write_colored_ply
+    from eval.core.cloud_metrics import write_colored_ply
 
     write_colored_ply(tmp_path / "e.ply", np.zeros((0, 3)), np.zeros(0), 1.0)
     text = (tmp_path / "e.ply").read_text()

@@ -98,7 +98,7 @@ def test_analytic_jacobian_of_the_refinement_matches_finite_differences():
     1e-6 rad): norm-relative 1e-6 per column block (the port columns, the point columns)."""
     from scipy.optimize._numdiff import approx_derivative
 
-    from measure.selfcal import _jacobian, _residuals, tilt_basis
+    from measure.selfcal import refinement_jacobian, refinement_residuals, tilt_basis
 
     rig = paper_rig()
     truth = paper_plane(1000.0)[::25]
@@ -107,8 +107,8 @@ def test_analytic_jacobian_of_the_refinement_matches_finite_differences():
     uv = _pixels(rig, rig.port, truth, 0.0, None)
     observed = np.concatenate(uv, axis=1).ravel()
     x = np.concatenate([[1.3312, 100.4, 0.01, -0.02], (truth + [3.0, -2.0, 5.0]).ravel()])
-    analytic = _jacobian(rig, rig.port, names, basis, x).toarray()
-    numeric = approx_derivative(lambda v: _residuals(rig, rig.port, names, basis, observed, v),
+    analytic = refinement_jacobian(rig, rig.port, names, basis, x).toarray()
+    numeric = approx_derivative(lambda v: refinement_residuals(rig, rig.port, names, basis, observed, v),
                                 x, method="3-point",
                                 abs_step=np.concatenate([[1e-4, 1e-3, 1e-6, 1e-6],
                                                          np.full(3 * len(truth), 1e-3)]))

@@ -1,5 +1,7 @@
-"""The structure the project promises: dependencies point one way, eval has no import cycle,
-measure imports neither Mitsuba nor Open3D, no module points at files outside the repository."""
+"""The structure the project promises: dependencies point one way (subpackages included), no
+package has an import cycle, measure imports neither Mitsuba nor Open3D, no private name crosses a
+module boundary, one import style per package, no command imports another command, the tests
+mirror the package tree, no module points at files outside the repository."""
 
 from __future__ import annotations
 
@@ -10,28 +12,72 @@ import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
 PACKAGES = ("measure", "synth", "eval")
+#: Modules holding a command of ``python -m eval`` (its parser and main); only the dispatcher
+#: ``eval.cli`` imports them.
+EVAL_COMMANDS = ("eval.run.command", "eval.score", "eval.paper.command", "eval.sweep.command",
+                 "eval.calibrate.command", "eval.bench", "eval.render_bench")
 
 
-def _imports(path: Path) -> set[str]:
-    """Every module a file imports, at module level or inside functions (absolute names)."""
-    package = path.parent.name
-    found = set()
+def _module_name(path: Path) -> str:
+    """``eval/run/command.py`` → ``eval.run.command``; ``eval/run/__init__.py`` → ``eval.run``."""
+    parts = list(path.relative_to(ROOT).with_suffix("").parts)
+    if parts[-1] == "__init__":
+        parts.pop()
+    return ".".join(parts)
+
+
+def _files(top: str):
+    """Every Python file of ``top`` (a package or ``tests``/``tools``), subfolders included."""
+    return sorted((ROOT / top).rglob("*.py"))
+
+
+def _import_nodes(path: Path):
+    """``(node, absolute module)`` for every import of a file, at module level or inside
+    functions; a relative import is resolved against the file's package."""
+    name = _module_name(path)
+    package = name if path.name == "__init__.py" else name.rpartition(".")[0]
     for node in ast.walk(ast.parse(path.read_text())):
         if isinstance(node, ast.Import):
-            found.update(alias.name for alias in node.names)
+            for alias in node.names:
+                yield node, alias.name
         elif isinstance(node, ast.ImportFrom):
             base = node.module or ""
             if node.level:
-                base = f"{package}.{base}" if base else package
-            found.add(base)
+                anchor = package.split(".")
+                anchor = anchor[:len(anchor) - (node.level - 1)]
+                base = ".".join(anchor + ([base] if base else []))
+            yield node, base
+
+
+def _imports(path: Path) -> set[str]:
+    """Every module a file imports, and every ``module.name`` it imports from one."""
+    found = set()
+    for node, base in _import_nodes(path):
+        found.add(base)
+        if isinstance(node, ast.ImportFrom):
             found.update(f"{base}.{alias.name}" for alias in node.names)
     return found
 
 
 def _graph(package: str) -> dict[str, set[str]]:
-    modules = {f"{package}.{p.stem}": p for p in (ROOT / package).glob("*.py")}
-    return {name: {m for m in _imports(path) if m in modules and m != name}
-            for name, path in modules.items()}
+    modules = {_module_name(p): p for p in _files(package)}
+    graph = {}
+    for name, path in modules.items():
+        targets = set()
+        for imported in _imports(path):
+            # an import of a subpackage's name depends on that subpackage's __init__ only
+            while imported and imported not in modules:
+                imported = imported.rpartition(".")[0]
+            if imported and imported != name and not name.startswith(imported + "."):
+                targets.add(imported)
+        graph[name] = targets
+    return graph
+
+
+def test_subpackages_are_seen():
+    """The walk below reaches into subpackages (a flat glob would let them slip past)."""
+    assert "eval.run.pipeline" in _graph("eval")
+    assert "eval.run.config" in _graph("eval")["eval.run.pipeline"]
 
 
 @pytest.mark.parametrize("package", PACKAGES)
@@ -58,13 +104,72 @@ def test_no_import_cycle(package):
     ("synth", ("eval",)),
 ])
 def test_dependencies_point_one_way(package, forbidden):
-    for path in (ROOT / package).glob("*.py"):
+    for path in _files(package):
         bad = {m for m in _imports(path) if m.split(".")[0] in forbidden}
         assert not bad, f"{path.relative_to(ROOT)} imports {sorted(bad)}"
 
 
+@pytest.mark.parametrize("top", PACKAGES + ("tests", "tools"))
+def test_no_private_name_crosses_a_module(top):
+    """``from x import _y`` (or ``import x._y``) of a project module is refused: what two
+    modules share is public."""
+    bad = []
+    for path in _files(top):
+        for node, base in _import_nodes(path):
+            if base.split(".")[0] not in PACKAGES:
+                continue
+            names = ([a.name for a in node.names] if isinstance(node, ast.ImportFrom) else [])
+            parts = base.split(".") + names
+            if any(p.startswith("_") and not p.startswith("__") for p in parts):
+                bad.append(f"{path.relative_to(ROOT)}:{node.lineno} imports "
+                           f"{base}{':' + ','.join(names) if names else ''}")
+    assert not bad, "\n".join(bad)
+
+
+@pytest.mark.parametrize("package", PACKAGES)
+def test_one_import_style_per_package(package):
+    """Inside a package its own modules are imported either all relatively or all absolutely."""
+    styles = {}
+    for path in _files(package):
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.ImportFrom) and node.level:
+                styles.setdefault("relative", path.relative_to(ROOT))
+            elif isinstance(node, ast.ImportFrom) and (node.module or "").split(".")[0] == package:
+                styles.setdefault("absolute", path.relative_to(ROOT))
+            elif isinstance(node, ast.Import) and any(a.name.split(".")[0] == package
+                                                      for a in node.names):
+                styles.setdefault("absolute", path.relative_to(ROOT))
+    assert len(styles) <= 1, f"{package} mixes import styles: {styles}"
+
+
+def test_no_command_imports_another_command():
+    """Commands share code through ``eval.core`` and the library parts of other command
+    packages (``eval.run.config``, ``eval.run.pipeline``), never through a command module: only
+    the dispatcher ``eval.cli`` imports them."""
+    for path in _files("eval"):
+        name = _module_name(path)
+        if name == "eval.cli":
+            continue
+        for imported in _imports(path):
+            for command in EVAL_COMMANDS:
+                if (imported == command or imported.startswith(command + ".")) and name != command:
+                    raise AssertionError(f"{name} imports the command module {command}")
+    cells = _imports(ROOT / "eval" / "sweep" / "cells.py")
+    assert not {m for m in cells if m.startswith("eval.cli")}, "a sweep cell parses no argv"
+
+
+def test_tests_mirror_the_package_tree():
+    """Every test module lives in ``tests/<package>/`` (or ``tests/`` for the whole project) and
+    every folder of tests names a package or subpackage that exists."""
+    for path in _files("tests"):
+        folder = path.parent.relative_to(ROOT / "tests")
+        if folder.parts:
+            assert (ROOT / folder).is_dir() and (ROOT / folder / "__init__.py").exists(), (
+                f"{path.relative_to(ROOT)}: no package {folder.as_posix()} to mirror")
+
+
 def test_no_pointers_outside_the_repository():
-    for package in PACKAGES + ("tests",):
-        for path in (ROOT / package).glob("*.py"):
+    for top in PACKAGES + ("tests", "tools"):
+        for path in _files(top):
             text = path.read_text()
             assert "DESIGN" + ".md" not in text and "../" + "shared" not in text, path.name

@@ -1,4 +1,4 @@
-"""Scoring of dense surface reconstructions (eval.surface_metrics, eval.surface_figures) on small
+"""Scoring of dense surface reconstructions (eval.core.surface_metrics, eval.run.dense_figures) on small
 synthetic arrays with known answers: planes, a tessellated cylinder, noise of known sigma."""
 
 from __future__ import annotations
@@ -11,8 +11,8 @@ import open3d as o3d
 import pytest
 from matplotlib import image as mpimg
 
-from eval.surface_figures import write_colored_cloud, write_distance_histogram, write_error_map
-from eval.surface_metrics import (SurfaceCase, fit_plane, mesh_is_planar, score_surface,
+from eval.run.dense_figures import write_colored_cloud, write_distance_histogram, write_error_map
+from eval.core.surface_metrics import (SurfaceCase, fit_plane, mesh_is_planar, score_surface,
                                   surface_arrays, surface_table)
 from synth.fileio import jsonable
 

@@ -20,8 +20,8 @@ import pyarrow.parquet as pq
 import pytest
 
 from eval.cli import main
-from eval.sweep import TIMING_COLUMNS
-from eval.sweep_spec import SpecError, load_spec
+from eval.sweep.command import TIMING_COLUMNS
+from eval.sweep.spec import SpecError, load_spec
 
 REPO = Path(__file__).resolve().parent.parent
 BIN = Path(sys.executable).parent
@@ -124,16 +124,15 @@ gate_mm = [0.5, 1.0]
 
 def test_detection_options_reach_eval_run(small_scene, tmp_path):
     """The detection options of a spec become eval run's options of the same names."""
-    from eval.sweep_cells import run_arguments
+    from eval.sweep.cells import run_config
 
     text = ('scenes = ["{scene}"]\n[fixed]\nkind = "render"\nmax_elongation = 3\n'
             'max_area_ratio = 6\nmedian_filter = 3\n')
     cell = load_spec(_spec(tmp_path, small_scene, text)).cells[0]
-    argv = run_arguments({"params": cell.params, "seed": 1, "methods": ["optical_path"],
-                          "defines": {}}, "scene.xml")
-    joined = " ".join(argv)
-    assert "--max-elongation 3" in joined and "--max-area-ratio 6" in joined
-    assert "--median-filter 3" in joined
+    config = run_config({"params": cell.params, "seed": 1, "methods": ["optical_path"],
+                         "defines": {}}, "scene.xml")
+    assert config.max_elongation == 3 and config.max_area_ratio == 6
+    assert config.median_filter == 3
 
 
 @pytest.mark.parametrize("text, fragment", [
@@ -233,8 +232,8 @@ def test_rerun_does_nothing_and_changed_spec_is_refused(local_run, spec_file, sm
 
 
 def test_figures(local_run, spec_file, tmp_path):
-    from eval.sweep import SweepDir, table_rows
-    from eval.sweep_figures import write_figures
+    from eval.sweep.command import SweepDir, table_rows
+    from eval.sweep.figures import write_figures
 
     out, _ = local_run
     spec = load_spec(spec_file)

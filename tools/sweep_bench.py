@@ -23,6 +23,19 @@ import time
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parent.parent
+
+
+def eval_run_arguments(cell: dict, scene_path: str) -> list:
+    """The ``python -m eval run`` arguments of one cell of :data:`RENDER_SPEC` (its parameters:
+    ``spp``, ``noise_px``, ``assume.n_water``), without ``--out``."""
+    p = cell["params"]
+    argv = [scene_path, "--no-progress", "--seed", str(cell["seed"]),
+            "--methods", ",".join(cell["methods"]), "--spp", str(p["spp"]),
+            "--noise-px", repr(float(p["noise_px"])),
+            "--assume", f"n_water={float(p['assume.n_water'])!r}"]
+    for name, value in sorted(cell["defines"].items()):
+        argv += ["-D", f"{name}={value}"]
+    return argv
 RENDER_SPEC = """
 name = "render16"
 seed = 0
@@ -77,8 +90,7 @@ def main() -> int:
           f"{results['throughput_ratio_2_vs_1_compute']:.2f}x without the cluster's start-up")
     if not args.skip_loop:
         sys.path.insert(0, str(REPO))
-        from eval.sweep_cells import run_arguments
-        from eval.sweep_spec import load_spec, scene_defines
+        from eval.sweep.spec import load_spec, scene_defines
 
         loaded = load_spec(spec)
         start = time.perf_counter()
@@ -87,7 +99,7 @@ def main() -> int:
             payload = {"params": cell.params, "seed": cell.seed, "methods": list(cell.methods),
                        "defines": scene_defines(cell.params, scene, cell.kind,
                                                 loaded.render_width)}
-            argv = run_arguments(payload, scene.path)
+            argv = eval_run_arguments(payload, scene.path)
             subprocess.run([sys.executable, "-m", "eval", "run", *argv, "--out",
                             str(scratch / "loop" / f"cell{k}")], cwd=REPO, check=True,
                            capture_output=True)

@@ -92,5 +92,26 @@ class ErrorStats:
         return out
 
 
-__all__ = ["COMPONENTS", "ComponentStats", "ErrorStats", "METHOD_LABELS", "jsonable",
+@dataclass(frozen=True)
+class MethodScores:
+    """How one triangulation method did. ``errors``: per-target error statistics over the
+    correctly matched targets (mm); ``cloud``: Open3D cloud distances (Chamfer mm, precision /
+    recall / F-score at 1 and 5 mm); ``alignment``: the errors left after the best rigid
+    alignment (mm, degrees); ``flatness``: RMS and peak-to-valley distance to the fitted plane
+    (mm); ``invalid``: matched pairs with no triangulation."""
+
+    errors: ErrorStats
+    cloud: dict
+    alignment: dict
+    flatness: dict
+    invalid: int
+
+    def to_json(self) -> dict:
+        flat = {k: v for k, v in self.flatness.items() if k != "plane"}
+        return {**self.errors.to_json(), **self.cloud, **self.alignment, **flat,
+                "plane": self.flatness.get("plane"), "invalid": self.invalid}
+
+
+__all__ = ["COMPONENTS", "ComponentStats", "ErrorStats", "METHOD_LABELS", "MethodScores",
+           "jsonable",
            "method_label"]

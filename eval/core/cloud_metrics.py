@@ -15,6 +15,8 @@ All distances in mm, both clouds in the reference frame (the left camera's).
 
 from __future__ import annotations
 
+import os
+
 import numpy as np
 import open3d as o3d
 
@@ -119,3 +121,17 @@ def write_colored_ply(path: str, points: np.ndarray, values: np.ndarray, vmax: f
     colors = colormaps[colormap](fraction)[:, :3]
     if not o3d.io.write_point_cloud(str(path), point_cloud(points, colors), write_ascii=False):
         raise OSError(f"Open3D could not write {path}")
+
+
+#: Colour map of the PLY files of measured points (dP, mm).
+PLY_COLORMAP = "viridis"
+
+
+def write_error_ply(directory: str, name: str, points, errors) -> dict:
+    """``points`` ``(N, 3)`` coloured by their dP (norm of ``errors`` ``(N, 3)``, mm) on
+    :data:`PLY_COLORMAP` from 0 to the largest, as ``directory/name``; returns the report entry."""
+    dp = np.linalg.norm(errors, axis=1)
+    vmax = float(dp.max()) if dp.size else 1.0
+    write_colored_ply(os.path.join(directory, name), points, dp, vmax, PLY_COLORMAP)
+    return {"file": name, "colormap": PLY_COLORMAP, "vmin_mm": 0.0, "vmax_mm": vmax,
+            "points": int(dp.size)}

@@ -19,13 +19,14 @@ from measure.detect import (MERGE_AREA_RATIO as DEFAULT_MAX_AREA_RATIO,
                             MERGE_ELONGATION as DEFAULT_MAX_ELONGATION, fractional_threshold)
 from measure.eccentricity import correct_eccentricity, outline_centroid_offsets
 from measure.matching import match_targets
-from synth.crosscheck import (ASSOCIATION_GATE_PX, associate_detections, distance_stats,
-                              wholly_in_image)
+from synth.crosscheck import ASSOCIATION_GATE_PX, associate_detections, distance_stats
 from synth.noise import add_pixel_noise
-from measure.projection import project
 
-from .cloud_metrics import cloud_distances, flatness, rigid_alignment
-from .results import ErrorStats
+from eval.core.cloud_metrics import cloud_distances, flatness, rigid_alignment
+from eval.core.results import ErrorStats, MethodScores
+from eval.run.config import RunConfig
+from eval.core.analytic import visible_targets
+from eval.run.inputs import RunInputs, expose_on_sensor, load_inputs
 
 #: The default working range around the scene's ``target_z``: ``(near, far)`` factors.
 DEPTH_WINDOW_FACTORS = (0.8, 1.25)
@@ -33,57 +34,6 @@ DEPTH_WINDOW_FACTORS = (0.8, 1.25)
 
 class NothingMatched(ValueError):
     """No pair of detections passed the matching: nothing to measure (a user-facing error)."""
-
-
-@dataclass
-class RunInputs:
-    """What the pipeline starts from: a rig, two linear images, and (for scoring) the truth.
-
-    ``rig`` is what the measurement believes; ``targets`` ``(N, 3)`` mm the true centres;
-    ``left``/``right`` float32 linear images ``(H, W)``; ``params`` the scene's resolved
-    parameters; ``seed`` the run's one seed (images, added noise, RANSAC)."""
-
-    scene: str
-    rig: object
-    has_port: bool
-    targets: np.ndarray
-    target_ids: np.ndarray
-    target_radius: float
-    left: np.ndarray
-    right: np.ndarray
-    params: dict
-    variant: str
-    spp: int
-    render_seconds: float
-    seed: int = 0
-    extra: dict = field(default_factory=dict)
-    target_normals: np.ndarray | None = None
-    truth_rig: object = None
-
-    @property
-    def true_rig(self):
-        """The rig the images were rendered with (``rig`` is what the measurement believes)."""
-        return self.rig if self.truth_rig is None else self.truth_rig
-
-
-@dataclass(frozen=True)
-class MethodScores:
-    """How one triangulation method did. ``errors``: per-target error statistics over the
-    correctly matched targets (mm); ``cloud``: Open3D cloud distances (Chamfer mm, precision /
-    recall / F-score at 1 and 5 mm); ``alignment``: the errors left after the best rigid
-    alignment (mm, degrees); ``flatness``: RMS and peak-to-valley distance to the fitted plane
-    (mm); ``invalid``: matched pairs with no triangulation."""
-
-    errors: ErrorStats
-    cloud: dict
-    alignment: dict
-    flatness: dict
-    invalid: int
-
-    def to_json(self) -> dict:
-        flat = {k: v for k, v in self.flatness.items() if k != "plane"}
-        return {**self.errors.to_json(), **self.cloud, **self.alignment, **flat,
-                "plane": self.flatness.get("plane"), "invalid": self.invalid}
 
 
 def default_depth_window(params: dict, targets=None, port=None):
@@ -100,12 +50,6 @@ def default_depth_window(params: dict, targets=None, port=None):
         return (DEPTH_WINDOW_FACTORS[0] * float(depth.min()),
                 DEPTH_WINDOW_FACTORS[1] * float(depth.max()))
     return (DEPTH_WINDOW_FACTORS[0] * z, DEPTH_WINDOW_FACTORS[1] * z)
-
-
-def visible_targets(camera, port, targets, radius_mm):
-    """Simulator pixels ``(N, 2)`` and whether each target lies wholly inside the image."""
-    uv = project(camera, port, targets)
-    return uv, wholly_in_image(camera, uv, targets, radius_mm)
 
 
 def detect_stage(inputs: RunInputs, noise_px: float, threshold_fraction: float | None = None,
@@ -329,24 +273,43 @@ def nothing_matched_message(inputs: RunInputs, detections, window) -> str:
 
 
 def _rigs_report(inputs: RunInputs) -> dict:
-    from .assumption import describe_rig, rig_difference
+    from eval.core.assumption import describe_rig, rig_difference
 
     return {"truth": describe_rig(inputs.true_rig), "assumed": describe_rig(inputs.rig),
             "difference": rig_difference(inputs.true_rig, inputs.rig)}
 
 
-def run_pipeline(inputs: RunInputs, methods, noise_px: float = 0.0, gate_mm: float = 0.5,
-                 depth_window=None, log=print, eccentricity: bool = False,
-                 self_calibrate: tuple = (), budget_rigs: dict | None = None,
-                 threshold_fraction: float | None = None,
-                 max_elongation: float = None, max_area_ratio: float = None,
-                 median_filter: int = 0):
-    """Run detection, matching, triangulation and scoring. Returns ``(report, arrays)``.
+@dataclass
+class RunResult:
+    """What a target run measured: ``report`` (the JSON-ready report: see the docs' report
+    fields; without ``versions``, ``inputs``, ``ply`` and the ``report`` / ``total`` timings),
+    the ``inputs`` it started from, and the arrays the figures and PLY files need:
+    ``detections`` and ``centers`` ``{view: (M, 2) px}``, ``matches`` (left/right indices),
+    ``correct`` (bool per pair, from the truth), ``per_method`` ``{method: {points, truth,
+    errors, all_points}}`` (mm), ``simulated`` ``{view: (N, 2) px}`` (the Fermat simulator's
+    pixels of every target) and ``scores`` ``{method: MethodScores}``."""
 
-    ``budget_rigs`` ``{label: rig}``: also measure with these rigs (:func:`budget_stage`).
-    Raises :class:`NothingMatched` when no pair is matched. ``report`` is the JSON-ready dict
-    (without versions and total timing); ``arrays`` holds what the figures and PLY files need.
-    """
+    report: dict
+    inputs: RunInputs
+    detections: dict
+    centers: dict
+    matches: object
+    correct: np.ndarray
+    per_method: dict
+    simulated: dict
+    scores: dict = field(default_factory=dict)
+
+
+def run_pipeline(inputs: RunInputs, config: RunConfig, log=print) -> RunResult:
+    """Detection, matching, triangulation and scoring of ``inputs`` as ``config`` says (its
+    methods, noise, gate, depth range, detection options, self-calibration, eccentricity;
+    the error budget's rigs are ``inputs.budget_rigs``). Raises :class:`NothingMatched` when
+    no pair is matched."""
+    methods, noise_px, gate_mm = config.target_methods(), config.noise_px, config.gate_mm
+    depth_window, self_calibrate = config.depth_range_mm, config.self_calibrate
+    threshold_fraction, median_filter = config.threshold_fraction, config.median_filter
+    max_elongation, max_area_ratio = config.max_elongation, config.max_area_ratio
+    budget_rigs = inputs.budget_rigs
     timings = {"render": inputs.render_seconds, **inputs.extra.pop("timings", {})}
 
     log("detect targets in both views …")
@@ -378,7 +341,7 @@ def run_pipeline(inputs: RunInputs, methods, noise_px: float = 0.0, gate_mm: flo
         timings["self_calibration"] = time.perf_counter() - start
 
     corrected = None
-    if eccentricity:
+    if config.eccentricity:
         log("correct the targets' eccentricity and triangulate again …")
         start = time.perf_counter()
         corrected, eccentricity_summary = eccentricity_stage(inputs, centers, matches, methods)
@@ -423,7 +386,25 @@ def run_pipeline(inputs: RunInputs, methods, noise_px: float = 0.0, gate_mm: flo
         "timings_s": timings,
         "variant": inputs.variant, "spp": inputs.spp,
     }
-    arrays = {"detections": detections, "centers": centers, "matches": matches,
-              "correct": scored["correct"], "per_method": scored["per_method"],
-              "simulated": scored["simulated"], "scores": scored["scores"]}
-    return report, arrays
+    return RunResult(report=report, inputs=inputs, detections=detections, centers=centers,
+                     matches=matches, correct=scored["correct"],
+                     per_method=scored["per_method"], simulated=scored["simulated"],
+                     scores=scored["scores"])
+
+
+def measure_scene(config: RunConfig, log=print) -> RunResult:
+    """Everything of ``eval run`` on a target scene but the output files: load or render the
+    images, expose them on the sensor, detect, match, triangulate, score. ``eval sweep`` runs
+    its render cells through this function, in its workers."""
+    inputs = load_inputs(config, log)
+    sensor_info = expose_on_sensor(inputs, config.sensor, log)
+    result = run_pipeline(inputs, config, log)
+    result.report["sensor"] = sensor_info
+    result.report["rigs"]["source"] = config.rig_source
+    return result
+
+
+__all__ = ["NothingMatched", "RunResult", "budget_stage", "crosscheck_stage",
+           "default_depth_window", "detect_stage", "eccentricity_stage", "match_stage",
+           "measure_scene", "run_pipeline", "score_stage", "self_calibration_stage",
+           "triangulate_stage"]

@@ -1,14 +1,14 @@
 """What a worker of ``python -m eval sweep`` does with a batch of cells (imported on the workers).
 
-* A **render cell** is ``eval run`` in-process: the cell's parameters become the arguments of
-  ``python -m eval run`` (:func:`run_arguments`), parsed by the same parser and measured by
-  :func:`eval.run.measure` — render, detect, match, triangulate, score. Its report is
-  ``eval run``'s ``report.json`` (without versions and output files).
+* A **render cell** is ``eval run`` in-process: the cell's parameters become a
+  :class:`eval.run.config.RunConfig` (:func:`run_config`), measured by
+  :func:`eval.run.pipeline.measure_scene` — render, detect, match, triangulate, score. Its
+  report is ``eval run``'s ``report.json`` (without versions and output files).
 * An **analytic cell** is the forward model plus noise, like ``eval paper``'s Monte Carlo: the
-  scene's targets projected through the true rig (:func:`eval.paper.project_pair`), Gaussian
+  scene's targets projected through the true rig (:func:`eval.core.analytic.project_pair`), Gaussian
   pixel noise of σ ``noise_px`` drawn from the cell's seed (:func:`synth.noise.pixel_noise`),
-  triangulated with the assumed rig (:func:`eval.paper.triangulation_errors`, numpy over all
-  targets at once) and summarized with :class:`eval.results.ErrorStats` (the schema of ``eval
+  triangulated with the assumed rig (:func:`eval.core.analytic.triangulation_errors`, numpy over all
+  targets at once) and summarized with :class:`eval.core.results.ErrorStats` (the schema of ``eval
   run``'s ``methods``). ``regular_in_air`` triangulates the all-air copy of the rig (indices 1),
   as section 3.3 of the paper does.
 
@@ -84,11 +84,8 @@ def scene_file(sha: str, data: bytes, original: str) -> str:
     return path
 
 
-def _d_items(cell: dict):
-    return [(k[2:], v) for k, v in cell["defines"].items()]
-
-
-def _value_text(value) -> str:
+def value_text(value) -> str:
+    """A spec value as the text ``--assume`` / ``-D`` take (lists space-separated, floats exact)."""
     if isinstance(value, list):
         return " ".join(repr(float(v)) if isinstance(v, float) else str(v) for v in value)
     if isinstance(value, float):
@@ -96,43 +93,34 @@ def _value_text(value) -> str:
     return str(value)
 
 
-def run_arguments(cell: dict, scene_path: str) -> list:
-    """The ``python -m eval run`` arguments of a render cell (without ``--out``)."""
+def cell_assumptions(params: dict) -> dict:
+    """The ``assume.*`` parameters of a cell as :func:`eval.core.assumption.parse_assumptions`
+    gives them."""
+    from eval.core.assumption import parse_assumptions
+
+    return parse_assumptions([f"{k[7:]}={value_text(v)}" for k, v in params.items()
+                              if k.startswith("assume.")])
+
+
+def run_config(cell: dict, scene_path: str):
+    """The :class:`eval.run.config.RunConfig` of a render cell: its scene, ``-D`` values, seed,
+    methods and the run parameters of the spec (``noise_px``, ``spp``, ``gate_mm``,
+    ``self_calibrate``, ``eccentricity``, ``threshold_fraction``, ``max_elongation``,
+    ``max_area_ratio``, ``median_filter``, ``assume.*``); no progress output."""
+    from eval.run.config import RunConfig, parse_self_calibration
+
     p = cell["params"]
-    argv = [scene_path, "--no-progress", "--seed", str(cell["seed"]),
-            "--methods", ",".join(cell["methods"])]
-    for name, value in sorted(cell["defines"].items()):
-        argv += ["-D", f"{name}={value}"]
-    for key, value in p.items():
-        if key.startswith("assume."):
-            argv += ["--assume", f"{key[7:]}={_value_text(value)}"]
-    if "noise_px" in p:
-        argv += ["--noise-px", _value_text(p["noise_px"])]
-    if "spp" in p:
-        argv += ["--spp", str(p["spp"])]
-    if "gate_mm" in p:
-        argv += ["--gate-mm", _value_text(p["gate_mm"])]
-    if p.get("self_calibrate"):
-        argv += ["--self-calibrate", p["self_calibrate"]]
-    if p.get("eccentricity"):
-        argv += ["--eccentricity"]
-    if "threshold_fraction" in p:
-        argv += ["--threshold-fraction", _value_text(p["threshold_fraction"])]
-    for key in ("max_elongation", "max_area_ratio"):
-        if key in p:
-            argv += [f"--{key.replace('_', '-')}", _value_text(p[key])]
-    if p.get("median_filter"):
-        argv += ["--median-filter", str(p["median_filter"])]
-    return argv
-
-
-def _run_parser():
-    parser = _CACHE.get("parser")
-    if parser is None:
-        from eval.cli import build_parser
-
-        parser = _CACHE["parser"] = build_parser()
-    return parser
+    kinds = {"noise_px": float, "spp": int, "gate_mm": float, "threshold_fraction": float,
+             "max_elongation": float, "max_area_ratio": float}
+    optional = {name: kind(p[name]) for name, kind in kinds.items() if name in p}
+    return RunConfig(scene=scene_path,
+                     defines=tuple((name, str(value))
+                                   for name, value in sorted(cell["defines"].items())),
+                     seed=int(cell["seed"]), methods=tuple(cell["methods"]),
+                     assumptions=cell_assumptions(p),
+                     self_calibrate=parse_self_calibration(p.get("self_calibrate", "")),
+                     eccentricity=bool(p.get("eccentricity", False)),
+                     median_filter=int(p.get("median_filter") or 0), progress=False, **optional)
 
 
 def render_cell(cell: dict, scene_path: str, save: tuple):
@@ -140,30 +128,28 @@ def render_cell(cell: dict, scene_path: str, save: tuple):
     bytes}`` holds what ``save`` asks for (``images``, ``ply``, ``figures``)."""
     from synth.fileio import jsonable
 
-    from eval import run
+    from eval.run.pipeline import measure_scene
 
-    args = _run_parser().parse_args(["run", *run_arguments(cell, scene_path), "--out", "-"])
-    options = run.check_options(args)
     start = time.perf_counter()
-    report, arrays, inputs = run.measure(args, options, lambda text: None)
-    files = {}
-    if save:
-        files = _saved_files(inputs, report, arrays, save)
+    result = measure_scene(run_config(cell, scene_path), lambda text: None)
+    files = _saved_files(result, save) if save else {}
+    report = result.report
     report["scene"] = cell["scene"]
     report["timings_s"]["total"] = time.perf_counter() - start
     report.pop("versions", None)
     return jsonable(report), files
 
 
-def _saved_files(inputs, report, arrays, save) -> dict:
+def _saved_files(result, save) -> dict:
     from synth.render import png16_scale, to_png16, write_png
 
-    from eval.run import write_outputs
+    from eval.run.report import write_outputs
 
     files = {}
+    inputs = result.inputs
     with tempfile.TemporaryDirectory(prefix="refstereo-cell-") as tmp:
         if "ply" in save or "figures" in save:
-            write_outputs(tmp, inputs, report, arrays)
+            write_outputs(tmp, result)
         if "images" in save:
             scale = png16_scale(inputs.left, inputs.right)
             for view in ("left", "right"):
@@ -195,32 +181,26 @@ def _projections(scene_path: str, defines: dict, spec, in_air: bool):
     key = ("projection", scene_path, tuple(sorted(defines.items())), in_air)
     uv = _CACHE.get(key)
     if uv is None:
-        from eval.paper import project_pair
+        from eval.core.analytic import air_copy, project_pair
 
-        rig = _air_copy(spec.rig) if in_air else spec.rig
+        rig = air_copy(spec.rig) if in_air else spec.rig
         uv = _CACHE[key] = project_pair(rig, spec.targets)
     return uv
-
-
-def _air_copy(rig):
-    """The same cameras behind an index-matched port (every index 1): the paper's all-air rig."""
-    return rig.with_port(rig.port.replace(indices=(1.0,) * len(rig.port.indices)))
 
 
 def analytic_cell(cell: dict, scene_path: str) -> dict:
     """The report of an analytic cell (see module docs)."""
     import numpy as np
 
-    from eval.assumption import assumed_rig, parse_assumptions, rig_difference
-    from eval.paper import triangulation_errors
-    from eval.results import ErrorStats
+    from eval.core.analytic import air_copy, triangulation_errors
+    from eval.core.assumption import assumed_rig, rig_difference
+    from eval.core.results import ErrorStats
     from synth.noise import pixel_noise
 
     start = time.perf_counter()
     p = cell["params"]
     spec = _scene_spec(scene_path, cell["defines"])
-    assumptions = parse_assumptions([f"{k[7:]}={_value_text(v)}" for k, v in p.items()
-                                     if k.startswith("assume.")])
+    assumptions = cell_assumptions(p)
     truth = spec.rig
     believed = assumed_rig(truth, spec.has_port, assumptions)
     targets = spec.targets
@@ -235,7 +215,7 @@ def analytic_cell(cell: dict, scene_path: str) -> dict:
     for method in cell["methods"]:
         if method == "regular_in_air":
             air_left, air_right = _projections(scene_path, cell["defines"], spec, True)
-            errors = triangulation_errors(_air_copy(believed), air_left + offset_left,
+            errors = triangulation_errors(air_copy(believed), air_left + offset_left,
                                           air_right + offset_right, "regular", targets)[0]
         else:
             errors = triangulation_errors(believed, uv_left, uv_right, method, targets)[0]
@@ -253,8 +233,8 @@ def analytic_cell(cell: dict, scene_path: str) -> dict:
 def _self_calibration(truth, believed, uv_left, uv_right, names, cell, targets) -> dict:
     from measure.selfcal import self_calibrate
 
-    from eval.paper import triangulation_errors
-    from eval.results import ErrorStats
+    from eval.core.analytic import triangulation_errors
+    from eval.core.results import ErrorStats
 
     fit = self_calibrate(believed, uv_left, uv_right, names)
     true_values = {"n_water": truth.port.n_water, "port_distance": truth.port.distance,
@@ -336,5 +316,5 @@ def probe() -> dict:
     return {"module": __file__, "python": sys.version.split()[0]}
 
 
-__all__ = ["analytic_cell", "flatten", "probe", "render_cell", "run_arguments", "run_batch",
-           "run_cell", "scene_file"]
+__all__ = ["analytic_cell", "cell_assumptions", "flatten", "probe", "render_cell", "run_batch",
+           "run_cell", "run_config", "scene_file", "value_text"]

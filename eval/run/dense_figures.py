@@ -1,4 +1,4 @@
-"""Figures and coloured clouds of a dense surface score (see :mod:`eval.surface_metrics`).
+"""Figures and coloured clouds of a dense surface score (see :mod:`eval.core.surface_metrics`).
 
 matplotlib with the Agg canvas only (no display). Every file is written whole or not at all:
 PNGs through :func:`synth.fileio.atomic_write_bytes`, PLYs by Open3D to a temporary file beside
@@ -18,28 +18,15 @@ from matplotlib.figure import Figure
 
 from synth.fileio import atomic_write_bytes
 
-from .cloud_metrics import write_colored_ply
-from .results import method_label
+from eval.core.cloud_metrics import write_colored_ply
+from eval.core.figures import new_figure, save_figure
+from eval.core.results import method_label
 
-DPI = 110
 #: Grey for pixels with no value (NaN) in the error map.
 NO_VALUE_GREY = "0.6"
 #: Lower end (mm) of the histogram's logarithmic axis: below the float32 resolution of the
-#: distances at ~1 m (1e-4 mm, see :mod:`eval.surface_metrics`); smaller values are counted here.
+#: distances at ~1 m (1e-4 mm, see :mod:`eval.core.surface_metrics`); smaller values are counted here.
 HISTOGRAM_FLOOR_MM = 1e-4
-
-
-def _new_figure(width: float, height: float) -> Figure:
-    fig = Figure(figsize=(width, height), dpi=DPI, layout="constrained")
-    FigureCanvasAgg(fig)
-    return fig
-
-
-def _save(fig: Figure, path) -> str:
-    buffer = io.BytesIO()
-    fig.savefig(buffer, format="png", dpi=DPI)
-    atomic_write_bytes(path, buffer.getvalue())
-    return os.fspath(path)
 
 
 def symmetric_limit(values, percentile: float = 99.0) -> float:
@@ -59,7 +46,7 @@ def write_error_map(path, depth_error: np.ndarray, title: str) -> str:
         raise ValueError("depth_error must be an (H, W) array")
     limit = symmetric_limit(depth_error)
     height, width = depth_error.shape
-    fig = _new_figure(7.5, 1.2 + 6.0 * height / max(width, 1))
+    fig = new_figure(7.5, 1.2 + 6.0 * height / max(width, 1))
     ax = fig.add_subplot()
     cmap = colormaps["RdBu_r"].with_extremes(bad=NO_VALUE_GREY)
     image = ax.imshow(np.ma.masked_invalid(depth_error), cmap=cmap, vmin=-limit, vmax=limit,
@@ -71,7 +58,7 @@ def write_error_map(path, depth_error: np.ndarray, title: str) -> str:
     ax.set_title(f"{title}\n{summary}; grey: no value", fontsize=9)
     ax.set_xlabel("u [px]")
     ax.set_ylabel("v [px]")
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def write_distance_histogram(path, distances_by_method: dict, thresholds=(0.5, 1.0, 5.0)) -> str:
@@ -83,7 +70,7 @@ def write_distance_histogram(path, distances_by_method: dict, thresholds=(0.5, 1
     series = {m: d[np.isfinite(d)] for m, d in series.items()}
     largest = max([float(d.max()) for d in series.values() if d.size] + list(thresholds) + [1.0])
     bins = np.geomspace(HISTOGRAM_FLOOR_MM, largest * 1.05, 61)
-    fig = _new_figure(7.5, 4.2)
+    fig = new_figure(7.5, 4.2)
     ax = fig.add_subplot()
     for index, (method, values) in enumerate(series.items()):
         if values.size == 0:
@@ -102,14 +89,14 @@ def write_distance_histogram(path, distances_by_method: dict, thresholds=(0.5, 1
     ax.set_ylabel("share of points per bin")
     ax.set_title("distance of the measured points to the true surface", fontsize=9)
     ax.legend(fontsize=7, loc="upper left", framealpha=0.9)
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def write_colored_cloud(path, points: np.ndarray, distances: np.ndarray, vmax: float,
                         colormap: str = "viridis") -> dict:
     """Binary PLY of ``(N, 3)`` points (mm, reference frame; rows with a non-finite point or
     distance left out) coloured by ``distances`` (mm) on ``colormap`` over [0, ``vmax``],
-    clipped (:func:`eval.cloud_metrics.write_colored_ply`, to a temporary ``.ply`` beside
+    clipped (:func:`eval.core.cloud_metrics.write_colored_ply`, to a temporary ``.ply`` beside
     ``path`` — Open3D picks the format from the extension — renamed into place). Returns
     ``{"file", "points", "colormap", "vmin_mm", "vmax_mm"}``."""
     points = np.asarray(points, dtype=np.float64).reshape(-1, 3)

@@ -1,8 +1,8 @@
 """``python -m eval sweep SPEC.toml --out DIR [--scheduler ADDRESS] [--workers N]``: sweeps at
 scale on ``dask.distributed``.
 
-The spec (:mod:`eval.sweep_spec`) expands into cells; the workers run them
-(:mod:`eval.sweep_cells`); this module owns the output directory, the execution and the tables.
+The spec (:mod:`eval.sweep.spec`) expands into cells; the workers run them
+(:mod:`eval.sweep.cells`); this module owns the output directory, the execution and the tables.
 
 Execution: a ``LocalCluster`` of ``--workers`` single-threaded worker processes (default: one
 per core), or ``--scheduler tcp://HOST:PORT``, a scheduler someone runs (``dask scheduler`` /
@@ -33,6 +33,7 @@ import time
 import uuid
 
 from eval.cli import CLIError, positive_float, positive_int
+from synth.cli import add_out_option, add_progress_option
 
 COMMAND = "eval sweep"
 #: What a sweep writes at the top of its directory (anything else makes it foreign).
@@ -56,8 +57,9 @@ def add_parser(subparsers):
                     "cell to DIR/results.parquet and DIR/results.csv, the per-cell reports and "
                     "figures. Resumable: a rerun does only the missing cells.")
     parser.add_argument("spec", help="sweep spec (TOML; see sweeps/ and the README)")
-    parser.add_argument("--out", required=True, metavar="DIR",
-                        help="output directory, updated in place cell by cell")
+    add_out_option(parser, COMMAND, rule="updated in place cell by cell, so that a killed sweep "
+                   "keeps what it finished; an existing one is used only if it is an earlier "
+                   "output of eval sweep")
     parser.add_argument("--scheduler", metavar="ADDRESS",
                         help="submit to a running Dask scheduler (tcp://HOST:PORT) instead of "
                              "starting a local cluster")
@@ -72,7 +74,7 @@ def add_parser(subparsers):
     parser.add_argument("--retry-failed", action="store_true",
                         help="run again the cells that failed in an earlier run")
     parser.add_argument("--no-figures", action="store_true", help="do not draw the figures")
-    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+    add_progress_option(parser)
 
 
 # ------------------------------------------------------------------------------------------------
@@ -373,13 +375,13 @@ def connect(args):
 
 
 def _probe_worker():
-    from eval.sweep_cells import probe
+    from eval.sweep.cells import probe
 
     return probe()
 
 
 def _cell_payload(spec, cell) -> dict:
-    from eval.sweep_spec import scene_defines
+    from eval.sweep.spec import scene_defines
 
     scene = spec.scenes[cell.scene]
     return {"key": cell.key, "kind": cell.kind, "scene": cell.scene, "scene_sha": scene.sha256,
@@ -454,13 +456,13 @@ def execute(client, spec, todo: list, out: SweepDir, records: dict, run_id: str,
 
 
 def _run_batch(cells, scenes, save):
-    from eval.sweep_cells import run_batch
+    from eval.sweep.cells import run_batch
 
     return run_batch(cells, scenes, save)
 
 
 def main(args) -> int:
-    from eval.sweep_spec import load_spec
+    from eval.sweep.spec import load_spec
 
     start = time.perf_counter()
     spec = load_spec(args.spec)
@@ -508,7 +510,7 @@ def main(args) -> int:
     out.write_state(spec, runs)
     figures = []
     if not args.no_figures and rows:
-        from eval.sweep_figures import write_figures
+        from eval.sweep.figures import write_figures
 
         figures = write_figures(os.path.join(out.path, "figures"), spec,
                                 table_rows(spec, records))

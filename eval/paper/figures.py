@@ -18,10 +18,10 @@ from matplotlib.ticker import MaxNLocator
 from matplotlib.tri import Triangulation
 from scipy.stats import norm
 
-from eval.results import method_label
+from eval.core.figures import new_figure, save_figure
+from eval.core.results import method_label
 from synth.fileio import atomic_write_bytes
 
-DPI = 110
 AXIS_NAMES = {"dX": "dX", "dY": "dY", "dZ": "dZ", "dP": "dP"}
 FIGURE_FILES = {
     "figure4": "figure4_gap.png", "figure5": "figure5_su_1m.png", "figure6": "figure6_su_2m.png",
@@ -29,18 +29,6 @@ FIGURE_FILES = {
     "figure9": "figure9_index_maps.png", "figure10": "figure10_index_hist.png",
     "figure11": "figure11_index_profile.png",
 }
-
-
-def _new_figure(width, height) -> Figure:
-    fig = Figure(figsize=(width, height), dpi=DPI, layout="constrained")
-    FigureCanvasAgg(fig)
-    return fig
-
-
-def _save(fig: Figure, path: Path) -> Path:
-    buffer = io.BytesIO()
-    fig.savefig(buffer, format="png", dpi=DPI)
-    return atomic_write_bytes(path, buffer.getvalue())
 
 
 def _components(errors: np.ndarray) -> dict[str, np.ndarray]:
@@ -93,7 +81,7 @@ def _plane_map(fig, ax, targets, values, title, label, signed=True, lines=(), n_
 def figure4_gap(results) -> Figure:
     gap = results["gap"]
     stats = gap["stats"]
-    fig = _new_figure(7.2, 6.2)
+    fig = new_figure(7.2, 6.2)
     ax = fig.add_subplot()
     intersect = gap["gap"] <= stats["threshold_mm"]
     _plane_map(fig, ax, gap["targets"], gap["gap"],
@@ -109,7 +97,7 @@ def figure4_gap(results) -> Figure:
 def figure_su_ideal(results, z: float, number: int) -> Figure:
     entry = results["ideal"][z]
     comps = _components(entry["errors"]["su"])
-    fig = _new_figure(11.5, 10.0)
+    fig = new_figure(11.5, 10.0)
     axes = fig.subplots(2, 2)
     for ax, name in zip(axes.ravel(), ("dX", "dY", "dZ", "dP")):
         signed = name != "dP"
@@ -124,7 +112,7 @@ def figure_su_ideal(results, z: float, number: int) -> Figure:
 
 def figure_maps(errors_by_method: dict, targets, trial: int, title: str) -> Figure:
     methods = list(errors_by_method)
-    fig = _new_figure(15.0, 4.6 * len(methods))
+    fig = new_figure(15.0, 4.6 * len(methods))
     axes = np.atleast_2d(fig.subplots(len(methods), 3))
     for row, method in enumerate(methods):
         comps = _components(errors_by_method[method][trial])
@@ -161,7 +149,7 @@ def _hist_panel(ax, values, label, color, reference=None):
 
 def figure_hist(errors_by_method: dict, title: str, reference: dict | None = None) -> Figure:
     methods = list(errors_by_method)
-    fig = _new_figure(15.0, 4.2 * len(methods))
+    fig = new_figure(15.0, 4.2 * len(methods))
     axes = np.atleast_2d(fig.subplots(len(methods), 3))
     colors = {"optical_path": "tab:blue", "su": "tab:orange", "regular_in_air": "tab:green"}
     for row, method in enumerate(methods):
@@ -181,7 +169,7 @@ def figure_hist(errors_by_method: dict, title: str, reference: dict | None = Non
 def figure_index_profile(in_situ: dict) -> Figure:
     """Reprojection RMS against the assumed water index (every point at its optimum), with the
     in-situ estimates, the truth and the assumed value marked."""
-    fig = _new_figure(7.5, 4.5)
+    fig = new_figure(7.5, 4.5)
     ax = fig.subplots()
     profile = in_situ["profile"]
     ax.plot(profile["n"], profile["rms_px"], "o-", ms=3, label="reprojection RMS (trial 0)")
@@ -240,5 +228,5 @@ def write_figures(results: dict, out) -> dict[str, Path]:
     }
     paths = {}
     for key, fig in figures.items():
-        paths[key] = _save(fig, out / FIGURE_FILES[key])
+        paths[key] = save_figure(fig, out / FIGURE_FILES[key])
     return paths

@@ -11,8 +11,8 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from eval.paper_settings import COMPONENTS, INDEX_METHODS, INDEX_SIDES, NOISE_METHODS, PAPER_REFERENCE
-from eval.results import jsonable, method_label
+from eval.paper.settings import COMPONENTS, INDEX_METHODS, INDEX_SIDES, NOISE_METHODS, PAPER_REFERENCE
+from eval.core.results import jsonable, method_label
 from synth.fileio import atomic_write_text
 
 

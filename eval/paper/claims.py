@@ -13,7 +13,7 @@ from typing import Callable
 
 import numpy as np
 
-from eval.paper_settings import (IDEAL_TOLERANCE_MM, INDEX_METHODS, NOISE_METHODS, SEM_FACTOR,
+from eval.paper.settings import (IDEAL_TOLERANCE_MM, INDEX_METHODS, NOISE_METHODS, SEM_FACTOR,
                                  SHIFT_AGREEMENT_MM)
 
 XYZ = ("dX", "dY", "dZ")

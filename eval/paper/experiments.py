@@ -22,7 +22,7 @@ differences of means over the same draws.
 
 :func:`run_experiments` returns everything as a dict; :func:`evaluate_claims` turns the numbers
 into the paper's claims, each with its threshold, the measured value and ``holds`` computed from
-them. The CLI (``add_parser``/``main``) writes ``report.json``, ``report.md`` and the figures.
+them. The command (:mod:`eval.paper.command`) writes ``report.json``, ``report.md`` and the figures.
 """
 
 from __future__ import annotations
@@ -40,12 +40,13 @@ from synth.noise import deviate_port, pixel_noise
 from measure.projection import project
 from synth.rig import paper_rig
 
-from eval.paper_settings import (COMPONENTS, DISTANCES_MM, GAP_THRESHOLD_MM,  # noqa: F401
+from eval.paper.settings import (COMPONENTS, DISTANCES_MM, GAP_THRESHOLD_MM,  # noqa: F401
                                  IDEAL_TOLERANCE_MM, INDEX_METHODS, INDEX_RELATIVE, INDEX_SIDES,
                                  NAME, NOISE_METHODS, NOISE_VARIANCE_PX2, PAPER_REFERENCE,
                                  SEM_FACTOR, SHIFT_AGREEMENT_MM)
-from eval.paper_claims import evaluate_claims
-from eval.results import ErrorStats
+from eval.paper.claims import evaluate_claims
+from eval.core.analytic import project_pair, triangulation_errors
+from eval.core.results import ErrorStats
 
 
 # --------------------------------------------------------------------------------------------
@@ -60,7 +61,7 @@ def error_components(errors: np.ndarray) -> dict[str, np.ndarray]:
 
 
 def error_stats(errors: np.ndarray) -> ErrorStats:
-    """:class:`eval.results.ErrorStats` of errors ``(..., 3)`` (measured − true, mm): per
+    """:class:`eval.core.results.ErrorStats` of errors ``(..., 3)`` (measured − true, mm): per
     component n, min, max, max_abs, mean, std, sem, rms. ``sem`` = std / sqrt(n) over all rows:
     it counts any deterministic per-target error (Su's model error) as spread; the noise
     yardstick of the claims is ``noise_sem`` instead. NaN rows are left out and counted."""
@@ -88,22 +89,6 @@ def rig_description(rig: StereoRig, air_rig: StereoRig) -> dict:
         "air_copy_port_indices": list(air_rig.port.indices),
         "frame": "left camera, OpenCV axes (x right, y down, z forward), mm",
     }
-
-
-def project_pair(rig: StereoRig, points: np.ndarray, port=None):
-    """The forward model: the pixels ``(left, right)`` of ``points`` ``(..., 3)`` mm through
-    ``port`` (default the rig's). Shared with the analytic cells of ``eval sweep``."""
-    port = rig.port if port is None else port
-    return project(rig.left, port, points), project(rig.right, port, points)
-
-
-def triangulation_errors(rig: StereoRig, uv_left, uv_right, method: str, truth: np.ndarray):
-    """``(errors, Triangulation)``: ``method`` on pixels ``(..., 2)``, errors measured − true
-    ``(..., 3)`` mm. Shared with the analytic cells of ``eval sweep``."""
-    result = triangulate(rig, uv_left.reshape(-1, 2), uv_right.reshape(-1, 2), method)
-    shape = uv_left.shape[:-1] + (3,)
-    errors = (result.points - truth.reshape(-1, 3)).reshape(shape)
-    return errors, result
 
 
 def run_gap(rig: StereoRig, z: float = DISTANCES_MM[0]) -> dict:
@@ -391,46 +376,3 @@ def run_experiments(trials: int = 100, seed: int = 0, *, variance: float = NOISE
 
 # --------------------------------------------------------------------------------------------
 # claims
-
-
-# --------------------------------------------------------------------------------------------
-# CLI
-
-
-def add_parser(subparsers) -> None:
-    """``python -m eval paper [--out DIR] [--trials N] [--seed S] [--no-progress]``."""
-    from eval.cli import non_negative_int, positive_int
-
-    parser = subparsers.add_parser(
-        NAME, help="reproduce section 3 of Li et al. 2024 on the analytic simulator",
-        description="Reproduce section 3 of Li et al. 2024 (ray gap, ideal, pixel noise, "
-                    "water-index deviation) on the analytic simulator; writes report.json, "
-                    "report.md and figures 4-10 (PNG) into --out.")
-    parser.add_argument("--out", default="out/paper", metavar="DIR",
-                        help="output directory (default: out/paper)")
-    parser.add_argument("--trials", type=positive_int, default=100, metavar="N",
-                        help="Monte-Carlo noise trials (default: 100)")
-    parser.add_argument("--seed", type=non_negative_int, default=0, metavar="S",
-                        help="seed of the pixel noise (default: 0)")
-    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
-
-
-def main(args) -> int:
-    """Run the experiments and write the report and figures into ``args.out`` (whole or not at
-    all; the ``--out`` rule of :class:`synth.fileio.OutputDir` is checked first)."""
-    from eval.paper_figures import write_figures  # matplotlib: only when needed
-    from eval.paper_report import write_reports
-    from synth.fileio import OutputDir
-
-    start = time.perf_counter()
-    output = OutputDir(args.out, f"eval {NAME}").claim()
-    results = run_experiments(args.trials, args.seed, progress=not args.no_progress)
-    with output.staged() as tmp:
-        figures = write_figures(results, tmp)
-        results["wall_seconds"] = time.perf_counter() - start
-        paths = write_reports(results, tmp, figures)
-    held = sum(c["holds"] for c in results["claims"])
-    print(f"paper: {held}/{len(results['claims'])} claims hold; wrote "
-          f"{', '.join(str(Path(p).name) for p in paths)} and {len(figures)} figures to "
-          f"{output.path} in {time.perf_counter() - start:.1f} s")
-    return 0

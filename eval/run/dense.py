@@ -5,7 +5,7 @@ Per method: ``optical_path`` matches along the refractive epipolar curves
 (:func:`measure.dense.match_dense`, model ``"refractive"``) and triangulates with the paper's
 optical-path model; ``regular`` is the baseline that ignores refraction — the same plane sweep
 and refinement with straight rays (model ``"pinhole"``) and pinhole triangulation — what a user
-gets who folds nothing for the port. Scores (:mod:`eval.surface_metrics`): point-to-mesh
+gets who folds nothing for the port. Scores (:mod:`eval.core.surface_metrics`): point-to-mesh
 distance, precision/recall/F at 0.5, 1 and 5 mm, Chamfer, per-pixel depth error against the
 truth maps, the fraction of overlap pixels measured, flatness of planes.
 
@@ -25,10 +25,13 @@ import os
 import sys
 import time
 import xml.etree.ElementTree as ET
+from dataclasses import fields
 
 import numpy as np
 
 from eval.cli import CLIError
+from eval.core.formatting import format_number
+from eval.run.config import COMMAND, RunConfig
 
 #: Dense methods: name -> (matching model, triangulation method).
 DENSE_METHODS = {"optical_path": ("refractive", "optical_path"), "regular": ("pinhole", "regular")}
@@ -38,10 +41,10 @@ DEPTH_MARGIN = 0.05
 #: The pinhole baseline's search range starts this fraction nearer than the paraxial apparent
 #: depth of the near end (see :func:`pinhole_depth_range`).
 PINHOLE_NEAR_MARGIN = 0.2
-#: Options of ``eval run`` that apply to target scenes only, with their defaults.
-TARGET_ONLY_OPTIONS = {"noise_px": 0.0, "gate_mm": 0.5, "self_calibrate": "", "eccentricity": False,
-                       "threshold_fraction": None, "max_elongation": None, "max_area_ratio": None,
-                       "compare_calib": []}
+#: Fields of :class:`eval.run.config.RunConfig` (options of ``eval run``) that apply to target
+#: scenes only; a surface run refuses any of them that differs from its default.
+TARGET_ONLY_OPTIONS = ("noise_px", "gate_mm", "self_calibrate", "eccentricity",
+                       "threshold_fraction", "max_elongation", "max_area_ratio", "compare_calib")
 
 
 def is_surface_scene(path: str) -> bool:
@@ -57,67 +60,64 @@ def is_surface_scene(path: str) -> bool:
     return any(shape.get("id") == SURFACE_ID for shape in root.iter("shape"))
 
 
-def check_dense_options(args) -> tuple:
-    """The dense methods of ``--methods`` (default: both), the depth range and the sensor model;
-    CLIError names an option that does not apply to a surface scene."""
-    from .run_options import DEFAULT_METHODS, _parse_range, _parse_sensor
-
-    for name, default in TARGET_ONLY_OPTIONS.items():
-        if getattr(args, name, default) != default:
+def dense_methods(config: RunConfig) -> tuple:
+    """The dense methods of the run (default: both); CLIError names an option of ``config``
+    that does not apply to a surface scene."""
+    defaults = {f.name: f.default for f in fields(RunConfig)}
+    for name in TARGET_ONLY_OPTIONS:
+        if getattr(config, name) != defaults[name]:
             raise CLIError(f"--{name.replace('_', '-')} applies to target scenes, not to the "
-                           f"surface scene {args.scene}")
-    if args.methods == ",".join(DEFAULT_METHODS):
-        methods = tuple(DENSE_METHODS)
-    else:
-        methods = tuple(m.strip() for m in args.methods.split(",") if m.strip())
-        unknown = [m for m in methods if m not in DENSE_METHODS]
-        if unknown or not methods:
-            raise CLIError(f"--methods: a surface scene is measured with "
-                           f"{' and '.join(DENSE_METHODS)}, got {args.methods!r}")
-    return methods, _parse_range(args.depth_range), _parse_sensor(args.sensor)
+                           f"surface scene {config.scene}")
+    if config.methods is None:
+        return tuple(DENSE_METHODS)
+    unknown = [m for m in config.methods if m not in DENSE_METHODS]
+    if unknown or not config.methods:
+        raise CLIError(f"--methods: a surface scene is measured with "
+                       f"{' and '.join(DENSE_METHODS)}, got {','.join(config.methods)!r}")
+    return config.methods
 
 
-def _develop(args, sensor, left, right, seed):
+def develop(config: RunConfig, left, right, seed):
     """The images the matcher sees: through the ``--sensor`` model (seeded) and the
     ``--median-filter``, if given; returns ``(left, right, sensor report or None)``."""
     import cv2
 
-    sensor_info = None
+    sensor_info, sensor = None, config.sensor
     if sensor is not None:
         from synth.sensor_model import sensor_views, to_radiance
 
         codes_left, codes_right, sensor_info = sensor_views(left, right, sensor, seed)
         left, right = (to_radiance(codes, sensor, sensor_info["electrons_per_unit"])
                        for codes in (codes_left, codes_right))
-    if args.median_filter:
-        left, right = (cv2.medianBlur(np.asarray(image, dtype=np.float32), int(args.median_filter))
+    if config.median_filter:
+        left, right = (cv2.medianBlur(np.asarray(image, dtype=np.float32), int(config.median_filter))
                        for image in (left, right))
     return left, right, sensor_info
 
 
-def _inputs(args, log):
+def surface_inputs(config: RunConfig, log):
     """``(spec, measured rig, left, right, truth maps of the left view, provenance)``."""
     from synth.truth_maps import MeshTracer, read_truth_maps, truth_maps
 
-    from .run_options import _measurement_rig, load_run_scene, read_run_dataset
+    from eval.run.inputs import load_run_scene, measurement_rig, read_run_dataset
 
-    spec = load_run_scene(args)
-    rig = _measurement_rig(args, spec)
-    if args.from_dir:
-        data = read_run_dataset(args, spec)
+    spec = load_run_scene(config)
+    rig = measurement_rig(config, spec)
+    if config.from_dir:
+        data = read_run_dataset(config, spec)
         try:
-            truth = read_truth_maps(args.from_dir, "left", spec.size)
+            truth = read_truth_maps(config.from_dir, "left", spec.size)
         except ValueError as exc:
-            raise CLIError(f"--from {args.from_dir}: {exc}") from None
-        log(f"reusing the images and truth maps of {args.from_dir}")
+            raise CLIError(f"--from {config.from_dir}: {exc}") from None
+        log(f"reusing the images and truth maps of {config.from_dir}")
         return spec, rig, data.left, data.right, truth, {
-            "from": os.path.abspath(args.from_dir), "variant": data.manifest.get("variant"),
+            "from": os.path.abspath(config.from_dir), "variant": data.manifest.get("variant"),
             "spp": data.manifest.get("spp"), "timings": {}}
     from synth.render import render_stereo
 
-    log(f"render both views ({spec.size[0]}x{spec.size[1]} px, {args.spp or spec.spp} spp) …")
-    left, right, info = render_stereo(spec, spp=args.spp, variant=args.variant,
-                                      progress=not args.no_progress)
+    log(f"render both views ({spec.size[0]}x{spec.size[1]} px, {config.spp or spec.spp} spp) …")
+    left, right, info = render_stereo(spec, spp=config.spp, variant=config.variant,
+                                      progress=config.progress)
     t = time.perf_counter()
     tracer = MeshTracer(spec.surface.mesh_path, spec.surface.vertices, spec.surface.triangles)
     truth = truth_maps(tracer, spec.rig.left, spec.rig.right, spec.rig.port)
@@ -145,16 +145,17 @@ def default_depth_range(truth) -> tuple[float, float]:
     return float(depth.min()) - margin, float(depth.max()) + margin
 
 
-def measure_surface(args, methods, depth_range, log, sensor=None):
+def measure_surface(config: RunConfig, methods, log):
     """Match, triangulate and score every method; returns ``(report, arrays)``."""
     from measure.dense import match_dense
     from measure.triangulate import triangulate
 
-    from .surface_metrics import SurfaceCase, score_surface, surface_arrays
+    from eval.core.surface_metrics import SurfaceCase, score_surface, surface_arrays
 
-    spec, rig, left, right, truth, provenance = _inputs(args, log)
-    left, right, sensor_info = _develop(args, sensor, left, right,
-                                        spec.seed if args.seed is None else args.seed)
+    spec, rig, left, right, truth, provenance = surface_inputs(config, log)
+    left, right, sensor_info = develop(config, left, right,
+                                       spec.seed if config.seed is None else config.seed)
+    depth_range = config.depth_range_mm
     if depth_range is None:
         depth_range = default_depth_range(truth)
     elif depth_range[0] <= rig.port.offsets[-1]:
@@ -167,12 +168,12 @@ def measure_surface(args, methods, depth_range, log, sensor=None):
                            f"surface (its depths where both cameras see it: {seen.min():.1f}-"
                            f"{seen.max():.1f} mm)")
     h, w = truth.valid.shape
-    report = {"scene": args.scene, "kind": "surface", "variant": provenance.get("variant"),
+    report = {"scene": config.scene, "kind": "surface", "variant": provenance.get("variant"),
               "spp": provenance.get("spp"), "image_size": [w, h],
               "depth_range_mm": list(depth_range),
               "truth": {"valid_pixels": int(truth.valid.sum()),
                         "overlap_pixels": int(truth.overlap.sum())},
-              "sensor": sensor_info, "median_filter": int(args.median_filter or 0),
+              "sensor": sensor_info, "median_filter": int(config.median_filter or 0),
               "methods": {}, "matching": {}, "timings_s": dict(provenance["timings"]),
               "inputs": {k: v for k, v in provenance.items() if k == "from"}}
     arrays = {"left": left, "right": right, "per_method": {}}
@@ -185,7 +186,7 @@ def measure_surface(args, methods, depth_range, log, sensor=None):
         t = time.perf_counter()
         try:
             matches = match_dense(rig, left, right, search, model=model,
-                                  progress=_progress(args, method))
+                                  progress=_progress(config, method))
         except ValueError as exc:
             raise CLIError(f"--depth-range ({method}, searched {search[0]:.0f}-{search[1]:.0f} "
                            f"mm): {exc}") from None
@@ -215,9 +216,9 @@ def measure_surface(args, methods, depth_range, log, sensor=None):
     return report, arrays
 
 
-def _progress(args, method):
+def _progress(config: RunConfig, method):
     """A ``(done, total)`` callback drawing a tqdm bar over the sweep planes (None if quiet)."""
-    if args.no_progress:
+    if not config.progress:
         return None
     from tqdm import tqdm
 
@@ -236,8 +237,8 @@ def _progress(args, method):
 
 def write_outputs(tmp: str, report: dict, arrays: dict) -> None:
     """Figures and coloured point clouds of a surface run into ``tmp`` (entries in the report)."""
-    from . import surface_figures as figures
-    from .run_figures import views_pair
+    from eval.run import dense_figures as figures
+    from eval.run.figures import views_pair
 
     views_pair(os.path.join(tmp, "views.png"), arrays["left"], arrays["right"])
     distances = {}
@@ -254,8 +255,7 @@ def write_outputs(tmp: str, report: dict, arrays: dict) -> None:
 
 
 def report_markdown(report: dict) -> str:
-    from .run_options import _fmt
-    from .surface_metrics import surface_table
+    from eval.core.surface_metrics import surface_table
 
     t = report["timings_s"]
     lines = [f"# Dense run report: `{report['scene']}`", "",
@@ -276,7 +276,7 @@ def report_markdown(report: dict) -> str:
              "time (s) |", "|---|---|---|---|---|---|"]
     for method, m in report["matching"].items():
         lines.append(f"| {method} | {m['model']} | {m['planes']} | {m['matched_pixels']} | "
-                     f"{_fmt(m['median_score'])} | {_fmt(m['timings_s']['total'], 1)} |")
+                     f"{format_number(m['median_score'])} | {format_number(m['timings_s']['total'], 1)} |")
     lines += ["", "Time per stage (s): " + "; ".join(
         f"{method}: " + ", ".join(f"{k} {v:.2f}" for k, v in m["timings_s"].items())
         for method, m in report["matching"].items()), "",
@@ -288,31 +288,29 @@ def report_markdown(report: dict) -> str:
 
 
 def summary_line(report: dict) -> str:
-    from .run_options import _fmt
-
     parts = []
     for method, s in report["methods"].items():
         fraction = s["measured_fraction"]
-        parts.append(f"{method} {_fmt(None if fraction is None else 100 * fraction, 1)} % "
-                     f"measured, RMS {_fmt(s['p2m_rms_mm'])} mm, F@1mm {_fmt(s['fscore_1mm'])}")
+        parts.append(f"{method} {format_number(None if fraction is None else 100 * fraction, 1)} % "
+                     f"measured, RMS {format_number(s['p2m_rms_mm'])} mm, F@1mm {format_number(s['fscore_1mm'])}")
     return (f"{report['scene']}: {report['truth']['overlap_pixels']} overlap pixels; "
             + "; ".join(parts) + f"; total {report['timings_s']['total']:.1f} s")
 
 
-def main(args, log) -> int:
-    """The dense ``eval run``: check, claim the output, measure, write (whole or not at all)."""
+def main(config: RunConfig, out: str, print_json: bool, log) -> int:
+    """The dense ``eval run`` into directory ``out``: check, claim the output, measure, write
+    (whole or not at all); ``print_json``: also print report.json to stdout."""
     import json
 
     from synth.fileio import OutputDir, atomic_write_json, atomic_write_text, jsonable
     from synth.provenance import package_versions
 
-    from .run_options import COMMAND
-    from .surface_metrics import surface_table
+    from eval.core.surface_metrics import surface_table
 
-    methods, depth_range, sensor = check_dense_options(args)
-    output = OutputDir(args.out, COMMAND).claim()
+    methods = dense_methods(config)
+    output = OutputDir(out, COMMAND).claim()
     start = time.perf_counter()
-    report, arrays = measure_surface(args, methods, depth_range, log, sensor)
+    report, arrays = measure_surface(config, methods, log)
     log("write the report, figures and point clouds …")
     with output.staged() as tmp:
         t = time.perf_counter()
@@ -323,10 +321,10 @@ def main(args, log) -> int:
         report = jsonable(report)
         atomic_write_json(os.path.join(tmp, "report.json"), report)
         atomic_write_text(os.path.join(tmp, "report.md"), report_markdown(report))
-    stream = sys.stderr if args.json else sys.stdout
+    stream = sys.stderr if print_json else sys.stdout
     print(summary_line(report), file=stream)
     print(surface_table(report["methods"]), file=stream)
     print(f"wrote {output.path}", file=stream)
-    if args.json:
+    if print_json:
         print(json.dumps(report, indent=2))
     return 0

@@ -21,6 +21,7 @@ import sys
 import time
 
 from eval.cli import CLIError, positive_float
+from synth.cli import add_out_option, add_progress_option
 
 COMMAND = "eval calibrate"
 
@@ -51,8 +52,8 @@ def add_parser(subparsers):
     p.add_argument("--n-water", type=positive_float, default=PAPER_INDICES[2],
                    help=f"design water index (default {PAPER_INDICES[2]:g}; the start when "
                         f"--free n_water)")
-    p.add_argument("--out", required=True, help="output directory")
-    p.add_argument("--no-progress", action="store_true", help="no progress output")
+    add_out_option(p, COMMAND)
+    add_progress_option(p)
 
 
 def _parse_free(text: str) -> tuple:
@@ -92,7 +93,7 @@ def main(args) -> int:
     from synth.boards import read_boards
     from synth.fileio import OutputDir, atomic_write_json, atomic_write_text, jsonable
 
-    from . import calibrate_report as report_lib
+    from eval.calibrate import report as report_lib
 
     log = (lambda text: None) if args.no_progress else (
         lambda text: print(text, file=sys.stderr, flush=True))

@@ -33,7 +33,7 @@ Parameters (in ``fixed``, ``grid``, ``zip`` or ``random``; each in one section o
 * ``kind`` — ``render`` or ``analytic``;
 * ``D.<name>`` — any ``<default>`` of the scenes (``-D name=value`` of ``eval run``), checked like
   ``eval run`` checks it; ``D.seed`` is not allowed (every cell has its own seed);
-* ``assume.<name>`` — what the measurement believes (``--assume``; :mod:`eval.assumption`);
+* ``assume.<name>`` — what the measurement believes (``--assume``; :mod:`eval.core.assumption`);
 * ``noise_px`` (σ of the Gaussian noise added to the pixels, ≥ 0), ``spp`` (render cells),
   ``self_calibrate`` (``""`` off, ``true`` = ``"n_water"``, or a comma list of ``n_water``,
   ``port_distance``, ``port_normal``), ``gate_mm`` (> 0), ``eccentricity`` (bool, render cells),
@@ -317,7 +317,7 @@ def _read_scene(text: str, base_dir: str, label: str) -> Scene:
 
 
 def _check_name(key: str, scenes: dict, label: str, section: str) -> None:
-    from eval.assumption import ASSUMABLE
+    from eval.core.assumption import ASSUMABLE
 
     if key in PLAIN_PARAMETERS:
         return
@@ -426,7 +426,7 @@ def _check_value(key: str, value, label: str):
             bad(f'"" or a comma list of {", ".join(PARAMETERS)}')
         return ",".join(dict.fromkeys(names))
     if key.startswith("assume."):
-        from eval.assumption import parse_assumptions
+        from eval.core.assumption import parse_assumptions
 
         name = key.split(".", 1)[1]
         text = " ".join(map(str, value)) if isinstance(value, list) else str(value)

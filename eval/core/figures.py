@@ -1,0 +1,92 @@
+"""Figures shared by the commands: a figure on the Agg canvas, saved atomically; the error maps
+and histograms of measured points against the truth (``eval run`` and ``eval score``).
+
+matplotlib with the Agg canvas only (no display). Coordinates: millimetres in the reference frame.
+"""
+
+from __future__ import annotations
+
+import io
+import os
+
+import numpy as np
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
+
+from eval.core.results import method_label
+from synth.fileio import atomic_write_bytes
+
+#: Resolution of the PNG figures (dots per inch).
+DPI = 110
+
+
+def new_figure(width: float, height: float, layout: str | None = "constrained") -> Figure:
+    """A figure of ``width`` × ``height`` inches on the Agg canvas."""
+    fig = Figure(figsize=(width, height), dpi=DPI, layout=layout)
+    FigureCanvasAgg(fig)
+    return fig
+
+
+def save_figure(fig: Figure, path, dpi: int = DPI) -> str:
+    """Write ``fig`` as PNG to ``path`` atomically (temporary file, then rename); returns
+    ``path`` as text."""
+    buffer = io.BytesIO()
+    fig.savefig(buffer, format="png", dpi=dpi)
+    atomic_write_bytes(path, buffer.getvalue())
+    return os.fspath(path)
+
+
+def error_maps_figure(path, per_method) -> None:
+    """Per method: dX, dY, dZ, dP (mm) over the true target positions (X, Y in mm)."""
+    methods = [m for m in per_method if len(per_method[m]["truth"])]
+    fig = new_figure(16, 3.8 * max(len(methods), 1), layout=None)
+    for row, method in enumerate(methods):
+        truth, errors = per_method[method]["truth"], per_method[method]["errors"]
+        columns = [("dX", errors[:, 0]), ("dY", errors[:, 1]), ("dZ", errors[:, 2]),
+                   ("dP", np.linalg.norm(errors, axis=1))]
+        for col, (name, values) in enumerate(columns):
+            ax = fig.add_subplot(len(methods), 4, row * 4 + col + 1)
+            if name == "dP":
+                norm = dict(vmin=0, vmax=float(values.max()) or 1.0, cmap="viridis")
+            else:
+                limit = float(np.max(np.abs(values))) or 1.0
+                norm = dict(vmin=-limit, vmax=limit, cmap="coolwarm")
+            if len(values) >= 10:
+                try:
+                    area = ax.tricontourf(truth[:, 0], truth[:, 1], values, levels=15, **norm)
+                except (ValueError, RuntimeError):
+                    area = ax.scatter(truth[:, 0], truth[:, 1], c=values, s=12, **norm)
+                ax.scatter(truth[:, 0], truth[:, 1], s=1, c="k")
+            else:
+                area = ax.scatter(truth[:, 0], truth[:, 1], c=values, s=20, **norm)
+            fig.colorbar(area, ax=ax, label=f"{name} [mm]")
+            ax.set_aspect("equal")
+            ax.invert_yaxis()
+            ax.set_title(f"{method_label(method)}: {name}", fontsize=9)
+            ax.set_xlabel("X [mm]")
+            ax.set_ylabel("Y [mm] (down)")
+    fig.tight_layout()
+    save_figure(fig, path)
+
+
+def histograms_figure(path, per_method) -> None:
+    """Normalized histograms of dX, dY, dZ per method (mm)."""
+    methods = [m for m in per_method if len(per_method[m]["errors"])]
+    fig = new_figure(15, 3.4 * max(len(methods), 1), layout=None)
+    for row, method in enumerate(methods):
+        errors = per_method[method]["errors"]
+        for col, axis_name in enumerate("XYZ"):
+            ax = fig.add_subplot(len(methods), 3, row * 3 + col + 1)
+            values = errors[:, col]
+            ax.hist(values, bins=40, density=True, color="C0" if method == "optical_path" else "C1")
+            ax.axvline(values.mean(), color="k", linewidth=1,
+                       label=f"mean {values.mean():+.3f} mm, σ {values.std():.3f} mm")
+            ax.set_title(f"{method_label(method)}: d{axis_name}", fontsize=9)
+            ax.set_xlabel(f"d{axis_name} [mm]")
+            ax.set_ylabel("density [1/mm]")
+            ax.legend(fontsize=7)
+    fig.tight_layout()
+    save_figure(fig, path)
+
+
+__all__ = ["DPI", "error_maps_figure", "histograms_figure", "new_figure", "save_figure"]

@@ -1,0 +1,154 @@
+"""``python -m eval run SCENE``: render, detect, match, triangulate and score — end to end.
+
+Writes ``DIR/report.json``, ``DIR/report.md``, the figures (``views.png``, ``error_maps.png``,
+``histograms.png``) and one PLY per method (``points_<method>.ply``, coloured by dP). The output
+directory appears whole or not at all. See the README for the report's fields.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import sys
+import time
+
+from eval.cli import non_negative_float, non_negative_int, positive_float, positive_int
+from eval.core.formatting import format_number
+from eval.run.config import COMMAND, RunConfig, fraction
+from eval.run.report import budget_table, report_markdown, summary_table, write_outputs
+from synth.cli import (add_define_option, add_json_option, add_out_option, add_progress_option,
+                       add_scene_argument, finite_float)
+
+#: argparse type of --max-elongation and --max-area-ratio (a blob's axis or area ratio).
+ABOVE_ONE = finite_float(1.0, strict=True, description="finite (> 1)")
+
+
+def add_parser(subparsers):
+    parser = subparsers.add_parser(
+        "run", help="render a scene, measure it and score the point clouds",
+        description="Render SCENE (or reuse --from DIR), detect and match the targets without "
+                    "ground truth, triangulate with each method and score against the truth.")
+    add_scene_argument(parser)
+    add_out_option(parser, COMMAND, "out/run")
+    parser.add_argument("--from", dest="from_dir", metavar="DIR",
+                        help="reuse the images of a dataset written by python -m synth dataset")
+    parser.add_argument("--spp", type=positive_int, help="samples per pixel (default: the scene's)")
+    parser.add_argument("--variant", help="Mitsuba variant (default: automatic)")
+    parser.add_argument("--methods", default=None,
+                        help="comma-separated triangulation methods (default: all three)")
+    parser.add_argument("--noise-px", type=non_negative_float, default=0.0,
+                        help="Gaussian noise σ (px) added to the detected centres (default 0)")
+    parser.add_argument("--seed", type=non_negative_int, default=None,
+                        help="the run's one seed: the scene's seed (same as -D seed=S; with "
+                             "--from, the dataset's images are used as they are), the added "
+                             "noise and the plane fit (default: the scene's seed)")
+    parser.add_argument("--gate-mm", type=positive_float, default=0.5,
+                        help="largest common-perpendicular length of a matched pair (mm, default 0.5)")
+    parser.add_argument("--depth-range", metavar="NEAR,FAR",
+                        help="working range along the port normal (mm); default: the scene's "
+                             "target_z × (0.8, 1.25), or for targets in depth their nearest "
+                             "and farthest depths × (0.8, 1.25)")
+    add_define_option(parser)
+    parser.add_argument("--assume", action="append", default=[], metavar="name=value",
+                        help="what the measurement believes, when it differs from the rendered "
+                             "truth (repeatable): n_water, n_glass, port_distance, "
+                             "glass_thickness, port_normal, focal, left_focal, right_focal, "
+                             "left_dist, right_dist")
+    parser.add_argument("--calib", metavar="FILE",
+                        help="measure with this calib.yaml (as datasets write it) instead of the "
+                             "scene's rig; --assume applies on top")
+    parser.add_argument("--compare-calib", action="append", default=[], metavar="FILE",
+                        help="error budget: also measure the same detections with this "
+                             "calib.yaml (repeatable); with --calib or --assume the exact "
+                             "calibration is always compared")
+    parser.add_argument("--self-calibrate", metavar="NAMES", default="",
+                        help="estimate these port parameters from the matched targets "
+                             "(comma list of n_water, port_distance, port_normal), measure "
+                             "again with them and report before and after")
+    parser.add_argument("--eccentricity", action="store_true",
+                        help="also measure with the detected centres corrected for the disk "
+                             "targets' eccentricity (reported beside the uncorrected numbers)")
+    parser.add_argument("--threshold-fraction", type=fraction, default=None, metavar="F",
+                        help="detect with a fixed threshold F of the way from the background "
+                             "(median) to the targets' level (99.99th percentile) instead of "
+                             "median + 5 noise sigmas; for speckled renders of scattering water")
+    parser.add_argument("--max-elongation", type=ABOVE_ONE, default=None, metavar="E",
+                        help="detected blobs more elongated than E (major/minor axis) are taken "
+                             "for merged targets (default 1.6); raise it (e.g. 3) for targets "
+                             "seen obliquely: tilted planes, cylinders, spheres")
+    parser.add_argument("--median-filter", type=int, choices=(3, 5), default=0, metavar="K",
+                        help="median-filter each view (K×K, 3 or 5) before detection: removes "
+                             "the fireflies of lights seen through scattering water (lit "
+                             "targets) that pull the centroids; default: no filter")
+    parser.add_argument("--max-area-ratio", type=ABOVE_ONE, default=None, metavar="A",
+                        help="detected blobs larger than A times the median blob are taken for "
+                             "merged targets (default 2.5); raise it (e.g. 6) when the targets "
+                             "span a wide range of depths (near ones image larger)")
+    parser.add_argument("--sensor", metavar="PRESET[,name=value…]",
+                        help="pass the rendered images through a camera sensor (exposure, shot "
+                             "and read noise, dark level, gain, bit depth), seeded: preset "
+                             "imx174; overrides full_well_e, read_noise_e, bit_depth, "
+                             "dark_level_dn, exposure")
+    add_json_option(parser)
+    add_progress_option(parser)
+
+
+def main(args) -> int:
+    from synth.fileio import OutputDir, atomic_write_json, atomic_write_text, jsonable
+    from synth.provenance import package_versions
+
+    from eval.run import dense
+    from eval.run.pipeline import measure_scene
+
+    quiet = args.no_progress
+    log = (lambda text: None) if quiet else (lambda text: print(text, file=sys.stderr, flush=True))
+    config = RunConfig.from_args(args)
+    if dense.is_surface_scene(config.scene):
+        return dense.main(config, args.out, args.json, log)
+    config.target_methods()  # refuses an unknown --methods before any expensive work
+    output = OutputDir(args.out, COMMAND).claim()  # before any expensive work
+    start = time.perf_counter()
+    result = measure_scene(config, log)
+    report = result.report
+    log("write the report, figures and point clouds …")
+    t = time.perf_counter()
+    with output.staged() as tmp:
+        report["versions"] = package_versions()
+        report["inputs"] = result.inputs.extra
+        write_outputs(tmp, result)
+        report["timings_s"]["report"] = time.perf_counter() - t
+        report["timings_s"]["total"] = time.perf_counter() - start
+        report = jsonable(report)
+        atomic_write_json(os.path.join(tmp, "report.json"), report)
+        atomic_write_text(os.path.join(tmp, "report.md"), report_markdown(report))
+    out = output.path
+    summary_stream = sys.stderr if args.json else sys.stdout
+    m, c = report["matching"], report["crosscheck"]
+    print(f"{report['scene']}: {m['visible_in_both']} targets visible in both views, "
+          f"{m['pairs']} matched ({m['correct']} correct, {m['wrong']} wrong), cross-check RMS "
+          f"{format_number(c['rms_px'], 4)} px, max {format_number(c['max_px'], 4)} px (outline centroid: RMS "
+          f"{format_number(c['rms_px_outline'], 4)} px, max {format_number(c['max_px_outline'], 4)} px); "
+          f"{report['variant']} {report['spp']} spp"
+          f"{'; sensor ' + report['sensor']['model']['name'] if report.get('sensor') else ''}; "
+          f"total {report['timings_s']['total']:.1f} s",
+          file=summary_stream)
+    print(summary_table(report), file=summary_stream)
+    print(f"wrote {out}", file=summary_stream)
+    if report.get("budget"):
+        print(budget_table(report), file=summary_stream)
+    calibration = report.get("self_calibration")
+    if calibration:
+        if calibration.get("methods"):
+            for name, value in calibration["estimates"].items():
+                sigma = calibration["sigmas"][name]
+                print(f"self-calibrated {name}: {value} ± {sigma} (truth {calibration['truth'][name]}, "
+                      f"assumed {calibration['assumed'][name]}); reprojection RMS "
+                      f"{calibration['rms_px_before']:.4f} -> {calibration['rms_px_after']:.4f} px",
+                      file=summary_stream)
+            print(summary_table({"methods": calibration["methods"]}), file=summary_stream)
+        else:
+            print(f"self-calibration: no trusted estimate ({calibration['reason'] or calibration['message']})",
+                  file=summary_stream)
+    if args.json:
+        print(json.dumps(report, indent=2))
+    return 0

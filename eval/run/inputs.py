@@ -1,0 +1,199 @@
+"""What a run starts from: the scene (with ``-D`` and the seed), the rig the measurement
+believes, the rigs of the error budget, and the two images — rendered now or read from a
+``--from`` dataset (:class:`RunInputs`).
+
+Frames and units: the reference frame is the left camera's (OpenCV axes), millimetres, pixels
+in the OpenCV convention.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from eval.cli import CLIError
+from eval.run.config import RunConfig
+from eval.core.analytic import visible_targets
+
+
+@dataclass
+class RunInputs:
+    """What the pipeline starts from: a rig, two linear images, and (for scoring) the truth.
+
+    ``rig`` is what the measurement believes; ``targets`` ``(N, 3)`` mm the true centres;
+    ``left``/``right`` float32 linear images ``(H, W)``; ``params`` the scene's resolved
+    parameters; ``seed`` the run's one seed (images, added noise, RANSAC); ``budget_rigs``
+    ``{label: rig}``: also measure with these rigs (the error budget)."""
+
+    scene: str
+    rig: object
+    has_port: bool
+    targets: np.ndarray
+    target_ids: np.ndarray
+    target_radius: float
+    left: np.ndarray
+    right: np.ndarray
+    params: dict
+    variant: str
+    spp: int
+    render_seconds: float
+    seed: int = 0
+    extra: dict = field(default_factory=dict)
+    target_normals: np.ndarray | None = None
+    truth_rig: object = None
+    budget_rigs: dict = field(default_factory=dict)
+
+    @property
+    def true_rig(self):
+        """The rig the images were rendered with (``rig`` is what the measurement believes)."""
+        return self.rig if self.truth_rig is None else self.truth_rig
+
+
+def same_value(a: str, b: str) -> bool:
+    """Whether two parameter values (text) mean the same: equal numbers, or equal text."""
+    try:
+        x = np.array([float(v) for v in str(a).replace(",", " ").split()])
+        y = np.array([float(v) for v in str(b).replace(",", " ").split()])
+        return x.shape == y.shape and bool(np.array_equal(x, y))
+    except ValueError:
+        return str(a).strip() == str(b).strip()
+
+
+def dataset_params(from_dir: str, defines: dict) -> dict:
+    """The parameters the dataset ``from_dir`` was rendered with; a conflicting ``-D`` is an
+    error naming both values."""
+    from synth.dataset import read_manifest
+
+    params = {str(k): str(v) for k, v in read_manifest(from_dir)["scene"]["params"].items()}
+    for name, value in defines.items():
+        if name in params and not same_value(value, params[name]):
+            raise CLIError(f"-D {name}={value} conflicts with --from {from_dir}, rendered "
+                           f"with {name}={params[name]}")
+    return params
+
+
+def measurement_rig(config: RunConfig, spec):
+    """The rig the measurement believes: the scene's (the truth), or ``--calib``, with
+    ``--assume`` applied."""
+    from synth.dataset import read_calib
+
+    from eval.core.assumption import assumed_rig
+
+    base = None
+    if config.calib:
+        calib = read_calib(config.calib)
+        if tuple(calib["size"]) != tuple(spec.size):
+            raise CLIError(f"--calib {config.calib}: image size {calib['size'][0]}x"
+                           f"{calib['size'][1]} px, but the scene renders {spec.size[0]}x"
+                           f"{spec.size[1]} px")
+        base = calib["rig"]
+    return assumed_rig(spec.rig, spec.has_port, config.assumptions, base)
+
+
+def load_run_scene(config: RunConfig):
+    """The scene of a run with ``-D`` and the seed applied. With ``--from`` the dataset's own
+    parameters are used (a conflicting ``-D`` is an error) and the seed seeds only the run's
+    noise, but a ``-D seed`` contradicting it is still refused."""
+    from synth.scene import apply_seed, load_scene
+
+    defines = dict(config.defines)
+    if config.from_dir:
+        apply_seed(dict(defines), config.seed)
+        return load_scene(config.scene, dataset_params(config.from_dir, defines))
+    return load_scene(config.scene, apply_seed(defines, config.seed))
+
+
+def read_run_dataset(config: RunConfig, spec):
+    """The ``--from`` dataset, refused when it was rendered from another scene than ``spec``."""
+    from synth.dataset import read_dataset
+
+    data = read_dataset(config.from_dir)
+    if data.manifest["scene"].get("sha256") != spec.sha256:
+        raise CLIError(f"--from {config.from_dir}: the dataset was rendered from another scene "
+                       f"than {config.scene}")
+    return data
+
+
+def budget_rigs(config: RunConfig, true_rig, measured_rig) -> dict:
+    """``{label: rig}`` of the error budget: the exact calibration (when the measurement's rig
+    differs from the truth) and every ``--compare-calib`` file."""
+    from synth.dataset import read_calib
+
+    from eval.core.assumption import rig_difference
+
+    rigs = {}
+    if config.compare_calib or rig_difference(true_rig, measured_rig):
+        rigs["exact calibration"] = true_rig
+    for path in config.compare_calib:
+        calib = read_calib(path)
+        if tuple(calib["size"]) != tuple(true_rig.left.size):
+            raise CLIError(f"--compare-calib {path}: image size {calib['size'][0]}x"
+                           f"{calib['size'][1]} px, but the scene renders "
+                           f"{true_rig.left.size[0]}x{true_rig.left.size[1]} px")
+        rigs[path] = calib["rig"]
+    return rigs
+
+
+def load_inputs(config: RunConfig, log) -> RunInputs:
+    """The scene (rig and truth) and its two images, rendered now or read from ``--from``."""
+    spec = load_run_scene(config)
+    seed = spec.seed if config.seed is None else config.seed
+    measured_rig = measurement_rig(config, spec)
+    in_left = visible_targets(spec.rig.left, spec.rig.port, spec.targets, spec.target_radius)[1]
+    in_right = visible_targets(spec.rig.right, spec.rig.port, spec.targets, spec.target_radius)[1]
+    if not (in_left & in_right).any():
+        raise CLIError(f"{config.scene}: no target is visible in both views")
+    budget = budget_rigs(config, spec.rig, measured_rig)
+    scene_part = dict(scene=config.scene, rig=measured_rig, has_port=spec.has_port,
+                      targets=spec.targets, target_ids=spec.target_ids,
+                      target_radius=spec.target_radius, params=spec.params, seed=seed,
+                      target_normals=spec.target_normals, truth_rig=spec.rig,
+                      budget_rigs=budget)
+    if config.from_dir:
+        data = read_run_dataset(config, spec)
+        log(f"reusing the images of {config.from_dir}")
+        return RunInputs(left=data.left, right=data.right,
+                         variant=data.manifest.get("variant", "?"),
+                         spp=int(data.manifest.get("spp", 0)), render_seconds=0.0,
+                         extra={"from": os.path.abspath(config.from_dir),
+                                "from_seed": data.manifest.get("seed")}, **scene_part)
+    from synth.render import render_stereo
+
+    log(f"render both views ({spec.size[0]}x{spec.size[1]} px, {config.spp or spec.spp} spp, in "
+        f"passes) …")
+    start = time.perf_counter()
+    left, right, info = render_stereo(spec, spp=config.spp, variant=config.variant,
+                                      progress=config.progress)
+    timings = {"render_left": info["seconds"]["left"], "render_right": info["seconds"]["right"],
+               "render_samples_per_second": info["samples_per_second"],
+               **{f"render_samples_per_second_{view}": speed
+                  for view, speed in info["samples_per_second_per_view"].items()}}
+    render = {k: v for k, v in info.items()
+              if k not in ("seconds", "samples_per_second", "samples_per_second_per_view")}
+    log("rendered: " + ", ".join(f"{view} {info['seconds'][view]:.1f} s at {speed / 1e6:.2f} M "
+                                 f"samples/s ({'+'.join(map(str, info['passes'][view]))} spp)"
+                                 for view, speed in info["samples_per_second_per_view"].items()))
+    return RunInputs(left=left, right=right, variant=info["variant"], spp=info["spp"],
+                     render_seconds=time.perf_counter() - start,
+                     extra={"render": render, "timings": timings}, **scene_part)
+
+
+def expose_on_sensor(inputs: RunInputs, sensor, log):
+    """Pass both views of ``inputs`` through the ``sensor`` model (seeded by the run's seed), in
+    place; returns the sensor's report entry (None without a sensor)."""
+    if sensor is None:
+        return None
+    from synth.sensor_model import sensor_views, to_radiance
+
+    log(f"expose both views on the {sensor.name} sensor …")
+    left, right, sensor_info = sensor_views(inputs.left, inputs.right, sensor, inputs.seed)
+    inputs.left, inputs.right = (to_radiance(codes, sensor, sensor_info["electrons_per_unit"])
+                                 for codes in (left, right))
+    return sensor_info
+
+
+__all__ = ["RunInputs", "budget_rigs", "dataset_params", "expose_on_sensor", "load_inputs",
+           "load_run_scene", "measurement_rig", "read_run_dataset", "same_value"]

@@ -1,0 +1,136 @@
+"""The written output of a target run: the summary and error-budget tables, ``report.md``, the
+PLY files coloured by dP and the figures (:mod:`eval.run.figures`)."""
+
+from __future__ import annotations
+
+import os
+
+from eval.core.cloud_metrics import write_error_ply
+from eval.core.formatting import format_number
+
+
+
+def budget_table(report: dict) -> str:
+    """The error budget as fixed-width text: one row per calibration, the first method."""
+    budget = report.get("budget") or {}
+    method = next(iter(report["methods"]))
+    rows = [(label, b) for label, b in budget.items()]
+    rows.append((f"this run ({report['rigs'].get('source', 'as measured')})",
+                 {"matching": report["matching"], "methods": report["methods"]}))
+    lines = [f"error budget ({method}): {'calibration':<44}{'pairs':>7}{'wrong':>7}"
+             f"{'RMS dP':>10}{'mean dZ':>10}{'max dP':>10}"]
+    for label, b in rows:
+        st = b["methods"].get(method, {})
+        lines.append(f"{'':<{len('error budget (' + method + '): ')}}{label[:43]:<44}"
+                     f"{b['matching']['pairs']:>7}{b['matching']['wrong']:>7}"
+                     f"{format_number(st.get('rms_dp_mm')):>10}{format_number(st.get('mean_dz_mm')):>10}"
+                     f"{format_number(st.get('max_dp_mm')):>10}")
+    return "\n".join(lines)
+
+
+SUMMARY_COLUMNS = (("n", "n", 0), ("rms_dp_mm", "RMS dP", 3), ("max_dp_mm", "max dP", 3),
+                   ("mean_dx_mm", "mean dX", 3), ("mean_dy_mm", "mean dY", 3),
+                   ("mean_dz_mm", "mean dZ", 3), ("chamfer_mm", "Chamfer", 3),
+                   ("fscore_1mm", "F@1mm", 3), ("fscore_5mm", "F@5mm", 3),
+                   ("rms_dp_aligned_mm", "RMS dP aligned", 3), ("flatness_mm", "flatness", 3))
+
+
+def summary_table(report: dict) -> str:
+    """The per-method table (mm) as fixed-width text."""
+    header = f"{'method':<17}" + "".join(f"{title:>15}" for _, title, _ in SUMMARY_COLUMNS)
+    lines = [header]
+    for method, stats in _method_rows(report):
+        lines.append(f"{method:<17}" + "".join(f"{format_number(stats.get(key), digits):>15}"
+                                                for key, _, digits in SUMMARY_COLUMNS))
+    return "\n".join(lines)
+
+
+def _method_rows(report: dict):
+    """``(label, stats)`` per method, then per method corrected for eccentricity (``+ecc``)."""
+    rows = list(report["methods"].items())
+    if report.get("eccentricity"):
+        rows += [(f"{m}+ecc", st) for m, st in report["eccentricity"]["methods"].items()]
+    return rows
+
+
+def _sensor_lines(sensor) -> list:
+    """report.md's paragraph on the ``--sensor`` (none without one)."""
+    if not sensor:
+        return []
+    m = sensor["model"]
+    return [f"Sensor `{m['name']}`: full well {m['full_well_e']:g} e⁻, read noise "
+            f"{m['read_noise_e']:g} e⁻, {m['bit_depth']} bit, dark level {m['dark_level_dn']:g} DN, "
+            f"gain {m['gain_e_per_dn']:.4g} e⁻/DN, brightest pixel exposed to "
+            f"{m['exposure']:g} of the full well; saturated pixels left "
+            f"{sensor['left']['saturated_pixels']}, right {sensor['right']['saturated_pixels']}.",
+            ""]
+
+
+def report_markdown(report: dict) -> str:
+    m, c, t = report["matching"], report["crosscheck"], report["timings_s"]
+    lines = [f"# Run report: `{report['scene']}`", "",
+             f"{report['targets']} targets; Mitsuba variant `{report['variant']}`, {report['spp']} spp; "
+             f"added pixel noise σ = {report['noise_px']} px.", "",
+             *_sensor_lines(report.get("sensor")),
+             "## Detection and matching", "",
+             "| | left | right |", "|---|---|---|",
+             f"| targets wholly in the image | {report['visibility']['in_both'] + report['visibility']['left_only']} "
+             f"| {report['visibility']['in_both'] + report['visibility']['right_only']} |",
+             f"| detections accepted | {report['detection']['left']['found']} | {report['detection']['right']['found']} |",
+             f"| blobs rejected | {report['detection']['left']['rejected_by_reason']} | {report['detection']['right']['rejected_by_reason']} |",
+             f"| cross-check RMS / max (px) | {format_number(c['left']['rms_px'], 4)} / {format_number(c['left']['max_px'], 4)} "
+             f"| {format_number(c['right']['rms_px'], 4)} / {format_number(c['right']['max_px'], 4)} |", "",
+             f"Targets visible in both views: {m['visible_in_both']}; matched pairs: {m['pairs']} "
+             f"({m['correct']} correct, {m['wrong']} wrong, {m['ambiguous_dropped']} ambiguous dropped); "
+             f"visible-in-both targets matched: {m['visible_in_both_matched']}. Gate {m['gate_mm']} mm, "
+             f"depth window {m['depth_window_mm']} mm. Cross-check of all detections against the "
+             f"Fermat simulator: RMS {format_number(c['rms_px'], 4)} px, max {format_number(c['max_px'], 4)} px "
+             f"(against the image of each target's centre); RMS {format_number(c['rms_px_outline'], 4)} px, "
+             f"max {format_number(c['max_px_outline'], 4)} px against the area centroid of the image of its "
+             f"outline (the eccentricity removed).", "",
+             "## Truth and assumption", "",
+             ("The measurement used the rendered rig (no assumption differs from the truth)."
+              if not report.get("rigs", {}).get("difference") else
+              "The measurement believed a rig that differs from the rendered truth (assumed − "
+              "true): " + "; ".join(f"`{k}` {v}" for k, v in report["rigs"]["difference"].items())
+              + ". Matching, triangulation and the eccentricity correction use the assumed rig; "
+                "the cross-check uses the true one."), "",
+             "## Accuracy per method (mm)", "",
+             "| method | " + " | ".join(title for _, title, _ in SUMMARY_COLUMNS) + " |",
+             "|---" * (len(SUMMARY_COLUMNS) + 1) + "|"]
+    for method, stats in _method_rows(report):
+        lines.append(f"| {method} | " + " | ".join(format_number(stats.get(k), d) for k, _, d in SUMMARY_COLUMNS) + " |")
+    lines += ["", "dP = |measured − true| over correctly matched targets; Chamfer = mean "
+              "measured→truth + mean truth→measured nearest-neighbour distance (all matched points "
+              "against the targets visible in both views); F@τ = harmonic mean of precision and "
+              "recall at τ; aligned = after the best rigid transform with known correspondences; "
+              "flatness = RMS distance to the RANSAC plane.", "",
+              *(["## Error budget", "", "The same detections measured with each calibration "
+                 "(matching, triangulation and scoring repeated):", "", "```",
+                 budget_table(report), "```", ""] if report.get("budget") else []),
+              "## Files", "",
+              "- `views.png`, `error_maps.png`, `histograms.png`",
+              *[f"- `{p['file']}`: colour = dP on `{p['colormap']}` from {p['vmin_mm']} mm to "
+                f"{format_number(p['vmax_mm'])} mm (clipped)" for p in report.get("ply", {}).values()], "",
+              "## Timings (s)", "",
+              " · ".join(f"{k} {v:.2f}" for k, v in t.items())]
+    return "\n".join(lines) + "\n"
+
+
+def write_outputs(tmp: str, result) -> None:
+    """The PLY files (their entries go into ``result.report["ply"]``) and figures of a run
+    (:class:`eval.run.pipeline.RunResult`), into directory ``tmp``."""
+    from eval.core.figures import error_maps_figure, histograms_figure
+    from eval.run.figures import views_figure
+
+    result.report["ply"] = {method: write_error_ply(tmp, f"points_{method}.ply",
+                                                    data["points"], data["errors"])
+                            for method, data in result.per_method.items()}
+    views_figure(os.path.join(tmp, "views.png"), result.inputs.left, result.inputs.right, result)
+    error_maps_figure(os.path.join(tmp, "error_maps.png"), result.per_method)
+    histograms_figure(os.path.join(tmp, "histograms.png"), result.per_method)
+
+
+__all__ = ["SUMMARY_COLUMNS", "budget_table", "report_markdown", "summary_table", "write_outputs"]
+
+
