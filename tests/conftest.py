@@ -1,6 +1,14 @@
-"""Shared fixtures and hypothesis strategies for the geometry tests."""
+"""Shared fixtures and hypothesis strategies for the geometry tests, and the ``slow`` marker.
+
+A test that renders with Mitsuba (``mi.render``, directly or through a fixture it uses) must be
+marked ``@pytest.mark.slow``; ``make test-fast`` (``pytest -m "not slow"``) runs the others. The
+marker is checked, not trusted: :func:`pytest_runtest_setup` records whether the test about to
+run is marked, and a render in an unmarked test fails it (:func:`_guard_renders`).
+"""
 
 from __future__ import annotations
+
+import os
 
 import numpy as np
 import pytest
@@ -11,6 +19,49 @@ from synth.rig import paper_rig
 settings.register_profile("ci", deadline=None, max_examples=60,
                           suppress_health_check=[HealthCheck.too_slow])
 settings.load_profile("ci")
+
+
+#: Whether the test now being set up, run or torn down is marked ``slow``.
+_CURRENT = {"slow": True, "name": ""}
+
+
+class UnmarkedRender(AssertionError):
+    """A test (or a fixture it uses) rendered with Mitsuba without the ``slow`` marker."""
+
+
+def _guard_renders() -> None:
+    """Wrap ``mitsuba.render`` (variant-independent) so that a render outside a ``slow`` test
+    fails. Imports Mitsuba once per session (a second or two); without Mitsuba nothing renders
+    and nothing needs guarding."""
+    try:
+        from synth.mitsuba_setup import import_mitsuba
+
+        mi, _ = import_mitsuba()
+    except Exception:  # no Mitsuba here: the render tests say so themselves
+        return
+    render = mi.render
+    if getattr(render, "_slow_guard", False):
+        return
+
+    def guarded(*args, **kwargs):
+        if not _CURRENT["slow"]:
+            raise UnmarkedRender(f"{_CURRENT['name']} renders with Mitsuba but is not marked "
+                                 f"@pytest.mark.slow (directly or through a fixture it uses)")
+        return render(*args, **kwargs)
+
+    guarded._slow_guard = True
+    mi.render = guarded
+
+
+def pytest_configure(config):
+    config.addinivalue_line("markers", "slow: renders with Mitsuba (left out by make test-fast)")
+    if not os.environ.get("REFSTEREO_NO_RENDER_GUARD"):
+        _guard_renders()
+
+
+def pytest_runtest_setup(item):
+    _CURRENT["slow"] = item.get_closest_marker("slow") is not None
+    _CURRENT["name"] = item.nodeid
 
 
 SMALL_SCENE_SIZE = (320, 268)
