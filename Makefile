@@ -3,13 +3,21 @@ PY := .venv/bin/python
 SCENE ?= scenes/paper_plane.xml
 OUT ?= out
 
-.PHONY: setup test run paper bench clean
+.PHONY: setup lint test test-fast run paper bench clean
 
 setup:
 	@bash tools/setup.sh
 
-test: setup
+lint: setup
+	$(PY) -m ruff check .
+
+# the whole suite, the renders included (about 7 minutes on 2 cores)
+test: lint
 	$(PY) -m pytest
+
+# everything that does not render with Mitsuba (the `slow` marker): about a minute
+test-fast: lint
+	$(PY) -m pytest -m "not slow"
 
 run: setup
 	$(PY) -m eval run $(SCENE) --out $(OUT)/run

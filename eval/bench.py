@@ -204,7 +204,8 @@ def format_table(results: dict) -> str:
     for name, row in results["timings"].items():
         points = row.get("points", results["points"])
         lines.append(f"{name:<34} {points:>9d} {row['seconds']:>9.3f} {row['points_per_s']:>12,.0f}")
-    lines.append(f"vectorized Fermat speed-up over per-point scipy: {results['fermat_speedup_over_scipy']:,.0f}x "
+    lines.append(f"vectorized Fermat speed-up over per-point scipy: "
+                 f"{results['fermat_speedup_over_scipy']:,.0f}x "
                  f"(max pixel difference {results['scipy_vs_vectorized_max_px']:.1e} px)")
     if results["per_size"]:
         lines.append("")

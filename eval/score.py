@@ -32,7 +32,7 @@ import numpy as np
 
 from eval.cli import CLIError, positive_float
 from synth.cli import add_json_option, add_out_option
-from eval.core.formatting import format_number
+from eval.core.formatting import format_number as fmt
 
 COMMAND = "eval score"
 PIXEL_COLUMNS = ("u_left", "v_left", "u_right", "v_right")
@@ -215,9 +215,9 @@ def main(args) -> int:
     summary = (f"{data.path}: {a['associated']} of {a['points']} points within "
                f"{a['gate_mm']:g} mm of a target ({a['unassociated']} not); "
                f"{a['visible_in_both_scored']} of {a['visible_in_both']} targets visible in both "
-               f"views scored; RMS dP {format_number(st['rms_dp_mm'])} mm, max dP "
-               f"{format_number(st['max_dp_mm'])} mm, mean dZ {format_number(st['mean_dz_mm'])} mm, Chamfer "
-               f"{format_number(st['chamfer_mm'])} mm, F@1mm {format_number(st['fscore_1mm'])}")
+               f"views scored; RMS dP {fmt(st['rms_dp_mm'])} mm, max dP "
+               f"{fmt(st['max_dp_mm'])} mm, mean dZ {fmt(st['mean_dz_mm'])} mm, Chamfer "
+               f"{fmt(st['chamfer_mm'])} mm, F@1mm {fmt(st['fscore_1mm'])}")
     if args.json:
         import json
 
@@ -243,5 +243,5 @@ def markdown(report: dict) -> str:
              f"associated points (mm); Chamfer and F-scores of all points against the targets "
              f"visible in both views.", "",
              "| " + " | ".join(keys) + " |", "|" + "---|" * len(keys),
-             "| " + " | ".join(str(st[k]) if k == "n" else format_number(st[k]) for k in keys) + " |"]
+             "| " + " | ".join(str(st[k]) if k == "n" else fmt(st[k]) for k in keys) + " |"]
     return "\n".join(lines) + "\n"

@@ -138,7 +138,7 @@ class Board:
         return out
 
     @classmethod
-    def from_dict(cls, data: dict) -> "Board":
+    def from_dict(cls, data: dict) -> Board:
         try:
             return cls(kind=data["kind"], squares=tuple(data["squares"]),
                        square_mm=float(data["square_mm"]),
@@ -231,7 +231,8 @@ def refine_saddle_points(image: np.ndarray, uv: np.ndarray, spacing=None, blur_s
     RMS where ``findChessboardCornersSB`` gave 0.08–0.42 px and ``cornerSubPix`` 0.05–0.08 px
     (docs/architecture.md). Through a flat port the board's straight edges image as curves;
     the rendered corners then sit 0.02–0.04 px outwards of the forward model (docs/architecture.md:
-    about half of it is the renderer's ray-spawn offset at the port). A corner converged when its last step is below
+    about half of it is the renderer's ray-spawn offset at the port). A corner converged when its
+    last step is below
     :data:`SADDLE_TOLERANCE_PX` and it stayed within its window; others keep their input
     position and are flagged (an outlier of the detector, or not a corner). ``spacing`` and
     ``blur_sigma`` default to :func:`saddle_scales` of ``uv``."""

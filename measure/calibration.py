@@ -288,7 +288,7 @@ def housing_problem(rig: StereoRig, board: Board, detections: Detections, names)
             return _rows_jacobian(np.zeros((m, width)), np.zeros(m, int), n_global, x.size)
         turn = _left_jacobian(x[n_global:].reshape(P, 6)[:, :3])
         blocks, poses = [], []
-        for view, pose_idx, ids, uv in obs:
+        for view, pose_idx, ids, _ in obs:
             rotated = np.einsum("nij,nj->ni", Rs[pose_idx], corners[ids])
             _, d_points, jac = project(cameras[view], port, rotated + ts[pose_idx],
                                        parameters=True)
@@ -376,7 +376,7 @@ def calibrate_housing(rig: StereoRig, board: Board, detections: Detections,
     poses = [(Rs[k], ts[k]) for k in range(P)]
     per, res = {}, {}
     offset = 0
-    for view, pose_idx, ids, uv in obs:
+    for view, pose_idx, ids, _ in obs:
         rv = r[offset:offset + 2 * pose_idx.size].reshape(-1, 2)
         offset += 2 * pose_idx.size
         res[view] = np.column_stack([usable_index(usable, pose_idx), ids, rv])

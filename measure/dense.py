@@ -265,7 +265,8 @@ def match_dense(rig: StereoRig, left, right, depth_range, *, model: str = "refra
     outside which nothing is matched. ``progress``: optional callable ``(done, total)`` per
     sweep plane. ``max_planes`` (default :data:`MAX_PLANES`): a depth range that needs more sweep
     planes is refused
-    (ValueError naming the count) before any image work. Rejected: score below ``min_score``, best plane at an end of the range, a
+    (ValueError naming the count) before any image work. Rejected: score below ``min_score``, best
+    plane at an end of the range, a
     window leaving either image, a right pixel leaving the right image, a refinement that does
     not converge.
     """

@@ -96,7 +96,7 @@ class FlatPort(ValueEquality):
         layers = sum(t * n[0] / n[k + 1] for k, t in enumerate(self.thicknesses))
         return float(self.distance + layers + (depth_mm - self.offsets[-1]) * n[0] / n[-1])
 
-    def replace(self, **changes) -> "FlatPort":
+    def replace(self, **changes) -> FlatPort:
         """A copy with some parameters changed (e.g. ``indices=...``)."""
         values = dict(normal=self.normal, distance=self.distance,
                       thicknesses=self.thicknesses, indices=self.indices)

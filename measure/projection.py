@@ -312,7 +312,7 @@ def _solve_fermat(problem: _PlaneProblem, start=None, max_iterations: int = 60):
     work, xs = problem, x
     positive = converged = curvature = None
     iterations = 0
-    for iterations in range(1, max_iterations + 1):
+    for iterations in range(1, max_iterations + 1):  # noqa: B007 (the count is read after the loop)
         gradient, diag, off, segment_curvature = _fermat_gradient_hessian(xs, work)
         step, definite = _solve_tridiagonal_spd(diag, off, gradient)
         largest = np.abs(step[0])
@@ -626,7 +626,6 @@ def _point_jacobian(camera, frame, problem, x, curvature, ratio, inverse, l1, l2
         rho = [[_sum_of_products([(f, mr[0]), (s, mr[1])]) for f, s in zip(phi, psi)]
                for mr in m]
         scales = [inverse_z, inverse_z]
-    column = np.empty(lateral.shape)
     for r in range(2):
         rho1, rho2 = rho[r]
         # d I1 / d P = α a aᵀ + (x1/ℓ) b bᵀ + β_w a Nᵀ with b = N × a, and a aᵀ + b bᵀ = e1 e1ᵀ +

@@ -58,7 +58,7 @@ class StereoRig(ValueEquality):
     def cameras(self) -> tuple[Camera, Camera]:
         return self.left, self.right
 
-    def with_port(self, port: FlatPort) -> "StereoRig":
+    def with_port(self, port: FlatPort) -> StereoRig:
         """The same cameras behind another port (e.g. a deviated water index)."""
         return StereoRig(self.left, self.right, port)
 

@@ -64,7 +64,7 @@ def split_markdown(text: str) -> tuple[str, list[str], list[str]]:
     return prose, spans, blocks
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def parsed(page: Path) -> tuple[str, list[str], list[str]]:
     return split_markdown(page.read_text(encoding="utf-8"))
 
@@ -90,7 +90,7 @@ def repo_paths(span: str) -> list[str]:
     return found
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def subcommands(cli: str) -> frozenset[str]:
     """The subcommand names of ``python -m eval`` or ``python -m synth``, from their parsers."""
     candidates = {"eval": ["eval.cli"], "synth": ["synth.commands", "synth.__main__"]}[cli]
@@ -114,7 +114,7 @@ def subcommands(cli: str) -> frozenset[str]:
     return frozenset(names)
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def make_targets() -> frozenset[str]:
     targets = set()
     for line in (ROOT / "Makefile").read_text(encoding="utf-8").splitlines():

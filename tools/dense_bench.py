@@ -29,11 +29,11 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from measure import triangulate  # noqa: E402
-from measure.dense import match_dense  # noqa: E402
-from measure.projection import project  # noqa: E402
-from synth.dense_pairs import PlaneSurface, SpeckleTexture, render_pair, surface_points  # noqa: E402
-from synth.rig import PAPER_FOCAL_PX, PAPER_IMAGE_SIZE, paper_rig  # noqa: E402
+from measure import triangulate
+from measure.dense import match_dense
+from measure.projection import project
+from synth.dense_pairs import PlaneSurface, SpeckleTexture, render_pair, surface_points
+from synth.rig import PAPER_FOCAL_PX, PAPER_IMAGE_SIZE, paper_rig
 
 #: Speckle diameter in pixels of the left image at 1 m (the texture scales with the image).
 SPECKLE_PX = 2.5

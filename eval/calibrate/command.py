@@ -86,7 +86,6 @@ def _in_air(path, log):
 
 
 def main(args) -> int:
-    import numpy as np
 
     from measure import FlatPort, StereoRig
     from measure.calibration import calibrate_housing, calibrate_in_air, detect_boards

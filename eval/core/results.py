@@ -15,7 +15,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from synth.fileio import jsonable  # noqa: F401  (re-exported: one JSON conversion)
+from synth.fileio import jsonable
 
 #: How people read the method names, in tables and figures.
 METHOD_LABELS = {"optical_path": "optical_path (Li et al.)", "su": "su (Su et al.)",
@@ -44,7 +44,7 @@ class ComponentStats:
     max_abs_mm: float
 
     @classmethod
-    def of(cls, values) -> "ComponentStats":
+    def of(cls, values) -> ComponentStats:
         values = np.asarray(values, dtype=np.float64).ravel()
         finite = values[np.isfinite(values)]
         n = int(finite.size)
@@ -71,7 +71,7 @@ class ErrorStats:
     dp: ComponentStats
 
     @classmethod
-    def of(cls, errors) -> "ErrorStats":
+    def of(cls, errors) -> ErrorStats:
         flat = np.asarray(errors, dtype=np.float64).reshape(-1, 3)
         valid = np.all(np.isfinite(flat), axis=1)
         parts = [ComponentStats.of(flat[valid, k]) for k in range(3)]

@@ -9,7 +9,7 @@ Units: mm. "SEM" is the standard error of the mean caused by the pixel noise (``
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
 

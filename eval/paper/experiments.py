@@ -29,15 +29,13 @@ from __future__ import annotations
 
 import sys
 import time
-from pathlib import Path
 
 import numpy as np
 from scipy.stats import spearmanr
 
-from measure import Reason, StereoRig, triangulate
+from measure import StereoRig, triangulate
 from synth.layouts import paper_plane
 from synth.noise import deviate_port, pixel_noise
-from measure.projection import project
 from synth.rig import paper_rig
 
 from eval.paper.settings import (COMPONENTS, DISTANCES_MM, GAP_THRESHOLD_MM,  # noqa: F401

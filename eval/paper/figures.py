@@ -7,11 +7,9 @@ Gaussian fitted by ``scipy.stats.norm.fit``. Every PNG is written atomically.
 
 from __future__ import annotations
 
-import io
 from pathlib import Path
 
 import numpy as np
-from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 from matplotlib.colors import TwoSlopeNorm
 from matplotlib.ticker import MaxNLocator
@@ -20,7 +18,6 @@ from scipy.stats import norm
 
 from eval.core.figures import new_figure, save_figure
 from eval.core.results import method_label
-from synth.fileio import atomic_write_bytes
 
 AXIS_NAMES = {"dX": "dX", "dY": "dY", "dZ": "dZ", "dP": "dP"}
 FIGURE_FILES = {

@@ -142,7 +142,8 @@ def render_markdown(report: dict) -> str:
     for method in NOISE_METHODS:
         st = noise["methods"][method]
         lines.append(f"| {method_label(method)} | "
-                     + " | ".join(f"{st['mean_' + c.lower() + '_mm']:+.4f}" for c in ("dX", "dY", "dZ")) + " | "
+                     + " | ".join(f"{st['mean_' + c.lower() + '_mm']:+.4f}" for c in ("dX", "dY", "dZ"))
+                     + " | "
                      + " | ".join(f"{st['std_' + c.lower() + '_mm']:.4f}" for c in ("dX", "dY", "dZ"))
                      + f" | {st['rms_dp_mm']:.4f} | {st['max_dp_mm']:.3f} |")
     nsem = noise["noise_sem"]
@@ -173,7 +174,7 @@ def render_markdown(report: dict) -> str:
                          + f" | {entry['stats'][method]['rms_dp_mm']:.4f} |")
     sem = index["noise_only_sem"]["optical_path"]
     lines += ["", "Shifts are 'beyond the noise' when larger than 3 noise standard errors "
-              f"(optical_path: " + ", ".join(f"{c} {sem[c]:.1e}" for c in ("dX", "dY", "dZ"))
+              "(optical_path: " + ", ".join(f"{c} {sem[c]:.1e}" for c in ("dX", "dY", "dZ"))
               + " mm; su: " + ", ".join(f"{c} {index['noise_only_sem']['su'][c]:.1e}"
                                          for c in ("dX", "dY", "dZ")) + " mm).", "",
               "![Figure 9](figure9_index_maps.png)", "", "![Figure 10](figure10_index_hist.png)",

@@ -13,7 +13,7 @@ import sys
 import time
 
 from eval.cli import non_negative_float, non_negative_int, positive_float, positive_int
-from eval.core.formatting import format_number
+from eval.core.formatting import format_number as fmt
 from eval.run.config import COMMAND, RunConfig, fraction
 from eval.run.report import budget_table, report_markdown, summary_table, write_outputs
 from synth.cli import (add_define_option, add_json_option, add_out_option, add_progress_option,
@@ -126,8 +126,8 @@ def main(args) -> int:
     m, c = report["matching"], report["crosscheck"]
     print(f"{report['scene']}: {m['visible_in_both']} targets visible in both views, "
           f"{m['pairs']} matched ({m['correct']} correct, {m['wrong']} wrong), cross-check RMS "
-          f"{format_number(c['rms_px'], 4)} px, max {format_number(c['max_px'], 4)} px (outline centroid: RMS "
-          f"{format_number(c['rms_px_outline'], 4)} px, max {format_number(c['max_px_outline'], 4)} px); "
+          f"{fmt(c['rms_px'], 4)} px, max {fmt(c['max_px'], 4)} px (outline centroid: RMS "
+          f"{fmt(c['rms_px_outline'], 4)} px, max {fmt(c['max_px_outline'], 4)} px); "
           f"{report['variant']} {report['spp']} spp"
           f"{'; sensor ' + report['sensor']['model']['name'] if report.get('sensor') else ''}; "
           f"total {report['timings_s']['total']:.1f} s",
@@ -147,8 +147,8 @@ def main(args) -> int:
                       file=summary_stream)
             print(summary_table({"methods": calibration["methods"]}), file=summary_stream)
         else:
-            print(f"self-calibration: no trusted estimate ({calibration['reason'] or calibration['message']})",
-                  file=summary_stream)
+            print(f"self-calibration: no trusted estimate "
+                  f"({calibration['reason'] or calibration['message']})", file=summary_stream)
     if args.json:
         print(json.dumps(report, indent=2))
     return 0

@@ -76,7 +76,7 @@ class RunConfig:
             " with --assume" if self.assumptions else "")
 
     @classmethod
-    def from_args(cls, args) -> "RunConfig":
+    def from_args(cls, args) -> RunConfig:
         """The configuration of the parsed command line ``args``; CLIError (or ValueError)
         names the bad option — before any expensive work."""
         from synth.scene import parse_defines

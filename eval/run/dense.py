@@ -30,7 +30,7 @@ from dataclasses import fields
 import numpy as np
 
 from eval.cli import CLIError
-from eval.core.formatting import format_number
+from eval.core.formatting import format_number as fmt
 from eval.run.config import COMMAND, RunConfig
 
 #: Dense methods: name -> (matching model, triangulation method).
@@ -276,7 +276,7 @@ def report_markdown(report: dict) -> str:
              "time (s) |", "|---|---|---|---|---|---|"]
     for method, m in report["matching"].items():
         lines.append(f"| {method} | {m['model']} | {m['planes']} | {m['matched_pixels']} | "
-                     f"{format_number(m['median_score'])} | {format_number(m['timings_s']['total'], 1)} |")
+                     f"{fmt(m['median_score'])} | {fmt(m['timings_s']['total'], 1)} |")
     lines += ["", "Time per stage (s): " + "; ".join(
         f"{method}: " + ", ".join(f"{k} {v:.2f}" for k, v in m["timings_s"].items())
         for method, m in report["matching"].items()), "",
@@ -291,8 +291,8 @@ def summary_line(report: dict) -> str:
     parts = []
     for method, s in report["methods"].items():
         fraction = s["measured_fraction"]
-        parts.append(f"{method} {format_number(None if fraction is None else 100 * fraction, 1)} % "
-                     f"measured, RMS {format_number(s['p2m_rms_mm'])} mm, F@1mm {format_number(s['fscore_1mm'])}")
+        parts.append(f"{method} {fmt(None if fraction is None else 100 * fraction, 1)} % "
+                     f"measured, RMS {fmt(s['p2m_rms_mm'])} mm, F@1mm {fmt(s['fscore_1mm'])}")
     return (f"{report['scene']}: {report['truth']['overlap_pixels']} overlap pixels; "
             + "; ".join(parts) + f"; total {report['timings_s']['total']:.1f} s")
 

@@ -7,16 +7,12 @@ the target, then renamed. Units mm; images in pixels (OpenCV convention, ``(u, v
 
 from __future__ import annotations
 
-import io
 import os
 import tempfile
 
 import numpy as np
 from matplotlib import colormaps
-from matplotlib.backends.backend_agg import FigureCanvasAgg
-from matplotlib.figure import Figure
 
-from synth.fileio import atomic_write_bytes
 
 from eval.core.cloud_metrics import write_colored_ply
 from eval.core.figures import new_figure, save_figure

@@ -6,7 +6,7 @@ from __future__ import annotations
 import os
 
 from eval.core.cloud_metrics import write_error_ply
-from eval.core.formatting import format_number
+from eval.core.formatting import format_number as fmt
 
 
 
@@ -23,8 +23,8 @@ def budget_table(report: dict) -> str:
         st = b["methods"].get(method, {})
         lines.append(f"{'':<{len('error budget (' + method + '): ')}}{label[:43]:<44}"
                      f"{b['matching']['pairs']:>7}{b['matching']['wrong']:>7}"
-                     f"{format_number(st.get('rms_dp_mm')):>10}{format_number(st.get('mean_dz_mm')):>10}"
-                     f"{format_number(st.get('max_dp_mm')):>10}")
+                     f"{fmt(st.get('rms_dp_mm')):>10}{fmt(st.get('mean_dz_mm')):>10}"
+                     f"{fmt(st.get('max_dp_mm')):>10}")
     return "\n".join(lines)
 
 
@@ -40,7 +40,7 @@ def summary_table(report: dict) -> str:
     header = f"{'method':<17}" + "".join(f"{title:>15}" for _, title, _ in SUMMARY_COLUMNS)
     lines = [header]
     for method, stats in _method_rows(report):
-        lines.append(f"{method:<17}" + "".join(f"{format_number(stats.get(key), digits):>15}"
+        lines.append(f"{method:<17}" + "".join(f"{fmt(stats.get(key), digits):>15}"
                                                 for key, _, digits in SUMMARY_COLUMNS))
     return "\n".join(lines)
 
@@ -68,25 +68,27 @@ def _sensor_lines(sensor) -> list:
 
 def report_markdown(report: dict) -> str:
     m, c, t = report["matching"], report["crosscheck"], report["timings_s"]
+    vis, det = report["visibility"], report["detection"]
     lines = [f"# Run report: `{report['scene']}`", "",
              f"{report['targets']} targets; Mitsuba variant `{report['variant']}`, {report['spp']} spp; "
              f"added pixel noise σ = {report['noise_px']} px.", "",
              *_sensor_lines(report.get("sensor")),
              "## Detection and matching", "",
              "| | left | right |", "|---|---|---|",
-             f"| targets wholly in the image | {report['visibility']['in_both'] + report['visibility']['left_only']} "
-             f"| {report['visibility']['in_both'] + report['visibility']['right_only']} |",
-             f"| detections accepted | {report['detection']['left']['found']} | {report['detection']['right']['found']} |",
-             f"| blobs rejected | {report['detection']['left']['rejected_by_reason']} | {report['detection']['right']['rejected_by_reason']} |",
-             f"| cross-check RMS / max (px) | {format_number(c['left']['rms_px'], 4)} / {format_number(c['left']['max_px'], 4)} "
-             f"| {format_number(c['right']['rms_px'], 4)} / {format_number(c['right']['max_px'], 4)} |", "",
+             f"| targets wholly in the image | {vis['in_both'] + vis['left_only']} "
+             f"| {vis['in_both'] + vis['right_only']} |",
+             f"| detections accepted | {det['left']['found']} | {det['right']['found']} |",
+             f"| blobs rejected | {det['left']['rejected_by_reason']} "
+             f"| {det['right']['rejected_by_reason']} |",
+             f"| cross-check RMS / max (px) | {fmt(c['left']['rms_px'], 4)} / {fmt(c['left']['max_px'], 4)} "
+             f"| {fmt(c['right']['rms_px'], 4)} / {fmt(c['right']['max_px'], 4)} |", "",
              f"Targets visible in both views: {m['visible_in_both']}; matched pairs: {m['pairs']} "
              f"({m['correct']} correct, {m['wrong']} wrong, {m['ambiguous_dropped']} ambiguous dropped); "
              f"visible-in-both targets matched: {m['visible_in_both_matched']}. Gate {m['gate_mm']} mm, "
              f"depth window {m['depth_window_mm']} mm. Cross-check of all detections against the "
-             f"Fermat simulator: RMS {format_number(c['rms_px'], 4)} px, max {format_number(c['max_px'], 4)} px "
-             f"(against the image of each target's centre); RMS {format_number(c['rms_px_outline'], 4)} px, "
-             f"max {format_number(c['max_px_outline'], 4)} px against the area centroid of the image of its "
+             f"Fermat simulator: RMS {fmt(c['rms_px'], 4)} px, max {fmt(c['max_px'], 4)} px "
+             f"(against the image of each target's centre); RMS {fmt(c['rms_px_outline'], 4)} px, "
+             f"max {fmt(c['max_px_outline'], 4)} px against the area centroid of the image of its "
              f"outline (the eccentricity removed).", "",
              "## Truth and assumption", "",
              ("The measurement used the rendered rig (no assumption differs from the truth)."
@@ -99,7 +101,8 @@ def report_markdown(report: dict) -> str:
              "| method | " + " | ".join(title for _, title, _ in SUMMARY_COLUMNS) + " |",
              "|---" * (len(SUMMARY_COLUMNS) + 1) + "|"]
     for method, stats in _method_rows(report):
-        lines.append(f"| {method} | " + " | ".join(format_number(stats.get(k), d) for k, _, d in SUMMARY_COLUMNS) + " |")
+        lines.append(f"| {method} | "
+                     + " | ".join(fmt(stats.get(k), d) for k, _, d in SUMMARY_COLUMNS) + " |")
     lines += ["", "dP = |measured − true| over correctly matched targets; Chamfer = mean "
               "measured→truth + mean truth→measured nearest-neighbour distance (all matched points "
               "against the targets visible in both views); F@τ = harmonic mean of precision and "
@@ -111,7 +114,7 @@ def report_markdown(report: dict) -> str:
               "## Files", "",
               "- `views.png`, `error_maps.png`, `histograms.png`",
               *[f"- `{p['file']}`: colour = dP on `{p['colormap']}` from {p['vmin_mm']} mm to "
-                f"{format_number(p['vmax_mm'])} mm (clipped)" for p in report.get("ply", {}).values()], "",
+                f"{fmt(p['vmax_mm'])} mm (clipped)" for p in report.get("ply", {}).values()], "",
               "## Timings (s)", "",
               " · ".join(f"{k} {v:.2f}" for k, v in t.items())]
     return "\n".join(lines) + "\n"

@@ -24,7 +24,6 @@ rebuilt from the cell files every few seconds and at the end; figures go into ``
 
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import re
