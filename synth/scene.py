@@ -546,7 +546,7 @@ def _floats(text: str, what: str) -> np.ndarray:
     return values
 
 
-def _declared_defaults(data: bytes, label: str):
+def declared_defaults(data: bytes, label: str):
     """The ``<default name value>`` declarations of the scene's root (in order) and the names
     the file references as ``$name`` — read, not interpreted: Mitsuba's parser does the rest."""
     try:
@@ -580,7 +580,7 @@ _UPPER_BOUNDS = {"water_albedo": (1.0, False), "water_g": (1.0, True),
                  "target_albedo": (1.0, False)}
 
 
-def _check_params(params: dict, label: str) -> None:
+def check_params(params: dict, label: str) -> None:
     """One-line errors for parameter values Mitsuba would reject or mis-render."""
     for name, (kind, lower, strict) in _NUMERIC_PARAMS.items():
         if name not in params:
@@ -818,13 +818,13 @@ def load_scene(path, defines: dict | None = None) -> SceneSpec:
             data = fh.read()
     except OSError as exc:
         raise SceneError(f"{label}: cannot read scene file ({exc.strerror or exc})") from None
-    params, referenced = _declared_defaults(data, label)
+    params, referenced = declared_defaults(data, label)
     for name, value in (defines or {}).items():
         if name not in params:
             known = ", ".join(sorted(params)) or "none"
             raise SceneError(f"{label}: unknown parameter -D {name} (the scene's defaults: {known})")
         params[name] = str(value)
-    _check_params(params, label)
+    check_params(params, label)
     mi, state = _parse_with_mitsuba(path, params, referenced, label)
     nodes = _Nodes(mi, state)
 
