@@ -23,8 +23,8 @@ import os
 import sys
 import time
 
-from .cli import (CLIError, Parser, any_float, non_negative_float, non_negative_int,
-                  positive_float, positive_int, run_command)
+from synth.cli import (CLIError, Parser, any_float, non_negative_float, non_negative_int,
+                       positive_float, positive_int, run_command)
 
 PROG = "python -m synth"
 
@@ -200,9 +200,9 @@ def _cmd_scene(args) -> int:
 
     from measure import FlatPort
 
-    from . import layouts, rig as rigs
-    from .fileio import check_file_output
-    from .scene import DEFAULT_SPP, DEFAULT_TARGET_RADIUS_MM, write_scene
+    from synth import layouts, rig as rigs
+    from synth.fileio import check_file_output
+    from synth.scene import DEFAULT_SPP, DEFAULT_TARGET_RADIUS_MM, write_scene
 
     check_file_output(args.out, "--out", may_replace=_is_our_scene)
     if args.lighting is None and args.layout == "surface" and args.port == "none":
@@ -301,7 +301,7 @@ def _cmd_scene(args) -> int:
                + (", lit targets" if args.lighting == "lit" else "")
                + (f", thin lens aperture {thin_lens[0]:g} mm focus {thin_lens[1]:.6g} mm"
                   if thin_lens else ""))
-    from .water import PRESETS as WATERS
+    from synth.water import PRESETS as WATERS
 
     water = WATERS.get(args.water)
     if water is not None and port is None:
@@ -322,9 +322,9 @@ def _cmd_scene(args) -> int:
 
 def _surface_scene(args, left, right, port) -> int:
     """``--layout surface``: see :mod:`synth.surface_scene`."""
-    from .scene import DEFAULT_SPP
-    from .surface_scene import write_surface_scene
-    from .water import PRESETS as WATERS
+    from synth.scene import DEFAULT_SPP
+    from synth.surface_scene import write_surface_scene
+    from synth.water import PRESETS as WATERS
 
     if args.lighting == "lit" and port is None:
         raise CLIError("--lighting lit needs a port (the lights are in the water); use "
@@ -385,7 +385,7 @@ def _check_visible(left, right, port, targets, radius: float, layout: str) -> No
 
     from measure.projection import project
 
-    from .crosscheck import wholly_in_image
+    from synth.crosscheck import wholly_in_image
 
     seen = np.ones(len(targets), dtype=bool)
     for camera in (left, right):
@@ -404,14 +404,15 @@ def _apparent_distance(port, depth_mm: float) -> float:
 
 def _spec(args):
     """The scene with ``-D`` and ``--seed`` applied (``--seed S`` is ``-D seed=S``)."""
-    from .scene import apply_seed, load_scene, parse_defines
+    from synth.scene import apply_seed, load_scene, parse_defines
 
     return load_scene(args.scene, apply_seed(parse_defines(args.defines), args.seed))
 
 
 def _cmd_render(args) -> int:
-    from .fileio import OutputDir
-    from .render import png16_scale, render_stereo, srgb_preview, to_png16, write_exr, write_png
+    from synth.fileio import OutputDir
+    from synth.render import (png16_scale, render_stereo, srgb_preview, to_png16, write_exr,
+                              write_png)
 
     output = OutputDir(args.out, "synth render").claim()
     spec = _spec(args)
@@ -434,9 +435,9 @@ def _cmd_render(args) -> int:
 
 
 def _cmd_dataset(args) -> int:
-    from .dataset import write_dataset
+    from synth.dataset import write_dataset
 
-    from .sensor_model import SensorError, sensor_from_spec
+    from synth.sensor_model import SensorError, sensor_from_spec
 
     try:
         sensor = None if args.sensor is None else sensor_from_spec(args.sensor)
@@ -456,8 +457,8 @@ def _cmd_dataset(args) -> int:
 
 def _cmd_boards(args) -> int:
     from measure.board import Board
-    from . import boards as b
-    from .scene import load_scene, parse_defines
+    from synth import boards as b
+    from synth.scene import load_scene, parse_defines
 
     try:
         cols, rows = (int(v) for v in args.squares.lower().split("x"))
@@ -484,8 +485,8 @@ def _cmd_boards(args) -> int:
 
 
 def _cmd_check(args) -> int:
-    from .crosscheck import CHECK_MAX_PX, CHECK_RMS_PX, check_dataset
-    from .dataset import read_dataset
+    from synth.crosscheck import CHECK_MAX_PX, CHECK_RMS_PX, check_dataset
+    from synth.dataset import read_dataset
 
     data = read_dataset(args.dir)
     if data.is_surface:
@@ -494,7 +495,7 @@ def _cmd_check(args) -> int:
     report = check_dataset(args.dir, rms_px=args.rms if args.rms is not None else CHECK_RMS_PX,
                            max_px=args.max if args.max is not None else CHECK_MAX_PX)
     if args.json:
-        from .fileio import jsonable
+        from synth.fileio import jsonable
 
         print(json.dumps(jsonable(report), indent=2))
     else:
@@ -516,11 +517,11 @@ def _cmd_check(args) -> int:
 
 def _check_surface(args, data) -> int:
     """``check`` of a surface dataset: the truth maps (see synth.truth_maps.check_truth_maps)."""
-    from .truth_maps import check_truth_maps
+    from synth.truth_maps import check_truth_maps
 
     report = check_truth_maps(data)
     if args.json:
-        from .fileio import jsonable
+        from synth.fileio import jsonable
 
         print(json.dumps(jsonable(report), indent=2))
         return 0 if report["passed"] else 1

@@ -37,10 +37,10 @@ import numpy as np
 
 from measure import Camera
 
-from .integrator import integrator_name, render_integrator
-from .mitsuba_setup import import_mitsuba
-from .scene import SceneError, SceneSpec, load_scene
-from .sensor import sensor_parameters
+from synth.integrator import integrator_name, render_integrator
+from synth.mitsuba_setup import import_mitsuba
+from synth.scene import SceneError, SceneSpec, load_scene
+from synth.sensor import sensor_parameters
 
 #: Oversampling factor of the undistorted render behind a distorted view.
 DISTORTION_OVERSAMPLE = 2

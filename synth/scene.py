@@ -43,7 +43,7 @@ import numpy as np
 from measure import Camera, FlatPort, StereoRig
 from measure.port import index_matched_port
 
-from .sensor import intrinsics_from_sensor, pose_from_to_world, sensor_parameters
+from synth.sensor import intrinsics_from_sensor, pose_from_to_world, sensor_parameters
 
 #: Half side (mm) of the square port interfaces: covers both fields of view far beyond 2 m.
 INTERFACE_HALF_SIZE_MM = 2000.0
@@ -609,7 +609,7 @@ def check_params(params: dict, label: str) -> None:
 def _parse_with_mitsuba(path: str, params: dict, referenced, label: str):
     """Mitsuba's own parser (``mitsuba.parser.parse_file``): ``$`` substitution, transforms
     composed in double precision, references; no plugin is built."""
-    from .mitsuba_setup import import_mitsuba
+    from synth.mitsuba_setup import import_mitsuba
 
     mi, variant = import_mitsuba()
     import mitsuba.parser as mp
@@ -773,7 +773,7 @@ def _texture_filename(nodes: _Nodes, what: str) -> str | None:
 
 def _read_surface(surfaces, scene_path: str, label: str) -> SceneSurface:
     """The scene's one surface, its files resolved next to the scene file and the mesh read."""
-    from .surfaces import read_ply
+    from synth.surfaces import read_ply
 
     if len(surfaces) != 1:
         raise SceneError(f"{label}: a surface scene holds exactly one surface, found "
