@@ -39,13 +39,13 @@ from measure.board import PATTERN_TEXELS_PER_SQUARE, Board, BoardError
 from measure.port import index_matched_port
 from measure.projection import project
 
-from .dataset import DatasetError, read_calib, write_calib
-from .fileio import OutputDir, atomic_write_json, read_marker
-from .integrator import RENDERER, integrator_name
-from .provenance import package_versions
-from .render import (check_render_request, load_mitsuba_scene, png16_scale, render_view,
-                     sensor_dict, to_png16, write_png)
-from .scene import SceneSpec, interface_placements
+from synth.dataset import DatasetError, read_calib, write_calib
+from synth.fileio import OutputDir, atomic_write_json, read_marker
+from synth.integrator import RENDERER, integrator_name
+from synth.provenance import package_versions
+from synth.render import (check_render_request, load_mitsuba_scene, png16_scale, render_view,
+                          sensor_dict, to_png16, write_png)
+from synth.scene import SceneSpec, interface_placements
 
 FORMAT_VERSION = 1
 COMMAND = "synth boards"
@@ -153,7 +153,7 @@ def _board_local_to_board(board: Board) -> np.ndarray:
 def build_board_scene(spec: SceneSpec, board: Board, air: bool, variant=None):
     """``(mitsuba_scene, mi, variant)``: the scene's two sensors (same order), its port
     interfaces unless ``air``, and the board (moved by :func:`render_pose`)."""
-    from .mitsuba_setup import import_mitsuba
+    from synth.mitsuba_setup import import_mitsuba
 
     mi, chosen = import_mitsuba(variant)
     pattern = board.pattern(PATTERN_TEXELS_PER_SQUARE).astype(np.float32)[..., None]

@@ -92,7 +92,7 @@ def check_dataset(path, rms_px: float = CHECK_RMS_PX, max_px: float = CHECK_MAX_
     """
     from measure.detect import detect_targets
 
-    from .dataset import read_dataset
+    from synth.dataset import read_dataset
 
     data = read_dataset(path)
     radius = float(data.manifest.get("scene", {}).get("target_radius_mm", 0.0))

@@ -45,12 +45,12 @@ import numpy as np
 from measure import Camera, FlatPort, StereoRig
 from measure.projection import project
 
-from .fileio import OutputDir, read_marker
-from .integrator import RENDERER
-from .provenance import package_versions
-from .render import (pass_seed, png16_scale, render_stereo, srgb_preview, to_png16, write_exr,
-                     write_png)
-from .scene import SceneError, SceneSpec, load_scene
+from synth.fileio import OutputDir, read_marker
+from synth.integrator import RENDERER
+from synth.provenance import package_versions
+from synth.render import (pass_seed, png16_scale, render_stereo, srgb_preview, to_png16,
+                          write_exr, write_png)
+from synth.scene import SceneError, SceneSpec, load_scene
 
 FORMAT_VERSION = 2  # 2: targets.ply in binary doubles (was ASCII, 6 digits)
 PIXELS_HEADER = ["id", "x", "y", "z", "u_left", "v_left", "u_right", "v_right"]
@@ -287,7 +287,7 @@ def write_dataset(scene, out_dir, spp: int | None = None, defines: dict | None =
             scale, offset, sensor_info = png16_scale(left, right), 0.0, None
             pngs = {"left": to_png16(left, scale), "right": to_png16(right, scale)}
         else:
-            from .sensor_model import sensor_views
+            from synth.sensor_model import sensor_views
 
             codes_left, codes_right, sensor_info = sensor_views(left, right, sensor, seed)
             scale, offset = sensor_info["dn_per_unit"], sensor.dark_level_dn
@@ -302,7 +302,7 @@ def write_dataset(scene, out_dir, spp: int | None = None, defines: dict | None =
 
         truth_counts = None
         if spec.surface is not None:
-            from .truth_maps import write_truth_maps
+            from synth.truth_maps import write_truth_maps
 
             t = time.perf_counter()
             truth_counts = write_truth_maps(tmp, spec.rig, spec.surface.mesh_path,

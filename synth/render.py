@@ -37,10 +37,10 @@ import numpy as np
 
 from measure import Camera
 
-from .integrator import integrator_name, render_integrator
-from .mitsuba_setup import import_mitsuba
-from .scene import SceneError, SceneSpec, load_scene
-from .sensor import sensor_parameters
+from synth.integrator import integrator_name, render_integrator
+from synth.mitsuba_setup import import_mitsuba
+from synth.scene import SceneError, SceneSpec, load_scene
+from synth.sensor import sensor_parameters
 
 #: Oversampling factor of the undistorted render behind a distorted view.
 DISTORTION_OVERSAMPLE = 2
@@ -191,7 +191,9 @@ def sensor_dict(mi, camera: Camera, sampler, K=None, size=None) -> dict:
     }
 
 
-def _develop(mi, image) -> np.ndarray:
+def develop_image(mi, image) -> np.ndarray:
+    """A film that ``mi.render`` returned, as a contiguous float32 ``(H, W)`` array of its first
+    channel (a luminance film has only one), linear units as rendered."""
     a = np.array(image, dtype=np.float32)
     if a.ndim == 3:
         a = a[..., 0]
@@ -221,7 +223,7 @@ def _render_passes(mi, scene, sensor, spp: int, seed: int, view: int, film_pixel
     total, weight = None, 0
     integrator = render_integrator(mi, scene)
     for k, pass_spp in enumerate(pass_plan(spp, film_pixels)):
-        image = _develop(mi, mi.render(scene, sensor=sensor, spp=pass_spp,
+        image = develop_image(mi, mi.render(scene, sensor=sensor, spp=pass_spp,
                                        seed=pass_seed(seed, view, k), integrator=integrator))
         taken = _sample_count(scene, sensor, pass_spp)
         total = image.astype(np.float64) * taken if total is None else total + image * taken

@@ -15,8 +15,8 @@ import os
 import cv2
 import numpy as np
 
-from . import speckle, surfaces
-from .scene import SurfaceFiles, write_scene
+from synth import speckle, surfaces
+from synth.scene import SurfaceFiles, write_scene
 
 #: Smallest extent of a speckle texture, mm (width, height).
 MIN_TEXTURE_EXTENT_MM = (2000.0, 1600.0)
@@ -56,7 +56,7 @@ def build_mesh(args, port_normal) -> surfaces.SurfaceMesh:
 def read_user_mesh(path) -> tuple[np.ndarray, np.ndarray]:
     """Vertices ``(V, 3)`` and triangles ``(T, 3)`` of a PLY or OBJ file, read by Mitsuba's
     own loaders (what the renderer would read). ValueError naming the file otherwise."""
-    from .mitsuba_setup import import_mitsuba
+    from synth.mitsuba_setup import import_mitsuba
 
     path = os.fspath(path)
     extension = os.path.splitext(path)[1].lower()
@@ -99,7 +99,7 @@ def companion_paths(scene_path: str) -> str:
 def write_texture(path: str, dot_mm: float, coverage: float, seed: int, extent) -> bool:
     """Write the speckle texture unless ``path`` already holds it (same name = same bytes);
     returns whether it was written."""
-    from .fileio import atomic_write_bytes
+    from synth.fileio import atomic_write_bytes
 
     if os.path.isfile(path):
         existing = cv2.imread(path, cv2.IMREAD_UNCHANGED)
@@ -117,7 +117,7 @@ def write_texture(path: str, dot_mm: float, coverage: float, seed: int, extent) 
 def overlap_samples(tracer, left, right, port) -> np.ndarray:
     """The surface points ``(M, 3)`` that pixels of a coarse grid of the left image see where
     the right camera sees them too (``tracer`` a :class:`synth.truth_maps.MeshTracer`)."""
-    from .truth_maps import hits_of_pixels, pixel_grid, seen_by
+    from synth.truth_maps import hits_of_pixels, pixel_grid, seen_by
 
     points = hits_of_pixels(tracer, left, port, pixel_grid(left.size, CHECK_STEP_PX))
     return points[seen_by(tracer, right, port, points)]
@@ -129,7 +129,7 @@ def back_facing_fraction(tracer, camera, port) -> float:
     area-light surfaces are one-sided, so the back renders black). 0 if no pixel meets it."""
     from measure.refraction import trace_through_port
 
-    from .truth_maps import pixel_grid
+    from synth.truth_maps import pixel_grid
 
     water = trace_through_port(camera.center, camera.rays(pixel_grid(camera.size, CHECK_STEP_PX)),
                                port, keep_interface_points=False)
@@ -157,7 +157,7 @@ def write_surface_scene(out: str, args, left, right, port, **scene_options) -> s
     import sys
     import tempfile
 
-    from .truth_maps import MeshTracer
+    from synth.truth_maps import MeshTracer
 
     from measure import StereoRig
 

@@ -228,7 +228,7 @@ def from_arrays(vertices, triangles, normal, description: str) -> SurfaceMesh:
 def write_ply(path, mesh: SurfaceMesh, uv_lower, uv_upper) -> None:
     """Write ``mesh`` as a binary PLY Mitsuba's ``ply`` plugin reads, atomically; texture
     coordinates normalised to [0, 1] over ``[uv_lower, uv_upper]`` (mm)."""
-    from .fileio import atomic_write_bytes
+    from synth.fileio import atomic_write_bytes
 
     lower, upper = np.asarray(uv_lower, float), np.asarray(uv_upper, float)
     uv = (mesh.uv_mm - lower) / (upper - lower)

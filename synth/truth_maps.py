@@ -54,7 +54,7 @@ class MeshTracer:
     point). ``vertices`` ``(V, 3)`` mm as the renderer sees them, ``triangles`` ``(T, 3)``."""
 
     def __init__(self, mesh_path: str, vertices: np.ndarray, triangles: np.ndarray):
-        from .mitsuba_setup import import_mitsuba
+        from synth.mitsuba_setup import import_mitsuba
 
         self.mi, _ = import_mitsuba()
         self.scene = self.mi.load_dict({"type": "scene",

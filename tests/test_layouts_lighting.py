@@ -17,7 +17,7 @@ from measure.detect import detect_targets
 from measure.projection import project
 from synth import layouts
 from synth.crosscheck import associate_detections
-from synth.render import _develop, load_mitsuba_scene, render_view
+from synth.render import develop_image as _develop, load_mitsuba_scene, render_view
 from synth.rig import paper_cameras, paper_port
 from synth.scene import LIGHT_INTENSITY, LIT_TARGET_ALBEDO, light_placements, load_scene, write_scene
 from synth.water import PRESETS

@@ -14,7 +14,7 @@ from measure.detect import detect_targets
 from measure.projection import solve_paths
 from synth.crosscheck import associate_detections
 from synth.layouts import grid_plane
-from synth.render import _develop, load_mitsuba_scene, render_view
+from synth.render import develop_image as _develop, load_mitsuba_scene, render_view
 from synth.rig import paper_cameras, paper_port
 from synth.scene import SceneError, load_scene, write_scene
 from synth.water import PRESETS

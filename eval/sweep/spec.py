@@ -295,7 +295,7 @@ def parse_spec(data: dict, base_dir: str, label: str) -> SweepSpec:
 
 
 def _read_scene(text: str, base_dir: str, label: str) -> Scene:
-    from synth.scene import SceneError, _declared_defaults
+    from synth.scene import SceneError, declared_defaults as _declared_defaults
 
     path = text if os.path.isabs(text) else os.path.join(base_dir, text)
     try:
@@ -473,7 +473,7 @@ def expand(spec: SweepSpec, label: str) -> list:
     """The cells of the spec, in a fixed order: scene × grid × zip × random sample × repeat."""
     import numpy as np
 
-    from synth.scene import SceneError, _check_params
+    from synth.scene import SceneError, check_params as _check_params
 
     grid_keys = list(spec.grid)
     grid_points = list(itertools.product(*(spec.grid[k] for k in grid_keys))) if grid_keys else [()]

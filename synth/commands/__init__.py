@@ -1,0 +1,65 @@
+"""``python -m synth`` -- write scenes, render them, write and check benchmark datasets.
+
+Subcommands::
+
+    python -m synth scene   --layout paper --z 1000 --out scenes/paper_plane.xml [options]
+    python -m synth render  SCENE --out DIR [--spp N] [--variant V] [--exr] [-D name=value ...]
+    python -m synth dataset SCENE --out DIR [--spp N] [--variant V] [--exr] [-D name=value ...]
+    python -m synth boards  SCENE --out DIR [--poses 15] [--board chessboard|charuco]
+                            [--squares 11x8] [--square-mm 40] [--seed S] [--air]
+    python -m synth check   DIR [--rms PX] [--max PX] [--json]
+
+Bad input (missing or malformed scene, wrong structure, unknown ``-D``, bad option, an ``--out``
+holding files this command did not write) prints one line ``error: ...`` and exits with code 2;
+``check`` exits with 1 when the dataset is outside the bounds; 130 when interrupted
+(:mod:`synth.cli`, shared with ``python -m eval``). Output directories follow
+:class:`synth.fileio.OutputDir`: whole or not at all, never over someone else's files.
+
+One module per command (``synth/commands/<name>.py``, listed in ``--help`` order in
+:data:`COMMANDS`), with the convention of :mod:`eval.cli`: each exposes
+
+* ``add_parser(subparsers)`` -- ``subparsers.add_parser("<name>", …)`` and its arguments,
+* ``main(args) -> int`` -- run it; raise :class:`synth.cli.CLIError` for a user error.
+
+What several commands share is in :mod:`synth.commands.common`. Heavy imports (Mitsuba, Open3D,
+matplotlib, SciPy) stay inside the functions so that ``--help`` stays fast.
+"""
+
+from __future__ import annotations
+
+import sys
+
+from synth.cli import Parser, run_command
+from synth.commands import boards, check, dataset, render, scene
+
+PROG = "python -m synth"
+#: The command modules, in the order ``--help`` lists them.
+COMMANDS = (scene, render, dataset, boards, check)
+
+
+def build_parser() -> Parser:
+    """The parser of ``python -m synth``: one subparser per module of :data:`COMMANDS`, whose
+    ``main`` it runs."""
+    parser = Parser(prog=PROG, description="Mitsuba scenes and datasets of a stereo rig "
+                                           "behind a flat port (units mm).")
+    subparsers = parser.add_subparsers(dest="command", required=True, parser_class=Parser)
+    for command in COMMANDS:
+        before = set(subparsers.choices)
+        command.add_parser(subparsers)
+        for added in set(subparsers.choices) - before:
+            subparsers.choices[added].set_defaults(_main=command.main)
+    return parser
+
+
+def main(argv=None) -> int:
+    """Run the CLI; returns the exit code (:mod:`synth.cli`: 2 on bad input, with one line
+    ``error: …`` on stderr; 1 when ``check`` fails; 130 when interrupted)."""
+    return run_command(build_parser(), argv)
+
+
+def console_main() -> None:
+    """Entry point of the ``refstereo-synth`` console script."""
+    sys.exit(main())
+
+
+__all__ = ["COMMANDS", "PROG", "build_parser", "console_main", "main"]

@@ -1,0 +1,64 @@
+"""``python -m synth boards SCENE --out DIR [--poses 15] [--board chessboard|charuco]
+[--squares 11x8] [--square-mm 40] [--seed S] [--air]``: stereo pairs of a calibration board at
+random poses behind the scene's port (or in air), :mod:`synth.boards`."""
+
+from __future__ import annotations
+
+from synth.cli import CLIError, non_negative_float, non_negative_int, positive_float, positive_int
+
+
+def add_parser(subparsers) -> None:
+    p = subparsers.add_parser("boards",
+                              help="render stereo pairs of a calibration board at random poses")
+    p.add_argument("scene", help="scene file whose cameras and port see the board")
+    p.add_argument("--out", required=True, help="output directory")
+    p.add_argument("--poses", type=positive_int, default=None, help="number of poses (default 15)")
+    p.add_argument("--board", choices=("chessboard", "charuco"), default="chessboard",
+                   help="board kind (default chessboard)")
+    p.add_argument("--squares", default="11x8", help="squares COLSxROWS (default 11x8)")
+    p.add_argument("--square-mm", type=positive_float, default=40.0,
+                   help="square side, mm (default 40)")
+    p.add_argument("--distance", type=positive_float, nargs=2, metavar=("NEAR", "FAR"),
+                   default=None, help="board centre depth range along the port normal, mm "
+                                      "(default 700 1400)")
+    p.add_argument("--max-tilt", type=non_negative_float, default=None,
+                   help="largest tilt of the board, degrees (default 45)")
+    p.add_argument("--spp", type=positive_int, default=None, help="samples per pixel (default 16)")
+    p.add_argument("--seed", type=non_negative_int, default=0,
+                   help="seed of the poses and the renderer (default 0)")
+    p.add_argument("--air", action="store_true", help="the same cameras with no port (in air)")
+    p.add_argument("--variant", help="Mitsuba variant (default: automatic)")
+    p.add_argument("-D", dest="defines", action="append", default=[], metavar="NAME=VALUE",
+                   help="override a <default> of the scene (repeatable)")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+
+
+def main(args) -> int:
+    """Render stereo pairs of the board at random poses into ``--out`` (skipped when up to
+    date)."""
+    from measure.board import Board
+    from synth import boards as b
+    from synth.scene import load_scene, parse_defines
+
+    try:
+        cols, rows = (int(v) for v in args.squares.lower().split("x"))
+    except ValueError:
+        raise CLIError(f"--squares must be COLSxROWS (e.g. 11x8), got {args.squares!r}") from None
+    board = Board(args.board, (cols, rows), args.square_mm)
+    spec = load_scene(args.scene, parse_defines(args.defines))
+    manifest = b.write_boards(
+        spec, args.out, board, n_poses=args.poses or b.DEFAULT_POSES,
+        spp=args.spp or b.DEFAULT_SPP, seed=args.seed, air=args.air,
+        distance_range=tuple(args.distance) if args.distance else b.DEFAULT_DISTANCE_RANGE_MM,
+        max_tilt_deg=b.DEFAULT_MAX_TILT_DEG if args.max_tilt is None else args.max_tilt,
+        variant=args.variant, progress=not args.quiet)
+    if manifest.get("skipped"):
+        print(f"{args.out}: up to date (same scene, board and options); nothing to do")
+        return 0
+    w, h = manifest["image_size"]
+    print(f"wrote {args.out}: {manifest['poses']} stereo pairs of a {board.kind} "
+          f"{cols}x{rows} ({board.square_mm:g} mm) {'in air' if args.air else 'behind the port'}, "
+          f"{w}x{h} px, {manifest['spp']} spp with {manifest['variant']}: render "
+          f"{manifest['seconds']['render']:.1f} s ({manifest['samples_per_second'] / 1e6:.2f} M "
+          f"samples/s), total {manifest['seconds']['total']:.1f} s")
+    return 0

@@ -1,0 +1,324 @@
+"""``python -m synth scene --layout paper --z 1000 --out scenes/paper_plane.xml [options]``:
+write a Mitsuba scene of the paper's rig, a port (or none) and targets or a speckled surface
+(units mm, the left camera's frame; :mod:`synth.scene`, :mod:`synth.surface_scene`)."""
+
+from __future__ import annotations
+
+import os
+
+from synth.cli import (CLIError, any_float, non_negative_float, non_negative_int, positive_float,
+                       positive_int)
+
+#: The first comment of every scene file ``python -m synth scene`` writes.
+SCENE_COMMENT_PREFIX = "written by python -m synth scene"
+
+
+def _coverage(text: str) -> float:
+    import argparse
+
+    value = positive_float(text)
+    if not value < 1:
+        raise argparse.ArgumentTypeError(f"expected a fraction in (0, 1), got {text!r}")
+    return value
+
+
+def add_parser(subparsers) -> None:
+    p = subparsers.add_parser("scene",
+                              help="write a Mitsuba scene of the rig, the port and targets")
+    p.add_argument("--out", required=True, help="scene file to write (.xml)")
+    p.add_argument("--layout", choices=("paper", "grid", "random", "tilted", "cylinder", "sphere",
+                                        "surface"),
+                   default="paper",
+                   help="paper: 496 targets on concentric circles; grid; random volume; tilted: "
+                        "the paper's targets on a tilted plane; cylinder, sphere: targets on a "
+                        "convex surface facing the cameras; surface: a speckled surface (mesh) "
+                        "for dense matching, see --surface")
+    p.add_argument("--surface", choices=("plane", "tilted", "cylinder", "sphere", "wavy", "mesh"),
+                   default="plane",
+                   help="layout surface: plane facing the cameras at --z; tilted (--tilt); "
+                        "cylinder, sphere (--surface-radius, --half-angle); wavy "
+                        "(--wave-amplitude, --wavelength); mesh (--mesh FILE)")
+    p.add_argument("--mesh", help="layout surface, --surface mesh: a PLY or OBJ file, mm, in the "
+                                  "left camera's frame")
+    p.add_argument("--speckle-size", type=positive_float, default=2.5,
+                   help="layout surface: speckle dot diameter, mm (default 2.5)")
+    p.add_argument("--speckle-coverage", type=_coverage, default=0.5,
+                   help="layout surface: dark fraction of the speckle pattern (default 0.5)")
+    p.add_argument("--speckle-seed", type=non_negative_int, default=0,
+                   help="layout surface: seed of the speckle pattern (default 0)")
+    p.add_argument("--wave-amplitude", type=positive_float, default=20.0,
+                   help="--surface wavy: amplitude, mm (default 20)")
+    p.add_argument("--wavelength", type=positive_float, default=300.0,
+                   help="--surface wavy: wavelength, mm (default 300)")
+    p.add_argument("--z", type=positive_float, default=1000.0,
+                   help="target plane Z, mm (paper, grid; tilted: its centre; cylinder, "
+                        "sphere: the nearest point of the surface)")
+    p.add_argument("--spacing", type=positive_float, default=50.0,
+                   help="target spacing, mm (grid; cylinder and sphere: along the surface)")
+    p.add_argument("--tilt", type=any_float, nargs=2, metavar=("ABOUT_X", "ABOUT_Y"),
+                   default=(0.0, 30.0), help="tilt of the target plane, degrees (layout tilted; "
+                                             "default 0 30)")
+    p.add_argument("--surface-radius", type=positive_float, default=400.0,
+                   help="radius of the cylinder or sphere, mm (default 400)")
+    p.add_argument("--half-angle", type=positive_float, default=60.0,
+                   help="targets up to this angle from the line or point facing the cameras, "
+                        "degrees (cylinder, sphere; default 60)")
+    p.add_argument("--half-width", type=non_negative_float, default=500.0, help="grid half width, mm")
+    p.add_argument("--n", type=positive_int, default=200, help="number of random targets")
+    p.add_argument("--z-range", type=positive_float, nargs=2, default=(600.0, 2000.0),
+                   metavar=("ZMIN", "ZMAX"), help="random targets' depth range, mm")
+    p.add_argument("--layout-seed", type=non_negative_int, default=0, help="seed of the random layout")
+    p.add_argument("--port", choices=("paper", "none"), default="paper",
+                   help="the paper's air-glass-water port, or none (all air)")
+    p.add_argument("--n-water", type=positive_float, help="water index (default 1.33)")
+    p.add_argument("--n-glass", type=positive_float, help="glass index (default 1.54)")
+    p.add_argument("--port-distance", type=positive_float, help="D, mm (default 100)")
+    p.add_argument("--glass-thickness", type=positive_float, help="d, mm (default 5)")
+    p.add_argument("--layer", type=positive_float, nargs=2, action="append",
+                   metavar=("INDEX", "THICKNESS"),
+                   help="one layer of the port, camera side first: refractive index and "
+                        "thickness in mm (repeatable; replaces the glass of --n-glass and "
+                        "--glass-thickness; e.g. --layer 1.49 10 --layer 1.54 5)")
+    p.add_argument("--port-tilt", type=any_float, nargs=2, metavar=("ABOUT_X", "ABOUT_Y"),
+                   default=(0.0, 0.0), help="tilt of the port normal from the left optical axis, "
+                                            "degrees about x and about y (default 0 0)")
+    p.add_argument("--size", type=positive_int, nargs=2, metavar=("W", "H"),
+                   help="image size, px (default 2448 2048); the focal length scales with W")
+    p.add_argument("--focal", type=positive_float, help="focal length, px (default 1100·W/2448)")
+    p.add_argument("--dist", type=any_float, nargs="+", metavar="K",
+                   help="OpenCV distortion coefficients of both cameras (4, 5 or 8)")
+    p.add_argument("--target-radius", type=positive_float, help="target disk radius, mm (default 2.5)")
+    p.add_argument("--spp", type=positive_int, help="default samples per pixel written into the scene")
+    p.add_argument("--seed", type=non_negative_int, default=0, help="default sampler seed of the scene")
+    p.add_argument("--water", choices=("clear", "clear_ocean", "coastal", "turbid_harbor"),
+                   default="clear", help="water that absorbs and scatters (Petzold's "
+                                         "measurements; default clear: no medium)")
+    p.add_argument("--lighting", choices=("led", "lit"), default=None,
+                   help="led: self-luminous targets (default for targets); lit: white diffuse "
+                        "targets lit by two spot lights beside the housing (backscatter in "
+                        "scattering water; default for --layout surface, whose speckle is then "
+                        "the reflectance; led makes the speckle self-luminous)")
+    p.add_argument("--aperture-radius", type=positive_float,
+                   help="thin lens: aperture radius, mm (Mitsuba thinlens; default: pinhole)")
+    p.add_argument("--focus-distance", type=positive_float,
+                   help="thin lens: focus distance of the lens in air, mm (default: where the "
+                        "targets' mean depth appears through the port, paraxially)")
+
+
+def _is_our_scene(path: str) -> bool:
+    """Whether ``path`` is a scene file that ``python -m synth scene`` wrote (may be replaced)."""
+    try:
+        with open(path, "rb") as handle:
+            head = handle.read(400).decode("utf-8", "replace")
+    except OSError:
+        return False
+    return f"<!-- {SCENE_COMMENT_PREFIX}" in head
+
+
+def main(args) -> int:
+    """Write the scene file ``--out`` (a disk-target or a surface layout)."""
+    import numpy as np
+    from scipy.spatial.transform import Rotation
+
+    from measure import FlatPort
+
+    from synth import layouts, rig as rigs
+    from synth.fileio import check_file_output
+    from synth.scene import DEFAULT_SPP, DEFAULT_TARGET_RADIUS_MM, write_scene
+
+    check_file_output(args.out, "--out", may_replace=_is_our_scene)
+    if args.lighting is None and args.layout == "surface" and args.port == "none":
+        raise CLIError("--port none: a surface in air needs --lighting led (the default, lit, "
+                       "puts the spot lights in the water)")
+    if args.lighting is None:
+        args.lighting = "lit" if args.layout == "surface" else "led"
+    if args.mesh and (args.layout != "surface" or args.surface != "mesh"):
+        raise CLIError("--mesh needs --layout surface --surface mesh")
+    if args.layout == "random" and not args.z_range[0] < args.z_range[1]:
+        raise CLIError(f"--z-range must be ZMIN < ZMAX, got {args.z_range[0]:g} {args.z_range[1]:g}")
+    _check_target_count(args)
+    if args.aperture_radius is not None and args.dist and any(args.dist):
+        raise CLIError("--aperture-radius (a thin lens) is rendered without lens distortion: "
+                       "drop --dist or the thin lens")
+    if args.layout == "grid" and args.half_width / args.spacing > 1000:
+        raise CLIError(f"--half-width / --spacing gives more than 2001 x 2001 grid targets "
+                       f"({args.half_width:g} / {args.spacing:g})")
+    size = tuple(args.size) if args.size else rigs.PAPER_IMAGE_SIZE
+    focal = args.focal if args.focal else rigs.PAPER_FOCAL_PX * size[0] / rigs.PAPER_IMAGE_SIZE[0]
+    left, right = rigs.paper_cameras(size, focal, args.dist)
+    port = None
+    if args.layer and (args.n_glass is not None or args.glass_thickness is not None):
+        raise CLIError("--layer replaces --n-glass and --glass-thickness; give one or the other")
+    if args.layer and any(index < 1 for index, _ in args.layer):
+        raise CLIError(f"--layer: refractive indices must be >= 1, got "
+                       f"{[index for index, _ in args.layer]}")
+    if args.focus_distance is not None and args.aperture_radius is None:
+        raise CLIError("--focus-distance needs --aperture-radius (the thin lens)")
+    if args.port == "none" and (args.layer or args.lighting == "lit"):
+        raise CLIError(f"{'--layer' if args.layer else '--lighting lit'} needs a port (--port paper)")
+    if args.port == "paper":
+        n = list(rigs.PAPER_INDICES)
+        if args.n_glass is not None:
+            n[1] = args.n_glass
+        if args.n_water is not None:
+            n[2] = args.n_water
+        tilt = np.radians(args.port_tilt)
+        if np.any(np.abs(tilt) >= np.radians(30)):
+            raise CLIError(f"--port-tilt must stay below 30 degrees, got {args.port_tilt}")
+        normal = Rotation.from_rotvec([tilt[0], 0, 0]).apply(
+            Rotation.from_rotvec([0, tilt[1], 0]).apply([0.0, 0.0, 1.0]))
+        distance = (args.port_distance if args.port_distance is not None
+                    else rigs.PAPER_PORT_DISTANCE_MM)
+        if args.layer:
+            thicknesses = tuple(t for _, t in args.layer)
+            n = [n[0], *(index for index, _ in args.layer), n[2]]
+        else:
+            thicknesses = (args.glass_thickness if args.glass_thickness is not None
+                           else rigs.PAPER_GLASS_THICKNESS_MM,)
+        port = FlatPort(normal, distance, thicknesses, tuple(n))
+    if args.layout == "surface":
+        return _surface_scene(args, left, right, port)
+    normals = None
+    if args.layout == "paper":
+        targets = layouts.paper_plane(args.z)
+    elif args.layout == "grid":
+        targets = layouts.grid_plane(args.z, args.half_width, args.spacing)
+    elif args.layout == "random":
+        targets = layouts.random_volume(args.n, args.layout_seed, tuple(args.z_range))
+    else:
+        try:
+            if args.layout == "tilted":
+                ax, ay = np.radians(args.tilt)
+                combined = np.degrees(np.arccos(np.clip(np.cos(ax) * np.cos(ay), -1.0, 1.0)))
+                if np.any(np.abs(args.tilt) >= 80) or combined >= 80:
+                    raise ValueError(f"--tilt must keep the plane within 80 degrees of facing the "
+                                     f"cameras, got {args.tilt[0]:g} {args.tilt[1]:g} "
+                                     f"({combined:.1f} degrees in all)")
+                targets, normals = layouts.tilted_plane(args.z, args.tilt)
+            elif args.layout == "cylinder":
+                targets, normals = layouts.cylinder(args.z, args.surface_radius, args.half_angle,
+                                                    2 * args.surface_radius, args.spacing)
+            else:
+                targets, normals = layouts.sphere_cap(args.z, args.surface_radius,
+                                                      args.half_angle, args.spacing)
+        except ValueError as exc:
+            raise CLIError(str(exc).replace("half_angle_deg", "--half-angle")) from None
+    radius = args.target_radius if args.target_radius else DEFAULT_TARGET_RADIUS_MM
+    _check_visible(left, right, port, targets, radius, args.layout)
+    thin_lens = None
+    if args.aperture_radius is not None:
+        focus = (args.focus_distance if args.focus_distance is not None
+                 else _apparent_distance(port, float(np.mean(targets[:, 2]))))
+        thin_lens = (args.aperture_radius, focus)
+    comment = (f"{SCENE_COMMENT_PREFIX}: layout {args.layout}"
+               + (f", z {args.z:g} mm" if args.layout != "random" else "")
+               + (f", tilt {args.tilt[0]:g} {args.tilt[1]:g} deg" if args.layout == "tilted" else "")
+               + (f", surface radius {args.surface_radius:g} mm"
+                  if args.layout in ("cylinder", "sphere") else "")
+               + f", port {args.port}"
+               + (f" tilted {args.port_tilt[0]:g} deg about x, {args.port_tilt[1]:g} deg about y"
+                  if port is not None and any(args.port_tilt) else "")
+               + (f" of {len(args.layer)} layers" if args.layer else "")
+               + f", target radius {radius:g} mm"
+               + (", lit targets" if args.lighting == "lit" else "")
+               + (f", thin lens aperture {thin_lens[0]:g} mm focus {thin_lens[1]:.6g} mm"
+                  if thin_lens else ""))
+    from synth.water import PRESETS as WATERS
+
+    water = WATERS.get(args.water)
+    if water is not None and port is None:
+        raise CLIError(f"--water {args.water} needs a port (--port paper): the water is behind it")
+    if water is not None:
+        comment += f", water {args.water}"
+    try:
+        write_scene(args.out, (left, right), port, targets, radius,
+                    spp=args.spp if args.spp else DEFAULT_SPP, seed=args.seed, comment=comment,
+                    water=water, target_normals=normals, lighting=args.lighting,
+                    thin_lens=thin_lens)
+    except ValueError as exc:
+        raise CLIError(str(exc)) from None
+    print(f"wrote {args.out}: {targets.shape[0]} targets of radius {radius:g} mm, "
+          f"{'port' if port else 'no port'}, {size[0]}x{size[1]} px")
+    return 0
+
+
+def _surface_scene(args, left, right, port) -> int:
+    """``--layout surface``: see :mod:`synth.surface_scene`."""
+    from synth.scene import DEFAULT_SPP
+    from synth.surface_scene import write_surface_scene
+    from synth.water import PRESETS as WATERS
+
+    if args.lighting == "lit" and port is None:
+        raise CLIError("--lighting lit needs a port (the lights are in the water); use "
+                       "--lighting led for a self-luminous surface in air")
+    if args.aperture_radius is not None:
+        raise CLIError("--layout surface is rendered with pinhole cameras: drop --aperture-radius")
+    water = WATERS.get(args.water)
+    if water is not None and port is None:
+        raise CLIError(f"--water {args.water} needs a port (--port paper): the water is behind it")
+    comment = (f"{SCENE_COMMENT_PREFIX}: layout surface {args.surface}, z {args.z:g} mm"
+               + (f", tilt {args.tilt[0]:g} {args.tilt[1]:g} deg" if args.surface == "tilted" else "")
+               + (f", surface radius {args.surface_radius:g} mm, half angle {args.half_angle:g} deg"
+                  if args.surface in ("cylinder", "sphere") else "")
+               + (f", amplitude {args.wave_amplitude:g} mm, wavelength {args.wavelength:g} mm"
+                  if args.surface == "wavy" else "")
+               + (f", mesh {os.path.basename(args.mesh)}" if args.surface == "mesh" and args.mesh
+                  else "")
+               + f", speckle {args.speckle_size:g} mm coverage {args.speckle_coverage:g} seed "
+                 f"{args.speckle_seed}, port {args.port}, "
+               + ("lit by two spot lights" if args.lighting == "lit" else "self-luminous")
+               + (f", water {args.water}" if water is not None else ""))
+    try:
+        print(write_surface_scene(args.out, args, left, right, port,
+                                  spp=args.spp if args.spp else DEFAULT_SPP, seed=args.seed,
+                                  comment=comment, water=water, lighting=args.lighting))
+    except ValueError as exc:
+        raise CLIError(str(exc)) from None
+    return 0
+
+
+#: Most targets a scene may hold (its XML grows by ~400 bytes per target).
+MAX_TARGETS = 100_000
+
+
+def _check_target_count(args) -> None:
+    """CLIError naming the options when a layout would hold more than :data:`MAX_TARGETS`."""
+    import math
+
+    if args.layout == "random":
+        count, names = args.n, "--n"
+    elif args.layout in ("cylinder", "sphere"):
+        arc = math.radians(min(args.half_angle, 90.0)) * args.surface_radius / args.spacing
+        if args.layout == "cylinder":
+            count = (2 * math.floor(arc) + 1) * (2 * math.floor(args.surface_radius / args.spacing) + 1)
+        else:  # rings of at most 2πR / spacing targets each
+            count = 1 + math.floor(arc) * 2 * math.pi * args.surface_radius / args.spacing
+        names = "--surface-radius / --spacing"
+    else:
+        return
+    if count > MAX_TARGETS:
+        raise CLIError(f"{names}: the {args.layout} layout would hold about {count:.3g} targets, "
+                       f"more than {MAX_TARGETS}")
+
+
+def _check_visible(left, right, port, targets, radius: float, layout: str) -> None:
+    """CLIError unless some target lies wholly inside both images (in front of the cameras)."""
+    import numpy as np
+
+    from measure.projection import project
+
+    from synth.crosscheck import wholly_in_image
+
+    seen = np.ones(len(targets), dtype=bool)
+    for camera in (left, right):
+        uv = project(camera, port, targets)
+        seen &= wholly_in_image(camera, uv, targets, radius)
+    if not seen.any():
+        raise CLIError(f"--layout {layout}: none of the {len(targets)} targets is visible in both "
+                       f"views (move them with --z or make the layout smaller)")
+
+
+def _apparent_distance(port, depth_mm: float) -> float:
+    """The focus distance of a lens in air that images a point ``depth_mm`` along the axis
+    sharply: :meth:`measure.FlatPort.apparent_depth`, or ``depth_mm`` itself without a port."""
+    return depth_mm if port is None else port.apparent_depth(depth_mm)

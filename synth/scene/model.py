@@ -1,0 +1,112 @@
+"""What a scene file says, its error type and the defaults it is written with.
+
+Units: millimetres; frame: the reference frame (the left camera's, OpenCV axes: x right, y down,
+z forward). :mod:`synth.scene.write` writes scenes, :mod:`synth.scene.read` reads them back into
+a :class:`SceneSpec`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from measure import Camera, FlatPort, StereoRig
+
+#: Defaults written into every scene unless given.
+DEFAULT_SPP = 36
+DEFAULT_SEED = 0
+DEFAULT_MAX_DEPTH = 8
+#: Target disk radius, mm: at 1 m behind the paper's port the innermost circle's neighbours
+#: (7.6 mm apart, ~10.8 px) keep a ~3.7 px gap, and each disk covers ~40-50 px.
+DEFAULT_TARGET_RADIUS_MM = 2.5
+#: Prefix of the target shapes' ids.
+TARGET_ID_PREFIX = "target_"
+#: Id of the surface mesh shape of a dense (surface) scene, and of its speckle texture.
+SURFACE_ID, SPECKLE_ID = "surface", "speckle"
+
+
+@dataclass(frozen=True)
+class SurfaceFiles:
+    """The files of a surface scene, as the XML names them (relative to the scene file's
+    directory): ``mesh`` a PLY of :func:`synth.surfaces.write_ply`, ``texture`` an 8-bit grey
+    speckle PNG (linear reflectance, or radiance when self-luminous)."""
+
+    mesh: str
+    texture: str
+
+
+@dataclass(frozen=True)
+class SceneSurface:
+    """The surface of a scene read back: ``mesh_path`` and ``texture_path`` (resolved),
+    ``vertices`` ``(V, 3)`` mm (float32 values widened: what the renderer sees), ``triangles``
+    ``(T, 3)``, ``sha256`` of the mesh and texture bytes together."""
+
+    mesh_path: str
+    texture_path: str
+    vertices: np.ndarray
+    triangles: np.ndarray
+    sha256: str
+
+
+class SceneError(ValueError):
+    """A scene file that cannot be used: missing, malformed, or not a port/stereo scene."""
+
+
+@dataclass(frozen=True)
+class SceneSpec:
+    """What a scene file says, after ``<default>`` values and ``-D`` overrides are applied.
+
+    ``rig`` is a :class:`measure.StereoRig`. In a scene with no port (``has_port`` False) its port
+    is an index-matched stand-in: ``FlatPort(N = left optical axis, D = 1 mm beyond the farther
+    camera centre, no layers, indices (1, 1))``, through which every projection and triangulation
+    reduces to the pinhole one. ``targets`` ``(N, 3)`` ground-truth centres (mm, reference frame)
+    in target-number order; ``target_ids`` ``(N,)`` their numbers; ``target_radii`` ``(N,)`` mm;
+    ``target_normals`` ``(N, 3)`` the unit normals of the disks (their emitting side);
+    ``params`` the resolved ``<default>`` values (strings) ; ``path`` the file; ``sha256`` of its
+    bytes.
+    """
+
+    rig: StereoRig
+    has_port: bool
+    targets: np.ndarray
+    target_ids: np.ndarray
+    target_radii: np.ndarray
+    params: dict
+    path: str | None
+    sha256: str
+    referenced: frozenset = frozenset()
+    target_normals: np.ndarray | None = None
+    surface: SceneSurface | None = None
+
+    @property
+    def mitsuba_params(self) -> dict:
+        """The resolved defaults that the XML references as ``$name`` (Mitsuba's loader rejects
+        parameters a file does not use), as keyword arguments for ``mi.load_file``."""
+        return {k: str(v) for k, v in self.params.items() if k in self.referenced}
+
+    @property
+    def cameras(self) -> tuple[Camera, Camera]:
+        return self.rig.left, self.rig.right
+
+    @property
+    def port(self) -> FlatPort | None:
+        """The port, or None in an all-air scene."""
+        return self.rig.port if self.has_port else None
+
+    @property
+    def target_radius(self) -> float:
+        """The (largest) target radius, mm."""
+        return float(np.max(self.target_radii)) if self.target_radii.size else float("nan")
+
+    @property
+    def size(self) -> tuple[int, int]:
+        return self.rig.left.size
+
+    @property
+    def spp(self) -> int:
+        return int(float(self.params.get("spp", DEFAULT_SPP)))
+
+    @property
+    def seed(self) -> int:
+        return int(float(self.params.get("seed", DEFAULT_SEED)))

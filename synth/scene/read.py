@@ -1,0 +1,335 @@
+"""Read the rig, the port and the ground-truth targets (or surface) back from a scene file.
+
+Reading back (:func:`load_scene`) uses Mitsuba's own parser (``mitsuba.parser.parse_file``:
+``<default>``, ``$name`` substitution and transforms composed in double precision, no plugin
+built), so the rig, port and targets live only in the scene file; units mm, reference frame (the
+left camera's, OpenCV axes). Conversions:
+``f = (W/2) / tan(fov/2)`` px (fov along x), ``cx = W/2 − 0.5 − ppx·W``,
+``cy = H/2 − 0.5 − ppy·H`` (Mitsuba's film pixel i covers [i, i+1); measured sign of the offset),
+``R = M[:3, :3]·diag(−1, −1, 1)``, ``t = M[:3, 3]`` for the sensor's ``to_world`` matrix ``M``.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+import os
+import re
+
+import numpy as np
+
+from measure import Camera, FlatPort, StereoRig
+from measure.port import index_matched_port
+from synth.scene.model import (SPECKLE_ID, SURFACE_ID, TARGET_ID_PREFIX, SceneError, SceneSpec,
+                               SceneSurface)
+from synth.scene.params import check_params, declared_defaults, override_defaults
+from synth.sensor import intrinsics_from_sensor, pose_from_to_world
+
+
+def _floats(text: str, what: str) -> np.ndarray:
+    """A parameter's list of numbers (separated by commas or spaces), all finite."""
+    try:
+        values = np.array([float(v) for v in re.split(r"[,\s]+", str(text).strip()) if v],
+                          dtype=float)
+    except ValueError:
+        raise SceneError(f"{what}: not a list of numbers: {text!r}") from None
+    if not np.all(np.isfinite(values)):
+        raise SceneError(f"{what}: not finite: {text!r}")
+    return values
+
+
+def _parse_with_mitsuba(path: str, params: dict, referenced, label: str):
+    """Mitsuba's own parser (``mitsuba.parser.parse_file``): ``$`` substitution, transforms
+    composed in double precision, references; no plugin is built."""
+    from synth.mitsuba_setup import import_mitsuba
+
+    mi, variant = import_mitsuba()
+    import mitsuba.parser as mp
+
+    config = mp.ParserConfig(variant)
+    used = {k: str(v) for k, v in params.items() if k in referenced}
+    try:
+        return mi, mp.parse_file(config, path, **used)
+    except RuntimeError as exc:
+        lines = [ln.strip() for ln in str(exc).splitlines() if ln.strip()]
+        message = re.sub(r"^\[[^\]]*\]\s*", "", " ".join(lines[:2]))
+        raise SceneError(f"{label}: Mitsuba cannot parse the scene: {message}") from None
+
+
+class _Nodes:
+    """The parsed scene graph: typed property access and child lookup by reference."""
+
+    def __init__(self, mi, state):
+        self.mi, self.state = mi, state
+        self.types = mi.Properties.Type
+        self.by_id = dict(state.id_to_index)
+
+    def children(self, node):
+        for key in node.props.keys():
+            kind = node.props.type(key)
+            if kind == self.types.ResolvedReference:
+                yield self.state.nodes[node.props[key].index()]
+            elif kind == self.types.Reference:
+                index = self.by_id.get(node.props[key].id())
+                if index is not None:
+                    yield self.state.nodes[index]
+
+    def child(self, node, object_type):
+        return next((c for c in self.children(node) if c.type == object_type), None)
+
+    def value(self, node, name, default, what):
+        props = node.props
+        if name not in props:
+            return default
+        try:
+            return props[name]
+        except (RuntimeError, TypeError):
+            raise SceneError(f"{what}: property {name!r} has an unsupported type") from None
+
+    def matrix(self, node) -> np.ndarray:
+        if "to_world" not in node.props:
+            return np.eye(4)
+        return np.array(node.props["to_world"].matrix, dtype=np.float64).reshape(4, 4)
+
+
+def _read_sensor(nodes: _Nodes, node, params, label) -> Camera:
+    ObjectType = nodes.mi.ObjectType
+    sid = node.props.id() or "?"
+    what = f"{label}: sensor {sid!r}"
+    if node.props.plugin_name() not in ("perspective", "thinlens"):
+        raise SceneError(f"{what}: type {node.props.plugin_name()!r}, expected 'perspective' "
+                         f"or 'thinlens'")
+    film = nodes.child(node, ObjectType.Film)
+    if film is None:
+        raise SceneError(f"{what}: no <film>")
+    try:
+        w = int(nodes.value(film, "width", 768, what))
+        h = int(nodes.value(film, "height", 576, what))
+    except (TypeError, ValueError):
+        raise SceneError(f"{what}: film width/height must be integers") from None
+    if w <= 0 or h <= 0:
+        raise SceneError(f"{what}: film size must be positive, got {w}x{h}")
+    if "fov" not in node.props:
+        raise SceneError(f"{what}: needs a 'fov' (focal_length is not supported)")
+    fov = float(nodes.value(node, "fov", 0.0, what))
+    if not 0 < fov < 180:
+        raise SceneError(f"{what}: fov must lie in (0, 180) degrees, got {fov}")
+    axis = str(nodes.value(node, "fov_axis", "x", what))
+    if axis not in ("x", "y"):
+        raise SceneError(f"{what}: fov_axis {axis!r} is not supported (use x or y)")
+    K = intrinsics_from_sensor(fov, axis,
+                               float(nodes.value(node, "principal_point_offset_x", 0.0, what)),
+                               float(nodes.value(node, "principal_point_offset_y", 0.0, what)),
+                               (w, h))
+    R, t = pose_from_to_world(nodes.matrix(node))
+    if not np.allclose(R @ R.T, np.eye(3), atol=1e-9) or np.linalg.det(R) < 0:
+        raise SceneError(f"{what}: to_world must be a rigid motion (no scale or shear)")
+    dist = None
+    if f"{sid}_dist" in params:
+        dist = _floats(params[f"{sid}_dist"], f"{label}: parameter {sid}_dist")
+        if dist.size not in (4, 5, 8):
+            raise SceneError(f"{label}: parameter {sid}_dist must hold 4, 5 or 8 OpenCV "
+                             f"distortion coefficients, got {dist.size}")
+    try:
+        return Camera(K, (w, h), dist=dist, R=_orthonormalize(R), t=t)
+    except ValueError as exc:
+        raise SceneError(f"{what}: {exc}") from None
+
+
+def _orthonormalize(R: np.ndarray) -> np.ndarray:
+    u, _, vt = np.linalg.svd(R)
+    return u @ vt
+
+
+def _read_shapes(nodes: _Nodes, label: str):
+    """``(interfaces, targets)`` of the parsed scene: interfaces ``(id, normal towards the
+    cameras' side reversed, centre, ext_ior, int_ior)``; targets ``(number, centre, radius,
+    normal)``; surfaces ``(id, mesh filename as written, texture filename or None)``."""
+    ObjectType = nodes.mi.ObjectType
+    interfaces, targets, surfaces = [], [], []
+    for node in nodes.state.nodes:
+        if node.type != ObjectType.Shape:
+            continue
+        sid = node.props.id() or ""
+        kind = node.props.plugin_name()
+        what = f"{label}: shape {sid!r}"
+        M = nodes.matrix(node)
+        if sid == SURFACE_ID or kind in ("ply", "obj"):
+            if kind != "ply" or sid != SURFACE_ID:
+                raise SceneError(f"{what}: a surface must be the ply shape with id "
+                                 f"'{SURFACE_ID}' (written by python -m synth scene --layout "
+                                 f"surface), got a {kind!r} shape")
+            if not np.allclose(M, np.eye(4)):
+                raise SceneError(f"{what}: the surface mesh must have no to_world transform "
+                                 f"(its vertices are in the reference frame)")
+            surfaces.append((sid, str(nodes.value(node, "filename", "", what)),
+                             _texture_filename(nodes, what)))
+            continue
+        if nodes.child(node, ObjectType.Emitter) is not None or sid.startswith(TARGET_ID_PREFIX):
+            if kind != "disk":
+                raise SceneError(f"{what}: targets must be disks, got {kind!r}")
+            if not sid.startswith(TARGET_ID_PREFIX) or not sid[len(TARGET_ID_PREFIX):].isdigit():
+                raise SceneError(f"{what}: target ids must be '{TARGET_ID_PREFIX}<number>'")
+            radius = float(np.linalg.norm(M[:3, 0]))
+            normal_length = float(np.linalg.norm(M[:3, 2]))
+            if not (radius > 0 and normal_length > 0 and np.all(np.isfinite(M))):
+                raise SceneError(f"{what}: the target radius (its scale) must be positive")
+            targets.append((int(sid[len(TARGET_ID_PREFIX):]), M[:3, 3].copy(), radius,
+                            M[:3, 2] / normal_length))
+            continue
+        if kind != "rectangle":
+            raise SceneError(f"{what}: port interfaces must be rectangles, got {kind!r}")
+        bsdf = nodes.child(node, ObjectType.BSDF)
+        if bsdf is None or bsdf.props.plugin_name() != "dielectric":
+            found = "none" if bsdf is None else repr(bsdf.props.plugin_name())
+            raise SceneError(f"{what}: port interface BSDF is {found}, expected 'dielectric'")
+        iors = []
+        for name, default in (("ext_ior", 1.000277), ("int_ior", 1.5046)):  # Mitsuba's defaults
+            value = nodes.value(bsdf, name, default, what)
+            if not isinstance(value, (int, float)) or not math.isfinite(value) or value < 1:
+                raise SceneError(f"{what}: {name} must be a number >= 1 (named media such as "
+                                 f"'water' are not supported), got {value!r}")
+            iors.append(float(value))
+        normal = M[:3, 2] / np.linalg.norm(M[:3, 2])
+        interfaces.append((sid, -normal, M[:3, 3].copy(), iors[0], iors[1]))
+    return interfaces, targets, surfaces
+
+
+def _texture_filename(nodes: _Nodes, what: str) -> str | None:
+    """The filename of the speckle bitmap of the scene (None if there is none)."""
+    for node in nodes.state.nodes:
+        if node.type == nodes.mi.ObjectType.Texture and node.props.id() == SPECKLE_ID:
+            return str(nodes.value(node, "filename", "", what))
+    return None
+
+
+def _read_surface(surfaces, scene_path: str, label: str) -> SceneSurface:
+    """The scene's one surface, its files resolved next to the scene file and the mesh read."""
+    from synth.surfaces import read_ply
+
+    if len(surfaces) != 1:
+        raise SceneError(f"{label}: a surface scene holds exactly one surface, found "
+                         f"{len(surfaces)}")
+    _, mesh_name, texture_name = surfaces[0]
+    base = os.path.dirname(os.path.abspath(scene_path))
+    paths = []
+    for kind, name in (("mesh", mesh_name), ("speckle texture", texture_name)):
+        if not name:
+            raise SceneError(f"{label}: the surface has no {kind} file")
+        full = name if os.path.isabs(name) else os.path.join(base, name)
+        if not os.path.isfile(full):
+            raise SceneError(f"{label}: the surface's {kind} {name!r} does not exist "
+                             f"(looked for {os.path.relpath(full)})")
+        paths.append(full)
+    try:
+        vertices, triangles = read_ply(paths[0])
+    except (OSError, ValueError) as exc:
+        raise SceneError(f"{label}: surface mesh: {exc}") from None
+    digest = hashlib.sha256()
+    for full in paths:
+        with open(full, "rb") as handle:
+            digest.update(handle.read())
+    return SceneSurface(paths[0], paths[1], vertices, triangles, digest.hexdigest())
+
+
+def load_scene(path, defines: dict | None = None) -> SceneSpec:
+    """Read the rig, the port and the ground-truth targets from a scene file.
+
+    ``defines`` overrides ``<default>`` values like Mitsuba's ``-D`` (values as strings or
+    numbers); a name with no ``<default>`` in the file is an error. The file is parsed by
+    Mitsuba's own parser (``mitsuba.parser.parse_file``: ``$`` substitution, transforms composed
+    in double precision). Raises :class:`SceneError` (a ``ValueError``) with one line naming the
+    file for anything that makes the scene unusable.
+    """
+    path = os.fspath(path)
+    label = path
+    if os.path.isdir(path):
+        raise SceneError(f"{label}: is a directory, not a scene file")
+    try:
+        with open(path, "rb") as fh:
+            data = fh.read()
+    except OSError as exc:
+        raise SceneError(f"{label}: cannot read scene file ({exc.strerror or exc})") from None
+    params, referenced = declared_defaults(data, label)
+    override_defaults(params, defines, label)
+    check_params(params, label)
+    mi, state = _parse_with_mitsuba(path, params, referenced, label)
+    nodes = _Nodes(mi, state)
+
+    sensors = [n for n in state.nodes if n.type == mi.ObjectType.Sensor]
+    if len(sensors) < 2:
+        raise SceneError(f"{label}: a stereo scene needs two sensors (left, then right), "
+                         f"found {len(sensors)}")
+    left = _read_sensor(nodes, sensors[0], params, label)
+    right = _read_sensor(nodes, sensors[1], params, label)
+    if left.size != right.size:
+        raise SceneError(f"{label}: the two sensors have different film sizes")
+    interfaces, targets, surfaces = _read_shapes(nodes, label)
+    surface = _read_surface(surfaces, path, label) if surfaces else None
+    if surface is not None and targets:
+        raise SceneError(f"{label}: a scene holds targets or a surface, not both")
+
+    if not targets and surface is None:
+        raise SceneError(f"{label}: no targets (disk shapes with an area emitter, "
+                         f"or with ids '{TARGET_ID_PREFIX}<number>')")
+    targets.sort(key=lambda item: item[0])
+    ids = np.array([t[0] for t in targets], dtype=int)
+    if np.unique(ids).size != ids.size:
+        raise SceneError(f"{label}: duplicate target ids")
+    centres = np.array([t[1] for t in targets]).reshape(-1, 3)
+    radii = np.array([t[2] for t in targets], dtype=float)
+
+    has_port = bool(interfaces)
+    if not interfaces:
+        if params.get("port") != "none":
+            raise SceneError(f"{label}: no port (no dielectric rectangle); an all-air scene "
+                             f"must declare <default name=\"port\" value=\"none\"/>")
+        port = index_matched_port(left.R[:, 2], np.stack([left.center, right.center]))
+    else:
+        if params.get("port") == "none":
+            raise SceneError(f"{label}: port=none but the scene has port interfaces")
+        port = _port_from_interfaces(interfaces, label)
+    try:
+        rig = StereoRig(left, right, port)
+    except ValueError as exc:
+        raise SceneError(f"{label}: {exc}") from None
+    if surface is not None and has_port and not np.all(port.water_side(surface.vertices)):
+        raise SceneError(f"{label}: the surface mesh reaches out of the water (through the port)")
+    if has_port and not np.all(port.water_side(centres)):
+        bad = ids[~port.water_side(centres)]
+        raise SceneError(f"{label}: targets {bad[:5].tolist()} are not in the water")
+    normals = np.array([t[3] for t in targets]).reshape(-1, 3)
+    facing = normals @ port.normal
+    if np.any(facing >= 0):
+        bad = ids[facing >= 0]
+        raise SceneError(f"{label}: targets {bad[:5].tolist()} do not face the cameras")
+    return SceneSpec(rig=rig, has_port=has_port, targets=centres, target_ids=ids,
+                     target_radii=radii, params=params, path=path,
+                     sha256=(hashlib.sha256(data).hexdigest() if surface is None else
+                             hashlib.sha256(data + surface.sha256.encode()).hexdigest()),
+                     referenced=referenced, target_normals=normals, surface=surface)
+
+
+def _port_from_interfaces(interfaces, label) -> FlatPort:
+    normal = interfaces[0][1]
+    for sid, n, _, _, _ in interfaces:
+        if not np.allclose(n, normal, atol=1e-9):
+            raise SceneError(f"{label}: interface {sid!r} is not parallel to the others, or its "
+                             f"normal does not face the cameras like theirs")
+    offsets = np.array([normal @ c for _, _, c, _, _ in interfaces])
+    order = np.argsort(offsets)
+    interfaces = [interfaces[i] for i in order]
+    offsets = offsets[order]
+    if offsets[0] <= 0:  # the normal must point from the cameras (origin) into the water
+        raise SceneError(f"{label}: the port's interfaces must face the cameras (their "
+                         f"rectangle normals point back towards the cameras)")
+    indices = [interfaces[0][3]]
+    for k, (sid, _, _, ext, inner) in enumerate(interfaces):
+        if abs(ext - indices[-1]) > 1e-9:
+            raise SceneError(f"{label}: interface {sid!r} has ext_ior {ext} but the medium "
+                             f"before it has index {indices[-1]}")
+        indices.append(inner)
+    try:
+        return FlatPort(normal + 0.0, offsets[0], tuple(np.diff(offsets)), tuple(indices))
+    except ValueError as exc:
+        raise SceneError(f"{label}: {exc}") from None
