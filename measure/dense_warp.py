@@ -29,7 +29,7 @@ MODELS = ("refractive", "pinhole")
 #: (f in px): measured on the paper's rig, max 0.0020 px at step 8, f = 1100 px, both models.
 WARP_CURVATURE = 0.034
 #: The largest interpolation error (px) the default grid step aims at (see :func:`grid_step_for`);
-#: tests/test_dense.py measures the actual error against the exact map.
+#: tests/measure/test_dense.py measures the actual error against the exact map.
 WARP_ERROR_BUDGET_PX = 0.002
 #: Coarse nodes added beyond every image edge, so that interpolation never reaches a
 #: replicated border value inside the image.

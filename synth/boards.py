@@ -43,7 +43,7 @@ from synth.dataset import DatasetError, read_calib, write_calib
 from synth.fileio import OutputDir, atomic_write_json, read_marker
 from synth.integrator import RENDERER, integrator_name
 from synth.provenance import package_versions
-from synth.render import (check_render_request, load_mitsuba_scene, png16_scale, render_view,
+from synth.render import (check_render_request, png16_scale, render_view,
                           sensor_dict, to_png16, write_png)
 from synth.scene import SceneSpec, interface_placements
 

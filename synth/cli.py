@@ -31,7 +31,7 @@ class CLIError(Exception):
 class Parser(argparse.ArgumentParser):
     """ArgumentParser whose errors are one line ``error: …`` (no usage dump) and exit 2."""
 
-    def error(self, message):  # noqa: D401 - argparse API
+    def error(self, message):
         raise CLIError(message)
 
 

@@ -140,7 +140,7 @@ def read_calib(path) -> dict:
         return _read_calib(path)
     except DatasetError:
         raise
-    except (cv2.error, SystemError) as exc:  # OpenCV's parser: not YAML/XML FileStorage
+    except (cv2.error, SystemError):  # OpenCV's parser: not YAML/XML FileStorage
         raise DatasetError(f"{path}: not a valid OpenCV FileStorage calibration file") from None
     except (ValueError, TypeError, AttributeError) as exc:
         message = " ".join(str(exc).split()) or type(exc).__name__
@@ -447,7 +447,8 @@ def read_dataset(path) -> Dataset:
     try:
         pixels = read_pixels_csv(os.path.join(path, "pixels.csv"))
     except (OSError, ValueError) as exc:
-        raise DatasetError(f"{path}/pixels.csv: {exc.strerror if isinstance(exc, OSError) else exc}") from None
+        reason = exc.strerror if isinstance(exc, OSError) else exc
+        raise DatasetError(f"{path}/pixels.csv: {reason}") from None
     targets_path = os.path.join(path, "targets.ply")
     if not os.path.isfile(targets_path):
         raise DatasetError(f"{targets_path}: no such file")

@@ -31,7 +31,7 @@ class SpeckleTexture:
     cell_mm: float
 
     @classmethod
-    def random(cls, extent, speckle_mm: float, seed: int = 0) -> "SpeckleTexture":
+    def random(cls, extent, speckle_mm: float, seed: int = 0) -> SpeckleTexture:
         cell = speckle_mm / 5.0
         s0, s1, t0, t1 = extent
         shape = (int(np.ceil((t1 - t0) / cell)) + 1, int(np.ceil((s1 - s0) / cell)) + 1)
@@ -60,7 +60,7 @@ class PlaneSurface:
     normal: np.ndarray
 
     @classmethod
-    def create(cls, point, normal) -> "PlaneSurface":
+    def create(cls, point, normal) -> PlaneSurface:
         normal = np.asarray(normal, float)
         return cls(np.asarray(point, float), normal / np.linalg.norm(normal))
 
@@ -94,7 +94,7 @@ class CylinderSurface:
     radius: float
 
     @classmethod
-    def create(cls, axis_point, radius) -> "CylinderSurface":
+    def create(cls, axis_point, radius) -> CylinderSurface:
         return cls(np.asarray(axis_point, float), float(radius))
 
     def intersect(self, origins, directions):

@@ -149,7 +149,7 @@ class OutputDir:
         if not os.access(parent, os.W_OK | os.X_OK):
             self._refuse(f"cannot be replaced: {parent} is not writable")
 
-    def claim(self) -> "OutputDir":
+    def claim(self) -> OutputDir:
         """Check the rule and clear dead processes' staging directories; returns ``self``."""
         self.check()
         if os.path.isdir(os.path.dirname(self.path)):

@@ -122,7 +122,7 @@ def import_mitsuba(variant: str | None = None):
         chosen = _selected
     else:
         chosen = choose_variant(variant)
-    import mitsuba as mi  # noqa: E402  (after DRJIT_LIBLLVM_PATH is set)
+    import mitsuba as mi
 
     if chosen not in mi.variants():
         raise VariantError(f"Mitsuba variant {chosen!r} is not available; "

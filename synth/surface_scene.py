@@ -224,5 +224,6 @@ def write_surface_scene(out: str, args, left, right, port, **scene_options) -> s
         raise
     return (f"wrote {out}: {mesh.description}, {mesh.triangles.shape[0]} triangles "
             f"({os.path.basename(mesh_path)}), speckle {args.speckle_size:g} mm dots "
-            f"({np.min(dot_px):.1f}-{np.max(dot_px):.1f} px) at {args.speckle_coverage:g} coverage ({texture_file}), "
+            f"({np.min(dot_px):.1f}-{np.max(dot_px):.1f} px) at {args.speckle_coverage:g} coverage "
+            f"({texture_file}), "
             f"{'port' if port else 'no port'}, {left.size[0]}x{left.size[1]} px")

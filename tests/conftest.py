@@ -9,6 +9,7 @@ run is marked, and a render in an unmarked test fails it (:func:`_guard_renders`
 from __future__ import annotations
 
 import os
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -20,6 +21,9 @@ settings.register_profile("ci", deadline=None, max_examples=60,
                           suppress_health_check=[HealthCheck.too_slow])
 settings.load_profile("ci")
 
+
+#: The repository's root (the tests live in folders mirroring the packages below it).
+REPO = Path(__file__).resolve().parent.parent
 
 #: Whether the test now being set up, run or torn down is marked ``slow``.
 _CURRENT = {"slow": True, "name": ""}

@@ -20,8 +20,8 @@ from hypothesis import strategies as st
 
 from eval.cli import main as eval_main
 from synth.__main__ import main as synth_main
+from tests.conftest import REPO
 
-REPO = Path(__file__).resolve().parent.parent
 SMALL = ["-D", "width=320", "-D", "height=268", "--spp", "4", "--no-progress"]
 
 

@@ -295,7 +295,7 @@ def parse_spec(data: dict, base_dir: str, label: str) -> SweepSpec:
 
 
 def _read_scene(text: str, base_dir: str, label: str) -> Scene:
-    from synth.scene import SceneError, declared_defaults as _declared_defaults
+    from synth.scene import SceneError, declared_defaults
 
     path = text if os.path.isabs(text) else os.path.join(base_dir, text)
     try:
@@ -304,7 +304,7 @@ def _read_scene(text: str, base_dir: str, label: str) -> Scene:
     except OSError as exc:
         raise SpecError(f"{label}: scene {text}: cannot read it ({exc.strerror or exc})") from None
     try:
-        defaults, _ = _declared_defaults(data, text)
+        defaults, _ = declared_defaults(data, text)
     except SceneError as exc:
         raise SpecError(f"{label}: {exc}") from None
     try:
@@ -473,7 +473,7 @@ def expand(spec: SweepSpec, label: str) -> list:
     """The cells of the spec, in a fixed order: scene × grid × zip × random sample × repeat."""
     import numpy as np
 
-    from synth.scene import SceneError, check_params as _check_params
+    from synth.scene import SceneError, check_params
 
     grid_keys = list(spec.grid)
     grid_points = list(itertools.product(*(spec.grid[k] for k in grid_keys))) if grid_keys else [()]
@@ -509,7 +509,7 @@ def expand(spec: SweepSpec, label: str) -> list:
                     if signature not in checked:
                         merged = {**scene.defaults, **defines}
                         try:
-                            _check_params(merged, scene.label)
+                            check_params(merged, scene.label)
                         except SceneError as exc:
                             raise SpecError(f"{label}: {exc}") from None
                         checked[signature] = True

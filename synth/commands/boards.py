@@ -4,14 +4,16 @@ random poses behind the scene's port (or in air), :mod:`synth.boards`."""
 
 from __future__ import annotations
 
-from synth.cli import CLIError, non_negative_float, non_negative_int, positive_float, positive_int
+from synth.cli import (CLIError, add_define_option, add_out_option, add_progress_option,
+                       add_scene_argument, non_negative_float, non_negative_int, positive_float,
+                       positive_int)
 
 
 def add_parser(subparsers) -> None:
     p = subparsers.add_parser("boards",
                               help="render stereo pairs of a calibration board at random poses")
-    p.add_argument("scene", help="scene file whose cameras and port see the board")
-    p.add_argument("--out", required=True, help="output directory")
+    add_scene_argument(p)
+    add_out_option(p, "synth boards")
     p.add_argument("--poses", type=positive_int, default=None, help="number of poses (default 15)")
     p.add_argument("--board", choices=("chessboard", "charuco"), default="chessboard",
                    help="board kind (default chessboard)")
@@ -28,9 +30,8 @@ def add_parser(subparsers) -> None:
                    help="seed of the poses and the renderer (default 0)")
     p.add_argument("--air", action="store_true", help="the same cameras with no port (in air)")
     p.add_argument("--variant", help="Mitsuba variant (default: automatic)")
-    p.add_argument("-D", dest="defines", action="append", default=[], metavar="NAME=VALUE",
-                   help="override a <default> of the scene (repeatable)")
-    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    add_define_option(p)
+    add_progress_option(p)
 
 
 def main(args) -> int:
@@ -51,7 +52,7 @@ def main(args) -> int:
         spp=args.spp or b.DEFAULT_SPP, seed=args.seed, air=args.air,
         distance_range=tuple(args.distance) if args.distance else b.DEFAULT_DISTANCE_RANGE_MM,
         max_tilt_deg=b.DEFAULT_MAX_TILT_DEG if args.max_tilt is None else args.max_tilt,
-        variant=args.variant, progress=not args.quiet)
+        variant=args.variant, progress=not args.no_progress)
     if manifest.get("skipped"):
         print(f"{args.out}: up to date (same scene, board and options); nothing to do")
         return 0

@@ -6,7 +6,9 @@ from __future__ import annotations
 
 import json
 
-from synth.cli import positive_float
+import sys
+
+from synth.cli import add_json_option, positive_float
 
 
 def add_parser(subparsers) -> None:
@@ -15,7 +17,7 @@ def add_parser(subparsers) -> None:
     p.add_argument("dir", help="dataset directory")
     p.add_argument("--rms", type=positive_float, default=None, help="RMS bound, px (default 0.05)")
     p.add_argument("--max", type=positive_float, default=None, help="max bound, px (default 0.15)")
-    p.add_argument("--json", action="store_true", help="print the report as JSON")
+    add_json_option(p)
 
 
 def main(args) -> int:
@@ -29,25 +31,30 @@ def main(args) -> int:
 
     report = check_dataset(args.dir, rms_px=args.rms if args.rms is not None else CHECK_RMS_PX,
                            max_px=args.max if args.max is not None else CHECK_MAX_PX)
+    stream = sys.stderr if args.json else sys.stdout
+    for view in ("left", "right"):
+        r = report[view]
+        rej = ", ".join(f"{k} {v}" for k, v in r["rejected"].items() if v) or "none"
+        print(f"{view:5s}: found {r['found']}/{r['in_image']} in-image targets "
+                  f"({r['detected']} detections, {r['unmatched_detections']} unmatched; "
+              f"rejected {rej}); RMS {r['rms_px']:.4f} px, max {r['max_px']:.4f} px, "
+              f"mean offset ({r['mean_px'][0]:+.4f}, {r['mean_px'][1]:+.4f}) px"
+              + (f"; missed ids {r['missed'][:10]}" if r["missed"] else ""), file=stream)
+    b = report["bounds"]
+    print(f"both : RMS {report['rms_px']:.4f} px (<= {b['rms_px']}), max "
+          f"{report['max_px']:.4f} px (<= {b['max_px']}), all found: "
+          f"{'yes' if report['all_found'] else 'no'} -> "
+          f"{'PASS' if report['passed'] else 'FAIL'}", file=stream)
+    _print_json(args, report)
+    return 0 if report["passed"] else 1
+
+
+def _print_json(args, report) -> None:
+    """With ``--json``, the report as JSON on stdout."""
     if args.json:
         from synth.fileio import jsonable
 
         print(json.dumps(jsonable(report), indent=2))
-    else:
-        for view in ("left", "right"):
-            r = report[view]
-            rej = ", ".join(f"{k} {v}" for k, v in r["rejected"].items() if v) or "none"
-            print(f"{view:5s}: found {r['found']}/{r['in_image']} in-image targets "
-                  f"({r['detected']} detections, {r['unmatched_detections']} unmatched; "
-                  f"rejected {rej}); RMS {r['rms_px']:.4f} px, max {r['max_px']:.4f} px, "
-                  f"mean offset ({r['mean_px'][0]:+.4f}, {r['mean_px'][1]:+.4f}) px"
-                  + (f"; missed ids {r['missed'][:10]}" if r["missed"] else ""))
-        b = report["bounds"]
-        print(f"both : RMS {report['rms_px']:.4f} px (<= {b['rms_px']}), max "
-              f"{report['max_px']:.4f} px (<= {b['max_px']}), all found: "
-              f"{'yes' if report['all_found'] else 'no'} -> "
-              f"{'PASS' if report['passed'] else 'FAIL'}")
-    return 0 if report["passed"] else 1
 
 
 def _check_surface(args, data) -> int:
@@ -55,18 +62,15 @@ def _check_surface(args, data) -> int:
     from synth.truth_maps import check_truth_maps
 
     report = check_truth_maps(data)
-    if args.json:
-        from synth.fileio import jsonable
-
-        print(json.dumps(jsonable(report), indent=2))
-        return 0 if report["passed"] else 1
+    stream = sys.stderr if args.json else sys.stdout
     for view in ("left", "right"):
         r = report[view]
         print(f"{view:5s}: {r['valid_pixels']} pixels see the surface, {r['overlap_pixels']} of "
               f"them seen by the other camera too; truth points' Fermat projection to their "
               f"pixel centres: max {r['round_trip_max_px']:.2e} px; renderer lit "
               f"{r['lit_outside_surface']} pixels off the surface, left "
-              f"{r['black_on_surface']} on it black")
+              f"{r['black_on_surface']} on it black", file=stream)
     print(f"truth maps: max round trip <= {report['bound_px']:g} px -> "
-          f"{'PASS' if report['passed'] else 'FAIL'}")
+          f"{'PASS' if report['passed'] else 'FAIL'}", file=stream)
+    _print_json(args, report)
     return 0 if report["passed"] else 1

@@ -9,7 +9,7 @@ from synth.commands.common import add_render_options, scene_from_args
 
 def add_parser(subparsers) -> None:
     p = subparsers.add_parser("dataset", help="render and write a benchmark dataset, atomically")
-    add_render_options(p)
+    add_render_options(p, "synth dataset")
     p.add_argument("--sensor", metavar="PRESET[,name=value…]",
                    help="store the images as a camera sensor's raw codes (exposure, shot and "
                         "read noise, dark level, gain, bit depth; seeded): preset imx174; "
@@ -26,7 +26,7 @@ def main(args) -> int:
     except SensorError as exc:
         raise CLIError(f"--sensor {args.sensor}: {exc}") from None
     manifest = write_dataset(scene_from_args(args), args.out, spp=args.spp,
-                             variant=args.variant, exr=args.exr, progress=not args.quiet,
+                             variant=args.variant, exr=args.exr, progress=not args.no_progress,
                              sensor=sensor)
     if manifest.get("skipped"):
         print(f"{args.out}: up to date (same scene, parameters and options); nothing to do")

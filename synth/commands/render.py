@@ -12,7 +12,7 @@ from synth.commands.common import add_render_options, scene_from_args
 
 def add_parser(subparsers) -> None:
     p = subparsers.add_parser("render", help="render both views to 16-bit linear PNGs (+ previews)")
-    add_render_options(p)
+    add_render_options(p, "synth render")
 
 
 def main(args) -> int:
@@ -25,7 +25,7 @@ def main(args) -> int:
     spec = scene_from_args(args)
     t0 = time.perf_counter()
     left, right, info = render_stereo(spec, spp=args.spp, variant=args.variant,
-                                      progress=not args.quiet)
+                                      progress=not args.no_progress)
     scale = png16_scale(left, right)
     white = max(float(left.max()), float(right.max()))
     with output.staged() as tmp:

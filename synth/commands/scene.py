@@ -6,8 +6,8 @@ from __future__ import annotations
 
 import os
 
-from synth.cli import (CLIError, any_float, non_negative_float, non_negative_int, positive_float,
-                       positive_int)
+from synth.cli import (CLIError, add_out_option, any_float, non_negative_float, non_negative_int,
+                       positive_float, positive_int)
 
 #: The first comment of every scene file ``python -m synth scene`` writes.
 SCENE_COMMENT_PREFIX = "written by python -m synth scene"
@@ -25,7 +25,9 @@ def _coverage(text: str) -> float:
 def add_parser(subparsers) -> None:
     p = subparsers.add_parser("scene",
                               help="write a Mitsuba scene of the rig, the port and targets")
-    p.add_argument("--out", required=True, help="scene file to write (.xml)")
+    add_out_option(p, "synth scene", what="file",
+                   rule="the scene (.xml); an existing file is replaced only if python -m synth "
+                        "scene wrote it")
     p.add_argument("--layout", choices=("paper", "grid", "random", "tilted", "cylinder", "sphere",
                                         "surface"),
                    default="paper",

@@ -324,7 +324,7 @@ def _port_from_interfaces(interfaces, label) -> FlatPort:
         raise SceneError(f"{label}: the port's interfaces must face the cameras (their "
                          f"rectangle normals point back towards the cameras)")
     indices = [interfaces[0][3]]
-    for k, (sid, _, _, ext, inner) in enumerate(interfaces):
+    for sid, _, _, ext, inner in interfaces:
         if abs(ext - indices[-1]) > 1e-9:
             raise SceneError(f"{label}: interface {sid!r} has ext_ior {ext} but the medium "
                              f"before it has index {indices[-1]}")

@@ -264,7 +264,7 @@ def scene_xml(cameras, port: FlatPort | None, targets, target_radius: float, *,
         parts.append("</scene>\n")
         return "\n".join(parts)
     if lighting == "led":
-        parts.append(f"""
+        parts.append("""
     <bsdf type="diffuse" id="target_back">
         <rgb name="reflectance" value="0"/>
     </bsdf>""")

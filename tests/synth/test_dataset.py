@@ -15,8 +15,8 @@ from synth.dataset import PIXELS_HEADER, read_dataset, stereo_extrinsics, write_
 from measure.projection import project
 from synth.scene import load_scene
 
-from .conftest import SMALL_SCENE_SIZE as SMALL
-from .conftest import SMALL_SCENE_SPP as SPP
+from tests.conftest import SMALL_SCENE_SIZE as SMALL
+from tests.conftest import SMALL_SCENE_SPP as SPP
 
 
 @pytest.fixture(scope="module")

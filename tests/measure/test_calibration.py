@@ -63,7 +63,7 @@ def test_housing_bundle_adjustment_recovers_a_tilted_port():
         assert abs(error @ axis) < 3 * sigma
     # the 2D RMS of the noise, σ·√2 = 0.0707 px, times √(1 − unknowns / residuals) = 0.989
     assert abs(fit.rms_px / (0.05 * np.sqrt(2) * np.sqrt(1 - 75 / 3360)) - 1) < 0.05
-    for (R, t), pose in zip(fit.poses, poses):
+    for (_, t), pose in zip(fit.poses, poses):
         assert np.linalg.norm(t - pose.t) < 1.0
 
 
@@ -150,7 +150,7 @@ def test_housing_analytic_jacobian_matches_finite_differences():
                                      rng.normal(0, 2e-3, 3), rng.normal(0, 0.3, 3),
                                      rng.normal(0, [2e-3] * 3 + [1.0] * 3, (problem.P, 6)).ravel()])
     analytic = problem.jacobian(x).toarray()
-    # steps as in tests/test_jacobian.py: 1e-3 mm, 1e-6 rad, 1e-4 for the index
+    # steps as in tests/measure/test_jacobian.py: 1e-3 mm, 1e-6 rad, 1e-4 for the index
     steps = np.concatenate([[1e-3, 1e-6, 1e-6, 1e-3, 1e-4], [1e-6] * 3, [1e-3] * 3,
                             np.tile([1e-6] * 3 + [1e-3] * 3, problem.P)])
     numeric = approx_derivative(problem.residuals, x, method="3-point", abs_step=steps)

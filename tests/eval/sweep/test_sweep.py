@@ -22,8 +22,8 @@ import pytest
 from eval.cli import main
 from eval.sweep.command import TIMING_COLUMNS
 from eval.sweep.spec import SpecError, load_spec
+from tests.conftest import REPO
 
-REPO = Path(__file__).resolve().parent.parent
 BIN = Path(sys.executable).parent
 
 #: 16 cells: 8 render (eval run) and 8 analytic; the render cells with a matching gate of

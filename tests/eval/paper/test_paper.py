@@ -9,7 +9,6 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -20,8 +19,8 @@ from eval import cli
 from eval.paper.experiments import run_experiments
 from synth.noise import add_pixel_noise, deviate_port, pixel_noise
 from synth.rig import paper_port
+from tests.conftest import REPO
 
-REPO = Path(__file__).resolve().parents[1]
 FIGURES = ("figure4_gap.png", "figure5_su_1m.png", "figure6_su_2m.png",
            "figure7_noise_maps.png", "figure8_noise_hist.png", "figure9_index_maps.png",
            "figure10_index_hist.png", "figure11_index_profile.png")

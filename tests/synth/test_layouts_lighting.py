@@ -17,7 +17,7 @@ from measure.detect import detect_targets
 from measure.projection import project
 from synth import layouts
 from synth.crosscheck import associate_detections
-from synth.render import develop_image as _develop, load_mitsuba_scene, render_view
+from synth.render import develop_image, load_mitsuba_scene, render_view
 from synth.rig import paper_cameras, paper_port
 from synth.scene import LIGHT_INTENSITY, LIT_TARGET_ALBEDO, light_placements, load_scene, write_scene
 from synth.water import PRESETS
@@ -129,7 +129,7 @@ def test_lit_renders_agree_with_mitsubas_own_integrators(lit_scenes, water):
     mscene, mi, _ = load_mitsuba_scene(spec)
     spp = 64 if water == "clear" else 32  # Mitsuba's volpath is slow here; its spread counts
     ours = [render_view(mscene, mi, 0, spec.rig.left, spp, 10 * s).sum() for s in range(3)]
-    theirs = [_develop(mi, mi.render(mscene, sensor=0, spp=spp, seed=s)).sum() for s in range(3)]
+    theirs = [develop_image(mi, mi.render(mscene, sensor=0, spp=spp, seed=s)).sum() for s in range(3)]
     sem = np.sqrt(np.var(ours, ddof=1) / 3 + np.var(theirs, ddof=1) / 3)
     assert abs(np.mean(ours) - np.mean(theirs)) < 4 * sem + 2e-3 * np.mean(theirs), (ours, theirs)
 

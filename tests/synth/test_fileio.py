@@ -11,6 +11,7 @@ import pytest
 
 from synth.fileio import (MARKER_NAME, OutputDir, OutputError, atomic_write_json,
                           check_file_output, read_marker, remove_stale_staging)
+from tests.conftest import REPO
 
 
 def _write(out, command="eval run", files=("a.txt",)):
@@ -89,7 +90,7 @@ def test_stale_staging_of_a_killed_process_is_removed(tmp_path):
             "with OutputDir(sys.argv[1], 'eval run').staged() as tmp:\n"
             "    open(tmp + '/partial.txt', 'w').write('x'); print('staged', flush=True);"
             " time.sleep(60)\n")
-    repo = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    repo = str(REPO)
     proc = subprocess.Popen([sys.executable, "-c", code, str(out), repo], stdout=subprocess.PIPE,
                             text=True)
     assert proc.stdout.readline().strip() == "staged"

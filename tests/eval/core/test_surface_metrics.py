@@ -16,7 +16,7 @@ from eval.core.surface_metrics import (SurfaceCase, fit_plane, mesh_is_planar, s
                                   surface_arrays, surface_table)
 from synth.fileio import jsonable
 
-from .conftest import rotation
+from tests.conftest import rotation
 
 Z0 = 1000.0  # mm: the surfaces sit 1 m in front of the left camera
 # Float64 arithmetic on coordinates of ~1000 mm: one ulp is 1.1e-13 mm, and the per-pixel

@@ -14,7 +14,7 @@ from measure.detect import detect_targets
 from measure.projection import solve_paths
 from synth.crosscheck import associate_detections
 from synth.layouts import grid_plane
-from synth.render import develop_image as _develop, load_mitsuba_scene, render_view
+from synth.render import develop_image, load_mitsuba_scene, render_view
 from synth.rig import paper_cameras, paper_port
 from synth.scene import SceneError, load_scene, write_scene
 from synth.water import PRESETS
@@ -67,7 +67,7 @@ def test_scattering_agrees_with_mitsubas_volpath(coastal_scene):
     spec = load_scene(coastal_scene)
     mscene, mi, _ = load_mitsuba_scene(spec)
     ours = [render_view(mscene, mi, 0, spec.rig.left, 128, 10 * s).sum() for s in range(3)]
-    theirs = [_develop(mi, mi.render(mscene, sensor=0, spp=128, seed=s)).sum()
+    theirs = [develop_image(mi, mi.render(mscene, sensor=0, spp=128, seed=s)).sum()
               for s in range(3)]
     clear = load_scene(coastal_scene, {"water_c": "0"})
     mclear, _, _ = load_mitsuba_scene(clear)

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -12,8 +11,9 @@ from measure import Camera, FlatPort
 from synth.layouts import paper_plane, random_volume
 from synth.rig import paper_cameras, paper_port, paper_rig
 from synth.scene import SceneError, load_scene, parse_defines, write_scene
+from tests.conftest import REPO
 
-ROOT = Path(__file__).resolve().parents[1]
+
 SCENES = ["paper_plane.xml", "paper_plane_2m.xml", "air_plane.xml"]
 SMALL = (320, 268)
 
@@ -78,7 +78,7 @@ def test_air_scene_has_index_matched_stand_in_port(tmp_path):
 
 
 def test_defines_override_defaults(tmp_path):
-    spec = load_scene(ROOT / "scenes" / "paper_plane.xml",
+    spec = load_scene(REPO / "scenes" / "paper_plane.xml",
                       parse_defines(["n_water=1.34", "width=320", "height=268", "target_z=1500",
                                      "spp=4", "target_radius=5", "left_dist=-0.1 0.01 0 0 0"]))
     small = paper_rig(size=SMALL)
@@ -89,14 +89,14 @@ def test_defines_override_defaults(tmp_path):
     np.testing.assert_allclose(spec.rig.left.dist, [-0.1, 0.01, 0, 0, 0])
     assert spec.rig.right.dist is None
     with pytest.raises(SceneError, match="unknown parameter -D water"):
-        load_scene(ROOT / "scenes" / "paper_plane.xml", {"water": "1.3"})
+        load_scene(REPO / "scenes" / "paper_plane.xml", {"water": "1.3"})
     with pytest.raises(SceneError, match="malformed -D"):
         parse_defines(["n_water"])
 
 
 @pytest.mark.parametrize("name", SCENES)
 def test_committed_scenes_match_the_paper_rig(name):
-    spec = load_scene(ROOT / "scenes" / name)
+    spec = load_scene(REPO / "scenes" / name)
     rig = paper_rig(in_air=(name == "air_plane.xml"))
     _assert_camera_equal(spec.rig.left, rig.left)
     _assert_camera_equal(spec.rig.right, rig.right)
@@ -112,7 +112,7 @@ def test_mitsuba_loads_committed_scenes_and_agrees(name):
     from synth.mitsuba_setup import import_mitsuba
 
     mi, _ = import_mitsuba()
-    path = ROOT / "scenes" / name
+    path = REPO / "scenes" / name
     scene = mi.load_file(str(path))  # Mitsuba's own loader, its own defaults, no plugin of ours
     spec = load_scene(path)
     assert len(scene.sensors()) == 2
@@ -137,20 +137,20 @@ def _xml(tmp_path, text, name="bad.xml"):
 
 
 def _edit(tmp_path, old, new, name="edited.xml"):
-    small = (ROOT / "scenes" / "paper_plane.xml").read_text()
+    small = (REPO / "scenes" / "paper_plane.xml").read_text()
     assert old in small
     return _xml(tmp_path, small.replace(old, new, 1), name)
 
 
 def _one_sensor(tmp_path):
-    text = (ROOT / "scenes" / "paper_plane.xml").read_text()
+    text = (REPO / "scenes" / "paper_plane.xml").read_text()
     start = text.index('    <sensor type="perspective" id="right">')
     end = text.index("</sensor>", start) + len("</sensor>")
     return _xml(tmp_path, text[:start] + text[end:], "one.xml")
 
 
 def _no_port(tmp_path):
-    text = (ROOT / "scenes" / "paper_plane.xml").read_text()
+    text = (REPO / "scenes" / "paper_plane.xml").read_text()
     while '<shape type="rectangle"' in text:
         start = text.index('    <shape type="rectangle"')
         end = text.index("</shape>", start) + len("</shape>")
@@ -182,7 +182,7 @@ def test_bad_scenes_raise_scene_error(tmp_path, case):
 def test_cli_bad_input_exit_code_2_and_one_line(tmp_path, capsys, case):
     from synth.__main__ import main
 
-    scene = str(ROOT / "scenes" / "paper_plane.xml")
+    scene = str(REPO / "scenes" / "paper_plane.xml")
     if case == "unknown -D":
         argv = ["render", scene, "--out", str(tmp_path / "o"), "-D", "n_glass=1.5"]
     elif case == "bad -D":

@@ -7,7 +7,7 @@ import pytest
 from measure import Camera, FlatPort, StereoRig
 from synth.rig import paper_intrinsics, paper_port
 
-from .conftest import rotation
+from tests.conftest import rotation
 
 K = paper_intrinsics()
 SIZE = (2448, 2048)

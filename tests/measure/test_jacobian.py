@@ -23,7 +23,7 @@ from measure.projection import ParameterJacobian, project, solve_paths
 from measure.selfcal import tilt_basis
 from synth.layouts import paper_plane
 
-from .test_geometry import rigs_and_points
+from tests.measure.test_geometry import rigs_and_points
 
 TOLERANCE = 1e-6
 LENGTH_STEP, INDEX_STEP, ANGLE_STEP = 1e-3, 1e-4, 1e-6

@@ -11,14 +11,15 @@ from measure import (Camera, FlatPort, Reason, StereoRig, intersect_plane, refra
 from synth.layouts import paper_plane
 from measure.projection import project, solve_paths
 
-from .conftest import rotation
+from tests.conftest import rotation
 
 
 def random_rig(draw, distorted: bool):
     """A random stereo rig behind a random (tilted, 0-3 layer) port, and points both cameras see."""
     f = draw(st.floats(600, 2000))
     size = (1280, 1024)
-    K = np.array([[f, 0, 639.5 + draw(st.floats(-20, 20))], [0, f, 511.5 + draw(st.floats(-20, 20))], [0, 0, 1]])
+    K = np.array([[f, 0, 639.5 + draw(st.floats(-20, 20))],
+                  [0, f, 511.5 + draw(st.floats(-20, 20))], [0, 0, 1]])
     dist = None
     if distorted:
         dist = np.array([draw(st.floats(-0.25, 0.15)), draw(st.floats(-0.05, 0.05)),
@@ -26,9 +27,11 @@ def random_rig(draw, distorted: bool):
                          draw(st.floats(-0.02, 0.02))])
     baseline = draw(st.floats(80, 400))
     toe = draw(st.floats(0, np.deg2rad(8)))
-    left = Camera(K, size, dist, R=rotation(draw(st.floats(-0.05, 0.05)), draw(st.floats(-0.05, 0.05)), 0),
+    left = Camera(K, size, dist,
+                  R=rotation(draw(st.floats(-0.05, 0.05)), draw(st.floats(-0.05, 0.05)), 0),
                   t=(draw(st.floats(-10, 10)), draw(st.floats(-10, 10)), draw(st.floats(-10, 10))))
-    right = Camera(K, size, dist, R=rotation(draw(st.floats(-0.05, 0.05)), -toe, draw(st.floats(-0.05, 0.05))),
+    right = Camera(K, size, dist,
+                   R=rotation(draw(st.floats(-0.05, 0.05)), -toe, draw(st.floats(-0.05, 0.05))),
                    t=(baseline, draw(st.floats(-20, 20)), draw(st.floats(-20, 20))))
     n_layers = draw(st.integers(0, 3))
     tilt = rotation(draw(st.floats(-0.25, 0.25)), draw(st.floats(-0.25, 0.25)), 0)
@@ -123,7 +126,8 @@ def test_snell_invariant_at_every_interface(data):
         assert np.max(np.abs(invariant - invariant[0])[:, conditioned], initial=0.0) < 1e-12
         # Each refraction point lies on its interface plane ...
         np.testing.assert_allclose(paths.interface_points[:, ok] @ normal,
-                                   np.broadcast_to(rig.port.offsets[:, None], (rig.port.n_interfaces, ok.sum())),
+                                   np.broadcast_to(rig.port.offsets[:, None],
+                                                   (rig.port.n_interfaces, ok.sum())),
                                    atol=1e-9)
         # ... and incoming ray, normal and outgoing ray are coplanar.
         plane_normals = np.cross(directions[:-1], directions[1:])
