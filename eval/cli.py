@@ -18,8 +18,8 @@ from __future__ import annotations
 import importlib
 import sys
 
-from synth.cli import (CLIError, Parser, non_negative_float, non_negative_int, positive_float,
-                       positive_int, run_command)
+from synth.cli import (CLIError, Parser, command_parser, non_negative_float, non_negative_int,
+                       positive_float, positive_int, run_command)
 
 #: The module of each subcommand, in the order ``--help`` lists them.
 SUBCOMMANDS = ("eval.run.command", "eval.score", "eval.paper.command", "eval.sweep.command",
@@ -27,17 +27,10 @@ SUBCOMMANDS = ("eval.run.command", "eval.score", "eval.paper.command", "eval.swe
 
 
 def build_parser() -> Parser:
-    parser = Parser(prog="python -m eval",
-                    description="Underwater refractive stereo: experiments, evaluation, reports.")
-    subparsers = parser.add_subparsers(dest="command", metavar="command", required=True,
-                                       parser_class=Parser)
-    for name in SUBCOMMANDS:
-        module = importlib.import_module(name)
-        before = set(subparsers.choices)
-        module.add_parser(subparsers)
-        for added in set(subparsers.choices) - before:
-            subparsers.choices[added].set_defaults(_main=module.main)
-    return parser
+    """The parser of ``python -m eval``: one subparser per module of :data:`SUBCOMMANDS`."""
+    return command_parser("python -m eval",
+                          "Underwater refractive stereo: experiments, evaluation, reports.",
+                          [importlib.import_module(name) for name in SUBCOMMANDS])
 
 
 def main(argv=None) -> int:

@@ -127,6 +127,21 @@ def add_json_option(parser) -> None:
     parser.add_argument("--json", action="store_true", help=JSON_HELP)
 
 
+def command_parser(prog: str, description: str, modules) -> Parser:
+    """The parser of a command line with one subcommand per module of ``modules`` (in ``--help``
+    order): each module's ``add_parser(subparsers)`` adds its subparser, whose ``main(args)``
+    :func:`run_command` runs."""
+    parser = Parser(prog=prog, description=description)
+    subparsers = parser.add_subparsers(dest="command", metavar="command", required=True,
+                                       parser_class=Parser)
+    for module in modules:
+        before = set(subparsers.choices)
+        module.add_parser(subparsers)
+        for added in set(subparsers.choices) - before:
+            subparsers.choices[added].set_defaults(_main=module.main)
+    return parser
+
+
 def one_line(message) -> str:
     """``message`` as one line (whitespace, including newlines, collapsed)."""
     return " ".join(str(message).split())
@@ -165,5 +180,5 @@ def run_command(parser: argparse.ArgumentParser, argv=None) -> int:
 __all__ = ["CLIError", "DEFINE_HELP", "EXIT_BAD_INPUT", "EXIT_CHECK_FAILED", "EXIT_INTERRUPTED",
            "EXIT_OK", "JSON_HELP", "NO_PROGRESS_HELP", "Parser", "SCENE_HELP", "add_define_option",
            "add_json_option", "add_out_option", "add_progress_option", "add_scene_argument",
-           "any_float", "finite_float", "int_at_least", "non_negative_float", "non_negative_int",
-           "one_line", "positive_float", "positive_int", "run_command"]
+           "any_float", "command_parser", "finite_float", "int_at_least", "non_negative_float",
+           "non_negative_int", "one_line", "positive_float", "positive_int", "run_command"]

@@ -50,13 +50,40 @@ def dataset_template(tmp_path_factory, small_scene):
 
 
 @pytest.fixture
-def workdir(tmp_path, monkeypatch, dataset_template):
-    """A fresh directory with ``paper_plane.xml``, ``small.xml`` and a dataset ``ds``."""
+def workdir(tmp_path, monkeypatch, small_scene):
+    """A fresh directory with ``paper_plane.xml`` and ``small.xml`` (add the dataset ``ds``
+    with :func:`_add_dataset`)."""
     shutil.copy(REPO / "scenes" / "paper_plane.xml", tmp_path / "paper_plane.xml")
-    shutil.copy(dataset_template / "small.xml", tmp_path / "small.xml")
-    shutil.copytree(dataset_template / "ds", tmp_path / "ds")
+    shutil.copy(small_scene, tmp_path / "small.xml")
     monkeypatch.chdir(tmp_path)
     return tmp_path
+
+
+#: Setups that damage the dataset ``ds``.
+DATASET_SETUPS = ("garbage_calib", "no_left_png", "bad_manifest")
+#: Cases that render before they are refused (nothing matched in the images).
+RENDERING = ("max_depth=0", "3000,4000", "target_radius=0")
+
+
+def _needs_dataset(setup, argv) -> bool:
+    return setup in DATASET_SETUPS or any(a == "ds" or a.startswith("ds/") for a in argv)
+
+
+def _add_dataset(workdir: Path, request) -> None:
+    """Copy the rendered dataset ``ds`` (of ``small.xml``) into ``workdir``."""
+    shutil.copytree(request.getfixturevalue("dataset_template") / "ds", workdir / "ds")
+
+
+def _cases(cases):
+    """pytest params of ``(setup, argv, fragment)`` cases; those that need the rendered
+    dataset or render themselves are marked ``slow``."""
+    params = []
+    for setup, argv, fragment in cases:
+        slow = _needs_dataset(setup, argv) or any(r in argv_part for argv_part in argv
+                                                  for r in RENDERING)
+        params.append(pytest.param(setup, argv, fragment, marks=[pytest.mark.slow] if slow else [],
+                                   id=" ".join(argv)[:70] + (f" [{setup}]" if setup else "")))
+    return params
 
 
 def _prepare(workdir: Path, setup: str | None):
@@ -238,18 +265,20 @@ SYNTH_CASES = [
 SYNTH_CASES[16] = (None, ["scene", "--out", "small_copy_foreign.xml"], "not a file this command wrote")
 
 
-@pytest.mark.parametrize("setup, argv, fragment", EVAL_CASES,
-                         ids=[" ".join(a)[:70] + (f" [{s}]" if s else "") for s, a, _ in EVAL_CASES])
-def test_eval_bad_input(workdir, capsys, setup, argv, fragment):
+@pytest.mark.parametrize("setup, argv, fragment", _cases(EVAL_CASES))
+def test_eval_bad_input(workdir, capsys, request, setup, argv, fragment):
+    if _needs_dataset(setup, argv):
+        _add_dataset(workdir, request)
     _prepare(workdir, setup)
     before = snapshot(workdir)
     code = eval_main(list(argv))
     _assert_refused(code, capsys, before, workdir, fragment)
 
 
-@pytest.mark.parametrize("setup, argv, fragment", SYNTH_CASES,
-                         ids=[" ".join(a)[:70] + (f" [{s}]" if s else "") for s, a, _ in SYNTH_CASES])
-def test_synth_bad_input(workdir, capsys, setup, argv, fragment):
+@pytest.mark.parametrize("setup, argv, fragment", _cases(SYNTH_CASES))
+def test_synth_bad_input(workdir, capsys, request, setup, argv, fragment):
+    if _needs_dataset(setup, argv):
+        _add_dataset(workdir, request)
     _prepare(workdir, setup)
     (workdir / "small_copy_foreign.xml").write_text("<scene version='3.0.0'/>\n")
     before = snapshot(workdir)
@@ -257,9 +286,11 @@ def test_synth_bad_input(workdir, capsys, setup, argv, fragment):
     _assert_refused(code, capsys, before, workdir, fragment)
 
 
-def test_earlier_output_is_replaced_and_stale_staging_removed(workdir, capsys):
+@pytest.mark.slow
+def test_earlier_output_is_replaced_and_stale_staging_removed(workdir, capsys, request):
     """Positive control: a second run over its own output succeeds; a staging directory of a
     dead process (PID 999999 does not exist here) is cleaned up by the next run."""
+    _add_dataset(workdir, request)
     argv = ["run", "small.xml", "--out", "out", "--from", "ds", "--methods", "optical_path",
             "--no-progress"]
     assert eval_main(argv) == 0
@@ -272,7 +303,9 @@ def test_earlier_output_is_replaced_and_stale_staging_removed(workdir, capsys):
     assert names == sorted(["ds", "out", "paper_plane.xml", "small.xml"])
 
 
-def test_from_dataset_with_its_own_parameters_runs(workdir):
+@pytest.mark.slow
+def test_from_dataset_with_its_own_parameters_runs(workdir, request):
+    _add_dataset(workdir, request)
     assert eval_main(["run", "small.xml", "--from", "ds", "--out", "out", "-D", "width=320",
                       "--methods", "optical_path", "--no-progress"]) == 0
 
@@ -311,6 +344,7 @@ NUMBERS = st.one_of(st.floats(allow_nan=True, allow_infinity=True).map(repr), BA
                     st.text(max_size=5))
 
 
+@pytest.mark.slow
 @settings(max_examples=25, deadline=None)
 @given(defines=st.dictionaries(
     st.sampled_from(["width", "height", "n_water", "target_radius", "target_z", "max_depth",

@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import sys
 
-from synth.cli import Parser, run_command
+from synth.cli import Parser, command_parser, run_command
 from synth.commands import boards, check, dataset, render, scene
 
 PROG = "python -m synth"
@@ -40,15 +40,8 @@ COMMANDS = (scene, render, dataset, boards, check)
 def build_parser() -> Parser:
     """The parser of ``python -m synth``: one subparser per module of :data:`COMMANDS`, whose
     ``main`` it runs."""
-    parser = Parser(prog=PROG, description="Mitsuba scenes and datasets of a stereo rig "
-                                           "behind a flat port (units mm).")
-    subparsers = parser.add_subparsers(dest="command", required=True, parser_class=Parser)
-    for command in COMMANDS:
-        before = set(subparsers.choices)
-        command.add_parser(subparsers)
-        for added in set(subparsers.choices) - before:
-            subparsers.choices[added].set_defaults(_main=command.main)
-    return parser
+    return command_parser(PROG, "Mitsuba scenes and datasets of a stereo rig behind a flat port "
+                                "(units mm).", COMMANDS)
 
 
 def main(argv=None) -> int:

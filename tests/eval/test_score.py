@@ -26,6 +26,7 @@ def scored_run(small_scene, tmp_path_factory):
     return data, run, json.loads((run / "report.json").read_text())
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("method, gate", [("optical_path", []), ("su", ["--gate-mm", "40"])])
 def test_scoring_a_runs_own_points_reproduces_its_numbers(scored_run, tmp_path, method, gate):
     """Su's errors (up to ~5 mm here) exceed the default gate (half the 80 mm spacing is
@@ -48,6 +49,7 @@ def test_scoring_a_runs_own_points_reproduces_its_numbers(scored_run, tmp_path, 
         assert (out / name).stat().st_size > 200
 
 
+@pytest.mark.slow
 def test_matched_pixels_are_triangulated_with_the_datasets_calibration(scored_run, tmp_path):
     data, _, _ = scored_run
     rows = list(csv.DictReader(open(data / "pixels.csv")))
@@ -80,6 +82,7 @@ def _fails(capsys, args, fragment):
     assert len(err) == 1 and err[0].startswith("error:") and fragment in err[0], err
 
 
+@pytest.mark.slow
 def test_bad_input_exits_2_and_writes_nothing(scored_run, tmp_path, capsys):
     data, _, _ = scored_run
     out = tmp_path / "out"

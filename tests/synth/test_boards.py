@@ -20,6 +20,9 @@ from synth.dataset import read_calib
 from synth.rig import paper_cameras
 from synth.scene import load_scene, write_scene
 
+#: Every test here renders with Mitsuba.
+pytestmark = pytest.mark.slow
+
 SIZE, FOCAL = (480, 402), 225.0
 BOARD = Board("chessboard", (7, 6), 60.0)
 DISTANCE = (450.0, 650.0)

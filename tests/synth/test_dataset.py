@@ -27,6 +27,7 @@ def dataset_dir(small_scene, tmp_path_factory):
     return out
 
 
+@pytest.mark.slow
 def test_files_are_readable_with_plain_libraries(small_scene, dataset_dir):
     spec = load_scene(small_scene)
     names = {"left.png", "right.png", "left_preview.png", "right_preview.png", "calib.yaml",
@@ -80,6 +81,7 @@ def test_files_are_readable_with_plain_libraries(small_scene, dataset_dir):
     assert {"render_left", "render_right", "write_images", "total"} <= set(manifest["seconds"])
 
 
+@pytest.mark.slow
 def test_read_dataset_round_trip(small_scene, dataset_dir):
     spec = load_scene(small_scene)
     data = read_dataset(dataset_dir)
@@ -95,6 +97,7 @@ def test_read_dataset_round_trip(small_scene, dataset_dir):
                                project(spec.rig.right, spec.rig.port, spec.targets), atol=1e-9)
 
 
+@pytest.mark.slow
 def test_check_finds_every_target_within_the_bounds(dataset_dir):
     report = check_dataset(dataset_dir)
     for view in ("left", "right"):
@@ -104,6 +107,7 @@ def test_check_finds_every_target_within_the_bounds(dataset_dir):
     assert report["passed"]
 
 
+@pytest.mark.slow
 def test_rerun_is_a_no_op_and_other_arguments_replace(small_scene, dataset_dir, tmp_path):
     before = {n: os.stat(dataset_dir / n).st_mtime_ns for n in os.listdir(dataset_dir)}
     again = write_dataset(small_scene, dataset_dir, progress=False)
@@ -141,6 +145,7 @@ def test_refuses_to_replace_a_foreign_directory(small_scene, tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["mine"]
 
 
+@pytest.mark.slow
 def test_refuses_an_earlier_dataset_that_someone_added_a_file_to(small_scene, tmp_path):
     from synth.fileio import OutputError
 
@@ -153,6 +158,7 @@ def test_refuses_an_earlier_dataset_that_someone_added_a_file_to(small_scene, tm
     assert json.loads((out / "manifest.json").read_text())["spp"] == 4
 
 
+@pytest.mark.slow
 def test_cli_dataset_and_check(small_scene, tmp_path, capsys):
     from synth.__main__ import main
 

@@ -7,6 +7,7 @@ makes the difference between the two integrators large enough to see on a small 
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from measure import Camera
 from measure.detect import detect_targets
@@ -17,6 +18,9 @@ from synth.layouts import grid_plane
 from synth.render import load_mitsuba_scene, render_view
 from synth.rig import paper_cameras, paper_port
 from synth.scene import load_scene, write_scene
+
+#: Every test here renders with Mitsuba.
+pytestmark = pytest.mark.slow
 
 SMALL = (320, 268)
 FOCAL = 150.0

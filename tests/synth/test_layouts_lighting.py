@@ -90,6 +90,7 @@ def test_lit_scene_reads_back_with_its_targets_and_lights(lit_scenes):
     assert kinds == ["SpotLight", "SpotLight"]  # the disks do not glow
 
 
+@pytest.mark.slow
 def test_lit_targets_have_the_radiance_of_a_diffuse_disk_under_a_spot(lit_scenes):
     """Clear water: a disk's mean pixel value is ρ/π · Σ_lights I·cos θ / r² (spots within
     their beam width, no falloff), times the port's Fresnel transmittance T (measured against a
@@ -121,6 +122,7 @@ def test_lit_targets_have_the_radiance_of_a_diffuse_disk_under_a_spot(lit_scenes
     assert abs(np.median(ratio) - 1.0) < 0.01, np.median(ratio)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("water", ["clear", "coastal"])
 def test_lit_renders_agree_with_mitsubas_own_integrators(lit_scenes, water):
     """Our integrators (surface next-event estimation with MIS, refracted ray starts) against
@@ -134,6 +136,7 @@ def test_lit_renders_agree_with_mitsubas_own_integrators(lit_scenes, water):
     assert abs(np.mean(ours) - np.mean(theirs)) < 4 * sem + 2e-3 * np.mean(theirs), (ours, theirs)
 
 
+@pytest.mark.slow
 def test_scattering_water_shows_backscatter_between_the_targets(lit_scenes):
     """Lit targets: clear water leaves the background black; coastal water fills it with the
     veil of light scattered back from the beams."""
@@ -153,6 +156,7 @@ def test_scattering_water_shows_backscatter_between_the_targets(lit_scenes):
     assert backgrounds["coastal"] > 0.0
 
 
+@pytest.mark.slow
 def test_thin_lens_blurs_off_the_focus_plane(tmp_path):
     left, right = paper_cameras(SMALL, FOCAL)
     targets = layouts.grid_plane(1000.0, 240.0, 80.0) + np.array([3.0, -2.0, 0.0])
@@ -191,6 +195,7 @@ def test_thin_lens_with_distortion_is_refused(tmp_path):
         check_render_request(load_scene(thin, {"left_dist": "-0.05 0 0 0 0"}))
 
 
+@pytest.mark.slow
 def test_eval_run_on_a_cylinder_matches_every_target(tmp_path):
     """Targets seen obliquely (up to 60° on a cylinder): with --max-elongation for the
     foreshortened disks, every target visible in both views is detected and matched, none

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from measure import Camera
 from measure.detect import detect_targets
@@ -37,6 +38,7 @@ def test_variant_selection_never_picks_llvm_15(monkeypatch, tmp_path):
     assert ms.find_libllvm() == str(good)
 
 
+@pytest.mark.slow
 def test_sensor_matches_camera_pinhole_in_air(tmp_path):
     """Disks of ~4 px radius in air, off-centre principal point: centroid within 0.02 px of K·X."""
     left, right = paper_cameras(SMALL, FOCAL)
@@ -58,6 +60,7 @@ def test_sensor_matches_camera_pinhole_in_air(tmp_path):
     assert info["variant"] in ("cuda_ad_rgb", "llvm_ad_rgb", "scalar_rgb")
 
 
+@pytest.mark.slow
 def test_distorted_camera_centroids_follow_synth_project(tmp_path):
     dist = (-0.08, 0.015, 0.0008, -0.0005, 0.0)
     left, right = paper_cameras(SMALL, FOCAL, dist=dist)
@@ -101,6 +104,7 @@ def test_pass_plan():
         assert max(plan) * pixels <= MAX_SAMPLES_PER_CALL or max(plan) == 1
 
 
+@pytest.mark.slow
 def test_passes_are_reproducible_and_seeded_per_pass(small_scene, monkeypatch):
     """Same seed, same bytes with several passes; the passes are independent draws."""
     import synth.render as render

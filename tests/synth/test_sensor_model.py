@@ -69,6 +69,7 @@ def test_specs_and_bad_values():
         expose(np.zeros((3, 3)), PRESETS["imx174"], np.random.default_rng(0))
 
 
+@pytest.mark.slow
 def test_eval_run_with_a_sensor(small_scene, tmp_path, capsys):
     from eval.cli import main
 
@@ -88,6 +89,7 @@ def test_eval_run_with_a_sensor(small_scene, tmp_path, capsys):
     assert not (tmp_path / "bad").exists()
 
 
+@pytest.mark.slow
 def test_dataset_with_a_sensor_stores_raw_codes(small_scene, tmp_path):
     from synth.crosscheck import check_dataset
     from synth.dataset import read_dataset, write_dataset

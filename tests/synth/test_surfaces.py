@@ -91,6 +91,7 @@ def tilted_dataset(tmp_path_factory):
     return scene, str(root / "ds")
 
 
+@pytest.mark.slow
 def test_surface_scene_files_and_load(tilted_dataset):
     scene, _ = tilted_dataset
     spec = load_scene(scene)
@@ -102,6 +103,7 @@ def test_surface_scene_files_and_load(tilted_dataset):
     assert len(spec.sha256) == 64
 
 
+@pytest.mark.slow
 def test_truth_maps_agree_with_the_fermat_projection_and_the_mesh(tilted_dataset):
     """Every valid truth point projects back to its own pixel centre through the Fermat solver
     to <= 1e-6 px (the issue's bound; measured ~1e-12) and lies on the mesh's plane to 1e-9 mm
@@ -125,6 +127,7 @@ def test_truth_maps_agree_with_the_fermat_projection_and_the_mesh(tilted_dataset
                            rtol=1e-6)
 
 
+@pytest.mark.slow
 def test_rendered_surface_covers_the_truth_mask(tilted_dataset):
     """The renderer and the truth tracer agree on where the surface is: inside the valid mask
     (eroded by one pixel for partly covered edge pixels) every pixel is lit; outside it

@@ -41,6 +41,7 @@ def _fluxes(image, camera, port, targets):
     return flux
 
 
+@pytest.mark.slow
 def test_absorption_follows_beer_lambert(coastal_scene):
     clear = load_scene(coastal_scene, {"water_c": "0"})
     absorbing = load_scene(coastal_scene, {"water_albedo": "0"})
@@ -63,6 +64,7 @@ def test_absorption_follows_beer_lambert(coastal_scene):
     assert sem < 0.005 and abs(expected[ok].mean() - 1.0) > 0.25
 
 
+@pytest.mark.slow
 def test_scattering_agrees_with_mitsubas_volpath(coastal_scene):
     spec = load_scene(coastal_scene)
     mscene, mi, _ = load_mitsuba_scene(spec)
@@ -94,6 +96,7 @@ def test_a_medium_needs_a_port():
                     water=PRESETS["coastal"])
 
 
+@pytest.mark.slow
 def test_eval_run_in_coastal_water(coastal_scene, tmp_path):
     """The whole pipeline through scattering water, with the speckle-proof threshold."""
     import json

@@ -38,6 +38,7 @@ def _snapshot(root):
                   for f in files)
 
 
+@pytest.mark.slow
 def test_dense_run_measures_the_plane_and_shows_what_ignoring_refraction_costs(plane_case):
     root, scene, ds = plane_case
     out = str(root / "run")
@@ -56,6 +57,7 @@ def test_dense_run_measures_the_plane_and_shows_what_ignoring_refraction_costs(p
         assert os.path.getsize(os.path.join(out, name)) > 0
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("argv, fragment", [
     (["--eccentricity"], "applies to target scenes"),
     (["--methods", "su"], "surface scene is measured with"),
@@ -73,6 +75,7 @@ def test_dense_run_bad_options(plane_case, capsys, argv, fragment):
     assert _snapshot(root) == before
 
 
+@pytest.mark.slow
 def test_scene_whose_mesh_is_missing(plane_case, tmp_path, capsys):
     _, scene, _ = plane_case
     copy = tmp_path / "plane.xml"
@@ -133,6 +136,7 @@ def test_user_mesh_and_fine_speckle_warning(tmp_path, capsys):
     assert (tmp_path / "s_surface.ply").exists()
 
 
+@pytest.mark.slow
 def test_dense_run_through_a_sensor_and_a_median_filter(plane_case):
     """--sensor and --median-filter apply to the images the matcher sees and are reported
     (measured here: 91.0 % of the overlap matched through imx174 + a 3x3 median)."""
@@ -146,6 +150,7 @@ def test_dense_run_through_a_sensor_and_a_median_filter(plane_case):
     assert report["methods"]["optical_path"]["measured_fraction"] >= 0.85
 
 
+@pytest.mark.slow
 def test_mesh_without_surface_mesh_and_score_of_a_surface_dataset(plane_case, tmp_path, capsys):
     root, _, ds = plane_case
     mesh = tmp_path / "mesh.obj"
@@ -159,6 +164,7 @@ def test_mesh_without_surface_mesh_and_score_of_a_surface_dataset(plane_case, tm
     assert not (tmp_path / "score").exists()
 
 
+@pytest.mark.slow
 def test_damaged_truth_maps_are_refused(plane_case, tmp_path, capsys):
     """Truth points that are NaN where the valid mask says the surface is hit: refused."""
     _, scene, ds = plane_case
@@ -173,6 +179,7 @@ def test_damaged_truth_maps_are_refused(plane_case, tmp_path, capsys):
     assert not (tmp_path / "out").exists()
 
 
+@pytest.mark.slow
 def test_depth_range_needing_too_many_planes(plane_case, monkeypatch, capsys):
     """A search that needs more sweep planes than measure.dense.MAX_PLANES is refused before
     any image work (at full size 200-1e9 mm needs thousands; here the cap is lowered to 20)."""

@@ -22,6 +22,7 @@ def run_dir(small_scene, tmp_path_factory):
     return out
 
 
+@pytest.mark.slow
 def test_report_fields_and_numbers(run_dir):
     report = json.loads((run_dir / "report.json").read_text())
     assert report["targets"] == 81 and report["spp"] == SPP
@@ -47,6 +48,7 @@ def test_report_fields_and_numbers(run_dir):
     assert report["variant"] and report["versions"]["numpy"]
 
 
+@pytest.mark.slow
 def test_figures_and_coloured_point_clouds(run_dir):
     report = json.loads((run_dir / "report.json").read_text())
     for name in ("report.md", "views.png", "error_maps.png", "histograms.png"):
@@ -57,6 +59,7 @@ def test_figures_and_coloured_point_clouds(run_dir):
         assert cloud.has_colors() and ply["vmax_mm"] > 0
 
 
+@pytest.mark.slow
 def test_from_dataset_gives_the_same_measurement(small_scene, tmp_path, capsys):
     data = tmp_path / "data"
     write_dataset(small_scene, data, spp=SPP, progress=False)
@@ -69,6 +72,7 @@ def test_from_dataset_gives_the_same_measurement(small_scene, tmp_path, capsys):
     assert printed["matching"]["wrong"] == 0
 
 
+@pytest.mark.slow
 def test_pixel_noise_option_is_seeded(small_scene, tmp_path):
     reports = []
     for name in ("a", "b"):
@@ -118,6 +122,7 @@ def _without_timings(report: dict) -> dict:
     return report
 
 
+@pytest.mark.slow
 def test_identical_runs_give_identical_reports(small_scene, tmp_path):
     """Same arguments, same numbers: five runs give byte-identical report.json apart from the
     timings (the plane fit is seeded and single-threaded, the noise is seeded)."""
@@ -134,6 +139,7 @@ def test_identical_runs_give_identical_reports(small_scene, tmp_path):
     assert json.loads(texts[0])["methods"]["optical_path"]["flatness_mm"] > 0
 
 
+@pytest.mark.slow
 def test_seed_option_and_scene_parameter_mean_the_same(small_scene, tmp_path):
     """--seed 7 and -D seed=7 render the same images (one seed, one meaning)."""
     from synth.__main__ import main as synth_main
@@ -145,6 +151,7 @@ def test_seed_option_and_scene_parameter_mean_the_same(small_scene, tmp_path):
     assert a == b and a != c
 
 
+@pytest.mark.slow
 def test_conflicting_define_with_from_dataset(small_scene, tmp_path, capsys):
     data = tmp_path / "data"
     write_dataset(small_scene, data, spp=4, progress=False, defines={"n_water": "1.34"})
@@ -175,6 +182,7 @@ def test_scene_with_no_visible_target(tmp_path, capsys):
     assert not out.exists()
 
 
+@pytest.mark.slow
 def test_eccentricity_option_reports_before_and_after(small_scene, tmp_path):
     data = tmp_path / "data"
     write_dataset(small_scene, data, spp=16, progress=False)
@@ -192,6 +200,7 @@ def test_eccentricity_option_reports_before_and_after(small_scene, tmp_path):
     assert "optical_path+ecc" in (out / "report.md").read_text()
 
 
+@pytest.mark.slow
 def test_truth_and_assumption(small_scene, tmp_path):
     """Rendered with n_water = 1.34, measured assuming 1.33: the report records both rigs and
     the difference, the cross-check still uses the truth, and the points move (mostly in Z)."""
@@ -216,6 +225,7 @@ def test_truth_and_assumption(small_scene, tmp_path):
     assert abs(shift) > 5 * abs(exact["methods"]["optical_path"]["mean_dz_mm"]) and abs(shift) > 1.0
 
 
+@pytest.mark.slow
 def test_self_calibration_of_the_water_index(small_scene, tmp_path):
     """Rendered with n_water = 1.34, measured assuming 1.33, the index estimated in situ: the
     estimate lies within 4 σ of the truth and removes the depth bias of the wrong index."""

@@ -168,6 +168,7 @@ def test_bad_specs_exit_2_with_one_line(small_scene, tmp_path, capsys, text, fra
 # a local run
 
 
+@pytest.mark.slow
 def test_local_run_writes_one_row_per_cell(local_run, spec_file):
     out, code = local_run
     assert code == 1  # the failing render cells make the exit code say so
@@ -201,6 +202,7 @@ def test_local_run_writes_one_row_per_cell(local_run, spec_file):
     assert (out / "sweep.json").exists() and (out / "spec.toml").exists()
 
 
+@pytest.mark.slow
 def test_render_cell_equals_eval_run(local_run, small_scene, tmp_path):
     """A render cell is eval run with the same arguments: the same numbers."""
     out, _ = local_run
@@ -216,6 +218,7 @@ def test_render_cell_equals_eval_run(local_run, small_scene, tmp_path):
     assert report["matching"]["correct"] == row["matching.correct"]
 
 
+@pytest.mark.slow
 def test_rerun_does_nothing_and_changed_spec_is_refused(local_run, spec_file, small_scene,
                                                         tmp_path, capsys):
     out, _ = local_run
@@ -231,6 +234,7 @@ def test_rerun_does_nothing_and_changed_spec_is_refused(local_run, spec_file, sm
     assert (out / "completions.log").read_text() == before
 
 
+@pytest.mark.slow
 def test_figures(local_run, spec_file, tmp_path):
     from eval.sweep.command import SweepDir, table_rows
     from eval.sweep.figures import write_figures
@@ -291,6 +295,7 @@ def dask_cluster(tmp_path_factory):
                 process.wait()
 
 
+@pytest.mark.slow
 def test_cluster_run_equals_local_run_cell_by_cell(local_run, spec_file, dask_cluster,
                                                    tmp_path, capsys):
     out, _ = local_run
@@ -370,6 +375,7 @@ def test_bad_options(spec_file, tmp_path, capsys, extra, fragment):
 # killed half-way
 
 
+@pytest.mark.slow
 def test_sigkill_half_way_then_rerun_equals_uninterrupted(local_run, spec_file, tmp_path):
     out, _ = local_run
     killed = tmp_path / "killed"
