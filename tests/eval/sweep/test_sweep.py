@@ -20,7 +20,7 @@ import pyarrow.parquet as pq
 import pytest
 
 from eval.cli import main
-from eval.sweep.command import TIMING_COLUMNS
+from eval.sweep.table import TIMING_COLUMNS
 from eval.sweep.spec import SpecError, load_spec
 from tests.conftest import REPO
 
@@ -236,7 +236,8 @@ def test_rerun_does_nothing_and_changed_spec_is_refused(local_run, spec_file, sm
 
 @pytest.mark.slow
 def test_figures(local_run, spec_file, tmp_path):
-    from eval.sweep.command import SweepDir, table_rows
+    from eval.sweep.directory import SweepDir
+    from eval.sweep.table import table_rows
     from eval.sweep.figures import write_figures
 
     out, _ = local_run
