@@ -15,7 +15,8 @@ import time
 from eval.cli import non_negative_float, non_negative_int, positive_float, positive_int
 from eval.core.formatting import format_number as fmt
 from eval.run.config import COMMAND, RunConfig, fraction
-from eval.run.report import budget_table, report_markdown, summary_table, write_outputs
+from eval.run.report import (budget_table, report_markdown, summary_table, verdict_exit_code,
+                             write_outputs)
 from synth.cli import (add_define_option, add_json_option, add_out_option, add_progress_option,
                        add_scene_argument, finite_float)
 
@@ -151,4 +152,5 @@ def main(args) -> int:
                   f"({calibration['reason'] or calibration['message']})", file=summary_stream)
     if args.json:
         print(json.dumps(report, indent=2))
-    return 0
+    return verdict_exit_code(report, out)
+

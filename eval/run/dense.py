@@ -32,6 +32,7 @@ import numpy as np
 from eval.cli import CLIError
 from eval.core.formatting import format_number as fmt
 from eval.run.config import COMMAND, RunConfig
+from eval.run.report import verdict_exit_code, verdict_lines
 
 #: Dense methods: name -> (matching model, triangulation method).
 DENSE_METHODS = {"optical_path": ("refractive", "optical_path"), "regular": ("pinhole", "regular")}
@@ -265,6 +266,7 @@ def report_markdown(report: dict) -> str:
              f"{report['truth']['overlap_pixels']} of them are seen by the right camera too (the "
              f"overlap). Search range {report['depth_range_mm'][0]:.1f}-"
              f"{report['depth_range_mm'][1]:.1f} mm along the port normal.", "",
+             *verdict_lines(report),
              "## Accuracy per method", "", "```", surface_table(report["methods"]), "```", "",
              "`optical_path`: matched along the refractive epipolar curves, triangulated with the "
              "paper's model. `regular`: the same matcher and triangulation with straight rays "
@@ -311,6 +313,8 @@ def main(config: RunConfig, out: str, print_json: bool, log) -> int:
     output = OutputDir(out, COMMAND).claim()
     start = time.perf_counter()
     report, arrays = measure_surface(config, methods, log)
+    failures = dense_failures(report)
+    report["verdict"] = {"passed": not failures, "failures": failures}
     log("write the report, figures and point clouds …")
     with output.staged() as tmp:
         t = time.perf_counter()
@@ -327,4 +331,14 @@ def main(config: RunConfig, out: str, print_json: bool, log) -> int:
     print(f"wrote {output.path}", file=stream)
     if print_json:
         print(json.dumps(report, indent=2))
-    return 0
+    return verdict_exit_code(report, output.path)
+
+
+def dense_failures(report: dict) -> list:
+    """What the truth shows went wrong in a dense run (empty: nothing): the refractive method
+    measured no pixel of the overlap."""
+    fraction = report["methods"].get("optical_path", {}).get("measured_fraction")
+    if "optical_path" in report["methods"] and not fraction:
+        return ["optical_path measured 0 % of the overlap (no pixel matched: check the depth "
+                "range, the spp and the speckle's size in pixels)"]
+    return []

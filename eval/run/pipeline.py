@@ -401,10 +401,30 @@ def measure_scene(config: RunConfig, log=print) -> RunResult:
     result = run_pipeline(inputs, config, log)
     result.report["sensor"] = sensor_info
     result.report["rigs"]["source"] = config.rig_source
+    failures = run_failures(result.report)
+    result.report["verdict"] = {"passed": not failures, "failures": failures}
     return result
+
+
+def run_failures(report: dict) -> list:
+    """What the truth shows went wrong in a target run, one phrase each (empty: nothing):
+    wrong matches, no correct match, a cross-check with no detection associated in one view
+    (its headline would then come from the other view alone)."""
+    failures = []
+    m, c = report["matching"], report["crosscheck"]
+    if m["wrong"]:
+        failures.append(f"{m['wrong']} of {m['pairs']} matched pairs are wrong")
+    if m["correct"] == 0:
+        failures.append("no pair was matched correctly")
+    for view in ("left", "right"):
+        if c[view]["associated"] == 0:
+            failures.append(f"no {view} detection lies within {ASSOCIATION_GATE_PX:g} px of a "
+                            f"target's simulated pixel, so the cross-check comes from one view "
+                            f"at most")
+    return failures
 
 
 __all__ = ["NothingMatched", "RunResult", "budget_stage", "crosscheck_stage",
            "default_depth_window", "detect_stage", "eccentricity_stage", "match_stage",
-           "measure_scene", "run_pipeline", "score_stage", "self_calibration_stage",
+           "measure_scene", "run_failures", "run_pipeline", "score_stage", "self_calibration_stage",
            "triangulate_stage"]

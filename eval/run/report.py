@@ -4,8 +4,10 @@ PLY files coloured by dP and the figures (:mod:`eval.run.figures`)."""
 from __future__ import annotations
 
 import os
+import sys
 
 from eval.core.cloud_metrics import write_error_ply
+from synth.cli import EXIT_CHECK_FAILED
 from eval.core.formatting import format_number as fmt
 
 
@@ -72,6 +74,7 @@ def report_markdown(report: dict) -> str:
     lines = [f"# Run report: `{report['scene']}`", "",
              f"{report['targets']} targets; Mitsuba variant `{report['variant']}`, {report['spp']} spp; "
              f"added pixel noise σ = {report['noise_px']} px.", "",
+             *verdict_lines(report),
              *_sensor_lines(report.get("sensor")),
              "## Detection and matching", "",
              "| | left | right |", "|---|---|---|",
@@ -134,6 +137,28 @@ def write_outputs(tmp: str, result) -> None:
     histograms_figure(os.path.join(tmp, "histograms.png"), result.per_method)
 
 
-__all__ = ["SUMMARY_COLUMNS", "budget_table", "report_markdown", "summary_table", "write_outputs"]
+def verdict_lines(report: dict) -> list:
+    """report.md's verdict: passed, or what failed (the run exited 1)."""
+    verdict = report.get("verdict")
+    if not verdict:
+        return []
+    if verdict["passed"]:
+        return ["**Verdict: passed** (no wrong match, the cross-check from both views).", ""]
+    return ["**Verdict: failed** (exit code 1): " + "; ".join(verdict["failures"]) + ".", ""]
+
+
+def verdict_exit_code(report: dict, out: str) -> int:
+    """0 when the run's ``verdict`` passed; else one line ``failed: …`` on stderr and 1 (the
+    report in ``out`` has been written: it says the same under ``verdict``)."""
+    failures = report.get("verdict", {}).get("failures") or []
+    if not failures:
+        return 0
+    print(f"failed: {report['scene']}: {'; '.join(failures)} (report in {out})", file=sys.stderr)
+    return EXIT_CHECK_FAILED
+
+
+__all__ = ["SUMMARY_COLUMNS", "budget_table", "report_markdown", "summary_table", "verdict_exit_code",
+           "verdict_lines",
+           "write_outputs"]
 
 

@@ -18,6 +18,7 @@ import pytest
 from eval.__main__ import main as eval_main
 from synth.__main__ import main as synth_main
 from synth.dataset import write_dataset
+from tests.conftest import REPO
 
 SMALL = ("--size", "320", "268")
 DOTS = ("--speckle-size", "12")  # 2.2-4.1 px at 1 m in the small image
@@ -193,3 +194,19 @@ def test_depth_range_needing_too_many_planes(plane_case, monkeypatch, capsys):
     err = capsys.readouterr().err
     assert code == 2 and "sweep planes, more than 20: narrow it" in err and "--depth-range" in err
     assert _snapshot(root) == before
+
+
+@pytest.mark.slow
+def test_a_dense_run_that_measured_nothing_exits_1(tmp_path, capsys):
+    """The committed speckle plane at 320 x 268 px and 4 spp: its dots are far below a pixel and
+    nothing matches. The run writes its report and says that it failed (exit 1, one line)."""
+    out = tmp_path / "run"
+    code = eval_main(["run", str(REPO / "scenes" / "speckle_plane.xml"), "-D", "width=320",
+                      "-D", "height=268", "--spp", "4", "--methods", "optical_path",
+                      "--out", str(out), "--no-progress"])
+    err = capsys.readouterr().err
+    failed = [line for line in err.splitlines() if line.startswith("failed:")]
+    assert code == 1 and len(failed) == 1 and "0 % of the overlap" in failed[0], err
+    report = json.loads((out / "report.json").read_text())
+    assert report["methods"]["optical_path"]["measured_fraction"] == 0
+    assert report["verdict"]["passed"] is False

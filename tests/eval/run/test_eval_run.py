@@ -242,3 +242,34 @@ def test_self_calibration_of_the_water_index(small_scene, tmp_path):
     before = report["methods"]["optical_path"]["mean_dz_mm"]
     after = cal["methods"]["optical_path"]["mean_dz_mm"]
     assert abs(after) < 0.25 * abs(before)
+
+
+@pytest.mark.slow
+def test_a_run_with_wrong_matches_exits_1_and_still_writes_its_report(small_scene, tmp_path,
+                                                                      capsys):
+    """A depth window that holds only the neighbouring column's depth makes every match wrong:
+    the run says so in one line, exits 1, and writes the report (whose verdict says why)."""
+    out = tmp_path / "out"
+    code = main(["run", small_scene, "--out", str(out), "--spp", "4", "--methods",
+                 "optical_path", "--depth-range", "700,900", "--no-progress"])
+    err = capsys.readouterr().err
+    failed = [line for line in err.splitlines() if line.startswith("failed:")]
+    assert code == 1, err
+    assert len(failed) == 1 and "wrong" in failed[0] and "no pair was matched correctly" in failed[0]
+    assert not [line for line in err.splitlines() if line.startswith("error:")]
+    report = json.loads((out / "report.json").read_text())
+    assert report["matching"]["wrong"] > 0 and report["matching"]["correct"] == 0
+    assert report["verdict"]["passed"] is False and len(report["verdict"]["failures"]) == 2
+    assert "Verdict" in (out / "report.md").read_text()
+
+
+def test_a_cross_check_from_one_view_is_a_failure():
+    """The headline cross-check would come from one view alone: the run fails."""
+    from eval.run.pipeline import run_failures
+
+    report = {"matching": {"wrong": 0, "correct": 10, "pairs": 10},
+              "crosscheck": {"left": {"associated": 12}, "right": {"associated": 0}}}
+    failures = run_failures(report)
+    assert len(failures) == 1 and "right" in failures[0] and "one view" in failures[0]
+    report["crosscheck"]["right"]["associated"] = 12
+    assert run_failures(report) == []
