@@ -5,8 +5,12 @@ and traced into the water; a true pair's water rays meet (their common perpendic
 the refractive epipolar constraint) at a point inside the working depth range and in front of
 both cameras. A global one-to-one assignment (``scipy.optimize.linear_sum_assignment``) on the
 gap lengths picks the pairs among those that pass the gate; a pair is kept only if no other
-assignment explains the detections about as well (see :func:`match_targets`). Ambiguous pairs
-are dropped, never guessed.
+assignment explains the detections about as well (see :func:`match_targets`). What stays
+ambiguous is then looked at again against its neighbours: targets on a surface lie at depths
+that vary smoothly across the image, so where the clear pairs around an ambiguous detection lie
+on a plane of depth, the candidates that leave that plane (the neighbour's partner, met some
+15-20 % nearer or farther) are ruled out (:func:`resolve_by_neighbours`). Pairs that stay
+ambiguous are dropped, never guessed.
 
 Units: mm; pixels in the OpenCV convention; reference frame = the left camera's.
 """
@@ -19,6 +23,7 @@ import numpy as np
 from scipy.optimize import linear_sum_assignment
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
+from scipy.spatial import cKDTree
 
 from .lines import common_perpendicular
 from .reasons import Reason
@@ -28,6 +33,13 @@ from .triangulate import StereoRig
 _NO_PAIR = 1e12  # cost of an impossible pair in the assignment
 #: Candidate pairs evaluated at once (memory: about 200 bytes each).
 PAIRS_PER_CHUNK = 1 << 20
+#: Clear pairs, nearest in the left image, that predict an ambiguous detection's depth.
+NEIGHBOURS = 8
+#: The neighbours predict a depth only when they lie on a plane of depth over the image to this
+#: RMS, relative to the depth (a surface, not a cloud of targets at random depths) ...
+NEIGHBOUR_PLANE_RMS = 0.01
+#: ... and a candidate pair agrees with the prediction within this fraction of the depth.
+NEIGHBOUR_DEPTH_TOLERANCE = 0.05
 
 
 @dataclass(frozen=True)
@@ -56,10 +68,11 @@ def _water_rays(camera, port, uv):
 
 
 def candidate_pairs(rig: StereoRig, uv_left, uv_right, gate_mm: float,
-                    depth_range=(None, None)):
+                    depth_range=(None, None), return_depth: bool = False):
     """``(i, j, gap)``: the pairs (left row i, right row j) whose common-perpendicular length
     (mm) is at most ``gate_mm`` and that are possible, computed in chunks of
-    :data:`PAIRS_PER_CHUNK` pairs, so that memory stays bounded by the pairs kept.
+    :data:`PAIRS_PER_CHUNK` pairs, so that memory stays bounded by the pairs kept. With
+    ``return_depth`` also each pair's depth ``normal · X`` of the midpoint (mm).
 
     A pair is impossible when a ray has no path into the water, the rays meet behind a camera,
     or the midpoint's depth along the port normal (``normal · X``) is outside ``depth_range``.
@@ -70,7 +83,7 @@ def candidate_pairs(rig: StereoRig, uv_left, uv_right, gate_mm: float,
     o2, d2, ok2 = _water_rays(rig.right, rig.port, uv_right)
     n_left, n_right = len(uv_left), len(uv_right)
     rows_per_chunk = max(1, PAIRS_PER_CHUNK // max(1, n_right))
-    found_i, found_j, found_gap = [], [], []
+    found_i, found_j, found_gap, found_depth = [], [], [], []
     near, far = depth_range
     for start in range(0, n_left, rows_per_chunk):
         i, j = np.meshgrid(np.arange(start, min(n_left, start + rows_per_chunk)),
@@ -87,9 +100,11 @@ def candidate_pairs(rig: StereoRig, uv_left, uv_right, gate_mm: float,
         found_i.append(i[keep])
         found_j.append(j[keep])
         found_gap.append(perp.length[keep])
+        found_depth.append(depth[keep])
     if not found_i:
-        return np.zeros(0, int), np.zeros(0, int), np.zeros(0)
-    return np.concatenate(found_i), np.concatenate(found_j), np.concatenate(found_gap)
+        found_i, found_j, found_gap, found_depth = [[np.zeros(0, int)]] * 2 + [[np.zeros(0)]] * 2
+    result = (np.concatenate(found_i), np.concatenate(found_j), np.concatenate(found_gap))
+    return result + (np.concatenate(found_depth),) if return_depth else result
 
 
 def _assign(cost: np.ndarray, candidate: np.ndarray):
@@ -101,7 +116,8 @@ def _assign(cost: np.ndarray, candidate: np.ndarray):
 
 
 def match_targets(rig: StereoRig, uv_left, uv_right, gate_mm: float = 0.5,
-                  depth_range=(None, None), ambiguity_margin_mm: float | None = None) -> Matches:
+                  depth_range=(None, None), ambiguity_margin_mm: float | None = None,
+                  resolve_ambiguities: bool = True) -> Matches:
     """Match left and right detections one to one with the refractive epipolar constraint.
 
     ``gate_mm``: the largest common-perpendicular length of an accepted pair (mm); a few times
@@ -113,7 +129,11 @@ def match_targets(rig: StereoRig, uv_left, uv_right, gate_mm: float = 0.5,
     ambiguous — and dropped — when forbidding it still leaves an assignment of the group with
     as many pairs whose total gap is within ``ambiguity_margin_mm`` (default ``gate_mm / 2``)
     of the best. A row of targets along the baseline (one epipolar plane) is resolved this way
-    when its shifted alternative must leave a detection unmatched.
+    when its shifted alternative must leave a detection unmatched. With
+    ``resolve_ambiguities`` (default) the ambiguous detections are assigned again among the
+    candidates that agree with the depth plane of their clear neighbours
+    (:func:`resolve_by_neighbours`), with the same ambiguity test; what stays ambiguous is
+    dropped.
     """
     if not gate_mm > 0:
         raise ValueError(f"gate_mm must be positive, got {gate_mm}")
@@ -122,39 +142,105 @@ def match_targets(rig: StereoRig, uv_left, uv_right, gate_mm: float = 0.5,
         raise ValueError(f"ambiguity_margin_mm must be >= 0, got {ambiguity_margin_mm}")
     n_left = len(np.asarray(uv_left).reshape(-1, 2))
     n_right = len(np.asarray(uv_right).reshape(-1, 2))
-    pair_i, pair_j, pair_gap = candidate_pairs(rig, uv_left, uv_right, gate_mm, depth_range)
+    pair_i, pair_j, pair_gap, pair_depth = candidate_pairs(rig, uv_left, uv_right, gate_mm,
+                                                           depth_range, return_depth=True)
     graph = coo_matrix((np.ones(len(pair_i)), (pair_i, n_left + pair_j)),
                        shape=(n_left + n_right, n_left + n_right))
     _, component = connected_components(graph, directed=False)
-    keep_rows, keep_cols, kept_gaps, n_ambiguous = [], [], [], 0
+    kept = {"rows": [], "cols": [], "gaps": [], "depths": []}
+    ambiguous = []  # (rows, cols) left unresolved in each group
     pair_label = component[pair_i]
     order_by_label = np.argsort(pair_label, kind="stable")
     starts = np.unique(pair_label[order_by_label], return_index=True)[1]
     for members in np.split(order_by_label, starts[1:]):
-        rows_in = np.unique(pair_i[members])
-        cols_in = np.unique(pair_j[members])
-        sub_gaps = np.full((len(rows_in), len(cols_in)), np.inf)
-        sub_gaps[np.searchsorted(rows_in, pair_i[members]),
-                 np.searchsorted(cols_in, pair_j[members])] = pair_gap[members]
-        sub_candidate = np.isfinite(sub_gaps)
-        rows, cols, total = _assign(sub_gaps, sub_candidate)
-        for r, c in zip(rows, cols):
-            clear = True
-            if sub_candidate.sum() > 1:
-                forbidden = sub_candidate.copy()
-                forbidden[r, c] = False
-                alt_rows, _, alt_total = _assign(sub_gaps, forbidden)
-                clear = len(alt_rows) < len(rows) or alt_total > total + margin
-            if clear:
-                keep_rows.append(rows_in[r])
-                keep_cols.append(cols_in[c])
-                kept_gaps.append(sub_gaps[r, c])
-            else:
-                n_ambiguous += 1
-    keep_rows = np.asarray(keep_rows, dtype=int)
-    keep_cols = np.asarray(keep_cols, dtype=int)
+        left_over = _assign_clear(pair_i[members], pair_j[members], pair_gap[members],
+                                  pair_depth[members], margin, kept)
+        if left_over[0].size:
+            ambiguous.append(left_over)
+    n_ambiguous = sum(len(rows) for rows, _ in ambiguous)
+    if ambiguous and resolve_ambiguities:
+        uv_l = np.asarray(uv_left, dtype=float).reshape(-1, 2)
+        allowed = resolve_by_neighbours(uv_l, np.asarray(kept["rows"], int),
+                                        np.asarray(kept["depths"], float), pair_i, pair_depth)
+        for rows, cols in ambiguous:
+            members = np.flatnonzero(np.isin(pair_i, rows) & np.isin(pair_j, cols) & allowed)
+            if members.size:
+                _assign_clear(pair_i[members], pair_j[members], pair_gap[members],
+                              pair_depth[members], margin, kept)
+        n_ambiguous = len(np.setdiff1d(np.concatenate([r for r, _ in ambiguous]), kept["rows"]))
+    keep_rows = np.asarray(kept["rows"], dtype=int)
+    keep_cols = np.asarray(kept["cols"], dtype=int)
     order = np.argsort(keep_rows)
     keep_rows, keep_cols = keep_rows[order], keep_cols[order]
-    return Matches(keep_rows, keep_cols, np.asarray(kept_gaps, float)[order], int(len(pair_i)),
-                   n_ambiguous, np.setdiff1d(np.arange(n_left), keep_rows),
+    return Matches(keep_rows, keep_cols, np.asarray(kept["gaps"], float)[order],
+                   int(len(pair_i)), n_ambiguous, np.setdiff1d(np.arange(n_left), keep_rows),
                    np.setdiff1d(np.arange(n_right), keep_cols))
+
+
+def _assign_clear(pair_i, pair_j, pair_gap, pair_depth, margin, kept):
+    """The assignment of one connected group of candidate pairs: its clear pairs go into
+    ``kept`` (lists ``rows``, ``cols``, ``gaps``, ``depths``); returns the left rows and right
+    columns of the ambiguous ones (see :func:`match_targets`)."""
+    rows_in, cols_in = np.unique(pair_i), np.unique(pair_j)
+    r_of, c_of = np.searchsorted(rows_in, pair_i), np.searchsorted(cols_in, pair_j)
+    sub_gaps = np.full((len(rows_in), len(cols_in)), np.inf)
+    sub_depths = np.full_like(sub_gaps, np.nan)
+    sub_gaps[r_of, c_of] = pair_gap
+    sub_depths[r_of, c_of] = pair_depth
+    sub_candidate = np.isfinite(sub_gaps)
+    rows, cols, total = _assign(sub_gaps, sub_candidate)
+    unclear_rows, unclear_cols = [], []
+    for r, c in zip(rows, cols):
+        clear = True
+        if sub_candidate.sum() > 1:
+            forbidden = sub_candidate.copy()
+            forbidden[r, c] = False
+            alt_rows, _, alt_total = _assign(sub_gaps, forbidden)
+            clear = len(alt_rows) < len(rows) or alt_total > total + margin
+        if clear:
+            kept["rows"].append(rows_in[r])
+            kept["cols"].append(cols_in[c])
+            kept["gaps"].append(sub_gaps[r, c])
+            kept["depths"].append(sub_depths[r, c])
+        else:
+            unclear_rows.append(rows_in[r])
+            unclear_cols.append(cols_in[c])
+    # the rows and columns of the group that no clear pair took part in stay open too
+    taken_r, taken_c = set(kept["rows"]), set(kept["cols"])
+    open_rows = np.array([r for r in rows_in if r not in taken_r], dtype=int)
+    open_cols = np.array([c for c in cols_in if c not in taken_c], dtype=int)
+    return (open_rows, open_cols) if unclear_rows else (np.zeros(0, int), np.zeros(0, int))
+
+
+def resolve_by_neighbours(uv_left, clear_rows, clear_depths, pair_i, pair_depth):
+    """Which candidate pairs agree with their neighbours (bool per pair).
+
+    For each left detection, the :data:`NEIGHBOURS` clear pairs nearest in the left image give
+    a plane of depth over ``(u, v)`` (least squares); where they lie on it within
+    :data:`NEIGHBOUR_PLANE_RMS` of the depth, a candidate pair of that detection agrees when
+    its depth is within :data:`NEIGHBOUR_DEPTH_TOLERANCE` of the plane's. Detections without
+    such neighbours keep all their candidates (nothing is ruled out)."""
+    allowed = np.ones(len(pair_i), dtype=bool)
+    if len(clear_rows) < NEIGHBOURS:
+        return allowed
+    rows = np.unique(pair_i)
+    tree = cKDTree(uv_left[clear_rows])
+    _, nearest = tree.query(uv_left[rows], k=NEIGHBOURS)
+    centred = uv_left[clear_rows][nearest] - uv_left[rows][:, None, :]  # (R, K, 2)
+    design = np.concatenate([np.ones(centred.shape[:2] + (1,)), centred], axis=2)
+    depths = clear_depths[nearest]  # (R, K)
+    normal = np.einsum("rki,rkj->rij", design, design)
+    rhs = np.einsum("rki,rk->ri", design, depths)
+    with np.errstate(invalid="ignore"):
+        try:
+            solution = np.linalg.solve(normal, rhs[..., None])[..., 0]
+        except np.linalg.LinAlgError:
+            return allowed
+        predicted = solution[:, 0]  # the plane at the detection itself
+        residual = depths - np.einsum("rki,ri->rk", design, solution)
+        rms = np.sqrt(np.mean(residual ** 2, axis=1))
+        smooth = np.isfinite(predicted) & (rms <= NEIGHBOUR_PLANE_RMS * np.abs(predicted))
+    where = np.searchsorted(rows, pair_i)
+    agree = np.abs(pair_depth - predicted[where]) <= NEIGHBOUR_DEPTH_TOLERANCE * np.abs(
+        predicted[where])
+    return np.where(smooth[where], agree, True)

@@ -369,7 +369,8 @@ def run_pipeline(inputs: RunInputs, config: RunConfig, log=print) -> RunResult:
         "scene": inputs.scene, "targets": int(len(inputs.targets)),
         "visibility": scored["visibility"],
         "detection": {name: {"found": int(d.n_found), "rejected": int(d.n_rejected),
-                             "rejected_by_reason": {k: int(v) for k, v in d.rejected.items()}}
+                             "rejected_by_reason": {k: int(v) for k, v in d.rejected.items()},
+                             "threshold": float(d.threshold), "threshold_rule": d.threshold_rule}
                       for name, d in detections.items()},
         "crosscheck": scored["crosscheck"],
         "matching": scored["matching"],

@@ -270,10 +270,12 @@ def test_sorted_deterministic_labels_and_quality(field):
     assert detect_targets(img).labels is None
 
 
-def test_fractional_threshold_ignores_speckle():
+def test_speckle_is_recognized_and_a_fractional_threshold_ignores_it_too():
     """Sparse bright speckle on black (a render of scattering water): median + k·MAD is zero
-    and every speckle is a blob; a threshold a fraction of the way to the targets is not."""
-    from measure.detect import fractional_threshold
+    and every speckle would be a blob. The automatic threshold recognizes the speckle (specks
+    outnumber blobs) and rises to a fraction of the targets' level; a given fraction of the
+    way to the targets works as well."""
+    from measure.detect import SPECKLE_THRESHOLD_FRACTION, fractional_threshold
 
     rng = np.random.default_rng(0)
     image = np.zeros((200, 200), np.float32)
@@ -284,7 +286,12 @@ def test_fractional_threshold_ignores_speckle():
     speckle = rng.random((200, 200)) < 0.05
     image[speckle] += rng.uniform(0, 0.15, speckle.sum()).astype(np.float32)
     automatic = detect_targets(image)
-    assert automatic.threshold < 1e-3 and automatic.n_rejected > 100
+    assert automatic.threshold_rule == "speckle" and automatic.n_found == 4
+    assert automatic.threshold == pytest.approx(SPECKLE_THRESHOLD_FRACTION * 1.0, abs=0.08)
+    np.testing.assert_allclose(sorted(map(tuple, np.round(automatic.centers))),
+                               sorted((x, y) for y, x in centres), atol=0.5)
+    noise_only = detect_targets(image, k_sigma=5.0, min_area=1000)  # no blob counts as a target
+    assert noise_only.threshold_rule == "noise"
     level = fractional_threshold(image, 0.2)
     assert 0.15 < level < 0.25
     found = detect_targets(image, threshold=level)
@@ -293,3 +300,37 @@ def test_fractional_threshold_ignores_speckle():
                                sorted((x, y) for y, x in centres), atol=0.5)
     with pytest.raises(ValueError, match="fraction"):
         fractional_threshold(image, 1.0)
+
+
+@pytest.mark.parametrize("aspect", [2.0, 3.0])
+def test_oblique_targets_are_accepted_and_touching_pairs_are_not(aspect):
+    """A disk seen at 60° (aspect 2) or 70° (aspect 3) is an ellipse without a waist: accepted
+    by default; two touching disks and two disks 1.5 radii apart have one: merged."""
+    rng = np.random.default_rng(7)
+    shape = (200, 320)
+    singles = np.array([[40.3, 50.2], [120.7, 50.6], [200.1, 49.8], [280.4, 50.3]])
+    pairs = np.array([[60.2, 140.3], [60.2 + 2.05 * 3.0, 140.1],      # touching
+                      [200.6, 140.4], [200.6 + 1.5 * 3.0, 140.6]])    # 1.5 radii apart
+    img = render_disks(shape, singles, 3.0, 1000.0, aspect=aspect)
+    img += render_disks(shape, pairs, 3.0, 1000.0)
+    det = detect_targets(img + rng.normal(0.0, 1.0, shape))
+    assert det.rejected["merged"] == 2 and det.n_found == 4
+    assert np.all(det.elongation > 0.9 * aspect)
+    dist, _ = centroid_errors(det, singles)
+    assert dist.max() <= 0.05
+
+
+def test_a_near_target_larger_than_the_others_is_accepted():
+    """Targets over a range of depths image at different sizes: one three times the median area
+    (no waist) is a target, not a merged blob."""
+    from measure.detect import MERGE_AREA_RATIO
+
+    rng = np.random.default_rng(8)
+    shape = (160, 260)
+    centers = np.array([[40.2, 40.6], [100.3, 40.1], [160.8, 40.4], [220.5, 41.0],
+                        [70.4, 110.2], [190.6, 110.7]])
+    radii = np.array([3.0, 3.0, 3.0, 3.0, 3.0, 5.5])
+    img = render_disks(shape, centers, radii, 1000.0) + rng.normal(0.0, 1.0, shape)
+    det = detect_targets(img)
+    assert det.n_found == 6 and det.n_rejected == 0
+    assert det.area.max() > MERGE_AREA_RATIO * np.median(det.area)  # suspicious, no waist

@@ -62,3 +62,33 @@ def test_targets_seen_in_one_view_only_stay_unmatched(rig):
 def test_bad_gate_is_rejected(rig):
     with pytest.raises(ValueError, match="gate_mm"):
         match_targets(rig, np.zeros((1, 2)), np.zeros((1, 2)), gate_mm=0)
+
+
+@pytest.mark.parametrize("depth_range", [(105.0, None), (500.0, 2000.0)])
+def test_ambiguities_on_a_surface_are_resolved_by_the_neighbours(rig, depth_range):
+    """With a wide working range a target's neighbour on the same epipolar plane is a rival
+    (24 of the paper's 496 are ambiguous with no upper bound). Its clear neighbours lie on a
+    plane of depth; only the true partner agrees with it: every target matched, none wrong."""
+    points = paper_plane(1000.0)
+    uv_left, uv_right = _pixels(rig, points, 0.03, seed=1)
+    plain = match_targets(rig, uv_left, uv_right, gate_mm=0.5, depth_range=depth_range,
+                          resolve_ambiguities=False)
+    assert plain.n_ambiguous >= 20
+    matches = match_targets(rig, uv_left, uv_right, gate_mm=0.5, depth_range=depth_range)
+    assert len(matches.left) == len(points) and matches.n_ambiguous == 0
+    assert np.array_equal(matches.left, matches.right)
+
+
+def test_targets_at_random_depths_are_not_resolved_by_neighbours(rig):
+    """Neighbours at random depths predict nothing: the row along the baseline stays dropped
+    (the rule never guesses where there is no surface)."""
+    rng = np.random.default_rng(4)
+    row = paper_plane(1000.0)
+    row = row[np.abs(row[:, 1]) < 1e-9]
+    others = np.column_stack([rng.uniform(-500, 500, 200), rng.uniform(-400, 400, 200),
+                              rng.uniform(700, 1400, 200)])
+    points = np.vstack([row, others])
+    uv_left, uv_right = _pixels(rig, points, 0.0, seed=0)
+    matches = match_targets(rig, uv_left, uv_right, gate_mm=0.5, depth_range=(105.0, None))
+    assert np.array_equal(matches.left, matches.right)  # whatever is matched is right
+    assert not np.isin(np.arange(len(row)), matches.left).any()  # the row stays dropped
