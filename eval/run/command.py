@@ -71,20 +71,21 @@ def add_parser(subparsers):
                              "targets' eccentricity (reported beside the uncorrected numbers)")
     parser.add_argument("--threshold-fraction", type=fraction, default=None, metavar="F",
                         help="detect with a fixed threshold F of the way from the background "
-                             "(median) to the targets' level (99.99th percentile) instead of "
-                             "median + 5 noise sigmas; for speckled renders of scattering water")
+                             "(median) to the targets' level (99.99th percentile) instead of the "
+                             "automatic one (median + 5 noise sigmas, or a quarter of the "
+                             "targets' level on a speckled background such as scattering water)")
     parser.add_argument("--max-elongation", type=ABOVE_ONE, default=None, metavar="E",
-                        help="detected blobs more elongated than E (major/minor axis) are taken "
-                             "for merged targets (default 1.6); raise it (e.g. 3) for targets "
-                             "seen obliquely: tilted planes, cylinders, spheres")
+                        help="blobs more elongated than E (major/minor axis) are examined for "
+                             "merged targets (default 1.6): merged when their outline has a "
+                             "waist or a hole; a single target seen obliquely has neither")
     parser.add_argument("--median-filter", type=int, choices=(3, 5), default=0, metavar="K",
                         help="median-filter each view (K×K, 3 or 5) before detection: removes "
                              "the fireflies of lights seen through scattering water (lit "
                              "targets) that pull the centroids; default: no filter")
     parser.add_argument("--max-area-ratio", type=ABOVE_ONE, default=None, metavar="A",
-                        help="detected blobs larger than A times the median blob are taken for "
-                             "merged targets (default 2.5); raise it (e.g. 6) when the targets "
-                             "span a wide range of depths (near ones image larger)")
+                        help="blobs larger than A times the median blob are examined for merged "
+                             "targets (default 2.5): merged when their outline has a waist or a "
+                             "hole; a near target, larger than the others, has neither")
     parser.add_argument("--sensor", metavar="PRESET[,name=value…]",
                         help="pass the rendered images through a camera sensor (exposure, shot "
                              "and read noise, dark level, gain, bit depth), seeded: preset "
