@@ -220,6 +220,30 @@ def test_eval_run_on_a_cylinder_matches_every_target(tmp_path):
     assert 0.8 * 1000.0 - 1e-6 <= lo and hi <= 1.25 * 1400.0 + 1e-6
 
 
+@pytest.mark.slow
+@pytest.mark.parametrize("layout", ["cylinder", "sphere"])
+def test_eval_run_with_no_options_on_oblique_layouts(tmp_path, layout):
+    """Targets up to 60° oblique (elongated) and over a range of depths (different sizes):
+    with no detection option every target visible in both views is matched, none wrongly —
+    the merged-blob test looks for a waist, not at the elongation."""
+    import json
+
+    from eval.cli import main as eval_main
+    from synth.__main__ import main as synth_main
+
+    scene = tmp_path / f"{layout}.xml"
+    assert synth_main(["scene", "--out", str(scene), "--layout", layout, "--size", "320",
+                       "268", "--target-radius", "14", "--spacing", "110"]) == 0
+    out = tmp_path / "run"
+    assert eval_main(["run", str(scene), "--out", str(out), "--spp", "64", "--no-progress",
+                      "--methods", "optical_path"]) == 0
+    report = json.loads((out / "report.json").read_text())
+    m = report["matching"]
+    assert m["wrong"] == 0 and m["visible_in_both_matched"] == m["visible_in_both"] > 20
+    assert max(d["rejected_by_reason"]["merged"] for d in report["detection"].values()) == 0
+    assert report["crosscheck"]["rms_px_outline"] < 0.03
+
+
 def test_median_filter_removes_a_firefly_beside_a_target():
     """A lone saturated pixel (a firefly of a light seen through scattering water) inside a
     disk's centroid window pulls its centroid; ``median_filter=3`` removes it and leaves a
