@@ -28,16 +28,18 @@ Pipeline
    **Speckled backgrounds.** Renders of scattering water (and the fireflies of lights seen
    through it) have a background whose upper tail is not Gaussian: most pixels sit near the
    median, but a few per cent are Monte-Carlo speckle one or two orders of magnitude above
-   ``k_sigma * sigma``. The threshold above then cuts tens of thousands of specks out of the
-   haze (and merges the targets into them). This is recognized by its effect: when the blobs
-   smaller than ``min_area`` at that threshold outnumber the others by more than
-   :data:`SPECKLE_BLOB_RATIO` (and are at least :data:`SPECKLE_MIN_SPECKS`), the background is
-   taken for speckle, and the threshold is raised to ``background +``
-   :data:`SPECKLE_THRESHOLD_FRACTION` ``* target level``. The target level is the median peak
-   (above the background) of the bright population of the larger blobs, split from the
-   speckle's peaks at the widest gap of the logarithm of the peaks (the two populations lie
-   decades apart). Nothing here uses the truth; ``Detections.threshold_rule`` says which rule
-   set the threshold.
+   ``k_sigma * sigma``. The threshold above then cuts tens of thousands of blobs out of the
+   haze (and merges the targets into them). This is recognized by its effect: the peaks
+   (above the background) of the blobs of at least ``min_area`` pixels fall into two
+   populations at the widest gap of their logarithms; the background is taken for speckle when
+   that gap spans at least :data:`SPECKLE_GAP_DECADES`, the faint population outnumbers the
+   bright one by more than :data:`SPECKLE_BLOB_RATIO` and counts at least
+   :data:`SPECKLE_MIN_SPECKS` blobs, and the bright blobs are flat-topped like targets (their
+   90th-percentile pixel at least :data:`SPECKLE_PLATEAU_RATIO` of their peak; a firefly on a
+   lit target is a lone spike, and a handful of them never makes the targets "speckle"). The
+   threshold is then ``background +`` :data:`SPECKLE_THRESHOLD_FRACTION` ``* target level``,
+   the target level being the median peak of the bright population. Nothing here uses the
+   truth; ``Detections.threshold_rule`` says which rule set the threshold.
 3. **Blobs.** ``cv2.connectedComponentsWithStats`` with 8-connectivity on the foreground mask.
    ``area`` is the number of foreground pixels of a blob.
 4. **Centroid window.** The faint anti-aliased rim of a disk lies below any useful threshold,
@@ -115,11 +117,16 @@ MERGE_AREA_RATIO = 2.5
 #: Percentile of the image taken as the targets' level by :func:`fractional_threshold` (robust
 #: to a few hot pixels).
 TARGET_LEVEL_PERCENTILE = 99.99
-#: A background is speckle when, at the noise threshold, the blobs smaller than ``min_area``
-#: outnumber the others by more than this factor ...
+#: A background is speckle when, at the noise threshold, the blobs' levels fall into two
+#: populations at least this many decades apart ...
+SPECKLE_GAP_DECADES = 0.5
+#: ... the faint one outnumbering the bright one by more than this factor ...
 SPECKLE_BLOB_RATIO = 2.0
-#: ... and number at least this many (a few specks in a clean image change nothing).
+#: ... counting at least this many blobs (a few specks in a clean image change nothing) ...
 SPECKLE_MIN_SPECKS = 200
+#: ... while the bright blobs are flat-topped: their 90th-percentile pixel is at least this
+#: fraction of their peak (median over the bright blobs).
+SPECKLE_PLATEAU_RATIO = 0.5
 #: On a speckled background the threshold is this fraction of the way from the background to
 #: the targets' level (the median peak of the bright blobs).
 SPECKLE_THRESHOLD_FRACTION = 0.25
@@ -290,16 +297,32 @@ def _sorted_vu(centers: np.ndarray) -> np.ndarray:
     return np.lexsort((centers[:, 0], centers[:, 1]))
 
 
-def _widest_gap_split(values: np.ndarray) -> float:
-    """The middle of the widest gap between consecutive sorted ``values`` above their median
-    (the speckle's peaks are many and continuous, the targets' few and decades above them: a
-    class-variance split such as Otsu's lands inside the speckle when it outnumbers the targets
-    a hundred to one)."""
+def _widest_gap(values: np.ndarray) -> tuple[float, float]:
+    """``(split, width)``: the middle and the width of the widest gap between consecutive
+    sorted ``values`` above their median (the speckle's levels are many and continuous, the
+    targets' few and decades above them: a class-variance split such as Otsu's lands inside
+    the speckle when it outnumbers the targets a hundred to one)."""
     upper = np.sort(values[values >= np.median(values)])
     if upper.size < 2:
-        return float(upper[0]) if upper.size else 0.0
-    k = int(np.argmax(np.diff(upper)))
-    return 0.5 * float(upper[k] + upper[k + 1])
+        return (float(upper[0]) if upper.size else 0.0), 0.0
+    gaps = np.diff(upper)
+    k = int(np.argmax(gaps))
+    return 0.5 * float(upper[k] + upper[k + 1]), float(gaps[k])
+
+
+def _blob_levels(f, labels, n_lab, quantile: float):
+    """The ``quantile`` pixel value (0: smallest, 1: the peak) of each blob (labels
+    ``1 … n_lab - 1``), vectorized."""
+    idx = np.flatnonzero(labels)
+    lab = labels.ravel()[idx]
+    val = f.ravel()[idx]
+    order = np.lexsort((val, lab))
+    lab, val = lab[order], val[order]
+    blobs = np.arange(1, n_lab)
+    start = np.searchsorted(lab, blobs)
+    end = np.searchsorted(lab, blobs, side="right")
+    pick = start + np.floor(quantile * (end - start - 1)).astype(np.int64)
+    return val[np.clip(pick, 0, max(val.size - 1, 0))]
 
 
 def _speckle_threshold(f, bg, thr, min_area):
@@ -308,20 +331,23 @@ def _speckle_threshold(f, bg, thr, min_area):
     mask = (f > np.float32(thr)).view(np.uint8)
     n_lab, labels, stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=8,
                                                                 ltype=cv2.CV_32S)
-    area = stats[1:, cv2.CC_STAT_AREA]
-    specks = int((area < min_area).sum())
-    blobs = area.size - specks
-    if specks < SPECKLE_MIN_SPECKS or specks <= SPECKLE_BLOB_RATIO * blobs or blobs == 0:
+    if n_lab - 1 < SPECKLE_MIN_SPECKS:
         return None
-    idx = np.flatnonzero(labels)
-    peak = np.full(n_lab, -np.inf)
-    np.maximum.at(peak, labels.ravel()[idx], f.ravel()[idx])
-    peak = peak[1:][area >= min_area] - bg
+    large = stats[1:, cv2.CC_STAT_AREA] >= min_area
+    if int(large.sum()) < SPECKLE_MIN_SPECKS:
+        return None
+    peak = _blob_levels(f, labels, n_lab, 1.0)[large] - bg
     log_peak = np.log10(np.maximum(peak, np.finfo(np.float32).tiny))
-    bright = peak[log_peak > _widest_gap_split(log_peak)]
-    if bright.size == 0:
+    split, width = _widest_gap(log_peak)
+    bright = log_peak > split
+    faint = peak.size - int(bright.sum())
+    if (width < SPECKLE_GAP_DECADES or not bright.any() or faint < SPECKLE_MIN_SPECKS
+            or faint <= SPECKLE_BLOB_RATIO * bright.sum()):
         return None
-    return bg + SPECKLE_THRESHOLD_FRACTION * float(np.median(bright))
+    plateau = _blob_levels(f, labels, n_lab, 0.9)[large][bright] - bg
+    if np.median(plateau / peak[bright]) < SPECKLE_PLATEAU_RATIO:
+        return None
+    return bg + SPECKLE_THRESHOLD_FRACTION * float(np.median(peak[bright]))
 
 
 def _levels(f, integer, background, threshold, k_sigma, min_area=4):

@@ -278,12 +278,12 @@ def test_speckle_is_recognized_and_a_fractional_threshold_ignores_it_too():
     from measure.detect import SPECKLE_THRESHOLD_FRACTION, fractional_threshold
 
     rng = np.random.default_rng(0)
-    image = np.zeros((200, 200), np.float32)
-    yy, xx = np.mgrid[:200, :200]
+    image = np.zeros((400, 400), np.float32)
+    yy, xx = np.mgrid[:400, :400]
     centres = [(50, 50), (50, 150), (150, 50), (150, 150)]
     for cy, cx in centres:
         image[(yy - cy) ** 2 + (xx - cx) ** 2 <= 36] = 1.0
-    speckle = rng.random((200, 200)) < 0.05
+    speckle = rng.random((400, 400)) < 0.12  # ~900 speckle blobs of 4 pixels or more
     image[speckle] += rng.uniform(0, 0.15, speckle.sum()).astype(np.float32)
     automatic = detect_targets(image)
     assert automatic.threshold_rule == "speckle" and automatic.n_found == 4
@@ -334,3 +334,21 @@ def test_a_near_target_larger_than_the_others_is_accepted():
     det = detect_targets(img)
     assert det.n_found == 6 and det.n_rejected == 0
     assert det.area.max() > MERGE_AREA_RATIO * np.median(det.area)  # suspicious, no waist
+
+
+def test_targets_of_uneven_brightness_with_fireflies_keep_the_noise_threshold():
+    """Lit targets in scattering water: brightness spread over a factor 4, a few fireflies far
+    brighter than any target sitting on them, specks around. No gap separates a faint crowd
+    from a bright few, so the noise threshold stays and every target is found."""
+    rng = np.random.default_rng(12)
+    shape = (480, 480)
+    grid = np.arange(20, 470, 30, dtype=float)
+    centers = np.array([(u + 0.3, v + 0.6) for v in grid for u in grid])  # 225 targets
+    brightness = rng.uniform(0.7, 3.0, len(centers))  # within the ghost test's ratio of 5
+    img = render_disks(shape, centers, 4.0, brightness)
+    img += rng.exponential(0.002, shape)  # haze
+    img[rng.random(shape) < 0.01] += 0.05  # isolated specks
+    hot = rng.choice(len(centers), 8, replace=False)
+    img[np.round(centers[hot, 1]).astype(int), np.round(centers[hot, 0]).astype(int)] += 300.0
+    det = detect_targets(img)
+    assert det.threshold_rule == "noise" and det.n_found == len(centers)
