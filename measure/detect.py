@@ -29,8 +29,10 @@ Pipeline
    through it) have a background whose upper tail is not Gaussian: most pixels sit near the
    median, but a few per cent are Monte-Carlo speckle one or two orders of magnitude above
    ``k_sigma * sigma``. The threshold above then cuts tens of thousands of blobs out of the
-   haze (and merges the targets into them). This is recognized by its effect: the peaks
-   (above the background) of the blobs of at least ``min_area`` pixels fall into two
+   haze (and merges the targets into them). This is recognized on the image averaged over
+   3 × 3 pixels (:data:`SPECKLE_FILTER_PX`: a matched filter for disks a few pixels wide — it
+   divides the per-pixel speckle by about 3 and keeps the targets' plateau), by its effect: the
+   peaks (above the background) of the blobs of at least ``min_area`` pixels fall into two
    populations at the widest gap of their logarithms; the background is taken for speckle when
    that gap spans at least :data:`SPECKLE_GAP_DECADES`, the faint population outnumbers the
    bright one by more than :data:`SPECKLE_BLOB_RATIO` and counts at least
@@ -38,8 +40,10 @@ Pipeline
    90th-percentile pixel at least :data:`SPECKLE_PLATEAU_RATIO` of their peak; a firefly on a
    lit target is a lone spike, and a handful of them never makes the targets "speckle"). The
    threshold is then ``background +`` :data:`SPECKLE_THRESHOLD_FRACTION` ``* target level``,
-   the target level being the median peak of the bright population. Nothing here uses the
-   truth; ``Detections.threshold_rule`` says which rule set the threshold.
+   the target level being the median peak of the bright population, and the blobs are cut
+   from the averaged image (their centroids, fluxes and shapes are measured on the image
+   itself). Nothing here uses the truth; ``Detections.threshold_rule`` says which rule set
+   the threshold.
 3. **Blobs.** ``cv2.connectedComponentsWithStats`` with 8-connectivity on the foreground mask.
    ``area`` is the number of foreground pixels of a blob.
 4. **Centroid window.** The faint anti-aliased rim of a disk lies below any useful threshold,
@@ -127,6 +131,8 @@ SPECKLE_MIN_SPECKS = 200
 #: ... while the bright blobs are flat-topped: their 90th-percentile pixel is at least this
 #: fraction of their peak (median over the bright blobs).
 SPECKLE_PLATEAU_RATIO = 0.5
+#: Side (px) of the mean filter applied before the speckle is looked for and cut.
+SPECKLE_FILTER_PX = 3
 #: On a speckled background the threshold is this fraction of the way from the background to
 #: the targets' level (the median peak of the bright blobs).
 SPECKLE_THRESHOLD_FRACTION = 0.25
@@ -190,7 +196,8 @@ class Detections:
     rejected : ``{reason: count}`` for every reason of :data:`REJECTION_REASONS` (zeros included).
     rejected_centers : (M, 2) centroids of the rejected blobs, sorted by ``v`` then ``u``.
     rejected_reasons : (M,) reason of each rejected blob (str).
-    background, noise_sigma, threshold : the levels used (image units).
+    background, noise_sigma, threshold : the levels used (image units; with the ``speckle``
+        rule the threshold applies to the image averaged over 3 × 3 pixels).
     threshold_rule : ``"noise"`` (background + k_sigma noise sigmas, or the floor),
         ``"speckle"`` (a speckled background: a fraction of the targets' level, see the module
         docs) or ``"given"`` (the caller's ``threshold``).
@@ -325,9 +332,10 @@ def _blob_levels(f, labels, n_lab, quantile: float):
     return val[np.clip(pick, 0, max(val.size - 1, 0))]
 
 
-def _speckle_threshold(f, bg, thr, min_area):
+def _speckle_threshold(f, bg, thr, min_area, original=None):
     """The threshold on a speckled background (module docs), or None when the background is
-    not speckle."""
+    not speckle. ``f`` is the image whose blobs are looked at (the averaged one); the bright
+    blobs' plateau is measured on ``original`` (default ``f``), where a firefly is a spike."""
     mask = (f > np.float32(thr)).view(np.uint8)
     n_lab, labels, stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=8,
                                                                 ltype=cv2.CV_32S)
@@ -344,15 +352,30 @@ def _speckle_threshold(f, bg, thr, min_area):
     if (width < SPECKLE_GAP_DECADES or not bright.any() or faint < SPECKLE_MIN_SPECKS
             or faint <= SPECKLE_BLOB_RATIO * bright.sum()):
         return None
-    plateau = _blob_levels(f, labels, n_lab, 0.9)[large][bright] - bg
-    if np.median(plateau / peak[bright]) < SPECKLE_PLATEAU_RATIO:
+    source = f if original is None else original
+    spike = _blob_levels(source, labels, n_lab, 1.0)[large][bright]
+    plateau = _blob_levels(source, labels, n_lab, 0.9)[large][bright]
+    floor = float(np.median(source))
+    if np.median((plateau - floor) / np.maximum(spike - floor, 1e-30)) < SPECKLE_PLATEAU_RATIO:
         return None
     return bg + SPECKLE_THRESHOLD_FRACTION * float(np.median(peak[bright]))
 
 
+def _speckle_levels(f, min_area):
+    """``(filtered image, threshold)`` on a speckled background, or None (module docs)."""
+    filtered = cv2.blur(f, (SPECKLE_FILTER_PX, SPECKLE_FILTER_PX))
+    bg, sigma = _background_and_sigma(filtered, False)
+    top = float(filtered.max()) - bg
+    noise_threshold = bg + max(5.0 * sigma, 1e-6 * top if top > 0 else 0.0)
+    threshold = _speckle_threshold(filtered, bg, noise_threshold, min_area, original=f)
+    return None if threshold is None else (filtered, threshold)
+
+
 def _levels(f, integer, background, threshold, k_sigma, min_area=4):
     """Stage 1-2: background, noise sigma, threshold (image units) and the rule that set it;
-    non-finite pixels set to the background. Returns ``(f, bg, sigma, thr, rule)``."""
+    non-finite pixels set to the background. Returns ``(f, bg, sigma, thr, rule, mask_image)``
+    where ``mask_image`` is the image the threshold applies to (``f``, or its average on a
+    speckled background)."""
     finite = np.isfinite(f)
     bg, sigma = _background_and_sigma(f, integer)
     if background is not None:
@@ -367,15 +390,15 @@ def _levels(f, integer, background, threshold, k_sigma, min_area=4):
         else:
             top = float(f.max()) - bg
             floor = 1e-6 * top if top > 0 else 0.0
-        thr, rule = bg + max(k_sigma * sigma, floor), "noise"
-        speckle = _speckle_threshold(f, bg, thr, min_area)
-        if speckle is not None and speckle > thr:
-            thr, rule = speckle, "speckle"
+        thr, rule, mask_image = bg + max(k_sigma * sigma, floor), "noise", f
+        speckle = _speckle_levels(f, min_area)
+        if speckle is not None and speckle[1] > thr:
+            (mask_image, thr), rule = speckle, "speckle"
     else:
-        thr, rule = float(threshold), "given"
+        thr, rule, mask_image = float(threshold), "given", f
         if not np.isfinite(thr):
             raise ValueError(f"threshold must be finite, got {threshold!r}")
-    return f, bg, sigma, thr, rule
+    return f, bg, sigma, thr, rule, mask_image
 
 
 @dataclass(frozen=True)
@@ -614,8 +637,9 @@ def detect_targets(
         raise ValueError(
             "k_sigma and merge_area_ratio must be > 0, ghost_ratio >= 0, merge_elongation >= 1"
         )
-    f, bg, sigma, thr, rule = _levels(f, integer, background, threshold, k_sigma, min_area)
-    blobs = _label_blobs(f, thr, min_area)
+    f, bg, sigma, thr, rule, mask_image = _levels(f, integer, background, threshold, k_sigma,
+                                                  min_area)
+    blobs = _label_blobs(mask_image, thr, min_area)
     window = _centroid_windows(blobs, window_pad)
     measures = _measure_blobs(f, window, blobs, bg, sigma)
     reason = _classify(f, blobs, measures, border_margin, ghost_ratio, merge_area_ratio,

@@ -283,8 +283,8 @@ def test_speckle_is_recognized_and_a_fractional_threshold_ignores_it_too():
     centres = [(50, 50), (50, 150), (150, 50), (150, 150)]
     for cy, cx in centres:
         image[(yy - cy) ** 2 + (xx - cx) ** 2 <= 36] = 1.0
-    speckle = rng.random((400, 400)) < 0.12  # ~900 speckle blobs of 4 pixels or more
-    image[speckle] += rng.uniform(0, 0.15, speckle.sum()).astype(np.float32)
+    speckle = rng.random((400, 400)) < 0.03  # thousands of specks, blobs once averaged 3 x 3
+    image[speckle] += rng.uniform(0, 0.3, speckle.sum()).astype(np.float32)
     automatic = detect_targets(image)
     assert automatic.threshold_rule == "speckle" and automatic.n_found == 4
     assert automatic.threshold == pytest.approx(SPECKLE_THRESHOLD_FRACTION * 1.0, abs=0.08)
@@ -336,10 +336,10 @@ def test_a_near_target_larger_than_the_others_is_accepted():
     assert det.area.max() > MERGE_AREA_RATIO * np.median(det.area)  # suspicious, no waist
 
 
-def test_targets_of_uneven_brightness_with_fireflies_keep_the_noise_threshold():
+def test_fireflies_on_lit_targets_never_set_the_threshold():
     """Lit targets in scattering water: brightness spread over a factor 4, a few fireflies far
-    brighter than any target sitting on them, specks around. No gap separates a faint crowd
-    from a bright few, so the noise threshold stays and every target is found."""
+    brighter than any target sitting on them, specks around. The fireflies never set the
+    threshold (they are spikes, not plateaus): every target is found, whichever rule holds."""
     rng = np.random.default_rng(12)
     shape = (480, 480)
     grid = np.arange(20, 470, 30, dtype=float)
@@ -351,4 +351,4 @@ def test_targets_of_uneven_brightness_with_fireflies_keep_the_noise_threshold():
     hot = rng.choice(len(centers), 8, replace=False)
     img[np.round(centers[hot, 1]).astype(int), np.round(centers[hot, 0]).astype(int)] += 300.0
     det = detect_targets(img)
-    assert det.threshold_rule == "noise" and det.n_found == len(centers)
+    assert det.threshold < brightness.min() and det.n_found == len(centers)
