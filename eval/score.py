@@ -52,7 +52,7 @@ def add_parser(subparsers):
     source.add_argument("--pixels", metavar="THEIRS.csv",
                         help="your matched pixel pairs: CSV with columns "
                              + ", ".join(PIXEL_COLUMNS))
-    p.add_argument("--method", default="optical_path", choices=METHODS[:3],
+    p.add_argument("--method", default=None, choices=METHODS[:3],
                    help="triangulation of --pixels (default optical_path)")
     p.add_argument("--gate-mm", type=positive_float, default=None,
                    help="largest distance of a point from its target, mm (default: half the "
@@ -170,6 +170,10 @@ def main(args) -> int:
 
     log = lambda text: print(text, file=sys.stderr, flush=True)  # noqa: E731
     start = time.perf_counter()
+    if args.points and args.method is not None:
+        raise CLIError("--method does not apply with --points: your points are scored as they "
+                       "are (--method triangulates --pixels)")
+    method = args.method or "optical_path"
     output = OutputDir(args.out, COMMAND).claim()
     try:
         data = read_dataset(args.dataset)
@@ -183,13 +187,13 @@ def main(args) -> int:
         label, source = "theirs", {"points": os.path.abspath(args.points)}
     else:
         pairs = read_pixel_pairs(args.pixels)
-        result = triangulate(data.rig, pairs[:, :2], pairs[:, 2:], args.method)
+        result = triangulate(data.rig, pairs[:, :2], pairs[:, 2:], method)
         if not result.valid.any():
-            raise CLIError(f"--pixels {args.pixels}: no pair triangulates with {args.method} "
+            raise CLIError(f"--pixels {args.pixels}: no pair triangulates with {method} "
                            f"and the dataset's calibration")
         points = result.points[result.valid]
-        label = args.method
-        source = {"pixels": os.path.abspath(args.pixels), "method": args.method,
+        label = method
+        source = {"pixels": os.path.abspath(args.pixels), "method": method,
                   "pairs": int(len(pairs)), "invalid": int((~result.valid).sum())}
     radius = float(data.manifest["scene"].get("target_radius_mm", 0.0))
     inside = [visible_targets(camera, data.rig.port, data.targets, radius)[1]

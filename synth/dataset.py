@@ -259,6 +259,7 @@ def write_dataset(scene, out_dir, spp: int | None = None, defines: dict | None =
                          f"identity rotation (the reference frame is the left camera's)")
     spp = spec.spp if spp is None else int(spp)
     seed = spec.seed if seed is None else int(seed)
+    spec = spec.rendered_with(spp=spp, seed=seed)  # the parameters say what was rendered
     key = request_key(spec, spp, seed, variant, exr, sensor)
 
     output = OutputDir(out_dir, "synth dataset")

@@ -151,3 +151,18 @@ def test_bad_inputs_are_one_line_and_exit_2(boards, tmp_path, capsys):
     (wrong / "board.json").write_text(json.dumps(Board("chessboard", (9, 6), 60.0).to_dict()))
     fails(["calibrate", str(wrong), "--out", str(tmp_path / "c")], eval_main, "found in 0")
     assert not (tmp_path / "c").exists()
+
+
+def test_define_spp_and_seed_mean_what_they_mean_everywhere(small_scene, tmp_path):
+    """``-D spp=4`` renders 4 spp (it rendered the boards' default, 16, issue 22) and
+    ``-D seed=2`` is ``--seed 2``: the same images."""
+    common = ["boards", small_scene, "--poses", "1", "--air", "--squares", "7x6", "--square-mm",
+              "40", "--distance", "450", "650", "--quiet"]
+    for name, extra in (("defines", ["-D", "spp=4", "-D", "seed=2"]),
+                        ("options", ["--spp", "4", "--seed", "2"])):
+        assert synth_main(common + ["--out", str(tmp_path / name), *extra]) == 0
+    manifests = [json.loads((tmp_path / name / "manifest.json").read_text())
+                 for name in ("defines", "options")]
+    assert [(m["spp"], m["seed"]) for m in manifests] == [(4, 2), (4, 2)]
+    assert ((tmp_path / "defines" / "left_00.png").read_bytes()
+            == (tmp_path / "options" / "left_00.png").read_bytes())

@@ -76,6 +76,24 @@ def test_dense_run_bad_options(plane_case, capsys, argv, fragment):
 
 
 @pytest.mark.slow
+@pytest.mark.parametrize("argv, fragment", [
+    (["--rms", "0.1"], "--rms does not apply"),
+    (["--max", "0.5"], "--max does not apply"),
+])
+def test_check_of_a_surface_dataset_refuses_the_detection_bounds(plane_case, capsys, argv,
+                                                                 fragment):
+    """A surface dataset's truth maps are checked, not detections: the bounds of the
+    detections cannot apply and are refused (issue 22: they were ignored)."""
+    root, _, ds = plane_case
+    before = _snapshot(root)
+    code = synth_main(["check", ds, *argv])
+    err = capsys.readouterr().err
+    assert code == 2 and fragment in err and "Traceback" not in err, err
+    assert len([line for line in err.splitlines() if line.startswith("error:")]) == 1
+    assert _snapshot(root) == before
+
+
+@pytest.mark.slow
 def test_scene_whose_mesh_is_missing(plane_case, tmp_path, capsys):
     _, scene, _ = plane_case
     copy = tmp_path / "plane.xml"
