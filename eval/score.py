@@ -63,19 +63,16 @@ def add_parser(subparsers):
 
 
 def read_points(path) -> np.ndarray:
-    """``(N, 3)`` float64 points of a point-cloud file; CLIError when unreadable, empty or not
-    finite."""
-    import open3d as o3d
+    """``(N, 3)`` float64 points of a point-cloud file, read whole (a truncated file is
+    refused: :mod:`synth.cloudfile`); CLIError when unreadable, empty or not finite."""
+    from synth.cloudfile import CloudFileError, read_cloud_points
 
     if not os.path.isfile(path):
         raise CLIError(f"--points {path}: no such file")
-    if str(path).lower().endswith(".ply"):
-        with open(path, "rb") as fh:
-            if fh.read(3) != b"ply":  # Open3D's PLY reader would print its own complaint
-                raise CLIError(f"--points {path}: not a PLY file (it does not start with 'ply')")
-    with o3d.utility.VerbosityContextManager(o3d.utility.VerbosityLevel.Error):
-        cloud = o3d.io.read_point_cloud(os.fspath(path))
-    points = np.asarray(cloud.points, dtype=np.float64).reshape(-1, 3)
+    try:
+        points = read_cloud_points(path)
+    except CloudFileError as exc:
+        raise CLIError(f"--points {exc}") from None
     if points.shape[0] == 0:
         raise CLIError(f"--points {path}: no points (not a point cloud Open3D can read, or empty)")
     bad = ~np.all(np.isfinite(points), axis=1)

@@ -328,6 +328,13 @@ def read_boards(path) -> BoardImages:
         raise DatasetError(f"{path}: {exc}") from None
     if manifest.get("command") != COMMAND:
         raise DatasetError(f"{path}: not a boards folder (manifest of {manifest.get('command')!r})")
+    if "board" in manifest and manifest["board"] != board.to_dict():
+        def described(b):
+            return f"{b.get('kind')} {'x'.join(map(str, b.get('squares', [])))}, {b.get('square_mm')} mm"
+
+        raise DatasetError(f"{path}/board.json: a {described(board.to_dict())} board, but "
+                           f"manifest.json says a {described(manifest['board'])} board was "
+                           f"rendered")
     scale = float(manifest["png_scale"])
     n = int(manifest["poses"])
     calib = read_calib(os.path.join(path, "calib.yaml"))
@@ -344,11 +351,37 @@ def read_boards(path) -> BoardImages:
                                    f"says {calib['size'][0]}x{calib['size'][1]}")
             pair.append(img.astype(np.float32) / np.float32(scale))
         images.append(tuple(pair))
-    poses_rows = np.loadtxt(os.path.join(path, "poses.csv"), delimiter=",", skiprows=1, ndmin=2)
+    poses_rows = _read_table(os.path.join(path, "poses.csv"), POSES_HEADER, n)
     poses = [BoardPose(Rotation.from_rotvec(r[1:4]).as_matrix(), r[4:7]) for r in poses_rows]
-    corners = np.loadtxt(os.path.join(path, "corners.csv"), delimiter=",", skiprows=1, ndmin=2)
+    corners = _read_table(os.path.join(path, "corners.csv"), CORNERS_HEADER, n * board.n_corners)
     return BoardImages(path, images, board, calib, poses, corners, bool(manifest.get("air")),
                        manifest)
+
+
+def _read_table(file, header, rows: int) -> np.ndarray:
+    """``(rows, len(header))`` numbers of a CSV that :func:`_write_truth` wrote, read whole:
+    :class:`DatasetError` unless it has ``header``, exactly ``rows`` complete rows of numbers
+    (what the manifest's pose count says) and ends with its last row's newline."""
+    try:
+        with open(file, newline="") as fh:
+            text = fh.read()
+    except OSError as exc:
+        raise DatasetError(f"{file}: {exc.strerror or exc}") from None
+    table = list(csv.reader(text.splitlines()))
+    if not table or table[0] != header:
+        raise DatasetError(f"{file}: header is {table[0] if table else None}, expected {header}")
+    body = table[1:]
+    bad = next((i for i, row in enumerate(body) if len(row) != len(header)), None)
+    if bad is not None or (body and not text.endswith("\n")):
+        line = (bad if bad is not None else len(body) - 1) + 2
+        raise DatasetError(f"{file}: line {line} is not complete: truncated or malformed")
+    if len(body) != rows:
+        raise DatasetError(f"{file}: {len(body)} rows, but the manifest's poses and board.json "
+                           f"say {rows}")
+    try:
+        return np.array(body, dtype=np.float64).reshape(rows, len(header))
+    except ValueError:
+        raise DatasetError(f"{file}: not numbers") from None
 
 
 __all__ = ["BoardImages", "BoardPose", "board_rig", "build_board_scene", "read_boards",

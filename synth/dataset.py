@@ -206,12 +206,20 @@ def write_pixels_csv(path, ids, points, uv_left, uv_right) -> None:
 def read_pixels_csv(path) -> dict:
     """``{"id": (N,), "points": (N, 3), "left": (N, 2), "right": (N, 2)}`` from ``pixels.csv``."""
     with open(path, newline="") as fh:
-        reader = csv.reader(fh)
-        header = next(reader, None)
-        if header != PIXELS_HEADER:
-            raise DatasetError(f"{path}: header is {header}, expected {PIXELS_HEADER}")
-        rows = np.array([[float(v) for v in row] for row in reader], dtype=np.float64)
-    rows = rows.reshape(-1, len(PIXELS_HEADER))
+        text = fh.read()
+    reader = csv.reader(text.splitlines())
+    header = next(reader, None)
+    if header != PIXELS_HEADER:
+        raise DatasetError(f"{path}: header is {header}, expected {PIXELS_HEADER}")
+    values = []
+    for line, row in enumerate(reader, start=2):
+        if len(row) != len(PIXELS_HEADER):
+            raise DatasetError(f"{path}: line {line} has {len(row)} values, the header "
+                               f"{len(PIXELS_HEADER)}: truncated or malformed")
+        values.append([float(v) for v in row])
+    if values and not text.endswith("\n"):  # the writer ends every row: cut mid-row
+        raise DatasetError(f"{path}: the last line is not complete: truncated")
+    rows = np.array(values, dtype=np.float64).reshape(-1, len(PIXELS_HEADER))
     return {"id": rows[:, 0].astype(int), "points": rows[:, 1:4], "left": rows[:, 4:6],
             "right": rows[:, 6:8]}
 
@@ -453,9 +461,17 @@ def read_dataset(path) -> Dataset:
     targets_path = os.path.join(path, "targets.ply")
     if not os.path.isfile(targets_path):
         raise DatasetError(f"{targets_path}: no such file")
-    import open3d as o3d
+    from synth.cloudfile import CloudFileError, read_cloud_points
 
-    targets = np.asarray(o3d.io.read_point_cloud(targets_path).points, dtype=np.float64)
+    try:  # whole or refused: Open3D reads a truncated PLY as far as it goes
+        targets = read_cloud_points(targets_path)
+    except CloudFileError as exc:
+        raise DatasetError(str(exc)) from None
+    n_targets = manifest["scene"].get("n_targets")
+    for name, count in (("targets.ply", targets.shape[0]), ("pixels.csv", pixels["id"].shape[0])):
+        if n_targets is not None and count != n_targets:
+            raise DatasetError(f"{path}/{name}: {count} targets, but manifest.json says "
+                               f"{n_targets}")
     if targets.shape[0] != pixels["id"].shape[0]:
         raise DatasetError(f"{path}: targets.ply has {targets.shape[0]} points but pixels.csv "
                            f"{pixels['id'].shape[0]} rows")

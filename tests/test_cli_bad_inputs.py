@@ -67,7 +67,8 @@ def workdir(tmp_path, monkeypatch, small_scene):
 
 
 #: Setups that damage the dataset ``ds``.
-DATASET_SETUPS = ("garbage_calib", "no_left_png", "bad_manifest")
+DATASET_SETUPS = ("garbage_calib", "no_left_png", "bad_manifest", "truncated_targets",
+                  "truncated_pixels", "truncated_points")
 #: Cases that render before they are refused (nothing matched in the images).
 RENDERING = ("max_depth=0", "3000,4000", "target_radius=0")
 
@@ -117,6 +118,16 @@ def _prepare(workdir: Path, setup: str | None):
         (workdir / "ds" / "left.png").unlink()
     elif setup == "bad_manifest":
         (workdir / "ds" / "manifest.json").write_text("{not json")
+    elif setup == "truncated_targets":  # theirs.ply: the whole truth, as a user's cloud
+        shutil.copy(workdir / "ds" / "targets.ply", workdir / "theirs.ply")
+        _truncate(workdir / "ds" / "targets.ply")
+    elif setup == "truncated_pixels":
+        _truncate(workdir / "ds" / "pixels.csv")
+    elif setup == "truncated_points":
+        shutil.copy(workdir / "ds" / "targets.ply", workdir / "half.ply")
+        _truncate(workdir / "half.ply")
+    elif setup == "truncated_corners":
+        _truncate(workdir / "bair" / "corners.csv")
     elif setup == "empty_scene":
         (workdir / "empty.xml").write_text("")
     elif setup == "not_xml":
@@ -127,6 +138,12 @@ def _prepare(workdir: Path, setup: str | None):
         (workdir / "adir").mkdir()
     elif setup == "foreign_file":
         (workdir / "notes.txt").write_text("a user's notes, not written by eval bench")
+
+
+def _truncate(path: Path) -> None:
+    """Cut ``path`` to half its size (a copy interrupted half-way)."""
+    data = path.read_bytes()
+    path.write_bytes(data[:len(data) // 2])
 
 
 def _assert_refused(code, capsys, before, workdir, fragment=None):
@@ -226,6 +243,15 @@ EVAL_CASES = [
      "--start-distance does not apply"),
     (None, ["sweep", str(REPO / "sweeps" / "smoke.toml"), "--out", "sw", "--connect-timeout",
             "3", "--no-progress"], "--connect-timeout does not apply"),
+    # files are read whole or refused (issue 22)
+    ("truncated_targets", ["score", "ds", "--points", "theirs.ply", "--out", "sc"],
+     "targets.ply: truncated"),
+    ("truncated_targets", RUN_FROM, "targets.ply: truncated"),
+    ("truncated_points", ["score", "ds", "--points", "half.ply", "--out", "sc"],
+     "half.ply: truncated"),
+    ("truncated_pixels", ["score", "ds", "--pixels", "ds/pixels.csv", "--out", "sc"],
+     "pixels.csv"),
+    ("truncated_corners", ["calibrate", "bair", "--out", "out", "--no-progress"], "corners.csv"),
     # truth and assumption
     (None, RUN + ["--assume", "bogus=1"], "bogus"),
     (None, RUN + ["--assume", "n_water"], "n_water"),
@@ -318,6 +344,9 @@ SYNTH_CASES = [
     (None, BOARDS + ["--seed", "1", "-D", "seed=2"], "--seed 1 conflicts with -D seed=2"),
     (None, BOARDS + ["--air", "-D", "n_water=1.4"], "n_water"),
     (None, BOARDS + ["-D", "target_radius=3"], "target_radius"),
+    # files are read whole or refused (issue 22)
+    ("truncated_targets", ["check", "ds"], "targets.ply: truncated"),
+    ("truncated_pixels", ["check", "ds"], "pixels.csv"),
 ]
 # Overwriting a file that `synth scene` did not write (the scene file of someone else).
 SYNTH_CASES[16] = (None, ["scene", "--out", "small_copy_foreign.xml"], "not a file this command wrote")

@@ -145,11 +145,13 @@ def test_bad_inputs_are_one_line_and_exit_2(boards, tmp_path, capsys):
     write_calib(other, paper_rig(size=(640, 480)))
     fails(["calibrate", boards["water"], "--intrinsics", str(other), "--out",
            str(tmp_path / "c")], eval_main, "image size")
-    # a board definition that does not match the images: found nowhere
+    # a board definition that does not match the images: it disagrees with the manifest (and
+    # with corners.csv), refused before any detection
     wrong = tmp_path / "wrong"
     shutil.copytree(boards["air"], wrong)
     (wrong / "board.json").write_text(json.dumps(Board("chessboard", (9, 6), 60.0).to_dict()))
-    fails(["calibrate", str(wrong), "--out", str(tmp_path / "c")], eval_main, "found in 0")
+    fails(["calibrate", str(wrong), "--out", str(tmp_path / "c")], eval_main,
+          "board.json: a chessboard 9x6, 60.0 mm board")
     assert not (tmp_path / "c").exists()
 
 
