@@ -212,7 +212,9 @@ def write_boards(spec: SceneSpec, out_dir, board: Board, n_poses: int = DEFAULT_
                  max_tilt_deg: float = DEFAULT_MAX_TILT_DEG, variant=None,
                  progress: bool = True) -> dict:
     """Render ``n_poses`` stereo pairs of ``board`` and write the folder (module docs). Returns
-    the manifest; ``manifest["skipped"]`` when ``out_dir`` already held the same request."""
+    the manifest; ``manifest["skipped"]`` when ``out_dir`` already held the same request, whole
+    (:meth:`synth.fileio.OutputDir.damage`); ``manifest["rendered_again"]`` why an earlier output
+    of the same request was rendered again, or None."""
     from tqdm import tqdm
 
     t_start = time.perf_counter()
@@ -222,12 +224,15 @@ def write_boards(spec: SceneSpec, out_dir, board: Board, n_poses: int = DEFAULT_
         raise ValueError(f"{spec.path}: the scene has no port; render its boards with --air")
     key = request_key(spec, board, n_poses, spp, seed, air, distance_range, max_tilt_deg, variant)
     output = OutputDir(out_dir, COMMAND)
+    damage = None
     if output.exists_as_output() and (read_marker(output.path) or {}).get("request_key") == key:
+        damage = output.damage()  # up to date only when every file is whole
         try:
-            with open(os.path.join(output.path, "manifest.json")) as fh:
-                return {**json.load(fh), "skipped": True}
+            if damage is None:
+                with open(os.path.join(output.path, "manifest.json")) as fh:
+                    return {**json.load(fh), "skipped": True}
         except (OSError, ValueError):
-            pass
+            damage = "manifest.json cannot be read"
     output.claim()
     rig = board_rig(spec, air)
     poses = sample_poses(rig, board, n_poses, seed, not air, distance_range, max_tilt_deg)
@@ -267,7 +272,7 @@ def write_boards(spec: SceneSpec, out_dir, board: Board, n_poses: int = DEFAULT_
         }
         manifest["files"] = sorted(os.listdir(tmp)) + ["manifest.json"]
         atomic_write_json(os.path.join(tmp, "manifest.json"), manifest)
-    return {**manifest, "skipped": False}
+    return {**manifest, "skipped": False, "rendered_again": damage}
 
 
 def _write_truth(directory, rig, board: Board, poses) -> None:

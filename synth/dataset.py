@@ -26,7 +26,8 @@ A dataset directory holds (units mm, reference frame = the left camera's, OpenCV
 
 Writing is atomic: everything goes to a temporary sibling directory that is renamed at the end.
 A rerun with the same request (scene bytes, resolved parameters, spp, seed, variant request,
-EXR) finds the manifest's key and does nothing.
+EXR) finds the manifest's key and does nothing — when every file written is whole (the output
+marker's sizes and SHA-256, :meth:`synth.fileio.OutputDir.damage`); otherwise it renders again.
 """
 
 from __future__ import annotations
@@ -252,8 +253,10 @@ def write_dataset(scene, out_dir, spp: int | None = None, defines: dict | None =
     ``png_scale`` its DN per unit of radiance; the EXRs (``exr``) stay noise-free.
 
     Returns the manifest (dict); ``manifest["skipped"]`` is True when ``out_dir`` already held
-    the same request and nothing was done. ``out_dir`` follows the project's output rule
-    (:class:`synth.fileio.OutputDir`): a directory holding files this command did not write is
+    the same request, whole, and nothing was done; ``manifest["rendered_again"]`` says why an
+    earlier output of the same request was rendered again (a file missing or changed), or
+    None. ``out_dir`` follows the project's output rule (:class:`synth.fileio.OutputDir`): a
+    directory holding files this command did not write is
     refused before rendering; an earlier dataset with another request is replaced atomically.
     """
     t_start = time.perf_counter()
@@ -271,16 +274,19 @@ def write_dataset(scene, out_dir, spp: int | None = None, defines: dict | None =
     key = request_key(spec, spp, seed, variant, exr, sensor)
 
     output = OutputDir(out_dir, "synth dataset")
+    damage = None
     if output.exists_as_output():
         marker = read_marker(output.path) or {}
         if marker.get("request_key") == key:
+            damage = output.damage()  # up to date only when every file is whole
             try:
-                with open(os.path.join(output.path, "manifest.json")) as fh:
-                    old = json.load(fh)
-                old["skipped"] = True
-                return old
+                if damage is None:
+                    with open(os.path.join(output.path, "manifest.json")) as fh:
+                        old = json.load(fh)
+                    old["skipped"] = True
+                    return old
             except (OSError, ValueError):
-                pass  # a damaged earlier output: render it again
+                damage = "manifest.json cannot be read"
     output.claim()
 
     with output.staged(extra={"request_key": key}) as tmp:
@@ -365,6 +371,7 @@ def write_dataset(scene, out_dir, spp: int | None = None, defines: dict | None =
             json.dump(manifest, fh, indent=2, sort_keys=False)
             fh.write("\n")
     manifest["skipped"] = False
+    manifest["rendered_again"] = damage  # why an earlier output of this request was not whole
     return manifest
 
 

@@ -79,6 +79,8 @@ def main(args) -> int:
     if manifest.get("skipped"):
         print(f"{args.out}: up to date (same scene, board and options); nothing to do")
         return 0
+    if manifest.get("rendered_again"):
+        print(f"{args.out}: {manifest['rendered_again']}; rendering it again")
     w, h = manifest["image_size"]
     print(f"wrote {args.out}: {manifest['poses']} stereo pairs of a {board.kind} "
           f"{cols}x{rows} ({board.square_mm:g} mm) {'in air' if args.air else 'behind the port'}, "

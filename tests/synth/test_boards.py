@@ -168,3 +168,22 @@ def test_define_spp_and_seed_mean_what_they_mean_everywhere(small_scene, tmp_pat
     assert [(m["spp"], m["seed"]) for m in manifests] == [(4, 2), (4, 2)]
     assert ((tmp_path / "defines" / "left_00.png").read_bytes()
             == (tmp_path / "options" / "left_00.png").read_bytes())
+
+
+def test_a_rerun_renders_again_unless_every_image_is_whole(boards, tmp_path, capsys):
+    """A boards folder is up to date only when every file it wrote is whole (issue 22: with one
+    image cut the rerun said 'up to date')."""
+    out = tmp_path / "air"
+    argv = ["boards", boards["scene"], "--out", str(out), "--poses", "2", "--seed", "3",
+            "--air", "--squares", "7x6", "--square-mm", "60", "--distance", "450", "650",
+            "--spp", "4", "--quiet"]
+    assert synth_main(argv) == 0
+    image = out / "left_01.png"
+    whole = image.read_bytes()
+    image.write_bytes(whole[:100])
+    capsys.readouterr()
+    assert synth_main(argv) == 0
+    printed = capsys.readouterr().out
+    assert "nothing to do" not in printed and "rendering it again" in printed, printed
+    assert image.read_bytes() == whole
+    assert synth_main(argv) == 0 and "nothing to do" in capsys.readouterr().out

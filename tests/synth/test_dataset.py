@@ -137,6 +137,29 @@ def test_spp_option_and_define_mean_the_same(small_scene, tmp_path):
     assert (tmp_path / "option" / "left.png").read_bytes() == (tmp_path / "define" / "left.png").read_bytes()
 
 
+@pytest.mark.slow
+@pytest.mark.parametrize("damage", ["delete", "truncate", "change"])
+def test_a_rerun_renders_again_unless_every_file_is_whole(small_scene, tmp_path, capsys, damage):
+    """A dataset is up to date only when every file it wrote is whole (issue 22: with
+    left.png deleted or cut the rerun said 'up to date … nothing to do')."""
+    out = tmp_path / "ds"
+    argv = ["dataset", small_scene, "--out", str(out), "--spp", "4", "--quiet"]
+    assert main(argv) == 0
+    whole = (out / "left.png").read_bytes()
+    if damage == "delete":
+        (out / "left.png").unlink()
+    elif damage == "truncate":
+        (out / "left.png").write_bytes(whole[:len(whole) // 2])
+    else:
+        (out / "pixels.csv").write_text((out / "pixels.csv").read_text().replace("1", "2"))
+    capsys.readouterr()
+    assert main(argv) == 0
+    printed = capsys.readouterr().out
+    assert "nothing to do" not in printed and "rendering it again" in printed, printed
+    assert (out / "left.png").read_bytes() == whole
+    assert main(argv) == 0 and "nothing to do" in capsys.readouterr().out
+
+
 def test_failed_write_leaves_nothing(small_scene, tmp_path, monkeypatch):
     import synth.dataset as ds
 
