@@ -18,7 +18,8 @@ files): ``left_PP.png``, ``right_PP.png`` (16-bit linear, one ``png_scale``), ``
 ``poses.csv`` (``pose,rx,ry,rz,tx,ty,tz``: rotation vector in rad and translation in mm of
 ``X_ref = R·X_board + t``), ``corners.csv`` (``pose,id,x,y,z,u_left,v_left,u_right,v_right``:
 every corner's 3D position and its forward-model pixel in each view), ``calib.yaml`` (the true
-rig, the dataset format) and ``manifest.json``.
+rig, the dataset format) and ``manifest.json`` (with every other file's SHA-256 and its own,
+checked when the folder is read: :func:`read_boards` reads it whole or refuses it).
 """
 
 from __future__ import annotations
@@ -39,15 +40,16 @@ from measure.board import PATTERN_TEXELS_PER_SQUARE, Board, BoardError
 from measure.port import index_matched_port
 from measure.projection import project
 
-from synth.dataset import DatasetError, read_calib, write_calib
-from synth.fileio import OutputDir, atomic_write_json, read_marker
+from synth.dataset import (DatasetError, check_files, manifest_digest, read_calib,
+                           write_calib)
+from synth.fileio import OutputDir, atomic_write_json, file_sha256, jsonable, read_marker
 from synth.integrator import RENDERER, integrator_name
 from synth.provenance import package_versions
 from synth.render import (check_render_request, png16_scale, render_view,
                           sensor_dict, to_png16, write_png)
 from synth.scene import SceneSpec, interface_placements
 
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2  # 2: the manifest holds every file's SHA-256 and its own
 COMMAND = "synth boards"
 DEFAULT_POSES = 15
 DEFAULT_SPP = 16
@@ -271,6 +273,10 @@ def write_boards(spec: SceneSpec, out_dir, board: Board, n_poses: int = DEFAULT_
             "seconds": times,
         }
         manifest["files"] = sorted(os.listdir(tmp)) + ["manifest.json"]
+        manifest["sha256"] = {name: file_sha256(os.path.join(tmp, name))
+                              for name in sorted(os.listdir(tmp))}
+        manifest = jsonable(manifest)  # as written: the digest is of what is read back
+        manifest["manifest_sha256"] = manifest_digest(manifest)
         atomic_write_json(os.path.join(tmp, "manifest.json"), manifest)
     return {**manifest, "skipped": False, "rendered_again": damage}
 
@@ -359,6 +365,7 @@ def read_boards(path) -> BoardImages:
     poses_rows = _read_table(os.path.join(path, "poses.csv"), POSES_HEADER, n)
     poses = [BoardPose(Rotation.from_rotvec(r[1:4]).as_matrix(), r[4:7]) for r in poses_rows]
     corners = _read_table(os.path.join(path, "corners.csv"), CORNERS_HEADER, n * board.n_corners)
+    check_files(path, manifest, COMMAND)  # last: the readers above say more precisely what is wrong
     return BoardImages(path, images, board, calib, poses, corners, bool(manifest.get("air")),
                        manifest)
 

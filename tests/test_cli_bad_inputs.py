@@ -68,7 +68,8 @@ def workdir(tmp_path, monkeypatch, small_scene):
 
 #: Setups that damage the dataset ``ds``.
 DATASET_SETUPS = ("garbage_calib", "no_left_png", "bad_manifest", "truncated_targets",
-                  "truncated_pixels", "truncated_points")
+                  "truncated_pixels", "truncated_points", "edited_manifest",
+                  "edited_manifest_no_hashes", "edited_calib", "edited_calib_no_hashes")
 #: Cases that render before they are refused (nothing matched in the images).
 RENDERING = ("max_depth=0", "3000,4000", "target_radius=0")
 
@@ -128,6 +129,16 @@ def _prepare(workdir: Path, setup: str | None):
         _truncate(workdir / "half.ply")
     elif setup == "truncated_corners":
         _truncate(workdir / "bair" / "corners.csv")
+    elif setup == "edited_boards_calib":
+        with open(workdir / "bair" / "calib.yaml", "a") as handle:
+            handle.write("# edited by hand\n")
+    elif setup in ("edited_manifest", "edited_manifest_no_hashes"):  # the truth edited by hand
+        _edit_manifest(workdir / "ds", n_water="1.40", hashes=setup == "edited_manifest")
+    elif setup in ("edited_calib", "edited_calib_no_hashes"):
+        calib = workdir / "ds" / "calib.yaml"
+        calib.write_text(calib.read_text().replace("1.3300000000000001", "1.3999999999999999"))
+        if setup == "edited_calib_no_hashes":
+            _edit_manifest(workdir / "ds", hashes=False)
     elif setup == "empty_scene":
         (workdir / "empty.xml").write_text("")
     elif setup == "not_xml":
@@ -138,6 +149,20 @@ def _prepare(workdir: Path, setup: str | None):
         (workdir / "adir").mkdir()
     elif setup == "foreign_file":
         (workdir / "notes.txt").write_text("a user's notes, not written by eval bench")
+
+
+def _edit_manifest(ds: Path, n_water: str | None = None, hashes: bool = True) -> None:
+    """Edit a dataset's manifest by hand: set its scene's ``n_water``; without ``hashes``, drop
+    its file hashes and its own hash (as in a manifest written before they were recorded)."""
+    import json
+
+    manifest = json.loads((ds / "manifest.json").read_text())
+    if n_water is not None:
+        manifest["scene"]["params"]["n_water"] = n_water
+    if not hashes:
+        manifest.pop("manifest_sha256", None)
+        manifest.pop("sha256", None)
+    (ds / "manifest.json").write_text(json.dumps(manifest, indent=2) + "\n")
 
 
 def _truncate(path: Path) -> None:
@@ -252,6 +277,17 @@ EVAL_CASES = [
     ("truncated_pixels", ["score", "ds", "--pixels", "ds/pixels.csv", "--out", "sc"],
      "pixels.csv"),
     ("truncated_corners", ["calibrate", "bair", "--out", "out", "--no-progress"], "corners.csv"),
+    # a dataset's manifest is not a place to edit the truth (issue 22)
+    ("edited_manifest", RUN_FROM, "manifest.json was changed"),
+    ("edited_manifest", ["score", "ds", "--points", "ds/targets.ply", "--out", "sc"],
+     "manifest.json was changed"),
+    ("edited_manifest_no_hashes", RUN_FROM, "disagree with its request key"),
+    ("edited_calib", RUN_FROM, "calib.yaml: changed"),
+    ("edited_calib", ["score", "ds", "--pixels", "ds/pixels.csv", "--out", "sc"],
+     "calib.yaml: changed"),
+    ("edited_calib_no_hashes", RUN_FROM, "calib.yaml disagrees"),
+    ("edited_boards_calib", ["calibrate", "bair", "--out", "out", "--no-progress"],
+     "calib.yaml: changed since synth boards wrote it"),
     # truth and assumption
     (None, RUN + ["--assume", "bogus=1"], "bogus"),
     (None, RUN + ["--assume", "n_water"], "n_water"),
@@ -347,6 +383,7 @@ SYNTH_CASES = [
     # files are read whole or refused (issue 22)
     ("truncated_targets", ["check", "ds"], "targets.ply: truncated"),
     ("truncated_pixels", ["check", "ds"], "pixels.csv"),
+    ("edited_manifest", ["check", "ds"], "manifest.json was changed"),
 ]
 # Overwriting a file that `synth scene` did not write (the scene file of someone else).
 SYNTH_CASES[16] = (None, ["scene", "--out", "small_copy_foreign.xml"], "not a file this command wrote")
@@ -388,6 +425,15 @@ def test_earlier_output_is_replaced_and_stale_staging_removed(workdir, capsys, r
     assert not stale.exists() and (workdir / "out" / "report.json").is_file()
     names = sorted(p.name for p in workdir.iterdir())
     assert names == sorted(["ds", "out", "paper_plane.xml", "small.xml"])
+
+
+@pytest.mark.slow
+def test_a_manifest_without_hashes_that_agrees_with_itself_is_read(workdir, request):
+    """Positive control of the edited-manifest cases: a manifest without its hashes (as
+    written before format 3) whose request key still agrees with it is read."""
+    _add_dataset(workdir, request)
+    _edit_manifest(workdir / "ds", hashes=False)
+    assert eval_main(["score", "ds", "--points", "ds/targets.ply", "--out", "sc"]) == 0
 
 
 @pytest.mark.slow

@@ -121,6 +121,14 @@ def read_run_dataset(config: RunConfig, spec):
     if data.manifest["scene"].get("sha256") != spec.sha256:
         raise CLIError(f"--from {config.from_dir}: the dataset was rendered from another scene "
                        f"than {config.scene}")
+    from eval.core.assumption import rig_difference
+
+    difference = rig_difference(spec.rig, data.rig)
+    if difference:
+        raise CLIError(f"--from {config.from_dir}: calib.yaml disagrees with the scene rendered "
+                       f"with manifest.json's parameters (in {', '.join(difference)}); the run "
+                       f"takes the scene as the truth: render the dataset again, or measure "
+                       f"with --calib {os.path.join(config.from_dir, 'calib.yaml')} to believe it")
     sensor = data.manifest.get("sensor")
     if config.sensor is not None and sensor:
         name = (sensor.get("model") or {}).get("name", "a") if isinstance(sensor, dict) else "a"

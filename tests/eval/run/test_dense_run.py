@@ -184,14 +184,22 @@ def test_mesh_without_surface_mesh_and_score_of_a_surface_dataset(plane_case, tm
 
 @pytest.mark.slow
 def test_damaged_truth_maps_are_refused(plane_case, tmp_path, capsys):
-    """Truth points that are NaN where the valid mask says the surface is hit: refused."""
+    """Truth points that are NaN where the valid mask says the surface is hit: refused — by
+    their SHA-256 against the manifest's, and in a manifest without the hashes (before format
+    3) by the maps' own consistency."""
     _, scene, ds = plane_case
     copy = tmp_path / "ds"
     shutil.copytree(ds, copy)
     points = np.load(copy / "left_truth_points.npy")
     np.save(copy / "left_truth_points.npy", np.full_like(points, np.nan))
-    code = eval_main(["run", scene, "--from", str(copy), "--out", str(tmp_path / "out"),
-                      "--no-progress"])
+    argv = ["run", scene, "--from", str(copy), "--out", str(tmp_path / "out"), "--no-progress"]
+    code = eval_main(argv)
+    err = capsys.readouterr().err
+    assert code == 2 and "left_truth_points.npy: changed since" in err and "Traceback" not in err
+    manifest = json.loads((copy / "manifest.json").read_text())
+    del manifest["sha256"], manifest["manifest_sha256"]
+    (copy / "manifest.json").write_text(json.dumps(manifest))
+    code = eval_main(argv)
     err = capsys.readouterr().err
     assert code == 2 and "truth maps disagree" in err and "Traceback" not in err
     assert not (tmp_path / "out").exists()
