@@ -260,6 +260,8 @@ EVAL_CASES = [
             "--self-calibrate", "n_water"], "no port"),
     (None, ["score", "missing_ds", "--points", "theirs.ply", "--method", "su"],
      "--method does not apply"),
+    (None, ["score", "missing_ds", "--pixels", "pairs.csv", "--units", "m"],
+     "--units does not apply"),
     (None, ["calibrate", "bair", "--free", "n_water", "--out", "out", "--no-progress"],
      "--free does not apply"),
     (None, ["calibrate", "bair", "--n-water", "1.2", "--out", "out", "--no-progress"],
