@@ -3,8 +3,9 @@
 Users render a dataset (``python -m synth dataset``), run their own pipeline on its images and
 hand back either
 
-* ``--points THEIRS.ply`` — their 3D points (any point cloud Open3D reads; millimetres, the
-  dataset's reference frame: the left camera's, OpenCV axes), or
+* ``--points THEIRS.ply`` — their 3D points (any point cloud Open3D reads, read whole;
+  millimetres, or metres with ``--units m``; the dataset's reference frame: the left camera's,
+  OpenCV axes), or
 * ``--pixels THEIRS.csv`` — matched pixel pairs (columns ``u_left, v_left, u_right, v_right``,
   OpenCV pixel convention), triangulated here with ``--method`` and the dataset's
   ``calib.yaml``,
@@ -16,6 +17,11 @@ nearest target is the right one; one point per target, the nearest wins; the oth
 points against the targets visible in both views, the rigid alignment, and the flatness (seeded
 with the dataset's seed). ``eval score`` on an ``eval run --from DATASET`` output's own
 ``points_<method>.ply`` reproduces that run's numbers.
+
+A submission is checked for plausibility before it is scored (:func:`plausibility`): when the
+points fit the targets markedly better scaled by 1000 (metres), reflected (an axis negated) or
+shifted rigidly, or some repeat others, one line ``warning: …`` names the likely cause on
+stderr and in the report (``warnings``); the points are scored as given all the same.
 
 Writes to ``--out``: ``report.json``, ``report.md``, ``error_maps.png``, ``histograms.png`` and
 ``points_scored.ply`` (the associated points coloured by dP).
@@ -36,6 +42,12 @@ from eval.core.formatting import format_number as fmt
 
 COMMAND = "eval score"
 PIXEL_COLUMNS = ("u_left", "v_left", "u_right", "v_right")
+#: ``--units`` of ``--points``: millimetres per unit.
+UNITS = {"mm": 1.0, "m": 1000.0}
+#: Points closer than this to an earlier point count as repeats of it (mm).
+DUPLICATE_MM = 1e-6
+#: Most points the plausibility check looks at (an evenly spaced subsample beyond).
+PLAUSIBILITY_POINTS = 20_000
 
 
 def add_parser(subparsers):
@@ -52,8 +64,10 @@ def add_parser(subparsers):
     source.add_argument("--pixels", metavar="THEIRS.csv",
                         help="your matched pixel pairs: CSV with columns "
                              + ", ".join(PIXEL_COLUMNS))
-    p.add_argument("--method", default="optical_path", choices=METHODS[:3],
+    p.add_argument("--method", default=None, choices=METHODS[:3],
                    help="triangulation of --pixels (default optical_path)")
+    p.add_argument("--units", default=None, choices=UNITS,
+                   help="units of --points (default mm; m: the points are multiplied by 1000)")
     p.add_argument("--gate-mm", type=positive_float, default=None,
                    help="largest distance of a point from its target, mm (default: half the "
                         "smallest distance between two targets, where the nearest target is "
@@ -63,19 +77,16 @@ def add_parser(subparsers):
 
 
 def read_points(path) -> np.ndarray:
-    """``(N, 3)`` float64 points of a point-cloud file; CLIError when unreadable, empty or not
-    finite."""
-    import open3d as o3d
+    """``(N, 3)`` float64 points of a point-cloud file, read whole (a truncated file is
+    refused: :mod:`synth.cloudfile`); CLIError when unreadable, empty or not finite."""
+    from synth.cloudfile import CloudFileError, read_cloud_points
 
     if not os.path.isfile(path):
         raise CLIError(f"--points {path}: no such file")
-    if str(path).lower().endswith(".ply"):
-        with open(path, "rb") as fh:
-            if fh.read(3) != b"ply":  # Open3D's PLY reader would print its own complaint
-                raise CLIError(f"--points {path}: not a PLY file (it does not start with 'ply')")
-    with o3d.utility.VerbosityContextManager(o3d.utility.VerbosityLevel.Error):
-        cloud = o3d.io.read_point_cloud(os.fspath(path))
-    points = np.asarray(cloud.points, dtype=np.float64).reshape(-1, 3)
+    try:
+        points = read_cloud_points(path)
+    except CloudFileError as exc:
+        raise CLIError(f"--points {exc}") from None
     if points.shape[0] == 0:
         raise CLIError(f"--points {path}: no points (not a point cloud Open3D can read, or empty)")
     bad = ~np.all(np.isfinite(points), axis=1)
@@ -159,6 +170,90 @@ def score_points(points: np.ndarray, truth: np.ndarray, visible_both: np.ndarray
     return scores, arrays, association
 
 
+def _fit(points: np.ndarray, truth: np.ndarray, gate_mm: float) -> tuple[int, float]:
+    """``(points associated with a target, RMS of their distances)`` (inf when none): one
+    point per target (:func:`associate_points`), so that a cloud shrunk onto one target counts
+    once."""
+    target = associate_points(points, truth, gate_mm)
+    ok = target >= 0
+    if not ok.any():
+        return 0, float("inf")
+    distance = np.linalg.norm(points[ok] - truth[target[ok]], axis=1)
+    return int(ok.sum()), float(np.sqrt(np.mean(distance ** 2)))
+
+
+def _rigid_shift(points: np.ndarray, truth: np.ndarray, tree, gate_mm: float) -> np.ndarray:
+    """The translation that best lays ``points`` on the targets: from centroid to centroid,
+    then refined a few times on the points that fall within the gate (mm)."""
+    shift = truth.mean(axis=0) - points.mean(axis=0)
+    for _ in range(5):
+        distance, index = tree.query(points + shift, distance_upper_bound=gate_mm)
+        near = np.isfinite(distance)
+        if not near.any():
+            break
+        shift = shift + (truth[index[near]] - (points[near] + shift)).mean(axis=0)
+    return shift
+
+
+#: Reflections and turns of the axes a submission may have been written in (label, diagonal).
+FRAMES = (("x negated", (-1, 1, 1)), ("y negated: a y-up frame?", (1, -1, 1)),
+          ("z negated", (1, 1, -1)), ("y and z negated: OpenGL axes, y up and z back?", (1, -1, -1)),
+          ("x and y negated: turned by 180 degrees about z?", (-1, -1, 1)))
+
+
+def plausibility(points: np.ndarray, truth: np.ndarray, gate_mm: float, units=None) -> list:
+    """Warnings (text, without the file) about a submission ``points`` (N, 3) mm scored against
+    the targets ``truth`` (M, 3) visible in both views: the likely cause when another scale
+    (metres), a reflection of the axes or a rigid shift lays the points on the targets
+    markedly better than as given, and repeated points. Empty when plausible."""
+    from scipy.spatial import cKDTree
+
+    warnings = []
+    points = np.asarray(points, dtype=np.float64)
+    if len(points) > 1:
+        pairs = cKDTree(points).query_pairs(DUPLICATE_MM, output_type="ndarray")
+        repeats = np.unique(pairs.max(axis=1)).size if len(pairs) else 0
+        if repeats:
+            warnings.append(f"{repeats} points repeat another point (within {DUPLICATE_MM:g} mm): "
+                            f"the same match written twice?")
+    if len(truth) == 0 or len(points) == 0:
+        return warnings
+    sample = points[::max(1, -(-len(points) // PLAUSIBILITY_POINTS))]
+    tree = cKDTree(truth)
+    given = _fit(sample, truth, gate_mm)
+    candidates = []
+    if units != "m":
+        candidates.append(("looks like metres (pass --units m)", sample * 1000.0, None))
+    else:
+        candidates.append(("looks like millimetres already (drop --units m)", sample / 1000.0,
+                           None))
+    candidates += [(f"looks reflected ({label})", sample * np.array(diagonal, float), None)
+                   for label, diagonal in FRAMES]
+    shift = _rigid_shift(sample, truth, tree, gate_mm)
+    candidates.append((f"looks offset by a rigid shift of ({shift[0]:+.1f}, {shift[1]:+.1f}, "
+                       f"{shift[2]:+.1f}) mm (another origin or frame?)", sample + shift, shift))
+    best = None
+    for label, moved, moved_by in candidates:
+        count, rms = _fit(moved, truth, gate_mm)
+        more = count >= given[0] + max(2, 0.05 * len(sample))
+        closer = count >= given[0] and count > 0 and rms < 0.5 * given[1]
+        if moved_by is not None:
+            # a frame's offset moves a cloud whole: the shift is large against the gate and
+            # the residual, and the shifted points lie on the targets (a wrong model, such as
+            # ignoring the port, is shifted too but not laid on them)
+            size = float(np.linalg.norm(moved_by))
+            if size < gate_mm / 4 or size < 5 * rms or rms > gate_mm / 4:
+                continue
+        if (more or closer) and (best is None or (count, -rms) > (best[1], -best[2])):
+            best = (label, count, rms)
+    if best is not None:
+        label, count, rms = best
+        as_given = (f"{given[0]}, RMS {given[1]:.3g} mm" if given[0] else "none")
+        warnings.insert(0, f"{label}: moved so, {count} of {len(sample)} points lie within "
+                           f"{gate_mm:g} mm of a target, RMS {rms:.3g} mm (as given: {as_given})")
+    return warnings
+
+
 def main(args) -> int:
     from measure import triangulate
     from synth.dataset import DatasetError, read_dataset
@@ -170,6 +265,13 @@ def main(args) -> int:
 
     log = lambda text: print(text, file=sys.stderr, flush=True)  # noqa: E731
     start = time.perf_counter()
+    if args.points and args.method is not None:
+        raise CLIError("--method does not apply with --points: your points are scored as they "
+                       "are (--method triangulates --pixels)")
+    if args.pixels and args.units is not None:
+        raise CLIError("--units does not apply with --pixels: the pairs are triangulated here, "
+                       "in mm (--units is the unit of --points)")
+    method = args.method or "optical_path"
     output = OutputDir(args.out, COMMAND).claim()
     try:
         data = read_dataset(args.dataset)
@@ -179,17 +281,18 @@ def main(args) -> int:
         raise CLIError(f"{args.dataset}: a surface dataset (per-pixel truth maps, no targets); "
                        f"eval score scores target datasets")
     if args.points:
-        points = read_points(args.points)
-        label, source = "theirs", {"points": os.path.abspath(args.points)}
+        units = args.units or "mm"
+        points = read_points(args.points) * UNITS[units]
+        label, source = "theirs", {"points": os.path.abspath(args.points), "units": units}
     else:
         pairs = read_pixel_pairs(args.pixels)
-        result = triangulate(data.rig, pairs[:, :2], pairs[:, 2:], args.method)
+        result = triangulate(data.rig, pairs[:, :2], pairs[:, 2:], method)
         if not result.valid.any():
-            raise CLIError(f"--pixels {args.pixels}: no pair triangulates with {args.method} "
+            raise CLIError(f"--pixels {args.pixels}: no pair triangulates with {method} "
                            f"and the dataset's calibration")
         points = result.points[result.valid]
-        label = args.method
-        source = {"pixels": os.path.abspath(args.pixels), "method": args.method,
+        label = method
+        source = {"pixels": os.path.abspath(args.pixels), "method": method,
                   "pairs": int(len(pairs)), "invalid": int((~result.valid).sum())}
     radius = float(data.manifest["scene"].get("target_radius_mm", 0.0))
     inside = [visible_targets(camera, data.rig.port, data.targets, radius)[1]
@@ -197,10 +300,15 @@ def main(args) -> int:
     visible_both = inside[0] & inside[1]
     seed = int(data.manifest.get("seed", 0))
     gate = default_gate_mm(data.targets) if args.gate_mm is None else args.gate_mm
+    warnings = plausibility(points, data.targets[visible_both], gate,
+                            units=source.get("units"))
+    if warnings:  # one line naming the likely cause; scored as given all the same
+        what = f"--points {args.points}" if args.points else f"--pixels {args.pixels}"
+        log(f"warning: {what}: " + "; ".join(warnings))
     scores, arrays, association = score_points(points, data.targets, visible_both, gate, seed)
     report = {"dataset": os.path.abspath(data.path), "source": source, "seed": seed,
               "targets": int(len(data.targets)), "association": association,
-              "methods": {label: scores.to_json()}}
+              "warnings": warnings, "methods": {label: scores.to_json()}}
     with output.staged() as tmp:
         report["ply"] = write_error_ply(tmp, "points_scored.ply", arrays["points"],
                                         arrays["errors"])
@@ -237,6 +345,8 @@ def markdown(report: dict) -> str:
     keys = ["n", "rms_dp_mm", "max_dp_mm", "mean_dx_mm", "mean_dy_mm", "mean_dz_mm",
             "chamfer_mm", "fscore_1mm", "fscore_5mm", "rms_dp_aligned_mm", "flatness_mm"]
     lines = [f"# Score of {label} against {report['dataset']}", "",
+             *[f"**Warning:** {warning}" for warning in report.get("warnings", [])],
+             *([""] if report.get("warnings") else []),
              f"{a['associated']} of {a['points']} points associated with a target within "
              f"{a['gate_mm']:g} mm ({a['unassociated']} not); {a['visible_in_both_scored']} of "
              f"{a['visible_in_both']} targets visible in both views scored. Errors over the "

@@ -18,7 +18,8 @@ files): ``left_PP.png``, ``right_PP.png`` (16-bit linear, one ``png_scale``), ``
 ``poses.csv`` (``pose,rx,ry,rz,tx,ty,tz``: rotation vector in rad and translation in mm of
 ``X_ref = R·X_board + t``), ``corners.csv`` (``pose,id,x,y,z,u_left,v_left,u_right,v_right``:
 every corner's 3D position and its forward-model pixel in each view), ``calib.yaml`` (the true
-rig, the dataset format) and ``manifest.json``.
+rig, the dataset format) and ``manifest.json`` (with every other file's SHA-256 and its own,
+checked when the folder is read: :func:`read_boards` reads it whole or refuses it).
 """
 
 from __future__ import annotations
@@ -39,15 +40,16 @@ from measure.board import PATTERN_TEXELS_PER_SQUARE, Board, BoardError
 from measure.port import index_matched_port
 from measure.projection import project
 
-from synth.dataset import DatasetError, read_calib, write_calib
-from synth.fileio import OutputDir, atomic_write_json, read_marker
+from synth.dataset import (DatasetError, check_files, manifest_digest, read_calib,
+                           write_calib)
+from synth.fileio import OutputDir, atomic_write_json, file_sha256, jsonable, read_marker
 from synth.integrator import RENDERER, integrator_name
 from synth.provenance import package_versions
 from synth.render import (check_render_request, png16_scale, render_view,
                           sensor_dict, to_png16, write_png)
 from synth.scene import SceneSpec, interface_placements
 
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2  # 2: the manifest holds every file's SHA-256 and its own
 COMMAND = "synth boards"
 DEFAULT_POSES = 15
 DEFAULT_SPP = 16
@@ -212,7 +214,9 @@ def write_boards(spec: SceneSpec, out_dir, board: Board, n_poses: int = DEFAULT_
                  max_tilt_deg: float = DEFAULT_MAX_TILT_DEG, variant=None,
                  progress: bool = True) -> dict:
     """Render ``n_poses`` stereo pairs of ``board`` and write the folder (module docs). Returns
-    the manifest; ``manifest["skipped"]`` when ``out_dir`` already held the same request."""
+    the manifest; ``manifest["skipped"]`` when ``out_dir`` already held the same request, whole
+    (:meth:`synth.fileio.OutputDir.damage`); ``manifest["rendered_again"]`` why an earlier output
+    of the same request was rendered again, or None."""
     from tqdm import tqdm
 
     t_start = time.perf_counter()
@@ -222,12 +226,15 @@ def write_boards(spec: SceneSpec, out_dir, board: Board, n_poses: int = DEFAULT_
         raise ValueError(f"{spec.path}: the scene has no port; render its boards with --air")
     key = request_key(spec, board, n_poses, spp, seed, air, distance_range, max_tilt_deg, variant)
     output = OutputDir(out_dir, COMMAND)
+    damage = None
     if output.exists_as_output() and (read_marker(output.path) or {}).get("request_key") == key:
+        damage = output.damage()  # up to date only when every file is whole
         try:
-            with open(os.path.join(output.path, "manifest.json")) as fh:
-                return {**json.load(fh), "skipped": True}
+            if damage is None:
+                with open(os.path.join(output.path, "manifest.json")) as fh:
+                    return {**json.load(fh), "skipped": True}
         except (OSError, ValueError):
-            pass
+            damage = "manifest.json cannot be read"
     output.claim()
     rig = board_rig(spec, air)
     poses = sample_poses(rig, board, n_poses, seed, not air, distance_range, max_tilt_deg)
@@ -266,8 +273,12 @@ def write_boards(spec: SceneSpec, out_dir, board: Board, n_poses: int = DEFAULT_
             "seconds": times,
         }
         manifest["files"] = sorted(os.listdir(tmp)) + ["manifest.json"]
+        manifest["sha256"] = {name: file_sha256(os.path.join(tmp, name))
+                              for name in sorted(os.listdir(tmp))}
+        manifest = jsonable(manifest)  # as written: the digest is of what is read back
+        manifest["manifest_sha256"] = manifest_digest(manifest)
         atomic_write_json(os.path.join(tmp, "manifest.json"), manifest)
-    return {**manifest, "skipped": False}
+    return {**manifest, "skipped": False, "rendered_again": damage}
 
 
 def _write_truth(directory, rig, board: Board, poses) -> None:
@@ -328,6 +339,13 @@ def read_boards(path) -> BoardImages:
         raise DatasetError(f"{path}: {exc}") from None
     if manifest.get("command") != COMMAND:
         raise DatasetError(f"{path}: not a boards folder (manifest of {manifest.get('command')!r})")
+    if "board" in manifest and manifest["board"] != board.to_dict():
+        def described(b):
+            return f"{b.get('kind')} {'x'.join(map(str, b.get('squares', [])))}, {b.get('square_mm')} mm"
+
+        raise DatasetError(f"{path}/board.json: a {described(board.to_dict())} board, but "
+                           f"manifest.json says a {described(manifest['board'])} board was "
+                           f"rendered")
     scale = float(manifest["png_scale"])
     n = int(manifest["poses"])
     calib = read_calib(os.path.join(path, "calib.yaml"))
@@ -344,11 +362,38 @@ def read_boards(path) -> BoardImages:
                                    f"says {calib['size'][0]}x{calib['size'][1]}")
             pair.append(img.astype(np.float32) / np.float32(scale))
         images.append(tuple(pair))
-    poses_rows = np.loadtxt(os.path.join(path, "poses.csv"), delimiter=",", skiprows=1, ndmin=2)
+    poses_rows = _read_table(os.path.join(path, "poses.csv"), POSES_HEADER, n)
     poses = [BoardPose(Rotation.from_rotvec(r[1:4]).as_matrix(), r[4:7]) for r in poses_rows]
-    corners = np.loadtxt(os.path.join(path, "corners.csv"), delimiter=",", skiprows=1, ndmin=2)
+    corners = _read_table(os.path.join(path, "corners.csv"), CORNERS_HEADER, n * board.n_corners)
+    check_files(path, manifest, COMMAND)  # last: the readers above say more precisely what is wrong
     return BoardImages(path, images, board, calib, poses, corners, bool(manifest.get("air")),
                        manifest)
+
+
+def _read_table(file, header, rows: int) -> np.ndarray:
+    """``(rows, len(header))`` numbers of a CSV that :func:`_write_truth` wrote, read whole:
+    :class:`DatasetError` unless it has ``header``, exactly ``rows`` complete rows of numbers
+    (what the manifest's pose count says) and ends with its last row's newline."""
+    try:
+        with open(file, newline="") as fh:
+            text = fh.read()
+    except OSError as exc:
+        raise DatasetError(f"{file}: {exc.strerror or exc}") from None
+    table = list(csv.reader(text.splitlines()))
+    if not table or table[0] != header:
+        raise DatasetError(f"{file}: header is {table[0] if table else None}, expected {header}")
+    body = table[1:]
+    bad = next((i for i, row in enumerate(body) if len(row) != len(header)), None)
+    if bad is not None or (body and not text.endswith("\n")):
+        line = (bad if bad is not None else len(body) - 1) + 2
+        raise DatasetError(f"{file}: line {line} is not complete: truncated or malformed")
+    if len(body) != rows:
+        raise DatasetError(f"{file}: {len(body)} rows, but the manifest's poses and board.json "
+                           f"say {rows}")
+    try:
+        return np.array(body, dtype=np.float64).reshape(rows, len(header))
+    except ValueError:
+        raise DatasetError(f"{file}: not numbers") from None
 
 
 __all__ = ["BoardImages", "BoardPose", "board_rig", "build_board_scene", "read_boards",

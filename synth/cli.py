@@ -28,11 +28,66 @@ class CLIError(Exception):
     """A user error: printed as one line ``error: <message>`` with exit code 2."""
 
 
+#: Attribute of a parsed namespace: ``{dest: option string}`` of the options given on the
+#: command line (see :func:`given`).
+GIVEN = "_given_options"
+
+
+class _RecordsGiven:
+    """Mixed into an option's action class: records that the option was given."""
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        given_options = getattr(namespace, GIVEN, None)
+        if given_options is None:
+            given_options = {}
+            setattr(namespace, GIVEN, given_options)
+        given_options[self.dest] = option_string or self.option_strings[0]
+        return super().__call__(parser, namespace, values, option_string)
+
+
+_RECORDING_CLASSES: dict = {}
+
+
+def _record_given_options(parser: argparse.ArgumentParser) -> None:
+    """Make every option of ``parser`` (and of its subparsers) record itself when given."""
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for sub in action.choices.values():
+                _record_given_options(sub)
+        elif action.option_strings and not isinstance(action, (_RecordsGiven,
+                                                                argparse._HelpAction)):
+            cls = type(action)
+            if cls not in _RECORDING_CLASSES:
+                _RECORDING_CLASSES[cls] = type(f"Recorded{cls.__name__}", (_RecordsGiven, cls), {})
+            action.__class__ = _RECORDING_CLASSES[cls]
+
+
 class Parser(argparse.ArgumentParser):
-    """ArgumentParser whose errors are one line ``error: …`` (no usage dump) and exit 2."""
+    """ArgumentParser whose errors are one line ``error: …`` (no usage dump) and exit 2, and
+    which records the options given on the command line (:func:`given`)."""
 
     def error(self, message):
         raise CLIError(message)
+
+    def parse_known_args(self, args=None, namespace=None):
+        _record_given_options(self)
+        return super().parse_known_args(args, namespace)
+
+
+def given(args, dest: str) -> str | None:
+    """The option string (e.g. ``--spp``) with which the option stored in ``args.<dest>`` was
+    given on the command line, or None when it was not (its value is then the default)."""
+    return getattr(args, GIVEN, {}).get(dest)
+
+
+def refuse_given(args, dests, why: str) -> None:
+    """CLIError ``<option> does not apply <why>`` for the first of the options ``dests``
+    (their ``dest`` names) given on the command line: an option that cannot apply is refused,
+    never ignored."""
+    for dest in dests:
+        option = given(args, dest)
+        if option:
+            raise CLIError(f"{option} does not apply {why}")
 
 
 def int_at_least(minimum: int, description: str):
@@ -181,4 +236,5 @@ __all__ = ["CLIError", "DEFINE_HELP", "EXIT_BAD_INPUT", "EXIT_CHECK_FAILED", "EX
            "EXIT_OK", "JSON_HELP", "NO_PROGRESS_HELP", "Parser", "SCENE_HELP", "add_define_option",
            "add_json_option", "add_out_option", "add_progress_option", "add_scene_argument",
            "any_float", "command_parser", "finite_float", "int_at_least", "non_negative_float",
-           "non_negative_int", "one_line", "positive_float", "positive_int", "run_command"]
+           "given", "non_negative_int", "one_line", "positive_float", "positive_int", "refuse_given",
+           "run_command"]

@@ -20,13 +20,19 @@ A dataset directory holds (units mm, reference frame = the left camera's, OpenCV
 * ``targets.ply`` -- ground-truth target centres in target order (Open3D, binary doubles);
 * ``pixels.csv`` -- ``id,x,y,z,u_left,v_left,u_right,v_right``: the Fermat simulator's pixel of
   every target in each view (NaN where it has none; pixels outside the image are kept);
-* ``manifest.json`` -- versions, scene hash and parameters, variant, spp, seed, image
-  statistics, ``png_scale``, ``png_offset`` (0 without a sensor), ``sensor``, the time of every
-  stage, and the request key.
+* ``manifest.json`` -- versions, scene hash and parameters (``spp`` and ``seed`` as rendered),
+  variant, spp, seed, image statistics, ``png_scale``, ``png_offset`` (0 without a sensor),
+  ``sensor``, the time of every stage, the request key, ``sha256`` (every other file's SHA-256)
+  and ``manifest_sha256`` (the SHA-256 of the manifest's own content, :func:`manifest_digest`).
+
+A dataset's manifest is not a place to edit the truth: :func:`read_manifest` refuses a
+manifest that disagrees with itself (its ``manifest_sha256``, and its request key recomputed
+from its fields) and :func:`read_dataset` a file whose SHA-256 is not the manifest's.
 
 Writing is atomic: everything goes to a temporary sibling directory that is renamed at the end.
 A rerun with the same request (scene bytes, resolved parameters, spp, seed, variant request,
-EXR) finds the manifest's key and does nothing.
+EXR) finds the manifest's key and does nothing — when every file written is whole (the output
+marker's sizes and SHA-256, :meth:`synth.fileio.OutputDir.damage`); otherwise it renders again.
 """
 
 from __future__ import annotations
@@ -45,14 +51,14 @@ import numpy as np
 from measure import Camera, FlatPort, StereoRig
 from measure.projection import project
 
-from synth.fileio import OutputDir, read_marker
+from synth.fileio import OutputDir, file_sha256, read_marker
 from synth.integrator import RENDERER
 from synth.provenance import package_versions
 from synth.render import (pass_seed, png16_scale, render_stereo, srgb_preview, to_png16,
                           write_exr, write_png)
 from synth.scene import SceneError, SceneSpec, load_scene
 
-FORMAT_VERSION = 2  # 2: targets.ply in binary doubles (was ASCII, 6 digits)
+FORMAT_VERSION = 3  # 2: targets.ply in binary doubles (was ASCII, 6 digits); 3: hashes
 PIXELS_HEADER = ["id", "x", "y", "z", "u_left", "v_left", "u_right", "v_right"]
 
 
@@ -206,12 +212,20 @@ def write_pixels_csv(path, ids, points, uv_left, uv_right) -> None:
 def read_pixels_csv(path) -> dict:
     """``{"id": (N,), "points": (N, 3), "left": (N, 2), "right": (N, 2)}`` from ``pixels.csv``."""
     with open(path, newline="") as fh:
-        reader = csv.reader(fh)
-        header = next(reader, None)
-        if header != PIXELS_HEADER:
-            raise DatasetError(f"{path}: header is {header}, expected {PIXELS_HEADER}")
-        rows = np.array([[float(v) for v in row] for row in reader], dtype=np.float64)
-    rows = rows.reshape(-1, len(PIXELS_HEADER))
+        text = fh.read()
+    reader = csv.reader(text.splitlines())
+    header = next(reader, None)
+    if header != PIXELS_HEADER:
+        raise DatasetError(f"{path}: header is {header}, expected {PIXELS_HEADER}")
+    values = []
+    for line, row in enumerate(reader, start=2):
+        if len(row) != len(PIXELS_HEADER):
+            raise DatasetError(f"{path}: line {line} has {len(row)} values, the header "
+                               f"{len(PIXELS_HEADER)}: truncated or malformed")
+        values.append([float(v) for v in row])
+    if values and not text.endswith("\n"):  # the writer ends every row: cut mid-row
+        raise DatasetError(f"{path}: the last line is not complete: truncated")
+    rows = np.array(values, dtype=np.float64).reshape(-1, len(PIXELS_HEADER))
     return {"id": rows[:, 0].astype(int), "points": rows[:, 1:4], "left": rows[:, 4:6],
             "right": rows[:, 6:8]}
 
@@ -224,11 +238,35 @@ def _image_stats(image: np.ndarray) -> dict:
 def request_key(spec: SceneSpec, spp: int, seed: int, variant: str | None, exr: bool,
                 sensor=None) -> str:
     """Hash of everything that determines a dataset's content."""
-    blob = json.dumps({"format": FORMAT_VERSION, "scene": spec.sha256, "params": spec.params,
+    return _request_key(FORMAT_VERSION, spec.sha256, spec.params, spp, seed, variant, exr,
+                        None if sensor is None else sensor.to_dict(), RENDERER)
+
+
+def _request_key(format_version, scene_sha256, params, spp, seed, variant, exr, sensor,
+                 renderer) -> str:
+    blob = json.dumps({"format": format_version, "scene": scene_sha256, "params": params,
                        "spp": spp, "seed": seed, "variant": variant, "exr": bool(exr),
-                       "sensor": None if sensor is None else sensor.to_dict(),
-                       "renderer": RENDERER}, sort_keys=True)
+                       "sensor": sensor, "renderer": renderer}, sort_keys=True)
     return hashlib.sha256(blob.encode()).hexdigest()
+
+
+def manifest_request_key(manifest: dict) -> str:
+    """The request key recomputed from a manifest's own fields (scene hash and parameters,
+    spp, seed, requested variant, EXR files, sensor model, this renderer)."""
+    sensor = manifest.get("sensor")
+    files = manifest.get("files") or []
+    return _request_key(manifest.get("format_version"), manifest["scene"].get("sha256"),
+                        manifest["scene"]["params"], manifest.get("spp"), manifest.get("seed"),
+                        manifest.get("variant_requested"), "left.exr" in files,
+                        sensor.get("model") if isinstance(sensor, dict) else None, RENDERER)
+
+
+def manifest_digest(manifest: dict) -> str:
+    """SHA-256 of a manifest's content: its JSON with sorted keys, without ``manifest_sha256``
+    itself (and the ``skipped`` / ``rendered_again`` flags :func:`write_dataset` returns)."""
+    content = {k: v for k, v in manifest.items()
+               if k not in ("manifest_sha256", "skipped", "rendered_again")}
+    return hashlib.sha256(json.dumps(content, sort_keys=True).encode()).hexdigest()
 
 
 # ---------------------------------------------------------------------------------------------
@@ -244,8 +282,10 @@ def write_dataset(scene, out_dir, spp: int | None = None, defines: dict | None =
     ``png_scale`` its DN per unit of radiance; the EXRs (``exr``) stay noise-free.
 
     Returns the manifest (dict); ``manifest["skipped"]`` is True when ``out_dir`` already held
-    the same request and nothing was done. ``out_dir`` follows the project's output rule
-    (:class:`synth.fileio.OutputDir`): a directory holding files this command did not write is
+    the same request, whole, and nothing was done; ``manifest["rendered_again"]`` says why an
+    earlier output of the same request was rendered again (a file missing or changed), or
+    None. ``out_dir`` follows the project's output rule (:class:`synth.fileio.OutputDir`): a
+    directory holding files this command did not write is
     refused before rendering; an earlier dataset with another request is replaced atomically.
     """
     t_start = time.perf_counter()
@@ -259,19 +299,23 @@ def write_dataset(scene, out_dir, spp: int | None = None, defines: dict | None =
                          f"identity rotation (the reference frame is the left camera's)")
     spp = spec.spp if spp is None else int(spp)
     seed = spec.seed if seed is None else int(seed)
+    spec = spec.rendered_with(spp=spp, seed=seed)  # the parameters say what was rendered
     key = request_key(spec, spp, seed, variant, exr, sensor)
 
     output = OutputDir(out_dir, "synth dataset")
+    damage = None
     if output.exists_as_output():
         marker = read_marker(output.path) or {}
         if marker.get("request_key") == key:
+            damage = output.damage()  # up to date only when every file is whole
             try:
-                with open(os.path.join(output.path, "manifest.json")) as fh:
-                    old = json.load(fh)
-                old["skipped"] = True
-                return old
+                if damage is None:
+                    with open(os.path.join(output.path, "manifest.json")) as fh:
+                        old = json.load(fh)
+                    old["skipped"] = True
+                    return old
             except (OSError, ValueError):
-                pass  # a damaged earlier output: render it again
+                damage = "manifest.json cannot be read"
     output.claim()
 
     with output.staged(extra={"request_key": key}) as tmp:
@@ -351,11 +395,15 @@ def write_dataset(scene, out_dir, spp: int | None = None, defines: dict | None =
             "passes": info["passes"],
             "seconds": times,
             "files": sorted(os.listdir(tmp)) + ["manifest.json"],
+            "sha256": {name: file_sha256(os.path.join(tmp, name))
+                       for name in sorted(os.listdir(tmp))},
         }
+        manifest["manifest_sha256"] = manifest_digest(manifest)
         with open(os.path.join(tmp, "manifest.json"), "w") as fh:
             json.dump(manifest, fh, indent=2, sort_keys=False)
             fh.write("\n")
     manifest["skipped"] = False
+    manifest["rendered_again"] = damage  # why an earlier output of this request was not whole
     return manifest
 
 
@@ -413,7 +461,41 @@ def read_manifest(path) -> dict:
     if not isinstance(manifest, dict) or not isinstance(manifest.get("scene"), dict) \
             or not isinstance(manifest["scene"].get("params"), dict):
         raise DatasetError(f"{manifest_path}: not a dataset manifest (no scene parameters)")
+    again = ("a dataset's truth is what was rendered: render it again with python -m synth "
+             "dataset (-D changes the scene; eval run --assume what the measurement believes)")
+    if "manifest_sha256" in manifest and manifest["manifest_sha256"] != manifest_digest(manifest):
+        raise DatasetError(f"{manifest_path} was changed after synth dataset wrote it (its "
+                           f"content no longer matches its manifest_sha256); {again}")
+    try:
+        key = manifest_request_key(manifest)
+    except (TypeError, ValueError, AttributeError):
+        key = None
+    if manifest.get("request_key") != key:
+        raise DatasetError(f"{manifest_path}: its scene parameters, spp, seed, variant or sensor "
+                           f"disagree with its request key (edited by hand, or written by "
+                           f"another renderer than {RENDERER}); {again}")
     return manifest
+
+
+def check_files(path, manifest: dict, command: str = "synth dataset") -> None:
+    """DatasetError unless every file of the folder ``path`` that ``manifest["sha256"]`` lists
+    is there with that SHA-256 (a manifest before format 3 lists none), and the manifest's
+    ``manifest_sha256``, when it has one, is its content's. ``command`` wrote the folder."""
+    if "manifest_sha256" in manifest and manifest["manifest_sha256"] != manifest_digest(manifest):
+        raise DatasetError(f"{os.path.join(path, 'manifest.json')} was changed after {command} "
+                           f"wrote it (its content no longer matches its manifest_sha256): "
+                           f"render it again with python -m {command}")
+    digests = manifest.get("sha256")
+    if not isinstance(digests, dict):
+        return
+    for name in sorted(digests):
+        file = os.path.join(path, name)
+        if not os.path.isfile(file):
+            raise DatasetError(f"{file}: no such file (manifest.json lists it)")
+        if file_sha256(file) != digests[name]:
+            raise DatasetError(f"{file}: changed since {command} wrote it (its SHA-256 is not "
+                               f"the one manifest.json records): render it again with "
+                               f"python -m {command}")
 
 
 def read_dataset(path) -> Dataset:
@@ -439,6 +521,7 @@ def read_dataset(path) -> Dataset:
             raise DatasetError(f"{path}/{name}: {image.shape[1]}x{image.shape[0]} px, but "
                                f"calib.yaml says {calib['size'][0]}x{calib['size'][1]}")
     if manifest["scene"].get("surface"):
+        check_files(path, manifest)
         empty = np.zeros((0, 2))
         return Dataset(path=path, left=left, right=right, rig=calib["rig"],
                        has_port=calib["has_port"], targets=np.zeros((0, 3)),
@@ -452,12 +535,21 @@ def read_dataset(path) -> Dataset:
     targets_path = os.path.join(path, "targets.ply")
     if not os.path.isfile(targets_path):
         raise DatasetError(f"{targets_path}: no such file")
-    import open3d as o3d
+    from synth.cloudfile import CloudFileError, read_cloud_points
 
-    targets = np.asarray(o3d.io.read_point_cloud(targets_path).points, dtype=np.float64)
+    try:  # whole or refused: Open3D reads a truncated PLY as far as it goes
+        targets = read_cloud_points(targets_path)
+    except CloudFileError as exc:
+        raise DatasetError(str(exc)) from None
+    n_targets = manifest["scene"].get("n_targets")
+    for name, count in (("targets.ply", targets.shape[0]), ("pixels.csv", pixels["id"].shape[0])):
+        if n_targets is not None and count != n_targets:
+            raise DatasetError(f"{path}/{name}: {count} targets, but manifest.json says "
+                               f"{n_targets}")
     if targets.shape[0] != pixels["id"].shape[0]:
         raise DatasetError(f"{path}: targets.ply has {targets.shape[0]} points but pixels.csv "
                            f"{pixels['id'].shape[0]} rows")
+    check_files(path, manifest)  # last: the readers above say more precisely what is wrong
     return Dataset(path=path, left=left, right=right, rig=calib["rig"],
                    has_port=calib["has_port"], targets=targets, ids=pixels["id"],
                    pixels_left=pixels["left"], pixels_right=pixels["right"], manifest=manifest)

@@ -7,18 +7,21 @@ Two tools:
   rule *before* any expensive work: the directory may be replaced only if it does not exist, is
   empty, or is an earlier output of the same command — it holds the marker file
   :data:`MARKER_NAME` that this module wrote (project name, schema version, command, the files
-  written) and nothing else. Anything else is refused with
+  written with their sizes and SHA-256) and nothing else. Anything else is refused with
   ``--out DIR exists and holds files this command did not write``. :meth:`OutputDir.staged` then
   yields a staging directory beside the output (``.NAME.staging-PID-XXXX``), writes the marker
   into it and renames it into place; on an exception the staging directory is removed and the
   output is left as it was. Staging and trash directories left by a process that died (``kill -9``)
   are removed by the next claim of the same output: their names carry the owner's PID.
+  :meth:`OutputDir.damage` says whether every file written is still whole (a command that skips
+  an up-to-date output skips only a whole one).
 * :func:`atomic_write_bytes` / :func:`atomic_write_text` — one file, written to a temporary file
   beside it and renamed into place.
 """
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
 import re
@@ -161,6 +164,23 @@ class OutputDir:
         marker = read_marker(self.path)
         return marker is not None and marker.get("command") == self.command
 
+    def damage(self) -> str | None:
+        """None when every file this output's marker lists is as it was written (its size and
+        SHA-256); otherwise what is wrong, in words (``left.png is missing``, ``left.png changed
+        since it was written``). An output is up to date only when whole."""
+        marker = read_marker(self.path) or {}
+        digests = marker.get("sha256")
+        if not isinstance(digests, dict):
+            return "its marker holds no record of the files' contents (an older output)"
+        for name, entry in sorted(digests.items()):
+            path = os.path.join(self.path, name)
+            if not os.path.isfile(path):
+                return f"{name} is missing"
+            size, digest = entry
+            if os.path.getsize(path) != size or file_sha256(path) != digest:
+                return f"{name} changed since it was written"
+        return None
+
     # -- writing --------------------------------------------------------------------------------
     @contextmanager
     def staged(self, extra: dict | None = None):
@@ -180,8 +200,11 @@ class OutputDir:
         try:
             yield tmp
             files = sorted(_walk_files(tmp))
+            digests = {name: [os.path.getsize(os.path.join(tmp, name)),
+                              file_sha256(os.path.join(tmp, name))]
+                       for name in files if os.path.isfile(os.path.join(tmp, name))}
             marker = {"project": PROJECT_NAME, "schema": MARKER_SCHEMA, "command": self.command,
-                      "files": files, **(extra or {})}
+                      "files": files, "sha256": digests, **(extra or {})}
             with open(os.path.join(tmp, MARKER_NAME), "w", encoding="utf-8") as handle:
                 json.dump(marker, handle, indent=1)
                 handle.write("\n")
@@ -210,6 +233,15 @@ class OutputDir:
             shutil.rmtree(trash, ignore_errors=True)
             raise
         shutil.rmtree(trash, ignore_errors=True)
+
+
+def file_sha256(path) -> str:
+    """The SHA-256 of a file's bytes (hex), read in chunks."""
+    digest = hashlib.sha256()
+    with open(path, "rb") as handle:
+        for chunk in iter(lambda: handle.read(1 << 20), b""):
+            digest.update(chunk)
+    return digest.hexdigest()
 
 
 def atomic_write_bytes(path, data: bytes, mode: int = 0o644) -> Path:
@@ -286,5 +318,5 @@ def check_file_output(path, option: str, may_replace=None) -> str:
 
 
 __all__ = ["MARKER_NAME", "OutputDir", "OutputError", "atomic_write_bytes", "atomic_write_json",
-           "atomic_write_text", "check_file_output", "jsonable", "read_marker",
+           "atomic_write_text", "check_file_output", "file_sha256", "jsonable", "read_marker",
            "remove_stale_staging"]

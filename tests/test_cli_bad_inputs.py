@@ -41,11 +41,18 @@ def snapshot(root: Path) -> dict:
 
 @pytest.fixture(scope="session")
 def dataset_template(tmp_path_factory, small_scene):
-    """A valid dataset of the small scene (rendered once), and the scene beside it."""
+    """Valid outputs of the small scene (each rendered once, at 4 spp), and the scene beside
+    them: the dataset ``ds``, the dataset ``dss`` stored through the imx174 sensor, and
+    ``bair``, one pose of a board in air."""
     root = tmp_path_factory.mktemp("template")
     shutil.copy(small_scene, root / "small.xml")
     assert synth_main(["dataset", str(root / "small.xml"), "--out", str(root / "ds"),
                        "--spp", "4", "--quiet"]) == 0
+    assert synth_main(["dataset", str(root / "small.xml"), "--out", str(root / "dss"),
+                       "--spp", "4", "--sensor", "imx174", "--quiet"]) == 0
+    assert synth_main(["boards", str(root / "small.xml"), "--out", str(root / "bair"),
+                       "--spp", "4", "--poses", "1", "--air", "--squares", "7x6",
+                       "--square-mm", "40", "--distance", "450", "650", "--quiet"]) == 0
     return root
 
 
@@ -60,18 +67,32 @@ def workdir(tmp_path, monkeypatch, small_scene):
 
 
 #: Setups that damage the dataset ``ds``.
-DATASET_SETUPS = ("garbage_calib", "no_left_png", "bad_manifest")
+DATASET_SETUPS = ("garbage_calib", "no_left_png", "bad_manifest", "truncated_targets",
+                  "truncated_pixels", "truncated_points", "edited_manifest",
+                  "edited_manifest_no_hashes", "edited_calib", "edited_calib_no_hashes")
 #: Cases that render before they are refused (nothing matched in the images).
 RENDERING = ("max_depth=0", "3000,4000", "target_radius=0")
 
 
+#: The rendered outputs of :func:`dataset_template` a case may name.
+RENDERED = ("ds", "dss", "bair")
+
+
+def _rendered_names(setup, argv) -> set:
+    """The rendered outputs (:data:`RENDERED`) that a case uses."""
+    names = {a.split("/")[0] for a in argv if a.split("/")[0] in RENDERED}
+    return names | ({"ds"} if setup in DATASET_SETUPS else set())
+
+
 def _needs_dataset(setup, argv) -> bool:
-    return setup in DATASET_SETUPS or any(a == "ds" or a.startswith("ds/") for a in argv)
+    return bool(_rendered_names(setup, argv))
 
 
-def _add_dataset(workdir: Path, request) -> None:
-    """Copy the rendered dataset ``ds`` (of ``small.xml``) into ``workdir``."""
-    shutil.copytree(request.getfixturevalue("dataset_template") / "ds", workdir / "ds")
+def _add_dataset(workdir: Path, request, names=("ds",)) -> None:
+    """Copy the rendered outputs ``names`` (default the dataset ``ds`` of ``small.xml``) into
+    ``workdir``."""
+    for name in names:
+        shutil.copytree(request.getfixturevalue("dataset_template") / name, workdir / name)
 
 
 def _cases(cases):
@@ -98,6 +119,26 @@ def _prepare(workdir: Path, setup: str | None):
         (workdir / "ds" / "left.png").unlink()
     elif setup == "bad_manifest":
         (workdir / "ds" / "manifest.json").write_text("{not json")
+    elif setup == "truncated_targets":  # theirs.ply: the whole truth, as a user's cloud
+        shutil.copy(workdir / "ds" / "targets.ply", workdir / "theirs.ply")
+        _truncate(workdir / "ds" / "targets.ply")
+    elif setup == "truncated_pixels":
+        _truncate(workdir / "ds" / "pixels.csv")
+    elif setup == "truncated_points":
+        shutil.copy(workdir / "ds" / "targets.ply", workdir / "half.ply")
+        _truncate(workdir / "half.ply")
+    elif setup == "truncated_corners":
+        _truncate(workdir / "bair" / "corners.csv")
+    elif setup == "edited_boards_calib":
+        with open(workdir / "bair" / "calib.yaml", "a") as handle:
+            handle.write("# edited by hand\n")
+    elif setup in ("edited_manifest", "edited_manifest_no_hashes"):  # the truth edited by hand
+        _edit_manifest(workdir / "ds", n_water="1.40", hashes=setup == "edited_manifest")
+    elif setup in ("edited_calib", "edited_calib_no_hashes"):
+        calib = workdir / "ds" / "calib.yaml"
+        calib.write_text(calib.read_text().replace("1.3300000000000001", "1.3999999999999999"))
+        if setup == "edited_calib_no_hashes":
+            _edit_manifest(workdir / "ds", hashes=False)
     elif setup == "empty_scene":
         (workdir / "empty.xml").write_text("")
     elif setup == "not_xml":
@@ -108,6 +149,26 @@ def _prepare(workdir: Path, setup: str | None):
         (workdir / "adir").mkdir()
     elif setup == "foreign_file":
         (workdir / "notes.txt").write_text("a user's notes, not written by eval bench")
+
+
+def _edit_manifest(ds: Path, n_water: str | None = None, hashes: bool = True) -> None:
+    """Edit a dataset's manifest by hand: set its scene's ``n_water``; without ``hashes``, drop
+    its file hashes and its own hash (as in a manifest written before they were recorded)."""
+    import json
+
+    manifest = json.loads((ds / "manifest.json").read_text())
+    if n_water is not None:
+        manifest["scene"]["params"]["n_water"] = n_water
+    if not hashes:
+        manifest.pop("manifest_sha256", None)
+        manifest.pop("sha256", None)
+    (ds / "manifest.json").write_text(json.dumps(manifest, indent=2) + "\n")
+
+
+def _truncate(path: Path) -> None:
+    """Cut ``path`` to half its size (a copy interrupted half-way)."""
+    data = path.read_bytes()
+    path.write_bytes(data[:len(data) // 2])
 
 
 def _assert_refused(code, capsys, before, workdir, fragment=None):
@@ -124,6 +185,7 @@ def _assert_refused(code, capsys, before, workdir, fragment=None):
 
 RUN = ["run", "paper_plane.xml", "--out", "out", *SMALL]
 RUN_SMALL = ["run", "small.xml", "--out", "out", "--spp", "4", "--no-progress"]
+RUN_FROM = ["run", "small.xml", "--out", "out", "--from", "ds", "--no-progress"]
 EVAL_CASES = [
     # data loss
     ("user_dir", RUN, "did not write"),
@@ -180,13 +242,54 @@ EVAL_CASES = [
     ("empty_scene", ["run", "empty.xml", "--out", "out", "--no-progress"], "empty.xml"),
     ("scene_dir", ["run", "adir", "--out", "out", "--no-progress"], "adir"),
     # datasets
-    ("garbage_calib", RUN_SMALL + ["--from", "ds"], "calib.yaml"),
-    ("no_left_png", RUN_SMALL + ["--from", "ds"], "left.png"),
-    ("bad_manifest", RUN_SMALL + ["--from", "ds"], "manifest.json"),
-    (None, RUN_SMALL + ["--from", "ds", "-D", "width=640"], "640"),
-    (None, RUN_SMALL + ["--from", "ds", "-D", "n_water=1.36"], "n_water"),
-    (None, RUN_SMALL + ["--from", "missing_ds"], "missing_ds"),
+    ("garbage_calib", RUN_FROM, "calib.yaml"),
+    ("no_left_png", RUN_FROM, "left.png"),
+    ("bad_manifest", RUN_FROM, "manifest.json"),
+    (None, RUN_FROM + ["-D", "width=640"], "640"),
+    (None, RUN_FROM + ["-D", "n_water=1.36"], "n_water"),
+    (None, RUN_SMALL[:-1] + ["--from", "missing_ds", "--no-progress"], "missing_ds"),
     (None, ["run", "paper_plane.xml", "--from", "ds", "--out", "out", "--no-progress"], "another scene"),
+    # options that cannot apply are refused, never ignored (issue 22)
+    (None, RUN_FROM + ["--spp", "8"], "--spp does not apply"),
+    (None, RUN_FROM + ["--variant", "scalar_rgb"], "--variant does not apply"),
+    (None, RUN_FROM + ["-D", "spp=8"], "spp=4"),  # compared with what was rendered
+    (None, ["run", "small.xml", "--out", "out", "--from", "dss", "--sensor", "imx174",
+            "--no-progress"], "--sensor does not apply"),
+    (None, RUN + ["-D", "spp=8"], "--spp 4 conflicts with -D spp=8"),
+    (None, ["run", str(REPO / "scenes" / "air_plane.xml"), "--out", "out", *SMALL,
+            "--self-calibrate", "n_water"], "no port"),
+    (None, ["score", "missing_ds", "--points", "theirs.ply", "--method", "su"],
+     "--method does not apply"),
+    (None, ["score", "missing_ds", "--pixels", "pairs.csv", "--units", "m"],
+     "--units does not apply"),
+    (None, ["calibrate", "bair", "--free", "n_water", "--out", "out", "--no-progress"],
+     "--free does not apply"),
+    (None, ["calibrate", "bair", "--n-water", "1.2", "--out", "out", "--no-progress"],
+     "--n-water does not apply"),
+    (None, ["calibrate", "bair", "--start-distance", "90", "--out", "out", "--no-progress"],
+     "--start-distance does not apply"),
+    (None, ["sweep", str(REPO / "sweeps" / "smoke.toml"), "--out", "sw", "--connect-timeout",
+            "3", "--no-progress"], "--connect-timeout does not apply"),
+    # files are read whole or refused (issue 22)
+    ("truncated_targets", ["score", "ds", "--points", "theirs.ply", "--out", "sc"],
+     "targets.ply: truncated"),
+    ("truncated_targets", RUN_FROM, "targets.ply: truncated"),
+    ("truncated_points", ["score", "ds", "--points", "half.ply", "--out", "sc"],
+     "half.ply: truncated"),
+    ("truncated_pixels", ["score", "ds", "--pixels", "ds/pixels.csv", "--out", "sc"],
+     "pixels.csv"),
+    ("truncated_corners", ["calibrate", "bair", "--out", "out", "--no-progress"], "corners.csv"),
+    # a dataset's manifest is not a place to edit the truth (issue 22)
+    ("edited_manifest", RUN_FROM, "manifest.json was changed"),
+    ("edited_manifest", ["score", "ds", "--points", "ds/targets.ply", "--out", "sc"],
+     "manifest.json was changed"),
+    ("edited_manifest_no_hashes", RUN_FROM, "disagree with its request key"),
+    ("edited_calib", RUN_FROM, "calib.yaml: changed"),
+    ("edited_calib", ["score", "ds", "--pixels", "ds/pixels.csv", "--out", "sc"],
+     "calib.yaml: changed"),
+    ("edited_calib_no_hashes", RUN_FROM, "calib.yaml disagrees"),
+    ("edited_boards_calib", ["calibrate", "bair", "--out", "out", "--no-progress"],
+     "calib.yaml: changed since synth boards wrote it"),
     # truth and assumption
     (None, RUN + ["--assume", "bogus=1"], "bogus"),
     (None, RUN + ["--assume", "n_water"], "n_water"),
@@ -213,6 +316,7 @@ EVAL_CASES = [
 SCENE = ["scene", "--out", "x.xml"]
 DATASET = ["dataset", "small.xml", "--out", "out", "--spp", "4", "--quiet"]
 RENDER = ["render", "small.xml", "--out", "out", "--spp", "4", "--quiet"]
+BOARDS = ["boards", "small.xml", "--out", "out", "--poses", "1", "--quiet"]
 SYNTH_CASES = [
     (None, SCENE + ["--layout", "grid", "--spacing", "0"], "--spacing"),
     (None, SCENE + ["--layout", "grid", "--spacing", "-5"], "--spacing"),
@@ -260,6 +364,28 @@ SYNTH_CASES = [
     (None, SCENE + ["--layout", "random", "--n", "100000000"], "--n"),
     (None, SCENE + ["--layout", "sphere", "--surface-radius", "1e12"], "--surface-radius"),
     (None, SCENE + ["--aperture-radius", "1", "--dist", "0.1", "0", "0", "0"], "--dist"),
+    # options that cannot apply are refused, never ignored (issue 22)
+    (None, SCENE + ["--layout", "paper", "--spacing", "30"], "--spacing does not apply"),
+    (None, SCENE + ["--layout", "grid", "--tilt", "0", "10"], "--tilt does not apply"),
+    (None, SCENE + ["--layout", "grid", "--n", "5"], "--n does not apply"),
+    (None, SCENE + ["--layout", "random", "--z", "900"], "--z does not apply"),
+    (None, SCENE + ["--layout", "paper", "--half-width", "300"], "--half-width does not apply"),
+    (None, SCENE + ["--layout", "paper", "--surface", "wavy"], "--surface does not apply"),
+    (None, SCENE + ["--layout", "paper", "--speckle-size", "3"], "--speckle-size does not apply"),
+    (None, SCENE + ["--layout", "surface", "--wavelength", "100"], "--wavelength does not apply"),
+    (None, SCENE + ["--layout", "surface", "--n", "10"], "--n does not apply"),
+    (None, SCENE + ["--port", "none", "--n-water", "1.34"], "--n-water does not apply"),
+    (None, SCENE + ["--port", "none", "--port-tilt", "1", "0"], "--port-tilt does not apply"),
+    (None, DATASET + ["-D", "spp=8"], "--spp 4 conflicts with -D spp=8"),
+    (None, RENDER + ["-D", "spp=8"], "--spp 4 conflicts with -D spp=8"),
+    (None, BOARDS + ["--spp", "4", "-D", "spp=8"], "--spp 4 conflicts with -D spp=8"),
+    (None, BOARDS + ["--seed", "1", "-D", "seed=2"], "--seed 1 conflicts with -D seed=2"),
+    (None, BOARDS + ["--air", "-D", "n_water=1.4"], "n_water"),
+    (None, BOARDS + ["-D", "target_radius=3"], "target_radius"),
+    # files are read whole or refused (issue 22)
+    ("truncated_targets", ["check", "ds"], "targets.ply: truncated"),
+    ("truncated_pixels", ["check", "ds"], "pixels.csv"),
+    ("edited_manifest", ["check", "ds"], "manifest.json was changed"),
 ]
 # Overwriting a file that `synth scene` did not write (the scene file of someone else).
 SYNTH_CASES[16] = (None, ["scene", "--out", "small_copy_foreign.xml"], "not a file this command wrote")
@@ -268,7 +394,7 @@ SYNTH_CASES[16] = (None, ["scene", "--out", "small_copy_foreign.xml"], "not a fi
 @pytest.mark.parametrize("setup, argv, fragment", _cases(EVAL_CASES))
 def test_eval_bad_input(workdir, capsys, request, setup, argv, fragment):
     if _needs_dataset(setup, argv):
-        _add_dataset(workdir, request)
+        _add_dataset(workdir, request, _rendered_names(setup, argv))
     _prepare(workdir, setup)
     before = snapshot(workdir)
     code = eval_main(list(argv))
@@ -278,7 +404,7 @@ def test_eval_bad_input(workdir, capsys, request, setup, argv, fragment):
 @pytest.mark.parametrize("setup, argv, fragment", _cases(SYNTH_CASES))
 def test_synth_bad_input(workdir, capsys, request, setup, argv, fragment):
     if _needs_dataset(setup, argv):
-        _add_dataset(workdir, request)
+        _add_dataset(workdir, request, _rendered_names(setup, argv))
     _prepare(workdir, setup)
     (workdir / "small_copy_foreign.xml").write_text("<scene version='3.0.0'/>\n")
     before = snapshot(workdir)
@@ -304,10 +430,21 @@ def test_earlier_output_is_replaced_and_stale_staging_removed(workdir, capsys, r
 
 
 @pytest.mark.slow
+def test_a_manifest_without_hashes_that_agrees_with_itself_is_read(workdir, request):
+    """Positive control of the edited-manifest cases: a manifest without its hashes (as
+    written before format 3) whose request key still agrees with it is read."""
+    _add_dataset(workdir, request)
+    _edit_manifest(workdir / "ds", hashes=False)
+    assert eval_main(["score", "ds", "--points", "ds/targets.ply", "--out", "sc"]) == 0
+
+
+@pytest.mark.slow
 def test_from_dataset_with_its_own_parameters_runs(workdir, request):
+    """``-D spp=4`` on a dataset rendered with ``--spp 4`` is what was rendered (issue 22: the
+    manifest recorded the scene's default, 36, and the run was refused)."""
     _add_dataset(workdir, request)
     assert eval_main(["run", "small.xml", "--from", "ds", "--out", "out", "-D", "width=320",
-                      "--methods", "optical_path", "--no-progress"]) == 0
+                      "-D", "spp=4", "--methods", "optical_path", "--no-progress"]) == 0
 
 
 @pytest.mark.parametrize("module, argv", [

@@ -21,9 +21,11 @@ import sys
 import time
 
 from eval.cli import CLIError, positive_float
-from synth.cli import add_out_option, add_progress_option
+from synth.cli import add_out_option, add_progress_option, refuse_given
 
 COMMAND = "eval calibrate"
+#: Options of the housing calibration (underwater boards): refused with in-air boards.
+HOUSING_OPTIONS = ("free", "start_distance", "glass_thickness", "n_glass", "n_water")
 
 
 def add_parser(subparsers):
@@ -101,6 +103,9 @@ def main(args) -> int:
     start = time.perf_counter()
     boards = read_boards(args.dir)
     truth = boards.calib["rig"]
+    if boards.air:
+        refuse_given(args, HOUSING_OPTIONS, f"to in-air boards ({args.dir}): they calibrate the "
+                                            f"cameras, no housing")
     if boards.air and args.intrinsics:
         raise CLIError(f"{args.dir}: in-air boards calibrate the intrinsics themselves; "
                        f"--intrinsics is for underwater boards")

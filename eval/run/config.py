@@ -83,7 +83,7 @@ class RunConfig:
 
         from eval.core.assumption import parse_assumptions
 
-        return cls(scene=args.scene, defines=tuple(parse_defines(args.defines).items()),
+        config = cls(scene=args.scene, defines=tuple(parse_defines(args.defines).items()),
                    seed=args.seed, from_dir=args.from_dir, spp=args.spp, variant=args.variant,
                    assumptions=parse_assumptions(args.assume), calib=args.calib,
                    compare_calib=tuple(args.compare_calib),
@@ -95,6 +95,20 @@ class RunConfig:
                    max_elongation=args.max_elongation, max_area_ratio=args.max_area_ratio,
                    median_filter=args.median_filter, sensor=parse_sensor(args.sensor),
                    progress=not args.no_progress)
+        config.refuse_inapplicable()
+        return config
+
+    def refuse_inapplicable(self) -> None:
+        """CLIError for an option that cannot apply (refused, never ignored): ``--spp`` and
+        ``--variant`` with ``--from`` (the dataset's images are reused as rendered; ``-D spp``
+        is compared with what they were rendered with)."""
+        if not self.from_dir:
+            return
+        for option, value in (("--spp", self.spp), ("--variant", self.variant)):
+            if value is not None:
+                raise CLIError(f"{option} does not apply with --from {self.from_dir}: its images "
+                               f"are reused as they were rendered (-D spp=N checks what they "
+                               f"were rendered with)")
 
 
 def split_names(text: str) -> tuple:

@@ -9,7 +9,8 @@ gets who folds nothing for the port. Scores (:mod:`eval.core.surface_metrics`): 
 distance, precision/recall/F at 0.5, 1 and 5 mm, Chamfer, per-pixel depth error against the
 truth maps, the fraction of overlap pixels measured, flatness of planes.
 
-Options that apply: ``--from``, ``--spp``, ``--variant``, ``--seed``, ``-D``, ``--depth-range``,
+Options that apply: ``--from``, ``--spp`` and ``--variant`` (without ``--from``), ``--seed``,
+``-D``, ``--depth-range``,
 ``--assume`` / ``--calib`` (what the measurement believes), ``--sensor`` and ``--median-filter``
 (the images the matcher sees), ``--methods`` (``optical_path``, ``regular``), ``--json``; the
 target-only options are refused with one ``error:`` line.

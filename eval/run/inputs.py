@@ -63,11 +63,17 @@ def same_value(a: str, b: str) -> bool:
 
 
 def dataset_params(from_dir: str, defines: dict) -> dict:
-    """The parameters the dataset ``from_dir`` was rendered with; a conflicting ``-D`` is an
-    error naming both values."""
+    """The parameters the dataset ``from_dir`` was rendered with — ``spp`` and ``seed`` as
+    rendered (the manifest's ``spp`` and ``seed``; datasets before format 3 recorded the
+    scene's defaults among the parameters); a conflicting ``-D`` is an error naming both
+    values."""
     from synth.dataset import read_manifest
 
-    params = {str(k): str(v) for k, v in read_manifest(from_dir)["scene"]["params"].items()}
+    manifest = read_manifest(from_dir)
+    params = {str(k): str(v) for k, v in manifest["scene"]["params"].items()}
+    for name in ("spp", "seed"):
+        if name in params and manifest.get(name) is not None:
+            params[name] = str(manifest[name])
     for name, value in defines.items():
         if name in params and not same_value(value, params[name]):
             raise CLIError(f"-D {name}={value} conflicts with --from {from_dir}, rendered "
@@ -97,13 +103,14 @@ def load_run_scene(config: RunConfig):
     """The scene of a run with ``-D`` and the seed applied. With ``--from`` the dataset's own
     parameters are used (a conflicting ``-D`` is an error) and the seed seeds only the run's
     noise, but a ``-D seed`` contradicting it is still refused."""
-    from synth.scene import apply_seed, load_scene
+    from synth.scene import apply_seed, apply_spp, load_scene
 
     defines = dict(config.defines)
     if config.from_dir:
         apply_seed(dict(defines), config.seed)
         return load_scene(config.scene, dataset_params(config.from_dir, defines))
-    return load_scene(config.scene, apply_seed(defines, config.seed))
+    defines = apply_spp(apply_seed(defines, config.seed), config.spp)
+    return load_scene(config.scene, defines).rendered_with(spp=config.spp)
 
 
 def read_run_dataset(config: RunConfig, spec):
@@ -114,6 +121,20 @@ def read_run_dataset(config: RunConfig, spec):
     if data.manifest["scene"].get("sha256") != spec.sha256:
         raise CLIError(f"--from {config.from_dir}: the dataset was rendered from another scene "
                        f"than {config.scene}")
+    from eval.core.assumption import rig_difference
+
+    difference = rig_difference(spec.rig, data.rig)
+    if difference:
+        raise CLIError(f"--from {config.from_dir}: calib.yaml disagrees with the scene rendered "
+                       f"with manifest.json's parameters (in {', '.join(difference)}); the run "
+                       f"takes the scene as the truth: render the dataset again, or measure "
+                       f"with --calib {os.path.join(config.from_dir, 'calib.yaml')} to believe it")
+    sensor = data.manifest.get("sensor")
+    if config.sensor is not None and sensor:
+        name = (sensor.get("model") or {}).get("name", "a") if isinstance(sensor, dict) else "a"
+        raise CLIError(f"--sensor does not apply with --from {config.from_dir}: its images "
+                       f"already hold the raw codes of the {name} sensor (synth dataset "
+                       f"--sensor); it would be applied twice")
     return data
 
 
@@ -140,6 +161,9 @@ def budget_rigs(config: RunConfig, true_rig, measured_rig) -> dict:
 def load_inputs(config: RunConfig, log) -> RunInputs:
     """The scene (rig and truth) and its two images, rendered now or read from ``--from``."""
     spec = load_run_scene(config)
+    if config.self_calibrate and not spec.has_port:
+        raise CLIError(f"--self-calibrate does not apply to {config.scene}: it estimates the "
+                       f"port's parameters, and the scene has no port (all air)")
     seed = spec.seed if config.seed is None else config.seed
     measured_rig = measurement_rig(config, spec)
     in_left = visible_targets(spec.rig.left, spec.rig.port, spec.targets, spec.target_radius)[1]

@@ -33,7 +33,7 @@ from eval.cli import CLIError, positive_float, positive_int
 from eval.sweep.cluster import check_address, connect, execute
 from eval.sweep.directory import COMMAND, SweepDir
 from eval.sweep.table import table_rows, write_tables
-from synth.cli import add_out_option, add_progress_option
+from synth.cli import add_out_option, add_progress_option, refuse_given
 
 
 def add_parser(subparsers):
@@ -72,6 +72,9 @@ def main(args) -> int:
     from eval.sweep.spec import load_spec
 
     start = time.perf_counter()
+    if args.scheduler is None:
+        refuse_given(args, ["connect_timeout"], "without --scheduler (the local cluster is "
+                                                "started here, nothing is connected to)")
     spec = load_spec(args.spec)
     if args.scheduler is not None:
         check_address(args.scheduler)

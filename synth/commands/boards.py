@@ -25,13 +25,23 @@ def add_parser(subparsers) -> None:
                                       "(default 700 1400)")
     p.add_argument("--max-tilt", type=non_negative_float, default=None,
                    help="largest tilt of the board, degrees (default 45)")
-    p.add_argument("--spp", type=positive_int, default=None, help="samples per pixel (default 16)")
-    p.add_argument("--seed", type=non_negative_int, default=0,
-                   help="seed of the poses and the renderer (default 0)")
+    p.add_argument("--spp", type=positive_int, default=None,
+                   help="samples per pixel, same as -D spp=N (default 16)")
+    p.add_argument("--seed", type=non_negative_int, default=None,
+                   help="seed of the poses and the renderer, same as -D seed=S (default 0)")
     p.add_argument("--air", action="store_true", help="the same cameras with no port (in air)")
     p.add_argument("--variant", help="Mitsuba variant (default: automatic)")
     add_define_option(p)
     add_progress_option(p)
+
+
+#: Scene parameters that the boards' scene does not use (it holds the scene's cameras, port and
+#: ``max_depth`` and a board; no targets, no water medium, no lights, pinhole sensors): a
+#: ``-D`` of one of them is refused, never ignored.
+NOT_RENDERED = ("target_radius", "target_z", "target_albedo", "light_intensity", "water_c",
+                "water_albedo", "water_g", "aperture_radius", "focus_distance")
+#: Scene parameters of the port, which boards in air (``--air``) do not have.
+PORT_PARAMETERS = ("n_water",)
 
 
 def main(args) -> int:
@@ -39,23 +49,38 @@ def main(args) -> int:
     date)."""
     from measure.board import Board
     from synth import boards as b
-    from synth.scene import load_scene, parse_defines
+    from synth.scene import apply_seed, apply_spp, load_scene, parse_defines
 
     try:
         cols, rows = (int(v) for v in args.squares.lower().split("x"))
     except ValueError:
         raise CLIError(f"--squares must be COLSxROWS (e.g. 11x8), got {args.squares!r}") from None
     board = Board(args.board, (cols, rows), args.square_mm)
-    spec = load_scene(args.scene, parse_defines(args.defines))
+    defines = apply_spp(apply_seed(parse_defines(args.defines), args.seed), args.spp)
+    for name in defines:
+        if name in NOT_RENDERED:
+            raise CLIError(f"-D {name} does not apply to synth boards: its scene renders the "
+                           f"scene's cameras and port with a board (no targets, water medium, "
+                           f"lights or thin lens)")
+        if args.air and name in PORT_PARAMETERS:
+            raise CLIError(f"-D {name} does not apply with --air: the boards are seen in air, "
+                           f"with no port")
+    spec = load_scene(args.scene, defines)
+    # -D spp / -D seed mean what they mean everywhere (the scene's defaults overridden); without
+    # them the boards' own defaults hold
+    spp = args.spp or (spec.spp if "spp" in defines else b.DEFAULT_SPP)
+    seed = spec.seed if "seed" in defines else 0
     manifest = b.write_boards(
-        spec, args.out, board, n_poses=args.poses or b.DEFAULT_POSES,
-        spp=args.spp or b.DEFAULT_SPP, seed=args.seed, air=args.air,
+        spec.rendered_with(spp=spp, seed=seed), args.out, board,
+        n_poses=args.poses or b.DEFAULT_POSES, spp=spp, seed=seed, air=args.air,
         distance_range=tuple(args.distance) if args.distance else b.DEFAULT_DISTANCE_RANGE_MM,
         max_tilt_deg=b.DEFAULT_MAX_TILT_DEG if args.max_tilt is None else args.max_tilt,
         variant=args.variant, progress=not args.no_progress)
     if manifest.get("skipped"):
         print(f"{args.out}: up to date (same scene, board and options); nothing to do")
         return 0
+    if manifest.get("rendered_again"):
+        print(f"{args.out}: {manifest['rendered_again']}; rendering it again")
     w, h = manifest["image_size"]
     print(f"wrote {args.out}: {manifest['poses']} stereo pairs of a {board.kind} "
           f"{cols}x{rows} ({board.square_mm:g} mm) {'in air' if args.air else 'behind the port'}, "

@@ -8,7 +8,7 @@ import json
 
 import sys
 
-from synth.cli import add_json_option, positive_float
+from synth.cli import add_json_option, positive_float, refuse_given
 
 
 def add_parser(subparsers) -> None:
@@ -27,6 +27,8 @@ def main(args) -> int:
 
     data = read_dataset(args.dir)
     if data.is_surface:
+        refuse_given(args, ["rms", "max"], f"to the surface dataset {args.dir}: its truth maps "
+                                           f"are checked, no detection")
         return _check_surface(args, data)
 
     report = check_dataset(args.dir, rms_px=args.rms if args.rms is not None else CHECK_RMS_PX,

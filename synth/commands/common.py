@@ -23,7 +23,9 @@ def add_render_options(p, command: str) -> None:
 
 
 def scene_from_args(args):
-    """The scene with ``-D`` and ``--seed`` applied (``--seed S`` is ``-D seed=S``)."""
-    from synth.scene import apply_seed, load_scene, parse_defines
+    """The scene with ``-D``, ``--seed`` and ``--spp`` applied (``--seed S`` is ``-D seed=S``,
+    ``--spp N`` is ``-D spp=N``: a ``-D`` with another value is refused)."""
+    from synth.scene import apply_seed, apply_spp, load_scene, parse_defines
 
-    return load_scene(args.scene, apply_seed(parse_defines(args.defines), args.seed))
+    defines = apply_spp(apply_seed(parse_defines(args.defines), args.seed), args.spp)
+    return load_scene(args.scene, defines).rendered_with(spp=args.spp)

@@ -31,6 +31,8 @@ def main(args) -> int:
     if manifest.get("skipped"):
         print(f"{args.out}: up to date (same scene, parameters and options); nothing to do")
         return 0
+    if manifest.get("rendered_again"):
+        print(f"{args.out}: {manifest['rendered_again']}; rendering it again")
     s = manifest["seconds"]
     stages = ", ".join(f"{k} {v:.2f} s" for k, v in s.items() if k != "total")
     print(f"wrote {args.out} with {manifest['variant']}, {manifest['spp']} spp: {stages}; "

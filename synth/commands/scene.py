@@ -7,7 +7,7 @@ from __future__ import annotations
 import os
 
 from synth.cli import (CLIError, add_out_option, any_float, non_negative_float, non_negative_int,
-                       positive_float, positive_int)
+                       positive_float, positive_int, refuse_given)
 
 #: The first comment of every scene file ``python -m synth scene`` writes.
 SCENE_COMMENT_PREFIX = "written by python -m synth scene"
@@ -129,6 +129,7 @@ def main(args) -> int:
     from synth.scene import DEFAULT_SPP, DEFAULT_TARGET_RADIUS_MM, write_scene
 
     check_file_output(args.out, "--out", may_replace=_is_our_scene)
+    _refuse_inapplicable(args)
     if args.lighting is None and args.layout == "surface" and args.port == "none":
         raise CLIError("--port none: a surface in air needs --lighting led (the default, lit, "
                        "puts the spot lights in the water)")
@@ -277,6 +278,32 @@ def _surface_scene(args, left, right, port) -> int:
     except ValueError as exc:
         raise CLIError(str(exc)) from None
     return 0
+
+
+def _refuse_inapplicable(args) -> None:
+    """CLIError for a given option that the layout (or ``--port none``) does not use: refused,
+    never ignored."""
+    layout, surface = args.layout, args.surface if args.layout == "surface" else None
+    shape = surface or layout  # what the options describe: the layout, or the surface's shape
+    applies = {
+        "z": layout != "random" and surface != "mesh",
+        "spacing": layout in ("grid", "cylinder", "sphere"),
+        "half_width": layout == "grid",
+        "tilt": shape == "tilted",
+        "surface_radius": shape in ("cylinder", "sphere"),
+        "half_angle": shape in ("cylinder", "sphere"),
+        "n": layout == "random", "z_range": layout == "random", "layout_seed": layout == "random",
+        "target_radius": layout != "surface",
+        "surface": layout == "surface",
+        "speckle_size": layout == "surface", "speckle_coverage": layout == "surface",
+        "speckle_seed": layout == "surface",
+        "wave_amplitude": surface == "wavy", "wavelength": surface == "wavy",
+    }
+    where = f"--layout {layout}" + (f" --surface {surface}" if surface else "")
+    refuse_given(args, [dest for dest, ok in applies.items() if not ok], f"to {where}")
+    if args.port == "none":
+        refuse_given(args, ["n_water", "n_glass", "port_distance", "glass_thickness",
+                            "port_tilt"], "to --port none (no port: all air)")
 
 
 #: Most targets a scene may hold (its XML grows by ~400 bytes per target).

@@ -18,14 +18,16 @@ from __future__ import annotations
 
 from synth.scene.model import (DEFAULT_SPP, DEFAULT_TARGET_RADIUS_MM, SURFACE_ID, SceneError,
                                SceneSpec, SurfaceFiles)
-from synth.scene.params import apply_seed, check_params, declared_defaults, parse_defines
+from synth.scene.params import (apply_seed, apply_spp, check_params, declared_defaults,
+                                parse_defines)
 from synth.scene.read import load_scene
 from synth.scene.write import (LIGHT_INTENSITY, LIT_TARGET_ALBEDO, interface_placements,
                                light_placements, write_scene)
 
 __all__ = [
     "DEFAULT_SPP", "DEFAULT_TARGET_RADIUS_MM", "LIGHT_INTENSITY", "LIT_TARGET_ALBEDO",
-    "SURFACE_ID", "SceneError", "SceneSpec", "SurfaceFiles", "apply_seed", "check_params",
+    "SURFACE_ID", "SceneError", "SceneSpec", "SurfaceFiles", "apply_seed", "apply_spp",
+    "check_params",
     "declared_defaults", "interface_placements", "light_placements", "load_scene", "parse_defines",
     "write_scene"
 ]

@@ -7,7 +7,7 @@ a :class:`SceneSpec`.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -110,3 +110,11 @@ class SceneSpec:
     @property
     def seed(self) -> int:
         return int(float(self.params.get("seed", DEFAULT_SEED)))
+
+    def rendered_with(self, spp: int | None = None, seed: int | None = None) -> SceneSpec:
+        """This scene with the ``spp`` and ``seed`` it is rendered with recorded in ``params``
+        (those it declares), so that the parameters say what was rendered: ``--spp 4`` and
+        ``-D spp=4`` give the same parameters. None keeps the scene's own value."""
+        values = {name: str(int(value)) for name, value in (("spp", spp), ("seed", seed))
+                  if value is not None and name in self.params}
+        return replace(self, params={**self.params, **values}) if values else self

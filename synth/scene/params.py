@@ -37,19 +37,35 @@ def parse_defines(items) -> dict:
     return defines
 
 
-def apply_seed(defines: dict, seed: int | None) -> dict:
-    """``--seed S`` is ``-D seed=S``: put it into ``defines`` (returned); a ``-D seed`` with
-    another value is an error naming both."""
-    if seed is None:
+def apply_option(defines: dict, name: str, value) -> dict:
+    """An option that sets the scene parameter ``name`` (``--seed S`` is ``-D seed=S``,
+    ``--spp N`` is ``-D spp=N``): put ``value`` into ``defines`` (returned; None leaves them as
+    they are); a ``-D name`` with another value is an error naming both."""
+    if value is None:
         return defines
-    if "seed" in defines:
+    if name in defines:
         try:
-            same = float(defines["seed"]) == float(seed)
+            same = float(defines[name]) == float(value)
         except ValueError:
             same = False
         if not same:
-            raise SceneError(f"--seed {seed} conflicts with -D seed={defines['seed']}")
-    defines["seed"] = str(seed)
+            raise SceneError(f"--{name} {value} conflicts with -D {name}={defines[name]}")
+    defines[name] = str(value)
+    return defines
+
+
+def apply_seed(defines: dict, seed: int | None) -> dict:
+    """``--seed S`` is ``-D seed=S`` (:func:`apply_option`)."""
+    return apply_option(defines, "seed", seed)
+
+
+def apply_spp(defines: dict, spp: int | None) -> dict:
+    """``--spp N`` and ``-D spp=M`` mean the same, the scene's spp default overridden: a
+    ``-D spp`` with another value is an error naming both (:func:`apply_option`). Returned
+    unchanged otherwise: the render takes ``--spp`` itself (a scene need not declare ``spp``),
+    and :meth:`synth.scene.SceneSpec.rendered_with` records it in the scene's parameters."""
+    if spp is not None and "spp" in defines:
+        apply_option(defines, "spp", spp)
     return defines
 
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import csv
 import json
+import re
 
 import numpy as np
 import open3d as o3d
@@ -119,3 +120,75 @@ def test_an_empty_cloud_is_still_written(tmp_path):
     write_colored_ply(tmp_path / "e.ply", np.zeros((0, 3)), np.zeros(0), 1.0)
     text = (tmp_path / "e.ply").read_text()
     assert text.startswith("ply\n") and "element vertex 0" in text and text.endswith("end_header\n")
+
+
+def _submit(path, points):
+    o3d.io.write_point_cloud(str(path), o3d.geometry.PointCloud(
+        o3d.utility.Vector3dVector(points)), write_ascii=False)
+    return str(path)
+
+
+def _theirs(run):
+    return np.asarray(o3d.io.read_point_cloud(str(run / "points_optical_path.ply")).points)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name, change, cause", [
+    ("metres", lambda p: p / 1000, r"looks like metres \(pass --units m\)"),
+    ("flip_y", lambda p: p * [1, -1, 1], "y negated"),
+    ("offset", lambda p: p + [80, 0, 0], r"rigid shift of \(-80\.\d, [+-]0\.\d, [+-]0\.\d\) mm"),
+    ("offset_small", lambda p: p + [0, 0, 25], r"rigid shift of \([+-]0\.\d, [+-]0\.\d, -2[45]\.\d\) mm"),
+    ("duplicates", lambda p: np.concatenate([p, p[:10]]), "10 points repeat"),
+])
+def test_an_implausible_submission_gets_one_warning_naming_the_likely_cause(
+        scored_run, tmp_path, capsys, name, change, cause):
+    """Scored as given (exit 0), with one warning line on stderr and in the report (issue 22:
+    a cloud in metres scored '0 of 69 points within 40 mm' with no hint, a y-flipped one
+    scored like the right one, an 80 mm offset one like a good one with 8 points fewer)."""
+    data, run, _ = scored_run
+    theirs = _submit(tmp_path / f"{name}.ply", change(_theirs(run)))
+    out = tmp_path / "score"
+    assert main(["score", str(data), "--points", theirs, "--out", str(out)]) == 0
+    warnings = [line for line in capsys.readouterr().err.splitlines()
+                if line.startswith("warning:")]
+    assert len(warnings) == 1 and re.search(cause, warnings[0]), warnings
+    report = json.loads((out / "report.json").read_text())
+    assert len(report["warnings"]) == 1 and re.search(cause, report["warnings"][0])
+    assert re.search(cause, (out / "report.md").read_text())
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("method", ["optical_path", "su", "regular"])
+def test_a_plausible_submission_gets_no_warning(scored_run, tmp_path, capsys, method):
+    """The run's own clouds, of every method (su's errors of a few mm, regular's of tens of
+    mm: a wrong model is not a wrong frame), are scored without a warning."""
+    data, run, _ = scored_run
+    out = tmp_path / "score"
+    assert main(["score", str(data), "--points", str(run / f"points_{method}.ply"), "--out",
+                 str(out)]) == 0
+    assert "warning:" not in capsys.readouterr().err
+    assert json.loads((out / "report.json").read_text())["warnings"] == []
+
+
+@pytest.mark.slow
+def test_units_m_converts_a_cloud_in_metres(scored_run, tmp_path, capsys):
+    data, run, _ = scored_run
+    metres = _submit(tmp_path / "metres.ply", _theirs(run) / 1000)
+    out = tmp_path / "score"
+    assert main(["score", str(data), "--points", metres, "--units", "m", "--out", str(out)]) == 0
+    assert "warning:" not in capsys.readouterr().err
+    scored = json.loads((out / "report.json").read_text())
+    assert scored["source"]["units"] == "m" and scored["association"]["unassociated"] == 0
+    millimetres = json.loads((run / "report.json").read_text())["methods"]["optical_path"]
+    np.testing.assert_allclose(scored["methods"]["theirs"]["rms_dp_mm"],
+                               millimetres["rms_dp_mm"], rtol=1e-9)
+
+
+def test_units_does_not_apply_to_pixels(tmp_path, capsys):
+    pairs = tmp_path / "pairs.csv"
+    pairs.write_text("u_left,v_left,u_right,v_right\n1,2,3,4\n")
+    assert main(["score", str(tmp_path / "missing_ds"), "--pixels", str(pairs), "--units", "m",
+                 "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--units does not apply with --pixels" in err[0]
+    assert not (tmp_path / "out").exists()

@@ -145,9 +145,45 @@ def test_bad_inputs_are_one_line_and_exit_2(boards, tmp_path, capsys):
     write_calib(other, paper_rig(size=(640, 480)))
     fails(["calibrate", boards["water"], "--intrinsics", str(other), "--out",
            str(tmp_path / "c")], eval_main, "image size")
-    # a board definition that does not match the images: found nowhere
+    # a board definition that does not match the images: it disagrees with the manifest (and
+    # with corners.csv), refused before any detection
     wrong = tmp_path / "wrong"
     shutil.copytree(boards["air"], wrong)
     (wrong / "board.json").write_text(json.dumps(Board("chessboard", (9, 6), 60.0).to_dict()))
-    fails(["calibrate", str(wrong), "--out", str(tmp_path / "c")], eval_main, "found in 0")
+    fails(["calibrate", str(wrong), "--out", str(tmp_path / "c")], eval_main,
+          "board.json: a chessboard 9x6, 60.0 mm board")
     assert not (tmp_path / "c").exists()
+
+
+def test_define_spp_and_seed_mean_what_they_mean_everywhere(small_scene, tmp_path):
+    """``-D spp=4`` renders 4 spp (it rendered the boards' default, 16, issue 22) and
+    ``-D seed=2`` is ``--seed 2``: the same images."""
+    common = ["boards", small_scene, "--poses", "1", "--air", "--squares", "7x6", "--square-mm",
+              "40", "--distance", "450", "650", "--quiet"]
+    for name, extra in (("defines", ["-D", "spp=4", "-D", "seed=2"]),
+                        ("options", ["--spp", "4", "--seed", "2"])):
+        assert synth_main(common + ["--out", str(tmp_path / name), *extra]) == 0
+    manifests = [json.loads((tmp_path / name / "manifest.json").read_text())
+                 for name in ("defines", "options")]
+    assert [(m["spp"], m["seed"]) for m in manifests] == [(4, 2), (4, 2)]
+    assert ((tmp_path / "defines" / "left_00.png").read_bytes()
+            == (tmp_path / "options" / "left_00.png").read_bytes())
+
+
+def test_a_rerun_renders_again_unless_every_image_is_whole(boards, tmp_path, capsys):
+    """A boards folder is up to date only when every file it wrote is whole (issue 22: with one
+    image cut the rerun said 'up to date')."""
+    out = tmp_path / "air"
+    argv = ["boards", boards["scene"], "--out", str(out), "--poses", "2", "--seed", "3",
+            "--air", "--squares", "7x6", "--square-mm", "60", "--distance", "450", "650",
+            "--spp", "4", "--quiet"]
+    assert synth_main(argv) == 0
+    image = out / "left_01.png"
+    whole = image.read_bytes()
+    image.write_bytes(whole[:100])
+    capsys.readouterr()
+    assert synth_main(argv) == 0
+    printed = capsys.readouterr().out
+    assert "nothing to do" not in printed and "rendering it again" in printed, printed
+    assert image.read_bytes() == whole
+    assert synth_main(argv) == 0 and "nothing to do" in capsys.readouterr().out

@@ -11,7 +11,9 @@ import numpy as np
 import pytest
 
 from synth.crosscheck import check_dataset
-from synth.dataset import PIXELS_HEADER, read_dataset, stereo_extrinsics, write_dataset
+from synth.__main__ import main
+from synth.dataset import (PIXELS_HEADER, read_dataset, read_manifest, stereo_extrinsics,
+                           write_dataset)
 from measure.projection import project
 from synth.scene import load_scene
 
@@ -120,6 +122,42 @@ def test_rerun_is_a_no_op_and_other_arguments_replace(small_scene, dataset_dir, 
     assert not second["skipped"] and second["request_key"] != first["request_key"]
     assert json.loads((out / "manifest.json").read_text())["spp"] == 9
     assert sorted(p.name for p in tmp_path.iterdir()) == ["ds2"]  # no temporary left behind
+
+
+@pytest.mark.slow
+def test_spp_option_and_define_mean_the_same(small_scene, tmp_path):
+    """``--spp 4`` and ``-D spp=4`` are one request, and the manifest's scene parameters record
+    what was rendered (issue 22: they held the scene's default, 36)."""
+    for name, extra in (("option", ["--spp", "4"]), ("define", ["-D", "spp=4"])):
+        assert main(["dataset", small_scene, "--out", str(tmp_path / name), "--quiet",
+                     *extra]) == 0
+    a, b = (read_manifest(tmp_path / name) for name in ("option", "define"))
+    assert a["scene"]["params"]["spp"] == "4" and a["spp"] == 4
+    assert a["request_key"] == b["request_key"]
+    assert (tmp_path / "option" / "left.png").read_bytes() == (tmp_path / "define" / "left.png").read_bytes()
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("damage", ["delete", "truncate", "change"])
+def test_a_rerun_renders_again_unless_every_file_is_whole(small_scene, tmp_path, capsys, damage):
+    """A dataset is up to date only when every file it wrote is whole (issue 22: with
+    left.png deleted or cut the rerun said 'up to date … nothing to do')."""
+    out = tmp_path / "ds"
+    argv = ["dataset", small_scene, "--out", str(out), "--spp", "4", "--quiet"]
+    assert main(argv) == 0
+    whole = (out / "left.png").read_bytes()
+    if damage == "delete":
+        (out / "left.png").unlink()
+    elif damage == "truncate":
+        (out / "left.png").write_bytes(whole[:len(whole) // 2])
+    else:
+        (out / "pixels.csv").write_text((out / "pixels.csv").read_text().replace("1", "2"))
+    capsys.readouterr()
+    assert main(argv) == 0
+    printed = capsys.readouterr().out
+    assert "nothing to do" not in printed and "rendering it again" in printed, printed
+    assert (out / "left.png").read_bytes() == whole
+    assert main(argv) == 0 and "nothing to do" in capsys.readouterr().out
 
 
 def test_failed_write_leaves_nothing(small_scene, tmp_path, monkeypatch):

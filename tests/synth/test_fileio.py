@@ -118,3 +118,23 @@ def test_single_files(tmp_path):
     with pytest.raises(OutputError, match="not a file this command wrote"):
         check_file_output(path, "--out", may_replace=lambda p: False)
     assert check_file_output(path, "--out", may_replace=lambda p: True) == str(path)
+
+
+def test_an_output_is_intact_only_when_every_file_it_wrote_is_whole(tmp_path):
+    """The marker records each file's size and SHA-256: a deleted, truncated or changed file
+    makes the output damaged (issue 22: a rerun of a dataset whose left.png was deleted said
+    'up to date')."""
+    out = tmp_path / "out"
+    _write(out, files=("a.txt", "b.txt"))
+    output = OutputDir(out, "eval run")
+    assert output.damage() is None
+    (out / "a.txt").write_text("a.")  # same size, other bytes
+    assert output.damage() == "a.txt changed since it was written"
+    (out / "a.txt").write_text("a")
+    assert output.damage() == "a.txt changed since it was written"
+    (out / "a.txt").unlink()
+    assert output.damage() == "a.txt is missing"
+    marker = read_marker(out)
+    del marker["sha256"]
+    (out / MARKER_NAME).write_text(json.dumps(marker))
+    assert "no record" in output.damage()

@@ -77,6 +77,24 @@ def test_dense_run_bad_options(plane_case, capsys, argv, fragment):
 
 
 @pytest.mark.slow
+@pytest.mark.parametrize("argv, fragment", [
+    (["--rms", "0.1"], "--rms does not apply"),
+    (["--max", "0.5"], "--max does not apply"),
+])
+def test_check_of_a_surface_dataset_refuses_the_detection_bounds(plane_case, capsys, argv,
+                                                                 fragment):
+    """A surface dataset's truth maps are checked, not detections: the bounds of the
+    detections cannot apply and are refused (issue 22: they were ignored)."""
+    root, _, ds = plane_case
+    before = _snapshot(root)
+    code = synth_main(["check", ds, *argv])
+    err = capsys.readouterr().err
+    assert code == 2 and fragment in err and "Traceback" not in err, err
+    assert len([line for line in err.splitlines() if line.startswith("error:")]) == 1
+    assert _snapshot(root) == before
+
+
+@pytest.mark.slow
 def test_scene_whose_mesh_is_missing(plane_case, tmp_path, capsys):
     _, scene, _ = plane_case
     copy = tmp_path / "plane.xml"
@@ -167,14 +185,22 @@ def test_mesh_without_surface_mesh_and_score_of_a_surface_dataset(plane_case, tm
 
 @pytest.mark.slow
 def test_damaged_truth_maps_are_refused(plane_case, tmp_path, capsys):
-    """Truth points that are NaN where the valid mask says the surface is hit: refused."""
+    """Truth points that are NaN where the valid mask says the surface is hit: refused — by
+    their SHA-256 against the manifest's, and in a manifest without the hashes (before format
+    3) by the maps' own consistency."""
     _, scene, ds = plane_case
     copy = tmp_path / "ds"
     shutil.copytree(ds, copy)
     points = np.load(copy / "left_truth_points.npy")
     np.save(copy / "left_truth_points.npy", np.full_like(points, np.nan))
-    code = eval_main(["run", scene, "--from", str(copy), "--out", str(tmp_path / "out"),
-                      "--no-progress"])
+    argv = ["run", scene, "--from", str(copy), "--out", str(tmp_path / "out"), "--no-progress"]
+    code = eval_main(argv)
+    err = capsys.readouterr().err
+    assert code == 2 and "left_truth_points.npy: changed since" in err and "Traceback" not in err
+    manifest = json.loads((copy / "manifest.json").read_text())
+    del manifest["sha256"], manifest["manifest_sha256"]
+    (copy / "manifest.json").write_text(json.dumps(manifest))
+    code = eval_main(argv)
     err = capsys.readouterr().err
     assert code == 2 and "truth maps disagree" in err and "Traceback" not in err
     assert not (tmp_path / "out").exists()
