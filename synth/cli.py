@@ -11,6 +11,8 @@
   ``--no-progress`` (alias ``--quiet``) silences progress output; ``--json`` prints the report
   as JSON to stdout (the human summary then goes to stderr). ``tests/test_cli_vocabulary.py``
   walks every subcommand of both command lines and checks it.
+* ``--version`` prints ``refractive-stereo X.Y.Z`` (:func:`package_version`); no command at all
+  prints the help (the list of commands) to stdout and exits 0.
 """
 
 from __future__ import annotations
@@ -127,12 +129,40 @@ def add_json_option(parser) -> None:
     parser.add_argument("--json", action="store_true", help=JSON_HELP)
 
 
+#: The distribution whose version ``--version`` prints.
+DISTRIBUTION = "refractive-stereo"
+
+
+def package_version() -> str:
+    """The version of this project: the installed distribution's (``importlib.metadata``), or,
+    when it is not installed (a bare checkout on ``PYTHONPATH``), the ``version`` in the
+    ``pyproject.toml`` beside the packages; ``"unknown"`` if neither says."""
+    import importlib.metadata
+    import re
+    from pathlib import Path
+
+    try:
+        return importlib.metadata.version(DISTRIBUTION)
+    except importlib.metadata.PackageNotFoundError:
+        pass
+    try:
+        text = (Path(__file__).resolve().parent.parent / "pyproject.toml").read_text("utf-8")
+    except OSError:
+        return "unknown"
+    project = re.search(r"(?ms)^\[project\]\s*$(.*?)(?=^\[|\Z)", text)
+    version = project and re.search(r'(?m)^version\s*=\s*"([^"]+)"', project.group(1))
+    return version.group(1) if version else "unknown"
+
+
 def command_parser(prog: str, description: str, modules) -> Parser:
     """The parser of a command line with one subcommand per module of ``modules`` (in ``--help``
     order): each module's ``add_parser(subparsers)`` adds its subparser, whose ``main(args)``
-    :func:`run_command` runs."""
+    :func:`run_command` runs. ``--version`` prints :func:`package_version`; the command may be
+    left out (:func:`run_command` then prints the help)."""
     parser = Parser(prog=prog, description=description)
-    subparsers = parser.add_subparsers(dest="command", metavar="command", required=True,
+    parser.add_argument("--version", action="version",
+                        version=f"{DISTRIBUTION} {package_version()}")
+    subparsers = parser.add_subparsers(dest="command", metavar="command", required=False,
                                        parser_class=Parser)
     for module in modules:
         before = set(subparsers.choices)
@@ -150,9 +180,16 @@ def one_line(message) -> str:
 def run_command(parser: argparse.ArgumentParser, argv=None) -> int:
     """Parse ``argv`` with ``parser`` (whose subparsers set ``_main``), run it, return the exit
     code. Bad input of any kind — :class:`CLIError`, ``ValueError`` and its subclasses (scene,
-    dataset, output errors), ``OSError`` — is one line ``error: …`` and exit 2."""
+    dataset, output errors), ``OSError`` — is one line ``error: …`` and exit 2. No command:
+    the help on stdout, exit 0; ``--help`` and ``--version`` return 0 too."""
     try:
-        args = parser.parse_args(argv)
+        try:
+            args = parser.parse_args(argv)
+        except SystemExit as exc:  # --help, --version: argparse has printed them
+            return exc.code if isinstance(exc.code, int) else EXIT_OK
+        if getattr(args, "_main", None) is None:  # no command: what there is to do
+            parser.print_help(sys.stdout)
+            return EXIT_OK
         return int(args._main(args) or 0)
     except (CLIError, ValueError) as exc:
         print(f"error: {one_line(exc)}", file=sys.stderr)
@@ -177,8 +214,9 @@ def run_command(parser: argparse.ArgumentParser, argv=None) -> int:
         return EXIT_CHECK_FAILED
 
 
-__all__ = ["CLIError", "DEFINE_HELP", "EXIT_BAD_INPUT", "EXIT_CHECK_FAILED", "EXIT_INTERRUPTED",
-           "EXIT_OK", "JSON_HELP", "NO_PROGRESS_HELP", "Parser", "SCENE_HELP", "add_define_option",
-           "add_json_option", "add_out_option", "add_progress_option", "add_scene_argument",
-           "any_float", "command_parser", "finite_float", "int_at_least", "non_negative_float",
-           "non_negative_int", "one_line", "positive_float", "positive_int", "run_command"]
+__all__ = ["CLIError", "DEFINE_HELP", "DISTRIBUTION", "EXIT_BAD_INPUT", "EXIT_CHECK_FAILED",
+           "EXIT_INTERRUPTED", "EXIT_OK", "JSON_HELP", "NO_PROGRESS_HELP", "Parser", "SCENE_HELP",
+           "add_define_option", "add_json_option", "add_out_option", "add_progress_option",
+           "add_scene_argument", "any_float", "command_parser", "finite_float", "int_at_least",
+           "non_negative_float", "non_negative_int", "one_line", "package_version",
+           "positive_float", "positive_int", "run_command"]
