@@ -14,7 +14,8 @@ Two tools:
   output is left as it was. Staging and trash directories left by a process that died (``kill -9``)
   are removed by the next claim of the same output: their names carry the owner's PID.
 * :func:`atomic_write_bytes` / :func:`atomic_write_text` — one file, written to a temporary file
-  beside it and renamed into place.
+  beside it and renamed into place; :func:`atomic_create_bytes` — the same, but only where no
+  file is (it never replaces one).
 """
 
 from __future__ import annotations
@@ -232,6 +233,27 @@ def atomic_write_bytes(path, data: bytes, mode: int = 0o644) -> Path:
     return path
 
 
+def atomic_create_bytes(path, data: bytes, mode: int = 0o644) -> Path:
+    """Write ``data`` at ``path`` only if nothing is there: a temporary file beside it is
+    hard-linked into place, which fails with ``FileExistsError`` when ``path`` exists (also one
+    that appeared meanwhile) and so never replaces anything."""
+    path = Path(path)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        os.fchmod(fd, mode)
+        with os.fdopen(fd, "wb") as handle:
+            handle.write(data)
+            handle.flush()
+            os.fsync(handle.fileno())
+        os.link(tmp, path)
+    finally:
+        try:
+            os.unlink(tmp)
+        except OSError:
+            pass
+    return path
+
+
 def atomic_write_text(path, text: str) -> Path:
     """:func:`atomic_write_bytes` of UTF-8 text."""
     return atomic_write_bytes(path, text.encode("utf-8"))
@@ -285,6 +307,7 @@ def check_file_output(path, option: str, may_replace=None) -> str:
     return path
 
 
-__all__ = ["MARKER_NAME", "OutputDir", "OutputError", "atomic_write_bytes", "atomic_write_json",
+__all__ = ["MARKER_NAME", "OutputDir", "OutputError", "atomic_create_bytes", "atomic_write_bytes",
+           "atomic_write_json",
            "atomic_write_text", "check_file_output", "jsonable", "read_marker",
            "remove_stale_staging"]

@@ -108,6 +108,16 @@ def _prepare(workdir: Path, setup: str | None):
         (workdir / "adir").mkdir()
     elif setup == "foreign_file":
         (workdir / "notes.txt").write_text("a user's notes, not written by eval bench")
+    elif setup == "user_mesh":  # the user's own file where synth scene puts the scene's mesh
+        (workdir / "x_surface.ply").write_text("ply\nformat ascii 1.0\nmy scanned part\n")
+    elif setup == "user_texture":  # a file named like the shared speckle texture
+        (workdir / SURFACE_TEXTURE).write_bytes(b"my own picture")
+    elif setup == "other_texture":  # a valid PNG of the texture's size but other pixels
+        import cv2
+        import numpy as np
+
+        ok, data = cv2.imencode(".png", np.full((160, 200), 200, np.uint8))
+        (workdir / SURFACE_TEXTURE).write_bytes(data.tobytes())
 
 
 def _assert_refused(code, capsys, before, workdir, fragment=None):
@@ -211,6 +221,9 @@ EVAL_CASES = [
 ]
 
 SCENE = ["scene", "--out", "x.xml"]
+#: A small surface scene (texture of 200 x 160 texels) and the name of its texture.
+SURFACE = SCENE + ["--layout", "surface", "--size", "320", "268", "--speckle-size", "50"]
+SURFACE_TEXTURE = "speckle_50mm_0.5_0_2000x1600mm.png"
 DATASET = ["dataset", "small.xml", "--out", "out", "--spp", "4", "--quiet"]
 RENDER = ["render", "small.xml", "--out", "out", "--spp", "4", "--quiet"]
 SYNTH_CASES = [
@@ -260,6 +273,10 @@ SYNTH_CASES = [
     (None, SCENE + ["--layout", "random", "--n", "100000000"], "--n"),
     (None, SCENE + ["--layout", "sphere", "--surface-radius", "1e12"], "--surface-radius"),
     (None, SCENE + ["--aperture-radius", "1", "--dist", "0.1", "0", "0", "0"], "--dist"),
+    # the files beside the scene: neither the mesh nor the shared texture of someone else
+    ("user_mesh", SURFACE, "x_surface.ply"),
+    ("user_texture", SURFACE, SURFACE_TEXTURE),
+    ("other_texture", SURFACE, SURFACE_TEXTURE),
 ]
 # Overwriting a file that `synth scene` did not write (the scene file of someone else).
 SYNTH_CASES[16] = (None, ["scene", "--out", "small_copy_foreign.xml"], "not a file this command wrote")

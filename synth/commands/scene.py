@@ -26,7 +26,8 @@ def add_parser(subparsers) -> None:
     p = subparsers.add_parser("scene",
                               help="write a Mitsuba scene of the rig, the port and targets")
     add_out_option(p, "synth scene", what="file",
-                   rule="the scene (.xml); an existing file is replaced only if python -m synth "
+                   rule="the scene (.xml; --layout surface also writes its mesh and speckle "
+                        "texture beside it); an existing file is replaced only if python -m synth "
                         "scene wrote it")
     p.add_argument("--layout", choices=("paper", "grid", "random", "tilted", "cylinder", "sphere",
                                         "surface"),

@@ -118,3 +118,13 @@ def test_single_files(tmp_path):
     with pytest.raises(OutputError, match="not a file this command wrote"):
         check_file_output(path, "--out", may_replace=lambda p: False)
     assert check_file_output(path, "--out", may_replace=lambda p: True) == str(path)
+
+
+def test_atomic_create_never_replaces(tmp_path):
+    from synth.fileio import atomic_create_bytes
+
+    path = tmp_path / "f.bin"
+    atomic_create_bytes(path, b"first")
+    with pytest.raises(FileExistsError):
+        atomic_create_bytes(path, b"second")
+    assert path.read_bytes() == b"first" and sorted(p.name for p in tmp_path.iterdir()) == ["f.bin"]
