@@ -56,6 +56,21 @@ positive_int = int_at_least(1, "positive")
 non_negative_int = int_at_least(0, "non-negative")
 
 
+def scene_seed(text: str) -> int:
+    """An argparse type: a scene's seed, an integer from 0 to :data:`synth.seeds.MAX_SEED` (the
+    renderer's sampler seed is 32-bit: a larger seed cannot be honoured)."""
+    from synth.seeds import MAX_SEED, seed_range_text
+
+    try:
+        value = int(text)
+    except ValueError:
+        value = None
+    if value is None or not 0 <= value <= MAX_SEED:
+        raise argparse.ArgumentTypeError(f"expected an integer from {seed_range_text()}, "
+                                         f"got {text!r}")
+    return value
+
+
 def finite_float(minimum: float = -math.inf, *, strict: bool = False, description: str = "finite"):
     """An argparse type: a finite float >= ``minimum`` (> when ``strict``); NaN and ±inf refused."""
 
@@ -219,4 +234,4 @@ __all__ = ["CLIError", "DEFINE_HELP", "DISTRIBUTION", "EXIT_BAD_INPUT", "EXIT_CH
            "add_define_option", "add_json_option", "add_out_option", "add_progress_option",
            "add_scene_argument", "any_float", "command_parser", "finite_float", "int_at_least",
            "non_negative_float", "non_negative_int", "one_line", "package_version",
-           "positive_float", "positive_int", "run_command"]
+           "positive_float", "positive_int", "run_command", "scene_seed"]

@@ -163,6 +163,9 @@ EVAL_CASES = [
     (None, RUN + ["--spp", "abc"], "--spp"),
     (None, RUN + ["--seed", "-3"], "--seed"),
     (None, RUN + ["--seed", "3", "-D", "seed=4"], "seed"),
+    # seeds beyond Mitsuba's 32-bit sampler seed (they wrapped: 2^32 rendered seed 0's bytes)
+    (None, RUN + ["--seed", "4294967296"], "4294967294"),
+    (None, RUN + ["-D", "seed=4294967295"], "4294967294"),
     (None, RUN + ["--depth-range", "5"], "--depth-range"),
     (None, RUN + ["--depth-range", "2,1"], "--depth-range"),
     (None, RUN + ["--depth-range", "nan,5"], "--depth-range"),
@@ -252,6 +255,14 @@ SYNTH_CASES = [
     ("out_file", RENDER, "not a directory"),
     (None, DATASET + ["-D", "width=100000", "-D", "height=100000"], "GiB"),
     (None, DATASET + ["--seed", "1", "-D", "seed=2"], "seed"),
+    (None, DATASET + ["--seed", "4294967296"], "4294967294"),
+    (None, RENDER + ["-D", "seed=99999999999"], "4294967294"),
+    (None, SCENE + ["--seed", "4294967295"], "4294967294"),
+    # two passes per view (3000 spp at 320 x 268): pass 1 of the right view is S + 1 + 2^21
+    (None, RENDER + ["--spp", "3000", "--seed", "4294967294"], "4292870142"),
+    # 15 board poses: pose k's views are seeded S + 2k and S + 2k + 1
+    (None, ["boards", "small.xml", "--out", "out", "--seed", "4294967280", "--quiet"],
+     "4294967266"),
     (None, RENDER + ["-D", "left_dist=-0.5 0 0 0 0"], "dist"),
     ("garbage_calib", ["check", "ds"], "calib.yaml"),
     ("no_left_png", ["check", "ds"], "left.png"),

@@ -7,7 +7,7 @@ from __future__ import annotations
 import os
 
 from synth.cli import (CLIError, add_out_option, any_float, non_negative_float, non_negative_int,
-                       positive_float, positive_int)
+                       positive_float, positive_int, scene_seed)
 
 #: The first comment of every scene file ``python -m synth scene`` writes.
 SCENE_COMMENT_PREFIX = "written by python -m synth scene"
@@ -92,7 +92,7 @@ def add_parser(subparsers) -> None:
                    help="OpenCV distortion coefficients of both cameras (4, 5 or 8)")
     p.add_argument("--target-radius", type=positive_float, help="target disk radius, mm (default 2.5)")
     p.add_argument("--spp", type=positive_int, help="default samples per pixel written into the scene")
-    p.add_argument("--seed", type=non_negative_int, default=0, help="default sampler seed of the scene")
+    p.add_argument("--seed", type=scene_seed, default=0, help="default sampler seed of the scene")
     p.add_argument("--water", choices=("clear", "clear_ocean", "coastal", "turbid_harbor"),
                    default="clear", help="water that absorbs and scatters (Petzold's "
                                          "measurements; default clear: no medium)")
