@@ -192,41 +192,84 @@ def one_line(message) -> str:
     return " ".join(str(message).split())
 
 
-def run_command(parser: argparse.ArgumentParser, argv=None) -> int:
+def run_command(parser, argv=None) -> int:
     """Parse ``argv`` with ``parser`` (whose subparsers set ``_main``), run it, return the exit
-    code. Bad input of any kind — :class:`CLIError`, ``ValueError`` and its subclasses (scene,
-    dataset, output errors), ``OSError`` — is one line ``error: …`` and exit 2. No command:
-    the help on stdout, exit 0; ``--help`` and ``--version`` return 0 too."""
+    code. ``parser`` is an ``ArgumentParser`` or a function that builds one (then building it —
+    importing the command modules — is covered too). Bad input of any kind — :class:`CLIError`,
+    ``ValueError`` and its subclasses (scene, dataset, output errors), ``OSError`` — is one line
+    ``error: …`` and exit 2. No command: the help on stdout, exit 0; ``--help`` and
+    ``--version`` return 0 too. A SIGINT at any moment (:mod:`synth.interrupt`), even one a
+    library swallowed or turned into another error, is the one line ``error: interrupted`` and
+    exit 130."""
+    from synth import interrupt
+
+    with interrupt.handling():
+        try:
+            code, error = _run(parser, argv)
+        except KeyboardInterrupt:
+            code, error = EXIT_INTERRUPTED, "interrupted"
+        if interrupt.requested():
+            code, error = EXIT_INTERRUPTED, "interrupted"
+        if error:
+            print(f"error: {error}", file=sys.stderr)
+    return code
+
+
+def _run(parser, argv) -> tuple[int, str | None]:
+    """``(exit code, the error line or None)`` of one command (see :func:`run_command`)."""
     try:
+        if not isinstance(parser, argparse.ArgumentParser):
+            parser = parser()
         try:
             args = parser.parse_args(argv)
         except SystemExit as exc:  # --help, --version: argparse has printed them
-            return exc.code if isinstance(exc.code, int) else EXIT_OK
+            return (exc.code if isinstance(exc.code, int) else EXIT_OK), None
         if getattr(args, "_main", None) is None:  # no command: what there is to do
             parser.print_help(sys.stdout)
-            return EXIT_OK
-        return int(args._main(args) or 0)
+            return EXIT_OK, None
+        return int(args._main(args) or 0), None
     except (CLIError, ValueError) as exc:
-        print(f"error: {one_line(exc)}", file=sys.stderr)
-        return EXIT_BAD_INPUT
+        return EXIT_BAD_INPUT, one_line(exc)
     except OSError as exc:
         where = f" {exc.filename}" if getattr(exc, "filename", None) else ""
-        print(f"error: {one_line(exc.strerror or exc)}{':' if where else ''}{where}",
-              file=sys.stderr)
-        return EXIT_BAD_INPUT
-    except KeyboardInterrupt:
-        print("error: interrupted", file=sys.stderr)
-        return EXIT_INTERRUPTED
+        return EXIT_BAD_INPUT, f"{one_line(exc.strerror or exc)}{':' if where else ''}{where}"
     except MemoryError:
-        print("error: out of memory (try a smaller image, fewer samples per pixel or fewer "
-              "targets)", file=sys.stderr)
-        return EXIT_BAD_INPUT
+        return EXIT_BAD_INPUT, ("out of memory (try a smaller image, fewer samples per pixel or "
+                                "fewer targets)")
     except Exception as exc:  # a bug: one line, the traceback on request
         if os.environ.get("REFSTEREO_TRACEBACK"):
             traceback.print_exc()
-        print(f"error: internal error: {type(exc).__name__}: {one_line(exc)} "
-              f"(set REFSTEREO_TRACEBACK=1 for the traceback)", file=sys.stderr)
-        return EXIT_CHECK_FAILED
+        return EXIT_CHECK_FAILED, (f"internal error: {type(exc).__name__}: {one_line(exc)} "
+                                   f"(set REFSTEREO_TRACEBACK=1 for the traceback)")
+
+
+def process_main(main) -> None:
+    """Run ``main()`` (a command line's ``main``) as the whole process and exit with its code:
+    the entry of ``python -m synth|eval`` and of the console scripts. SIGINT is handled from
+    here on (:mod:`synth.interrupt`). Once the command has reported, a Ctrl-C no longer
+    interrupts the exit (its code stands). An interrupted command ends at once after its one
+    line: ``os._exit(130)`` once the streams are flushed, without the interpreter's shutdown,
+    whose finalizers would print more (Dask's ``atexit`` of a cluster cut short, Open3D's leak
+    report of an import cut short) — the command has already removed what it had staged."""
+    import signal
+
+    from synth import interrupt
+
+    interrupt.install()
+    try:
+        code = main()
+    except KeyboardInterrupt:
+        print("error: interrupted", file=sys.stderr)
+        code = EXIT_INTERRUPTED
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    if code == EXIT_INTERRUPTED:
+        for stream in (sys.stdout, sys.stderr):
+            try:
+                stream.flush()
+            except (OSError, ValueError):
+                pass
+        os._exit(code)
+    sys.exit(code)
 
 
 __all__ = ["CLIError", "DEFINE_HELP", "DISTRIBUTION", "EXIT_BAD_INPUT", "EXIT_CHECK_FAILED",
@@ -234,4 +277,4 @@ __all__ = ["CLIError", "DEFINE_HELP", "DISTRIBUTION", "EXIT_BAD_INPUT", "EXIT_CH
            "add_define_option", "add_json_option", "add_out_option", "add_progress_option",
            "add_scene_argument", "any_float", "command_parser", "finite_float", "int_at_least",
            "non_negative_float", "non_negative_int", "one_line", "package_version",
-           "positive_float", "positive_int", "run_command", "scene_seed"]
+           "positive_float", "positive_int", "process_main", "run_command", "scene_seed"]

@@ -168,8 +168,12 @@ class OutputDir:
         """Yield a staging directory; on success it becomes the output (with the marker).
 
         ``extra`` is stored in the marker (e.g. a request key). The rule is checked again just
-        before the rename, so a file that appeared meanwhile is never deleted.
+        before the rename, so a file that appeared meanwhile is never deleted; an interrupted
+        command (:mod:`synth.interrupt`, even if a library swallowed the interrupt) never
+        renames its staging directory into place.
         """
+        from synth import interrupt
+
         self.claim()
         parent, name = os.path.split(self.path)
         try:
@@ -186,6 +190,7 @@ class OutputDir:
             with open(os.path.join(tmp, MARKER_NAME), "w", encoding="utf-8") as handle:
                 json.dump(marker, handle, indent=1)
                 handle.write("\n")
+            interrupt.check()
             self.check()
             self._replace(tmp)
         except BaseException:

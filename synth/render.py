@@ -39,7 +39,9 @@ import numpy as np
 from measure import Camera
 
 from synth.integrator import integrator_name, render_integrator
+from synth import interrupt
 from synth.mitsuba_setup import import_mitsuba
+from synth.mitsuba_setup import render as quiet_render
 from synth.scene import SceneError, SceneSpec, load_scene
 from synth.seeds import PASS_SEED_STRIDE, SEED_LIMIT, largest_seed, render_offset
 from synth.sensor import sensor_parameters
@@ -251,8 +253,10 @@ def _render_passes(mi, scene, sensor, spp: int, seed: int, view: int, film_pixel
     total, weight = None, 0
     integrator = render_integrator(mi, scene)
     for k, pass_spp in enumerate(pass_plan(spp, film_pixels)):
-        image = develop_image(mi, mi.render(scene, sensor=sensor, spp=pass_spp,
-                                       seed=pass_seed(seed, view, k), integrator=integrator))
+        interrupt.check()  # a pass takes seconds to minutes: stop between them
+        image = develop_image(mi, quiet_render(mi, scene, sensor=sensor, spp=pass_spp,
+                                               seed=pass_seed(seed, view, k),
+                                               integrator=integrator))
         taken = _sample_count(scene, sensor, pass_spp)
         total = image.astype(np.float64) * taken if total is None else total + image * taken
         weight += taken
