@@ -28,7 +28,8 @@ import signal
 import threading
 from contextlib import contextmanager
 
-_STATE = {"interrupted": False}
+#: ``interrupted``: a SIGINT arrived; ``handling``: inside :func:`handling` (a command runs).
+_STATE = {"interrupted": False, "handling": False}
 
 
 def _raise(signum, frame):
@@ -58,15 +59,17 @@ def handling():
         yield
         return
     previous = signal.signal(signal.SIGINT, _raise)
-    _STATE["interrupted"] = False
+    _STATE.update(interrupted=False, handling=True)
     try:
         yield
     finally:
         signal.signal(signal.SIGINT, previous if previous is not None else signal.SIG_DFL)
+        _STATE.update(interrupted=False, handling=False)
 
 
 def requested() -> bool:
-    """Whether a SIGINT arrived since :func:`handling` began (even if it was swallowed)."""
+    """Whether a SIGINT arrived since :func:`handling` began (even if it was swallowed); read
+    it inside the block."""
     return _STATE["interrupted"]
 
 
@@ -98,6 +101,9 @@ def deferred(processes: bool = False):
     finally:
         signal.pthread_sigmask(signal.SIG_SETMASK, mask)  # a held SIGINT is recorded now
         signal.signal(signal.SIGINT, previous if previous is not None else signal.SIG_DFL)
+    if _STATE["interrupted"] and not _STATE["handling"]:  # used as a library: raise it once
+        _STATE["interrupted"] = False
+        raise KeyboardInterrupt
     check()
 
 

@@ -144,7 +144,7 @@ def render(mi, scene, **options):
     report an interrupt themselves (one line ``error: interrupted`` on stderr,
     :mod:`synth.interrupt`), so during the call Mitsuba logs errors only. (Loading a scene, where
     Mitsuba's warnings say something about the scene, keeps its level.)"""
-    logger = mi.Thread.thread().logger()
+    logger = mi.logger() if hasattr(mi, "logger") else mi.Thread.thread().logger()
     level = logger.log_level()
     logger.set_log_level(mi.LogLevel.Error)
     try:
