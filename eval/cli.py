@@ -16,10 +16,9 @@ Errors and exit codes follow :mod:`synth.cli`, shared with ``python -m synth``: 
 from __future__ import annotations
 
 import importlib
-import sys
 
 from synth.cli import (CLIError, Parser, command_parser, non_negative_float, non_negative_int,
-                       positive_float, positive_int, run_command)
+                       positive_float, positive_int, process_main, run_command)
 
 #: The module of each subcommand, in the order ``--help`` lists them.
 SUBCOMMANDS = ("eval.run.command", "eval.score", "eval.paper.command", "eval.sweep.command",
@@ -35,12 +34,12 @@ def build_parser() -> Parser:
 
 def main(argv=None) -> int:
     """Parse ``argv`` (default ``sys.argv[1:]``), run the subcommand, return the exit code."""
-    return run_command(build_parser(), argv)
+    return run_command(build_parser, argv)
 
 
 def console_main() -> None:
-    """Entry point of the ``refstereo-eval`` console script."""
-    sys.exit(main())
+    """Entry point of ``python -m eval`` and of the ``refstereo-eval`` console script."""
+    process_main(main)
 
 
 __all__ = ["CLIError", "SUBCOMMANDS", "build_parser", "main", "console_main", "positive_int",

@@ -62,17 +62,18 @@ def measure_throughput(mscene, mi, spec, per_call_list, total_spp, log):
     import numpy as np
 
     from synth.integrator import render_integrator
+    from synth.mitsuba_setup import render
 
     w, h = spec.size
     integrator = render_integrator(mi, mscene)
-    np.array(mi.render(mscene, sensor=0, spp=1, seed=12345,  # JIT compilation, not timed
-                       integrator=integrator))
+    np.array(render(mi, mscene, sensor=0, spp=1, seed=12345,  # JIT compilation, not timed
+                    integrator=integrator))
     rows = []
     for per_call in per_call_list:
         calls = max(1, -(-total_spp // per_call))
         start = time.perf_counter()
         for k in range(calls):
-            np.array(mi.render(mscene, sensor=0, spp=per_call, seed=k, integrator=integrator))
+            np.array(render(mi, mscene, sensor=0, spp=per_call, seed=k, integrator=integrator))
         seconds = time.perf_counter() - start
         rows.append({"spp_per_call": per_call, "calls": calls, "seconds": seconds,
                      "samples_per_call": w * h * per_call,
@@ -88,6 +89,7 @@ def measure_side_by_side(mscene, mi, spec, spp: int, log) -> dict:
     import numpy as np
 
     from synth.integrator import render_integrator
+    from synth.mitsuba_setup import render
     from synth.render import pass_plan
 
     w, h = spec.size
@@ -98,8 +100,8 @@ def measure_side_by_side(mscene, mi, spec, spp: int, log) -> dict:
         start = time.perf_counter()
         for view in (0, 1):
             for k, pass_spp in enumerate(passes):
-                np.array(mi.render(mscene, sensor=view, spp=pass_spp, seed=view + 2 * k,
-                                   integrator=integrator))
+                np.array(render(mi, mscene, sensor=view, spp=pass_spp, seed=view + 2 * k,
+                                integrator=integrator))
         timings[label] = time.perf_counter() - start
     speedup = timings["one_call"] / timings["passes"]
     log(f"  {spp} spp, both views: one call {timings['one_call']:.1f} s, passes "

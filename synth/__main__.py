@@ -1,10 +1,8 @@
 """``python -m synth``: the command line of :mod:`synth.commands`."""
 
-import sys
-
 from synth.commands import console_main, main
 
 __all__ = ["console_main", "main"]
 
 if __name__ == "__main__":
-    sys.exit(main())
+    console_main()

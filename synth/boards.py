@@ -236,9 +236,9 @@ def write_boards(spec: SceneSpec, out_dir, board: Board, n_poses: int = DEFAULT_
         except (OSError, ValueError):
             damage = "manifest.json cannot be read"
     output.claim()
+    check_render_request(spec, spp, seed, poses=n_poses)  # pose p renders with seed + 2p
     rig = board_rig(spec, air)
     poses = sample_poses(rig, board, n_poses, seed, not air, distance_range, max_tilt_deg)
-    check_render_request(spec, spp)
     times = {}
     t = time.perf_counter()
     mscene, mi, chosen = build_board_scene(spec, board, air, variant)

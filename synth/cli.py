@@ -11,6 +11,8 @@
   ``--no-progress`` (alias ``--quiet``) silences progress output; ``--json`` prints the report
   as JSON to stdout (the human summary then goes to stderr). ``tests/test_cli_vocabulary.py``
   walks every subcommand of both command lines and checks it.
+* ``--version`` prints ``refractive-stereo X.Y.Z`` (:func:`package_version`); no command at all
+  prints the help (the list of commands) to stdout and exits 0.
 """
 
 from __future__ import annotations
@@ -109,6 +111,21 @@ positive_int = int_at_least(1, "positive")
 non_negative_int = int_at_least(0, "non-negative")
 
 
+def scene_seed(text: str) -> int:
+    """An argparse type: a scene's seed, an integer from 0 to :data:`synth.seeds.MAX_SEED` (the
+    renderer's sampler seed is 32-bit: a larger seed cannot be honoured)."""
+    from synth.seeds import MAX_SEED, seed_range_text
+
+    try:
+        value = int(text)
+    except ValueError:
+        value = None
+    if value is None or not 0 <= value <= MAX_SEED:
+        raise argparse.ArgumentTypeError(f"expected an integer from {seed_range_text()}, "
+                                         f"got {text!r}")
+    return value
+
+
 def finite_float(minimum: float = -math.inf, *, strict: bool = False, description: str = "finite"):
     """An argparse type: a finite float >= ``minimum`` (> when ``strict``); NaN and ±inf refused."""
 
@@ -182,12 +199,40 @@ def add_json_option(parser) -> None:
     parser.add_argument("--json", action="store_true", help=JSON_HELP)
 
 
+#: The distribution whose version ``--version`` prints.
+DISTRIBUTION = "refractive-stereo"
+
+
+def package_version() -> str:
+    """The version of this project: the installed distribution's (``importlib.metadata``), or,
+    when it is not installed (a bare checkout on ``PYTHONPATH``), the ``version`` in the
+    ``pyproject.toml`` beside the packages; ``"unknown"`` if neither says."""
+    import importlib.metadata
+    import re
+    from pathlib import Path
+
+    try:
+        return importlib.metadata.version(DISTRIBUTION)
+    except importlib.metadata.PackageNotFoundError:
+        pass
+    try:
+        text = (Path(__file__).resolve().parent.parent / "pyproject.toml").read_text("utf-8")
+    except OSError:
+        return "unknown"
+    project = re.search(r"(?ms)^\[project\]\s*$(.*?)(?=^\[|\Z)", text)
+    version = project and re.search(r'(?m)^version\s*=\s*"([^"]+)"', project.group(1))
+    return version.group(1) if version else "unknown"
+
+
 def command_parser(prog: str, description: str, modules) -> Parser:
     """The parser of a command line with one subcommand per module of ``modules`` (in ``--help``
     order): each module's ``add_parser(subparsers)`` adds its subparser, whose ``main(args)``
-    :func:`run_command` runs."""
+    :func:`run_command` runs. ``--version`` prints :func:`package_version`; the command may be
+    left out (:func:`run_command` then prints the help)."""
     parser = Parser(prog=prog, description=description)
-    subparsers = parser.add_subparsers(dest="command", metavar="command", required=True,
+    parser.add_argument("--version", action="version",
+                        version=f"{DISTRIBUTION} {package_version()}")
+    subparsers = parser.add_subparsers(dest="command", metavar="command", required=False,
                                        parser_class=Parser)
     for module in modules:
         before = set(subparsers.choices)
@@ -202,39 +247,90 @@ def one_line(message) -> str:
     return " ".join(str(message).split())
 
 
-def run_command(parser: argparse.ArgumentParser, argv=None) -> int:
+def run_command(parser, argv=None) -> int:
     """Parse ``argv`` with ``parser`` (whose subparsers set ``_main``), run it, return the exit
-    code. Bad input of any kind — :class:`CLIError`, ``ValueError`` and its subclasses (scene,
-    dataset, output errors), ``OSError`` — is one line ``error: …`` and exit 2."""
+    code. ``parser`` is an ``ArgumentParser`` or a function that builds one (then building it —
+    importing the command modules — is covered too). Bad input of any kind — :class:`CLIError`,
+    ``ValueError`` and its subclasses (scene, dataset, output errors), ``OSError`` — is one line
+    ``error: …`` and exit 2. No command: the help on stdout, exit 0; ``--help`` and
+    ``--version`` return 0 too. A SIGINT at any moment (:mod:`synth.interrupt`), even one a
+    library swallowed or turned into another error, is the one line ``error: interrupted`` and
+    exit 130."""
+    from synth import interrupt
+
+    with interrupt.handling():
+        try:
+            code, error = _run(parser, argv)
+        except KeyboardInterrupt:
+            code, error = EXIT_INTERRUPTED, "interrupted"
+        if interrupt.requested():
+            code, error = EXIT_INTERRUPTED, "interrupted"
+        if error:
+            print(f"error: {error}", file=sys.stderr)
+    return code
+
+
+def _run(parser, argv) -> tuple[int, str | None]:
+    """``(exit code, the error line or None)`` of one command (see :func:`run_command`)."""
     try:
-        args = parser.parse_args(argv)
-        return int(args._main(args) or 0)
+        if not isinstance(parser, argparse.ArgumentParser):
+            parser = parser()
+        try:
+            args = parser.parse_args(argv)
+        except SystemExit as exc:  # --help, --version: argparse has printed them
+            return (exc.code if isinstance(exc.code, int) else EXIT_OK), None
+        if getattr(args, "_main", None) is None:  # no command: what there is to do
+            parser.print_help(sys.stdout)
+            return EXIT_OK, None
+        return int(args._main(args) or 0), None
     except (CLIError, ValueError) as exc:
-        print(f"error: {one_line(exc)}", file=sys.stderr)
-        return EXIT_BAD_INPUT
+        return EXIT_BAD_INPUT, one_line(exc)
     except OSError as exc:
         where = f" {exc.filename}" if getattr(exc, "filename", None) else ""
-        print(f"error: {one_line(exc.strerror or exc)}{':' if where else ''}{where}",
-              file=sys.stderr)
-        return EXIT_BAD_INPUT
-    except KeyboardInterrupt:
-        print("error: interrupted", file=sys.stderr)
-        return EXIT_INTERRUPTED
+        return EXIT_BAD_INPUT, f"{one_line(exc.strerror or exc)}{':' if where else ''}{where}"
     except MemoryError:
-        print("error: out of memory (try a smaller image, fewer samples per pixel or fewer "
-              "targets)", file=sys.stderr)
-        return EXIT_BAD_INPUT
+        return EXIT_BAD_INPUT, ("out of memory (try a smaller image, fewer samples per pixel or "
+                                "fewer targets)")
     except Exception as exc:  # a bug: one line, the traceback on request
         if os.environ.get("REFSTEREO_TRACEBACK"):
             traceback.print_exc()
-        print(f"error: internal error: {type(exc).__name__}: {one_line(exc)} "
-              f"(set REFSTEREO_TRACEBACK=1 for the traceback)", file=sys.stderr)
-        return EXIT_CHECK_FAILED
+        return EXIT_CHECK_FAILED, (f"internal error: {type(exc).__name__}: {one_line(exc)} "
+                                   f"(set REFSTEREO_TRACEBACK=1 for the traceback)")
 
 
-__all__ = ["CLIError", "DEFINE_HELP", "EXIT_BAD_INPUT", "EXIT_CHECK_FAILED", "EXIT_INTERRUPTED",
-           "EXIT_OK", "JSON_HELP", "NO_PROGRESS_HELP", "Parser", "SCENE_HELP", "add_define_option",
-           "add_json_option", "add_out_option", "add_progress_option", "add_scene_argument",
-           "any_float", "command_parser", "finite_float", "int_at_least", "non_negative_float",
-           "given", "non_negative_int", "one_line", "positive_float", "positive_int", "refuse_given",
-           "run_command"]
+def process_main(main) -> None:
+    """Run ``main()`` (a command line's ``main``) as the whole process and exit with its code:
+    the entry of ``python -m synth|eval`` and of the console scripts. SIGINT is handled from
+    here on (:mod:`synth.interrupt`). Once the command has reported, a Ctrl-C no longer
+    interrupts the exit (its code stands). An interrupted command ends at once after its one
+    line: ``os._exit(130)`` once the streams are flushed, without the interpreter's shutdown,
+    whose finalizers would print more (Dask's ``atexit`` of a cluster cut short, Open3D's leak
+    report of an import cut short) — the command has already removed what it had staged."""
+    import signal
+
+    from synth import interrupt
+
+    interrupt.install()
+    try:
+        code = main()
+    except KeyboardInterrupt:
+        print("error: interrupted", file=sys.stderr)
+        code = EXIT_INTERRUPTED
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    if code == EXIT_INTERRUPTED:
+        for stream in (sys.stdout, sys.stderr):
+            try:
+                stream.flush()
+            except (OSError, ValueError):
+                pass
+        os._exit(code)
+    sys.exit(code)
+
+
+__all__ = ["DEFINE_HELP", "DISTRIBUTION", "EXIT_BAD_INPUT", "EXIT_CHECK_FAILED",
+           "EXIT_INTERRUPTED", "EXIT_OK", "JSON_HELP", "NO_PROGRESS_HELP", "SCENE_HELP",
+           "add_define_option", "add_json_option", "add_out_option", "add_progress_option",
+           "add_scene_argument", "any_float", "CLIError", "command_parser", "finite_float",
+           "given", "int_at_least", "non_negative_float", "non_negative_int", "one_line",
+           "package_version", "Parser", "positive_float", "positive_int", "process_main",
+           "refuse_given", "run_command", "scene_seed"]

@@ -16,7 +16,8 @@ Two tools:
   :meth:`OutputDir.damage` says whether every file written is still whole (a command that skips
   an up-to-date output skips only a whole one).
 * :func:`atomic_write_bytes` / :func:`atomic_write_text` — one file, written to a temporary file
-  beside it and renamed into place.
+  beside it and renamed into place; :func:`atomic_create_bytes` — the same, but only where no
+  file is (it never replaces one).
 """
 
 from __future__ import annotations
@@ -187,8 +188,12 @@ class OutputDir:
         """Yield a staging directory; on success it becomes the output (with the marker).
 
         ``extra`` is stored in the marker (e.g. a request key). The rule is checked again just
-        before the rename, so a file that appeared meanwhile is never deleted.
+        before the rename, so a file that appeared meanwhile is never deleted; an interrupted
+        command (:mod:`synth.interrupt`, even if a library swallowed the interrupt) never
+        renames its staging directory into place.
         """
+        from synth import interrupt
+
         self.claim()
         parent, name = os.path.split(self.path)
         try:
@@ -208,6 +213,7 @@ class OutputDir:
             with open(os.path.join(tmp, MARKER_NAME), "w", encoding="utf-8") as handle:
                 json.dump(marker, handle, indent=1)
                 handle.write("\n")
+            interrupt.check()
             self.check()
             self._replace(tmp)
         except BaseException:
@@ -264,6 +270,27 @@ def atomic_write_bytes(path, data: bytes, mode: int = 0o644) -> Path:
     return path
 
 
+def atomic_create_bytes(path, data: bytes, mode: int = 0o644) -> Path:
+    """Write ``data`` at ``path`` only if nothing is there: a temporary file beside it is
+    hard-linked into place, which fails with ``FileExistsError`` when ``path`` exists (also one
+    that appeared meanwhile) and so never replaces anything."""
+    path = Path(path)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        os.fchmod(fd, mode)
+        with os.fdopen(fd, "wb") as handle:
+            handle.write(data)
+            handle.flush()
+            os.fsync(handle.fileno())
+        os.link(tmp, path)
+    finally:
+        try:
+            os.unlink(tmp)
+        except OSError:
+            pass
+    return path
+
+
 def atomic_write_text(path, text: str) -> Path:
     """:func:`atomic_write_bytes` of UTF-8 text."""
     return atomic_write_bytes(path, text.encode("utf-8"))
@@ -317,6 +344,7 @@ def check_file_output(path, option: str, may_replace=None) -> str:
     return path
 
 
-__all__ = ["MARKER_NAME", "OutputDir", "OutputError", "atomic_write_bytes", "atomic_write_json",
-           "atomic_write_text", "check_file_output", "file_sha256", "jsonable", "read_marker",
+__all__ = ["MARKER_NAME", "OutputDir", "OutputError", "atomic_create_bytes", "atomic_write_bytes",
+           "atomic_write_json", "atomic_write_text", "check_file_output", "file_sha256", "jsonable",
+           "read_marker",
            "remove_stale_staging"]

@@ -135,3 +135,20 @@ def import_mitsuba(variant: str | None = None):
             raise VariantError(f"Mitsuba variant {chosen!r} cannot start here: {reason}") from None
     _selected = chosen
     return mi, chosen
+
+
+def render(mi, scene, **options):
+    """``mi.render(scene, **options)`` without Mitsuba's own word on Ctrl-C. Every render call
+    installs Mitsuba's SIGINT handler, which logs ``WARN [integrator_v.cpp:38] Received
+    interrupt signal, winding down..`` to stdout before passing the signal on; the command lines
+    report an interrupt themselves (one line ``error: interrupted`` on stderr,
+    :mod:`synth.interrupt`), so during the call Mitsuba logs errors only. (Loading a scene, where
+    Mitsuba's warnings say something about the scene, keeps its level.)"""
+    logger = mi.logger() if hasattr(mi, "logger") else mi.Thread.thread().logger()
+    level = logger.log_level()
+    logger.set_log_level(mi.LogLevel.Error)
+    try:
+        return mi.render(scene, **options)
+    finally:
+        logger.set_log_level(level)
+

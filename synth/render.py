@@ -20,7 +20,8 @@ Seeds: one seed, one meaning. The scene's ``seed`` parameter (``-D seed=S``, or 
 which sets it) is the only seed: pass ``k`` of view ``i`` (0 left, 1 right) is rendered with
 ``mi.render(seed=S + i + 2^21·k)`` from a scene loaded with its sampler's own seed at 0 (Mitsuba
 adds the two), so ``--seed 7`` and ``-D seed=7`` render the same bytes, and a one-pass render
-uses ``S + i``.
+uses ``S + i``. Mitsuba's seed is 32-bit: a seed whose sums do not fit is refused before the
+render (:func:`check_render_request`, :mod:`synth.seeds`), never wrapped.
 
 Before rendering, :func:`check_render_request` refuses what cannot work: an image whose
 wavefront would not fit in memory (the estimate is stated in the message) and a lens
@@ -38,8 +39,11 @@ import numpy as np
 from measure import Camera
 
 from synth.integrator import integrator_name, render_integrator
+from synth import interrupt
 from synth.mitsuba_setup import import_mitsuba
+from synth.mitsuba_setup import render as quiet_render
 from synth.scene import SceneError, SceneSpec, load_scene
+from synth.seeds import PASS_SEED_STRIDE, SEED_LIMIT, largest_seed, render_offset
 from synth.sensor import sensor_parameters
 
 #: Oversampling factor of the undistorted render behind a distorted view.
@@ -56,8 +60,6 @@ DISTORTION_MARGIN_PX = 3
 #: 48 spp in 3 passes (72 s) matched one call of 36 (0.0229 px). Measured with
 #: ``python -m eval render-bench`` (docs/architecture.md): passes pay off only above 36 spp.
 MAX_SAMPLES_PER_CALL = 36 * 2448 * 2048
-#: Seed stride between the passes of one view (see :func:`pass_seed`).
-PASS_SEED_STRIDE = 1 << 21
 #: Memory per rendered pixel (bytes), about twice what was measured with ``llvm_ad_rgb`` on the
 #: paper scene (peak RSS grew 32 bytes per pixel above ~190 MiB, the same at 4 and 16 spp:
 #: Mitsuba splits a wavefront of more than 2^32 samples into passes itself). docs/architecture.md
@@ -82,9 +84,12 @@ def render_memory_bytes(size, oversample: int = 1) -> int:
     return int(size[0]) * int(size[1]) * oversample * oversample * BYTES_PER_PIXEL
 
 
-def check_render_request(spec: SceneSpec, spp: int | None = None) -> None:
+def check_render_request(spec: SceneSpec, spp: int | None = None, seed: int | None = None,
+                         poses: int = 0) -> None:
     """Raise ``ValueError`` (one line) for a render that cannot work: a lens distortion that is
-    not invertible over the image, or an estimated memory need beyond what is available."""
+    not invertible over the image, an estimated memory need beyond what is available, or a
+    ``seed`` (default: the scene's) whose pass seeds would not fit Mitsuba's 32-bit seed
+    (``poses``: ``synth boards``, whose pose p renders with the seed ``seed + 2p``)."""
     spp = spec.spp if spp is None else int(spp)
     if spp <= 0:
         raise ValueError(f"spp must be positive, got {spp}")
@@ -103,6 +108,25 @@ def check_render_request(spec: SceneSpec, spp: int | None = None) -> None:
         raise ValueError(f"{spec.path}: rendering {w}x{h} px needs about {need / 2**30:.1f} GiB "
                          f"of memory, {have / 2**30:.1f} GiB are available (use a smaller image"
                          f"{' or a milder lens distortion' if spec.cameras[0].dist is not None else ''})")
+    check_render_seed(spec, spp, spec.seed if seed is None else int(seed), poses)
+
+
+def check_render_seed(spec: SceneSpec, spp: int, seed: int, poses: int = 0) -> None:
+    """ValueError (one line, stating the largest seed) unless every sampler seed of the render,
+    ``seed + view + 2^21·pass`` (``synth boards``: ``+ 2·pose`` for ``poses`` poses), fits
+    Mitsuba's 32-bit seed (:mod:`synth.seeds`)."""
+    passes = [len(pass_plan(spp, int(np.prod(_render_size(c))))) for c in spec.cameras]
+    largest = largest_seed(render_offset(passes, 2 * max(poses - 1, 0)))
+    if seed < 0 or seed > largest:
+        w, h = spec.size
+        plan = f"{max(passes)} passes per view" if max(passes) > 1 else "one pass per view"
+        what = (f"--seed {seed} is too large: pose p of {poses} renders with seed + 2p, "
+                if poses else f"{spec.path}: seed {seed} (--seed / -D seed=) is too large: ")
+        limit = (f"the largest seed is {largest}" if largest >= 0 else
+                 "no seed fits (use fewer samples per pixel)")
+        raise ValueError(f"{what}pass k of view i {'' if poses else 'renders '}with seed + i + "
+                         f"{PASS_SEED_STRIDE}*k ({plan} at "
+                         f"{spp} spp, {w}x{h} px), and Mitsuba's sampler seed is 32-bit: {limit}")
 
 
 def _render_size(camera: Camera) -> tuple[int, int]:
@@ -213,8 +237,14 @@ def pass_plan(spp: int, film_pixels: int, max_samples: int = None) -> list[int]:
 
 def pass_seed(seed: int, view: int, k: int) -> int:
     """Sampler seed of pass ``k`` of view ``view`` (0 left, 1 right) for the scene seed
-    ``seed``: ``seed + view + 2^21·k`` (mod 2^32). One pass is ``seed + view``, as before."""
-    return (int(seed) + int(view) + PASS_SEED_STRIDE * int(k)) % (1 << 32)
+    ``seed``: ``seed + view + 2^21·k``. One pass is ``seed + view``, as before. ValueError when
+    it does not fit Mitsuba's 32-bit seed (never wrapped: :func:`check_render_seed` refuses such
+    a seed before the render)."""
+    value = int(seed) + int(view) + PASS_SEED_STRIDE * int(k)
+    if not 0 <= value < SEED_LIMIT:
+        raise ValueError(f"sampler seed {value} (scene seed {seed}, view {view}, pass {k}) does "
+                         f"not fit Mitsuba's 32-bit seed")
+    return value
 
 
 def _render_passes(mi, scene, sensor, spp: int, seed: int, view: int, film_pixels: int):
@@ -223,8 +253,10 @@ def _render_passes(mi, scene, sensor, spp: int, seed: int, view: int, film_pixel
     total, weight = None, 0
     integrator = render_integrator(mi, scene)
     for k, pass_spp in enumerate(pass_plan(spp, film_pixels)):
-        image = develop_image(mi, mi.render(scene, sensor=sensor, spp=pass_spp,
-                                       seed=pass_seed(seed, view, k), integrator=integrator))
+        interrupt.check()  # a pass takes seconds to minutes: stop between them
+        image = develop_image(mi, quiet_render(mi, scene, sensor=sensor, spp=pass_spp,
+                                               seed=pass_seed(seed, view, k),
+                                               integrator=integrator))
         taken = _sample_count(scene, sensor, pass_spp)
         total = image.astype(np.float64) * taken if total is None else total + image * taken
         weight += taken
@@ -278,7 +310,7 @@ def render_stereo(scene, spp: int | None = None, variant: str | None = None,
     spec = scene if isinstance(scene, SceneSpec) else load_scene(scene, defines)
     spp = spec.spp if spp is None else int(spp)
     seed = spec.seed if seed is None else int(seed)
-    check_render_request(spec, spp)
+    check_render_request(spec, spp, seed)
     t0 = time.perf_counter()
     mscene, mi, chosen = load_mitsuba_scene(spec, variant)
     seconds = {"load": time.perf_counter() - t0}

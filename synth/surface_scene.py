@@ -1,7 +1,11 @@
 """``python -m synth scene --layout surface``: a speckled surface behind the port, as three
 files — the scene XML, its mesh (``<scene stem>_surface.ply``) and its speckle texture
 (``speckle_<dot>mm_<coverage>_<seed>_<W>x<H>mm.png``, named by what determines its bytes, so
-scenes with the same pattern share one file) — in the scene file's directory.
+scenes with the same pattern share one file) — in the scene file's directory. None of them is
+written over a file this command did not write: the mesh is replaced only if it is a mesh as
+:func:`synth.surfaces.write_ply` writes it, the texture is used only if its pixels are the
+texture (:func:`write_texture`); anything else is refused, one line, nothing written
+(docs/scenes.md, "Files beside the scene").
 
 Texture space: the surface's texture coordinates (mm of surface, :mod:`synth.surfaces`)
 centred on the texture, which covers at least :data:`MIN_TEXTURE_EXTENT_MM` (rounded up to
@@ -96,22 +100,64 @@ def companion_paths(scene_path: str) -> str:
     return stem + "_surface.ply"
 
 
-def write_texture(path: str, dot_mm: float, coverage: float, seed: int, extent) -> bool:
-    """Write the speckle texture unless ``path`` already holds it (same name = same bytes);
-    returns whether it was written."""
-    from synth.fileio import atomic_write_bytes
+def texture_problem(path: str, dot_mm: float, extent) -> str | None:
+    """Why the file at the texture's ``path`` is not this command's texture, judged cheaply
+    (unreadable as an 8-bit grey PNG, or another size); None if it may be (its pixels are
+    compared in :func:`write_texture`) or if there is no file."""
+    if not os.path.lexists(path):
+        return None
+    rows, cols, _ = speckle.texture_shape(extent, dot_mm)
+    existing = cv2.imread(path, cv2.IMREAD_UNCHANGED) if os.path.isfile(path) else None
+    if existing is None or existing.dtype != np.uint8:
+        return "is not an 8-bit grey PNG"
+    if existing.shape != (rows, cols):
+        return (f"is {existing.shape[1]} x {existing.shape[0]} "
+                f"{'texels' if existing.ndim == 2 else 'px in colour'}, not {cols} x {rows}")
+    return None
 
-    if os.path.isfile(path):
-        existing = cv2.imread(path, cv2.IMREAD_UNCHANGED)
-        rows, cols, _ = speckle.texture_shape(extent, dot_mm)
-        if existing is not None and existing.shape == (rows, cols):
-            return False
+
+def texture_error(path: str, why: str, dot_mm: float, coverage: float, seed: int,
+                  label: str = "--out") -> str:
+    """The one-line refusal of a file at the texture's ``path`` that is not the texture
+    (``label`` says whose: ``--out SCENE``)."""
+    return (f"{label}: the speckle texture {path} exists and {why}, not the texture python -m "
+            f"synth scene writes for --speckle-size {dot_mm:g} --speckle-coverage {coverage:g} "
+            f"--speckle-seed {seed} (move it away or write the scene into another directory)")
+
+
+def write_texture(path: str, dot_mm: float, coverage: float, seed: int, extent,
+                  label: str = "--out") -> bool:
+    """Write the speckle texture at ``path`` unless the file there already is it (same name,
+    same pixels: scenes share it); returns whether it was written. A file there that holds
+    anything else was not written by this command: ValueError naming it, nothing written."""
+    from synth.fileio import atomic_create_bytes
+
+    problem = texture_problem(path, dot_mm, extent)
+    if problem:
+        raise ValueError(texture_error(path, problem, dot_mm, coverage, seed, label))
     image = speckle.speckle_texture(extent, dot_mm, coverage, seed)
+    if os.path.lexists(path):
+        if np.array_equal(cv2.imread(path, cv2.IMREAD_UNCHANGED), image):
+            return False
+        raise ValueError(texture_error(path, "holds other pixels", dot_mm, coverage, seed, label))
     ok, data = cv2.imencode(".png", image, [cv2.IMWRITE_PNG_COMPRESSION, 9])
     if not ok:
         raise OSError(f"cannot encode the speckle texture {path}")
-    atomic_write_bytes(path, data.tobytes())
+    try:
+        atomic_create_bytes(path, data.tobytes())
+    except FileExistsError:  # appeared meanwhile: judge it like any other
+        return write_texture(path, dot_mm, coverage, seed, extent, label)
     return True
+
+
+def mesh_problem(mesh_path: str, label: str = "--out") -> str | None:
+    """The error (one line) when the mesh file beside the scene exists and was not written by
+    ``python -m synth scene`` (:func:`synth.surfaces.written_by_write_ply`); None otherwise."""
+    if not os.path.lexists(mesh_path) or (os.path.isfile(mesh_path)
+                                          and surfaces.written_by_write_ply(mesh_path)):
+        return None
+    return (f"{label}: the scene's mesh {mesh_path} exists and is not a surface mesh python -m "
+            f"synth scene wrote (move it away or choose another --out)")
 
 
 def overlap_samples(tracer, left, right, port) -> np.ndarray:
@@ -180,9 +226,20 @@ def write_surface_scene(out: str, args, left, right, port, **scene_options) -> s
     directory = os.path.dirname(os.path.abspath(out))
     mesh_path = companion_paths(out)
     texture_file = texture_name(args.speckle_size, args.speckle_coverage, args.speckle_seed, extent)
+    texture_path = os.path.join(directory, texture_file)
+    texture_display = os.path.join(os.path.dirname(out), texture_file)
+    # the files beside the scene: replaced (the mesh) or used (the texture) only if ours
+    label = f"--out {out}"
+    problem = mesh_problem(mesh_path, label)
+    if problem:
+        raise ValueError(problem)
+    problem = texture_problem(texture_path, args.speckle_size, extent)
+    if problem:
+        raise ValueError(texture_error(texture_display, problem, args.speckle_size,
+                                       args.speckle_coverage, args.speckle_seed, label))
     fd, tmp_mesh = tempfile.mkstemp(prefix=".surface-", suffix=".ply", dir=directory)
     os.close(fd)
-    written = []
+    written, old_mesh = [], None
     try:
         surfaces.write_ply(tmp_mesh, mesh, lower, lower + extent)
         tracer = MeshTracer(tmp_mesh, *surfaces.read_ply(tmp_mesh))
@@ -209,10 +266,21 @@ def write_surface_scene(out: str, args, left, right, port, **scene_options) -> s
             print(f"warning: --speckle-size {args.speckle_size:g} mm is down to "
                   f"{dot_px.min():.2f} px on the surface: below one pixel the speckle aliases",
                   file=sys.stderr)
-        texture_path = os.path.join(directory, texture_file)
-        if write_texture(texture_path, args.speckle_size, args.speckle_coverage,
-                         args.speckle_seed, extent):
+        if write_texture(texture_display, args.speckle_size, args.speckle_coverage,
+                         args.speckle_seed, extent, label):
             written.append(texture_path)
+        problem = mesh_problem(mesh_path, label)  # again: it may have appeared meanwhile
+        if problem:
+            raise ValueError(problem)
+        if os.path.lexists(mesh_path):  # an earlier mesh of ours: put back if this one fails
+            fd, kept = tempfile.mkstemp(prefix=".surface-old-", suffix=".ply", dir=directory)
+            os.close(fd)
+            try:
+                os.replace(mesh_path, kept)
+            except BaseException:
+                os.unlink(kept)
+                raise
+            old_mesh = kept
         os.replace(tmp_mesh, mesh_path)
         written.append(mesh_path)
         files = SurfaceFiles(mesh=os.path.basename(mesh_path), texture=texture_file)
@@ -221,7 +289,11 @@ def write_surface_scene(out: str, args, left, right, port, **scene_options) -> s
         for path in [tmp_mesh, *written]:
             if os.path.exists(path):
                 os.unlink(path)
+        if old_mesh is not None:
+            os.replace(old_mesh, mesh_path)
         raise
+    if old_mesh is not None:
+        os.unlink(old_mesh)
     return (f"wrote {out}: {mesh.description}, {mesh.triangles.shape[0]} triangles "
             f"({os.path.basename(mesh_path)}), speckle {args.speckle_size:g} mm dots "
             f"({np.min(dot_px):.1f}-{np.max(dot_px):.1f} px) at {args.speckle_coverage:g} coverage "

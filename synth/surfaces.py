@@ -225,6 +225,40 @@ def from_arrays(vertices, triangles, normal, description: str) -> SurfaceMesh:
 # ---------------------------------------------------------------------------------------------
 # PLY files (binary little endian): x y z as float32, u v as float32, triangles as int32
 # ---------------------------------------------------------------------------------------------
+#: The header comment :func:`write_ply` puts after the mesh's description: with the header's
+#: layout it tells a mesh ``python -m synth scene`` wrote (:func:`written_by_write_ply`).
+PLY_MARK = "comment units mm, reference frame of the left camera"
+_PLY_HEAD = ("ply", "format binary_little_endian 1.0")
+_PLY_LAYOUT = ("property float x", "property float y", "property float z", "property float u",
+               "property float v", "property list uchar int vertex_indices")
+
+
+def written_by_write_ply(path) -> bool:
+    """Whether ``path`` is a mesh file as :func:`write_ply` writes it: its header is
+    ``ply``, the binary format, the description comment, :data:`PLY_MARK`, the vertex (x y z u v
+    floats) and face elements and nothing else, and the file is exactly as long as the header
+    says. Any other file (a user's mesh, one edited by another program, a truncated one) is not."""
+    try:
+        with open(path, "rb") as handle:
+            head = handle.read(4096)
+            size = os.fstat(handle.fileno()).st_size
+    except OSError:
+        return False
+    end = head.find(b"end_header\n")
+    if end < 0:
+        return False
+    lines = head[:end].decode("ascii", "replace").splitlines()
+    if (len(lines) != 12 or tuple(lines[:2]) != _PLY_HEAD or not lines[2].startswith("comment ")
+            or lines[3] != PLY_MARK):
+        return False
+    vertex, face = lines[4].split(), lines[10].split()
+    if (vertex[:2] != ["element", "vertex"] or face[:2] != ["element", "face"]
+            or len(vertex) != 3 or len(face) != 3 or not (vertex[2] + face[2]).isdigit()
+            or tuple(lines[5:10]) + (lines[11],) != _PLY_LAYOUT):
+        return False
+    return size == end + len(b"end_header\n") + 20 * int(vertex[2]) + 13 * int(face[2])
+
+
 def write_ply(path, mesh: SurfaceMesh, uv_lower, uv_upper) -> None:
     """Write ``mesh`` as a binary PLY Mitsuba's ``ply`` plugin reads, atomically; texture
     coordinates normalised to [0, 1] over ``[uv_lower, uv_upper]`` (mm)."""
@@ -234,7 +268,7 @@ def write_ply(path, mesh: SurfaceMesh, uv_lower, uv_upper) -> None:
     uv = (mesh.uv_mm - lower) / (upper - lower)
     n_v, n_t = mesh.vertices.shape[0], mesh.triangles.shape[0]
     header = ("ply\nformat binary_little_endian 1.0\n"
-              f"comment {mesh.description}\ncomment units mm, reference frame of the left camera\n"
+              f"comment {mesh.description}\n{PLY_MARK}\n"
               f"element vertex {n_v}\nproperty float x\nproperty float y\nproperty float z\n"
               "property float u\nproperty float v\n"
               f"element face {n_t}\nproperty list uchar int vertex_indices\nend_header\n")

@@ -149,6 +149,16 @@ def _prepare(workdir: Path, setup: str | None):
         (workdir / "adir").mkdir()
     elif setup == "foreign_file":
         (workdir / "notes.txt").write_text("a user's notes, not written by eval bench")
+    elif setup == "user_mesh":  # the user's own file where synth scene puts the scene's mesh
+        (workdir / "x_surface.ply").write_text("ply\nformat ascii 1.0\nmy scanned part\n")
+    elif setup == "user_texture":  # a file named like the shared speckle texture
+        (workdir / SURFACE_TEXTURE).write_bytes(b"my own picture")
+    elif setup == "other_texture":  # a valid PNG of the texture's size but other pixels
+        import cv2
+        import numpy as np
+
+        ok, data = cv2.imencode(".png", np.full((160, 200), 200, np.uint8))
+        (workdir / SURFACE_TEXTURE).write_bytes(data.tobytes())
 
 
 def _edit_manifest(ds: Path, n_water: str | None = None, hashes: bool = True) -> None:
@@ -215,6 +225,9 @@ EVAL_CASES = [
     (None, RUN + ["--spp", "abc"], "--spp"),
     (None, RUN + ["--seed", "-3"], "--seed"),
     (None, RUN + ["--seed", "3", "-D", "seed=4"], "seed"),
+    # seeds beyond Mitsuba's 32-bit sampler seed (they wrapped: 2^32 rendered seed 0's bytes)
+    (None, RUN + ["--seed", "4294967296"], "4294967294"),
+    (None, RUN + ["-D", "seed=4294967295"], "4294967294"),
     (None, RUN + ["--depth-range", "5"], "--depth-range"),
     (None, RUN + ["--depth-range", "2,1"], "--depth-range"),
     (None, RUN + ["--depth-range", "nan,5"], "--depth-range"),
@@ -314,6 +327,9 @@ EVAL_CASES = [
 ]
 
 SCENE = ["scene", "--out", "x.xml"]
+#: A small surface scene (texture of 200 x 160 texels) and the name of its texture.
+SURFACE = SCENE + ["--layout", "surface", "--size", "320", "268", "--speckle-size", "50"]
+SURFACE_TEXTURE = "speckle_50mm_0.5_0_2000x1600mm.png"
 DATASET = ["dataset", "small.xml", "--out", "out", "--spp", "4", "--quiet"]
 RENDER = ["render", "small.xml", "--out", "out", "--spp", "4", "--quiet"]
 BOARDS = ["boards", "small.xml", "--out", "out", "--poses", "1", "--quiet"]
@@ -343,6 +359,14 @@ SYNTH_CASES = [
     ("out_file", RENDER, "not a directory"),
     (None, DATASET + ["-D", "width=100000", "-D", "height=100000"], "GiB"),
     (None, DATASET + ["--seed", "1", "-D", "seed=2"], "seed"),
+    (None, DATASET + ["--seed", "4294967296"], "4294967294"),
+    (None, RENDER + ["-D", "seed=99999999999"], "4294967294"),
+    (None, SCENE + ["--seed", "4294967295"], "4294967294"),
+    # two passes per view (3000 spp at 320 x 268): pass 1 of the right view is S + 1 + 2^21
+    (None, RENDER + ["--spp", "3000", "--seed", "4294967294"], "4292870142"),
+    # 15 board poses: pose k's views are seeded S + 2k and S + 2k + 1
+    (None, ["boards", "small.xml", "--out", "out", "--seed", "4294967280", "--quiet"],
+     "4294967266"),
     (None, RENDER + ["-D", "left_dist=-0.5 0 0 0 0"], "dist"),
     ("garbage_calib", ["check", "ds"], "calib.yaml"),
     ("no_left_png", ["check", "ds"], "left.png"),
@@ -386,6 +410,10 @@ SYNTH_CASES = [
     ("truncated_targets", ["check", "ds"], "targets.ply: truncated"),
     ("truncated_pixels", ["check", "ds"], "pixels.csv"),
     ("edited_manifest", ["check", "ds"], "manifest.json was changed"),
+    # the files beside the scene: neither the mesh nor the shared texture of someone else
+    ("user_mesh", SURFACE, "x_surface.ply"),
+    ("user_texture", SURFACE, SURFACE_TEXTURE),
+    ("other_texture", SURFACE, SURFACE_TEXTURE),
 ]
 # Overwriting a file that `synth scene` did not write (the scene file of someone else).
 SYNTH_CASES[16] = (None, ["scene", "--out", "small_copy_foreign.xml"], "not a file this command wrote")

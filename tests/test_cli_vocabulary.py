@@ -76,3 +76,93 @@ def test_vocabulary(prog, name, parser):
         assert action.metavar in ("DIR", "FILE"), where
         assert action.help.startswith("output "), where
         assert "earlier output of" in action.help or "wrote it" in action.help, where
+
+
+# --- --version and a bare command --------------------------------------------------------------
+def _main(prog):
+    if prog == "eval":
+        from eval.cli import main
+    else:
+        from synth.commands import main
+    return main
+
+
+def _pyproject_version() -> str:
+    import re
+
+    from tests.conftest import REPO
+
+    text = (REPO / "pyproject.toml").read_text(encoding="utf-8")
+    return re.search(r'(?m)^version\s*=\s*"([^"]+)"', text).group(1)
+
+
+@pytest.mark.parametrize("prog", ["eval", "synth"])
+def test_version(prog, capsys):
+    """``--version``: ``refractive-stereo X.Y.Z`` on stdout, exit 0 (the version of the installed
+    distribution, which is pyproject's)."""
+    assert _main(prog)(["--version"]) == 0
+    out, err = capsys.readouterr()
+    assert out == f"refractive-stereo {_pyproject_version()}\n" and err == ""
+
+
+def test_version_falls_back_to_pyproject(monkeypatch, capsys):
+    """Not installed (no distribution metadata): the version in pyproject.toml."""
+    import importlib.metadata
+
+    def missing(name):
+        raise importlib.metadata.PackageNotFoundError(name)
+
+    monkeypatch.setattr(importlib.metadata, "version", missing)
+    from synth.cli import package_version
+
+    assert package_version() == _pyproject_version()
+    assert _main("synth")(["--version"]) == 0
+    assert capsys.readouterr().out == f"refractive-stereo {_pyproject_version()}\n"
+
+
+def _commands_listed(prog, text):
+    from eval.cli import build_parser as eval_parser
+
+    parser = eval_parser() if prog == "eval" else _synth_parser()
+    sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    return all(name in text for name in sub.choices) and "usage:" in text
+
+
+@pytest.mark.parametrize("prog", ["eval", "synth"])
+def test_bare_command_prints_the_commands(prog, capsys):
+    """No command: the help (its list of commands) on stdout, exit 0 — a question, not bad
+    input (docs/architecture.md, "The command lines")."""
+    assert _main(prog)([]) == 0
+    out, err = capsys.readouterr()
+    assert _commands_listed(prog, out) and err == ""
+
+
+@pytest.mark.parametrize("argv", [["-m", "eval"], ["-m", "synth"], ["refstereo-eval"],
+                                  ["refstereo-synth"], ["-m", "eval", "--version"],
+                                  ["refstereo-synth", "--version"]],
+                         ids=lambda argv: " ".join(argv))
+def test_bare_command_and_version_in_a_process(argv, tmp_path):
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    from tests.conftest import REPO
+
+    if argv[0] == "-m":
+        command = [sys.executable, *argv]
+    else:
+        script = Path(sys.executable).parent / argv[0]
+        if not script.exists():
+            pytest.skip(f"{argv[0]} is not installed in this environment (pip install -e .)")
+        command = [str(script), *argv[1:]]
+    env = dict(os.environ, PYTHONPATH=str(REPO))  # this checkout, not another editable one
+    proc = subprocess.run(command, cwd=tmp_path, env=env, capture_output=True, text=True,
+                          timeout=120)
+    assert proc.returncode == 0 and proc.stderr == "", proc.stderr
+    prog = "eval" if "eval" in " ".join(argv) else "synth"
+    if "--version" in argv:
+        assert proc.stdout == f"refractive-stereo {_pyproject_version()}\n"
+    else:
+        assert _commands_listed(prog, proc.stdout)
+    assert list(tmp_path.iterdir()) == []

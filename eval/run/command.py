@@ -12,13 +12,13 @@ import os
 import sys
 import time
 
-from eval.cli import non_negative_float, non_negative_int, positive_float, positive_int
+from eval.cli import non_negative_float, positive_float, positive_int
 from eval.core.formatting import format_number as fmt
 from eval.run.config import COMMAND, RunConfig, fraction
 from eval.run.report import (budget_table, report_markdown, summary_table, verdict_exit_code,
                              write_outputs)
 from synth.cli import (add_define_option, add_json_option, add_out_option, add_progress_option,
-                       add_scene_argument, finite_float)
+                       add_scene_argument, finite_float, scene_seed)
 
 #: argparse type of --max-elongation and --max-area-ratio (a blob's axis or area ratio).
 ABOVE_ONE = finite_float(1.0, strict=True, description="finite (> 1)")
@@ -39,7 +39,7 @@ def add_parser(subparsers):
                         help="comma-separated triangulation methods (default: all three)")
     parser.add_argument("--noise-px", type=non_negative_float, default=0.0,
                         help="Gaussian noise σ (px) added to the detected centres (default 0)")
-    parser.add_argument("--seed", type=non_negative_int, default=None,
+    parser.add_argument("--seed", type=scene_seed, default=None,
                         help="the run's one seed: the scene's seed (same as -D seed=S; with "
                              "--from, the dataset's images are used as they are), the added "
                              "noise and the plane fit (default: the scene's seed)")

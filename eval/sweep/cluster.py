@@ -13,6 +13,7 @@ import time
 from eval.cli import CLIError
 from eval.sweep.directory import SweepDir
 from eval.sweep.table import write_tables
+from synth import interrupt
 
 #: Seconds between two rebuilds of the tables while cells come in.
 TABLE_INTERVAL_S = 10.0
@@ -77,8 +78,16 @@ def connect(args):
             client.close()
             raise CLIError(f"--scheduler {args.scheduler}: the scheduler has no worker "
                            f"(start some with: dask worker {args.scheduler} --nthreads 1)") from None
+        except KeyboardInterrupt:
+            with interrupt.deferred():
+                client.close()
+            raise
         try:
             client.run(_probe_worker)
+        except KeyboardInterrupt:
+            with interrupt.deferred():
+                client.close()
+            raise
         except Exception as exc:
             client.close()
             raise CLIError(f"--scheduler {args.scheduler}: a worker cannot run sweep cells "
@@ -91,9 +100,22 @@ def connect(args):
         raise CLIError(f"--workers {workers}: at most {MAX_WORKERS_PER_CORE} single-threaded "
                        f"workers per core ({MAX_WORKERS_PER_CORE * default_workers()} here); "
                        f"for more, run a cluster and pass --scheduler")
-    cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                           dashboard_address=":0", silence_logs=logging.CRITICAL)
-    client = Client(cluster, set_as_default=False)
+    # Started whole, SIGINT held back (synth.interrupt.deferred): Dask's threads and the worker
+    # processes they spawn inherit SIGINT blocked, so a Ctrl-C in the terminal reaches this
+    # process only, which closes them (their tracebacks, Mitsuba's "winding down" on stdout and a
+    # render cut short are no longer possible).
+    cluster = client = None
+    try:
+        with interrupt.deferred(processes=True):
+            cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                                   dashboard_address=":0", silence_logs=logging.CRITICAL)
+            client = Client(cluster, set_as_default=False)
+    except BaseException:  # Ctrl-C held back until the cluster stood: close it again
+        with interrupt.deferred():
+            for started in (client, cluster):
+                if started is not None:
+                    started.close()
+        raise
     return client, cluster, f"{workers} local single-threaded worker(s)"
 
 
@@ -145,6 +167,7 @@ def execute(client, spec, todo: list, out: SweepDir, records: dict, run_id: str,
     ran, last_table, interval = 0, time.monotonic(), TABLE_INTERVAL_S
     try:
         for future in as_completed(futures, loop=client.loop):
+            interrupt.check()  # an interrupt that Dask's machinery swallowed stops here
             batch = futures.pop(future)
             try:
                 results = future.result()
@@ -158,7 +181,8 @@ def execute(client, spec, todo: list, out: SweepDir, records: dict, run_id: str,
                 record = {**result, "run_id": run_id, "kind": cell.kind, "scene": cell.scene,
                           "params": cell.params, "repeat": cell.repeat, "sample": cell.sample,
                           "seed": cell.seed, "methods": list(cell.methods)}
-                out.write_record(record, files)
+                with interrupt.deferred():  # the cell file and its log line, both or neither
+                    out.write_record(record, files)
                 records[cell.key] = record
                 ran += 1
             bar.update(len(batch))

@@ -33,6 +33,7 @@ from eval.cli import CLIError, positive_float, positive_int
 from eval.sweep.cluster import check_address, connect, execute
 from eval.sweep.directory import COMMAND, SweepDir
 from eval.sweep.table import table_rows, write_tables
+from synth import interrupt
 from synth.cli import add_out_option, add_progress_option, refuse_given
 
 
@@ -110,10 +111,12 @@ def main(args) -> int:
             except ValueError as exc:  # from Dask: a bug, not bad input (exit 1, not 2)
                 raise RuntimeError(f"{type(exc).__name__}: {exc}") from exc
     finally:
-        if client is not None:
-            client.close()
-        if cluster is not None:
-            cluster.close()
+        with interrupt.deferred():  # closed whole even when Ctrl-C is pressed again
+            if client is not None:
+                client.close()
+            if cluster is not None:
+                cluster.close()
+    interrupt.check()
     rows = write_tables(out.path, spec, records)
     elapsed = time.perf_counter() - start
     runs[-1].update({"cells_ran": ran, "seconds": elapsed, "compute_seconds": compute})
@@ -122,6 +125,7 @@ def main(args) -> int:
     if not args.no_figures and rows:
         from eval.sweep.figures import write_figures
 
+        interrupt.check()
         figures = write_figures(os.path.join(out.path, "figures"), spec,
                                 table_rows(spec, records))
     failed = sum(1 for c in spec.cells if records.get(c.key, {}).get("status") == "failed")

@@ -21,6 +21,8 @@ import math
 import os
 import re
 
+from synth import interrupt
+
 MAX_SERIES_COMBINATIONS = 4
 _METHOD = re.compile(r"^(?P<prefix>self_calibration\.)?methods\.(?P<method>[^.]+)\.(?P<metric>.+)$")
 _META = {"key", "kind", "scene", "repeat", "sample", "seed", "status", "error", "seconds"}
@@ -140,9 +142,15 @@ def _figure(path, title, panels, draw, columns: int = 4):
                         top=1 - 0.6 / (2.6 * lines + 0.6), hspace=0.55, wspace=0.35)
     directory, name = os.path.split(path)
     tmp = os.path.join(directory, f".{name}.{os.getpid()}.tmp")
-    fig.savefig(tmp, dpi=72, format="png")
-    plt.close(fig)
-    os.replace(tmp, path)
+    try:
+        fig.savefig(tmp, dpi=72, format="png")
+        os.replace(tmp, path)
+    except BaseException:  # Ctrl-C included: no half-written figure left behind
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+    finally:
+        plt.close(fig)
 
 
 def write_figures(directory: str, spec, rows: list) -> list:
@@ -201,6 +209,7 @@ def write_figures(directory: str, spec, rows: list) -> list:
             if not panels:
                 continue
             path = os.path.join(directory, f"{_safe(param)}__{suffix}.png")
+            interrupt.check()  # a figure takes seconds: stop between them
             _figure(path, f"{spec.name}: {what} metrics against {param} (mean ± 1 std over "
                           f"repeats{note})", panels, drawer)
             paths.append(path)

@@ -27,9 +27,7 @@ matplotlib, SciPy) stay inside the functions so that ``--help`` stays fast.
 
 from __future__ import annotations
 
-import sys
-
-from synth.cli import Parser, command_parser, run_command
+from synth.cli import Parser, command_parser, process_main, run_command
 from synth.commands import boards, check, dataset, render, scene
 
 PROG = "python -m synth"
@@ -47,12 +45,12 @@ def build_parser() -> Parser:
 def main(argv=None) -> int:
     """Run the CLI; returns the exit code (:mod:`synth.cli`: 2 on bad input, with one line
     ``error: …`` on stderr; 1 when ``check`` fails; 130 when interrupted)."""
-    return run_command(build_parser(), argv)
+    return run_command(build_parser, argv)
 
 
 def console_main() -> None:
-    """Entry point of the ``refstereo-synth`` console script."""
-    sys.exit(main())
+    """Entry point of ``python -m synth`` and of the ``refstereo-synth`` console script."""
+    process_main(main)
 
 
 __all__ = ["COMMANDS", "PROG", "build_parser", "console_main", "main"]

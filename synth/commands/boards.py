@@ -5,8 +5,8 @@ random poses behind the scene's port (or in air), :mod:`synth.boards`."""
 from __future__ import annotations
 
 from synth.cli import (CLIError, add_define_option, add_out_option, add_progress_option,
-                       add_scene_argument, non_negative_float, non_negative_int, positive_float,
-                       positive_int)
+                       add_scene_argument, non_negative_float, positive_float,
+                       positive_int, scene_seed)
 
 
 def add_parser(subparsers) -> None:
@@ -27,7 +27,7 @@ def add_parser(subparsers) -> None:
                    help="largest tilt of the board, degrees (default 45)")
     p.add_argument("--spp", type=positive_int, default=None,
                    help="samples per pixel, same as -D spp=N (default 16)")
-    p.add_argument("--seed", type=non_negative_int, default=None,
+    p.add_argument("--seed", type=scene_seed, default=None,
                    help="seed of the poses and the renderer, same as -D seed=S (default 0)")
     p.add_argument("--air", action="store_true", help="the same cameras with no port (in air)")
     p.add_argument("--variant", help="Mitsuba variant (default: automatic)")

@@ -4,7 +4,7 @@ and the scene they load (``-D`` and ``--seed`` applied)."""
 from __future__ import annotations
 
 from synth.cli import (add_define_option, add_out_option, add_progress_option,
-                       add_scene_argument, non_negative_int, positive_int)
+                       add_scene_argument, positive_int, scene_seed)
 
 
 def add_render_options(p, command: str) -> None:
@@ -13,7 +13,7 @@ def add_render_options(p, command: str) -> None:
     add_scene_argument(p)
     add_out_option(p, command)
     p.add_argument("--spp", type=positive_int, help="samples per pixel (default: the scene's spp)")
-    p.add_argument("--seed", type=non_negative_int,
+    p.add_argument("--seed", type=scene_seed,
                    help="the scene's seed, same as -D seed=S (default: the scene's seed)")
     p.add_argument("--variant", help="Mitsuba variant (default: cuda_ad_rgb > llvm_ad_rgb > "
                                      "scalar_rgb, whichever works here)")

@@ -7,7 +7,7 @@ from __future__ import annotations
 import os
 
 from synth.cli import (CLIError, add_out_option, any_float, non_negative_float, non_negative_int,
-                       positive_float, positive_int, refuse_given)
+                       positive_float, positive_int, refuse_given, scene_seed)
 
 #: The first comment of every scene file ``python -m synth scene`` writes.
 SCENE_COMMENT_PREFIX = "written by python -m synth scene"
@@ -26,7 +26,8 @@ def add_parser(subparsers) -> None:
     p = subparsers.add_parser("scene",
                               help="write a Mitsuba scene of the rig, the port and targets")
     add_out_option(p, "synth scene", what="file",
-                   rule="the scene (.xml); an existing file is replaced only if python -m synth "
+                   rule="the scene (.xml; --layout surface also writes its mesh and speckle "
+                        "texture beside it); an existing file is replaced only if python -m synth "
                         "scene wrote it")
     p.add_argument("--layout", choices=("paper", "grid", "random", "tilted", "cylinder", "sphere",
                                         "surface"),
@@ -91,7 +92,7 @@ def add_parser(subparsers) -> None:
                    help="OpenCV distortion coefficients of both cameras (4, 5 or 8)")
     p.add_argument("--target-radius", type=positive_float, help="target disk radius, mm (default 2.5)")
     p.add_argument("--spp", type=positive_int, help="default samples per pixel written into the scene")
-    p.add_argument("--seed", type=non_negative_int, default=0, help="default sampler seed of the scene")
+    p.add_argument("--seed", type=scene_seed, default=0, help="default sampler seed of the scene")
     p.add_argument("--water", choices=("clear", "clear_ocean", "coastal", "turbid_harbor"),
                    default="clear", help="water that absorbs and scatters (Petzold's "
                                          "measurements; default clear: no medium)")

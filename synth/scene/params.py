@@ -20,6 +20,7 @@ import re
 import xml.etree.ElementTree as ET
 
 from synth.scene.model import SceneError
+from synth.seeds import MAX_SEED, seed_range_text
 
 _NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
 _SUBST = re.compile(r"\$([A-Za-z_][A-Za-z0-9_]*)")
@@ -130,6 +131,9 @@ def check_params(params: dict, label: str) -> None:
             bound = f"> {lower:g}" if strict else f">= {lower:g}"
             raise SceneError(f"{label}: parameter {name}={text!r} must be a finite "
                              f"{'integer' if kind == 'int' else 'number'} {bound}")
+        if name == "seed" and value > MAX_SEED:
+            raise SceneError(f"{label}: parameter seed={text!r} is too large: expected an integer "
+                             f"from {seed_range_text()}")
         if name in _UPPER_BOUNDS:
             upper, strict_upper = _UPPER_BOUNDS[name]
             if not (value < upper if strict_upper else value <= upper):

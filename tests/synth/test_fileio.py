@@ -138,3 +138,13 @@ def test_an_output_is_intact_only_when_every_file_it_wrote_is_whole(tmp_path):
     del marker["sha256"]
     (out / MARKER_NAME).write_text(json.dumps(marker))
     assert "no record" in output.damage()
+
+
+def test_atomic_create_never_replaces(tmp_path):
+    from synth.fileio import atomic_create_bytes
+
+    path = tmp_path / "f.bin"
+    atomic_create_bytes(path, b"first")
+    with pytest.raises(FileExistsError):
+        atomic_create_bytes(path, b"second")
+    assert path.read_bytes() == b"first" and sorted(p.name for p in tmp_path.iterdir()) == ["f.bin"]

@@ -104,6 +104,35 @@ def test_pass_plan():
         assert max(plan) * pixels <= MAX_SAMPLES_PER_CALL or max(plan) == 1
 
 
+def test_seeds_that_do_not_fit_mitsubas_32_bit_seed_are_refused_not_wrapped(small_scene):
+    """Seeds used to wrap at 2^32 (``--seed 4294967296`` rendered the bytes of seed 0): the
+    largest accepted seed leaves room for the offsets of the views, passes and board poses."""
+    from synth.render import check_render_request, pass_seed
+    from synth.scene import SceneError
+    from synth.seeds import MAX_SEED, PASS_SEED_STRIDE
+
+    assert MAX_SEED == 2 ** 32 - 2 and pass_seed(MAX_SEED, 1, 0) == 2 ** 32 - 1
+    with pytest.raises(ValueError, match="32-bit"):
+        pass_seed(MAX_SEED + 1, 1, 0)
+    with pytest.raises(ValueError, match="32-bit"):
+        pass_seed(2 ** 32 - 1 - PASS_SEED_STRIDE, 1, 1)
+    spec = load_scene(small_scene)  # 320 x 268: one pass per view up to 2104 spp
+    check_render_request(spec, 36, seed=MAX_SEED)
+    largest = 2 ** 32 - 1 - (1 + PASS_SEED_STRIDE)  # two passes: the right view's second
+    check_render_request(spec, 3000, seed=largest)
+    with pytest.raises(ValueError, match=f"the largest seed is {largest}"):
+        check_render_request(spec, 3000, seed=largest + 1)
+    with pytest.raises(ValueError, match=f"the largest seed is {2 ** 32 - 1 - 1 - 2 * 14}"):
+        check_render_request(spec, 16, seed=MAX_SEED - 27, poses=15)
+    check_render_request(spec, 16, seed=MAX_SEED - 28, poses=15)  # pose 14's right view: 2^32 - 1
+    with pytest.raises(ValueError, match="no seed fits"):  # more than 2048 passes per view
+        check_render_request(spec, 2105 * 2049, seed=0)
+    # the scene's own parameter, however it is set
+    with pytest.raises(SceneError, match="4294967294"):
+        load_scene(small_scene, {"seed": str(2 ** 32)})
+    assert load_scene(small_scene, {"seed": str(MAX_SEED)}).seed == MAX_SEED
+
+
 @pytest.mark.slow
 def test_passes_are_reproducible_and_seeded_per_pass(small_scene, monkeypatch):
     """Same seed, same bytes with several passes; the passes are independent draws."""

@@ -160,3 +160,58 @@ def test_bad_surface_scene_options(tmp_path, capsys, argv, fragment):
     assert code == 2 and fragment in err and "Traceback" not in err, err
     assert [line for line in err.splitlines() if line.strip()] == [err.strip()]
     assert err.startswith("error:") and os.listdir(tmp_path) == []
+
+
+def test_rewriting_a_surface_scene_keeps_the_shared_texture_and_refuses_foreign_files(tmp_path,
+                                                                                         capsys):
+    """The files beside a surface scene (docs/scenes.md, "Files beside the scene"): a second
+    ``synth scene`` over its own scene replaces its mesh and uses the shared texture as it is
+    (not rewritten); a second scene shares the texture; a mesh or a texture someone else put
+    there is refused with one line, and nothing is changed."""
+    argv = ["scene", "--layout", "surface", *SMALL, "--speckle-size", "50"]
+    assert synth_main([*argv, "--out", str(tmp_path / "a.xml")]) == 0
+    texture = next(tmp_path.glob("speckle_*.png"))
+    texture_stat = texture.stat()
+    mesh = tmp_path / "a_surface.ply"
+    assert mesh.read_bytes().startswith(b"ply\n")
+    # our own scene again (another surface): the mesh is replaced, the texture used as it is
+    assert synth_main([*argv, "--surface", "tilted", "--out", str(tmp_path / "a.xml")]) == 0
+    assert "tilted" in mesh.read_bytes()[:200].decode("ascii", "replace")
+    assert texture.stat().st_mtime_ns == texture_stat.st_mtime_ns
+    # another scene beside it shares the texture
+    assert synth_main([*argv, "--out", str(tmp_path / "b.xml")]) == 0
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(
+        ["a.xml", "a_surface.ply", "b.xml", "b_surface.ply", texture.name])
+    assert texture.stat().st_mtime_ns == texture_stat.st_mtime_ns
+    capsys.readouterr()
+    # a user's mesh where b's mesh goes, a texture whose pixels are not the pattern: refused
+    (tmp_path / "b_surface.ply").write_bytes(mesh.read_bytes().replace(b"comment units mm",
+                                                                       b"comment edited by me"))
+    before = {p.name: p.read_bytes() for p in tmp_path.iterdir()}
+    assert synth_main([*argv, "--out", str(tmp_path / "b.xml")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("error:") == 1 and "b_surface.ply" in err, err
+    (tmp_path / "b_surface.ply").unlink()
+    image = cv2.imread(str(texture), cv2.IMREAD_UNCHANGED)
+    image[0, 0] ^= 1  # one texel changed: not the texture this command writes
+    assert cv2.imwrite(str(texture), image)
+    before = {p.name: p.read_bytes() for p in tmp_path.iterdir()}
+    assert synth_main([*argv, "--out", str(tmp_path / "b.xml")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("error:") == 1 and texture.name in err, err
+    assert {p.name: p.read_bytes() for p in tmp_path.iterdir()} == before
+
+
+def test_meshes_written_by_synth_scene_are_told_from_others(tmp_path):
+    """The committed meshes (written before this test existed) are recognised as ours; an
+    edited header, a truncated body or another program's PLY is not."""
+    from tests.conftest import REPO
+
+    committed = sorted((REPO / "scenes").glob("*_surface.ply"))
+    assert committed and all(surfaces.written_by_write_ply(p) for p in committed)
+    data = (REPO / "scenes" / "speckle_plane_surface.ply").read_bytes()
+    for name, other in [("truncated", data[:-1]), ("longer", data + b"\0"),
+                        ("edited", data.replace(b"units mm", b"units cm")),
+                        ("ascii", b"ply\nformat ascii 1.0\nelement vertex 0\nend_header\n")]:
+        (tmp_path / name).write_bytes(other)
+        assert not surfaces.written_by_write_ply(tmp_path / name), name

@@ -156,8 +156,7 @@ def test_same_seed_same_numbers():
     ["paper", "--seed", "-1"],
     ["paper", "--bogus"],
     ["nonsense"],
-    [],
-])
+])  # no command at all prints the list of commands, exit 0: tests/test_cli_vocabulary.py
 def test_cli_bad_arguments(argv, capsys, tmp_path):
     code = cli.main(argv + (["--out", str(tmp_path / "x")] if argv[:1] == ["paper"] else []))
     captured = capsys.readouterr()
