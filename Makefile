@@ -15,9 +15,9 @@ lint: setup
 test: lint
 	$(PY) -m pytest
 
-# everything that does not render with Mitsuba (the `slow` marker): about a minute
+# everything that does not render with Mitsuba (the `slow` marker), on two processes: about a minute
 test-fast: lint
-	$(PY) -m pytest -m "not slow"
+	$(PY) -m pytest -m "not slow" -n 2
 
 run: setup
 	$(PY) -m eval run $(SCENE) --out $(OUT)/run
