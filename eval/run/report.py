@@ -6,7 +6,6 @@ from __future__ import annotations
 import os
 import sys
 
-from eval.core.cloud_metrics import write_error_ply
 from synth.cli import EXIT_CHECK_FAILED
 from eval.core.formatting import format_number as fmt
 
@@ -126,6 +125,7 @@ def report_markdown(report: dict) -> str:
 def write_outputs(tmp: str, result) -> None:
     """The PLY files (their entries go into ``result.report["ply"]``) and figures of a run
     (:class:`eval.run.pipeline.RunResult`), into directory ``tmp``."""
+    from eval.core.cloud_metrics import write_error_ply  # Open3D: only when writing
     from eval.core.figures import error_maps_figure, histograms_figure
     from eval.run.figures import views_figure
 
