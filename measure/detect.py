@@ -317,9 +317,9 @@ def _widest_gap(values: np.ndarray) -> tuple[float, float]:
     return 0.5 * float(upper[k] + upper[k + 1]), float(gaps[k])
 
 
-def _blob_levels(f, labels, n_lab, quantile: float):
-    """The ``quantile`` pixel value (0: smallest, 1: the peak) of each blob (labels
-    ``1 … n_lab - 1``), vectorized."""
+def _blob_levels(f, labels, n_lab, quantiles):
+    """``(len(quantiles), n_lab - 1)``: each quantile's pixel value (0: smallest, 1: the peak)
+    of each blob (labels ``1 … n_lab - 1``), from one sort of the blobs' pixels."""
     idx = np.flatnonzero(labels)
     lab = labels.ravel()[idx]
     val = f.ravel()[idx]
@@ -328,14 +328,14 @@ def _blob_levels(f, labels, n_lab, quantile: float):
     blobs = np.arange(1, n_lab)
     start = np.searchsorted(lab, blobs)
     end = np.searchsorted(lab, blobs, side="right")
-    pick = start + np.floor(quantile * (end - start - 1)).astype(np.int64)
-    return val[np.clip(pick, 0, max(val.size - 1, 0))]
+    pick = start + np.floor(np.asarray(quantiles, float)[:, None] * (end - start - 1))
+    return val[np.clip(pick.astype(np.int64), 0, max(val.size - 1, 0))]
 
 
-def _speckle_threshold(f, bg, thr, min_area, original=None):
+def _speckle_threshold(f, original, bg, thr, min_area):
     """The threshold on a speckled background (module docs), or None when the background is
     not speckle. ``f`` is the image whose blobs are looked at (the averaged one); the bright
-    blobs' plateau is measured on ``original`` (default ``f``), where a firefly is a spike."""
+    blobs' plateau is measured on ``original``, where a firefly is a spike."""
     mask = (f > np.float32(thr)).view(np.uint8)
     n_lab, labels, stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=8,
                                                                 ltype=cv2.CV_32S)
@@ -344,7 +344,7 @@ def _speckle_threshold(f, bg, thr, min_area, original=None):
     large = stats[1:, cv2.CC_STAT_AREA] >= min_area
     if int(large.sum()) < SPECKLE_MIN_SPECKS:
         return None
-    peak = _blob_levels(f, labels, n_lab, 1.0)[large] - bg
+    peak = _blob_levels(f, labels, n_lab, [1.0])[0][large] - bg
     log_peak = np.log10(np.maximum(peak, np.finfo(np.float32).tiny))
     split, width = _widest_gap(log_peak)
     bright = log_peak > split
@@ -352,22 +352,29 @@ def _speckle_threshold(f, bg, thr, min_area, original=None):
     if (width < SPECKLE_GAP_DECADES or not bright.any() or faint < SPECKLE_MIN_SPECKS
             or faint <= SPECKLE_BLOB_RATIO * bright.sum()):
         return None
-    source = f if original is None else original
-    spike = _blob_levels(source, labels, n_lab, 1.0)[large][bright]
-    plateau = _blob_levels(source, labels, n_lab, 0.9)[large][bright]
-    floor = float(np.median(source))
+    spike, plateau = _blob_levels(original, labels, n_lab, [1.0, 0.9])[:, large][:, bright]
+    floor = float(np.median(original))
     if np.median((plateau - floor) / np.maximum(spike - floor, 1e-30)) < SPECKLE_PLATEAU_RATIO:
         return None
     return bg + SPECKLE_THRESHOLD_FRACTION * float(np.median(peak[bright]))
 
 
-def _speckle_levels(f, min_area):
+def _noise_threshold(f, bg, sigma, integer, k_sigma) -> float:
+    """``background + max(k_sigma * sigma, floor)`` (module docs, stage 2)."""
+    if integer:
+        floor = 0.5
+    else:
+        top = float(f.max()) - bg
+        floor = 1e-6 * top if top > 0 else 0.0
+    return bg + max(k_sigma * sigma, floor)
+
+
+def _speckle_levels(f, min_area, k_sigma):
     """``(filtered image, threshold)`` on a speckled background, or None (module docs)."""
     filtered = cv2.blur(f, (SPECKLE_FILTER_PX, SPECKLE_FILTER_PX))
     bg, sigma = _background_and_sigma(filtered, False)
-    top = float(filtered.max()) - bg
-    noise_threshold = bg + max(5.0 * sigma, 1e-6 * top if top > 0 else 0.0)
-    threshold = _speckle_threshold(filtered, bg, noise_threshold, min_area, original=f)
+    noise_threshold = _noise_threshold(filtered, bg, sigma, False, k_sigma)
+    threshold = _speckle_threshold(filtered, f, bg, noise_threshold, min_area)
     return None if threshold is None else (filtered, threshold)
 
 
@@ -385,13 +392,8 @@ def _levels(f, integer, background, threshold, k_sigma, min_area=4):
     if not bool(finite.all()):
         f = np.where(finite, f, np.float32(bg))
     if threshold is None:
-        if integer:
-            floor = 0.5
-        else:
-            top = float(f.max()) - bg
-            floor = 1e-6 * top if top > 0 else 0.0
-        thr, rule, mask_image = bg + max(k_sigma * sigma, floor), "noise", f
-        speckle = _speckle_levels(f, min_area)
+        thr, rule, mask_image = _noise_threshold(f, bg, sigma, integer, k_sigma), "noise", f
+        speckle = _speckle_levels(f, min_area, k_sigma)
         if speckle is not None and speckle[1] > thr:
             (mask_image, thr), rule = speckle, "speckle"
     else:

@@ -160,8 +160,11 @@ def match_targets(rig: StereoRig, uv_left, uv_right, gate_mm: float = 0.5,
     n_ambiguous = sum(len(rows) for rows, _ in ambiguous)
     if ambiguous and resolve_ambiguities:
         uv_l = np.asarray(uv_left, dtype=float).reshape(-1, 2)
-        allowed = resolve_by_neighbours(uv_l, np.asarray(kept["rows"], int),
-                                        np.asarray(kept["depths"], float), pair_i, pair_depth)
+        open_pairs = np.flatnonzero(np.isin(pair_i, np.concatenate([r for r, _ in ambiguous])))
+        allowed = np.zeros(len(pair_i), dtype=bool)
+        allowed[open_pairs] = resolve_by_neighbours(
+            uv_l, np.asarray(kept["rows"], int), np.asarray(kept["depths"], float),
+            pair_i[open_pairs], pair_depth[open_pairs])
         for rows, cols in ambiguous:
             members = np.flatnonzero(np.isin(pair_i, rows) & np.isin(pair_j, cols) & allowed)
             if members.size:
@@ -189,7 +192,7 @@ def _assign_clear(pair_i, pair_j, pair_gap, pair_depth, margin, kept):
     sub_depths[r_of, c_of] = pair_depth
     sub_candidate = np.isfinite(sub_gaps)
     rows, cols, total = _assign(sub_gaps, sub_candidate)
-    unclear_rows, unclear_cols = [], []
+    unclear_rows, clear_rows, clear_cols = [], [], []
     for r, c in zip(rows, cols):
         clear = True
         if sub_candidate.sum() > 1:
@@ -198,18 +201,19 @@ def _assign_clear(pair_i, pair_j, pair_gap, pair_depth, margin, kept):
             alt_rows, _, alt_total = _assign(sub_gaps, forbidden)
             clear = len(alt_rows) < len(rows) or alt_total > total + margin
         if clear:
+            clear_rows.append(r)
+            clear_cols.append(c)
             kept["rows"].append(rows_in[r])
             kept["cols"].append(cols_in[c])
             kept["gaps"].append(sub_gaps[r, c])
             kept["depths"].append(sub_depths[r, c])
         else:
-            unclear_rows.append(rows_in[r])
-            unclear_cols.append(cols_in[c])
-    # the rows and columns of the group that no clear pair took part in stay open too
-    taken_r, taken_c = set(kept["rows"]), set(kept["cols"])
-    open_rows = np.array([r for r in rows_in if r not in taken_r], dtype=int)
-    open_cols = np.array([c for c in cols_in if c not in taken_c], dtype=int)
-    return (open_rows, open_cols) if unclear_rows else (np.zeros(0, int), np.zeros(0, int))
+            unclear_rows.append(r)
+    if not unclear_rows:
+        return np.zeros(0, int), np.zeros(0, int)
+    # the rows and columns of the group that no clear pair took part in stay open (the group
+    # shares no row or column with another, so its own clear pairs are all that took any)
+    return np.delete(rows_in, clear_rows), np.delete(cols_in, clear_cols)
 
 
 def resolve_by_neighbours(uv_left, clear_rows, clear_depths, pair_i, pair_depth):

@@ -84,13 +84,9 @@ def develop(config: RunConfig, left, right, seed):
     ``--median-filter``, if given; returns ``(left, right, sensor report or None)``."""
     import cv2
 
-    sensor_info, sensor = None, config.sensor
-    if sensor is not None:
-        from synth.sensor_model import sensor_views, to_radiance
+    from eval.run.inputs import expose_views
 
-        codes_left, codes_right, sensor_info = sensor_views(left, right, sensor, seed)
-        left, right = (to_radiance(codes, sensor, sensor_info["electrons_per_unit"])
-                       for codes in (codes_left, codes_right))
+    left, right, sensor_info = expose_views(left, right, config.sensor, seed)
     if config.median_filter:
         left, right = (cv2.medianBlur(np.asarray(image, dtype=np.float32), int(config.median_filter))
                        for image in (left, right))

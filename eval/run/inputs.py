@@ -205,19 +205,30 @@ def load_inputs(config: RunConfig, log) -> RunInputs:
                      extra={"render": render, "timings": timings}, **scene_part)
 
 
+def expose_views(left, right, sensor, seed):
+    """Both views through the ``sensor`` model (seeded by ``seed``) and back to radiance:
+    ``(left, right, the sensor's report entry)``; unchanged with None when there is no
+    sensor."""
+    if sensor is None:
+        return left, right, None
+    from synth.sensor_model import sensor_views, to_radiance
+
+    codes_left, codes_right, sensor_info = sensor_views(left, right, sensor, seed)
+    left, right = (to_radiance(codes, sensor, sensor_info["electrons_per_unit"])
+                   for codes in (codes_left, codes_right))
+    return left, right, sensor_info
+
+
 def expose_on_sensor(inputs: RunInputs, sensor, log):
     """Pass both views of ``inputs`` through the ``sensor`` model (seeded by the run's seed), in
     place; returns the sensor's report entry (None without a sensor)."""
-    if sensor is None:
-        return None
-    from synth.sensor_model import sensor_views, to_radiance
-
-    log(f"expose both views on the {sensor.name} sensor …")
-    left, right, sensor_info = sensor_views(inputs.left, inputs.right, sensor, inputs.seed)
-    inputs.left, inputs.right = (to_radiance(codes, sensor, sensor_info["electrons_per_unit"])
-                                 for codes in (left, right))
+    if sensor is not None:
+        log(f"expose both views on the {sensor.name} sensor …")
+    inputs.left, inputs.right, sensor_info = expose_views(inputs.left, inputs.right, sensor,
+                                                          inputs.seed)
     return sensor_info
 
 
-__all__ = ["RunInputs", "budget_rigs", "dataset_params", "expose_on_sensor", "load_inputs",
+__all__ = ["RunInputs", "budget_rigs", "dataset_params", "expose_on_sensor", "expose_views",
+           "load_inputs",
            "load_run_scene", "measurement_rig", "read_run_dataset", "same_value"]
