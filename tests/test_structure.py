@@ -10,12 +10,13 @@ from pathlib import Path
 
 import pytest
 
+from eval.cli import SUBCOMMANDS
+
 ROOT = Path(__file__).resolve().parent.parent
 PACKAGES = ("measure", "synth", "eval")
 #: Modules holding a command of ``python -m eval`` (its parser and main); only the dispatcher
 #: ``eval.cli`` imports them.
-EVAL_COMMANDS = ("eval.run.command", "eval.score", "eval.paper.command", "eval.sweep.command",
-                 "eval.calibrate.command", "eval.bench", "eval.render_bench")
+EVAL_COMMANDS = SUBCOMMANDS
 
 
 def _module_name(path: Path) -> str:
