@@ -28,11 +28,11 @@ matplotlib, SciPy) stay inside the functions so that ``--help`` stays fast.
 from __future__ import annotations
 
 from synth.cli import Parser, command_parser, process_main, run_command
-from synth.commands import boards, check, dataset, render, scene
+from synth.commands import boards, check, dataset, photos, render, scene
 
 PROG = "python -m synth"
 #: The command modules, in the order ``--help`` lists them.
-COMMANDS = (scene, render, dataset, boards, check)
+COMMANDS = (scene, render, dataset, boards, photos, check)
 
 
 def build_parser() -> Parser:

@@ -1,0 +1,138 @@
+"""A user's photos: read one image as grey, and pair a left and a right folder by file name.
+
+Formats: whatever ``cv2.imread`` reads (PNG 8- or 16-bit, JPEG, TIFF, …). Colour images become
+grey with ``cv2.cvtColor(…, COLOR_BGR2GRAY)`` (0.299 R + 0.587 G + 0.114 B on the stored
+values: what an OpenCV user gets from ``cv2.imread(path, cv2.IMREAD_GRAYSCALE)``, but keeping
+16 bits where the file has them). The values stay as stored (``uint8`` or ``uint16``, no
+gamma decoding): the board detector and the target detector accept integer images directly.
+
+Layout of a photo folder: ``DIR/left/`` and ``DIR/right/``, files paired by name (``0001.jpg``
+↔ ``0001.jpg``; the extension may differ, the stem may not). Every problem is one
+:class:`PhotoError` naming the file or folder.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+
+import numpy as np
+
+#: File extensions taken as photos (lower case); anything else in a folder is ignored.
+PHOTO_EXTENSIONS = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp", ".pgm", ".ppm")
+
+
+class PhotoError(ValueError):
+    """A photo or photo folder that cannot be used."""
+
+
+def read_photo(path) -> np.ndarray:
+    """The photo at ``path`` as a 2D grey array (``uint8``, ``uint16`` or ``float32`` as
+    stored; colour converted by ``cv2.cvtColor``, alpha dropped). :class:`PhotoError` if it is
+    missing or unreadable."""
+    import cv2
+
+    path = os.fspath(path)
+    if not os.path.isfile(path):
+        raise PhotoError(f"{path}: no such file")
+    image = cv2.imread(path, cv2.IMREAD_UNCHANGED)
+    if image is None or image.size == 0:
+        raise PhotoError(f"{path}: not an image OpenCV can read")
+    if image.ndim == 3:
+        channels = image.shape[2]
+        if channels == 1:
+            image = image[:, :, 0]
+        elif channels in (3, 4):
+            image = cv2.cvtColor(image, cv2.COLOR_BGRA2GRAY if channels == 4 else cv2.COLOR_BGR2GRAY)
+        else:
+            raise PhotoError(f"{path}: {channels} channels; expected grey, BGR or BGRA")
+    if image.dtype not in (np.uint8, np.uint16, np.float32):
+        image = image.astype(np.float32)
+    return np.ascontiguousarray(image)
+
+
+def _photos_in(folder: str) -> dict:
+    """``{stem: file name}`` of the photos in ``folder``; two files with one stem are refused."""
+    if not os.path.isdir(folder):
+        raise PhotoError(f"{folder}: no such folder")
+    out = {}
+    for name in sorted(os.listdir(folder)):
+        stem, ext = os.path.splitext(name)
+        if ext.lower() not in PHOTO_EXTENSIONS or name.startswith("."):
+            continue
+        if stem in out:
+            raise PhotoError(f"{folder}: two photos named {stem} ({out[stem]}, {name})")
+        out[stem] = name
+    return out
+
+
+@dataclass(frozen=True)
+class PhotoPairs:
+    """Pairs of a photo folder: ``names`` (the shared stems, sorted), ``left`` / ``right`` the
+    file paths, ``size`` ``(width, height)`` px of each camera's photos."""
+
+    path: str
+    names: tuple
+    left: tuple
+    right: tuple
+
+    def read(self, index: int) -> tuple[np.ndarray, np.ndarray]:
+        """The pair ``index`` as grey arrays (:func:`read_photo`)."""
+        return read_photo(self.left[index]), read_photo(self.right[index])
+
+
+def pair_folders(left_dir, right_dir, what: str = "photo") -> PhotoPairs:
+    """Pair the photos of ``left_dir`` and ``right_dir`` by stem. :class:`PhotoError` when a
+    folder has no photos or a photo has no partner (the first few are named)."""
+    left_dir, right_dir = os.fspath(left_dir), os.fspath(right_dir)
+    left, right = _photos_in(left_dir), _photos_in(right_dir)
+    if not left and not right:
+        raise PhotoError(f"{left_dir}, {right_dir}: no {what}s (expected "
+                         f"{', '.join(PHOTO_EXTENSIONS)} files)")
+    alone = ([f"{left_dir}/{left[s]}" for s in sorted(set(left) - set(right))]
+             + [f"{right_dir}/{right[s]}" for s in sorted(set(right) - set(left))])
+    if alone:
+        more = f" and {len(alone) - 3} more" if len(alone) > 3 else ""
+        raise PhotoError(f"{', '.join(alone[:3])}{more}: no {what} of the same name in the other "
+                         f"camera's folder (pairs are matched by file name)")
+    names = tuple(sorted(left))
+    return PhotoPairs(os.path.dirname(left_dir.rstrip("/")) or ".", names,
+                      tuple(os.path.join(left_dir, left[s]) for s in names),
+                      tuple(os.path.join(right_dir, right[s]) for s in names))
+
+
+def photo_folder(path) -> PhotoPairs:
+    """The pairs of a photo folder ``path`` (``path/left``, ``path/right``)."""
+    path = os.fspath(path)
+    if not os.path.isdir(path):
+        raise PhotoError(f"{path}: no such folder")
+    missing = [sub for sub in ("left", "right") if not os.path.isdir(os.path.join(path, sub))]
+    if missing:
+        raise PhotoError(f"{path}: no {' and no '.join(missing)} folder (a photo folder holds "
+                         f"left/ and right/, photos paired by name)")
+    pairs = pair_folders(os.path.join(path, "left"), os.path.join(path, "right"))
+    return PhotoPairs(path, pairs.names, pairs.left, pairs.right)
+
+
+def read_pairs(pairs: PhotoPairs) -> tuple[list, tuple]:
+    """Every pair read: ``([(left, right), …], (width, height))``. :class:`PhotoError` when one
+    camera's photos differ in size (the first that differs is named)."""
+    images, size = [], {}
+    for index in range(len(pairs.names)):
+        pair = pairs.read(index)
+        for view, (image, file) in enumerate(zip(pair, (pairs.left[index], pairs.right[index]))):
+            shape = (image.shape[1], image.shape[0])
+            first = size.setdefault(view, (shape, file))
+            if shape != first[0]:
+                raise PhotoError(f"{file}: {shape[0]}x{shape[1]} px, but {first[1]} is "
+                                 f"{first[0][0]}x{first[0][1]} px (one camera's photos must all "
+                                 f"have one size)")
+        images.append(pair)
+    if size and size[0][0] != size[1][0]:
+        raise PhotoError(f"{pairs.path}: the left photos are {size[0][0][0]}x{size[0][0][1]} px, the "
+                         f"right {size[1][0][0]}x{size[1][0][1]} px; the rig model needs one size")
+    return images, size[0][0] if size else (0, 0)
+
+
+__all__ = ["PHOTO_EXTENSIONS", "PhotoError", "PhotoPairs", "pair_folders", "photo_folder",
+           "read_pairs", "read_photo"]
