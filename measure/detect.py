@@ -23,7 +23,11 @@ Pipeline
    ``background + max(k_sigma * sigma, floor)`` where ``floor`` is half a grey level for integer
    images and ``1e-6 * (max - background)`` for float images, so that a noise-free render with
    an exactly black background (``sigma == 0``) keeps every lit pixel. Pixels strictly above the
-   threshold are foreground.
+   threshold are foreground. ``floor_fraction`` (default 0) raises it to at least
+   ``background + floor_fraction * (target level − background)`` (the target level as in
+   :func:`fractional_threshold`; rule ``"floor"``): photos stored as 8-bit JPEG carry
+   compression ringing of a few per cent of a target's level around every target, on a
+   background whose noise estimate cannot see it (a black background is mostly exactly 0).
 
    **Speckled backgrounds.** Renders of scattering water (and the fireflies of lights seen
    through it) have a background whose upper tail is not Gaussian: most pixels sit near the
@@ -200,7 +204,8 @@ class Detections:
         rule the threshold applies to the image averaged over 3 × 3 pixels).
     threshold_rule : ``"noise"`` (background + k_sigma noise sigmas, or the floor),
         ``"speckle"`` (a speckled background: a fraction of the targets' level, see the module
-        docs) or ``"given"`` (the caller's ``threshold``).
+        docs), ``"floor"`` (``floor_fraction`` of the targets' level) or ``"given"`` (the
+        caller's ``threshold``).
     labels : ``None`` unless ``return_labels``; then an int32 image: 0 background,
         ``k + 1`` on the centroid window of accepted target ``k``, -1 on rejected blobs
         (their windows, and the pixels of ``small`` blobs).
@@ -378,7 +383,7 @@ def _speckle_levels(f, min_area, k_sigma):
     return None if threshold is None else (filtered, threshold)
 
 
-def _levels(f, integer, background, threshold, k_sigma, min_area=4):
+def _levels(f, integer, background, threshold, k_sigma, min_area=4, floor_fraction=0.0):
     """Stage 1-2: background, noise sigma, threshold (image units) and the rule that set it;
     non-finite pixels set to the background. Returns ``(f, bg, sigma, thr, rule, mask_image)``
     where ``mask_image`` is the image the threshold applies to (``f``, or its average on a
@@ -396,6 +401,11 @@ def _levels(f, integer, background, threshold, k_sigma, min_area=4):
         speckle = _speckle_levels(f, min_area, k_sigma)
         if speckle is not None and speckle[1] > thr:
             (mask_image, thr), rule = speckle, "speckle"
+        if floor_fraction > 0:
+            level = float(np.percentile(f, TARGET_LEVEL_PERCENTILE))
+            floor = bg + floor_fraction * (level - bg)
+            if floor > thr:
+                thr, rule, mask_image = floor, "floor", f
     else:
         thr, rule, mask_image = float(threshold), "given", f
         if not np.isfinite(thr):
@@ -602,6 +612,7 @@ def detect_targets(
     ghost_ratio: float = 0.2,
     merge_area_ratio: float = MERGE_AREA_RATIO,
     merge_elongation: float = MERGE_ELONGATION,
+    floor_fraction: float = 0.0,
     return_labels: bool = False,
 ) -> Detections:
     """Detect bright disk targets and measure their sub-pixel intensity centroids.
@@ -625,6 +636,8 @@ def detect_targets(
     merge_area_ratio, merge_elongation : ``area > merge_area_ratio * reference_area`` or
         ``elongation > merge_elongation`` makes a blob suspicious; a suspicious blob with a
         waist or a hole is ``"merged"`` (module docs).
+    floor_fraction : in [0, 1); with ``threshold`` None the threshold is at least this fraction
+        of the way from the background to the targets' level (module docs, stage 2).
     return_labels : also return the label image (``Detections.labels``).
 
     Returns
@@ -639,8 +652,10 @@ def detect_targets(
         raise ValueError(
             "k_sigma and merge_area_ratio must be > 0, ghost_ratio >= 0, merge_elongation >= 1"
         )
+    if not 0 <= floor_fraction < 1:
+        raise ValueError(f"floor_fraction must be in [0, 1), got {floor_fraction!r}")
     f, bg, sigma, thr, rule, mask_image = _levels(f, integer, background, threshold, k_sigma,
-                                                  min_area)
+                                                  min_area, floor_fraction)
     blobs = _label_blobs(mask_image, thr, min_area)
     window = _centroid_windows(blobs, window_pad)
     measures = _measure_blobs(f, window, blobs, bg, sigma)

@@ -3,8 +3,13 @@
 Formats: whatever ``cv2.imread`` reads (PNG 8- or 16-bit, JPEG, TIFF, …). Colour images become
 grey with ``cv2.cvtColor(…, COLOR_BGR2GRAY)`` (0.299 R + 0.587 G + 0.114 B on the stored
 values: what an OpenCV user gets from ``cv2.imread(path, cv2.IMREAD_GRAYSCALE)``, but keeping
-16 bits where the file has them). The values stay as stored (``uint8`` or ``uint16``, no
-gamma decoding): the board detector and the target detector accept integer images directly.
+16 bits where the file has them). The grey values are then made **linear** (float32, 1 = the
+file's white), because the target detector's intensity centroids assume linear radiometry:
+``encoding="auto"`` decodes 8-bit files as sRGB (what cameras and image editors store; on the
+paper plane's JPEG the sRGB-encoded centroids were 0.040 px RMS off, the decoded ones 0.015 px,
+the same as the 16-bit linear render's 0.014 px) and takes 16-bit and float files as linear
+(scientific cameras, raw conversions, this project's renders); ``"srgb"`` and ``"linear"``
+force one reading.
 
 Layout of a photo folder: ``DIR/left/`` and ``DIR/right/``, files paired by name (``0001.jpg``
 ↔ ``0001.jpg``; the extension may differ, the stem may not). Every problem is one
@@ -26,11 +31,25 @@ class PhotoError(ValueError):
     """A photo or photo folder that cannot be used."""
 
 
-def read_photo(path) -> np.ndarray:
-    """The photo at ``path`` as a 2D grey array (``uint8``, ``uint16`` or ``float32`` as
-    stored; colour converted by ``cv2.cvtColor``, alpha dropped). :class:`PhotoError` if it is
-    missing or unreadable."""
+#: How the stored values of a photo are read (module docs).
+PHOTO_ENCODINGS = ("auto", "srgb", "linear")
+
+
+def srgb_to_linear(values: np.ndarray) -> np.ndarray:
+    """IEC 61966-2-1 sRGB decoding of values in [0, 1]."""
+    x = np.asarray(values, dtype=np.float64)
+    return np.where(x <= 0.04045, x / 12.92, ((x + 0.055) / 1.055) ** 2.4)
+
+
+def read_photo(path, encoding: str = "auto") -> np.ndarray:
+    """The photo at ``path`` as a 2D linear grey ``float32`` array, 1 = the file's white
+    (colour converted by ``cv2.cvtColor``, alpha dropped; ``encoding`` in
+    :data:`PHOTO_ENCODINGS`, module docs). :class:`PhotoError` if it is missing or
+    unreadable."""
     import cv2
+
+    if encoding not in PHOTO_ENCODINGS:
+        raise PhotoError(f"photo encoding {encoding!r}: choose from {', '.join(PHOTO_ENCODINGS)}")
 
     path = os.fspath(path)
     if not os.path.isfile(path):
@@ -46,9 +65,15 @@ def read_photo(path) -> np.ndarray:
             image = cv2.cvtColor(image, cv2.COLOR_BGRA2GRAY if channels == 4 else cv2.COLOR_BGR2GRAY)
         else:
             raise PhotoError(f"{path}: {channels} channels; expected grey, BGR or BGRA")
-    if image.dtype not in (np.uint8, np.uint16, np.float32):
-        image = image.astype(np.float32)
-    return np.ascontiguousarray(image)
+    if image.dtype in (np.uint8, np.uint16):
+        white = float(np.iinfo(image.dtype).max)
+        srgb = encoding == "srgb" or (encoding == "auto" and image.dtype == np.uint8)
+        levels = np.arange(int(white) + 1) / white  # a lookup table: one decode per level
+        table = (srgb_to_linear(levels) if srgb else levels).astype(np.float32)
+        return table[image]
+    image = image.astype(np.float32)
+    return np.ascontiguousarray(srgb_to_linear(np.clip(image, 0, 1)).astype(np.float32)
+                                if encoding == "srgb" else image)
 
 
 def _photos_in(folder: str) -> dict:
@@ -76,9 +101,9 @@ class PhotoPairs:
     left: tuple
     right: tuple
 
-    def read(self, index: int) -> tuple[np.ndarray, np.ndarray]:
-        """The pair ``index`` as grey arrays (:func:`read_photo`)."""
-        return read_photo(self.left[index]), read_photo(self.right[index])
+    def read(self, index: int, encoding: str = "auto") -> tuple[np.ndarray, np.ndarray]:
+        """The pair ``index`` as linear grey arrays (:func:`read_photo`)."""
+        return read_photo(self.left[index], encoding), read_photo(self.right[index], encoding)
 
 
 def pair_folders(left_dir, right_dir, what: str = "photo") -> PhotoPairs:
@@ -114,12 +139,12 @@ def photo_folder(path) -> PhotoPairs:
     return PhotoPairs(path, pairs.names, pairs.left, pairs.right)
 
 
-def read_pairs(pairs: PhotoPairs) -> tuple[list, tuple]:
+def read_pairs(pairs: PhotoPairs, encoding: str = "auto") -> tuple[list, tuple]:
     """Every pair read: ``([(left, right), …], (width, height))``. :class:`PhotoError` when one
     camera's photos differ in size (the first that differs is named)."""
     images, size = [], {}
     for index in range(len(pairs.names)):
-        pair = pairs.read(index)
+        pair = pairs.read(index, encoding)
         for view, (image, file) in enumerate(zip(pair, (pairs.left[index], pairs.right[index]))):
             shape = (image.shape[1], image.shape[0])
             first = size.setdefault(view, (shape, file))
@@ -134,5 +159,5 @@ def read_pairs(pairs: PhotoPairs) -> tuple[list, tuple]:
     return images, size[0][0] if size else (0, 0)
 
 
-__all__ = ["PHOTO_EXTENSIONS", "PhotoError", "PhotoPairs", "pair_folders", "photo_folder",
-           "read_pairs", "read_photo"]
+__all__ = ["PHOTO_ENCODINGS", "PHOTO_EXTENSIONS", "PhotoError", "PhotoPairs", "pair_folders",
+           "photo_folder", "read_pairs", "read_photo", "srgb_to_linear"]

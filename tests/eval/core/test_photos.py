@@ -1,0 +1,74 @@
+"""Tests of eval.core.photos: a user's photos read as linear grey, folders paired by name."""
+
+import cv2
+import numpy as np
+import pytest
+
+from eval.core.photos import PhotoError, photo_folder, read_pairs, read_photo, srgb_to_linear
+
+
+def test_8bit_is_decoded_as_srgb_and_16bit_taken_as_linear(tmp_path):
+    levels = np.arange(256, dtype=np.uint8).reshape(16, 16)
+    cv2.imwrite(str(tmp_path / "a.png"), levels)
+    decoded = read_photo(tmp_path / "a.png")
+    assert decoded.dtype == np.float32
+    np.testing.assert_allclose(decoded, srgb_to_linear(levels / 255.0), rtol=1e-6, atol=1e-7)
+    assert decoded[8, 0] == pytest.approx(((128 / 255 + 0.055) / 1.055) ** 2.4, rel=1e-6)
+    np.testing.assert_allclose(read_photo(tmp_path / "a.png", "linear"), levels / 255.0, rtol=1e-6)
+    wide = (np.arange(256, dtype=np.uint16) * 257).reshape(16, 16)
+    cv2.imwrite(str(tmp_path / "b.png"), wide)
+    np.testing.assert_allclose(read_photo(tmp_path / "b.png"), wide / 65535.0, rtol=1e-6)
+
+
+def test_colour_becomes_grey_as_opencv_does(tmp_path):
+    rng = np.random.default_rng(1)
+    bgr = rng.integers(0, 256, (8, 9, 3), dtype=np.uint8)
+    cv2.imwrite(str(tmp_path / "c.png"), bgr)
+    grey = cv2.cvtColor(bgr, cv2.COLOR_BGR2GRAY)
+    np.testing.assert_allclose(read_photo(tmp_path / "c.png", "linear"), grey / 255.0, rtol=1e-6)
+
+
+def test_unreadable_and_missing(tmp_path):
+    (tmp_path / "x.jpg").write_bytes(b"not a jpeg")
+    with pytest.raises(PhotoError, match="x.jpg: not an image"):
+        read_photo(tmp_path / "x.jpg")
+    with pytest.raises(PhotoError, match="no such file"):
+        read_photo(tmp_path / "y.jpg")
+    with pytest.raises(PhotoError, match="encoding"):
+        read_photo(tmp_path / "x.jpg", "gamma")
+
+
+def _folder(root, left, right, size=(10, 8)):
+    for view, names in (("left", left), ("right", right)):
+        (root / view).mkdir(parents=True, exist_ok=True)
+        for name in names:
+            w, h = size[name] if isinstance(size, dict) else size
+            cv2.imwrite(str(root / view / name), np.zeros((h, w), np.uint8))
+    return root
+
+
+def test_pairs_by_stem_ignore_other_files(tmp_path):
+    root = _folder(tmp_path / "p", ["1.png", "2.jpg"], ["1.tif", "2.png"])
+    (root / "left" / "notes.txt").write_text("ignored")
+    pairs = photo_folder(root)
+    assert pairs.names == ("1", "2")
+    images, size = read_pairs(pairs)
+    assert size == (10, 8) and len(images) == 2
+
+
+def test_folder_problems_are_named(tmp_path):
+    with pytest.raises(PhotoError, match="no right folder"):
+        photo_folder(_only_left(tmp_path / "a"))
+    with pytest.raises(PhotoError, match="3.png: no photo of the same name"):
+        photo_folder(_folder(tmp_path / "b", ["1.png", "3.png"], ["1.png"]))
+    with pytest.raises(PhotoError, match="no photos"):
+        photo_folder(_folder(tmp_path / "c", [], []))
+    mixed = _folder(tmp_path / "d", ["1.png", "2.png"], ["1.png", "2.png"],
+                    {"1.png": (10, 8), "2.png": (12, 8)})
+    with pytest.raises(PhotoError, match="12x8 px, but .*1.png is 10x8 px"):
+        read_pairs(photo_folder(mixed))
+
+
+def _only_left(root):
+    (root / "left").mkdir(parents=True)
+    return root
