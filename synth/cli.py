@@ -147,6 +147,35 @@ positive_float = finite_float(0.0, strict=True, description="positive finite")
 non_negative_float = finite_float(0.0, description="non-negative finite")
 
 
+class WaterIndex(float):
+    """The float :func:`water_index_argument` returns; ``note`` says how it was computed from
+    temperature and salinity (None for a plain number), to be printed once to the user."""
+
+    note: str | None = None
+
+    def __new__(cls, value: float, note: str | None = None):
+        self = super().__new__(cls, value)
+        self.note = note
+        return self
+
+
+def water_index_argument(text: str) -> float:
+    """An argparse type: a water index, as a number (``1.339``) or from the water's temperature
+    and salinity, ``T=12,S=35[,wavelength=550]`` (°C, PSU, nm; Quan & Fry 1995,
+    :mod:`measure.water_index`). Returns a :class:`WaterIndex` whose ``note`` says how."""
+    from measure.water_index import WaterIndexError, parse_water_index
+
+    try:
+        value, note = parse_water_index(text)
+    except WaterIndexError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+    return WaterIndex(value, note)
+
+
+#: Help of the options that take a water index.
+WATER_INDEX_HELP = ("water index: a number, or T=<°C>,S=<PSU>[,wavelength=<nm>] for Quan & Fry "
+                    "1995's index of that water (0–30 °C, 0–35 PSU, 400–700 nm; default 550 nm)")
+
 #: Help of ``--json`` everywhere.
 JSON_HELP = "print the report as JSON to stdout (the summary then goes to stderr)"
 #: Help of ``-D`` everywhere.
@@ -333,4 +362,5 @@ __all__ = ["DEFINE_HELP", "DISTRIBUTION", "EXIT_BAD_INPUT", "EXIT_CHECK_FAILED",
            "add_scene_argument", "any_float", "CLIError", "command_parser", "finite_float",
            "given", "int_at_least", "non_negative_float", "non_negative_int", "one_line",
            "package_version", "Parser", "positive_float", "positive_int", "process_main",
-           "refuse_given", "run_command", "scene_seed"]
+           "refuse_given", "run_command", "scene_seed", "WATER_INDEX_HELP", "WaterIndex",
+           "water_index_argument"]

@@ -51,6 +51,8 @@ import numpy as np
 from measure import Camera, FlatPort, StereoRig
 from measure.projection import project
 
+from synth.calib_formats import (CalibFormatError, calib_dict, calib_format, read_calibmar,
+                                 read_colmap, stereo_extrinsics)
 from synth.fileio import OutputDir, file_sha256, read_marker
 from synth.integrator import RENDERER
 from synth.provenance import package_versions
@@ -69,13 +71,6 @@ class DatasetError(ValueError):
 # ---------------------------------------------------------------------------------------------
 # calibration in OpenCV's stereo convention
 # ---------------------------------------------------------------------------------------------
-def stereo_extrinsics(left: Camera, right: Camera) -> tuple[np.ndarray, np.ndarray]:
-    """OpenCV's stereo ``R, T`` (``X_right = R·X_left + T``) from two camera-to-reference poses."""
-    R = right.R.T @ left.R
-    T = right.R.T @ (left.t - right.t)
-    return R, T
-
-
 def _dist5(camera: Camera) -> np.ndarray:
     return np.zeros(5) if camera.dist is None else camera.dist.copy()
 
@@ -138,14 +133,24 @@ def _seq(node) -> list[float]:
 
 
 def read_calib(path) -> dict:
-    """Read ``calib.yaml``: a dict with ``size``, ``K1``, ``D1``, ``K2``, ``D2``, ``R``, ``T``,
-    ``port`` (:class:`measure.FlatPort`), ``has_port`` and ``rig`` (:class:`measure.StereoRig`,
-    the left camera at the reference origin). Anything unreadable or inconsistent raises
+    """Read a stereo calibration: a dict with ``size``, ``K1``, ``D1``, ``K2``, ``D2``, ``R``,
+    ``T``, ``port`` (:class:`measure.FlatPort`), ``has_port`` and ``rig``
+    (:class:`measure.StereoRig`, the left camera at the reference origin). The file is this
+    project's ``calib.yaml``, a calibmar stereo calibration (either of its two YAML files) or
+    the COLMAP fork's ``cameras.txt`` with ``rig_config.json`` beside it, told apart by content
+    (:mod:`synth.calib_formats`). Anything unreadable or inconsistent raises
     :class:`DatasetError` naming the file."""
+    kind = calib_format(path) if os.path.isfile(path) else "opencv"
     try:
+        if kind == "calibmar":
+            return read_calibmar(path)
+        if kind == "colmap":
+            return read_colmap(path)
         return _read_calib(path)
     except DatasetError:
         raise
+    except CalibFormatError as exc:  # its message starts with the file
+        raise DatasetError(str(exc)) from None
     except (cv2.error, SystemError):  # OpenCV's parser: not YAML/XML FileStorage
         raise DatasetError(f"{path}: not a valid OpenCV FileStorage calibration file") from None
     except (ValueError, TypeError, AttributeError) as exc:
@@ -178,13 +183,8 @@ def _read_calib(path) -> dict:
         out["has_port"] = bool(present.real()) if not present.empty() else True
     finally:
         fs.release()
-    if out["R"].shape != (3, 3) or out["T"].size != 3:
-        raise DatasetError(f"{path}: R must be 3x3 and T 3x1")
-    left = Camera(out["K1"], out["size"], dist=out["D1"].ravel())
-    R, T = out["R"], out["T"].ravel()
-    right = Camera(out["K2"], out["size"], dist=out["D2"].ravel(), R=R.T, t=-R.T @ T)
-    out["rig"] = StereoRig(left, right, out["port"])
-    return out
+    return calib_dict(out["size"], out["K1"], out["D1"], out["K2"], out["D2"], out["R"],
+                      out["T"], out["port"], out["has_port"], str(path))
 
 
 # ---------------------------------------------------------------------------------------------

@@ -6,7 +6,8 @@ triangulation and the eccentricity correction; scoring compares with the true ta
 cross-check with the simulator uses the true rig. Names (units mm, pixels; vectors as
 space-separated numbers):
 
-``n_water``, ``n_glass`` (the first layer's index), ``port_distance`` (D), ``glass_thickness``
+``n_water`` (or the water's temperature and salinity: ``n_water=T=12,S=35[,wavelength=550]``,
+Quan & Fry 1995), ``n_glass`` (the first layer's index), ``port_distance`` (D), ``glass_thickness``
 (the first layer), ``port_normal`` (3 values, normalized), ``focal`` (fx = fy of both cameras),
 ``left_focal``, ``right_focal``, ``left_dist``, ``right_dist`` (4, 5 or 8 OpenCV coefficients).
 """
@@ -22,8 +23,22 @@ ASSUMABLE = ("n_water", "n_glass", "port_distance", "glass_thickness", "port_nor
 _PORT_NAMES = ("n_water", "n_glass", "port_distance", "glass_thickness", "port_normal")
 
 
-def parse_assumptions(items) -> dict:
-    """``["name=value", …]`` → ``{name: numpy array}``; ValueError naming a bad item."""
+def _water_index(item, text: str):
+    """``(array, note)`` of an ``n_water`` value given as ``T=…,S=…[,wavelength=…]``."""
+    from measure.water_index import WaterIndexError, parse_water_index
+
+    try:
+        value, note = parse_water_index(text)
+    except WaterIndexError as exc:
+        raise ValueError(f"--assume {item!r}: {exc}") from None
+    return np.array([value]), note
+
+
+def parse_assumptions(items, notes: list | None = None) -> dict:
+    """``["name=value", …]`` → ``{name: numpy array}``; ValueError naming a bad item.
+    ``n_water`` also takes the water's temperature and salinity, ``n_water=T=12,S=35[,
+    wavelength=550]`` (Quan & Fry 1995, :mod:`measure.water_index`); the sentence saying which
+    index that gave is appended to ``notes`` (when given), to be shown to the user once."""
     out = {}
     for item in items or ():
         name, sep, text = str(item).partition("=")
@@ -31,6 +46,11 @@ def parse_assumptions(items) -> dict:
         if not sep or name not in ASSUMABLE:
             raise ValueError(f"--assume {item!r}: expected name=value with name one of "
                              f"{', '.join(ASSUMABLE)}")
+        if name == "n_water" and "=" in text:
+            out[name], note = _water_index(item, text)
+            if notes is not None:
+                notes.append(note)
+            continue
         try:
             value = np.array([float(v) for v in text.replace(",", " ").split()], dtype=float)
         except ValueError:

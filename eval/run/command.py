@@ -54,10 +54,13 @@ def add_parser(subparsers):
                         help="what the measurement believes, when it differs from the rendered "
                              "truth (repeatable): n_water, n_glass, port_distance, "
                              "glass_thickness, port_normal, focal, left_focal, right_focal, "
-                             "left_dist, right_dist")
+                             "left_dist, right_dist; n_water=T=<°C>,S=<PSU>[,wavelength=<nm>] "
+                             "computes the index (Quan & Fry 1995)")
     parser.add_argument("--calib", metavar="FILE",
-                        help="measure with this calib.yaml (as datasets write it) instead of the "
-                             "scene's rig; --assume applies on top")
+                        help="measure with this calibration instead of the scene's rig: a "
+                             "calib.yaml (as datasets write it), a calibmar stereo YAML or the "
+                             "COLMAP fork's cameras.txt with rig_config.json beside it; --assume "
+                             "applies on top")
     parser.add_argument("--compare-calib", action="append", default=[], metavar="FILE",
                         help="error budget: also measure the same detections with this "
                              "calib.yaml (repeatable); with --calib or --assume the exact "
@@ -105,6 +108,8 @@ def main(args) -> int:
     quiet = args.no_progress
     log = (lambda text: None) if quiet else (lambda text: print(text, file=sys.stderr, flush=True))
     config = RunConfig.from_args(args)
+    for note in config.assumption_notes:  # e.g. n_water computed from T and S
+        log(note)
     if dense.is_surface_scene(config.scene):
         return dense.main(config, args.out, args.json, log)
     config.target_methods()  # refuses an unknown --methods before any expensive work

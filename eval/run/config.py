@@ -33,7 +33,8 @@ class RunConfig:
     (:func:`eval.core.assumption.parse_assumptions`); ``methods``: None for the default of
     the scene's kind (targets: :data:`DEFAULT_METHODS`; surfaces: both dense methods);
     ``depth_range_mm``: ``(near, far)`` along the port normal or None for the default;
-    ``sensor``: a :class:`synth.sensor_model.SensorModel` or None."""
+    ``sensor``: a :class:`synth.sensor_model.SensorModel` or None; ``assumption_notes``: how
+    an assumed value was computed (``n_water`` from temperature and salinity), to show once."""
 
     scene: str
     defines: tuple = ()
@@ -56,6 +57,7 @@ class RunConfig:
     median_filter: int = 0
     sensor: object = None
     progress: bool = True
+    assumption_notes: tuple = ()
 
     def target_methods(self) -> tuple:
         """The triangulation methods of a target run; CLIError names an unknown one."""
@@ -83,9 +85,10 @@ class RunConfig:
 
         from eval.core.assumption import parse_assumptions
 
+        notes = []
         config = cls(scene=args.scene, defines=tuple(parse_defines(args.defines).items()),
                    seed=args.seed, from_dir=args.from_dir, spp=args.spp, variant=args.variant,
-                   assumptions=parse_assumptions(args.assume), calib=args.calib,
+                   assumptions=parse_assumptions(args.assume, notes), calib=args.calib,
                    compare_calib=tuple(args.compare_calib),
                    methods=None if args.methods is None else split_names(args.methods),
                    noise_px=args.noise_px, gate_mm=args.gate_mm,
@@ -94,7 +97,7 @@ class RunConfig:
                    eccentricity=args.eccentricity, threshold_fraction=args.threshold_fraction,
                    max_elongation=args.max_elongation, max_area_ratio=args.max_area_ratio,
                    median_filter=args.median_filter, sensor=parse_sensor(args.sensor),
-                   progress=not args.no_progress)
+                   progress=not args.no_progress, assumption_notes=tuple(notes))
         config.refuse_inapplicable()
         return config
 

@@ -5,9 +5,11 @@ write a Mitsuba scene of the paper's rig, a port (or none) and targets or a spec
 from __future__ import annotations
 
 import os
+import sys
 
-from synth.cli import (CLIError, add_out_option, any_float, non_negative_float, non_negative_int,
-                       positive_float, positive_int, refuse_given, scene_seed)
+from synth.cli import (WATER_INDEX_HELP, CLIError, add_out_option, any_float,
+                       non_negative_float, non_negative_int, positive_float, positive_int,
+                       refuse_given, scene_seed, water_index_argument)
 
 #: The first comment of every scene file ``python -m synth scene`` writes.
 SCENE_COMMENT_PREFIX = "written by python -m synth scene"
@@ -73,7 +75,8 @@ def add_parser(subparsers) -> None:
     p.add_argument("--layout-seed", type=non_negative_int, default=0, help="seed of the random layout")
     p.add_argument("--port", choices=("paper", "none"), default="paper",
                    help="the paper's air-glass-water port, or none (all air)")
-    p.add_argument("--n-water", type=positive_float, help="water index (default 1.33)")
+    p.add_argument("--n-water", type=water_index_argument,
+                   help=f"{WATER_INDEX_HELP}; default 1.33")
     p.add_argument("--n-glass", type=positive_float, help="glass index (default 1.54)")
     p.add_argument("--port-distance", type=positive_float, help="D, mm (default 100)")
     p.add_argument("--glass-thickness", type=positive_float, help="d, mm (default 5)")
@@ -165,7 +168,9 @@ def main(args) -> int:
         if args.n_glass is not None:
             n[1] = args.n_glass
         if args.n_water is not None:
-            n[2] = args.n_water
+            n[2] = float(args.n_water)
+            if getattr(args.n_water, "note", None):
+                print(args.n_water.note, file=sys.stderr)
         tilt = np.radians(args.port_tilt)
         if np.any(np.abs(tilt) >= np.radians(30)):
             raise CLIError(f"--port-tilt must stay below 30 degrees, got {args.port_tilt}")
