@@ -70,12 +70,15 @@ def median_filtered(image, size: int) -> np.ndarray:
 
 def detect_view(image, threshold_fraction: float | None = None,
                 max_elongation: float | None = None, max_area_ratio: float | None = None,
-                median_filter: int = 0, return_labels: bool = False):
+                median_filter: int = 0, floor_fraction: float = 0.0,
+                return_labels: bool = False):
     """The targets of one view (:func:`measure.detect_targets`) with the detector options:
     ``median_filter`` first (:func:`median_filtered`), a fixed threshold at
     ``threshold_fraction`` of the way from the background to the targets' level
     (:func:`measure.detect.fractional_threshold`) or the automatic one (None), and the merge
-    tests' limits (None: the detector's defaults)."""
+    tests' limits (None: the detector's defaults); ``floor_fraction``: the automatic threshold
+    is at least that fraction of the way to the targets' level (JPEG ringing; see
+    :func:`measure.detect_targets`)."""
     from measure import detect_targets
     from measure.detect import MERGE_AREA_RATIO, MERGE_ELONGATION, fractional_threshold
 
@@ -86,7 +89,8 @@ def detect_view(image, threshold_fraction: float | None = None,
                           merge_elongation=MERGE_ELONGATION if max_elongation is None
                           else max_elongation,
                           merge_area_ratio=MERGE_AREA_RATIO if max_area_ratio is None
-                          else max_area_ratio, return_labels=return_labels)
+                          else max_area_ratio, floor_fraction=floor_fraction,
+                          return_labels=return_labels)
 
 
 __all__ = ["ABOVE_ONE", "DETECTOR_OPTIONS", "add_detector_options", "detect_view", "fraction",
