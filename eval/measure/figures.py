@@ -2,9 +2,9 @@
 
 Targets: accepted detections (green circles), rejected blobs (red crosses), the matched pairs
 (blue lines from left to right), detections left unmatched (orange). Dense: the matched left
-pixels of the first method shaded over the left photo. The photos are shown as stored (no gamma:
-a photo is already encoded for display), scaled to their 99.9th percentile. matplotlib, Agg
-canvas only. Coordinates: pixels, OpenCV convention.
+pixels of the first method shaded over the left photo. The photos (linear, as read) are shown
+with an sRGB-like gamma, their 99.9th percentile as white. matplotlib, Agg canvas only.
+Coordinates: pixels, OpenCV convention.
 """
 
 from __future__ import annotations
@@ -17,7 +17,7 @@ from eval.core.figures import new_figure, save_figure
 def _display(image: np.ndarray) -> np.ndarray:
     image = np.asarray(image, dtype=np.float32)
     white = float(np.percentile(image, 99.9)) or float(image.max()) or 1.0
-    return np.clip(image / white, 0, 1)
+    return np.clip(image / white, 0, 1) ** (1 / 2.2)
 
 
 def views_figure(path, result, method: str | None = None) -> None:
@@ -52,7 +52,8 @@ def views_figure(path, result, method: str | None = None) -> None:
             ys = np.vstack([result.uv_left[:, 1], result.uv_right[:, 1]])
             ax.plot(xs, ys, color="deepskyblue", linewidth=0.25, alpha=0.6)
             ax.plot([], [], color="deepskyblue", label=f"matched pair ({len(result.uv_left)})")
-        ax.legend(loc="lower center", ncol=4, fontsize=8)
+        if ax.get_legend_handles_labels()[0]:
+            ax.legend(loc="lower center", ncol=4, fontsize=8)
         title = f"{result.name}: left | right, detections and matches"
     else:
         uv = result.uv_left.get(method, np.zeros((0, 2))) if method else np.zeros((0, 2))
