@@ -14,8 +14,9 @@ import numpy as np
 
 from eval.core.formatting import format_number as fmt
 
-#: Columns of ``points.csv``: the pair, the method, the point (mm), the gap of the two water
-#: rays (mm) and the pixels (px) it was triangulated from.
+#: Columns of ``points.csv``: the pair, the method, the point (mm), the gap of the method's two
+#: final rays (the water rays, or for ``regular`` the straight rays; mm) and the pixels (px) it
+#: was triangulated from.
 CSV_COLUMNS = ("pair", "method", "x_mm", "y_mm", "z_mm", "gap_mm", "u_left", "v_left",
                "u_right", "v_right")
 
@@ -178,8 +179,9 @@ def report_markdown(report: dict) -> str:
     for method, m in s["methods"].items():
         lines.append(f"| {method} | {m['points']} | {fmt(m['rms_mm'], 4)} | "
                      f"{fmt(m['median_mm'], 4)} | {fmt(m['max_mm'], 4)} |")
-    lines += ["", "Gap: the length of the common perpendicular of the two water rays of a point "
-              "(0 for a perfect calibration and perfect pixels). Plane: the least-squares plane "
+    lines += ["", "Gap: the length of the common perpendicular of the two final rays of a point "
+              "(the water rays; for regular the straight rays): 0 for a perfect calibration and "
+              "perfect pixels. Plane: the least-squares plane "
               "of the pair's points (all of them), its normal towards the cameras, the RMS and "
               "largest distance of the points from it.", "", "## Files", "",
               f"- `points.ply`: the {report['methods'][0]} points of every pair (mm, binary PLY)",
