@@ -22,7 +22,8 @@ from synth.cli import (CLIError, Parser, command_parser, non_negative_float, non
 
 #: The module of each subcommand, in the order ``--help`` lists them.
 SUBCOMMANDS = ("eval.run.command", "eval.score", "eval.paper.command", "eval.sweep.command",
-               "eval.calibrate.command", "eval.bench", "eval.render_bench")
+               "eval.calibrate.command", "eval.measure.command", "eval.bench",
+               "eval.render_bench")
 
 
 def build_parser() -> Parser:

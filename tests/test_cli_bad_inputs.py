@@ -196,6 +196,8 @@ def _assert_refused(code, capsys, before, workdir, fragment=None):
 RUN = ["run", "paper_plane.xml", "--out", "out", *SMALL]
 RUN_SMALL = ["run", "small.xml", "--out", "out", "--spp", "4", "--no-progress"]
 RUN_FROM = ["run", "small.xml", "--out", "out", "--from", "ds", "--no-progress"]
+MEASURE = ["measure", "--calib", "ds/calib.yaml", "ds/left.png", "ds/right.png", "--out", "out",
+           "--quiet"]
 EVAL_CASES = [
     # data loss
     ("user_dir", RUN, "did not write"),
@@ -324,6 +326,14 @@ EVAL_CASES = [
     (None, ["paper", "--trials", "0", "--out", "p"], "--trials"),
     (None, ["paper", "--seed", "-1", "--out", "p"], "--seed"),
     (None, ["no_such_command"], "no_such_command"),
+    # measure: a user's photos (here the dataset's 16-bit renders) with a calibration
+    ("user_dir", MEASURE, "did not write"),
+    (None, MEASURE[:-3] + ["--out", ".", "--quiet"], "did not write"),
+    ("out_file", MEASURE, "not a directory"),
+    ("garbage_calib", MEASURE, "calib.yaml"),
+    (None, MEASURE + ["--depth-range", "3000,4000"], "no target was matched"),
+    (None, ["measure", "--calib", "ds/calib.yaml", "ds/left.png", "small.xml", "--out", "out"],
+     "small.xml"),
 ]
 
 SCENE = ["scene", "--out", "x.xml"]

@@ -11,7 +11,8 @@ from synth.cli import DEFINE_HELP, JSON_HELP, NO_PROGRESS_HELP, SCENE_HELP
 
 #: Subcommands that show progress (long work): each takes --no-progress.
 WITH_PROGRESS = {("eval", "run"), ("eval", "paper"), ("eval", "sweep"), ("eval", "calibrate"),
-                 ("eval", "bench"), ("eval", "render-bench"), ("synth", "render"),
+                 ("eval", "bench"), ("eval", "render-bench"), ("eval", "measure"),
+                 ("synth", "render"),
                  ("synth", "dataset"), ("synth", "boards")}
 #: Subcommands that read a scene file: each takes it as the positional ``scene``.
 WITH_SCENE = {("eval", "run"), ("eval", "render-bench"), ("synth", "render"),
@@ -41,7 +42,7 @@ SUBCOMMANDS = list(_subcommands())
 def test_every_subcommand_is_walked():
     names = {(prog, name) for prog, name, _ in SUBCOMMANDS}
     assert WITH_PROGRESS <= names and WITH_SCENE <= names
-    assert len(names) == 13
+    assert len(names) == 14
 
 
 @pytest.mark.parametrize("prog, name, parser", SUBCOMMANDS,

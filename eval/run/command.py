@@ -14,14 +14,12 @@ import time
 
 from eval.cli import non_negative_float, positive_float, positive_int
 from eval.core.formatting import format_number as fmt
-from eval.run.config import COMMAND, RunConfig, fraction
+from eval.core.detection import add_detector_options
+from eval.run.config import COMMAND, RunConfig
 from eval.run.report import (budget_table, report_markdown, summary_table, verdict_exit_code,
                              write_outputs)
 from synth.cli import (add_define_option, add_json_option, add_out_option, add_progress_option,
-                       add_scene_argument, finite_float, scene_seed)
-
-#: argparse type of --max-elongation and --max-area-ratio (a blob's axis or area ratio).
-ABOVE_ONE = finite_float(1.0, strict=True, description="finite (> 1)")
+                       add_scene_argument, scene_seed)
 
 
 def add_parser(subparsers):
@@ -72,23 +70,7 @@ def add_parser(subparsers):
     parser.add_argument("--eccentricity", action="store_true",
                         help="also measure with the detected centres corrected for the disk "
                              "targets' eccentricity (reported beside the uncorrected numbers)")
-    parser.add_argument("--threshold-fraction", type=fraction, default=None, metavar="F",
-                        help="detect with a fixed threshold F of the way from the background "
-                             "(median) to the targets' level (99.99th percentile) instead of the "
-                             "automatic one (median + 5 noise sigmas, or a quarter of the "
-                             "targets' level on a speckled background such as scattering water)")
-    parser.add_argument("--max-elongation", type=ABOVE_ONE, default=None, metavar="E",
-                        help="blobs more elongated than E (major/minor axis) are examined for "
-                             "merged targets (default 1.6): merged when their outline has a "
-                             "waist or a hole; a single target seen obliquely has neither")
-    parser.add_argument("--median-filter", type=int, choices=(3, 5), default=0, metavar="K",
-                        help="median-filter each view (K×K, 3 or 5) before detection: removes "
-                             "the fireflies of lights seen through scattering water (lit "
-                             "targets) that pull the centroids; default: no filter")
-    parser.add_argument("--max-area-ratio", type=ABOVE_ONE, default=None, metavar="A",
-                        help="blobs larger than A times the median blob are examined for merged "
-                             "targets (default 2.5): merged when their outline has a waist or a "
-                             "hole; a near target, larger than the others, has neither")
+    add_detector_options(parser)
     parser.add_argument("--sensor", metavar="PRESET[,name=value…]",
                         help="pass the rendered images through a camera sensor (exposure, shot "
                              "and read noise, dark level, gain, bit depth), seeded: preset "

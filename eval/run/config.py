@@ -13,11 +13,11 @@ Units: millimetres and pixels, as the field names say.
 
 from __future__ import annotations
 
-import argparse
 import math
 from dataclasses import dataclass, field
 
 from eval.cli import CLIError
+from eval.core.detection import fraction
 
 #: Triangulation methods of a target run when ``--methods`` is not given.
 DEFAULT_METHODS = ("optical_path", "su", "regular")
@@ -155,17 +155,6 @@ def parse_depth_range(text):
     if not (math.isfinite(near) and math.isfinite(far) and 0 <= near < far):
         raise CLIError(f"--depth-range must satisfy 0 <= NEAR < FAR (finite), got {text!r}")
     return near, far
-
-
-def fraction(text: str) -> float:
-    """argparse type: a number strictly between 0 and 1."""
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
-    if not 0 < value < 1:
-        raise argparse.ArgumentTypeError(f"must be between 0 and 1 (exclusive), got {text}")
-    return value
 
 
 __all__ = ["COMMAND", "DEFAULT_METHODS", "RunConfig", "fraction", "parse_depth_range",

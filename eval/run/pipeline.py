@@ -14,14 +14,15 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from measure import detect_targets, triangulate
+from measure import triangulate
 from measure.detect import (MERGE_AREA_RATIO as DEFAULT_MAX_AREA_RATIO,
-                            MERGE_ELONGATION as DEFAULT_MAX_ELONGATION, fractional_threshold)
+                            MERGE_ELONGATION as DEFAULT_MAX_ELONGATION)
 from measure.eccentricity import correct_eccentricity, outline_centroid_offsets
 from measure.matching import match_targets
 from synth.crosscheck import ASSOCIATION_GATE_PX, associate_detections, distance_stats
 from synth.noise import add_pixel_noise
 
+from eval.core.detection import detect_view
 from eval.core.cloud_metrics import cloud_distances, flatness, rigid_alignment
 from eval.core.results import ErrorStats, MethodScores
 from eval.run.config import RunConfig
@@ -63,14 +64,8 @@ def detect_stage(inputs: RunInputs, noise_px: float, threshold_fraction: float |
     removes isolated bright pixels — the fireflies of lights seen through scattering water —
     that would otherwise pull the centroids; 0 (default): no filter."""
     def detect(image):
-        if median_filter:
-            import cv2
-
-            image = cv2.medianBlur(np.asarray(image, dtype=np.float32), int(median_filter))
-        threshold = (None if threshold_fraction is None
-                     else fractional_threshold(image, threshold_fraction))
-        return detect_targets(image, threshold=threshold, merge_elongation=max_elongation,
-                              merge_area_ratio=max_area_ratio)
+        return detect_view(image, threshold_fraction, max_elongation, max_area_ratio,
+                           median_filter)
 
     detections = {"left": detect(inputs.left), "right": detect(inputs.right)}
     centers = {name: np.array(d.centers, dtype=float).reshape(-1, 2)

@@ -1,0 +1,202 @@
+"""``python -m eval measure`` end to end on small renders exported as 8-bit sRGB PNG photos
+(``synth photos --format png``): the measured points against the dataset's truth, ``eval score``
+on the written cloud, several pairs, dense matching; and the bad inputs (exit 2, one ``error:``
+line, no output directory left).
+
+The bounds come from measuring these very cases (numbers in the comments: 2026-12-02, 2 cores),
+with margin for the renderer."""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+import shutil
+
+import cv2
+import numpy as np
+import open3d as o3d
+import pytest
+
+from eval.cli import main as eval_main
+from synth.__main__ import main as synth_main
+from synth.dataset import write_calib, write_dataset
+from synth.rig import paper_cameras, paper_port
+
+SPP = 16
+COLUMNS = ["pair", "method", "x_mm", "y_mm", "z_mm", "gap_mm", "u_left", "v_left", "u_right",
+           "v_right"]
+
+
+@pytest.fixture(scope="module")
+def photos(small_scene, tmp_path_factory):
+    """The small target scene rendered as a dataset and exported as 8-bit sRGB PNG photos."""
+    root = tmp_path_factory.mktemp("measure")
+    write_dataset(small_scene, root / "ds", spp=SPP, progress=False)
+    assert synth_main(["photos", str(root / "ds"), "--out", str(root / "ph"), "--format",
+                       "png"]) == 0
+    return root
+
+
+def _nearest(points, truth):
+    from scipy.spatial import cKDTree
+
+    return cKDTree(truth).query(points)[0]
+
+
+@pytest.mark.slow
+def test_one_pair_measures_the_targets_and_eval_score_reads_the_cloud(photos, capsys):
+    root, out = photos, photos / "out"
+    assert eval_main(["measure", "--calib", str(root / "ds" / "calib.yaml"),
+                      str(root / "ph" / "left" / "pair.png"), str(root / "ph" / "right" / "pair.png"),
+                      "--out", str(out), "--methods", "optical_path,regular", "--quiet"]) == 0
+    printed = capsys.readouterr().out
+    assert "1 pair(s), 1 measured: 81 targets matched" in printed and f"wrote {out}" in printed
+    report = json.loads((out / "report.json").read_text())
+    pair = report["pairs"][0]
+    # measured here: 81 of 81 detected and matched, none ambiguous; gap RMS 0.116 mm
+    assert pair["detected"] == {"left": 81, "right": 81} and pair["matched"] == 81
+    assert pair["ambiguous"] == 0 and pair["unmatched"] == {"left": 0, "right": 0}
+    optical = pair["methods"]["optical_path"]
+    assert optical["points"] == 81 and optical["gap"]["rms_mm"] < 0.3
+    # the plane Z = 1000 mm, facing the cameras: plane RMS 0.54 mm here
+    plane = optical["plane"]
+    assert plane["normal"][2] < -0.999 and abs(plane["distance_mm"] - 1000) < 2
+    assert plane["rms_mm"] < 2
+    text = json.dumps(report)
+    for word in ("truth", "correct", "wrong", "dP", "targets.ply"):
+        assert word not in text
+    # the honest end-to-end test: every point near its true target (RMS 0.78 mm, max 2.4 mm)
+    truth = np.asarray(o3d.io.read_point_cloud(str(root / "ds" / "targets.ply")).points)
+    cloud = np.asarray(o3d.io.read_point_cloud(str(out / "points.ply")).points)
+    assert len(cloud) == 81
+    distance = _nearest(cloud, truth)
+    assert np.sqrt(np.mean(distance ** 2)) < 2.0 and distance.max() < 5.0
+    # the regular method (port ignored) is ~300 mm off
+    regular = np.asarray(o3d.io.read_point_cloud(str(out / "points_regular.ply")).points)
+    assert np.median(_nearest(regular, truth)) > 50
+    with open(out / "points.csv", newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    assert list(rows[0]) == COLUMNS and len(rows) == 162
+    first = [r for r in rows if r["method"] == "optical_path"]
+    assert np.allclose([[float(r[c]) for c in ("x_mm", "y_mm", "z_mm")] for r in first], cloud,
+                       atol=1e-5)
+    assert (out / "views.png").stat().st_size > 1000 and (out / "report.md").stat().st_size > 500
+    # eval score accepts the written cloud against the dataset
+    assert eval_main(["score", str(root / "ds"), "--points", str(out / "points.ply"), "--out",
+                      str(root / "score"), "--json"]) == 0
+    scored = json.loads(capsys.readouterr().out)
+    assert scored["methods"]["theirs"]["n"] == 81
+    assert scored["methods"]["theirs"]["rms_dp_mm"] < 2.0
+
+
+@pytest.mark.slow
+def test_folders_pair_by_name_and_a_pair_with_nothing_matched_is_reported(photos, capsys):
+    root = photos
+    folders = root / "many"
+    for view in ("left", "right"):
+        (folders / view).mkdir(parents=True)
+        for name in ("a", "b"):
+            shutil.copy(root / "ph" / view / "pair.png", folders / view / f"{name}.png")
+        cv2.imwrite(str(folders / view / "c.png"), np.zeros((268, 320), np.uint8))  # black
+    out = root / "many_out"
+    assert eval_main(["measure", "--calib", str(root / "ds" / "calib.yaml"),
+                      str(folders / "left"), str(folders / "right"), "--out", str(out),
+                      "--quiet"]) == 0
+    captured = capsys.readouterr()
+    assert "3 pair(s), 2 measured: 162 targets matched" in captured.out
+    assert "warning: c: no target was matched" in captured.err
+    report = json.loads((out / "report.json").read_text())
+    assert [p["name"] for p in report["pairs"]] == ["a", "b", "c"]
+    assert report["pairs"][2]["problem"] and report["pairs"][2]["detected"] == {"left": 0,
+                                                                                "right": 0}
+    assert report["summary"]["problems"] == [report["pairs"][2]["problem"]]
+    assert len(o3d.io.read_point_cloud(str(out / "points.ply")).points) == 162
+    for name in ("a", "b", "c"):
+        assert (out / f"views_{name}.png").is_file()
+    with open(out / "points.csv", newline="") as fh:
+        assert {r["pair"] for r in csv.DictReader(fh)} == {"a", "b"}
+
+
+@pytest.mark.slow
+def test_dense_measures_a_speckled_plane(tmp_path, capsys):
+    scene = str(tmp_path / "plane.xml")
+    assert synth_main(["scene", "--layout", "surface", "--surface", "plane", "--size", "320",
+                       "268", "--speckle-size", "12", "--out", scene]) == 0
+    write_dataset(scene, tmp_path / "ds", spp=SPP, progress=False)
+    assert synth_main(["photos", str(tmp_path / "ds"), "--out", str(tmp_path / "ph"),
+                       "--format", "png"]) == 0
+    calib, out = str(tmp_path / "ds" / "calib.yaml"), tmp_path / "out"
+    left, right = str(tmp_path / "ph" / "left"), str(tmp_path / "ph" / "right")
+    # the target options are refused with --dense, never ignored
+    assert eval_main(["measure", "--calib", calib, left, right, "--dense", "--depth-range",
+                      "900,1100", "--threshold-fraction", "0.3", "--out", str(out)]) == 2
+    assert "--threshold-fraction does not apply with --dense" in capsys.readouterr().err
+    assert not out.exists()
+    assert eval_main(["measure", "--calib", calib, left, right, "--dense", "--depth-range",
+                      "900,1100", "--out", str(out), "--quiet"]) == 0
+    report = json.loads((out / "report.json").read_text())
+    assert report["mode"] == "dense"
+    # measured here: 69894 pixels, 0.59 mm RMS from the true surface, plane RMS 0.53 mm
+    matched = report["pairs"][0]["matched"]["optical_path"]
+    assert matched > 50000
+    with open(out / "points.csv", newline="") as fh:
+        rows = np.array([[float(r[c]) for c in COLUMNS[2:]] for r in csv.DictReader(fh)])
+    assert len(rows) == matched
+    truth = np.load(tmp_path / "ds" / "left_truth_points.npy")
+    true = truth[rows[:, 5].astype(int), rows[:, 4].astype(int)]
+    error = np.linalg.norm(rows[:, :3] - true, axis=1)
+    assert np.sqrt(np.nanmean(error ** 2)) < 1.0
+    plane = report["pairs"][0]["methods"]["optical_path"]["plane"]
+    assert abs(plane["distance_mm"] - 1000) < 2 and plane["rms_mm"] < 1.0
+    assert len(o3d.io.read_point_cloud(str(out / "points.ply")).points) == matched
+
+
+# --- bad inputs: no render needed --------------------------------------------------------------
+@pytest.fixture
+def user(tmp_path, monkeypatch):
+    """A working folder with the small rig's calibration, a calibration of the full-size rig,
+    black photos of the small size (nothing to detect) and a file that is no image."""
+    monkeypatch.chdir(tmp_path)
+    from measure import StereoRig
+
+    for name, size, focal in (("calib.yaml", (320, 268), 150.0),
+                              ("big.yaml", (2448, 2048), 1100.0)):
+        write_calib(tmp_path / name, StereoRig(*paper_cameras(size, focal), paper_port()))
+    for view in ("left", "right"):
+        (tmp_path / view).mkdir()
+        cv2.imwrite(str(tmp_path / view / "p1.png"), np.zeros((268, 320), np.uint8))
+    (tmp_path / "garbage.png").write_text("not an image")
+    (tmp_path / "alone").mkdir()
+    cv2.imwrite(str(tmp_path / "alone" / "p2.png"), np.zeros((268, 320), np.uint8))
+    return tmp_path
+
+
+BAD = [
+    (["--calib", "big.yaml", "left/p1.png", "right/p1.png"], "2448x2048"),
+    (["--calib", "calib.yaml", "left", "alone"], "no photo of the same name"),
+    (["--calib", "calib.yaml", "garbage.png", "right/p1.png"], "garbage.png"),
+    (["--calib", "calib.yaml", "left/p1.png", "missing.png"], "missing.png"),
+    (["--calib", "calib.yaml", "left/p1.png", "right"], "not a photo and a folder"),
+    (["--calib", "missing.yaml", "left/p1.png", "right/p1.png"], "missing.yaml"),
+    (["--calib", "garbage.png", "left/p1.png", "right/p1.png"], "garbage.png"),
+    (["--calib", "calib.yaml", "left/p1.png", "right/p1.png"], "no target was matched"),
+    (["--calib", "calib.yaml", "left", "right"], "no target was matched"),
+    (["--calib", "calib.yaml", "left", "right", "--dense"], "--dense needs --depth-range"),
+    (["--calib", "calib.yaml", "left", "right", "--dense", "--depth-range", "900,1100",
+      "--gate-mm", "1"], "--gate-mm does not apply with --dense"),
+    (["--calib", "calib.yaml", "left", "right", "--methods", "optical_path,nope"], "nope"),
+    (["--calib", "calib.yaml", "left", "right", "--dense", "--depth-range", "900,1100",
+      "--methods", "su"], "su"),
+    (["--calib", "calib.yaml", "left", "right", "--floor-fraction", "1"], "--floor-fraction"),
+]
+
+
+@pytest.mark.parametrize("argv, fragment", BAD, ids=[a[-1] if i < 7 else f"{i}"
+                                                     for i, (a, _) in enumerate(BAD)])
+def test_bad_inputs_exit_2_with_one_line_and_write_nothing(user, capsys, argv, fragment):
+    before = sorted(os.listdir(user))
+    assert eval_main(["measure", *argv, "--out", "out", "--quiet"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("error: ") and fragment in err[0], err
+    assert sorted(os.listdir(user)) == before  # no output directory, no staging left
