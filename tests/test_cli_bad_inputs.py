@@ -356,7 +356,7 @@ SYNTH_CASES = [
     (None, SCENE + ["--layout", "random", "--z-range", "5", "1"], "--z-range"),
     (None, SCENE + ["--target-radius", "-1"], "--target-radius"),
     (None, SCENE + ["--n-water", "nan"], "--n-water"),
-    (None, SCENE + ["--n-water", "0.5"], "indices"),
+    (None, SCENE + ["--n-water", "0.5"], "index >= 1"),
     (None, SCENE + ["--dist", "nan", "0", "0", "0", "0"], "--dist"),
     (None, SCENE + ["--dist", "0.1", "0"], "dist"),
     (None, ["scene", "--out", "missing_dir/x.xml"], "missing_dir"),
