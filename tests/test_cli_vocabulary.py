@@ -41,7 +41,7 @@ SUBCOMMANDS = list(_subcommands())
 def test_every_subcommand_is_walked():
     names = {(prog, name) for prog, name, _ in SUBCOMMANDS}
     assert WITH_PROGRESS <= names and WITH_SCENE <= names
-    assert len(names) == 12
+    assert len(names) == 13
 
 
 @pytest.mark.parametrize("prog, name, parser", SUBCOMMANDS,
