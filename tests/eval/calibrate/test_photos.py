@@ -12,7 +12,6 @@ import os
 import cv2
 import numpy as np
 import pytest
-from scipy.spatial.transform import Rotation
 
 from eval.__main__ import main as eval_main
 from eval.calibrate.photos import outlier_poses, outlier_threshold
