@@ -12,6 +12,7 @@ import os
 import cv2
 import numpy as np
 import pytest
+from scipy.spatial.transform import Rotation
 
 from eval.__main__ import main as eval_main
 from eval.calibrate.photos import outlier_poses, outlier_threshold
@@ -186,3 +187,75 @@ def test_bad_photo_folders(drawn, tmp_path, capsys):
     _fails(["calibrate", src, "--intrinsics", str(other)] + board, "image size", capsys)
     assert not out.exists()
     assert not [p for p in os.listdir(tmp_path) if p.startswith(".c.")]  # no staging left
+
+
+# ---------------------------------------------------------------------------------------------
+# rendered boards, exported as photos (slow: Mitsuba)
+# ---------------------------------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def rendered(tmp_path_factory):
+    """A 480x402 rig behind a port tilted by 1°: boards in air (8 poses) exported as 8-bit PNG
+    photos and underwater (6 poses) as JPEG, and the truth (which the command never sees)."""
+    from measure import FlatPort
+    from synth.__main__ import main as synth_main
+    from synth.boards import write_boards
+    from synth.dataset import read_calib
+    from synth.scene import load_scene, write_scene
+
+    root = tmp_path_factory.mktemp("rendered")
+    normal = Rotation.from_rotvec([0, np.radians(1.0), 0]).apply([0, 0, 1.0])
+    port = FlatPort(normal, 100.0, (5.0,), (1.0, 1.54, 1.33))
+    scene = str(write_scene(root / "tilt.xml", paper_cameras(SIZE, FOCAL), port,
+                            np.array([[0.0, 0.0, 1000.0]]), 10.0))
+    spec = load_scene(scene)
+    out = {}
+    for name, air, n, fmt in (("air", True, 8, "png"), ("water", False, 6, "jpg")):
+        write_boards(spec, root / name, BOARD, n_poses=n, seed=5, air=air,
+                     distance_range=(450.0, 650.0), progress=False)
+        assert synth_main(["photos", str(root / name), "--out", str(root / f"{name}_photos"),
+                           "--format", fmt]) == 0
+        out[name] = str(root / f"{name}_photos")
+        out[f"{name}_truth"] = read_calib(root / name / "calib.yaml")["rig"]
+    return out
+
+
+@pytest.mark.slow
+def test_rendered_photos_in_air_then_underwater(rendered, tmp_path, capsys):
+    """The chain from photos alone: in air (PNG), then the housing (JPEG) with the in-air
+    calib.yaml; every estimate against the rendered truth, within bounds that 6–8 small poses
+    support (the full-size numbers are in docs/calibration.md)."""
+    from synth.dataset import read_calib
+
+    board = ["--squares", "7x6", "--square-mm", "60", "--no-progress"]
+    assert eval_main(["calibrate", rendered["air"], "--air", "--out", str(tmp_path / "air")]
+                     + board) == 0
+    report = json.loads((tmp_path / "air" / "report.json").read_text())
+    truth = rendered["air_truth"]
+    assert report["used"] >= 7, report["per_pose"]
+    for name in ("left", "right"):
+        cam, K = report["in_air"]["cameras"][name], getattr(truth, name).K
+        for key, (i, j) in (("fx", (0, 0)), ("fy", (1, 1)), ("cx", (0, 2)), ("cy", (1, 2))):
+            error = cam[key]["estimate"] - K[i, j]
+            assert abs(error) < max(5 * cam[key]["sigma"], 0.5), (name, key, error, cam[key])
+    stereo = report["in_air"]["stereo"]
+    assert abs(stereo["baseline_mm"] - np.linalg.norm(truth.right.t)) < 1.0
+    assert report["in_air"]["stereo_rms_px"] < 0.1
+    print(f"in air: {json.dumps(report['in_air']['cameras']['left'])}", file=os.sys.stderr)
+
+    calib = str(tmp_path / "air" / "calib.yaml")
+    assert eval_main(["calibrate", rendered["water"], "--intrinsics", calib,
+                      "--start-distance", "90", "--out", str(tmp_path / "water")] + board) == 0
+    out = tmp_path / "water"
+    assert {"calib.yaml", "calib_in_air_only.yaml", "flatport.txt", "report.json", "report.md",
+            "coverage.png", "residuals.png"} <= set(os.listdir(out))
+    report = json.loads((out / "report.json").read_text())
+    housing, truth = report["housing"], rendered["water_truth"]
+    assert housing["rms_px"] < 0.15
+    distance = housing["parameters"]["distance"]
+    assert abs(distance["estimate"] - truth.port.distance) < 2.0, distance
+    normal = np.asarray(housing["parameters"]["normal"]["estimate"])
+    assert np.degrees(np.arccos(np.clip(normal @ truth.port.normal, -1, 1))) < 0.3
+    assert np.asarray(housing["correlation"]).shape == (3, 3)
+    assert read_calib(out / "calib.yaml")["has_port"]
+    printed = capsys.readouterr().out
+    assert "housing distance" in printed and "truth" not in printed
