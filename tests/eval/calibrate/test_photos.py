@@ -23,6 +23,8 @@ from synth.rig import paper_cameras
 SIZE, FOCAL = (480, 402), 225.0
 BOARD = Board("chessboard", (7, 6), 60.0)
 TEXELS = 128
+#: Supersampling of the drawn photos.
+SUPER = 4
 
 
 class _Spec:  # what board_rig needs of a SceneSpec
@@ -46,9 +48,9 @@ def _draw(camera, pose, board=BOARD, rng=None):
     t_cam = camera.R.T @ (pose.t - camera.t)
     H = camera.K @ np.column_stack([R_cam[:, 0], R_cam[:, 1], t_cam]) @ A
     w, h = camera.size
-    # drawn at 4x and averaged down (pixel u of the photo is centred on 4u + 1.5 there)
-    S = np.array([[4.0, 0, 1.5], [0, 4.0, 1.5], [0, 0, 1]])
-    image = cv2.warpPerspective(pattern, S @ H, (4 * w, 4 * h), flags=cv2.INTER_LINEAR,
+    # drawn at SUPER× and averaged down (pixel u is centred on SUPER·u + (SUPER − 1)/2 there)
+    S = np.array([[SUPER, 0, (SUPER - 1) / 2], [0, SUPER, (SUPER - 1) / 2], [0, 0, 1]])
+    image = cv2.warpPerspective(pattern, S @ H, (SUPER * w, SUPER * h), flags=cv2.INTER_LINEAR,
                                 borderMode=cv2.BORDER_CONSTANT, borderValue=90.0)
     image = cv2.resize(image, (w, h), interpolation=cv2.INTER_AREA)
     image = cv2.GaussianBlur(image, (0, 0), 0.7) * 0.8 + 20
