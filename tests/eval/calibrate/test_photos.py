@@ -59,12 +59,15 @@ def _draw(camera, pose, board=BOARD, rng=None):
     return np.clip(np.rint(image), 0, 255).astype(np.uint8)
 
 
-def _write_photos(folder, rig, poses, ext="png", left_rig=None):
+def _write_photos(folder, rig, poses, ext="png", board=BOARD):
     rng = np.random.default_rng(1)
-    for view, camera in (("left", (left_rig or rig).left), ("right", rig.right)):
+    for view, camera in (("left", rig.left), ("right", rig.right)):
         os.makedirs(folder / view, exist_ok=True)
         for k, pose in enumerate(poses):
-            cv2.imwrite(str(folder / view / f"{k:02d}.{ext}"), _draw(camera, pose, rng=rng))
+            image = _draw(camera, pose, board, rng=rng)
+            if view == "right":  # colour photos are read as grey
+                image = cv2.cvtColor(image, cv2.COLOR_GRAY2BGR)
+            cv2.imwrite(str(folder / view / f"{k:02d}.{ext}"), image)
     return folder
 
 
@@ -142,6 +145,28 @@ def test_an_outlier_pose_is_left_out_and_said(drawn, tmp_path, capsys):
     assert report["per_pose"][4]["status"].startswith("left out: outlier")
     assert any("outlier" in w for w in report["warnings"])
     assert "left out as outliers: 04" in capsys.readouterr().out
+
+
+def test_drawn_charuco_with_its_dictionary_and_marker_size(tmp_path):
+    """A ChArUco board of another dictionary and marker size, in JPEG photos: the board options
+    of synth boards (--marker-mm, --dictionary) define it."""
+    board = Board("charuco", (7, 6), 60.0, marker_ratio=0.7, dictionary="DICT_4X4_50")
+    rig = _air_rig()
+    poses = sample_poses(rig, board, 8, seed=7, water=False, distance_range=(400, 550),
+                         max_tilt_deg=35)
+    folder = _write_photos(tmp_path / "charuco", rig, poses, ext="jpg", board=board)
+    out = tmp_path / "cal"
+    assert _run(["calibrate", str(folder), "--air", "--board", "charuco", "--squares", "7x6",
+                 "--square-mm", "60", "--marker-mm", "42", "--dictionary", "DICT_4X4_50",
+                 "--out", str(out)]) == 0
+    report = json.loads((out / "report.json").read_text())
+    assert report["board"]["dictionary"] == "DICT_4X4_50" and report["used"] >= 6
+    fx = report["in_air"]["cameras"]["left"]["fx"]
+    assert abs(fx["estimate"] - FOCAL) < max(5 * fx["sigma"], 1.0), fx
+    # the default dictionary does not find these markers: said, exit 2
+    assert _run(["calibrate", str(folder), "--air", "--board", "charuco", "--squares", "7x6",
+                 "--square-mm", "60", "--out", str(tmp_path / "c2")]) == 2
+    assert not (tmp_path / "c2").exists()
 
 
 def _fails(argv, text, capsys):
