@@ -88,7 +88,13 @@ def fit_without_outliers(fit, rms_of, detections):
     if not bad:
         return first, detections, info
     kept = without(detections, bad)
-    return fit(kept), kept, info
+    from measure.calibration import CalibrationError
+
+    try:
+        return fit(kept), kept, info
+    except CalibrationError as exc:
+        raise CalibrationError(f"{exc} (after leaving out {len(bad)} outlier pose(s) whose "
+                               f"RMS exceeded {threshold:.3g} px)") from None
 
 
 def coverage(detections, size, cells: int = COVERAGE_CELLS) -> dict:
