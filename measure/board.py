@@ -14,9 +14,10 @@ Two kinds (``kind``):
   the other even) is resolved by the colour of the square outside corner 0, which must be
   black. The corners are then refined to the saddle point of the blurred image
   (:func:`refine_saddle_points`), which is what makes them accurate.
-* ``"charuco"``: OpenCV's ``cv2.aruco.CharucoBoard`` (dictionary ``DICT_5X5_1000``, markers
-  ``marker_ratio`` of a square); corner ids and positions are OpenCV's
-  (``getChessboardCorners``). Detected with ``cv2.aruco.CharucoDetector``; partial views work.
+* ``"charuco"``: OpenCV's ``cv2.aruco.CharucoBoard`` (``dictionary``, default ``DICT_5X5_1000``,
+  any of OpenCV's predefined ``DICT_…`` names; markers ``marker_ratio`` of a square); corner
+  ids and positions are OpenCV's (``getChessboardCorners``). Detected with
+  ``cv2.aruco.CharucoDetector``; partial views work.
 """
 
 from __future__ import annotations
@@ -48,12 +49,13 @@ class BoardError(ValueError):
 class Board:
     """A planar calibration board (see module docs). ``squares`` = (cols, rows);
     ``square_mm`` the side of one square; ``marker_ratio`` the ArUco marker side over the
-    square side (ChArUco only)."""
+    square side and ``dictionary`` OpenCV's predefined ArUco dictionary (ChArUco only)."""
 
     kind: str = "chessboard"
     squares: tuple = (11, 8)
     square_mm: float = 40.0
     marker_ratio: float = 0.5
+    dictionary: str = CHARUCO_DICTIONARY
 
     def __post_init__(self):
         if self.kind not in BOARD_KINDS:
@@ -72,6 +74,10 @@ class Board:
             raise BoardError(f"square size must be positive, got {self.square_mm!r} mm")
         if not 0.1 <= self.marker_ratio <= 0.9:
             raise BoardError(f"marker ratio must lie in [0.1, 0.9], got {self.marker_ratio!r}")
+        if not (str(self.dictionary).startswith("DICT_") and hasattr(cv2.aruco, self.dictionary)):
+            raise BoardError(f"ArUco dictionary {self.dictionary!r}: not one of OpenCV's "
+                             f"predefined dictionaries (e.g. {CHARUCO_DICTIONARY}, DICT_4X4_50, "
+                             f"DICT_6X6_250, DICT_APRILTAG_36h11)")
         object.__setattr__(self, "squares", (cols, rows))
         object.__setattr__(self, "square_mm", float(self.square_mm))
         object.__setattr__(self, "marker_ratio", float(self.marker_ratio))
@@ -123,7 +129,7 @@ class Board:
         return cv2.copyMakeBorder(squares, p, p, p, p, cv2.BORDER_CONSTANT, value=255)
 
     def _charuco(self):
-        dictionary = cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, CHARUCO_DICTIONARY))
+        dictionary = cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, self.dictionary))
         return cv2.aruco.CharucoBoard(self.squares, self.square_mm,
                                       self.marker_ratio * self.square_mm, dictionary)
 
@@ -133,8 +139,8 @@ class Board:
         out["squares"] = list(self.squares)
         out["frame"] = ("origin at the pattern's top-left corner, x right, y down, z away from "
                         "the printed side; mm")
-        if self.kind == "charuco":
-            out["dictionary"] = CHARUCO_DICTIONARY
+        if self.kind != "charuco":  # a chessboard has no markers: its file says nothing of them
+            del out["dictionary"]
         return out
 
     @classmethod
@@ -142,7 +148,8 @@ class Board:
         try:
             return cls(kind=data["kind"], squares=tuple(data["squares"]),
                        square_mm=float(data["square_mm"]),
-                       marker_ratio=float(data.get("marker_ratio", 0.5)))
+                       marker_ratio=float(data.get("marker_ratio", 0.5)),
+                       dictionary=str(data.get("dictionary", CHARUCO_DICTIONARY)))
         except (KeyError, TypeError, ValueError) as exc:
             if isinstance(exc, BoardError):
                 raise

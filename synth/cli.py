@@ -223,6 +223,59 @@ def add_progress_option(parser) -> None:
                         help=NO_PROGRESS_HELP)
 
 
+#: ``dest`` names of the board options (:func:`add_board_options`).
+BOARD_OPTIONS = ("board", "squares", "square_mm", "marker_mm", "dictionary")
+#: The board ``synth boards`` renders when none is given.
+DEFAULT_BOARD = {"board": "chessboard", "squares": "11x8", "square_mm": 40.0}
+
+
+def add_board_options(parser, defaults: bool = True, needed: str = "") -> None:
+    """The board of ``synth boards`` and ``eval calibrate``: ``--board chessboard|charuco
+    --squares COLSxROWS --square-mm S [--marker-mm M --dictionary NAME]`` (:func:`board_from_args`
+    builds the :class:`measure.board.Board`). With ``defaults`` False nothing has a default
+    (``needed`` says when they are required)."""
+    def default(name):
+        return DEFAULT_BOARD[name] if defaults else None
+
+    def said(name, unit=""):
+        return f"default {DEFAULT_BOARD[name]}{unit}" if defaults else needed
+
+    parser.add_argument("--board", choices=("chessboard", "charuco"), default=default("board"),
+                        help="board kind (default chessboard)")
+    parser.add_argument("--squares", default=default("squares"), metavar="COLSxROWS",
+                        help=f"squares of the board, COLSxROWS ({said('squares')})")
+    parser.add_argument("--square-mm", type=positive_float, default=default("square_mm"),
+                        help=f"square side, mm ({said('square_mm', ' mm') if defaults else needed})")
+    parser.add_argument("--marker-mm", type=positive_float, default=None,
+                        help="ChArUco only: ArUco marker side, mm (default half the square)")
+    parser.add_argument("--dictionary", default=None,
+                        help="ChArUco only: OpenCV's predefined ArUco dictionary (default "
+                             "DICT_5X5_1000)")
+
+
+def board_from_args(args):
+    """The :class:`measure.board.Board` of :func:`add_board_options`' options; CLIError names
+    what does not make a board."""
+    from measure.board import CHARUCO_DICTIONARY, Board, BoardError
+
+    kind = args.board or DEFAULT_BOARD["board"]
+    try:
+        cols, rows = (int(v) for v in str(args.squares).lower().split("x"))
+    except ValueError:
+        raise CLIError(f"--squares must be COLSxROWS (e.g. 11x8), got {args.squares!r}") from None
+    if kind != "charuco":
+        refuse_given(args, ("marker_mm", "dictionary"), "to a chessboard (ChArUco only)")
+    ratio = 0.5 if args.marker_mm is None else args.marker_mm / args.square_mm
+    if args.marker_mm is not None and args.marker_mm >= args.square_mm:
+        raise CLIError(f"--marker-mm {args.marker_mm:g}: the marker must be smaller than the "
+                       f"square ({args.square_mm:g} mm)")
+    try:
+        return Board(kind, (cols, rows), args.square_mm, ratio,
+                     args.dictionary or CHARUCO_DICTIONARY)
+    except BoardError as exc:
+        raise CLIError(str(exc)) from None
+
+
 def add_json_option(parser) -> None:
     """``--json``: print the report as JSON to stdout."""
     parser.add_argument("--json", action="store_true", help=JSON_HELP)
@@ -356,7 +409,8 @@ def process_main(main) -> None:
     sys.exit(code)
 
 
-__all__ = ["DEFINE_HELP", "DISTRIBUTION", "EXIT_BAD_INPUT", "EXIT_CHECK_FAILED",
+__all__ = ["BOARD_OPTIONS", "DEFAULT_BOARD", "add_board_options", "board_from_args",
+           "DEFINE_HELP", "DISTRIBUTION", "EXIT_BAD_INPUT", "EXIT_CHECK_FAILED",
            "EXIT_INTERRUPTED", "EXIT_OK", "JSON_HELP", "NO_PROGRESS_HELP", "SCENE_HELP",
            "add_define_option", "add_json_option", "add_out_option", "add_progress_option",
            "add_scene_argument", "any_float", "CLIError", "command_parser", "finite_float",

@@ -283,6 +283,10 @@ EVAL_CASES = [
      "--n-water does not apply"),
     (None, ["calibrate", "bair", "--start-distance", "90", "--out", "out", "--no-progress"],
      "--start-distance does not apply"),
+    (None, ["calibrate", "bair", "--squares", "9x6", "--out", "out", "--no-progress"],
+     "the folder's board.json defines the board"),
+    (None, ["calibrate", "missing_photos", "--air", "--out", "out", "--no-progress"],
+     "missing_photos"),
     (None, ["sweep", str(REPO / "sweeps" / "smoke.toml"), "--out", "sw", "--connect-timeout",
             "3", "--no-progress"], "--connect-timeout does not apply"),
     # files are read whole or refused (issue 22)

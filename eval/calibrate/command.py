@@ -1,6 +1,9 @@
-"""``python -m eval calibrate DIR``: calibrate from rendered board images, and say what it cost.
+"""``python -m eval calibrate DIR``: calibrate from board images, and say what it cost.
 
-``DIR`` is a folder of ``python -m synth boards``. In air (``--air`` boards): OpenCV calibrates
+``DIR`` is a folder of ``python -m synth boards`` (compared with its truth) or a folder of a
+user's own photos (``DIR/left/``, ``DIR/right/``, paired by name; the board on the command line,
+``--air`` or ``--intrinsics``; the report says what can be trusted without truth:
+:mod:`eval.calibrate.photos`). In air (``--air`` boards): OpenCV calibrates
 both cameras and the stereo pose (:func:`measure.calibration.calibrate_in_air`). Underwater:
 the housing is estimated by refractive bundle adjustment with the in-air intrinsics fixed
 (:func:`measure.calibration.calibrate_housing`); ``--intrinsics`` gives them, as an in-air boards
@@ -21,7 +24,8 @@ import sys
 import time
 
 from eval.cli import CLIError, positive_float
-from synth.cli import add_out_option, add_progress_option, refuse_given
+from synth.cli import (BOARD_OPTIONS, add_board_options, add_out_option, add_progress_option,
+                       board_from_args, refuse_given)
 
 COMMAND = "eval calibrate"
 #: Options of the housing calibration (underwater boards): refused with in-air boards.
@@ -33,13 +37,20 @@ def add_parser(subparsers):
     from synth.rig import PAPER_GLASS_THICKNESS_MM, PAPER_INDICES, PAPER_PORT_DISTANCE_MM
 
     p = subparsers.add_parser(
-        "calibrate", help="calibrate from rendered boards (in air, or the housing underwater)",
-        description="Calibrate from a folder of python -m synth boards and compare every "
-                    "estimate with the rendered truth.")
-    p.add_argument("dir", help="boards folder (python -m synth boards)")
+        "calibrate", help="calibrate from board images (in air, or the housing underwater)",
+        description="Calibrate from a folder of python -m synth boards (every estimate beside "
+                    "the rendered truth) or from your own photos, DIR/left/ and DIR/right/ "
+                    "paired by name (give the board, and --air or --intrinsics).")
+    p.add_argument("dir", help="boards folder (python -m synth boards) or photo folder "
+                               "(DIR/left/, DIR/right/)")
+    p.add_argument("--air", action="store_true",
+                   help="photos: taken in air (OpenCV calibrates both cameras and the stereo "
+                        "pose); a boards folder says it itself")
     p.add_argument("--intrinsics", metavar="AIR_DIR_or_calib.yaml",
-                   help="underwater boards: the in-air calibration, as an --air boards folder "
-                        "(calibrated here with OpenCV) or a calib.yaml")
+                   help="underwater boards or photos: the in-air calibration, as an --air "
+                        "boards folder (calibrated here with OpenCV) or a calib.yaml")
+    add_board_options(p, defaults=False,
+                      needed="photos: required; a boards folder's board.json defines it")
     p.add_argument("--free", default=",".join(DEFAULT_FREE),
                    help=f"housing parameters to estimate, comma list of "
                         f"{', '.join(HOUSING_PARAMETERS)} (default {','.join(DEFAULT_FREE)})")
@@ -101,8 +112,18 @@ def main(args) -> int:
     free = _parse_free(args.free)
     output = OutputDir(args.out, COMMAND).claim()
     start = time.perf_counter()
+    if is_photo_folder(args.dir):
+        return _calibrate_photos(args, output, log, free, start)
+    if not os.path.isfile(os.path.join(args.dir, "manifest.json")) and os.path.isdir(args.dir):
+        raise CLIError(f"{args.dir}: not a boards folder (no manifest.json) nor a photo folder "
+                       f"(no left/ and right/ folders)")
     boards = read_boards(args.dir)
     truth = boards.calib["rig"]
+    refuse_given(args, BOARD_OPTIONS, f"to a boards folder ({args.dir}): the folder's "
+                                      f"board.json defines the board")
+    if args.air and not boards.air:
+        raise CLIError(f"--air: {args.dir} holds boards rendered underwater (its manifest says "
+                       f"so; --air is for photos)")
     if boards.air:
         refuse_given(args, HOUSING_OPTIONS, f"to in-air boards ({args.dir}): they calibrate the "
                                             f"cameras, no housing")
@@ -169,3 +190,130 @@ def main(args) -> int:
     print(report_lib.summary_lines(report))
     print(f"wrote {output.path}")
     return 0
+
+
+def is_photo_folder(path) -> bool:
+    """Whether ``path`` is a photo folder (it holds ``left/`` and ``right/``)."""
+    return all(os.path.isdir(os.path.join(path, sub)) for sub in ("left", "right"))
+
+
+def _calibrate_photos(args, output, log, free, start) -> int:
+    """``eval calibrate`` of a user's photo folder (module docs, :mod:`eval.calibrate.photos`)."""
+    from measure import FlatPort, StereoRig
+    from measure.calibration import calibrate_housing, calibrate_in_air, detect_boards
+    from synth.fileio import atomic_write_json, atomic_write_text, jsonable
+
+    from eval.calibrate import photos as trust
+    from eval.calibrate import report as report_lib
+    from eval.core.photos import photo_folder, read_pairs
+
+    where = f"{args.dir} (photos)"
+    if args.air:
+        refuse_given(args, HOUSING_OPTIONS, "to in-air photos (--air): they calibrate the "
+                                            "cameras, no housing")
+        if args.intrinsics:
+            raise CLIError("--intrinsics does not apply with --air: in-air photos calibrate the "
+                           "intrinsics themselves")
+    elif not args.intrinsics:
+        raise CLIError(f"{where}: say --air (photos taken in air) or --intrinsics calib.yaml "
+                       f"(photos taken underwater, with the in-air calibration)")
+    missing = [option for dest, option in (("squares", "--squares COLSxROWS"),
+                                           ("square_mm", "--square-mm S"))
+               if getattr(args, dest) is None]
+    if missing:
+        raise CLIError(f"{where}: a photo folder needs the board on the command line: "
+                       f"{' and '.join(missing)} (and --board charuco for a ChArUco board)")
+    board = board_from_args(args)
+    pairs = photo_folder(args.dir)
+    air_rig = None
+    if not args.air:
+        air_rig = _intrinsics_for_photos(args.intrinsics, log)
+    log(f"read {len(pairs.names)} photo pairs from {args.dir} …")
+    t = time.perf_counter()
+    images, size = read_pairs(pairs)
+    timings = {"read": time.perf_counter() - t}
+    if air_rig is not None and tuple(air_rig.left.size) != tuple(size):
+        raise CLIError(f"--intrinsics {args.intrinsics}: image size "
+                       f"{air_rig.left.size[0]}x{air_rig.left.size[1]} px, but the photos are "
+                       f"{size[0]}x{size[1]} px")
+    log(f"detect the board in {len(images)} photo pairs …")
+    t = time.perf_counter()
+    detections = detect_boards(board, images)
+    timings["detect"] = time.perf_counter() - t
+    found = {v: detections.found(i) for i, v in enumerate(trust.VIEWS)}
+    if not found["left"] and not found["right"]:
+        squares = "x".join(map(str, board.squares))
+        raise CLIError(f"{where}: the {board.kind} {squares} was found in none of the "
+                       f"{len(images)} photo pairs{trust.board_hint(board, images)}")
+    not_found = [pairs.names[k] for k in range(len(images))
+                 if k not in found["left"] and k not in found["right"]]
+    t = time.perf_counter()
+    if args.air:
+        log("calibrate in air (OpenCV calibrateCamera, stereoCalibrate) …")
+        result, used_detections, outliers = trust.fit_without_outliers(
+            lambda d: calibrate_in_air(board, d, size), lambda r: r.rms_px_per, detections)
+        rig, housing, rms_per = result.rig, None, result.rms_px_per
+        poses = {k: result.board_poses.get((k, 0), pose)  # the left camera's where it has one
+                 for (k, _), pose in result.board_poses.items()}
+        timings["calibrate"] = time.perf_counter() - t
+    else:
+        design = FlatPort(air_rig.left.R[:, 2], args.start_distance, (args.glass_thickness,),
+                          (1.0, args.n_glass, args.n_water))
+        start_rig = StereoRig(air_rig.left, air_rig.right, design)
+        log(f"refractive bundle adjustment of {', '.join(free)} …")
+        result, used_detections, outliers = trust.fit_without_outliers(
+            lambda d: calibrate_housing(start_rig, board, d, free), lambda r: r.rms_px_per,
+            detections)
+        housing = result
+        timings["bundle_adjustment"] = time.perf_counter() - t
+        if not housing.identifiable:
+            raise CLIError(f"{where}: {housing.reason}; nothing written (free fewer parameters "
+                           f"with --free, or photograph more varied poses)")
+        rig, rms_per = housing.rig, housing.rms_px_per
+        poses = dict(zip(housing.pose_ids, housing.poses))
+    used = sorted({k for k, _ in rms_per})
+    geometry = trust.pose_geometry(board, {k: poses[k] for k in used if k in poses}, rig)
+    names = list(pairs.names)
+    report = {"photos": os.path.abspath(args.dir), "source": "photos", "air": bool(args.air),
+              "board": board.to_dict(), "image_size": list(size), "poses": len(images),
+              "found": {v: len(found[v]) for v in trust.VIEWS}, "used": len(used),
+              "not_found": not_found,
+              "left_out": [names[k] for k in outliers["left_out"]],
+              "outlier_rule": trust.OUTLIER_RULE, "outliers": outliers,
+              "per_pose": trust.per_pose_table(names, detections, used_detections, rms_per,
+                                               outliers, geometry),
+              "coverage": trust.coverage(used_detections, size),
+              "geometry": {"distance_mm": trust.stats_range(g["distance_mm"]
+                                                            for g in geometry.values()),
+                           "tilt_deg": trust.stats_range(g["tilt_deg"] for g in geometry.values())}}
+    if args.air:
+        report["in_air"] = trust.air_estimates(result, used)
+    else:
+        report["housing"] = trust.housing_estimates(housing, start_rig)
+        report["sigma_note"] = report_lib.SIGMA_NOTE_PHOTOS
+    report["warnings"] = trust.warnings_for(report)
+    report["timings_s"] = timings
+    log("write the calibration, report and figures …")
+    with output.staged() as tmp:
+        report_lib.write_calibration(tmp, rig, not args.air, housing, report)
+        if housing is not None:
+            report_lib.write_calibration(os.path.join(tmp, "calib_in_air_only.yaml"),
+                                         start_rig, True, None, None, single=True)
+            report_lib.residual_figure(tmp, used_detections, housing, size)
+        trust.coverage_figure(tmp, detections, set(used), size, report)
+        report["timings_s"]["total"] = time.perf_counter() - start
+        report = jsonable(report)
+        atomic_write_json(os.path.join(tmp, "report.json"), report)
+        atomic_write_text(os.path.join(tmp, "report.md"), trust.markdown(report))
+    print(trust.summary_lines(report))
+    print(f"wrote {output.path}")
+    return 0
+
+
+def _intrinsics_for_photos(path, log):
+    """The in-air rig of ``--intrinsics`` for underwater photos: a calib.yaml, or an in-air
+    boards folder (calibrated here)."""
+    if os.path.isdir(path) and is_photo_folder(path):
+        raise CLIError(f"--intrinsics {path}: a photo folder; calibrate it first (python -m eval "
+                       f"calibrate {path} --air …) and give its calib.yaml")
+    return _in_air(path, log)[0]

@@ -4,9 +4,9 @@ random poses behind the scene's port (or in air), :mod:`synth.boards`."""
 
 from __future__ import annotations
 
-from synth.cli import (CLIError, add_define_option, add_out_option, add_progress_option,
-                       add_scene_argument, non_negative_float, positive_float,
-                       positive_int, scene_seed)
+from synth.cli import (CLIError, add_board_options, add_define_option, add_out_option,
+                       add_progress_option, add_scene_argument, board_from_args,
+                       non_negative_float, positive_float, positive_int, scene_seed)
 
 
 def add_parser(subparsers) -> None:
@@ -15,11 +15,7 @@ def add_parser(subparsers) -> None:
     add_scene_argument(p)
     add_out_option(p, "synth boards")
     p.add_argument("--poses", type=positive_int, default=None, help="number of poses (default 15)")
-    p.add_argument("--board", choices=("chessboard", "charuco"), default="chessboard",
-                   help="board kind (default chessboard)")
-    p.add_argument("--squares", default="11x8", help="squares COLSxROWS (default 11x8)")
-    p.add_argument("--square-mm", type=positive_float, default=40.0,
-                   help="square side, mm (default 40)")
+    add_board_options(p)
     p.add_argument("--distance", type=positive_float, nargs=2, metavar=("NEAR", "FAR"),
                    default=None, help="board centre depth range along the port normal, mm "
                                       "(default 700 1400)")
@@ -47,15 +43,11 @@ PORT_PARAMETERS = ("n_water",)
 def main(args) -> int:
     """Render stereo pairs of the board at random poses into ``--out`` (skipped when up to
     date)."""
-    from measure.board import Board
     from synth import boards as b
     from synth.scene import apply_seed, apply_spp, load_scene, parse_defines
 
-    try:
-        cols, rows = (int(v) for v in args.squares.lower().split("x"))
-    except ValueError:
-        raise CLIError(f"--squares must be COLSxROWS (e.g. 11x8), got {args.squares!r}") from None
-    board = Board(args.board, (cols, rows), args.square_mm)
+    board = board_from_args(args)
+    cols, rows = board.squares
     defines = apply_spp(apply_seed(parse_defines(args.defines), args.seed), args.spp)
     for name in defines:
         if name in NOT_RENDERED:

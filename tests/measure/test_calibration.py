@@ -125,6 +125,12 @@ def test_in_air_opencv_calibration_from_corners():
     baseline = np.linalg.norm(result.rig.right.t - result.rig.left.t)
     assert abs(baseline - 200.0) < 0.1
     assert 0.03 < result.rms_px["left"] < 0.08
+    # per view: OpenCV's errors, and the board poses it estimated (in the reference frame)
+    assert set(result.rms_px_per) == {(k, v) for k in range(15) for v in (0, 1)}
+    assert all(0.01 < r < 0.15 for r in result.rms_px_per.values())
+    for (k, view), (R, t) in result.board_poses.items():
+        assert np.linalg.norm(t - poses[k].t) < 1.0, (k, view)
+        assert np.degrees(Rotation.from_matrix(R @ poses[k].R.T).magnitude()) < 0.1
     with pytest.raises(CalibrationError, match="at least 3"):
         calibrate_in_air(BOARD, Detections(detections.ids[:2], detections.pixels[:2]),
                          truth.left.size)

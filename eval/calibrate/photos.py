@@ -1,0 +1,474 @@
+"""Calibrating a user's own photos: what the report says when there is no truth to compare with.
+
+A photo folder (:mod:`eval.core.photos`: ``DIR/left/``, ``DIR/right/``, paired by name) holds
+nothing but images, so every number reported here comes from the photos themselves:
+
+* per pose and view the corners found and the reprojection RMS of the final fit (RMS of the 2D
+  residual length, px: OpenCV's per-view errors in air, the bundle adjustment's underwater);
+* poses where the board was not found, and **outlier poses**: a pose is left out of the final
+  fit when one of its views' RMS in the first fit exceeds :func:`outlier_threshold` =
+  max(3 × median, median + 5 × 1.4826 × MAD, median + 0.1 px) of all views' RMS (MAD the
+  median absolute deviation; 1.4826 × MAD is σ for Gaussian scatter; the 0.1 px floor keeps a
+  set of nearly equal, very small residuals from shedding poses). The fit is then run once more
+  without them, and the report says so;
+* the σ and correlations of every estimate (in air OpenCV's ``calibrateCameraExtended``
+  standard deviations; the stereo pose has none from OpenCV, so the per-pose scatter of the
+  baseline over √n is given; underwater the housing's σ and correlation matrix);
+* how well the corners cover each image (:func:`coverage`: the fraction of a 10 × 10 grid of
+  cells holding a corner of a used pose, and ``coverage.png``), the board distances and tilts
+  (from the estimated poses);
+* warnings (:func:`warnings_for`) when there are fewer than :data:`RECOMMENDED_POSES` poses,
+  the boards are tilted by less than :data:`MIN_TILT_DEG` (focal length and, underwater, the
+  port trade against each other without perspective), the corners cover less than
+  :data:`MIN_COVERAGE` of an image (the distortion is extrapolated), or two housing parameters
+  correlate at :data:`HIGH_CORRELATION` or more.
+"""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+
+#: The outlier rule (module docs).
+OUTLIER_FACTOR, OUTLIER_MADS, OUTLIER_FLOOR_PX = 3.0, 5.0, 0.1
+#: Warn below these.
+RECOMMENDED_POSES, MIN_TILT_DEG, MIN_COVERAGE = 8, 15.0, 0.5
+#: Warn at or above this |correlation| between two housing parameters.
+HIGH_CORRELATION = 0.95
+#: Coverage grid: cells per image side.
+COVERAGE_CELLS = 10
+#: Photos tried per candidate board when the board is found in no photo.
+HINT_PHOTOS = 3
+VIEWS = ("left", "right")
+OUTLIER_RULE = (f"a pose is left out when one of its views' RMS in the first fit exceeds "
+                f"max({OUTLIER_FACTOR:g} × median, median + {OUTLIER_MADS:g} × 1.4826 × MAD, "
+                f"median + {OUTLIER_FLOOR_PX:g} px) of all views' RMS; the fit is then run again "
+                f"without it")
+
+
+def outlier_threshold(rms_values) -> float:
+    """The RMS (px) above which a view is an outlier (module docs)."""
+    values = np.asarray(list(rms_values), dtype=np.float64)
+    if values.size == 0:
+        return float("inf")
+    median = float(np.median(values))
+    mad = float(np.median(np.abs(values - median)))
+    return max(OUTLIER_FACTOR * median, median + OUTLIER_MADS * 1.4826 * mad,
+               median + OUTLIER_FLOOR_PX)
+
+
+def outlier_poses(rms_per: dict) -> tuple[float, list[int]]:
+    """``(threshold, poses)`` of ``{(pose, view): rms}``: the poses with a view above the
+    threshold, sorted."""
+    threshold = outlier_threshold(rms_per.values())
+    return threshold, sorted({k for (k, _), r in rms_per.items() if r > threshold})
+
+
+def without(detections, poses):
+    """``detections`` with the board of ``poses`` removed (both views; pose numbers kept)."""
+    from measure.calibration import Detections
+
+    drop = set(poses)
+    empty = (np.empty(0, int), np.empty((0, 2)))
+    ids = [[empty[0]] * 2 if k in drop else list(v) for k, v in enumerate(detections.ids)]
+    pixels = [[empty[1]] * 2 if k in drop else list(v) for k, v in enumerate(detections.pixels)]
+    return Detections(ids, pixels)
+
+
+def fit_without_outliers(fit, rms_of, detections):
+    """``(result, detections used, outliers)``: ``fit(detections)``, then, when
+    :func:`outlier_poses` of ``rms_of(result)`` names poses, ``fit`` again without them.
+    ``outliers`` holds the threshold, the poses left out and the first fit's per-view RMS."""
+    first = fit(detections)
+    per = rms_of(first)
+    threshold, bad = outlier_poses(per)
+    info = {"threshold_px": threshold, "left_out": bad,
+            "first_fit_rms_px": {f"{k}:{VIEWS[v]}": r for (k, v), r in sorted(per.items())}}
+    if not bad:
+        return first, detections, info
+    kept = without(detections, bad)
+    from measure.calibration import CalibrationError
+
+    try:
+        return fit(kept), kept, info
+    except CalibrationError as exc:
+        raise CalibrationError(f"{exc} (after leaving out {len(bad)} outlier pose(s) whose "
+                               f"RMS exceeded {threshold:.3g} px)") from None
+
+
+def coverage(detections, size, cells: int = COVERAGE_CELLS) -> dict:
+    """Per view: ``fraction`` of ``cells × cells`` image cells holding a detected corner, and
+    the ``cells`` grid (rows of 0/1)."""
+    w, h = size
+    out = {}
+    for view, name in enumerate(VIEWS):
+        grid = np.zeros((cells, cells), int)
+        for k in range(detections.n_poses):
+            uv = np.asarray(detections.pixels[k][view]).reshape(-1, 2)
+            if len(uv):
+                col = np.clip((uv[:, 0] + 0.5) * cells // w, 0, cells - 1).astype(int)
+                row = np.clip((uv[:, 1] + 0.5) * cells // h, 0, cells - 1).astype(int)
+                grid[row, col] = 1
+        out[name] = {"fraction": float(grid.mean()), "cells": grid.tolist()}
+    return out
+
+
+def pose_geometry(board, poses: dict, rig) -> dict:
+    """Per pose ``{distance_mm, tilt_deg}`` of ``{pose: (R, t)}`` (board to reference frame):
+    the distance from the left camera's centre to the board's centre and the angle between the
+    board's normal and the left camera's optical axis (0° = facing the camera)."""
+    centre = board.corners().mean(axis=0)
+    axis = rig.left.R[:, 2]
+    out = {}
+    for k, (R, t) in poses.items():
+        R, t = np.asarray(R), np.asarray(t)
+        c = R @ centre + t
+        cos = abs(float(R[:, 2] @ axis))
+        out[k] = {"distance_mm": float(np.linalg.norm(c - rig.left.t)),
+                  "tilt_deg": float(np.degrees(np.arccos(min(cos, 1.0))))}
+    return out
+
+
+def stats_range(values) -> list | None:
+    values = list(values)
+    return [float(min(values)), float(max(values))] if values else None
+
+
+def stereo_scatter(air, poses) -> dict:
+    """The stereo pose seen pose by pose: for each pose found in both views the right camera's
+    position relative to the left from the two cameras' own board extrinsics; the baseline's
+    scatter (std over poses) and that over √n — the σ OpenCV's ``stereoCalibrate`` does not
+    give."""
+    rig = air.rig
+    baselines = []
+    for k in poses:
+        if (k, 0) in air.board_poses and (k, 1) in air.board_poses:
+            (Rl, tl), (Rr, tr) = air.board_poses[(k, 0)], air.board_poses[(k, 1)]
+            # both are board → reference through each camera's own extrinsics; the right
+            # camera's centre as the left camera sees it, through this pose alone
+            R_cl = rig.left.R.T @ Rl
+            t_cl = rig.left.R.T @ (tl - rig.left.t)
+            R_cr = rig.right.R.T @ Rr
+            t_cr = rig.right.R.T @ (tr - rig.right.t)
+            R_rel = R_cr @ R_cl.T
+            T_rel = t_cr - R_rel @ t_cl
+            baselines.append(float(np.linalg.norm(R_rel.T @ T_rel)))
+    b = np.asarray(baselines)
+    if b.size < 2:
+        return {"poses": int(b.size), "baseline_std_mm": None, "baseline_sigma_mm": None}
+    std = float(np.std(b, ddof=1))
+    return {"poses": int(b.size), "baseline_std_mm": std,
+            "baseline_sigma_mm": std / np.sqrt(b.size)}
+
+
+def air_estimates(air, poses) -> dict:
+    """The in-air calibration's numbers with OpenCV's σ (no truth)."""
+    out = {"rms_px": air.rms_px, "stereo_rms_px": air.stereo_rms_px,
+           "poses_used": air.poses_used, "cameras": {}}
+    for name in VIEWS:
+        cam, sig = getattr(air.rig, name), air.sigmas[name]
+        values = {"fx": cam.K[0, 0], "fy": cam.K[1, 1], "cx": cam.K[0, 2], "cy": cam.K[1, 2]}
+        dist = (np.zeros(5) if cam.dist is None else np.ravel(cam.dist))
+        values.update(zip(("k1", "k2", "p1", "p2"), dist[:4]))
+        out["cameras"][name] = {key: {"estimate": float(v), "sigma": sig.get(key)}
+                                for key, v in values.items()}
+    R, t = air.rig.right.R, air.rig.right.t
+    from scipy.spatial.transform import Rotation
+
+    scatter = stereo_scatter(air, poses)
+    out["stereo"] = {"baseline_mm": float(np.linalg.norm(t - air.rig.left.t)),
+                     "baseline_sigma_mm": scatter["baseline_sigma_mm"],
+                     "baseline_std_over_poses_mm": scatter["baseline_std_mm"],
+                     "baseline_poses": scatter["poses"],
+                     "right_position_mm": t.tolist(),
+                     "right_rotation_deg": float(np.degrees(Rotation.from_matrix(R).magnitude())),
+                     "right_R": R.tolist()}
+    return out
+
+
+def housing_estimates(housing, start_rig) -> dict:
+    """The housing calibration's numbers with σ and the correlation matrix (no truth)."""
+    out = {"free": list(dict.fromkeys(label.split("[")[0] for label in housing.labels)),
+           "labels": list(housing.labels), "correlation": housing.correlation.tolist(),
+           "rms_px": housing.rms_px, "rms_px_start": housing.rms_px_start,
+           "observations": housing.n_observations, "evaluations": housing.nfev,
+           "parameters": {}}
+    port = housing.rig.port
+    for name in housing.estimates:
+        sigma = housing.sigmas[name]
+        if name == "distance":
+            out["parameters"][name] = {"estimate": port.distance, "sigma": sigma, "unit": "mm"}
+        elif name == "thickness":
+            out["parameters"][name] = {"estimate": port.thicknesses[0], "sigma": sigma,
+                                       "unit": "mm"}
+        elif name == "n_water":
+            out["parameters"][name] = {"estimate": port.n_water, "sigma": sigma, "unit": ""}
+        elif name == "normal":
+            tilt = float(np.degrees(np.arccos(np.clip(port.normal @ housing.rig.left.R[:, 2],
+                                                      -1, 1))))
+            out["parameters"][name] = {"estimate": port.normal.tolist(),
+                                       "sigma_deg": np.degrees(sigma).tolist(),
+                                       "tilt_from_left_axis_deg": tilt}
+        elif name == "extrinsics":
+            out["parameters"][name] = {"R": housing.rig.right.R.tolist(),
+                                       "t": housing.rig.right.t.tolist(),
+                                       "sigma_rotation_deg": np.degrees(sigma[:3]).tolist(),
+                                       "sigma_position_mm": list(sigma[3:])}
+    out["start"] = {"distance": start_rig.port.distance,
+                    "thickness": list(start_rig.port.thicknesses),
+                    "indices": list(start_rig.port.indices)}
+    return out
+
+
+def warnings_for(report: dict) -> list[str]:
+    """What a user should know before trusting the calibration (module docs)."""
+    out = []
+    used = [p for p in report["per_pose"] if p["status"] == "used"]
+    if len(used) < RECOMMENDED_POSES:
+        out.append(f"only {len(used)} pose(s) used; at least {RECOMMENDED_POSES} are "
+                   f"recommended (fewer leave the distortion and the σ themselves uncertain)")
+    tilt = report["geometry"]["tilt_deg"]
+    if tilt is not None and tilt[1] < MIN_TILT_DEG:
+        what = ("the focal lengths" if report["air"] else
+                "the port distance and tilt (they trade against the focal length)")
+        out.append(f"the boards are tilted by at most {tilt[1]:.1f}° (< {MIN_TILT_DEG:g}°): "
+                   f"{what} are poorly determined without tilted boards; tilt some by 20–45°")
+    for name in VIEWS:
+        fraction = report["coverage"][name]["fraction"]
+        if fraction < MIN_COVERAGE:
+            out.append(f"the corners cover {100 * fraction:.0f} % of the {name} image "
+                       f"({COVERAGE_CELLS}×{COVERAGE_CELLS} cells; < {100 * MIN_COVERAGE:.0f} %): "
+                       f"the lens distortion is extrapolated outside them; photograph the board "
+                       f"near the image's edges and corners too")
+    if report["left_out"]:
+        out.append(f"{len(report['left_out'])} outlier pose(s) left out of the final fit: "
+                   f"{', '.join(report['left_out'])} (see the outlier rule)")
+    housing = report.get("housing")
+    if housing and len(housing["labels"]) > 1:
+        c = np.abs(np.triu(np.asarray(housing["correlation"]), 1))
+        i, j = np.unravel_index(np.argmax(c), c.shape)
+        if c[i, j] >= HIGH_CORRELATION:
+            out.append(f"{housing['labels'][i]} and {housing['labels'][j]} are correlated at "
+                       f"{housing['correlation'][i][j]:+.3f}: these boards barely tell them apart")
+    return out
+
+
+def per_pose_table(names, detections_all, detections_used, rms_per, outliers, geometry) -> list:
+    """One row per pose: name, corners per view, final RMS per view, status, distance, tilt."""
+    rows = []
+    for k, name in enumerate(names):
+        corners = {v: int(len(detections_all.ids[k][i])) for i, v in enumerate(VIEWS)}
+        if not any(corners.values()):
+            status = "board not found"
+        elif k in outliers["left_out"]:
+            first = {v: outliers["first_fit_rms_px"].get(f"{k}:{v}") for v in VIEWS}
+            worst = max(r for r in first.values() if r is not None)
+            status = (f"left out: outlier (first fit RMS {worst:.3f} px > "
+                      f"{outliers['threshold_px']:.3f} px)")
+        else:
+            status = "used"
+        rms = {v: rms_per.get((k, i)) if status == "used" else None
+               for i, v in enumerate(VIEWS)}
+        row = {"pose": k, "name": name, "corners": corners, "rms_px": rms, "status": status}
+        row.update(geometry.get(k, {"distance_mm": None, "tilt_deg": None}))
+        rows.append(row)
+    return rows
+
+
+def board_hint(board, images) -> str:
+    """When the board was found in no photo: the chessboard (one square more or fewer each way)
+    that is found in the first :data:`HINT_PHOTOS` left photos, said as a sentence (empty when
+    none is)."""
+    import cv2
+
+    from measure.board import DETECTION_WIDTH_PX, to_uint8
+
+    if board.kind != "chessboard":
+        return (" (check --squares, --marker-mm and --dictionary: no ChArUco corners of this "
+                "board were found)")
+    cols, rows = board.squares
+    candidates = [(c, r) for c, r in ((cols + 1, rows), (cols - 1, rows), (cols, rows + 1),
+                                      (cols, rows - 1), (cols + 1, rows + 1),
+                                      (cols - 1, rows - 1), (cols + 1, rows - 1),
+                                      (cols - 1, rows + 1))
+                  if c >= 3 and r >= 3]
+    smalls = []
+    for left, _ in images[:HINT_PHOTOS]:
+        small = to_uint8(left)
+        while small.shape[1] > DETECTION_WIDTH_PX:
+            small = cv2.pyrDown(small)
+        smalls.append(small)
+    for c, r in candidates:
+        found = sum(bool(cv2.findChessboardCornersSB(s, (c - 1, r - 1))[0]) for s in smalls)
+        if found:
+            note = ("" if (c + r) % 2 else "; a board with an even number of squares both ways "
+                    "looks the same turned by 180° and cannot be used")
+            return (f"; the photos show a {c}x{r} chessboard, not {cols}x{rows} (found in {found} "
+                    f"of the first {len(smalls)} left photos with --squares {c}x{r}{note})")
+    return (f" (no chessboard of {cols}x{rows} squares, nor one square more or fewer, in the "
+            f"first {len(smalls)} left photos: check --board and --squares)")
+
+
+def _f(value, digits=4):
+    if value is None:
+        return "–"
+    if isinstance(value, (list, tuple)):
+        return "(" + ", ".join(_f(v, digits) for v in value) + ")"
+    return f"{value:.{digits}g}" if isinstance(value, float) else str(value)
+
+
+def markdown(report: dict) -> str:
+    b = report["board"]
+    lines = [f"# Calibration report: `{report['photos']}`", "",
+             f"{report['poses']} photo pairs ({report['image_size'][0]}x{report['image_size'][1]}"
+             f" px) of a {b['kind']} {b['squares'][0]}x{b['squares'][1]}, {b['square_mm']:g} mm "
+             f"squares, {'in air' if report['air'] else 'underwater, behind the port'}; board "
+             f"found in {report['found']['left']} left and {report['found']['right']} right "
+             f"photos; {report['used']} pose(s) in the final fit. No truth: every number below "
+             f"comes from the photos.", ""]
+    if report["warnings"]:
+        lines += ["## Warnings", ""] + [f"- {w}" for w in report["warnings"]] + [""]
+    lines += ["## Poses", "", f"Outlier rule: {report['outlier_rule']} (threshold here "
+              f"{report['outliers']['threshold_px']:.3f} px).", "",
+              "| pose | corners L | corners R | RMS L (px) | RMS R (px) | distance (mm) | "
+              "tilt (°) | status |", "|---|---|---|---|---|---|---|---|"]
+    for p in report["per_pose"]:
+        lines.append(f"| {p['name']} | {p['corners']['left']} | {p['corners']['right']} | "
+                     f"{_f(p['rms_px']['left'])} | {_f(p['rms_px']['right'])} | "
+                     f"{_f(p['distance_mm'], 5)} | {_f(p['tilt_deg'], 3)} | {p['status']} |")
+    g, c = report["geometry"], report["coverage"]
+    lines += ["", f"Board distances {_f(g['distance_mm'], 5)} mm, tilts {_f(g['tilt_deg'], 3)}° "
+              f"(poses in the final fit). Corners cover {100 * c['left']['fraction']:.0f} % of "
+              f"the left and {100 * c['right']['fraction']:.0f} % of the right image "
+              f"({COVERAGE_CELLS}×{COVERAGE_CELLS} cells; `coverage.png`)."]
+    if "in_air" in report:
+        a = report["in_air"]
+        lines += ["", "## In-air calibration (OpenCV)", "",
+                  f"Reprojection RMS: left {a['rms_px']['left']:.4f} px, right "
+                  f"{a['rms_px']['right']:.4f} px, stereo {a['stereo_rms_px']:.4f} px. σ: "
+                  f"OpenCV's `calibrateCameraExtended` standard deviations.", "",
+                  "| parameter | left | σ | right | σ |", "|---|---|---|---|---|"]
+        for key in a["cameras"]["left"]:
+            left, right = a["cameras"]["left"][key], a["cameras"]["right"][key]
+            lines.append(f"| {key} | {left['estimate']:.6g} | {_f(left['sigma'], 3)} | "
+                         f"{right['estimate']:.6g} | {_f(right['sigma'], 3)} |")
+        s = a["stereo"]
+        lines += ["", f"Baseline {s['baseline_mm']:.4f} mm; σ {_f(s['baseline_sigma_mm'], 3)} mm "
+                  f"(the per-pose baselines' scatter {_f(s['baseline_std_over_poses_mm'], 3)} mm "
+                  f"over √{s['baseline_poses']}: OpenCV's stereoCalibrate gives no σ); right "
+                  f"camera rotated {s['right_rotation_deg']:.4f}° from the left."]
+    if "housing" in report:
+        h = report["housing"]
+        lines += ["", "## Housing calibration (refractive bundle adjustment)", "",
+                  f"Free: {', '.join(h['free'])}; {h['observations']} corner observations; "
+                  f"reprojection RMS {h['rms_px_start']:.3f} px at the start, {h['rms_px']:.4f} "
+                  f"px after ({h['evaluations']} evaluations). Start (design port): distance "
+                  f"{h['start']['distance']:g} mm, glass {_f(h['start']['thickness'])} mm, "
+                  f"indices {_f(h['start']['indices'])}.", "", report["sigma_note"], "",
+                  "| parameter | estimate | σ |", "|---|---|---|"]
+        for name, p in h["parameters"].items():
+            if name == "normal":
+                lines.append(f"| normal | {_f(p['estimate'], 7)} ({p['tilt_from_left_axis_deg']:.4f}° "
+                             f"from the left optical axis) | {_f(p['sigma_deg'], 3)}° (two tilts) |")
+            elif name == "extrinsics":
+                lines.append(f"| right camera position | {_f(p['t'], 6)} mm | "
+                             f"{_f(p['sigma_position_mm'], 3)} mm; rotation "
+                             f"{_f(p['sigma_rotation_deg'], 3)}° |")
+            else:
+                lines.append(f"| {name} | {p['estimate']:.6f} {p['unit']} | {_f(p['sigma'], 3)} |")
+        lines += ["", "Correlations of the free numbers (" + ", ".join(h["labels"]) + "):", ""]
+        lines += ["    " + " ".join(f"{v:+.3f}" for v in row) for row in h["correlation"]]
+    lines += ["", "## Files", "", "- `calib.yaml`: the calibration in the dataset format"
+              + (" (with an `uncertainty` map), `calib_in_air_only.yaml` (the in-air calibration "
+                 "with the design port), `flatport.txt` (FLATPORT per camera)"
+                 if "housing" in report else ""),
+              "- `coverage.png`" + (", `residuals.png`" if "housing" in report else ""),
+              "", "## Timings (s)", "",
+              " · ".join(f"{k} {v:.2f}" for k, v in report["timings_s"].items())]
+    return "\n".join(lines) + "\n"
+
+
+def summary_lines(report: dict) -> str:
+    lines = [f"{report['photos']}: board found in {report['found']['left']}/{report['poses']} "
+             f"left and {report['found']['right']}/{report['poses']} right photos; "
+             f"{report['used']} pose(s) used"
+             + (f", not found in {', '.join(report['not_found'])}" if report["not_found"] else "")
+             + (f", left out as outliers: {', '.join(report['left_out'])}"
+                if report["left_out"] else "")]
+    if "in_air" in report:
+        a = report["in_air"]
+        for cam, v in a["cameras"].items():
+            lines.append(f"in air {cam}: fx {v['fx']['estimate']:.3f} ± {_f(v['fx']['sigma'], 2)}, "
+                         f"fy {v['fy']['estimate']:.3f} ± {_f(v['fy']['sigma'], 2)}, cx "
+                         f"{v['cx']['estimate']:.3f} ± {_f(v['cx']['sigma'], 2)}, cy "
+                         f"{v['cy']['estimate']:.3f} ± {_f(v['cy']['sigma'], 2)} px; RMS "
+                         f"{a['rms_px'][cam]:.4f} px")
+        s = a["stereo"]
+        lines.append(f"in air baseline {s['baseline_mm']:.4f} ± {_f(s['baseline_sigma_mm'], 2)} "
+                     f"mm, stereo RMS {a['stereo_rms_px']:.4f} px")
+    if "housing" in report:
+        h = report["housing"]
+        for name, p in h["parameters"].items():
+            if name == "normal":
+                lines.append(f"housing normal: {_f(p['estimate'], 6)}, "
+                             f"{p['tilt_from_left_axis_deg']:.4f}° from the left optical axis, "
+                             f"σ {_f(p['sigma_deg'], 2)}°")
+            elif name == "extrinsics":
+                lines.append(f"housing right camera: position {_f(p['t'], 6)} mm, σ "
+                             f"{_f(p['sigma_position_mm'], 2)} mm")
+            else:
+                lines.append(f"housing {name}: {p['estimate']:.6f} ± {_f(p['sigma'], 2)} "
+                             f"{p['unit']}".rstrip())
+        lines.append(f"housing reprojection RMS {h['rms_px']:.4f} px ({h['observations']} "
+                     f"corners)")
+    g, c = report["geometry"], report["coverage"]
+    lines.append(f"boards at {_f(g['distance_mm'], 5)} mm, tilted {_f(g['tilt_deg'], 3)}°; "
+                 f"corners cover {100 * c['left']['fraction']:.0f} % / "
+                 f"{100 * c['right']['fraction']:.0f} % of the images")
+    lines += [f"warning: {w}" for w in report["warnings"]]
+    return "\n".join(lines)
+
+
+def coverage_figure(directory, detections_all, used, size, report) -> None:
+    """``coverage.png``: every detected corner on each camera's image frame (colour = pose;
+    poses left out as red crosses), the covered cells shaded."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    w, h = size
+    fig, axes = plt.subplots(1, 2, figsize=(12, 5), constrained_layout=True)
+    cmap = plt.get_cmap("tab20")
+    for view, ax in enumerate(axes):
+        name = VIEWS[view]
+        grid = np.asarray(report["coverage"][name]["cells"])
+        n = grid.shape[0]
+        ax.imshow(grid, extent=(-0.5, w - 0.5, h - 0.5, -0.5), cmap="Greens", vmin=0, vmax=4,
+                  alpha=0.6, interpolation="nearest")
+        for i in range(1, n):
+            ax.axvline(i * w / n - 0.5, color="0.85", lw=0.5)
+            ax.axhline(i * h / n - 0.5, color="0.85", lw=0.5)
+        for k in range(detections_all.n_poses):
+            uv = np.asarray(detections_all.pixels[k][view]).reshape(-1, 2)
+            if not len(uv):
+                continue
+            if k in used:
+                ax.plot(uv[:, 0], uv[:, 1], ".", ms=2, color=cmap(k % 20))
+            else:
+                ax.plot(uv[:, 0], uv[:, 1], "x", ms=3, color="red")
+        ax.set_xlim(-0.5, w - 0.5)
+        ax.set_ylim(h - 0.5, -0.5)
+        ax.set_aspect("equal")
+        ax.set_title(f"{name}: corners of {len(used)} poses; {100 * grid.mean():.0f} % of "
+                     f"{n}×{n} cells covered (red ×: left out)", fontsize=9)
+    fig.savefig(os.path.join(directory, "coverage.png"), dpi=110)
+    plt.close(fig)
+
+
+__all__ = ["COVERAGE_CELLS", "HIGH_CORRELATION", "MIN_COVERAGE", "MIN_TILT_DEG", "OUTLIER_RULE",
+           "RECOMMENDED_POSES", "air_estimates", "board_hint", "coverage", "coverage_figure",
+           "fit_without_outliers", "housing_estimates", "markdown", "outlier_poses",
+           "outlier_threshold", "per_pose_table", "pose_geometry", "stats_range", "stereo_scatter",
+           "summary_lines", "warnings_for", "without"]
