@@ -54,6 +54,11 @@ COMMAND = "synth boards"
 DEFAULT_POSES = 15
 DEFAULT_SPP = 16
 DEFAULT_DISTANCE_RANGE_MM = (700.0, 1400.0)
+#: In air the boards come nearer, so that their corners cover about half of each image: the
+#: in-air distortion and principal point are what the housing calibration trusts, and boards at
+#: 0.7–1.4 m (37 % of the image) left them 0.1–0.2 px off, which moved the port distance by
+#: 0.35–0.40 mm; at 0.35–0.8 m (48–52 %) the port came within 0.06 mm (docs/calibration.md).
+DEFAULT_AIR_DISTANCE_RANGE_MM = (350.0, 800.0)
 DEFAULT_MAX_TILT_DEG = 45.0
 #: Largest turn of the board about its own normal (degrees).
 MAX_ROLL_DEG = 20.0
@@ -210,7 +215,7 @@ def request_key(spec: SceneSpec, board: Board, n_poses, spp, seed, air, distance
 
 def write_boards(spec: SceneSpec, out_dir, board: Board, n_poses: int = DEFAULT_POSES,
                  spp: int = DEFAULT_SPP, seed: int = 0, air: bool = False,
-                 distance_range=DEFAULT_DISTANCE_RANGE_MM,
+                 distance_range=None,
                  max_tilt_deg: float = DEFAULT_MAX_TILT_DEG, variant=None,
                  progress: bool = True) -> dict:
     """Render ``n_poses`` stereo pairs of ``board`` and write the folder (module docs). Returns
@@ -224,6 +229,8 @@ def write_boards(spec: SceneSpec, out_dir, board: Board, n_poses: int = DEFAULT_
         raise ValueError(f"--poses must be at least 1, got {n_poses}")
     if not air and not spec.has_port:
         raise ValueError(f"{spec.path}: the scene has no port; render its boards with --air")
+    if distance_range is None:
+        distance_range = DEFAULT_AIR_DISTANCE_RANGE_MM if air else DEFAULT_DISTANCE_RANGE_MM
     key = request_key(spec, board, n_poses, spp, seed, air, distance_range, max_tilt_deg, variant)
     output = OutputDir(out_dir, COMMAND)
     damage = None

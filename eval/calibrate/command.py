@@ -24,8 +24,9 @@ import sys
 import time
 
 from eval.cli import CLIError, positive_float
-from synth.cli import (BOARD_OPTIONS, add_board_options, add_out_option, add_progress_option,
-                       board_from_args, refuse_given)
+from eval.core.photos import add_encoding_option
+from synth.cli import (BOARD_OPTIONS, WATER_INDEX_HELP, add_board_options, add_out_option,
+                       add_progress_option, board_from_args, refuse_given, water_index_argument)
 
 COMMAND = "eval calibrate"
 #: Options of the housing calibration (underwater boards): refused with in-air boards.
@@ -62,10 +63,11 @@ def add_parser(subparsers):
                         f"the start when --free thickness)")
     p.add_argument("--n-glass", type=positive_float, default=PAPER_INDICES[1],
                    help=f"design glass index (default {PAPER_INDICES[1]:g})")
-    p.add_argument("--n-water", type=positive_float, default=PAPER_INDICES[2],
-                   help=f"design water index (default {PAPER_INDICES[2]:g}; the start when "
-                        f"--free n_water)")
+    p.add_argument("--n-water", type=water_index_argument, default=PAPER_INDICES[2],
+                   help=f"design {WATER_INDEX_HELP}; default {PAPER_INDICES[2]:g}; the start "
+                        f"when --free n_water")
     add_out_option(p, COMMAND)
+    add_encoding_option(p)
     add_progress_option(p)
 
 
@@ -110,6 +112,8 @@ def main(args) -> int:
     log = (lambda text: None) if args.no_progress else (
         lambda text: print(text, file=sys.stderr, flush=True))
     free = _parse_free(args.free)
+    if getattr(args.n_water, "note", None):
+        print(args.n_water.note, file=sys.stderr, flush=True)
     output = OutputDir(args.out, COMMAND).claim()
     start = time.perf_counter()
     if is_photo_folder(args.dir):
@@ -119,6 +123,8 @@ def main(args) -> int:
                        f"(no left/ and right/ folders)")
     boards = read_boards(args.dir)
     truth = boards.calib["rig"]
+    refuse_given(args, ("encoding",), f"to a boards folder ({args.dir}): its images are "
+                                      f"16-bit linear renders")
     refuse_given(args, BOARD_OPTIONS, f"to a boards folder ({args.dir}): the folder's "
                                       f"board.json defines the board")
     if args.air and not boards.air:
@@ -230,7 +236,7 @@ def _calibrate_photos(args, output, log, free, start) -> int:
         air_rig = _intrinsics_for_photos(args.intrinsics, log)
     log(f"read {len(pairs.names)} photo pairs from {args.dir} …")
     t = time.perf_counter()
-    images, size = read_pairs(pairs)
+    images, size = read_pairs(pairs, args.encoding)
     timings = {"read": time.perf_counter() - t}
     if air_rig is not None and tuple(air_rig.left.size) != tuple(size):
         raise CLIError(f"--intrinsics {args.intrinsics}: image size "

@@ -30,6 +30,8 @@ import os
 
 import numpy as np
 
+from eval.calibrate.report import format_value as _f
+
 #: The outlier rule (module docs).
 OUTLIER_FACTOR, OUTLIER_MADS, OUTLIER_FLOOR_PX = 3.0, 5.0, 0.1
 #: Warn below these.
@@ -310,12 +312,9 @@ def board_hint(board, images) -> str:
             f"first {len(smalls)} left photos: check --board and --squares)")
 
 
-def _f(value, digits=4):
-    if value is None:
-        return "–"
-    if isinstance(value, (list, tuple)):
-        return "(" + ", ".join(_f(v, digits) for v in value) + ")"
-    return f"{value:.{digits}g}" if isinstance(value, float) else str(value)
+def _range(pair, digits) -> str:
+    """``low–high`` of a ``(low, high)`` pair, or – when unknown."""
+    return "–" if pair is None or None in pair else "–".join(_f(float(v), digits) for v in pair)
 
 
 def markdown(report: dict) -> str:
@@ -423,7 +422,7 @@ def summary_lines(report: dict) -> str:
         lines.append(f"housing reprojection RMS {h['rms_px']:.4f} px ({h['observations']} "
                      f"corners)")
     g, c = report["geometry"], report["coverage"]
-    lines.append(f"boards at {_f(g['distance_mm'], 5)} mm, tilted {_f(g['tilt_deg'], 3)}°; "
+    lines.append(f"boards {_range(g['distance_mm'], 4)} mm away, tilted {_range(g['tilt_deg'], 3)}°; "
                  f"corners cover {100 * c['left']['fraction']:.0f} % / "
                  f"{100 * c['right']['fraction']:.0f} % of the images")
     lines += [f"warning: {w}" for w in report["warnings"]]

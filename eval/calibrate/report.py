@@ -143,11 +143,14 @@ def write_calibration(path, rig, has_port: bool, housing, report, single: bool =
 
 
 def write_other_formats(directory, rig, has_port: bool) -> list[str]:
-    """THE ONE CALL SITE of the calibration formats of other tools (issue 24): calibmar's
-    ``calibration.yaml`` and the refractive COLMAP fork's ``cameras.txt`` are to be written here,
-    into ``directory``, from ``rig`` (with its port when ``has_port``), once their writers are
-    merged. Nothing is written yet; returns the names written (none)."""
-    return []
+    """The calibration in the formats of other tools, into ``directory``: calibmar's stereo
+    pair (``calibmar.yaml``, ``calibmar_stereo.yaml``) and the refractive COLMAP fork's
+    ``cameras.txt`` with ``rig_config.json`` (:func:`synth.calib_formats.write_calibration_formats`;
+    the COLMAP file's header says that upstream COLMAP and pycolmap drop the port). Returns
+    the names written."""
+    from synth.calib_formats import write_calibration_formats
+
+    return [os.path.basename(p) for p in write_calibration_formats(directory, rig, has_port)]
 
 
 def figures(directory, boards, detections, housing, rig) -> None:
@@ -228,12 +231,16 @@ def _quiver(ax, pose, where, vectors, w, h, title) -> None:
     ax.set_title(f"{title}\nRMS {rms:.4f} px; arrows × {gain:.0f}; colour = pose", fontsize=9)
 
 
-def _f(value, digits=4):
+def format_value(value, digits=4):
+    """A number (``digits`` significant), a list of them in parentheses, or – for None."""
     if value is None:
         return "–"
     if isinstance(value, (list, tuple)):
         return "(" + ", ".join(_f(v, digits) for v in value) + ")"
     return f"{value:.{digits}g}" if isinstance(value, float) else str(value)
+
+
+_f = format_value
 
 
 def markdown(report: dict) -> str:

@@ -35,6 +35,15 @@ class PhotoError(ValueError):
 PHOTO_ENCODINGS = ("auto", "srgb", "linear")
 
 
+ENCODING_HELP = ("how the photos' values are read: auto (default: 8-bit files are sRGB and "
+                 "decoded to linear, 16-bit and float files are linear), srgb, linear")
+
+
+def add_encoding_option(parser) -> None:
+    """``--encoding auto|srgb|linear`` of the commands that read a user's photos."""
+    parser.add_argument("--encoding", choices=PHOTO_ENCODINGS, default="auto", help=ENCODING_HELP)
+
+
 def srgb_to_linear(values: np.ndarray) -> np.ndarray:
     """IEC 61966-2-1 sRGB decoding of values in [0, 1]."""
     x = np.asarray(values, dtype=np.float64)
@@ -159,5 +168,6 @@ def read_pairs(pairs: PhotoPairs, encoding: str = "auto") -> tuple[list, tuple]:
     return images, size[0][0] if size else (0, 0)
 
 
-__all__ = ["PHOTO_ENCODINGS", "PHOTO_EXTENSIONS", "PhotoError", "PhotoPairs", "pair_folders",
-           "photo_folder", "read_pairs", "read_photo", "srgb_to_linear"]
+__all__ = ["ENCODING_HELP", "PHOTO_ENCODINGS", "PHOTO_EXTENSIONS", "PhotoError", "PhotoPairs",
+           "add_encoding_option", "pair_folders", "photo_folder", "read_pairs", "read_photo",
+           "srgb_to_linear"]

@@ -28,7 +28,7 @@ import time
 from eval.cli import CLIError, positive_float
 from eval.core.detection import DETECTOR_OPTIONS, add_detector_options
 from eval.core.formatting import format_number as fmt
-from eval.core.photos import PHOTO_ENCODINGS
+from eval.core.photos import add_encoding_option
 from synth.cli import add_json_option, add_out_option, add_progress_option, refuse_given
 
 COMMAND = "eval measure"
@@ -68,9 +68,7 @@ def add_parser(subparsers):
                    help=f"the automatic detection threshold is at least F of the way from the "
                         f"background to the targets' level (default {DEFAULT_FLOOR_FRACTION:g}: "
                         f"keeps JPEG ringing out of the targets; 0: no floor)")
-    p.add_argument("--encoding", choices=PHOTO_ENCODINGS, default="auto",
-                   help="how the photos' values are read: auto (default: 8-bit files are sRGB "
-                        "and decoded to linear, 16-bit and float files are linear), srgb, linear")
+    add_encoding_option(p)
     p.add_argument("--dense", action="store_true",
                    help="measure a speckled surface per pixel (dense matching through the port) "
                         "instead of targets; needs --depth-range; the target options are "

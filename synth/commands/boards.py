@@ -18,7 +18,8 @@ def add_parser(subparsers) -> None:
     add_board_options(p)
     p.add_argument("--distance", type=positive_float, nargs=2, metavar=("NEAR", "FAR"),
                    default=None, help="board centre depth range along the port normal, mm "
-                                      "(default 700 1400)")
+                                      "(default 700 1400; with --air 350 800, so that the "
+                                      "corners cover about half of each image)")
     p.add_argument("--max-tilt", type=non_negative_float, default=None,
                    help="largest tilt of the board, degrees (default 45)")
     p.add_argument("--spp", type=positive_int, default=None,
@@ -65,7 +66,7 @@ def main(args) -> int:
     manifest = b.write_boards(
         spec.rendered_with(spp=spp, seed=seed), args.out, board,
         n_poses=args.poses or b.DEFAULT_POSES, spp=spp, seed=seed, air=args.air,
-        distance_range=tuple(args.distance) if args.distance else b.DEFAULT_DISTANCE_RANGE_MM,
+        distance_range=tuple(args.distance) if args.distance else None,
         max_tilt_deg=b.DEFAULT_MAX_TILT_DEG if args.max_tilt is None else args.max_tilt,
         variant=args.variant, progress=not args.no_progress)
     if manifest.get("skipped"):

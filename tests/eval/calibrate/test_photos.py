@@ -18,6 +18,7 @@ from eval.__main__ import main as eval_main
 from eval.calibrate.photos import outlier_poses, outlier_threshold
 from measure.board import Board
 from synth.boards import board_rig, sample_poses
+from synth.photos import to_photo
 from synth.rig import paper_cameras
 
 SIZE, FOCAL = (480, 402), 225.0
@@ -37,8 +38,8 @@ def _air_rig():
 
 
 def _draw(camera, pose, board=BOARD, rng=None):
-    """The board at ``pose`` as an 8-bit photo of a pinhole ``camera`` (homography of the
-    pattern, a little blur and noise)."""
+    """The board at ``pose`` as an 8-bit sRGB photo of a pinhole ``camera`` (homography of the
+    pattern, a little blur, then sRGB-encoded with 1 grey level of noise)."""
     p = TEXELS
     pattern = board.pattern(p).astype(np.float32)
     s = board.square_mm / p
@@ -53,9 +54,10 @@ def _draw(camera, pose, board=BOARD, rng=None):
     image = cv2.warpPerspective(pattern, S @ H, (SUPER * w, SUPER * h), flags=cv2.INTER_LINEAR,
                                 borderMode=cv2.BORDER_CONSTANT, borderValue=90.0)
     image = cv2.resize(image, (w, h), interpolation=cv2.INTER_AREA)
-    image = cv2.GaussianBlur(image, (0, 0), 0.7) * 0.8 + 20
+    linear = cv2.GaussianBlur(image, (0, 0), 0.7) / 255.0 * 0.8 + 0.08
+    stored = to_photo(np.rint(linear * 65535))  # sRGB-encoded, as a camera stores it
     rng = rng or np.random.default_rng(0)
-    image = image + rng.normal(0, 1.0, image.shape)
+    image = stored + rng.normal(0, 1.0, image.shape)
     return np.clip(np.rint(image), 0, 255).astype(np.uint8)
 
 
