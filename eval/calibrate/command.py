@@ -19,6 +19,7 @@ vectors per pose and view) and ``poses.png`` (the board poses in 3D).
 
 from __future__ import annotations
 
+import math
 import os
 import sys
 import time
@@ -26,11 +27,18 @@ import time
 from eval.cli import CLIError, positive_float
 from eval.core.photos import add_encoding_option
 from synth.cli import (BOARD_OPTIONS, WATER_INDEX_HELP, add_board_options, add_out_option,
-                       add_progress_option, board_from_args, refuse_given, water_index_argument)
+                       add_progress_option, board_from_args, given, refuse_given,
+                       water_index_argument)
 
 COMMAND = "eval calibrate"
 #: Options of the housing calibration (underwater boards): refused with in-air boards.
-HOUSING_OPTIONS = ("free", "start_distance", "glass_thickness", "n_glass", "n_water")
+HOUSING_OPTIONS = ("free", "design_port", "start_distance", "glass_thickness", "n_glass",
+                   "n_water")
+#: What the printed summary says of ``cameras.txt`` (its header says it too).
+COLMAP_NOTE = "upstream COLMAP and pycolmap read it without an error and drop the port"
+#: ``--design-port`` keys and the single option each one stands for.
+DESIGN_KEYS = {"distance": "start_distance", "thickness": "glass_thickness", "n_glass": "n_glass",
+               "n_water": "n_water"}
 
 
 def add_parser(subparsers):
@@ -66,9 +74,43 @@ def add_parser(subparsers):
     p.add_argument("--n-water", type=water_index_argument, default=PAPER_INDICES[2],
                    help=f"design {WATER_INDEX_HELP}; default {PAPER_INDICES[2]:g}; the start "
                         f"when --free n_water")
+    p.add_argument("--design-port", metavar="KEY=VALUE,…",
+                   help="the starting port in one option, from the housing's drawing: any of "
+                        "distance=MM, thickness=MM, n_glass=N, n_water=N (e.g. "
+                        "distance=120,thickness=8,n_glass=1.49); the keys not given keep the "
+                        "defaults above")
     add_out_option(p, COMMAND)
     add_encoding_option(p)
     add_progress_option(p)
+
+
+def design_port(args, normal):
+    """The starting port (:class:`measure.FlatPort`, normal ``normal``): the single options, with
+    ``--design-port`` keys over them (a key and its single option both given are refused)."""
+    from measure import FlatPort
+
+    values = {dest: getattr(args, dest) for dest in DESIGN_KEYS.values()}
+    for item in filter(None, (args.design_port or "").split(",")):
+        key, sep, text = item.partition("=")
+        key = key.strip()
+        if not sep or key not in DESIGN_KEYS:
+            raise CLIError(f"--design-port {args.design_port!r}: expected KEY=VALUE items with KEY "
+                           f"one of {', '.join(DESIGN_KEYS)}, got {item!r}")
+        option = given(args, DESIGN_KEYS[key])
+        if option:
+            raise CLIError(f"--design-port {key}= and {option} both give the design {key}; "
+                           f"give one")
+        try:
+            value = float(text)
+        except ValueError:
+            value = float("nan")
+        index = key.startswith("n_")
+        if not (math.isfinite(value) and (value >= 1.0 if index else value > 0.0)):
+            raise CLIError(f"--design-port {key}={text}: expected "
+                           f"{'an index >= 1' if index else 'a positive length, mm'}")
+        values[DESIGN_KEYS[key]] = value
+    return FlatPort(normal, values["start_distance"], (values["glass_thickness"],),
+                    (1.0, values["n_glass"], values["n_water"]))
 
 
 def _parse_free(text: str) -> tuple:
@@ -102,7 +144,7 @@ def _in_air(path, log):
 
 def main(args) -> int:
 
-    from measure import FlatPort, StereoRig
+    from measure import StereoRig
     from measure.calibration import calibrate_housing, calibrate_in_air, detect_boards
     from synth.boards import read_boards
     from synth.fileio import OutputDir, atomic_write_json, atomic_write_text, jsonable
@@ -168,8 +210,7 @@ def main(args) -> int:
         if len(truth.port.thicknesses) != 1:
             raise CLIError(f"{args.dir}: the housing calibration models one glass layer; the "
                            f"truth has {len(truth.port.thicknesses)}")
-        design = FlatPort(air_rig.left.R[:, 2], args.start_distance, (args.glass_thickness,),
-                          (1.0, args.n_glass, args.n_water))
+        design = design_port(args, air_rig.left.R[:, 2])
         start_rig = StereoRig(air_rig.left, air_rig.right, design)
         log(f"refractive bundle adjustment of {', '.join(free)} over "
             f"{len(detections.found(0))} + {len(detections.found(1))} board views …")
@@ -194,7 +235,8 @@ def main(args) -> int:
         atomic_write_json(os.path.join(tmp, "report.json"), report)
         atomic_write_text(os.path.join(tmp, "report.md"), report_lib.markdown(report))
     print(report_lib.summary_lines(report))
-    print(f"wrote {output.path}")
+    print(f"wrote {output.path} (calib.yaml; calibmar.yaml + calibmar_stereo.yaml; cameras.txt + "
+          f"rig_config.json for the refractive COLMAP fork — {COLMAP_NOTE})")
     return 0
 
 
@@ -205,7 +247,7 @@ def is_photo_folder(path) -> bool:
 
 def _calibrate_photos(args, output, log, free, start) -> int:
     """``eval calibrate`` of a user's photo folder (module docs, :mod:`eval.calibrate.photos`)."""
-    from measure import FlatPort, StereoRig
+    from measure import StereoRig
     from measure.calibration import calibrate_housing, calibrate_in_air, detect_boards
     from synth.fileio import atomic_write_json, atomic_write_text, jsonable
 
@@ -263,8 +305,7 @@ def _calibrate_photos(args, output, log, free, start) -> int:
                  for (k, _), pose in result.board_poses.items()}
         timings["calibrate"] = time.perf_counter() - t
     else:
-        design = FlatPort(air_rig.left.R[:, 2], args.start_distance, (args.glass_thickness,),
-                          (1.0, args.n_glass, args.n_water))
+        design = design_port(args, air_rig.left.R[:, 2])
         start_rig = StereoRig(air_rig.left, air_rig.right, design)
         log(f"refractive bundle adjustment of {', '.join(free)} …")
         result, used_detections, outliers = trust.fit_without_outliers(
@@ -312,7 +353,8 @@ def _calibrate_photos(args, output, log, free, start) -> int:
         atomic_write_json(os.path.join(tmp, "report.json"), report)
         atomic_write_text(os.path.join(tmp, "report.md"), trust.markdown(report))
     print(trust.summary_lines(report))
-    print(f"wrote {output.path}")
+    print(f"wrote {output.path} (calib.yaml; calibmar.yaml + calibmar_stereo.yaml; cameras.txt + "
+          f"rig_config.json for the refractive COLMAP fork — {COLMAP_NOTE})")
     return 0
 
 

@@ -288,3 +288,25 @@ def test_rendered_photos_in_air_then_underwater(rendered, tmp_path, capsys):
     assert read_calib(out / "calib.yaml")["has_port"]
     printed = capsys.readouterr().out
     assert "housing distance" in printed and "truth" not in printed
+
+
+def test_design_port_gives_the_starting_port_in_one_option():
+    from eval.calibrate.command import design_port
+    from eval.cli import CLIError, build_parser
+
+    def parsed(*extra):
+        return build_parser().parse_args(["calibrate", "photos", "--out", "o", *extra])
+
+    port = design_port(parsed("--design-port", "distance=120,thickness=8,n_glass=1.49"),
+                       np.array([0.0, 0.0, 1.0]))
+    assert port.distance == 120.0 and port.thicknesses == (8.0,)
+    assert port.indices == (1.0, 1.49, 1.33)
+    port = design_port(parsed("--n-water", "T=12,S=35", "--design-port", "distance=90"),
+                       np.array([0.0, 0.0, 1.0]))
+    assert port.distance == 90.0 and port.indices[2] == pytest.approx(1.3415179766, abs=1e-9)
+    for extra, message in ((("--design-port", "distance=90", "--start-distance", "95"), "give one"),
+                           (("--design-port", "depth=3"), "KEY one of"),
+                           (("--design-port", "thickness=-1"), "positive length"),
+                           (("--design-port", "n_water=0.99"), "index >= 1")):
+        with pytest.raises(CLIError, match=message):
+            design_port(parsed(*extra), np.array([0.0, 0.0, 1.0]))
