@@ -276,14 +276,19 @@ def write_calibmar(path, rig: StereoRig, has_port: bool = True,
 _LIST = re.compile(r"^\[(.*)\]$")
 
 
-def _parse_calibmar(path) -> dict:
+def _read_text(path) -> str:
+    """The text of a calibration file; :class:`CalibFormatError` naming it when unreadable."""
     try:
         with open(path, encoding="utf-8") as fh:
-            text = fh.read()
+            return fh.read()
     except FileNotFoundError:
         raise CalibFormatError(f"{path}: no such file") from None
     except (OSError, UnicodeDecodeError) as exc:
         raise CalibFormatError(f"{path}: cannot read ({exc})") from None
+
+
+def _parse_calibmar(path) -> dict:
+    text = _read_text(path)
     values = {}
     for number, line in enumerate(text.splitlines(), 1):
         line = line.strip()
@@ -420,13 +425,7 @@ def write_colmap(path, rig: StereoRig, has_port: bool = True,
 
 
 def _parse_cameras_txt(path) -> dict:
-    try:
-        with open(path, encoding="utf-8") as fh:
-            text = fh.read()
-    except FileNotFoundError:
-        raise CalibFormatError(f"{path}: no such file") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise CalibFormatError(f"{path}: cannot read ({exc})") from None
+    text = _read_text(path)
     cameras = {}
     for number, line in enumerate(text.splitlines(), 1):
         line = line.strip()

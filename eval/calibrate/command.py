@@ -84,6 +84,26 @@ def add_parser(subparsers):
     add_progress_option(p)
 
 
+def _write_report(directory, report: dict, markdown, start: float) -> dict:
+    """``report.json`` and ``report.md`` (``markdown(report)``) into ``directory``, with the total
+    time since ``start``; returns the report as written (JSON types)."""
+    from synth.fileio import atomic_write_json, atomic_write_text, jsonable
+
+    report["timings_s"]["total"] = time.perf_counter() - start
+    report = jsonable(report)
+    atomic_write_json(os.path.join(directory, "report.json"), report)
+    atomic_write_text(os.path.join(directory, "report.md"), markdown(report))
+    return report
+
+
+def _written(output, summary: str) -> int:
+    """Print the summary and what was written; exit code 0."""
+    print(summary)
+    print(f"wrote {output.path} (calib.yaml; calibmar.yaml + calibmar_stereo.yaml; cameras.txt + "
+          f"rig_config.json for the refractive COLMAP fork — {COLMAP_NOTE})")
+    return 0
+
+
 def design_port(args, normal):
     """The starting port (:class:`measure.FlatPort`, normal ``normal``): the single options, with
     ``--design-port`` keys over them (a key and its single option both given are refused)."""
@@ -147,7 +167,7 @@ def main(args) -> int:
     from measure import StereoRig
     from measure.calibration import calibrate_housing, calibrate_in_air, detect_boards
     from synth.boards import read_boards
-    from synth.fileio import OutputDir, atomic_write_json, atomic_write_text, jsonable
+    from synth.fileio import OutputDir
 
     from eval.calibrate import report as report_lib
 
@@ -230,14 +250,8 @@ def main(args) -> int:
             report_lib.write_calibration(os.path.join(tmp, "calib_in_air_only.yaml"),
                                          start_rig, True, None, None, single=True)
         report_lib.figures(tmp, boards, detections, housing, rig)
-        report["timings_s"]["total"] = time.perf_counter() - start
-        report = jsonable(report)
-        atomic_write_json(os.path.join(tmp, "report.json"), report)
-        atomic_write_text(os.path.join(tmp, "report.md"), report_lib.markdown(report))
-    print(report_lib.summary_lines(report))
-    print(f"wrote {output.path} (calib.yaml; calibmar.yaml + calibmar_stereo.yaml; cameras.txt + "
-          f"rig_config.json for the refractive COLMAP fork — {COLMAP_NOTE})")
-    return 0
+        report = _write_report(tmp, report, report_lib.markdown, start)
+    return _written(output, report_lib.summary_lines(report))
 
 
 def is_photo_folder(path) -> bool:
@@ -249,7 +263,6 @@ def _calibrate_photos(args, output, log, free, start) -> int:
     """``eval calibrate`` of a user's photo folder (module docs, :mod:`eval.calibrate.photos`)."""
     from measure import StereoRig
     from measure.calibration import calibrate_housing, calibrate_in_air, detect_boards
-    from synth.fileio import atomic_write_json, atomic_write_text, jsonable
 
     from eval.calibrate import photos as trust
     from eval.calibrate import report as report_lib
@@ -348,14 +361,8 @@ def _calibrate_photos(args, output, log, free, start) -> int:
                                          start_rig, True, None, None, single=True)
             report_lib.residual_figure(tmp, used_detections, housing, size)
         trust.coverage_figure(tmp, detections, set(used), size, report)
-        report["timings_s"]["total"] = time.perf_counter() - start
-        report = jsonable(report)
-        atomic_write_json(os.path.join(tmp, "report.json"), report)
-        atomic_write_text(os.path.join(tmp, "report.md"), trust.markdown(report))
-    print(trust.summary_lines(report))
-    print(f"wrote {output.path} (calib.yaml; calibmar.yaml + calibmar_stereo.yaml; cameras.txt + "
-          f"rig_config.json for the refractive COLMAP fork — {COLMAP_NOTE})")
-    return 0
+        report = _write_report(tmp, report, trust.markdown, start)
+    return _written(output, trust.summary_lines(report))
 
 
 def _intrinsics_for_photos(path, log):
