@@ -293,6 +293,9 @@ def _calibrate_photos(args, output, log, free, start) -> int:
         squares = "x".join(map(str, board.squares))
         raise CLIError(f"{where}: the {board.kind} {squares} was found in none of the "
                        f"{len(images)} photo pairs{trust.board_hint(board, images)}")
+    larger = trust.larger_board(board, images, found["left"])
+    if larger:
+        raise CLIError(f"{where}: {larger}")
     not_found = [pairs.names[k] for k in range(len(images))
                  if k not in found["left"] and k not in found["right"]]
     t = time.perf_counter()

@@ -190,6 +190,10 @@ def test_bad_photo_folders(drawn, tmp_path, capsys):
     # the wrong number of squares: the photos say which board they show
     _fails(["calibrate", src, "--air", "--squares", "8x7", "--square-mm", "60", "--out",
             str(out)], "the photos show a 7x6 chessboard, not 8x7", capsys)
+    # one square fewer each way: OpenCV finds the smaller pattern inside the board, a different
+    # part of it in each photo; refused, naming the board the photos show
+    _fails(["calibrate", src, "--air", "--squares", "6x5", "--square-mm", "60", "--out",
+            str(out)], "the photos show a chessboard of at least 7x6 squares, not 6x5", capsys)
     # unpaired, unreadable, sizes that differ
     lonely = tmp_path / "lonely"
     _write_photos(lonely, drawn["rig"], drawn["poses"][:4])
