@@ -154,8 +154,6 @@ def main(args) -> int:
     log = (lambda text: None) if args.no_progress else (
         lambda text: print(text, file=sys.stderr, flush=True))
     free = _parse_free(args.free)
-    if getattr(args.n_water, "note", None):
-        print(args.n_water.note, file=sys.stderr, flush=True)
     output = OutputDir(args.out, COMMAND).claim()
     start = time.perf_counter()
     if is_photo_folder(args.dir):
@@ -234,10 +232,18 @@ def main(args) -> int:
         report = jsonable(report)
         atomic_write_json(os.path.join(tmp, "report.json"), report)
         atomic_write_text(os.path.join(tmp, "report.md"), report_lib.markdown(report))
+    _print_n_water_note(args)
     print(report_lib.summary_lines(report))
     print(f"wrote {output.path} (calib.yaml; calibmar.yaml + calibmar_stereo.yaml; cameras.txt + "
           f"rig_config.json for the refractive COLMAP fork — {COLMAP_NOTE})")
     return 0
+
+
+def _print_n_water_note(args) -> None:
+    """The index computed from ``--n-water T=…,S=…`` (on stderr), once the calibration is
+    written: a refused command prints its one ``error:`` line and nothing else."""
+    if getattr(args.n_water, "note", None):
+        print(args.n_water.note, file=sys.stderr, flush=True)
 
 
 def is_photo_folder(path) -> bool:
@@ -248,7 +254,8 @@ def is_photo_folder(path) -> bool:
 def _calibrate_photos(args, output, log, free, start) -> int:
     """``eval calibrate`` of a user's photo folder (module docs, :mod:`eval.calibrate.photos`)."""
     from measure import StereoRig
-    from measure.calibration import calibrate_housing, calibrate_in_air, detect_boards
+    from measure.calibration import (CalibrationError, calibrate_housing, calibrate_in_air,
+                                     detect_boards)
     from synth.fileio import atomic_write_json, atomic_write_text, jsonable
 
     from eval.calibrate import photos as trust
@@ -299,10 +306,16 @@ def _calibrate_photos(args, output, log, free, start) -> int:
     not_found = [pairs.names[k] for k in range(len(images))
                  if k not in found["left"] and k not in found["right"]]
     t = time.perf_counter()
+
+    def fit(calibrate):  # a CalibrationError (too few poses) names the photo folder
+        try:
+            return trust.fit_without_outliers(calibrate, lambda r: r.rms_px_per, detections)
+        except CalibrationError as exc:
+            raise CLIError(f"{where}: {exc}") from None
+
     if args.air:
         log("calibrate in air (OpenCV calibrateCamera, stereoCalibrate) …")
-        result, used_detections, outliers = trust.fit_without_outliers(
-            lambda d: calibrate_in_air(board, d, size), lambda r: r.rms_px_per, detections)
+        result, used_detections, outliers = fit(lambda d: calibrate_in_air(board, d, size))
         rig, housing, rms_per = result.rig, None, result.rms_px_per
         poses = {k: result.board_poses.get((k, 0), pose)  # the left camera's where it has one
                  for (k, _), pose in result.board_poses.items()}
@@ -311,9 +324,8 @@ def _calibrate_photos(args, output, log, free, start) -> int:
         design = design_port(args, air_rig.left.R[:, 2])
         start_rig = StereoRig(air_rig.left, air_rig.right, design)
         log(f"refractive bundle adjustment of {', '.join(free)} …")
-        result, used_detections, outliers = trust.fit_without_outliers(
-            lambda d: calibrate_housing(start_rig, board, d, free), lambda r: r.rms_px_per,
-            detections)
+        result, used_detections, outliers = fit(
+            lambda d: calibrate_housing(start_rig, board, d, free))
         housing = result
         timings["bundle_adjustment"] = time.perf_counter() - t
         if not housing.identifiable:
@@ -355,6 +367,7 @@ def _calibrate_photos(args, output, log, free, start) -> int:
         report = jsonable(report)
         atomic_write_json(os.path.join(tmp, "report.json"), report)
         atomic_write_text(os.path.join(tmp, "report.md"), trust.markdown(report))
+    _print_n_water_note(args)
     print(trust.summary_lines(report))
     print(f"wrote {output.path} (calib.yaml; calibmar.yaml + calibmar_stereo.yaml; cameras.txt + "
           f"rig_config.json for the refractive COLMAP fork — {COLMAP_NOTE})")

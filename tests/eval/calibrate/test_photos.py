@@ -211,13 +211,19 @@ def test_bad_photo_folders(drawn, tmp_path, capsys):
     # too few poses with the board
     few = tmp_path / "few"
     _write_photos(few, drawn["rig"], drawn["poses"][:2])
-    _fails(["calibrate", str(few), "--air"] + board, "at least 3", capsys)
+    _fails(["calibrate", str(few), "--air"] + board, f"{few} (photos): the board was found in "
+           f"2 left image(s); an in-air calibration needs at least 3", capsys)
     # intrinsics of another image size
     from synth.dataset import write_calib
     from synth.rig import paper_rig
     other = tmp_path / "other.yaml"
     write_calib(other, paper_rig(size=(640, 480)))
     _fails(["calibrate", src, "--intrinsics", str(other)] + board, "image size", capsys)
+    # the index computed from T=,S= is printed only when the calibration is written
+    _fails(["calibrate", src, "--intrinsics", str(other), "--n-water", "T=12,S=35"] + board,
+           "image size", capsys)
+    _fails(["calibrate", src, "--air", "--n-water", "T=12,S=35"] + board,
+           "--n-water does not apply", capsys)
     assert not out.exists()
     assert not [p for p in os.listdir(tmp_path) if p.startswith(".c.")]  # no staging left
 
