@@ -57,7 +57,8 @@ def add_parser(subparsers):
                         "pose); a boards folder says it itself")
     p.add_argument("--intrinsics", metavar="AIR_DIR_or_calib.yaml",
                    help="underwater boards or photos: the in-air calibration, as an --air "
-                        "boards folder (calibrated here with OpenCV) or a calib.yaml")
+                        "boards folder (calibrated here with OpenCV) or a file: calib.yaml, "
+                        "calibmar's YAML or the COLMAP fork's cameras.txt")
     add_board_options(p, defaults=False,
                       needed="photos: required; a boards folder's board.json defines it")
     p.add_argument("--free", default=",".join(DEFAULT_FREE),

@@ -50,8 +50,10 @@ def add_parser(subparsers):
     p.add_argument("right", metavar="RIGHT", help="right photo, or folder of right photos "
                                                   "(paired with the left ones by file name)")
     p.add_argument("--calib", required=True, metavar="FILE",
-                   help="the rig's calibration (calib.yaml as python -m synth dataset writes it) "
-                        "for the photos' image size")
+                   help="the rig's calibration for the photos' image size: calib.yaml (as "
+                        "python -m synth dataset and eval calibrate write it), calibmar's YAML "
+                        "(either file of the pair) or the COLMAP fork's cameras.txt "
+                        "(rig_config.json beside it)")
     add_out_option(p, COMMAND, "out/measure")
     p.add_argument("--methods", default=None,
                    help="comma-separated triangulation methods (default optical_path; targets: "
