@@ -198,7 +198,8 @@ def build_report(inputs, options, results) -> dict:
                  "depth_range_mm": [None if v is None else float(v)
                                     for v in options.depth_range],
                  **{d: getattr(options, d) for d in (*DETECTOR_OPTIONS, "floor_fraction")}})
-    return {"command": COMMAND, "calib": inputs.calib_path, "encoding": inputs.encoding,
+    return {"command": COMMAND, "calib": inputs.calib_path, "has_port": inputs.has_port,
+            "encoding": inputs.encoding,
             "image_size": list(inputs.size), "mode": "dense" if dense else "targets",
             "methods": list(options.methods), "options": settings, "pairs": pairs,
             "summary": summarize(pairs, options.methods, results)}
@@ -262,6 +263,10 @@ def main(args) -> int:
         report = jsonable(report)
         atomic_write_json(os.path.join(tmp, "report.json"), report)
         atomic_write_text(os.path.join(tmp, "report.md"), report_markdown(report))
+    if not inputs.has_port:
+        from eval.measure.report import AIR_CALIBRATION
+
+        print(f"warning: {AIR_CALIBRATION.format(calib=args.calib)}", file=sys.stderr)
     stream = sys.stderr if args.json else sys.stdout
     print(summary_line(report), file=stream)
     print(f"wrote {output.path}", file=stream)

@@ -153,6 +153,37 @@ def test_dense_measures_a_speckled_plane(tmp_path, capsys):
 
 
 # --- bad inputs: no render needed --------------------------------------------------------------
+def test_an_in_air_calibration_is_said(tmp_path, capsys):
+    """Photos measured with an in-air calibration (no port) are measured as if taken in air: a
+    warning on stderr, ``has_port`` false in report.json and a line in report.md (underwater
+    photos would otherwise come out at the wrong depth with exit 0). The photos: 20 Gaussian
+    targets on a plane at 1 m drawn where the in-air rig projects them (no render)."""
+    from measure import StereoRig
+    from measure.projection import project
+    from synth.rig import air_port
+
+    size = (320, 268)
+    rig = StereoRig(*paper_cameras(size, 150.0), air_port())
+    write_calib(tmp_path / "air.yaml", rig, has_port=False)
+    xs, ys = np.meshgrid(np.linspace(-90, 210, 5), np.linspace(-120, 120, 4))
+    points = np.column_stack([xs.ravel(), ys.ravel(), np.full(xs.size, 1000.0)])
+    vv, uu = np.mgrid[0:size[1], 0:size[0]]
+    for view, camera in (("left", rig.left), ("right", rig.right)):
+        image = sum(np.exp(-((uu - u) ** 2 + (vv - v) ** 2) / (2 * 1.5 ** 2))
+                    for u, v in project(camera, rig.port, points))
+        cv2.imwrite(str(tmp_path / f"{view}.png"), np.clip(np.rint(image * 200), 0, 255)
+                    .astype(np.uint8))
+    out = tmp_path / "out"
+    assert eval_main(["measure", "--calib", str(tmp_path / "air.yaml"), str(tmp_path / "left.png"),
+                      str(tmp_path / "right.png"), "--depth-range", "900,1100", "--out", str(out),
+                      "--quiet"]) == 0
+    captured = capsys.readouterr()
+    assert "20 targets matched" in captured.out
+    assert captured.err.startswith("warning: --calib ") and "in-air calibration" in captured.err
+    report = json.loads((out / "report.json").read_text())
+    assert report["has_port"] is False and "in-air calibration" in (out / "report.md").read_text()
+
+
 @pytest.fixture
 def user(tmp_path, monkeypatch):
     """A working folder with the small rig's calibration, a calibration of the full-size rig,
