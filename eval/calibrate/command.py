@@ -235,9 +235,17 @@ def main(args) -> int:
         atomic_write_text(os.path.join(tmp, "report.md"), report_lib.markdown(report))
     _print_n_water_note(args)
     print(report_lib.summary_lines(report))
-    print(f"wrote {output.path} (calib.yaml; calibmar.yaml + calibmar_stereo.yaml; cameras.txt + "
-          f"rig_config.json for the refractive COLMAP fork — {COLMAP_NOTE})")
+    print(written_line(output.path, housing is not None))
     return 0
+
+
+def written_line(path, has_port: bool) -> str:
+    """The last printed line: what was written; the COLMAP caveat only when there is a port to
+    drop (an in-air cameras.txt holds none)."""
+    colmap = (f"the refractive COLMAP fork — {COLMAP_NOTE}" if has_port else
+              "COLMAP (in air: no port)")
+    return (f"wrote {path} (calib.yaml; calibmar.yaml + calibmar_stereo.yaml; cameras.txt + "
+            f"rig_config.json for {colmap})")
 
 
 def _print_n_water_note(args) -> None:
@@ -370,8 +378,7 @@ def _calibrate_photos(args, output, log, free, start) -> int:
         atomic_write_text(os.path.join(tmp, "report.md"), trust.markdown(report))
     _print_n_water_note(args)
     print(trust.summary_lines(report))
-    print(f"wrote {output.path} (calib.yaml; calibmar.yaml + calibmar_stereo.yaml; cameras.txt + "
-          f"rig_config.json for the refractive COLMAP fork — {COLMAP_NOTE})")
+    print(written_line(output.path, housing is not None))
     return 0
 
 

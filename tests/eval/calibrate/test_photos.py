@@ -102,6 +102,8 @@ def test_drawn_photos_in_air(drawn, tmp_path, capsys):
                  "--out", str(out)]) == 0
     printed = capsys.readouterr().out
     assert "in air left: fx" in printed and "truth" not in printed
+    # in air there is no port for COLMAP to drop: the caveat is not printed
+    assert "(in air: no port)" in printed and "drop the port" not in printed
     assert {"calib.yaml", "report.json", "report.md", "coverage.png"} <= set(os.listdir(out))
     report = json.loads((out / "report.json").read_text())
     assert report["used"] == 10 and report["left_out"] == [] and report["not_found"] == []
