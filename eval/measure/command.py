@@ -252,8 +252,10 @@ def main(args) -> int:
     results = measure_all(inputs, options, quiet, log)
     problems = [r.problem for r in results if r.problem]
     if len(problems) == len(results):
-        raise CLIError(problems[0] if len(results) == 1 else
-                       f"no pair was measured ({len(results)} pairs); the first: {problems[0]}")
+        if len(results) == 1:  # named by its two files, not by the left file's stem
+            problem = problems[0].removeprefix(f"{results[0].name}: ")
+            raise CLIError(f"{inputs.left[0]}, {inputs.right[0]}: {problem}")
+        raise CLIError(f"no pair was measured ({len(results)} pairs); the first: {problems[0]}")
     report = build_report(inputs, options, results)
     log("write the point clouds, points.csv, the report and the views …")
     with output.staged() as tmp:
