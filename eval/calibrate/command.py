@@ -157,8 +157,14 @@ def main(args) -> int:
     free = _parse_free(args.free)
     output = OutputDir(args.out, COMMAND).claim()
     start = time.perf_counter()
-    if is_photo_folder(args.dir):
-        return _calibrate_photos(args, output, log, free, start)
+    if not os.path.isdir(args.dir):
+        what = "a file, not a folder" if os.path.exists(args.dir) else "no such folder"
+        raise CLIError(f"{args.dir}: {what} (give a photo folder, DIR/left/ and DIR/right/, or a "
+                       f"synth boards folder)")
+    if is_photo_folder(args.dir) or (
+            any(os.path.isdir(os.path.join(args.dir, sub)) for sub in ("left", "right"))
+            and not os.path.exists(os.path.join(args.dir, "manifest.json"))):
+        return _calibrate_photos(args, output, log, free, start)  # says which folder is missing
     if not os.path.isfile(os.path.join(args.dir, "manifest.json")) and os.path.isdir(args.dir):
         raise CLIError(f"{args.dir}: not a boards folder (no manifest.json) nor a photo folder "
                        f"(no left/ and right/ folders)")

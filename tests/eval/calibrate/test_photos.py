@@ -221,6 +221,11 @@ def test_bad_photo_folders(drawn, tmp_path, capsys):
     other = tmp_path / "other.yaml"
     write_calib(other, paper_rig(size=(640, 480)))
     _fails(["calibrate", src, "--intrinsics", str(other)] + board, "image size", capsys)
+    # a file, a folder with only left/: said as such
+    _fails(["calibrate", str(other), "--air"] + board, "other.yaml: a file, not a folder", capsys)
+    (tmp_path / "half" / "left").mkdir(parents=True)
+    _fails(["calibrate", str(tmp_path / "half"), "--air"] + board, "half: no right folder",
+           capsys)
     # the index computed from T=,S= is printed only when the calibration is written
     _fails(["calibrate", src, "--intrinsics", str(other), "--n-water", "T=12,S=35"] + board,
            "image size", capsys)
