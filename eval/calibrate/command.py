@@ -91,12 +91,18 @@ def design_port(args, normal):
     from measure import FlatPort
 
     values = {dest: getattr(args, dest) for dest in DESIGN_KEYS.values()}
+    seen = set()
     for item in filter(None, (args.design_port or "").split(",")):
         key, sep, text = item.partition("=")
         key = key.strip()
         if not sep or key not in DESIGN_KEYS:
+            hint = (" (the water of a temperature and salinity: --n-water T=…,S=…)"
+                    if key in ("S", "wavelength") else "")
             raise CLIError(f"--design-port {args.design_port!r}: expected KEY=VALUE items with KEY "
-                           f"one of {', '.join(DESIGN_KEYS)}, got {item!r}")
+                           f"one of {', '.join(DESIGN_KEYS)}, got {item!r}{hint}")
+        if key in seen:
+            raise CLIError(f"--design-port {args.design_port!r}: {key} is given twice")
+        seen.add(key)
         option = given(args, DESIGN_KEYS[key])
         if option:
             raise CLIError(f"--design-port {key}= and {option} both give the design {key}; "
@@ -107,8 +113,10 @@ def design_port(args, normal):
             value = float("nan")
         index = key.startswith("n_")
         if not (math.isfinite(value) and (value >= 1.0 if index else value > 0.0)):
+            hint = (" (the water of a temperature and salinity: --n-water T=…,S=…)"
+                    if key == "n_water" and "=" in text else "")
             raise CLIError(f"--design-port {key}={text}: expected "
-                           f"{'an index >= 1' if index else 'a positive length, mm'}")
+                           f"{'an index >= 1' if index else 'a positive length, mm'}{hint}")
         values[DESIGN_KEYS[key]] = value
     return FlatPort(normal, values["start_distance"], (values["glass_thickness"],),
                     (1.0, values["n_glass"], values["n_water"]))
@@ -186,6 +194,8 @@ def main(args) -> int:
     if not boards.air and not args.intrinsics:
         raise CLIError(f"{args.dir}: underwater boards need --intrinsics (an --air boards "
                        f"folder or a calib.yaml)")
+    if not boards.air:
+        design_port(args, (0.0, 0.0, 1.0))  # a bad --design-port is refused before any work
     log(f"detect the boards in {boards.path} ({len(boards.images)} poses) …")
     t = time.perf_counter()
     detections = detect_boards(boards.board, boards.images)
@@ -294,6 +304,8 @@ def _calibrate_photos(args, output, log, free, start) -> int:
         raise CLIError(f"{where}: a photo folder needs the board on the command line: "
                        f"{' and '.join(missing)} (and --board charuco for a ChArUco board)")
     board = board_from_args(args)
+    if not args.air:
+        design_port(args, (0.0, 0.0, 1.0))  # a bad --design-port is refused before any work
     pairs = photo_folder(args.dir)
     air_rig = None
     if not args.air:

@@ -324,6 +324,8 @@ def test_design_port_gives_the_starting_port_in_one_option():
     for extra, message in ((("--design-port", "distance=90", "--start-distance", "95"), "give one"),
                            (("--design-port", "depth=3"), "KEY one of"),
                            (("--design-port", "thickness=-1"), "positive length"),
-                           (("--design-port", "n_water=0.99"), "index >= 1")):
+                           (("--design-port", "n_water=0.99"), "index >= 1"),
+                           (("--design-port", "distance=90,distance=95"), "distance is given twice"),
+                           (("--design-port", "n_water=T=12,S=35"), "--n-water T=…,S=…")):
         with pytest.raises(CLIError, match=message):
             design_port(parsed(*extra), np.array([0.0, 0.0, 1.0]))
