@@ -152,6 +152,28 @@ def test_dense_measures_a_speckled_plane(tmp_path, capsys):
     assert len(o3d.io.read_point_cloud(str(out / "points.ply")).points) == matched
 
 
+def test_the_dense_summary_prints_the_plane_fit_not_the_gap():
+    """Dense matches lie on the epipolar curves by construction: their gap (~0) says nothing, so
+    the printed line gives the plane fit's RMS (a range over several pairs); targets keep the
+    gap."""
+    from eval.measure.command import summary_line
+
+    def pair(rms, problem=None):
+        return {"problem": problem, "methods": {} if problem else
+                {"optical_path": {"plane": {"rms_mm": rms}}}}
+
+    report = {"mode": "dense", "timings_s": {"total": 3.0},
+              "pairs": [pair(0.45), pair(None, "b: no pixel was matched"), pair(0.61)],
+              "summary": {"pairs": 3, "measured_pairs": 2, "matched": 1000,
+                          "methods": {"optical_path": {"rms_mm": 1e-9}}}}
+    line = summary_line(report)
+    assert "plane fit RMS optical_path 0.450–0.610 mm" in line and "gap" not in line
+    report["pairs"] = report["pairs"][:1]
+    assert "plane fit RMS optical_path 0.450 mm" in summary_line(report)
+    report["mode"] = "targets"
+    assert "gap RMS optical_path 0.0000 mm" in summary_line(report)
+
+
 # --- bad inputs: no render needed --------------------------------------------------------------
 def test_an_in_air_calibration_is_said(tmp_path, capsys):
     """Photos measured with an in-air calibration (no port) are measured as if taken in air: a
