@@ -214,6 +214,7 @@ def main(args) -> int:
         housing = None
     else:
         t = time.perf_counter()
+        _refuse_calibration_folder(args.intrinsics)
         air_rig, air, air_boards = _in_air(args.intrinsics, log)
         timings["calibrate_in_air"] = time.perf_counter() - t
         if tuple(air_rig.left.size) != tuple(boards.calib["size"]):
@@ -406,4 +407,14 @@ def _intrinsics_for_photos(path, log):
     if os.path.isdir(path) and is_photo_folder(path):
         raise CLIError(f"--intrinsics {path}: a photo folder; calibrate it first (python -m eval "
                        f"calibrate {path} --air …) and give its calib.yaml")
+    _refuse_calibration_folder(path)
     return _in_air(path, log)[0]
+
+
+def _refuse_calibration_folder(path) -> None:
+    """``--intrinsics OUT``, the folder of a calibration rather than its file: named, with the
+    file to give (it read as 'not a boards folder (… manifest.json)')."""
+    if (os.path.isdir(path) and not os.path.exists(os.path.join(path, "manifest.json"))
+            and os.path.isfile(os.path.join(path, "calib.yaml"))):
+        raise CLIError(f"--intrinsics {path}: a folder holding a calibration; give the file, "
+                       f"--intrinsics {os.path.join(path, 'calib.yaml')}")

@@ -45,6 +45,10 @@ def read_calibration(path):
     in-air calibration, whose port is index-matched air); CLIError when it cannot be read."""
     from synth.dataset import DatasetError, read_calib
 
+    if os.path.isdir(path):
+        inside = os.path.join(path, "calib.yaml")
+        raise CLIError(f"--calib {path}: a folder; give the calibration file"
+                       + (f", e.g. --calib {inside}" if os.path.isfile(inside) else ""))
     if not os.path.isfile(path):
         raise CLIError(f"--calib {path}: no such file")
     try:

@@ -221,6 +221,11 @@ def test_bad_photo_folders(drawn, tmp_path, capsys):
     other = tmp_path / "other.yaml"
     write_calib(other, paper_rig(size=(640, 480)))
     _fails(["calibrate", src, "--intrinsics", str(other)] + board, "image size", capsys)
+    # the folder of a calibration instead of its file: the file is named
+    os.makedirs(tmp_path / "cal_air")
+    write_calib(tmp_path / "cal_air" / "calib.yaml", paper_rig(size=SIZE))
+    _fails(["calibrate", src, "--intrinsics", str(tmp_path / "cal_air")] + board,
+           f"give the file, --intrinsics {tmp_path / 'cal_air' / 'calib.yaml'}", capsys)
     # a file, a folder with only left/: said as such
     _fails(["calibrate", str(other), "--air"] + board, "other.yaml: a file, not a folder", capsys)
     (tmp_path / "half" / "left").mkdir(parents=True)

@@ -233,6 +233,8 @@ BAD = [
     (["--calib", "calib.yaml", "left/p1.png", "right"], "not a photo and a folder"),
     (["--calib", "missing.yaml", "left/p1.png", "right/p1.png"], "missing.yaml"),
     (["--calib", "garbage.png", "left/p1.png", "right/p1.png"], "garbage.png"),
+    (["--calib", ".", "left/p1.png", "right/p1.png"], "a folder; give the calibration file, e.g. "
+                                                        "--calib ./calib.yaml"),
     (["--calib", "calib.yaml", "left/p1.png", "right/p1.png"],
      "left/p1.png, right/p1.png: no target was matched"),
     (["--calib", "calib.yaml", "left", "right"], "no target was matched"),
