@@ -36,6 +36,14 @@ def save_figure(fig: Figure, path, dpi: int = DPI) -> str:
     return os.fspath(path)
 
 
+def _adjust(fig: Figure, rows: int, wspace: float, hspace: float) -> None:
+    """Fixed margins for a grid of ``rows`` rows of panels (``tight_layout`` measures every
+    text of the figure first: a second drawing, a second or more for the grids below)."""
+    height = fig.get_figheight()
+    fig.subplots_adjust(left=0.05, right=0.98, bottom=0.55 / height, top=1 - 0.3 / height,
+                        wspace=wspace, hspace=hspace if rows > 1 else 0.2)
+
+
 def error_maps_figure(path, per_method) -> None:
     """Per method: dX, dY, dZ, dP (mm) over the true target positions (X, Y in mm)."""
     methods = [m for m in per_method if len(per_method[m]["truth"])]
@@ -65,7 +73,7 @@ def error_maps_figure(path, per_method) -> None:
             ax.set_title(f"{method_label(method)}: {name}", fontsize=9)
             ax.set_xlabel("X [mm]")
             ax.set_ylabel("Y [mm] (down)")
-    fig.tight_layout()
+    _adjust(fig, len(methods), wspace=0.45, hspace=0.3)
     save_figure(fig, path)
 
 
@@ -78,14 +86,18 @@ def histograms_figure(path, per_method) -> None:
         for col, axis_name in enumerate("XYZ"):
             ax = fig.add_subplot(len(methods), 3, row * 3 + col + 1)
             values = errors[:, col]
-            ax.hist(values, bins=40, density=True, color="C0" if method == "optical_path" else "C1")
-            ax.axvline(values.mean(), color="k", linewidth=1,
-                       label=f"mean {values.mean():+.3f} mm, σ {values.std():.3f} mm")
+            # one filled outline instead of 40 bars (ax.hist): the same picture, drawn faster
+            density, edges = np.histogram(values, bins=40, density=True)
+            ax.stairs(density, edges, fill=True,
+                      color="C0" if method == "optical_path" else "C1")
+            ax.axvline(values.mean(), color="k", linewidth=1)
             ax.set_title(f"{method_label(method)}: d{axis_name}", fontsize=9)
+            ax.text(0.02, 0.97, f"mean {values.mean():+.3f} mm, σ {values.std():.3f} mm\n"
+                    f"(vertical line: the mean)", transform=ax.transAxes, fontsize=7,
+                    va="top", bbox=dict(boxstyle="round", fc="white", ec="0.8", alpha=0.8))
             ax.set_xlabel(f"d{axis_name} [mm]")
             ax.set_ylabel("density [1/mm]")
-            ax.legend(fontsize=7)
-    fig.tight_layout()
+    _adjust(fig, len(methods), wspace=0.25, hspace=0.55)
     save_figure(fig, path)
 
 
