@@ -17,8 +17,9 @@ from eval.core.formatting import format_number as fmt
 from eval.run.config import COMMAND, RunConfig, fraction
 from eval.run.report import (budget_table, report_markdown, summary_table, verdict_exit_code,
                              write_outputs)
-from synth.cli import (add_define_option, add_json_option, add_out_option, add_progress_option,
-                       add_scene_argument, finite_float, scene_seed)
+from synth.cli import (add_define_option, add_full_film_option, add_json_option,
+                       add_out_option, add_progress_option, add_scene_argument, finite_float,
+                       scene_seed)
 
 #: argparse type of --max-elongation and --max-area-ratio (a blob's axis or area ratio).
 ABOVE_ONE = finite_float(1.0, strict=True, description="finite (> 1)")
@@ -35,6 +36,7 @@ def add_parser(subparsers):
                         help="reuse the images of a dataset written by python -m synth dataset")
     parser.add_argument("--spp", type=positive_int, help="samples per pixel (default: the scene's)")
     parser.add_argument("--variant", help="Mitsuba variant (default: automatic)")
+    add_full_film_option(parser)
     parser.add_argument("--methods", default=None,
                         help="comma-separated triangulation methods (default: all three)")
     parser.add_argument("--noise-px", type=non_negative_float, default=0.0,
