@@ -45,35 +45,60 @@ def _adjust(fig: Figure, rows: int, wspace: float, hspace: float) -> None:
 
 
 def error_maps_figure(path, per_method) -> None:
-    """Per method: dX, dY, dZ, dP (mm) over the true target positions (X, Y in mm)."""
+    """Per method: dX, dY, dZ, dP (mm) over the true target positions (X, Y in mm). The panels
+    share their X and Y axes (tick labels on the outer ones only) and each method's
+    triangulation of the targets."""
+    from matplotlib.ticker import MaxNLocator
+    from matplotlib.tri import Triangulation
+
     methods = [m for m in per_method if len(per_method[m]["truth"])]
     fig = new_figure(16, 3.8 * max(len(methods), 1), layout=None)
+    first = None
     for row, method in enumerate(methods):
         truth, errors = per_method[method]["truth"], per_method[method]["errors"]
         columns = [("dX", errors[:, 0]), ("dY", errors[:, 1]), ("dZ", errors[:, 2]),
                    ("dP", np.linalg.norm(errors, axis=1))]
+        try:
+            triangles = Triangulation(truth[:, 0], truth[:, 1]) if len(truth) >= 10 else None
+        except (ValueError, RuntimeError):
+            triangles = None
         for col, (name, values) in enumerate(columns):
-            ax = fig.add_subplot(len(methods), 4, row * 4 + col + 1)
+            ax = fig.add_subplot(len(methods), 4, row * 4 + col + 1, sharex=first, sharey=first)
             if name == "dP":
                 norm = dict(vmin=0, vmax=float(values.max()) or 1.0, cmap="viridis")
             else:
                 limit = float(np.max(np.abs(values))) or 1.0
                 norm = dict(vmin=-limit, vmax=limit, cmap="coolwarm")
-            if len(values) >= 10:
+            area = None
+            if triangles is not None:
                 try:
-                    area = ax.tricontourf(truth[:, 0], truth[:, 1], values, levels=15, **norm)
+                    area = ax.tricontourf(triangles, values, levels=15, **norm)
                 except (ValueError, RuntimeError):
-                    area = ax.scatter(truth[:, 0], truth[:, 1], c=values, s=12, **norm)
+                    area = None
+            if area is None:
+                area = ax.scatter(truth[:, 0], truth[:, 1], c=values,
+                                  s=12 if len(values) >= 10 else 20, **norm)
+            if len(values) >= 10:
                 ax.scatter(truth[:, 0], truth[:, 1], s=1, c="k")
-            else:
-                area = ax.scatter(truth[:, 0], truth[:, 1], c=values, s=20, **norm)
-            fig.colorbar(area, ax=ax, label=f"{name} [mm]")
+            bar = fig.colorbar(area, ax=ax, label=f"{name} [mm]")
+            bar.locator = MaxNLocator(6)  # fewer ticks: each costs a few ms to make and draw
+            bar.update_ticks()
             ax.set_aspect("equal")
-            ax.invert_yaxis()
+            if first is None:
+                first = ax
+                ax.invert_yaxis()  # shared: once for all panels
+                ax.xaxis.set_major_locator(MaxNLocator(5))
+                ax.yaxis.set_major_locator(MaxNLocator(5))
             ax.set_title(f"{method_label(method)}: {name}", fontsize=9)
-            ax.set_xlabel("X [mm]")
-            ax.set_ylabel("Y [mm] (down)")
-    _adjust(fig, len(methods), wspace=0.45, hspace=0.3)
+            if row == len(methods) - 1:
+                ax.set_xlabel("X [mm]")
+            else:
+                ax.tick_params(labelbottom=False)
+            if col == 0:
+                ax.set_ylabel("Y [mm] (down)")
+            else:
+                ax.tick_params(labelleft=False)
+    _adjust(fig, len(methods), wspace=0.3, hspace=0.2)
     save_figure(fig, path)
 
 
