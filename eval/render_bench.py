@@ -8,10 +8,11 @@ reading the image back (Dr.Jit is lazy: the work happens when the result is read
    samples per second for each.
 2. **Side by side**: both views at the scene's spp, one ``mi.render`` call per view against
    the pass plan, timed one after the other in the same process.
-3. **Adaptive against full film**, side by side: both views at the scene's spp rendered on the
-   full film and adaptively (:func:`synth.render.render_view_counted`: a pilot, then the
-   samples only where it saw light), one after the other in the same process, each with its
-   render seconds, samples, lit fraction and cross-check.
+3. **Adaptive against full film**, side by side: both views rendered on the full film at
+   ``--full-film-spp`` (default 36), adaptively (:func:`synth.render.render_view_counted`: a
+   pilot, then the samples only where it saw light) at the same spp and adaptively at the
+   scene's spp, one after the other in the same process, each with its render seconds,
+   samples, lit fraction and cross-check.
 4. **Accuracy against time**: both views rendered on the full film with the project's pass plan
    (:func:`synth.render.pass_plan`) at each total spp of ``--spp``, and adaptively at each spp
    of ``--adaptive-spp``, the targets detected and compared with the Fermat simulator (against
@@ -55,6 +56,9 @@ def add_parser(subparsers):
     parser.add_argument("--adaptive-spp", default="16,36,64,100,144",
                         help="spp on the lit pixels of the adaptive accuracy curve "
                              "(comma-separated)")
+    parser.add_argument("--full-film-spp", type=positive_int, default=36,
+                        help="spp of the full-film render of the side by side (default 36, the "
+                             "default before adaptive rendering)")
     parser.add_argument("--parts", default=",".join(PARTS),
                         help=f"what to measure (comma-separated, default all): {', '.join(PARTS)}")
     add_define_option(parser)
@@ -161,15 +165,30 @@ def measure_accuracy(spec, spp_list, variant, log, adaptive: bool = False):
     return rows
 
 
-def measure_adaptive(spec, variant, log) -> dict:
-    """Both views at the scene's spp on the full film and adaptively, one after the other."""
-    full, adaptive = (measure_accuracy(spec, [spec.spp], variant, log, mode)[0]
-                      for mode in (False, True))
-    speedup = full["seconds"] / adaptive["seconds"]
-    log(f"  adaptive {adaptive['seconds']:.1f} s against full film {full['seconds']:.1f} s: "
-        f"{speedup:.1f}x; cross-check RMS {adaptive['rms_px']:.4f} against "
-        f"{full['rms_px']:.4f} px")
-    return {"spp": spec.spp, "full_film": full, "adaptive": adaptive, "speedup": speedup}
+def measure_adaptive(spec, variant, log, full_spp: int) -> dict:
+    """Both views on the full film at ``full_spp``, adaptively at the same spp and adaptively
+    at the scene's spp, one after the other in the same process."""
+    full = measure_accuracy(spec, [full_spp], variant, log)[0]
+    same = measure_accuracy(spec, [full_spp], variant, log, True)[0]
+    scene = (same if spec.spp == full_spp else
+             measure_accuracy(spec, [spec.spp], variant, log, True)[0])
+    result = {"full_film": full, "adaptive_same_spp": same, "adaptive_scene_spp": scene,
+              "speedup_same_spp": full["seconds"] / same["seconds"],
+              "speedup_scene_spp": full["seconds"] / scene["seconds"]}
+    log(f"  full film {full_spp} spp {full['seconds']:.1f} s, RMS {full['rms_px']:.4f} px; "
+        f"adaptive {full_spp} spp {same['seconds']:.1f} s ({result['speedup_same_spp']:.1f}x), "
+        f"RMS {same['rms_px']:.4f} px; adaptive {spec.spp} spp {scene['seconds']:.1f} s "
+        f"({result['speedup_scene_spp']:.1f}x), RMS {scene['rms_px']:.4f} px")
+    return result
+
+
+def _throughput_panel(a, throughput) -> None:
+    a.plot([r["spp_per_call"] for r in throughput],
+           [r["samples_per_second"] / 1e6 for r in throughput], "o-")
+    a.set_xlabel("spp per mi.render call (left view)")
+    a.set_ylabel("M samples / s")
+    a.set_title("Throughput against the wavefront size")
+    a.grid(alpha=0.3)
 
 
 def curve_figure(path, throughput, accuracy, title, adaptive=()):
@@ -178,15 +197,14 @@ def curve_figure(path, throughput, accuracy, title, adaptive=()):
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
-    fig = Figure(figsize=(11, 4.2), layout="constrained")
+    fig = Figure(figsize=(11 if throughput else 6.5, 4.2), layout="constrained")
     FigureCanvasAgg(fig)
-    a, b = fig.subplots(1, 2)
-    a.plot([r["spp_per_call"] for r in throughput],
-           [r["samples_per_second"] / 1e6 for r in throughput], "o-")
-    a.set_xlabel("spp per mi.render call (left view)")
-    a.set_ylabel("M samples / s")
-    a.set_title("Throughput against the wavefront size")
-    a.grid(alpha=0.3)
+    from matplotlib.ticker import FormatStrFormatter, NullFormatter
+
+    a, b = fig.subplots(1, 2) if throughput else (None, fig.subplots(1, 1))
+    all_seconds = [r["seconds"] for r in (*accuracy, *adaptive)] or [1.0]
+    if a is not None:
+        _throughput_panel(a, throughput)
     for rows, name, marks in ((accuracy, "full film", ("o-", "s-")),
                               (adaptive, "adaptive", ("o--", "s--"))):
         if not rows:
@@ -200,6 +218,10 @@ def curve_figure(path, throughput, accuracy, title, adaptive=()):
             b.annotate(f"{r['spp']} spp", (r["seconds"], r["rms_px_outline"]),
                        textcoords="offset points", xytext=(4, -12), fontsize=8)
     b.set_xscale("log")
+    b.xaxis.set_major_formatter(FormatStrFormatter("%g"))
+    b.xaxis.set_minor_formatter(NullFormatter())
+    b.set_xticks([t for t in (1, 2, 3, 5, 10, 20, 30, 50, 100, 200, 500)
+                  if 0.7 * min(all_seconds) <= t <= 1.4 * max(all_seconds)] or [1])
     b.set_xlabel("render time, both views (s)")
     b.set_ylabel("cross-check RMS (px)")
     b.set_title("Accuracy against time")
@@ -238,8 +260,9 @@ def main(args) -> int:
         log(f"one call against passes at the scene's {spec.spp} spp:")
         side_by_side = measure_side_by_side(mscene, mi, spec, spec.spp, log)
     if "adaptive" in parts:
-        log(f"full film against adaptive at the scene's {spec.spp} spp, both views:")
-        adaptive = measure_adaptive(spec, variant, log)
+        log(f"full film at {args.full_film_spp} spp against adaptive at the same and the scene's "
+            f"{spec.spp} spp, both views:")
+        adaptive = measure_adaptive(spec, variant, log, args.full_film_spp)
     if "curve" in parts:
         log("accuracy against time, both views, full film in passes:")
         accuracy = measure_accuracy(spec, spp_list, variant, log)
