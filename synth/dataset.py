@@ -22,8 +22,11 @@ A dataset directory holds (units mm, reference frame = the left camera's, OpenCV
   every target in each view (NaN where it has none; pixels outside the image are kept);
 * ``manifest.json`` -- versions, scene hash and parameters (``spp`` and ``seed`` as rendered),
   variant, spp, seed, image statistics, ``png_scale``, ``png_offset`` (0 without a sensor),
-  ``sensor``, the time of every stage, the request key, ``sha256`` (every other file's SHA-256)
-  and ``manifest_sha256`` (the SHA-256 of the manifest's own content, :func:`manifest_digest`).
+  ``sensor``, the time of every stage, ``render`` (the adaptive settings or None for a
+  full-film render, and per view how it was rendered: :func:`synth.render.render_stereo`;
+  absent in datasets written before adaptive rendering, read as full film), the request key,
+  ``sha256`` (every other file's SHA-256) and ``manifest_sha256`` (the SHA-256 of the
+  manifest's own content, :func:`manifest_digest`).
 
 A dataset's manifest is not a place to edit the truth: :func:`read_manifest` refuses a
 manifest that disagrees with itself (its ``manifest_sha256``, and its request key recomputed
