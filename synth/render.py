@@ -355,6 +355,8 @@ def _render_pixels(mi, scene, sensor, integrator, pixels: np.ndarray, spp: int, 
     ray, ray_weight = chosen.sample_ray_differential(time_, wavelength,
                                                      position / mi.ScalarVector2f(w, h),
                                                      aperture)
+    if ray.has_differentials:  # as mi.render does
+        ray.scale_differential(1.0 / math.sqrt(taken))
     result = integrator.sample(scene, sampler, ray, chosen.get_medium(), True)
     value = mi.luminance(result[0] * ray_weight) if not mi.is_monochromatic \
         else (result[0] * ray_weight)[0]
@@ -434,11 +436,18 @@ def render_view(scene, mi, index: int, camera: Camera, spp: int, seed: int,
     return render_view_counted(scene, mi, index, camera, spp, seed, oversample, adaptive)[0]
 
 
-def adaptive_possible(mi) -> tuple[bool, str]:
-    """Whether the Mitsuba variant can render a list of pixels (a JIT variant: ``llvm_*``,
-    ``cuda_*``), and why not."""
+def adaptive_possible(mi, sensor=None) -> tuple[bool, str]:
+    """Whether the Mitsuba variant can render a list of pixels (a JIT RGB or monochrome variant:
+    ``llvm_*``, ``cuda_*``; spectral ones develop their films otherwise) of ``sensor``'s film
+    (a film without a crop window), and why not."""
     if mi.variant().startswith("scalar"):
         return False, f"{mi.variant()} renders one ray at a time: the full film"
+    if mi.is_spectral:
+        return False, f"{mi.variant()} is spectral: the full film"
+    if sensor is not None:
+        film = sensor.film()
+        if list(film.crop_offset()) != [0, 0] or list(film.crop_size()) != list(film.size()):
+            return False, "the film has a crop window: the full film"
     return True, ""
 
 
@@ -456,12 +465,12 @@ def render_view_counted(scene, mi, index: int, camera: Camera, spp: int, seed: i
     and the pilot is not used. ``adaptive=False``: the full film in passes (:func:`pass_plan`,
     passes 0, 1, …), as before. A distorted camera's mask is on its oversampled pinhole film
     (margin × ``oversample``)."""
-    possible, why = adaptive_possible(mi)
     if camera.dist is None:
         sensor, size, remap = index, camera.size, None
     else:
         K, size, map_x, map_y = _ideal_camera_for(camera, oversample, DISTORTION_MARGIN_PX)
         sensor, remap = _ideal_sensor(mi, scene.sensors()[index], camera, K, size), (map_x, map_y)
+    possible, why = adaptive_possible(mi, _sensor_object(scene, sensor))
     film_pixels = int(size[0]) * int(size[1])
     if adaptive and possible:
         margin = ADAPTIVE_MARGIN_PX * (1 if remap is None else oversample)
