@@ -89,7 +89,7 @@ def error_maps_figure(path, per_method) -> None:
                 ax.invert_yaxis()  # shared: once for all panels
                 ax.xaxis.set_major_locator(MaxNLocator(5))
                 ax.yaxis.set_major_locator(MaxNLocator(5))
-            ax.set_title(f"{method_label(method)}: {name}", fontsize=9)
+            ax.set_title(f"{method_label(method)}: {name}", fontsize=9, y=1.0)
             if row == len(methods) - 1:
                 ax.set_xlabel("X [mm]")
             else:
@@ -116,7 +116,7 @@ def histograms_figure(path, per_method) -> None:
             ax.stairs(density, edges, fill=True,
                       color="C0" if method == "optical_path" else "C1")
             ax.axvline(values.mean(), color="k", linewidth=1)
-            ax.set_title(f"{method_label(method)}: d{axis_name}", fontsize=9)
+            ax.set_title(f"{method_label(method)}: d{axis_name}", fontsize=9, y=1.0)
             ax.text(0.02, 0.97, f"mean {values.mean():+.3f} mm, σ {values.std():.3f} mm\n"
                     f"(vertical line: the mean)", transform=ax.transAxes, fontsize=7,
                     va="top", bbox=dict(boxstyle="round", fc="white", ec="0.8", alpha=0.8))

@@ -65,7 +65,7 @@ def views_figure(path, left, right, result) -> None:
             ax.add_collection(LineCollection(segments, colors=colour, linewidths=0.25,
                                              alpha=0.6))
             ax.plot([], [], color=colour, label=f"{label} ({int(sel.sum())})")
-    ax.set_title("left | right: detections and matches")
+    ax.set_title("left | right: detections and matches", y=1.0)
     ax.set_xlabel("u [px]")
     ax.set_ylabel("v [px]")
     ax.legend(loc="lower center", ncol=4, fontsize=8)
@@ -78,7 +78,7 @@ def views_pair(path, left, right) -> None:
     fig = new_figure(16, 7.2, layout=None)
     ax = fig.add_subplot()
     _side_by_side(ax, left, right)
-    ax.set_title("left | right")
+    ax.set_title("left | right", y=1.0)
     ax.set_xlabel("u [px]")
     ax.set_ylabel("v [px]")
     fig.subplots_adjust(left=0.045, right=0.99, bottom=0.08, top=0.95)
