@@ -134,6 +134,7 @@ def measure_accuracy(spec, spp_list, variant, log, adaptive: bool = False):
     from eval.run.inputs import RunInputs
     from eval.run.pipeline import crosscheck_stage
     from measure import detect_targets
+    from synth.crosscheck import DETECT_FLOOR_FRACTION
     from synth.render import render_stereo
 
     rows = []
@@ -145,8 +146,9 @@ def measure_accuracy(spec, spp_list, variant, log, adaptive: bool = False):
         inputs = RunInputs(spec.path, spec.rig, spec.has_port, spec.targets, spec.target_ids,
                            spec.target_radius, left, right, spec.params, info["variant"], spp,
                            seconds, spec.seed, {}, spec.target_normals)
-        crosscheck = crosscheck_stage(inputs, {"left": detect_targets(left),
-                                               "right": detect_targets(right)})[3]
+        crosscheck = crosscheck_stage(inputs, {
+            view: detect_targets(image, floor_fraction=DETECT_FLOOR_FRACTION)
+            for view, image in (("left", left), ("right", right))})[3]
         rows.append({"spp": spp, "adaptive": adaptive, "mode": views["left"]["mode"],
                      "passes": info["passes"]["left"], "seconds": seconds,
                      "samples": views["left"]["samples"] + views["right"]["samples"],

@@ -19,7 +19,8 @@ from measure.detect import (MERGE_AREA_RATIO as DEFAULT_MAX_AREA_RATIO,
                             MERGE_ELONGATION as DEFAULT_MAX_ELONGATION, fractional_threshold)
 from measure.eccentricity import correct_eccentricity, outline_centroid_offsets
 from measure.matching import match_targets
-from synth.crosscheck import ASSOCIATION_GATE_PX, associate_detections, distance_stats
+from synth.crosscheck import (ASSOCIATION_GATE_PX, DETECT_FLOOR_FRACTION, associate_detections,
+                              distance_stats)
 from synth.noise import add_pixel_noise
 
 from eval.core.cloud_metrics import cloud_distances, flatness, rigid_alignment
@@ -70,7 +71,8 @@ def detect_stage(inputs: RunInputs, noise_px: float, threshold_fraction: float |
         threshold = (None if threshold_fraction is None
                      else fractional_threshold(image, threshold_fraction))
         return detect_targets(image, threshold=threshold, merge_elongation=max_elongation,
-                              merge_area_ratio=max_area_ratio)
+                              merge_area_ratio=max_area_ratio,
+                              floor_fraction=DETECT_FLOOR_FRACTION)
 
     detections = {"left": detect(inputs.left), "right": detect(inputs.right)}
     centers = {name: np.array(d.centers, dtype=float).reshape(-1, 2)
