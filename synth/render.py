@@ -11,7 +11,15 @@ whole distorted field of view, pre-filtered with an ``oversample``-pixel box (on
 and warped with ``cv2.remap`` (bilinear) to the distorted pixel grid; the map is the exact
 inverse of the OpenCV distortion (``Camera.undistort``, Newton to ~1e-16).
 
-Passes: a view is rendered in as few ``mi.render`` calls as keep each call at most
+Adaptive rendering (the default, :func:`render_view_counted`): a pilot of
+:data:`ADAPTIVE_PILOT_SPP` over the whole film, the mask of the pixels it saw light on grown by
+:data:`ADAPTIVE_MARGIN_PX`, and the requested samples only on the mask (:func:`_render_pixels`:
+the scene's own sampler and integrator on an explicit list of pixels); a pixel off the mask
+keeps its pilot. A film lit on more than :data:`ADAPTIVE_MAX_LIT_FRACTION` of its pixels is
+rendered whole. ``adaptive=False`` renders the full film in passes, as below, with the seeds
+and bytes of before.
+
+Passes: a full film is rendered in as few ``mi.render`` calls as keep each call at most
 :data:`MAX_SAMPLES_PER_CALL` samples, and the passes are averaged, weighted by their samples.
 Large wavefronts are slower, but the sampler stratifies within one call only; the limit is the
 measured balance of the two (see the constant).
@@ -20,8 +28,10 @@ Seeds: one seed, one meaning. The scene's ``seed`` parameter (``-D seed=S``, or 
 which sets it) is the only seed: pass ``k`` of view ``i`` (0 left, 1 right) is rendered with
 ``mi.render(seed=S + i + 2^21·k)`` from a scene loaded with its sampler's own seed at 0 (Mitsuba
 adds the two), so ``--seed 7`` and ``-D seed=7`` render the same bytes, and a one-pass render
-uses ``S + i``. Mitsuba's seed is 32-bit: a seed whose sums do not fit is refused before the
-render (:func:`check_render_request`, :mod:`synth.seeds`), never wrapped.
+uses ``S + i``. An adaptive render's pilot is pass 0 and its masked calls (or the full-film
+passes of a mostly lit film) passes 1, 2, …. Mitsuba's seed is 32-bit: a seed whose sums do
+not fit is refused before the render (:func:`check_render_request`, :mod:`synth.seeds`), never
+wrapped.
 
 Before rendering, :func:`check_render_request` refuses what cannot work: an image whose
 wavefront would not fit in memory (the estimate is stated in the message) and a lens
