@@ -29,6 +29,7 @@ from eval.cli import CLIError, positive_float
 from eval.core.detection import DETECTOR_OPTIONS, add_detector_options
 from eval.core.formatting import format_number as fmt
 from eval.core.photos import add_encoding_option
+from measure.detect import FLOOR_FRACTION
 from synth.cli import add_json_option, add_out_option, add_progress_option, refuse_given
 
 COMMAND = "eval measure"
@@ -36,7 +37,7 @@ DEFAULT_METHODS = ("optical_path",)
 DEFAULT_GATE_MM = 0.5
 #: Default ``--floor-fraction``: JPEG ringing around a target is 2-5 % of its level
 #: (docs/datasets.md); the automatic threshold stays above it.
-DEFAULT_FLOOR_FRACTION = 0.05
+DEFAULT_FLOOR_FRACTION = FLOOR_FRACTION
 
 
 def add_parser(subparsers):
