@@ -203,8 +203,8 @@ def test_sweep_of_render_cells_interrupted_then_resumed(small_scene, tmp_path):
 
 @pytest.mark.slow
 @pytest.mark.parametrize("argv", [
-    ["synth", "dataset", "{scene}", "--out", "out", "--spp", "256", "--quiet"],
-    ["eval", "run", "{scene}", "--out", "out", "--spp", "256", "--no-progress"],
+    ["synth", "dataset", "{scene}", "--out", "out", "--spp", "256", "--full-film", "--quiet"],
+    ["eval", "run", "{scene}", "--out", "out", "--spp", "256", "--full-film", "--no-progress"],
 ], ids=["synth dataset", "eval run"])
 @pytest.mark.parametrize("seconds", [1.5, 4.0])
 def test_render_commands_interrupted(argv, seconds, small_scene, tmp_path):
