@@ -6,9 +6,11 @@ one ``error:`` line."""
 
 from __future__ import annotations
 
+import hashlib
 import os
 import re
 import sys
+import tempfile
 
 from synth import interrupt
 from synth.cli import CLIError
@@ -114,4 +116,66 @@ def connect(scheduler: str | None, workers: int | None, timeout: float, probe, w
     return client, cluster, f"{workers} local single-threaded worker(s)"
 
 
-__all__ = ["MAX_WORKERS_PER_CORE", "check_address", "connect", "default_workers"]
+# ------------------------------------------------------------------------------------------------
+# on the workers
+
+#: Per worker process: the scene files written (by SHA-256).
+_FILES: dict = {}
+_SETUP_DONE = False
+
+
+def setup_worker() -> None:
+    """Once per process: as many Dr.Jit and OpenCV threads as the Dask worker has (1 in the
+    local cluster: one single-threaded worker process per core, no oversubscription)."""
+    global _SETUP_DONE
+    if _SETUP_DONE:
+        return
+    threads = 1
+    try:
+        from distributed import get_worker
+
+        threads = max(1, int(get_worker().state.nthreads))
+    except (ImportError, ValueError, AttributeError):
+        pass
+    import cv2
+
+    cv2.setNumThreads(threads)
+    try:
+        from synth.mitsuba_setup import import_mitsuba
+
+        import_mitsuba()
+        import drjit
+
+        drjit.set_thread_count(threads)
+    except Exception:  # no Mitsuba here: analytic cells still run (scene parsing will say why)
+        pass
+    _SETUP_DONE = True
+
+
+def scene_file(sha: str, data: bytes, original: str) -> str:
+    """A path on this machine holding the scene bytes: the original path when it holds the same
+    bytes, else a copy in the temporary directory named by the hash."""
+    cached = _FILES.get(sha)
+    if cached:
+        return cached
+    path = original
+    try:
+        with open(original, "rb") as handle:
+            same = hashlib.sha256(handle.read()).hexdigest() == sha
+    except OSError:
+        same = False
+    if not same:
+        directory = os.path.join(tempfile.gettempdir(), "refstereo-sweep-scenes")
+        os.makedirs(directory, exist_ok=True)
+        path = os.path.join(directory, f"{sha}.xml")
+        if not os.path.exists(path):
+            fd, tmp = tempfile.mkstemp(dir=directory, suffix=".tmp")
+            with os.fdopen(fd, "wb") as handle:
+                handle.write(data)
+            os.replace(tmp, path)
+    _FILES[sha] = path
+    return path
+
+
+__all__ = ["MAX_WORKERS_PER_CORE", "check_address", "connect", "default_workers", "scene_file",
+           "setup_worker"]
