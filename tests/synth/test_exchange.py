@@ -219,3 +219,37 @@ def test_a_dataset_holds_the_exchange_files_and_old_datasets_stay_readable(small
     m["manifest_sha256"] = manifest_digest(m)
     (old / "manifest.json").write_text(json.dumps(m))
     assert read_dataset(old).targets.shape == dataset.targets.shape
+
+
+@pytest.mark.slow
+def test_a_surface_dataset_holds_depth_and_correspondence_in_common_formats(tmp_path):
+    import cv2
+
+    from synth.dataset import read_dataset, write_dataset
+    from synth.scene import load_scene
+    from tests.conftest import REPO
+
+    out = tmp_path / "surface"
+    manifest = write_dataset(load_scene(str(REPO / "scenes" / "speckle_tilted.xml"),
+                                        {"width": "96", "height": "80"}), out, spp=2,
+                             progress=False)
+    rig = read_dataset(out).rig
+    scale = manifest["truth_formats"]["zdepth_png_scale"]
+    for view, camera in (("left", rig.left), ("right", rig.right)):
+        points = np.load(out / f"{view}_truth_points.npy")
+        z = (points - camera.t) @ camera.R[:, 2]
+        depth = read_pfm(str(out / f"{view}_truth_zdepth.pfm"))
+        assert np.array_equal(np.isfinite(depth), np.isfinite(z))
+        assert np.nanmax(np.abs(depth - z)) <= 1e-4  # float32 of ~1000 mm
+        codes = cv2.imread(str(out / f"{view}_truth_zdepth.png"), cv2.IMREAD_UNCHANGED)
+        assert codes.dtype == np.uint16 and np.array_equal(codes > 0, np.isfinite(z))
+        assert np.nanmax(np.abs(codes[codes > 0] / scale - z[codes > 0])) <= 0.5 / scale + 1e-4
+        assert f"{view}_truth_zdepth.pfm" in manifest["sha256"]
+    flow = read_flo(str(out / "left_truth_flow.flo"))
+    overlap = cv2.imread(str(out / "left_truth_overlap.png"), cv2.IMREAD_UNCHANGED) > 0
+    assert overlap.sum() > 100 and np.array_equal(np.isfinite(flow[..., 0]), overlap)
+    rows, cols = np.nonzero(overlap)
+    points = np.load(out / "left_truth_points.npy")[rows, cols]
+    right_pixels = np.column_stack([cols, rows]) + flow[rows, cols]
+    # the right camera's refracted ray through the right pixel meets the same point
+    assert np.allclose(right_pixels, project(rig.right, rig.port, points), atol=1e-3)

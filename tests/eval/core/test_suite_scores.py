@@ -125,3 +125,25 @@ def test_aggregate_counts_failures_and_takes_the_worst():
     assert everything["mean_dz_mm.worst"] == -0.5
     assert np.isclose(everything["rms_dp_mm.mean"], 0.2)
     assert out[("p", "2")]["failed"] == 1 and out[("p", "2")]["rms_dp_mm.median"] == 0.3
+
+
+@pytest.mark.slow
+def test_a_surface_suite_scored_with_its_own_truth_depth_is_exact(tmp_path, capsys):
+    from synth.exchange import read_pfm, write_pfm
+
+    spec = tmp_path / "surfaces.toml"
+    spec.write_text(f'scenes = ["{REPO / "scenes" / "speckle_tilted.xml"}"]\n'
+                    f'render = "surface"\nrender_width = 96\n[fixed]\nspp = 2\n')
+    suite, sub = tmp_path / "suite", tmp_path / "sub"
+    assert synth_main(["suite", str(spec), "--out", str(suite), "--workers", "1",
+                       "--no-progress"]) == 0
+    folder = pq.read_table(suite / "index.parquet").to_pylist()[0]["folder"]
+    (sub / folder).mkdir(parents=True)
+    write_pfm(str(sub / folder / "depth.pfm"),
+              read_pfm(str(suite / folder / "left_truth_zdepth.pfm")))
+    out = tmp_path / "scores"
+    assert main(["score", str(suite), "--submission", str(sub), "--out", str(out),
+                 "--no-progress"]) == 0
+    row = json.loads((out / "summary.json").read_text())["datasets"][0]
+    assert row["status"] == "ok" and row["measured_fraction"] == 1.0
+    assert row["p2m_max_mm"] < 1e-3  # float32 depths of ~1 m: ~3e-5 mm steps
