@@ -90,6 +90,18 @@ def connect(scheduler: str | None, workers: int | None, timeout: float, probe, w
             raise CLIError(f"--scheduler {scheduler}: a worker cannot run {what} "
                            f"({type(exc).__name__}: {' '.join(str(exc).split())[:160]}); "
                            f"install this project where the workers run") from None
+        try:  # the scheduler unpickles the tasks too: it needs the project as well
+            client.run_on_scheduler(probe)
+        except KeyboardInterrupt:
+            with interrupt.deferred():
+                client.close()
+            raise
+        except Exception as exc:
+            client.close()
+            raise CLIError(f"--scheduler {scheduler}: the scheduler cannot import what the "
+                           f"{what} need ({type(exc).__name__}: "
+                           f"{' '.join(str(exc).split())[:160]}); install this project where "
+                           f"the scheduler runs too") from None
         n = len(client.scheduler_info(n_workers=-1)["workers"])
         return client, None, f"{n} worker(s) of {scheduler}"
     workers = workers or default_workers()
