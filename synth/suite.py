@@ -221,7 +221,8 @@ def render_task(task: dict) -> dict:
     """Render one entry (on a Dask worker): its dataset written by
     :func:`synth.dataset.write_dataset` straight into ``task["out"]`` when this machine sees the
     suite's directory (its lock file holds ``task["token"]``), else into a temporary folder
-    whose files come back as bytes. Never raises: a failure is ``status = "failed"``."""
+    whose files come back as bytes. Never raises: a failure is ``status = "failed"``, and
+    ``write_error`` when it was the output that could not be written (the suite then stops)."""
     import shutil
     import tempfile
     import time
@@ -262,6 +263,10 @@ def render_task(task: dict) -> dict:
                 "variant": manifest["variant"], "spp": manifest["spp"],
                 "n_targets": manifest["scene"]["n_targets"],
                 "image_size": manifest["image_size"], "skipped": bool(manifest.get("skipped"))}
+    except OSError as exc:  # the output cannot be written (a full disk): the suite stops
+        return {"key": task["key"], "status": "failed", "write_error": True, "files": None,
+                "error": f"{type(exc).__name__}: {' '.join(str(exc).split())}",
+                "task_seconds": time.perf_counter() - started}
     except Exception as exc:  # recorded, never raised: the suite goes on
         message = f"{type(exc).__name__}: {' '.join(str(exc).split())}"
         if os.environ.get("REFSTEREO_TRACEBACK"):

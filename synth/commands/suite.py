@@ -136,6 +136,8 @@ def _execute(client, spec, todo, out, records, token, progress) -> tuple[int, fl
             except Exception as exc:  # the task itself failed (a worker died, …)
                 result = {"key": entry.key, "status": "failed",
                           "error": f"{type(exc).__name__}: {' '.join(str(exc).split())}"}
+            if result.get("write_error"):  # a full disk: stop, keep what finished
+                raise OSError(f"{entry.folder}: {result['error']}")
             files = result.pop("files", None)
             if result["status"] == "ok" and files is not None:
                 out.write_dataset_files(entry.folder, files, result["request_key"])

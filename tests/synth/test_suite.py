@@ -169,3 +169,34 @@ def test_another_spec_for_the_same_folder_is_refused(tmp_path, capsys):
     (tmp_path / "out" / "suite.json").write_text(json.dumps({"spec_hash": "other"}))
     assert main(["suite", str(_spec(tmp_path)), "--out", str(tmp_path / "out")]) == 2
     assert "another spec" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_a_full_disk_is_one_error_line_and_what_finished_is_kept(tmp_path):
+    """Files larger than RLIMIT_FSIZE cannot be written (EFBIG, SIGXFSZ ignored): the first
+    small dataset fits, the second's noisy sensor images do not."""
+    import resource
+    import signal
+    import subprocess
+    import sys
+
+    spec = _spec(tmp_path, SPEC.replace('"D.target_z" = [900, 1100]',
+                                        '"D.width" = [96, 640]\n"D.height" = [80, 536]\n'
+                                        'sensor = ["", "imx174"]').replace("[grid]", "[zip]"))
+
+    def limit():
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+        resource.setrlimit(resource.RLIMIT_FSIZE, (60_000, 60_000))
+
+    out = tmp_path / "out"
+    done = subprocess.run([sys.executable, "-m", "synth", "suite", str(spec), "--out", str(out),
+                           "--workers", "1", "--no-progress"], cwd=REPO, capture_output=True,
+                          text=True, preexec_fn=limit, timeout=120)
+    # (libpng, in the worker process, also says "libpng error: Write Error")
+    err = [line for line in done.stderr.strip().splitlines() if "libpng" not in line]
+    assert done.returncode == 2 and len(err) == 1, done.stderr
+    assert err[0].startswith(f"error: --out {out}: cannot write") and "kept" in err[0]
+    finished = list((out / "entries").glob("*.json"))
+    assert len(finished) == 1 and "the 1 dataset(s) finished are kept" in err[0]
+    assert not [p for p in out.iterdir() if ".staging-" in p.name]
+    assert main(["suite", str(spec), "--out", str(out), "--workers", "1", "--no-progress"]) == 0
