@@ -527,7 +527,7 @@ mm, left-camera frame) or `pairs.csv` (matched pixels `u_left,v_left,u_right,v_r
 surface datasets `depth.pfm` / `depth.npy` (depth along z, mm, left view) or `points.ply`. Then
 
 ```sh
-python -m eval score {os.path.basename(spec.path) and "SUITE_DIR"} --submission SUB --out scores
+python -m eval score SUITE_DIR --submission SUB --out scores      # SUITE_DIR: this folder
 ```
 
 scores every dataset (a missing or unreadable one counts as a failure) and writes

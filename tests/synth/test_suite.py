@@ -48,7 +48,8 @@ def _index(out: Path) -> list:
 
 
 def _digests(folder: Path) -> dict:
-    return {p.name: hashlib.sha256(p.read_bytes()).hexdigest() for p in sorted(folder.rglob("*"))
+    return {str(p.relative_to(folder)): hashlib.sha256(p.read_bytes()).hexdigest()
+            for p in sorted(folder.rglob("*"))
             if p.is_file()}
 
 
@@ -200,3 +201,31 @@ def test_a_full_disk_is_one_error_line_and_what_finished_is_kept(tmp_path):
     assert len(finished) == 1 and "the 1 dataset(s) finished are kept" in err[0]
     assert not [p for p in out.iterdir() if ".staging-" in p.name]
     assert main(["suite", str(spec), "--out", str(out), "--workers", "1", "--no-progress"]) == 0
+
+
+@pytest.mark.slow
+def test_a_worker_that_does_not_see_the_folder_sends_the_files_back(local_suite, tmp_path,
+                                                                    monkeypatch):
+    """The path of a cluster without a shared file system: the worker renders into a temporary
+    folder and returns the bytes; the client writes them as a synth dataset output."""
+    from synth import cluster
+    from synth.suite import SuiteDir, render_task
+
+    spec_path, out = local_suite
+    spec = load_suite_spec(spec_path)
+    entry = spec.entries[0]
+    scene = spec.scenes[entry.scene]
+    monkeypatch.setattr(cluster, "_SETUP_DONE", True)  # keep this process's thread counts
+    result = render_task({"key": entry.key, "scene_sha": scene.sha256, "scene_data": scene.data,
+                          "scene_path": scene.path, "params": entry.params,
+                          "defines": entry.defines, "seed": entry.seed,
+                          "out": str(tmp_path / "elsewhere" / entry.folder), "token": "other"})
+    assert result["status"] == "ok" and "left.png" in result["files"]
+    assert "colmap/cameras.txt" in result["files"]
+    assert not (tmp_path / "elsewhere").exists()
+    target = SuiteDir(tmp_path / "suite")
+    target.write_dataset_files(entry.folder, result["files"], result["request_key"])
+    varying = {"manifest.json", ".refractive-stereo-output.json"}
+    mine = {k: v for k, v in _digests(out / entry.folder).items() if k not in varying}
+    assert {k: v for k, v in _digests(tmp_path / "suite" / entry.folder).items()
+            if k not in varying} == mine
