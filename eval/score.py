@@ -157,7 +157,7 @@ def score_suite_main(args, output, method, log, start) -> int:
     files into ``--out``; exit 1 when a dataset is missing or failed."""
     from synth.fileio import atomic_write_json, jsonable
 
-    from eval.core.suite_scores import score_suite, write_summary
+    from eval.core.suite_scores import FAILURES, score_suite, write_summary
 
     if args.units is not None:
         raise CLIError("--units does not apply with --submission: the points of a submission "
@@ -170,7 +170,7 @@ def score_suite_main(args, output, method, log, start) -> int:
             {"suite": os.path.abspath(args.dataset), "submission":
              os.path.abspath(args.submission), "method": method, "datasets": rows,
              "timings_s": {"total": time.perf_counter() - start}}))
-    failed = [r for r in rows if r["status"] != "ok"]
+    failed = [r for r in rows if r["status"] in FAILURES]
     warned = [r for r in rows if r.get("warnings")]
     for r in failed:
         log(f"failure: {r['folder']} ({r['status']}): {r['error']}")

@@ -8,8 +8,10 @@ The spec uses the grammar of :mod:`synth.grid` (the one ``eval sweep`` uses)::
     seed = 0                  # every dataset's seed derives from it and the entry's key
     repeats = 1               # datasets per combination (the seed differs)
     scenes = ["../scenes/small_grid.xml"]     # relative to the spec; each combination on each
-    render = "targets"        # what the entries render: "targets" or "surface" (the scenes must
-                              # be target scenes or surface scenes: python -m synth scene)
+    render = "targets"        # what the entries render: "targets", "surface" (the scenes must
+                              # be target or surface scenes: python -m synth scene) or "boards"
+                              # (a calibration board sequence through the scene's cameras and
+                              # port: synth boards; parameters poses, air, squares, square_mm)
     render_width = 320        # width of the images (height keeps the aspect); "scene": as is
 
     [fixed]
@@ -50,7 +52,11 @@ COMMAND = "synth suite"
 TOP_KEYS = ("name", "description", "seed", "repeats", "scenes", "render", "render_width",
             "fixed", "grid", "zip", "random")
 PLAIN_PARAMETERS = ("spp", "sensor", "exr")
-RENDERS = ("targets", "surface")
+#: Parameters of board sequences (``render = "boards"``) only.
+BOARD_PARAMETERS = ("poses", "air", "squares", "square_mm")
+RENDERS = ("targets", "surface", "boards")
+#: The command whose output each kind of entry is.
+OUTPUT_COMMAND = {"targets": "synth dataset", "surface": "synth dataset", "boards": "synth boards"}
 DEFAULT_RENDER_WIDTH = 320
 #: What a suite writes at the top of its directory besides the dataset folders.
 TOP_LEVEL = ("suite.json", "spec.toml", "README.md", "index.parquet", "index.csv", "entries",
@@ -140,7 +146,8 @@ def parse_suite_spec(data: dict, base_dir: str, label: str) -> SuiteSpec:
                                    f"dataset holds), got {render!r}")
     scenes = read_scenes(data, base_dir, label)
     for scene in scenes.values():
-        need(_is_surface(scene) == (render == "surface"), label,
+        need(_is_surface(scene) == (render == "surface") or render == "boards" and
+             not _is_surface(scene), label,
              f"render = {render!r} but scene {scene.label} is a "
              f"{'surface' if _is_surface(scene) else 'target'} scene")
     width = data.get("render_width", DEFAULT_RENDER_WIDTH)
@@ -151,13 +158,26 @@ def parse_suite_spec(data: dict, base_dir: str, label: str) -> SuiteSpec:
              f'render_width must be an integer >= 16 or "scene", got {width!r}')
 
     def check_name(key, section):
+        if render == "boards" and key in ("sensor", "exr"):
+            raise SpecError(f"{label}: [{section}] {key}: board sequences have no {key}")
         if key in PLAIN_PARAMETERS:
             return
+        if key in BOARD_PARAMETERS:
+            need(render == "boards", label, f"[{section}] {key}: a parameter of board sequences "
+                                            f"(render = \"boards\")")
+            return
         if key.startswith("D.") and len(key) > 2:
+            if render == "boards":
+                from synth.commands.boards import NOT_RENDERED
+
+                need(key[2:] not in NOT_RENDERED, label,
+                     f"[{section}] {key} does not apply to board sequences (no targets, water "
+                     f"medium, lights or thin lens are rendered)")
             check_scene_parameter(key, scenes, label, section)
             return
         raise SpecError(f"{label}: [{section}] unknown parameter {key!r} (a suite's "
-                        f"parameters: {', '.join(PLAIN_PARAMETERS)}, D.<scene default>)")
+                        f"parameters: {', '.join(PLAIN_PARAMETERS)}, D.<scene default>; board "
+                        f"sequences also {', '.join(BOARD_PARAMETERS)})")
 
     sections = parse_sections(data, seed, label, check_name)
     spec = SuiteSpec(path=label, name=name, description=description, seed=seed, repeats=repeats,
@@ -195,7 +215,24 @@ def _check_value(key: str, value, label: str):
         if not (isinstance(value, int) and not isinstance(value, bool) and value >= 1):
             bad("an integer >= 1")
         return value
-    if key == "exr":
+    if key == "poses":
+        if not (isinstance(value, int) and not isinstance(value, bool) and value >= 1):
+            bad("an integer >= 1")
+        return value
+    if key == "square_mm":
+        if not (isinstance(value, (int, float)) and not isinstance(value, bool) and value > 0):
+            bad("a number > 0 (mm)")
+        return value
+    if key == "squares":
+        from measure.board import Board, BoardError
+
+        try:
+            cols, rows = (int(v) for v in str(value).lower().split("x"))
+            Board("chessboard", (cols, rows), 40.0)
+        except (ValueError, BoardError) as exc:
+            bad(f'"COLSxROWS" such as "11x8" ({exc})')
+        return value
+    if key in ("exr", "air"):
         if not isinstance(value, bool):
             bad("true or false")
         return value
@@ -239,6 +276,8 @@ def render_task(task: dict) -> dict:
 
         scene = scene_file(task["scene_sha"], task["scene_data"], task["scene_path"])
         params = task["params"]
+        if task.get("render") == "boards":
+            return _render_boards(task, scene, started)
         sensor = sensor_from_spec(params["sensor"]) if params.get("sensor") else None
         direct = _sees_suite(task["out"], task["token"])
         target = task["out"] if direct else os.path.join(
@@ -246,16 +285,7 @@ def render_task(task: dict) -> dict:
         manifest = write_dataset(scene, target, spp=params.get("spp"), defines=task["defines"],
                                  exr=bool(params.get("exr", False)), progress=False,
                                  seed=task["seed"], sensor=sensor)
-        files = None
-        if not direct:
-            files = {}
-            for root, _, names in os.walk(target):
-                for name in names:
-                    path = os.path.join(root, name)
-                    rel = os.path.relpath(path, target)
-                    if not rel.startswith("."):
-                        with open(path, "rb") as handle:
-                            files[rel] = handle.read()
+        files = None if direct else _read_files(target)
         return {"key": task["key"], "status": "ok", "error": None, "files": files,
                 "request_key": manifest["request_key"],
                 "render_seconds": manifest["seconds"]["total"],
@@ -276,6 +306,54 @@ def render_task(task: dict) -> dict:
     finally:
         if tmp is not None:
             shutil.rmtree(tmp, ignore_errors=True)
+
+
+def _render_boards(task: dict, scene: str, started: float) -> dict:
+    """A board sequence (``synth boards``) of one entry: see :func:`render_task`."""
+    import shutil
+    import tempfile
+    import time
+
+    from measure.board import Board
+
+    from synth.boards import DEFAULT_POSES, DEFAULT_SPP, write_boards
+    from synth.scene import load_scene
+
+    params = task["params"]
+    cols, rows = (int(v) for v in str(params.get("squares", "11x8")).lower().split("x"))
+    board = Board("chessboard", (cols, rows), float(params.get("square_mm", 40.0)))
+    spp = int(params.get("spp", DEFAULT_SPP))
+    spec = load_scene(scene, task["defines"]).rendered_with(spp=spp, seed=task["seed"])
+    direct = _sees_suite(task["out"], task["token"])
+    tmp = None if direct else tempfile.mkdtemp(prefix="refstereo-suite-")
+    target = task["out"] if direct else os.path.join(tmp, "boards")
+    try:
+        manifest = write_boards(spec, target, board, n_poses=int(params.get("poses",
+                                                                             DEFAULT_POSES)),
+                                spp=spp, seed=task["seed"], air=bool(params.get("air", False)),
+                                progress=False)
+        files = None if direct else _read_files(target)
+    finally:
+        if tmp is not None:
+            shutil.rmtree(tmp, ignore_errors=True)
+    return {"key": task["key"], "status": "ok", "error": None, "files": files,
+            "request_key": manifest["request_key"],
+            "render_seconds": manifest["seconds"]["total"],
+            "task_seconds": time.perf_counter() - started, "variant": manifest["variant"],
+            "spp": manifest["spp"], "n_targets": None, "poses": manifest["poses"],
+            "image_size": manifest["image_size"], "skipped": bool(manifest.get("skipped"))}
+
+
+def _read_files(target: str) -> dict:
+    files = {}
+    for root, _, names in os.walk(target):
+        for name in names:
+            path = os.path.join(root, name)
+            rel = os.path.relpath(path, target)
+            if not rel.startswith("."):
+                with open(path, "rb") as handle:
+                    files[rel] = handle.read()
+    return files
 
 
 def _sees_suite(out: str, token: str) -> bool:
@@ -391,7 +469,8 @@ class SuiteDir:
             if record.get("key") != entry.key:
                 continue
             if record.get("status") == "ok":
-                folder = OutputDir(os.path.join(self.path, entry.folder), "synth dataset")
+                folder = OutputDir(os.path.join(self.path, entry.folder),
+                                   OUTPUT_COMMAND[entry.render])
                 if not folder.exists_as_output() or folder.damage() is not None:
                     continue
             out[entry.key] = record
@@ -405,11 +484,13 @@ class SuiteDir:
             handle.write(text)
         os.replace(tmp, path)
 
-    def write_dataset_files(self, folder: str, files: dict, request_key: str) -> None:
-        """A dataset that came back as bytes, written atomically as a ``synth dataset`` output."""
+    def write_dataset_files(self, folder: str, files: dict, request_key: str,
+                            render: str = "targets") -> None:
+        """A dataset (or board sequence) that came back as bytes, written atomically as the
+        output of ``synth dataset`` (``synth boards``)."""
         from synth.fileio import OutputDir
 
-        output = OutputDir(os.path.join(self.path, folder), "synth dataset")
+        output = OutputDir(os.path.join(self.path, folder), OUTPUT_COMMAND[render])
         output.claim()
         with output.staged(extra={"request_key": request_key}) as tmp:
             for rel, data in files.items():
@@ -438,7 +519,8 @@ def index_rows(spec: SuiteSpec, records: dict) -> list:
                     if f"D.{k}" not in entry.params})
         row.update({"width": (record.get("image_size") or [None, None])[0],
                     "height": (record.get("image_size") or [None, None])[1],
-                    "n_targets": record.get("n_targets"), "variant": record.get("variant"),
+                    "n_targets": record.get("n_targets"), "poses": record.get("poses"),
+                    "variant": record.get("variant"),
                     "status": record["status"], "error": record.get("error"),
                     "render_seconds": record.get("render_seconds")})
         rows.append(row)
@@ -447,7 +529,8 @@ def index_rows(spec: SuiteSpec, records: dict) -> list:
 
 def index_columns(rows: list) -> list:
     first = ["folder", "key", "render", "scene", "repeat", "sample", "seed"]
-    last = ["width", "height", "n_targets", "variant", "status", "error", "render_seconds"]
+    last = ["width", "height", "n_targets", "poses", "variant", "status", "error",
+            "render_seconds"]
     middle = sorted({k for row in rows for k in row} - set(first) - set(last))
     return first + middle + last
 
@@ -488,6 +571,10 @@ def readme_text(spec: SuiteSpec, rows: list) -> str:
     fixed = ", ".join(f"`{k}` = {json.dumps(v)}" for k, v in spec.fixed.items()) or "none"
     what = ("stereo images of circular targets, their true 3D centres (`targets.ply`) and the "
             "simulator's pixels of every target (`pixels.csv`)" if spec.render == "targets" else
+            "a sequence of stereo pairs of a calibration chessboard at random poses "
+            "(`left_PP.png`, `right_PP.png`, `poses.csv`, `corners.csv`, `calib.yaml`; "
+            "`python -m eval calibrate` reads it)"
+            if spec.render == "boards" else
             "stereo images of a speckled surface, its mesh (`surface.ply`) and per-pixel truth: "
             "depth along the camera's z (`*_truth_zdepth.pfm`, `*_truth_zdepth.png` 16-bit with "
             "the scale in `manifest.json`), the left→right correspondence "

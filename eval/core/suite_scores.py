@@ -36,6 +36,8 @@ SURFACE_METRICS = ("p2m_rms_mm", "p2m_median_mm", "p2m_max_mm", "fscore_1mm", "c
                    "depth_rms_mm", "depth_mean_mm", "measured_fraction")
 #: The metric the figures and the aggregation headline show, per kind of dataset.
 HEADLINE = {"targets": "rms_dp_mm", "surface": "p2m_rms_mm"}
+#: Statuses of a row that count as failures (``not_applicable``: a board sequence, not scored).
+FAILURES = ("missing", "failed")
 #: Metrics where larger is better (their "worst" is the minimum).
 HIGHER_IS_BETTER = ("fscore_1mm", "fscore_5mm", "measured_fraction")
 
@@ -105,6 +107,9 @@ def score_entry(suite_dir: str, sub_dir: str, row: dict, method: str, gate_mm) -
     if row.get("status") != "ok":
         return {**out, "status": "failed", "error": f"the suite has no dataset here "
                                                      f"({row.get('error')})"}
+    if row["render"] == "boards":
+        return {**out, "status": "not_applicable",
+                "error": "a board sequence: calibrate from it with python -m eval calibrate"}
     found = find_submission(os.path.join(sub_dir, row["folder"]), row["render"], method)
     if found is None:
         wanted = ("points.ply, points_<method>.ply or pairs.csv" if row["render"] == "targets"
@@ -203,7 +208,7 @@ def aggregate(rows: list, swept: list) -> list:
         scored = [r for r in members if r["status"] == "ok"]
         entry = {"group": name, "value": None if value is None else str(value),
                  "datasets": len(members), "scored": len(scored),
-                 "failed": len(members) - len(scored)}
+                 "failed": sum(r["status"] in FAILURES for r in members)}
         for metric in metrics:
             values = _finite(r.get(metric) for r in scored)
             worst = (min if metric in HIGHER_IS_BETTER else
@@ -246,7 +251,7 @@ def _fmt(value) -> str:
 def summary_markdown(info, rows, aggregated, suite_dir, sub_dir, figures) -> str:
     render = rows[0]["render"] if rows else "targets"
     metrics = [m for m in (TARGET_METRICS if render == "targets" else SURFACE_METRICS)][:6]
-    failed = [r for r in rows if r["status"] != "ok"]
+    failed = [r for r in rows if r["status"] in FAILURES]
     warned = [r for r in rows if r.get("warnings")]
     lines = [f"# Scores of {sub_dir} against the suite {info.get('name', suite_dir)}", "",
              f"{len(rows)} datasets, {len(rows) - len(failed)} scored, **{len(failed)} "
@@ -313,6 +318,6 @@ def write_figures(directory: str, rows: list, swept: list) -> list:
     return written
 
 
-__all__ = ["HEADLINE", "SURFACE_METRICS", "TARGET_METRICS", "aggregate", "find_submission",
+__all__ = ["FAILURES", "HEADLINE", "SURFACE_METRICS", "TARGET_METRICS", "aggregate", "find_submission",
            "read_suite", "score_entry", "score_suite", "summary_markdown", "write_figures",
            "write_summary"]

@@ -120,7 +120,7 @@ def _execute(client, spec, todo, out, records, token, progress) -> tuple[int, fl
     futures = {}
     for entry in todo:
         scene = spec.scenes[entry.scene]
-        task = {"key": entry.key, "scene_sha": scene.sha256, "scene_data": scene.data,
+        task = {"key": entry.key, "render": entry.render, "scene_sha": scene.sha256, "scene_data": scene.data,
                 "scene_path": scene.path, "params": entry.params, "defines": entry.defines,
                 "seed": entry.seed, "out": os.path.join(out.path, entry.folder), "token": token}
         futures[client.submit(render_task, task, pure=False, key=f"suite-{entry.key}")] = entry
@@ -140,7 +140,7 @@ def _execute(client, spec, todo, out, records, token, progress) -> tuple[int, fl
                 raise OSError(f"{entry.folder}: {result['error']}")
             files = result.pop("files", None)
             if result["status"] == "ok" and files is not None:
-                out.write_dataset_files(entry.folder, files, result["request_key"])
+                out.write_dataset_files(entry.folder, files, result["request_key"], entry.render)
             record = {**result, "folder": entry.folder}
             with interrupt.deferred():
                 out.write_record(record)

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import re
 import shutil
 import socket
 from pathlib import Path
@@ -56,7 +57,7 @@ def _digests(folder: Path) -> dict:
 def test_the_committed_specs_expand():
     smoke = load_suite_spec(REPO / "suites" / "smoke.toml")
     assert len(smoke.entries) == 4 and smoke.swept == ["D.target_z", "D.n_water"]
-    for name in ("targets_distance_water_tilt.toml", "surfaces_small.toml"):
+    for name in ("targets_distance_water_tilt.toml", "surfaces_small.toml", "boards_small.toml"):
         spec = load_suite_spec(REPO / "suites" / name)
         assert spec.entries
     assert len(load_suite_spec(REPO / "suites" / "targets_distance_water_tilt.toml").entries) >= 24
@@ -229,3 +230,31 @@ def test_a_worker_that_does_not_see_the_folder_sends_the_files_back(local_suite,
     mine = {k: v for k, v in _digests(out / entry.folder).items() if k not in varying}
     assert {k: v for k, v in _digests(tmp_path / "suite" / entry.folder).items()
             if k not in varying} == mine
+
+
+@pytest.mark.slow
+def test_a_suite_of_board_sequences(tmp_path):
+    from synth.boards import read_boards
+
+    spec = _spec(tmp_path, SPEC.replace('render = "targets"', 'render = "boards"').replace(
+        "spp = 2", "spp = 2\nposes = 2\nsquares = \"7x4\"\nsquare_mm = 60").replace(
+        '"D.target_z" = [900, 1100]', "air = [false, true]"))
+    out = tmp_path / "boards"
+    assert main(["suite", str(spec), "--out", str(out), "--workers", "1", "--no-progress"]) == 0
+    rows = pq.read_table(out / "index.parquet").to_pylist()
+    assert [r["air"] for r in rows] == [False, True] and [r["poses"] for r in rows] == [2, 2]
+    for row in rows:
+        boards = read_boards(out / row["folder"])
+        assert boards.manifest["air"] == row["air"] and boards.manifest["board"]["squares"] == [7, 4]
+
+
+@pytest.mark.parametrize("text, fragment", [
+    ('render = "boards"\n[fixed]\nsensor = "imx174"', "board sequences have no sensor"),
+    ('[fixed]\nposes = 3', "a parameter of board sequences"),
+    ('render = "boards"\n[fixed]\nsquares = "1x1"', "squares"),
+    ('render = "boards"\n[grid]\n"D.target_z" = [1000]', "does not apply to board sequences"),
+])
+def test_board_parameters_are_checked(tmp_path, text, fragment):
+    path = _spec(tmp_path, 'scenes = ["{scene}"]\n' + text)
+    with pytest.raises(SpecError, match=re.escape(fragment)):
+        load_suite_spec(path)
