@@ -566,7 +566,10 @@ def readme_text(spec: SuiteSpec, rows: list) -> str:
         if name == "scene":
             values = list(spec.scenes)
         else:
-            values = sorted({json.dumps(e.params.get(name)) for e in spec.entries})
+            distinct = {json.dumps(e.params.get(name)): e.params.get(name) for e in spec.entries}
+            values = [json.dumps(v) for v in sorted(
+                distinct.values(), key=lambda v: (not isinstance(v, (int, float)), v
+                                                  if isinstance(v, (int, float)) else str(v)))]
         swept_lines.append(f"- `{name}`: {', '.join(str(v) for v in values)}")
     fixed = ", ".join(f"`{k}` = {json.dumps(v)}" for k, v in spec.fixed.items()) or "none"
     what = ("stereo images of circular targets, their true 3D centres (`targets.ply`) and the "
@@ -611,7 +614,8 @@ Fixed: {fixed}. Every dataset's parameters, seed and render time: `index.csv` /
 
 Put your pipeline's output per dataset in a folder `SUB/<folder>/`: `points.ply` (3D points in
 mm, left-camera frame) or `pairs.csv` (matched pixels `u_left,v_left,u_right,v_right`); for
-surface datasets `depth.pfm` / `depth.npy` (depth along z, mm, left view) or `points.ply`. Then
+surface datasets `depth.pfm` / `depth.npy` (depth along the left camera's z, mm, the left image's
+pixel grid). Then
 
 ```sh
 python -m eval score SUITE_DIR --submission SUB --out scores      # SUITE_DIR: this folder
