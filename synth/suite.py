@@ -432,6 +432,11 @@ class SuiteDir:
         if previous and previous.get("spec_hash") not in (None, spec.spec_hash()):
             self._refuse(f"holds a suite of another spec ({previous.get('spec_path', '?')}); "
                          f"write this one elsewhere")
+        os.makedirs(self.path, exist_ok=True)
+        marker = os.path.join(self.path, MARKER_NAME)
+        if not os.path.exists(marker):  # first, so that a suite killed now is still ours
+            atomic_write_json(marker, {"project": PROJECT_NAME, "schema": MARKER_SCHEMA,
+                                       "command": COMMAND, "files": sorted(TOP_LEVEL)})
         os.makedirs(self.entries, exist_ok=True)
         self._lock = open(os.path.join(self.path, ".suite.lock"), "a+", encoding="utf-8")
         try:
