@@ -5,8 +5,9 @@
 (:func:`find_submission`, first match wins):
 
 * target datasets — ``points.ply`` (3D points, mm, the left camera's frame; ``eval measure``
-  writes it), ``points_<method>.ply`` (``eval run``'s clouds, ``method`` = ``--method``,
-  default optical_path) or ``pairs.csv`` (matched pixels ``u_left, v_left, u_right, v_right``,
+  writes it), ``points_<method>_all.ply`` or ``points_<method>.ply`` (``eval run``'s clouds:
+  every point, and the correctly matched ones; ``method`` = ``--method``, default
+  optical_path) or ``pairs.csv`` (matched pixels ``u_left, v_left, u_right, v_right``,
   triangulated here with ``--method`` and the dataset's calibration);
 * surface datasets — ``depth.pfm`` or ``depth.npy`` (depth along the left camera's z, mm, in
   the left image's pixel grid, NaN or 0 where none), turned into points on each pixel's refracted
@@ -62,8 +63,9 @@ def read_suite(path) -> tuple[dict, list]:
 
 def find_submission(directory: str, render: str, method: str) -> tuple[str, str] | None:
     """``(kind, path)`` of the first submission file in ``directory`` (module docs), or None."""
-    names = ((("points", "points.ply"), ("points", f"points_{method}.ply"),
-              ("pairs", "pairs.csv")) if render == "targets" else
+    names = ((("points", "points.ply"), ("points", f"points_{method}_all.ply"),
+              ("points", f"points_{method}.ply"), ("pairs", "pairs.csv"))
+             if render == "targets" else
              (("depth", "depth.pfm"), ("depth", "depth.npy")))
     for kind, name in names:
         path = os.path.join(directory, name)

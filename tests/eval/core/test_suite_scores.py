@@ -58,7 +58,7 @@ def test_the_baseline_scores_equal_eval_run_key_by_key(baseline, tmp_path):
     summary = json.loads((out / "summary.json").read_text())
     assert [r["folder"] for r in summary["datasets"]] == [r["folder"] for r in index]
     for row in summary["datasets"]:
-        assert row["status"] == "ok" and row["submission"].endswith("points_optical_path.ply")
+        assert row["status"] == "ok" and row["submission"].endswith("points_optical_path_all.ply")
         ours = reports[row["folder"]]["methods"]["optical_path"]
         assert set(row["scores"]) == set(ours)
         for key, value in ours.items():
@@ -109,6 +109,8 @@ def test_find_submission_prefers_points_then_the_methods_cloud_then_pairs(tmp_pa
     assert find_submission(str(tmp_path), "targets", "su")[0] == "pairs"
     (tmp_path / "points_su.ply").write_text("")
     assert find_submission(str(tmp_path), "targets", "su")[1].endswith("points_su.ply")
+    (tmp_path / "points_su_all.ply").write_text("")
+    assert find_submission(str(tmp_path), "targets", "su")[1].endswith("points_su_all.ply")
     (tmp_path / "points.ply").write_text("")
     assert find_submission(str(tmp_path), "targets", "su")[1].endswith("points.ply")
     assert find_submission(str(tmp_path), "surface", "su") is None
