@@ -192,6 +192,19 @@ def _finite(values) -> list:
             and math.isfinite(v)]
 
 
+def distinct_values(rows: list, name: str) -> list:
+    """The values ``name`` takes over ``rows``, once each: numbers in numeric order first,
+    then the others by their text."""
+    def number(v):
+        return isinstance(v, (int, float)) and not isinstance(v, bool)
+
+    values = {}
+    for r in rows:
+        v = r.get(name)
+        values.setdefault(("n", float(v)) if number(v) else ("o", json.dumps(v)), v)
+    return sorted(values.values(), key=lambda v: (0, v, "") if number(v) else (1, 0, str(v)))
+
+
 def aggregate(rows: list, swept: list) -> list:
     """Rows of the aggregation: over all datasets, and per value of each swept parameter —
     ``group``, ``value``, ``datasets``, ``scored``, ``failed`` (missing or failed), and for each
@@ -201,10 +214,8 @@ def aggregate(rows: list, swept: list) -> list:
     metrics = list(dict.fromkeys(metrics))
     groups = [("all", None, rows)]
     for name in swept:
-        values = sorted({json.dumps(r.get(name)) for r in rows})
-        for value in values:
-            groups.append((name, json.loads(value),
-                           [r for r in rows if json.dumps(r.get(name)) == value]))
+        for value in distinct_values(rows, name):
+            groups.append((name, value, [r for r in rows if r.get(name) == value]))
     out = []
     for name, value, members in groups:
         scored = [r for r in members if r["status"] == "ok"]
@@ -295,13 +306,12 @@ def write_figures(directory: str, rows: list, swept: list) -> list:
     os.makedirs(directory, exist_ok=True)
     written = []
     for name in swept:
-        values = sorted({json.dumps(r.get(name)) for r in scored})
-        labels = [json.loads(v) for v in values]
+        labels = distinct_values(scored, name)
         numeric = all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in labels)
         xs = labels if numeric else list(range(len(labels)))
         stats = []
-        for value in values:
-            ys = _finite(r.get(metric) for r in scored if json.dumps(r.get(name)) == value)
+        for value in labels:
+            ys = _finite(r.get(metric) for r in scored if r.get(name) == value)
             stats.append((np.mean(ys), min(ys), max(ys)) if ys else (np.nan,) * 3)
         stats = np.array(stats, dtype=float)
         fig = new_figure(5.0, 3.4)
@@ -320,6 +330,7 @@ def write_figures(directory: str, rows: list, swept: list) -> list:
     return written
 
 
-__all__ = ["FAILURES", "HEADLINE", "SURFACE_METRICS", "TARGET_METRICS", "aggregate", "find_submission",
+__all__ = ["FAILURES", "HEADLINE", "SURFACE_METRICS", "TARGET_METRICS", "aggregate",
+           "distinct_values", "find_submission",
            "read_suite", "score_entry", "score_suite", "summary_markdown", "write_figures",
            "write_summary"]

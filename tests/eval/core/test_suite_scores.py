@@ -149,3 +149,12 @@ def test_a_surface_suite_scored_with_its_own_truth_depth_is_exact(tmp_path, caps
     row = json.loads((out / "summary.json").read_text())["datasets"][0]
     assert row["status"] == "ok" and row["measured_fraction"] == 1.0
     assert row["p2m_max_mm"] < 1e-3  # float32 depths of ~1 m: ~3e-5 mm steps
+
+
+def test_swept_values_are_in_numeric_order():
+    from eval.core.suite_scores import distinct_values
+
+    rows = [{"z": 2000}, {"z": 600}, {"z": 1000}, {"z": 600.0}, {"z": None}]
+    assert distinct_values(rows, "z") == [600, 1000, 2000, None]
+    groups = [a["value"] for a in aggregate([{"status": "ok", **r} for r in rows[:3]], ["z"])]
+    assert groups == [None, "600", "1000", "2000"]
