@@ -148,6 +148,8 @@ def _score_targets(data, kind: str, path: str, method: str, gate_mm) -> dict:
     report, _, warnings = score_dataset(data, points, label, gate_mm)
     scores = report["methods"][label]
     a = report["association"]
+    # a suite's submissions have no --units: say "metres" without the option
+    warnings = [w.replace(" (pass --units m)", ": write millimetres") for w in warnings]
     return {"warnings": "; ".join(warnings), "points": a["points"],
             "associated": a["associated"], "unassociated": a["unassociated"],
             "visible_in_both": a["visible_in_both"],
