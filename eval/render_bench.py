@@ -8,10 +8,19 @@ reading the image back (Dr.Jit is lazy: the work happens when the result is read
    samples per second for each.
 2. **Side by side**: both views at the scene's spp, one ``mi.render`` call per view against
    the pass plan, timed one after the other in the same process.
-3. **Accuracy against time**: both views rendered with the project's pass plan
-   (:func:`synth.render.pass_plan`) at each total spp of ``--spp``, the targets detected and
-   compared with the Fermat simulator (against each centre's pixel and against the outline
-   centroid); cross-check RMS (px) against render seconds.
+3. **Adaptive against full film**, side by side: both views rendered on the full film at
+   ``--full-film-spp`` (default 36), adaptively (:func:`synth.render.render_view_counted`: a
+   pilot, then the samples only where it saw light) at the same spp and adaptively at the
+   scene's spp, one after the other in the same process, each with its render seconds,
+   samples, lit fraction and cross-check.
+4. **Accuracy against time**: both views rendered on the full film with the project's pass plan
+   (:func:`synth.render.pass_plan`) at each total spp of ``--spp``, and adaptively at each spp
+   of ``--adaptive-spp``, the targets detected and compared with the Fermat simulator (against
+   each centre's pixel and against the outline centroid); cross-check RMS (px) against render
+   seconds, both curves in one figure.
+
+``--parts`` chooses which of ``throughput``, ``passes`` (2), ``adaptive`` (3), ``curve`` (the
+full-film curve of 4) and ``adaptive-curve`` run (default: all).
 
 Writes ``DIR/render_bench.json`` and ``DIR/render_curve.png`` (``--out``, the project's output
 rule). Speeds are measured here, never in tests.
@@ -27,6 +36,8 @@ from eval.cli import CLIError, positive_int
 from synth.cli import add_define_option, add_out_option, add_progress_option, add_scene_argument
 
 COMMAND = "eval render-bench"
+#: The measurements ``--parts`` can choose.
+PARTS = ("throughput", "passes", "adaptive", "curve", "adaptive-curve")
 
 
 def add_parser(subparsers):
@@ -41,7 +52,15 @@ def add_parser(subparsers):
     parser.add_argument("--throughput-spp", type=positive_int, default=48,
                         help="total spp of each throughput measurement (default 48)")
     parser.add_argument("--spp", default="8,16,24,36,48,64",
-                        help="total spp of the accuracy curve (comma-separated)")
+                        help="total spp of the full-film accuracy curve (comma-separated)")
+    parser.add_argument("--adaptive-spp", default="16,36,64,100,144",
+                        help="spp on the lit pixels of the adaptive accuracy curve "
+                             "(comma-separated)")
+    parser.add_argument("--full-film-spp", type=positive_int, default=36,
+                        help="spp of the full-film render of the side by side (default 36, the "
+                             "default before adaptive rendering)")
+    parser.add_argument("--parts", default=",".join(PARTS),
+                        help=f"what to measure (comma-separated, default all): {', '.join(PARTS)}")
     add_define_option(parser)
     parser.add_argument("--variant", help="Mitsuba variant (default: automatic)")
     add_progress_option(parser)
@@ -109,58 +128,105 @@ def measure_side_by_side(mscene, mi, spec, spp: int, log) -> dict:
     return {"spp": spp, "passes": plan, "seconds": timings, "speedup": speedup}
 
 
-def measure_accuracy(spec, spp_list, variant, log):
-    """``[{spp, seconds, crosscheck…}]``: both views rendered in passes, detected, compared."""
+def measure_accuracy(spec, spp_list, variant, log, adaptive: bool = False):
+    """``[{spp, seconds, crosscheck…}]``: both views rendered (on the full film in passes, or
+    ``adaptive``), detected, compared."""
     from eval.run.inputs import RunInputs
     from eval.run.pipeline import crosscheck_stage
     from measure import detect_targets
+    from synth.crosscheck import DETECT_FLOOR_FRACTION
     from synth.render import render_stereo
 
     rows = []
     for spp in spp_list:
-        left, right, info = render_stereo(spec, spp=spp, variant=variant, progress=False)
+        left, right, info = render_stereo(spec, spp=spp, variant=variant, progress=False,
+                                          adaptive=adaptive)
         seconds = info["seconds"]["left"] + info["seconds"]["right"]
+        views = info["render"]
         inputs = RunInputs(spec.path, spec.rig, spec.has_port, spec.targets, spec.target_ids,
                            spec.target_radius, left, right, spec.params, info["variant"], spp,
                            seconds, spec.seed, {}, spec.target_normals)
-        crosscheck = crosscheck_stage(inputs, {"left": detect_targets(left),
-                                               "right": detect_targets(right)})[3]
-        rows.append({"spp": spp, "passes": info["passes"]["left"], "seconds": seconds,
+        crosscheck = crosscheck_stage(inputs, {
+            view: detect_targets(image, floor_fraction=DETECT_FLOOR_FRACTION)
+            for view, image in (("left", left), ("right", right))})[3]
+        rows.append({"spp": spp, "adaptive": adaptive, "mode": views["left"]["mode"],
+                     "passes": info["passes"]["left"], "seconds": seconds,
+                     "samples": views["left"]["samples"] + views["right"]["samples"],
+                     "lit_fraction": [views[v]["lit_fraction"] for v in ("left", "right")],
                      "samples_per_second": info["samples_per_second"],
                      "rms_px": crosscheck["rms_px"], "max_px": crosscheck["max_px"],
                      "rms_px_outline": crosscheck["rms_px_outline"],
                      "max_px_outline": crosscheck["max_px_outline"],
                      "associated": crosscheck["left"]["associated"]
                      + crosscheck["right"]["associated"]})
-        log(f"  {spp:3d} spp ({'+'.join(map(str, info['passes']['left']))}): {seconds:.1f} s, "
-            f"cross-check RMS {crosscheck['rms_px']:.4f} px, outline {crosscheck['rms_px_outline']:.4f} px")
+        log(f"  {'adaptive' if adaptive else 'full film'} {spp:3d} spp "
+            f"({'+'.join(map(str, info['passes']['left']))}): {seconds:.1f} s, "
+            f"{rows[-1]['samples'] / 1e6:.1f} M samples, cross-check RMS "
+            f"{crosscheck['rms_px']:.4f} px, outline {crosscheck['rms_px_outline']:.4f} px, "
+            f"{rows[-1]['associated']} targets")
     return rows
 
 
-def curve_figure(path, throughput, accuracy, title):
-    """Two panels: samples/s against spp per call; cross-check RMS against render seconds."""
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
+def measure_adaptive(spec, variant, log, full_spp: int) -> dict:
+    """Both views on the full film at ``full_spp``, adaptively at the same spp and adaptively
+    at the scene's spp, one after the other in the same process."""
+    full = measure_accuracy(spec, [full_spp], variant, log)[0]
+    same = measure_accuracy(spec, [full_spp], variant, log, True)[0]
+    scene = (same if spec.spp == full_spp else
+             measure_accuracy(spec, [spec.spp], variant, log, True)[0])
+    result = {"full_film": full, "adaptive_same_spp": same, "adaptive_scene_spp": scene,
+              "speedup_same_spp": full["seconds"] / same["seconds"],
+              "speedup_scene_spp": full["seconds"] / scene["seconds"]}
+    log(f"  full film {full_spp} spp {full['seconds']:.1f} s, RMS {full['rms_px']:.4f} px; "
+        f"adaptive {full_spp} spp {same['seconds']:.1f} s ({result['speedup_same_spp']:.1f}x), "
+        f"RMS {same['rms_px']:.4f} px; adaptive {spec.spp} spp {scene['seconds']:.1f} s "
+        f"({result['speedup_scene_spp']:.1f}x), RMS {scene['rms_px']:.4f} px")
+    return result
 
-    fig = Figure(figsize=(11, 4.2), layout="constrained")
-    FigureCanvasAgg(fig)
-    a, b = fig.subplots(1, 2)
+
+def _throughput_panel(a, throughput) -> None:
     a.plot([r["spp_per_call"] for r in throughput],
            [r["samples_per_second"] / 1e6 for r in throughput], "o-")
     a.set_xlabel("spp per mi.render call (left view)")
     a.set_ylabel("M samples / s")
     a.set_title("Throughput against the wavefront size")
     a.grid(alpha=0.3)
-    seconds = [r["seconds"] for r in accuracy]
-    b.plot(seconds, [r["rms_px"] for r in accuracy], "o-", label="against the centre's pixel")
-    b.plot(seconds, [r["rms_px_outline"] for r in accuracy], "s-",
-           label="against the outline centroid")
-    for r in accuracy:
-        b.annotate(f"{r['spp']} spp", (r["seconds"], r["rms_px_outline"]),
-                   textcoords="offset points", xytext=(4, -12), fontsize=8)
+
+
+def curve_figure(path, throughput, accuracy, title, adaptive=()):
+    """Two panels: samples/s against spp per call; cross-check RMS against render seconds
+    (full film and adaptive)."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(11 if throughput else 6.5, 4.2), layout="constrained")
+    FigureCanvasAgg(fig)
+    from matplotlib.ticker import FormatStrFormatter, NullFormatter
+
+    a, b = fig.subplots(1, 2) if throughput else (None, fig.subplots(1, 1))
+    all_seconds = [r["seconds"] for r in (*accuracy, *adaptive)] or [1.0]
+    if a is not None:
+        _throughput_panel(a, throughput)
+    for rows, name, marks in ((accuracy, "full film", ("o-", "s-")),
+                              (adaptive, "adaptive", ("o--", "s--"))):
+        if not rows:
+            continue
+        seconds = [r["seconds"] for r in rows]
+        b.plot(seconds, [r["rms_px"] for r in rows], marks[0],
+               label=f"{name}: against the centre's pixel")
+        b.plot(seconds, [r["rms_px_outline"] for r in rows], marks[1],
+               label=f"{name}: against the outline centroid")
+        for r in rows:
+            b.annotate(f"{r['spp']} spp", (r["seconds"], r["rms_px_outline"]),
+                       textcoords="offset points", xytext=(4, -12), fontsize=8)
+    b.set_xscale("log")
+    b.xaxis.set_major_formatter(FormatStrFormatter("%g"))
+    b.xaxis.set_minor_formatter(NullFormatter())
+    b.set_xticks([t for t in (1, 2, 3, 5, 10, 20, 30, 50, 100, 200, 500)
+                  if 0.7 * min(all_seconds) <= t <= 1.4 * max(all_seconds)] or [1])
     b.set_xlabel("render time, both views (s)")
     b.set_ylabel("cross-check RMS (px)")
-    b.set_title("Accuracy against time (passes)")
+    b.set_title("Accuracy against time")
     b.grid(alpha=0.3)
     b.legend(fontsize=8)
     fig.suptitle(title, fontsize=10)
@@ -177,24 +243,44 @@ def main(args) -> int:
         lambda text: print(text, file=sys.stderr, flush=True))
     per_call = _int_list(args.per_call, "--per-call")
     spp_list = _int_list(args.spp, "--spp")
+    adaptive_spp = _int_list(args.adaptive_spp, "--adaptive-spp")
+    parts = [p.strip() for p in args.parts.split(",") if p.strip()]
+    unknown = sorted(set(parts) - set(PARTS))
+    if unknown or not parts:
+        raise CLIError(f"--parts: {', '.join(unknown) or 'nothing'} is not one of "
+                       f"{', '.join(PARTS)}")
     output = OutputDir(args.out, COMMAND).claim()
     spec = load_scene(args.scene, parse_defines(args.defines))
     mscene, mi, variant = load_mitsuba_scene(spec, args.variant)
     w, h = spec.size
-    log(f"throughput, left view, {w}x{h} px, {variant}:")
-    throughput = measure_throughput(mscene, mi, spec, per_call, args.throughput_spp, log)
-    log(f"side by side at the scene's {spec.spp} spp:")
-    side_by_side = measure_side_by_side(mscene, mi, spec, spec.spp, log)
-    log("accuracy against time, both views, rendered in passes:")
-    accuracy = measure_accuracy(spec, spp_list, variant, log)
+    throughput = side_by_side = adaptive = None
+    accuracy, adaptive_accuracy = [], []
+    if "throughput" in parts:
+        log(f"throughput, left view, {w}x{h} px, {variant}:")
+        throughput = measure_throughput(mscene, mi, spec, per_call, args.throughput_spp, log)
+    if "passes" in parts:
+        log(f"one call against passes at the scene's {spec.spp} spp:")
+        side_by_side = measure_side_by_side(mscene, mi, spec, spec.spp, log)
+    if "adaptive" in parts:
+        log(f"full film at {args.full_film_spp} spp against adaptive at the same and the scene's "
+            f"{spec.spp} spp, both views:")
+        adaptive = measure_adaptive(spec, variant, log, args.full_film_spp)
+    if "curve" in parts:
+        log("accuracy against time, both views, full film in passes:")
+        accuracy = measure_accuracy(spec, spp_list, variant, log)
+    if "adaptive-curve" in parts:
+        log("accuracy against time, both views, adaptive:")
+        adaptive_accuracy = measure_accuracy(spec, adaptive_spp, variant, log, True)
     result = {"scene": args.scene, "size": [w, h], "variant": variant, "cpu_count": os.cpu_count(),
+              "load_average": list(os.getloadavg()),
               "max_samples_per_call": MAX_SAMPLES_PER_CALL, "throughput": throughput,
-              "side_by_side": side_by_side,
-              "accuracy": accuracy, "versions": package_versions()}
+              "side_by_side": side_by_side, "adaptive_vs_full_film": adaptive,
+              "accuracy": accuracy, "accuracy_adaptive": adaptive_accuracy,
+              "versions": package_versions()}
     with output.staged() as tmp:
         atomic_write_json(os.path.join(tmp, "render_bench.json"), result)
-        curve_figure(os.path.join(tmp, "render_curve.png"), throughput, accuracy,
-                     f"{os.path.basename(args.scene)}, {w}x{h} px, {variant}, "
-                     f"{os.cpu_count()} cores")
+        curve_figure(os.path.join(tmp, "render_curve.png"), throughput or [],
+                     accuracy, f"{os.path.basename(args.scene)}, {w}x{h} px, {variant}, "
+                     f"{os.cpu_count()} cores", adaptive_accuracy)
     print(f"wrote {output.path}")
     return 0

@@ -40,13 +40,13 @@ from measure.board import PATTERN_TEXELS_PER_SQUARE, Board, BoardError
 from measure.port import index_matched_port
 from measure.projection import project
 
-from synth.dataset import (DatasetError, check_files, manifest_digest, read_calib,
-                           write_calib)
+from synth.dataset import (DatasetError, adaptive_settings, check_files, manifest_digest,
+                           read_calib, write_calib)
 from synth.fileio import OutputDir, atomic_write_json, file_sha256, jsonable, read_marker
 from synth.integrator import RENDERER, integrator_name
 from synth.provenance import package_versions
-from synth.render import (check_render_request, png16_scale, render_view,
-                          sensor_dict, to_png16, write_png)
+from synth.render import (check_render_request, png16_scale, render_view_counted, sensor_dict,
+                          to_png16, write_png)
 from synth.scene import SceneSpec, interface_placements
 
 FORMAT_VERSION = 2  # 2: the manifest holds every file's SHA-256 and its own
@@ -188,40 +188,49 @@ def build_board_scene(spec: SceneSpec, board: Board, air: bool, variant=None):
 
 
 def render_pose(mscene, mi, spec: SceneSpec, board: Board, pose: BoardPose, index: int,
-                spp: int, seed: int):
-    """Both views (float32 linear) of the board at ``pose``; pose ``index`` renders with the
-    scene seeds ``seed + 2·index`` (view 0) and ``+ 1`` (view 1)."""
+                spp: int, seed: int, adaptive: bool = True):
+    """Both views (float32 linear) of the board at ``pose`` and, per view, how it was rendered
+    (:func:`synth.render.render_view_counted`): ``([left, right], [stats_left, stats_right])``;
+    pose ``index`` renders with the scene seeds ``seed + 2·index`` (view 0) and ``+ 1``
+    (view 1)."""
     M = np.eye(4)
     M[:3, :3], M[:3, 3] = pose.R, pose.t
     params = mi.traverse(mscene)
     params["board.to_world"] = mi.ScalarTransform4f((M @ _board_local_to_board(board)).tolist())
     params.update()
-    return [render_view(mscene, mi, view, camera, spp, seed + 2 * index)
-            for view, camera in enumerate(spec.cameras)]
+    views = [render_view_counted(mscene, mi, view, camera, spp, seed + 2 * index,
+                                 adaptive=adaptive)
+             for view, camera in enumerate(spec.cameras)]
+    return [v[0] for v in views], [v[2] for v in views]
 
 
 # ---------------------------------------------------------------------------------------------
 # the folder
 # ---------------------------------------------------------------------------------------------
 def request_key(spec: SceneSpec, board: Board, n_poses, spp, seed, air, distance_range,
-                max_tilt_deg, variant) -> str:
-    blob = json.dumps({"format": FORMAT_VERSION, "scene": spec.sha256, "params": spec.params,
-                       "board": board.to_dict(), "poses": n_poses, "spp": spp, "seed": seed,
-                       "air": bool(air), "distance_range": list(distance_range),
-                       "max_tilt_deg": max_tilt_deg, "variant": variant,
-                       "renderer": RENDERER}, sort_keys=True)
-    return hashlib.sha256(blob.encode()).hexdigest()
+                max_tilt_deg, variant, adaptive: bool = True) -> str:
+    """Hash of everything that determines the folder; the adaptive settings only for an
+    adaptive render (a full-film request keeps the key of earlier folders, rendered so)."""
+    request = {"format": FORMAT_VERSION, "scene": spec.sha256, "params": spec.params,
+               "board": board.to_dict(), "poses": n_poses, "spp": spp, "seed": seed,
+               "air": bool(air), "distance_range": list(distance_range),
+               "max_tilt_deg": max_tilt_deg, "variant": variant, "renderer": RENDERER}
+    if adaptive:
+        request["adaptive"] = adaptive_settings()
+    return hashlib.sha256(json.dumps(request, sort_keys=True).encode()).hexdigest()
 
 
 def write_boards(spec: SceneSpec, out_dir, board: Board, n_poses: int = DEFAULT_POSES,
                  spp: int = DEFAULT_SPP, seed: int = 0, air: bool = False,
                  distance_range=None,
                  max_tilt_deg: float = DEFAULT_MAX_TILT_DEG, variant=None,
-                 progress: bool = True) -> dict:
+                 progress: bool = True, adaptive: bool = True) -> dict:
     """Render ``n_poses`` stereo pairs of ``board`` and write the folder (module docs). Returns
     the manifest; ``manifest["skipped"]`` when ``out_dir`` already held the same request, whole
     (:meth:`synth.fileio.OutputDir.damage`); ``manifest["rendered_again"]`` why an earlier output
-    of the same request was rendered again, or None."""
+    of the same request was rendered again, or None. ``adaptive`` (default) renders each view
+    adaptively, False on the full film (:func:`synth.render.render_view_counted`); the
+    manifest's ``render`` says how (lit fraction and samples per pose and view)."""
     from tqdm import tqdm
 
     t_start = time.perf_counter()
@@ -231,7 +240,8 @@ def write_boards(spec: SceneSpec, out_dir, board: Board, n_poses: int = DEFAULT_
         raise ValueError(f"{spec.path}: the scene has no port; render its boards with --air")
     if distance_range is None:
         distance_range = DEFAULT_AIR_DISTANCE_RANGE_MM if air else DEFAULT_DISTANCE_RANGE_MM
-    key = request_key(spec, board, n_poses, spp, seed, air, distance_range, max_tilt_deg, variant)
+    key = request_key(spec, board, n_poses, spp, seed, air, distance_range, max_tilt_deg, variant,
+                      adaptive)
     output = OutputDir(out_dir, COMMAND)
     damage = None
     if output.exists_as_output() and (read_marker(output.path) or {}).get("request_key") == key:
@@ -243,21 +253,28 @@ def write_boards(spec: SceneSpec, out_dir, board: Board, n_poses: int = DEFAULT_
         except (OSError, ValueError):
             damage = "manifest.json cannot be read"
     output.claim()
-    check_render_request(spec, spp, seed, poses=n_poses)  # pose p renders with seed + 2p
+    check_render_request(spec, spp, seed, poses=n_poses,  # pose p renders with seed + 2p
+                         adaptive=adaptive)
     rig = board_rig(spec, air)
     poses = sample_poses(rig, board, n_poses, seed, not air, distance_range, max_tilt_deg)
     times = {}
     t = time.perf_counter()
     mscene, mi, chosen = build_board_scene(spec, board, air, variant)
     times["load_mitsuba"] = time.perf_counter() - t
-    images = []
+    images, stats = [], []
     t = time.perf_counter()
-    for k, pose in enumerate(tqdm(poses, desc=f"render boards {chosen} {spp} spp", unit="pose",
-                                  disable=not progress, leave=False)):
-        images.append(render_pose(mscene, mi, spec, board, pose, k, spp, seed))
+    bar = tqdm(poses, desc=f"render boards {chosen} {spp} spp{' adaptive' if adaptive else ''}",
+               unit="pose", disable=not progress, leave=False)
+    for k, pose in enumerate(bar):
+        pair, pair_stats = render_pose(mscene, mi, spec, board, pose, k, spp, seed, adaptive)
+        images.append(pair)
+        stats.append(pair_stats)
+        bar.set_postfix_str(f"lit {pair_stats[0]['lit_fraction'] or 1:.1%} / "
+                            f"{pair_stats[1]['lit_fraction'] or 1:.1%}")
+    bar.close()
     times["render"] = time.perf_counter() - t
     w, h = spec.size
-    samples = 2 * n_poses * w * h * spp
+    samples = sum(s["samples"] for pair in stats for s in pair)
     with output.staged(extra={"request_key": key}) as tmp:
         scale = png16_scale(*[img for pair in images for img in pair])
         for k, pair in enumerate(images):
@@ -277,6 +294,11 @@ def write_boards(spec: SceneSpec, out_dir, board: Board, n_poses: int = DEFAULT_
             "variant": chosen, "integrator": integrator_name(mi, mscene), "spp": spp,
             "seed": seed, "image_size": [w, h],
             "png_scale": scale, "samples_per_second": samples / times["render"],
+            "render": {"settings": adaptive_settings() if adaptive else None,
+                       "samples": samples,
+                       "views": [{view: {k: s[k] for k in _POSE_STATS if k in s}
+                                  for view, s in zip(("left", "right"), pair)}
+                                 for pair in stats]},
             "seconds": times,
         }
         manifest["files"] = sorted(os.listdir(tmp)) + ["manifest.json"]
@@ -286,6 +308,11 @@ def write_boards(spec: SceneSpec, out_dir, board: Board, n_poses: int = DEFAULT_
         manifest["manifest_sha256"] = manifest_digest(manifest)
         atomic_write_json(os.path.join(tmp, "manifest.json"), manifest)
     return {**manifest, "skipped": False, "rendered_again": damage}
+
+
+#: What the manifest keeps of each view's render statistics.
+_POSE_STATS = ("mode", "reason", "lit_fraction", "mask_pixels", "samples_on_mask",
+               "samples_off_mask", "spp_on_mask", "spp_off_mask")
 
 
 def _write_truth(directory, rig, board: Board, poses) -> None:

@@ -156,7 +156,7 @@ def opencv_camera(model: str, params, where: str) -> tuple[np.ndarray, np.ndarra
     values = np.asarray(params, dtype=np.float64)
     if values.size != len(names) or not np.all(np.isfinite(values)):
         raise CalibFormatError(f"{where}: {model} needs {len(names)} finite parameters "
-                               f"({', '.join(names)}), got {len(values)}")
+                               f"({', '.join(names)}), got {_got(values, names)}")
     p = dict(zip(names, values))
     fx, fy = (p["f"], p["f"]) if "f" in p else (p["fx"], p["fy"])
     if not (fx > 0 and fy > 0):
@@ -172,11 +172,21 @@ def opencv_camera(model: str, params, where: str) -> tuple[np.ndarray, np.ndarra
     return K, D.reshape(1, -1)
 
 
+def _got(values: np.ndarray, names) -> str:
+    """What was found instead of ``len(names)`` finite numbers: their count, or (the count being
+    right) which of them are not finite."""
+    if values.size != len(names):
+        return str(values.size)
+    bad = [f"{n} = {v!r}" for n, v in zip(names, values.tolist()) if not np.isfinite(v)]
+    return f"{', '.join(bad)}"
+
+
 def _check_port(params, where: str) -> list[float]:
     values = [float(v) for v in params]
     if len(values) != len(FLATPORT_NAMES) or not np.all(np.isfinite(values)):
         raise CalibFormatError(f"{where}: FLATPORT needs {len(FLATPORT_NAMES)} finite numbers "
-                               f"({', '.join(FLATPORT_NAMES)}), got {len(values)}")
+                               f"({', '.join(FLATPORT_NAMES)}), got "
+                               f"{_got(np.asarray(values), FLATPORT_NAMES)}")
     length = float(np.linalg.norm(values[:3]))
     if abs(length - 1.0) > 1e-6:
         raise CalibFormatError(f"{where}: FLATPORT normal (Nx, Ny, Nz) must be a unit vector, "

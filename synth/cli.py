@@ -217,6 +217,17 @@ def add_define_option(parser) -> None:
                         help=DEFINE_HELP)
 
 
+#: Help of ``--full-film`` (synth render, synth dataset, eval run).
+FULL_FILM_HELP = ("render every pixel with --spp samples instead of adaptively (the default: a "
+                  "1-spp pilot over the film, then the samples only on the pixels it saw light "
+                  "on, with a 3-px margin; docs/speed.md)")
+
+
+def add_full_film_option(parser) -> None:
+    """``--full-film`` into ``args.full_film``."""
+    parser.add_argument("--full-film", action="store_true", help=FULL_FILM_HELP)
+
+
 def add_progress_option(parser) -> None:
     """``--no-progress`` (alias ``--quiet``) into ``args.no_progress``."""
     parser.add_argument("--no-progress", "--quiet", dest="no_progress", action="store_true",

@@ -28,8 +28,11 @@ A dataset directory holds (units mm, reference frame = the left camera's, OpenCV
   every target in each view (NaN where it has none; pixels outside the image are kept);
 * ``manifest.json`` -- versions, scene hash and parameters (``spp`` and ``seed`` as rendered),
   variant, spp, seed, image statistics, ``png_scale``, ``png_offset`` (0 without a sensor),
-  ``sensor``, the time of every stage, the request key, ``sha256`` (every other file's SHA-256)
-  and ``manifest_sha256`` (the SHA-256 of the manifest's own content, :func:`manifest_digest`).
+  ``sensor``, the time of every stage, ``render`` (the adaptive settings or None for a
+  full-film render, and per view how it was rendered: :func:`synth.render.render_stereo`;
+  absent in datasets written before adaptive rendering, read as full film), the request key,
+  ``sha256`` (every other file's SHA-256) and ``manifest_sha256`` (the SHA-256 of the
+  manifest's own content, :func:`manifest_digest`).
 
 A dataset's manifest is not a place to edit the truth: :func:`read_manifest` refuses a
 manifest that disagrees with itself (its ``manifest_sha256``, and its request key recomputed
@@ -244,17 +247,34 @@ def _image_stats(image: np.ndarray) -> dict:
 
 
 def request_key(spec: SceneSpec, spp: int, seed: int, variant: str | None, exr: bool,
-                sensor=None) -> str:
+                sensor=None, adaptive: bool = True) -> str:
     """Hash of everything that determines a dataset's content."""
     return _request_key(FORMAT_VERSION, spec.sha256, spec.params, spp, seed, variant, exr,
-                        None if sensor is None else sensor.to_dict(), RENDERER)
+                        None if sensor is None else sensor.to_dict(), RENDERER,
+                        adaptive_settings() if adaptive else None)
+
+
+def adaptive_settings() -> dict:
+    """What an adaptive render's content depends on beyond the scene, spp and seed (the
+    ``render`` entry of the manifest and request key; :func:`synth.render.render_view_counted`)."""
+    from synth import render
+
+    return {"mode": "adaptive", "pilot_spp": render.ADAPTIVE_PILOT_SPP,
+            "margin_px": render.ADAPTIVE_MARGIN_PX,
+            "max_lit_fraction": render.ADAPTIVE_MAX_LIT_FRACTION}
 
 
 def _request_key(format_version, scene_sha256, params, spp, seed, variant, exr, sensor,
-                 renderer) -> str:
-    blob = json.dumps({"format": format_version, "scene": scene_sha256, "params": params,
-                       "spp": spp, "seed": seed, "variant": variant, "exr": bool(exr),
-                       "sensor": sensor, "renderer": renderer}, sort_keys=True)
+                 renderer, adaptive: dict | None = None) -> str:
+    """The key; ``adaptive`` (the settings of an adaptive render) is part of it only when given,
+    so that a full-film dataset — what every dataset was before adaptive rendering, with the
+    same seeds and bytes — keeps its key."""
+    request = {"format": format_version, "scene": scene_sha256, "params": params,
+               "spp": spp, "seed": seed, "variant": variant, "exr": bool(exr),
+               "sensor": sensor, "renderer": renderer}
+    if adaptive is not None:
+        request["adaptive"] = adaptive
+    blob = json.dumps(request, sort_keys=True)
     return hashlib.sha256(blob.encode()).hexdigest()
 
 
@@ -263,10 +283,13 @@ def manifest_request_key(manifest: dict) -> str:
     spp, seed, requested variant, EXR files, sensor model, this renderer)."""
     sensor = manifest.get("sensor")
     files = manifest.get("files") or []
+    render = manifest.get("render")  # absent before adaptive rendering: the full film
+    settings = render.get("settings") if isinstance(render, dict) else None
     return _request_key(manifest.get("format_version"), manifest["scene"].get("sha256"),
                         manifest["scene"]["params"], manifest.get("spp"), manifest.get("seed"),
                         manifest.get("variant_requested"), "left.exr" in files,
-                        sensor.get("model") if isinstance(sensor, dict) else None, RENDERER)
+                        sensor.get("model") if isinstance(sensor, dict) else None, RENDERER,
+                        settings)
 
 
 def manifest_digest(manifest: dict) -> str:
@@ -282,8 +305,12 @@ def manifest_digest(manifest: dict) -> str:
 # ---------------------------------------------------------------------------------------------
 def write_dataset(scene, out_dir, spp: int | None = None, defines: dict | None = None,
                   variant: str | None = None, exr: bool = False, progress: bool = True,
-                  seed: int | None = None, sensor=None) -> dict:
+                  seed: int | None = None, sensor=None, adaptive: bool = True) -> dict:
     """Render ``scene`` (a path or :class:`SceneSpec`) and write a dataset to ``out_dir``.
+
+    ``adaptive`` (default) renders each view adaptively, False on the full film
+    (:func:`synth.render.render_view_counted`); the manifest's ``render`` says how each view was
+    rendered (mode, lit fraction, samples on and off the mask, samples/s).
 
     ``sensor`` (a :class:`synth.sensor_model.SensorModel`): the PNGs hold that sensor's raw
     codes of the render (seeded by the scene's seed), ``png_offset`` its dark level and
@@ -308,7 +335,7 @@ def write_dataset(scene, out_dir, spp: int | None = None, defines: dict | None =
     spp = spec.spp if spp is None else int(spp)
     seed = spec.seed if seed is None else int(seed)
     spec = spec.rendered_with(spp=spp, seed=seed)  # the parameters say what was rendered
-    key = request_key(spec, spp, seed, variant, exr, sensor)
+    key = request_key(spec, spp, seed, variant, exr, sensor, adaptive)
 
     output = OutputDir(out_dir, "synth dataset")
     damage = None
@@ -328,7 +355,7 @@ def write_dataset(scene, out_dir, spp: int | None = None, defines: dict | None =
 
     with output.staged(extra={"request_key": key}) as tmp:
         left, right, info = render_stereo(spec, spp=spp, variant=variant, progress=progress,
-                                          seed=seed)
+                                          seed=seed, adaptive=adaptive)
         times["render_left"] = info["seconds"]["left"]
         times["render_right"] = info["seconds"]["right"]
         times["load_mitsuba"] = info["seconds"]["load"]
@@ -408,6 +435,8 @@ def write_dataset(scene, out_dir, spp: int | None = None, defines: dict | None =
             "samples_per_second": info["samples_per_second"],
             "samples_per_second_per_view": info["samples_per_second_per_view"],
             "passes": info["passes"],
+            "render": {"settings": adaptive_settings() if adaptive else None,
+                       **{view: info["render"][view] for view in ("left", "right")}},
             "seconds": times,
             "truth_formats": truth_formats,
             "colmap": ("colmap/: cameras.txt (FLATPORT, metres), images.txt, points3D.txt"

@@ -16,9 +16,11 @@ it into a scene) seeds
 
 So a scene seed is at most :data:`MAX_SEED` = 2³² − 2 (a one-pass render seeds its right view
 ``S + 1``), checked with every scene parameter (:func:`synth.scene.check_params`) and by the
-``--seed`` options (:func:`synth.cli.scene_seed`); a render of several passes per view (more than
-36 × 2448 × 2048 samples per view) or of several board poses lowers it further, which
-:func:`synth.render.check_render_request` checks before rendering, stating the bound.
+``--seed`` options (:func:`synth.cli.scene_seed`); a render of several passes per view (an
+adaptive render's pilot is pass 0 and its masked calls or full-film fallback passes 1, 2, …; a
+full-film render takes more than one pass above 36 × 2448 × 2048 samples per view) or of several
+board poses lowers it further, which :func:`synth.render.check_render_request` checks before
+rendering, stating the bound (for an adaptive render, the most passes it could take).
 """
 
 from __future__ import annotations

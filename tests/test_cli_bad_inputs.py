@@ -376,11 +376,17 @@ SYNTH_CASES = [
     (None, DATASET + ["--seed", "4294967296"], "4294967294"),
     (None, RENDER + ["-D", "seed=99999999999"], "4294967294"),
     (None, SCENE + ["--seed", "4294967295"], "4294967294"),
-    # two passes per view (3000 spp at 320 x 268): pass 1 of the right view is S + 1 + 2^21
-    (None, RENDER + ["--spp", "3000", "--seed", "4294967294"], "4292870142"),
-    # 15 board poses: pose k's views are seeded S + 2k and S + 2k + 1
+    # full film, two passes per view (3000 spp at 320 x 268): pass 1 of the right view is
+    # S + 1 + 2^21
+    (None, RENDER + ["--spp", "3000", "--seed", "4294967294", "--full-film"], "4292870142"),
+    # adaptive: the pilot (pass 0), then up to two masked calls or full-film passes
+    (None, RENDER + ["--spp", "3000", "--seed", "4294967294"], "4290772990"),
+    # 15 board poses: pose k's views are seeded S + 2k and S + 2k + 1 (+ 2^21 for the pass
+    # after an adaptive render's pilot)
+    (None, ["boards", "small.xml", "--out", "out", "--seed", "4294967280", "--quiet",
+            "--full-film"], "4294967266"),
     (None, ["boards", "small.xml", "--out", "out", "--seed", "4294967280", "--quiet"],
-     "4294967266"),
+     "4292870114"),
     (None, RENDER + ["-D", "left_dist=-0.5 0 0 0 0"], "dist"),
     ("garbage_calib", ["check", "ds"], "calib.yaml"),
     ("no_left_png", ["check", "ds"], "left.png"),

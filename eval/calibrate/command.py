@@ -57,7 +57,8 @@ def add_parser(subparsers):
                         "pose); a boards folder says it itself")
     p.add_argument("--intrinsics", metavar="AIR_DIR_or_calib.yaml",
                    help="underwater boards or photos: the in-air calibration, as an --air "
-                        "boards folder (calibrated here with OpenCV) or a calib.yaml")
+                        "boards folder (calibrated here with OpenCV) or a file: calib.yaml, "
+                        "calibmar's YAML or the COLMAP fork's cameras.txt")
     add_board_options(p, defaults=False,
                       needed="photos: required; a boards folder's board.json defines it")
     p.add_argument("--free", default=",".join(DEFAULT_FREE),
@@ -96,11 +97,11 @@ def _write_report(directory, report: dict, markdown, start: float) -> dict:
     return report
 
 
-def _written(output, summary: str) -> int:
-    """Print the summary and what was written; exit code 0."""
+def _written(output, summary: str, args, has_port: bool) -> int:
+    """Print the water index's note, the summary and what was written; exit code 0."""
+    _print_n_water_note(args)
     print(summary)
-    print(f"wrote {output.path} (calib.yaml; calibmar.yaml + calibmar_stereo.yaml; cameras.txt + "
-          f"rig_config.json for the refractive COLMAP fork — {COLMAP_NOTE})")
+    print(written_line(output.path, has_port))
     return 0
 
 
@@ -110,12 +111,18 @@ def design_port(args, normal):
     from measure import FlatPort
 
     values = {dest: getattr(args, dest) for dest in DESIGN_KEYS.values()}
+    seen = set()
     for item in filter(None, (args.design_port or "").split(",")):
         key, sep, text = item.partition("=")
         key = key.strip()
         if not sep or key not in DESIGN_KEYS:
+            hint = (" (the water of a temperature and salinity: --n-water T=…,S=…)"
+                    if key in ("S", "wavelength") else "")
             raise CLIError(f"--design-port {args.design_port!r}: expected KEY=VALUE items with KEY "
-                           f"one of {', '.join(DESIGN_KEYS)}, got {item!r}")
+                           f"one of {', '.join(DESIGN_KEYS)}, got {item!r}{hint}")
+        if key in seen:
+            raise CLIError(f"--design-port {args.design_port!r}: {key} is given twice")
+        seen.add(key)
         option = given(args, DESIGN_KEYS[key])
         if option:
             raise CLIError(f"--design-port {key}= and {option} both give the design {key}; "
@@ -126,8 +133,10 @@ def design_port(args, normal):
             value = float("nan")
         index = key.startswith("n_")
         if not (math.isfinite(value) and (value >= 1.0 if index else value > 0.0)):
+            hint = (" (the water of a temperature and salinity: --n-water T=…,S=…)"
+                    if key == "n_water" and "=" in text else "")
             raise CLIError(f"--design-port {key}={text}: expected "
-                           f"{'an index >= 1' if index else 'a positive length, mm'}")
+                           f"{'an index >= 1' if index else 'a positive length, mm'}{hint}")
         values[DESIGN_KEYS[key]] = value
     return FlatPort(normal, values["start_distance"], (values["glass_thickness"],),
                     (1.0, values["n_glass"], values["n_water"]))
@@ -174,12 +183,16 @@ def main(args) -> int:
     log = (lambda text: None) if args.no_progress else (
         lambda text: print(text, file=sys.stderr, flush=True))
     free = _parse_free(args.free)
-    if getattr(args.n_water, "note", None):
-        print(args.n_water.note, file=sys.stderr, flush=True)
     output = OutputDir(args.out, COMMAND).claim()
     start = time.perf_counter()
-    if is_photo_folder(args.dir):
-        return _calibrate_photos(args, output, log, free, start)
+    if not os.path.isdir(args.dir):
+        what = "a file, not a folder" if os.path.exists(args.dir) else "no such folder"
+        raise CLIError(f"{args.dir}: {what} (give a photo folder, DIR/left/ and DIR/right/, or a "
+                       f"synth boards folder)")
+    if is_photo_folder(args.dir) or (
+            any(os.path.isdir(os.path.join(args.dir, sub)) for sub in ("left", "right"))
+            and not os.path.exists(os.path.join(args.dir, "manifest.json"))):
+        return _calibrate_photos(args, output, log, free, start)  # says which folder is missing
     if not os.path.isfile(os.path.join(args.dir, "manifest.json")) and os.path.isdir(args.dir):
         raise CLIError(f"{args.dir}: not a boards folder (no manifest.json) nor a photo folder "
                        f"(no left/ and right/ folders)")
@@ -201,6 +214,8 @@ def main(args) -> int:
     if not boards.air and not args.intrinsics:
         raise CLIError(f"{args.dir}: underwater boards need --intrinsics (an --air boards "
                        f"folder or a calib.yaml)")
+    if not boards.air:
+        design_port(args, (0.0, 0.0, 1.0))  # a bad --design-port is refused before any work
     log(f"detect the boards in {boards.path} ({len(boards.images)} poses) …")
     t = time.perf_counter()
     detections = detect_boards(boards.board, boards.images)
@@ -219,6 +234,7 @@ def main(args) -> int:
         housing = None
     else:
         t = time.perf_counter()
+        _refuse_calibration_folder(args.intrinsics)
         air_rig, air, air_boards = _in_air(args.intrinsics, log)
         timings["calibrate_in_air"] = time.perf_counter() - t
         if tuple(air_rig.left.size) != tuple(boards.calib["size"]):
@@ -251,7 +267,23 @@ def main(args) -> int:
                                          start_rig, True, None, None, single=True)
         report_lib.figures(tmp, boards, detections, housing, rig)
         report = _write_report(tmp, report, report_lib.markdown, start)
-    return _written(output, report_lib.summary_lines(report))
+    return _written(output, report_lib.summary_lines(report), args, housing is not None)
+
+
+def written_line(path, has_port: bool) -> str:
+    """The last printed line: what was written; the COLMAP caveat only when there is a port to
+    drop (an in-air cameras.txt holds none)."""
+    colmap = (f"the refractive COLMAP fork — {COLMAP_NOTE}" if has_port else
+              "COLMAP (in air: no port)")
+    return (f"wrote {path} (calib.yaml; calibmar.yaml + calibmar_stereo.yaml; cameras.txt + "
+            f"rig_config.json for {colmap})")
+
+
+def _print_n_water_note(args) -> None:
+    """The index computed from ``--n-water T=…,S=…`` (on stderr), once the calibration is
+    written: a refused command prints its one ``error:`` line and nothing else."""
+    if getattr(args.n_water, "note", None):
+        print(args.n_water.note, file=sys.stderr, flush=True)
 
 
 def is_photo_folder(path) -> bool:
@@ -262,7 +294,8 @@ def is_photo_folder(path) -> bool:
 def _calibrate_photos(args, output, log, free, start) -> int:
     """``eval calibrate`` of a user's photo folder (module docs, :mod:`eval.calibrate.photos`)."""
     from measure import StereoRig
-    from measure.calibration import calibrate_housing, calibrate_in_air, detect_boards
+    from measure.calibration import (CalibrationError, calibrate_housing, calibrate_in_air,
+                                     detect_boards)
 
     from eval.calibrate import photos as trust
     from eval.calibrate import report as report_lib
@@ -285,6 +318,8 @@ def _calibrate_photos(args, output, log, free, start) -> int:
         raise CLIError(f"{where}: a photo folder needs the board on the command line: "
                        f"{' and '.join(missing)} (and --board charuco for a ChArUco board)")
     board = board_from_args(args)
+    if not args.air:
+        design_port(args, (0.0, 0.0, 1.0))  # a bad --design-port is refused before any work
     pairs = photo_folder(args.dir)
     air_rig = None
     if not args.air:
@@ -306,13 +341,22 @@ def _calibrate_photos(args, output, log, free, start) -> int:
         squares = "x".join(map(str, board.squares))
         raise CLIError(f"{where}: the {board.kind} {squares} was found in none of the "
                        f"{len(images)} photo pairs{trust.board_hint(board, images)}")
+    larger = trust.larger_board(board, images, found["left"])
+    if larger:
+        raise CLIError(f"{where}: {larger}")
     not_found = [pairs.names[k] for k in range(len(images))
                  if k not in found["left"] and k not in found["right"]]
     t = time.perf_counter()
+
+    def fit(calibrate):  # a CalibrationError (too few poses) names the photo folder
+        try:
+            return trust.fit_without_outliers(calibrate, lambda r: r.rms_px_per, detections)
+        except CalibrationError as exc:
+            raise CLIError(f"{where}: {exc}") from None
+
     if args.air:
         log("calibrate in air (OpenCV calibrateCamera, stereoCalibrate) …")
-        result, used_detections, outliers = trust.fit_without_outliers(
-            lambda d: calibrate_in_air(board, d, size), lambda r: r.rms_px_per, detections)
+        result, used_detections, outliers = fit(lambda d: calibrate_in_air(board, d, size))
         rig, housing, rms_per = result.rig, None, result.rms_px_per
         poses = {k: result.board_poses.get((k, 0), pose)  # the left camera's where it has one
                  for (k, _), pose in result.board_poses.items()}
@@ -321,9 +365,8 @@ def _calibrate_photos(args, output, log, free, start) -> int:
         design = design_port(args, air_rig.left.R[:, 2])
         start_rig = StereoRig(air_rig.left, air_rig.right, design)
         log(f"refractive bundle adjustment of {', '.join(free)} …")
-        result, used_detections, outliers = trust.fit_without_outliers(
-            lambda d: calibrate_housing(start_rig, board, d, free), lambda r: r.rms_px_per,
-            detections)
+        result, used_detections, outliers = fit(
+            lambda d: calibrate_housing(start_rig, board, d, free))
         housing = result
         timings["bundle_adjustment"] = time.perf_counter() - t
         if not housing.identifiable:
@@ -362,7 +405,7 @@ def _calibrate_photos(args, output, log, free, start) -> int:
             report_lib.residual_figure(tmp, used_detections, housing, size)
         trust.coverage_figure(tmp, detections, set(used), size, report)
         report = _write_report(tmp, report, trust.markdown, start)
-    return _written(output, trust.summary_lines(report))
+    return _written(output, trust.summary_lines(report), args, housing is not None)
 
 
 def _intrinsics_for_photos(path, log):
@@ -371,4 +414,14 @@ def _intrinsics_for_photos(path, log):
     if os.path.isdir(path) and is_photo_folder(path):
         raise CLIError(f"--intrinsics {path}: a photo folder; calibrate it first (python -m eval "
                        f"calibrate {path} --air …) and give its calib.yaml")
+    _refuse_calibration_folder(path)
     return _in_air(path, log)[0]
+
+
+def _refuse_calibration_folder(path) -> None:
+    """``--intrinsics OUT``, the folder of a calibration rather than its file: named, with the
+    file to give (it read as 'not a boards folder (… manifest.json)')."""
+    if (os.path.isdir(path) and not os.path.exists(os.path.join(path, "manifest.json"))
+            and os.path.isfile(os.path.join(path, "calib.yaml"))):
+        raise CLIError(f"--intrinsics {path}: a folder holding a calibration; give the file, "
+                       f"--intrinsics {os.path.join(path, 'calib.yaml')}")

@@ -42,6 +42,9 @@ HIGH_CORRELATION = 0.95
 COVERAGE_CELLS = 10
 #: Photos tried per candidate board when the board is found in no photo.
 HINT_PHOTOS = 3
+#: Photos searched for a board larger than --squares (:func:`larger_board`), and how many
+#: squares larger each way a board is looked for once one is found.
+LARGER_PHOTOS, LARGER_SEARCH = 2, 4
 VIEWS = ("left", "right")
 OUTLIER_RULE = (f"a pose is left out when one of its views' RMS in the first fit exceeds "
                 f"max({OUTLIER_FACTOR:g} × median, median + {OUTLIER_MADS:g} × 1.4826 × MAD, "
@@ -278,13 +281,63 @@ def per_pose_table(names, detections_all, detections_used, rms_per, outliers, ge
     return rows
 
 
-def board_hint(board, images) -> str:
-    """When the board was found in no photo: the chessboard (one square more or fewer each way)
-    that is found in the first :data:`HINT_PHOTOS` left photos, said as a sentence (empty when
-    none is)."""
+def _small_left(images) -> list:
+    """The left images of ``images`` as the detector sees them (uint8, halved to at most
+    :data:`measure.board.DETECTION_WIDTH_PX` wide)."""
     import cv2
 
     from measure.board import DETECTION_WIDTH_PX, to_uint8
+
+    smalls = []
+    for left, _ in images:
+        small = to_uint8(left)
+        while small.shape[1] > DETECTION_WIDTH_PX:
+            small = cv2.pyrDown(small)
+        smalls.append(small)
+    return smalls
+
+
+def larger_board(board, images, found_left) -> str:
+    """Empty, or why ``--squares`` is smaller than the chessboard in the photos: OpenCV finds a
+    smaller pattern inside a board (an 8x5 inside an 11x8, a 6x5 inside a 7x6), whose corners
+    are a different part of the board in each photo, and the calibration is then nonsense. The
+    first :data:`LARGER_PHOTOS` left photos where the board was found are searched for the
+    pattern one square larger (each way, and both); when one is found, the largest pattern up to
+    :data:`LARGER_SEARCH` squares larger each way is named (a pattern larger than the board is
+    never found, either way round)."""
+    import functools
+
+    import cv2
+
+    if board.kind != "chessboard" or not found_left:
+        return ""
+    smalls = _small_left([images[k] for k in found_left[:LARGER_PHOTOS]])
+
+    @functools.cache
+    def seen(c, r):
+        return any(cv2.findChessboardCornersSB(s, (c - 1, r - 1))[0] for s in smalls)
+
+    cols, rows = board.squares
+    if not any(seen(c, r) for c, r in ((cols + 1, rows), (cols, rows + 1), (cols + 1, rows + 1))):
+        return ""
+    bigger = sorted(((c, r) for c in range(cols, cols + LARGER_SEARCH + 1)
+                     for r in range(rows, rows + LARGER_SEARCH + 1) if (c, r) != (cols, rows)),
+                    key=lambda cr: (-cr[0] * cr[1], (cr[0] >= cr[1]) != (cols >= rows)))
+    c, r = next(cr for cr in bigger if seen(*cr))
+    note = ("" if (c + r) % 2 else "; a board with an even number of squares both ways looks "
+            "the same turned by 180° and cannot be used")
+    return (f"the photos show a chessboard of at least {c}x{r} squares, not {cols}x{rows} (OpenCV "
+            f"also finds a part of a board, a different part in each photo): give the whole "
+            f"board, e.g. --squares {c}x{r}{note}")
+
+
+def board_hint(board, images) -> str:
+    """When the board was found in no photo: the chessboard (one square more or fewer each way)
+    that is found in the first :data:`HINT_PHOTOS` left photos, said as a sentence (empty when
+    none is). OpenCV also finds a smaller pattern inside a larger board (a 10x6 inside an 11x8),
+    so every candidate is tried and the largest one found is named (then the one found in more
+    photos): a pattern larger than the board is never found."""
+    import cv2
 
     if board.kind != "chessboard":
         return (" (check --squares, --marker-mm and --dictionary: no ChArUco corners of this "
@@ -295,19 +348,17 @@ def board_hint(board, images) -> str:
                                       (cols - 1, rows - 1), (cols + 1, rows - 1),
                                       (cols - 1, rows + 1))
                   if c >= 3 and r >= 3]
-    smalls = []
-    for left, _ in images[:HINT_PHOTOS]:
-        small = to_uint8(left)
-        while small.shape[1] > DETECTION_WIDTH_PX:
-            small = cv2.pyrDown(small)
-        smalls.append(small)
-    for c, r in candidates:
-        found = sum(bool(cv2.findChessboardCornersSB(s, (c - 1, r - 1))[0]) for s in smalls)
-        if found:
-            note = ("" if (c + r) % 2 else "; a board with an even number of squares both ways "
-                    "looks the same turned by 180° and cannot be used")
-            return (f"; the photos show a {c}x{r} chessboard, not {cols}x{rows} (found in {found} "
-                    f"of the first {len(smalls)} left photos with --squares {c}x{r}{note})")
+    smalls = _small_left(images[:HINT_PHOTOS])
+    found = {(c, r): sum(bool(cv2.findChessboardCornersSB(s, (c - 1, r - 1))[0])
+                         for s in smalls) for c, r in candidates}
+    seen = [cr for cr in candidates if found[cr]]
+    if seen:
+        c, r = max(seen, key=lambda cr: (cr[0] * cr[1], found[cr]))
+        note = ("" if (c + r) % 2 else "; a board with an even number of squares both ways "
+                "looks the same turned by 180° and cannot be used")
+        return (f"; the photos show a {c}x{r} chessboard, not {cols}x{rows} (found in "
+                f"{found[(c, r)]} of the first {len(smalls)} left photos with --squares "
+                f"{c}x{r}{note})")
     return (f" (no chessboard of {cols}x{rows} squares, nor one square more or fewer, in the "
             f"first {len(smalls)} left photos: check --board and --squares)")
 
@@ -468,6 +519,6 @@ def coverage_figure(directory, detections_all, used, size, report) -> None:
 
 __all__ = ["COVERAGE_CELLS", "HIGH_CORRELATION", "MIN_COVERAGE", "MIN_TILT_DEG", "OUTLIER_RULE",
            "RECOMMENDED_POSES", "air_estimates", "board_hint", "coverage", "coverage_figure",
-           "fit_without_outliers", "housing_estimates", "markdown", "outlier_poses",
+           "fit_without_outliers", "housing_estimates", "larger_board", "markdown", "outlier_poses",
            "outlier_threshold", "per_pose_table", "pose_geometry", "stats_range", "stereo_scatter",
            "summary_lines", "warnings_for", "without"]

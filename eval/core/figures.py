@@ -31,41 +31,76 @@ def save_figure(fig: Figure, path, dpi: int = DPI) -> str:
     """Write ``fig`` as PNG to ``path`` atomically (temporary file, then rename); returns
     ``path`` as text."""
     buffer = io.BytesIO()
-    fig.savefig(buffer, format="png", dpi=dpi)
+    # zlib level 3 instead of 6: half the encoding time (0.12 → 0.065 s for the error maps) for
+    # files 7 % larger
+    fig.savefig(buffer, format="png", dpi=dpi, pil_kwargs={"compress_level": 3})
     atomic_write_bytes(path, buffer.getvalue())
     return os.fspath(path)
 
 
+def _adjust(fig: Figure, rows: int, wspace: float, hspace: float) -> None:
+    """Fixed margins for a grid of ``rows`` rows of panels (``tight_layout`` measures every
+    text of the figure first: a second drawing, a second or more for the grids below)."""
+    height = fig.get_figheight()
+    fig.subplots_adjust(left=0.05, right=0.98, bottom=0.55 / height, top=1 - 0.3 / height,
+                        wspace=wspace, hspace=hspace if rows > 1 else 0.2)
+
+
 def error_maps_figure(path, per_method) -> None:
-    """Per method: dX, dY, dZ, dP (mm) over the true target positions (X, Y in mm)."""
+    """Per method: dX, dY, dZ, dP (mm) over the true target positions (X, Y in mm). The panels
+    share their X and Y axes (tick labels on the outer ones only) and each method's
+    triangulation of the targets."""
+    from matplotlib.ticker import MaxNLocator
+    from matplotlib.tri import Triangulation
+
     methods = [m for m in per_method if len(per_method[m]["truth"])]
     fig = new_figure(16, 3.8 * max(len(methods), 1), layout=None)
+    first = None
     for row, method in enumerate(methods):
         truth, errors = per_method[method]["truth"], per_method[method]["errors"]
         columns = [("dX", errors[:, 0]), ("dY", errors[:, 1]), ("dZ", errors[:, 2]),
                    ("dP", np.linalg.norm(errors, axis=1))]
+        try:
+            triangles = Triangulation(truth[:, 0], truth[:, 1]) if len(truth) >= 10 else None
+        except (ValueError, RuntimeError):
+            triangles = None
         for col, (name, values) in enumerate(columns):
-            ax = fig.add_subplot(len(methods), 4, row * 4 + col + 1)
+            ax = fig.add_subplot(len(methods), 4, row * 4 + col + 1, sharex=first, sharey=first)
             if name == "dP":
                 norm = dict(vmin=0, vmax=float(values.max()) or 1.0, cmap="viridis")
             else:
                 limit = float(np.max(np.abs(values))) or 1.0
                 norm = dict(vmin=-limit, vmax=limit, cmap="coolwarm")
-            if len(values) >= 10:
+            area = None
+            if triangles is not None:
                 try:
-                    area = ax.tricontourf(truth[:, 0], truth[:, 1], values, levels=15, **norm)
+                    area = ax.tricontourf(triangles, values, levels=15, **norm)
                 except (ValueError, RuntimeError):
-                    area = ax.scatter(truth[:, 0], truth[:, 1], c=values, s=12, **norm)
+                    area = None
+            if area is None:
+                area = ax.scatter(truth[:, 0], truth[:, 1], c=values,
+                                  s=12 if len(values) >= 10 else 20, **norm)
+            if len(values) >= 10:
                 ax.scatter(truth[:, 0], truth[:, 1], s=1, c="k")
-            else:
-                area = ax.scatter(truth[:, 0], truth[:, 1], c=values, s=20, **norm)
-            fig.colorbar(area, ax=ax, label=f"{name} [mm]")
+            bar = fig.colorbar(area, ax=ax, label=f"{name} [mm]")
+            bar.locator = MaxNLocator(6)  # fewer ticks: each costs a few ms to make and draw
+            bar.update_ticks()
             ax.set_aspect("equal")
-            ax.invert_yaxis()
-            ax.set_title(f"{method_label(method)}: {name}", fontsize=9)
-            ax.set_xlabel("X [mm]")
-            ax.set_ylabel("Y [mm] (down)")
-    fig.tight_layout()
+            if first is None:
+                first = ax
+                ax.invert_yaxis()  # shared: once for all panels
+                ax.xaxis.set_major_locator(MaxNLocator(5))
+                ax.yaxis.set_major_locator(MaxNLocator(5))
+            ax.set_title(f"{method_label(method)}: {name}", fontsize=9, y=1.0)
+            if row == len(methods) - 1:
+                ax.set_xlabel("X [mm]")
+            else:
+                ax.tick_params(labelbottom=False)
+            if col == 0:
+                ax.set_ylabel("Y [mm] (down)")
+            else:
+                ax.tick_params(labelleft=False)
+    _adjust(fig, len(methods), wspace=0.3, hspace=0.2)
     save_figure(fig, path)
 
 
@@ -78,14 +113,18 @@ def histograms_figure(path, per_method) -> None:
         for col, axis_name in enumerate("XYZ"):
             ax = fig.add_subplot(len(methods), 3, row * 3 + col + 1)
             values = errors[:, col]
-            ax.hist(values, bins=40, density=True, color="C0" if method == "optical_path" else "C1")
-            ax.axvline(values.mean(), color="k", linewidth=1,
-                       label=f"mean {values.mean():+.3f} mm, σ {values.std():.3f} mm")
-            ax.set_title(f"{method_label(method)}: d{axis_name}", fontsize=9)
+            # one filled outline instead of 40 bars (ax.hist): the same picture, drawn faster
+            density, edges = np.histogram(values, bins=40, density=True)
+            ax.stairs(density, edges, fill=True,
+                      color="C0" if method == "optical_path" else "C1")
+            ax.axvline(values.mean(), color="k", linewidth=1)
+            ax.set_title(f"{method_label(method)}: d{axis_name}", fontsize=9, y=1.0)
+            ax.text(0.02, 0.97, f"mean {values.mean():+.3f} mm, σ {values.std():.3f} mm\n"
+                    f"(vertical line: the mean)", transform=ax.transAxes, fontsize=7,
+                    va="top", bbox=dict(boxstyle="round", fc="white", ec="0.8", alpha=0.8))
             ax.set_xlabel(f"d{axis_name} [mm]")
             ax.set_ylabel("density [1/mm]")
-            ax.legend(fontsize=7)
-    fig.tight_layout()
+    _adjust(fig, len(methods), wspace=0.25, hspace=0.55)
     save_figure(fig, path)
 
 

@@ -61,6 +61,8 @@ def read_photo(path, encoding: str = "auto") -> np.ndarray:
         raise PhotoError(f"photo encoding {encoding!r}: choose from {', '.join(PHOTO_ENCODINGS)}")
 
     path = os.fspath(path)
+    if os.path.isdir(path):
+        raise PhotoError(f"{path}: a folder, not a photo")
     if not os.path.isfile(path):
         raise PhotoError(f"{path}: no such file")
     image = cv2.imread(path, cv2.IMREAD_UNCHANGED)

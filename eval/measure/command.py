@@ -29,6 +29,7 @@ from eval.cli import CLIError, positive_float
 from eval.core.detection import DETECTOR_OPTIONS, add_detector_options
 from eval.core.formatting import format_number as fmt
 from eval.core.photos import add_encoding_option
+from measure.detect import FLOOR_FRACTION
 from synth.cli import add_json_option, add_out_option, add_progress_option, refuse_given
 
 COMMAND = "eval measure"
@@ -36,7 +37,7 @@ DEFAULT_METHODS = ("optical_path",)
 DEFAULT_GATE_MM = 0.5
 #: Default ``--floor-fraction``: JPEG ringing around a target is 2-5 % of its level
 #: (docs/datasets.md); the automatic threshold stays above it.
-DEFAULT_FLOOR_FRACTION = 0.05
+DEFAULT_FLOOR_FRACTION = FLOOR_FRACTION
 
 
 def add_parser(subparsers):
@@ -50,8 +51,10 @@ def add_parser(subparsers):
     p.add_argument("right", metavar="RIGHT", help="right photo, or folder of right photos "
                                                   "(paired with the left ones by file name)")
     p.add_argument("--calib", required=True, metavar="FILE",
-                   help="the rig's calibration (calib.yaml as python -m synth dataset writes it) "
-                        "for the photos' image size")
+                   help="the rig's calibration for the photos' image size: calib.yaml (as "
+                        "python -m synth dataset and eval calibrate write it), calibmar's YAML "
+                        "(either file of the pair) or the COLMAP fork's cameras.txt "
+                        "(rig_config.json beside it)")
     add_out_option(p, COMMAND, "out/measure")
     p.add_argument("--methods", default=None,
                    help="comma-separated triangulation methods (default optical_path; targets: "
@@ -196,7 +199,8 @@ def build_report(inputs, options, results) -> dict:
                  "depth_range_mm": [None if v is None else float(v)
                                     for v in options.depth_range],
                  **{d: getattr(options, d) for d in (*DETECTOR_OPTIONS, "floor_fraction")}})
-    return {"command": COMMAND, "calib": inputs.calib_path, "encoding": inputs.encoding,
+    return {"command": COMMAND, "calib": inputs.calib_path, "has_port": inputs.has_port,
+            "encoding": inputs.encoding,
             "image_size": list(inputs.size), "mode": "dense" if dense else "targets",
             "methods": list(options.methods), "options": settings, "pairs": pairs,
             "summary": summarize(pairs, options.methods, results)}
@@ -224,11 +228,24 @@ def write_outputs(tmp: str, report: dict, results) -> None:
 
 
 def summary_line(report: dict) -> str:
+    """The printed line. Targets: the gap RMS per method. Dense: the plane fit's RMS per method
+    (of each measured pair, a range over several) — dense matches lie on the epipolar curves by
+    construction, so their gap is ~0 and says nothing (docs/measure.md)."""
     s = report["summary"]
-    what = "pixels" if report["mode"] == "dense" else "targets"
-    gaps = ", ".join(f"{m} {fmt(v['rms_mm'], 4)} mm" for m, v in s["methods"].items())
+    if report["mode"] == "dense":
+        what, check = "pixels", "plane fit RMS"
+        values = {}
+        for method in s["methods"]:
+            rms = [p["methods"][method]["plane"]["rms_mm"] for p in report["pairs"]
+                   if not p["problem"] and (p["methods"].get(method) or {}).get("plane")]
+            values[method] = (f"{fmt(min(rms), 3)}–{fmt(max(rms), 3)}" if len(rms) > 1 else
+                              fmt(rms[0], 3) if rms else "–")
+    else:
+        what, check = "targets", "gap RMS"
+        values = {m: fmt(v["rms_mm"], 4) for m, v in s["methods"].items()}
+    checks = ", ".join(f"{m} {v} mm" for m, v in values.items())
     return (f"{s['pairs']} pair(s), {s['measured_pairs']} measured: {s['matched']} {what} "
-            f"matched; gap RMS {gaps}; total {report['timings_s']['total']:.1f} s")
+            f"matched; {check} {checks}; total {report['timings_s']['total']:.1f} s")
 
 
 def main(args) -> int:
@@ -249,8 +266,10 @@ def main(args) -> int:
     results = measure_all(inputs, options, quiet, log)
     problems = [r.problem for r in results if r.problem]
     if len(problems) == len(results):
-        raise CLIError(problems[0] if len(results) == 1 else
-                       f"no pair was measured ({len(results)} pairs); the first: {problems[0]}")
+        if len(results) == 1:  # named by its two files, not by the left file's stem
+            problem = problems[0].removeprefix(f"{results[0].name}: ")
+            raise CLIError(f"{inputs.left[0]}, {inputs.right[0]}: {problem}")
+        raise CLIError(f"no pair was measured ({len(results)} pairs); the first: {problems[0]}")
     report = build_report(inputs, options, results)
     log("write the point clouds, points.csv, the report and the views …")
     with output.staged() as tmp:
@@ -260,6 +279,10 @@ def main(args) -> int:
         report = jsonable(report)
         atomic_write_json(os.path.join(tmp, "report.json"), report)
         atomic_write_text(os.path.join(tmp, "report.md"), report_markdown(report))
+    if not inputs.has_port:
+        from eval.measure.report import AIR_CALIBRATION
+
+        print(f"warning: {AIR_CALIBRATION.format(calib=args.calib)}", file=sys.stderr)
     stream = sys.stderr if args.json else sys.stdout
     print(summary_line(report), file=stream)
     print(f"wrote {output.path}", file=stream)

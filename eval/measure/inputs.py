@@ -29,6 +29,7 @@ class MeasureInputs:
     left: tuple
     right: tuple
     encoding: str = "auto"
+    has_port: bool = True
 
     def read(self, index: int):
         """Pair ``index`` as linear grey float32 arrays (:func:`eval.core.photos.read_photo`
@@ -40,16 +41,21 @@ class MeasureInputs:
 
 
 def read_calibration(path):
-    """``(rig, (width, height))`` of a calibration file; CLIError when it cannot be read."""
+    """``(rig, (width, height), has_port)`` of a calibration file (``has_port`` false for an
+    in-air calibration, whose port is index-matched air); CLIError when it cannot be read."""
     from synth.dataset import DatasetError, read_calib
 
+    if os.path.isdir(path):
+        inside = os.path.join(path, "calib.yaml")
+        raise CLIError(f"--calib {path}: a folder; give the calibration file"
+                       + (f", e.g. --calib {inside}" if os.path.isfile(inside) else ""))
     if not os.path.isfile(path):
         raise CLIError(f"--calib {path}: no such file")
     try:
         calib = read_calib(path)
     except DatasetError as exc:
         raise CLIError(f"--calib {exc}") from None
-    return calib["rig"], tuple(int(v) for v in calib["size"])
+    return calib["rig"], tuple(int(v) for v in calib["size"]), bool(calib["has_port"])
 
 
 def photo_pairs(left, right):
@@ -77,7 +83,7 @@ def load_inputs(calib_path, left, right, encoding: str = "auto") -> MeasureInput
     unreadable photo or a wrong size is refused before any work."""
     from eval.core.photos import PhotoError, read_photo
 
-    rig, calib_size = read_calibration(calib_path)
+    rig, calib_size, has_port = read_calibration(calib_path)
     names, lefts, rights = photo_pairs(left, right)
     for files in zip(lefts, rights):
         for file in files:
@@ -91,7 +97,7 @@ def load_inputs(calib_path, left, right, encoding: str = "auto") -> MeasureInput
                                f"{calib_path} is for {calib_size[0]}x{calib_size[1]} px images "
                                f"(photos must be measured at the calibrated size)")
     return MeasureInputs(os.fspath(calib_path), rig, calib_size, tuple(names), tuple(lefts),
-                         tuple(rights), encoding)
+                         tuple(rights), encoding, has_port)
 
 
 __all__ = ["MeasureInputs", "load_inputs", "photo_pairs", "read_calibration"]

@@ -18,8 +18,8 @@ from eval.core.detection import add_detector_options
 from eval.run.config import COMMAND, RunConfig
 from eval.run.report import (budget_table, report_markdown, summary_table, verdict_exit_code,
                              write_outputs)
-from synth.cli import (add_define_option, add_json_option, add_out_option, add_progress_option,
-                       add_scene_argument, scene_seed)
+from synth.cli import (add_define_option, add_full_film_option, add_json_option,
+                       add_out_option, add_progress_option, add_scene_argument, scene_seed)
 
 
 def add_parser(subparsers):
@@ -33,6 +33,7 @@ def add_parser(subparsers):
                         help="reuse the images of a dataset written by python -m synth dataset")
     parser.add_argument("--spp", type=positive_int, help="samples per pixel (default: the scene's)")
     parser.add_argument("--variant", help="Mitsuba variant (default: automatic)")
+    add_full_film_option(parser)
     parser.add_argument("--methods", default=None,
                         help="comma-separated triangulation methods (default: all three)")
     parser.add_argument("--noise-px", type=non_negative_float, default=0.0,

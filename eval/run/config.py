@@ -42,6 +42,7 @@ class RunConfig:
     from_dir: str | None = None
     spp: int | None = None
     variant: str | None = None
+    full_film: bool = False
     assumptions: dict = field(default_factory=dict)
     calib: str | None = None
     compare_calib: tuple = ()
@@ -88,6 +89,7 @@ class RunConfig:
         notes = []
         config = cls(scene=args.scene, defines=tuple(parse_defines(args.defines).items()),
                    seed=args.seed, from_dir=args.from_dir, spp=args.spp, variant=args.variant,
+                   full_film=args.full_film,
                    assumptions=parse_assumptions(args.assume, notes), calib=args.calib,
                    compare_calib=tuple(args.compare_calib),
                    methods=None if args.methods is None else split_names(args.methods),
@@ -107,7 +109,8 @@ class RunConfig:
         is compared with what they were rendered with)."""
         if not self.from_dir:
             return
-        for option, value in (("--spp", self.spp), ("--variant", self.variant)):
+        for option, value in (("--spp", self.spp), ("--variant", self.variant),
+                              ("--full-film", self.full_film or None)):
             if value is not None:
                 raise CLIError(f"{option} does not apply with --from {self.from_dir}: its images "
                                f"are reused as they were rendered (-D spp=N checks what they "

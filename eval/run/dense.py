@@ -115,12 +115,12 @@ def surface_inputs(config: RunConfig, log):
 
     log(f"render both views ({spec.size[0]}x{spec.size[1]} px, {config.spp or spec.spp} spp) …")
     left, right, info = render_stereo(spec, spp=config.spp, variant=config.variant,
-                                      progress=config.progress)
+                                      progress=config.progress, adaptive=not config.full_film)
     t = time.perf_counter()
     tracer = MeshTracer(spec.surface.mesh_path, spec.surface.vertices, spec.surface.triangles)
     truth = truth_maps(tracer, spec.rig.left, spec.rig.right, spec.rig.port)
     return spec, rig, left, right, truth, {
-        "variant": info["variant"], "spp": info["spp"],
+        "variant": info["variant"], "spp": info["spp"], "render": info["render"],
         "timings": {"render_left": info["seconds"]["left"], "render_right": info["seconds"]["right"],
                     "truth_maps": time.perf_counter() - t}}
 
@@ -173,7 +173,7 @@ def measure_surface(config: RunConfig, methods, log):
                         "overlap_pixels": int(truth.overlap.sum())},
               "sensor": sensor_info, "median_filter": int(config.median_filter or 0),
               "methods": {}, "matching": {}, "timings_s": dict(provenance["timings"]),
-              "inputs": {k: v for k, v in provenance.items() if k == "from"}}
+              "inputs": {k: v for k, v in provenance.items() if k in ("from", "render")}}
     arrays = {"left": left, "right": right, "per_method": {}}
     for method in methods:
         model, triangulation = DENSE_METHODS[method]

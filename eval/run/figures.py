@@ -11,10 +11,29 @@ import numpy as np
 
 from eval.core.figures import new_figure, save_figure
 
+#: Width (figure pixels) the two views are shrunk to before they are drawn: about the width of
+#: the axes in the 16-inch figure, so that matplotlib does not resample 10^7 pixels itself.
+VIEWS_WIDTH_PX = 1700
+
+
 def _display(image: np.ndarray) -> np.ndarray:
     """Linear radiance to a display image (sRGB-like gamma, 99.9th percentile as white)."""
     white = np.percentile(image, 99.9) or float(image.max()) or 1.0
     return np.clip(image / white, 0, 1) ** (1 / 2.2)
+
+
+def _side_by_side(ax, left, right) -> None:
+    """Both views side by side on ``ax`` in pixel coordinates (OpenCV: pixel centres on
+    integers), area-averaged down to about :data:`VIEWS_WIDTH_PX` before drawing."""
+    import cv2
+
+    pair = np.hstack([np.asarray(left, np.float32), np.asarray(right, np.float32)])
+    h, w = pair.shape
+    factor = max(1, int(w // VIEWS_WIDTH_PX))
+    if factor > 1:
+        pair = cv2.resize(pair, (w // factor, h // factor), interpolation=cv2.INTER_AREA)
+    ax.imshow(_display(pair), cmap="gray", interpolation="nearest",
+              extent=(-0.5, (w // factor) * factor - 0.5, (h // factor) * factor - 0.5, -0.5))
 
 
 def views_figure(path, left, right, result) -> None:
@@ -22,9 +41,11 @@ def views_figure(path, left, right, result) -> None:
     ``result`` (:class:`eval.run.pipeline.RunResult`)."""
     detections, matches, correct = result.detections, result.matches, result.correct
     width = left.shape[1]
+    from matplotlib.collections import LineCollection
+
     fig = new_figure(16, 7.2, layout=None)
     ax = fig.add_subplot()
-    ax.imshow(np.hstack([_display(left), _display(right)]), cmap="gray", interpolation="nearest")
+    _side_by_side(ax, left, right)
     for offset, name in ((0, "left"), (width, "right")):
         d = detections[name]
         c = np.asarray(d.centers)
@@ -40,15 +61,15 @@ def views_figure(path, left, right, result) -> None:
     for ok, colour, label in ((True, "deepskyblue", "matched pair"), (False, "red", "wrong match")):
         sel = correct == ok
         if sel.any():
-            xs = np.vstack([left_c[sel, 0], right_c[sel, 0] + width])
-            ys = np.vstack([left_c[sel, 1], right_c[sel, 1]])
-            ax.plot(xs, ys, color=colour, linewidth=0.25, alpha=0.6)
+            segments = np.stack([left_c[sel], right_c[sel] + [width, 0]], axis=1)
+            ax.add_collection(LineCollection(segments, colors=colour, linewidths=0.25,
+                                             alpha=0.6))
             ax.plot([], [], color=colour, label=f"{label} ({int(sel.sum())})")
-    ax.set_title("left | right: detections and matches")
+    ax.set_title("left | right: detections and matches", y=1.0)
     ax.set_xlabel("u [px]")
     ax.set_ylabel("v [px]")
     ax.legend(loc="lower center", ncol=4, fontsize=8)
-    fig.tight_layout()
+    fig.subplots_adjust(left=0.045, right=0.99, bottom=0.08, top=0.95)
     save_figure(fig, path)
 
 
@@ -56,9 +77,9 @@ def views_pair(path, left, right) -> None:
     """Both views side by side (a surface scene: nothing detected to mark)."""
     fig = new_figure(16, 7.2, layout=None)
     ax = fig.add_subplot()
-    ax.imshow(np.hstack([_display(left), _display(right)]), cmap="gray", interpolation="nearest")
-    ax.set_title("left | right")
+    _side_by_side(ax, left, right)
+    ax.set_title("left | right", y=1.0)
     ax.set_xlabel("u [px]")
     ax.set_ylabel("v [px]")
-    fig.tight_layout()
+    fig.subplots_adjust(left=0.045, right=0.99, bottom=0.08, top=0.95)
     save_figure(fig, path)

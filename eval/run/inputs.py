@@ -184,13 +184,13 @@ def load_inputs(config: RunConfig, log) -> RunInputs:
                          spp=int(data.manifest.get("spp", 0)), render_seconds=0.0,
                          extra={"from": os.path.abspath(config.from_dir),
                                 "from_seed": data.manifest.get("seed")}, **scene_part)
-    from synth.render import render_stereo
+    from synth.render import render_stereo, render_summary
 
-    log(f"render both views ({spec.size[0]}x{spec.size[1]} px, {config.spp or spec.spp} spp, in "
-        f"passes) …")
+    log(f"render both views ({spec.size[0]}x{spec.size[1]} px, {config.spp or spec.spp} spp, "
+        f"{'full film' if config.full_film else 'adaptive'}) …")
     start = time.perf_counter()
     left, right, info = render_stereo(spec, spp=config.spp, variant=config.variant,
-                                      progress=config.progress)
+                                      progress=config.progress, adaptive=not config.full_film)
     timings = {"render_left": info["seconds"]["left"], "render_right": info["seconds"]["right"],
                "render_samples_per_second": info["samples_per_second"],
                **{f"render_samples_per_second_{view}": speed
@@ -200,6 +200,8 @@ def load_inputs(config: RunConfig, log) -> RunInputs:
     log("rendered: " + ", ".join(f"{view} {info['seconds'][view]:.1f} s at {speed / 1e6:.2f} M "
                                  f"samples/s ({'+'.join(map(str, info['passes'][view]))} spp)"
                                  for view, speed in info["samples_per_second_per_view"].items()))
+    for view in ("left", "right"):
+        log(f"  {view}: {render_summary(info['render'][view])}")
     return RunInputs(left=left, right=right, variant=info["variant"], spp=info["spp"],
                      render_seconds=time.perf_counter() - start,
                      extra={"render": render, "timings": timings}, **scene_part)

@@ -67,6 +67,18 @@ def _sensor_lines(sensor) -> list:
             ""]
 
 
+def _render_lines(render) -> list:
+    """How each view was rendered (adaptive or full film, lit fraction, samples), or nothing
+    (images read with ``--from``)."""
+    if not isinstance(render, dict) or not isinstance(render.get("render"), dict):
+        return []
+    from synth.render import render_summary
+
+    views = render["render"]
+    return ["## Render", "", *[f"- {view}: {render_summary(views[view])}"
+                               for view in ("left", "right") if view in views], ""]
+
+
 def report_markdown(report: dict) -> str:
     m, c, t = report["matching"], report["crosscheck"], report["timings_s"]
     vis, det = report["visibility"], report["detection"]
@@ -74,6 +86,7 @@ def report_markdown(report: dict) -> str:
              f"{report['targets']} targets; Mitsuba variant `{report['variant']}`, {report['spp']} spp; "
              f"added pixel noise σ = {report['noise_px']} px.", "",
              *verdict_lines(report),
+             *_render_lines(report.get("inputs", {}).get("render")),
              *_sensor_lines(report.get("sensor")),
              "## Detection and matching", "",
              "| | left | right |", "|---|---|---|",

@@ -4,8 +4,8 @@ random poses behind the scene's port (or in air), :mod:`synth.boards`."""
 
 from __future__ import annotations
 
-from synth.cli import (CLIError, add_board_options, add_define_option, add_out_option,
-                       add_progress_option, add_scene_argument, board_from_args,
+from synth.cli import (CLIError, add_board_options, add_define_option, add_full_film_option,
+                       add_out_option, add_progress_option, add_scene_argument, board_from_args,
                        non_negative_float, positive_float, positive_int, scene_seed)
 
 
@@ -28,6 +28,7 @@ def add_parser(subparsers) -> None:
                    help="seed of the poses and the renderer, same as -D seed=S (default 0)")
     p.add_argument("--air", action="store_true", help="the same cameras with no port (in air)")
     p.add_argument("--variant", help="Mitsuba variant (default: automatic)")
+    add_full_film_option(p)
     add_define_option(p)
     add_progress_option(p)
 
@@ -68,7 +69,7 @@ def main(args) -> int:
         n_poses=args.poses or b.DEFAULT_POSES, spp=spp, seed=seed, air=args.air,
         distance_range=tuple(args.distance) if args.distance else None,
         max_tilt_deg=b.DEFAULT_MAX_TILT_DEG if args.max_tilt is None else args.max_tilt,
-        variant=args.variant, progress=not args.no_progress)
+        variant=args.variant, progress=not args.no_progress, adaptive=not args.full_film)
     if manifest.get("skipped"):
         print(f"{args.out}: up to date (same scene, board and options); nothing to do")
         return 0
@@ -80,4 +81,9 @@ def main(args) -> int:
           f"{w}x{h} px, {manifest['spp']} spp with {manifest['variant']}: render "
           f"{manifest['seconds']['render']:.1f} s ({manifest['samples_per_second'] / 1e6:.2f} M "
           f"samples/s), total {manifest['seconds']['total']:.1f} s")
+    lit = [s["lit_fraction"] for pair in manifest["render"]["views"] for s in pair.values()
+           if s.get("lit_fraction") is not None]
+    modes = sorted({s["mode"] for pair in manifest["render"]["views"] for s in pair.values()})
+    print(f"  render: {' and '.join(modes)}"
+          + (f"; lit fraction {min(lit):.1%} to {max(lit):.1%} of the film" if lit else ""))
     return 0

@@ -3,8 +3,8 @@ and the scene they load (``-D`` and ``--seed`` applied)."""
 
 from __future__ import annotations
 
-from synth.cli import (add_define_option, add_out_option, add_progress_option,
-                       add_scene_argument, positive_int, scene_seed)
+from synth.cli import (add_define_option, add_full_film_option, add_out_option,
+                       add_progress_option, add_scene_argument, positive_int, scene_seed)
 
 
 def add_render_options(p, command: str) -> None:
@@ -18,6 +18,7 @@ def add_render_options(p, command: str) -> None:
     p.add_argument("--variant", help="Mitsuba variant (default: cuda_ad_rgb > llvm_ad_rgb > "
                                      "scalar_rgb, whichever works here)")
     p.add_argument("--exr", action="store_true", help="also write float32 linear EXR images")
+    add_full_film_option(p)
     add_define_option(p)
     add_progress_option(p)
 

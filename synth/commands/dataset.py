@@ -27,7 +27,7 @@ def main(args) -> int:
         raise CLIError(f"--sensor {args.sensor}: {exc}") from None
     manifest = write_dataset(scene_from_args(args), args.out, spp=args.spp,
                              variant=args.variant, exr=args.exr, progress=not args.no_progress,
-                             sensor=sensor)
+                             sensor=sensor, adaptive=not args.full_film)
     if manifest.get("skipped"):
         print(f"{args.out}: up to date (same scene, parameters and options); nothing to do")
         return 0
@@ -37,4 +37,8 @@ def main(args) -> int:
     stages = ", ".join(f"{k} {v:.2f} s" for k, v in s.items() if k != "total")
     print(f"wrote {args.out} with {manifest['variant']}, {manifest['spp']} spp: {stages}; "
           f"total {s['total']:.1f} s")
+    from synth.render import render_summary
+
+    for name in ("left", "right"):
+        print(f"  {name}: {render_summary(manifest['render'][name])}")
     return 0

@@ -18,14 +18,15 @@ def add_parser(subparsers) -> None:
 def main(args) -> int:
     """Render both views of the scene into ``--out``."""
     from synth.fileio import OutputDir
-    from synth.render import (png16_scale, render_stereo, srgb_preview, to_png16, write_exr,
-                              write_png)
+    from synth.render import (png16_scale, render_stereo, render_summary, srgb_preview,
+                              to_png16, write_exr, write_png)
 
     output = OutputDir(args.out, "synth render").claim()
     spec = scene_from_args(args)
     t0 = time.perf_counter()
     left, right, info = render_stereo(spec, spp=args.spp, variant=args.variant,
-                                      progress=not args.no_progress)
+                                      progress=not args.no_progress,
+                                      adaptive=not args.full_film)
     scale = png16_scale(left, right)
     white = max(float(left.max()), float(right.max()))
     with output.staged() as tmp:
@@ -38,4 +39,6 @@ def main(args) -> int:
           f"{info['size'][0]}x{info['size'][1]} px: left {info['seconds']['left']:.1f} s, "
           f"right {info['seconds']['right']:.1f} s, {info['samples_per_second'] / 1e6:.2f} M "
           f"samples/s, total {time.perf_counter() - t0:.1f} s; png_scale {scale:.6g} -> {args.out}")
+    for name in ("left", "right"):
+        print(f"  {name}: {render_summary(info['render'][name])}")
     return 0

@@ -130,7 +130,8 @@ def main(args) -> int:
 
     from synth import layouts, rig as rigs
     from synth.fileio import check_file_output
-    from synth.scene import DEFAULT_SPP, DEFAULT_TARGET_RADIUS_MM, write_scene
+    from synth.scene import (DEFAULT_FULL_FILM_SPP, DEFAULT_SPP, DEFAULT_TARGET_RADIUS_MM,
+                             write_scene)
 
     check_file_output(args.out, "--out", may_replace=_is_our_scene)
     _refuse_inapplicable(args)
@@ -240,8 +241,9 @@ def main(args) -> int:
     if water is not None:
         comment += f", water {args.water}"
     try:
+        default_spp = DEFAULT_SPP if water is None else DEFAULT_FULL_FILM_SPP  # haze: full film
         write_scene(args.out, (left, right), port, targets, radius,
-                    spp=args.spp if args.spp else DEFAULT_SPP, seed=args.seed, comment=comment,
+                    spp=args.spp if args.spp else default_spp, seed=args.seed, comment=comment,
                     water=water, target_normals=normals, lighting=args.lighting,
                     thin_lens=thin_lens)
     except ValueError as exc:
@@ -253,7 +255,7 @@ def main(args) -> int:
 
 def _surface_scene(args, left, right, port) -> int:
     """``--layout surface``: see :mod:`synth.surface_scene`."""
-    from synth.scene import DEFAULT_SPP
+    from synth.scene import DEFAULT_FULL_FILM_SPP
     from synth.surface_scene import write_surface_scene
     from synth.water import PRESETS as WATERS
 
@@ -279,7 +281,8 @@ def _surface_scene(args, left, right, port) -> int:
                + (f", water {args.water}" if water is not None else ""))
     try:
         print(write_surface_scene(args.out, args, left, right, port,
-                                  spp=args.spp if args.spp else DEFAULT_SPP, seed=args.seed,
+                                  spp=args.spp if args.spp else DEFAULT_FULL_FILM_SPP,
+                                  seed=args.seed,
                                   comment=comment, water=water, lighting=args.lighting))
     except ValueError as exc:
         raise CLIError(str(exc)) from None

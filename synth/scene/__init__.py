@@ -16,8 +16,8 @@ This package re-exports the names the rest of the project uses; the others live 
 
 from __future__ import annotations
 
-from synth.scene.model import (DEFAULT_SPP, DEFAULT_TARGET_RADIUS_MM, SURFACE_ID, SceneError,
-                               SceneSpec, SurfaceFiles)
+from synth.scene.model import (DEFAULT_FULL_FILM_SPP, DEFAULT_SPP, DEFAULT_TARGET_RADIUS_MM,
+                               SURFACE_ID, SceneError, SceneSpec, SurfaceFiles)
 from synth.scene.params import (apply_seed, apply_spp, check_params, declared_defaults,
                                 parse_defines)
 from synth.scene.read import load_scene
@@ -25,7 +25,8 @@ from synth.scene.write import (LIGHT_INTENSITY, LIT_TARGET_ALBEDO, interface_pla
                                light_placements, write_scene)
 
 __all__ = [
-    "DEFAULT_SPP", "DEFAULT_TARGET_RADIUS_MM", "LIGHT_INTENSITY", "LIT_TARGET_ALBEDO",
+    "DEFAULT_FULL_FILM_SPP", "DEFAULT_SPP", "DEFAULT_TARGET_RADIUS_MM", "LIGHT_INTENSITY",
+    "LIT_TARGET_ALBEDO",
     "SURFACE_ID", "SceneError", "SceneSpec", "SurfaceFiles", "apply_seed", "apply_spp",
     "check_params",
     "declared_defaults", "interface_placements", "light_placements", "load_scene", "parse_defines",

@@ -13,8 +13,14 @@ import numpy as np
 
 from measure import Camera, FlatPort, StereoRig
 
-#: Defaults written into every scene unless given.
-DEFAULT_SPP = 36
+#: Defaults written into every scene unless given. ``spp`` is what a lit pixel gets: target
+#: scenes render adaptively (synth.render), where 144 spp on the lit pixels costs about as much
+#: as 36 (the pilot over the whole film dominates) and halves the centroid noise
+#: (docs/speed.md, "Adaptive rendering").
+DEFAULT_SPP = 144
+#: The default of scenes whose film is mostly lit (surfaces, scattering water): rendered on the
+#: full film, where the samples cost in proportion.
+DEFAULT_FULL_FILM_SPP = 36
 DEFAULT_SEED = 0
 DEFAULT_MAX_DEPTH = 8
 #: Target disk radius, mm: at 1 m behind the paper's port the innermost circle's neighbours

@@ -63,6 +63,11 @@ def test_folder_holds_images_truth_and_manifest(boards):
         for camera in rig.cameras:  # the whole board inside both images
             assert camera.in_image(project(camera, rig.port, world), 10).all()
     assert read_boards(boards["air"]).air
+    render = data.manifest["render"]  # how it was rendered: adaptively, per pose and view
+    assert render["settings"]["mode"] == "adaptive" and len(render["views"]) == 5
+    for pair in render["views"]:
+        for stats in pair.values():
+            assert stats["mode"] in ("adaptive", "full film") and stats["samples_on_mask"] > 0
 
 
 def test_detected_corners_match_the_forward_model(boards):

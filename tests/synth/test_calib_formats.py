@@ -211,6 +211,8 @@ def _edit(path, old, new):
     ("calibmar.yaml", "0.0053, 1.0, 1.49", "0.0053, 0.9, 1.49", "indices"),
     ("calibmar.yaml", "model: OPENCV", "model: OPENCV_FISHEYE", "unsupported camera model"),
     ("calibmar.yaml", "parameters: [1100.3, ", "parameters: [", "needs 8 finite parameters"),
+    # the right count with a number that is not finite: which one is named
+    ("calibmar.yaml", "parameters: [1100.3, ", "parameters: [nan, ", r"got fx = nan$"),
     ("calibmar.yaml", "width: 2448", "width: 2000", "image size"),
     ("calibmar.yaml", "model: OPENCV\n", "", "no model"),
     ("calibmar_stereo.yaml", "0.0053, 1.0, 1.49, 1.3412]", "0.0053, 1.0, 1.49, 1.34]",
@@ -238,6 +240,8 @@ def test_calibmar_partner_missing(tmp_path):
     ("1 OPENCV 2448 2048 1100.3 ", "1 OPENCV 2448 2048 ", "FLATPORT and 8 numbers may follow"),
     (" FLATPORT 0.0199", " DOMEPORT 0.0199", "found 'DOMEPORT'"),
     (" 1.0 1.49 1.3412\n2", " 1.0 1.49\n2", "FLATPORT needs 8"),
+    ("1 OPENCV 2448 2048 1100.3", "1 OPENCV 2448 2048 1e400", r"got fx = inf$"),
+    (" 1.0 1.49 1.3412\n2", " 1.0 1.49 inf\n2", r"got nw = inf$"),
     ("2 OPENCV 2448 2048", "3 OPENCV 2448 2048", "names cameras"),
     ("2 OPENCV 2448 2048", "2 OPENCV 2448 2000", "different image sizes"),
 ])

@@ -125,6 +125,38 @@ def test_rerun_is_a_no_op_and_other_arguments_replace(small_scene, dataset_dir, 
 
 
 @pytest.mark.slow
+def test_manifest_says_how_it_was_rendered_and_full_film_keeps_the_old_key(small_scene,
+                                                                           tmp_path):
+    """An adaptive dataset's manifest states, per view, the lit fraction and the samples on and
+    off the mask; ``--full-film`` is another request, whose key is the key every dataset had
+    before adaptive rendering (a manifest without ``render`` is read as a full-film one, so
+    earlier datasets stay readable)."""
+    import copy
+
+    from synth.dataset import manifest_request_key
+
+    assert main(["dataset", small_scene, "--out", str(tmp_path / "a"), "--quiet",
+                 "--spp", "4"]) == 0
+    assert main(["dataset", small_scene, "--out", str(tmp_path / "f"), "--quiet",
+                 "--spp", "4", "--full-film"]) == 0
+    a, f = (read_manifest(tmp_path / name) for name in ("a", "f"))
+    assert a["render"]["settings"]["mode"] == "adaptive" and f["render"]["settings"] is None
+    left = a["render"]["left"]
+    assert left["mode"] == "adaptive" and 0 < left["lit_fraction"] < 0.5
+    assert left["samples_on_mask"] == 4 * left["mask_pixels"]
+    assert left["samples_off_mask"] == SMALL[0] * SMALL[1] - left["mask_pixels"]
+    assert a["passes"]["left"] == [1, 4] and len(a["seeds"]["left"]) == 2
+    assert f["render"]["left"]["mode"] == "full film" and f["passes"]["left"] == [4]
+    assert a["request_key"] != f["request_key"]
+    old = copy.deepcopy(f)
+    del old["render"]  # as written before adaptive rendering
+    assert manifest_request_key(old) == f["request_key"]
+    edited = copy.deepcopy(a)
+    edited["render"]["settings"]["margin_px"] = 5
+    assert manifest_request_key(edited) != a["request_key"]
+
+
+@pytest.mark.slow
 def test_spp_option_and_define_mean_the_same(small_scene, tmp_path):
     """``--spp 4`` and ``-D spp=4`` are one request, and the manifest's scene parameters record
     what was rendered (issue 22: they held the scene's default, 36)."""

@@ -102,6 +102,8 @@ def test_drawn_photos_in_air(drawn, tmp_path, capsys):
                  "--out", str(out)]) == 0
     printed = capsys.readouterr().out
     assert "in air left: fx" in printed and "truth" not in printed
+    # in air there is no port for COLMAP to drop: the caveat is not printed
+    assert "(in air: no port)" in printed and "drop the port" not in printed
     assert {"calib.yaml", "report.json", "report.md", "coverage.png"} <= set(os.listdir(out))
     report = json.loads((out / "report.json").read_text())
     assert report["used"] == 10 and report["left_out"] == [] and report["not_found"] == []
@@ -190,6 +192,10 @@ def test_bad_photo_folders(drawn, tmp_path, capsys):
     # the wrong number of squares: the photos say which board they show
     _fails(["calibrate", src, "--air", "--squares", "8x7", "--square-mm", "60", "--out",
             str(out)], "the photos show a 7x6 chessboard, not 8x7", capsys)
+    # one square fewer each way: OpenCV finds the smaller pattern inside the board, a different
+    # part of it in each photo; refused, naming the board the photos show
+    _fails(["calibrate", src, "--air", "--squares", "6x5", "--square-mm", "60", "--out",
+            str(out)], "the photos show a chessboard of at least 7x6 squares, not 6x5", capsys)
     # unpaired, unreadable, sizes that differ
     lonely = tmp_path / "lonely"
     _write_photos(lonely, drawn["rig"], drawn["poses"][:4])
@@ -207,13 +213,29 @@ def test_bad_photo_folders(drawn, tmp_path, capsys):
     # too few poses with the board
     few = tmp_path / "few"
     _write_photos(few, drawn["rig"], drawn["poses"][:2])
-    _fails(["calibrate", str(few), "--air"] + board, "at least 3", capsys)
+    _fails(["calibrate", str(few), "--air"] + board, f"{few} (photos): the board was found in "
+           f"2 left image(s); an in-air calibration needs at least 3", capsys)
     # intrinsics of another image size
     from synth.dataset import write_calib
     from synth.rig import paper_rig
     other = tmp_path / "other.yaml"
     write_calib(other, paper_rig(size=(640, 480)))
     _fails(["calibrate", src, "--intrinsics", str(other)] + board, "image size", capsys)
+    # the folder of a calibration instead of its file: the file is named
+    os.makedirs(tmp_path / "cal_air")
+    write_calib(tmp_path / "cal_air" / "calib.yaml", paper_rig(size=SIZE))
+    _fails(["calibrate", src, "--intrinsics", str(tmp_path / "cal_air")] + board,
+           f"give the file, --intrinsics {tmp_path / 'cal_air' / 'calib.yaml'}", capsys)
+    # a file, a folder with only left/: said as such
+    _fails(["calibrate", str(other), "--air"] + board, "other.yaml: a file, not a folder", capsys)
+    (tmp_path / "half" / "left").mkdir(parents=True)
+    _fails(["calibrate", str(tmp_path / "half"), "--air"] + board, "half: no right folder",
+           capsys)
+    # the index computed from T=,S= is printed only when the calibration is written
+    _fails(["calibrate", src, "--intrinsics", str(other), "--n-water", "T=12,S=35"] + board,
+           "image size", capsys)
+    _fails(["calibrate", src, "--air", "--n-water", "T=12,S=35"] + board,
+           "--n-water does not apply", capsys)
     assert not out.exists()
     assert not [p for p in os.listdir(tmp_path) if p.startswith(".c.")]  # no staging left
 
@@ -307,6 +329,8 @@ def test_design_port_gives_the_starting_port_in_one_option():
     for extra, message in ((("--design-port", "distance=90", "--start-distance", "95"), "give one"),
                            (("--design-port", "depth=3"), "KEY one of"),
                            (("--design-port", "thickness=-1"), "positive length"),
-                           (("--design-port", "n_water=0.99"), "index >= 1")):
+                           (("--design-port", "n_water=0.99"), "index >= 1"),
+                           (("--design-port", "distance=90,distance=95"), "distance is given twice"),
+                           (("--design-port", "n_water=T=12,S=35"), "--n-water T=…,S=…")):
         with pytest.raises(CLIError, match=message):
             design_port(parsed(*extra), np.array([0.0, 0.0, 1.0]))

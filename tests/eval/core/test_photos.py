@@ -34,6 +34,9 @@ def test_unreadable_and_missing(tmp_path):
         read_photo(tmp_path / "x.jpg")
     with pytest.raises(PhotoError, match="no such file"):
         read_photo(tmp_path / "y.jpg")
+    (tmp_path / "z.jpg").mkdir()  # a folder with a photo's name is not "no such file"
+    with pytest.raises(PhotoError, match="z.jpg: a folder, not a photo"):
+        read_photo(tmp_path / "z.jpg")
     with pytest.raises(PhotoError, match="encoding"):
         read_photo(tmp_path / "x.jpg", "gamma")
 

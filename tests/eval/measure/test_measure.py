@@ -152,7 +152,60 @@ def test_dense_measures_a_speckled_plane(tmp_path, capsys):
     assert len(o3d.io.read_point_cloud(str(out / "points.ply")).points) == matched
 
 
+def test_the_dense_summary_prints_the_plane_fit_not_the_gap():
+    """Dense matches lie on the epipolar curves by construction: their gap (~0) says nothing, so
+    the printed line gives the plane fit's RMS (a range over several pairs); targets keep the
+    gap."""
+    from eval.measure.command import summary_line
+
+    def pair(rms, problem=None):
+        return {"problem": problem, "methods": {} if problem else
+                {"optical_path": {"plane": {"rms_mm": rms}}}}
+
+    report = {"mode": "dense", "timings_s": {"total": 3.0},
+              "pairs": [pair(0.45), pair(None, "b: no pixel was matched"), pair(0.61)],
+              "summary": {"pairs": 3, "measured_pairs": 2, "matched": 1000,
+                          "methods": {"optical_path": {"rms_mm": 1e-9}}}}
+    line = summary_line(report)
+    assert "plane fit RMS optical_path 0.450–0.610 mm" in line and "gap" not in line
+    report["pairs"] = report["pairs"][:1]
+    assert "plane fit RMS optical_path 0.450 mm" in summary_line(report)
+    report["mode"] = "targets"
+    assert "gap RMS optical_path 0.0000 mm" in summary_line(report)
+
+
 # --- bad inputs: no render needed --------------------------------------------------------------
+def test_an_in_air_calibration_is_said(tmp_path, capsys):
+    """Photos measured with an in-air calibration (no port) are measured as if taken in air: a
+    warning on stderr, ``has_port`` false in report.json and a line in report.md (underwater
+    photos would otherwise come out at the wrong depth with exit 0). The photos: 20 Gaussian
+    targets on a plane at 1 m drawn where the in-air rig projects them (no render)."""
+    from measure import StereoRig
+    from measure.projection import project
+    from synth.rig import air_port
+
+    size = (320, 268)
+    rig = StereoRig(*paper_cameras(size, 150.0), air_port())
+    write_calib(tmp_path / "air.yaml", rig, has_port=False)
+    xs, ys = np.meshgrid(np.linspace(-90, 210, 5), np.linspace(-120, 120, 4))
+    points = np.column_stack([xs.ravel(), ys.ravel(), np.full(xs.size, 1000.0)])
+    vv, uu = np.mgrid[0:size[1], 0:size[0]]
+    for view, camera in (("left", rig.left), ("right", rig.right)):
+        image = sum(np.exp(-((uu - u) ** 2 + (vv - v) ** 2) / (2 * 1.5 ** 2))
+                    for u, v in project(camera, rig.port, points))
+        cv2.imwrite(str(tmp_path / f"{view}.png"), np.clip(np.rint(image * 200), 0, 255)
+                    .astype(np.uint8))
+    out = tmp_path / "out"
+    assert eval_main(["measure", "--calib", str(tmp_path / "air.yaml"), str(tmp_path / "left.png"),
+                      str(tmp_path / "right.png"), "--depth-range", "900,1100", "--out", str(out),
+                      "--quiet"]) == 0
+    captured = capsys.readouterr()
+    assert "20 targets matched" in captured.out
+    assert captured.err.startswith("warning: --calib ") and "in-air calibration" in captured.err
+    report = json.loads((out / "report.json").read_text())
+    assert report["has_port"] is False and "in-air calibration" in (out / "report.md").read_text()
+
+
 @pytest.fixture
 def user(tmp_path, monkeypatch):
     """A working folder with the small rig's calibration, a calibration of the full-size rig,
@@ -180,7 +233,10 @@ BAD = [
     (["--calib", "calib.yaml", "left/p1.png", "right"], "not a photo and a folder"),
     (["--calib", "missing.yaml", "left/p1.png", "right/p1.png"], "missing.yaml"),
     (["--calib", "garbage.png", "left/p1.png", "right/p1.png"], "garbage.png"),
-    (["--calib", "calib.yaml", "left/p1.png", "right/p1.png"], "no target was matched"),
+    (["--calib", ".", "left/p1.png", "right/p1.png"], "a folder; give the calibration file, e.g. "
+                                                        "--calib ./calib.yaml"),
+    (["--calib", "calib.yaml", "left/p1.png", "right/p1.png"],
+     "left/p1.png, right/p1.png: no target was matched"),
     (["--calib", "calib.yaml", "left", "right"], "no target was matched"),
     (["--calib", "calib.yaml", "left", "right", "--dense"], "--dense needs --depth-range"),
     (["--calib", "calib.yaml", "left", "right", "--dense", "--depth-range", "900,1100",

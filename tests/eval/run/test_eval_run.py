@@ -46,6 +46,12 @@ def test_report_fields_and_numbers(run_dir):
     assert methods["su"]["max_dp_mm"] > methods["optical_path"]["max_dp_mm"]
     assert set(report["timings_s"]) >= {"render", "detect", "match", "triangulate", "evaluate", "total"}
     assert report["variant"] and report["versions"]["numpy"]
+    # how each view was rendered: adaptively, with its lit fraction and samples
+    render = report["inputs"]["render"]["render"]
+    for view in ("left", "right"):
+        assert render[view]["mode"] == "adaptive" and 0 < render[view]["lit_fraction"] < 0.5
+        assert render[view]["samples_on_mask"] == SPP * render[view]["mask_pixels"]
+    assert "## Render" in (run_dir / "report.md").read_text()
 
 
 @pytest.mark.slow
