@@ -16,7 +16,8 @@ The spec uses the grammar of :mod:`synth.grid` (the one ``eval sweep`` uses)::
 
     [fixed]
     spp = 16                  # parameters: spp, sensor ("" none, or a preset of --sensor),
-    exr = false               # exr, and D.<name> (any <default> of the scenes, -D name=value)
+    exr = false               # exr, full_film (true: --full-film, no adaptive rendering), and
+                              # D.<name> (any <default> of the scenes, -D name=value)
 
     [grid]
     "D.target_z" = [600, 1000, 1500]
@@ -51,7 +52,7 @@ from synth.grid import (SpecError, canonical_json, check_defines, check_scene_pa
 COMMAND = "synth suite"
 TOP_KEYS = ("name", "description", "seed", "repeats", "scenes", "render", "render_width",
             "fixed", "grid", "zip", "random")
-PLAIN_PARAMETERS = ("spp", "sensor", "exr")
+PLAIN_PARAMETERS = ("spp", "sensor", "exr", "full_film")
 #: Parameters of board sequences (``render = "boards"``) only.
 BOARD_PARAMETERS = ("poses", "air", "squares", "square_mm")
 RENDERS = ("targets", "surface", "boards")
@@ -232,7 +233,7 @@ def _check_value(key: str, value, label: str):
         except (ValueError, BoardError) as exc:
             bad(f'"COLSxROWS" such as "11x8" ({exc})')
         return value
-    if key in ("exr", "air"):
+    if key in ("exr", "air", "full_film"):
         if not isinstance(value, bool):
             bad("true or false")
         return value
@@ -284,7 +285,8 @@ def render_task(task: dict) -> dict:
             tmp := tempfile.mkdtemp(prefix="refstereo-suite-"), "dataset")
         manifest = write_dataset(scene, target, spp=params.get("spp"), defines=task["defines"],
                                  exr=bool(params.get("exr", False)), progress=False,
-                                 seed=task["seed"], sensor=sensor)
+                                 seed=task["seed"], sensor=sensor,
+                                 adaptive=not params.get("full_film", False))
         files = None if direct else _read_files(target)
         return {"key": task["key"], "status": "ok", "error": None, "files": files,
                 "request_key": manifest["request_key"],
@@ -331,7 +333,7 @@ def _render_boards(task: dict, scene: str, started: float) -> dict:
         manifest = write_boards(spec, target, board, n_poses=int(params.get("poses",
                                                                              DEFAULT_POSES)),
                                 spp=spp, seed=task["seed"], air=bool(params.get("air", False)),
-                                progress=False)
+                                progress=False, adaptive=not params.get("full_film", False))
         files = None if direct else _read_files(target)
     finally:
         if tmp is not None:
