@@ -29,25 +29,19 @@ Writes to ``--out``: ``report.json``, ``report.md``, ``error_maps.png``, ``histo
 
 from __future__ import annotations
 
-import csv
 import os
 import sys
 import time
 
-import numpy as np
-
 from eval.cli import CLIError, positive_float
-from synth.cli import add_json_option, add_out_option
+from synth.cli import add_json_option, add_out_option, add_progress_option
 from eval.core.formatting import format_number as fmt
+from eval.core.scoring import (PIXEL_COLUMNS, UNITS, read_pixel_pairs, read_points,
+                               score_dataset)
+# the scoring functions, where they were before eval.core.scoring held them
+from eval.core.scoring import associate_points, default_gate_mm, plausibility  # noqa: F401
 
 COMMAND = "eval score"
-PIXEL_COLUMNS = ("u_left", "v_left", "u_right", "v_right")
-#: ``--units`` of ``--points``: millimetres per unit.
-UNITS = {"mm": 1.0, "m": 1000.0}
-#: Points closer than this to an earlier point count as repeats of it (mm).
-DUPLICATE_MM = 1e-6
-#: Most points the plausibility check looks at (an evenly spaced subsample beyond).
-PLAUSIBILITY_POINTS = 20_000
 
 
 def add_parser(subparsers):
@@ -57,8 +51,13 @@ def add_parser(subparsers):
         "score", help="score an external reconstruction against a rendered dataset",
         description="Score your own pipeline's points (or matched pixel pairs) against the "
                     "truth of a python -m synth dataset, with eval run's metrics.")
-    p.add_argument("dataset", help="dataset folder (python -m synth dataset)")
+    p.add_argument("dataset", help="dataset folder (python -m synth dataset), or a suite folder "
+                                   "(python -m synth suite) with --submission")
     source = p.add_mutually_exclusive_group(required=True)
+    source.add_argument("--submission", metavar="DIR",
+                        help="score a whole suite: DIR/<dataset folder>/ holds points.ply, "
+                             "points_<method>.ply or pairs.csv (targets), depth.pfm or depth.npy "
+                             "(surfaces); a missing or unreadable one counts as a failure")
     source.add_argument("--points", metavar="THEIRS.ply",
                         help="your 3D points, mm, in the dataset's reference frame")
     source.add_argument("--pixels", metavar="THEIRS.csv",
@@ -74,184 +73,7 @@ def add_parser(subparsers):
                         "unambiguous)")
     add_out_option(p, COMMAND, "out/score")
     add_json_option(p)
-
-
-def read_points(path) -> np.ndarray:
-    """``(N, 3)`` float64 points of a point-cloud file, read whole (a truncated file is
-    refused: :mod:`synth.cloudfile`); CLIError when unreadable, empty or not finite."""
-    from synth.cloudfile import CloudFileError, read_cloud_points
-
-    if not os.path.isfile(path):
-        raise CLIError(f"--points {path}: no such file")
-    try:
-        points = read_cloud_points(path)
-    except CloudFileError as exc:
-        raise CLIError(f"--points {exc}") from None
-    if points.shape[0] == 0:
-        raise CLIError(f"--points {path}: no points (not a point cloud Open3D can read, or empty)")
-    bad = ~np.all(np.isfinite(points), axis=1)
-    if bad.any():
-        raise CLIError(f"--points {path}: {int(bad.sum())} of {len(points)} points have NaN or "
-                       f"infinite coordinates (row {int(np.flatnonzero(bad)[0])} first)")
-    return points
-
-
-def read_pixel_pairs(path) -> np.ndarray:
-    """``(N, 4)`` ``u_left, v_left, u_right, v_right`` from a CSV with those columns (others
-    ignored); CLIError naming what is wrong."""
-    if not os.path.isfile(path):
-        raise CLIError(f"--pixels {path}: no such file")
-    with open(path, newline="") as fh:
-        reader = csv.DictReader(fh)
-        missing = [c for c in PIXEL_COLUMNS if c not in (reader.fieldnames or [])]
-        if missing:
-            raise CLIError(f"--pixels {path}: missing column(s) {', '.join(missing)} (needs "
-                           f"{', '.join(PIXEL_COLUMNS)})")
-        rows = []
-        for line, row in enumerate(reader, start=2):
-            try:
-                values = [float(row[c]) for c in PIXEL_COLUMNS]
-            except (TypeError, ValueError):
-                raise CLIError(f"--pixels {path}: line {line}: not a number in "
-                               f"{', '.join(PIXEL_COLUMNS)}") from None
-            if not np.all(np.isfinite(values)):
-                raise CLIError(f"--pixels {path}: line {line}: NaN or infinite pixel")
-            rows.append(values)
-    if not rows:
-        raise CLIError(f"--pixels {path}: no pixel pairs")
-    return np.asarray(rows, dtype=np.float64)
-
-
-def associate_points(points: np.ndarray, truth: np.ndarray, gate_mm: float) -> np.ndarray:
-    """Index of each point's true target ``(N,)``, −1 where none: the nearest target within
-    ``gate_mm``; when several points claim one target, the nearest keeps it."""
-    from scipy.spatial import cKDTree
-
-    distance, index = cKDTree(truth).query(points, distance_upper_bound=gate_mm)
-    order = np.argsort(distance, kind="stable")  # nearest first; misses (inf) last
-    order = order[np.isfinite(distance[order])]
-    winners = order[np.unique(index[order], return_index=True)[1]]
-    result = np.full(len(points), -1)
-    result[winners] = index[winners]
-    return result
-
-
-def default_gate_mm(truth: np.ndarray) -> float:
-    """Half the smallest distance between two of the targets ``truth`` ``(M, 3)`` (mm): a point
-    closer than that to a target is closer to it than to any other."""
-    from scipy.spatial import cKDTree
-
-    if len(truth) < 2:
-        return float("inf")
-    return float(cKDTree(truth).query(truth, k=2)[0][:, 1].min() / 2)
-
-
-def score_points(points: np.ndarray, truth: np.ndarray, visible_both: np.ndarray, gate_mm: float,
-                 seed: int):
-    """``(scores, per_method_arrays, association)`` of ``points`` against the true targets
-    ``truth`` ``(M, 3)``; Chamfer and F-scores against ``truth[visible_both]``."""
-    from eval.core.cloud_metrics import cloud_distances, flatness, rigid_alignment
-    from eval.core.results import ErrorStats, MethodScores
-
-    target = associate_points(points, truth, gate_mm)
-    ok = target >= 0
-    errors = points[ok] - truth[target[ok]]
-    scores = MethodScores(errors=ErrorStats.of(errors),
-                          cloud=cloud_distances(points, truth[visible_both]),
-                          alignment=rigid_alignment(points[ok], truth[target[ok]]),
-                          flatness=flatness(points, seed=seed), invalid=0)
-    arrays = {"points": points[ok], "truth": truth[target[ok]], "errors": errors,
-              "all_points": points}
-    association = {"points": int(len(points)), "associated": int(ok.sum()),
-                   "unassociated": int((~ok).sum()), "gate_mm": gate_mm,
-                   "visible_in_both": int(visible_both.sum()),
-                   "visible_in_both_scored": int(np.isin(np.flatnonzero(visible_both),
-                                                         target[ok]).sum())}
-    return scores, arrays, association
-
-
-def _fit(points: np.ndarray, truth: np.ndarray, gate_mm: float) -> tuple[int, float]:
-    """``(points associated with a target, RMS of their distances)`` (inf when none): one
-    point per target (:func:`associate_points`), so that a cloud shrunk onto one target counts
-    once."""
-    target = associate_points(points, truth, gate_mm)
-    ok = target >= 0
-    if not ok.any():
-        return 0, float("inf")
-    distance = np.linalg.norm(points[ok] - truth[target[ok]], axis=1)
-    return int(ok.sum()), float(np.sqrt(np.mean(distance ** 2)))
-
-
-def _rigid_shift(points: np.ndarray, truth: np.ndarray, tree, gate_mm: float) -> np.ndarray:
-    """The translation that best lays ``points`` on the targets: from centroid to centroid,
-    then refined a few times on the points that fall within the gate (mm)."""
-    shift = truth.mean(axis=0) - points.mean(axis=0)
-    for _ in range(5):
-        distance, index = tree.query(points + shift, distance_upper_bound=gate_mm)
-        near = np.isfinite(distance)
-        if not near.any():
-            break
-        shift = shift + (truth[index[near]] - (points[near] + shift)).mean(axis=0)
-    return shift
-
-
-#: Reflections and turns of the axes a submission may have been written in (label, diagonal).
-FRAMES = (("x negated", (-1, 1, 1)), ("y negated: a y-up frame?", (1, -1, 1)),
-          ("z negated", (1, 1, -1)), ("y and z negated: OpenGL axes, y up and z back?", (1, -1, -1)),
-          ("x and y negated: turned by 180 degrees about z?", (-1, -1, 1)))
-
-
-def plausibility(points: np.ndarray, truth: np.ndarray, gate_mm: float, units=None) -> list:
-    """Warnings (text, without the file) about a submission ``points`` (N, 3) mm scored against
-    the targets ``truth`` (M, 3) visible in both views: the likely cause when another scale
-    (metres), a reflection of the axes or a rigid shift lays the points on the targets
-    markedly better than as given, and repeated points. Empty when plausible."""
-    from scipy.spatial import cKDTree
-
-    warnings = []
-    points = np.asarray(points, dtype=np.float64)
-    if len(points) > 1:
-        pairs = cKDTree(points).query_pairs(DUPLICATE_MM, output_type="ndarray")
-        repeats = np.unique(pairs.max(axis=1)).size if len(pairs) else 0
-        if repeats:
-            warnings.append(f"{repeats} points repeat another point (within {DUPLICATE_MM:g} mm): "
-                            f"the same match written twice?")
-    if len(truth) == 0 or len(points) == 0:
-        return warnings
-    sample = points[::max(1, -(-len(points) // PLAUSIBILITY_POINTS))]
-    tree = cKDTree(truth)
-    given = _fit(sample, truth, gate_mm)
-    candidates = []
-    if units != "m":
-        candidates.append(("looks like metres (pass --units m)", sample * 1000.0, None))
-    else:
-        candidates.append(("looks like millimetres already (drop --units m)", sample / 1000.0,
-                           None))
-    candidates += [(f"looks reflected ({label})", sample * np.array(diagonal, float), None)
-                   for label, diagonal in FRAMES]
-    shift = _rigid_shift(sample, truth, tree, gate_mm)
-    candidates.append((f"looks offset by a rigid shift of ({shift[0]:+.1f}, {shift[1]:+.1f}, "
-                       f"{shift[2]:+.1f}) mm (another origin or frame?)", sample + shift, shift))
-    best = None
-    for label, moved, moved_by in candidates:
-        count, rms = _fit(moved, truth, gate_mm)
-        more = count >= given[0] + max(2, 0.05 * len(sample))
-        closer = count >= given[0] and count > 0 and rms < 0.5 * given[1]
-        if moved_by is not None:
-            # a frame's offset moves a cloud whole: the shift is large against the gate and
-            # the residual, and the shifted points lie on the targets (a wrong model, such as
-            # ignoring the port, is shifted too but not laid on them)
-            size = float(np.linalg.norm(moved_by))
-            if size < gate_mm / 4 or size < 5 * rms or rms > gate_mm / 4:
-                continue
-        if (more or closer) and (best is None or (count, -rms) > (best[1], -best[2])):
-            best = (label, count, rms)
-    if best is not None:
-        label, count, rms = best
-        as_given = (f"{given[0]}, RMS {given[1]:.3g} mm" if given[0] else "none")
-        warnings.insert(0, f"{label}: moved so, {count} of {len(sample)} points lie within "
-                           f"{gate_mm:g} mm of a target, RMS {rms:.3g} mm (as given: {as_given})")
-    return warnings
+    add_progress_option(p)
 
 
 def main(args) -> int:
@@ -259,7 +81,6 @@ def main(args) -> int:
     from synth.dataset import DatasetError, read_dataset
     from synth.fileio import OutputDir, atomic_write_json, atomic_write_text, jsonable
 
-    from eval.core.analytic import visible_targets
     from eval.core.cloud_metrics import write_error_ply
     from eval.core.figures import error_maps_figure, histograms_figure
 
@@ -273,6 +94,8 @@ def main(args) -> int:
                        "in mm (--units is the unit of --points)")
     method = args.method or "optical_path"
     output = OutputDir(args.out, COMMAND).claim()
+    if args.submission:
+        return score_suite_main(args, output, method, log, start)
     try:
         data = read_dataset(args.dataset)
     except DatasetError as exc:
@@ -294,21 +117,13 @@ def main(args) -> int:
         label = method
         source = {"pixels": os.path.abspath(args.pixels), "method": method,
                   "pairs": int(len(pairs)), "invalid": int((~result.valid).sum())}
-    radius = float(data.manifest["scene"].get("target_radius_mm", 0.0))
-    inside = [visible_targets(camera, data.rig.port, data.targets, radius)[1]
-              for camera in (data.rig.left, data.rig.right)]
-    visible_both = inside[0] & inside[1]
-    seed = int(data.manifest.get("seed", 0))
-    gate = default_gate_mm(data.targets) if args.gate_mm is None else args.gate_mm
-    warnings = plausibility(points, data.targets[visible_both], gate,
-                            units=source.get("units"))
+    report, arrays, warnings = score_dataset(data, points, label, args.gate_mm,
+                                             units=source.get("units"))
     if warnings:  # one line naming the likely cause; scored as given all the same
         what = f"--points {args.points}" if args.points else f"--pixels {args.pixels}"
         log(f"warning: {what}: " + "; ".join(warnings))
-    scores, arrays, association = score_points(points, data.targets, visible_both, gate, seed)
-    report = {"dataset": os.path.abspath(data.path), "source": source, "seed": seed,
-              "targets": int(len(data.targets)), "association": association,
-              "warnings": warnings, "methods": {label: scores.to_json()}}
+    report = {"dataset": report["dataset"], "source": source, **{k: v for k, v in report.items()
+                                                               if k != "dataset"}}
     with output.staged() as tmp:
         report["ply"] = write_error_ply(tmp, "points_scored.ply", arrays["points"],
                                         arrays["errors"])
@@ -335,6 +150,41 @@ def main(args) -> int:
         print(summary)
     print(f"wrote {output.path}", file=sys.stderr if args.json else sys.stdout)
     return 0
+
+
+def score_suite_main(args, output, method, log, start) -> int:
+    """``--submission DIR``: every dataset of the suite ``args.dataset`` scored; the summary
+    files into ``--out``; exit 1 when a dataset is missing or failed."""
+    from synth.fileio import atomic_write_json, jsonable
+
+    from eval.core.suite_scores import FAILURES, score_suite, write_summary
+
+    if args.units is not None:
+        raise CLIError("--units does not apply with --submission: the points of a submission "
+                       "are in mm (metres are detected and reported)")
+    info, rows = score_suite(args.dataset, args.submission, method, args.gate_mm,
+                             log=None if args.no_progress else log)
+    with output.staged() as tmp:
+        files = write_summary(tmp, info, rows, args.dataset, args.submission)
+        atomic_write_json(os.path.join(tmp, "summary.json"), jsonable(
+            {"suite": os.path.abspath(args.dataset), "submission":
+             os.path.abspath(args.submission), "method": method, "datasets": rows,
+             "timings_s": {"total": time.perf_counter() - start}}))
+    failed = [r for r in rows if r["status"] in FAILURES]
+    warned = [r for r in rows if r.get("warnings")]
+    for r in failed:
+        log(f"failure: {r['folder']} ({r['status']}): {r['error']}")
+    for r in warned:
+        log(f"warning: {r['folder']}: {r['warnings']}")
+    if args.json:
+        import json
+
+        print(json.dumps(jsonable(rows), indent=1))
+    print(f"{args.dataset}: {len(rows)} datasets, {len(rows) - len(failed)} scored, "
+          f"{len(failed)} missing or failed, {len(warned)} with warnings; wrote {output.path}/"
+          f"{', '.join(files[:3])} and {len(files) - 3} figure(s)",
+          file=sys.stderr if args.json else sys.stdout)
+    return 1 if failed else 0
 
 
 def markdown(report: dict) -> str:

@@ -17,6 +17,12 @@ A dataset directory holds (units mm, reference frame = the left camera's, OpenCV
   ``{left,right}_truth_points.npy`` (H, W, 3) float64 mm, ``{left,right}_truth_depth.npy``
   (H, W) float32 mm along the port normal, ``{left,right}_truth_valid.png`` and
   ``{left,right}_truth_overlap.png`` (8-bit masks);
+* ``cameras.json`` -- the same rig as plain JSON (both pose conventions named, units stated) and
+  ``colmap/`` -- a COLMAP text model (``cameras.txt`` with FLATPORT in metres, ``images.txt``,
+  ``points3D.txt``; COLMAP's pixels), since format 4 (:mod:`synth.exchange`); surface datasets
+  also ``{left,right}_truth_zdepth.pfm`` / ``.png`` (depth along each camera's z; the PNG's
+  scale in ``manifest["truth_formats"]``) and ``left_truth_flow.flo`` (left→right, NaN where
+  none);
 * ``targets.ply`` -- ground-truth target centres in target order (Open3D, binary doubles);
 * ``pixels.csv`` -- ``id,x,y,z,u_left,v_left,u_right,v_right``: the Fermat simulator's pixel of
   every target in each view (NaN where it has none; pixels outside the image are kept);
@@ -56,6 +62,7 @@ from measure.projection import project
 
 from synth.calib_formats import (CalibFormatError, calib_dict, calib_format, read_calibmar,
                                  read_colmap, stereo_extrinsics)
+from synth.exchange import write_cameras_json, write_colmap_model, write_surface_formats
 from synth.fileio import OutputDir, file_sha256, read_marker
 from synth.integrator import RENDERER
 from synth.provenance import package_versions
@@ -63,7 +70,8 @@ from synth.render import (pass_seed, png16_scale, render_stereo, srgb_preview, t
                           write_exr, write_png)
 from synth.scene import SceneError, SceneSpec, load_scene
 
-FORMAT_VERSION = 3  # 2: targets.ply in binary doubles (was ASCII, 6 digits); 3: hashes
+FORMAT_VERSION = 4  # 2: targets.ply in binary doubles (was ASCII, 6 digits); 3: hashes;
+#                    4: cameras.json, colmap/, surfaces' PFM / PNG depth and .flo (synth.exchange)
 PIXELS_HEADER = ["id", "x", "y", "z", "u_left", "v_left", "u_right", "v_right"]
 
 
@@ -371,13 +379,14 @@ def write_dataset(scene, out_dir, spp: int | None = None, defines: dict | None =
                 write_exr(os.path.join(tmp, f"{name}.exr"), img, info["variant"])
         times["write_images"] = time.perf_counter() - t
 
-        truth_counts = None
+        truth_counts = truth_formats = colmap_note = None
         if spec.surface is not None:
             from synth.truth_maps import write_truth_maps
 
             t = time.perf_counter()
             truth_counts = write_truth_maps(tmp, spec.rig, spec.surface.mesh_path,
                                             spec.surface.vertices, spec.surface.triangles)
+            truth_formats = write_surface_formats(tmp, spec.rig)
             times["truth_maps"] = time.perf_counter() - t
         else:
             t = time.perf_counter()
@@ -387,10 +396,16 @@ def write_dataset(scene, out_dir, spp: int | None = None, defines: dict | None =
 
         t = time.perf_counter()
         write_calib(os.path.join(tmp, "calib.yaml"), spec.rig, spec.has_port)
+        write_cameras_json(tmp, spec.rig, spec.has_port)
         if spec.surface is None:
             write_targets_ply(os.path.join(tmp, "targets.ply"), spec.targets)
             write_pixels_csv(os.path.join(tmp, "pixels.csv"), spec.target_ids, spec.targets,
                              uv_left, uv_right)
+            colmap_note = write_colmap_model(tmp, spec.rig, spec.has_port, spec.target_ids,
+                                             spec.targets, uv_left, uv_right)
+        else:
+            colmap_note = write_colmap_model(tmp, spec.rig, spec.has_port, [], np.zeros((0, 3)),
+                                             np.zeros((0, 2)), np.zeros((0, 2)))
         times["write_files"] = time.perf_counter() - t
         times["total"] = time.perf_counter() - t_start
 
@@ -423,9 +438,12 @@ def write_dataset(scene, out_dir, spp: int | None = None, defines: dict | None =
             "render": {"settings": adaptive_settings() if adaptive else None,
                        **{view: info["render"][view] for view in ("left", "right")}},
             "seconds": times,
-            "files": sorted(os.listdir(tmp)) + ["manifest.json"],
+            "truth_formats": truth_formats,
+            "colmap": ("colmap/: cameras.txt (FLATPORT, metres), images.txt, points3D.txt"
+                       if colmap_note is None else f"not written: {colmap_note}"),
+            "files": dataset_files(tmp) + ["manifest.json"],
             "sha256": {name: file_sha256(os.path.join(tmp, name))
-                       for name in sorted(os.listdir(tmp))},
+                       for name in dataset_files(tmp)},
         }
         manifest["manifest_sha256"] = manifest_digest(manifest)
         with open(os.path.join(tmp, "manifest.json"), "w") as fh:
@@ -434,6 +452,18 @@ def write_dataset(scene, out_dir, spp: int | None = None, defines: dict | None =
     manifest["skipped"] = False
     manifest["rendered_again"] = damage  # why an earlier output of this request was not whole
     return manifest
+
+
+def dataset_files(directory: str) -> list:
+    """Every file below ``directory`` (paths relative to it, ``/``-separated, sorted), hidden
+    files left out."""
+    out = []
+    for root, dirs, files in os.walk(directory):
+        dirs[:] = [d for d in dirs if not d.startswith(".")]
+        rel = os.path.relpath(root, directory)
+        out += [name if rel == "." else f"{rel}/{name}" for name in files
+                if not name.startswith(".")]
+    return sorted(out)
 
 
 @dataclass(frozen=True)

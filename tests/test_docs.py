@@ -43,7 +43,7 @@ PAGES = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
 PAGE_IDS = [str(p.relative_to(ROOT)) for p in PAGES]
 
 README_MAX_LINES = 300
-PATH_PREFIXES = ("scenes/", "sweeps/", "tools/", "docs/", "tests/", "measure/", "synth/", "eval/")
+PATH_PREFIXES = ("scenes/", "sweeps/", "suites/", "tools/", "docs/", "tests/", "measure/", "synth/", "eval/")
 PATH_NAMES = ("Makefile", "pyproject.toml")
 PLACEHOLDER_CHARS = set("*?[]{}<>…|")
 

@@ -136,15 +136,23 @@ def report_markdown(report: dict) -> str:
 
 
 def write_outputs(tmp: str, result) -> None:
-    """The PLY files (their entries go into ``result.report["ply"]``) and figures of a run
+    """The PLY files (their entries go into ``result.report["ply"]``; ``points_<method>_all.ply``
+    every valid point, wrong matches included) and figures of a run
     (:class:`eval.run.pipeline.RunResult`), into directory ``tmp``."""
     from eval.core.cloud_metrics import write_error_ply  # Open3D: only when writing
     from eval.core.figures import error_maps_figure, histograms_figure
     from eval.run.figures import views_figure
 
+    from synth.dataset import write_targets_ply
+
     result.report["ply"] = {method: write_error_ply(tmp, f"points_{method}.ply",
                                                     data["points"], data["errors"])
                             for method, data in result.per_method.items()}
+    # every triangulated point, wrong matches included (what the cloud metrics score): with
+    # eval score, a submission that gives back this run's numbers key by key
+    for method, data in result.per_method.items():
+        if "all_points" in data:
+            write_targets_ply(os.path.join(tmp, f"points_{method}_all.ply"), data["all_points"])
     views_figure(os.path.join(tmp, "views.png"), result.inputs.left, result.inputs.right, result)
     error_maps_figure(os.path.join(tmp, "error_maps.png"), result.per_method)
     histograms_figure(os.path.join(tmp, "histograms.png"), result.per_method)

@@ -20,68 +20,15 @@ travel with the tasks (bytes), so a cluster needs no shared file system.
 
 from __future__ import annotations
 
-import hashlib
 import os
 import tempfile
 import time
 import traceback
 
+from synth.cluster import scene_file, setup_worker
+
 #: Per worker process: scene files written, scenes parsed, projections computed.
 _CACHE: dict = {}
-_SETUP_DONE = False
-
-
-def _setup_worker() -> None:
-    """Once per process: as many Dr.Jit and OpenCV threads as the Dask worker has (1 in the
-    local cluster: one single-threaded worker process per core, no oversubscription)."""
-    global _SETUP_DONE
-    if _SETUP_DONE:
-        return
-    threads = 1
-    try:
-        from distributed import get_worker
-
-        threads = max(1, int(get_worker().state.nthreads))
-    except (ImportError, ValueError, AttributeError):
-        pass
-    import cv2
-
-    cv2.setNumThreads(threads)
-    try:
-        from synth.mitsuba_setup import import_mitsuba
-
-        import_mitsuba()
-        import drjit
-
-        drjit.set_thread_count(threads)
-    except Exception:  # no Mitsuba here: analytic cells still run (scene parsing will say why)
-        pass
-    _SETUP_DONE = True
-
-
-def scene_file(sha: str, data: bytes, original: str) -> str:
-    """A path on this machine holding the scene bytes: the original path when it holds the same
-    bytes, else a copy in the temporary directory named by the hash."""
-    cached = _CACHE.get(("file", sha))
-    if cached:
-        return cached
-    path = original
-    try:
-        with open(original, "rb") as handle:
-            same = hashlib.sha256(handle.read()).hexdigest() == sha
-    except OSError:
-        same = False
-    if not same:
-        directory = os.path.join(tempfile.gettempdir(), "refstereo-sweep-scenes")
-        os.makedirs(directory, exist_ok=True)
-        path = os.path.join(directory, f"{sha}.xml")
-        if not os.path.exists(path):
-            fd, tmp = tempfile.mkstemp(dir=directory, suffix=".tmp")
-            with os.fdopen(fd, "wb") as handle:
-                handle.write(data)
-            os.replace(tmp, path)
-    _CACHE[("file", sha)] = path
-    return path
 
 
 def value_text(value) -> str:
@@ -304,7 +251,7 @@ def run_cell(cell: dict, scenes: dict, save: tuple) -> dict:
 
 def run_batch(cells: list, scenes: dict, save: tuple = ()) -> list:
     """The Dask task: every cell of ``cells`` (dicts), in order; ``scenes`` ``{sha: bytes}``."""
-    _setup_worker()
+    setup_worker()
     return [run_cell(cell, scenes, tuple(save)) for cell in cells]
 
 

@@ -5,118 +5,26 @@ tables rebuilt every few seconds (:func:`execute`)."""
 
 from __future__ import annotations
 
-import os
-import re
 import sys
 import time
 
-from eval.cli import CLIError
 from eval.sweep.directory import SweepDir
 from eval.sweep.table import write_tables
 from synth import interrupt
+from synth.cluster import MAX_WORKERS_PER_CORE, check_address, default_workers
+from synth.cluster import connect as cluster_connect
 
 #: Seconds between two rebuilds of the tables while cells come in.
 TABLE_INTERVAL_S = 10.0
 #: Analytic cells per task when the spec does not say (and at most this many).
 MAX_CELLS_PER_TASK = 250
 
-
-def check_address(address: str) -> str:
-    if not re.fullmatch(r"(tcp|tls|inproc|ucx|ws|wss)://[^\s/]+(:\d+)?", address or ""):
-        raise CLIError(f"--scheduler {address!r}: expected an address like tcp://HOST:PORT")
-    return address
-
-
-#: Largest local cluster, in single-threaded workers per usable core (more only costs memory).
-MAX_WORKERS_PER_CORE = 4
-
-
-def _ignore_client_finalizer_errors() -> None:
-    """Silence the 'Exception ignored in Client.__del__' report of a client whose connection
-    failed half-way (the command is about to exit with its one error line)."""
-    previous = sys.unraisablehook
-
-    def hook(unraisable):
-        if "Client.__del__" not in getattr(getattr(unraisable, "object", None), "__qualname__", ""):
-            previous(unraisable)
-
-    sys.unraisablehook = hook
-
-
-def default_workers() -> int:
-    try:
-        return max(1, len(os.sched_getaffinity(0)))
-    except AttributeError:  # not Linux
-        return max(1, os.cpu_count() or 1)
-
-
 def connect(args):
     """``(client, cluster or None, description)``: the scheduler of ``--scheduler`` (CLIError
-    when it does not answer within ``--connect-timeout``), or a new local cluster."""
-    import logging
-
-    for name in ("distributed", "distributed.client", "distributed.comm", "tornado", "asyncio"):
-        logging.getLogger(name).setLevel(logging.CRITICAL)
-    from distributed import Client, LocalCluster
-
-    if args.scheduler:
-        timeout = args.connect_timeout
-        try:
-            client = Client(args.scheduler, timeout=f"{timeout}s", set_as_default=False)
-        except (OSError, TimeoutError) as exc:
-            raise CLIError(f"--scheduler {args.scheduler}: no Dask scheduler answered within "
-                           f"{timeout:g} s ({' '.join(str(exc).split())[:160]})") from None
-        except (MemoryError, ValueError, TypeError, EOFError) as exc:
-            # something answered, but not in Dask's protocol (its bytes read as a message
-            # length ask for exabytes); the half-built client complains again when collected
-            _ignore_client_finalizer_errors()
-            raise CLIError(f"--scheduler {args.scheduler}: what answers there is not a Dask "
-                           f"scheduler ({type(exc).__name__})") from None
-        try:
-            client.wait_for_workers(1, timeout=max(timeout, 30.0))
-        except (OSError, TimeoutError):
-            client.close()
-            raise CLIError(f"--scheduler {args.scheduler}: the scheduler has no worker "
-                           f"(start some with: dask worker {args.scheduler} --nthreads 1)") from None
-        except KeyboardInterrupt:
-            with interrupt.deferred():
-                client.close()
-            raise
-        try:
-            client.run(_probe_worker)
-        except KeyboardInterrupt:
-            with interrupt.deferred():
-                client.close()
-            raise
-        except Exception as exc:
-            client.close()
-            raise CLIError(f"--scheduler {args.scheduler}: a worker cannot run sweep cells "
-                           f"({type(exc).__name__}: {' '.join(str(exc).split())[:160]}); "
-                           f"install this project where the workers run") from None
-        n = len(client.scheduler_info(n_workers=-1)["workers"])
-        return client, None, f"{n} worker(s) of {args.scheduler}"
-    workers = args.workers or default_workers()
-    if workers > MAX_WORKERS_PER_CORE * default_workers():
-        raise CLIError(f"--workers {workers}: at most {MAX_WORKERS_PER_CORE} single-threaded "
-                       f"workers per core ({MAX_WORKERS_PER_CORE * default_workers()} here); "
-                       f"for more, run a cluster and pass --scheduler")
-    # Started whole, SIGINT held back (synth.interrupt.deferred): Dask's threads and the worker
-    # processes they spawn inherit SIGINT blocked, so a Ctrl-C in the terminal reaches this
-    # process only, which closes them (their tracebacks, Mitsuba's "winding down" on stdout and a
-    # render cut short are no longer possible).
-    cluster = client = None
-    try:
-        with interrupt.deferred(processes=True):
-            cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                                   dashboard_address=":0", silence_logs=logging.CRITICAL)
-            client = Client(cluster, set_as_default=False)
-    except BaseException:  # Ctrl-C held back until the cluster stood: close it again
-        with interrupt.deferred():
-            for started in (client, cluster):
-                if started is not None:
-                    started.close()
-        raise
-    return client, cluster, f"{workers} local single-threaded worker(s)"
+    when it does not answer within ``--connect-timeout``, has no worker, or its workers cannot
+    run sweep cells), or a new local cluster (:func:`synth.cluster.connect`)."""
+    return cluster_connect(args.scheduler, args.workers, args.connect_timeout, _probe_worker,
+                           "sweep cells")
 
 
 def _probe_worker():

@@ -4,8 +4,9 @@ written as ``results.parquet`` and ``results.csv``."""
 
 from __future__ import annotations
 
-import os
 import re
+
+from synth.tables import write_table
 
 #: Columns that differ from run to run of the same cell (left out when comparing tables).
 TIMING_COLUMNS = re.compile(r"^(seconds$|timings_s\.)")
@@ -48,27 +49,8 @@ def table_columns(spec, rows: list) -> list:
 
 def write_tables(directory: str, spec, records: dict) -> int:
     """``results.parquet`` and ``results.csv`` from the records; returns the number of rows."""
-    import pyarrow as pa
-    import pyarrow.csv as pa_csv
-    import pyarrow.parquet as pq
-
     rows = table_rows(spec, records)
-    columns = table_columns(spec, rows)
-    arrays = {}
-    for name in columns:
-        values = [row.get(name) for row in rows]
-        kinds = {type(v) for v in values if v is not None}
-        if kinds <= {int, float} and int in kinds and float in kinds:
-            values = [None if v is None else float(v) for v in values]
-        elif len(kinds) > 1:
-            values = [None if v is None else str(v) for v in values]
-        arrays[name] = pa.array(values, type=None if kinds else pa.null())
-    table = pa.table(arrays)
-    for name, writer in (("results.parquet", pq.write_table), ("results.csv", pa_csv.write_csv)):
-        tmp = os.path.join(directory, f".{name}.{os.getpid()}.tmp")
-        writer(table, tmp)
-        os.chmod(tmp, 0o644)
-        os.replace(tmp, os.path.join(directory, name))
+    write_table(directory, "results", rows, table_columns(spec, rows))
     return len(rows)
 
 

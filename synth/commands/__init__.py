@@ -5,6 +5,7 @@ Subcommands::
     python -m synth scene   --layout paper --z 1000 --out scenes/paper_plane.xml [options]
     python -m synth render  SCENE --out DIR [--spp N] [--variant V] [--exr] [-D name=value ...]
     python -m synth dataset SCENE --out DIR [--spp N] [--variant V] [--exr] [-D name=value ...]
+    python -m synth suite   SPEC.toml --out DIR [--workers N | --scheduler tcp://HOST:PORT]
     python -m synth boards  SCENE --out DIR [--poses 15] [--board chessboard|charuco]
                             [--squares 11x8] [--square-mm 40] [--seed S] [--air]
     python -m synth check   DIR [--rms PX] [--max PX] [--json]
@@ -28,11 +29,11 @@ matplotlib, SciPy) stay inside the functions so that ``--help`` stays fast.
 from __future__ import annotations
 
 from synth.cli import Parser, command_parser, process_main, run_command
-from synth.commands import boards, check, dataset, photos, render, scene
+from synth.commands import boards, check, dataset, photos, render, scene, suite
 
 PROG = "python -m synth"
 #: The command modules, in the order ``--help`` lists them.
-COMMANDS = (scene, render, dataset, boards, photos, check)
+COMMANDS = (scene, render, dataset, suite, boards, photos, check)
 
 
 def build_parser() -> Parser:

@@ -1,0 +1,157 @@
+"""``python -m synth suite SPEC.toml --out DIR [--workers N | --scheduler tcp://HOST:PORT]``:
+render a benchmark suite — one dataset per entry of the spec — on Dask workers
+(:mod:`synth.suite`, the grammar of :mod:`synth.grid`, the cluster of :mod:`synth.cluster`).
+
+Resumable: a rerun does only the entries without a whole dataset; each dataset appears whole
+(written by :func:`synth.dataset.write_dataset`). A write that fails (a full disk) or an
+unreachable scheduler ends with one ``error:`` line; the datasets finished are kept."""
+
+from __future__ import annotations
+
+import sys
+import time
+import uuid
+
+from synth import interrupt
+from synth.cli import (CLIError, add_out_option, add_progress_option, positive_float, positive_int,
+                       refuse_given)
+
+
+def add_parser(subparsers) -> None:
+    p = subparsers.add_parser(
+        "suite", help="render a benchmark suite: one dataset per entry of a spec, on Dask",
+        description="Expand SPEC.toml (the grammar of eval sweep: grid, zip, seeded random "
+                    "samples over scenes and their -D parameters, spp, sensor) into entries and "
+                    "render one dataset per entry into DIR/<folder>/ on dask.distributed; write "
+                    "DIR/index.parquet, index.csv, suite.json and README.md. Resumable.")
+    p.add_argument("spec", help="suite spec (TOML; see suites/ and docs/suites.md)")
+    add_out_option(p, "synth suite", rule="updated in place dataset by dataset, so that a killed "
+                   "suite keeps what it finished; an existing one is used only if it is an "
+                   "earlier output of synth suite with the same spec")
+    p.add_argument("--scheduler", metavar="ADDRESS",
+                   help="submit to a running Dask scheduler (tcp://HOST:PORT) instead of "
+                        "starting a local cluster")
+    p.add_argument("--workers", type=positive_int, default=None, metavar="N",
+                   help="local cluster: N single-threaded worker processes (default: one per "
+                        "core)")
+    p.add_argument("--connect-timeout", type=positive_float, default=5.0, metavar="S",
+                   help="seconds to wait for --scheduler to answer (default 5)")
+    p.add_argument("--retry-failed", action="store_true",
+                   help="render again the entries that failed in an earlier run")
+    add_progress_option(p)
+
+
+def main(args) -> int:
+    from synth.cluster import check_address, connect
+    from synth.suite import (SuiteDir, load_suite_spec, probe, write_index, write_readme,
+                             write_suite_json)
+
+    start = time.perf_counter()
+    if args.scheduler is None:
+        refuse_given(args, ["connect_timeout"], "without --scheduler (the local cluster is "
+                                                "started here, nothing is connected to)")
+    else:
+        check_address(args.scheduler)
+        if args.workers is not None:
+            raise CLIError("--workers sets the size of the local cluster; with --scheduler the "
+                           "cluster's workers render the datasets")
+    spec = load_suite_spec(args.spec)
+    out = SuiteDir(args.out)
+    previous = out.check()
+    if previous and previous.get("spec_hash") not in (None, spec.spec_hash()):
+        out.open(spec, previous, "")  # refuses, one line
+    records = out.finished(spec) if previous is not None else {}
+    todo = [e for e in spec.entries if e.key not in records
+            or (args.retry_failed and records[e.key].get("status") != "ok")]
+    token = uuid.uuid4().hex
+    client = cluster = None
+    where, ran, compute = "nothing to render", 0, 0.0
+    runs = list((previous or {}).get("runs", []))
+    try:
+        if todo:
+            client, cluster, where = connect(args.scheduler, args.workers, args.connect_timeout,
+                                             probe, "suite datasets")
+        out.open(spec, previous, token)
+        runs.append({"run_id": token[:12], "started": time.strftime("%Y-%m-%dT%H:%M:%S"),
+                     "datasets_to_render": len(todo), "where": where})
+        if todo:
+            try:
+                ran, compute = _execute(client, spec, todo, out, records, token,
+                                        not args.no_progress)
+            except OSError as exc:  # a full disk, a folder that vanished: what finished stays
+                done = sum(1 for r in records.values() if r.get("status") == "ok")
+                raise CLIError(f"--out {args.out}: cannot write "
+                               f"({exc.strerror or exc}{': ' + exc.filename if exc.filename else ''}"
+                               f"); the {done} dataset(s) finished are kept: rerun to resume"
+                               ) from None
+    finally:
+        with interrupt.deferred():
+            if client is not None:
+                client.close()
+            if cluster is not None:
+                cluster.close()
+    interrupt.check()
+    rows = write_index(out.path, spec, records)
+    runs[-1].update({"datasets_rendered": ran, "seconds": time.perf_counter() - start,
+                     "compute_seconds": compute})
+    write_suite_json(out.path, spec, records, runs)
+    write_readme(out.path, spec, rows)
+    failed = [r for r in rows if r["status"] != "ok"]
+    elapsed = time.perf_counter() - start
+    per = f" ({compute / ran:.2f} s per dataset)" if ran else ""
+    print(f"suite {spec.name}: {len(spec.entries)} datasets: {len(spec.entries) - len(todo)} "
+          f"done before, {ran} rendered now on {where} in {elapsed:.1f} s{per}; {len(failed)} "
+          f"failed{' (see the error column of index.csv)' if failed else ''}; wrote "
+          f"{out.display}/index.parquet, index.csv, suite.json, README.md")
+    for row in failed[:5]:
+        print(f"  {row['folder']}: {row['error']}", file=sys.stderr)
+    return 1 if failed else 0
+
+
+def _execute(client, spec, todo, out, records, token, progress) -> tuple[int, float]:
+    import os
+
+    from distributed import as_completed
+    from tqdm import tqdm
+
+    from synth.suite import render_task
+
+    started = time.perf_counter()
+    futures = {}
+    for entry in todo:
+        scene = spec.scenes[entry.scene]
+        task = {"key": entry.key, "render": entry.render, "scene_sha": scene.sha256, "scene_data": scene.data,
+                "scene_path": scene.path, "params": entry.params, "defines": entry.defines,
+                "seed": entry.seed, "out": os.path.join(out.path, entry.folder), "token": token}
+        futures[client.submit(render_task, task, pure=False, key=f"suite-{entry.key}")] = entry
+    bar = tqdm(total=len(todo), unit="dataset", desc="suite", file=sys.stderr,
+               disable=True if not progress else None)
+    ran = 0
+    try:
+        for future in as_completed(futures, loop=client.loop):
+            interrupt.check()
+            entry = futures.pop(future)
+            try:
+                result = future.result()
+            except Exception as exc:  # the task itself failed (a worker died, …)
+                result = {"key": entry.key, "status": "failed",
+                          "error": f"{type(exc).__name__}: {' '.join(str(exc).split())}"}
+            if result.get("write_error"):  # a full disk: stop, keep what finished
+                raise OSError(f"{entry.folder}: {result['error']}")
+            files = result.pop("files", None)
+            if result["status"] == "ok" and files is not None:
+                out.write_dataset_files(entry.folder, files, result["request_key"], entry.render)
+            record = {**result, "folder": entry.folder}
+            with interrupt.deferred():
+                out.write_record(record)
+            records[entry.key] = record
+            ran += 1
+            bar.update(1)
+    finally:
+        bar.close()
+        for future in futures:
+            future.cancel()
+    return ran, time.perf_counter() - started
+
+
+__all__ = ["add_parser", "main"]

@@ -1,0 +1,160 @@
+"""python -m eval score SUITE --submission DIR: the project's own baseline (eval run's clouds)
+scored per dataset equals eval run key by key; a missing dataset is a listed failure; a
+submission in metres or in another frame is detected and said so. A suite of two 320 x 268
+datasets at 4 spp."""
+
+from __future__ import annotations
+
+import json
+import shutil
+
+import numpy as np
+import pyarrow.parquet as pq
+import pytest
+
+from eval.cli import main
+from eval.core.suite_scores import aggregate, find_submission
+from synth.commands import main as synth_main
+from tests.conftest import REPO
+
+SPEC = f"""
+name = "score-me"
+seed = 1
+scenes = ["{REPO / 'scenes' / 'small_grid.xml'}"]
+render = "targets"
+render_width = 320
+
+[fixed]
+spp = 4
+
+[grid]
+"D.target_z" = [1000, 1200]
+"""
+
+
+@pytest.fixture(scope="module")
+def baseline(tmp_path_factory):
+    root = tmp_path_factory.mktemp("suite_scores")
+    (root / "spec.toml").write_text(SPEC)
+    suite, sub = root / "suite", root / "sub"
+    assert synth_main(["suite", str(root / "spec.toml"), "--out", str(suite), "--workers", "1",
+                       "--no-progress"]) == 0
+    index = pq.read_table(suite / "index.parquet").to_pylist()
+    reports = {}
+    for row in index:  # the project scores itself: eval run's output folder is the submission
+        run = sub / row["folder"]
+        assert main(["run", str(REPO / "scenes" / "small_grid.xml"), "--from",
+                     str(suite / row["folder"]), "--out", str(run), "--no-progress"]) == 0
+        reports[row["folder"]] = json.loads((run / "report.json").read_text())
+    return suite, sub, index, reports
+
+
+@pytest.mark.slow
+def test_the_baseline_scores_equal_eval_run_key_by_key(baseline, tmp_path):
+    suite, sub, index, reports = baseline
+    out = tmp_path / "scores"
+    assert main(["score", str(suite), "--submission", str(sub), "--out", str(out),
+                 "--no-progress"]) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    assert [r["folder"] for r in summary["datasets"]] == [r["folder"] for r in index]
+    for row in summary["datasets"]:
+        assert row["status"] == "ok" and row["submission"].endswith("points_optical_path_all.ply")
+        ours = reports[row["folder"]]["methods"]["optical_path"]
+        assert set(row["scores"]) == set(ours)
+        for key, value in ours.items():
+            assert row["scores"][key] == value, (row["folder"], key)
+    table = pq.read_table(out / "summary.parquet").to_pylist()
+    assert [r["row"] for r in table].count("dataset") == 2
+    assert any(r["row"] == "aggregate" and r["group"] == "D.target_z" for r in table)
+    assert (out / "summary.csv").is_file() and "## Aggregated" in (out / "summary.md").read_text()
+    assert (out / "figures" / "error_vs_D.target_z.png").stat().st_size > 1000
+
+
+@pytest.mark.slow
+def test_missing_metres_and_offset_submissions_are_failures_and_warnings(baseline, tmp_path,
+                                                                         capsys):
+    from synth.cloudfile import read_cloud_points
+
+    suite, sub, index, _ = baseline
+    mine = tmp_path / "mine"
+    first, second = index[0]["folder"], index[1]["folder"]
+    (mine / first).mkdir(parents=True)
+    import open3d as o3d
+
+    points = read_cloud_points(str(sub / first / "points_optical_path.ply"))
+    cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points / 1000.0))  # metres
+    o3d.io.write_point_cloud(str(mine / first / "points.ply"), cloud)
+    out = tmp_path / "scores"
+    capsys.readouterr()
+    assert main(["score", str(suite), "--submission", str(mine), "--out", str(out),
+                 "--no-progress"]) == 1
+    err = capsys.readouterr().err
+    assert f"failure: {second} (missing)" in err
+    assert f"warning: {first}: looks like metres" in err
+    md = (out / "summary.md").read_text()
+    assert "1 missing or failed" in md and second in md and "looks like metres" in md
+    # another frame: shifted by 200 mm
+    shutil.rmtree(mine / first)
+    (mine / first).mkdir()
+    cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points + [200.0, 0.0, 0.0]))
+    o3d.io.write_point_cloud(str(mine / first / "points.ply"), cloud)
+    assert main(["score", str(suite), "--submission", str(mine), "--out", str(out),
+                 "--no-progress"]) == 1
+    assert "rigid shift" in capsys.readouterr().err
+
+
+def test_find_submission_prefers_points_then_the_methods_cloud_then_pairs(tmp_path):
+    assert find_submission(str(tmp_path), "targets", "su") is None
+    (tmp_path / "pairs.csv").write_text("u_left,v_left,u_right,v_right\n")
+    assert find_submission(str(tmp_path), "targets", "su")[0] == "pairs"
+    (tmp_path / "points_su.ply").write_text("")
+    assert find_submission(str(tmp_path), "targets", "su")[1].endswith("points_su.ply")
+    (tmp_path / "points_su_all.ply").write_text("")
+    assert find_submission(str(tmp_path), "targets", "su")[1].endswith("points_su_all.ply")
+    (tmp_path / "points.ply").write_text("")
+    assert find_submission(str(tmp_path), "targets", "su")[1].endswith("points.ply")
+    assert find_submission(str(tmp_path), "surface", "su") is None
+
+
+def test_aggregate_counts_failures_and_takes_the_worst():
+    rows = [{"status": "ok", "p": 1, "rms_dp_mm": 0.1, "fscore_1mm": 0.9, "mean_dz_mm": -0.5},
+            {"status": "ok", "p": 2, "rms_dp_mm": 0.3, "fscore_1mm": 0.7, "mean_dz_mm": 0.2},
+            {"status": "missing", "p": 2}]
+    out = {(a["group"], a["value"]): a for a in aggregate(rows, ["p"])}
+    everything = out[("all", None)]
+    assert everything["scored"] == 2 and everything["failed"] == 1
+    assert everything["rms_dp_mm.worst"] == 0.3 and everything["fscore_1mm.worst"] == 0.7
+    assert everything["mean_dz_mm.worst"] == -0.5
+    assert np.isclose(everything["rms_dp_mm.mean"], 0.2)
+    assert out[("p", "2")]["failed"] == 1 and out[("p", "2")]["rms_dp_mm.median"] == 0.3
+
+
+@pytest.mark.slow
+def test_a_surface_suite_scored_with_its_own_truth_depth_is_exact(tmp_path, capsys):
+    from synth.exchange import read_pfm, write_pfm
+
+    spec = tmp_path / "surfaces.toml"
+    spec.write_text(f'scenes = ["{REPO / "scenes" / "speckle_tilted.xml"}"]\n'
+                    f'render = "surface"\nrender_width = 96\n[fixed]\nspp = 2\n')
+    suite, sub = tmp_path / "suite", tmp_path / "sub"
+    assert synth_main(["suite", str(spec), "--out", str(suite), "--workers", "1",
+                       "--no-progress"]) == 0
+    folder = pq.read_table(suite / "index.parquet").to_pylist()[0]["folder"]
+    (sub / folder).mkdir(parents=True)
+    write_pfm(str(sub / folder / "depth.pfm"),
+              read_pfm(str(suite / folder / "left_truth_zdepth.pfm")))
+    out = tmp_path / "scores"
+    assert main(["score", str(suite), "--submission", str(sub), "--out", str(out),
+                 "--no-progress"]) == 0
+    row = json.loads((out / "summary.json").read_text())["datasets"][0]
+    assert row["status"] == "ok" and row["measured_fraction"] == 1.0
+    assert row["p2m_max_mm"] < 1e-3  # float32 depths of ~1 m: ~3e-5 mm steps
+
+
+def test_swept_values_are_in_numeric_order():
+    from eval.core.suite_scores import distinct_values
+
+    rows = [{"z": 2000}, {"z": 600}, {"z": 1000}, {"z": 600.0}, {"z": None}]
+    assert distinct_values(rows, "z") == [600, 1000, 2000, None]
+    groups = [a["value"] for a in aggregate([{"status": "ok", **r} for r in rows[:3]], ["z"])]
+    assert groups == [None, "600", "1000", "2000"]
