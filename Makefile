@@ -11,9 +11,9 @@ setup:
 lint: setup
 	$(PY) -m ruff check .
 
-# the whole suite, the renders included (about 7 minutes on 2 cores)
+# the whole suite, the renders included, on two processes (about 5 minutes on 2 cores)
 test: lint
-	$(PY) -m pytest
+	$(PY) -m pytest -n 2
 
 # everything that does not render with Mitsuba (the `slow` marker), on two processes: about a minute
 test-fast: lint
