@@ -45,6 +45,22 @@ def default_workers() -> int:
         return max(1, os.cpu_count() or 1)
 
 
+def _probe(client, run, probe, message) -> None:
+    """``run(probe)`` (``client.run`` on the workers or ``client.run_on_scheduler``); on failure
+    the client is closed and :class:`CLIError` ``message(why)`` raised (Ctrl-C closes it and is
+    raised again)."""
+    try:
+        run(probe)
+    except KeyboardInterrupt:
+        with interrupt.deferred():
+            client.close()
+        raise
+    except Exception as exc:
+        client.close()
+        raise CLIError(message(f"{type(exc).__name__}: {' '.join(str(exc).split())[:160]}")) \
+            from None
+
+
 def connect(scheduler: str | None, workers: int | None, timeout: float, probe, what: str):
     """``(client, cluster or None, description)``: the scheduler at ``scheduler`` (CLIError
     when it does not answer within ``timeout`` seconds, has no worker after
@@ -79,29 +95,14 @@ def connect(scheduler: str | None, workers: int | None, timeout: float, probe, w
             with interrupt.deferred():
                 client.close()
             raise
-        try:
-            client.run(probe)
-        except KeyboardInterrupt:
-            with interrupt.deferred():
-                client.close()
-            raise
-        except Exception as exc:
-            client.close()
-            raise CLIError(f"--scheduler {scheduler}: a worker cannot run {what} "
-                           f"({type(exc).__name__}: {' '.join(str(exc).split())[:160]}); "
-                           f"install this project where the workers run") from None
-        try:  # the scheduler unpickles the tasks too: it needs the project as well
-            client.run_on_scheduler(probe)
-        except KeyboardInterrupt:
-            with interrupt.deferred():
-                client.close()
-            raise
-        except Exception as exc:
-            client.close()
-            raise CLIError(f"--scheduler {scheduler}: the scheduler cannot import what the "
-                           f"{what} need ({type(exc).__name__}: "
-                           f"{' '.join(str(exc).split())[:160]}); install this project where "
-                           f"the scheduler runs too") from None
+        _probe(client, client.run, probe,
+               lambda why: f"--scheduler {scheduler}: a worker cannot run {what} ({why}); "
+                           f"install this project where the workers run")
+        # the scheduler unpickles the tasks too: it needs the project as well
+        _probe(client, client.run_on_scheduler, probe,
+               lambda why: f"--scheduler {scheduler}: the scheduler cannot import what the "
+                           f"{what} need ({why}); install this project where the scheduler "
+                           f"runs too")
         n = len(client.scheduler_info(n_workers=-1)["workers"])
         return client, None, f"{n} worker(s) of {scheduler}"
     workers = workers or default_workers()
