@@ -155,29 +155,32 @@ def write_outputs(tmp: str, result) -> None:
         if "all_points" in data:
             write_targets_ply(os.path.join(tmp, f"points_{method}_all.ply"), data["all_points"])
     maps = os.path.join(tmp, "error_maps.png")
-    with _beside(error_maps_figure, maps, result.per_method):  # the largest figure, in parallel
+    histograms = os.path.join(tmp, "histograms.png")
+    with _beside((error_maps_figure, maps, result.per_method),
+                 (histograms_figure, histograms, result.per_method)):
         views_figure(os.path.join(tmp, "views.png"), result.inputs.left, result.inputs.right,
                      result)
-        histograms_figure(os.path.join(tmp, "histograms.png"), result.per_method)
 
 
 @contextlib.contextmanager
-def _beside(function, *args):
-    """Run ``function(*args)`` in a forked process while the body runs (matplotlib holds the
-    GIL: the error maps drew for ~1.5 s on one core while the other was idle); its exception,
-    if any, is raised here. Without ``fork`` (or with one CPU) it simply runs first."""
+def _beside(*calls):
+    """Run each ``(function, *args)`` of ``calls`` in a forked process while the body runs
+    (matplotlib holds the GIL: one figure at a time per process); their exceptions, if any,
+    are raised here. Without ``fork`` (or with one CPU) they simply run first."""
     import multiprocessing
 
     if "fork" not in multiprocessing.get_all_start_methods() or (os.cpu_count() or 1) < 2:
-        function(*args)
+        for function, *args in calls:
+            function(*args)
         yield
         return
     from concurrent.futures import ProcessPoolExecutor
 
-    with ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("fork")) as pool:
-        future = pool.submit(function, *args)
+    with ProcessPoolExecutor(len(calls), mp_context=multiprocessing.get_context("fork")) as pool:
+        futures = [pool.submit(function, *args) for function, *args in calls]
         yield
-        future.result()
+        for future in futures:
+            future.result()
 
 
 def verdict_lines(report: dict) -> list:
