@@ -40,6 +40,10 @@ MARKER_SCHEMA = 1
 _STAGING = re.compile(r"^\.(?P<name>.+)\.(?P<kind>staging|trash)-(?P<pid>\d+)-[A-Za-z0-9_]+$")
 
 
+#: Name of a temporary file of :func:`atomic_write_bytes` (left behind only by a killed process).
+TEMPORARY_FILE = re.compile(r"^\..+\.tmp$")
+
+
 class OutputError(ValueError):
     """An output path that cannot be used (a user error: the CLIs print it and exit with 2)."""
 
@@ -327,6 +331,37 @@ def jsonable(value):
     return value
 
 
+def claim_in_place(path, lock_name: str, refuse, roots, marker: dict, spec_text: str,
+                   token: str | None = None):
+    """Take over a directory that a command updates in place (``eval sweep``, ``synth
+    suite``): lock ``path/lock_name`` exclusively (``refuse(why)`` raises when another process
+    holds it; ``token``, if given, is written into the lock file), remove the temporary files
+    a killed run left in ``roots``, write the output ``marker`` (the project, schema and the
+    given fields) and ``spec.toml`` (``spec_text``). Returns the open lock file: the lock lasts
+    as long as it stays open."""
+    import fcntl
+
+    lock = open(os.path.join(path, lock_name), "a+", encoding="utf-8")
+    try:
+        fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError:
+        lock.close()
+        refuse(f"is being written by another {marker['command'].split()[-1]}")
+    if token is not None:
+        lock.seek(0)
+        lock.truncate()
+        lock.write(token + "\n")
+        lock.flush()
+    for root in roots:
+        for name in os.listdir(root):
+            if TEMPORARY_FILE.match(name):
+                os.unlink(os.path.join(root, name))
+    atomic_write_json(os.path.join(path, MARKER_NAME),
+                      {"project": PROJECT_NAME, "schema": MARKER_SCHEMA, **marker})
+    atomic_write_text(os.path.join(path, "spec.toml"), spec_text)
+    return lock
+
+
 def check_file_output(path, option: str, may_replace=None) -> str:
     """Check a single output file before the work: its directory exists and is writable, and an
     existing file is replaced only if ``may_replace(path)`` says it is ours. Returns the path."""
@@ -344,7 +379,6 @@ def check_file_output(path, option: str, may_replace=None) -> str:
     return path
 
 
-__all__ = ["MARKER_NAME", "OutputDir", "OutputError", "atomic_create_bytes", "atomic_write_bytes",
-           "atomic_write_json", "atomic_write_text", "check_file_output", "file_sha256", "jsonable",
-           "read_marker",
-           "remove_stale_staging"]
+__all__ = ["MARKER_NAME", "OutputDir", "OutputError", "TEMPORARY_FILE", "atomic_create_bytes",
+           "atomic_write_bytes", "atomic_write_json", "atomic_write_text", "check_file_output",
+           "claim_in_place", "file_sha256", "jsonable", "read_marker", "remove_stale_staging"]

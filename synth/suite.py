@@ -66,7 +66,6 @@ TOP_LEVEL = ("suite.json", "spec.toml", "README.md", "index.parquet", "index.csv
 TIMING_COLUMNS = ("render_seconds",)
 FOLDER = re.compile(r"^\d{3,}_[A-Za-z0-9_.-]+_[0-9a-f]{8}$")
 _STAGING = re.compile(r"^\..+\.(staging|trash)-\d+-[A-Za-z0-9_]+$")
-_TMP = re.compile(r"^\..+\.tmp$")
 
 
 @dataclass(frozen=True)
@@ -396,7 +395,7 @@ class SuiteDir:
     def check(self) -> dict | None:
         """The rule (no writes): the earlier suite's ``suite.json`` (``{}`` if unreadable) or
         None when ``DIR`` is new or empty."""
-        from synth.fileio import MARKER_NAME, directory_problem, read_marker
+        from synth.fileio import MARKER_NAME, TEMPORARY_FILE, directory_problem, read_marker
 
         problem = directory_problem(self.path)
         if problem:
@@ -410,10 +409,10 @@ class SuiteDir:
             self._refuse("exists and holds files this command did not write")
         for name in sorted(os.listdir(self.path)):
             full = os.path.join(self.path, name)
-            ours = (name in TOP_LEVEL or name == MARKER_NAME or _TMP.match(name)
+            ours = (name in TOP_LEVEL or name == MARKER_NAME or TEMPORARY_FILE.match(name)
                     or _STAGING.match(name) or (FOLDER.match(name) and os.path.isdir(full)))
             if name == "entries" and os.path.isdir(full):
-                ours = all(re.fullmatch(r"[0-9a-f]{20}\.json", n) or _TMP.match(n)
+                ours = all(re.fullmatch(r"[0-9a-f]{20}\.json", n) or TEMPORARY_FILE.match(n)
                            for n in os.listdir(full))
             if not ours:
                 self._refuse(f"exists and holds files this command did not write ({name})")
@@ -426,10 +425,8 @@ class SuiteDir:
     def open(self, spec: SuiteSpec, previous: dict | None, token: str) -> None:
         """Create or reuse ``DIR`` for ``spec`` (another spec's suite is refused), lock it and
         write the marker and ``spec.toml``."""
-        import fcntl
-
         from synth.fileio import (MARKER_NAME, MARKER_SCHEMA, PROJECT_NAME, atomic_write_json,
-                                  atomic_write_text)
+                                  claim_in_place)
 
         if previous and previous.get("spec_hash") not in (None, spec.spec_hash()):
             self._refuse(f"holds a suite of another spec ({previous.get('spec_path', '?')}); "
@@ -440,24 +437,10 @@ class SuiteDir:
             atomic_write_json(marker, {"project": PROJECT_NAME, "schema": MARKER_SCHEMA,
                                        "command": COMMAND, "files": sorted(TOP_LEVEL)})
         os.makedirs(self.entries, exist_ok=True)
-        self._lock = open(os.path.join(self.path, ".suite.lock"), "a+", encoding="utf-8")
-        try:
-            fcntl.flock(self._lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except OSError:
-            self._refuse("is being written by another suite")
-        self._lock.seek(0)
-        self._lock.truncate()
-        self._lock.write(token + "\n")
-        self._lock.flush()
-        for root in (self.path, self.entries):
-            for name in os.listdir(root):
-                if _TMP.match(name):
-                    os.unlink(os.path.join(root, name))
-        atomic_write_json(os.path.join(self.path, MARKER_NAME),
-                          {"project": PROJECT_NAME, "schema": MARKER_SCHEMA, "command": COMMAND,
-                           "files": sorted(TOP_LEVEL),
-                           "note": "updated in place dataset by dataset (synth suite)"})
-        atomic_write_text(os.path.join(self.path, "spec.toml"), spec.text)
+        self._lock = claim_in_place(
+            self.path, ".suite.lock", self._refuse, (self.path, self.entries),
+            {"command": COMMAND, "files": sorted(TOP_LEVEL),
+             "note": "updated in place dataset by dataset (synth suite)"}, spec.text, token)
 
     def finished(self, spec: SuiteSpec) -> dict:
         """``{key: record}`` of the entries whose record says ok and whose dataset folder is

@@ -20,7 +20,6 @@ COMMAND = "eval sweep"
 TOP_LEVEL = ("sweep.json", "spec.toml", "cells", "files", "figures", "results.parquet",
              "results.csv", "completions.log", ".sweep.lock")
 _KEY = re.compile(r"^[0-9a-f]{20}$")
-_TMP = re.compile(r"^\..+\.tmp$")
 
 
 class SweepDir:
@@ -67,16 +66,16 @@ class SweepDir:
 
     @staticmethod
     def _ours(rel: str) -> bool:
-        from synth.fileio import MARKER_NAME
+        from synth.fileio import MARKER_NAME, TEMPORARY_FILE
 
         parts = rel.split(os.sep)
         top = parts[0]
         if len(parts) == 1:
-            return top in TOP_LEVEL or top == MARKER_NAME or bool(_TMP.match(top))
+            return top in TOP_LEVEL or top == MARKER_NAME or bool(TEMPORARY_FILE.match(top))
         if top == "cells":
             name = parts[1]
             return len(parts) == 2 and (bool(_KEY.match(name[:-5])) and name.endswith(".json")
-                                        or bool(_TMP.match(name)))
+                                        or bool(TEMPORARY_FILE.match(name)))
         if top == "files":
             return bool(_KEY.match(parts[1])) and len(parts) <= 3
         if top == "figures":
@@ -85,9 +84,7 @@ class SweepDir:
 
     def open(self, spec, allow_changed: bool, previous: dict | None) -> None:
         """Create or reuse the directory for ``spec``; lock it against a second sweep."""
-        import fcntl
-
-        from synth.fileio import MARKER_NAME, MARKER_SCHEMA, PROJECT_NAME, atomic_write_json
+        from synth.fileio import claim_in_place
 
         if previous and previous.get("spec_hash") not in (None, spec.spec_hash()):
             if not allow_changed:
@@ -95,22 +92,10 @@ class SweepDir:
                              f"hash {str(previous.get('spec_hash'))[:12]}); use "
                              f"--allow-changed-spec to reuse the cells both specs share")
         os.makedirs(self.cells, exist_ok=True)
-        self._lock = open(os.path.join(self.path, ".sweep.lock"), "a")
-        try:
-            fcntl.flock(self._lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except OSError:
-            self._refuse("is being written by another sweep")
-        for root in (self.path, self.cells):  # temporary files of a killed sweep
-            for name in os.listdir(root):
-                if _TMP.match(name):
-                    os.unlink(os.path.join(root, name))
-        atomic_write_json(os.path.join(self.path, MARKER_NAME),
-                          {"project": PROJECT_NAME, "schema": MARKER_SCHEMA, "command": COMMAND,
-                           "files": sorted(TOP_LEVEL),
-                           "note": "updated in place cell by cell (eval sweep)"})
-        from synth.fileio import atomic_write_text
-
-        atomic_write_text(os.path.join(self.path, "spec.toml"), spec.text)
+        self._lock = claim_in_place(
+            self.path, ".sweep.lock", self._refuse, (self.path, self.cells),
+            {"command": COMMAND, "files": sorted(TOP_LEVEL),
+             "note": "updated in place cell by cell (eval sweep)"}, spec.text)
 
     def write_state(self, spec, runs: list) -> None:
         from synth.fileio import atomic_write_json
