@@ -134,7 +134,7 @@ def measure_accuracy(spec, spp_list, variant, log, adaptive: bool = False):
     from eval.run.inputs import RunInputs
     from eval.run.pipeline import crosscheck_stage
     from measure import detect_targets
-    from synth.crosscheck import DETECT_FLOOR_FRACTION
+    from measure.detect import FLOOR_FRACTION
     from synth.render import render_stereo
 
     rows = []
@@ -147,7 +147,7 @@ def measure_accuracy(spec, spp_list, variant, log, adaptive: bool = False):
                            spec.target_radius, left, right, spec.params, info["variant"], spp,
                            seconds, spec.seed, {}, spec.target_normals)
         crosscheck = crosscheck_stage(inputs, {
-            view: detect_targets(image, floor_fraction=DETECT_FLOOR_FRACTION)
+            view: detect_targets(image, floor_fraction=FLOOR_FRACTION)
             for view, image in (("left", left), ("right", right))})[3]
         rows.append({"spp": spp, "adaptive": adaptive, "mode": views["left"]["mode"],
                      "passes": info["passes"]["left"], "seconds": seconds,

@@ -15,15 +15,6 @@ from measure.detect import FLOOR_FRACTION
 
 #: Pixels between a detection and the simulator's pixel of a target for them to be associated.
 ASSOCIATION_GATE_PX = 2.0
-#: Threshold floor (fraction of the targets' level, ``measure.detect_targets(floor_fraction=)``)
-#: with which rendered images are detected (``synth check``, ``eval run`` without
-#: ``--threshold-fraction``). On a render's exactly black background the noise threshold is
-#: 1e-6 of the peak, and a single Monte Carlo sample of a ghost (two reflections inside the
-#: glass: 1/spp of the target level) in the 3.7-px gap between two targets of the paper plane's
-#: innermost circle joined them into one blob (2 of 496 lost at 100 spp seed 0 and at 144 spp
-#: seed 1, docs/speed.md); a floor of 5 % keeps such samples out above 20 spp and left the
-#: centroids where they were (0.0066 → 0.0067 px RMS; the centroid window still takes the rim).
-DETECT_FLOOR_FRACTION = FLOOR_FRACTION
 
 
 def associate_detections(detected, expected, gate_px: float = ASSOCIATION_GATE_PX):
@@ -111,7 +102,7 @@ def check_dataset(path, rms_px: float = CHECK_RMS_PX, max_px: float = CHECK_MAX_
     all_found = True
     for name, img, camera, expected in (("left", data.left, data.rig.left, data.pixels_left),
                                         ("right", data.right, data.rig.right, data.pixels_right)):
-        det = detect_targets(img, floor_fraction=DETECT_FLOOR_FRACTION)
+        det = detect_targets(img, floor_fraction=FLOOR_FRACTION)
         inside = wholly_in_image(camera, expected, data.targets, radius)
         idx, dist = associate_detections(det.centers, expected, gate_px)
         matched = idx >= 0

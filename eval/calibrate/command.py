@@ -97,6 +97,18 @@ def _write_report(directory, report: dict, markdown, start: float) -> dict:
     return report
 
 
+def _write_calibrations(directory, rig, housing, report: dict, start_rig) -> None:
+    """The calibration files (:func:`eval.calibrate.report.write_calibration`) into
+    ``directory``; underwater (``start_rig`` given: the in-air cameras with the design port)
+    also ``calib_in_air_only.yaml``."""
+    from eval.calibrate import report as report_lib
+
+    report_lib.write_calibration(directory, rig, start_rig is not None, housing, report)
+    if housing is not None:
+        report_lib.write_calibration(os.path.join(directory, "calib_in_air_only.yaml"),
+                                     start_rig, True, None, None, single=True)
+
+
 def _written(output, summary: str, args, has_port: bool) -> int:
     """Print the water index's note, the summary and what was written; exit code 0."""
     _print_n_water_note(args)
@@ -261,10 +273,7 @@ def main(args) -> int:
     report["timings_s"] = timings
     log("write the calibration, report and figures …")
     with output.staged() as tmp:
-        report_lib.write_calibration(tmp, rig, not boards.air, housing, report)
-        if housing is not None:
-            report_lib.write_calibration(os.path.join(tmp, "calib_in_air_only.yaml"),
-                                         start_rig, True, None, None, single=True)
+        _write_calibrations(tmp, rig, housing, report, None if boards.air else start_rig)
         report_lib.figures(tmp, boards, detections, housing, rig)
         report = _write_report(tmp, report, report_lib.markdown, start)
     return _written(output, report_lib.summary_lines(report), args, housing is not None)
@@ -398,10 +407,8 @@ def _calibrate_photos(args, output, log, free, start) -> int:
     report["timings_s"] = timings
     log("write the calibration, report and figures …")
     with output.staged() as tmp:
-        report_lib.write_calibration(tmp, rig, not args.air, housing, report)
+        _write_calibrations(tmp, rig, housing, report, None if args.air else start_rig)
         if housing is not None:
-            report_lib.write_calibration(os.path.join(tmp, "calib_in_air_only.yaml"),
-                                         start_rig, True, None, None, single=True)
             report_lib.residual_figure(tmp, used_detections, housing, size)
         trust.coverage_figure(tmp, detections, set(used), size, report)
         report = _write_report(tmp, report, trust.markdown, start)

@@ -37,7 +37,6 @@ DEFAULT_METHODS = ("optical_path",)
 DEFAULT_GATE_MM = 0.5
 #: Default ``--floor-fraction``: JPEG ringing around a target is 2-5 % of its level
 #: (docs/datasets.md); the automatic threshold stays above it.
-DEFAULT_FLOOR_FRACTION = FLOOR_FRACTION
 
 
 def add_parser(subparsers):
@@ -69,7 +68,7 @@ def add_parser(subparsers):
     add_detector_options(p)
     p.add_argument("--floor-fraction", type=floor_fraction, default=None, metavar="F",
                    help=f"the automatic detection threshold is at least F of the way from the "
-                        f"background to the targets' level (default {DEFAULT_FLOOR_FRACTION:g}: "
+                        f"background to the targets' level (default {FLOOR_FRACTION:g}: "
                         f"keeps JPEG ringing out of the targets; 0: no floor)")
     add_encoding_option(p)
     p.add_argument("--dense", action="store_true",
@@ -130,7 +129,7 @@ def options_of(args):
     return TargetOptions(methods, DEFAULT_GATE_MM if args.gate_mm is None else args.gate_mm,
                          depth_range or (None, None),
                          **{d: getattr(args, d) for d in DETECTOR_OPTIONS},
-                         floor_fraction=DEFAULT_FLOOR_FRACTION if args.floor_fraction is None
+                         floor_fraction=FLOOR_FRACTION if args.floor_fraction is None
                          else args.floor_fraction)
 
 

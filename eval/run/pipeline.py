@@ -15,12 +15,11 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from measure import triangulate
-from measure.detect import (MERGE_AREA_RATIO as DEFAULT_MAX_AREA_RATIO,
+from measure.detect import (FLOOR_FRACTION, MERGE_AREA_RATIO as DEFAULT_MAX_AREA_RATIO,
                             MERGE_ELONGATION as DEFAULT_MAX_ELONGATION)
 from measure.eccentricity import correct_eccentricity, outline_centroid_offsets
 from measure.matching import match_targets
-from synth.crosscheck import (ASSOCIATION_GATE_PX, DETECT_FLOOR_FRACTION, associate_detections,
-                              distance_stats)
+from synth.crosscheck import ASSOCIATION_GATE_PX, associate_detections, distance_stats
 from synth.noise import add_pixel_noise
 
 from eval.core.detection import detect_view
@@ -66,7 +65,7 @@ def detect_stage(inputs: RunInputs, noise_px: float, threshold_fraction: float |
     that would otherwise pull the centroids; 0 (default): no filter."""
     def detect(image):
         return detect_view(image, threshold_fraction, max_elongation, max_area_ratio,
-                           median_filter, floor_fraction=DETECT_FLOOR_FRACTION)
+                           median_filter, floor_fraction=FLOOR_FRACTION)
 
     detections = {"left": detect(inputs.left), "right": detect(inputs.right)}
     centers = {name: np.array(d.centers, dtype=float).reshape(-1, 2)
