@@ -228,6 +228,19 @@ def add_full_film_option(parser) -> None:
     parser.add_argument("--full-film", action="store_true", help=FULL_FILM_HELP)
 
 
+def add_cluster_options(parser) -> None:
+    """``--scheduler``, ``--workers`` and ``--connect-timeout``: where the Dask tasks of
+    ``eval sweep`` and ``synth suite`` run (:func:`synth.cluster.connect`)."""
+    parser.add_argument("--scheduler", metavar="ADDRESS",
+                        help="submit to a running Dask scheduler (tcp://HOST:PORT) instead of "
+                             "starting a local cluster")
+    parser.add_argument("--workers", type=positive_int, default=None, metavar="N",
+                        help="local cluster: N single-threaded worker processes (default: one "
+                             "per core)")
+    parser.add_argument("--connect-timeout", type=positive_float, default=5.0, metavar="S",
+                        help="seconds to wait for --scheduler to answer (default 5)")
+
+
 def add_progress_option(parser) -> None:
     """``--no-progress`` (alias ``--quiet``) into ``args.no_progress``."""
     parser.add_argument("--no-progress", "--quiet", dest="no_progress", action="store_true",
@@ -420,7 +433,7 @@ def process_main(main) -> None:
     sys.exit(code)
 
 
-__all__ = ["BOARD_OPTIONS", "DEFAULT_BOARD", "add_board_options", "board_from_args",
+__all__ = ["BOARD_OPTIONS", "DEFAULT_BOARD", "add_board_options", "add_cluster_options", "board_from_args",
            "DEFINE_HELP", "DISTRIBUTION", "EXIT_BAD_INPUT", "EXIT_CHECK_FAILED",
            "EXIT_INTERRUPTED", "EXIT_OK", "JSON_HELP", "NO_PROGRESS_HELP", "SCENE_HELP",
            "add_define_option", "add_json_option", "add_out_option", "add_progress_option",

@@ -29,12 +29,12 @@ import os
 import time
 import uuid
 
-from eval.cli import CLIError, positive_float, positive_int
+from eval.cli import CLIError
 from eval.sweep.cluster import check_address, connect, execute
 from eval.sweep.directory import COMMAND, SweepDir
 from eval.sweep.table import table_rows, write_tables
 from synth import interrupt
-from synth.cli import add_out_option, add_progress_option, refuse_given
+from synth.cli import add_cluster_options, add_out_option, add_progress_option, refuse_given
 
 
 def add_parser(subparsers):
@@ -48,14 +48,7 @@ def add_parser(subparsers):
     add_out_option(parser, COMMAND, rule="updated in place cell by cell, so that a killed sweep "
                    "keeps what it finished; an existing one is used only if it is an earlier "
                    "output of eval sweep")
-    parser.add_argument("--scheduler", metavar="ADDRESS",
-                        help="submit to a running Dask scheduler (tcp://HOST:PORT) instead of "
-                             "starting a local cluster")
-    parser.add_argument("--workers", type=positive_int, default=None, metavar="N",
-                        help="local cluster: N single-threaded worker processes (default: one "
-                             "per core)")
-    parser.add_argument("--connect-timeout", type=positive_float, default=5.0, metavar="S",
-                        help="seconds to wait for --scheduler to answer (default 5)")
+    add_cluster_options(parser)
     parser.add_argument("--allow-changed-spec", action="store_true",
                         help="reuse an output written with another spec (its cells that the new "
                              "spec shares are kept; the tables hold the new spec's cells)")

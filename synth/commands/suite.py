@@ -13,8 +13,7 @@ import time
 import uuid
 
 from synth import interrupt
-from synth.cli import (CLIError, add_out_option, add_progress_option, positive_float, positive_int,
-                       refuse_given)
+from synth.cli import (CLIError, add_cluster_options, add_out_option, add_progress_option, refuse_given)
 
 
 def add_parser(subparsers) -> None:
@@ -28,14 +27,7 @@ def add_parser(subparsers) -> None:
     add_out_option(p, "synth suite", rule="updated in place dataset by dataset, so that a killed "
                    "suite keeps what it finished; an existing one is used only if it is an "
                    "earlier output of synth suite with the same spec")
-    p.add_argument("--scheduler", metavar="ADDRESS",
-                   help="submit to a running Dask scheduler (tcp://HOST:PORT) instead of "
-                        "starting a local cluster")
-    p.add_argument("--workers", type=positive_int, default=None, metavar="N",
-                   help="local cluster: N single-threaded worker processes (default: one per "
-                        "core)")
-    p.add_argument("--connect-timeout", type=positive_float, default=5.0, metavar="S",
-                   help="seconds to wait for --scheduler to answer (default 5)")
+    add_cluster_options(p)
     p.add_argument("--retry-failed", action="store_true",
                    help="render again the entries that failed in an earlier run")
     add_progress_option(p)
