@@ -86,13 +86,14 @@ def stereo_extrinsics(left: Camera, right: Camera) -> tuple[np.ndarray, np.ndarr
 def calib_dict(size, K1, D1, K2, D2, R, T, port: FlatPort, has_port: bool,
                where: str = "calibration") -> dict:
     """The dictionary :func:`synth.dataset.read_calib` returns: ``size``, ``K1``, ``D1``, ``K2``,
-    ``D2``, ``R``, ``T`` (OpenCV's stereo pose, 3x1), ``port``, ``has_port`` and ``rig`` (the
-    left camera at the reference origin); ``where`` (the file) starts a CalibFormatError."""
+    ``D2``, ``R``, ``T`` (OpenCV's stereo pose, 3x1), ``port``, ``has_port``, ``rig`` (the
+    left camera at the reference origin) and ``covariance`` (None here; ``calib.yaml`` may
+    hold one); ``where`` (the file) starts a CalibFormatError."""
     out = {"size": (int(size[0]), int(size[1])),
            "K1": np.asarray(K1, dtype=np.float64), "D1": np.asarray(D1, dtype=np.float64),
            "K2": np.asarray(K2, dtype=np.float64), "D2": np.asarray(D2, dtype=np.float64),
            "R": np.asarray(R, dtype=np.float64), "T": np.asarray(T, dtype=np.float64),
-           "port": port, "has_port": bool(has_port)}
+           "port": port, "has_port": bool(has_port), "covariance": None}
     if out["R"].shape != (3, 3) or out["T"].size != 3:
         raise CalibFormatError(f"{where}: R must be 3x3 and T 3x1")
     left = Camera(out["K1"], out["size"], dist=out["D1"].ravel())

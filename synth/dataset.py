@@ -103,9 +103,12 @@ def _write_node(fs, name: str, value) -> None:
         fs.write(name, float(value))
 
 
-def write_calib(path, rig: StereoRig, has_port: bool = True, extra: dict | None = None) -> None:
+def write_calib(path, rig: StereoRig, has_port: bool = True, extra: dict | None = None,
+                covariance=None) -> None:
     """Write ``calib.yaml`` (see module docs) with ``cv2.FileStorage``; ``extra`` adds maps
-    (e.g. ``uncertainty``) of numbers, strings, lists and maps after the standard nodes."""
+    (e.g. ``uncertainty``) of numbers, strings, lists and maps after the standard nodes;
+    ``covariance`` (:class:`measure.rig_covariance.RigCovariance`) a ``covariance`` node:
+    ``names`` (a sequence of parameter names), ``matrix`` (P x P), ``normal_axes`` (2 x 3)."""
     left, right = rig.left, rig.right
     R, T = stereo_extrinsics(left, right)
     fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_WRITE)
@@ -130,6 +133,13 @@ def write_calib(path, rig: StereoRig, has_port: bool = True, extra: dict | None 
                 fs.write("", float(v))
             fs.endWriteStruct()
         fs.endWriteStruct()
+        if covariance is not None:
+            fs.startWriteStruct("covariance", cv2.FileNode_MAP)
+            _write_node(fs, "names", list(covariance.names))
+            fs.write("matrix", covariance.matrix)
+            if covariance.normal_axes is not None:
+                fs.write("normal_axes", covariance.normal_axes)
+            fs.endWriteStruct()
         for name, value in (extra or {}).items():
             _write_node(fs, name, value)
     finally:
@@ -192,10 +202,32 @@ def _read_calib(path) -> dict:
                                tuple(_seq(pnode.getNode("indices"))))
         present = pnode.getNode("present")
         out["has_port"] = bool(present.real()) if not present.empty() else True
+        covariance = _read_covariance(path, fs.getNode("covariance"))
     finally:
         fs.release()
-    return calib_dict(out["size"], out["K1"], out["D1"], out["K2"], out["D2"], out["R"],
-                      out["T"], out["port"], out["has_port"], str(path))
+    calib = calib_dict(out["size"], out["K1"], out["D1"], out["K2"], out["D2"], out["R"],
+                       out["T"], out["port"], out["has_port"], str(path))
+    calib["covariance"] = covariance
+    return calib
+
+
+def _read_covariance(path, node):
+    """The ``covariance`` node as a :class:`measure.rig_covariance.RigCovariance`, or None when
+    the file has none; DatasetError naming the file when it is malformed, singular or not
+    positive definite."""
+    from measure.rig_covariance import CovarianceError, RigCovariance
+
+    if node.empty():
+        return None
+    names_node = node.getNode("names")
+    names = ([names_node.at(i).string() for i in range(names_node.size())]
+             if names_node.isSeq() else [])
+    matrix = node.getNode("matrix").mat()
+    axes = node.getNode("normal_axes").mat()
+    try:
+        return RigCovariance(names, np.zeros((0, 0)) if matrix is None else matrix, axes)
+    except CovarianceError as exc:
+        raise DatasetError(f"{path}: covariance: {exc}") from None
 
 
 # ---------------------------------------------------------------------------------------------

@@ -18,7 +18,7 @@ from synth.calib_formats import (CALIBMAR_NAME, COLMAP_CAMERAS_NAME, COLMAP_RIG_
 from synth.dataset import DatasetError, read_calib, write_calib
 from synth.rig import air_port, paper_rig
 
-KEYS = ("size", "K1", "D1", "K2", "D2", "R", "T", "port", "has_port", "rig")
+KEYS = ("size", "K1", "D1", "K2", "D2", "R", "T", "port", "has_port", "rig", "covariance")
 
 
 def _rig(dist_left=(0.1, -0.02, 0.001, -0.002, 0.0), dist_right=(-0.1, 0.02, 0.0, 0.001, 0.0),
