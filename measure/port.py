@@ -16,7 +16,7 @@ import numpy as np
 from .camera import ValueEquality
 
 
-def _as_vector(value, name: str) -> tuple[float, ...]:
+def as_vector(value, name: str) -> tuple[float, ...]:
     """A sequence of numbers as a tuple of floats; one-line ValueError naming ``name``."""
     try:
         array = np.asarray(value, dtype=np.float64)
@@ -46,7 +46,7 @@ class FlatPort(ValueEquality):
     indices: tuple[float, ...]
 
     def __init__(self, normal, distance, thicknesses, indices):
-        normal = np.asarray(_as_vector(normal, "normal"))
+        normal = np.asarray(as_vector(normal, "normal"))
         if normal.shape != (3,) or not np.all(np.isfinite(normal)):
             raise ValueError(f"normal must be a finite 3-vector, got {normal.tolist()}")
         length = np.linalg.norm(normal)
@@ -58,10 +58,10 @@ class FlatPort(ValueEquality):
             raise ValueError(f"distance must be a number, got {distance!r}") from None
         if not np.isfinite(distance):
             raise ValueError(f"distance must be finite, got {distance}")
-        thicknesses = _as_vector(thicknesses, "thicknesses") if np.size(thicknesses) else ()
+        thicknesses = as_vector(thicknesses, "thicknesses") if np.size(thicknesses) else ()
         if any(not np.isfinite(d) or d <= 0 for d in thicknesses):
             raise ValueError(f"thicknesses must be positive and finite, got {thicknesses}")
-        indices = _as_vector(indices, "indices")
+        indices = as_vector(indices, "indices")
         if len(indices) != len(thicknesses) + 2:
             raise ValueError(
                 f"indices must hold len(thicknesses) + 2 = {len(thicknesses) + 2} values "

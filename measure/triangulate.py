@@ -23,6 +23,7 @@ import numpy as np
 from .camera import Camera
 from .lines import common_perpendicular
 from .camera import ValueEquality
+from .dome import DomePair
 from .port import FlatPort, index_matched_port
 from .batching import map_row_chunks
 from .reasons import Reason
@@ -34,7 +35,9 @@ METHODS = ("optical_path", "su", "regular", "reprojection")
 
 @dataclass(frozen=True, eq=False)
 class StereoRig(ValueEquality):
-    """Two cameras behind one flat port. Both centres must be on the air side of the port.
+    """Two cameras behind one flat port, or each inside its own dome (``port`` a
+    :class:`measure.dome.DomePair`). Both centres must be on the air side of the port (inside
+    their domes).
 
     ``port=None`` means no port (all air): it is replaced by :func:`index_matched_port` along
     the left camera's optical axis, through which everything reduces to the pinhole model."""
@@ -49,10 +52,24 @@ class StereoRig(ValueEquality):
         if self.port is None:
             object.__setattr__(self, "port", index_matched_port(
                 self.left.R[:, 2], np.stack([self.left.center, self.right.center])))
+        if isinstance(self.port, DomePair):
+            self.port.left.check_camera(self.left.center, "left camera")
+            self.port.right.check_camera(self.right.center, "right camera")
+            return
         if not isinstance(self.port, FlatPort):
-            raise ValueError("port must be a measure.FlatPort or None")
+            raise ValueError("port must be a measure.FlatPort, a measure.dome.DomePair or None")
         self.port.check_camera(self.left.center, "left camera")
         self.port.check_camera(self.right.center, "right camera")
+
+    @property
+    def is_dome(self) -> bool:
+        """Whether each camera looks through its own dome (``port`` is a DomePair)."""
+        return isinstance(self.port, DomePair)
+
+    def port_of(self, view: int):
+        """The port camera ``view`` (0 left, 1 right) looks through: the shared FlatPort, or
+        that camera's DomePort."""
+        return self.port[view] if self.is_dome else self.port
 
     @property
     def cameras(self) -> tuple[Camera, Camera]:

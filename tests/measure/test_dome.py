@@ -1,0 +1,60 @@
+"""measure.dome: the dome port's parameters, its rig and the backward trace."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from measure import StereoRig
+from measure.dome import DomePair, DomePort, trace_through_dome
+from synth.rig import paper_rig
+
+INDICES = (1.0, 1.49, 1.33)
+
+
+def _directions(n=200, seed=0):
+    rng = np.random.default_rng(seed)
+    v = rng.normal(size=(n, 3))
+    v[:, 2] = np.abs(v[:, 2]) + 0.5
+    return v / np.linalg.norm(v, axis=1)[:, None]
+
+
+def test_a_centred_dome_bends_no_ray_from_its_centre():
+    dome = DomePort((1.0, -2.0, 3.0), 50.0, 8.0, INDICES)
+    rays = trace_through_dome(dome.center, _directions(), dome)
+    np.testing.assert_allclose(rays.directions, _directions(), atol=1e-15)
+    np.testing.assert_allclose(np.linalg.norm(rays.origins - dome.center, axis=1), 58.0,
+                               rtol=1e-15)
+
+
+def test_a_decentred_dome_obeys_snell_at_both_spheres():
+    dome = DomePort((2.0, -1.0, 1.5), 50.0, 8.0, INDICES)
+    d = _directions()
+    rays = trace_through_dome(np.zeros(3), d, dome)
+    headings = [d, None, rays.directions]
+    inner, outer = rays.interface_points
+    mid = (outer - inner) / np.linalg.norm(outer - inner, axis=1)[:, None]
+    headings[1] = mid
+    for k, point in enumerate((inner, outer)):
+        normal = (point - dome.center) / dome.radii[k]
+        np.testing.assert_allclose(np.linalg.norm(point - dome.center, axis=1), dome.radii[k],
+                                   rtol=1e-14)
+        sin_in = np.linalg.norm(np.cross(headings[k], normal), axis=1)
+        sin_out = np.linalg.norm(np.cross(headings[k + 1], normal), axis=1)
+        np.testing.assert_allclose(INDICES[k] * sin_in, INDICES[k + 1] * sin_out, atol=1e-14)
+        # coplanar: incident, refracted and normal in one plane
+        np.testing.assert_allclose(np.einsum("ij,ij->i", np.cross(headings[k], normal),
+                                             headings[k + 1]), 0.0, atol=1e-14)
+    assert np.abs(rays.directions - d).max() > 1e-3
+
+
+def test_bad_domes_and_cameras_outside_are_refused():
+    for radius, thickness in ((0.0, 5.0), (50.0, -1.0), (np.nan, 5.0)):
+        with pytest.raises(ValueError, match="positive"):
+            DomePort((0, 0, 0), radius, thickness, INDICES)
+    rig = paper_rig()
+    inside = DomePort(rig.left.center, 50.0, 8.0, INDICES)
+    with pytest.raises(ValueError, match="right camera centre lies outside its dome"):
+        StereoRig(rig.left, rig.right, DomePair(inside, inside))
+    pair = DomePair(inside, inside.replace(center=rig.right.center))
+    assert StereoRig(rig.left, rig.right, pair).port_of(1) is pair.right
