@@ -56,8 +56,8 @@ def add_parser(subparsers):
     source = p.add_mutually_exclusive_group(required=True)
     source.add_argument("--submission", metavar="DIR",
                         help="score a whole suite: DIR/<dataset folder>/ holds points.ply, "
-                             "points_<method>.ply or pairs.csv (targets), depth.pfm or depth.npy "
-                             "(surfaces); a missing or unreadable one counts as a failure")
+                             "points_<method>.ply or pairs.csv (targets), depth.pfm, depth.npy "
+                             "or points.ply (surfaces); a missing or unreadable one counts as a failure")
     source.add_argument("--points", metavar="THEIRS.ply",
                         help="your 3D points, mm, in the dataset's reference frame")
     source.add_argument("--pixels", metavar="THEIRS.csv",

@@ -605,7 +605,7 @@ Fixed: {fixed}. Every dataset's parameters, seed and render time: `index.csv` /
 Put your pipeline's output per dataset in a folder `SUB/<folder>/`: `points.ply` (3D points in
 mm, left-camera frame) or `pairs.csv` (matched pixels `u_left,v_left,u_right,v_right`); for
 surface datasets `depth.pfm` / `depth.npy` (depth along the left camera's z, mm, the left image's
-pixel grid). Then
+pixel grid) or a point cloud `points.ply` (mm, left-camera frame). Then
 
 ```sh
 python -m eval score SUITE_DIR --submission SUB --out scores      # SUITE_DIR: this folder

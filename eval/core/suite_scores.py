@@ -11,7 +11,11 @@
   triangulated here with ``--method`` and the dataset's calibration);
 * surface datasets — ``depth.pfm`` or ``depth.npy`` (depth along the left camera's z, mm, in
   the left image's pixel grid, NaN or 0 where none), turned into points on each pixel's refracted
-  ray (the dataset's true rig) and scored with ``eval run``'s dense metrics.
+  ray (the dataset's true rig) and scored with ``eval run``'s dense metrics; or ``points.ply``
+  (a point cloud, mm, the left camera's frame), scored with the same metrics
+  (:func:`eval.core.surface_metrics.score_surface_cloud`: every point against the mesh, each
+  point against the true point of the left pixel it projects to) after the plausibility check
+  of target clouds (metres, another frame) against the true surface points.
 
 Every dataset of the index is scored with the metrics of ``eval score`` / ``eval run``
 (:func:`eval.core.scoring.score_dataset`, :func:`eval.core.surface_metrics.score_surface`); a
@@ -66,7 +70,7 @@ def find_submission(directory: str, render: str, method: str) -> tuple[str, str]
     names = ((("points", "points.ply"), ("points", f"points_{method}_all.ply"),
               ("points", f"points_{method}.ply"), ("pairs", "pairs.csv"))
              if render == "targets" else
-             (("depth", "depth.pfm"), ("depth", "depth.npy")))
+             (("depth", "depth.pfm"), ("depth", "depth.npy"), ("points", "points.ply")))
     for kind, name in names:
         path = os.path.join(directory, name)
         if os.path.isfile(path):
@@ -115,7 +119,7 @@ def score_entry(suite_dir: str, sub_dir: str, row: dict, method: str, gate_mm) -
     found = find_submission(os.path.join(sub_dir, row["folder"]), row["render"], method)
     if found is None:
         wanted = ("points.ply, points_<method>.ply or pairs.csv" if row["render"] == "targets"
-                  else "depth.pfm or depth.npy")
+                  else "depth.pfm, depth.npy or points.ply")
         return {**out, "status": "missing",
                 "error": f"no submission: {os.path.join(sub_dir, row['folder'])} holds none of "
                          f"{wanted}"}
@@ -126,7 +130,7 @@ def score_entry(suite_dir: str, sub_dir: str, row: dict, method: str, gate_mm) -
         if row["render"] == "targets":
             out.update(_score_targets(data, kind, path, method, gate_mm))
         else:
-            out.update(_score_surface(data, path))
+            out.update(_score_surface(data, kind, path))
     except (CLIError, DatasetError, ValueError, OSError) as exc:
         return {**out, "status": "failed", "error": " ".join(str(exc).split())}
     return out
@@ -157,17 +161,39 @@ def _score_targets(data, kind: str, path: str, method: str, gate_mm) -> dict:
             **{k: scores.get(k) for k in TARGET_METRICS}, "scores": scores}
 
 
-def _score_surface(data, path: str) -> dict:
-    from eval.core.surface_metrics import SurfaceCase, score_surface
+#: Gate (mm) of the plausibility check of a surface cloud (:func:`eval.core.scoring.plausibility`
+#: against the true points of the overlap pixels): the largest F-score threshold of the surface
+#: metrics — a point within it of a true point lies on the surface.
+SURFACE_GATE_MM = 5.0
+
+
+def _score_surface(data, kind: str, path: str) -> dict:
+    from eval.core.surface_metrics import SurfaceCase, score_surface, score_surface_cloud
     from synth.surfaces import read_ply
     from synth.truth_maps import SURFACE_FILE, read_truth_maps
 
-    measured = _depth_points(path, data)
     truth = read_truth_maps(data.path, "left", data.rig.left.size)
     vertices, triangles = read_ply(os.path.join(data.path, SURFACE_FILE))
-    scores = score_surface(SurfaceCase(vertices, triangles, measured, truth.points,
-                                       truth.overlap, data.rig.port.normal))
-    return {**{k: scores.get(k) for k in SURFACE_METRICS}, "scores": scores}
+    if kind == "depth":
+        measured = _depth_points(path, data)
+        scores = score_surface(SurfaceCase(vertices, triangles, measured, truth.points,
+                                           truth.overlap, data.rig.port.normal))
+        return {**{k: scores.get(k) for k in SURFACE_METRICS}, "scores": scores}
+    from measure.projection import project
+
+    from eval.core.scoring import plausibility, read_points
+
+    points = read_points(path)
+    on_surface = truth.points[truth.overlap]
+    on_surface = on_surface[np.isfinite(on_surface).all(axis=1)]
+    warnings = plausibility(points, on_surface, SURFACE_GATE_MM)
+    pixels = project(data.rig.left, data.rig.port, points)
+    scores = score_surface_cloud(vertices, triangles, points, pixels, truth.points,
+                                 truth.overlap, data.rig.port.normal)
+    return {"warnings": "; ".join(w.replace(" (pass --units m)", ": write millimetres")
+                                  for w in warnings),
+            "points": int(len(points)),
+            **{k: scores.get(k) for k in SURFACE_METRICS}, "scores": scores}
 
 
 def score_suite(suite_dir: str, sub_dir: str, method: str = "optical_path",
@@ -333,6 +359,6 @@ def write_figures(directory: str, rows: list, swept: list) -> list:
 
 
 __all__ = ["FAILURES", "HEADLINE", "SURFACE_METRICS", "TARGET_METRICS", "aggregate",
-           "distinct_values", "find_submission",
+           "SURFACE_GATE_MM", "distinct_values", "find_submission",
            "read_suite", "score_entry", "score_suite", "summary_markdown", "write_figures",
            "write_summary"]

@@ -204,9 +204,69 @@ def score_surface(case: SurfaceCase, thresholds=THRESHOLDS_MM, plane: bool | Non
     ``arrays``: the output of :func:`surface_arrays` for this case, to avoid computing it twice.
     """
     arrays = surface_arrays(case) if arrays is None else arrays
-    distance, signed = arrays["distance"], arrays["signed_distance"]
-    t_to_m = arrays["truth_to_measured"]
-    measured_mask, overlap = case.measured_mask, case.overlap_mask
+    both = np.isfinite(arrays["depth_error"])
+    return _scores(arrays["distance"], arrays["signed_distance"], arrays["truth_to_measured"],
+                   arrays["resolution_mm"], arrays["depth_error"][both], arrays["error_3d"][both],
+                   case.measured_mask, case.overlap_mask, arrays["measured"],
+                   case.mesh_vertices, thresholds, plane)
+
+
+def score_surface_cloud(vertices, triangles, points, pixels, truth_points, overlap_mask,
+                        port_normal, thresholds=THRESHOLDS_MM, plane: bool | None = None) -> dict:
+    """The scores of :func:`score_surface` for a reconstruction given as a point cloud rather
+    than one point per left pixel. ``points`` ``(N, 3)`` mm (reference frame), ``pixels``
+    ``(N, 2)`` the left image pixel ``(u, v)`` each point projects to (float, NaN where none;
+    rounded to the nearest pixel here); ``truth_points`` ``(H, W, 3)``, ``overlap_mask``
+    ``(H, W)`` and ``port_normal`` as in :class:`SurfaceCase`.
+
+    Every point counts in the point-to-mesh, precision, recall, F-score and Chamfer metrics
+    (as each pixel's point does for a depth map); the per-pixel metrics compare each point with
+    the true point of the pixel it projects to (``depth_*``, ``error3d_*``, ``lateral_rms_mm``,
+    over the points whose pixel has a true point); the coverage counts the pixels hit by at
+    least one point (``measured_pixels``, ``measured_fraction`` of the overlap pixels,
+    ``measured_outside_overlap``). Adds ``cloud_points`` (N)."""
+    case = SurfaceCase(vertices, triangles, np.zeros((1, 1, 3)), np.zeros((1, 1, 3)),
+                       np.ones((1, 1), bool), port_normal)  # checks the mesh and the normal
+    points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    if not np.isfinite(points).all():
+        raise ValueError("points must be finite")
+    truth = np.asarray(truth_points, dtype=np.float64)
+    overlap = np.asarray(overlap_mask, dtype=bool)
+    h, w = overlap.shape
+    if truth.shape != (h, w, 3):
+        raise ValueError("truth_points must be (H, W, 3) with overlap_mask (H, W)")
+    uv = np.rint(np.asarray(pixels, dtype=np.float64).reshape(-1, 2))
+    inside = np.isfinite(uv).all(axis=1)
+    inside[inside] &= ((uv[inside, 0] >= 0) & (uv[inside, 0] < w) & (uv[inside, 1] >= 0)
+                       & (uv[inside, 1] < h))
+    cols, rows = uv[inside, 0].astype(np.int64), uv[inside, 1].astype(np.int64)
+    measured_mask = np.zeros((h, w), dtype=bool)
+    measured_mask[rows, cols] = True
+    distance, signed, resolution = point_to_mesh(case.mesh_vertices, case.mesh_triangles, points)
+    truth_overlap = truth[overlap]
+    truth_overlap = truth_overlap[np.isfinite(truth_overlap).all(axis=1)]
+    if len(truth_overlap) and len(points):
+        t_to_m = cKDTree(points).query(truth_overlap, workers=-1,
+                                       distance_upper_bound=NEAREST_TRUNCATION_MM)[0]
+        t_to_m = np.minimum(t_to_m, NEAREST_TRUNCATION_MM)
+    else:
+        t_to_m = np.full(len(truth_overlap), NEAREST_TRUNCATION_MM)
+    difference = points[inside] - truth[rows, cols]
+    known = np.isfinite(difference).all(axis=1)
+    difference = difference[known]
+    out = _scores(distance, signed, t_to_m, resolution, difference @ case.port_normal,
+                  np.linalg.norm(difference, axis=1), measured_mask, overlap, points,
+                  case.mesh_vertices, thresholds, plane)
+    out["cloud_points"] = int(len(points))
+    return out
+
+
+def _scores(distance, signed, t_to_m, resolution, depth, error_3d, measured_mask, overlap,
+            measured, vertices, thresholds, plane) -> dict:
+    """The flat dict of :func:`score_surface` from per-point distances to the mesh
+    (``distance``, ``signed``), the truncated truth-to-measured distances ``t_to_m``, per-point
+    depth and 3D errors against the truth of their pixel, the coverage masks and the measured
+    points ``(N, 3)``."""
     nan = float("nan")
     out = {"overlap_pixels": int(overlap.sum()), "measured_pixels": int(measured_mask.sum()),
            "measured_fraction": float((measured_mask & overlap).sum() / overlap.sum())
@@ -214,7 +274,7 @@ def score_surface(case: SurfaceCase, thresholds=THRESHOLDS_MM, plane: bool | Non
            "measured_outside_overlap": int((measured_mask & ~overlap).sum())}
     out.update(_stats(distance, "p2m", ("rms", "mean", "median", "p95", "max")))
     out.update(_stats(signed, "p2m_signed", ("mean", "std"), count=False))
-    out.update({"distance_resolution_mm": arrays["resolution_mm"], "truth_count": int(t_to_m.size)})
+    out.update({"distance_resolution_mm": resolution, "truth_count": int(t_to_m.size)})
     for tau in thresholds:
         precision = float(np.mean(distance < tau)) if distance.size else nan
         recall = float(np.mean(t_to_m < tau)) if t_to_m.size else nan
@@ -226,16 +286,14 @@ def score_surface(case: SurfaceCase, thresholds=THRESHOLDS_MM, plane: bool | Non
     t_to_m_mean = float(t_to_m.mean()) if t_to_m.size else nan
     out.update({"mean_measured_to_mesh_mm": m_to_mesh, "mean_truth_to_measured_mm": t_to_m_mean,
                 "chamfer_mm": 0.5 * (m_to_mesh + t_to_m_mean)})
-    both = np.isfinite(arrays["depth_error"])
-    depth, error_3d = arrays["depth_error"][both], arrays["error_3d"][both]
     out.update(_stats(depth, "depth", ("rms", "mean", "max_abs")))
     out.update(_stats(error_3d, "error3d", ("rms", "mean", "max"), count=False))
     out.update(_stats(np.sqrt(np.maximum(error_3d ** 2 - depth ** 2, 0.0)), "lateral", ("rms",),
                       count=False))
-    planar = mesh_is_planar(case.mesh_vertices) if plane is None else bool(plane)
+    planar = mesh_is_planar(vertices) if plane is None else bool(plane)
     out["planar"] = planar
     if planar:
-        out.update(plane_scores(arrays["measured"], fit_plane(case.mesh_vertices)[0]))
+        out.update(plane_scores(measured, fit_plane(vertices)[0]))
     return out
 
 

@@ -104,6 +104,7 @@ def test_missing_metres_and_offset_submissions_are_failures_and_warnings(baselin
 
 
 def test_find_submission_prefers_points_then_the_methods_cloud_then_pairs(tmp_path):
+    assert find_submission(str(tmp_path), "surface", "su") is None
     assert find_submission(str(tmp_path), "targets", "su") is None
     (tmp_path / "pairs.csv").write_text("u_left,v_left,u_right,v_right\n")
     assert find_submission(str(tmp_path), "targets", "su")[0] == "pairs"
@@ -113,7 +114,10 @@ def test_find_submission_prefers_points_then_the_methods_cloud_then_pairs(tmp_pa
     assert find_submission(str(tmp_path), "targets", "su")[1].endswith("points_su_all.ply")
     (tmp_path / "points.ply").write_text("")
     assert find_submission(str(tmp_path), "targets", "su")[1].endswith("points.ply")
-    assert find_submission(str(tmp_path), "surface", "su") is None
+    assert find_submission(str(tmp_path), "surface", "su") == ("points",
+                                                               str(tmp_path / "points.ply"))
+    (tmp_path / "depth.npy").write_text("")
+    assert find_submission(str(tmp_path), "surface", "su")[1].endswith("depth.npy")
 
 
 def test_aggregate_counts_failures_and_takes_the_worst():
@@ -129,17 +133,24 @@ def test_aggregate_counts_failures_and_takes_the_worst():
     assert out[("p", "2")]["failed"] == 1 and out[("p", "2")]["rms_dp_mm.median"] == 0.3
 
 
-@pytest.mark.slow
-def test_a_surface_suite_scored_with_its_own_truth_depth_is_exact(tmp_path, capsys):
-    from synth.exchange import read_pfm, write_pfm
-
-    spec = tmp_path / "surfaces.toml"
+@pytest.fixture(scope="module")
+def surface_suite(tmp_path_factory):
+    root = tmp_path_factory.mktemp("surface_suite")
+    spec = root / "surfaces.toml"
     spec.write_text(f'scenes = ["{REPO / "scenes" / "speckle_tilted.xml"}"]\n'
                     f'render = "surface"\nrender_width = 96\n[fixed]\nspp = 2\n')
-    suite, sub = tmp_path / "suite", tmp_path / "sub"
+    suite = root / "suite"
     assert synth_main(["suite", str(spec), "--out", str(suite), "--workers", "1",
                        "--no-progress"]) == 0
-    folder = pq.read_table(suite / "index.parquet").to_pylist()[0]["folder"]
+    return suite, pq.read_table(suite / "index.parquet").to_pylist()[0]["folder"]
+
+
+@pytest.mark.slow
+def test_a_surface_suite_scored_with_its_own_truth_depth_is_exact(surface_suite, tmp_path):
+    from synth.exchange import read_pfm, write_pfm
+
+    suite, folder = surface_suite
+    sub = tmp_path / "sub"
     (sub / folder).mkdir(parents=True)
     write_pfm(str(sub / folder / "depth.pfm"),
               read_pfm(str(suite / folder / "left_truth_zdepth.pfm")))
@@ -149,6 +160,46 @@ def test_a_surface_suite_scored_with_its_own_truth_depth_is_exact(tmp_path, caps
     row = json.loads((out / "summary.json").read_text())["datasets"][0]
     assert row["status"] == "ok" and row["measured_fraction"] == 1.0
     assert row["p2m_max_mm"] < 1e-3  # float32 depths of ~1 m: ~3e-5 mm steps
+
+
+def _truth_cloud(suite, folder):
+    from synth.truth_maps import read_truth_maps
+
+    size = json.loads((suite / folder / "manifest.json").read_text())["image_size"]
+    truth = read_truth_maps(str(suite / folder), "left", tuple(size))
+    points = truth.points[truth.overlap]
+    return points[np.isfinite(points).all(axis=1)]
+
+
+@pytest.mark.slow
+def test_a_surface_cloud_is_scored_and_one_in_metres_or_shifted_is_said(surface_suite, tmp_path,
+                                                                        capsys):
+    import open3d as o3d
+
+    suite, folder = surface_suite
+    points = _truth_cloud(suite, folder)
+    out = tmp_path / "scores"
+    runs = {"exact": points, "metres": points / 1000.0,
+            "shifted": points + np.array([0.0, 0.0, 120.0])}
+    rows = {}
+    for name, cloud_points in runs.items():
+        sub = tmp_path / name
+        (sub / folder).mkdir(parents=True)
+        cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(cloud_points))
+        o3d.io.write_point_cloud(str(sub / folder / "points.ply"), cloud)
+        assert main(["score", str(suite), "--submission", str(sub), "--out",
+                     str(out / name), "--no-progress"]) == 0
+        rows[name] = json.loads((out / name / "summary.json").read_text())["datasets"][0]
+        assert rows[name]["submission"] == f"{folder}/points.ply"
+    exact = rows["exact"]
+    assert exact["status"] == "ok" and not exact["warnings"]
+    assert exact["scores"]["cloud_points"] == len(points)
+    assert exact["p2m_max_mm"] < 1e-3 and exact["depth_rms_mm"] < 1e-9
+    assert exact["measured_fraction"] == 1.0 and exact["fscore_1mm"] == 1.0
+    assert "looks like metres" in rows["metres"]["warnings"]
+    assert rows["metres"]["p2m_rms_mm"] > 500  # scored as given
+    assert "rigid shift of (+0.0, +0.0, -120.0) mm" in rows["shifted"]["warnings"]
+    assert "looks like metres" in capsys.readouterr().err
 
 
 def test_swept_values_are_in_numeric_order():
