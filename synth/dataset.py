@@ -279,11 +279,11 @@ def _image_stats(image: np.ndarray) -> dict:
 
 
 def request_key(spec: SceneSpec, spp: int, seed: int, variant: str | None, exr: bool,
-                sensor=None, adaptive: bool = True) -> str:
+                sensor=None, adaptive: bool = True, design: dict | None = None) -> str:
     """Hash of everything that determines a dataset's content."""
     return _request_key(FORMAT_VERSION, spec.sha256, spec.params, spp, seed, variant, exr,
                         None if sensor is None else sensor.to_dict(), RENDERER,
-                        adaptive_settings() if adaptive else None)
+                        adaptive_settings() if adaptive else None, design)
 
 
 def adaptive_settings() -> dict:
@@ -297,7 +297,7 @@ def adaptive_settings() -> dict:
 
 
 def _request_key(format_version, scene_sha256, params, spp, seed, variant, exr, sensor,
-                 renderer, adaptive: dict | None = None) -> str:
+                 renderer, adaptive: dict | None = None, design: dict | None = None) -> str:
     """The key; ``adaptive`` (the settings of an adaptive render) is part of it only when given,
     so that a full-film dataset — what every dataset was before adaptive rendering, with the
     same seeds and bytes — keeps its key."""
@@ -306,6 +306,8 @@ def _request_key(format_version, scene_sha256, params, spp, seed, variant, exr, 
                "sensor": sensor, "renderer": renderer}
     if adaptive is not None:
         request["adaptive"] = adaptive
+    if design is not None:  # a port that deviates from its design (synth.design)
+        request["design"] = design
     blob = json.dumps(request, sort_keys=True)
     return hashlib.sha256(blob.encode()).hexdigest()
 
@@ -321,7 +323,7 @@ def manifest_request_key(manifest: dict) -> str:
                         manifest["scene"]["params"], manifest.get("spp"), manifest.get("seed"),
                         manifest.get("variant_requested"), "left.exr" in files,
                         sensor.get("model") if isinstance(sensor, dict) else None, RENDERER,
-                        settings)
+                        settings, manifest.get("design"))
 
 
 def manifest_digest(manifest: dict) -> str:
@@ -337,8 +339,14 @@ def manifest_digest(manifest: dict) -> str:
 # ---------------------------------------------------------------------------------------------
 def write_dataset(scene, out_dir, spp: int | None = None, defines: dict | None = None,
                   variant: str | None = None, exr: bool = False, progress: bool = True,
-                  seed: int | None = None, sensor=None, adaptive: bool = True) -> dict:
+                  seed: int | None = None, sensor=None, adaptive: bool = True,
+                  design: dict | None = None) -> dict:
     """Render ``scene`` (a path or :class:`SceneSpec`) and write a dataset to ``out_dir``.
+
+    ``design`` (``{"error": {name: truth − design}, "port": {name: design value}}``,
+    :mod:`synth.design`): the scene is the truth; the dataset also states the design port a
+    user would believe (``calib_design.yaml``, ``cameras_design.json``; the manifest's
+    ``design``), and the design is part of the request key.
 
     ``adaptive`` (default) renders each view adaptively, False on the full film
     (:func:`synth.render.render_view_counted`); the manifest's ``render`` says how each view was
@@ -367,7 +375,7 @@ def write_dataset(scene, out_dir, spp: int | None = None, defines: dict | None =
     spp = spec.spp if spp is None else int(spp)
     seed = spec.seed if seed is None else int(seed)
     spec = spec.rendered_with(spp=spp, seed=seed)  # the parameters say what was rendered
-    key = request_key(spec, spp, seed, variant, exr, sensor, adaptive)
+    key = request_key(spec, spp, seed, variant, exr, sensor, adaptive, design)
 
     output = OutputDir(out_dir, "synth dataset")
     damage = None
@@ -429,6 +437,10 @@ def write_dataset(scene, out_dir, spp: int | None = None, defines: dict | None =
         t = time.perf_counter()
         write_calib(os.path.join(tmp, "calib.yaml"), spec.rig, spec.has_port)
         write_cameras_json(tmp, spec.rig, spec.has_port)
+        if design is not None:
+            from synth.design import write_design_files
+
+            write_design_files(tmp, spec.rig, design, spec.has_port)
         if spec.surface is None:
             write_targets_ply(os.path.join(tmp, "targets.ply"), spec.targets)
             write_pixels_csv(os.path.join(tmp, "pixels.csv"), spec.target_ids, spec.targets,
@@ -471,6 +483,7 @@ def write_dataset(scene, out_dir, spp: int | None = None, defines: dict | None =
                        **{view: info["render"][view] for view in ("left", "right")}},
             "seconds": times,
             "truth_formats": truth_formats,
+            **({} if design is None else {"design": design}),
             "colmap": ("colmap/: cameras.txt (FLATPORT, metres), images.txt, points3D.txt"
                        if colmap_note is None else f"not written: {colmap_note}"),
             "files": dataset_files(tmp) + ["manifest.json"],

@@ -181,7 +181,8 @@ def parse_sections(data: dict, seed: int, label: str, check_name) -> Sections:
     for key, dist in random.items():
         check_distribution(key, dist, label)
     for key, value in sections["fixed"].items():
-        need(not isinstance(value, (list, dict)) or key.startswith("assume."), label,
+        need(not isinstance(value, (list, dict)) or key.startswith(("assume.", "scene.")),
+             label,
              f"[fixed] {key} must be one value (lists go into [grid] or [zip])")
     return Sections(sections["fixed"], sections["grid"], sections["zip"], random, samples,
                     random_seed)

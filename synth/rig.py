@@ -28,6 +28,14 @@ def rotation_y(angle_rad: float) -> np.ndarray:
     return Rotation.from_rotvec([0.0, angle_rad, 0.0]).as_matrix()
 
 
+def tilted_port_normal(about_x_deg: float, about_y_deg: float) -> np.ndarray:
+    """The unit normal of a port tilted from the left optical axis (0, 0, 1) by ``about_y_deg``
+    about y, then ``about_x_deg`` about x (degrees; ``python -m synth scene --port-tilt``)."""
+    ax, ay = np.radians([about_x_deg, about_y_deg])
+    return Rotation.from_rotvec([ax, 0.0, 0.0]).apply(
+        Rotation.from_rotvec([0.0, ay, 0.0]).apply([0.0, 0.0, 1.0]))
+
+
 def paper_intrinsics(size=PAPER_IMAGE_SIZE, focal_px=PAPER_FOCAL_PX) -> np.ndarray:
     """3x3 K with square pixels and the principal point at the image centre (OpenCV pixels)."""
     w, h = size

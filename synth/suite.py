@@ -44,10 +44,10 @@ import os
 import re
 from dataclasses import dataclass, field
 
-from synth.grid import (SpecError, canonical_json, check_defines, check_scene_parameter,
-                        check_scene_value, check_top_keys, combinations, entry_key, entry_seed,
-                        integer, need, parse_sections, read_scenes, read_toml, scene_defines,
-                        swept)
+from synth.grid import (Scene, SpecError, canonical_json, check_defines, check_scene_parameter,
+                        check_scene_value, check_top_keys, combinations, d_text, entry_key,
+                        entry_seed, integer, need, number, parse_sections, read_scene, read_toml,
+                        scene_defines, swept)
 
 COMMAND = "synth suite"
 TOP_KEYS = ("name", "description", "seed", "repeats", "scenes", "render", "render_width",
@@ -61,7 +61,11 @@ OUTPUT_COMMAND = {"targets": "synth dataset", "surface": "synth dataset", "board
 DEFAULT_RENDER_WIDTH = 320
 #: What a suite writes at the top of its directory besides the dataset folders.
 TOP_LEVEL = ("suite.json", "spec.toml", "README.md", "index.parquet", "index.csv", "entries",
-             ".suite.lock")
+             "scenes", ".suite.lock")
+#: Prefix of the parameters that vary a generated scene's options (:mod:`synth.suite_scenes`).
+SCENE_PREFIX = "scene."
+#: Prefix of the port deviations, truth − design (:mod:`synth.design`).
+ERROR_PREFIX = "error."
 #: Columns of the index that differ from run to run of the same entry.
 TIMING_COLUMNS = ("render_seconds",)
 FOLDER = re.compile(r"^\d{3,}_[A-Za-z0-9_.-]+_[0-9a-f]{8}$")
@@ -81,6 +85,11 @@ class Entry:
     repeat: int
     seed: int
     sample: int | None = None
+    #: The concrete scene's key in :attr:`SuiteSpec.scene_files` (its SHA-256, or a generated
+    #: scene's digest over all its files).
+    scene_id: str = ""
+    #: The design port the dataset states besides the truth (:mod:`synth.design`), or None.
+    design: dict | None = None
 
 
 @dataclass
@@ -101,6 +110,11 @@ class SuiteSpec:
     random_seed: int
     text: str = ""
     entries: list = field(default_factory=list)
+    #: ``{scene_id: Scene}`` of every entry's concrete scene (files and generated ones).
+    scene_files: dict = field(default_factory=dict)
+    #: ``{scene_id: GeneratedScene}`` of the scenes generated from options
+    #: (:mod:`synth.suite_scenes`), written into ``DIR/scenes/`` when the suite runs.
+    generated: dict = field(default_factory=dict)
 
     @property
     def swept(self) -> list:
@@ -112,7 +126,8 @@ class SuiteSpec:
 
     def canonical(self) -> dict:
         return {"seed": self.seed, "repeats": self.repeats, "render": self.render,
-                "scenes": {label: s.sha256 for label, s in self.scenes.items()},
+                "scenes": {label: s.sha256 if isinstance(s, Scene) else {"generate": s}
+                           for label, s in self.scenes.items()},
                 "render_width": self.render_width, "fixed": self.fixed, "grid": self.grid,
                 "zip": self.zip, "random": self.random, "random_samples": self.random_samples,
                 "random_seed": self.random_seed}
@@ -134,7 +149,37 @@ def _is_surface(scene) -> bool:
     return b'id="surface"' in scene.data
 
 
+def _read_sources(data: dict, base_dir: str, label: str) -> dict:
+    """``{label: Scene or options}`` of the spec's ``scenes`` list: a scene file (a string,
+    relative to the spec) or a table of ``synth scene`` options (:mod:`synth.suite_scenes`;
+    ``name`` labels it, default its layout and surface)."""
+    items = data.get("scenes")
+    need(isinstance(items, list) and items and all(isinstance(s, (str, dict)) for s in items),
+         label, "scenes must be a non-empty list of scene files or tables of python -m synth "
+                "scene options")
+    sources = {}
+    for k, item in enumerate(items):
+        if isinstance(item, str):
+            need(item not in sources, label, f"scene {item} is listed twice")
+            sources[item] = read_scene(item, base_dir, label)
+            continue
+        options = dict(item)
+        name = options.pop("name", None)
+        if name is None:
+            name = str(options.get("layout", "paper"))
+            if name == "surface":
+                name += f"_{options.get('surface', 'plane')}"
+        need(isinstance(name, str) and name, label, f"scenes[{k}]: name must be a string")
+        need(name not in sources, label, f"scenes[{k}]: two scenes are called {name!r} (give "
+                                         f"each table its own name = \"…\")")
+        sources[name] = options
+    return sources
+
+
 def parse_suite_spec(data: dict, base_dir: str, label: str) -> SuiteSpec:
+    from synth.design import ERRORS
+    from synth.suite_scenes import generate, option_names
+
     check_top_keys(data, TOP_KEYS, label)
     seed = integer(data, "seed", 0, 0, label)
     repeats = integer(data, "repeats", 1, 1, label)
@@ -144,12 +189,12 @@ def parse_suite_spec(data: dict, base_dir: str, label: str) -> SuiteSpec:
     render = data.get("render", "targets")
     need(render in RENDERS, label, f"render must be one of {', '.join(RENDERS)} (what each "
                                    f"dataset holds), got {render!r}")
-    scenes = read_scenes(data, base_dir, label)
-    for scene in scenes.values():
-        need(_is_surface(scene) == (render == "surface") or render == "boards" and
-             not _is_surface(scene), label,
-             f"render = {render!r} but scene {scene.label} is a "
-             f"{'surface' if _is_surface(scene) else 'target'} scene")
+    sources = _read_sources(data, base_dir, label)
+    files = {k: v for k, v in sources.items() if isinstance(v, Scene)}
+    made = {k: v for k, v in sources.items() if not isinstance(v, Scene)}
+    known_options = option_names() if made else ()
+    for scene in files.values():
+        _check_render(scene, render, label)
     width = data.get("render_width", DEFAULT_RENDER_WIDTH)
     if width == "scene":
         width = None
@@ -166,6 +211,28 @@ def parse_suite_spec(data: dict, base_dir: str, label: str) -> SuiteSpec:
             need(render == "boards", label, f"[{section}] {key}: a parameter of board sequences "
                                             f"(render = \"boards\")")
             return
+        if key.startswith(SCENE_PREFIX):
+            option = key[len(SCENE_PREFIX):]
+            need(made and not files, label,
+                 f"[{section}] {key}: varies the options of generated scenes (tables in "
+                 f"scenes), and the spec lists the scene file(s) "
+                 f"{', '.join(files) or '(none generated)'}")
+            need(option in known_options, label,
+                 f"[{section}] unknown parameter {key!r} (scene.<option> takes the options of "
+                 f"python -m synth scene, with _ for -: {', '.join(known_options)})")
+            return
+        if key.startswith(ERROR_PREFIX):
+            error = key[len(ERROR_PREFIX):]
+            need(error in ERRORS, label,
+                 f"[{section}] unknown parameter {key!r} (port deviations, truth - design: "
+                 f"{', '.join(ERROR_PREFIX + e for e in ERRORS)})")
+            need(render != "boards", label, f"[{section}] {key}: board sequences state no "
+                                            f"design port")
+            need(error == "n_water" or not files, label,
+                 f"[{section}] {key}: the port of a scene file is drawn in its geometry; this "
+                 f"deviation needs generated scenes (tables in scenes), and the spec lists "
+                 f"{', '.join(files)}")
+            return
         if key.startswith("D.") and len(key) > 2:
             if render == "boards":
                 from synth.commands.boards import NOT_RENDERED
@@ -173,38 +240,111 @@ def parse_suite_spec(data: dict, base_dir: str, label: str) -> SuiteSpec:
                 need(key[2:] not in NOT_RENDERED, label,
                      f"[{section}] {key} does not apply to board sequences (no targets, water "
                      f"medium, lights or thin lens are rendered)")
-            check_scene_parameter(key, scenes, label, section)
+            check_scene_parameter(key, files, label, section)
             return
         raise SpecError(f"{label}: [{section}] unknown parameter {key!r} (a suite's "
-                        f"parameters: {', '.join(PLAIN_PARAMETERS)}, D.<scene default>; board "
-                        f"sequences also {', '.join(BOARD_PARAMETERS)})")
+                        f"parameters: {', '.join(PLAIN_PARAMETERS)}, D.<scene default>, "
+                        f"scene.<synth scene option> of generated scenes, error.<port "
+                        f"deviation>; board sequences also {', '.join(BOARD_PARAMETERS)})")
 
     sections = parse_sections(data, seed, label, check_name)
     spec = SuiteSpec(path=label, name=name, description=description, seed=seed, repeats=repeats,
-                     scenes=scenes, render=render, render_width=width, fixed=sections.fixed,
+                     scenes=sources, render=render, render_width=width, fixed=sections.fixed,
                      grid=sections.grid, zip=sections.zip, random=sections.random,
                      random_samples=sections.random_samples, random_seed=sections.random_seed)
-    combos = combinations(sections, label, len(scenes) * repeats)
-    checked, entries = {}, []
-    for scene in scenes.values():
-        stem = re.sub(r"[^A-Za-z0-9_.-]", "_", os.path.splitext(os.path.basename(scene.label))[0])
+    combos = combinations(sections, label, len(sources) * repeats)
+    checked, entries, cache = {}, [], {}
+    for source_label, source in sources.items():
+        stem = re.sub(r"[^A-Za-z0-9_.-]", "_",
+                      os.path.splitext(os.path.basename(source_label))[0])
         for sample, values in combos:
             params = dict(sorted((k, _check_value(k, v, label)) for k, v in values.items()))
+            errors = {k[len(ERROR_PREFIX):]: v for k, v in params.items()
+                      if k.startswith(ERROR_PREFIX)}
+            if isinstance(source, Scene):
+                scene, scene_id, design_port = source, source.sha256, {}
+            else:
+                options = {**source, **{k[len(SCENE_PREFIX):]: v for k, v in params.items()
+                                        if k.startswith(SCENE_PREFIX)}}
+                truth_options, design_port = _deviate(options, errors, source_label, label)
+                signature = canonical_json([source_label, truth_options])
+                if signature not in cache:
+                    cache[signature] = generate(source_label, truth_options, base_dir, label)
+                made_scene = cache[signature]
+                scene, scene_id = made_scene.scene, made_scene.digest
+                spec.generated[scene_id] = made_scene
+                _check_render(scene, render, label)
+                for key in params:
+                    need(not key.startswith("D.") or key[2:] in scene.defaults, label,
+                         f"unknown parameter {key}: scene {source_label!r} has no default "
+                         f"{key[2:]!r} (its defaults: {', '.join(sorted(scene.defaults))})")
+            spec.scene_files[scene_id] = scene
             defines = scene_defines(params, scene, width)
+            if "n_water" in errors:
+                need("n_water" in scene.defaults, label,
+                     f"error.n_water: scene {source_label} has no port (no water index)")
+                base = float(defines.get("n_water", scene.defaults["n_water"]))
+                defines["n_water"] = d_text(base + errors["n_water"])
+                design_port["n_water"] = base
             check_defines(scene, defines, label, checked)
+            design = ({"error": errors, "port": design_port} if errors else None)
             for repeat in range(repeats):
-                payload = {"render": render, "scene": scene.sha256, "params": params,
+                payload = {"render": render, "scene": scene_id, "params": params,
                            "defines": defines, "repeat": repeat, "suite_seed": seed}
                 if sample is not None:
                     payload["sample"] = sample
+                if design is not None:
+                    payload["design"] = design
                 key = entry_key(payload)
                 folder = f"{len(entries):03d}_{stem}_{key[:8]}"
-                entries.append(Entry(key, folder, scene.label, render, params, defines, repeat,
-                                     entry_seed(seed, key), sample))
+                entries.append(Entry(key, folder, source_label, render, params, defines, repeat,
+                                     entry_seed(seed, key), sample, scene_id, design))
     need(len({e.key for e in entries}) == len(entries), label,
          "two entries of the spec are the same (a value is listed twice?)")
     spec.entries = entries
     return spec
+
+
+def _check_render(scene, render: str, label: str) -> None:
+    need(_is_surface(scene) == (render == "surface") or render == "boards" and
+         not _is_surface(scene), label,
+         f"render = {render!r} but scene {scene.label} is a "
+         f"{'surface' if _is_surface(scene) else 'target'} scene")
+
+
+def _deviate(options: dict, errors: dict, name: str, label: str) -> tuple[dict, dict]:
+    """``(the options of the true scene, the design port's values)`` of a generated scene's
+    ``options`` (the design) with the port deviations ``errors`` (truth − design;
+    :mod:`synth.design`) applied, ``n_water`` aside (a ``-D`` value, see the caller)."""
+    from synth import rig
+
+    geometric = {k: v for k, v in errors.items() if k != "n_water"}
+    if not geometric:
+        return options, {}
+    need(options.get("port", "paper") != "none", label,
+         f"scene {name!r}: port deviations need a port (the scene has port = \"none\")")
+    truth, design = dict(options), {}
+    for error in ("glass_thickness", "n_glass"):
+        need(error not in geometric or "layer" not in options, label,
+             f"error.{error}: scene {name!r} gives its port as layers (layer = …); deviate "
+             f"the layers themselves")
+    defaults = {"port_distance": rig.PAPER_PORT_DISTANCE_MM,
+                "glass_thickness": rig.PAPER_GLASS_THICKNESS_MM, "n_glass": rig.PAPER_INDICES[1]}
+    for error, default in defaults.items():
+        if error in geometric:
+            value = options.get(error, default)
+            need(number(value), label, f"scene {name!r}: {error} = {value!r}: expected a number "
+                                       f"to deviate from")
+            design[error] = float(value)
+            truth[error] = float(value) + geometric[error]
+    if "port_tilt_x" in geometric or "port_tilt_y" in geometric:
+        tilt = options.get("port_tilt", [0.0, 0.0])
+        need(isinstance(tilt, list) and len(tilt) == 2 and all(number(t) for t in tilt), label,
+             f"scene {name!r}: port_tilt = {tilt!r}: expected [about_x, about_y] degrees")
+        design["port_normal"] = rig.tilted_port_normal(*tilt).tolist()
+        truth["port_tilt"] = [float(tilt[0]) + geometric.get("port_tilt_x", 0.0),
+                              float(tilt[1]) + geometric.get("port_tilt_y", 0.0)]
+    return truth, design
 
 
 def _check_value(key: str, value, label: str):
@@ -231,6 +371,16 @@ def _check_value(key: str, value, label: str):
             Board("chessboard", (cols, rows), 40.0)
         except (ValueError, BoardError) as exc:
             bad(f'"COLSxROWS" such as "11x8" ({exc})')
+        return value
+    if key.startswith(SCENE_PREFIX):  # checked by python -m synth scene's code
+        if isinstance(value, bool) or not (number(value) or isinstance(value, str) or (
+                isinstance(value, list) and all(number(v) or isinstance(v, list)
+                                                for v in value))):
+            bad("a number, a string or a list of numbers (an option of python -m synth scene)")
+        return value
+    if key.startswith(ERROR_PREFIX):
+        if not number(value):
+            bad("a number (truth - design)")
         return value
     if key in ("exr", "air", "full_film"):
         if not isinstance(value, bool):
@@ -285,7 +435,8 @@ def render_task(task: dict) -> dict:
         manifest = write_dataset(scene, target, spp=params.get("spp"), defines=task["defines"],
                                  exr=bool(params.get("exr", False)), progress=False,
                                  seed=task["seed"], sensor=sensor,
-                                 adaptive=not params.get("full_film", False))
+                                 adaptive=not params.get("full_film", False),
+                                 design=task.get("design"))
         files = None if direct else _read_files(target)
         return {"key": task["key"], "status": "ok", "error": None, "files": files,
                 "request_key": manifest["request_key"],
@@ -414,6 +565,9 @@ class SuiteDir:
             if name == "entries" and os.path.isdir(full):
                 ours = all(re.fullmatch(r"[0-9a-f]{20}\.json", n) or TEMPORARY_FILE.match(n)
                            for n in os.listdir(full))
+            if name == "scenes" and os.path.isdir(full):
+                ours = all(re.fullmatch(r"[A-Za-z0-9_.-]+_[0-9a-f]{12}", n) or _STAGING.match(n)
+                           for n in os.listdir(full))
             if not ours:
                 self._refuse(f"exists and holds files this command did not write ({name})")
         try:
@@ -466,6 +620,14 @@ class SuiteDir:
             out[entry.key] = record
         return out
 
+    def write_scenes(self, spec: SuiteSpec) -> None:
+        """The scenes generated from options (:mod:`synth.suite_scenes`), each written
+        atomically into ``DIR/scenes/<name>_<hash>/`` unless already there whole."""
+        from synth.suite_scenes import write_generated
+
+        for made in spec.generated.values():
+            write_generated(self.path, made)
+
     def write_record(self, record: dict) -> None:
         text = json.dumps(record, allow_nan=False, separators=(",", ":"), sort_keys=True)
         path = os.path.join(self.entries, f"{record['key']}.json")
@@ -496,6 +658,8 @@ class SuiteDir:
 
 def index_rows(spec: SuiteSpec, records: dict) -> list:
     """One row per entry of the spec that has a record, in the spec's order."""
+    from synth.suite_scenes import SCENE_FILE
+
     rows = []
     for entry in spec.entries:
         record = records.get(entry.key)
@@ -504,6 +668,9 @@ def index_rows(spec: SuiteSpec, records: dict) -> list:
         row = {"folder": entry.folder, "key": entry.key, "render": entry.render,
                "scene": entry.scene, "repeat": entry.repeat, "sample": entry.sample,
                "seed": entry.seed}
+        made = spec.generated.get(entry.scene_id)
+        if made is not None:  # where the scene lies in DIR (python -m eval run SCENE --from …)
+            row["scene_file"] = f"{made.folder}/{SCENE_FILE}"
         row.update(entry.params)
         row.update({f"D.{k}": v for k, v in entry.defines.items()
                     if f"D.{k}" not in entry.params})
@@ -519,6 +686,8 @@ def index_rows(spec: SuiteSpec, records: dict) -> list:
 
 def index_columns(rows: list) -> list:
     first = ["folder", "key", "render", "scene", "repeat", "sample", "seed"]
+    if any("scene_file" in row for row in rows):
+        first.insert(4, "scene_file")
     last = ["width", "height", "n_targets", "poses", "variant", "status", "error",
             "render_seconds"]
     middle = sorted({k for row in rows for k in row} - set(first) - set(last))

@@ -124,7 +124,6 @@ def _is_our_scene(path: str) -> bool:
 def main(args) -> int:
     """Write the scene file ``--out`` (a disk-target or a surface layout)."""
     import numpy as np
-    from scipy.spatial.transform import Rotation
 
     from measure import FlatPort
 
@@ -175,8 +174,7 @@ def main(args) -> int:
         tilt = np.radians(args.port_tilt)
         if np.any(np.abs(tilt) >= np.radians(30)):
             raise CLIError(f"--port-tilt must stay below 30 degrees, got {args.port_tilt}")
-        normal = Rotation.from_rotvec([tilt[0], 0, 0]).apply(
-            Rotation.from_rotvec([0, tilt[1], 0]).apply([0.0, 0.0, 1.0]))
+        normal = rigs.tilted_port_normal(*args.port_tilt)
         distance = (args.port_distance if args.port_distance is not None
                     else rigs.PAPER_PORT_DISTANCE_MM)
         if args.layer:

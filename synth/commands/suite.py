@@ -64,6 +64,7 @@ def main(args) -> int:
             client, cluster, where = connect(args.scheduler, args.workers, args.connect_timeout,
                                              probe, "suite datasets")
         out.open(spec, previous, token)
+        out.write_scenes(spec)
         runs.append({"run_id": token[:12], "started": time.strftime("%Y-%m-%dT%H:%M:%S"),
                      "datasets_to_render": len(todo), "where": where})
         if todo:
@@ -111,10 +112,14 @@ def _execute(client, spec, todo, out, records, token, progress) -> tuple[int, fl
     started = time.perf_counter()
     futures = {}
     for entry in todo:
-        scene = spec.scenes[entry.scene]
-        task = {"key": entry.key, "render": entry.render, "scene_sha": scene.sha256, "scene_data": scene.data,
-                "scene_path": scene.path, "params": entry.params, "defines": entry.defines,
-                "seed": entry.seed, "out": os.path.join(out.path, entry.folder), "token": token}
+        scene = spec.scene_files[entry.scene_id]
+        made = spec.generated.get(entry.scene_id)
+        if made is not None:  # written into DIR/scenes/ by out.write_scenes
+            scene = made.placed(out.path)
+        task = {"key": entry.key, "render": entry.render, "scene_sha": scene.sha256,
+                "scene_data": scene.data, "scene_path": scene.path, "params": entry.params,
+                "defines": entry.defines, "design": entry.design, "seed": entry.seed,
+                "out": os.path.join(out.path, entry.folder), "token": token}
         futures[client.submit(render_task, task, pure=False, key=f"suite-{entry.key}")] = entry
     bar = tqdm(total=len(todo), unit="dataset", desc="suite", file=sys.stderr,
                disable=True if not progress else None)
