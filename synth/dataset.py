@@ -62,7 +62,7 @@ from measure.projection import project
 
 from synth.calib_formats import (CalibFormatError, calib_dict, calib_format, read_calibmar,
                                  read_colmap, stereo_extrinsics)
-from synth.exchange import write_cameras_json, write_colmap_model, write_surface_formats
+from synth.exchange import cameras_json, write_cameras_json, write_colmap_model, write_surface_formats
 from synth.fileio import OutputDir, file_sha256, read_marker
 from synth.integrator import RENDERER
 from synth.provenance import package_versions
@@ -437,10 +437,17 @@ def write_dataset(scene, out_dir, spp: int | None = None, defines: dict | None =
         t = time.perf_counter()
         write_calib(os.path.join(tmp, "calib.yaml"), spec.rig, spec.has_port)
         write_cameras_json(tmp, spec.rig, spec.has_port)
-        if design is not None:
-            from synth.design import write_design_files
+        if design is not None:  # the port a user would believe, beside the truth
+            from synth.design import CALIB_DESIGN, CAMERAS_DESIGN, DESIGN_NOTE, design_rig
 
-            write_design_files(tmp, spec.rig, design, spec.has_port)
+            if not spec.has_port:
+                raise SceneError(f"{spec.path}: a design port needs a scene with a port")
+            believed = design_rig(spec.rig, design.get("port", {}))
+            write_calib(os.path.join(tmp, CALIB_DESIGN), believed, True,
+                        extra={"design": {"note": DESIGN_NOTE}})
+            with open(os.path.join(tmp, CAMERAS_DESIGN), "w", encoding="utf-8") as fh:
+                json.dump(cameras_json(believed, True), fh, indent=1)
+                fh.write("\n")
         if spec.surface is None:
             write_targets_ply(os.path.join(tmp, "targets.ply"), spec.targets)
             write_pixels_csv(os.path.join(tmp, "pixels.csv"), spec.target_ids, spec.targets,

@@ -26,7 +26,10 @@ ERRORS = {"port_distance": "mm", "port_tilt_x": "deg", "port_tilt_y": "deg",
           "glass_thickness": "mm", "n_glass": "index", "n_water": "index"}
 #: The design port's quantities a design may set (:func:`design_rig`).
 DESIGN_PORT = ("port_distance", "port_normal", "glass_thickness", "n_glass", "n_water")
-#: The files a dataset with a design adds.
+#: What ``calib_design.yaml`` says it is (its ``design: note``).
+DESIGN_NOTE = ("the DESIGN port a user would believe; calib.yaml holds the truth that was "
+               "rendered (deviations truth - design in manifest.json: design)")
+#: The files a dataset with a design adds (:func:`synth.dataset.write_dataset`).
 CALIB_DESIGN = "calib_design.yaml"
 CAMERAS_DESIGN = "cameras_design.json"
 
@@ -59,27 +62,5 @@ def design_rig(truth: StereoRig, port: dict) -> StereoRig:
                      FlatPort(normal, distance, tuple(thicknesses), tuple(indices)))
 
 
-def write_design_files(directory: str, truth: StereoRig, design: dict, has_port: bool) -> StereoRig:
-    """Write :data:`CALIB_DESIGN` and :data:`CAMERAS_DESIGN` of the rig with ``design["port"]``
-    (:func:`design_rig`) into ``directory``; returns that rig."""
-    import json
-    import os
-
-    from synth.dataset import write_calib
-    from synth.exchange import cameras_json
-
-    if not has_port:
-        raise ValueError("a design port needs a scene with a port")
-    rig = design_rig(truth, design.get("port", {}))
-    note = ("the DESIGN port a user would believe; calib.yaml holds the truth that was rendered "
-            "(deviations truth - design in manifest.json: design)")
-    write_calib(os.path.join(directory, CALIB_DESIGN), rig, has_port,
-                extra={"design": {"note": note}})
-    with open(os.path.join(directory, CAMERAS_DESIGN), "w", encoding="utf-8") as handle:
-        json.dump(cameras_json(rig, has_port), handle, indent=1)
-        handle.write("\n")
-    return rig
-
-
-__all__ = ["CALIB_DESIGN", "CAMERAS_DESIGN", "DESIGN_PORT", "ERRORS", "design_rig",
-           "write_design_files"]
+__all__ = ["CALIB_DESIGN", "CAMERAS_DESIGN", "DESIGN_NOTE", "DESIGN_PORT", "ERRORS",
+           "design_rig"]

@@ -61,12 +61,12 @@ class GeneratedScene:
 def _parser():
     """``(parser of python -m synth, the scene subparser's actions by dest)``."""
     from synth.cli import Parser
-    from synth.commands import scene as scene_command
+    from synth.commands.scene import add_parser, main
 
     parser = Parser(prog="python -m synth")
     subparsers = parser.add_subparsers(dest="command", parser_class=Parser)
-    scene_command.add_parser(subparsers)
-    subparsers.choices["scene"].set_defaults(_main=scene_command.main)
+    add_parser(subparsers)
+    subparsers.choices["scene"].set_defaults(_main=main)
     actions = {a.dest: a for a in subparsers.choices["scene"]._actions
                if a.option_strings and a.dest not in EXCLUDED}
     return parser, actions
