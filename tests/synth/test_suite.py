@@ -57,7 +57,8 @@ def _digests(folder: Path) -> dict:
 def test_the_committed_specs_expand():
     smoke = load_suite_spec(REPO / "suites" / "smoke.toml")
     assert len(smoke.entries) == 4 and smoke.swept == ["D.target_z", "D.n_water"]
-    for name in ("targets_distance_water_tilt.toml", "surfaces_small.toml", "boards_small.toml"):
+    for name in ("targets_distance_water_tilt.toml", "surfaces_small.toml", "boards_small.toml",
+                 "generated_small.toml"):
         spec = load_suite_spec(REPO / "suites" / name)
         assert spec.entries
     assert len(load_suite_spec(REPO / "suites" / "targets_distance_water_tilt.toml").entries) >= 24
