@@ -677,8 +677,11 @@ def index_rows(spec: SuiteSpec, records: dict) -> list:
         if made is not None:  # where the scene lies in DIR (python -m eval run SCENE --from …)
             row["scene_file"] = f"{made.folder}/{SCENE_FILE}"
         row.update(entry.params)
+        deviated = (entry.design or {}).get("error", {})
+        # D.* are the spec's values: a water index that error.n_water moved is not one
         row.update({f"D.{k}": v for k, v in entry.defines.items()
-                    if f"D.{k}" not in entry.params})
+                    if f"D.{k}" not in entry.params and not (k == "n_water"
+                                                             and "n_water" in deviated)})
         row.update({"width": (record.get("image_size") or [None, None])[0],
                     "height": (record.get("image_size") or [None, None])[1],
                     "n_targets": record.get("n_targets"), "poses": record.get("poses"),

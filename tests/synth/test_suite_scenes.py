@@ -139,6 +139,7 @@ def test_a_suite_renders_the_truth_and_states_the_design(tmp_path, capsys):
                  "error.n_water"):
         assert name in rows[0]
     assert [r["error.port_distance"] for r in rows] == [0, 2]
+    assert "D.n_water" not in rows[0]  # the spec set none; the truth is 1.33 + error.n_water
     for row in rows:
         folder = out / row["folder"]
         assert (out / row["scene_file"]).is_file()
