@@ -181,3 +181,25 @@ spp = 2
     assert (scene_folder / "scene_surface.ply").is_file()
     assert (out / row["folder"] / "left_truth_zdepth.pfm").is_file()
     assert not (out / row["folder"] / "calib_design.yaml").exists()  # no deviation, no design
+
+
+@pytest.mark.slow
+def test_a_worker_that_does_not_see_the_folder_renders_a_generated_scene(tmp_path, monkeypatch):
+    """A generated target scene travels as bytes, like a scene file; the design files come back
+    with the dataset's."""
+    from synth import cluster
+    from synth.suite import render_task
+
+    spec = load_suite_spec(_write(tmp_path, TARGETS))
+    entry = spec.entries[1]
+    scene = spec.generated[entry.scene_id].placed(str(tmp_path / "not-here"))
+    monkeypatch.setattr(cluster, "_SETUP_DONE", True)  # keep this process's thread counts
+    result = render_task({"key": entry.key, "render": "targets", "scene_sha": scene.sha256,
+                          "scene_data": scene.data, "scene_path": scene.path,
+                          "params": entry.params, "defines": entry.defines,
+                          "design": entry.design, "seed": entry.seed,
+                          "out": str(tmp_path / "elsewhere" / entry.folder), "token": "other"})
+    assert result["status"] == "ok", result["error"]
+    assert {"calib_design.yaml", "cameras_design.json", "left.png"} <= set(result["files"])
+    manifest = json.loads(result["files"]["manifest.json"])
+    assert manifest["design"] == entry.design
