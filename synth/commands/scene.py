@@ -268,7 +268,8 @@ def main(args) -> int:
     except ValueError as exc:
         raise CLIError(str(exc)) from None
     print(f"wrote {args.out}: {targets.shape[0]} targets of radius {radius:g} mm, "
-          f"{'port' if port else 'no port'}, {size[0]}x{size[1]} px")
+          f"{'no port' if port is None else 'two domes' if args.port == 'dome' else 'port'}, "
+          f"{size[0]}x{size[1]} px")
     return 0
 
 
