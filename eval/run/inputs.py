@@ -158,16 +158,35 @@ def budget_rigs(config: RunConfig, true_rig, measured_rig) -> dict:
     return rigs
 
 
+def refuse_flat_only(config: RunConfig) -> None:
+    """CLIError for an option of a flat port given for a dome scene (each camera inside its
+    own dome): the self-calibration of the port and the eccentricity correction model a flat
+    port only."""
+    for option, given in (("--self-calibrate", bool(config.self_calibrate)),
+                          ("--eccentricity", config.eccentricity)):
+        if given:
+            raise CLIError(f"{option} does not apply to the dome scene {config.scene}: it models "
+                           f"a flat port")
+
+
 def load_inputs(config: RunConfig, log) -> RunInputs:
     """The scene (rig and truth) and its two images, rendered now or read from ``--from``."""
     spec = load_run_scene(config)
     if config.self_calibrate and not spec.has_port:
         raise CLIError(f"--self-calibrate does not apply to {config.scene}: it estimates the "
                        f"port's parameters, and the scene has no port (all air)")
+    if spec.rig.is_dome:
+        refuse_flat_only(config)
     seed = spec.seed if config.seed is None else config.seed
     measured_rig = measurement_rig(config, spec)
-    in_left = visible_targets(spec.rig.left, spec.rig.port, spec.targets, spec.target_radius)[1]
-    in_right = visible_targets(spec.rig.right, spec.rig.port, spec.targets, spec.target_radius)[1]
+    if measured_rig.is_dome != spec.rig.is_dome:
+        raise CLIError(f"--calib {config.calib}: a {'dome' if measured_rig.is_dome else 'flat'} "
+                       f"port, but {config.scene} has "
+                       f"{'domes' if spec.rig.is_dome else 'a flat port'}")
+    in_left = visible_targets(spec.rig.left, spec.rig.port_of(0), spec.targets,
+                              spec.target_radius)[1]
+    in_right = visible_targets(spec.rig.right, spec.rig.port_of(1), spec.targets,
+                               spec.target_radius)[1]
     if not (in_left & in_right).any():
         raise CLIError(f"{config.scene}: no target is visible in both views")
     budget = budget_rigs(config, spec.rig, measured_rig)
@@ -232,5 +251,5 @@ def expose_on_sensor(inputs: RunInputs, sensor, log):
 
 
 __all__ = ["RunInputs", "budget_rigs", "dataset_params", "expose_on_sensor", "expose_views",
-           "load_inputs",
+           "load_inputs", "refuse_flat_only",
            "load_run_scene", "measurement_rig", "read_run_dataset", "same_value"]
