@@ -7,6 +7,7 @@ import pytest
 
 from measure import StereoRig
 from measure.dome import DomePair, DomePort, trace_through_dome
+from measure.flatport_format import from_domeport, to_domeport
 from synth.rig import paper_rig
 
 INDICES = (1.0, 1.49, 1.33)
@@ -58,3 +59,17 @@ def test_bad_domes_and_cameras_outside_are_refused():
         StereoRig(rig.left, rig.right, DomePair(inside, inside))
     pair = DomePair(inside, inside.replace(center=rig.right.center))
     assert StereoRig(rig.left, rig.right, pair).port_of(1) is pair.right
+
+
+def test_domeport_parameters_round_trip():
+    """DOMEPORT: the dome centre in the camera's frame, radius and thickness in metres."""
+    rig = paper_rig()
+    dome = DomePort(rig.right.center + (1.5, -2.0, 3.25), 50.0, 8.0, INDICES)
+    params = to_domeport(dome, rig.right)
+    np.testing.assert_allclose(params[:3], rig.right.R.T @ (1.5, -2.0, 3.25) * 1e-3, rtol=1e-12)
+    assert params[3:] == [0.05, 0.008, *INDICES]
+    back = from_domeport(params, rig.right)
+    np.testing.assert_allclose(back.center, dome.center, rtol=0, atol=1e-12)
+    assert (back.radius, back.thickness, back.indices) == (50.0, 8.0, INDICES)
+    with pytest.raises(ValueError, match="DOMEPORT needs 8 finite numbers"):
+        from_domeport(params[:7], rig.right)
