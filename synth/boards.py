@@ -98,12 +98,6 @@ def in_water(rig: StereoRig, points) -> np.ndarray:
     return rig.port.water_side(points)
 
 
-def depth_axis(rig: StereoRig) -> np.ndarray:
-    """The unit vector board depths are measured along: the port normal, or the left optical
-    axis in a dome rig (its domes have no normal)."""
-    return rig.left.R[:, 2] if rig.is_dome else rig.port.normal
-
-
 def _fits(rig: StereoRig, board: Board, poses_R, poses_t, water: bool) -> np.ndarray:
     """Which candidate poses ``(M, 3, 3)``, ``(M, 3)`` put every board point inside both images
     (and in the water behind a port)."""
@@ -132,7 +126,7 @@ def sample_poses(rig: StereoRig, board: Board, n: int, seed: int, water: bool,
     left = rig.left
     w, h = left.size
     half = np.array(board.size_mm + (0.0,)) / 2
-    normal = depth_axis(rig)
+    normal = rig.depth_axis  # the port normal, or the left optical axis for domes
     poses, tried = [], 0
     while len(poses) < n:
         if tried >= ATTEMPTS_PER_POSE * n:

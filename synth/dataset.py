@@ -510,7 +510,8 @@ def write_dataset(scene, out_dir, spp: int | None = None, defines: dict | None =
                        **{view: info["render"][view] for view in ("left", "right")}},
             "seconds": times,
             "truth_formats": truth_formats,
-            "colmap": ("colmap/: cameras.txt (FLATPORT, metres), images.txt, points3D.txt"
+            "colmap": (f"colmap/: cameras.txt ({'DOMEPORT' if spec.rig.is_dome else 'FLATPORT'}, "
+                       f"metres), images.txt, points3D.txt"
                        if colmap_note is None else f"not written: {colmap_note}"),
             "files": dataset_files(tmp) + ["manifest.json"],
             "sha256": {name: file_sha256(os.path.join(tmp, name))

@@ -9,8 +9,8 @@
   ``rig_config.json``), ``images.txt`` (the two views, world-to-camera quaternions, the world
   being the left camera, metres) and ``points3D.txt`` (the targets seen in both views and their
   2D observations), in COLMAP's pixels (the top-left pixel's centre is (0.5, 0.5)); upstream
-  COLMAP reads the files but ignores the port (:func:`write_colmap_model`); not written for a
-  dome rig (FLATPORT is a flat port).
+  COLMAP reads the files but ignores the port (:func:`write_colmap_model`); a dome rig's
+  ``cameras.txt`` holds one DOMEPORT per camera.
 * surfaces, per view, beside the ``.npy`` maps: depth along the camera's own z as PFM
   (``{view}_truth_zdepth.pfm``, float32, NaN where none) and as 16-bit PNG
   (``{view}_truth_zdepth.png``, ``png = round(z · scale)``, 0 where none, the scale in the
@@ -124,9 +124,6 @@ def write_colmap_model(directory: str, rig: StereoRig, has_port: bool, ids, poin
     views is inside the image, ids as in ``pixels.csv`` (+ 1: COLMAP's ids start at 1).
     Returns None, or why the model cannot be written (a port of several layers, a skewed K),
     in which case nothing is written."""
-    if rig.is_dome:
-        return ("a dome rig: the COLMAP model (FLATPORT) describes flat ports only; the domes "
-                "are in calib.yaml and cameras.json")
     folder = os.path.join(directory, COLMAP_DIR)
     try:
         os.makedirs(folder, exist_ok=True)

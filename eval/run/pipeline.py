@@ -50,7 +50,7 @@ def default_depth_window(params: dict, targets=None, port=None):
         if targets is None or port is None or len(targets) == 0:
             return (None, None)
         axis = np.array([0.0, 0.0, 1.0]) if isinstance(port, DomePair) else port.normal
-        depth = np.asarray(targets, dtype=float) @ axis
+        depth = np.asarray(targets, dtype=float) @ axis  # domes: the left camera's z
         return (DEPTH_WINDOW_FACTORS[0] * float(depth.min()),
                 DEPTH_WINDOW_FACTORS[1] * float(depth.max()))
     return (DEPTH_WINDOW_FACTORS[0] * z, DEPTH_WINDOW_FACTORS[1] * z)
