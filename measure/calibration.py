@@ -368,6 +368,9 @@ def calibrate_housing(rig: StereoRig, board: Board, detections: Detections,
                       free=DEFAULT_FREE) -> HousingCalibration:
     """Refractive bundle adjustment of the housing (module docs). ``rig``: the in-air cameras
     with the starting port (its fixed parameters are the design values)."""
+    if rig.is_dome:
+        raise CalibrationError("the housing calibration estimates a flat port; a rig of two "
+                               "domes (DomePair) is not supported yet")
     names = tuple(dict.fromkeys(free))
     unknown = [n for n in names if n not in HOUSING_PARAMETERS]
     if not names or unknown:

@@ -91,6 +91,9 @@ def measurement_rig(config: RunConfig, spec):
     base = None
     if config.calib:
         calib = read_calib(config.calib)
+        if calib["rig"].is_dome:
+            raise CLIError(f"--calib {config.calib}: a dome-port calibration (DOMEPORT); eval "
+                           f"run measures through a flat port only")
         if tuple(calib["size"]) != tuple(spec.size):
             raise CLIError(f"--calib {config.calib}: image size {calib['size'][0]}x"
                            f"{calib['size'][1]} px, but the scene renders {spec.size[0]}x"
@@ -150,6 +153,9 @@ def budget_rigs(config: RunConfig, true_rig, measured_rig) -> dict:
         rigs["exact calibration"] = true_rig
     for path in config.compare_calib:
         calib = read_calib(path)
+        if calib["rig"].is_dome:
+            raise CLIError(f"--compare-calib {path}: a dome-port calibration (DOMEPORT); eval "
+                           f"run measures through a flat port only")
         if tuple(calib["size"]) != tuple(true_rig.left.size):
             raise CLIError(f"--compare-calib {path}: image size {calib['size'][0]}x"
                            f"{calib['size'][1]} px, but the scene renders "
