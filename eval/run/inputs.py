@@ -91,15 +91,23 @@ def measurement_rig(config: RunConfig, spec):
     base = None
     if config.calib:
         calib = read_calib(config.calib)
-        if calib["rig"].is_dome:
-            raise CLIError(f"--calib {config.calib}: a dome-port calibration (DOMEPORT); eval "
-                           f"run measures through a flat port only")
+        _same_kind_of_port(f"--calib {config.calib}", calib["rig"], spec.rig)
         if tuple(calib["size"]) != tuple(spec.size):
             raise CLIError(f"--calib {config.calib}: image size {calib['size'][0]}x"
                            f"{calib['size'][1]} px, but the scene renders {spec.size[0]}x"
                            f"{spec.size[1]} px")
         base = calib["rig"]
     return assumed_rig(spec.rig, spec.has_port, config.assumptions, base)
+
+
+def _same_kind_of_port(what: str, calibrated, scene_rig) -> None:
+    """CLIError unless a calibration's rig has the scene's kind of port (a dome pair for a dome
+    scene, a flat port otherwise)."""
+    if calibrated.is_dome != scene_rig.is_dome:
+        kind = ("dome-port calibration (DOMEPORT)" if calibrated.is_dome
+                else "flat-port calibration")
+        raise CLIError(f"{what}: a {kind}, but the scene has "
+                       f"{'domes' if scene_rig.is_dome else 'a flat port'}")
 
 
 def load_run_scene(config: RunConfig):
@@ -153,9 +161,7 @@ def budget_rigs(config: RunConfig, true_rig, measured_rig) -> dict:
         rigs["exact calibration"] = true_rig
     for path in config.compare_calib:
         calib = read_calib(path)
-        if calib["rig"].is_dome:
-            raise CLIError(f"--compare-calib {path}: a dome-port calibration (DOMEPORT); eval "
-                           f"run measures through a flat port only")
+        _same_kind_of_port(f"--compare-calib {path}", calib["rig"], true_rig)
         if tuple(calib["size"]) != tuple(true_rig.left.size):
             raise CLIError(f"--compare-calib {path}: image size {calib['size'][0]}x"
                            f"{calib['size'][1]} px, but the scene renders "
@@ -185,10 +191,6 @@ def load_inputs(config: RunConfig, log) -> RunInputs:
         refuse_flat_only(config)
     seed = spec.seed if config.seed is None else config.seed
     measured_rig = measurement_rig(config, spec)
-    if measured_rig.is_dome != spec.rig.is_dome:
-        raise CLIError(f"--calib {config.calib}: a {'dome' if measured_rig.is_dome else 'flat'} "
-                       f"port, but {config.scene} has "
-                       f"{'domes' if spec.rig.is_dome else 'a flat port'}")
     in_left = visible_targets(spec.rig.left, spec.rig.port_of(0), spec.targets,
                               spec.target_radius)[1]
     in_right = visible_targets(spec.rig.right, spec.rig.port_of(1), spec.targets,

@@ -259,8 +259,9 @@ def test_bad_inputs_exit_2_with_one_line_and_write_nothing(user, capsys, argv, f
 
 
 def test_a_dome_calibration_is_one_error_line(tmp_path):
-    """A DOMEPORT calibration reads (synth.calib_formats), but eval measure and eval run
-    measure through a flat port only: one CLIError naming the file, no traceback."""
+    """A DOMEPORT calibration reads (synth.calib_formats), but eval measure measures through a
+    flat port only, and eval run takes it only for a dome scene: one CLIError naming the file,
+    no traceback."""
     from types import SimpleNamespace
 
     from eval.cli import CLIError
@@ -276,7 +277,8 @@ def test_a_dome_calibration_is_one_error_line(tmp_path):
     path = write_calibmar(tmp_path / "dome.yaml", StereoRig(left, right, pair))[0]
     with pytest.raises(CLIError, match=r"dome\.yaml: a dome-port calibration"):
         read_calibration(path)
+    flat = SimpleNamespace(rig=StereoRig(left, right, None))  # eval run: a flat-port scene
     with pytest.raises(CLIError, match=r"--calib .*dome\.yaml: a dome-port calibration"):
-        measurement_rig(SimpleNamespace(calib=path, assumptions={}), None)
+        measurement_rig(SimpleNamespace(calib=path, assumptions={}), flat)
     with pytest.raises(CLIError, match=r"--compare-calib .*dome\.yaml: a dome-port"):
-        budget_rigs(SimpleNamespace(compare_calib=(path,)), None, None)
+        budget_rigs(SimpleNamespace(compare_calib=(path,)), flat.rig, None)

@@ -91,3 +91,16 @@ def test_assumed_dome_rig_and_its_difference(scenes):
     moved = rig_difference(truth, centred)
     assert moved["left_dome_center_mm"] == pytest.approx([-2.0, 0.0, 0.0])
     assert describe_rig(truth)["port"]["right"]["radius_mm"] == 50.0
+
+
+def test_a_flat_port_calibration_is_refused_for_a_dome_scene(scenes, tmp_path, capsys):
+    from synth.dataset import write_calib
+    from synth.rig import paper_rig
+
+    calib = tmp_path / "flat.yaml"
+    write_calib(calib, paper_rig(size=SIZE, focal_px=FOCAL))
+    for option in ("--calib", "--compare-calib"):
+        assert main(["run", scenes["decentred"], "--out", str(tmp_path / "out"), option,
+                     str(calib), "--no-progress"]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and "a flat-port calibration, but the scene has domes" in err[0]
