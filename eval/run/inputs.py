@@ -172,13 +172,11 @@ def budget_rigs(config: RunConfig, true_rig, measured_rig) -> dict:
 
 def refuse_flat_only(config: RunConfig) -> None:
     """CLIError for an option of a flat port given for a dome scene (each camera inside its
-    own dome): the self-calibration of the port and the eccentricity correction model a flat
-    port only."""
-    for option, given in (("--self-calibrate", bool(config.self_calibrate)),
-                          ("--eccentricity", config.eccentricity)):
-        if given:
-            raise CLIError(f"{option} does not apply to the dome scene {config.scene}: it models "
-                           f"a flat port")
+    own dome): the self-calibration estimates a flat port's parameters. (``--assume`` of a flat
+    port's parameter is refused by :func:`eval.core.assumption.assumed_rig`.)"""
+    if config.self_calibrate:
+        raise CLIError(f"--self-calibrate does not apply to the dome scene {config.scene}: it "
+                       f"estimates a flat port's parameters")
 
 
 def load_inputs(config: RunConfig, log) -> RunInputs:
