@@ -16,6 +16,11 @@ travel time's stationarity, chained with the board poses and SO(3)'s left Jacobi
 sparse structure (a pose's 6 columns touch only its own corners' rows). Starting poses:
 ``cv2.solvePnP`` on the refracted images with the in-air intrinsics (a plain pinhole solve).
 
+A rig of two domes (:class:`measure.dome.DomePair`, :func:`dome_problem`): the unknowns are
+each camera's decentring — its dome's centre relative to the camera centre, in the camera's
+frame (3 + 3 numbers, mm) — and optionally ``n_water`` (:data:`DOME_PARAMETERS`); radius,
+thickness and glass index stay at the design values; the same poses, residuals and σ.
+
 Uncertainty: ``s² (JᵀJ)⁻¹`` with ``s² = Σr² / (m − n)``; a parameter is reported not
 identifiable when the column-scaled normal matrix is singular in its direction or two free
 parameters correlate at :data:`CORRELATION_LIMIT` or more (then no estimate is returned).
@@ -370,9 +375,13 @@ def housing_problem(rig: StereoRig, board: Board, detections: Detections, names)
 
 
 def calibrate_housing(rig: StereoRig, board: Board, detections: Detections,
-                      free=DEFAULT_FREE) -> HousingCalibration:
+                      free=None) -> HousingCalibration:
     """Refractive bundle adjustment of the housing (module docs). ``rig``: the in-air cameras
-    with the starting port (its fixed parameters are the design values)."""
+    with the starting port (its fixed parameters are the design values) — a flat port, or two
+    domes (:func:`dome_problem`: each camera's decentring). ``free`` defaults to
+    :data:`DEFAULT_FREE`, for domes :data:`DEFAULT_DOME_FREE`."""
+    if free is None:
+        free = DEFAULT_DOME_FREE if rig.is_dome else DEFAULT_FREE
     names = tuple(dict.fromkeys(free))
     table = DOME_PARAMETERS if rig.is_dome else HOUSING_PARAMETERS
     unknown = [n for n in names if n not in table]
