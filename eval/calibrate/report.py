@@ -277,13 +277,18 @@ def format_value(value, digits=4):
 _f = format_value
 
 
+def _behind(report: dict) -> str:
+    """Where underwater boards were: behind the port, or behind the domes."""
+    return "behind the domes" if report.get("dome") else "behind the port"
+
+
 def markdown(report: dict) -> str:
     d = report["detection"]
     lines = [f"# Calibration report: `{report['boards']}`", "",
              f"{report['poses']} poses of a {report['board']['kind']} "
              f"{report['board']['squares'][0]}x{report['board']['squares'][1]}, "
              f"{report['board']['square_mm']:g} mm squares, "
-             f"{'in air' if report['air'] else 'behind the port'}; board found in "
+             f"{'in air' if report['air'] else _behind(report)}; board found in "
              f"{report['found']['left']} left and {report['found']['right']} right images.", "",
              "## Corner detection against the forward model", "",
              "| view | corners | RMS (px) | max (px) |", "|---|---|---|---|"]

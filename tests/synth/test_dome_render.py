@@ -96,3 +96,12 @@ def test_boards_through_the_domes_match_the_forward_model(dome_scene, tmp_path):
             errors.append(uv - rows[ids][:, 5 + 2 * view:7 + 2 * view])
     errors = np.concatenate(errors)
     assert np.sqrt(np.mean(np.sum(errors ** 2, axis=1))) < 0.05
+
+
+def test_synth_boards_command_on_a_dome_scene(dome_scene, tmp_path, capsys):
+    out = tmp_path / "b"
+    assert synth_main(["boards", dome_scene, "--poses", "2", "--squares", "7x6", "--square-mm",
+                       "60", "--distance", "450", "650", "--out", str(out),
+                       "--no-progress"]) == 0
+    assert "behind the domes" in capsys.readouterr().out
+    assert read_calib(str(out / "calib.yaml"))["rig"].is_dome
