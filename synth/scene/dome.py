@@ -139,7 +139,11 @@ def pair_from_spheres(spheres: dict) -> DomePair:
     sphere, spheres that are not concentric, an outer sphere not larger than the inner one,
     indices that do not chain air → glass → water, different water on the two domes)."""
     domes = []
-    every = ", ".join(DOME_ID.format(camera=c, sphere=s) for c in CAMERA_NAMES for s in SPHERE_NAMES)
+    known = [DOME_ID.format(camera=c, sphere=s) for c in CAMERA_NAMES for s in SPHERE_NAMES]
+    every = ", ".join(known)
+    extra = sorted(set(spheres) - set(known))
+    if extra:
+        raise ValueError(f"sphere {extra[0]!r} is not a dome sphere (a dome scene holds {every})")
     for camera in CAMERA_NAMES:
         ids = [DOME_ID.format(camera=camera, sphere=s) for s in SPHERE_NAMES]
         missing = [i for i in ids if i not in spheres]

@@ -112,6 +112,8 @@ def test_pair_from_spheres_refuses_what_is_not_a_dome():
             ("dome_right_outer", (c + 200, 58.0, 1.34, 1.54), "different water")):
         with pytest.raises(ValueError, match=message):
             pair_from_spheres({**good, key: value})
+    with pytest.raises(ValueError, match="'ball' is not a dome sphere"):
+        pair_from_spheres({**good, "ball": (c, 5.0, 1.33, 1.5)})
     with pytest.raises(ValueError, match="missing"):
         pair_from_spheres({k: v for k, v in good.items() if k != "dome_right_inner"})
 
