@@ -78,7 +78,7 @@ def test_domeport_parameters_round_trip():
 def _fork_cam_from_img(direction, params):
     """The refractive COLMAP fork's ``DomePort::CamFromImg`` (src/colmap/sensor/models_refrac.h
     lines 500–538, with ``RaySphereIntersection`` and ``ComputeRefraction`` of
-    src/colmap/sensor/ray3d.h lines 75–108), transcribed for one ray: camera frame, metres."""
+    src/colmap/sensor/ray3d.h lines 75–107), transcribed for one ray: camera frame, metres."""
     center, radius, thick, na, ng, nw = (np.asarray(params[:3]), *params[3:])
     ori, d = np.zeros(3), direction / np.linalg.norm(direction)
     for r, n1, n2 in ((radius, na, ng), (radius + thick, ng, nw)):
