@@ -8,7 +8,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from measure import Camera, Reason
-from measure.dome import DomePort, trace_through_dome
+from measure.dome import DomePair, DomePort, trace_through_dome
 from measure.projection import project, solve_paths
 
 INDICES = (1.0, 1.49, 1.33)
@@ -181,3 +181,11 @@ def test_rows_do_not_depend_on_their_batch_and_empty_batches_work():
         empty = project(camera, dome, np.zeros((0, 3)), solver, parameters=True)
         assert empty[0].shape == (0, 2) and empty[1].shape == (0, 2, 3)
         assert empty[2].dome_center.shape == (0, 2, 3) and empty[2].radius.shape == (0, 2)
+
+
+def test_a_dome_pair_is_not_a_port_of_one_camera():
+    camera = _camera(9)
+    dome = DomePort(camera.center, 50.0, 8.0, INDICES)
+    with pytest.raises(ValueError, match=r"DomePair holds one dome per camera: pass "
+                                         r"rig.port_of\(view\)"):
+        project(camera, DomePair(dome, dome), [0.0, 0.0, 900.0])
