@@ -26,10 +26,13 @@ Two independent solvers, both vectorized over N points:
 The pixel is the pinhole projection (with lens distortion, as ``cv2.projectPoints``) of the
 first interface point ``I1``. Rows without an answer are NaN with a :class:`measure.Reason`:
 ``NOT_IN_WATER`` (the point is inside the dome or in its glass), ``NOT_CONVERGED`` (no physical
-stationary path found, e.g. beyond total internal reflection in a strongly decentred dome),
-``BEHIND_CAMERA`` (``I1`` at or behind the camera plane), ``INVALID_INPUT``.
+stationary path found), ``BEHIND_CAMERA`` (``I1`` at or behind the camera plane),
+``INVALID_INPUT``. Total internal reflection cannot occur while ``n_water ≥ n_air``: a ray in
+the glass keeps its distance ``b`` from ``M`` (``b = r_1 sin α_1 = r_2 sin β_2``), so at the
+outer sphere ``n_glass sin β_2 = (r_1 / r_2) n_air sin θ_air < n_water``; only indices with
+``n_air > n_water`` can reach ``NOT_CONVERGED`` that way.
 
-Jacobians (:func:`dome_project` with ``jacobian``) come from the implicit function theorem on
+Jacobians (:func:`dome_paths` with ``jacobian``) come from the implicit function theorem on
 the stationarity (Karush–Kuhn–Tucker) conditions of the optical path in 3D: unknowns ``I1, I2``
 and two multipliers, ``∇_{I_k} t = λ_k (I_k − M)`` and ``|I_k − M|² = r_k²`` — an 8×8 linear
 system per point, no finite differences. Units mm, reference frame, OpenCV pixels.
