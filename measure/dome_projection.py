@@ -26,10 +26,13 @@ Two independent solvers, both vectorized over N points:
 The pixel is the pinhole projection (with lens distortion, as ``cv2.projectPoints``) of the
 first interface point ``I1``. Rows without an answer are NaN with a :class:`measure.Reason`:
 ``NOT_IN_WATER`` (the point is inside the dome or in its glass), ``NOT_CONVERGED`` (no physical
-stationary path found, e.g. beyond total internal reflection in a strongly decentred dome),
-``BEHIND_CAMERA`` (``I1`` at or behind the camera plane), ``INVALID_INPUT``.
+stationary path found), ``BEHIND_CAMERA`` (``I1`` at or behind the camera plane),
+``INVALID_INPUT``. Total internal reflection cannot occur while ``n_water ≥ n_air``: a ray in
+the glass keeps its distance ``b`` from ``M`` (``b = r_1 sin α_1 = r_2 sin β_2``), so at the
+outer sphere ``n_glass sin β_2 = (r_1 / r_2) n_air sin θ_air < n_water``; only indices with
+``n_air > n_water`` can reach ``NOT_CONVERGED`` that way.
 
-Jacobians (:func:`dome_project` with ``jacobian``) come from the implicit function theorem on
+Jacobians (:func:`dome_paths` with ``jacobian``) come from the implicit function theorem on
 the stationarity (Karush–Kuhn–Tucker) conditions of the optical path in 3D: unknowns ``I1, I2``
 and two multipliers, ``∇_{I_k} t = λ_k (I_k − M)`` and ``|I_k − M|² = r_k²`` — an 8×8 linear
 system per point, no finite differences. Units mm, reference frame, OpenCV pixels.
@@ -42,6 +45,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import elementwise
 
+from .batching import map_row_chunks
 from .camera import Camera
 from .dome import DomePort, trace_through_dome
 from .reasons import Reason
@@ -383,6 +387,30 @@ def dome_paths(camera: Camera, dome: DomePort, points, solver: str = "fermat",
         points = points[None]
     if points.ndim != 2 or points.shape[1] != 3:
         raise ValueError(f"points must have shape (N, 3) or (3,), got {points.shape}")
+    iterations = []
+    parts = map_row_chunks(lambda chunk: _chunk(camera, dome, chunk, solver, jacobian,
+                                                iterations), (points,))
+    pixels, reason, is_minimum, interface = parts[:4]
+    jacobians = []
+    if jacobian:
+        d_pixel, center, rotation = parts[4:]
+        jacobians.append(np.ascontiguousarray(d_pixel[:, :, 0:3]))
+        if jacobian > 1:
+            jacobians.append(DomeParameterJacobian(
+                dome_center=np.ascontiguousarray(d_pixel[:, :, 3:6]),
+                radius=np.ascontiguousarray(d_pixel[:, :, 9]),
+                thickness=np.ascontiguousarray(d_pixel[:, :, 10]),
+                indices=np.ascontiguousarray(d_pixel[:, :, 11:14]), center=center,
+                rotation=rotation))
+    return pixels, reason, is_minimum, interface, max(iterations, default=0), jacobians
+
+
+def _chunk(camera: Camera, dome: DomePort, points, solver: str, jacobian: int,
+           iterations_used: list):
+    """:func:`dome_paths` of one chunk of rows: pixels, reasons, minimum flags, interface
+    points and, with ``jacobian``, d pixel / d θ ``(n, 2, 14)`` (θ of :func:`_path_jacobian`,
+    the camera centre's direct term not yet added), d pixel / d camera centre and d pixel /
+    d rotation; NaN in every output where the reason is not OK. Appends the iterations."""
     radii, indices = dome.radii, dome.indices
     with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
         plane, reason = _reduce(camera, dome, points)
@@ -391,6 +419,7 @@ def dome_paths(camera: Camera, dome: DomePort, points, solver: str = "fermat",
         else:
             angles, converged, iterations = _solve_shooting(camera, dome, plane)
             is_minimum = converged.copy()
+        iterations_used.append(iterations)
         converged &= _physical(plane, angles, radii, indices)
         reason[(reason == Reason.OK) & ~converged] = Reason.NOT_CONVERGED
         interface = np.stack([dome.center + r * (np.cos(phi)[:, None] * plane.u
@@ -400,31 +429,21 @@ def dome_paths(camera: Camera, dome: DomePort, points, solver: str = "fermat",
         reason[(reason == Reason.OK) & ~np.all(np.isfinite(pixels), axis=1)] = \
             Reason.BEHIND_CAMERA
         bad = reason != Reason.OK
-        jacobians = []
+        outputs = [pixels, reason, is_minimum & ~bad, interface]
         if jacobian:
             d_path = np.full((points.shape[0], 3, 14), np.nan)
             good = ~bad
             if good.any():
                 d_path[good] = _path_jacobian(camera, dome, points[good], interface[good, 0],
                                               interface[good, 1])
-            d_first = np.where(bad[:, None, None], np.nan, d_first)
-            d_pixel = d_first @ d_path  # (N, 2, 14)
-            jacobians.append(d_pixel[:, :, 0:3])
-            if jacobian > 1:
-                jacobians.append(DomeParameterJacobian(
-                    dome_center=d_pixel[:, :, 3:6], radius=d_pixel[:, :, 9],
-                    thickness=d_pixel[:, :, 10], indices=d_pixel[:, :, 11:14],
-                    center=d_pixel[:, :, 6:9] - d_first,
-                    rotation=np.cross(d_first, (interface[:, 0] - camera.center)[:, None, :])))
+            d_pixel = d_first @ d_path  # (n, 2, 14)
+            center = d_pixel[:, :, 6:9] - d_first  # the pixel also moves with I1 − C directly
+            rotation = np.cross(d_first, (interface[:, 0] - camera.center)[:, None, :])
+            outputs += [d_pixel, center, rotation]
     if bad.any():
-        pixels[bad] = np.nan
-        interface[bad] = np.nan
-        is_minimum = is_minimum & ~bad
-        for array in jacobians[:1]:
+        for array in outputs[:1] + outputs[3:]:
             array[bad] = np.nan
-        for field in (jacobians[1].__dict__.values() if len(jacobians) > 1 else ()):
-            field[bad] = np.nan
-    return pixels, reason, is_minimum, interface, iterations, jacobians
+    return tuple(outputs)
 
 
 __all__ = ["DOME_SOLVERS", "DomeParameterJacobian", "dome_paths"]

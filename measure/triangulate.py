@@ -10,6 +10,10 @@
   nearest the two pixels (least squares from the optical-path point; ``gap`` is the optical-path
   gap of the pixels). Statistically optimal for Gaussian pixel noise; slower.
 
+Every method also takes a rig of two domes (``port`` a :class:`measure.dome.DomePair`): the
+rays are traced through each camera's own dome (:meth:`StereoRig.trace`); ``regular`` is exact
+there when each camera sits at its dome's centre (no ray through the centre is bent).
+
 Frames and units: reference frame = left camera frame (OpenCV axes), millimetres, pixels in the
 OpenCV convention.
 """

@@ -8,7 +8,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from measure import Camera, Reason
-from measure.dome import DomePort, trace_through_dome
+from measure.dome import DomePair, DomePort, trace_through_dome
 from measure.projection import project, solve_paths
 
 INDICES = (1.0, 1.49, 1.33)
@@ -155,3 +155,37 @@ def test_analytic_jacobians_match_central_differences(centred):
         return project(Camera(K, camera.size, camera.dist, R, camera.t), dome, points)
 
     assert _relative(jac.rotation, _central(rotated, np.zeros(3), 1e-7)) <= 1e-6
+
+
+def test_a_point_on_the_line_through_both_centres_is_seen_straight():
+    """Camera centre, dome centre and point collinear (the plane of the path undefined): the
+    path is the straight line, the pixel the pinhole one."""
+    camera = _camera(7)
+    dome = DomePort(camera.center + (0.6, -0.4, 1.5), 50.0, 8.0, INDICES)
+    axis = (dome.center - camera.center) / np.linalg.norm(dome.center - camera.center)
+    points = camera.center + np.outer([400.0, 900.0, 1500.0], axis)
+    for solver in ("fermat", "shooting"):
+        np.testing.assert_allclose(project(camera, dome, points, solver),
+                                   camera.project(points), rtol=0, atol=1e-9)
+
+
+def test_rows_do_not_depend_on_their_batch_and_empty_batches_work():
+    """Chunked batches (more than one chunk of rows) give each row what it gets alone."""
+    camera = _camera(8)
+    dome = DomePort(camera.center + (2.0, 1.0, -3.0), 50.0, 8.0, INDICES)
+    points = _points(camera, n=40000, seed=8)
+    pixels = project(camera, dome, points)
+    for k in (0, 12345, 39999):
+        np.testing.assert_array_equal(project(camera, dome, points[k]), pixels[k:k + 1])
+    for solver in ("fermat", "shooting"):
+        empty = project(camera, dome, np.zeros((0, 3)), solver, parameters=True)
+        assert empty[0].shape == (0, 2) and empty[1].shape == (0, 2, 3)
+        assert empty[2].dome_center.shape == (0, 2, 3) and empty[2].radius.shape == (0, 2)
+
+
+def test_a_dome_pair_is_not_a_port_of_one_camera():
+    camera = _camera(9)
+    dome = DomePort(camera.center, 50.0, 8.0, INDICES)
+    with pytest.raises(ValueError, match=r"DomePair holds one dome per camera: pass "
+                                         r"rig.port_of\(view\)"):
+        project(camera, DomePair(dome, dome), [0.0, 0.0, 900.0])

@@ -9,6 +9,7 @@ import pytest
 
 from measure import Reason, StereoRig, triangulate
 from measure.calibration import CalibrationError, calibrate_housing
+from measure.dense import match_dense
 from measure.dense_warp import PlaneWarp
 from measure.dome import DomePair, DomePort
 from measure.eccentricity import correct_eccentricity, outline_centroid_offsets
@@ -16,6 +17,7 @@ from measure.matching import match_targets
 from measure.projection import project
 from measure.reprojection import reprojection_points
 from measure.selfcal import self_calibrate
+from synth.dense_pairs import PlaneSurface, SpeckleTexture, render_pair, surface_points
 from synth.rig import paper_rig
 
 INDICES = (1.0, 1.49, 1.33)
@@ -140,3 +142,29 @@ def test_flat_port_calibrations_refuse_domes():
         self_calibrate(rig, *_pixels(rig, _points(10)))
     with pytest.raises(CalibrationError, match="of two domes estimates dome_center"):
         calibrate_housing(rig, None, None, ("distance", "normal"))
+
+
+def test_dense_matching_through_domes():
+    """A speckled plane 1 m away rendered analytically through two decentred domes
+    (synth.dense_pairs) and matched densely (depths along the left optical axis), against the
+    exact forward projection of each matched left pixel's surface point. The speckle is 17 mm
+    (~2.4 px at 1 m: a dome does not magnify as a flat port does) on a texture wide enough for
+    the dome's wider view. Measured (2026-12-02): 99.4 % of the overlap matched, right-pixel
+    error RMS 0.0099 px, max 0.053 px; asserted as for the flat port (tests/measure/
+    test_dense.py): 97 %, RMS 0.02 px, max 0.15 px."""
+    rig = _dome_rig(*DECENTRED, size=(320, 268))
+    surface = PlaneSurface.create((0.0, 0.0, 1000.0), (0.0, 0.0, 1.0))
+    texture = SpeckleTexture.random((-1300, 1500, -1100, 1100), 17.0, seed=1)
+    left, right = render_pair(rig, surface, texture)
+    matches = match_dense(rig, left, right, (900.0, 1100.0))
+    grid = np.stack(np.meshgrid(np.arange(320.0), np.arange(268.0)), axis=-1).reshape(-1, 2)
+    truth = project(rig.right, rig.port.right, surface_points(rig.left, rig.port.left, surface,
+                                                              grid))
+    overlap = rig.left.in_image(grid, 7) & rig.right.in_image(truth, 7)
+    index = (matches.uv_left[:, 1] * 320 + matches.uv_left[:, 0]).astype(np.int64)
+    error = np.hypot(*(matches.uv_right - truth[index]).T)
+    assert overlap[index].sum() / overlap.sum() > 0.97
+    assert np.sqrt(np.mean(error ** 2)) < 0.02 and error.max() < 0.15
+    rows, cols = matches.uv_left[:, 1].astype(int), matches.uv_left[:, 0].astype(int)
+    points = triangulate(rig, matches.uv_left, matches.uv_right).points
+    assert np.max(np.abs(matches.depth_map[rows, cols] - points @ rig.depth_axis)) < 1e-6
