@@ -16,6 +16,11 @@ travel time's stationarity, chained with the board poses and SO(3)'s left Jacobi
 sparse structure (a pose's 6 columns touch only its own corners' rows). Starting poses:
 ``cv2.solvePnP`` on the refracted images with the in-air intrinsics (a plain pinhole solve).
 
+A rig of two domes (:class:`measure.dome.DomePair`, :func:`dome_problem`): the unknowns are
+each camera's decentring — its dome's centre relative to the camera centre, in the camera's
+frame (3 + 3 numbers, mm) — and optionally ``n_water`` (:data:`DOME_PARAMETERS`); radius,
+thickness and glass index stay at the design values; the same poses, residuals and σ.
+
 Uncertainty: ``s² (JᵀJ)⁻¹`` with ``s² = Σr² / (m − n)``; a parameter is reported not
 identifiable when the column-scaled normal matrix is singular in its direction or two free
 parameters correlate at :data:`CORRELATION_LIMIT` or more (then no estimate is returned).
@@ -36,6 +41,7 @@ from scipy.spatial.transform import Rotation
 
 from .board import MIN_CORNERS, Board
 from .camera import Camera
+from .dome import DomePair, DomePort
 from .port import FlatPort, index_matched_port
 from .projection import project
 from .selfcal import tilt_basis
@@ -44,6 +50,10 @@ from .triangulate import StereoRig
 #: Free housing parameters and how many numbers each is.
 HOUSING_PARAMETERS = {"distance": 1, "normal": 2, "thickness": 1, "n_water": 1, "extrinsics": 6}
 DEFAULT_FREE = ("distance", "normal")
+#: Free parameters of a rig of two domes: each camera's decentring (x, y, z in its own frame,
+#: left then right) and the water index; and the default.
+DOME_PARAMETERS = {"dome_center": 6, "n_water": 1}
+DEFAULT_DOME_FREE = ("dome_center",)
 #: Fewest board poses a calibration accepts.
 MIN_POSES = 3
 #: Relative eigenvalue of the scaled normal matrix below which a direction is not determined.
@@ -365,17 +375,23 @@ def housing_problem(rig: StereoRig, board: Board, detections: Detections, names)
 
 
 def calibrate_housing(rig: StereoRig, board: Board, detections: Detections,
-                      free=DEFAULT_FREE) -> HousingCalibration:
+                      free=None) -> HousingCalibration:
     """Refractive bundle adjustment of the housing (module docs). ``rig``: the in-air cameras
-    with the starting port (its fixed parameters are the design values)."""
+    with the starting port (its fixed parameters are the design values) — a flat port, or two
+    domes (:func:`dome_problem`: each camera's decentring). ``free`` defaults to
+    :data:`DEFAULT_FREE`, for domes :data:`DEFAULT_DOME_FREE`."""
+    if free is None:
+        free = DEFAULT_DOME_FREE if rig.is_dome else DEFAULT_FREE
     names = tuple(dict.fromkeys(free))
-    unknown = [n for n in names if n not in HOUSING_PARAMETERS]
+    table = DOME_PARAMETERS if rig.is_dome else HOUSING_PARAMETERS
+    unknown = [n for n in names if n not in table]
     if not names or unknown:
         raise CalibrationError(f"--free {','.join(free) or '(nothing)'}: the housing calibration "
-                               f"estimates {', '.join(HOUSING_PARAMETERS)}")
-    if "thickness" in names and not rig.port.thicknesses:
+                               f"{'of two domes ' if rig.is_dome else ''}estimates "
+                               f"{', '.join(table)}")
+    if not rig.is_dome and "thickness" in names and not rig.port.thicknesses:
         raise CalibrationError("--free thickness: the port has no glass layer")
-    problem = housing_problem(rig, board, detections, names)
+    problem = (dome_problem if rig.is_dome else housing_problem)(rig, board, detections, names)
     residuals, unpack, x0, lower, upper = (problem.residuals, problem.unpack, problem.x0,
                                            problem.lower, problem.upper)
     obs, usable, P, n_global, basis, m = (problem.obs, problem.usable, problem.P,
@@ -393,8 +409,7 @@ def calibrate_housing(rig: StereoRig, board: Board, detections: Detections,
     scale[scale == 0] = 1.0
     Ns = N / np.outer(scale, scale)
     eigval, eigvec = np.linalg.eigh(Ns)
-    labels = tuple(f"{n}[{k}]" if HOUSING_PARAMETERS[n] > 1 else n
-                   for n in names for k in range(HOUSING_PARAMETERS[n]))
+    labels = tuple(f"{n}[{k}]" if table[n] > 1 else n for n in names for k in range(table[n]))
     port, cameras, Rs, ts = unpack(fit.x)
     poses = [(Rs[k], ts[k]) for k in range(P)]
     per, res = {}, {}
@@ -450,8 +465,11 @@ def calibrate_housing(rig: StereoRig, board: Board, detections: Detections,
                                        f"these boards do not determine it", **base)
     estimates, sigmas, k = {}, {}, 0
     for name in names:
-        w = HOUSING_PARAMETERS[name]
-        if name == "distance":
+        w = table[name]
+        if name == "dome_center":
+            estimates[name] = {view: dome_offset(cameras[i], port[i]).tolist()
+                               for i, view in enumerate(("left", "right"))}
+        elif name == "distance":
             estimates[name] = port.distance
         elif name == "normal":
             estimates[name] = port.normal.tolist()
@@ -468,9 +486,112 @@ def calibrate_housing(rig: StereoRig, board: Board, detections: Detections,
                               correlation=correlation, identifiable=True, reason="", **base)
 
 
-def _offset(names, name) -> int:
+def _offset(names, name, table=None) -> int:
     """Position of a free housing parameter's first number in the unknowns."""
-    return sum(HOUSING_PARAMETERS[n] for n in names[:names.index(name)])
+    table = HOUSING_PARAMETERS if table is None else table
+    return sum(table[n] for n in names[:names.index(name)])
+
+
+def dome_offset(camera: Camera, dome: DomePort) -> np.ndarray:
+    """A dome's decentring: its centre relative to the camera's centre, in the camera's frame
+    (mm), ``R^T (M − C)``."""
+    return camera.R.T @ (dome.center - camera.center)
+
+
+def dome_problem(rig: StereoRig, board: Board, detections: Detections, names):
+    """:func:`housing_problem` of a rig of two domes (:data:`DOME_PARAMETERS`): the unknowns are
+    the free dome numbers — ``dome_center``: each camera's decentring in its own frame (left
+    x, y, z, then right), mm; ``n_water`` — then 6 per usable pose. Radius, thickness, glass
+    index and the cameras stay at the starting rig's values. Residuals through each camera's
+    own dome; the Jacobian from ``project(..., parameters=True)``'s
+    :class:`measure.dome_projection.DomeParameterJacobian` (``dome_center`` turned into each
+    camera's frame)."""
+    starts = _start_poses(rig, board, detections)
+    usable = [k for k, s in enumerate(starts) if s is not None]
+    if len(usable) < MIN_POSES:
+        raise CalibrationError(f"the board was found in {len(usable)} pose(s); the housing "
+                               f"calibration needs at least {MIN_POSES}")
+    detections = Detections([detections.ids[k] for k in usable],
+                            [detections.pixels[k] for k in usable])
+    starts = [starts[k] for k in usable]
+    P = len(starts)
+    n_global = sum(DOME_PARAMETERS[n] for n in names)
+    domes0 = (rig.port.left, rig.port.right)
+    corners, obs = _observations(board, detections)
+    m = sum(2 * o[1].size for o in obs)
+
+    def unpack(x):
+        offsets = [dome_offset(c, d) for c, d in zip(rig.cameras, domes0)]
+        n_water = domes0[0].n_water
+        k = 0
+        for name in names:
+            if name == "dome_center":
+                offsets = [x[k:k + 3], x[k + 3:k + 6]]
+            else:
+                n_water = x[k]
+            k += DOME_PARAMETERS[name]
+        domes = DomePair(*(d.replace(center=c.center + c.R @ o,
+                                     indices=d.indices[:-1] + (float(n_water),))
+                           for c, d, o in zip(rig.cameras, domes0, offsets)))
+        Rs = Rotation.from_rotvec(x[n_global:].reshape(P, 6)[:, :3]).as_matrix()
+        ts = x[n_global:].reshape(P, 6)[:, 3:]
+        return domes, rig.cameras, Rs, ts
+
+    def residuals(x):
+        try:
+            domes, cameras, Rs, ts = unpack(x)
+        except ValueError:  # e.g. a non-physical index on the way
+            return np.full(m, 1e3)
+        out = []
+        for view, pose_idx, ids, uv in obs:
+            world = np.einsum("nij,nj->ni", Rs[pose_idx], corners[ids]) + ts[pose_idx]
+            r = (project(cameras[view], domes[view], world) - uv).ravel()
+            out.append(np.where(np.isfinite(r), r, 1e3))
+        return np.concatenate(out)
+
+    def jacobian(x):
+        width = n_global + 6
+        try:
+            domes, cameras, Rs, ts = unpack(x)
+        except ValueError:
+            return _rows_jacobian(np.zeros((m, width)), np.zeros(m, int), n_global, x.size)
+        turn = _left_jacobian(x[n_global:].reshape(P, 6)[:, :3])
+        blocks, poses = [], []
+        for view, pose_idx, ids, _ in obs:
+            rotated = np.einsum("nij,nj->ni", Rs[pose_idx], corners[ids])
+            _, d_points, jac = project(cameras[view], domes[view], rotated + ts[pose_idx],
+                                       parameters=True)
+            columns = []
+            for name in names:
+                if name == "dome_center":  # M = C + R·o: d pixel / d o = d pixel / d M · R
+                    own = jac.dome_center @ cameras[view].R
+                    zero = np.zeros_like(own)
+                    columns += [own, zero] if view == 0 else [zero, own]
+                else:
+                    columns.append(jac.indices[..., -1:])
+            d_turn = np.einsum("nrj,njk->nrk", np.cross(rotated[:, None, :], d_points),
+                               turn[pose_idx])
+            columns += [d_turn, d_points]
+            blocks.append(np.concatenate(columns, axis=-1).reshape(-1, width))
+            poses.append(np.repeat(pose_idx, 2))
+        return _rows_jacobian(np.concatenate(blocks), np.concatenate(poses), n_global, x.size)
+
+    x0 = []
+    for name in names:
+        x0 += (np.concatenate([dome_offset(c, d) for c, d in zip(rig.cameras, domes0)]).tolist()
+               if name == "dome_center" else [domes0[0].n_water])
+    for R, t in starts:
+        x0 += list(Rotation.from_matrix(R).as_rotvec()) + list(t)
+    x0 = np.asarray(x0, dtype=np.float64)
+    lower = np.full(x0.size, -np.inf)
+    upper = np.full(x0.size, np.inf)
+    if "n_water" in names:
+        k = _offset(names, "n_water", DOME_PARAMETERS)
+        lower[k], upper[k] = 1.0, MAX_INDEX
+        x0[k] = np.clip(x0[k], lower[k] + 1e-9, upper[k] - 1e-9)
+    return SimpleNamespace(residuals=residuals, jacobian=jacobian, unpack=unpack, x0=x0,
+                           lower=lower, upper=upper, obs=obs, usable=usable, P=P,
+                           n_global=n_global, basis=(), m=m)
 
 
 def _left_jacobian(rotvecs) -> np.ndarray:
@@ -504,6 +625,7 @@ def usable_index(usable, pose_idx) -> np.ndarray:
     return np.asarray(usable)[pose_idx]
 
 
-__all__ = ["AirCalibration", "CalibrationError", "DEFAULT_FREE", "Detections",
-           "HOUSING_PARAMETERS", "HousingCalibration", "MIN_POSES", "calibrate_housing",
-           "calibrate_in_air", "detect_boards", "housing_problem"]
+__all__ = ["AirCalibration", "CalibrationError", "DEFAULT_DOME_FREE", "DEFAULT_FREE",
+           "DOME_PARAMETERS", "Detections", "HOUSING_PARAMETERS", "HousingCalibration",
+           "MIN_POSES", "calibrate_housing", "calibrate_in_air", "detect_boards", "dome_offset",
+           "dome_problem", "housing_problem"]

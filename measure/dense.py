@@ -1,4 +1,5 @@
-"""Dense stereo matching through a flat port: a refractive plane sweep and a sub-pixel refinement.
+"""Dense stereo matching through a flat port or two domes: a refractive plane sweep and a
+sub-pixel refinement.
 
 1. Plane sweep (:mod:`measure.dense_warp`): for depth planes ``N·(X − C_left) = d`` spaced so
    that right pixels move about ``step_px`` between planes, the right image is resampled onto
@@ -20,7 +21,8 @@ The heavy per-pixel work runs in row bands on a thread pool (NumPy and OpenCV re
 a band's window filters also read the halo rows half a window beyond it, so the bands give the
 whole image's result (up to the rounding of the filters' running sums).
 
-The result per pixel is the refined depth parameter d (the depth map, mm along the port normal
+The result per pixel is the refined depth parameter d (the depth map, mm along the rig's
+:attr:`~measure.StereoRig.depth_axis` — the port normal, or the left optical axis for domes —
 from the left camera centre) and the exact right pixel of the left ray's point at that depth;
 triangulating the pair with the same model (``optical_path`` for ``"refractive"``, ``regular``
 for ``"pinhole"``) gives back that point.
@@ -105,7 +107,12 @@ def _check_depth_range(rig: StereoRig, depth_range) -> tuple[float, float]:
         raise ValueError(f"depth_range must be (near, far) in mm, got {depth_range!r}") from None
     if not (np.isfinite(near) and np.isfinite(far)) or near >= far:
         raise ValueError(f"depth_range must be finite with near < far, got ({near}, {far})")
-    water_depth = rig.port.offsets[-1] - float(rig.port.normal @ rig.left.center)
+    if rig.is_dome:  # beyond both domes' outer spheres along the left optical axis
+        axis = rig.depth_axis
+        water_depth = max(float(axis @ (dome.center - rig.left.center)) + dome.radii[1]
+                          for dome in (rig.port.left, rig.port.right))
+    else:
+        water_depth = rig.port.offsets[-1] - float(rig.port.normal @ rig.left.center)
     if near <= water_depth:
         raise ValueError(f"depth_range starts at {near} mm, not beyond the port's last interface "
                          f"({water_depth:g} mm from the left camera along the port normal)")
@@ -257,8 +264,10 @@ def match_dense(rig: StereoRig, left, right, depth_range, *, model: str = "refra
     """Dense matches of a rectification-free stereo pair through the rig's port.
 
     ``left``, ``right``: 2D grey images of the cameras' sizes (any real dtype; scaled to
-    [0, 1] float32 together). ``depth_range``: (near, far) in mm along the port normal from the
-    left camera centre, beyond the port. ``model``: ``"refractive"`` (through ``rig.port``) or
+    [0, 1] float32 together). ``depth_range``: (near, far) in mm along the rig's depth axis
+    (the port normal; for a :class:`measure.dome.DomePair` the left optical axis) from the left
+    camera centre, beyond the port (beyond both domes). ``model``: ``"refractive"`` (through
+    ``rig.port``) or
     ``"pinhole"`` (the port ignored: straight rays). ``window``: odd side of the square ZNCC
     window (px). ``min_score``: the least ZNCC kept. ``step_px``: right-pixel motion between
     sweep planes. ``roi``: optional ``(u0, v0, u1, v1)`` left-image box (px, end exclusive)

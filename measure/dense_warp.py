@@ -1,9 +1,11 @@
-"""Plane-sweep warps for dense stereo through a flat port: left pixel → right pixel via a plane.
+"""Plane-sweep warps for dense stereo through a flat port or two domes: left pixel → right pixel
+via a plane.
 
-A depth plane is ``N · (X − C_left) = d`` (N the port normal, C_left the left camera centre, d in
-mm). For one plane the warp map sends every left pixel along its water ray (``Camera.rays`` →
-:func:`trace_through_port`) to the plane and projects the point into the right camera through
-the port (:func:`project`, the exact Fermat forward model). The map is smooth, so it is computed
+A depth plane is ``N · (X − C_left) = d`` (N the rig's :attr:`~measure.StereoRig.depth_axis`:
+the port normal, or the left optical axis for domes; C_left the left camera centre, d in mm).
+For one plane the warp map sends every left pixel along its water ray (``Camera.rays`` →
+:meth:`~measure.StereoRig.trace`) to the plane and projects the point into the right camera
+through its port (:func:`project`, the exact Fermat forward model). The map is smooth, so it is computed
 exactly on a coarse grid of left pixels and interpolated to full resolution (``cv2.resize``,
 bilinear: OpenCV's bicubic kernel (a = −0.75) does not even reproduce a linear ramp and misses
 by ~0.07 px per grid step, bilinear's error falls as step² / f); ``model="pinhole"`` runs the
@@ -21,7 +23,6 @@ import numpy as np
 
 from .port import index_matched_port
 from .projection import project
-from .refraction import trace_through_port
 from .triangulate import StereoRig
 
 MODELS = ("refractive", "pinhole")
@@ -55,9 +56,9 @@ class PlaneWarp:
             raise ValueError(f"model must be one of {', '.join(MODELS)}, got {model!r}")
         self.rig = rig
         self.model = model
-        self.normal = rig.port.normal
+        self.normal = rig.depth_axis
         self.depth_origin = float(self.normal @ rig.left.center)
-        self.projection_port = rig.port if model == "refractive" else index_matched_port(
+        self.projection_port = rig.port_of(1) if model == "refractive" else index_matched_port(
             self.normal, np.stack([rig.left.center, rig.right.center]))
         if grid_step_px is None:
             grid_step_px = grid_step_for(min(rig.left.K[0, 0], rig.left.K[1, 1]))
@@ -79,8 +80,7 @@ class PlaneWarp:
         directions = self.rig.left.rays(uv_left)
         if self.model == "pinhole":
             return np.broadcast_to(self.rig.left.center, directions.shape), directions
-        water = trace_through_port(self.rig.left.center, directions, self.rig.port,
-                                   keep_interface_points=False)
+        water = self.rig.trace(0, directions)
         return water.origins, water.directions
 
     def points_at_depth(self, origins, directions, depth):

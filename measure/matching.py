@@ -1,4 +1,4 @@
-"""Stereo matching of detected targets through a flat port, without ground truth.
+"""Stereo matching of detected targets through a flat port or two domes, without ground truth.
 
 For every candidate pair (left detection i, right detection j) the two pixels are back-projected
 and traced into the water; a true pair's water rays meet (their common perpendicular is short:
@@ -27,7 +27,6 @@ from scipy.spatial import cKDTree
 
 from .lines import common_perpendicular
 from .reasons import Reason
-from .refraction import trace_through_port
 from .triangulate import StereoRig
 
 _NO_PAIR = 1e12  # cost of an impossible pair in the assignment
@@ -62,8 +61,8 @@ class Matches:
     unmatched_right: np.ndarray
 
 
-def _water_rays(camera, port, uv):
-    water = trace_through_port(camera.center, camera.rays(uv), port, keep_interface_points=False)
+def _water_rays(rig: StereoRig, view: int, uv):
+    water = rig.trace(view, rig.cameras[view].rays(uv))
     return water.origins, water.directions, water.reason == Reason.OK
 
 
@@ -72,16 +71,19 @@ def candidate_pairs(rig: StereoRig, uv_left, uv_right, gate_mm: float,
     """``(i, j, gap)``: the pairs (left row i, right row j) whose common-perpendicular length
     (mm) is at most ``gate_mm`` and that are possible, computed in chunks of
     :data:`PAIRS_PER_CHUNK` pairs, so that memory stays bounded by the pairs kept. With
-    ``return_depth`` also each pair's depth ``normal · X`` of the midpoint (mm).
+    ``return_depth`` also each pair's depth ``a · X`` of the midpoint (mm; ``a`` =
+    :attr:`StereoRig.depth_axis`: the port normal, or the left optical axis for domes).
 
     A pair is impossible when a ray has no path into the water, the rays meet behind a camera,
-    or the midpoint's depth along the port normal (``normal · X``) is outside ``depth_range``.
+    or the midpoint's depth ``a · X`` is outside ``depth_range``. Either port: the rays are
+    traced by :meth:`StereoRig.trace` (a flat port or each camera's dome).
     """
     uv_left = np.asarray(uv_left, dtype=float).reshape(-1, 2)
     uv_right = np.asarray(uv_right, dtype=float).reshape(-1, 2)
-    o1, d1, ok1 = _water_rays(rig.left, rig.port, uv_left)
-    o2, d2, ok2 = _water_rays(rig.right, rig.port, uv_right)
+    o1, d1, ok1 = _water_rays(rig, 0, uv_left)
+    o2, d2, ok2 = _water_rays(rig, 1, uv_right)
     n_left, n_right = len(uv_left), len(uv_right)
+    axis = rig.depth_axis
     rows_per_chunk = max(1, PAIRS_PER_CHUNK // max(1, n_right))
     found_i, found_j, found_gap, found_depth = [], [], [], []
     near, far = depth_range
@@ -91,7 +93,7 @@ def candidate_pairs(rig: StereoRig, uv_left, uv_right, gate_mm: float,
         i, j = i.ravel(), j.ravel()
         with np.errstate(invalid="ignore", divide="ignore"):
             perp = common_perpendicular(o1[i], d1[i], o2[j], d2[j])
-            depth = perp.midpoint @ rig.port.normal
+            depth = perp.midpoint @ axis
             keep = ok1[i] & ok2[j] & (perp.s1 > 0) & (perp.s2 > 0) & (perp.length <= gate_mm)
             if near is not None:
                 keep &= depth >= near
@@ -122,7 +124,8 @@ def match_targets(rig: StereoRig, uv_left, uv_right, gate_mm: float = 0.5,
 
     ``gate_mm``: the largest common-perpendicular length of an accepted pair (mm); a few times
     the gap that pixel noise produces at the working distance. ``depth_range``: ``(near, far)``
-    bounds on ``normal · X`` (mm) of the triangulated point, ``None`` for no bound.
+    bounds on ``a · X`` (mm, ``a`` = :attr:`StereoRig.depth_axis`) of the triangulated point,
+    ``None`` for no bound.
 
     The candidate pairs form a bipartite graph; within each connected group the assignment
     explains as many detections as possible with the smallest total gap. An assigned pair is

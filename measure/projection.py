@@ -32,6 +32,8 @@ from scipy.optimize import elementwise
 
 from .batching import map_row_chunks
 from .camera import Camera
+from .dome import DomePair, DomePort
+from .dome_projection import dome_paths
 from .port import FlatPort, index_matched_port
 from .reasons import Reason
 
@@ -720,6 +722,11 @@ def _jacobians(camera, frame, problem, points, x, curvature, ratio, inverse, l1,
 
 
 def _run(camera, port, points, solver, paths: bool, jacobian: int):
+    if not (port is None or isinstance(port, FlatPort)):
+        raise ValueError(f"port must be a measure.FlatPort, a measure.dome.DomePort or None, got "
+                         f"{type(port).__name__}" + (" (a DomePair holds one dome per camera: "
+                                                     "pass rig.port_of(view))"
+                                                     if isinstance(port, DomePair) else ""))
     if solver not in SOLVERS:
         raise ValueError(f"solver must be one of {', '.join(SOLVERS)}, got {solver!r}")
     points = np.asarray(points, dtype=np.float64)
@@ -738,21 +745,30 @@ def _run(camera, port, points, solver, paths: bool, jacobian: int):
     return outputs, max(iterations, default=0)
 
 
-def solve_paths(camera: Camera, port: FlatPort | None, points, solver: str = "fermat") -> RefractedPaths:
+def solve_paths(camera: Camera, port: FlatPort | DomePort | None, points,
+                solver: str = "fermat") -> RefractedPaths:
     """Refracted light paths from ``points (N, 3)`` (or one point ``(3,)``) in the water to
-    ``camera``'s centre. ``port=None`` means no port (all air).
+    ``camera``'s centre. ``port=None`` means no port (all air); a
+    :class:`measure.dome.DomePort` is solved by :func:`measure.dome_projection.dome_paths`
+    (solvers ``"fermat"`` and ``"shooting"``; ``interface_points`` on the inner and outer
+    sphere).
 
     Raises ``ValueError`` for an unknown solver or a camera centre on the water side of the
     port; per-point failures (a point not in the water, NaN input) are NaN rows with a reason.
     Large batches run in chunks on all cores (same result as one batch).
     """
+    if isinstance(port, DomePort):
+        pixels, reason, is_minimum, interface_points, iterations, _ = dome_paths(
+            camera, port, points, solver)
+        return RefractedPaths(pixels, interface_points.transpose(1, 0, 2), reason, is_minimum,
+                              int(iterations))
     (pixels, reason, is_minimum, interface_points), iterations = _run(camera, port, points,
                                                                       solver, True, 0)
     return RefractedPaths(pixels, interface_points.transpose(1, 0, 2), reason, is_minimum,
                           int(iterations))
 
 
-def project(camera: Camera, port: FlatPort | None, points, solver: str = "fermat", *,
+def project(camera: Camera, port: FlatPort | DomePort | None, points, solver: str = "fermat", *,
             jacobian: bool = False, parameters: bool = False):
     """Pixels ``(N, 2)`` of points ``(N, 3)`` in the water seen by ``camera`` through ``port``
     (``None``: no port, all air). One point ``(3,)`` gives ``(1, 2)``, like :func:`triangulate`
@@ -769,9 +785,18 @@ def project(camera: Camera, port: FlatPort | None, points, solver: str = "fermat
     the solution, Snell's invariant ``p = n_i sin θ_i`` is the same in every medium: one
     equation ``F(p; ℓ, h, n) = 0`` per point) chained with the pinhole and distortion model —
     no finite differences. Rows without a pixel are NaN in every output.
+
+    A :class:`measure.dome.DomePort` as ``port`` goes to
+    :func:`measure.dome_projection.dome_paths` (solvers ``"fermat"``, ``"shooting"``); its
+    ``parameters=True`` gives a :class:`measure.dome_projection.DomeParameterJacobian`
+    (dome centre, radius, thickness, indices, camera centre and rotation).
     """
     if parameters:
         jacobian = True
+    if isinstance(port, DomePort):
+        pixels, _, _, _, _, rest = dome_paths(camera, port, points, solver,
+                                              2 if parameters else int(bool(jacobian)))
+        return (pixels, *rest) if jacobian else pixels
     (pixels, *rest), _ = _run(camera, port, points, solver, False,
                               2 if parameters else int(bool(jacobian)))
     if not jacobian:

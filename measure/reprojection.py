@@ -8,15 +8,24 @@ import numpy as np
 from scipy.optimize import least_squares
 from scipy.sparse import csr_matrix, lil_matrix
 
+from .dome import DomePair
 from .projection import project
+
+
+def _view_port(port, view: int):
+    """The port of camera ``view``: ``port`` itself, or its dome for a
+    :class:`measure.dome.DomePair` (one dome per camera)."""
+    return port[view] if isinstance(port, DomePair) else port
 
 
 def stereo_residuals(rig, port, points, observed) -> np.ndarray:
     """Reprojection residuals ``(4N,)`` px of ``points`` ``(N, 3)`` through ``port`` against
     ``observed`` = rows ``(u_left, v_left, u_right, v_right)`` flattened; a point with no image
-    gets a large residual (1e3 px) instead of NaN, so the optimizer steers away from it."""
-    predicted = np.concatenate([project(rig.left, port, points),
-                                project(rig.right, port, points)], axis=1).ravel()
+    gets a large residual (1e3 px) instead of NaN, so the optimizer steers away from it.
+    ``port``: a flat port (both views) or a :class:`measure.dome.DomePair` (one dome each)."""
+    predicted = np.concatenate([project(rig.left, _view_port(port, 0), points),
+                                project(rig.right, _view_port(port, 1), points)],
+                               axis=1).ravel()
     r = predicted - observed
     return np.where(np.isfinite(r), r, 1e3)
 
@@ -25,9 +34,10 @@ def stereo_projections(rig, port, points, parameters: bool = False):
     """Both views' pixels and analytic derivatives for :func:`stereo_residuals`: returns the
     predicted ``(u_left, v_left, u_right, v_right)`` rows ``(N, 4)``, d residual / d point
     ``(N, 4, 3)`` and, with ``parameters``, the two views' :class:`~measure.projection.
-    ParameterJacobian` (else None). Rows without an image are NaN."""
-    left = project(rig.left, port, points, jacobian=True, parameters=parameters)
-    right = project(rig.right, port, points, jacobian=True, parameters=parameters)
+    ParameterJacobian` (:class:`~measure.dome_projection.DomeParameterJacobian` for a
+    :class:`measure.dome.DomePair`; else None). Rows without an image are NaN."""
+    left = project(rig.left, _view_port(port, 0), points, jacobian=True, parameters=parameters)
+    right = project(rig.right, _view_port(port, 1), points, jacobian=True, parameters=parameters)
     predicted = np.concatenate([left[0], right[0]], axis=1)
     d_points = np.concatenate([left[1], right[1]], axis=1)
     return predicted, d_points, ((left[2], right[2]) if parameters else None)

@@ -146,6 +146,9 @@ def self_calibrate(rig: StereoRig, uv_left, uv_right, parameters=("n_water",),
     ``(N, 2)`` of unknown points. ``points`` ``(N, 3)`` start values (default: the optical-path
     triangulation with ``rig``). Raises ``ValueError`` for an unknown parameter or fewer
     targets than free numbers."""
+    if rig.is_dome:
+        raise ValueError("self-calibration estimates flat-port parameters; a rig of two domes "
+                         "(DomePair) is not supported yet")
     names = tuple(dict.fromkeys(parameters))
     unknown = [p for p in names if p not in PARAMETERS]
     if not names or unknown:

@@ -10,6 +10,10 @@
   nearest the two pixels (least squares from the optical-path point; ``gap`` is the optical-path
   gap of the pixels). Statistically optimal for Gaussian pixel noise; slower.
 
+Every method also takes a rig of two domes (``port`` a :class:`measure.dome.DomePair`): the
+rays are traced through each camera's own dome (:meth:`StereoRig.trace`); ``regular`` is exact
+there when each camera sits at its dome's centre (no ray through the centre is bent).
+
 Frames and units: reference frame = left camera frame (OpenCV axes), millimetres, pixels in the
 OpenCV convention.
 """
@@ -23,7 +27,7 @@ import numpy as np
 from .camera import Camera
 from .lines import common_perpendicular
 from .camera import ValueEquality
-from .dome import DomePair
+from .dome import DomePair, trace_through_dome
 from .port import FlatPort, index_matched_port
 from .batching import map_row_chunks
 from .reasons import Reason
@@ -37,7 +41,8 @@ METHODS = ("optical_path", "su", "regular", "reprojection")
 class StereoRig(ValueEquality):
     """Two cameras behind one flat port, or each inside its own dome (``port`` a
     :class:`measure.dome.DomePair`). Both centres must be on the air side of the port (inside
-    their domes).
+    their domes). Every triangulation method takes either kind (:meth:`trace` back-projects
+    through the port of each view).
 
     ``port=None`` means no port (all air): it is replaced by :func:`index_matched_port` along
     the left camera's optical axis, through which everything reduces to the pinhole model."""
@@ -70,6 +75,20 @@ class StereoRig(ValueEquality):
         """The port camera ``view`` (0 left, 1 right) looks through: the shared FlatPort, or
         that camera's DomePort."""
         return self.port[view] if self.is_dome else self.port
+
+    @property
+    def depth_axis(self) -> np.ndarray:
+        """The unit axis along which depths are measured (reference frame): the port normal
+        of a flat port, the left camera's optical axis for domes (no shared normal)."""
+        return self.left.R[:, 2].copy() if self.is_dome else self.port.normal
+
+    def trace(self, view: int, directions: np.ndarray, keep_interface_points: bool = False):
+        """Water rays (:class:`measure.WaterRays`) of unit camera rays ``directions``
+        ``(N, 3)`` (reference frame) from camera ``view``'s centre through its port:
+        :func:`measure.trace_through_port` or :func:`measure.dome.trace_through_dome`."""
+        camera, port = self.cameras[view], self.port_of(view)
+        trace = trace_through_dome if self.is_dome else trace_through_port
+        return trace(camera.center, directions, port, keep_interface_points=keep_interface_points)
 
     @property
     def cameras(self) -> tuple[Camera, Camera]:
@@ -153,8 +172,8 @@ def triangulate_rays(rig: StereoRig, rays_left: np.ndarray, rays_right: np.ndarr
         rays_left /= np.linalg.norm(rays_left, axis=1, keepdims=True)
         rays_right = virtual - o_right
         rays_right /= np.linalg.norm(rays_right, axis=1, keepdims=True)
-    water_left = trace_through_port(o_left, rays_left, rig.port, keep_interface_points=False)
-    water_right = trace_through_port(o_right, rays_right, rig.port, keep_interface_points=False)
+    water_left = rig.trace(0, rays_left)
+    water_right = rig.trace(1, rays_right)
     for water in (water_left, water_right):
         reason[reason == Reason.OK] = water.reason[reason == Reason.OK]
     perp = _midpoint(water_left.origins, water_left.directions,
@@ -367,7 +386,7 @@ def triangulate(rig: StereoRig, uv_left, uv_right, method: str = "optical_path")
         reason = start.reason.copy()
         points[reason != Reason.OK] = np.nan
         return Triangulation(points, start.gap, reason, method)
-    if method == "optical_path":
+    if method == "optical_path" and not rig.is_dome:  # the fused flat-port form
         n_rows = uv_left.shape[0]
         points, gap, reason = map_row_chunks(
             lambda left, right, out: _optical_path_rows(rig, left, right, out),

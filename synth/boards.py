@@ -7,11 +7,11 @@ values 0 and 1), so its corners are exactly where OpenCV's model of the board sa
 One Mitsuba scene is built per folder; each pose only moves the board (``mi.traverse``).
 
 Poses (reference frame = the left camera's, mm): the board's centre at a depth (along the
-port normal) drawn uniformly from ``distance_range``, at a random place of the left view, tilted
-about a random in-plane axis by up to ``max_tilt_deg`` and turned about its normal by up to
-:data:`MAX_ROLL_DEG`; a pose is kept only when the forward model puts the whole board (its
-outline and every corner) inside both images, :data:`IMAGE_MARGIN_PX` from the border, and in
-the water.
+port normal; in a dome rig along the left optical axis) drawn uniformly from
+``distance_range``, at a random place of the left view, tilted about a random in-plane axis by
+up to ``max_tilt_deg`` and turned about its normal by up to :data:`MAX_ROLL_DEG`; a pose is kept
+only when the forward model puts the whole board (its outline and every corner) inside both
+images, :data:`IMAGE_MARGIN_PX` from the border, and in the water (outside both domes).
 
 Folder (same output rule as ``synth dataset``: atomic, rerunnable, never over someone else's
 files): ``left_PP.png``, ``right_PP.png`` (16-bit linear, one ``png_scale``), ``board.json``,
@@ -48,6 +48,7 @@ from synth.provenance import package_versions
 from synth.render import (check_render_request, png16_scale, render_view_counted, sensor_dict,
                           to_png16, write_png)
 from synth.scene import SceneSpec, interface_placements
+from synth.scene.dome import dome_placements
 
 FORMAT_VERSION = 2  # 2: the manifest holds every file's SHA-256 and its own
 COMMAND = "synth boards"
@@ -89,6 +90,14 @@ def board_rig(spec: SceneSpec, air: bool) -> StereoRig:
     return StereoRig(left, right, index_matched_port(left.R[:, 2], np.stack([left.t, right.t])))
 
 
+def in_water(rig: StereoRig, points) -> np.ndarray:
+    """Whether points ``(N, 3)`` (mm) lie in the water: beyond the flat port's last interface,
+    or outside both domes of a dome rig."""
+    if rig.is_dome:
+        return rig.port.left.water_side(points) & rig.port.right.water_side(points)
+    return rig.port.water_side(points)
+
+
 def _fits(rig: StereoRig, board: Board, poses_R, poses_t, water: bool) -> np.ndarray:
     """Which candidate poses ``(M, 3, 3)``, ``(M, 3)`` put every board point inside both images
     (and in the water behind a port)."""
@@ -97,9 +106,9 @@ def _fits(rig: StereoRig, board: Board, poses_R, poses_t, water: bool) -> np.nda
     flat = world.reshape(-1, 3)
     ok = np.ones(flat.shape[0], bool)
     if water:
-        ok &= rig.port.water_side(flat)
-    for camera in rig.cameras:
-        ok &= camera.in_image(project(camera, rig.port, flat), IMAGE_MARGIN_PX)
+        ok &= in_water(rig, flat)
+    for view, camera in enumerate(rig.cameras):
+        ok &= camera.in_image(project(camera, rig.port_of(view), flat), IMAGE_MARGIN_PX)
     return ok.reshape(poses_R.shape[0], -1).all(axis=1)
 
 
@@ -117,7 +126,7 @@ def sample_poses(rig: StereoRig, board: Board, n: int, seed: int, water: bool,
     left = rig.left
     w, h = left.size
     half = np.array(board.size_mm + (0.0,)) / 2
-    normal = rig.port.normal
+    normal = rig.depth_axis  # the port normal, or the left optical axis for domes
     poses, tried = [], 0
     while len(poses) < n:
         if tried >= ATTEMPTS_PER_POSE * n:
@@ -175,7 +184,13 @@ def build_board_scene(spec: SceneSpec, board: Board, air: bool, variant=None):
                        "emitter": {"type": "area", "radiance": {
                            "type": "bitmap", "data": mi.TensorXf(pattern), "raw": True,
                            "filter_type": "nearest"}}}}
-    if not air and spec.has_port:
+    if not air and spec.rig.is_dome:
+        for sid, centre, radius, ext_ior, int_ior in dome_placements(spec.rig.port):
+            scene[sid] = {"type": "sphere", "center": [float(c) for c in centre],
+                          "radius": float(radius),
+                          "bsdf": {"type": "dielectric", "ext_ior": float(ext_ior),
+                                   "int_ior": float(int_ior)}}
+    elif not air and spec.has_port:
         half = 2000.0
         for k, centre, target, up, ext_ior, int_ior in interface_placements(spec.rig.port):
             to_world = (mi.ScalarTransform4f().look_at(origin=centre.tolist(),
@@ -329,8 +344,8 @@ def _write_truth(directory, rig, board: Board, poses) -> None:
         writer.writerow(CORNERS_HEADER)
         for k, pose in enumerate(poses):
             world = pose.apply(corners)
-            uv_l = project(rig.left, rig.port, world)
-            uv_r = project(rig.right, rig.port, world)
+            uv_l = project(rig.left, rig.port_of(0), world)
+            uv_r = project(rig.right, rig.port_of(1), world)
             for i, p, a, b in zip(ids, world, uv_l, uv_r):
                 writer.writerow([k, int(i)] + [f"{v:.17g}" for v in (*p, *a, *b)])
 

@@ -6,13 +6,15 @@ Both come from Kiel's refractive tools (docs/formats.md has the sources, file an
 * **calibmar** (github MDSKiel/calibmar) saves a stereo calibration as *two* files:
   ``<name>.yaml`` for the first camera and ``<name>_stereo.yaml`` for the second
   (``src/app/ui/main_window.cpp``), each ``model``, ``parameters`` (a COLMAP camera model),
-  ``non_svp_model`` (``FLATPORT``, or ``NONE`` in air), ``non_svp_parameters``
-  ``[Nx, Ny, Nz, int_dist, int_thick, na, ng, nw]``, ``width``, ``height`` and the stereo pose
+  ``non_svp_model`` (``FLATPORT``, ``DOMEPORT``, or ``NONE`` in air), ``non_svp_parameters``
+  ``[Nx, Ny, Nz, int_dist, int_thick, na, ng, nw]`` (``DOMEPORT``: ``[Cx, Cy, Cz, int_radius,
+  int_thick, na, ng, nw]``, the dome centre in that camera's frame), ``width``, ``height`` and the stereo pose
   ``cam_to_world_rotation_rowmajor`` (9 numbers) and ``cam_to_world_translation`` (3):
   ``X_world = R·X_cam + t``, the world being the first camera (identity in its file)
   (``src/calibmar/core/report.cpp`` lines 91–152, ``stereo_calibrator.cpp`` lines 93–96).
 * **COLMAP fork** (github MDSKiel/colmap_underwater): ``cameras.txt`` lines
-  ``CAMERA_ID MODEL WIDTH HEIGHT PARAMS… [FLATPORT Nx Ny Nz int_dist int_thick na ng nw]``
+  ``CAMERA_ID MODEL WIDTH HEIGHT PARAMS… [FLATPORT Nx Ny Nz int_dist int_thick na ng nw]`` or
+  ``… [DOMEPORT Cx Cy Cz int_radius int_thick na ng nw]``
   (``src/colmap/scene/reconstruction.cc`` lines 1854–1893). A ``cameras.txt`` holds no relative
   pose; the fork's rig bundle adjuster reads it from a rig configuration JSON
   (``src/colmap/exe/sfm.cc`` lines 540–583): ``[{"ref_camera_id": 1, "cameras": [{"camera_id",
@@ -24,8 +26,10 @@ Conventions of both: COLMAP pixels — the centre of the top-left pixel is (0.5,
 ``cx, cy`` are OpenCV's + 0.5 (calibmar adds 0.5 to OpenCV's corners:
 ``src/calibmar/extractors/chessboard_extractor.cpp`` lines 61–63); the port normal in each
 camera's own frame and its distance from that camera (:mod:`measure.flatport_format`); lengths
-in metres (calibmar: the unit of the target, "expected in meters"). This project keeps one port
-for both cameras, so the two cameras' ports must agree (:data:`PORT_TOLERANCE`); a rig with a
+in metres (calibmar: the unit of the target, "expected in meters"). This project keeps one flat
+port for both cameras, so the two cameras' FLATPORTs must agree (:data:`PORT_TOLERANCE`); a
+rig of two domes (:class:`measure.dome.DomePair`) is one DOMEPORT per camera, each camera's
+own (:func:`measure.flatport_format.to_domeport`); both cameras must have the same housing; a rig with a
 skewed K, zero or several port layers cannot be written and raises :class:`CalibFormatError`.
 Camera models read: SIMPLE_PINHOLE, PINHOLE, SIMPLE_RADIAL, RADIAL, OPENCV, FULL_OPENCV (their
 distortion is OpenCV's); written: OPENCV, or FULL_OPENCV when k3 (or k4–k6) is not zero.
@@ -41,7 +45,9 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from measure import Camera, FlatPort, StereoRig
-from measure.flatport_format import FLATPORT_NAMES, METRES_PER_MM, from_flatport, to_flatport
+from measure.dome import DomePair
+from measure.flatport_format import (DOMEPORT_NAMES, FLATPORT_NAMES, METRES_PER_MM,
+                                     from_domeport, from_flatport, to_domeport, to_flatport)
 
 from synth.fileio import atomic_write_text
 
@@ -67,6 +73,13 @@ COLMAP_RIG_NAME = "rig_config.json"
 IMAGE_PREFIXES = ("left/", "right/")
 PYCOLMAP_WARNING = ("upstream COLMAP and pycolmap (4.2.1 tried) read this file without an error "
                     "and silently DROP the FLATPORT part: use the refractive fork")
+#: The housings (the fork's refractive models) this module writes and reads, their parameters.
+HOUSINGS = {"FLATPORT": FLATPORT_NAMES, "DOMEPORT": DOMEPORT_NAMES}
+#: calibmar's comment line above ``non_svp_parameters`` (the fork's RefracParamsInfo, newline
+#: replaced by a space: calibmar ``src/calibmar/core/report.cpp`` lines 113–119).
+_PARAMS_INFO = {"FLATPORT": "Nx, Ny, Nz, int_dist, int_thick, na, ng, nw (Note that [Nx, Ny, "
+                            "Nz] must be unit vector)",
+                "DOMEPORT": "Cx, Cy, Cz, int_radius, int_thick, na, ng, nw"}
 
 
 class CalibFormatError(ValueError):
@@ -182,12 +195,27 @@ def _got(values: np.ndarray, names) -> str:
     return f"{', '.join(bad)}"
 
 
-def _check_port(params, where: str) -> list[float]:
+def _check_port(params, where: str, housing: str = "FLATPORT") -> list[float]:
+    """The 8 numbers of a ``FLATPORT`` or ``DOMEPORT`` (metres), checked (CalibFormatError)."""
+    names = HOUSINGS[housing]
     values = [float(v) for v in params]
-    if len(values) != len(FLATPORT_NAMES) or not np.all(np.isfinite(values)):
-        raise CalibFormatError(f"{where}: FLATPORT needs {len(FLATPORT_NAMES)} finite numbers "
-                               f"({', '.join(FLATPORT_NAMES)}), got "
-                               f"{_got(np.asarray(values), FLATPORT_NAMES)}")
+    if len(values) != len(names) or not np.all(np.isfinite(values)):
+        raise CalibFormatError(f"{where}: {housing} needs {len(names)} finite numbers "
+                               f"({', '.join(names)}), got {_got(np.asarray(values), names)}")
+    if housing == "DOMEPORT":
+        for k in (3, 4):
+            if not values[k] > 0:
+                raise CalibFormatError(f"{where}: DOMEPORT {names[k]} must be > 0, got "
+                                       f"{values[k]:g}")
+        offset = float(np.linalg.norm(values[:3]))
+        if not offset < values[3]:
+            raise CalibFormatError(f"{where}: DOMEPORT: the camera centre lies outside its dome "
+                                   f"(|Cx, Cy, Cz| = {offset:.6g} m >= int_radius "
+                                   f"{values[3]:.6g} m)")
+        if min(values[5:]) < 1.0:
+            raise CalibFormatError(f"{where}: DOMEPORT indices na, ng, nw must be >= 1, got "
+                                   f"{values[5:]}")
+        return values
     length = float(np.linalg.norm(values[:3]))
     if abs(length - 1.0) > 1e-6:
         raise CalibFormatError(f"{where}: FLATPORT normal (Nx, Ny, Nz) must be a unit vector, "
@@ -201,6 +229,16 @@ def _check_port(params, where: str) -> list[float]:
         raise CalibFormatError(f"{where}: FLATPORT indices na, ng, nw must be >= 1, got "
                                f"{values[5:]}")
     return values
+
+
+def _dome_pair(params_left, params_right, left: Camera, right: Camera) -> DomePair:
+    """The two domes of two ``DOMEPORT`` parameter lists (each in its camera's frame, the
+    cameras' poses in any common frame), in the left camera's frame (mm)."""
+    domes = []
+    for params, camera in ((params_left, left), (params_right, right)):
+        dome = from_domeport(params, camera)
+        domes.append(dome.replace(center=left.R.T @ (dome.center - left.t)))
+    return DomePair(*domes)
 
 
 def _one_port(params_left, params_right, left: Camera, right: Camera, where: str) -> FlatPort:
@@ -221,11 +259,15 @@ def _one_port(params_left, params_right, left: Camera, right: Camera, where: str
     return port
 
 
-def _port_params(rig: StereoRig) -> tuple[list, list]:
+def _port_params(rig: StereoRig) -> tuple[str, list, list]:
+    """``(housing, left parameters, right parameters)``: FLATPORT or DOMEPORT (metres)."""
+    if rig.is_dome:
+        return ("DOMEPORT", to_domeport(rig.port.left, rig.left),
+                to_domeport(rig.port.right, rig.right))
     if len(rig.port.thicknesses) != 1:
         raise CalibFormatError(f"FLATPORT holds one glass layer; this port has "
                                f"{len(rig.port.thicknesses)}")
-    return to_flatport(rig.port, rig.left), to_flatport(rig.port, rig.right)
+    return "FLATPORT", to_flatport(rig.port, rig.left), to_flatport(rig.port, rig.right)
 
 
 def _numbers(values) -> str:
@@ -245,7 +287,8 @@ def calibmar_partner(path) -> tuple[str, str]:
     return path, stem + "_stereo" + ext
 
 
-def _calibmar_text(camera: Camera, port_params, size, pose, model) -> str:
+def _calibmar_text(camera: Camera, port_params, size, pose, model,
+                   housing: str = "FLATPORT") -> str:
     name, params = colmap_camera(camera, model)
     R, t = pose
     lines = [f"model: {name}", "# " + ", ".join(COLMAP_MODELS[name]),
@@ -253,9 +296,8 @@ def _calibmar_text(camera: Camera, port_params, size, pose, model) -> str:
     if port_params is None:
         lines += ["non_svp_model: NONE", "non_svp_parameters: []"]
     else:
-        lines += ["non_svp_model: FLATPORT",
-                  "# Nx, Ny, Nz, int_dist, int_thick, na, ng, nw (Note that [Nx, Ny, Nz] must "
-                  "be unit vector)", f"non_svp_parameters: [{_numbers(port_params)}]"]
+        lines += [f"non_svp_model: {housing}", "# " + _PARAMS_INFO[housing],
+                  f"non_svp_parameters: [{_numbers(port_params)}]"]
     lines += [f"width: {int(size[0])}", f"height: {int(size[1])}",
               "# written by refractive-stereo: COLMAP pixels (the centre of the top-left pixel "
               "is 0.5, 0.5), lengths in metres", "",
@@ -275,10 +317,11 @@ def write_calibmar(path, rig: StereoRig, has_port: bool = True,
     if os.path.normpath(first) != os.path.normpath(os.fspath(path)):
         raise CalibFormatError(f"{path}: name the first camera's file; {first} and {second} "
                                f"are written")
-    ports = _port_params(rig) if has_port else (None, None)
+    housing, *ports = _port_params(rig) if has_port else ("NONE", None, None)
     R_rel, t_rel = _relative(rig)
-    texts = (_calibmar_text(rig.left, ports[0], rig.left.size, (np.eye(3), np.zeros(3)), model),
-             _calibmar_text(rig.right, ports[1], rig.left.size, (R_rel, t_rel), model))
+    texts = (_calibmar_text(rig.left, ports[0], rig.left.size, (np.eye(3), np.zeros(3)), model,
+                            housing),
+             _calibmar_text(rig.right, ports[1], rig.left.size, (R_rel, t_rel), model, housing))
     for target, text in zip((first, second), texts):
         atomic_write_text(target, text)
     return first, second
@@ -376,13 +419,18 @@ def read_calibmar(path) -> dict:
         return calib_dict(sizes["left"], *cams["left"], *cams["right"], R, T, _air_port(), False,
                           first)
     for view, (name, _) in files.items():
-        if housings[view] != "FLATPORT":
+        if housings[view] not in HOUSINGS or housings[view] != housings["left"]:
             raise CalibFormatError(f"{name}: non_svp_model {housings[view]}; this project reads "
-                                   f"FLATPORT (both files) or NONE (both, in air)")
-    params = {view: _check_port(values.get("non_svp_parameters") or [], name)
+                                   f"FLATPORT or DOMEPORT (both files alike) or NONE (both, in "
+                                   f"air)")
+    housing = housings["left"]
+    params = {view: _check_port(values.get("non_svp_parameters") or [], name, housing)
               for view, (name, values) in files.items()}
     left = Camera(cams["left"][0], sizes["left"], R=poses["left"][0], t=poses["left"][1])
     right = Camera(cams["right"][0], sizes["left"], R=poses["right"][0], t=poses["right"][1])
+    if housing == "DOMEPORT":
+        return calib_dict(sizes["left"], *cams["left"], *cams["right"], R, T,
+                          _dome_pair(params["left"], params["right"], left, right), True, first)
     port = _one_port(params["left"], params["right"], left, right, f"{first} and {second}")
     # the reference frame is the left camera's
     port = FlatPort(left.R.T @ port.normal, port.distance - float(port.normal @ left.t),
@@ -399,7 +447,7 @@ def write_colmap(path, rig: StereoRig, has_port: bool = True,
     2 = right, each with its FLATPORT unless ``has_port`` is False) and ``rig_config.json``
     beside it (the stereo pose), atomically. Returns both paths."""
     path = os.fspath(path)
-    ports = _port_params(rig) if has_port else (None, None)
+    housing, *ports = _port_params(rig) if has_port else ("NONE", None, None)
     lines = ["# Camera list with one line of data per camera:",
              "#   CAMERA_ID, MODEL, WIDTH, HEIGHT, PARAMS[] OPTIONAL[REFRAC_MODEL REFRAC_PARAMS[]]",
              "# Number of cameras: 2",
@@ -409,13 +457,15 @@ def write_colmap(path, rig: StereoRig, has_port: bool = True,
              "centre of the top-left pixel is (0.5, 0.5) (cx, cy = OpenCV's + 0.5).",
              "# FLATPORT: Nx Ny Nz (unit normal in that camera's frame) int_dist int_thick "
              "(metres) na ng nw.",
+             "# DOMEPORT: Cx Cy Cz (dome centre in that camera's frame) int_radius int_thick "
+             "(metres) na ng nw.",
              f"# WARNING: {PYCOLMAP_WARNING}."]
     for camera_id, (camera, port) in enumerate(zip((rig.left, rig.right), ports), start=1):
         name, params = colmap_camera(camera, model)
         items = [str(camera_id), name, str(int(rig.left.size[0])), str(int(rig.left.size[1]))]
         items += [repr(v) for v in params]
         if port is not None:
-            items += ["FLATPORT"] + [repr(float(v)) for v in port]
+            items += [housing] + [repr(float(v)) for v in port]
         lines.append(" ".join(items))  # single spaces: the fork's reader splits on ' '
     R_rel, t_rel = _relative(rig)
     R_cam = R_rel.T  # cam_from_rig of the right camera (the rig frame is the left camera's)
@@ -453,11 +503,13 @@ def _parse_cameras_txt(path) -> dict:
         count = len(COLMAP_MODELS[model])
         rest = parts[4:]
         port = None
+        housing = None
         if len(rest) > count:
-            if rest[count] != "FLATPORT":
+            housing = rest[count]
+            if housing not in HOUSINGS:
                 raise CalibFormatError(f"{where}: {model} takes {count} parameters; then "
-                                       f"FLATPORT and 8 numbers may follow, found "
-                                       f"{rest[count]!r}")
+                                       f"FLATPORT and 8 numbers may follow (or DOMEPORT and "
+                                       f"8), found {rest[count]!r}")
             port = rest[count + 1:]
         try:
             params = [float(v) for v in rest[:count]]
@@ -471,7 +523,9 @@ def _parse_cameras_txt(path) -> dict:
             raise CalibFormatError(f"{where}: camera {camera_id} given twice")
         K, D = opencv_camera(model, params, where)
         cameras[camera_id] = {"size": (int(parts[2]), int(parts[3])), "K": K, "D": D,
-                              "port": None if port is None else _check_port(port, where)}
+                              "housing": housing,
+                              "port": None if port is None else _check_port(port, where,
+                                                                            housing)}
     return cameras
 
 
@@ -534,9 +588,17 @@ def read_colmap(path) -> dict:
         return calib_dict(left["size"], left["K"], left["D"], right["K"], right["D"], R, T,
                           _air_port(), False, path)
     if left["port"] is None or right["port"] is None:
-        raise CalibFormatError(f"{path}: one camera has a FLATPORT and the other none")
+        raise CalibFormatError(f"{path}: one camera has a {left['housing'] or right['housing']} "
+                               f"and the other none")
+    if left["housing"] != right["housing"]:
+        raise CalibFormatError(f"{path}: camera {ref} has a {left['housing']}, camera {other} a "
+                               f"{right['housing']}; both cameras need the same housing")
     cam_left = Camera(left["K"], left["size"], R=poses[ref][0], t=poses[ref][1])
     cam_right = Camera(right["K"], left["size"], R=poses[other][0], t=poses[other][1])
+    if left["housing"] == "DOMEPORT":
+        return calib_dict(left["size"], left["K"], left["D"], right["K"], right["D"], R, T,
+                          _dome_pair(left["port"], right["port"], cam_left, cam_right), True,
+                          path)
     port = _one_port(left["port"], right["port"], cam_left, cam_right, path)
     port = FlatPort(cam_left.R.T @ port.normal, port.distance - float(port.normal @ cam_left.t),
                     port.thicknesses, port.indices)

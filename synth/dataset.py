@@ -11,7 +11,9 @@ A dataset directory holds (units mm, reference frame = the left camera's, OpenCV
 * ``calib.yaml`` -- OpenCV FileStorage: ``image_width``, ``image_height``, ``K1``, ``D1``,
   ``K2``, ``D2``, ``R``, ``T`` (OpenCV stereo convention ``X_right = R·X_left + T``), ``units``
   and a map ``port`` {``normal`` (3x1), ``distance``, ``thicknesses`` (sequence),
-  ``indices`` (sequence), ``present`` (0 for an all-air scene, whose port is index-matched)};
+  ``indices`` (sequence), ``present`` (0 for an all-air scene, whose port is index-matched)} —
+  or, for a dome scene, a map ``dome`` {``left``, ``right``: {``center`` (3x1, reference
+  frame), ``radius`` (inner), ``thickness``, ``indices`` (air, glass, water)}};
 * surface scenes (``python -m synth scene --layout surface``) instead of targets:
   ``surface.ply`` (the mesh) and per-view truth maps (:mod:`synth.truth_maps`):
   ``{left,right}_truth_points.npy`` (H, W, 3) float64 mm, ``{left,right}_truth_depth.npy``
@@ -58,6 +60,7 @@ import cv2
 import numpy as np
 
 from measure import Camera, FlatPort, StereoRig
+from measure.dome import DomePair, DomePort
 from measure.projection import project
 
 from synth.calib_formats import (CalibFormatError, calib_dict, calib_format, read_calibmar,
@@ -123,16 +126,27 @@ def write_calib(path, rig: StereoRig, has_port: bool = True, extra: dict | None 
         fs.write("R", R)
         fs.write("T", T.reshape(3, 1))
         port = rig.port
-        fs.startWriteStruct("port", cv2.FileNode_MAP)
-        fs.write("present", int(has_port))
-        fs.write("normal", port.normal.reshape(3, 1))
-        fs.write("distance", float(port.distance))
-        for name, values in (("thicknesses", port.thicknesses), ("indices", port.indices)):
-            fs.startWriteStruct(name, cv2.FileNode_SEQ)
-            for v in values:
-                fs.write("", float(v))
+        if rig.is_dome:
+            fs.startWriteStruct("dome", cv2.FileNode_MAP)
+            for name, dome in (("left", port.left), ("right", port.right)):
+                fs.startWriteStruct(name, cv2.FileNode_MAP)
+                fs.write("center", dome.center.reshape(3, 1))
+                fs.write("radius", float(dome.radius))
+                fs.write("thickness", float(dome.thickness))
+                _write_node(fs, "indices", [float(v) for v in dome.indices])
+                fs.endWriteStruct()
             fs.endWriteStruct()
-        fs.endWriteStruct()
+        else:
+            fs.startWriteStruct("port", cv2.FileNode_MAP)
+            fs.write("present", int(has_port))
+            fs.write("normal", port.normal.reshape(3, 1))
+            fs.write("distance", float(port.distance))
+            for name, values in (("thicknesses", port.thicknesses), ("indices", port.indices)):
+                fs.startWriteStruct(name, cv2.FileNode_SEQ)
+                for v in values:
+                    fs.write("", float(v))
+                fs.endWriteStruct()
+            fs.endWriteStruct()
         if covariance is not None:
             fs.startWriteStruct("covariance", cv2.FileNode_MAP)
             _write_node(fs, "names", list(covariance.names))
@@ -193,15 +207,21 @@ def _read_calib(path) -> dict:
             if mat is None:
                 raise DatasetError(f"{path}: no matrix {name}")
             out[name] = np.asarray(mat, dtype=np.float64)
-        pnode = fs.getNode("port")
-        if pnode.empty() or pnode.getNode("normal").mat() is None:
-            raise DatasetError(f"{path}: no port map (normal, distance, thicknesses, indices)")
-        out["port"] = FlatPort(pnode.getNode("normal").mat().ravel(),
-                               pnode.getNode("distance").real(),
-                               tuple(_seq(pnode.getNode("thicknesses"))),
-                               tuple(_seq(pnode.getNode("indices"))))
-        present = pnode.getNode("present")
-        out["has_port"] = bool(present.real()) if not present.empty() else True
+        pnode, dnode = fs.getNode("port"), fs.getNode("dome")
+        if not dnode.empty():
+            if not pnode.empty():
+                raise DatasetError(f"{path}: holds both a port map and a dome map")
+            out["port"], out["has_port"] = _read_domes(path, dnode), True
+        else:
+            if pnode.empty() or pnode.getNode("normal").mat() is None:
+                raise DatasetError(f"{path}: no port map (normal, distance, thicknesses, "
+                                   f"indices) and no dome map")
+            out["port"] = FlatPort(pnode.getNode("normal").mat().ravel(),
+                                   pnode.getNode("distance").real(),
+                                   tuple(_seq(pnode.getNode("thicknesses"))),
+                                   tuple(_seq(pnode.getNode("indices"))))
+            present = pnode.getNode("present")
+            out["has_port"] = bool(present.real()) if not present.empty() else True
         covariance = _read_covariance(path, fs.getNode("covariance"))
     finally:
         fs.release()
@@ -209,6 +229,25 @@ def _read_calib(path) -> dict:
                        out["T"], out["port"], out["has_port"], str(path))
     calib["covariance"] = covariance
     return calib
+
+
+def _read_domes(path, node) -> DomePair:
+    """The ``dome`` map of ``calib.yaml``: ``left`` and ``right`` maps of ``center`` (3x1, mm,
+    reference frame), ``radius``, ``thickness`` (mm) and ``indices`` (air, glass, water)."""
+    domes = []
+    for name in ("left", "right"):
+        sub = node.getNode(name)
+        centre = None if sub.empty() else sub.getNode("center").mat()
+        if centre is None:
+            raise DatasetError(f"{path}: dome map without a {name} dome (center, radius, "
+                               f"thickness, indices)")
+        try:
+            domes.append(DomePort(centre.ravel(), sub.getNode("radius").real(),
+                                  sub.getNode("thickness").real(),
+                                  tuple(_seq(sub.getNode("indices")))))
+        except ValueError as exc:
+            raise DatasetError(f"{path}: {name} dome: {exc}") from None
+    return DomePair(*domes)
 
 
 def _read_covariance(path, node):
@@ -430,8 +469,8 @@ def write_dataset(scene, out_dir, spp: int | None = None, defines: dict | None =
             times["truth_maps"] = time.perf_counter() - t
         else:
             t = time.perf_counter()
-            uv_left = project(spec.rig.left, spec.rig.port, spec.targets)
-            uv_right = project(spec.rig.right, spec.rig.port, spec.targets)
+            uv_left = project(spec.rig.left, spec.rig.port_of(0), spec.targets)
+            uv_right = project(spec.rig.right, spec.rig.port_of(1), spec.targets)
             times["project"] = time.perf_counter() - t
 
         t = time.perf_counter()
@@ -491,7 +530,8 @@ def write_dataset(scene, out_dir, spp: int | None = None, defines: dict | None =
             "seconds": times,
             "truth_formats": truth_formats,
             **({} if design is None else {"design": design}),
-            "colmap": ("colmap/: cameras.txt (FLATPORT, metres), images.txt, points3D.txt"
+            "colmap": (f"colmap/: cameras.txt ({'DOMEPORT' if spec.rig.is_dome else 'FLATPORT'}, "
+                       f"metres), images.txt, points3D.txt"
                        if colmap_note is None else f"not written: {colmap_note}"),
             "files": dataset_files(tmp) + ["manifest.json"],
             "sha256": {name: file_sha256(os.path.join(tmp, name))

@@ -1,8 +1,10 @@
-"""Analytic speckle stereo pairs through a flat port, for testing and benchmarking dense matching.
+"""Analytic speckle stereo pairs through a flat port (or a dome per camera), for testing and
+benchmarking dense matching.
 
 A surface (plane or cylinder) carries a band-limited speckle texture defined in surface
 coordinates (mm). Each view is rendered by tracing every pixel's refracted ray
-(``Camera.rays`` → :func:`measure.trace_through_port`) to the surface and evaluating the
+(``Camera.rays`` → :func:`measure.trace_through_port`, or
+:func:`measure.dome.trace_through_dome` for a dome) to the surface and evaluating the
 texture there, averaging ``supersample²`` sub-pixel rays per pixel (a box pixel footprint).
 No Mitsuba: the images are exact up to the texture interpolation and the supersampling.
 
@@ -17,6 +19,7 @@ import numpy as np
 from scipy import ndimage
 
 from measure import Camera, FlatPort, trace_through_port
+from measure.dome import DomePort, trace_through_dome
 
 
 @dataclass(frozen=True)
@@ -116,14 +119,16 @@ class CylinderSurface:
         return np.abs(np.hypot(rel[:, 0], rel[:, 2]) - self.radius)
 
 
-def surface_points(camera: Camera, port: FlatPort, surface, uv: np.ndarray) -> np.ndarray:
+def surface_points(camera: Camera, port: FlatPort | DomePort, surface,
+                   uv: np.ndarray) -> np.ndarray:
     """Where the refracted rays of pixels ``uv`` ``(N, 2)`` meet ``surface`` ``(N, 3)``
-    (NaN where they miss)."""
-    water = trace_through_port(camera.center, camera.rays(uv), port, keep_interface_points=False)
+    (NaN where they miss); ``port`` a flat port or the camera's dome."""
+    trace = trace_through_dome if isinstance(port, DomePort) else trace_through_port
+    water = trace(camera.center, camera.rays(uv), port, keep_interface_points=False)
     return surface.intersect(water.origins, water.directions)
 
 
-def render_view(camera: Camera, port: FlatPort, surface, texture: SpeckleTexture,
+def render_view(camera: Camera, port: FlatPort | DomePort, surface, texture: SpeckleTexture,
                 supersample: int = 4, background: float = 0.0, rows_per_chunk: int = 256):
     """The camera's float32 image of the textured surface: the mean texture over
     ``supersample × supersample`` sub-pixel rays per pixel; ``background`` where rays miss."""
@@ -148,6 +153,7 @@ def render_view(camera: Camera, port: FlatPort, surface, texture: SpeckleTexture
 
 
 def render_pair(rig, surface, texture, supersample: int = 4):
-    """Left and right images of ``surface`` through ``rig.port``."""
-    return (render_view(rig.left, rig.port, surface, texture, supersample),
-            render_view(rig.right, rig.port, surface, texture, supersample))
+    """Left and right images of ``surface`` through ``rig.port`` (each camera's dome for a
+    :class:`measure.dome.DomePair`)."""
+    return (render_view(rig.left, rig.port_of(0), surface, texture, supersample),
+            render_view(rig.right, rig.port_of(1), surface, texture, supersample))

@@ -2,14 +2,15 @@
 
 * ``cameras.json`` — plain JSON: per camera ``K``, distortion (OpenCV's order), image size and
   pose ``X_ref = R·X_cam + t``; OpenCV's stereo ``R, T`` (``X_right = R·X_left + T``); the port
-  (normal, distance, thicknesses, indices); units and conventions stated in the file
-  (:func:`cameras_json`).
+  (normal, distance, thicknesses, indices; or a dome rig's two domes: centre, radius,
+  thickness, indices); units and conventions stated in the file (:func:`cameras_json`).
 * ``colmap/`` — a COLMAP text model for the refractive COLMAP fork and calibmar:
   ``cameras.txt`` with ``FLATPORT`` in metres (:func:`synth.calib_formats.write_colmap`, with
   ``rig_config.json``), ``images.txt`` (the two views, world-to-camera quaternions, the world
   being the left camera, metres) and ``points3D.txt`` (the targets seen in both views and their
   2D observations), in COLMAP's pixels (the top-left pixel's centre is (0.5, 0.5)); upstream
-  COLMAP reads the files but ignores the port (:func:`write_colmap_model`).
+  COLMAP reads the files but ignores the port (:func:`write_colmap_model`); a dome rig's
+  ``cameras.txt`` holds one DOMEPORT per camera.
 * surfaces, per view, beside the ``.npy`` maps: depth along the camera's own z as PFM
   (``{view}_truth_zdepth.pfm``, float32, NaN where none) and as 16-bit PNG
   (``{view}_truth_zdepth.png``, ``png = round(z · scale)``, 0 where none, the scale in the
@@ -59,6 +60,25 @@ def cameras_json(rig: StereoRig, has_port: bool = True) -> dict:
             "pose_camera_to_reference": {"convention": "X_ref = R · X_cam + t",
                                          "R": _list(camera.R), "t": _list(camera.t)}}
     port = rig.port
+    if rig.is_dome:
+        port_entry = {"present": True,
+                      "model": "dome port: each camera inside its own spherical glass shell "
+                               "(inner radius, thickness; centre in the reference frame); "
+                               "indices from the camera side (air, glass, water)",
+                      "domes": {name: {"center": _list(dome.center), "radius": dome.radius,
+                                       "thickness": dome.thickness,
+                                       "indices": [float(v) for v in dome.indices]}
+                                for name, dome in (("left", port.left), ("right", port.right))}}
+    else:
+        port_entry = {
+            "present": bool(has_port),
+            "model": "flat port: interfaces N · X = distance + cumulative thicknesses, in the "
+                     "reference frame; indices from the camera side (air, glass…, water)",
+            "normal": _list(port.normal), "distance": float(port.distance),
+            "thicknesses": [float(v) for v in port.thicknesses],
+            "indices": [float(v) for v in port.indices],
+            "note": None if has_port else "an all-air scene: the port is index-matched "
+                                          "(all indices 1) and bends no ray"}
     return {
         "format": "refractive-stereo cameras.json 1",
         "units": {"length": "mm", "pixels": "OpenCV: integer coordinates are pixel centres, "
@@ -69,15 +89,7 @@ def cameras_json(rig: StereoRig, has_port: bool = True) -> dict:
         "stereo_opencv": {"convention": "X_right = R · X_left + T (cv2.stereoCalibrate, "
                                         "cv2.stereoRectify)", "R": _list(R),
                           "T": _list(np.ravel(T))},
-        "port": {"present": bool(has_port),
-                 "model": "flat port: interfaces N · X = distance + cumulative thicknesses, in "
-                          "the reference frame; indices from the camera side (air, glass…, "
-                          "water)",
-                 "normal": _list(port.normal), "distance": float(port.distance),
-                 "thicknesses": [float(v) for v in port.thicknesses],
-                 "indices": [float(v) for v in port.indices],
-                 "note": None if has_port else "an all-air scene: the port is index-matched "
-                                               "(all indices 1) and bends no ray"}}
+        "port": port_entry}
 
 
 def write_cameras_json(directory: str, rig: StereoRig, has_port: bool = True) -> str:

@@ -42,7 +42,8 @@ DESIGN_KEYS = {"distance": "start_distance", "thickness": "glass_thickness", "n_
 
 
 def add_parser(subparsers):
-    from measure.calibration import DEFAULT_FREE, HOUSING_PARAMETERS
+    from measure.calibration import (DEFAULT_DOME_FREE, DEFAULT_FREE, DOME_PARAMETERS,
+                                     HOUSING_PARAMETERS)
     from synth.rig import PAPER_GLASS_THICKNESS_MM, PAPER_INDICES, PAPER_PORT_DISTANCE_MM
 
     p = subparsers.add_parser(
@@ -63,7 +64,9 @@ def add_parser(subparsers):
                       needed="photos: required; a boards folder's board.json defines it")
     p.add_argument("--free", default=",".join(DEFAULT_FREE),
                    help=f"housing parameters to estimate, comma list of "
-                        f"{', '.join(HOUSING_PARAMETERS)} (default {','.join(DEFAULT_FREE)})")
+                        f"{', '.join(HOUSING_PARAMETERS)} (default {','.join(DEFAULT_FREE)}); "
+                        f"behind domes: {', '.join(DOME_PARAMETERS)} (default "
+                        f"{','.join(DEFAULT_DOME_FREE)}: each camera's decentring)")
     p.add_argument("--start-distance", type=positive_float, default=PAPER_PORT_DISTANCE_MM,
                    help=f"starting port distance D, mm (the design value; default "
                         f"{PAPER_PORT_DISTANCE_MM:g})")
@@ -75,6 +78,12 @@ def add_parser(subparsers):
     p.add_argument("--n-water", type=water_index_argument, default=PAPER_INDICES[2],
                    help=f"design {WATER_INDEX_HELP}; default {PAPER_INDICES[2]:g}; the start "
                         f"when --free n_water")
+    p.add_argument("--dome-radius", type=positive_float, default=50.0,
+                   help="boards behind domes: the design inner radius of each dome, mm (default "
+                        "50); the start is a dome centred on each camera")
+    p.add_argument("--dome-thickness", type=positive_float, default=8.0,
+                   help="boards behind domes: the design glass thickness of each dome, mm "
+                        "(default 8)")
     p.add_argument("--design-port", metavar="KEY=VALUE,…",
                    help="the starting port in one option, from the housing's drawing: any of "
                         "distance=MM, thickness=MM, n_glass=N, n_water=N (e.g. "
@@ -154,15 +163,37 @@ def design_port(args, normal):
                     (1.0, values["n_glass"], values["n_water"]))
 
 
-def _parse_free(text: str) -> tuple:
-    from measure.calibration import HOUSING_PARAMETERS
+def _parse_free(text: str, dome: bool = False) -> tuple:
+    from measure.calibration import DOME_PARAMETERS, HOUSING_PARAMETERS
 
+    table = DOME_PARAMETERS if dome else HOUSING_PARAMETERS
     names = tuple(dict.fromkeys(n.strip() for n in text.split(",") if n.strip()))
-    unknown = [n for n in names if n not in HOUSING_PARAMETERS]
+    unknown = [n for n in names if n not in table]
     if not names or unknown:
-        raise CLIError(f"--free {text!r}: unknown parameter {', '.join(unknown) or '(none)'} "
-                       f"(choose from {', '.join(HOUSING_PARAMETERS)})")
+        kind = " of a dome rig" if dome else ""
+        raise CLIError(f"--free {text!r}: unknown parameter{kind} "
+                       f"{', '.join(unknown) or '(none)'} (choose from {', '.join(table)})")
     return names
+
+
+#: Options of a flat port's design, refused for dome boards; the dome's own, refused otherwise.
+FLAT_DESIGN_OPTIONS = ("start_distance", "glass_thickness", "design_port")
+DOME_DESIGN_OPTIONS = ("dome_radius", "dome_thickness")
+
+
+def design_domes(args, rig):
+    """The starting rig of a dome housing calibration: ``rig``'s cameras, each inside a dome
+    centred on it (no decentring) of ``--dome-radius`` and ``--dome-thickness``, indices
+    ``(1, --n-glass, --n-water)``."""
+    from measure import StereoRig
+    from synth.scene.dome import dome_pair
+
+    try:
+        pair = dome_pair(rig.cameras, args.dome_radius, args.dome_thickness, (0.0, 0.0, 0.0),
+                         (1.0, args.n_glass, float(args.n_water)))
+    except ValueError as exc:
+        raise CLIError(f"--dome-radius / --dome-thickness: {exc}") from None
+    return StereoRig(rig.left, rig.right, pair)
 
 
 def _in_air(path, log):
@@ -194,7 +225,7 @@ def main(args) -> int:
 
     log = (lambda text: None) if args.no_progress else (
         lambda text: print(text, file=sys.stderr, flush=True))
-    free = _parse_free(args.free)
+    free = args.free
     output = OutputDir(args.out, COMMAND).claim()
     start = time.perf_counter()
     if not os.path.isdir(args.dir):
@@ -204,12 +235,26 @@ def main(args) -> int:
     if is_photo_folder(args.dir) or (
             any(os.path.isdir(os.path.join(args.dir, sub)) for sub in ("left", "right"))
             and not os.path.exists(os.path.join(args.dir, "manifest.json"))):
-        return _calibrate_photos(args, output, log, free, start)  # says which folder is missing
+        refuse_given(args, DOME_DESIGN_OPTIONS, f"to photos ({args.dir}): the housing "
+                                                "calibration of photos models a flat port")
+        return _calibrate_photos(args, output, log, _parse_free(free), start)
     if not os.path.isfile(os.path.join(args.dir, "manifest.json")) and os.path.isdir(args.dir):
         raise CLIError(f"{args.dir}: not a boards folder (no manifest.json) nor a photo folder "
                        f"(no left/ and right/ folders)")
     boards = read_boards(args.dir)
     truth = boards.calib["rig"]
+    dome = not boards.air and truth.is_dome
+    if dome:
+        from measure.calibration import DEFAULT_DOME_FREE
+
+        refuse_given(args, FLAT_DESIGN_OPTIONS, f"to boards behind domes ({args.dir}): the "
+                                                f"design is --dome-radius, --dome-thickness, "
+                                                f"--n-glass, --n-water")
+        free = _parse_free(free if given(args, "free") else ",".join(DEFAULT_DOME_FREE), True)
+    else:
+        refuse_given(args, DOME_DESIGN_OPTIONS, f"to {args.dir}: its boards are not behind "
+                                                f"domes")
+        free = _parse_free(free)
     refuse_given(args, ("encoding",), f"to a boards folder ({args.dir}): its images are "
                                       f"16-bit linear renders")
     refuse_given(args, BOARD_OPTIONS, f"to a boards folder ({args.dir}): the folder's "
@@ -226,7 +271,7 @@ def main(args) -> int:
     if not boards.air and not args.intrinsics:
         raise CLIError(f"{args.dir}: underwater boards need --intrinsics (an --air boards "
                        f"folder or a calib.yaml)")
-    if not boards.air:
+    if not boards.air and not dome:
         design_port(args, (0.0, 0.0, 1.0))  # a bad --design-port is refused before any work
     log(f"detect the boards in {boards.path} ({len(boards.images)} poses) …")
     t = time.perf_counter()
@@ -255,11 +300,14 @@ def main(args) -> int:
                            f"are {boards.calib['size'][0]}x{boards.calib['size'][1]} px")
         if air is not None:
             report["in_air"] = report_lib.air_summary(air, air_boards.calib["rig"])
-        if len(truth.port.thicknesses) != 1:
-            raise CLIError(f"{args.dir}: the housing calibration models one glass layer; the "
-                           f"truth has {len(truth.port.thicknesses)}")
-        design = design_port(args, air_rig.left.R[:, 2])
-        start_rig = StereoRig(air_rig.left, air_rig.right, design)
+        if dome:
+            start_rig = design_domes(args, air_rig)
+        else:
+            if len(truth.port.thicknesses) != 1:
+                raise CLIError(f"{args.dir}: the housing calibration models one glass layer; "
+                               f"the truth has {len(truth.port.thicknesses)}")
+            design = design_port(args, air_rig.left.R[:, 2])
+            start_rig = StereoRig(air_rig.left, air_rig.right, design)
         log(f"refractive bundle adjustment of {', '.join(free)} over "
             f"{len(detections.found(0))} + {len(detections.found(1))} board views …")
         t = time.perf_counter()
@@ -269,7 +317,9 @@ def main(args) -> int:
             raise CLIError(f"{args.dir}: {housing.reason}; nothing written (free fewer "
                            f"parameters with --free, or render more varied poses)")
         rig = housing.rig
-        report["housing"] = report_lib.housing_summary(housing, truth, start_rig)
+        report["dome"] = dome
+        report["housing"] = (report_lib.dome_summary if dome else report_lib.housing_summary)(
+            housing, truth, start_rig)
     report["timings_s"] = timings
     log("write the calibration, report and figures …")
     with output.staged() as tmp:

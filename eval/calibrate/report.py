@@ -119,6 +119,40 @@ def housing_summary(housing, truth, start_rig) -> dict:
     return out
 
 
+def dome_summary(housing, truth, start_rig) -> dict:
+    """Every estimated dome parameter beside the truth, with its error in σ: each camera's
+    decentring (its dome centre relative to the camera centre, in the camera's frame, mm) and
+    the water index."""
+    from measure.calibration import dome_offset
+
+    out = {"free": list(dict.fromkeys(label.split("[")[0] for label in housing.labels)),
+           "labels": list(housing.labels), "correlation": housing.correlation.tolist(),
+           "rms_px": housing.rms_px, "rms_px_start": housing.rms_px_start,
+           "rms_px_per_pose_view": {f"{k}:{'left' if v == 0 else 'right'}": r
+                                    for (k, v), r in sorted(housing.rms_px_per.items())},
+           "observations": housing.n_observations, "poses_used": list(housing.pose_ids),
+           "evaluations": housing.nfev, "parameters": {}}
+    params = out["parameters"]
+    for name in housing.estimates:
+        sigma = housing.sigmas[name]
+        if name == "n_water":
+            params[name] = _with_sigma(housing.rig.port.n_water, truth.port.n_water, sigma)
+            continue
+        for view, (camera, axes) in enumerate(zip(("left", "right"), ((0, 1, 2), (3, 4, 5)))):
+            estimate = dome_offset(housing.rig.cameras[view], housing.rig.port[view])
+            true = dome_offset(truth.cameras[view], truth.port[view])
+            for axis, k in zip("xyz", axes):
+                params[f"{camera}_dome_{axis}"] = _with_sigma(estimate[k % 3], true[k % 3],
+                                                              sigma[k])
+    out["start"] = {view: {"offset_mm": dome_offset(c, d).tolist(), "radius": d.radius,
+                           "thickness": d.thickness, "indices": list(d.indices)}
+                    for view, c, d in zip(("left", "right"), start_rig.cameras,
+                                          (start_rig.port.left, start_rig.port.right))}
+    zs = [abs(p["error_in_sigma"]) for p in params.values() if p.get("error_in_sigma") is not None]
+    out["max_abs_error_in_sigma"] = max(zs) if zs else None
+    return out
+
+
 def write_calibration(path, rig, has_port: bool, housing, report, single: bool = False) -> None:
     """``calib.yaml`` (with an ``uncertainty`` map for the housing) and ``flatport.txt`` into
     directory ``path``; with ``single`` just the calib file at ``path``."""
@@ -135,7 +169,7 @@ def write_calibration(path, rig, has_port: bool, housing, report, single: bool =
                  "calibration": {"rms_px": housing.rms_px, "poses": len(housing.poses)}}
     target = path if single else os.path.join(path, "calib.yaml")
     write_calib(target, rig, has_port, extra)
-    if not single and has_port:
+    if not single and has_port and not rig.is_dome:  # a dome rig: DOMEPORT in cameras.txt
         atomic_write_text(os.path.join(path, "flatport.txt"),
                           flatport_text(rig.port, {"left": rig.left, "right": rig.right}))
     if not single:
@@ -243,13 +277,18 @@ def format_value(value, digits=4):
 _f = format_value
 
 
+def _behind(report: dict) -> str:
+    """Where underwater boards were: behind the port, or behind the domes."""
+    return "behind the domes" if report.get("dome") else "behind the port"
+
+
 def markdown(report: dict) -> str:
     d = report["detection"]
     lines = [f"# Calibration report: `{report['boards']}`", "",
              f"{report['poses']} poses of a {report['board']['kind']} "
              f"{report['board']['squares'][0]}x{report['board']['squares'][1]}, "
              f"{report['board']['square_mm']:g} mm squares, "
-             f"{'in air' if report['air'] else 'behind the port'}; board found in "
+             f"{'in air' if report['air'] else _behind(report)}; board found in "
              f"{report['found']['left']} left and {report['found']['right']} right images.", "",
              "## Corner detection against the forward model", "",
              "| view | corners | RMS (px) | max (px) |", "|---|---|---|---|"]
@@ -289,6 +328,10 @@ def markdown(report: dict) -> str:
                 lines.append(f"| right camera | rotation error {p['rotation_error_deg']:.5f}° | "
                              f"– | position {_f(p['position_error_mm'])} mm | "
                              f"{_f(p['sigma_position_mm'])} mm | {_f(p['error_in_sigma'], 3)} |")
+            elif name.endswith(("_dome_x", "_dome_y", "_dome_z")):
+                lines.append(f"| {name.replace('_', ' ')} (mm, camera frame) | "
+                             f"{p['estimate']:.4f} | {p['truth']:.4f} | {p['error']:+.4f} | "
+                             f"{_f(p['sigma'])} | {_f(p['error_in_sigma'], 3)} |")
             else:
                 lines.append(f"| {name} | {p['estimate']:.6f} | {p['truth']:.6f} | "
                              f"{p['error']:+.6f} | {_f(p['sigma'])} | {_f(p['error_in_sigma'], 3)} |")
@@ -296,7 +339,9 @@ def markdown(report: dict) -> str:
         lines += ["    " + " ".join(f"{v:+.3f}" for v in row) for row in hs["correlation"]]
     lines += ["", "## Files", "", "- `calib.yaml`: the calibration in the dataset format"
               + (" (with an `uncertainty` map), `calib_in_air_only.yaml` (the in-air calibration "
-                 "with the design port), `flatport.txt` (FLATPORT per camera)"
+                 "with the design port), "
+                 + ("`cameras.txt` (DOMEPORT per camera)" if report.get("dome")
+                    else "`flatport.txt` (FLATPORT per camera)")
                  if "housing" in report else ""),
               "- `detections.png`, " + ("`residuals.png`, " if "housing" in report else "")
               + "`poses.png`", "", "## Timings (s)", "",

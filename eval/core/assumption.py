@@ -10,6 +10,8 @@ space-separated numbers):
 Quan & Fry 1995), ``n_glass`` (the first layer's index), ``port_distance`` (D), ``glass_thickness``
 (the first layer), ``port_normal`` (3 values, normalized), ``focal`` (fx = fy of both cameras),
 ``left_focal``, ``right_focal``, ``left_dist``, ``right_dist`` (4, 5 or 8 OpenCV coefficients).
+A dome rig takes the indices (of both domes) and the cameras' names (:data:`DOME_ASSUMABLE`);
+the flat port's ``port_distance``, ``glass_thickness`` and ``port_normal`` are refused.
 """
 
 from __future__ import annotations
@@ -17,6 +19,7 @@ from __future__ import annotations
 import numpy as np
 
 from measure import Camera, FlatPort, StereoRig
+from measure.dome import DomePair
 
 ASSUMABLE = ("n_water", "n_glass", "port_distance", "glass_thickness", "port_normal", "focal",
              "left_focal", "right_focal", "left_dist", "right_dist")
@@ -82,6 +85,8 @@ def assumed_rig(truth: StereoRig, has_port: bool, assumptions: dict,
     if not has_port and any(name in assumptions for name in _PORT_NAMES):
         raise ValueError("--assume: the scene has no port (all air); port parameters cannot be "
                          "assumed")
+    if rig.is_dome:
+        return _assumed_dome_rig(rig, assumptions)
     left, right, port = rig.left, rig.right, rig.port
     indices, thicknesses = list(port.indices), list(port.thicknesses)
     normal, distance = port.normal, port.distance
@@ -116,12 +121,56 @@ def assumed_rig(truth: StereoRig, has_port: bool, assumptions: dict,
         raise ValueError(f"--assume: {exc}") from None
 
 
+#: What ``--assume`` may change in a dome rig (the flat port's distance, glass thickness and
+#: normal have no meaning there).
+DOME_ASSUMABLE = ("n_water", "n_glass", "focal", "left_focal", "right_focal", "left_dist",
+                  "right_dist")
+
+
+def _assumed_dome_rig(rig: StereoRig, assumptions: dict) -> StereoRig:
+    """:func:`assumed_rig` of a dome rig: the water or glass index of both domes, the cameras'
+    focal lengths and distortion; a flat port's parameter is refused."""
+    flat = [name for name in assumptions if name not in DOME_ASSUMABLE]
+    if flat:
+        raise ValueError(f"--assume {flat[0]} does not apply to a dome rig (each camera inside "
+                         f"its own dome); a dome rig takes {', '.join(DOME_ASSUMABLE)}")
+    left, right = rig.left, rig.right
+    domes = [rig.port.left, rig.port.right]
+    for name, value in assumptions.items():
+        v = float(value[0]) if value.size == 1 else value
+        if name in ("n_water", "n_glass"):
+            k = 2 if name == "n_water" else 1
+            domes = [d.replace(indices=tuple(v if i == k else n for i, n in enumerate(d.indices)))
+                     for d in domes]
+        elif name in ("focal", "left_focal"):
+            left = _with_focal(left, v)
+        if name in ("focal", "right_focal"):
+            right = _with_focal(right, v)
+        elif name == "left_dist":
+            left = Camera(left.K, left.size, v, left.R, left.t)
+        elif name == "right_dist":
+            right = Camera(right.K, right.size, v, right.R, right.t)
+    try:
+        return StereoRig(left, right, DomePair(*domes))
+    except ValueError as exc:
+        raise ValueError(f"--assume: {exc}") from None
+
+
+def _describe_dome(dome) -> dict:
+    return {"center_mm": dome.center.tolist(), "radius_mm": dome.radius,
+            "thickness_mm": dome.thickness, "indices": list(dome.indices)}
+
+
 def describe_rig(rig: StereoRig) -> dict:
     """The rig as plain numbers: per camera ``K``, ``dist``, ``R``, ``t_mm``; the port."""
     def camera(c: Camera):
         return {"K": c.K.tolist(), "dist": None if c.dist is None else c.dist.tolist(),
                 "R": c.R.tolist(), "t_mm": c.t.tolist()}
     p = rig.port
+    if rig.is_dome:
+        return {"left": camera(rig.left), "right": camera(rig.right),
+                "port": {"kind": "dome", "left": _describe_dome(p.left),
+                         "right": _describe_dome(p.right)}}
     return {"left": camera(rig.left), "right": camera(rig.right),
             "port": {"normal": p.normal.tolist(), "distance_mm": p.distance,
                      "thicknesses_mm": list(p.thicknesses), "indices": list(p.indices)}}
@@ -138,21 +187,48 @@ def rig_difference(truth: StereoRig, assumed: StereoRig) -> dict:
     def differs(a, b) -> bool:
         return bool(np.max(np.abs(np.asarray(a, float) - np.asarray(b, float))) > ROUND_OFF)
 
-    if differs(assumed.port.distance, truth.port.distance):
-        diff["port_distance_mm"] = assumed.port.distance - truth.port.distance
-    if len(assumed.port.indices) == len(truth.port.indices):
-        for k, (a, b) in enumerate(zip(assumed.port.indices, truth.port.indices)):
+    if assumed.is_dome != truth.is_dome:
+        diff["port"] = {"truth": "dome" if truth.is_dome else "flat",
+                        "assumed": "dome" if assumed.is_dome else "flat"}
+    elif truth.is_dome:
+        for view in ("left", "right"):
+            a, b = getattr(assumed.port, view), getattr(truth.port, view)
+            if differs(a.center, b.center):
+                diff[f"{view}_dome_center_mm"] = (a.center - b.center).tolist()
+            if differs(a.radius, b.radius):
+                diff[f"{view}_dome_radius_mm"] = a.radius - b.radius
+            if differs(a.thickness, b.thickness):
+                diff[f"{view}_dome_thickness_mm"] = a.thickness - b.thickness
+            for k, (x, y) in enumerate(zip(a.indices, b.indices)):
+                if differs(x, y):
+                    diff[f"{view}_dome_index_{k}"] = x - y
+    else:
+        _flat_port_difference(truth.port, assumed.port, differs, diff)
+    _camera_difference(truth, assumed, differs, diff)
+    return diff
+
+
+def _flat_port_difference(truth, assumed, differs, diff) -> None:
+    """The flat ports' entries of :func:`rig_difference` (assumed − true), into ``diff``."""
+    if differs(assumed.distance, truth.distance):
+        diff["port_distance_mm"] = assumed.distance - truth.distance
+    if len(assumed.indices) == len(truth.indices):
+        for k, (a, b) in enumerate(zip(assumed.indices, truth.indices)):
             if differs(a, b):
                 diff[f"index_{k}"] = a - b
     else:
-        diff["indices"] = {"truth": list(truth.port.indices), "assumed": list(assumed.port.indices)}
-    if len(assumed.port.thicknesses) == len(truth.port.thicknesses):
-        for k, (a, b) in enumerate(zip(assumed.port.thicknesses, truth.port.thicknesses)):
+        diff["indices"] = {"truth": list(truth.indices), "assumed": list(assumed.indices)}
+    if len(assumed.thicknesses) == len(truth.thicknesses):
+        for k, (a, b) in enumerate(zip(assumed.thicknesses, truth.thicknesses)):
             if differs(a, b):
                 diff[f"thickness_{k}_mm"] = a - b
-    angle = float(np.degrees(np.arccos(np.clip(assumed.port.normal @ truth.port.normal, -1, 1))))
-    if differs(assumed.port.normal, truth.port.normal):
+    angle = float(np.degrees(np.arccos(np.clip(assumed.normal @ truth.normal, -1, 1))))
+    if differs(assumed.normal, truth.normal):
         diff["port_normal_deg"] = angle
+
+
+def _camera_difference(truth: StereoRig, assumed: StereoRig, differs, diff) -> None:
+    """The cameras' entries of :func:`rig_difference` (assumed − true), into ``diff``."""
     for view in ("left", "right"):
         a, b = getattr(assumed, view), getattr(truth, view)
         if differs(a.K, b.K):
@@ -165,7 +241,7 @@ def rig_difference(truth: StereoRig, assumed: StereoRig) -> dict:
         if differs(a.R, b.R) or differs(a.t, b.t):
             diff[f"{view}_pose"] = {"t_mm": (a.t - b.t).tolist(), "rotation_deg": float(
                 np.degrees(np.arccos(np.clip((np.trace(a.R.T @ b.R) - 1) / 2, -1, 1))))}
-    return diff
 
 
-__all__ = ["ASSUMABLE", "assumed_rig", "describe_rig", "parse_assumptions", "rig_difference"]
+__all__ = ["ASSUMABLE", "DOME_ASSUMABLE", "assumed_rig", "describe_rig", "parse_assumptions",
+           "rig_difference"]

@@ -91,12 +91,23 @@ def measurement_rig(config: RunConfig, spec):
     base = None
     if config.calib:
         calib = read_calib(config.calib)
+        _same_kind_of_port(f"--calib {config.calib}", calib["rig"], spec.rig)
         if tuple(calib["size"]) != tuple(spec.size):
             raise CLIError(f"--calib {config.calib}: image size {calib['size'][0]}x"
                            f"{calib['size'][1]} px, but the scene renders {spec.size[0]}x"
                            f"{spec.size[1]} px")
         base = calib["rig"]
     return assumed_rig(spec.rig, spec.has_port, config.assumptions, base)
+
+
+def _same_kind_of_port(what: str, calibrated, scene_rig) -> None:
+    """CLIError unless a calibration's rig has the scene's kind of port (a dome pair for a dome
+    scene, a flat port otherwise)."""
+    if calibrated.is_dome != scene_rig.is_dome:
+        kind = ("dome-port calibration (DOMEPORT)" if calibrated.is_dome
+                else "flat-port calibration")
+        raise CLIError(f"{what}: a {kind}, but the scene has "
+                       f"{'domes' if scene_rig.is_dome else 'a flat port'}")
 
 
 def load_run_scene(config: RunConfig):
@@ -150,6 +161,7 @@ def budget_rigs(config: RunConfig, true_rig, measured_rig) -> dict:
         rigs["exact calibration"] = true_rig
     for path in config.compare_calib:
         calib = read_calib(path)
+        _same_kind_of_port(f"--compare-calib {path}", calib["rig"], true_rig)
         if tuple(calib["size"]) != tuple(true_rig.left.size):
             raise CLIError(f"--compare-calib {path}: image size {calib['size'][0]}x"
                            f"{calib['size'][1]} px, but the scene renders "
@@ -158,16 +170,29 @@ def budget_rigs(config: RunConfig, true_rig, measured_rig) -> dict:
     return rigs
 
 
+def refuse_flat_only(config: RunConfig) -> None:
+    """CLIError for an option of a flat port given for a dome scene (each camera inside its
+    own dome): the self-calibration estimates a flat port's parameters. (``--assume`` of a flat
+    port's parameter is refused by :func:`eval.core.assumption.assumed_rig`.)"""
+    if config.self_calibrate:
+        raise CLIError(f"--self-calibrate does not apply to the dome scene {config.scene}: it "
+                       f"estimates a flat port's parameters")
+
+
 def load_inputs(config: RunConfig, log) -> RunInputs:
     """The scene (rig and truth) and its two images, rendered now or read from ``--from``."""
     spec = load_run_scene(config)
     if config.self_calibrate and not spec.has_port:
         raise CLIError(f"--self-calibrate does not apply to {config.scene}: it estimates the "
                        f"port's parameters, and the scene has no port (all air)")
+    if spec.rig.is_dome:
+        refuse_flat_only(config)
     seed = spec.seed if config.seed is None else config.seed
     measured_rig = measurement_rig(config, spec)
-    in_left = visible_targets(spec.rig.left, spec.rig.port, spec.targets, spec.target_radius)[1]
-    in_right = visible_targets(spec.rig.right, spec.rig.port, spec.targets, spec.target_radius)[1]
+    in_left = visible_targets(spec.rig.left, spec.rig.port_of(0), spec.targets,
+                              spec.target_radius)[1]
+    in_right = visible_targets(spec.rig.right, spec.rig.port_of(1), spec.targets,
+                               spec.target_radius)[1]
     if not (in_left & in_right).any():
         raise CLIError(f"{config.scene}: no target is visible in both views")
     budget = budget_rigs(config, spec.rig, measured_rig)
@@ -232,5 +257,5 @@ def expose_on_sensor(inputs: RunInputs, sensor, log):
 
 
 __all__ = ["RunInputs", "budget_rigs", "dataset_params", "expose_on_sensor", "expose_views",
-           "load_inputs",
+           "load_inputs", "refuse_flat_only",
            "load_run_scene", "measurement_rig", "read_run_dataset", "same_value"]

@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from measure import triangulate
+from measure.dome import DomePair
 from measure.detect import (FLOOR_FRACTION, MERGE_AREA_RATIO as DEFAULT_MAX_AREA_RATIO,
                             MERGE_ELONGATION as DEFAULT_MAX_ELONGATION)
 from measure.eccentricity import correct_eccentricity, outline_centroid_offsets
@@ -38,16 +39,18 @@ class NothingMatched(ValueError):
 
 
 def default_depth_window(params: dict, targets=None, port=None):
-    """``(near, far)`` along the port normal (mm): the scene's ``target_z`` × (0.8, 1.25) for a
-    plane facing the cameras; otherwise the targets' nearest and farthest depths along the
-    port normal × (0.8, 1.25) — the working range a user states for a layout in depth (the
-    matcher takes it as given, like the plane's distance); no bound without either."""
+    """``(near, far)`` along the port normal (mm; for domes along the left optical axis, the
+    reference z): the scene's ``target_z`` × (0.8, 1.25) for a plane facing the cameras;
+    otherwise the targets' nearest and farthest depths along the port normal × (0.8, 1.25) —
+    the working range a user states for a layout in depth (the matcher takes it as given, like
+    the plane's distance); no bound without either."""
     try:
         z = float(params["target_z"])
     except (KeyError, TypeError, ValueError):
         if targets is None or port is None or len(targets) == 0:
             return (None, None)
-        depth = np.asarray(targets, dtype=float) @ port.normal
+        axis = np.array([0.0, 0.0, 1.0]) if isinstance(port, DomePair) else port.normal
+        depth = np.asarray(targets, dtype=float) @ axis  # domes: the left camera's z
         return (DEPTH_WINDOW_FACTORS[0] * float(depth.min()),
                 DEPTH_WINDOW_FACTORS[1] * float(depth.max()))
     return (DEPTH_WINDOW_FACTORS[0] * z, DEPTH_WINDOW_FACTORS[1] * z)
@@ -104,15 +107,16 @@ def crosscheck_stage(inputs: RunInputs, detections):
     rig = inputs.true_rig  # the simulator predicts what was rendered
     normals = (inputs.target_normals if inputs.target_normals is not None
                else np.array([0.0, 0.0, -1.0]))
-    for name, camera in (("left", rig.left), ("right", rig.right)):
-        simulated[name], inside[name] = visible_targets(camera, rig.port, inputs.targets,
+    for view, (name, camera) in enumerate((("left", rig.left), ("right", rig.right))):
+        port = rig.port_of(view)
+        simulated[name], inside[name] = visible_targets(camera, port, inputs.targets,
                                                         inputs.target_radius)
         centers = np.asarray(detections[name].centers).reshape(-1, 2)
         index, distance = associate_detections(centers, simulated[name], ASSOCIATION_GATE_PX)
         truth_of[name] = index
         found = index >= 0
         d = distance[found]
-        offsets = outline_centroid_offsets(camera, rig.port, inputs.targets[index[found]],
+        offsets = outline_centroid_offsets(camera, port, inputs.targets[index[found]],
                                            np.broadcast_to(normals, inputs.targets.shape)[index[found]],
                                            inputs.target_radius)
         d_outline = np.linalg.norm(centers[found] - simulated[name][index[found]] - offsets, axis=1)

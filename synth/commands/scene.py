@@ -73,8 +73,17 @@ def add_parser(subparsers) -> None:
     p.add_argument("--z-range", type=positive_float, nargs=2, default=(600.0, 2000.0),
                    metavar=("ZMIN", "ZMAX"), help="random targets' depth range, mm")
     p.add_argument("--layout-seed", type=non_negative_int, default=0, help="seed of the random layout")
-    p.add_argument("--port", choices=("paper", "none"), default="paper",
-                   help="the paper's air-glass-water port, or none (all air)")
+    p.add_argument("--port", choices=("paper", "dome", "none"), default="paper",
+                   help="the paper's air-glass-water port; dome: each camera inside its own "
+                        "glass dome (two concentric spheres, --dome-radius, --dome-thickness, "
+                        "--dome-offset); or none (all air)")
+    p.add_argument("--dome-radius", type=positive_float,
+                   help="--port dome: inner radius of each dome, mm (default 50)")
+    p.add_argument("--dome-thickness", type=positive_float,
+                   help="--port dome: glass thickness of each dome, mm (default 8)")
+    p.add_argument("--dome-offset", type=any_float, nargs=3, metavar=("X", "Y", "Z"),
+                   help="--port dome: the dome centre relative to each camera's centre, mm, in "
+                        "that camera's frame (the same for both cameras; default 0 0 0: centred)")
     p.add_argument("--n-water", type=water_index_argument,
                    help=f"{WATER_INDEX_HELP}; default 1.33")
     p.add_argument("--n-glass", type=positive_float, help="glass index (default 1.54)")
@@ -184,6 +193,8 @@ def main(args) -> int:
             thicknesses = (args.glass_thickness if args.glass_thickness is not None
                            else rigs.PAPER_GLASS_THICKNESS_MM,)
         port = FlatPort(normal, distance, thicknesses, tuple(n))
+    elif args.port == "dome":
+        port = _dome_port(args, left, right)
     if args.layout == "surface":
         return _surface_scene(args, left, right, port)
     normals = None
@@ -212,6 +223,13 @@ def main(args) -> int:
         except ValueError as exc:
             raise CLIError(str(exc).replace("half_angle_deg", "--half-angle")) from None
     radius = args.target_radius if args.target_radius else DEFAULT_TARGET_RADIUS_MM
+    if args.port == "dome":
+        from synth.scene.dome import check_targets
+
+        try:
+            check_targets(port, targets, radius)
+        except ValueError as exc:
+            raise CLIError(f"--layout {args.layout}: {exc}") from None
     _check_visible(left, right, port, targets, radius, args.layout)
     thin_lens = None
     if args.aperture_radius is not None:
@@ -224,6 +242,7 @@ def main(args) -> int:
                + (f", surface radius {args.surface_radius:g} mm"
                   if args.layout in ("cylinder", "sphere") else "")
                + f", port {args.port}"
+               + (_dome_comment(port, left) if args.port == "dome" else "")
                + (f" tilted {args.port_tilt[0]:g} deg about x, {args.port_tilt[1]:g} deg about y"
                   if port is not None and any(args.port_tilt) else "")
                + (f" of {len(args.layer)} layers" if args.layer else "")
@@ -247,7 +266,8 @@ def main(args) -> int:
     except ValueError as exc:
         raise CLIError(str(exc)) from None
     print(f"wrote {args.out}: {targets.shape[0]} targets of radius {radius:g} mm, "
-          f"{'port' if port else 'no port'}, {size[0]}x{size[1]} px")
+          f"{'no port' if port is None else 'two domes' if args.port == 'dome' else 'port'}, "
+          f"{size[0]}x{size[1]} px")
     return 0
 
 
@@ -311,6 +331,64 @@ def _refuse_inapplicable(args) -> None:
     if args.port == "none":
         refuse_given(args, ["n_water", "n_glass", "port_distance", "glass_thickness",
                             "port_tilt"], "to --port none (no port: all air)")
+    if args.port != "dome":
+        refuse_given(args, ["dome_radius", "dome_thickness", "dome_offset"],
+                     f"to --port {args.port} (only to --port dome)")
+    else:
+        refuse_given(args, ["port_distance", "glass_thickness", "layer", "port_tilt",
+                            "aperture_radius", "focus_distance"],
+                     "to --port dome (a dome scene: pinhole cameras, each inside its dome)")
+        if layout == "surface":
+            raise CLIError("--layout surface does not apply to --port dome (dome scenes hold "
+                           "disk targets)")
+        if args.water != "clear":
+            raise CLIError(f"--water {args.water} does not apply to --port dome (dome scenes "
+                           f"are in clear water)")
+        if args.lighting == "lit":
+            raise CLIError("--lighting lit does not apply to --port dome (dome scenes hold LED "
+                           "targets)")
+
+
+def _dome_port(args, left, right):
+    """The DomePair of ``--port dome``: ``--dome-radius``, ``--dome-thickness``,
+    ``--dome-offset`` (in each camera's frame), the glass index ``--n-glass`` and the water's
+    ``--n-water``; CLIError for a camera outside its dome or a field of view that does not fit
+    through the domes."""
+    from measure import StereoRig
+
+    from synth import rig as rigs
+    from synth.scene.dome import (DEFAULT_DOME_RADIUS_MM, DEFAULT_DOME_THICKNESS_MM,
+                                  check_field_of_view, dome_pair)
+
+    n = list(rigs.PAPER_INDICES)
+    if args.n_glass is not None:
+        n[1] = args.n_glass
+    if args.n_water is not None:
+        n[2] = float(args.n_water)
+        if getattr(args.n_water, "note", None):
+            print(args.n_water.note, file=sys.stderr)
+    radius = args.dome_radius if args.dome_radius is not None else DEFAULT_DOME_RADIUS_MM
+    thickness = (args.dome_thickness if args.dome_thickness is not None
+                 else DEFAULT_DOME_THICKNESS_MM)
+    offset = tuple(args.dome_offset) if args.dome_offset is not None else (0.0, 0.0, 0.0)
+    try:
+        pair = dome_pair((left, right), radius, thickness, offset, tuple(n))
+    except ValueError as exc:
+        raise CLIError(f"--dome-offset {' '.join(f'{v:g}' for v in offset)}: {exc}") from None
+    try:
+        check_field_of_view(StereoRig(left, right, pair))
+    except ValueError as exc:
+        raise CLIError(f"--dome-radius {radius:g} --dome-thickness {thickness:g}: {exc}") from None
+    return pair
+
+
+def _dome_comment(pair, left) -> str:
+    """The dome's numbers for the scene file's first comment (the offset in the left camera's
+    frame)."""
+    dome = pair.left
+    offset = left.R.T @ (dome.center - left.center)
+    return (f" radius {dome.radius:g} mm thickness {dome.thickness:g} mm offset "
+            f"{offset[0]:g} {offset[1]:g} {offset[2]:g} mm")
 
 
 #: Most targets a scene may hold (its XML grows by ~400 bytes per target).
@@ -341,13 +419,14 @@ def _check_visible(left, right, port, targets, radius: float, layout: str) -> No
     """CLIError unless some target lies wholly inside both images (in front of the cameras)."""
     import numpy as np
 
+    from measure.dome import DomePair
     from measure.projection import project
 
     from synth.crosscheck import wholly_in_image
 
     seen = np.ones(len(targets), dtype=bool)
-    for camera in (left, right):
-        uv = project(camera, port, targets)
+    for view, camera in enumerate((left, right)):
+        uv = project(camera, port[view] if isinstance(port, DomePair) else port, targets)
         seen &= wholly_in_image(camera, uv, targets, radius)
     if not seen.any():
         raise CLIError(f"--layout {layout}: none of the {len(targets)} targets is visible in both "

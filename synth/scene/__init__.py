@@ -9,7 +9,9 @@ job:
 * :mod:`synth.scene.write` -- :func:`write_scene`: the XML of cameras, port, targets or surface;
 * :mod:`synth.scene.params` -- the ``<default>`` parameters and their ``-D`` overrides;
 * :mod:`synth.scene.read` -- :func:`load_scene`: the rig, port and targets read back through
-  Mitsuba's own parser.
+  Mitsuba's own parser;
+* :mod:`synth.scene.dome` -- dome ports: the two domes of a rig, the field-of-view check, the
+  Mitsuba spheres.
 
 This package re-exports the names the rest of the project uses; the others live in the modules.
 """

@@ -11,7 +11,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from measure import Camera, FlatPort, StereoRig
+from measure import Camera, StereoRig
 
 #: Defaults written into every scene unless given. ``spp`` is what a lit pixel gets: target
 #: scenes render adaptively (synth.render), where 144 spp on the lit pixels costs about as much
@@ -96,8 +96,9 @@ class SceneSpec:
         return self.rig.left, self.rig.right
 
     @property
-    def port(self) -> FlatPort | None:
-        """The port, or None in an all-air scene."""
+    def port(self):
+        """The port — a :class:`measure.FlatPort`, or a :class:`measure.dome.DomePair` in a dome
+        scene (``rig.is_dome``) — or None in an all-air scene."""
         return self.rig.port if self.has_port else None
 
     @property

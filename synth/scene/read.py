@@ -20,6 +20,7 @@ import numpy as np
 
 from measure import Camera, FlatPort, StereoRig
 from measure.port import index_matched_port
+from synth.scene.dome import check_field_of_view, facing_cameras, pair_from_spheres
 from synth.scene.model import (SPECKLE_ID, SURFACE_ID, TARGET_ID_PREFIX, SceneError, SceneSpec,
                                SceneSurface)
 from synth.scene.params import check_params, declared_defaults, override_defaults
@@ -146,7 +147,7 @@ def _read_shapes(nodes: _Nodes, label: str):
     cameras' side reversed, centre, ext_ior, int_ior)``; targets ``(number, centre, radius,
     normal)``; surfaces ``(id, mesh filename as written, texture filename or None)``."""
     ObjectType = nodes.mi.ObjectType
-    interfaces, targets, surfaces = [], [], []
+    interfaces, targets, surfaces, spheres = [], [], [], {}
     for node in nodes.state.nodes:
         if node.type != ObjectType.Shape:
             continue
@@ -177,8 +178,9 @@ def _read_shapes(nodes: _Nodes, label: str):
             targets.append((int(sid[len(TARGET_ID_PREFIX):]), M[:3, 3].copy(), radius,
                             M[:3, 2] / normal_length))
             continue
-        if kind != "rectangle":
-            raise SceneError(f"{what}: port interfaces must be rectangles, got {kind!r}")
+        if kind not in ("rectangle", "sphere"):
+            raise SceneError(f"{what}: port interfaces must be rectangles (a flat port) or "
+                             f"spheres (a dome), got {kind!r}")
         bsdf = nodes.child(node, ObjectType.BSDF)
         if bsdf is None or bsdf.props.plugin_name() != "dielectric":
             found = "none" if bsdf is None else repr(bsdf.props.plugin_name())
@@ -190,9 +192,31 @@ def _read_shapes(nodes: _Nodes, label: str):
                 raise SceneError(f"{what}: {name} must be a number >= 1 (named media such as "
                                  f"'water' are not supported), got {value!r}")
             iors.append(float(value))
+        if kind == "sphere":
+            spheres[sid] = _sphere(nodes, node, M, what) + tuple(iors)
+            continue
         normal = M[:3, 2] / np.linalg.norm(M[:3, 2])
         interfaces.append((sid, -normal, M[:3, 3].copy(), iors[0], iors[1]))
-    return interfaces, targets, surfaces
+    return interfaces, targets, surfaces, spheres
+
+
+def _sphere(nodes: _Nodes, node, M: np.ndarray, what: str):
+    """``(centre, radius)`` of a dome sphere (mm): its ``center`` and ``radius`` properties
+    (Mitsuba's defaults 0 and 1), with no ``to_world`` and no ``flip_normals`` (the dielectric's
+    ``ext_ior`` must be outside)."""
+    if not np.allclose(M, np.eye(4)):
+        raise SceneError(f"{what}: a dome sphere is given by its 'center' and 'radius' (no "
+                         f"to_world transform)")
+    if bool(nodes.value(node, "flip_normals", False, what)):
+        raise SceneError(f"{what}: a dome sphere must not flip its normals (ext_ior is the "
+                         f"outside's index)")
+    centre = np.array(nodes.value(node, "center", (0.0, 0.0, 0.0), what), dtype=np.float64)
+    radius = float(nodes.value(node, "radius", 1.0, what))
+    if centre.shape != (3,) or not np.all(np.isfinite(centre)):
+        raise SceneError(f"{what}: the sphere's center must be a finite point")
+    if not (np.isfinite(radius) and radius > 0):
+        raise SceneError(f"{what}: the sphere's radius must be positive, got {radius:g}")
+    return centre, radius
 
 
 def _texture_filename(nodes: _Nodes, what: str) -> str | None:
@@ -264,7 +288,7 @@ def load_scene(path, defines: dict | None = None) -> SceneSpec:
     right = _read_sensor(nodes, sensors[1], params, label)
     if left.size != right.size:
         raise SceneError(f"{label}: the two sensors have different film sizes")
-    interfaces, targets, surfaces = _read_shapes(nodes, label)
+    interfaces, targets, surfaces, spheres = _read_shapes(nodes, label)
     surface = _read_surface(surfaces, path, label) if surfaces else None
     if surface is not None and targets:
         raise SceneError(f"{label}: a scene holds targets or a surface, not both")
@@ -279,8 +303,18 @@ def load_scene(path, defines: dict | None = None) -> SceneSpec:
     centres = np.array([t[1] for t in targets]).reshape(-1, 3)
     radii = np.array([t[2] for t in targets], dtype=float)
 
-    has_port = bool(interfaces)
-    if not interfaces:
+    has_port = bool(interfaces or spheres)
+    if interfaces and spheres:
+        raise SceneError(f"{label}: a scene holds a flat port (rectangles) or domes (spheres), "
+                         f"not both")
+    if spheres:
+        if params.get("port") == "none":
+            raise SceneError(f"{label}: port=none but the scene has dome spheres")
+        try:
+            port = pair_from_spheres(spheres)
+        except ValueError as exc:
+            raise SceneError(f"{label}: {exc}") from None
+    elif not interfaces:
         if params.get("port") != "none":
             raise SceneError(f"{label}: no port (no dielectric rectangle); an all-air scene "
                              f"must declare <default name=\"port\" value=\"none\"/>")
@@ -293,15 +327,27 @@ def load_scene(path, defines: dict | None = None) -> SceneSpec:
         rig = StereoRig(left, right, port)
     except ValueError as exc:
         raise SceneError(f"{label}: {exc}") from None
-    if surface is not None and has_port and not np.all(port.water_side(surface.vertices)):
-        raise SceneError(f"{label}: the surface mesh reaches out of the water (through the port)")
-    if has_port and not np.all(port.water_side(centres)):
-        bad = ids[~port.water_side(centres)]
+    if spheres:
+        if surface is not None:
+            raise SceneError(f"{label}: a dome scene holds disk targets, not a surface")
+        try:
+            check_field_of_view(rig)
+        except ValueError as exc:
+            raise SceneError(f"{label}: {exc}") from None
+        in_water = port.left.water_side(centres) & port.right.water_side(centres)
+    else:
+        if surface is not None and has_port and not np.all(port.water_side(surface.vertices)):
+            raise SceneError(f"{label}: the surface mesh reaches out of the water (through the "
+                             f"port)")
+        in_water = port.water_side(centres) if has_port else np.ones(len(centres), dtype=bool)
+    if not np.all(in_water):
+        bad = ids[~in_water]
         raise SceneError(f"{label}: targets {bad[:5].tolist()} are not in the water")
     normals = np.array([t[3] for t in targets]).reshape(-1, 3)
-    facing = normals @ port.normal
-    if np.any(facing >= 0):
-        bad = ids[facing >= 0]
+    facing = (facing_cameras(rig, centres, normals) if spheres
+              else normals @ port.normal < 0)
+    if not np.all(facing):
+        bad = ids[~facing]
         raise SceneError(f"{label}: targets {bad[:5].tolist()} do not face the cameras")
     return SceneSpec(rig=rig, has_port=has_port, targets=centres, target_ids=ids,
                      target_radii=radii, params=params, path=path,

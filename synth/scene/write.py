@@ -11,6 +11,8 @@ the ``<default>`` parameters of :mod:`synth.scene.params` and holds:
 * the port: one ``rectangle`` per interface with a ``dielectric`` BSDF, its normal (local +z)
   turned towards the cameras so that ``ext_ior`` is the camera-side index: air-glass
   ``int_ior = n2, ext_ior = n1``, glass-water ``int_ior = $n_water, ext_ior = n2``.
+* or, for a dome port (a :class:`measure.dome.DomePair`), per camera two concentric analytic
+  ``sphere`` shapes with ``dielectric`` BSDFs (:mod:`synth.scene.dome`).
 * the targets: ``disk`` shapes with an ``area`` emitter, facing the cameras (normal −z), shape
   ``id = "target_<k>"`` for target number ``k``; radius = the disk's scale.
 """
@@ -23,8 +25,11 @@ import tempfile
 import numpy as np
 
 from measure import Camera, FlatPort, StereoRig
+from measure.dome import DomePair
 from synth.scene.model import (DEFAULT_MAX_DEPTH, DEFAULT_SEED, DEFAULT_SPP, SPECKLE_ID,
                                SURFACE_ID, TARGET_ID_PREFIX, SurfaceFiles)
+from synth.scene.dome import (check_field_of_view, check_targets, dome_placements,
+                              facing_cameras)
 from synth.sensor import sensor_parameters
 
 #: Half side (mm) of the square port interfaces: covers both fields of view far beyond 2 m.
@@ -120,7 +125,8 @@ def scene_xml(cameras, port: FlatPort | None, targets, target_radius: float, *,
     """The text of a Mitsuba 3 scene of two cameras, a flat port (or none) and disk targets.
 
     ``cameras`` (left, right) :class:`measure.Camera` (same image size; square pixels);
-    ``port`` a :class:`measure.FlatPort` or None for an all-air scene; ``targets`` ``(N, 3)`` mm,
+    ``port`` a :class:`measure.FlatPort`, a :class:`measure.dome.DomePair` (a dome around each
+    camera: :mod:`synth.scene.dome`) or None for an all-air scene; ``targets`` ``(N, 3)`` mm,
     reference frame, all in the water; ``target_radius`` mm. When all targets share one ``z``,
     it becomes the ``target_z`` default. ``comment`` goes into an XML comment (for people only).
     ``water`` (a :class:`synth.water.Water`, needs a port): the water behind the port becomes a
@@ -161,7 +167,17 @@ def scene_xml(cameras, port: FlatPort | None, targets, target_radius: float, *,
     if target_normals.shape != targets.shape or not np.all(np.isfinite(target_normals)):
         raise ValueError("target_normals must be a finite (N, 3) array like targets")
     target_normals = target_normals / np.linalg.norm(target_normals, axis=1, keepdims=True)
-    if port is not None:
+    dome = isinstance(port, DomePair)
+    if dome:
+        if water is not None or lighting == "lit" or thin_lens is not None or surface is not None:
+            raise ValueError("a dome scene holds LED disk targets seen by pinhole cameras in "
+                             "clear water (no water medium, lit targets, thin lens or surface)")
+        rig = StereoRig(left, right, port)  # each camera inside its dome
+        check_field_of_view(rig)
+        check_targets(port, targets, target_radius)
+        if not np.all(facing_cameras(rig, targets, target_normals)):
+            raise ValueError("every target must face the cameras (its normal towards them)")
+    elif port is not None:
         StereoRig(left, right, port)  # cameras on the air side
         if not np.all(port.water_side(targets)):
             raise ValueError("every target must lie in the water, beyond the port's last interface")
@@ -184,7 +200,8 @@ def scene_xml(cameras, port: FlatPort | None, targets, target_radius: float, *,
                      ("water_g", _num(water.g))]
         max_depth = max(int(max_depth), WATER_MAX_DEPTH)
     if port is not None:  # a path crosses every interface once: room for them and a few more
-        max_depth = max(int(max_depth), 2 * port.n_interfaces + 4)
+        crossed = port.left.n_interfaces if dome else port.n_interfaces
+        max_depth = max(int(max_depth), 2 * crossed + 4)
     if surface is None:
         defaults.append(("target_radius", _num(target_radius)))
     if lighting == "lit":
@@ -240,7 +257,20 @@ def scene_xml(cameras, port: FlatPort | None, targets, target_radius: float, *,
         <float name="beam_width" value="{_num(LIGHT_BEAM_WIDTH_DEG)}"/>
     </emitter>""")
 
-    if port is not None:
+    if dome:
+        parts.append("\n    <!-- The domes: per camera two concentric spheres (normals outwards, "
+                     "ext_ior outside): air inside the inner one, glass between, water outside. -->")
+        for sid, centre, radius, ext_ior, int_ior in dome_placements(port):
+            outer = sid.endswith("outer")  # its ext_ior is the water's: $n_water
+            parts.append(f"""    <shape type="sphere" id="{sid}">
+        <point name="center" value="{_vec(centre)}"/>
+        <float name="radius" value="{_num(radius)}"/>
+        <bsdf type="dielectric">
+            <float name="ext_ior" value="{'$n_water' if outer else _num(ext_ior)}"/>
+            <float name="int_ior" value="{_num(int_ior)}"/>
+        </bsdf>
+    </shape>""")
+    elif port is not None:
         for k, centre, target, up, ext_ior, int_ior in interface_placements(port):
             ext = _num(ext_ior)
             last = k == port.n_interfaces - 1

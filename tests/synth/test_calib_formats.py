@@ -11,7 +11,8 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from measure import Camera, FlatPort, StereoRig
-from measure.flatport_format import to_flatport
+from measure.dome import DomePair, DomePort
+from measure.flatport_format import to_domeport, to_flatport
 from synth.calib_formats import (CALIBMAR_NAME, COLMAP_CAMERAS_NAME, COLMAP_RIG_NAME,
                                  CalibFormatError, calib_format, colmap_camera, write_calibmar,
                                  write_calibration_formats, write_colmap)
@@ -238,7 +239,9 @@ def test_calibmar_partner_missing(tmp_path):
 @pytest.mark.parametrize("old, new, word", [
     ("1 OPENCV 2448 2048 1100.3", "1 FISHEYE_X 2448 2048 1100.3", "unsupported camera model"),
     ("1 OPENCV 2448 2048 1100.3 ", "1 OPENCV 2448 2048 ", "FLATPORT and 8 numbers may follow"),
-    (" FLATPORT 0.0199", " DOMEPORT 0.0199", "found 'DOMEPORT'"),
+    # a DOMEPORT whose centre (here the flat port's unit normal, 1 m) is not inside its radius
+    (" FLATPORT 0.0199", " DOMEPORT 0.0199", "camera centre lies outside its dome"),
+    (" FLATPORT 0.0199", " SPHEREPORT 0.0199", "found 'SPHEREPORT'"),
     (" 1.0 1.49 1.3412\n2", " 1.0 1.49\n2", "FLATPORT needs 8"),
     ("1 OPENCV 2448 2048 1100.3", "1 OPENCV 2448 2048 1e400", r"got fx = inf$"),
     (" 1.0 1.49 1.3412\n2", " 1.0 1.49 inf\n2", r"got nw = inf$"),
@@ -281,3 +284,86 @@ def test_project_files_still_read_and_unknown_content_is_opencvs_error(tmp_path)
     (tmp_path / "junk.yaml").write_text("just some words\n")
     with pytest.raises(DatasetError, match="junk.yaml"):
         read_calib(tmp_path / "junk.yaml")
+
+
+# ---------------------------------------------------------------------------------------------
+# DOMEPORT: one dome per camera
+# ---------------------------------------------------------------------------------------------
+def _dome_rig() -> StereoRig:
+    rig = _rig()
+    return StereoRig(rig.left, rig.right, DomePair(
+        DomePort(rig.left.center + (1.25, -0.75, 2.5), 50.8, 7.9, (1.0, 1.473, 1.3412)),
+        DomePort(rig.right.center + (-0.5, 1.0, -3.25), 60.3, 8.1, (1.0, 1.52, 1.3412))))
+
+
+def _assert_same_domes(got: DomePair, want: DomePair):
+    for a, b in ((got.left, want.left), (got.right, want.right)):
+        np.testing.assert_allclose(a.center, b.center, rtol=0, atol=1e-12)
+        assert a.radius == pytest.approx(b.radius, rel=1e-14)
+        assert a.thickness == pytest.approx(b.thickness, rel=1e-14)
+        assert a.indices == b.indices
+
+
+@pytest.mark.parametrize("fmt", ["calibmar", "colmap"])
+def test_dome_rigs_round_trip_through_each_format(tmp_path, fmt):
+    """A DomePair rig → calibmar / cameras.txt (DOMEPORT: the dome centre in each camera's
+    frame, metres) → read_calib: every dome to 1e-12 mm, the cameras as for FLATPORT."""
+    rig = _dome_rig()
+    if fmt == "calibmar":
+        path = write_calibmar(tmp_path / "cal.yaml", rig)[1]
+    else:
+        path = write_colmap(tmp_path / "cameras.txt", rig)[0]
+    got = read_calib(path)
+    assert got["has_port"] and got["rig"].is_dome
+    _assert_same_domes(got["port"], rig.port)
+    np.testing.assert_allclose(got["rig"].right.t, rig.right.t, rtol=1e-12)
+    np.testing.assert_allclose(got["rig"].right.R, rig.right.R, rtol=0, atol=1e-15)
+    np.testing.assert_allclose(got["K2"], rig.right.K, rtol=1e-15)
+
+
+def test_domeport_lines_as_the_tools_read_them(tmp_path):
+    """cameras.txt: ``DOMEPORT`` and 8 numbers after the camera parameters; calibmar:
+    ``non_svp_model: DOMEPORT`` and the fork's parameter names as the comment."""
+    rig = _dome_rig()
+    write_calibration_formats(tmp_path, rig)
+    data = [row for row in (tmp_path / COLMAP_CAMERAS_NAME).read_text().splitlines()
+            if not row.startswith("#")]
+    assert all(row.split()[12] == "DOMEPORT" and len(row.split()) == 21 for row in data)
+    params = [float(v) for v in data[1].split()[13:]]
+    assert params == to_domeport(rig.port.right, rig.right)
+    # the right dome's centre in the right camera's frame, in metres
+    np.testing.assert_allclose(params[:3], rig.right.R.T @ (-0.5, 1.0, -3.25) * 1e-3,
+                               rtol=1e-12)
+    assert params[3:5] == pytest.approx([0.0603, 0.0081], rel=1e-15)
+    stereo = (tmp_path / "calibmar_stereo.yaml").read_text()
+    assert "non_svp_model: DOMEPORT\n# Cx, Cy, Cz, int_radius, int_thick, na, ng, nw\n" in stereo
+
+
+@pytest.mark.parametrize("name, old, new, word", [
+    ("calibmar_stereo.yaml", "non_svp_model: DOMEPORT", "non_svp_model: FLATPORT",
+     "non_svp_model FLATPORT"),
+    ("calibmar.yaml", "0.0508, 0.0079,", "0.0508, -0.0079,", "int_thick must be > 0"),
+    ("calibmar.yaml", "0.0508, 0.0079,", "0.0, 0.0079,", "int_radius must be > 0"),
+    ("calibmar.yaml", "0.0508, 0.0079,", "0.001, 0.0079,", "outside its dome"),
+    ("calibmar.yaml", "0.0079, 1.0, 1.473", "0.0079, 0.9, 1.473", "indices"),
+    ("cameras.txt", " 1.0 1.52 1.3412", " 1.0 1.52", "DOMEPORT needs 8"),
+    ("cameras.txt", "DOMEPORT 0.00125", "FLATPORT 0.00125", "unit vector"),
+])
+def test_bad_domeport_files(tmp_path, name, old, new, word):
+    write_calibration_formats(tmp_path, _dome_rig())
+    _edit(tmp_path / name, old, new)
+    with pytest.raises(DatasetError, match=word) as info:
+        read_calib(tmp_path / name)
+    assert "\n" not in str(info.value)
+
+
+def test_cameras_with_two_housings_are_refused(tmp_path):
+    """One camera FLATPORT, the other DOMEPORT: one error naming the file."""
+    write_colmap(tmp_path / COLMAP_CAMERAS_NAME, _dome_rig())
+    text = (tmp_path / COLMAP_CAMERAS_NAME).read_text().splitlines()
+    flat = " ".join(["FLATPORT"] + [repr(v) for v in to_flatport(_rig().port, _rig().left)])
+    text = [row.split(" DOMEPORT ")[0] + " " + flat if row.startswith("1 ") else row
+            for row in text]
+    (tmp_path / COLMAP_CAMERAS_NAME).write_text("\n".join(text) + "\n")
+    with pytest.raises(DatasetError, match="both cameras need the same housing"):
+        read_calib(tmp_path / COLMAP_CAMERAS_NAME)

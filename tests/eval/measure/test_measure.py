@@ -256,3 +256,29 @@ def test_bad_inputs_exit_2_with_one_line_and_write_nothing(user, capsys, argv, f
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("error: ") and fragment in err[0], err
     assert sorted(os.listdir(user)) == before  # no output directory, no staging left
+
+
+def test_a_dome_calibration_is_one_error_line(tmp_path):
+    """A DOMEPORT calibration reads (synth.calib_formats), but eval measure measures through a
+    flat port only, and eval run takes it only for a dome scene: one CLIError naming the file,
+    no traceback."""
+    from types import SimpleNamespace
+
+    from eval.cli import CLIError
+    from eval.measure.inputs import read_calibration
+    from eval.run.inputs import budget_rigs, measurement_rig
+    from measure import StereoRig
+    from measure.dome import DomePair, DomePort
+    from synth.calib_formats import write_calibmar
+
+    left, right = paper_cameras()
+    pair = DomePair(DomePort(left.center, 50.0, 8.0, (1.0, 1.49, 1.33)),
+                    DomePort(right.center, 50.0, 8.0, (1.0, 1.49, 1.33)))
+    path = write_calibmar(tmp_path / "dome.yaml", StereoRig(left, right, pair))[0]
+    with pytest.raises(CLIError, match=r"dome\.yaml: a dome-port calibration"):
+        read_calibration(path)
+    flat = SimpleNamespace(rig=StereoRig(left, right, None))  # eval run: a flat-port scene
+    with pytest.raises(CLIError, match=r"--calib .*dome\.yaml: a dome-port calibration"):
+        measurement_rig(SimpleNamespace(calib=path, assumptions={}), flat)
+    with pytest.raises(CLIError, match=r"--compare-calib .*dome\.yaml: a dome-port"):
+        budget_rigs(SimpleNamespace(compare_calib=(path,)), flat.rig, None)

@@ -1,0 +1,171 @@
+"""Dome ports in scene files: the rig's two domes, the check that the fields of view fit through
+them, and the Mitsuba spheres that model them.
+
+Units mm, reference frame = the left camera's (OpenCV axes). A dome scene holds, per camera
+(``left``, ``right``), two concentric Mitsuba ``sphere`` shapes (analytic spheres, not meshes)
+with ``dielectric`` BSDFs: ``dome_<camera>_inner`` (radius ``R``) and ``dome_<camera>_outer``
+(radius ``R + T``). A Mitsuba sphere's normal points outwards and a ``dielectric``'s exterior
+(``ext_ior``) is on the normal side, so with no ``flip_normals``: inner sphere ``int_ior`` = the
+air's index, ``ext_ior`` = the glass's; outer sphere ``int_ior`` = the glass's, ``ext_ior`` =
+``$n_water``. Inside the inner sphere is air, between the spheres glass, outside water (checked
+against :func:`measure.dome.trace_through_dome` with Mitsuba's own ``ray_intersect`` and BSDF
+sampling in ``tests/synth/test_scene_dome.py``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from measure import StereoRig
+from measure.dome import DomePair, DomePort, trace_through_dome
+
+#: Defaults of ``synth scene --port dome``: inner radius and glass thickness, mm. With the
+#: paper's 200 mm baseline the two outer spheres (58 mm) leave 84 mm between them, and no ray of
+#: either camera's field of view (±48° across, ±55° at the corners, the right camera turned 5°)
+#: reaches the other dome (:func:`check_field_of_view`).
+DEFAULT_DOME_RADIUS_MM = 50.0
+DEFAULT_DOME_THICKNESS_MM = 8.0
+#: Shape ids of the spheres: ``DOME_ID.format(camera="left", sphere="inner")``.
+DOME_ID = "dome_{camera}_{sphere}"
+CAMERA_NAMES = ("left", "right")
+SPHERE_NAMES = ("inner", "outer")
+#: Spacing (px) of the pixels whose rays :func:`check_field_of_view` traces (plus the border).
+FOV_CHECK_STEP_PX = 16
+
+
+def dome_pair(cameras, radius: float, thickness: float, offset, indices) -> DomePair:
+    """The two domes of a rig: each camera inside its own dome whose centre is ``offset`` (mm,
+    in that camera's frame) from the camera's centre — the same offset for both cameras;
+    ``indices`` ``(n_air, n_glass, n_water)``. Raises ``ValueError`` for a radius or thickness
+    that is not positive, or a camera outside its dome."""
+    offset = np.asarray(offset, dtype=np.float64).reshape(3)
+    domes = [DomePort(cam.center + cam.R @ offset, radius, thickness, indices) for cam in cameras]
+    pair = DomePair(*domes)
+    StereoRig(cameras[0], cameras[1], pair)  # each camera inside its dome
+    return pair
+
+
+def check_field_of_view(rig: StereoRig, step_px: int = FOV_CHECK_STEP_PX) -> None:
+    """Raise ``ValueError`` unless each camera's whole field of view fits through its own dome
+    and misses the other camera's dome.
+
+    The rays of a grid of pixels (every ``step_px`` and the image border) are traced through
+    the camera's dome (:func:`measure.dome.trace_through_dome`); each must reach the water (no
+    total internal reflection) and its water ray must not meet the other dome's outer sphere.
+    The two domes must not overlap.
+    """
+    if not rig.is_dome:
+        raise ValueError("check_field_of_view needs a rig with a DomePair")
+    left, right = rig.port.left, rig.port.right
+    gap = np.linalg.norm(left.center - right.center) - left.radii[1] - right.radii[1]
+    if gap <= 0:
+        raise ValueError(f"the two domes overlap (their outer spheres are "
+                         f"{-gap:.6g} mm into each other): move the cameras apart or make the "
+                         f"domes smaller")
+    for view, camera in enumerate(rig.cameras):
+        name, other_name = CAMERA_NAMES[view], CAMERA_NAMES[1 - view]
+        w, h = camera.size
+        # pixel centres every step_px and the image's outer edges (OpenCV: [-0.5, W - 0.5])
+        u, v = np.meshgrid(np.r_[-0.5, np.arange(0, w, step_px), w - 0.5],
+                           np.r_[-0.5, np.arange(0, h, step_px), h - 0.5])
+        uv = np.column_stack([u.ravel(), v.ravel()])
+        water = trace_through_dome(camera.center, camera.rays(uv), rig.port_of(view),
+                                   keep_interface_points=False)
+        lost = ~np.all(np.isfinite(water.directions), axis=1)
+        if lost.any():
+            worst = uv[np.flatnonzero(lost)[0]]
+            raise ValueError(f"the {name} camera's field of view does not fit through its dome "
+                             f"(the ray of pixel ({worst[0]:g}, {worst[1]:g}) does not reach "
+                             f"the water)")
+        other = rig.port_of(1 - view)
+        hits = _ray_meets_sphere(water.origins, water.directions, other.center, other.radii[1])
+        if hits.any():
+            worst = uv[np.flatnonzero(hits)[0]]
+            raise ValueError(f"the {name} camera's field of view reaches the {other_name} dome "
+                             f"(the ray of pixel ({worst[0]:g}, {worst[1]:g})): the field of "
+                             f"view does not fit past it; move the cameras apart or make the "
+                             f"domes smaller")
+
+
+def _ray_meets_sphere(origins, directions, center, radius) -> np.ndarray:
+    """Whether rays ``(N, 3)`` (unit directions) meet a sphere ahead of their origins."""
+    offset = origins - center
+    b = np.einsum("ij,ij->i", offset, directions)
+    c = np.einsum("ij,ij->i", offset, offset) - radius * radius
+    disc = b * b - c
+    with np.errstate(invalid="ignore"):
+        far = -b + np.sqrt(disc)
+    return (disc >= 0) & (far > 0)
+
+
+def check_targets(pair: DomePair, targets, target_radius: float) -> None:
+    """Raise ``ValueError`` unless every target ``(N, 3)`` (mm) lies in the water, at least its
+    radius outside both domes' outer spheres (a target inside a dome or in its glass is
+    refused)."""
+    targets = np.asarray(targets, dtype=np.float64).reshape(-1, 3)
+    for name, dome in zip(CAMERA_NAMES, (pair.left, pair.right)):
+        distance = np.linalg.norm(targets - dome.center, axis=1)
+        inside = distance <= dome.radii[1]
+        if inside.any():
+            where = "inside the dome" if distance[inside].min() < dome.radius else "in the glass"
+            raise ValueError(f"targets {np.flatnonzero(inside)[:5].tolist()} lie inside the "
+                             f"{name} dome's outer sphere ({where}); every target must be in "
+                             f"the water")
+        if np.any(distance - dome.radii[1] <= target_radius):
+            raise ValueError(f"targets closer to the {name} dome than their radius")
+
+
+def facing_cameras(rig: StereoRig, targets, normals) -> np.ndarray:
+    """Whether each target's normal ``(N, 3)`` points back towards the cameras (negative dot
+    product with the direction from the midpoint of the two camera centres to the target)."""
+    middle = 0.5 * (rig.left.center + rig.right.center)
+    return np.einsum("ij,ij->i", np.asarray(normals, float), np.asarray(targets, float) - middle) < 0
+
+
+def dome_placements(pair: DomePair):
+    """Per sphere, left dome first, inner sphere first: ``(shape id, centre, radius, ext_ior,
+    int_ior)``; the outer sphere's ``ext_ior`` is the water's index."""
+    for camera, dome in zip(CAMERA_NAMES, (pair.left, pair.right)):
+        n_air, n_glass, n_water = dome.indices
+        yield DOME_ID.format(camera=camera, sphere="inner"), dome.center, dome.radii[0], \
+            n_glass, n_air
+        yield DOME_ID.format(camera=camera, sphere="outer"), dome.center, dome.radii[1], \
+            n_water, n_glass
+
+
+def pair_from_spheres(spheres: dict) -> DomePair:
+    """The DomePair of a scene's spheres: ``{shape id: (centre, radius, ext_ior, int_ior)}`` with
+    the four ids of :data:`DOME_ID`. Raises ``ValueError`` naming what does not fit (a missing
+    sphere, spheres that are not concentric, an outer sphere not larger than the inner one,
+    indices that do not chain air → glass → water, different water on the two domes)."""
+    domes = []
+    known = [DOME_ID.format(camera=c, sphere=s) for c in CAMERA_NAMES for s in SPHERE_NAMES]
+    every = ", ".join(known)
+    extra = sorted(set(spheres) - set(known))
+    if extra:
+        raise ValueError(f"sphere {extra[0]!r} is not a dome sphere (a dome scene holds {every})")
+    for camera in CAMERA_NAMES:
+        ids = [DOME_ID.format(camera=camera, sphere=s) for s in SPHERE_NAMES]
+        missing = [i for i in ids if i not in spheres]
+        if missing:
+            raise ValueError(f"dome sphere {missing[0]!r} is missing (a dome scene holds "
+                             f"{every})")
+        (c_in, r_in, ext_in, int_in), (c_out, r_out, ext_out, int_out) = (spheres[i] for i in ids)
+        if not np.allclose(c_in, c_out, rtol=0, atol=1e-9):
+            raise ValueError(f"spheres {ids[0]!r} and {ids[1]!r} are not concentric")
+        if not r_out > r_in:
+            raise ValueError(f"sphere {ids[1]!r} (radius {r_out:g}) must be larger than "
+                             f"{ids[0]!r} (radius {r_in:g})")
+        if abs(ext_in - int_out) > 1e-9:
+            raise ValueError(f"the glass of the {camera} dome has two indices: ext_ior "
+                             f"{ext_in:g} of {ids[0]!r}, int_ior {int_out:g} of {ids[1]!r}")
+        domes.append(DomePort(c_in, r_in, r_out - r_in, (int_in, ext_in, ext_out)))
+    if abs(domes[0].n_water - domes[1].n_water) > 1e-12:
+        raise ValueError(f"the two domes are in different water (ext_ior {domes[0].n_water:g} "
+                         f"and {domes[1].n_water:g})")
+    return DomePair(*domes)
+
+
+__all__ = ["CAMERA_NAMES", "DEFAULT_DOME_RADIUS_MM", "DEFAULT_DOME_THICKNESS_MM", "DOME_ID",
+           "FOV_CHECK_STEP_PX", "check_field_of_view", "check_targets", "dome_pair",
+           "dome_placements", "facing_cameras", "pair_from_spheres"]
