@@ -37,6 +37,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.optimize import brentq
 
 from .camera import Camera
 from .port import FlatPort
@@ -202,9 +203,10 @@ def perturbed_rig(rig: StereoRig, names, delta, normal_axes=None) -> StereoRig:
                                                tuple(thick), tuple(indices)))
 
 
-def pixel_sigmas(pixel_sigma, n: int) -> np.ndarray:
+def pixel_sigmas(pixel_sigma, n: int, allow_zero: bool = False) -> np.ndarray:
     """``(N, 4)`` px: σ of each of a point's four pixel coordinates from a stated σ (a number,
-    ``(N,)`` per point, or ``(N, 2)`` per point and view: left, right)."""
+    ``(N,)`` per point, or ``(N, 2)`` per point and view: left, right); positive (or zero with
+    ``allow_zero``), ValueError otherwise."""
     sigma = np.asarray(pixel_sigma, dtype=np.float64)
     if sigma.ndim == 0:
         sigma = np.full((n, 2), float(sigma))
@@ -213,7 +215,7 @@ def pixel_sigmas(pixel_sigma, n: int) -> np.ndarray:
     elif sigma.shape != (n, 2):
         raise ValueError(f"pixel_sigma must be a number, ({n},) or ({n}, 2), got {sigma.shape}")
     finite = np.isfinite(sigma)
-    if np.any(sigma[finite] <= 0):
+    if np.any(sigma[finite] < 0) or (not allow_zero and np.any(sigma[finite] == 0)):
         raise ValueError("pixel_sigma must be positive")
     return np.repeat(sigma, 2, axis=1)
 
@@ -256,6 +258,56 @@ def point_covariance(rig: StereoRig, uv_left, uv_right, points, pixel_sigma,
                          np.asarray(uv_right, dtype=float).reshape(-1, 2)], axis=1)
     total[~np.all(np.isfinite(uv), axis=1)] = np.nan
     return total
+
+
+#: Median of χ²₁ (``scipy.stats.chi2.ppf(0.5, 1)``): a point's reprojection residual has one
+#: degree of freedom (4 pixel coordinates, 3 unknowns).
+CHI2_1_MEDIAN = 0.454936423119572
+
+
+def residual_sigma(rig: StereoRig, uv_left, uv_right, points, pixel_sigma=0.0) -> dict:
+    """The pixel noise the data show beyond ``pixel_sigma`` (px; a number, ``(N,)`` or
+    ``(N, 2)``): the a-posteriori variance factor of the triangulation, no truth needed.
+
+    At each point the first-order maximum-likelihood residual of its four pixel coordinates is
+    ``r = (I − J (JᵀJ)⁻¹ Jᵀ)(m − f(X))`` (``f`` the forward model, ``J`` its point Jacobian; at
+    the optical-path point or the reprojection point alike, since the projector removes the
+    part a move of X explains); ``|r|²`` has one degree of freedom and expectation σ² for a
+    pixel noise of σ per coordinate. The extra σ₀ every detection gets is
+    found from the median of ``|r|² / (σ_i² + σ₀²)`` (the median: a wrong match does not
+    inflate it), with ``σ_i²`` the mean of the point's four stated variances. What it cannot
+    see: an error the two views share (the disks' eccentricity moves both images of a target
+    consistently, and so does a calibration error along the rays). With per-point stated σ_i,
+    σ₀² solves ``median(|r|² / (σ_i² + σ₀²)) = median(χ²₁)`` (0 when the stated σ already
+    explain the residuals). Returns ``{"sigma0_px",
+    "rms_residual_px", "n"}``."""
+    points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    observed = np.concatenate([np.asarray(uv_left, dtype=float).reshape(-1, 2),
+                               np.asarray(uv_right, dtype=float).reshape(-1, 2)], axis=1)
+    stated = pixel_sigmas(pixel_sigma, points.shape[0], allow_zero=True)
+    predicted, J, _ = pixel_jacobians(rig, points)
+    e = observed - predicted
+    ok = np.all(np.isfinite(e), axis=1) & np.all(np.isfinite(J), axis=(1, 2))
+    if not ok.any():
+        return {"sigma0_px": None, "rms_residual_px": None, "n": 0}
+    e, J = e[ok], J[ok]
+    normal = np.einsum("nki,nkj->nij", J, J)
+    step = np.linalg.solve(normal, np.einsum("nki,nk->ni", J, e)[..., None])[..., 0]
+    r = e - np.einsum("nki,ni->nk", J, step)
+    q = np.einsum("nk,nk->n", r, r)
+    known = np.mean(stated[ok] ** 2, axis=1)
+
+    def excess(variance):  # median of the residuals in units of their expected size, minus χ²₁'s
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return float(np.median(np.where(q > 0, q / (known + variance), 0.0))) - CHI2_1_MEDIAN
+
+    upper = float(np.median(q) / CHI2_1_MEDIAN) + float(known.max())
+    if upper <= 0 or excess(0.0) <= 0:
+        sigma0 = 0.0
+    else:  # the excess falls from > 0 at 0 to ≤ 0 at ``upper``
+        sigma0 = float(np.sqrt(brentq(excess, 0.0, upper, xtol=1e-12 * upper)))
+    return {"sigma0_px": sigma0, "rms_residual_px": float(np.sqrt(np.mean(q))),
+            "n": int(ok.sum())}
 
 
 def mahalanobis_squared(errors, covariance) -> np.ndarray:
@@ -335,6 +387,7 @@ def detection_sigma(detections, floor_px: float = 0.0) -> np.ndarray:
     return np.sqrt(background_term ** 2 + float(floor_px) ** 2)
 
 
-__all__ = ["CHI2_3_95", "PointCovariance", "coverage_summary", "detection_sigma",
-           "mahalanobis_squared", "perturbed_rig", "pixel_jacobians", "pixel_sigmas",
-           "point_covariance", "point_covariances", "sigma_summary"]
+__all__ = ["CHI2_1_MEDIAN", "CHI2_3_95", "PointCovariance", "coverage_summary",
+           "detection_sigma", "mahalanobis_squared", "perturbed_rig", "pixel_jacobians",
+           "pixel_sigmas", "point_covariance", "point_covariances", "residual_sigma",
+           "sigma_summary"]

@@ -19,7 +19,8 @@ from measure.rig_covariance import RigCovariance
 from measure.selfcal import self_calibrate, tilt_basis
 from measure.uncertainty import (CHI2_3_95, coverage_summary, detection_sigma,
                                  mahalanobis_squared, perturbed_rig, pixel_jacobians,
-                                 point_covariance, point_covariances, sigma_summary)
+                                 point_covariance, point_covariances, residual_sigma,
+                                 sigma_summary)
 from synth.layouts import paper_plane
 from synth.rig import paper_rig
 
@@ -179,3 +180,24 @@ def test_detection_sigma_from_snr_and_size():
     spread = np.std(np.array(found), axis=0)
     assert np.all(np.abs(np.median(predicted) / spread - 1.0) <= 0.15), (predicted[0], spread)
     assert detection_sigma(d, floor_px=1.0)[0] > 1.0
+
+
+def test_residual_sigma_recovers_the_pixel_noise():
+    """The variance factor of the residuals (no truth) against the σ of the added noise, and
+    only what lies beyond a stated part."""
+    rig = paper_rig()
+    points = paper_plane(1000.0)
+    uv_left, uv_right = (project(c, rig.port, points) for c in rig.cameras)
+    rng = np.random.default_rng(5)
+    noisy_left = uv_left + rng.normal(0, SIGMA_PX, uv_left.shape)
+    noisy_right = uv_right + rng.normal(0, SIGMA_PX, uv_right.shape)
+    start = triangulate(rig, noisy_left, noisy_right, "optical_path").points
+    found = residual_sigma(rig, noisy_left, noisy_right, start)
+    assert abs(found["sigma0_px"] / SIGMA_PX - 1) <= 0.10, found
+    assert found["n"] == len(points)
+    # a stated part of 0.06 px leaves sqrt(0.1² − 0.06²) = 0.08 px
+    beyond = residual_sigma(rig, noisy_left, noisy_right, start, 0.06)
+    assert abs(beyond["sigma0_px"] / 0.08 - 1) <= 0.15, beyond
+    # exact pixels: nothing beyond
+    exact = residual_sigma(rig, uv_left, uv_right, points)
+    assert exact["sigma0_px"] < 1e-6
