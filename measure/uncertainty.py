@@ -263,6 +263,9 @@ def point_covariance(rig: StereoRig, uv_left, uv_right, points, pixel_sigma,
 #: Median of χ²₁ (``scipy.stats.chi2.ppf(0.5, 1)``): a point's reprojection residual has one
 #: degree of freedom (4 pixel coordinates, 3 unknowns).
 CHI2_1_MEDIAN = 0.454936423119572
+#: A residual beyond this many times its expected size (χ²₁ exceeds it with probability 8e-6) is
+#: a gross error (a wrong match) and left out of the variance factor.
+OUTLIER_CHI2_1 = 20.0
 
 
 def residual_sigma(rig: StereoRig, uv_left, uv_right, points, pixel_sigma=0.0) -> dict:
@@ -273,13 +276,13 @@ def residual_sigma(rig: StereoRig, uv_left, uv_right, points, pixel_sigma=0.0) -
     ``r = (I − J (JᵀJ)⁻¹ Jᵀ)(m − f(X))`` (``f`` the forward model, ``J`` its point Jacobian; at
     the optical-path point or the reprojection point alike, since the projector removes the
     part a move of X explains); ``|r|²`` has one degree of freedom and expectation σ² for a
-    pixel noise of σ per coordinate. The extra σ₀ every detection gets is
-    found from the median of ``|r|² / (σ_i² + σ₀²)`` (the median: a wrong match does not
-    inflate it), with ``σ_i²`` the mean of the point's four stated variances. What it cannot
+    pixel noise of σ per coordinate. The extra σ₀ every detection gets solves
+    ``mean(|r|² / (σ_i² + σ₀²)) = 1`` (0 when the stated σ_i — the mean of the point's four
+    stated variances — already explain the residuals) over the residuals within
+    :data:`OUTLIER_CHI2_1` times their expected size under the robust start (the same equation
+    with the median and ``median(χ²₁)``): a wrong match does not inflate it. What it cannot
     see: an error the two views share (the disks' eccentricity moves both images of a target
-    consistently, and so does a calibration error along the rays). With per-point stated σ_i,
-    σ₀² solves ``median(|r|² / (σ_i² + σ₀²)) = median(χ²₁)`` (0 when the stated σ already
-    explain the residuals). Returns ``{"sigma0_px",
+    consistently, and so does a calibration error along the rays). Returns ``{"sigma0_px",
     "rms_residual_px", "n"}``."""
     points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     observed = np.concatenate([np.asarray(uv_left, dtype=float).reshape(-1, 2),
@@ -297,15 +300,23 @@ def residual_sigma(rig: StereoRig, uv_left, uv_right, points, pixel_sigma=0.0) -
     q = np.einsum("nk,nk->n", r, r)
     known = np.mean(stated[ok] ** 2, axis=1)
 
-    def excess(variance):  # median of the residuals in units of their expected size, minus χ²₁'s
+    def excess(variance, statistic, rows):  # residuals in units of their expected size
         with np.errstate(divide="ignore", invalid="ignore"):
-            return float(np.median(np.where(q > 0, q / (known + variance), 0.0))) - CHI2_1_MEDIAN
+            return float(statistic(np.where(q[rows] > 0, q[rows] / (known[rows] + variance),
+                                            0.0)))
 
-    upper = float(np.median(q) / CHI2_1_MEDIAN) + float(known.max())
-    if upper <= 0 or excess(0.0) <= 0:
-        sigma0 = 0.0
-    else:  # the excess falls from > 0 at 0 to ≤ 0 at ``upper``
-        sigma0 = float(np.sqrt(brentq(excess, 0.0, upper, xtol=1e-12 * upper)))
+    def solve(statistic, target, rows):
+        upper = 2.0 * float(statistic(q[rows]) / target) + float(known.max())
+        if upper <= 0 or excess(0.0, statistic, rows) <= target:
+            return 0.0
+        # the excess falls from > target at 0 to < target at ``upper``
+        return brentq(lambda v: excess(v, statistic, rows) - target, 0.0, upper,
+                      xtol=1e-12 * upper)
+
+    everything = np.ones(q.shape, dtype=bool)
+    robust = solve(np.median, CHI2_1_MEDIAN, everything)
+    inliers = q <= OUTLIER_CHI2_1 * (known + robust)
+    sigma0 = float(np.sqrt(solve(np.mean, 1.0, inliers)))
     return {"sigma0_px": sigma0, "rms_residual_px": float(np.sqrt(np.mean(q))),
             "n": int(ok.sum())}
 

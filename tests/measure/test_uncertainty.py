@@ -201,3 +201,16 @@ def test_residual_sigma_recovers_the_pixel_noise():
     # exact pixels: nothing beyond
     exact = residual_sigma(rig, uv_left, uv_right, points)
     assert exact["sigma0_px"] < 1e-6
+
+
+def test_residual_sigma_ignores_a_wrong_match():
+    rig = paper_rig()
+    points = paper_plane(1000.0)
+    uv_left, uv_right = (project(c, rig.port, points) for c in rig.cameras)
+    rng = np.random.default_rng(6)
+    noisy_left = uv_left + rng.normal(0, SIGMA_PX, uv_left.shape)
+    noisy_right = uv_right + rng.normal(0, SIGMA_PX, uv_right.shape)
+    noisy_right[:3, 1] += 5.0  # three pairs 5 px off the epipolar curve
+    start = triangulate(rig, noisy_left, noisy_right, "optical_path").points
+    found = residual_sigma(rig, noisy_left, noisy_right, start)
+    assert abs(found["sigma0_px"] / SIGMA_PX - 1) <= 0.10, found
