@@ -136,8 +136,8 @@ def ellipses_figure(path, per_method) -> None:
     """Per method, over the target plane (X, Y in mm): each point's 95 % error ellipse in X, Y
     (the marginal of its covariance ``per_method[m]["covariance"]`` ``(N, 3, 3)``), coloured
     by σZ, and — where ``errors`` are known — its measured error (X, Y) as a line; ellipses and
-    errors magnified by one factor per method (written in the title), so that the median
-    ellipse is a third of the median distance between neighbouring points."""
+    errors magnified by one factor per method (written in the title), so that the largest
+    ellipse is as long as the 90th percentile of the distances between neighbouring points."""
     from matplotlib.collections import EllipseCollection, LineCollection
     from scipy.spatial import cKDTree
 
@@ -155,9 +155,9 @@ def ellipses_figure(path, per_method) -> None:
         block = cov[:, :2, :2]
         values, vectors = np.linalg.eigh(block)
         half = ELLIPSE_95_SIGMAS * np.sqrt(np.maximum(values, 0.0))  # minor, major (mm)
-        spacing = (float(np.median(cKDTree(points[:, :2]).query(points[:, :2], k=2)[0][:, 1]))
-                   if len(points) > 1 else 1.0)
-        scale = spacing / 3.0 / max(float(np.median(2 * half[:, 1])), 1e-12)
+        spacing = (float(np.percentile(cKDTree(points[:, :2]).query(points[:, :2], k=2)[0][:, 1],
+                                       90)) if len(points) > 1 else 1.0)
+        scale = spacing / max(float(np.max(2 * half[:, 1])), 1e-12)
         angles = np.degrees(np.arctan2(vectors[:, 1, 1], vectors[:, 0, 1]))
         sigma_z = np.sqrt(cov[:, 2, 2])
         ellipses = EllipseCollection(2 * half[:, 1] * scale, 2 * half[:, 0] * scale, angles,
@@ -170,7 +170,7 @@ def ellipses_figure(path, per_method) -> None:
             errors = np.asarray(data["errors"])[ok]
             ax.add_collection(LineCollection(
                 np.stack([points[:, :2], points[:, :2] + scale * errors[:, :2]], axis=1),
-                colors="C3", linewidths=0.8))
+                colors="C3", linewidths=1.0))
         ax.set_xlim(points[:, 0].min() - spacing, points[:, 0].max() + spacing)
         ax.set_ylim(points[:, 1].max() + spacing, points[:, 1].min() - spacing)  # Y down
         ax.set_aspect("equal")
@@ -180,7 +180,7 @@ def ellipses_figure(path, per_method) -> None:
                      + f", ×{scale:.3g}", fontsize=9)
         ax.set_xlabel("X [mm]")
         ax.set_ylabel("Y [mm] (down)")
-    fig.subplots_adjust(left=0.08, right=0.97, bottom=0.09, top=0.93, wspace=0.25)
+    fig.subplots_adjust(left=0.1, right=0.97, bottom=0.09, top=0.93, wspace=0.25)
     save_figure(fig, path)
 
 
