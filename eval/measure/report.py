@@ -200,7 +200,7 @@ def uncertainty_markdown(report: dict) -> list:
     unc = report.get("uncertainty") or {}
     if not unc.get("methods"):
         return [f"Uncertainty: {unc['note']}.", ""] if unc.get("note") else []
-    lines = ["## Uncertainty", "", f"Point covariances from {unc['rig']}.", "",
+    lines = ["## Uncertainty", "", f"Point covariances: {unc['rig']}.", "",
              "| method | median σx | median σy | median σz | largest σP |", "|---|---|---|---|---|"]
     for method, entry in unc["methods"].items():
         sig = entry["sigma"]

@@ -154,7 +154,7 @@ def uncertainty_lines(report: dict) -> list:
         pixel = (f"per target from the detector (median {fmt(ps.get('detector_median_px'), 4)} "
                  f"px) plus σ₀ = {fmt(ps.get('residual_sigma0_px'), 4)} px that the "
                  f"reprojection residuals show beyond it (median {fmt(ps.get('median_px'), 4)} px)")
-    lines = ["## Uncertainty", "", f"Point covariances from {unc['rig']}; pixel noise: {pixel}.",
+    lines = ["## Uncertainty", "", f"Point covariances: {unc['rig']}; pixel noise: {pixel}.",
              "", "| method | median σx | median σy | median σz | max σP | coverage 95 % | "
              "mean d² | normalized std x / y / z |", "|---|---|---|---|---|---|---|---|"]
     rows = [(m, v) for m, v in summaries.items()]
