@@ -14,7 +14,7 @@ import os
 
 import numpy as np
 
-from eval.cli import CLIError
+from synth.cli import CLIError
 from measure.uncertainty import (coverage_summary, detection_sigma, mahalanobis_squared,
                                  point_covariances, residual_sigma, sigma_summary)
 from synth.fileio import atomic_write_bytes, atomic_write_text
