@@ -16,7 +16,8 @@ nearest target is the right one; one point per target, the nearest wins; the oth
 ``unassociated``), dX, dY, dZ, dP over the associated points, Open3D's cloud distances of all
 points against the targets visible in both views, the rigid alignment, and the flatness (seeded
 with the dataset's seed). ``eval score`` on an ``eval run --from DATASET`` output's own
-``points_<method>.ply`` reproduces that run's numbers.
+``points_<method>.ply`` reproduces that run's numbers (all but ``coverage_95``: a point's
+covariance needs its two pixels, which a PLY file does not hold — ``--pixels`` gets one).
 
 A submission is checked for plausibility before it is scored (:func:`plausibility`): when the
 points fit the targets markedly better scaled by 1000 (metres), reflected (an axis negated) or
@@ -36,6 +37,7 @@ import time
 from eval.cli import CLIError, positive_float
 from synth.cli import add_json_option, add_out_option, add_progress_option
 from eval.core.formatting import format_number as fmt
+from eval.core.uncertainty import AUTO, add_pixel_sigma_option, parse_pixel_sigma
 from eval.core.scoring import (PIXEL_COLUMNS, UNITS, read_pixel_pairs, read_points,
                                score_dataset)
 # the scoring functions, where they were before eval.core.scoring held them
@@ -71,6 +73,7 @@ def add_parser(subparsers):
                    help="largest distance of a point from its target, mm (default: half the "
                         "smallest distance between two targets, where the nearest target is "
                         "unambiguous)")
+    add_pixel_sigma_option(p)
     add_out_option(p, COMMAND, "out/score")
     add_json_option(p)
     add_progress_option(p)
@@ -82,7 +85,8 @@ def main(args) -> int:
     from synth.fileio import OutputDir, atomic_write_json, atomic_write_text, jsonable
 
     from eval.core.cloud_metrics import write_error_ply
-    from eval.core.figures import error_maps_figure, histograms_figure
+    from eval.core.figures import ellipses_figure, error_maps_figure, histograms_figure
+    from eval.core.uncertainty import write_uncertainty_files
 
     log = lambda text: print(text, file=sys.stderr, flush=True)  # noqa: E731
     start = time.perf_counter()
@@ -92,6 +96,10 @@ def main(args) -> int:
     if args.pixels and args.units is not None:
         raise CLIError("--units does not apply with --pixels: the pairs are triangulated here, "
                        "in mm (--units is the unit of --points)")
+    pixel_sigma = parse_pixel_sigma(args.pixel_sigma)
+    if not args.pixels and pixel_sigma != AUTO:
+        raise CLIError("--pixel-sigma applies with --pixels only: the covariance of a point "
+                       "comes from its two pixels")
     method = args.method or "optical_path"
     output = OutputDir(args.out, COMMAND).claim()
     if args.submission:
@@ -114,6 +122,7 @@ def main(args) -> int:
             raise CLIError(f"--pixels {args.pixels}: no pair triangulates with {method} "
                            f"and the dataset's calibration")
         points = result.points[result.valid]
+        uv = (pairs[result.valid, :2], pairs[result.valid, 2:])
         label = method
         source = {"pixels": os.path.abspath(args.pixels), "method": method,
                   "pairs": int(len(pairs)), "invalid": int((~result.valid).sum())}
@@ -124,11 +133,21 @@ def main(args) -> int:
         log(f"warning: {what}: " + "; ".join(warnings))
     report = {"dataset": report["dataset"], "source": source, **{k: v for k, v in report.items()
                                                                if k != "dataset"}}
+    report["uncertainty"] = (score_covariances(data, arrays, label, uv, pixel_sigma)
+                             if args.pixels else {"note": "no covariance: --points have no "
+                                                          "pixels (score --pixels for one)"})
+    summary_of = report["uncertainty"].get("summaries", {}).get(label)
+    report["methods"][label]["coverage_95"] = (summary_of["coverage"]["coverage_95"]
+                                               if summary_of else None)
     with output.staged() as tmp:
         report["ply"] = write_error_ply(tmp, "points_scored.ply", arrays["points"],
                                         arrays["errors"])
         error_maps_figure(os.path.join(tmp, "error_maps.png"), {label: arrays})
         histograms_figure(os.path.join(tmp, "histograms.png"), {label: arrays})
+        if "covariance" in arrays:
+            report["uncertainty"]["files"] = {label: write_uncertainty_files(
+                tmp, label, arrays["points"], arrays["covariance"], arrays["errors"])}
+            ellipses_figure(os.path.join(tmp, "ellipses.png"), {label: arrays})
         report["timings_s"] = {"total": time.perf_counter() - start}
         report = jsonable(report)
         atomic_write_json(os.path.join(tmp, "report.json"), report)
@@ -141,6 +160,9 @@ def main(args) -> int:
                f"views scored; RMS dP {fmt(st['rms_dp_mm'])} mm, max dP "
                f"{fmt(st['max_dp_mm'])} mm, mean dZ {fmt(st['mean_dz_mm'])} mm, Chamfer "
                f"{fmt(st['chamfer_mm'])} mm, F@1mm {fmt(st['fscore_1mm'])}")
+    if summary_of:
+        summary += (f"; coverage of the 95 % ellipsoids {fmt(summary_of['coverage']['coverage_95'])}"
+                    f" (median σz {fmt(summary_of['sigma']['median_sigma_mm']['z'], 4)} mm)")
     if args.json:
         import json
 
@@ -150,6 +172,32 @@ def main(args) -> int:
         print(summary)
     print(f"wrote {output.path}", file=sys.stderr if args.json else sys.stdout)
     return 0
+
+
+def score_covariances(data, arrays, label, uv, pixel_sigma) -> dict:
+    """The report's ``uncertainty`` of ``--pixels`` triangulated with ``label``: covariances of
+    the associated points (into ``arrays["covariance"]``) from ``pixel_sigma`` (``auto``: the
+    reprojection residuals; no detections here) and the covariance of the dataset's
+    ``calib.yaml``, if it holds one; their σ and coverage against the truth. Only the
+    optical-path points get covariances (:mod:`measure.uncertainty`)."""
+    from synth.dataset import read_calib
+
+    from eval.core.uncertainty import (method_covariances, pair_sigmas, rig_covariance_note,
+                                       uncertainty_summary)
+
+    calib_path = os.path.join(data.path, "calib.yaml")
+    rig_covariance = read_calib(calib_path)["covariance"]
+    info = {"rig": rig_covariance_note(rig_covariance, calib_path)}
+    if label != "optical_path" or data.rig.is_dome:
+        info["note"] = f"no covariance for {label} (only optical_path gets one)"
+        return info
+    ok = arrays["associated"]
+    points = arrays["all_points"]
+    sigma, info["pixel_sigma"] = pair_sigmas(pixel_sigma, uv[0], uv[1], points, data.rig)
+    covariance = method_covariances(data.rig, {label: points}, sigma, rig_covariance)[label]
+    arrays["covariance"] = covariance.total[ok]
+    info["summaries"] = {label: uncertainty_summary(arrays["covariance"], arrays["errors"])}
+    return info
 
 
 def score_suite_main(args, output, method, log, start) -> int:

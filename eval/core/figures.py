@@ -128,4 +128,61 @@ def histograms_figure(path, per_method) -> None:
     save_figure(fig, path)
 
 
-__all__ = ["DPI", "error_maps_figure", "histograms_figure", "new_figure", "save_figure"]
+#: sqrt(χ²₂(0.95)): the half-axes of the 95 % ellipse of a 2-D normal are this many σ.
+ELLIPSE_95_SIGMAS = 2.447746830680816
+
+
+def ellipses_figure(path, per_method) -> None:
+    """Per method, over the target plane (X, Y in mm): each point's 95 % error ellipse in X, Y
+    (the marginal of its covariance ``per_method[m]["covariance"]`` ``(N, 3, 3)``), coloured
+    by σZ, and — where ``errors`` are known — its measured error (X, Y) as a line; ellipses and
+    errors magnified by one factor per method (written in the title), so that the largest
+    ellipse is as long as the 90th percentile of the distances between neighbouring points."""
+    from matplotlib.collections import EllipseCollection, LineCollection
+    from scipy.spatial import cKDTree
+
+    methods = [m for m in per_method if len(per_method[m].get("points", ())) and
+               per_method[m].get("covariance") is not None]
+    fig = new_figure(7.5 * max(len(methods), 1), 6.5, layout=None)
+    for col, method in enumerate(methods):
+        data = per_method[method]
+        points, cov = np.asarray(data["points"]), np.asarray(data["covariance"])
+        ok = np.all(np.isfinite(cov), axis=(1, 2)) & np.all(np.isfinite(points), axis=1)
+        points, cov = points[ok], cov[ok]
+        ax = fig.add_subplot(1, len(methods), col + 1)
+        if not len(points):
+            continue
+        block = cov[:, :2, :2]
+        values, vectors = np.linalg.eigh(block)
+        half = ELLIPSE_95_SIGMAS * np.sqrt(np.maximum(values, 0.0))  # minor, major (mm)
+        spacing = (float(np.percentile(cKDTree(points[:, :2]).query(points[:, :2], k=2)[0][:, 1],
+                                       90)) if len(points) > 1 else 1.0)
+        scale = spacing / max(float(np.max(2 * half[:, 1])), 1e-12)
+        angles = np.degrees(np.arctan2(vectors[:, 1, 1], vectors[:, 0, 1]))
+        sigma_z = np.sqrt(cov[:, 2, 2])
+        ellipses = EllipseCollection(2 * half[:, 1] * scale, 2 * half[:, 0] * scale, angles,
+                                     units="xy", offsets=points[:, :2],
+                                     offset_transform=ax.transData, cmap="viridis",
+                                     edgecolors="k", linewidths=0.3)
+        ellipses.set_array(sigma_z)
+        ax.add_collection(ellipses)
+        if data.get("errors") is not None:
+            errors = np.asarray(data["errors"])[ok]
+            ax.add_collection(LineCollection(
+                np.stack([points[:, :2], points[:, :2] + scale * errors[:, :2]], axis=1),
+                colors="C3", linewidths=1.0))
+        ax.set_xlim(points[:, 0].min() - spacing, points[:, 0].max() + spacing)
+        ax.set_ylim(points[:, 1].max() + spacing, points[:, 1].min() - spacing)  # Y down
+        ax.set_aspect("equal")
+        fig.colorbar(ellipses, ax=ax, label="σZ [mm]", shrink=0.8)
+        ax.set_title(f"{method_label(method)}: 95 % ellipses (X, Y)"
+                     + (" and errors (red)" if data.get("errors") is not None else "")
+                     + f", ×{scale:.3g}", fontsize=9)
+        ax.set_xlabel("X [mm]")
+        ax.set_ylabel("Y [mm] (down)")
+    fig.subplots_adjust(left=0.1, right=0.97, bottom=0.09, top=0.93, wspace=0.25)
+    save_figure(fig, path)
+
+
+__all__ = ["DPI", "ELLIPSE_95_SIGMAS", "ellipses_figure", "error_maps_figure", "histograms_figure",
+           "new_figure", "save_figure"]

@@ -95,7 +95,9 @@ def default_gate_mm(truth: np.ndarray) -> float:
 def score_points(points: np.ndarray, truth: np.ndarray, visible_both: np.ndarray, gate_mm: float,
                  seed: int):
     """``(scores, per_method_arrays, association)`` of ``points`` against the true targets
-    ``truth`` ``(M, 3)``; Chamfer and F-scores against ``truth[visible_both]``."""
+    ``truth`` ``(M, 3)``; Chamfer and F-scores against ``truth[visible_both]``. The arrays:
+    ``points``, ``truth``, ``errors`` of the associated points, ``all_points`` and
+    ``associated`` (bool per point of ``points``)."""
     from eval.core.cloud_metrics import cloud_distances, flatness, rigid_alignment
     from eval.core.results import ErrorStats, MethodScores
 
@@ -107,7 +109,7 @@ def score_points(points: np.ndarray, truth: np.ndarray, visible_both: np.ndarray
                           alignment=rigid_alignment(points[ok], truth[target[ok]]),
                           flatness=flatness(points, seed=seed), invalid=0)
     arrays = {"points": points[ok], "truth": truth[target[ok]], "errors": errors,
-              "all_points": points}
+              "all_points": points, "associated": ok}
     association = {"points": int(len(points)), "associated": int(ok.sum()),
                    "unassociated": int((~ok).sum()), "gate_mm": gate_mm,
                    "visible_in_both": int(visible_both.sum()),

@@ -29,6 +29,7 @@ from eval.cli import CLIError, positive_float
 from eval.core.detection import DETECTOR_OPTIONS, add_detector_options
 from eval.core.formatting import format_number as fmt
 from eval.core.photos import add_encoding_option
+from eval.core.uncertainty import add_pixel_sigma_option, parse_pixel_sigma
 from measure.detect import FLOOR_FRACTION
 from synth.cli import add_json_option, add_out_option, add_progress_option, refuse_given
 
@@ -66,6 +67,7 @@ def add_parser(subparsers):
                    help="working range along the port normal (mm): targets are matched only "
                         "there (default: no bound); required with --dense (the sweep's range)")
     add_detector_options(p)
+    add_pixel_sigma_option(p)
     p.add_argument("--floor-fraction", type=floor_fraction, default=None, metavar="F",
                    help=f"the automatic detection threshold is at least F of the way from the "
                         f"background to the targets' level (default {FLOOR_FRACTION:g}: "
@@ -119,7 +121,7 @@ def options_of(args):
     methods = _methods(args)
     depth_range = parse_depth_range(args.depth_range)
     if args.dense:
-        refuse_given(args, ["gate_mm", "floor_fraction",
+        refuse_given(args, ["gate_mm", "floor_fraction", "pixel_sigma",
                             *(d for d in DETECTOR_OPTIONS if d != "median_filter")],
                      "with --dense (it applies to targets; --median-filter does apply)")
         if depth_range is None:
@@ -130,7 +132,8 @@ def options_of(args):
                          depth_range or (None, None),
                          **{d: getattr(args, d) for d in DETECTOR_OPTIONS},
                          floor_fraction=FLOOR_FRACTION if args.floor_fraction is None
-                         else args.floor_fraction)
+                         else args.floor_fraction,
+                         pixel_sigma=parse_pixel_sigma(args.pixel_sigma))
 
 
 def _progress_bar(quiet: bool):
@@ -179,7 +182,8 @@ def measure_all(inputs, options, quiet: bool, log) -> list:
                 raise CLIError(f"--depth-range {options.depth_range[0]:g},"
                                f"{options.depth_range[1]:g}: {exc}") from None
         else:
-            result = measure_targets(inputs.rig, name, left, right, options)
+            result = measure_targets(inputs.rig, name, left, right, options,
+                                     inputs.rig_covariance)
         if result.problem and len(inputs.names) > 1:
             print(f"warning: {result.problem}; the other pairs are measured", file=sys.stderr)
         results.append(result)
@@ -198,11 +202,14 @@ def build_report(inputs, options, results) -> dict:
                  "depth_range_mm": [None if v is None else float(v)
                                     for v in options.depth_range],
                  **{d: getattr(options, d) for d in (*DETECTOR_OPTIONS, "floor_fraction")}})
+    from eval.measure.report import uncertainty_report
+
     return {"command": COMMAND, "calib": inputs.calib_path, "has_port": inputs.has_port,
             "encoding": inputs.encoding,
             "image_size": list(inputs.size), "mode": "dense" if dense else "targets",
             "methods": list(options.methods), "options": settings, "pairs": pairs,
-            "summary": summarize(pairs, options.methods, results)}
+            "summary": summarize(pairs, options.methods, results),
+            "uncertainty": uncertainty_report(inputs, options, results, pairs)}
 
 
 def write_outputs(tmp: str, report: dict, results) -> None:
@@ -210,7 +217,8 @@ def write_outputs(tmp: str, report: dict, results) -> None:
     report's ``files``)."""
     from eval.measure.figures import views_figure
     from eval.measure.pipeline import pair_pixels
-    from eval.measure.report import method_points, write_cloud, write_points_csv
+    from eval.measure.report import (method_points, write_cloud, write_points_csv,
+                                     write_uncertainty_outputs)
 
     clouds = {}
     for i, method in enumerate(report["methods"]):
@@ -218,6 +226,7 @@ def write_outputs(tmp: str, report: dict, results) -> None:
         write_cloud(os.path.join(tmp, name), method_points(results, method))
         clouds[method] = name
     rows = write_points_csv(os.path.join(tmp, "points.csv"), results, pair_pixels)
+    write_uncertainty_outputs(tmp, report, results)
     views = []
     for result in results:
         name = "views.png" if len(results) == 1 else f"views_{result.name}.png"

@@ -20,7 +20,8 @@ class MeasureInputs:
     """The calibration and the pairs to measure: ``calib_path``, ``rig``
     (:class:`measure.StereoRig`), ``size`` ``(width, height)`` px, and per pair its ``names``
     (the file stems), ``left`` and ``right`` file paths; ``encoding`` how the stored values
-    are read (:data:`eval.core.photos.PHOTO_ENCODINGS`)."""
+    are read (:data:`eval.core.photos.PHOTO_ENCODINGS`); ``rig_covariance`` the calibration's
+    :class:`measure.rig_covariance.RigCovariance` (None: it holds none)."""
 
     calib_path: str
     rig: object
@@ -30,6 +31,7 @@ class MeasureInputs:
     right: tuple
     encoding: str = "auto"
     has_port: bool = True
+    rig_covariance: object = None
 
     def read(self, index: int):
         """Pair ``index`` as linear grey float32 arrays (:func:`eval.core.photos.read_photo`
@@ -41,8 +43,9 @@ class MeasureInputs:
 
 
 def read_calibration(path):
-    """``(rig, (width, height), has_port)`` of a calibration file (``has_port`` false for an
-    in-air calibration, whose port is index-matched air); CLIError when it cannot be read."""
+    """``(rig, (width, height), has_port, covariance)`` of a calibration file (``has_port``
+    false for an in-air calibration, whose port is index-matched air; ``covariance`` None when
+    it holds none); CLIError when it cannot be read (a singular covariance included)."""
     from synth.dataset import DatasetError, read_calib
 
     if os.path.isdir(path):
@@ -58,7 +61,8 @@ def read_calibration(path):
     if calib["rig"].is_dome:
         raise CLIError(f"--calib {path}: a dome-port calibration (DOMEPORT); eval measure "
                        f"measures through a flat port only")
-    return calib["rig"], tuple(int(v) for v in calib["size"]), bool(calib["has_port"])
+    return (calib["rig"], tuple(int(v) for v in calib["size"]), bool(calib["has_port"]),
+            calib.get("covariance"))
 
 
 def photo_pairs(left, right):
@@ -86,7 +90,7 @@ def load_inputs(calib_path, left, right, encoding: str = "auto") -> MeasureInput
     unreadable photo or a wrong size is refused before any work."""
     from eval.core.photos import PhotoError, read_photo
 
-    rig, calib_size, has_port = read_calibration(calib_path)
+    rig, calib_size, has_port, covariance = read_calibration(calib_path)
     names, lefts, rights = photo_pairs(left, right)
     for files in zip(lefts, rights):
         for file in files:
@@ -100,7 +104,7 @@ def load_inputs(calib_path, left, right, encoding: str = "auto") -> MeasureInput
                                f"{calib_path} is for {calib_size[0]}x{calib_size[1]} px images "
                                f"(photos must be measured at the calibrated size)")
     return MeasureInputs(os.fspath(calib_path), rig, calib_size, tuple(names), tuple(lefts),
-                         tuple(rights), encoding, has_port)
+                         tuple(rights), encoding, has_port, covariance)
 
 
 __all__ = ["MeasureInputs", "load_inputs", "photo_pairs", "read_calibration"]

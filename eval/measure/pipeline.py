@@ -15,13 +15,18 @@ import numpy as np
 
 from eval.core.detection import detect_view
 
+#: The methods whose points get a covariance (:mod:`measure.uncertainty`; as ``eval run``).
+COVARIANCE_METHODS = ("optical_path", "reprojection")
+
 
 @dataclass(frozen=True)
 class TargetOptions:
     """How targets are measured: the detector options (None: the detector's defaults; see
     :func:`eval.core.detection.detect_view`), the matching gate (mm) and the depth window
     ``(near, far)`` along the port normal (mm; ``(None, None)``: no bound); ``floor_fraction``
-    the automatic threshold's floor (a fraction of the targets' level)."""
+    the automatic threshold's floor (a fraction of the targets' level); ``pixel_sigma`` the
+    σ of a detected centre for the points' covariances (``"auto"`` or px:
+    :func:`eval.core.uncertainty.pair_sigmas`)."""
 
     methods: tuple = ("optical_path",)
     gate_mm: float = 0.5
@@ -31,6 +36,7 @@ class TargetOptions:
     max_area_ratio: float | None = None
     median_filter: int = 0
     floor_fraction: float = 0.0
+    pixel_sigma: object = "auto"
 
 
 @dataclass(frozen=True)
@@ -49,8 +55,9 @@ class PairResult:
     """One pair measured. ``name``, ``left`` / ``right`` (the images as read), ``counts`` (the
     report's counts), ``uv_left`` / ``uv_right`` ``(M, 2)`` px of the matched pairs (or
     pixels), ``methods`` ``{method: Triangulation}``; targets only: ``detections``
-    ``{view: Detections}`` and ``matches``; ``problem``: why nothing was measured (a
-    multi-pair run reports it and goes on), else None."""
+    ``{view: Detections}`` and ``matches``, ``covariances`` ``{method: PointCovariance}`` (one
+    row per pair, NaN where invalid) and ``pixel_sigma`` (how the pixel σ was set); ``problem``:
+    why nothing was measured (a multi-pair run reports it and goes on), else None."""
 
     name: str
     left: np.ndarray
@@ -63,6 +70,8 @@ class PairResult:
     matches: object = None
     problem: str | None = None
     timings: dict = field(default_factory=dict)
+    covariances: dict = field(default_factory=dict)
+    pixel_sigma: dict | None = None
 
 
 def nothing_matched(name: str, found: dict, options: TargetOptions) -> str:
@@ -81,9 +90,12 @@ def nothing_matched(name: str, found: dict, options: TargetOptions) -> str:
             f"{found['right']} right): {cause}")
 
 
-def measure_targets(rig, name: str, left, right, options: TargetOptions) -> PairResult:
+def measure_targets(rig, name: str, left, right, options: TargetOptions,
+                    rig_covariance=None) -> PairResult:
     """Detect, match (:func:`measure.matching.match_targets`, the refractive epipolar gap
-    within ``options.gate_mm``) and triangulate one pair with each method."""
+    within ``options.gate_mm``) and triangulate one pair with each method; the covariances of
+    the ``optical_path`` and ``reprojection`` points (the pixel noise, and ``rig_covariance``
+    if given)."""
     from measure import triangulate
     from measure.matching import match_targets
 
@@ -123,6 +135,20 @@ def measure_targets(rig, name: str, left, right, options: TargetOptions) -> Pair
     result.methods = {m: triangulate(rig, result.uv_left, result.uv_right, m)
                       for m in options.methods}
     timings["triangulate"] = time.perf_counter() - t
+    t = time.perf_counter()
+    covariance_methods = [m for m in COVARIANCE_METHODS if m in result.methods]
+    if covariance_methods and not rig.is_dome:
+        from eval.core.uncertainty import method_covariances, pair_sigmas
+
+        start = (result.methods["optical_path"].points if "optical_path" in result.methods
+                 else triangulate(rig, result.uv_left, result.uv_right).points)
+        sigma, result.pixel_sigma = pair_sigmas(options.pixel_sigma, result.uv_left,
+                                                result.uv_right, start, rig, detections,
+                                                matches)
+        result.covariances = method_covariances(
+            rig, {m: result.methods[m].points for m in covariance_methods}, sigma,
+            rig_covariance)
+    timings["covariance"] = time.perf_counter() - t
     return result
 
 
@@ -173,5 +199,5 @@ def pair_pixels(result: PairResult, method: str):
     return result.uv_left, result.uv_right
 
 
-__all__ = ["DenseOptions", "PairResult", "TargetOptions", "measure_dense", "measure_targets",
-           "nothing_matched", "pair_pixels"]
+__all__ = ["COVARIANCE_METHODS", "DenseOptions", "PairResult", "TargetOptions", "measure_dense",
+           "measure_targets", "nothing_matched", "pair_pixels"]

@@ -143,6 +143,77 @@ def method_points(results, method) -> np.ndarray:
     return np.concatenate(blocks) if blocks else np.zeros((0, 3))
 
 
+def _covariances(results, method):
+    """The valid points of ``method`` over every pair and their covariances, pair order."""
+    points, covariances = [], []
+    for r in results:
+        if method in r.covariances:
+            valid = np.asarray(r.methods[method].valid, bool)
+            points.append(np.asarray(r.methods[method].points)[valid])
+            covariances.append(r.covariances[method].total[valid])
+    if not points:
+        return np.zeros((0, 3)), np.zeros((0, 3, 3))
+    return np.concatenate(points), np.concatenate(covariances)
+
+
+def uncertainty_report(inputs, options, results, pairs) -> dict:
+    """The report's ``uncertainty``: where the covariances come from (the pixel σ of each pair,
+    the calibration's covariance or its absence) and per method the σ summary over every pair;
+    each pair's ``methods.<m>.sigma`` is filled in ``pairs``. Nothing for a dense run (no
+    covariance per pixel yet)."""
+    from eval.core.uncertainty import rig_covariance_note
+    from measure.uncertainty import sigma_summary
+
+    if not hasattr(options, "pixel_sigma"):
+        return {"note": "dense: no covariance per pixel (not implemented)"}
+    for entry, result in zip(pairs, results):
+        for method, covariance in result.covariances.items():
+            valid = np.asarray(result.methods[method].valid, bool)
+            entry["methods"][method]["sigma"] = sigma_summary(covariance.total[valid])
+    methods = sorted({m for r in results for m in r.covariances},
+                     key=list(options.methods).index)
+    return {"rig": rig_covariance_note(inputs.rig_covariance, inputs.calib_path),
+            "pixel_sigma": {r.name: r.pixel_sigma for r in results if r.pixel_sigma},
+            "methods": {m: {"sigma": sigma_summary(_covariances(results, m)[1])}
+                        for m in methods}}
+
+
+def write_uncertainty_outputs(tmp: str, report: dict, results) -> None:
+    """``uncertainty_<method>.ply`` / ``.csv`` (the rows of ``points_<method>``: every pair's
+    valid points in pair order) and ``ellipses.png`` (the first such method's points)."""
+    from eval.core.figures import ellipses_figure
+    from eval.core.uncertainty import write_uncertainty_files
+
+    unc = report.get("uncertainty") or {}
+    files, figure = {}, {}
+    for method in unc.get("methods", {}):
+        points, covariance = _covariances(results, method)
+        files[method] = write_uncertainty_files(tmp, method, points, covariance)
+        figure[method] = {"points": points, "covariance": covariance}
+    if files:
+        unc["files"] = files
+        ellipses_figure(os.path.join(tmp, "ellipses.png"), figure)
+
+
+def uncertainty_markdown(report: dict) -> list:
+    """report.md's lines on the covariances."""
+    unc = report.get("uncertainty") or {}
+    if not unc.get("methods"):
+        return [f"Uncertainty: {unc['note']}.", ""] if unc.get("note") else []
+    lines = ["## Uncertainty", "", f"Point covariances: {unc['rig']}.", "",
+             "| method | median σx | median σy | median σz | largest σP |", "|---|---|---|---|---|"]
+    for method, entry in unc["methods"].items():
+        sig = entry["sigma"]
+        med = sig.get("median_sigma_mm") or {}
+        lines.append(f"| {method} | {fmt(med.get('x'), 4)} | {fmt(med.get('y'), 4)} | "
+                     f"{fmt(med.get('z'), 4)} | {fmt(sig.get('max_sigma_p_mm'), 4)} |")
+    lines += ["", "σ in mm, first order: the pixel noise of each detection (its σ from the "
+              "detector's SNR and size plus what the reprojection residuals show beyond it, or "
+              "--pixel-sigma) and the calibration's covariance, if it holds one. "
+              "`uncertainty_<method>.csv` / `.ply`: each point's σ and covariance.", ""]
+    return lines
+
+
 def report_markdown(report: dict) -> str:
     """``report.md``: what was measured, per pair and method, without any truth."""
     s = report["summary"]
@@ -192,14 +263,21 @@ def report_markdown(report: dict) -> str:
               "(the water rays; for regular the straight rays): 0 for a perfect calibration and "
               "perfect pixels. Plane: the least-squares plane "
               "of the pair's points (all of them), its normal towards the cameras, the RMS and "
-              "largest distance of the points from it.", "", "## Files", "",
+              "largest distance of the points from it.", "", *uncertainty_markdown(report),
+              "## Files", "",
               f"- `points.ply`: the {report['methods'][0]} points of every pair (mm, binary PLY)",
               *[f"- `{f}`: the {m} points" for m, f in report["files"]["clouds"].items()
                 if f != "points.ply"],
               f"- `points.csv`: {', '.join(CSV_COLUMNS)} ({report['files']['csv_rows']} rows)",
-              *[f"- `{f}`" for f in report["files"]["views"]], ""]
+              *[f"- `{f}`" for f in report["files"]["views"]],
+              *[f"- `{f['ply']}`, `{f['csv']}`: the {m} points with σx, σy, σz (mm) and their "
+                f"covariance (mm²)" for m, f in
+                ((report.get("uncertainty") or {}).get("files") or {}).items()],
+              *(["- `ellipses.png`"] if (report.get("uncertainty") or {}).get("files") else []),
+              ""]
     return "\n".join(lines)
 
 
 __all__ = ["CSV_COLUMNS", "gap_stats", "method_points", "method_summary", "pair_entry",
-           "plane_fit", "report_markdown", "summarize", "write_cloud", "write_points_csv"]
+           "plane_fit", "report_markdown", "summarize", "uncertainty_markdown",
+           "uncertainty_report", "write_cloud", "write_points_csv", "write_uncertainty_outputs"]

@@ -15,6 +15,7 @@ import time
 from eval.cli import non_negative_float, positive_float, positive_int
 from eval.core.formatting import format_number as fmt
 from eval.core.detection import add_detector_options
+from eval.core.uncertainty import add_pixel_sigma_option
 from eval.run.config import COMMAND, RunConfig
 from eval.run.report import (budget_table, report_markdown, summary_table, verdict_exit_code,
                              write_outputs)
@@ -72,6 +73,7 @@ def add_parser(subparsers):
                         help="also measure with the detected centres corrected for the disk "
                              "targets' eccentricity (reported beside the uncorrected numbers)")
     add_detector_options(parser)
+    add_pixel_sigma_option(parser)
     parser.add_argument("--sensor", metavar="PRESET[,name=value…]",
                         help="pass the rendered images through a camera sensor (exposure, shot "
                              "and read noise, dark level, gain, bit depth), seeded: preset "
@@ -123,6 +125,12 @@ def main(args) -> int:
           f"total {report['timings_s']['total']:.1f} s",
           file=summary_stream)
     print(summary_table(report), file=summary_stream)
+    coverage = {m: v["coverage_95"] for m, v in report["methods"].items()
+                if v.get("coverage_95") is not None}
+    if coverage:
+        print("coverage of the 95 % ellipsoids: " + ", ".join(
+            f"{m} {fmt(v, 3)}" for m, v in coverage.items()) + f" ({report['uncertainty']['rig']})",
+            file=summary_stream)
     print(f"wrote {out}", file=summary_stream)
     if report.get("budget"):
         print(budget_table(report), file=summary_stream)

@@ -59,6 +59,7 @@ class RunConfig:
     sensor: object = None
     progress: bool = True
     assumption_notes: tuple = ()
+    pixel_sigma: object = "auto"
 
     def target_methods(self) -> tuple:
         """The triangulation methods of a target run; CLIError names an unknown one."""
@@ -85,6 +86,7 @@ class RunConfig:
         from synth.scene import parse_defines
 
         from eval.core.assumption import parse_assumptions
+        from eval.core.uncertainty import parse_pixel_sigma
 
         notes = []
         config = cls(scene=args.scene, defines=tuple(parse_defines(args.defines).items()),
@@ -99,7 +101,8 @@ class RunConfig:
                    eccentricity=args.eccentricity, threshold_fraction=args.threshold_fraction,
                    max_elongation=args.max_elongation, max_area_ratio=args.max_area_ratio,
                    median_filter=args.median_filter, sensor=parse_sensor(args.sensor),
-                   progress=not args.no_progress, assumption_notes=tuple(notes))
+                   progress=not args.no_progress, assumption_notes=tuple(notes),
+                   pixel_sigma=parse_pixel_sigma(getattr(args, "pixel_sigma", "auto")))
         config.refuse_inapplicable()
         return config
 

@@ -46,7 +46,8 @@ PINHOLE_NEAR_MARGIN = 0.2
 #: Fields of :class:`eval.run.config.RunConfig` (options of ``eval run``) that apply to target
 #: scenes only; a surface run refuses any of them that differs from its default.
 TARGET_ONLY_OPTIONS = ("noise_px", "gate_mm", "self_calibrate", "eccentricity",
-                       "threshold_fraction", "max_elongation", "max_area_ratio", "compare_calib")
+                       "threshold_fraction", "max_elongation", "max_area_ratio", "compare_calib",
+                       "pixel_sigma")
 
 
 def is_surface_scene(path: str) -> bool:

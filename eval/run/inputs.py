@@ -45,6 +45,8 @@ class RunInputs:
     target_normals: np.ndarray | None = None
     truth_rig: object = None
     budget_rigs: dict = field(default_factory=dict)
+    rig_covariance: object = None
+    rig_covariance_source: str | None = None
 
     @property
     def true_rig(self):
@@ -108,6 +110,15 @@ def _same_kind_of_port(what: str, calibrated, scene_rig) -> None:
                 else "flat-port calibration")
         raise CLIError(f"{what}: a {kind}, but the scene has "
                        f"{'domes' if scene_rig.is_dome else 'a flat port'}")
+
+
+def measurement_covariance(config: RunConfig):
+    """The covariance of ``--calib``'s rig (:class:`measure.rig_covariance.RigCovariance`) or
+    None (no ``--calib``, or a calibration without one); a singular or malformed one is refused
+    by ``read_calib`` with one line naming the file."""
+    from synth.dataset import read_calib
+
+    return read_calib(config.calib)["covariance"] if config.calib else None
 
 
 def load_run_scene(config: RunConfig):
@@ -200,7 +211,9 @@ def load_inputs(config: RunConfig, log) -> RunInputs:
                       targets=spec.targets, target_ids=spec.target_ids,
                       target_radius=spec.target_radius, params=spec.params, seed=seed,
                       target_normals=spec.target_normals, truth_rig=spec.rig,
-                      budget_rigs=budget)
+                      budget_rigs=budget, rig_covariance=measurement_covariance(config),
+                      rig_covariance_source=(f"--calib {config.calib}" if config.calib
+                                             else None))
     if config.from_dir:
         data = read_run_dataset(config, spec)
         log(f"reusing the images of {config.from_dir}")
@@ -257,5 +270,5 @@ def expose_on_sensor(inputs: RunInputs, sensor, log):
 
 
 __all__ = ["RunInputs", "budget_rigs", "dataset_params", "expose_on_sensor", "expose_views",
-           "load_inputs", "refuse_flat_only",
-           "load_run_scene", "measurement_rig", "read_run_dataset", "same_value"]
+           "load_inputs", "refuse_flat_only", "load_run_scene", "measurement_covariance",
+           "measurement_rig", "read_run_dataset", "same_value"]

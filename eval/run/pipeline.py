@@ -96,6 +96,58 @@ def triangulate_stage(inputs: RunInputs, centers, matches, methods):
     return {m: triangulate(inputs.rig, uv_left, uv_right, m) for m in methods}
 
 
+#: The methods whose points get a covariance: the maximum-likelihood point (``reprojection``)
+#: and the optical-path midpoint, the same to first order (:mod:`measure.uncertainty`); ``su``
+#: and ``regular`` are other estimators (``regular`` ignores the port) and get none.
+COVARIANCE_METHODS = ("optical_path", "reprojection")
+
+
+def covariance_stage(inputs: RunInputs, pixel_sigma, detections, centers, matches, results,
+                     noise_px: float = 0.0, uv=None):
+    """``({method: PointCovariance}, info)``: the covariance of every pair's point for the
+    methods of :data:`COVARIANCE_METHODS` among ``results``, with the pixel σ of ``pixel_sigma``
+    (``"auto"`` or px; :func:`eval.core.uncertainty.pair_sigmas`) and the rig covariance of
+    ``inputs`` (None: the pixel part only). ``uv``: the pairs' pixels when they are not the
+    matched centres (the eccentricity-corrected ones). A dome rig gets none (info says why)."""
+    from measure import triangulate as triangulate_pixels
+    from eval.core.uncertainty import method_covariances, pair_sigmas, rig_covariance_note
+
+    methods = [m for m in COVARIANCE_METHODS if m in results]
+    info = {"methods": methods, "rig": rig_covariance_note(inputs.rig_covariance,
+                                                           inputs.rig_covariance_source)}
+    if inputs.rig.is_dome or not methods:
+        info["note"] = ("no covariance: dome ports have no Jacobian here" if inputs.rig.is_dome
+                        else f"no covariance: only {', '.join(COVARIANCE_METHODS)} get one")
+        return {}, info
+    uv_left, uv_right = uv if uv is not None else (centers["left"][matches.left],
+                                                   centers["right"][matches.right])
+    start = results[methods[0]].points
+    if methods[0] != "optical_path":
+        start = triangulate_pixels(inputs.rig, uv_left, uv_right, "optical_path").points
+    sigma, info["pixel_sigma"] = pair_sigmas(pixel_sigma, uv_left, uv_right, start, inputs.rig,
+                                             detections, matches, noise_px)
+    covariances = method_covariances(inputs.rig, {m: results[m].points for m in methods}, sigma,
+                                     inputs.rig_covariance)
+    return covariances, info
+
+
+def attach_covariances(covariances, results, scored, info) -> dict:
+    """Put each method's covariances beside its points in ``scored["per_method"]`` (the
+    correctly matched rows: ``covariance``; every valid row: ``all_covariance``) and return the
+    report's ``{method: summary}`` (σ, coverage against the truth)."""
+    from eval.core.uncertainty import uncertainty_summary
+
+    summaries = {}
+    for method, covariance in covariances.items():
+        ok = scored["correct"] & results[method].valid
+        data = scored["per_method"][method]
+        data["covariance"] = covariance.total[ok]
+        data["all_covariance"] = covariance.total[results[method].valid]
+        summaries[method] = uncertainty_summary(data["covariance"], data["errors"])
+    info["summaries"] = summaries
+    return summaries
+
+
 def crosscheck_stage(inputs: RunInputs, detections):
     """Per view: simulator pixels, visibility, truth index per detection, cross-check stats.
 
@@ -192,7 +244,8 @@ def eccentricity_stage(inputs: RunInputs, centers, matches, methods, iterations:
         offsets[name] = {"rms_px": float(np.sqrt(np.nanmean(length ** 2))) if length.size else None,
                          "max_px": float(np.nanmax(length)) if length.size else None}
     return results, {"iterations": iterations, "offset_px": offsets,
-                     "normals": "plane of the 8 nearest triangulated targets"}
+                     "normals": "plane of the 8 nearest triangulated targets",
+                     "uv": (corr.uv_left, corr.uv_right)}
 
 
 def self_calibration_stage(inputs: RunInputs, centers, matches, parameters, methods, log):
@@ -278,6 +331,18 @@ def _rigs_report(inputs: RunInputs) -> dict:
             "difference": rig_difference(inputs.true_rig, inputs.rig)}
 
 
+def _with_coverage(scores, uncertainty) -> dict:
+    """``report.json``'s ``methods``: each method's scores with ``coverage_95`` (None for a
+    method without covariances) — the fraction of its correctly matched points inside their
+    95 % ellipsoid."""
+    methods = {}
+    for method, score in scores.items():
+        summary = uncertainty.get("summaries", {}).get(method)
+        methods[method] = {**score.to_json(), "coverage_95": (
+            summary["coverage"]["coverage_95"] if summary else None)}
+    return methods
+
+
 @dataclass
 class RunResult:
     """What a target run measured: ``report`` (the JSON-ready report: see the docs' report
@@ -331,6 +396,12 @@ def run_pipeline(inputs: RunInputs, config: RunConfig, log=print) -> RunResult:
     results = triangulate_stage(inputs, centers, matches, methods)
     timings["triangulate"] = time.perf_counter() - start
 
+    log("point covariances …")
+    start = time.perf_counter()
+    covariances, uncertainty = covariance_stage(inputs, config.pixel_sigma, detections, centers,
+                                                matches, results, noise_px)
+    timings["covariance"] = time.perf_counter() - start
+
     calibration, refined = None, None
     if self_calibrate:
         log(f"estimate {', '.join(self_calibrate)} from the matched targets …")
@@ -345,6 +416,12 @@ def run_pipeline(inputs: RunInputs, config: RunConfig, log=print) -> RunResult:
         start = time.perf_counter()
         corrected, eccentricity_summary = eccentricity_stage(inputs, centers, matches, methods)
         timings["eccentricity"] = time.perf_counter() - start
+        start = time.perf_counter()
+        uv_corrected = eccentricity_summary.pop("uv")
+        covariances_corrected, uncertainty_corrected = covariance_stage(
+            inputs, config.pixel_sigma, detections, centers, matches, corrected, noise_px,
+            uv=uv_corrected)
+        timings["covariance_eccentricity"] = time.perf_counter() - start
 
     budget = None
     if budget_rigs:
@@ -357,8 +434,11 @@ def run_pipeline(inputs: RunInputs, config: RunConfig, log=print) -> RunResult:
     log("score against the ground truth (Open3D) …")
     start = time.perf_counter()
     scored = score_stage(inputs, detections, matches, window, results, gate_mm)
+    attach_covariances(covariances, results, scored, uncertainty)
     if corrected is not None:
         scored_corrected = score_stage(inputs, detections, matches, window, corrected, gate_mm)
+        attach_covariances(covariances_corrected, corrected, scored_corrected,
+                           uncertainty_corrected)
     if refined is not None:
         calibration["methods"] = {m: s.to_json() for m, s in score_stage(
             inputs, detections, matches, window, refined, gate_mm)["scores"].items()}
@@ -373,7 +453,8 @@ def run_pipeline(inputs: RunInputs, config: RunConfig, log=print) -> RunResult:
                       for name, d in detections.items()},
         "crosscheck": scored["crosscheck"],
         "matching": scored["matching"],
-        "methods": {m: s.to_json() for m, s in scored["scores"].items()},
+        "methods": _with_coverage(scored["scores"], uncertainty),
+        "uncertainty": uncertainty,
         "noise_px": noise_px, "seed": inputs.seed, "threshold_fraction": threshold_fraction,
         "max_elongation": max_elongation, "max_area_ratio": max_area_ratio,
         "median_filter": median_filter,
@@ -382,7 +463,8 @@ def run_pipeline(inputs: RunInputs, config: RunConfig, log=print) -> RunResult:
         "budget": budget,
         "eccentricity": None if corrected is None else {
             **eccentricity_summary,
-            "methods": {m: s.to_json() for m, s in scored_corrected["scores"].items()}},
+            "methods": _with_coverage(scored_corrected["scores"], uncertainty_corrected),
+            "uncertainty": uncertainty_corrected},
         "timings_s": timings,
         "variant": inputs.variant, "spp": inputs.spp,
     }
@@ -425,6 +507,7 @@ def run_failures(report: dict) -> list:
 
 
 __all__ = ["NothingMatched", "RunResult", "budget_stage", "crosscheck_stage",
+           "COVARIANCE_METHODS", "attach_covariances", "covariance_stage",
            "default_depth_window", "detect_stage", "eccentricity_stage", "match_stage",
            "measure_scene", "run_failures", "run_pipeline", "score_stage", "self_calibration_stage",
            "triangulate_stage"]

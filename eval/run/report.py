@@ -124,11 +124,16 @@ def report_markdown(report: dict) -> str:
               "against the targets visible in both views); F@τ = harmonic mean of precision and "
               "recall at τ; aligned = after the best rigid transform with known correspondences; "
               "flatness = RMS distance to the RANSAC plane.", "",
+              *uncertainty_lines(report),
               *(["## Error budget", "", "The same detections measured with each calibration "
                  "(matching, triangulation and scoring repeated):", "", "```",
                  budget_table(report), "```", ""] if report.get("budget") else []),
               "## Files", "",
-              "- `views.png`, `error_maps.png`, `histograms.png`",
+              "- `views.png`, `error_maps.png`, `histograms.png`"
+              + (", `ellipses.png`" if (report.get("uncertainty") or {}).get("files") else ""),
+              *[f"- `{f['ply']}`, `{f['csv']}`: each correctly matched point with σx, σy, σz "
+                f"(mm) and its covariance (mm²), its error and Mahalanobis distance²"
+                for f in ((report.get("uncertainty") or {}).get("files") or {}).values()],
               *[f"- `{p['file']}`: colour = dP on `{p['colormap']}` from {p['vmin_mm']} mm to "
                 f"{fmt(p['vmax_mm'])} mm (clipped)" for p in report.get("ply", {}).values()], "",
               "## Timings (s)", "",
@@ -136,12 +141,47 @@ def report_markdown(report: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
+def uncertainty_lines(report: dict) -> list:
+    """report.md's section on the points' covariances (none when no method has one)."""
+    unc = report.get("uncertainty") or {}
+    summaries = unc.get("summaries") or {}
+    if not summaries:
+        return ["## Uncertainty", "", unc.get("note", "No point covariances."), ""] if unc else []
+    ps = unc.get("pixel_sigma") or {}
+    if "stated_px" in ps:
+        pixel = f"stated σ = {fmt(ps['stated_px'], 4)} px per coordinate"
+    else:
+        pixel = (f"per target from the detector (median {fmt(ps.get('detector_median_px'), 4)} "
+                 f"px) plus σ₀ = {fmt(ps.get('residual_sigma0_px'), 4)} px that the "
+                 f"reprojection residuals show beyond it (median {fmt(ps.get('median_px'), 4)} px)")
+    lines = ["## Uncertainty", "", f"Point covariances: {unc['rig']}; pixel noise: {pixel}.",
+             "", "| method | median σx | median σy | median σz | max σP | coverage 95 % | "
+             "mean d² | normalized std x / y / z |", "|---|---|---|---|---|---|---|---|"]
+    rows = [(m, v) for m, v in summaries.items()]
+    ecc = (report.get("eccentricity") or {}).get("uncertainty") or {}
+    rows += [(f"{m}+ecc", v) for m, v in (ecc.get("summaries") or {}).items()]
+    for method, summary in rows:
+        sig, cov = summary["sigma"], summary.get("coverage") or {}
+        med = sig.get("median_sigma_mm", {})
+        norm = cov.get("normalized") or {}
+        lines.append(f"| {method} | {fmt(med.get('x'), 4)} | {fmt(med.get('y'), 4)} | "
+                     f"{fmt(med.get('z'), 4)} | {fmt(sig.get('max_sigma_p_mm'), 4)} | "
+                     f"{fmt(cov.get('coverage_95'), 3)} | {fmt(cov.get('mahalanobis2_mean'), 2)} | "
+                     + " / ".join(fmt(norm[a]['std'], 2) for a in "xyz" if a in norm) + " |")
+    lines += ["", "σ in mm; coverage = fraction of the correctly matched points whose "
+              "Mahalanobis distance² to the truth is at most χ²₃(0.95) = 7.81 (0.95 when the "
+              "covariances are right; 3 the expected mean d²); normalized = error / σ per axis "
+              "(std 1 expected).", ""]
+    return lines
+
+
 def write_outputs(tmp: str, result) -> None:
     """The PLY files (their entries go into ``result.report["ply"]``; ``points_<method>_all.ply``
     every valid point, wrong matches included) and figures of a run
     (:class:`eval.run.pipeline.RunResult`), into directory ``tmp``."""
     from eval.core.cloud_metrics import write_error_ply  # Open3D: only when writing
-    from eval.core.figures import error_maps_figure, histograms_figure
+    from eval.core.figures import ellipses_figure, error_maps_figure, histograms_figure
+    from eval.core.uncertainty import write_uncertainty_files
     from eval.run.figures import views_figure
 
     from synth.dataset import write_targets_ply
@@ -154,10 +194,20 @@ def write_outputs(tmp: str, result) -> None:
     for method, data in result.per_method.items():
         if "all_points" in data:
             write_targets_ply(os.path.join(tmp, f"points_{method}_all.ply"), data["all_points"])
+    # the covariances of the correctly matched points, their errors against the truth
+    uncertainty = result.report.get("uncertainty") or {}
+    files = {method: write_uncertainty_files(tmp, method, data["points"], data["covariance"],
+                                             data["errors"])
+             for method, data in result.per_method.items() if "covariance" in data}
+    if files:
+        uncertainty["files"] = files
     maps = os.path.join(tmp, "error_maps.png")
     histograms = os.path.join(tmp, "histograms.png")
+    extra = ([(ellipses_figure, os.path.join(tmp, "ellipses.png"),
+               {m: d for m, d in result.per_method.items() if "covariance" in d})]
+             if files else [])
     with _beside((error_maps_figure, maps, result.per_method),
-                 (histograms_figure, histograms, result.per_method)):
+                 (histograms_figure, histograms, result.per_method), *extra):
         views_figure(os.path.join(tmp, "views.png"), result.inputs.left, result.inputs.right,
                      result)
 
@@ -203,7 +253,8 @@ def verdict_exit_code(report: dict, out: str) -> int:
     return EXIT_CHECK_FAILED
 
 
-__all__ = ["SUMMARY_COLUMNS", "budget_table", "report_markdown", "summary_table", "verdict_exit_code",
+__all__ = ["SUMMARY_COLUMNS", "budget_table", "report_markdown", "summary_table",
+           "uncertainty_lines", "verdict_exit_code",
            "verdict_lines",
            "write_outputs"]
 

@@ -102,7 +102,7 @@ def _saved_files(result, save) -> dict:
             for view in ("left", "right"):
                 write_png(os.path.join(tmp, f"{view}.png"), to_png16(getattr(inputs, view), scale))
         for name in sorted(os.listdir(tmp)):
-            kind = ("ply" if name.endswith(".ply") else
+            kind = ("ply" if name.endswith((".ply", ".csv")) else  # points, covariances
                     "images" if name in ("left.png", "right.png") else "figures")
             if kind in save:
                 with open(os.path.join(tmp, name), "rb") as handle:

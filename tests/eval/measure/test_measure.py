@@ -91,6 +91,40 @@ def test_one_pair_measures_the_targets_and_eval_score_reads_the_cloud(photos, ca
 
 
 @pytest.mark.slow
+def test_point_covariances_with_and_without_the_calibrations_covariance(photos, capsys):
+    """A calibration without covariance is accepted (the points carry the pixel-noise part and
+    the report says so); with one, σ grows; the files hold one row per point."""
+    from measure.rig_covariance import RigCovariance
+    from synth.dataset import read_calib
+
+    root = photos
+    rig = read_calib(root / "ds" / "calib.yaml")["rig"]
+    with_cov = root / "with_cov.yaml"
+    write_calib(with_cov, rig, covariance=RigCovariance(
+        ("port.distance", "right.center[0]", "left.fx"), np.diag([1.0, 0.5, 0.5]) ** 2))
+    reports = {}
+    for name, calib in (("plain", root / "ds" / "calib.yaml"), ("with", with_cov)):
+        out = root / f"unc_{name}"
+        assert eval_main(["measure", "--calib", str(calib), str(root / "ph" / "left" / "pair.png"),
+                          str(root / "ph" / "right" / "pair.png"), "--out", str(out), "--methods",
+                          "optical_path,regular", "--quiet"]) == 0
+        reports[name] = json.loads((out / "report.json").read_text())
+        unc = reports[name]["uncertainty"]
+        assert list(unc["methods"]) == ["optical_path"]  # regular ignores the port: none
+        with open(out / unc["files"]["optical_path"]["csv"], newline="") as fh:
+            assert len(list(csv.DictReader(fh))) == 81
+        assert (out / "ellipses.png").stat().st_size > 1000
+        assert "## Uncertainty" in (out / "report.md").read_text()
+    plain, with_rig = (reports[k]["uncertainty"] for k in ("plain", "with"))
+    assert "holds no covariance" in plain["rig"] and "pixel-noise part only" in plain["rig"]
+    assert "rig covariance" in with_rig["rig"]
+    assert plain["pixel_sigma"]["pair"]["median_px"] > 0
+    sz = [u["methods"]["optical_path"]["sigma"]["median_sigma_mm"]["z"] for u in (plain, with_rig)]
+    assert sz[1] > 2 * sz[0], sz
+    assert reports["plain"]["pairs"][0]["methods"]["optical_path"]["sigma"]["n"] == 81
+
+
+@pytest.mark.slow
 def test_folders_pair_by_name_and_a_pair_with_nothing_matched_is_reported(photos, capsys):
     root = photos
     folders = root / "many"
@@ -213,9 +247,17 @@ def user(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     from measure import StereoRig
 
+    from measure.rig_covariance import RigCovariance
+
     for name, size, focal in (("calib.yaml", (320, 268), 150.0),
                               ("big.yaml", (2448, 2048), 1100.0)):
         write_calib(tmp_path / name, StereoRig(*paper_cameras(size, focal), paper_port()))
+    singular = object.__new__(RigCovariance)  # what RigCovariance itself refuses to hold
+    for field_name, value in (("names", ("port.distance", "port.index[2]")),
+                              ("matrix", np.ones((2, 2))), ("normal_axes", None)):
+        object.__setattr__(singular, field_name, value)
+    write_calib(tmp_path / "singular.yaml", StereoRig(*paper_cameras((320, 268), 150.0),
+                                                      paper_port()), covariance=singular)
     for view in ("left", "right"):
         (tmp_path / view).mkdir()
         cv2.imwrite(str(tmp_path / view / "p1.png"), np.zeros((268, 320), np.uint8))
@@ -245,6 +287,10 @@ BAD = [
     (["--calib", "calib.yaml", "left", "right", "--dense", "--depth-range", "900,1100",
       "--methods", "su"], "su"),
     (["--calib", "calib.yaml", "left", "right", "--floor-fraction", "1"], "--floor-fraction"),
+    (["--calib", "calib.yaml", "left", "right", "--dense", "--depth-range", "900,1100",
+      "--pixel-sigma", "0.1"], "--pixel-sigma does not apply with --dense"),
+    (["--calib", "calib.yaml", "left", "right", "--pixel-sigma", "-1"], "--pixel-sigma"),
+    (["--calib", "singular.yaml", "left/p1.png", "right/p1.png"], "singular.yaml"),
 ]
 
 

@@ -61,6 +61,7 @@ def test_dense_run_measures_the_plane_and_shows_what_ignoring_refraction_costs(p
 @pytest.mark.slow
 @pytest.mark.parametrize("argv, fragment", [
     (["--eccentricity"], "applies to target scenes"),
+    (["--pixel-sigma", "0.1"], "--pixel-sigma applies to target scenes"),
     (["--methods", "su"], "surface scene is measured with"),
     (["--depth-range", "2000,2100"], "excludes the surface"),
     (["--depth-range", "50,2000"], "NEAR must lie beyond the port"),

@@ -279,3 +279,60 @@ def test_a_cross_check_from_one_view_is_a_failure():
     assert len(failures) == 1 and "right" in failures[0] and "one view" in failures[0]
     report["crosscheck"]["right"]["associated"] = 12
     assert run_failures(report) == []
+
+
+@pytest.mark.slow
+def test_point_covariances_with_and_without_a_rig_covariance(small_scene, tmp_path, capsys):
+    """The points of optical_path carry covariances: from the pixel noise alone with the
+    scene's rig or a calibration without covariance (the report says so), larger with a
+    calibration's covariance; their files, coverage and summaries; a singular covariance is
+    refused with one line naming the file."""
+    from measure.rig_covariance import RigCovariance
+    from synth.dataset import read_calib, write_calib
+
+    data = tmp_path / "data"
+    write_dataset(small_scene, data, spp=16, progress=False)
+    rig = read_calib(data / "calib.yaml")["rig"]
+    names = ("port.distance", "port.index[2]", "right.center[0]")
+    with_cov = tmp_path / "with.yaml"
+    write_calib(with_cov, rig, covariance=RigCovariance(names, np.diag([1.0, 1e-3, 0.5]) ** 2))
+    reports = {}
+    for name, extra in (("scene", []), ("plain", ["--calib", str(data / "calib.yaml")]),
+                        ("with", ["--calib", str(with_cov)]), ("stated", ["--pixel-sigma", "0.2"])):
+        out = tmp_path / name
+        assert main(["run", small_scene, "--from", str(data), "--out", str(out), "--methods",
+                     "optical_path,su", "--no-progress", *extra]) == 0
+        reports[name] = json.loads((out / "report.json").read_text())
+    scene, plain, with_rig = reports["scene"], reports["plain"], reports["with"]
+    assert "exact" in scene["uncertainty"]["rig"]
+    assert "holds no covariance" in plain["uncertainty"]["rig"]
+    assert "pixel-noise part only" in plain["uncertainty"]["rig"]
+    assert "rig covariance" in with_rig["uncertainty"]["rig"]
+    assert scene["methods"]["su"]["coverage_95"] is None  # no covariance for Su's method
+    summary = scene["uncertainty"]["summaries"]["optical_path"]
+    assert summary["coverage"]["n"] == scene["methods"]["optical_path"]["n"]
+    assert scene["methods"]["optical_path"]["coverage_95"] == summary["coverage"]["coverage_95"]
+    assert 0 <= summary["coverage"]["coverage_95"] <= 1
+    assert scene["uncertainty"]["pixel_sigma"]["residual_sigma0_px"] > 0
+    sz = {k: r["uncertainty"]["summaries"]["optical_path"]["sigma"]["median_sigma_mm"]["z"]
+          for k, r in reports.items()}
+    assert sz["with"] > 2 * sz["plain"] and sz["plain"] == pytest.approx(sz["scene"], rel=1e-6)
+    assert reports["stated"]["uncertainty"]["pixel_sigma"]["stated_px"] == 0.2
+    files = scene["uncertainty"]["files"]["optical_path"]
+    rows = (tmp_path / "scene" / files["csv"]).read_text().splitlines()
+    assert len(rows) == 1 + scene["methods"]["optical_path"]["n"]
+    assert (tmp_path / "scene" / "ellipses.png").stat().st_size > 1000
+    assert "## Uncertainty" in (tmp_path / "scene" / "report.md").read_text()
+    # a singular covariance: refused, one line naming the file, nothing written
+    singular = object.__new__(RigCovariance)
+    for field_name, value in (("names", names[:2]), ("matrix", np.ones((2, 2))),
+                              ("normal_axes", None)):
+        object.__setattr__(singular, field_name, value)
+    bad = tmp_path / "singular.yaml"
+    write_calib(bad, rig, covariance=singular)
+    capsys.readouterr()
+    assert main(["run", small_scene, "--from", str(data), "--out", str(tmp_path / "bad"),
+                 "--calib", str(bad), "--no-progress"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("error:") and "singular.yaml" in err[0]
+    assert not (tmp_path / "bad").exists()

@@ -1,0 +1,68 @@
+"""eval.core.uncertainty: --pixel-sigma, the pairs' pixel σ, and the covariance files."""
+
+from __future__ import annotations
+
+import csv
+
+import numpy as np
+import pytest
+
+from eval.cli import CLIError
+from eval.core.uncertainty import (AUTO, COLUMNS, TRUTH_COLUMNS, pair_sigmas, parse_pixel_sigma,
+                                   rig_covariance_note, write_uncertainty_files)
+from measure.projection import project
+from measure.uncertainty import point_covariances
+from synth.cloudfile import ply_layout, read_cloud_points
+from synth.layouts import paper_plane
+from synth.rig import paper_rig
+
+
+def test_parse_pixel_sigma():
+    assert parse_pixel_sigma("auto") == AUTO and parse_pixel_sigma(None) == AUTO
+    assert parse_pixel_sigma("0.05") == 0.05
+    for bad in ("0", "-1", "nan", "inf", "x"):
+        with pytest.raises(CLIError, match="--pixel-sigma"):
+            parse_pixel_sigma(bad)
+
+
+def test_pair_sigmas_stated_and_from_the_residuals():
+    rig = paper_rig()
+    points = paper_plane(1000.0)
+    uv_left, uv_right = (project(c, rig.port, points) for c in rig.cameras)
+    rng = np.random.default_rng(4)
+    uv_left = uv_left + rng.normal(0, 0.05, uv_left.shape)
+    uv_right = uv_right + rng.normal(0, 0.05, uv_right.shape)
+    stated, info = pair_sigmas(0.03, uv_left, uv_right, points, rig, noise_px=0.04)
+    assert np.allclose(stated, 0.05) and info["stated_px"] == 0.03
+    auto, info = pair_sigmas(AUTO, uv_left, uv_right, points, rig)
+    assert auto.shape == (len(points), 2)
+    assert info["detector_median_px"] == 0.0  # no detections given
+    assert info["residual_sigma0_px"] == pytest.approx(0.05, rel=0.1)
+
+
+def test_uncertainty_files_round_trip(tmp_path):
+    rig = paper_rig()
+    points = paper_plane(1000.0)[:20]
+    covariance = point_covariances(rig, points, 0.1).total
+    errors = np.full((20, 3), 0.01)
+    entry = write_uncertainty_files(tmp_path, "optical_path", points, covariance, errors)
+    assert entry["columns"] == list(COLUMNS + TRUTH_COLUMNS)
+    layout = ply_layout(tmp_path / entry["ply"], "ply")
+    assert layout["format"] == "binary_little_endian"
+    assert np.allclose(read_cloud_points(tmp_path / entry["ply"]), points)
+    raw = (tmp_path / entry["ply"]).read_bytes()
+    body = np.frombuffer(raw[raw.index(b"end_header\n") + 11:], dtype="<f8").reshape(20, -1)
+    assert np.array_equal(body[:, 3:6], np.sqrt(np.einsum("nii->ni", covariance)))
+    assert np.array_equal(body[:, 7], covariance[:, 0, 1])
+    with open(tmp_path / entry["csv"], newline="") as fh:
+        rows = list(csv.reader(fh))
+    assert rows[0] == list(COLUMNS + TRUTH_COLUMNS) and len(rows) == 21
+    table = np.array(rows[1:], dtype=float)
+    assert np.allclose(table[:, 11], covariance[:, 2, 2], rtol=1e-9)
+    assert np.all(table[:, -1] > 0)  # the Mahalanobis distance² of the errors
+
+
+def test_rig_covariance_note_says_when_the_calibration_has_none():
+    assert "pixel-noise part only" in rig_covariance_note(None, "--calib c.yaml")
+    assert "c.yaml holds no covariance" in rig_covariance_note(None, "--calib c.yaml")
+    assert "exact" in rig_covariance_note(None, None)
