@@ -110,14 +110,19 @@ def pixel_jacobians(rig: StereoRig, points, names=(), normal_axes=None):
     (:mod:`measure.rig_covariance`'s grammar, its units), analytic (the port and pose
     derivatives of :class:`measure.projection.ParameterJacobian`, the intrinsics of
     :func:`_distortion_terms`). ``normal_axes`` ``(2, 3)``: the tilt axes of ``port.tilt[*]``.
-    Flat ports only. Rows without an image are NaN."""
-    if rig.is_dome:
-        raise ValueError("point covariances need a flat port (dome ports have no Jacobian here)")
+    A dome rig (each camera through its own dome, :class:`measure.dome_projection.DomeParameterJacobian`)
+    takes the intrinsics and the right camera's pose; the ``port.*`` names describe a flat port
+    and are refused there. Rows without an image are NaN."""
     points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     names = tuple(names)
+    if rig.is_dome:
+        flat = [n for n in names if n.startswith("port.")]
+        if flat:
+            raise ValueError(f"{', '.join(flat)}: flat-port parameters, but the rig looks "
+                             f"through domes")
     want = bool(names)
-    views = [project(cam, rig.port, points, jacobian=True, parameters=want)
-             for cam in rig.cameras]
+    views = [project(cam, rig.port_of(view), points, jacobian=True, parameters=want)
+             for view, cam in enumerate(rig.cameras)]
     pixels = np.concatenate([v[0] for v in views], axis=1)
     d_points = np.concatenate([v[1] for v in views], axis=1)
     d_parameters = np.zeros((points.shape[0], 4, len(names)))

@@ -108,16 +108,15 @@ def covariance_stage(inputs: RunInputs, pixel_sigma, detections, centers, matche
     methods of :data:`COVARIANCE_METHODS` among ``results``, with the pixel σ of ``pixel_sigma``
     (``"auto"`` or px; :func:`eval.core.uncertainty.pair_sigmas`) and the rig covariance of
     ``inputs`` (None: the pixel part only). ``uv``: the pairs' pixels when they are not the
-    matched centres (the eccentricity-corrected ones). A dome rig gets none (info says why)."""
+    matched centres (the eccentricity-corrected ones)."""
     from measure import triangulate as triangulate_pixels
     from eval.core.uncertainty import method_covariances, pair_sigmas, rig_covariance_note
 
     methods = [m for m in COVARIANCE_METHODS if m in results]
     info = {"methods": methods, "rig": rig_covariance_note(inputs.rig_covariance,
                                                            inputs.rig_covariance_source)}
-    if inputs.rig.is_dome or not methods:
-        info["note"] = ("no covariance: dome ports have no Jacobian here" if inputs.rig.is_dome
-                        else f"no covariance: only {', '.join(COVARIANCE_METHODS)} get one")
+    if not methods:
+        info["note"] = f"no covariance: only {', '.join(COVARIANCE_METHODS)} get one"
         return {}, info
     uv_left, uv_right = uv if uv is not None else (centers["left"][matches.left],
                                                    centers["right"][matches.right])
