@@ -106,7 +106,32 @@ def uncertainty_summary(covariance, errors=None) -> dict:
     out = {"sigma": sigma_summary(covariance)}
     if errors is not None:
         out["coverage"] = coverage_summary(errors, covariance)
+        verdict = coverage_verdict(out["coverage"])
+        if verdict:
+            out["coverage"]["verdict"] = verdict
     return out
+
+
+#: The range of ``coverage_95`` an honest σ gives (0.95 expected; outside it the report says so)
+#: and the fewest points a verdict needs (binomial σ of the fraction ≤ 0.04 from 30 points).
+HONEST_COVERAGE, VERDICT_MIN_POINTS = (0.90, 0.98), 30
+
+
+def coverage_verdict(coverage: dict) -> str:
+    """A sentence when ``coverage_95`` is outside :data:`HONEST_COVERAGE` (with at least
+    :data:`VERDICT_MIN_POINTS` points), else ``""``: the σ understated or overstated the error."""
+    fraction, n = coverage.get("coverage_95"), coverage.get("n") or 0
+    if fraction is None or n < VERDICT_MIN_POINTS:
+        return ""
+    if fraction < HONEST_COVERAGE[0]:
+        return (f"σ understates the errors: {fraction:.3f} of the points inside their 95 % "
+                f"ellipsoid (< {HONEST_COVERAGE[0]:.2f}); an error both views share is not in "
+                f"it (disk targets: --eccentricity removes their eccentricity)")
+    if fraction > HONEST_COVERAGE[1]:
+        return (f"σ overstates the errors: {fraction:.3f} of the points inside their 95 % "
+                f"ellipsoid (> {HONEST_COVERAGE[1]:.2f}); with a calibration's covariance one "
+                f"calibration is one draw of the rig error, shared by every point")
+    return ""
 
 
 def _rows(points, covariance, errors):
@@ -143,6 +168,7 @@ def write_uncertainty_files(directory, method: str, points, covariance, errors=N
     return {"ply": ply, "csv": table, "columns": list(names)}
 
 
-__all__ = ["AUTO", "COLUMNS", "TRUTH_COLUMNS", "add_pixel_sigma_option", "method_covariances",
+__all__ = ["AUTO", "COLUMNS", "HONEST_COVERAGE", "TRUTH_COLUMNS", "add_pixel_sigma_option",
+           "coverage_verdict", "method_covariances",
            "pair_sigmas", "parse_pixel_sigma", "rig_covariance_note", "uncertainty_summary",
            "write_uncertainty_files"]

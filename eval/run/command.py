@@ -127,10 +127,19 @@ def main(args) -> int:
     print(summary_table(report), file=summary_stream)
     coverage = {m: v["coverage_95"] for m, v in report["methods"].items()
                 if v.get("coverage_95") is not None}
+    corrected = ((report.get("eccentricity") or {}).get("uncertainty") or {}).get("summaries") or {}
+    coverage.update({f"{m}+ecc": v["coverage"]["coverage_95"] for m, v in corrected.items()
+                     if (v.get("coverage") or {}).get("coverage_95") is not None})
     if coverage:
         print("coverage of the 95 % ellipsoids: " + ", ".join(
             f"{m} {fmt(v, 3)}" for m, v in coverage.items()) + f" ({report['uncertainty']['rig']})",
             file=summary_stream)
+        summaries = dict(report["uncertainty"].get("summaries") or {})
+        summaries.update({f"{m}+ecc": v for m, v in corrected.items()})
+        for method, summary in summaries.items():
+            verdict = (summary.get("coverage") or {}).get("verdict")
+            if verdict:
+                print(f"  {method}: {verdict}", file=summary_stream)
     print(f"wrote {out}", file=summary_stream)
     if report.get("budget"):
         print(budget_table(report), file=summary_stream)

@@ -172,6 +172,8 @@ def uncertainty_lines(report: dict) -> list:
               "Mahalanobis distance² to the truth is at most χ²₃(0.95) = 7.81 (0.95 when the "
               "covariances are right; 3 the expected mean d²); normalized = error / σ per axis "
               "(std 1 expected).", ""]
+    lines += [f"- {method}: {summary['coverage']['verdict']}" for method, summary in rows
+              if (summary.get("coverage") or {}).get("verdict")]
     return lines
 
 

@@ -66,3 +66,13 @@ def test_rig_covariance_note_says_when_the_calibration_has_none():
     assert "pixel-noise part only" in rig_covariance_note(None, "--calib c.yaml")
     assert "c.yaml holds no covariance" in rig_covariance_note(None, "--calib c.yaml")
     assert "exact" in rig_covariance_note(None, None)
+
+
+def test_the_coverage_verdict_says_when_sigma_is_dishonest():
+    from eval.core.uncertainty import coverage_verdict
+
+    assert coverage_verdict({"coverage_95": 0.95, "n": 496}) == ""
+    assert "understates" in coverage_verdict({"coverage_95": 0.786, "n": 496})
+    assert "overstates" in coverage_verdict({"coverage_95": 1.0, "n": 496})
+    assert coverage_verdict({"coverage_95": 0.5, "n": 10}) == ""  # too few points to judge
+    assert coverage_verdict({"coverage_95": None, "n": 0}) == ""
