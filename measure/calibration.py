@@ -601,7 +601,7 @@ def _rig_parameters(names, x, basis, start_normal, port, n_global):
     return tuple(out), T, axes
 
 
-def _apply_air(rig: StereoRig, air, delta) -> StereoRig:
+def apply_air_change(rig: StereoRig, air, delta) -> StereoRig:
     """``rig`` with the in-air parameters ``air`` moved by ``delta`` (px, unitless, rad: the
     right camera's ``R → exp([φ]×) R``, mm: its centre)."""
     change = dict(zip(air, np.asarray(delta, dtype=np.float64)))
@@ -637,7 +637,7 @@ def _prior_fit(rig, board, detections, names, x, s2, air, sigma_air):
     s = np.sqrt(s2)
     delta, a = np.zeros(len(air)), len(air)
     for _ in range(PRIOR_ITERATIONS + 1):
-        moved = _apply_air(rig, air, delta)
+        moved = apply_air_change(rig, air, delta)
         problem = housing_problem(moved, board, detections, names)
         J = problem.jacobian(x)
         J = J.toarray() if hasattr(J, "toarray") else np.asarray(J)
@@ -693,5 +693,6 @@ def usable_index(usable, pose_idx) -> np.ndarray:
 
 
 __all__ = ["AirCalibration", "CalibrationError", "DEFAULT_FREE", "Detections",
-           "HOUSING_PARAMETERS", "HousingCalibration", "MIN_POSES", "calibrate_housing",
+           "HOUSING_PARAMETERS", "HousingCalibration", "MIN_POSES", "UNCERTAINTY",
+           "apply_air_change", "calibrate_housing",
            "calibrate_in_air", "detect_boards", "housing_problem"]

@@ -26,7 +26,8 @@ class RunInputs:
     ``rig`` is what the measurement believes; ``targets`` ``(N, 3)`` mm the true centres;
     ``left``/``right`` float32 linear images ``(H, W)``; ``params`` the scene's resolved
     parameters; ``seed`` the run's one seed (images, added noise, RANSAC); ``budget_rigs``
-    ``{label: rig}``: also measure with these rigs (the error budget)."""
+    ``{label: rig}``: also measure with these rigs (the error budget); ``rig_covariance`` the
+    ``--calib`` file's covariance (:class:`measure.rig_covariance.RigCovariance`) or None."""
 
     scene: str
     rig: object
@@ -45,6 +46,7 @@ class RunInputs:
     target_normals: np.ndarray | None = None
     truth_rig: object = None
     budget_rigs: dict = field(default_factory=dict)
+    rig_covariance: object = None
 
     @property
     def true_rig(self):
@@ -171,7 +173,12 @@ def load_inputs(config: RunConfig, log) -> RunInputs:
     if not (in_left & in_right).any():
         raise CLIError(f"{config.scene}: no target is visible in both views")
     budget = budget_rigs(config, spec.rig, measured_rig)
-    scene_part = dict(scene=config.scene, rig=measured_rig, has_port=spec.has_port,
+    covariance = None
+    if config.calib:
+        from synth.dataset import read_calib
+
+        covariance = read_calib(config.calib).get("covariance")
+    scene_part = dict(rig_covariance=covariance, scene=config.scene, rig=measured_rig, has_port=spec.has_port,
                       targets=spec.targets, target_ids=spec.target_ids,
                       target_radius=spec.target_radius, params=spec.params, seed=seed,
                       target_normals=spec.target_normals, truth_rig=spec.rig,
