@@ -339,7 +339,9 @@ def markdown(report: dict) -> str:
                 lines.append(f"| {name} | {p['estimate']:.6f} | {p['truth']:.6f} | "
                              f"{p['error']:+.6f} | {_f(p['sigma'])} | {_f(p['error_in_sigma'], 3)} "
                              f"| {_f(p['sigma_conditional'])} |")
-        lines += ["", "Correlations of the free numbers (" + ", ".join(hs["labels"]) + "):", ""]
+        lines += ["", "Correlations of the free numbers (" + ", ".join(hs["labels"])
+                  + "; of the housing adjustment alone — the joint ones are in calib.yaml's "
+                    "covariance):", ""]
         lines += ["    " + " ".join(f"{v:+.3f}" for v in row) for row in hs["correlation"]]
     lines += ["", "## Files", "", "- `calib.yaml`: the calibration in the dataset format"
               + (" (with an `uncertainty` map), `calib_in_air_only.yaml` (the in-air calibration "
