@@ -34,9 +34,6 @@ COMMAND = "eval calibrate"
 #: Options of the housing calibration (underwater boards): refused with in-air boards.
 HOUSING_OPTIONS = ("free", "design_port", "start_distance", "glass_thickness", "n_glass",
                    "n_water", "air_uncertainty")
-#: How the in-air covariance enters the housing's σ unless --air-uncertainty says otherwise
-#: (measured on 30 seeds of rendered boards: docs/calibration.md).
-DEFAULT_AIR_UNCERTAINTY = "propagate"
 #: What the printed summary says of ``cameras.txt`` (its header says it too).
 COLMAP_NOTE = "upstream COLMAP and pycolmap read it without an error and drop the port"
 #: ``--design-port`` keys and the single option each one stands for.
@@ -45,7 +42,8 @@ DESIGN_KEYS = {"distance": "start_distance", "thickness": "glass_thickness", "n_
 
 
 def add_parser(subparsers):
-    from measure.calibration import DEFAULT_FREE, HOUSING_PARAMETERS, UNCERTAINTY
+    from measure.calibration import (DEFAULT_FREE, DEFAULT_UNCERTAINTY, HOUSING_PARAMETERS,
+                                     UNCERTAINTY)
     from synth.rig import PAPER_GLASS_THICKNESS_MM, PAPER_INDICES, PAPER_PORT_DISTANCE_MM
 
     p = subparsers.add_parser(
@@ -67,11 +65,11 @@ def add_parser(subparsers):
     p.add_argument("--free", default=",".join(DEFAULT_FREE),
                    help=f"housing parameters to estimate, comma list of "
                         f"{', '.join(HOUSING_PARAMETERS)} (default {','.join(DEFAULT_FREE)})")
-    p.add_argument("--air-uncertainty", choices=UNCERTAINTY, default=DEFAULT_AIR_UNCERTAINTY,
+    p.add_argument("--air-uncertainty", choices=UNCERTAINTY, default=DEFAULT_UNCERTAINTY,
                    help=f"how the in-air calibration's covariance (--intrinsics: its calib.yaml's "
                         f"covariance node) enters the housing's σ: propagate (intrinsics and "
                         f"stereo pose held, their covariance propagated) or prior (freed, the "
-                        f"in-air result as a prior); default {DEFAULT_AIR_UNCERTAINTY} "
+                        f"in-air result as a prior); default {DEFAULT_UNCERTAINTY} "
                         f"(docs/calibration.md says why)")
     p.add_argument("--start-distance", type=positive_float, default=PAPER_PORT_DISTANCE_MM,
                    help=f"starting port distance D, mm (the design value; default "

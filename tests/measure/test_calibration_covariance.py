@@ -75,7 +75,6 @@ def test_in_air_stereo_pose_sigma_matches_monte_carlo():
         sigmas.append(np.sqrt(np.diag(air.covariance.matrix))[16:])
     spread = np.concatenate([np.std(rotations, axis=0), np.std(centres, axis=0)])
     ratio = np.mean(sigmas, axis=0) / spread
-    print(ratio)
     assert np.all((ratio > 0.75) & (ratio < 1.33)), ratio
 
 
@@ -151,7 +150,8 @@ def test_housing_propagation_predicts_how_the_port_moves_with_the_intrinsics(cha
     from measure.calibration import apply_air_change
 
     air, start = chain["air"], chain["start"]
-    fit = calibrate_housing(start, BOARD, chain["detections"], air_covariance=air.covariance)
+    fit = calibrate_housing(start, BOARD, chain["detections"], air_covariance=air.covariance,
+                            uncertainty="propagate")
     assert fit.identifiable and fit.uncertainty == "propagate", fit.reason
     cov = fit.covariance
     assert cov.names == AIR_NAMES + ("port.distance", "port.tilt[0]", "port.tilt[1]")
@@ -173,7 +173,7 @@ def test_housing_with_the_in_air_prior(chain):
     within 3 σ of the truth, the intrinsics refined."""
     air, start, truth = chain["air"], chain["start"], chain["truth"]
     propagated = calibrate_housing(start, BOARD, chain["detections"],
-                                   air_covariance=air.covariance)
+                                   air_covariance=air.covariance, uncertainty="propagate")
     prior = calibrate_housing(start, BOARD, chain["detections"], air_covariance=air.covariance,
                               uncertainty="prior")
     assert prior.identifiable and prior.uncertainty == "prior"
@@ -196,6 +196,6 @@ def test_housing_without_an_in_air_covariance_is_conditional(chain):
     # extrinsics free: the in-air stereo pose no longer enters, the intrinsics do
     both = calibrate_housing(chain["start"], BOARD, chain["detections"],
                              ("distance", "normal", "extrinsics"),
-                             air_covariance=chain["air"].covariance)
+                             air_covariance=chain["air"].covariance, uncertainty="propagate")
     assert both.covariance.names[:16] == AIR_NAMES[:16]
     assert len(both.covariance.names) == 16 + 9

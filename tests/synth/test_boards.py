@@ -127,7 +127,7 @@ def test_calibrate_chain_from_images(boards, tmp_path, capsys):
     cov = calib["covariance"]
     assert cov.names == AIR_NAMES + ("port.distance", "port.tilt[0]", "port.tilt[1]")
     distance = housing["parameters"]["distance"]
-    assert housing["uncertainty"] == "propagate"
+    assert housing["uncertainty"] == "prior"
     assert distance["sigma"] > distance["sigma_conditional"] > 0
     assert cov.sigmas["port.distance"] == pytest.approx(distance["sigma"], rel=1e-9)
     design = read_calib(out / "calib_in_air_only.yaml")
