@@ -50,7 +50,7 @@ DEFAULT_FREE = ("distance", "normal")
 #: How the in-air calibration's covariance enters the housing's (:func:`calibrate_housing`).
 UNCERTAINTY = ("propagate", "prior")
 #: The default: both covered the chain's error on 30 seeds of rendered boards, the prior with
-#: errors 40–50 % smaller (docs/calibration.md, "σ that covers the chain").
+#: errors 30–53 % smaller (docs/calibration.md, "σ that covers the chain").
 DEFAULT_UNCERTAINTY = "prior"
 #: Fewest board poses a calibration accepts.
 MIN_POSES = 3
