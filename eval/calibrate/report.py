@@ -66,6 +66,7 @@ def air_summary(air, truth) -> dict:
         for key in ("fx", "fy"):
             cam[key]["error_percent"] = 100 * cam[key]["error"] / cam[key]["truth"]
         cam["dist"] = None if est.dist is None else est.dist.tolist()
+        cam["dist_sigma"] = {key: sig.get(key) for key in ("k1", "k2", "p1", "p2")}
         out["cameras"][name] = cam
     baseline = np.linalg.norm(air.rig.right.t - air.rig.left.t)
     true_baseline = np.linalg.norm(truth.right.t - truth.left.t)
@@ -136,12 +137,44 @@ def housing_summary(housing, truth, start_rig) -> dict:
                             "error_in_sigma": [float(e / s) for e, s in
                                                zip(t - truth.right.t, sigma[3:])],
                             "sigma_conditional": list(conditional)}
+    if housing.uncertainty == "prior":  # the in-air parameters the underwater boards refined
+        out["in_air_refined"] = in_air_changes(housing, start_rig)
     out["start"] = {"distance": start_rig.port.distance, "normal": start_rig.port.normal.tolist(),
                     "thickness": list(start_rig.port.thicknesses),
                     "indices": list(start_rig.port.indices)}
     zs = [abs(z) for p in params.values()
           for z in np.atleast_1d(p.get("error_in_sigma") if p.get("error_in_sigma") is not None else [])]
     out["max_abs_error_in_sigma"] = max(zs) if zs else None
+    return out
+
+
+def in_air_changes(housing, start_rig) -> dict:
+    """``{name: {"change", "sigma"}}``: how far the prior fit moved each in-air parameter of the
+    covariance from its in-air value (px, unitless, rad about reference axes, mm) and its σ."""
+    from scipy.spatial.transform import Rotation
+
+    out, sig = {}, housing.covariance.sigmas
+    for name in housing.covariance.names:
+        cam, _, key = name.partition(".")
+        if cam not in ("left", "right") or key.startswith(("rotation", "center")):
+            continue
+        new, old = getattr(housing.rig, cam), getattr(start_rig, cam)
+        if key in ("fx", "fy", "cx", "cy"):
+            i, j = {"fx": (0, 0), "fy": (1, 1), "cx": (0, 2), "cy": (1, 2)}[key]
+            change = new.K[i, j] - old.K[i, j]
+        else:
+            k = ("k1", "k2", "p1", "p2").index(key)
+            change = (0.0 if new.dist is None else new.dist[k]) - (
+                0.0 if old.dist is None else old.dist[k])
+        out[name] = {"change": float(change), "sigma": sig[name]}
+    if "right.rotation[0]" in sig and "extrinsics" not in housing.estimates:
+        phi = Rotation.from_matrix(housing.rig.right.R @ start_rig.right.R.T).as_rotvec()
+        for k in range(3):
+            out[f"right.rotation[{k}]"] = {"change": float(phi[k]),
+                                           "sigma": sig[f"right.rotation[{k}]"]}
+            out[f"right.center[{k}]"] = {
+                "change": float(housing.rig.right.t[k] - start_rig.right.t[k]),
+                "sigma": sig[f"right.center[{k}]"]}
     return out
 
 
@@ -305,6 +338,10 @@ def markdown(report: dict) -> str:
                 v = values[key]
                 lines.append(f"| {cam} | {key} (px) | {v['estimate']:.4f} | {v['truth']:.4f} | "
                              f"{v['error']:+.4f} | {_f(v['sigma'])} | {_f(v['error_in_sigma'], 3)} |")
+        for cam, values in a["cameras"].items():
+            if values.get("dist_sigma"):
+                lines.append(f"| {cam} | k1 k2 p1 p2 | {_f(values['dist'][:4] if values['dist'] else None)} "
+                             f"| – | – | {_f(list(values['dist_sigma'].values()), 3)} | – |")
         b = a["baseline_mm"]
         lines += ["", f"Baseline {b['estimate']:.4f} mm (truth {b['truth']:.4f}, error "
                   f"{b['error']:+.4f} mm, σ {_f(a.get('baseline_sigma_mm'), 3)} mm); right "
@@ -312,8 +349,8 @@ def markdown(report: dict) -> str:
                   f"{_f(a.get('right_rotation_sigma_deg'), 3)}° about x, y, z), position error "
                   f"{a['right_position_error_mm']:.4f} mm (σ "
                   f"{_f(a.get('right_center_sigma_mm'), 3)} mm; error / σ "
-                  f"{_f(a.get('right_position_error_in_sigma'), 3)}). The distortion "
-                  f"coefficients' σ and every correlation are in calib.yaml's `covariance`."]
+                  f"{_f(a.get('right_position_error_in_sigma'), 3)}). Every correlation "
+                  f"is in calib.yaml's `covariance`."]
     if "housing" in report:
         hs = report["housing"]
         lines += ["", "## Housing calibration (refractive bundle adjustment)", "",
@@ -339,6 +376,11 @@ def markdown(report: dict) -> str:
                 lines.append(f"| {name} | {p['estimate']:.6f} | {p['truth']:.6f} | "
                              f"{p['error']:+.6f} | {_f(p['sigma'])} | {_f(p['error_in_sigma'], 3)} "
                              f"| {_f(p['sigma_conditional'])} |")
+        if hs.get("in_air_refined"):
+            lines += ["", "In-air parameters refined by the underwater boards (the prior fit; "
+                      "change from the in-air value, σ): " + ", ".join(
+                          f"{name} {v['change']:+.3g} ({_f(v['sigma'], 2)})"
+                          for name, v in hs["in_air_refined"].items()) + "."]
         lines += ["", "Correlations of the free numbers (" + ", ".join(hs["labels"])
                   + "; of the housing adjustment alone — the joint ones are in calib.yaml's "
                     "covariance):", ""]
