@@ -642,6 +642,9 @@ def _prior_fit(rig, board, detections, names, x, s2, air, sigma_air):
     for _ in range(PRIOR_ITERATIONS + 1):
         moved = apply_air_change(rig, air, delta)
         problem = housing_problem(moved, board, detections, names)
+        if problem.x0.size != x.size:  # solvePnP found another set of usable poses
+            raise CalibrationError("the prior fit lost a board pose when the intrinsics moved; "
+                                   "use --air-uncertainty propagate")
         J = problem.jacobian(x)
         J = J.toarray() if hasattr(J, "toarray") else np.asarray(J)
         A = np.block([[J, problem.air_jacobian(x, air)],
