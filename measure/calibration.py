@@ -40,10 +40,13 @@ from scipy.sparse import csr_matrix
 from scipy.spatial.transform import Rotation
 
 from .board import MIN_CORNERS, Board
+from .calibration_covariance import (AIR_INTRINSICS, AIR_NAMES, POSE_NAMES, air_covariance,
+                                     intrinsics_jacobian, left_jacobian)
 from .camera import Camera
 from .dome import DomePair, DomePort
 from .port import FlatPort, index_matched_port
 from .projection import project
+from .rig_covariance import RigCovariance
 from .selfcal import tilt_basis
 from .triangulate import StereoRig
 
@@ -54,6 +57,11 @@ DEFAULT_FREE = ("distance", "normal")
 #: left then right) and the water index; and the default.
 DOME_PARAMETERS = {"dome_center": 6, "n_water": 1}
 DEFAULT_DOME_FREE = ("dome_center",)
+#: How the in-air calibration's covariance enters the housing's (:func:`calibrate_housing`).
+UNCERTAINTY = ("propagate", "prior")
+#: The default: both covered the chain's error on 30 seeds of rendered boards, the prior with
+#: errors 30–53 % smaller (docs/calibration.md, "σ that covers the chain").
+DEFAULT_UNCERTAINTY = "prior"
 #: Fewest board poses a calibration accepts.
 MIN_POSES = 3
 #: Relative eigenvalue of the scaled normal matrix below which a direction is not determined.
@@ -115,7 +123,8 @@ class AirCalibration:
     number of poses used per camera and for the pair; ``rms_px_per`` ``{(pose, view): rms}``
     (OpenCV's per-view errors: RMS of the 2D residual length, px) and ``board_poses``
     ``{(pose, view): (R, t)}`` (board to the reference frame, mm, from that camera's
-    ``calibrateCamera`` extrinsics)."""
+    ``calibrateCamera`` extrinsics); ``covariance`` the full covariance of both cameras'
+    intrinsics and the stereo pose (:func:`measure.calibration_covariance.air_covariance`)."""
 
     rig: StereoRig
     rms_px: dict
@@ -124,6 +133,7 @@ class AirCalibration:
     poses_used: dict
     rms_px_per: dict = field(default_factory=dict)
     board_poses: dict = field(default_factory=dict)
+    covariance: RigCovariance | None = None
 
 
 def calibrate_in_air(board: Board, detections: Detections, size) -> AirCalibration:
@@ -132,6 +142,7 @@ def calibrate_in_air(board: Board, detections: Detections, size) -> AirCalibrati
     flags = cv2.CALIB_FIX_K3
     criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 200, 1e-12)
     cameras, rms, sigmas, used, per, extrinsics = [], {}, {}, {}, {}, {}
+    views, s2, left_poses = [], [], {}
     for view, name in enumerate(("left", "right")):
         poses = detections.found(view)
         if len(poses) < MIN_POSES:
@@ -149,16 +160,24 @@ def calibrate_in_air(board: Board, detections: Detections, size) -> AirCalibrati
         sigmas[name] = dict(zip(("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2"),
                                 (float(s) for s in std[:8])))
         cameras.append((K, D))
+        n = sum(len(o) for o in obj)  # OpenCV's RMS is per corner of the 2D residual length
+        s2.append(rms[name] ** 2 * n / max(2 * n - 8 - 6 * len(poses), 1))
+        views.append({"obj": obj, "keys": [[(k, i) for i in detections.ids[k][view]]
+                                           for k in poses],
+                      "rvecs": out[3], "tvecs": out[4], "K": K, "dist": D})
+        if view == 0:
+            left_poses = {k: (rv, tv) for k, rv, tv in zip(poses, out[3], out[4])}
         used[name] = len(poses)
     both = [k for k in detections.found(0) if k in set(detections.found(1))]
     if len(both) < MIN_POSES:
         raise CalibrationError(f"the board was found in both views of {len(both)} pose(s); the "
                                f"stereo calibration needs at least {MIN_POSES}")
-    obj, img_l, img_r = [], [], []
+    obj, img_l, img_r, keys = [], [], [], []
     for k in both:
         common, il, ir = np.intersect1d(detections.ids[k][0], detections.ids[k][1],
                                         return_indices=True)
         obj.append(corners[common])
+        keys.append([(k, i) for i in common])
         img_l.append(detections.pixels[k][0][il].astype(np.float32))
         img_r.append(detections.pixels[k][1][ir].astype(np.float32))
     (K1, D1), (K2, D2) = cameras
@@ -173,8 +192,14 @@ def calibrate_in_air(board: Board, detections: Detections, size) -> AirCalibrati
     for (k, view), (R_cam, t_cam) in extrinsics.items():
         camera = (left, right)[view]
         board_poses[(k, view)] = (camera.R @ R_cam, camera.R @ t_cam + camera.t)
+    # the covariance is linearized at the left camera's own board poses (stereoCalibrate's
+    # refinement of them moves the Jacobian by nothing that matters)
+    covariance = air_covariance(
+        views, {"obj": obj, "keys": keys, "rvecs": [left_poses[k][0] for k in both],
+                "tvecs": [left_poses[k][1] for k in both], "om": cv2.Rodrigues(R)[0], "T": T},
+        s2)
     return AirCalibration(StereoRig(left, right, port), rms, sigmas, stereo_rms, used, per,
-                          board_poses)
+                          board_poses, covariance)
 
 
 def _orthonormal(R) -> np.ndarray:
@@ -216,6 +241,9 @@ class HousingCalibration:
     message: str = ""
     normal_axes: tuple = field(default=())
     pose_ids: tuple = field(default=())
+    covariance: RigCovariance | None = None
+    sigmas_conditional: dict = field(default_factory=dict)
+    uncertainty: str = "conditional"
 
 
 def _observations(board: Board, detections: Detections, views=(0, 1)):
@@ -351,6 +379,31 @@ def housing_problem(rig: StereoRig, board: Board, detections: Detections, names)
             poses.append(np.repeat(pose_idx, 2))
         return _rows_jacobian(np.concatenate(blocks), np.concatenate(poses), n_global, x.size)
 
+    def air_jacobian(x, air):
+        """Dense ``(m, len(air))``: d residuals / d the in-air parameters ``air`` (names of
+        :data:`measure.calibration_covariance.AIR_NAMES`) at ``x`` (module docs of
+        :mod:`measure.calibration_covariance`)."""
+        port, cameras, Rs, ts = unpack(x)
+        column = {name: j for j, name in enumerate(air)}
+        out, row = np.zeros((m, len(air))), 0
+        for view, pose_idx, ids, _ in obs:
+            world = np.einsum("nij,nj->ni", Rs[pose_idx], corners[ids]) + ts[pose_idx]
+            pixels, _, jac = project(cameras[view], port, world, parameters=True)
+            n = 2 * pose_idx.size
+            camera = ("left", "right")[view]
+            d_int = intrinsics_jacobian(cameras[view], pixels).reshape(n, -1)
+            for j, p in enumerate(AIR_INTRINSICS):
+                if f"{camera}.{p}" in column:
+                    out[row:row + n, column[f"{camera}.{p}"]] = d_int[:, j]
+            if view == 1:
+                for k in range(3):
+                    for what, values in (("rotation", jac.rotation), ("center", jac.center)):
+                        if f"right.{what}[{k}]" in column:
+                            out[row:row + n, column[f"right.{what}[{k}]"]] = (
+                                values[..., k].reshape(n))
+            row += n
+        return np.where(np.isfinite(out), out, 0.0)
+
     x0 = []
     for name in names:
         x0 += {"distance": [port0.distance], "normal": [0.0, 0.0],
@@ -370,18 +423,28 @@ def housing_problem(rig: StereoRig, board: Board, detections: Detections, names)
         k += HOUSING_PARAMETERS[name]
     x0[:n_global] = np.clip(x0[:n_global], lower[:n_global] + 1e-9, upper[:n_global] - 1e-9)
     return SimpleNamespace(residuals=residuals, jacobian=jacobian, unpack=unpack, x0=x0,
+                           air_jacobian=air_jacobian,
                            lower=lower, upper=upper, obs=obs, usable=usable, P=P,
                            n_global=n_global, basis=basis, m=m)
 
 
 def calibrate_housing(rig: StereoRig, board: Board, detections: Detections,
-                      free=None) -> HousingCalibration:
+                      free=None, air_covariance: RigCovariance | None = None,
+                      uncertainty: str = DEFAULT_UNCERTAINTY) -> HousingCalibration:
     """Refractive bundle adjustment of the housing (module docs). ``rig``: the in-air cameras
     with the starting port (its fixed parameters are the design values) — a flat port, or two
     domes (:func:`dome_problem`: each camera's decentring). ``free`` defaults to
-    :data:`DEFAULT_FREE`, for domes :data:`DEFAULT_DOME_FREE`."""
+    :data:`DEFAULT_FREE`, for domes :data:`DEFAULT_DOME_FREE`. ``air_covariance``: the in-air
+    calibration's covariance (:attr:`AirCalibration.covariance`, or a calib.yaml's), brought
+    into the housing's by ``uncertainty``: ``"propagate"`` (the in-air parameters fixed, their
+    covariance propagated) or ``"prior"`` (freed, with the in-air result as a prior). Without
+    it — and behind domes, whose σ stays conditional on the in-air calibration — the σ is
+    conditional on the in-air calibration."""
     if free is None:
         free = DEFAULT_DOME_FREE if rig.is_dome else DEFAULT_FREE
+    if uncertainty not in UNCERTAINTY:
+        raise CalibrationError(f"uncertainty {uncertainty!r}: expected one of "
+                               f"{', '.join(UNCERTAINTY)}")
     names = tuple(dict.fromkeys(free))
     table = DOME_PARAMETERS if rig.is_dome else HOUSING_PARAMETERS
     unknown = [n for n in names if n not in table]
@@ -463,7 +526,33 @@ def calibrate_housing(rig: StereoRig, board: Board, detections: Detections,
             rig=rig, estimates={}, sigmas={}, correlation=np.full((n_global, n_global), np.nan),
             identifiable=False, reason=f"{labels[at_bound[0]]} ran into its physical bound: "
                                        f"these boards do not determine it", **base)
-    estimates, sigmas, k = {}, {}, 0
+    x, sig_conditional = fit.x, sig[:n_global].copy()
+    air = () if rig.is_dome else _air_parameters(air_covariance, names)
+    if air:
+        sigma_air = _sub_covariance(air_covariance, air)
+        if uncertainty == "prior":
+            rig, x, joint = _prior_fit(rig, board, detections, names, x, s2, air, sigma_air)
+            port, cameras, Rs, ts = housing_problem(rig, board, detections, names).unpack(x)
+            base["poses"] = [(Rs[k], ts[k]) for k in range(P)]
+        else:
+            J_air = problem.air_jacobian(x, air)
+            G = np.linalg.solve(N, J.T @ J_air)  # δx = −G δθ_air
+            cross = -(G @ sigma_air)
+            joint = np.block([[sigma_air, cross.T], [cross, covariance + G @ sigma_air @ G.T]])
+        sig = np.sqrt(np.diag(joint))[len(air):]
+    else:
+        joint = covariance
+    rig_cov = None  # domes: the decentring has no name in measure.rig_covariance's grammar
+    if not rig.is_dome:
+        rig_names, transform, axes = _rig_parameters(names, x, basis, rig.port.normal, port,
+                                                   n_global)
+        a = len(air)
+        T = np.eye(a + n_global)
+        T[a:, a:] = transform
+        keep = list(range(a + n_global))
+        joint = T @ joint[np.ix_(keep, keep)] @ T.T
+        rig_cov = RigCovariance(tuple(air) + rig_names, 0.5 * (joint + joint.T), axes)
+    estimates, sigmas, conditional, k = {}, {}, {}, 0
     for name in names:
         w = table[name]
         if name == "dome_center":
@@ -480,10 +569,119 @@ def calibrate_housing(rig: StereoRig, board: Board, detections: Detections,
         else:
             estimates[name] = {"R": cameras[1].R.tolist(), "t": cameras[1].t.tolist()}
         sigmas[name] = float(sig[k]) if w == 1 else sig[k:k + w].tolist()
+        conditional[name] = (float(sig_conditional[k]) if w == 1
+                             else sig_conditional[k:k + w].tolist())
         k += w
     calibrated = StereoRig(cameras[0], cameras[1], port)
     return HousingCalibration(rig=calibrated, estimates=estimates, sigmas=sigmas,
-                              correlation=correlation, identifiable=True, reason="", **base)
+                              correlation=correlation, identifiable=True, reason="",
+                              covariance=rig_cov, sigmas_conditional=conditional,
+                              uncertainty=("dome" if rig.is_dome else uncertainty if air
+                                           else "conditional"), **base)
+
+
+def _air_parameters(covariance: RigCovariance | None, names) -> tuple:
+    """The in-air parameters whose uncertainty enters the housing: the intrinsics in
+    ``covariance`` and — unless the housing frees the extrinsics — the right camera's pose."""
+    if covariance is None:
+        return ()
+    have = set(covariance.names)
+    return tuple(n for n in AIR_NAMES if n in have
+                 and not ("extrinsics" in names and n in POSE_NAMES))
+
+
+def _sub_covariance(covariance: RigCovariance, names) -> np.ndarray:
+    where = [covariance.names.index(n) for n in names]
+    return covariance.matrix[np.ix_(where, where)]
+
+
+def _rig_parameters(names, x, basis, start_normal, port, n_global):
+    """The housing's free numbers as :mod:`measure.rig_covariance` names, the ``(g, g)``
+    Jacobian of those parameters with respect to the free numbers at ``x``, and the tilt axes
+    (⟂ the estimated normal; None without a free normal)."""
+    out, T, axes, k = [], np.zeros((n_global, n_global)), None, 0
+    for name in names:
+        if name == "distance":
+            out.append("port.distance")
+            T[k, k] = 1.0
+        elif name == "normal":  # n = m/|m|, m = n0 + a e0 + b e1; new tilts about axes ⟂ n
+            m = start_normal + basis[0] * x[k] + basis[1] * x[k + 1]
+            length = np.linalg.norm(m)
+            n = m / length
+            axes = np.array(tilt_basis(n))
+            T[k:k + 2, k:k + 2] = axes @ (np.eye(3) - np.outer(n, n)) @ np.array(basis).T / length
+            out += ["port.tilt[0]", "port.tilt[1]"]
+        elif name == "thickness":
+            out.append("port.thickness[0]")
+            T[k, k] = 1.0
+        elif name == "n_water":
+            out.append(f"port.index[{len(port.indices) - 1}]")
+            T[k, k] = 1.0
+        else:  # R = exp(ω) R0: φ = J_l(ω) δω; the centre t = t0 + δt
+            out += [f"right.rotation[{i}]" for i in range(3)]
+            out += [f"right.center[{i}]" for i in range(3)]
+            T[k:k + 3, k:k + 3] = left_jacobian(x[k:k + 3])
+            T[k + 3:k + 6, k + 3:k + 6] = np.eye(3)
+        k += HOUSING_PARAMETERS[name]
+    return tuple(out), T, axes
+
+
+def apply_air_change(rig: StereoRig, air, delta) -> StereoRig:
+    """``rig`` with the in-air parameters ``air`` moved by ``delta`` (px, unitless, rad: the
+    right camera's ``R → exp([φ]×) R``, mm: its centre)."""
+    change = dict(zip(air, np.asarray(delta, dtype=np.float64)))
+    cameras = []
+    for name, camera in (("left", rig.left), ("right", rig.right)):
+        K, dist = camera.K.copy(), np.zeros(5)
+        if camera.dist is not None:
+            dist[:min(5, camera.dist.size)] = camera.dist[:5]
+        for (i, j), p in zip(((0, 0), (1, 1), (0, 2), (1, 2)), AIR_INTRINSICS[:4]):
+            K[i, j] += change.get(f"{name}.{p}", 0.0)
+        for i, p in enumerate(AIR_INTRINSICS[4:]):
+            dist[i] += change.get(f"{name}.{p}", 0.0)
+        R, t = camera.R, camera.t
+        if name == "right":
+            phi = [change.get(f"right.rotation[{i}]", 0.0) for i in range(3)]
+            R = Rotation.from_rotvec(phi).as_matrix() @ R
+            t = t + np.array([change.get(f"right.center[{i}]", 0.0) for i in range(3)])
+        cameras.append(Camera(K, camera.size, dist if np.any(dist) else None, R, t))
+    return StereoRig(cameras[0], cameras[1], rig.port)
+
+
+#: Gauss-Newton iterations of the prior fit, and its stop: every step below this many σ.
+PRIOR_ITERATIONS, PRIOR_STEP_SIGMA = 8, 1e-4
+
+
+def _prior_fit(rig, board, detections, names, x, s2, air, sigma_air):
+    """The housing with the in-air parameters ``air`` free under their in-air prior: the rows
+    ``s·L(θ − θ_air)`` (``LᵀL = Σ_air⁻¹``, ``s²`` the corners' variance of the conditional fit)
+    beside the corners' residuals; Gauss-Newton from the conditional solution ``x``. Returns
+    the rig with the refined in-air parameters, the housing unknowns and the joint covariance
+    ``s²(AᵀA)⁻¹`` ordered (in-air parameters, housing unknowns)."""
+    L = np.linalg.inv(np.linalg.cholesky(sigma_air))
+    s = np.sqrt(s2)
+    delta, a = np.zeros(len(air)), len(air)
+    for _ in range(PRIOR_ITERATIONS + 1):
+        moved = apply_air_change(rig, air, delta)
+        problem = housing_problem(moved, board, detections, names)
+        if problem.x0.size != x.size:  # solvePnP found another set of usable poses
+            raise CalibrationError("the prior fit lost a board pose when the intrinsics moved; "
+                                   "use --air-uncertainty propagate")
+        J = problem.jacobian(x)
+        J = J.toarray() if hasattr(J, "toarray") else np.asarray(J)
+        A = np.block([[J, problem.air_jacobian(x, air)],
+                      [np.zeros((a, J.shape[1])), s * L]])
+        b = np.concatenate([problem.residuals(x), s * L @ delta])
+        AtA = A.T @ A
+        step = -np.linalg.solve(AtA, A.T @ b)
+        sig = np.sqrt(s2 * np.diag(np.linalg.inv(AtA)))
+        if np.max(np.abs(step) / sig) < PRIOR_STEP_SIGMA:
+            break
+        x = x + step[:J.shape[1]]
+        delta = delta + step[J.shape[1]:]
+    cov = s2 * np.linalg.inv(AtA)
+    order = np.r_[J.shape[1]:J.shape[1] + a, 0:J.shape[1]]
+    return moved, x, cov[np.ix_(order, order)]
 
 
 def _offset(names, name, table=None) -> int:
@@ -626,6 +824,7 @@ def usable_index(usable, pose_idx) -> np.ndarray:
 
 
 __all__ = ["AirCalibration", "CalibrationError", "DEFAULT_DOME_FREE", "DEFAULT_FREE",
-           "DOME_PARAMETERS", "Detections", "HOUSING_PARAMETERS", "HousingCalibration",
-           "MIN_POSES", "calibrate_housing", "calibrate_in_air", "detect_boards", "dome_offset",
+           "DEFAULT_UNCERTAINTY", "DOME_PARAMETERS", "Detections", "HOUSING_PARAMETERS",
+           "HousingCalibration", "MIN_POSES", "UNCERTAINTY", "apply_air_change",
+           "calibrate_housing", "calibrate_in_air", "detect_boards", "dome_offset",
            "dome_problem", "housing_problem"]

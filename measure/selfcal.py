@@ -10,7 +10,13 @@ the travel time's stationarity, no finite differences) in its sparse block-arrow
 point touches only its own 4 residuals, each port parameter touches all of them.
 
 Uncertainty: the covariance of the parameters is ``s² (JᵀJ)⁻¹`` restricted to them, with
-``s² = Σr² / (m − n)`` (m residuals, n unknowns). A parameter is reported as *not identifiable*
+``s² = Σr² / (m − n)`` (m residuals, n unknowns). With the rig's covariance
+(``rig_covariance``, a calibration's :class:`measure.rig_covariance.RigCovariance`) the fixed
+parameters' uncertainty is propagated as in the housing calibration: ``+ G Σ_fixed Gᵀ`` with
+``G = S⁻¹ J̃ᵀ J_fixed`` (S the Schur complement below, J̃ the parameter columns with the points
+projected out, ``J_fixed`` d residuals / d the rig parameters held: intrinsics, the right
+camera's pose, the port parameters not estimated); the estimated ones' earlier uncertainty
+does not enter (the data estimate them afresh). A parameter is reported as *not identifiable*
 (no number) when the normal equations are singular for it: the smallest singular value of the
 column-scaled Jacobian, relative to the largest, is below :data:`IDENTIFIABILITY_LIMIT`, or a
 correlation between free parameters reaches :data:`CORRELATION_LIMIT`.
@@ -20,7 +26,7 @@ Units: mm, pixels (OpenCV convention), the reference frame is the left camera's.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.optimize import least_squares
@@ -47,7 +53,9 @@ class SelfCalibration:
     ``labels``); ``rig`` the refined rig; ``points`` ``(N, 3)`` the reprojection-optimal points
     (mm); ``rms_px`` the reprojection RMS after, ``rms_px_before`` before; ``converged``;
     ``identifiable`` False with ``reason`` when the data do not determine the parameters (then
-    ``estimates`` and ``sigmas`` are empty and ``rig`` is the starting rig)."""
+    ``estimates`` and ``sigmas`` are empty and ``rig`` is the starting rig);
+    ``sigmas_conditional`` the σ with the rest of the rig taken as exact and ``propagated`` the
+    names of the rig parameters whose covariance is in ``sigmas`` (empty: none given)."""
 
     estimates: dict
     sigmas: dict
@@ -62,6 +70,8 @@ class SelfCalibration:
     reason: str
     n_points: int
     message: str
+    sigmas_conditional: dict = field(default_factory=dict)
+    propagated: tuple = ()
 
 
 def tilt_basis(normal):
@@ -141,10 +151,11 @@ def refinement_jacobian(rig, port0, names, basis, x):
 
 
 def self_calibrate(rig: StereoRig, uv_left, uv_right, parameters=("n_water",),
-                   points=None) -> SelfCalibration:
+                   points=None, rig_covariance=None) -> SelfCalibration:
     """Estimate ``parameters`` (names of :data:`PARAMETERS`) of ``rig.port`` from matched pixels
     ``(N, 2)`` of unknown points. ``points`` ``(N, 3)`` start values (default: the optical-path
-    triangulation with ``rig``). Raises ``ValueError`` for an unknown parameter or fewer
+    triangulation with ``rig``); ``rig_covariance`` the calibration's covariance, propagated
+    into σ (module docs). Raises ``ValueError`` for an unknown parameter or fewer
     targets than free numbers."""
     if rig.is_dome:
         raise ValueError("self-calibration estimates flat-port parameters; a rig of two domes "
@@ -206,13 +217,23 @@ def self_calibrate(rig: StereoRig, uv_left, uv_right, parameters=("n_water",),
     covariance = s2 * np.linalg.inv(schur)
     sig = np.sqrt(np.diag(covariance))
     correlation = covariance / np.outer(sig, sig)
+    sig_conditional, fixed = sig, ()
+    if rig_covariance is not None:
+        port = _port_from(port0, names, fit.x[:n_free], basis)
+        fixed = tuple(n for n in rig_covariance.names if n not in _estimated(names, port))
+        if fixed:
+            where = [rig_covariance.names.index(n) for n in fixed]
+            sigma_fixed = rig_covariance.matrix[np.ix_(where, where)]
+            G = _influence(fit.jac, n, n_free, schur) @ _fixed_jacobian(
+                rig, port, fit.x[n_free:].reshape(n, 3), fixed, rig_covariance.normal_axes)
+            sig = np.sqrt(np.diag(covariance + G @ sigma_fixed @ G.T))
     off = np.abs(correlation - np.eye(n_free))
     refined = StereoRig(rig.left, rig.right, _port_from(port0, names, fit.x[:n_free], basis))
     if n_free > 1 and off.max() >= CORRELATION_LIMIT:
         return SelfCalibration({}, {}, correlation, rig=rig, identifiable=False,
                                reason=f"free parameters are correlated at {off.max():.4f}: the "
                                       f"data cannot tell them apart", **base)
-    estimates, sigmas, k = {}, {}, 0
+    estimates, sigmas, conditional, k = {}, {}, {}, 0
     for name in names:
         if name == "n_water":
             estimates[name], sigmas[name] = refined.port.n_water, float(sig[k])
@@ -220,9 +241,72 @@ def self_calibrate(rig: StereoRig, uv_left, uv_right, parameters=("n_water",),
             estimates[name], sigmas[name] = refined.port.distance, float(sig[k])
         else:
             estimates[name], sigmas[name] = refined.port.normal.tolist(), sig[k:k + 2].tolist()
-        k += PARAMETERS[name]
+        w = PARAMETERS[name]
+        conditional[name] = (float(sig_conditional[k]) if w == 1
+                             else sig_conditional[k:k + w].tolist())
+        k += w
     return SelfCalibration(estimates, sigmas, correlation, rig=refined, identifiable=True,
-                           reason="", **base)
+                           reason="", sigmas_conditional=conditional, propagated=fixed, **base)
+
+
+def _estimated(names, port) -> set:
+    """The :mod:`measure.rig_covariance` names of the parameters the refinement estimates."""
+    out = set()
+    for name in names:
+        out |= {"n_water": {f"port.index[{len(port.indices) - 1}]"},
+                "port_distance": {"port.distance"},
+                "port_normal": {"port.tilt[0]", "port.tilt[1]"}}[name]
+    return out
+
+
+def _influence(jacobian, n: int, n_free: int, schur) -> np.ndarray:
+    """``(n_free, 4n)``: the free parameters' rows of ``(JᵀJ)⁻¹Jᵀ`` — ``S⁻¹ J̃ᵀ`` with
+    ``J̃ᵢ = Jp,ᵢ − Jx,ᵢ Aᵢ⁻¹ Bᵢ`` per point (the block-arrow's points eliminated)."""
+    J = jacobian.tocsr() if hasattr(jacobian, "tocsr") else np.asarray(jacobian)
+    rows = np.arange(4 * n)
+    cols = n_free + 3 * (rows // 4)[:, None] + np.arange(3)
+    if hasattr(J, "tocsr"):
+        Jp = J[:, :n_free].toarray()
+        Jx = np.asarray(J[np.repeat(rows, 3), cols.ravel()]).reshape(n, 4, 3)
+    else:
+        Jp = J[:, :n_free]
+        Jx = J[rows[:, None], cols].reshape(n, 4, 3)
+    Jp_i = Jp.reshape(n, 4, n_free)
+    A = np.einsum("nki,nkj->nij", Jx, Jx)
+    B = np.einsum("nki,nkj->nij", Jx, Jp_i)
+    projected = Jp_i - np.einsum("nki,nij->nkj", Jx, np.linalg.solve(A, B))
+    return np.linalg.solve(schur, projected.reshape(4 * n, n_free).T)
+
+
+def _fixed_jacobian(rig, port, points, fixed, normal_axes) -> np.ndarray:
+    """``(4N, F)``: d residuals (u_left, v_left, u_right, v_right per point) / d the rig
+    parameters ``fixed`` (:mod:`measure.rig_covariance` names) at the solution."""
+    from .calibration_covariance import AIR_INTRINSICS, intrinsics_jacobian
+
+    predicted, _, views = stereo_projections(rig, port, points, True)
+    n = len(points)
+    out = np.zeros((n, 4, len(fixed)))
+    for v, (camera, jac) in enumerate(zip(rig.cameras, views)):
+        rows = slice(2 * v, 2 * v + 2)
+        cam = ("left", "right")[v]
+        d_int = intrinsics_jacobian(camera, predicted[:, rows])
+        for j, name in enumerate(fixed):
+            group, _, item = name.partition(".")
+            key, _, index = item.partition("[")
+            k = int(index[:-1]) if index else None
+            if group == cam and key in AIR_INTRINSICS:
+                out[:, rows, j] = d_int[:, :, AIR_INTRINSICS.index(key)]
+            elif group == "right" and v == 1 and key in ("rotation", "center"):
+                out[:, rows, j] = getattr(jac, key)[..., k]
+            elif name == "port.distance":
+                out[:, rows, j] = jac.distance
+            elif key == "tilt":
+                out[:, rows, j] = jac.normal @ np.asarray(normal_axes)[k]
+            elif key == "thickness":
+                out[:, rows, j] = jac.thicknesses[..., k]
+            elif key == "index":
+                out[:, rows, j] = jac.indices[..., k]
+    return np.where(np.isfinite(out), out, 0.0).reshape(4 * n, len(fixed))
 
 
 __all__ = ["PARAMETERS", "SelfCalibration", "refinement_jacobian", "refinement_residuals",

@@ -33,7 +33,7 @@ from synth.cli import (BOARD_OPTIONS, WATER_INDEX_HELP, add_board_options, add_o
 COMMAND = "eval calibrate"
 #: Options of the housing calibration (underwater boards): refused with in-air boards.
 HOUSING_OPTIONS = ("free", "design_port", "start_distance", "glass_thickness", "n_glass",
-                   "n_water")
+                   "n_water", "air_uncertainty")
 #: What the printed summary says of ``cameras.txt`` (its header says it too).
 COLMAP_NOTE = "upstream COLMAP and pycolmap read it without an error and drop the port"
 #: ``--design-port`` keys and the single option each one stands for.
@@ -42,8 +42,8 @@ DESIGN_KEYS = {"distance": "start_distance", "thickness": "glass_thickness", "n_
 
 
 def add_parser(subparsers):
-    from measure.calibration import (DEFAULT_DOME_FREE, DEFAULT_FREE, DOME_PARAMETERS,
-                                     HOUSING_PARAMETERS)
+    from measure.calibration import (DEFAULT_DOME_FREE, DEFAULT_FREE, DEFAULT_UNCERTAINTY,
+                                     DOME_PARAMETERS, HOUSING_PARAMETERS, UNCERTAINTY)
     from synth.rig import PAPER_GLASS_THICKNESS_MM, PAPER_INDICES, PAPER_PORT_DISTANCE_MM
 
     p = subparsers.add_parser(
@@ -67,6 +67,12 @@ def add_parser(subparsers):
                         f"{', '.join(HOUSING_PARAMETERS)} (default {','.join(DEFAULT_FREE)}); "
                         f"behind domes: {', '.join(DOME_PARAMETERS)} (default "
                         f"{','.join(DEFAULT_DOME_FREE)}: each camera's decentring)")
+    p.add_argument("--air-uncertainty", choices=UNCERTAINTY, default=DEFAULT_UNCERTAINTY,
+                   help=f"how the in-air calibration's covariance (--intrinsics: its calib.yaml's "
+                        f"covariance node) enters the housing's σ: propagate (intrinsics and "
+                        f"stereo pose held, their covariance propagated) or prior (freed, the "
+                        f"in-air result as a prior); default {DEFAULT_UNCERTAINTY} "
+                        f"(docs/calibration.md says why)")
     p.add_argument("--start-distance", type=positive_float, default=PAPER_PORT_DISTANCE_MM,
                    help=f"starting port distance D, mm (the design value; default "
                         f"{PAPER_PORT_DISTANCE_MM:g})")
@@ -106,16 +112,20 @@ def _write_report(directory, report: dict, markdown, start: float) -> dict:
     return report
 
 
-def _write_calibrations(directory, rig, housing, report: dict, start_rig) -> None:
+def _write_calibrations(directory, rig, housing, report: dict, start_rig,
+                        air_covariance=None) -> None:
     """The calibration files (:func:`eval.calibrate.report.write_calibration`) into
     ``directory``; underwater (``start_rig`` given: the in-air cameras with the design port)
-    also ``calib_in_air_only.yaml``."""
+    also ``calib_in_air_only.yaml`` (with the in-air covariance, the port exact).
+    ``air_covariance``: the in-air calibration's (in air: written to calib.yaml)."""
     from eval.calibrate import report as report_lib
 
-    report_lib.write_calibration(directory, rig, start_rig is not None, housing, report)
+    report_lib.write_calibration(directory, rig, start_rig is not None, housing, report,
+                                 covariance=air_covariance if housing is None else None)
     if housing is not None:
         report_lib.write_calibration(os.path.join(directory, "calib_in_air_only.yaml"),
-                                     start_rig, True, None, None, single=True)
+                                     start_rig, True, None, None, single=True,
+                                     covariance=air_covariance)
 
 
 def _written(output, summary: str, args, has_port: bool) -> int:
@@ -197,7 +207,9 @@ def design_domes(args, rig):
 
 
 def _in_air(path, log):
-    """``(rig, air_summary or None)`` from ``--intrinsics``: a boards folder or a calib.yaml."""
+    """``(rig, air calibration or None, boards or None, covariance or None)`` from
+    ``--intrinsics``: a boards folder (calibrated here) or a calibration file (its covariance
+    node, when it has one)."""
     from measure.calibration import calibrate_in_air, detect_boards
     from synth.boards import read_boards
     from synth.dataset import read_calib
@@ -210,8 +222,9 @@ def _in_air(path, log):
         log(f"detect the boards in {path} and calibrate in air (OpenCV) …")
         detections = detect_boards(boards.board, boards.images)
         air = calibrate_in_air(boards.board, detections, boards.calib["size"])
-        return air.rig, air, boards
-    return read_calib(path)["rig"], None, None
+        return air.rig, air, boards, air.covariance
+    calib = read_calib(path)
+    return calib["rig"], None, None, calib.get("covariance")
 
 
 def main(args) -> int:
@@ -286,13 +299,13 @@ def main(args) -> int:
         t = time.perf_counter()
         air = calibrate_in_air(boards.board, detections, boards.calib["size"])
         timings["calibrate"] = time.perf_counter() - t
-        rig = air.rig
+        rig, air_covariance = air.rig, air.covariance
         report["in_air"] = report_lib.air_summary(air, truth)
         housing = None
     else:
         t = time.perf_counter()
         _refuse_calibration_folder(args.intrinsics)
-        air_rig, air, air_boards = _in_air(args.intrinsics, log)
+        air_rig, air, air_boards, air_covariance = _in_air(args.intrinsics, log)
         timings["calibrate_in_air"] = time.perf_counter() - t
         if tuple(air_rig.left.size) != tuple(boards.calib["size"]):
             raise CLIError(f"--intrinsics {args.intrinsics}: image size "
@@ -311,7 +324,8 @@ def main(args) -> int:
         log(f"refractive bundle adjustment of {', '.join(free)} over "
             f"{len(detections.found(0))} + {len(detections.found(1))} board views …")
         t = time.perf_counter()
-        housing = calibrate_housing(start_rig, boards.board, detections, free)
+        housing = calibrate_housing(start_rig, boards.board, detections, free, air_covariance,
+                                    args.air_uncertainty)
         timings["bundle_adjustment"] = time.perf_counter() - t
         if not housing.identifiable:
             raise CLIError(f"{args.dir}: {housing.reason}; nothing written (free fewer "
@@ -323,7 +337,8 @@ def main(args) -> int:
     report["timings_s"] = timings
     log("write the calibration, report and figures …")
     with output.staged() as tmp:
-        _write_calibrations(tmp, rig, housing, report, None if boards.air else start_rig)
+        _write_calibrations(tmp, rig, housing, report, None if boards.air else start_rig,
+                            air_covariance)
         report_lib.figures(tmp, boards, detections, housing, rig)
         report = _write_report(tmp, report, report_lib.markdown, start)
     return _written(output, report_lib.summary_lines(report), args, housing is not None)
@@ -380,9 +395,9 @@ def _calibrate_photos(args, output, log, free, start) -> int:
     if not args.air:
         design_port(args, (0.0, 0.0, 1.0))  # a bad --design-port is refused before any work
     pairs = photo_folder(args.dir)
-    air_rig = None
+    air_rig = air_covariance = None
     if not args.air:
-        air_rig = _intrinsics_for_photos(args.intrinsics, log)
+        air_rig, air_covariance = _intrinsics_for_photos(args.intrinsics, log)
     log(f"read {len(pairs.names)} photo pairs from {args.dir} …")
     t = time.perf_counter()
     images, size = read_pairs(pairs, args.encoding)
@@ -417,6 +432,7 @@ def _calibrate_photos(args, output, log, free, start) -> int:
         log("calibrate in air (OpenCV calibrateCamera, stereoCalibrate) …")
         result, used_detections, outliers = fit(lambda d: calibrate_in_air(board, d, size))
         rig, housing, rms_per = result.rig, None, result.rms_px_per
+        air_covariance = result.covariance
         poses = {k: result.board_poses.get((k, 0), pose)  # the left camera's where it has one
                  for (k, _), pose in result.board_poses.items()}
         timings["calibrate"] = time.perf_counter() - t
@@ -425,7 +441,8 @@ def _calibrate_photos(args, output, log, free, start) -> int:
         start_rig = StereoRig(air_rig.left, air_rig.right, design)
         log(f"refractive bundle adjustment of {', '.join(free)} …")
         result, used_detections, outliers = fit(
-            lambda d: calibrate_housing(start_rig, board, d, free))
+            lambda d: calibrate_housing(start_rig, board, d, free, air_covariance,
+                                        args.air_uncertainty))
         housing = result
         timings["bundle_adjustment"] = time.perf_counter() - t
         if not housing.identifiable:
@@ -452,12 +469,13 @@ def _calibrate_photos(args, output, log, free, start) -> int:
         report["in_air"] = trust.air_estimates(result, used)
     else:
         report["housing"] = trust.housing_estimates(housing, start_rig)
-        report["sigma_note"] = report_lib.SIGMA_NOTE_PHOTOS
+        report["sigma_note"] = report_lib.sigma_note(housing.uncertainty)
     report["warnings"] = trust.warnings_for(report)
     report["timings_s"] = timings
     log("write the calibration, report and figures …")
     with output.staged() as tmp:
-        _write_calibrations(tmp, rig, housing, report, None if args.air else start_rig)
+        _write_calibrations(tmp, rig, housing, report, None if args.air else start_rig,
+                            air_covariance)
         if housing is not None:
             report_lib.residual_figure(tmp, used_detections, housing, size)
         trust.coverage_figure(tmp, detections, set(used), size, report)
@@ -466,13 +484,14 @@ def _calibrate_photos(args, output, log, free, start) -> int:
 
 
 def _intrinsics_for_photos(path, log):
-    """The in-air rig of ``--intrinsics`` for underwater photos: a calib.yaml, or an in-air
-    boards folder (calibrated here)."""
+    """The in-air rig of ``--intrinsics`` for underwater photos and its covariance (or None): a
+    calib.yaml, or an in-air boards folder (calibrated here)."""
     if os.path.isdir(path) and is_photo_folder(path):
         raise CLIError(f"--intrinsics {path}: a photo folder; calibrate it first (python -m eval "
                        f"calibrate {path} --air …) and give its calib.yaml")
     _refuse_calibration_folder(path)
-    return _in_air(path, log)[0]
+    rig, _, _, covariance = _in_air(path, log)
+    return rig, covariance
 
 
 def _refuse_calibration_folder(path) -> None:

@@ -220,6 +220,9 @@ def housing_estimates(housing, start_rig) -> dict:
                                        "t": housing.rig.right.t.tolist(),
                                        "sigma_rotation_deg": np.degrees(sigma[:3]).tolist(),
                                        "sigma_position_mm": list(sigma[3:])}
+    for name, p in out["parameters"].items():  # σ with the in-air calibration taken as exact
+        p["sigma_conditional"] = housing.sigmas_conditional.get(name)
+    out["uncertainty"] = housing.uncertainty
     out["start"] = {"distance": start_rig.port.distance,
                     "thickness": list(start_rig.port.thicknesses),
                     "indices": list(start_rig.port.indices)}

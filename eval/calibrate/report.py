@@ -66,13 +66,33 @@ def air_summary(air, truth) -> dict:
         for key in ("fx", "fy"):
             cam[key]["error_percent"] = 100 * cam[key]["error"] / cam[key]["truth"]
         cam["dist"] = None if est.dist is None else est.dist.tolist()
+        cam["dist_sigma"] = {key: sig.get(key) for key in ("k1", "k2", "p1", "p2")}
         out["cameras"][name] = cam
     baseline = np.linalg.norm(air.rig.right.t - air.rig.left.t)
     true_baseline = np.linalg.norm(truth.right.t - truth.left.t)
     out["baseline_mm"] = _with_sigma(baseline, true_baseline, None)
     out["right_rotation_error_deg"] = _rotation_deg(air.rig.right.R, truth.right.R)
     out["right_position_error_mm"] = float(np.linalg.norm(air.rig.right.t - truth.right.t))
+    out.update(stereo_sigmas(air))
+    out["right_position_error_in_sigma"] = [
+        float(e / s) for e, s in zip(air.rig.right.t - truth.right.t,
+                                     out["right_center_sigma_mm"])]
     return out
+
+
+def stereo_sigmas(air) -> dict:
+    """The stereo pose's σ from the in-air covariance: the right camera's centre (mm, reference
+    axes), its rotation (degrees, about reference axes) and the baseline (mm)."""
+    cov = air.covariance
+    where = [cov.names.index(f"right.center[{k}]") for k in range(3)]
+    centre = cov.matrix[np.ix_(where, where)]
+    direction = (air.rig.right.t - air.rig.left.t)
+    direction = direction / np.linalg.norm(direction)
+    sig = cov.sigmas
+    return {"right_center_sigma_mm": np.sqrt(np.diag(centre)).tolist(),
+            "right_rotation_sigma_deg": [float(np.degrees(sig[f"right.rotation[{k}]"]))
+                                         for k in range(3)],
+            "baseline_sigma_mm": float(np.sqrt(direction @ centre @ direction))}
 
 
 def housing_summary(housing, truth, start_rig) -> dict:
@@ -84,16 +104,19 @@ def housing_summary(housing, truth, start_rig) -> dict:
                                     for (k, v), r in sorted(housing.rms_px_per.items())},
            "observations": housing.n_observations, "poses_used": list(housing.pose_ids),
            "evaluations": housing.nfev, "parameters": {}}
+    out["uncertainty"] = housing.uncertainty
     est, tru = housing.rig.port, truth.port
     params = out["parameters"]
     for name in housing.estimates:
         sigma = housing.sigmas[name]
-        if name == "distance":
-            params[name] = _with_sigma(est.distance, tru.distance, sigma)
-        elif name == "thickness":
-            params[name] = _with_sigma(est.thicknesses[0], tru.thicknesses[0], sigma)
-        elif name == "n_water":
-            params[name] = _with_sigma(est.n_water, tru.n_water, sigma)
+        conditional = housing.sigmas_conditional.get(name, sigma)
+        if name in ("distance", "thickness", "n_water"):
+            value, true = {"distance": (est.distance, tru.distance),
+                           "thickness": (est.thicknesses[0], tru.thicknesses[0]),
+                           "n_water": (est.n_water, tru.n_water)}[name]
+            params[name] = _with_sigma(value, true, sigma)
+            params[name]["sigma_conditional"] = float(conditional)
+            params[name]["error_in_sigma_conditional"] = (value - true) / conditional
         elif name == "normal":
             a, b = (np.asarray(v) for v in housing.normal_axes)
             tilt_error = [float((est.normal - tru.normal) @ a), float((est.normal - tru.normal) @ b)]
@@ -101,7 +124,10 @@ def housing_summary(housing, truth, start_rig) -> dict:
             params[name] = {"estimate": est.normal.tolist(), "truth": tru.normal.tolist(),
                             "error_deg": angle, "sigma_deg": np.degrees(sigma).tolist(),
                             "tilt_error_rad": tilt_error,
-                            "error_in_sigma": [e / s for e, s in zip(tilt_error, sigma)]}
+                            "error_in_sigma": [e / s for e, s in zip(tilt_error, sigma)],
+                            "sigma_conditional_deg": np.degrees(conditional).tolist(),
+                            "error_in_sigma_conditional": [e / s for e, s in
+                                                           zip(tilt_error, conditional)]}
         elif name == "extrinsics":
             R, t = housing.rig.right.R, housing.rig.right.t
             params[name] = {"rotation_error_deg": _rotation_deg(R, truth.right.R),
@@ -109,7 +135,10 @@ def housing_summary(housing, truth, start_rig) -> dict:
                             "sigma_rotation_deg": np.degrees(sigma[:3]).tolist(),
                             "sigma_position_mm": list(sigma[3:]),
                             "error_in_sigma": [float(e / s) for e, s in
-                                               zip(t - truth.right.t, sigma[3:])]}
+                                               zip(t - truth.right.t, sigma[3:])],
+                            "sigma_conditional": list(conditional)}
+    if housing.uncertainty == "prior":  # the in-air parameters the underwater boards refined
+        out["in_air_refined"] = in_air_changes(housing, start_rig)
     out["start"] = {"distance": start_rig.port.distance, "normal": start_rig.port.normal.tolist(),
                     "thickness": list(start_rig.port.thicknesses),
                     "indices": list(start_rig.port.indices)}
@@ -153,22 +182,65 @@ def dome_summary(housing, truth, start_rig) -> dict:
     return out
 
 
-def write_calibration(path, rig, has_port: bool, housing, report, single: bool = False) -> None:
-    """``calib.yaml`` (with an ``uncertainty`` map for the housing) and ``flatport.txt`` into
-    directory ``path``; with ``single`` just the calib file at ``path``."""
+def in_air_changes(housing, start_rig) -> dict:
+    """``{name: {"change", "sigma"}}``: how far the prior fit moved each in-air parameter of the
+    covariance from its in-air value (px, unitless, rad about reference axes, mm) and its σ."""
+    from scipy.spatial.transform import Rotation
+
+    out, sig = {}, housing.covariance.sigmas
+    for name in housing.covariance.names:
+        cam, _, key = name.partition(".")
+        if cam not in ("left", "right") or key.startswith(("rotation", "center")):
+            continue
+        new, old = getattr(housing.rig, cam), getattr(start_rig, cam)
+        if key in ("fx", "fy", "cx", "cy"):
+            i, j = {"fx": (0, 0), "fy": (1, 1), "cx": (0, 2), "cy": (1, 2)}[key]
+            change = new.K[i, j] - old.K[i, j]
+        else:
+            k = ("k1", "k2", "p1", "p2").index(key)
+            change = (0.0 if new.dist is None else new.dist[k]) - (
+                0.0 if old.dist is None else old.dist[k])
+        out[name] = {"change": float(change), "sigma": sig[name]}
+    if "right.rotation[0]" in sig and "extrinsics" not in housing.estimates:
+        phi = Rotation.from_matrix(housing.rig.right.R @ start_rig.right.R.T).as_rotvec()
+        for k in range(3):
+            out[f"right.rotation[{k}]"] = {"change": float(phi[k]),
+                                           "sigma": sig[f"right.rotation[{k}]"]}
+            out[f"right.center[{k}]"] = {
+                "change": float(housing.rig.right.t[k] - start_rig.right.t[k]),
+                "sigma": sig[f"right.center[{k}]"]}
+    return out
+
+
+def write_calibration(path, rig, has_port: bool, housing, report, single: bool = False,
+                      covariance=None) -> None:
+    """``calib.yaml`` and ``flatport.txt`` into directory ``path``; with ``single`` just the
+    calib file at ``path``. ``covariance`` (:class:`measure.rig_covariance.RigCovariance`; the
+    housing's own when ``housing`` is given) becomes the file's ``covariance`` node and an
+    ``uncertainty`` map: every named parameter's σ (``names``, ``sigmas``), what the σ covers
+    (``includes``) and, underwater, the housing's σ conditional on the in-air calibration."""
     from measure.flatport_format import flatport_text
     from synth.dataset import write_calib
     from synth.fileio import atomic_write_text
 
-    extra = None
     if housing is not None:
-        extra = {"uncertainty": {"labels": list(housing.labels),
-                                 "sigmas": [float(s) for s in np.concatenate(
-                                     [np.atleast_1d(housing.sigmas[n]) for n in housing.sigmas])],
-                                 "units": "mm, rad (normal tilts, rotation vector), index units"},
-                 "calibration": {"rms_px": housing.rms_px, "poses": len(housing.poses)}}
+        covariance = housing.covariance
+    extra = {}
+    if covariance is not None:
+        extra["uncertainty"] = {
+            "names": list(covariance.names),
+            "sigmas": [float(s) for s in covariance.sigmas.values()],
+            "units": "px (intrinsics), unitless (distortion), rad (rotation, port tilts), mm "
+                     "(centre, distance, thickness), index units",
+            "includes": SIGMA_INCLUDES[housing.uncertainty if housing is not None else "air"]}
+    if housing is not None:
+        extra.setdefault("uncertainty", {"includes": SIGMA_INCLUDES["dome"]})
+        extra["uncertainty"]["housing_labels"] = list(housing.labels)
+        extra["uncertainty"]["housing_sigmas_conditional"] = [float(s) for s in np.concatenate(
+            [np.atleast_1d(housing.sigmas_conditional[n]) for n in housing.sigmas_conditional])]
+        extra["calibration"] = {"rms_px": housing.rms_px, "poses": len(housing.poses)}
     target = path if single else os.path.join(path, "calib.yaml")
-    write_calib(target, rig, has_port, extra)
+    write_calib(target, rig, has_port, extra or None, covariance=covariance)
     if not single and has_port and not rig.is_dome:  # a dome rig: DOMEPORT in cameras.txt
         atomic_write_text(os.path.join(path, "flatport.txt"),
                           flatport_text(rig.port, {"left": rig.left, "right": rig.right}))
@@ -306,36 +378,56 @@ def markdown(report: dict) -> str:
                 v = values[key]
                 lines.append(f"| {cam} | {key} (px) | {v['estimate']:.4f} | {v['truth']:.4f} | "
                              f"{v['error']:+.4f} | {_f(v['sigma'])} | {_f(v['error_in_sigma'], 3)} |")
+        for cam, values in a["cameras"].items():
+            if values.get("dist_sigma"):
+                lines.append(f"| {cam} | k1 k2 p1 p2 | {_f(values['dist'][:4] if values['dist'] else None)} "
+                             f"| – | – | {_f(list(values['dist_sigma'].values()), 3)} | – |")
         b = a["baseline_mm"]
         lines += ["", f"Baseline {b['estimate']:.4f} mm (truth {b['truth']:.4f}, error "
-                  f"{b['error']:+.4f} mm); right camera rotation error "
-                  f"{a['right_rotation_error_deg']:.5f}°, position error "
-                  f"{a['right_position_error_mm']:.4f} mm."]
+                  f"{b['error']:+.4f} mm, σ {_f(a.get('baseline_sigma_mm'), 3)} mm); right "
+                  f"camera rotation error {a['right_rotation_error_deg']:.5f}° (σ "
+                  f"{_f(a.get('right_rotation_sigma_deg'), 3)}° about x, y, z), position error "
+                  f"{a['right_position_error_mm']:.4f} mm (σ "
+                  f"{_f(a.get('right_center_sigma_mm'), 3)} mm; error / σ "
+                  f"{_f(a.get('right_position_error_in_sigma'), 3)}). Every correlation "
+                  f"is in calib.yaml's `covariance`."]
     if "housing" in report:
         hs = report["housing"]
         lines += ["", "## Housing calibration (refractive bundle adjustment)", "",
                   f"Free: {', '.join(hs['free'])}; {hs['observations']} corner observations in "
                   f"{len(hs['poses_used'])} poses; reprojection RMS {hs['rms_px_start']:.3f} px "
                   f"at the start, {hs['rms_px']:.4f} px after ({hs['evaluations']} evaluations).",
-                  "", SIGMA_NOTE, "", "| parameter | estimate | truth | error | σ | error / σ |",
-                  "|---|---|---|---|---|---|"]
+                  "", sigma_note(hs.get("uncertainty", "conditional")), "",
+                  "| parameter | estimate | truth | error | σ | error / σ | σ (conditional) |",
+                  "|---|---|---|---|---|---|---|"]
         for name, p in hs["parameters"].items():
             if name == "normal":
                 lines.append(f"| normal | {_f(p['estimate'], 7)} | {_f(p['truth'], 7)} | "
                              f"{p['error_deg'] * 3600:.2f}″ | {_f([s * 3600 for s in p['sigma_deg']], 3)}″ "
-                             f"(two tilts) | {_f(p['error_in_sigma'], 3)} |")
+                             f"(two tilts) | {_f(p['error_in_sigma'], 3)} | "
+                             f"{_f([s * 3600 for s in p['sigma_conditional_deg']], 3)}″ |")
             elif name == "extrinsics":
                 lines.append(f"| right camera | rotation error {p['rotation_error_deg']:.5f}° | "
                              f"– | position {_f(p['position_error_mm'])} mm | "
-                             f"{_f(p['sigma_position_mm'])} mm | {_f(p['error_in_sigma'], 3)} |")
+                             f"{_f(p['sigma_position_mm'])} mm, "
+                             f"{_f(p['sigma_rotation_deg'], 3)}° | {_f(p['error_in_sigma'], 3)} | "
+                             f"{_f(p['sigma_conditional'][3:])} mm |")
             elif name.endswith(("_dome_x", "_dome_y", "_dome_z")):
                 lines.append(f"| {name.replace('_', ' ')} (mm, camera frame) | "
                              f"{p['estimate']:.4f} | {p['truth']:.4f} | {p['error']:+.4f} | "
-                             f"{_f(p['sigma'])} | {_f(p['error_in_sigma'], 3)} |")
+                             f"{_f(p['sigma'])} | {_f(p['error_in_sigma'], 3)} | – |")
             else:
                 lines.append(f"| {name} | {p['estimate']:.6f} | {p['truth']:.6f} | "
-                             f"{p['error']:+.6f} | {_f(p['sigma'])} | {_f(p['error_in_sigma'], 3)} |")
-        lines += ["", "Correlations of the free numbers (" + ", ".join(hs["labels"]) + "):", ""]
+                             f"{p['error']:+.6f} | {_f(p['sigma'])} | {_f(p['error_in_sigma'], 3)} "
+                             f"| {_f(p.get('sigma_conditional'))} |")
+        if hs.get("in_air_refined"):
+            lines += ["", "In-air parameters refined by the underwater boards (the prior fit; "
+                      "change from the in-air value, σ): " + ", ".join(
+                          f"{name} {v['change']:+.3g} ({_f(v['sigma'], 2)})"
+                          for name, v in hs["in_air_refined"].items()) + "."]
+        lines += ["", "Correlations of the free numbers (" + ", ".join(hs["labels"])
+                  + "; of the housing adjustment alone — the joint ones are in calib.yaml's "
+                    "covariance):", ""]
         lines += ["    " + " ".join(f"{v:+.3f}" for v in row) for row in hs["correlation"]]
     lines += ["", "## Files", "", "- `calib.yaml`: the calibration in the dataset format"
               + (" (with an `uncertainty` map), `calib_in_air_only.yaml` (the in-air calibration "
@@ -349,21 +441,41 @@ def markdown(report: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
-#: What the housing σ covers (said in every report).
-SIGMA_NOTE = ("σ is the housing calibration's own: its corners' scatter through the refractive "
-              "bundle adjustment, with the intrinsics (and the stereo extrinsics unless free) "
-              "held at the in-air calibration. Errors of the in-air calibration are not in it; "
-              "run again with `--intrinsics` the boards folder's own calib.yaml (the truth) "
-              "to see the two apart.")
+#: What the σ of a calibration file covers, by how it was obtained (calib.yaml's
+#: ``uncertainty.includes``).
+SIGMA_INCLUDES = {
+    "air": "the corners' scatter through OpenCV's calibration: both cameras' intrinsics and "
+           "the stereo pose, with their correlations",
+    "propagate": "the corners' scatter of the housing adjustment and the in-air calibration's "
+                 "covariance propagated through it (intrinsics and stereo pose held at the "
+                 "in-air values)",
+    "prior": "the housing adjustment with the in-air parameters free under their in-air "
+             "covariance as a prior",
+    "conditional": "the housing adjustment's corners only: conditional on the in-air "
+                   "calibration, whose file carried no covariance",
+    "dome": "the housing adjustment's corners only: conditional on the in-air calibration (the "
+            "domes' decentring has no covariance node yet)"}
 
-
-#: What the housing σ covers, for photos (no truth to run against).
-SIGMA_NOTE_PHOTOS = ("σ is the housing calibration's own: its corners' scatter through the "
-                     "refractive bundle adjustment, with the intrinsics (and the stereo "
-                     "extrinsics unless free) held at the in-air calibration (--intrinsics). "
-                     "Errors of the in-air calibration are not in it: on rendered boards the "
-                     "chain's error was 4–7 σ where the exact intrinsics gave ≤ 2 σ "
-                     "(docs/calibration.md).")
+def sigma_note(mode: str) -> str:
+    """What the housing σ covers (said in every report), by ``HousingCalibration.uncertainty``."""
+    if mode == "dome":
+        return ("σ is the dome calibration's own: its corners' scatter through the refractive "
+                "bundle adjustment, with the intrinsics and the stereo pose held at the in-air "
+                "calibration. Errors of the in-air calibration are not in it (the propagation "
+                "and the prior are built for flat ports; docs/calibration.md).")
+    if mode == "conditional":
+        return ("σ is the housing calibration's own: its corners' scatter through the refractive "
+                "bundle adjustment, with the intrinsics (and the stereo extrinsics unless free) "
+                "held at the in-air calibration, whose file (--intrinsics) carried no "
+                "covariance. Errors of the in-air calibration are not in it: on rendered boards "
+                "the chain's error was 4–15 σ where the exact intrinsics gave ≤ 2 σ "
+                "(docs/calibration.md).")
+    how = ("propagated through the adjustment (σ² = s²(JᵀJ)⁻¹ + G Σ_air Gᵀ)" if mode == "propagate"
+           else "as a prior on the intrinsics and stereo pose, freed in the adjustment")
+    return (f"σ includes the in-air calibration's uncertainty: its full covariance (both "
+            f"cameras' intrinsics and the stereo pose) {how}. σ (conditional) is the housing's "
+            f"own, with the in-air calibration taken as exact. calib.yaml's `covariance` node "
+            f"holds the joint covariance of every calibrated rig parameter.")
 
 
 def summary_lines(report: dict) -> str:

@@ -148,8 +148,13 @@ def main(args) -> int:
         if calibration.get("methods"):
             for name, value in calibration["estimates"].items():
                 sigma = calibration["sigmas"][name]
+                covered = (f"σ with the --calib covariance of "
+                           f"{len(calibration['sigma_includes'])} fixed rig parameters; without "
+                           f"{calibration['sigmas_conditional'][name]}"
+                           if calibration.get("sigma_includes") else
+                           "σ conditional on the rig, which has no covariance")
                 print(f"self-calibrated {name}: {value} ± {sigma} (truth {calibration['truth'][name]}, "
-                      f"assumed {calibration['assumed'][name]}); reprojection RMS "
+                      f"assumed {calibration['assumed'][name]}; {covered}); reprojection RMS "
                       f"{calibration['rms_px_before']:.4f} -> {calibration['rms_px_after']:.4f} px",
                       file=summary_stream)
             print(summary_table({"methods": calibration["methods"]}), file=summary_stream)

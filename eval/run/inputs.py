@@ -26,7 +26,8 @@ class RunInputs:
     ``rig`` is what the measurement believes; ``targets`` ``(N, 3)`` mm the true centres;
     ``left``/``right`` float32 linear images ``(H, W)``; ``params`` the scene's resolved
     parameters; ``seed`` the run's one seed (images, added noise, RANSAC); ``budget_rigs``
-    ``{label: rig}``: also measure with these rigs (the error budget)."""
+    ``{label: rig}``: also measure with these rigs (the error budget); ``rig_covariance`` the
+    ``--calib`` file's covariance (:class:`measure.rig_covariance.RigCovariance`) or None."""
 
     scene: str
     rig: object

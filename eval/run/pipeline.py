@@ -251,13 +251,16 @@ def self_calibration_stage(inputs: RunInputs, centers, matches, parameters, meth
     """Estimate port ``parameters`` from the matched pixels (:func:`measure.selfcal.self_calibrate`)
     and triangulate again with the refined rig. Returns ``(summary, {method: Triangulation} or
     None)``: None when the refinement did not converge or the data do not determine the
-    parameters (then nothing is refined, and the summary says why)."""
+    parameters (then nothing is refined, and the summary says why). σ includes the ``--calib``
+    file's covariance of the parameters held fixed when it has one (``sigma_includes`` names
+    them; ``sigmas_conditional`` is the σ without)."""
     from measure.selfcal import self_calibrate
 
     uv_left = centers["left"][matches.left]
     uv_right = centers["right"][matches.right]
     start = time.perf_counter()
-    fit = self_calibrate(inputs.rig, uv_left, uv_right, parameters)
+    fit = self_calibrate(inputs.rig, uv_left, uv_right, parameters,
+                         rig_covariance=inputs.rig_covariance)
     seconds = time.perf_counter() - start
     truth = {"n_water": inputs.true_rig.port.n_water,
              "port_distance": inputs.true_rig.port.distance,
@@ -271,6 +274,8 @@ def self_calibration_stage(inputs: RunInputs, centers, matches, parameters, meth
                "assumed": {p: assumed[p] for p in parameters},
                "truth": {p: truth[p] for p in parameters},
                "estimates": fit.estimates, "sigmas": fit.sigmas,
+               "sigmas_conditional": fit.sigmas_conditional,
+               "sigma_includes": list(fit.propagated),
                "correlation": fit.correlation.tolist(), "labels": list(fit.labels)}
     for name in ("n_water", "port_distance"):
         if name in fit.estimates and fit.sigmas.get(name):

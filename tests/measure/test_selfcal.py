@@ -119,3 +119,38 @@ def test_analytic_jacobian_of_the_refinement_matches_finite_differences():
     from measure.reprojection import point_block_sparsity  # the structure it promises
 
     assert np.all((analytic != 0) <= (point_block_sparsity(len(truth), 4).toarray() != 0))
+
+
+def test_the_rigs_covariance_is_propagated_into_sigma():
+    """With a calibration's covariance the fixed rig parameters' uncertainty enters σ: for one
+    parameter at a time (left cx, the right camera's centre x, the port distance) the added
+    variance is (G σ)², G the estimate's change per unit of that parameter — checked by
+    estimating again with the parameter moved (to 2 %). The estimated parameter's own entry
+    (port.index[2]) does not enter."""
+    from measure import Camera, StereoRig
+    from measure.rig_covariance import RigCovariance
+
+    rig = paper_rig()
+    truth = paper_plane(1000.0)
+    port = rig.port.replace(indices=(1.0, 1.54, N_TRUE))
+    uv = _pixels(rig, port, truth, 0.05, np.random.default_rng(3))
+    plain = self_calibrate(rig, uv[0], uv[1], ("n_water", "port_distance"))
+    assert plain.propagated == () and plain.sigmas == plain.sigmas_conditional
+    K = rig.left.K.copy()
+    K[0, 2] += 0.1
+    moved = {"left.cx": (0.1, StereoRig(Camera(K, rig.left.size), rig.right, rig.port)),
+             "right.center[0]": (0.05, StereoRig(rig.left, Camera(
+                 rig.right.K, rig.right.size, None, rig.right.R, rig.right.t + [0.05, 0, 0]),
+                 rig.port)),
+             "port.thickness[0]": (0.02, StereoRig(rig.left, rig.right, rig.port.replace(
+                 thicknesses=(rig.port.thicknesses[0] + 0.02,))))}
+    for name, (sigma, other) in moved.items():
+        cov = RigCovariance([name, "port.index[2]"], np.diag([sigma ** 2, 1e-6]))
+        fit = self_calibrate(rig, uv[0], uv[1], ("n_water", "port_distance"),
+                             rig_covariance=cov)
+        assert fit.propagated == (name,)
+        again = self_calibrate(other, uv[0], uv[1], ("n_water", "port_distance"))
+        for key in ("n_water", "port_distance"):
+            shift = again.estimates[key] - plain.estimates[key]
+            added = np.sqrt(fit.sigmas[key] ** 2 - fit.sigmas_conditional[key] ** 2)
+            assert abs(added - abs(shift)) < 0.02 * abs(shift), (name, key, added, shift)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import os
 import shutil
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -105,6 +106,11 @@ def test_calibrate_chain_from_images(boards, tmp_path, capsys):
     report = json.loads((tmp_path / "air" / "report.json").read_text())
     assert report["detection"]["both"]["rms_px"] < 0.05
     assert abs(report["in_air"]["baseline_mm"]["error"]) < 1.0
+    # the in-air calib.yaml carries the full covariance of the intrinsics and the stereo pose
+    from measure.calibration_covariance import AIR_NAMES
+    air_cov = read_calib(tmp_path / "air" / "calib.yaml")["covariance"]
+    assert air_cov.names == AIR_NAMES
+    assert report["in_air"]["baseline_sigma_mm"] > 0
     assert eval_main(["calibrate", boards["water"], "--intrinsics", boards["air"],
                       "--start-distance", "90", "--out", str(tmp_path / "water"),
                       "--no-progress"]) == 0
@@ -117,6 +123,13 @@ def test_calibrate_chain_from_images(boards, tmp_path, capsys):
     assert abs(housing["parameters"]["distance"]["error"]) < 2.0
     calib = read_calib(out / "calib.yaml")
     assert calib["has_port"] and abs(calib["port"].distance - 100.0) < 2.0
+    # the housing's σ includes the in-air covariance, and the rig's joint covariance is written
+    cov = calib["covariance"]
+    assert cov.names == AIR_NAMES + ("port.distance", "port.tilt[0]", "port.tilt[1]")
+    distance = housing["parameters"]["distance"]
+    assert housing["uncertainty"] == "prior"
+    assert distance["sigma"] > distance["sigma_conditional"] > 0
+    assert cov.sigmas["port.distance"] == pytest.approx(distance["sigma"], rel=1e-9)
     design = read_calib(out / "calib_in_air_only.yaml")
     assert design["port"].distance == 90.0 and design["port"].normal[2] == 1.0
     assert "FLATPORT" in (out / "flatport.txt").read_text()
@@ -150,6 +163,14 @@ def test_bad_inputs_are_one_line_and_exit_2(boards, tmp_path, capsys):
     write_calib(other, paper_rig(size=(640, 480)))
     fails(["calibrate", boards["water"], "--intrinsics", str(other), "--out",
            str(tmp_path / "c")], eval_main, "image size")
+    # a calibration whose covariance is singular: refused, naming the file
+    from types import SimpleNamespace
+    singular = tmp_path / "singular.yaml"
+    write_calib(singular, paper_rig(size=read_calib(Path(boards["water"]) / "calib.yaml")["size"]),
+                covariance=SimpleNamespace(names=["left.cx", "left.cy"],
+                                           matrix=np.ones((2, 2)), normal_axes=None))
+    fails(["calibrate", boards["water"], "--intrinsics", str(singular), "--out",
+           str(tmp_path / "c")], eval_main, f"{singular}: covariance")
     # a board definition that does not match the images: it disagrees with the manifest (and
     # with corners.csv), refused before any detection
     wrong = tmp_path / "wrong"

@@ -251,6 +251,34 @@ def test_self_calibration_of_the_water_index(small_scene, tmp_path):
 
 
 @pytest.mark.slow
+def test_self_calibration_sigma_includes_the_calibrations_covariance(small_scene, tmp_path):
+    """--calib with a covariance (left cx and the port distance, 0.1 px and 0.2 mm): the index's
+    σ includes it — larger than the conditional σ, which is the σ without a covariance — and
+    the report names what entered."""
+    from measure.rig_covariance import RigCovariance
+    from synth.dataset import read_calib, write_calib
+
+    data = tmp_path / "data"
+    write_dataset(small_scene, data, spp=16, progress=False, defines={"n_water": "1.34"})
+    rig = read_calib(data / "calib.yaml")["rig"]
+    calib = tmp_path / "calib.yaml"
+    write_calib(calib, rig, covariance=RigCovariance(["left.cx", "port.distance"],
+                                                     np.diag([0.1 ** 2, 0.2 ** 2])))
+    runs = {}
+    for name, extra in (("with", ["--calib", str(calib)]), ("without", [])):
+        assert main(["run", small_scene, "--from", str(data), "--out", str(tmp_path / name),
+                     "--methods", "optical_path", "--assume", "n_water=1.33",
+                     "--self-calibrate", "n_water", "--no-progress", *extra]) == 0
+        runs[name] = json.loads((tmp_path / name / "report.json").read_text())["self_calibration"]
+    with_cov, without = runs["with"], runs["without"]
+    assert with_cov["sigma_includes"] == ["left.cx", "port.distance"]
+    assert without["sigma_includes"] == [] and without["sigmas"] == without["sigmas_conditional"]
+    assert with_cov["sigmas_conditional"]["n_water"] == pytest.approx(
+        without["sigmas"]["n_water"], rel=1e-6)
+    assert with_cov["sigmas"]["n_water"] > 1.2 * with_cov["sigmas_conditional"]["n_water"]
+
+
+@pytest.mark.slow
 def test_a_run_with_wrong_matches_exits_1_and_still_writes_its_report(small_scene, tmp_path,
                                                                       capsys):
     """A depth window that holds only the neighbouring column's depth makes every match wrong:
