@@ -103,6 +103,16 @@ def _parameter_normal_matrix(jacobian, n: int, n_free: int) -> np.ndarray:
     """The normal matrix of the free parameters with the points eliminated (Schur complement of
     the block-arrow ``JᵀJ``): ``Jpᵀ Jp − Σ_i Bᵢᵀ Aᵢ⁻¹ Bᵢ`` with ``Aᵢ = Jᵢᵀ Jᵢ`` (point i's 3×3
     block) and ``Bᵢ = Jᵢᵀ Jp,ᵢ``. Its inverse is the parameters' block of ``(JᵀJ)⁻¹``."""
+    Jp_i, _, _, B, A_inv_B = _point_blocks(jacobian, n, n_free)
+    Jp = Jp_i.reshape(4 * n, n_free)
+    return Jp.T @ Jp - np.einsum("nki,nkj->ij", B, A_inv_B)
+
+
+def _point_blocks(jacobian, n: int, n_free: int):
+    """The block-arrow Jacobian's pieces per point: ``Jp,ᵢ`` ``(n, 4, n_free)`` (the free
+    parameters' columns), ``Jx,ᵢ`` ``(n, 4, 3)`` (the point's own), ``Aᵢ = Jx,ᵢᵀ Jx,ᵢ``,
+    ``Bᵢ = Jx,ᵢᵀ Jp,ᵢ`` and ``Aᵢ⁻¹ Bᵢ``; ``jacobian`` dense or sparse, rows 4 per point,
+    columns the free parameters then 3 per point."""
     J = jacobian.tocsr() if hasattr(jacobian, "tocsr") else np.asarray(jacobian)
     rows = np.arange(4 * n)
     cols = n_free + 3 * (rows // 4)[:, None] + np.arange(3)
@@ -115,7 +125,7 @@ def _parameter_normal_matrix(jacobian, n: int, n_free: int) -> np.ndarray:
     Jp_i = Jp.reshape(n, 4, n_free)
     A = np.einsum("nki,nkj->nij", Jx, Jx)
     B = np.einsum("nki,nkj->nij", Jx, Jp_i)
-    return Jp.T @ Jp - np.einsum("nki,nkj->ij", B, np.linalg.solve(A, B))
+    return Jp_i, Jx, A, B, np.linalg.solve(A, B)
 
 
 def refinement_residuals(rig, port0, names, basis, observed, x) -> np.ndarray:
@@ -262,19 +272,8 @@ def _estimated(names, port) -> set:
 def _influence(jacobian, n: int, n_free: int, schur) -> np.ndarray:
     """``(n_free, 4n)``: the free parameters' rows of ``(JᵀJ)⁻¹Jᵀ`` — ``S⁻¹ J̃ᵀ`` with
     ``J̃ᵢ = Jp,ᵢ − Jx,ᵢ Aᵢ⁻¹ Bᵢ`` per point (the block-arrow's points eliminated)."""
-    J = jacobian.tocsr() if hasattr(jacobian, "tocsr") else np.asarray(jacobian)
-    rows = np.arange(4 * n)
-    cols = n_free + 3 * (rows // 4)[:, None] + np.arange(3)
-    if hasattr(J, "tocsr"):
-        Jp = J[:, :n_free].toarray()
-        Jx = np.asarray(J[np.repeat(rows, 3), cols.ravel()]).reshape(n, 4, 3)
-    else:
-        Jp = J[:, :n_free]
-        Jx = J[rows[:, None], cols].reshape(n, 4, 3)
-    Jp_i = Jp.reshape(n, 4, n_free)
-    A = np.einsum("nki,nkj->nij", Jx, Jx)
-    B = np.einsum("nki,nkj->nij", Jx, Jp_i)
-    projected = Jp_i - np.einsum("nki,nij->nkj", Jx, np.linalg.solve(A, B))
+    Jp_i, Jx, _, _, A_inv_B = _point_blocks(jacobian, n, n_free)
+    projected = Jp_i - np.einsum("nki,nij->nkj", Jx, A_inv_B)
     return np.linalg.solve(schur, projected.reshape(4 * n, n_free).T)
 
 

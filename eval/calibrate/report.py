@@ -95,15 +95,22 @@ def stereo_sigmas(air) -> dict:
             "baseline_sigma_mm": float(np.sqrt(direction @ centre @ direction))}
 
 
+def _adjustment_summary(housing) -> dict:
+    """What a housing or dome adjustment reports whatever it estimated: the free parameters,
+    their labels and correlation, the reprojection RMS (px; overall, at the start, per pose and
+    view), the observations, poses and evaluations; ``parameters`` left to fill."""
+    return {"free": list(dict.fromkeys(label.split("[")[0] for label in housing.labels)),
+            "labels": list(housing.labels), "correlation": housing.correlation.tolist(),
+            "rms_px": housing.rms_px, "rms_px_start": housing.rms_px_start,
+            "rms_px_per_pose_view": {f"{k}:{'left' if v == 0 else 'right'}": r
+                                     for (k, v), r in sorted(housing.rms_px_per.items())},
+            "observations": housing.n_observations, "poses_used": list(housing.pose_ids),
+            "evaluations": housing.nfev, "parameters": {}}
+
+
 def housing_summary(housing, truth, start_rig) -> dict:
     """Every estimated housing parameter beside the truth, with its error in σ."""
-    out = {"free": list(dict.fromkeys(label.split("[")[0] for label in housing.labels)),
-           "labels": list(housing.labels), "correlation": housing.correlation.tolist(),
-           "rms_px": housing.rms_px, "rms_px_start": housing.rms_px_start,
-           "rms_px_per_pose_view": {f"{k}:{'left' if v == 0 else 'right'}": r
-                                    for (k, v), r in sorted(housing.rms_px_per.items())},
-           "observations": housing.n_observations, "poses_used": list(housing.pose_ids),
-           "evaluations": housing.nfev, "parameters": {}}
+    out = _adjustment_summary(housing)
     out["uncertainty"] = housing.uncertainty
     est, tru = housing.rig.port, truth.port
     params = out["parameters"]
@@ -154,13 +161,7 @@ def dome_summary(housing, truth, start_rig) -> dict:
     the water index."""
     from measure.calibration import dome_offset
 
-    out = {"free": list(dict.fromkeys(label.split("[")[0] for label in housing.labels)),
-           "labels": list(housing.labels), "correlation": housing.correlation.tolist(),
-           "rms_px": housing.rms_px, "rms_px_start": housing.rms_px_start,
-           "rms_px_per_pose_view": {f"{k}:{'left' if v == 0 else 'right'}": r
-                                    for (k, v), r in sorted(housing.rms_px_per.items())},
-           "observations": housing.n_observations, "poses_used": list(housing.pose_ids),
-           "evaluations": housing.nfev, "parameters": {}}
+    out = _adjustment_summary(housing)
     params = out["parameters"]
     for name in housing.estimates:
         sigma = housing.sigmas[name]

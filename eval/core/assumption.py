@@ -106,14 +106,8 @@ def assumed_rig(truth: StereoRig, has_port: bool, assumptions: dict,
             distance = v
         elif name == "port_normal":
             normal = v
-        elif name in ("focal", "left_focal"):
-            left = _with_focal(left, v)
-        if name in ("focal", "right_focal"):
-            right = _with_focal(right, v)
-        elif name == "left_dist":
-            left = Camera(left.K, left.size, v, left.R, left.t)
-        elif name == "right_dist":
-            right = Camera(right.K, right.size, v, right.R, right.t)
+        else:
+            left, right = _assumed_cameras(name, v, left, right)
     try:
         return StereoRig(left, right, FlatPort(normal, distance, tuple(thicknesses),
                                                tuple(indices)))
@@ -142,18 +136,27 @@ def _assumed_dome_rig(rig: StereoRig, assumptions: dict) -> StereoRig:
             k = 2 if name == "n_water" else 1
             domes = [d.replace(indices=tuple(v if i == k else n for i, n in enumerate(d.indices)))
                      for d in domes]
-        elif name in ("focal", "left_focal"):
-            left = _with_focal(left, v)
-        if name in ("focal", "right_focal"):
-            right = _with_focal(right, v)
-        elif name == "left_dist":
-            left = Camera(left.K, left.size, v, left.R, left.t)
-        elif name == "right_dist":
-            right = Camera(right.K, right.size, v, right.R, right.t)
+        else:
+            left, right = _assumed_cameras(name, v, left, right)
     try:
         return StereoRig(left, right, DomePair(*domes))
     except ValueError as exc:
         raise ValueError(f"--assume: {exc}") from None
+
+
+def _assumed_cameras(name: str, value, left: Camera, right: Camera):
+    """``(left, right)`` with a camera assumption of ``--assume`` applied (``focal``,
+    ``left_focal``, ``right_focal``: px; ``left_dist``, ``right_dist``: OpenCV coefficients);
+    other names leave both cameras as they are."""
+    if name in ("focal", "left_focal"):
+        left = _with_focal(left, value)
+    if name in ("focal", "right_focal"):
+        right = _with_focal(right, value)
+    elif name == "left_dist":
+        left = Camera(left.K, left.size, value, left.R, left.t)
+    elif name == "right_dist":
+        right = Camera(right.K, right.size, value, right.R, right.t)
+    return left, right
 
 
 def _describe_dome(dome) -> dict:

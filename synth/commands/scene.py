@@ -173,13 +173,7 @@ def main(args) -> int:
     if args.port == "none" and (args.layer or args.lighting == "lit"):
         raise CLIError(f"{'--layer' if args.layer else '--lighting lit'} needs a port (--port paper)")
     if args.port == "paper":
-        n = list(rigs.PAPER_INDICES)
-        if args.n_glass is not None:
-            n[1] = args.n_glass
-        if args.n_water is not None:
-            n[2] = float(args.n_water)
-            if getattr(args.n_water, "note", None):
-                print(args.n_water.note, file=sys.stderr)
+        n = _indices(args)
         tilt = np.radians(args.port_tilt)
         if np.any(np.abs(tilt) >= np.radians(30)):
             raise CLIError(f"--port-tilt must stay below 30 degrees, got {args.port_tilt}")
@@ -356,17 +350,10 @@ def _dome_port(args, left, right):
     through the domes."""
     from measure import StereoRig
 
-    from synth import rig as rigs
     from synth.scene.dome import (DEFAULT_DOME_RADIUS_MM, DEFAULT_DOME_THICKNESS_MM,
                                   check_field_of_view, dome_pair)
 
-    n = list(rigs.PAPER_INDICES)
-    if args.n_glass is not None:
-        n[1] = args.n_glass
-    if args.n_water is not None:
-        n[2] = float(args.n_water)
-        if getattr(args.n_water, "note", None):
-            print(args.n_water.note, file=sys.stderr)
+    n = _indices(args)
     radius = args.dome_radius if args.dome_radius is not None else DEFAULT_DOME_RADIUS_MM
     thickness = (args.dome_thickness if args.dome_thickness is not None
                  else DEFAULT_DOME_THICKNESS_MM)
@@ -437,3 +424,18 @@ def _apparent_distance(port, depth_mm: float) -> float:
     """The focus distance of a lens in air that images a point ``depth_mm`` along the axis
     sharply: :meth:`measure.FlatPort.apparent_depth`, or ``depth_mm`` itself without a port."""
     return depth_mm if port is None else port.apparent_depth(depth_mm)
+
+
+def _indices(args) -> list:
+    """``[n_air, n_glass, n_water]``: the paper's, with ``--n-glass`` and ``--n-water`` applied
+    (a water index from temperature and salinity prints how it was computed)."""
+    from synth import rig as rigs
+
+    n = list(rigs.PAPER_INDICES)
+    if args.n_glass is not None:
+        n[1] = args.n_glass
+    if args.n_water is not None:
+        n[2] = float(args.n_water)
+        if getattr(args.n_water, "note", None):
+            print(args.n_water.note, file=sys.stderr)
+    return n
