@@ -27,6 +27,23 @@ from the left camera centre) and the exact right pixel of the left ray's point a
 triangulating the pair with the same model (``optical_path`` for ``"refractive"``, ``regular``
 for ``"pinhole"``) gives back that point.
 
+The matching σ of every pixel (:func:`matching_sigma`): the refinement fits, over the window
+``w`` (``n = window²`` pixels) of each left pixel, ``f_q = a·g_q(δ) + b + ε_q`` with
+``g_q(δ) ≈ u_q + h_q δ`` (``δ`` the depth step, ``h = ∂g/∂d``, gain ``a`` and offset ``b``
+free). Its least-squares (Cramér–Rao) bound is
+
+    σ_d² = σ_n² (1 + a²) / (a² · n · C),    C = c_hh − c_gh² / c_gg
+
+with ``c_xy`` the window's centred means (``c_hh`` = the variance of ``h`` over the window;
+the ``c_gh²/c_gg`` term is what the free gain takes away) and ``σ_n²(1 + a²)`` the variance of
+the residual ``ε = n_f − a·n_g`` for independent noise ``σ_n`` in both images (the factor 2 of
+the textbook form ``σ_s² = 2σ_n² / Σ(∂I/∂s)²`` when ``a = 1`` and the gain is known). The right
+pixel's σ along the epipolar curve is ``σ_s = σ_d · |∂r/∂d|`` (px). ``σ_n`` is stated or
+estimated from the matched windows' residuals: per pixel ``n/(n − 3) · var_f · (1 − ρ²)``
+(ρ the ZNCC: the residual of the affine fit, 3 parameters) divided by ``1 + a²``; the median
+over the matched pixels, corrected by the median of χ²ₙ₋₃ / (n − 3), is the image's σ_n (any
+misfit of the model, the renderer's noise, the interpolation all count as noise).
+
 Units mm; reference frame = left camera frame; OpenCV pixels ``(u, v)``, integer = pixel centre.
 """
 
@@ -75,6 +92,13 @@ class DenseMatches:
     sub-pixel right pixels; ``score`` ``(N,)`` the ZNCC of the refined match; ``depth_map``
     ``(H, W)`` the refined depth ``N·(X − C_left)`` (mm), NaN where unmatched; ``timings``
     seconds per stage; ``n_planes`` the number of sweep planes.
+
+    The matching σ (module docs): ``sigma_px`` ``(N,)`` the σ of each right pixel along its
+    epipolar curve (px; the left pixel is the exact grid point), ``curve_direction`` ``(N, 2)``
+    the unit direction of the curve there (towards larger depth), ``sigma_depth`` ``(N,)`` the
+    σ of the depth parameter (mm), ``noise_sigma`` the image noise σ_n used (in the input
+    images' units) and ``noise_source`` ``"estimated"`` (the matched windows' residuals) or
+    ``"stated"``.
     """
 
     uv_left: np.ndarray
@@ -83,6 +107,11 @@ class DenseMatches:
     depth_map: np.ndarray
     timings: dict = field(default_factory=dict)
     n_planes: int = 0
+    sigma_px: np.ndarray | None = None
+    curve_direction: np.ndarray | None = None
+    sigma_depth: np.ndarray | None = None
+    noise_sigma: float | None = None
+    noise_source: str | None = None
 
 
 def _as_image(image, name: str, size) -> np.ndarray:
@@ -260,7 +289,8 @@ def _sweep(warp: PlaneWarp, left, right, depths, window, progress):
 
 def match_dense(rig: StereoRig, left, right, depth_range, *, model: str = "refractive",
                 window: int = 11, min_score: float = 0.8, step_px: float = 0.5, roi=None,
-                progress=None, max_planes: int | None = None) -> DenseMatches:
+                progress=None, max_planes: int | None = None,
+                noise_sigma: float | None = None) -> DenseMatches:
     """Dense matches of a rectification-free stereo pair through the rig's port.
 
     ``left``, ``right``: 2D grey images of the cameras' sizes (any real dtype; scaled to
@@ -274,7 +304,9 @@ def match_dense(rig: StereoRig, left, right, depth_range, *, model: str = "refra
     outside which nothing is matched. ``progress``: optional callable ``(done, total)`` per
     sweep plane. ``max_planes`` (default :data:`MAX_PLANES`): a depth range that needs more sweep
     planes is refused
-    (ValueError naming the count) before any image work. Rejected: score below ``min_score``, best
+    (ValueError naming the count) before any image work. ``noise_sigma``: the images' noise σ_n
+    (their units) for the matching σ; None (default): estimated from the matched windows'
+    residuals (module docs). Rejected: score below ``min_score``, best
     plane at an end of the range, a
     window leaving either image, a right pixel leaving the right image, a refinement that does
     not converge.
@@ -285,6 +317,8 @@ def match_dense(rig: StereoRig, left, right, depth_range, *, model: str = "refra
         raise ValueError(f"window must be an odd whole number >= 3, got {window!r}")
     if not (np.isfinite(step_px) and step_px > 0):
         raise ValueError(f"step_px must be a positive number, got {step_px!r}")
+    if noise_sigma is not None and not (np.isfinite(noise_sigma) and noise_sigma > 0):
+        raise ValueError(f"noise_sigma must be a positive number, got {noise_sigma!r}")
     window = int(window)
     near, far = _check_depth_range(rig, depth_range)
     left = _as_image(left, "left", rig.left.size)
@@ -318,15 +352,52 @@ def match_dense(rig: StereoRig, left, right, depth_range, *, model: str = "refra
 
     t0 = time.perf_counter()
     refine_times = {}
+    fit = {}
     depth, score, uv_right, converged = _refine(warp, left, right, start, candidate, window,
-                                                (near, far), refine_times)
+                                                (near, far), refine_times, fit)
     timings["refinement"] = time.perf_counter() - t0
     timings.update(refine_times)
     keep = candidate & converged & (score >= min_score)
     rows, cols = np.nonzero(keep)
     depth_map = np.where(keep, depth, np.nan)
+    t0 = time.perf_counter()
+    stated = None if noise_sigma is None else float(noise_sigma) / scale
+    sigma = matching_sigma({k: v[keep] for k, v in fit.items()}, window, stated)
+    timings["matching sigma"] = time.perf_counter() - t0
     return DenseMatches(np.stack([cols, rows], axis=1).astype(np.float64), uv_right[keep],
-                        score[keep].astype(np.float64), depth_map, timings, len(depths))
+                        score[keep].astype(np.float64), depth_map, timings, len(depths),
+                        sigma["sigma_px"], sigma["direction"], sigma["sigma_depth"],
+                        sigma["noise_sigma"] * scale, sigma["source"])
+
+
+def matching_sigma(fit: dict, window: int, noise_sigma: float | None = None) -> dict:
+    """The matching σ of refined pixels (module docs) from the refinement's window statistics
+    ``fit`` (``(N,)`` arrays: ``gain`` a, ``information`` ``a²·C`` per window pixel (1/mm²),
+    ``residual`` ``var_f (1 − ρ²)``, ``rate`` ``(N, 2)`` the curve's ``∂r/∂d`` px/mm), images
+    in [0, 1]. ``noise_sigma``: σ_n (same units) or None to estimate it. Returns ``sigma_px``,
+    ``sigma_depth`` (mm), ``direction`` ``(N, 2)``, ``noise_sigma`` and ``source``."""
+    from scipy.stats import chi2
+
+    n = window * window
+    gain = np.asarray(fit["gain"], dtype=np.float64)
+    if noise_sigma is None:
+        per_pixel = n / (n - 3) * np.asarray(fit["residual"]) / (1 + gain * gain)
+        per_pixel = per_pixel[np.isfinite(per_pixel)]
+        correction = chi2.ppf(0.5, n - 3) / (n - 3)
+        noise_sigma = float(np.sqrt(np.median(per_pixel) / correction)) if per_pixel.size \
+            else float("nan")
+        source = "estimated"
+    else:
+        source = "stated"
+    rate = np.asarray(fit["rate"], dtype=np.float64).reshape(-1, 2)
+    speed = np.hypot(rate[:, 0], rate[:, 1])
+    with np.errstate(invalid="ignore", divide="ignore"):
+        information = np.asarray(fit["information"], dtype=np.float64)
+        sigma_depth = noise_sigma * np.sqrt((1 + gain * gain) / (n * information))
+        sigma_depth = np.where(information > 0, sigma_depth, np.inf)
+        direction = rate / speed[:, None]
+    return {"sigma_px": sigma_depth * speed, "sigma_depth": sigma_depth,
+            "direction": direction, "noise_sigma": float(noise_sigma), "source": source}
 
 
 def _start_depth(depths, best_index, best, before, after):
@@ -378,6 +449,49 @@ def _gauss_newton_band(band, window, f, mean_f, var_f, g, h, rate_u, rate_v, del
         speed[rows] = band_speed
 
 
+def _fit_band(band, window, f, mean_f, var_f, g, h, h_true, delta, fit):
+    """Rows ``[r0, r1)`` of the window statistics of :func:`matching_sigma` (``fit``: ``gain``,
+    ``information``, ``residual`` ``(H, W)``) at the final depths, band ``(r0, r1, lo, hi)``.
+
+    The refinement's fixed point makes the left window ``f`` orthogonal to its regressor ``S``
+    (the Scharr derivative ``h``) once the offset and the gain's regressor ``G`` (the right
+    samples extrapolated to the centre's depth, as in :func:`_gauss_newton_band`) are
+    projected out: ``Σ S̃ (f − a G(δ) − b) = 0``. Linearised, ``δ̂ − δ = Σ S̃ ε / (a Σ S̃ T̃)``
+    with ``T`` the true derivative ``h_true`` (:func:`_curve_derivative`), so
+    ``var δ̂ = σ_ε² Σ S̃² / (a Σ S̃ T̃)²`` — the sandwich of the estimator the matcher is; it is
+    the Cramér–Rao bound ``σ_ε² / (a² Σ T̃²)`` when ``S ∝ T``. ``information`` is
+    ``a² (c_ST − c_GS c_GT / c_GG)² / (c_SS − c_GS² / c_GG)`` (window means: ``n`` times it is
+    ``1 / var δ̂`` per unit ``σ_ε²``), ``residual`` ``var_f − c_fG² / c_GG`` (the mean square
+    of the affine fit's residual) and ``gain`` ``a = c_fG / c_GG``."""
+    r0, r1, lo, hi = band
+    inner = slice(r0 - lo, r1 - lo)
+    rows = slice(r0, r1)
+
+    def box(image):
+        return _box(image, window)[inner]
+
+    g, h, t, f = g[lo:hi], h[lo:hi], h_true[lo:hi], f[lo:hi]
+    u = g - h * delta[lo:hi]
+    m_u, m_h, m_t = box(u), box(h), box(t)
+    m_uu, m_uh, m_hh, m_ut, m_ht = box(u * u), box(u * h), box(h * h), box(u * t), box(h * t)
+    m_fu, m_fh = box(f * u), box(f * h)
+    delta, mean_f, var_f = delta[rows], mean_f[rows], var_f[rows]
+    mean_g = m_u + delta * m_h
+    c_gg = np.maximum(m_uu + 2 * delta * m_uh + delta * delta * m_hh - mean_g * mean_g,
+                      MIN_WINDOW_VARIANCE)
+    c_fg = m_fu + delta * m_fh - mean_f * mean_g
+    c_gs = m_uh + delta * m_hh - mean_g * m_h
+    c_gt = m_ut + delta * m_ht - mean_g * m_t
+    c_ss = m_hh - m_h * m_h
+    c_st = m_ht - m_h * m_t
+    gain = c_fg / c_gg
+    with np.errstate(invalid="ignore", divide="ignore"):
+        cross = c_st - c_gs * c_gt / c_gg
+        fit["information"][rows] = gain * gain * cross * cross / (c_ss - c_gs * c_gs / c_gg)
+    fit["gain"][rows] = gain
+    fit["residual"][rows] = np.maximum(var_f - c_fg * c_fg / c_gg, 0.0)
+
+
 #: Largest map width (px) handed to ``cv2.remap``, which needs maps under 32767 px a side.
 _SAMPLE_COLUMNS = 16384
 
@@ -396,7 +510,32 @@ def _sample(image, u, v):
     return sampled.reshape(-1)[:n]
 
 
-def _refine(warp: PlaneWarp, left, right, start, candidate, window, depth_range, times=None):
+#: Steps (px along the epipolar curve) of the central differences that
+#: :func:`_curve_derivative` combines (Richardson: ``(4 D(ε₁) − D(ε₂)) / 3``).
+CURVE_DERIVATIVE_STEPS_PX = (0.5, 1.0)
+
+
+def _curve_derivative(image, u, v, rate_u, rate_v):
+    """``∂g/∂d`` (intensity per mm) of the bicubic interpolant of ``image`` at ``(u, v)`` along
+    the curve of rate ``(rate_u, rate_v)`` px/mm, each ``(N,)``: Richardson-extrapolated central
+    differences of :func:`_sample` (error O(ε⁴); the amplitude at 1 rad/px is 0.998 of the
+    truth). The matcher's Scharr derivative is a smoothed one (0.70 of the truth at 1 rad/px,
+    speckle of ~3 px): fine for Gauss–Newton steps, whose fixed point does not depend on the
+    derivative's scale, but the registration's information needs the true one."""
+    speed = np.hypot(rate_u, rate_v)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        tu, tv = rate_u / speed, rate_v / speed
+    small, large = CURVE_DERIVATIVE_STEPS_PX
+
+    def central(eps):
+        return (_sample(image, u + eps * tu, v + eps * tv).astype(np.float64)
+                - _sample(image, u - eps * tu, v - eps * tv)) / (2 * eps)
+
+    return (4 * central(small) - central(large)) / 3 * speed
+
+
+def _refine(warp: PlaneWarp, left, right, start, candidate, window, depth_range, times=None,
+            fit=None):
     """Gauss–Newton along the epipolar curve (see the module docstring), all pixels at once.
 
     A pixel whose step falls to :data:`REFINE_TOLERANCE_PX` or below keeps its depth (its step
@@ -408,7 +547,9 @@ def _refine(warp: PlaneWarp, left, right, start, candidate, window, depth_range,
     whether the pixel converged (last step below 0.01 px, depth inside ``depth_range``, whole
     right window inside the right image). ``times`` (a dict), if given, receives the seconds
     spent in the set-up (rays, nearest candidates), in projecting and sampling, and in the
-    window sums and steps."""
+    window sums and steps. ``fit`` (a dict), if given, receives the window statistics of the
+    final depths (:func:`matching_sigma`'s ``gain``, ``information``, ``residual`` ``(H, W)``
+    and ``rate`` ``(H, W, 2)``)."""
     t_start = time.perf_counter()
     t_project = t_sums = 0.0
     height, width = left.shape
@@ -418,6 +559,10 @@ def _refine(warp: PlaneWarp, left, right, start, candidate, window, depth_range,
     # Pixels in the windows of candidates that are no candidates themselves follow their
     # nearest candidate's depth: their own sweep answer may be anything, and through
     # g(d_p) ≈ g(d_q) + ∂g/∂d (d_p − d_q) a wrong d_q would spoil their neighbours' windows.
+    if fit is not None:
+        fit.update({k: np.full((height, width), np.nan) for k in ("gain", "information",
+                                                                   "residual")})
+        fit["rate"] = np.full((height, width, 2), np.nan)
     if not candidate.any():
         empty = np.full(left.shape, np.nan)
         return empty, empty, np.full(left.shape + (2,), np.nan), np.zeros(left.shape, bool)
@@ -491,14 +636,26 @@ def _refine(warp: PlaneWarp, left, right, start, candidate, window, depth_range,
             t_sums += time.perf_counter() - t1
             if not np.any(step_px[candidate] > REFINE_TOLERANCE_PX):
                 break
+        t_fit = time.perf_counter()
+        if fit is not None:  # the window statistics of the matching σ at the final depths
+            h_curve = np.zeros_like(h)
+            h_curve[rows, cols] = _curve_derivative(right, map_u[rows, cols], map_v[rows, cols],
+                                                    rate_u[rows, cols], rate_v[rows, cols])
+            delta = depth - reference
+            list(pool.map(lambda band: _fit_band(band, window, f, mean_f, var_f, g, h, h_curve,
+                                                 delta, fit), bands))
+        t_fit = time.perf_counter() - t_fit
     inside = _window_inside(_right_inside(map_u, map_v, warp.rig.right.size), window)
     near, far = depth_range
     with np.errstate(invalid="ignore"):
         moved_px = np.abs(depth - start) * speed
         converged = inside & (step_px < CONVERGED_STEP_PX) & (depth >= near) & (depth <= far) \
             & np.isfinite(score) & (moved_px <= MAX_REFINE_MOVE_PX)
+    if fit is not None:
+        fit["rate"] = np.stack([rate_u, rate_v], axis=-1)
     if times is not None:
         times.update({"refine set-up": t_setup, "refine projection": t_project,
-                      "refine sums": t_sums, "refine checks": time.perf_counter() - t_start
-                      - t_setup - t_project - t_sums})
+                      "refine sums": t_sums, "refine sigma": t_fit,
+                      "refine checks": time.perf_counter() - t_start - t_setup - t_project
+                      - t_sums - t_fit})
     return depth, score, uv_right, converged
