@@ -231,13 +231,58 @@ def point_covariances(rig: StereoRig, points, pixel_sigma, rig_covariance: RigCo
     docs), with its pixel and rig parts. ``pixel_sigma``: px, see :func:`pixel_sigmas`.
     ``rig_covariance`` None: the rig is taken as exact (pixel part only)."""
     points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-    n = points.shape[0]
-    sigma = pixel_sigmas(pixel_sigma, n)
+    sigma = pixel_sigmas(pixel_sigma, points.shape[0])
+    return _covariances(rig, points, 1.0 / (sigma * sigma), rig_covariance)
+
+
+def point_covariances_full(rig: StereoRig, points, pixel_covariance,
+                           rig_covariance: RigCovariance | None = None) -> PointCovariance:
+    """:func:`point_covariances` with a full ``(N, 4, 4)`` px² covariance of each point's four
+    pixel coordinates ``(u_L, v_L, u_R, v_R)`` (positive definite; correlated coordinates, a
+    σ along a direction: :func:`dense_pixel_covariance`): ``Σ_pix = (JᵀWJ)⁻¹`` with
+    ``W = pixel_covariance⁻¹``, the rig part as in the module docs."""
+    points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    covariance = np.asarray(pixel_covariance, dtype=np.float64)
+    if covariance.shape != (points.shape[0], 4, 4):
+        raise ValueError(f"pixel_covariance must be ({points.shape[0]}, 4, 4), got "
+                         f"{covariance.shape}")
+    weight = np.full_like(covariance, np.nan)
+    ok = np.all(np.isfinite(covariance), axis=(1, 2))
+    weight[ok] = np.linalg.inv(covariance[ok])
+    return _covariances(rig, points, weight, rig_covariance)
+
+
+#: The isotropic part of :func:`dense_pixel_covariance`, a fraction of the σ along the curve.
+DENSE_ISOTROPIC_FRACTION = 0.01
+
+
+def dense_pixel_covariance(sigma_px, direction, isotropic_px=None) -> np.ndarray:
+    """``(N, 4, 4)`` px²: the pixel covariance of dense matches (:class:`measure.dense.
+    DenseMatches`): the left pixel is the grid point (exact) and the matcher moves the right
+    pixel along its epipolar curve only, so the right pixel carries ``sigma_px`` ``(N,)`` along
+    the unit ``direction`` ``(N, 2)`` (a rank-1 2 × 2 block), plus ``isotropic_px`` (default
+    :data:`DENSE_ISOTROPIC_FRACTION` × ``sigma_px``) on all four coordinates, which keeps the
+    covariance invertible (the point's σ across its left ray is that small fraction)."""
+    sigma = np.asarray(sigma_px, dtype=np.float64).reshape(-1)
+    direction = np.asarray(direction, dtype=np.float64).reshape(-1, 2)
+    iso = DENSE_ISOTROPIC_FRACTION * sigma if isotropic_px is None else \
+        np.broadcast_to(np.asarray(isotropic_px, dtype=np.float64), sigma.shape)
+    out = np.zeros((sigma.size, 4, 4))
+    out[:, 2:, 2:] = (sigma * sigma)[:, None, None] * direction[:, :, None] * direction[:, None, :]
+    out += (iso * iso)[:, None, None] * np.eye(4)
+    return out
+
+
+def _covariances(rig, points, weight, rig_covariance) -> PointCovariance:
+    """The pixel and rig parts with pixel weights ``weight`` ``(N, 4)`` (diagonal) or
+    ``(N, 4, 4)``."""
     names = () if rig_covariance is None else rig_covariance.names
     axes = None if rig_covariance is None else rig_covariance.normal_axes
     _, J, Jt = pixel_jacobians(rig, points, names, axes)
-    w = 1.0 / (sigma * sigma)  # (N, 4)
-    normal = np.einsum("nki,nk,nkj->nij", J, w, J)
+    if weight.ndim == 2:
+        weight = weight[:, :, None] * np.eye(4)
+    JW = np.einsum("nki,nkl->nil", J, weight)  # (N, 3, 4)
+    normal = np.einsum("nil,nlj->nij", JW, J)
     bad = ~np.all(np.isfinite(normal), axis=(1, 2))
     normal[bad] = np.eye(3)
     pixel = np.linalg.inv(normal)
@@ -245,7 +290,7 @@ def point_covariances(rig: StereoRig, points, pixel_sigma, rig_covariance: RigCo
     rig_part = np.zeros_like(pixel)
     if names:
         # A = −(JᵀWJ)⁻¹ JᵀW J_θ  (N, 3, P)
-        A = -np.einsum("nij,nkj,nk,nkp->nip", pixel, J, w, Jt)
+        A = -np.einsum("nij,njl,nlp->nip", pixel, JW, Jt)
         rig_part = np.einsum("nip,pq,njq->nij", A, rig_covariance.matrix, A)
     total = pixel + rig_part
     return PointCovariance(total, pixel, rig_part)
@@ -403,7 +448,8 @@ def detection_sigma(detections, floor_px: float = 0.0) -> np.ndarray:
     return np.sqrt(background_term ** 2 + float(floor_px) ** 2)
 
 
-__all__ = ["CHI2_1_MEDIAN", "CHI2_3_95", "PointCovariance", "coverage_summary",
-           "detection_sigma", "mahalanobis_squared", "perturbed_rig", "pixel_jacobians",
-           "pixel_sigmas", "point_covariance", "point_covariances", "residual_sigma",
+__all__ = ["CHI2_1_MEDIAN", "CHI2_3_95", "DENSE_ISOTROPIC_FRACTION", "PointCovariance",
+           "coverage_summary", "dense_pixel_covariance", "detection_sigma",
+           "mahalanobis_squared", "perturbed_rig", "pixel_jacobians", "pixel_sigmas",
+           "point_covariance", "point_covariances", "point_covariances_full", "residual_sigma",
            "sigma_summary"]
