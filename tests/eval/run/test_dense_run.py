@@ -54,14 +54,22 @@ def test_dense_run_measures_the_plane_and_shows_what_ignoring_refraction_costs(p
     # ignoring the port puts the plane where it appears (~250 mm nearer) and bends it
     assert pinhole["p2m_median_mm"] > 100 and pinhole["fscore_5mm"] < 0.01
     for name in ("report.md", "views.png", "distances.png", "depth_error_optical_path.png",
-                 "points_optical_path.ply", "points_regular.ply"):
+                 "points_optical_path.ply", "points_regular.ply", "sigma_z_optical_path.png"):
         assert os.path.getsize(os.path.join(out, name)) > 0
+    # every matched pixel of optical_path has a σ (regular, which ignores the port, none)
+    assert set(report["uncertainty"]) == {"optical_path"}
+    uncertainty = report["uncertainty"]["optical_path"]
+    assert uncertainty["matching_sigma"]["source"].startswith("matching σ per pixel")
+    assert uncertainty["sigma"]["n"] == refractive["measured_pixels"]
+    sigma_z = np.load(os.path.join(out, "sigma_z_optical_path.npy"))
+    assert sigma_z.shape == (268, 320) and np.isfinite(sigma_z).sum() == uncertainty["sigma"]["n"]
+    assert uncertainty["coverage"]["n"] > 0.9 * uncertainty["sigma"]["n"]
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("argv, fragment", [
     (["--eccentricity"], "applies to target scenes"),
-    (["--pixel-sigma", "0.1"], "--pixel-sigma applies to target scenes"),
+    (["--pixel-sigma", "0"], "--pixel-sigma '0': expected auto or a positive number"),
     (["--methods", "su"], "surface scene is measured with"),
     (["--depth-range", "2000,2100"], "excludes the surface"),
     (["--depth-range", "50,2000"], "NEAR must lie beyond the port"),
