@@ -91,9 +91,11 @@ def test_interpolated_warp_matches_exact_map(size, model):
 
 
 def test_fronto_parallel_plane(small_rig, front_pair, front_matches):
-    """Plane z = 1 m. Measured: 99.3 % of the overlap matched, right-pixel error RMS 0.0082 px,
-    max 0.054 px, points RMS 0.20 mm from the plane (max 1.5 mm). Tolerances: 97 %, RMS
-    0.02 px, max 0.15 px, RMS 0.4 mm (about 2-3x the measurement)."""
+    """Plane z = 1 m. Measured (2026-12-02, the refinement's fourth-order derivative): 99.3 % of
+    the overlap matched, right-pixel error RMS 0.0067 px, max 0.041 px, points RMS 0.16 mm from
+    the plane (max 1.1 mm); with Scharr's derivative it was RMS 0.0082 px, max 0.054 px,
+    0.20 mm. Tolerances: 97 %, RMS 0.02 px, max 0.15 px, RMS 0.4 mm (about 2-3x the
+    measurement)."""
     surface, _ = front_pair
     fraction, error, distance = _evaluate(small_rig, surface, front_matches, "optical_path")
     assert fraction > 0.97
@@ -117,7 +119,7 @@ def test_depth_map_is_the_triangulated_depth(small_rig, front_matches):
 def test_pinhole_model_is_measurably_worse(small_rig, front_pair, front_matches):
     """The same pair matched with the port ignored (straight rays, over its own apparent depth
     range 650-900 mm): its epipolar curves miss the refracted ones, so few windows correlate.
-    Measured: 19 % matched (refractive 99 %), right-pixel RMS 0.37 px (refractive 0.008 px).
+    Measured: 19 % matched (refractive 99 %), right-pixel RMS 0.36 px (refractive 0.007 px).
     Asserted: under half the refractive fraction and over 10x its RMS pixel error."""
     surface, (left, right) = front_pair
     pinhole = match_dense(small_rig, left, right, (650.0, 900.0), model="pinhole")
@@ -132,12 +134,14 @@ def test_slanted_surfaces(small_rig, texture, case):
     """A plane tilted 20 degrees about y, and a vertical cylinder of radius 600 mm whose near
     side is at 900 mm. The square windows assume a constant depth across them, which these
     surfaces break (at 5 mm per px an 11 px window spans up to ~20 mm of depth), and a few
-    wrong peaks pass min_score (max errors 2.7 / 3.8 px). Measured (tilted / cylinder), with the
-    refinement damping steps that reverse the previous one: 98.0 % / 79.0 % matched (92.7 % /
-    67.5 % before the damping), median right-pixel error 0.031 / 0.024 px, 95th percentile
-    0.097 / 0.125 px, median point distance 0.74 / 0.48 mm. Tolerances: 94 % / 72 %, median
-    0.06 px, 95th percentile 0.2 px, median 1.5 mm. Matches whose left ray misses the cylinder
-    (windows across its silhouette): measured 0.66 %, asserted < 1 % (in ``_evaluate``)."""
+    wrong peaks pass min_score (max errors 2.3 / 2.1 px). Measured (tilted / cylinder,
+    2026-12-02, the refinement's fourth-order derivative and its damping of steps that reverse
+    the previous one): 98.1 % / 79.9 % matched (92.7 % / 67.5 % before the damping), median
+    right-pixel error 0.030 / 0.023 px, 95th percentile 0.095 / 0.123 px, median point distance
+    0.72 / 0.47 mm (Scharr's derivative: 98.0 % / 79.0 %, 0.031 / 0.024 px, 0.097 / 0.125 px,
+    0.74 / 0.48 mm). Tolerances: 94 % / 72 %, median 0.06 px, 95th percentile 0.2 px, median
+    1.5 mm. Matches whose left ray misses the cylinder (windows across its silhouette):
+    measured 0.64 %, asserted < 1 % (in ``_evaluate``)."""
     if case == "tilted":
         tilt = np.radians(20.0)
         surface = PlaneSurface.create((100.0, 0.0, 1000.0), (np.sin(tilt), 0.0, np.cos(tilt)))
