@@ -38,6 +38,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.optimize import brentq
+from scipy.stats import chi2
 
 from .camera import Camera
 from .port import FlatPort
@@ -387,11 +388,13 @@ def mahalanobis_squared(errors, covariance) -> np.ndarray:
     return out
 
 
-def coverage_summary(errors, covariance) -> dict:
+def coverage_summary(errors, covariance, dof: int = 3) -> dict:
     """How honest the covariances were, against the truth: ``coverage_95`` (fraction of points
-    with Mahalanobis distance² ≤ χ²₃(0.95); 0.95 expected), ``mahalanobis2_mean`` (3 expected),
-    and per component (x, y, z) the normalized errors ``e / σ``: mean, standard deviation (1
-    expected) and the fraction beyond 1.96 (0.05 expected). ``n``: the points counted."""
+    with Mahalanobis distance² ≤ χ²_dof(0.95); 0.95 expected), ``mahalanobis2_mean`` (``dof``
+    expected), and per component (x, y, z) the normalized errors ``e / σ``: mean, standard
+    deviation (1 expected) and the fraction beyond 1.96 (0.05 expected). ``n``: the points
+    counted. ``dof``: the dimensions the errors span — 3, or 1 for errors along one line (a
+    dense match against truth on the same left ray: :data:`DENSE_ISOTROPIC_FRACTION`)."""
     errors = np.asarray(errors, dtype=np.float64).reshape(-1, 3)
     covariance = np.asarray(covariance, dtype=np.float64).reshape(-1, 3, 3)
     d2 = mahalanobis_squared(errors, covariance)
@@ -399,7 +402,9 @@ def coverage_summary(errors, covariance) -> dict:
     if not ok.any():
         return {"n": 0, "coverage_95": None, "mahalanobis2_mean": None, "normalized": None}
     z = errors[ok] / np.sqrt(np.einsum("nii->ni", covariance[ok]))
-    return {"n": int(ok.sum()), "coverage_95": float(np.mean(d2[ok] <= CHI2_3_95)),
+    threshold = CHI2_3_95 if dof == 3 else float(chi2.ppf(0.95, dof))
+    return {"n": int(ok.sum()), "dof": int(dof),
+            "coverage_95": float(np.mean(d2[ok] <= threshold)),
             "mahalanobis2_mean": float(np.mean(d2[ok])),
             "mahalanobis2_median": float(np.median(d2[ok])),
             "normalized": {axis: {"mean": float(np.mean(z[:, k])), "std": float(np.std(z[:, k])),

@@ -99,13 +99,13 @@ def rig_covariance_note(rig_covariance, source: str | None) -> str:
     return "the rig is taken as exact (no calibration file): the pixel-noise part only"
 
 
-def uncertainty_summary(covariance, errors=None) -> dict:
+def uncertainty_summary(covariance, errors=None, dof: int = 3) -> dict:
     """A method's ``report.json`` entry: :func:`measure.uncertainty.sigma_summary` and, with
     ``errors`` (N, 3) mm (measured − true, the same rows), the coverage and normalized errors
-    (:func:`measure.uncertainty.coverage_summary`)."""
+    (:func:`measure.uncertainty.coverage_summary`, ``dof`` the dimensions the errors span)."""
     out = {"sigma": sigma_summary(covariance)}
     if errors is not None:
-        out["coverage"] = coverage_summary(errors, covariance)
+        out["coverage"] = coverage_summary(errors, covariance, dof)
         verdict = coverage_verdict(out["coverage"])
         if verdict:
             out["coverage"]["verdict"] = verdict

@@ -277,14 +277,34 @@ def measure_surface(config: RunConfig, methods, log):
             sigma_z = np.full((h, w), np.nan, np.float32)
             sigma_z[rows, cols] = np.sqrt(covariance.total[:, 2, 2])
             method_arrays["sigma_z"] = sigma_z
+            # the truth point of a pixel lies on its left ray, like the measured one: with an
+            # exact rig the error has one dimension (the covariance's 1 % across is padding)
+            summary = uncertainty_summary(covariance.total, errors,
+                                          dof=1 if rig_covariance is None else 3)
+            if summary["coverage"].get("verdict"):
+                summary["coverage"]["verdict"] = dense_verdict(summary["coverage"])
             report["uncertainty"][method] = {
                 "matching_sigma": info,
-                "rig": rig_covariance_note(rig_covariance, rig_source),
-                **uncertainty_summary(covariance.total, errors)}
+                "rig": rig_covariance_note(rig_covariance, rig_source), **summary}
             report["timings_s"][f"covariance_{method}"] = time.perf_counter() - t
         arrays["per_method"][method] = method_arrays
         log(f"{method}: {rows.size} pixels matched in {match_seconds:.1f} s")
     return report, arrays
+
+
+def dense_verdict(coverage: dict) -> str:
+    """The report's sentence when a dense run's ``coverage_95`` is outside
+    :data:`eval.core.uncertainty.HONEST_COVERAGE` (what the matching σ does not hold)."""
+    from eval.core.uncertainty import HONEST_COVERAGE
+
+    fraction = coverage["coverage_95"]
+    if fraction < HONEST_COVERAGE[0]:
+        return (f"σ understates the errors: {fraction:.3f} of the pixels inside their 95 % "
+                f"interval (< {HONEST_COVERAGE[0]:.2f}); the matching σ holds the images' "
+                f"noise, not the renderer's texture filtering nor the depth a window spans on "
+                f"a slanted surface")
+    return (f"σ overstates the errors: {fraction:.3f} of the pixels inside their 95 % interval "
+            f"(> {HONEST_COVERAGE[1]:.2f})")
 
 
 def _progress(config: RunConfig, method):
