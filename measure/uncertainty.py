@@ -274,6 +274,35 @@ def dense_pixel_covariance(sigma_px, direction, isotropic_px=None) -> np.ndarray
     return out
 
 
+def dense_point_covariances(rig: StereoRig, points, sigma_px, direction,
+                            rig_covariance: RigCovariance | None = None) -> PointCovariance:
+    """:func:`point_covariances_full` with :func:`dense_pixel_covariance` (its default
+    isotropic part), the weights written in closed form (no 4 × 4 inverse per point): the left
+    block ``I / ε²``, the right one ``(I − s² / (s² + ε²) t tᵀ) / ε²`` for ``s`` = ``sigma_px``
+    along the unit ``t`` = ``direction`` and ``ε = DENSE_ISOTROPIC_FRACTION · s``."""
+    points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    s2 = np.asarray(sigma_px, dtype=np.float64).reshape(-1) ** 2
+    t = np.asarray(direction, dtype=np.float64).reshape(-1, 2)
+    if s2.shape[0] != points.shape[0] or t.shape[0] != points.shape[0]:
+        raise ValueError("sigma_px and direction need one row per point")
+    e2 = DENSE_ISOTROPIC_FRACTION ** 2 * s2
+    with np.errstate(invalid="ignore", divide="ignore"):
+        weight = np.eye(4) / e2[:, None, None]
+        weight[:, 2:, 2:] -= ((s2 / (s2 + e2) / e2)[:, None, None] * t[:, :, None]
+                              * t[:, None, :])
+    weight[~(np.isfinite(s2) & (s2 > 0))] = np.nan
+    return _covariances(rig, points, weight, rig_covariance)
+
+
+def _inverse_3x3(m: np.ndarray) -> np.ndarray:
+    """Inverses of ``(N, 3, 3)`` matrices in closed form (columns: cross products of the rows
+    over the determinant); non-finite where singular."""
+    a, b, c = m[:, 0], m[:, 1], m[:, 2]
+    cofactors = np.stack([np.cross(b, c), np.cross(c, a), np.cross(a, b)], axis=2)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return cofactors / np.einsum("ni,ni->n", a, cofactors[:, :, 0])[:, None, None]
+
+
 def _covariances(rig, points, weight, rig_covariance) -> PointCovariance:
     """The pixel and rig parts with pixel weights ``weight`` ``(N, 4)`` (diagonal) or
     ``(N, 4, 4)``."""
@@ -281,17 +310,16 @@ def _covariances(rig, points, weight, rig_covariance) -> PointCovariance:
     axes = None if rig_covariance is None else rig_covariance.normal_axes
     _, J, Jt = pixel_jacobians(rig, points, names, axes)
     if weight.ndim == 2:
-        weight = weight[:, :, None] * np.eye(4)
-    JW = np.einsum("nki,nkl->nil", J, weight)  # (N, 3, 4)
-    normal = np.einsum("nil,nlj->nij", JW, J)
-    bad = ~np.all(np.isfinite(normal), axis=(1, 2))
-    normal[bad] = np.eye(3)
-    pixel = np.linalg.inv(normal)
-    pixel[bad] = np.nan
+        JW = np.swapaxes(J, 1, 2) * weight[:, None, :]  # (N, 3, 4)
+    else:
+        JW = np.matmul(np.swapaxes(J, 1, 2), weight)
+    normal = np.matmul(JW, J)
+    pixel = _inverse_3x3(normal)
+    pixel[~np.all(np.isfinite(pixel), axis=(1, 2))] = np.nan
     rig_part = np.zeros_like(pixel)
     if names:
         # A = −(JᵀWJ)⁻¹ JᵀW J_θ  (N, 3, P)
-        A = -np.einsum("nij,njl,nlp->nip", pixel, JW, Jt)
+        A = -np.matmul(np.matmul(pixel, JW), Jt)
         rig_part = np.einsum("nip,pq,njq->nij", A, rig_covariance.matrix, A)
     total = pixel + rig_part
     return PointCovariance(total, pixel, rig_part)
@@ -454,7 +482,7 @@ def detection_sigma(detections, floor_px: float = 0.0) -> np.ndarray:
 
 
 __all__ = ["CHI2_1_MEDIAN", "CHI2_3_95", "DENSE_ISOTROPIC_FRACTION", "PointCovariance",
-           "coverage_summary", "dense_pixel_covariance", "detection_sigma",
+           "coverage_summary", "dense_pixel_covariance", "dense_point_covariances", "detection_sigma",
            "mahalanobis_squared", "perturbed_rig", "pixel_jacobians", "pixel_sigmas",
            "point_covariance", "point_covariances", "point_covariances_full", "residual_sigma",
            "sigma_summary"]

@@ -160,13 +160,11 @@ def default_depth_range(truth) -> tuple[float, float]:
 
 def dense_covariances(rig, matches, points, pixel_sigma, rig_covariance=None):
     """``(PointCovariance, info)``: the covariance of every dense match's point ``(N, 3)``
-    (:func:`measure.uncertainty.point_covariances_full` with
-    :func:`measure.uncertainty.dense_pixel_covariance`: the left pixel exact, the right one σ
+    (:func:`measure.uncertainty.dense_point_covariances`: the left pixel exact, the right one σ
     along its epipolar curve) and the rig's covariance (None: the rig taken as exact).
     ``pixel_sigma``: ``"auto"`` (the matcher's σ per pixel) or px (stated for every pixel)."""
     from eval.core.uncertainty import AUTO
-    from measure.uncertainty import (PointCovariance, dense_pixel_covariance,
-                                     point_covariances_full)
+    from measure.uncertainty import PointCovariance, dense_point_covariances
 
     n = points.shape[0]
     if pixel_sigma == AUTO:
@@ -184,11 +182,10 @@ def dense_covariances(rig, matches, points, pixel_sigma, rig_covariance=None):
                  "p95_px": float(np.percentile(finite, 95)) if finite.size else None,
                  "max_px": float(finite.max()) if finite.size else None,
                  "infinite": int(n - finite.size)})
-    parts = [point_covariances_full(rig, points[k:k + COVARIANCE_CHUNK],
-                                    dense_pixel_covariance(sigma[k:k + COVARIANCE_CHUNK],
-                                                           matches.curve_direction[
-                                                               k:k + COVARIANCE_CHUNK]),
-                                    rig_covariance)
+    parts = [dense_point_covariances(rig, points[k:k + COVARIANCE_CHUNK],
+                                     sigma[k:k + COVARIANCE_CHUNK],
+                                     matches.curve_direction[k:k + COVARIANCE_CHUNK],
+                                     rig_covariance)
              for k in range(0, n, COVARIANCE_CHUNK)]
     if not parts:
         empty = np.zeros((0, 3, 3))

@@ -18,6 +18,7 @@ from measure.projection import project
 from measure.rig_covariance import RigCovariance
 from measure.selfcal import self_calibrate, tilt_basis
 from measure.uncertainty import (CHI2_3_95, coverage_summary, dense_pixel_covariance,
+                                 dense_point_covariances,
                                  detection_sigma, mahalanobis_squared, perturbed_rig,
                                  pixel_jacobians, point_covariance, point_covariances,
                                  point_covariances_full, residual_sigma, sigma_summary)
@@ -259,3 +260,14 @@ def test_dense_covariance_lies_along_the_left_ray():
     assert np.all(np.abs(np.einsum("ni,ni->n", along, rays)) > np.cos(1e-3))
     np.testing.assert_allclose(np.sqrt(values[:, 2]), sigma_px / speed, rtol=1e-3)
     assert np.all(np.sqrt(values[:, 1]) < 0.02 * np.sqrt(values[:, 2]))
+    # the closed-form weights of dense_point_covariances give the same, rig part included
+    names = ("left.fx", "right.cx", "port.distance", "port.tilt[0]")
+    rig_covariance = RigCovariance(names, np.diag([0.5, 0.3, 0.2, 2e-4]) ** 2, AXES)
+    direction = rate / speed[:, None]
+    full = point_covariances_full(rig, points, dense_pixel_covariance(sigma_px, direction),
+                                  rig_covariance)
+    closed = dense_point_covariances(rig, points, sigma_px, direction, rig_covariance)
+    np.testing.assert_allclose(closed.pixel, full.pixel, rtol=1e-6, atol=1e-14)
+    np.testing.assert_allclose(closed.rig, full.rig, rtol=1e-6, atol=1e-12)
+    sigma_px[0] = np.inf  # no information: NaN, like a point without an image
+    assert np.all(np.isnan(dense_point_covariances(rig, points, sigma_px, direction).total[0]))
