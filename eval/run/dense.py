@@ -169,10 +169,12 @@ def dense_covariances(rig, matches, points, pixel_sigma, rig_covariance=None):
     n = points.shape[0]
     if pixel_sigma == AUTO:
         sigma = np.asarray(matches.sigma_px, dtype=np.float64)
-        info = {"source": f"matching σ per pixel (image noise σ_n {matches.noise_source} from "
-                          f"the matched windows)" if matches.noise_source == "estimated" else
-                          "matching σ per pixel (image noise σ_n stated)",
+        info = {"source": f"matching σ per pixel (image noise {matches.noise_source} from the "
+                          f"matched windows' residuals)",
                 "noise_sigma": matches.noise_sigma}
+        if matches.noise_levels is not None:
+            info["noise_levels"] = {"intensity": matches.noise_levels[0],
+                                    "sigma": matches.noise_levels[1]}
     else:
         sigma = np.full(n, float(pixel_sigma))
         info = {"source": "stated (--pixel-sigma), along the epipolar curve",
