@@ -38,11 +38,15 @@ with ``c_xy`` the window's centred means (``c_hh`` = the variance of ``h`` over 
 the ``c_gh²/c_gg`` term is what the free gain takes away) and ``σ_n²(1 + a²)`` the variance of
 the residual ``ε = n_f − a·n_g`` for independent noise ``σ_n`` in both images (the factor 2 of
 the textbook form ``σ_s² = 2σ_n² / Σ(∂I/∂s)²`` when ``a = 1`` and the gain is known). The right
-pixel's σ along the epipolar curve is ``σ_s = σ_d · |∂r/∂d|`` (px). ``σ_n`` is stated or
-estimated from the matched windows' residuals: per pixel ``n/(n − 3) · var_f · (1 − ρ²)``
-(ρ the ZNCC: the residual of the affine fit, 3 parameters) divided by ``1 + a²``; the median
-over the matched pixels, corrected by the median of χ²ₙ₋₃ / (n − 3), is the image's σ_n (any
-misfit of the model, the renderer's noise, the interpolation all count as noise).
+pixel's σ along the epipolar curve is ``σ_s = σ_d · |∂r/∂d|`` (px). The refinement's regressor
+is not exactly the true derivative, so the σ is the sandwich of its fixed point
+(:func:`_fit_band`), which is this bound when they agree. ``σ_n`` is stated (one for every
+pixel) or estimated from the matched pixels' residuals as a function of intensity (the noise
+level function, :func:`_noise_levels`: rendered and photographed noise grows with the
+intensity), and each window's pixels then carry their own noise in the sandwich; with too few
+matched pixels for the levels, one σ_n from the windows' median residual
+``n/(n − 3) · var_f · (1 − ρ²) / (1 + a²)`` (ρ the ZNCC, corrected by the median of
+χ²ₙ₋₃ / (n − 3)). Any misfit of the window model and the interpolation count as noise.
 
 Units mm; reference frame = left camera frame; OpenCV pixels ``(u, v)``, integer = pixel centre.
 """

@@ -48,7 +48,9 @@ def add_pixel_sigma_option(parser) -> None:
                         help="σ of a detected centre per coordinate (px) for the points' "
                              "covariances: a number, or auto (default): each target's σ from "
                              "the detector (its SNR and size) plus the noise the reprojection "
-                             "residuals show beyond it")
+                             "residuals show beyond it; on a surface scene the right pixel's σ "
+                             "along the epipolar curve (auto: each pixel's from its window and "
+                             "the images' noise)")
 
 
 def pair_sigmas(mode, uv_left, uv_right, start, rig, detections=None, matches=None,
