@@ -303,7 +303,8 @@ def dense_verdict(coverage: dict) -> str:
                 f"noise, not the renderer's texture filtering nor the depth a window spans on "
                 f"a slanted surface")
     return (f"σ overstates the errors: {fraction:.3f} of the pixels inside their 95 % interval "
-            f"(> {HONEST_COVERAGE[1]:.2f})")
+            f"(> {HONEST_COVERAGE[1]:.2f}); with a calibration's covariance one calibration is "
+            f"one draw of the rig error, shared by every pixel")
 
 
 def _progress(config: RunConfig, method):
