@@ -627,8 +627,10 @@ def _refine(warp: PlaneWarp, left, right, start, candidate, window, depth_range,
     right window inside the right image). ``times`` (a dict), if given, receives the seconds
     spent in the set-up (rays, nearest candidates), in projecting and sampling, and in the
     window sums and steps. ``fit`` (a dict), if given, receives the window statistics of the
-    final depths (:func:`matching_sigma`'s ``gain``, ``information``, ``residual`` ``(H, W)``
-    and ``rate`` ``(H, W, 2)``)."""
+    final depths (:func:`_fit_band`'s ``gain``, ``information``, ``residual``,
+    ``pixel_residual`` ``(H, W)`` and ``rate`` ``(H, W, 2)``); with ``fit["noise_levels"]``
+    true also ``levels`` (:func:`_noise_levels`, from the candidates of ZNCC ≥
+    :data:`NOISE_LEVEL_MIN_SCORE`) and ``weighted`` (a second pass with each pixel's noise)."""
     t_start = time.perf_counter()
     t_project = t_sums = 0.0
     height, width = left.shape
