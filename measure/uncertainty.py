@@ -38,6 +38,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.optimize import brentq
+from scipy.stats import chi2
 
 from .camera import Camera
 from .port import FlatPort
@@ -231,21 +232,94 @@ def point_covariances(rig: StereoRig, points, pixel_sigma, rig_covariance: RigCo
     docs), with its pixel and rig parts. ``pixel_sigma``: px, see :func:`pixel_sigmas`.
     ``rig_covariance`` None: the rig is taken as exact (pixel part only)."""
     points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-    n = points.shape[0]
-    sigma = pixel_sigmas(pixel_sigma, n)
+    sigma = pixel_sigmas(pixel_sigma, points.shape[0])
+    return _covariances(rig, points, 1.0 / (sigma * sigma), rig_covariance)
+
+
+def point_covariances_full(rig: StereoRig, points, pixel_covariance,
+                           rig_covariance: RigCovariance | None = None) -> PointCovariance:
+    """:func:`point_covariances` with a full ``(N, 4, 4)`` px² covariance of each point's four
+    pixel coordinates ``(u_L, v_L, u_R, v_R)`` (positive definite; correlated coordinates, a
+    σ along a direction: :func:`dense_pixel_covariance`): ``Σ_pix = (JᵀWJ)⁻¹`` with
+    ``W = pixel_covariance⁻¹``, the rig part as in the module docs."""
+    points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    covariance = np.asarray(pixel_covariance, dtype=np.float64)
+    if covariance.shape != (points.shape[0], 4, 4):
+        raise ValueError(f"pixel_covariance must be ({points.shape[0]}, 4, 4), got "
+                         f"{covariance.shape}")
+    weight = np.full_like(covariance, np.nan)
+    ok = np.all(np.isfinite(covariance), axis=(1, 2))
+    weight[ok] = np.linalg.inv(covariance[ok])
+    return _covariances(rig, points, weight, rig_covariance)
+
+
+#: The isotropic part of :func:`dense_pixel_covariance`, a fraction of the σ along the curve.
+DENSE_ISOTROPIC_FRACTION = 0.01
+
+
+def dense_pixel_covariance(sigma_px, direction, isotropic_px=None) -> np.ndarray:
+    """``(N, 4, 4)`` px²: the pixel covariance of dense matches (:class:`measure.dense.
+    DenseMatches`): the left pixel is the grid point (exact) and the matcher moves the right
+    pixel along its epipolar curve only, so the right pixel carries ``sigma_px`` ``(N,)`` along
+    the unit ``direction`` ``(N, 2)`` (a rank-1 2 × 2 block), plus ``isotropic_px`` (default
+    :data:`DENSE_ISOTROPIC_FRACTION` × ``sigma_px``) on all four coordinates, which keeps the
+    covariance invertible (the point's σ across its left ray is that small fraction)."""
+    sigma = np.asarray(sigma_px, dtype=np.float64).reshape(-1)
+    direction = np.asarray(direction, dtype=np.float64).reshape(-1, 2)
+    iso = DENSE_ISOTROPIC_FRACTION * sigma if isotropic_px is None else \
+        np.broadcast_to(np.asarray(isotropic_px, dtype=np.float64), sigma.shape)
+    out = np.zeros((sigma.size, 4, 4))
+    out[:, 2:, 2:] = (sigma * sigma)[:, None, None] * direction[:, :, None] * direction[:, None, :]
+    out += (iso * iso)[:, None, None] * np.eye(4)
+    return out
+
+
+def dense_point_covariances(rig: StereoRig, points, sigma_px, direction,
+                            rig_covariance: RigCovariance | None = None) -> PointCovariance:
+    """:func:`point_covariances_full` with :func:`dense_pixel_covariance` (its default
+    isotropic part), the weights written in closed form (no 4 × 4 inverse per point): the left
+    block ``I / ε²``, the right one ``(I − s² / (s² + ε²) t tᵀ) / ε²`` for ``s`` = ``sigma_px``
+    along the unit ``t`` = ``direction`` and ``ε = DENSE_ISOTROPIC_FRACTION · s``."""
+    points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    s2 = np.asarray(sigma_px, dtype=np.float64).reshape(-1) ** 2
+    t = np.asarray(direction, dtype=np.float64).reshape(-1, 2)
+    if s2.shape[0] != points.shape[0] or t.shape[0] != points.shape[0]:
+        raise ValueError("sigma_px and direction need one row per point")
+    e2 = DENSE_ISOTROPIC_FRACTION ** 2 * s2
+    with np.errstate(invalid="ignore", divide="ignore"):
+        weight = np.eye(4) / e2[:, None, None]
+        weight[:, 2:, 2:] -= ((s2 / (s2 + e2) / e2)[:, None, None] * t[:, :, None]
+                              * t[:, None, :])
+    weight[~(np.isfinite(s2) & (s2 > 0))] = np.nan
+    return _covariances(rig, points, weight, rig_covariance)
+
+
+def _inverse_3x3(m: np.ndarray) -> np.ndarray:
+    """Inverses of ``(N, 3, 3)`` matrices in closed form (columns: cross products of the rows
+    over the determinant); non-finite where singular."""
+    a, b, c = m[:, 0], m[:, 1], m[:, 2]
+    cofactors = np.stack([np.cross(b, c), np.cross(c, a), np.cross(a, b)], axis=2)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return cofactors / np.einsum("ni,ni->n", a, cofactors[:, :, 0])[:, None, None]
+
+
+def _covariances(rig, points, weight, rig_covariance) -> PointCovariance:
+    """The pixel and rig parts with pixel weights ``weight`` ``(N, 4)`` (diagonal) or
+    ``(N, 4, 4)``."""
     names = () if rig_covariance is None else rig_covariance.names
     axes = None if rig_covariance is None else rig_covariance.normal_axes
     _, J, Jt = pixel_jacobians(rig, points, names, axes)
-    w = 1.0 / (sigma * sigma)  # (N, 4)
-    normal = np.einsum("nki,nk,nkj->nij", J, w, J)
-    bad = ~np.all(np.isfinite(normal), axis=(1, 2))
-    normal[bad] = np.eye(3)
-    pixel = np.linalg.inv(normal)
-    pixel[bad] = np.nan
+    if weight.ndim == 2:
+        JW = np.swapaxes(J, 1, 2) * weight[:, None, :]  # (N, 3, 4)
+    else:
+        JW = np.matmul(np.swapaxes(J, 1, 2), weight)
+    normal = np.matmul(JW, J)
+    pixel = _inverse_3x3(normal)
+    pixel[~np.all(np.isfinite(pixel), axis=(1, 2))] = np.nan
     rig_part = np.zeros_like(pixel)
     if names:
         # A = −(JᵀWJ)⁻¹ JᵀW J_θ  (N, 3, P)
-        A = -np.einsum("nij,nkj,nk,nkp->nip", pixel, J, w, Jt)
+        A = -np.matmul(np.matmul(pixel, JW), Jt)
         rig_part = np.einsum("nip,pq,njq->nij", A, rig_covariance.matrix, A)
     total = pixel + rig_part
     return PointCovariance(total, pixel, rig_part)
@@ -342,11 +416,13 @@ def mahalanobis_squared(errors, covariance) -> np.ndarray:
     return out
 
 
-def coverage_summary(errors, covariance) -> dict:
+def coverage_summary(errors, covariance, dof: int = 3) -> dict:
     """How honest the covariances were, against the truth: ``coverage_95`` (fraction of points
-    with Mahalanobis distance² ≤ χ²₃(0.95); 0.95 expected), ``mahalanobis2_mean`` (3 expected),
-    and per component (x, y, z) the normalized errors ``e / σ``: mean, standard deviation (1
-    expected) and the fraction beyond 1.96 (0.05 expected). ``n``: the points counted."""
+    with Mahalanobis distance² ≤ χ²_dof(0.95); 0.95 expected), ``mahalanobis2_mean`` (``dof``
+    expected), and per component (x, y, z) the normalized errors ``e / σ``: mean, standard
+    deviation (1 expected) and the fraction beyond 1.96 (0.05 expected). ``n``: the points
+    counted. ``dof``: the dimensions the errors span — 3, or 1 for errors along one line (a
+    dense match against truth on the same left ray: :data:`DENSE_ISOTROPIC_FRACTION`)."""
     errors = np.asarray(errors, dtype=np.float64).reshape(-1, 3)
     covariance = np.asarray(covariance, dtype=np.float64).reshape(-1, 3, 3)
     d2 = mahalanobis_squared(errors, covariance)
@@ -354,7 +430,9 @@ def coverage_summary(errors, covariance) -> dict:
     if not ok.any():
         return {"n": 0, "coverage_95": None, "mahalanobis2_mean": None, "normalized": None}
     z = errors[ok] / np.sqrt(np.einsum("nii->ni", covariance[ok]))
-    return {"n": int(ok.sum()), "coverage_95": float(np.mean(d2[ok] <= CHI2_3_95)),
+    threshold = CHI2_3_95 if dof == 3 else float(chi2.ppf(0.95, dof))
+    return {"n": int(ok.sum()), "dof": int(dof),
+            "coverage_95": float(np.mean(d2[ok] <= threshold)),
             "mahalanobis2_mean": float(np.mean(d2[ok])),
             "mahalanobis2_median": float(np.median(d2[ok])),
             "normalized": {axis: {"mean": float(np.mean(z[:, k])), "std": float(np.std(z[:, k])),
@@ -403,7 +481,8 @@ def detection_sigma(detections, floor_px: float = 0.0) -> np.ndarray:
     return np.sqrt(background_term ** 2 + float(floor_px) ** 2)
 
 
-__all__ = ["CHI2_1_MEDIAN", "CHI2_3_95", "PointCovariance", "coverage_summary",
-           "detection_sigma", "mahalanobis_squared", "perturbed_rig", "pixel_jacobians",
-           "pixel_sigmas", "point_covariance", "point_covariances", "residual_sigma",
+__all__ = ["CHI2_1_MEDIAN", "CHI2_3_95", "DENSE_ISOTROPIC_FRACTION", "PointCovariance",
+           "coverage_summary", "dense_pixel_covariance", "dense_point_covariances", "detection_sigma",
+           "mahalanobis_squared", "perturbed_rig", "pixel_jacobians", "pixel_sigmas",
+           "point_covariance", "point_covariances", "point_covariances_full", "residual_sigma",
            "sigma_summary"]

@@ -48,7 +48,9 @@ def add_pixel_sigma_option(parser) -> None:
                         help="σ of a detected centre per coordinate (px) for the points' "
                              "covariances: a number, or auto (default): each target's σ from "
                              "the detector (its SNR and size) plus the noise the reprojection "
-                             "residuals show beyond it")
+                             "residuals show beyond it; on a surface scene the right pixel's σ "
+                             "along the epipolar curve (auto: each pixel's from its window and "
+                             "the images' noise)")
 
 
 def pair_sigmas(mode, uv_left, uv_right, start, rig, detections=None, matches=None,
@@ -99,13 +101,13 @@ def rig_covariance_note(rig_covariance, source: str | None) -> str:
     return "the rig is taken as exact (no calibration file): the pixel-noise part only"
 
 
-def uncertainty_summary(covariance, errors=None) -> dict:
+def uncertainty_summary(covariance, errors=None, dof: int = 3) -> dict:
     """A method's ``report.json`` entry: :func:`measure.uncertainty.sigma_summary` and, with
     ``errors`` (N, 3) mm (measured − true, the same rows), the coverage and normalized errors
-    (:func:`measure.uncertainty.coverage_summary`)."""
+    (:func:`measure.uncertainty.coverage_summary`, ``dof`` the dimensions the errors span)."""
     out = {"sigma": sigma_summary(covariance)}
     if errors is not None:
-        out["coverage"] = coverage_summary(errors, covariance)
+        out["coverage"] = coverage_summary(errors, covariance, dof)
         verdict = coverage_verdict(out["coverage"])
         if verdict:
             out["coverage"]["verdict"] = verdict

@@ -12,16 +12,26 @@ truth maps, the fraction of overlap pixels measured, flatness of planes.
 Options that apply: ``--from``, ``--spp`` and ``--variant`` (without ``--from``), ``--seed``,
 ``-D``, ``--depth-range``,
 ``--assume`` / ``--calib`` (what the measurement believes), ``--sensor`` and ``--median-filter``
-(the images the matcher sees), ``--methods`` (``optical_path``, ``regular``), ``--json``; the
-target-only options are refused with one ``error:`` line.
+(the images the matcher sees), ``--methods`` (``optical_path``, ``regular``), ``--pixel-sigma``
+(the matching σ, below), ``--json``; the target-only options are refused with one ``error:``
+line.
+
+Uncertainty (``optical_path`` only; ``regular`` ignores the port and gets none, like the
+sparse runs): every matched pixel's 3 × 3 covariance (:func:`dense_covariances`) from its
+matching σ — the right pixel's σ along the epipolar curve, from the window's registration bound
+and the image noise σ_n estimated from the matched windows (:mod:`measure.dense`), or
+``--pixel-sigma PX`` stated for every pixel — and the ``--calib`` file's covariance when it
+has one; the report gives the σ summary and, against the truth maps, the coverage.
 
 Writes ``report.json``, ``report.md``, ``views.png`` (both images), per method
 ``depth_error_<method>.png`` and ``points_<method>.ply`` (coloured by point-to-mesh distance),
-and ``distances.png`` (histograms).
+and ``distances.png`` (histograms); for ``optical_path`` also ``sigma_z_optical_path.npy``
+(``(H, W)`` float32 mm, NaN unmatched) and ``sigma_z_optical_path.png``.
 """
 
 from __future__ import annotations
 
+import io
 import os
 import sys
 import time
@@ -46,8 +56,12 @@ PINHOLE_NEAR_MARGIN = 0.2
 #: Fields of :class:`eval.run.config.RunConfig` (options of ``eval run``) that apply to target
 #: scenes only; a surface run refuses any of them that differs from its default.
 TARGET_ONLY_OPTIONS = ("noise_px", "gate_mm", "self_calibrate", "eccentricity",
-                       "threshold_fraction", "max_elongation", "max_area_ratio", "compare_calib",
-                       "pixel_sigma")
+                       "threshold_fraction", "max_elongation", "max_area_ratio", "compare_calib")
+#: The dense methods whose points get a covariance (the refractive model's; ``regular`` ignores
+#: the port).
+COVARIANCE_METHODS = ("optical_path",)
+#: Points per chunk of :func:`dense_covariances` (bounded memory: ~1 kB per point and parameter).
+COVARIANCE_CHUNK = 1 << 16
 
 
 def is_surface_scene(path: str) -> bool:
@@ -144,14 +158,56 @@ def default_depth_range(truth) -> tuple[float, float]:
     return float(depth.min()) - margin, float(depth.max()) + margin
 
 
+def dense_covariances(rig, matches, points, pixel_sigma, rig_covariance=None):
+    """``(PointCovariance, info)``: the covariance of every dense match's point ``(N, 3)``
+    (:func:`measure.uncertainty.dense_point_covariances`: the left pixel exact, the right one σ
+    along its epipolar curve) and the rig's covariance (None: the rig taken as exact).
+    ``pixel_sigma``: ``"auto"`` (the matcher's σ per pixel) or px (stated for every pixel)."""
+    from eval.core.uncertainty import AUTO
+    from measure.uncertainty import PointCovariance, dense_point_covariances
+
+    n = points.shape[0]
+    if pixel_sigma == AUTO:
+        sigma = np.asarray(matches.sigma_px, dtype=np.float64)
+        info = {"source": f"matching σ per pixel (image noise {matches.noise_source} from the "
+                          f"matched windows' residuals)",
+                "noise_sigma": matches.noise_sigma}
+        if matches.noise_levels is not None:
+            info["noise_levels"] = {"intensity": matches.noise_levels[0],
+                                    "sigma": matches.noise_levels[1]}
+    else:
+        sigma = np.full(n, float(pixel_sigma))
+        info = {"source": "stated (--pixel-sigma), along the epipolar curve",
+                "stated_px": float(pixel_sigma)}
+    finite = sigma[np.isfinite(sigma)]
+    info.update({"median_px": float(np.median(finite)) if finite.size else None,
+                 "p95_px": float(np.percentile(finite, 95)) if finite.size else None,
+                 "max_px": float(finite.max()) if finite.size else None,
+                 "infinite": int(n - finite.size)})
+    parts = [dense_point_covariances(rig, points[k:k + COVARIANCE_CHUNK],
+                                     sigma[k:k + COVARIANCE_CHUNK],
+                                     matches.curve_direction[k:k + COVARIANCE_CHUNK],
+                                     rig_covariance)
+             for k in range(0, n, COVARIANCE_CHUNK)]
+    if not parts:
+        empty = np.zeros((0, 3, 3))
+        return PointCovariance(empty, empty, empty), info
+    return PointCovariance(*(np.concatenate([getattr(p, name) for p in parts])
+                             for name in ("total", "pixel", "rig"))), info
+
+
 def measure_surface(config: RunConfig, methods, log):
     """Match, triangulate and score every method; returns ``(report, arrays)``."""
     from measure.dense import match_dense
     from measure.triangulate import triangulate
 
     from eval.core.surface_metrics import SurfaceCase, score_surface, surface_arrays
+    from eval.core.uncertainty import rig_covariance_note, uncertainty_summary
+    from eval.run.inputs import measurement_covariance
 
     spec, rig, left, right, truth, provenance = surface_inputs(config, log)
+    rig_covariance = measurement_covariance(config)
+    rig_source = f"--calib {config.calib}" if config.calib else None
     left, right, sensor_info = develop(config, left, right,
                                        spec.seed if config.seed is None else config.seed)
     depth_range = config.depth_range_mm
@@ -173,7 +229,8 @@ def measure_surface(config: RunConfig, methods, log):
               "truth": {"valid_pixels": int(truth.valid.sum()),
                         "overlap_pixels": int(truth.overlap.sum())},
               "sensor": sensor_info, "median_filter": int(config.median_filter or 0),
-              "methods": {}, "matching": {}, "timings_s": dict(provenance["timings"]),
+              "methods": {}, "matching": {}, "uncertainty": {},
+              "timings_s": dict(provenance["timings"]),
               "inputs": {k: v for k, v in provenance.items() if k in ("from", "render")}}
     arrays = {"left": left, "right": right, "per_method": {}}
     for method in methods:
@@ -210,9 +267,44 @@ def measure_surface(config: RunConfig, methods, log):
         report["timings_s"][f"match_{method}"] = match_seconds
         report["timings_s"][f"triangulate_{method}"] = triangulate_seconds
         report["timings_s"][f"score_{method}"] = time.perf_counter() - t
+        if method in COVARIANCE_METHODS:
+            t = time.perf_counter()
+            covariance, info = dense_covariances(rig, matches, result.points, config.pixel_sigma,
+                                                 rig_covariance)
+            errors = result.points - truth.points[rows, cols]
+            errors[~truth.overlap[rows, cols]] = np.nan
+            sigma_z = np.full((h, w), np.nan, np.float32)
+            sigma_z[rows, cols] = np.sqrt(covariance.total[:, 2, 2])
+            method_arrays["sigma_z"] = sigma_z
+            # the truth point of a pixel lies on its left ray, like the measured one: with an
+            # exact rig the error has one dimension (the covariance's 1 % across is padding)
+            summary = uncertainty_summary(covariance.total, errors,
+                                          dof=1 if rig_covariance is None else 3)
+            if summary["coverage"].get("verdict"):
+                summary["coverage"]["verdict"] = dense_verdict(summary["coverage"])
+            report["uncertainty"][method] = {
+                "matching_sigma": info,
+                "rig": rig_covariance_note(rig_covariance, rig_source), **summary}
+            report["timings_s"][f"covariance_{method}"] = time.perf_counter() - t
         arrays["per_method"][method] = method_arrays
         log(f"{method}: {rows.size} pixels matched in {match_seconds:.1f} s")
     return report, arrays
+
+
+def dense_verdict(coverage: dict) -> str:
+    """The report's sentence when a dense run's ``coverage_95`` is outside
+    :data:`eval.core.uncertainty.HONEST_COVERAGE` (what the matching σ does not hold)."""
+    from eval.core.uncertainty import HONEST_COVERAGE
+
+    fraction = coverage["coverage_95"]
+    if fraction < HONEST_COVERAGE[0]:
+        return (f"σ understates the errors: {fraction:.3f} of the pixels inside their 95 % "
+                f"interval (< {HONEST_COVERAGE[0]:.2f}); the matching σ holds the images' "
+                f"noise, not the renderer's texture filtering nor the depth a window spans on "
+                f"a slanted surface")
+    return (f"σ overstates the errors: {fraction:.3f} of the pixels inside their 95 % interval "
+            f"(> {HONEST_COVERAGE[1]:.2f}); with a calibration's covariance one calibration is "
+            f"one draw of the rig error, shared by every pixel")
 
 
 def _progress(config: RunConfig, method):
@@ -236,6 +328,8 @@ def _progress(config: RunConfig, method):
 
 def write_outputs(tmp: str, report: dict, arrays: dict) -> None:
     """Figures and coloured point clouds of a surface run into ``tmp`` (entries in the report)."""
+    from synth.fileio import atomic_write_bytes
+
     from eval.run import dense_figures as figures
     from eval.run.figures import views_pair
 
@@ -245,6 +339,12 @@ def write_outputs(tmp: str, report: dict, arrays: dict) -> None:
     for method, data in arrays["per_method"].items():
         figures.write_error_map(os.path.join(tmp, f"depth_error_{method}.png"),
                                 data["depth_error"], f"{method}: measured − true depth [mm]")
+        if "sigma_z" in data:
+            buffer = io.BytesIO()
+            np.save(buffer, data["sigma_z"], allow_pickle=False)
+            atomic_write_bytes(os.path.join(tmp, f"sigma_z_{method}.npy"), buffer.getvalue())
+            figures.write_sigma_map(os.path.join(tmp, f"sigma_z_{method}.png"), data["sigma_z"],
+                                    f"{method}: σ_z of each point [mm]")
         vmax = float(np.nanpercentile(data["distance"], 99)) if data["distance"].size else 1.0
         report["files"][method] = figures.write_colored_cloud(
             os.path.join(tmp, f"points_{method}.ply"), data["measured"], data["distance"],
@@ -277,6 +377,8 @@ def report_markdown(report: dict) -> str:
     for method, m in report["matching"].items():
         lines.append(f"| {method} | {m['model']} | {m['planes']} | {m['matched_pixels']} | "
                      f"{fmt(m['median_score'])} | {fmt(m['timings_s']['total'], 1)} |")
+    for method, u in report.get("uncertainty", {}).items():
+        lines += ["", f"## Uncertainty ({method})", "", *uncertainty_lines(u)]
     lines += ["", "Time per stage (s): " + "; ".join(
         f"{method}: " + ", ".join(f"{k} {v:.2f}" for k, v in m["timings_s"].items())
         for method, m in report["matching"].items()), "",
@@ -287,12 +389,41 @@ def report_markdown(report: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
+def uncertainty_lines(u: dict) -> list:
+    """report.md's lines on one method's covariances (``report["uncertainty"][method]``)."""
+    m, sig = u["matching_sigma"], u["sigma"]
+    noise = (f"; image noise σ_n {fmt(m['noise_sigma'], 4)} (the images' units)"
+             if m.get("noise_sigma") is not None else "")
+    lines = [f"Matching σ: {m['source']}{noise}; along the epipolar curve median "
+             f"{fmt(m['median_px'], 4)} px, 95th percentile {fmt(m['p95_px'], 4)} px. Rig: "
+             f"{u['rig']}."]
+    if sig.get("n"):
+        lines += ["", f"σ of the {sig['n']} points: median σx, σy, σz "
+                      f"{fmt(sig['median_sigma_mm']['x'], 4)}, {fmt(sig['median_sigma_mm']['y'], 4)}, "
+                      f"{fmt(sig['median_sigma_mm']['z'], 4)} mm; largest σ_P "
+                      f"{fmt(sig['max_sigma_p_mm'], 4)} mm (`sigma_z_*.npy`, `sigma_z_*.png`)."]
+    cov = u.get("coverage") or {}
+    if cov.get("n"):
+        z = cov["normalized"]["z"]
+        lines += ["", f"Against the truth ({cov['n']} pixels of the overlap): coverage_95 "
+                      f"{fmt(cov['coverage_95'], 3)} (0.95 expected), mean Mahalanobis² "
+                      f"{fmt(cov['mahalanobis2_mean'], 3)} (3 expected), normalized z error "
+                      f"mean {fmt(z['mean'], 3)}, std {fmt(z['std'], 3)} (1 expected)."]
+        if cov.get("verdict"):
+            lines += ["", cov["verdict"]]
+    return lines
+
+
 def summary_line(report: dict) -> str:
     parts = []
     for method, s in report["methods"].items():
         fraction = s["measured_fraction"]
         parts.append(f"{method} {fmt(None if fraction is None else 100 * fraction, 1)} % "
                      f"measured, RMS {fmt(s['p2m_rms_mm'])} mm, F@1mm {fmt(s['fscore_1mm'])}")
+    for method, u in report.get("uncertainty", {}).items():
+        coverage = (u.get("coverage") or {}).get("coverage_95")
+        parts.append(f"{method} median σz {fmt((u['sigma'].get('median_sigma_mm') or {}).get('z'))}"
+                     f" mm, coverage_95 {fmt(coverage, 3)}")
     return (f"{report['scene']}: {report['truth']['overlap_pixels']} overlap pixels; "
             + "; ".join(parts) + f"; total {report['timings_s']['total']:.1f} s")
 

@@ -57,6 +57,30 @@ def write_error_map(path, depth_error: np.ndarray, title: str) -> str:
     return save_figure(fig, path)
 
 
+def write_sigma_map(path, sigma: np.ndarray, title: str) -> str:
+    """The ``(H, W)`` σ of each point (mm) over the left image grid: sequential colormap from 0
+    to the 99th percentile (larger values saturate), NaN (no measurement) in grey; the title
+    gives the median and the largest. Returns the path."""
+    sigma = np.asarray(sigma, dtype=np.float64)
+    if sigma.ndim != 2:
+        raise ValueError("sigma must be an (H, W) array")
+    finite = sigma[np.isfinite(sigma)]
+    limit = float(np.percentile(finite, 99)) if finite.size else 1.0
+    height, width = sigma.shape
+    fig = new_figure(7.5, 1.2 + 6.0 * height / max(width, 1))
+    ax = fig.add_subplot()
+    cmap = colormaps["viridis"].with_extremes(bad=NO_VALUE_GREY)
+    image = ax.imshow(np.ma.masked_invalid(sigma), cmap=cmap, vmin=0.0,
+                      vmax=limit if limit > 0 else 1.0, interpolation="nearest")
+    fig.colorbar(image, ax=ax, label="σ [mm]", extend="max")
+    summary = (f"median {np.median(finite):.4f} mm, max {finite.max():.4f} mm, {finite.size} px"
+               if finite.size else "no pixel with a value")
+    ax.set_title(f"{title}\n{summary}; grey: no value", fontsize=9)
+    ax.set_xlabel("u [px]")
+    ax.set_ylabel("v [px]")
+    return save_figure(fig, path)
+
+
 def write_distance_histogram(path, distances_by_method: dict, thresholds=(0.5, 1.0, 5.0)) -> str:
     """Histograms of point-to-mesh distances (mm), one step line per method (name → ``(N,)``
     array), on a logarithmic axis from :data:`HISTOGRAM_FLOOR_MM` (smaller values counted in the

@@ -91,9 +91,11 @@ def test_interpolated_warp_matches_exact_map(size, model):
 
 
 def test_fronto_parallel_plane(small_rig, front_pair, front_matches):
-    """Plane z = 1 m. Measured: 99.3 % of the overlap matched, right-pixel error RMS 0.0082 px,
-    max 0.054 px, points RMS 0.20 mm from the plane (max 1.5 mm). Tolerances: 97 %, RMS
-    0.02 px, max 0.15 px, RMS 0.4 mm (about 2-3x the measurement)."""
+    """Plane z = 1 m. Measured (2026-12-02, the refinement's fourth-order derivative): 99.3 % of
+    the overlap matched, right-pixel error RMS 0.0067 px, max 0.041 px, points RMS 0.16 mm from
+    the plane (max 1.1 mm); with Scharr's derivative it was RMS 0.0082 px, max 0.054 px,
+    0.20 mm. Tolerances: 97 %, RMS 0.02 px, max 0.15 px, RMS 0.4 mm (about 2-3x the
+    measurement)."""
     surface, _ = front_pair
     fraction, error, distance = _evaluate(small_rig, surface, front_matches, "optical_path")
     assert fraction > 0.97
@@ -117,7 +119,7 @@ def test_depth_map_is_the_triangulated_depth(small_rig, front_matches):
 def test_pinhole_model_is_measurably_worse(small_rig, front_pair, front_matches):
     """The same pair matched with the port ignored (straight rays, over its own apparent depth
     range 650-900 mm): its epipolar curves miss the refracted ones, so few windows correlate.
-    Measured: 19 % matched (refractive 99 %), right-pixel RMS 0.37 px (refractive 0.008 px).
+    Measured: 19 % matched (refractive 99 %), right-pixel RMS 0.36 px (refractive 0.007 px).
     Asserted: under half the refractive fraction and over 10x its RMS pixel error."""
     surface, (left, right) = front_pair
     pinhole = match_dense(small_rig, left, right, (650.0, 900.0), model="pinhole")
@@ -132,12 +134,14 @@ def test_slanted_surfaces(small_rig, texture, case):
     """A plane tilted 20 degrees about y, and a vertical cylinder of radius 600 mm whose near
     side is at 900 mm. The square windows assume a constant depth across them, which these
     surfaces break (at 5 mm per px an 11 px window spans up to ~20 mm of depth), and a few
-    wrong peaks pass min_score (max errors 2.7 / 3.8 px). Measured (tilted / cylinder), with the
-    refinement damping steps that reverse the previous one: 98.0 % / 79.0 % matched (92.7 % /
-    67.5 % before the damping), median right-pixel error 0.031 / 0.024 px, 95th percentile
-    0.097 / 0.125 px, median point distance 0.74 / 0.48 mm. Tolerances: 94 % / 72 %, median
-    0.06 px, 95th percentile 0.2 px, median 1.5 mm. Matches whose left ray misses the cylinder
-    (windows across its silhouette): measured 0.66 %, asserted < 1 % (in ``_evaluate``)."""
+    wrong peaks pass min_score (max errors 2.3 / 2.1 px). Measured (tilted / cylinder,
+    2026-12-02, the refinement's fourth-order derivative and its damping of steps that reverse
+    the previous one): 98.1 % / 79.9 % matched (92.7 % / 67.5 % before the damping), median
+    right-pixel error 0.030 / 0.023 px, 95th percentile 0.095 / 0.123 px, median point distance
+    0.72 / 0.47 mm (Scharr's derivative: 98.0 % / 79.0 %, 0.031 / 0.024 px, 0.097 / 0.125 px,
+    0.74 / 0.48 mm). Tolerances: 94 % / 72 %, median 0.06 px, 95th percentile 0.2 px, median
+    1.5 mm. Matches whose left ray misses the cylinder (windows across its silhouette):
+    measured 0.64 %, asserted < 1 % (in ``_evaluate``)."""
     if case == "tilted":
         tilt = np.radians(20.0)
         surface = PlaneSurface.create((100.0, 0.0, 1000.0), (np.sin(tilt), 0.0, np.cos(tilt)))
@@ -163,12 +167,13 @@ def test_slanted_surfaces(small_rig, texture, case):
     (dict(depth_range=(900.0,)), "depth_range must be (near, far)"),
     (dict(model="fisheye"), "model must be one of"),
     (dict(window=10), "window must be an odd"),
+    (dict(noise_sigma=0.0), "noise_sigma must be a positive"),
 ])
 def test_bad_inputs_are_one_line_errors(small_rig, change, message):
     arguments = dict(left=np.zeros((268, 320), np.uint8), right=np.zeros((268, 320), np.uint8),
                      depth_range=(900.0, 1100.0))
     arguments.update(change)
-    options = {k: arguments.pop(k) for k in ("model", "window") if k in arguments}
+    options = {k: arguments.pop(k) for k in ("model", "window", "noise_sigma") if k in arguments}
     with pytest.raises(ValueError) as caught:
         match_dense(small_rig, arguments["left"], arguments["right"], arguments["depth_range"],
                     **options)
@@ -181,3 +186,76 @@ def test_featureless_pair_matches_nothing(small_rig):
     flat = np.full((268, 320), 100, np.uint16)
     matches = match_dense(small_rig, flat, flat, (900.0, 1100.0))
     assert matches.score.size == 0 and np.all(np.isnan(matches.depth_map))
+
+
+#: The Monte Carlo pair: the paper's rig at 160 x 134 px (f = 71.9 px; a quarter of the sweep's
+#: work of the 320 px pair) and speckle twice as large in mm (the same ~2.5 px blobs).
+MC_SIZE, MC_TRIALS, MC_NOISE = (160, 134), 50, 0.02
+
+
+@pytest.fixture(scope="module")
+def monte_carlo():
+    """``MC_TRIALS`` matches of one analytic pair (a plane at 1 m tilted 11° about x) with
+    independent Gaussian noise of σ_n = ``MC_NOISE`` (texture 0.5 ± 0.15) in both images, the
+    σ_n stated; the left pixels matched in every trial, their right pixels ``(T, N, 2)``, the
+    predicted σ ``(T, N)``, curve directions ``(N, 2)`` and the estimated σ_n of each trial
+    (a second match with σ_n left to the matcher)."""
+    rig = paper_rig(size=MC_SIZE)
+    texture = SpeckleTexture.random((-900, 1100, -800, 800), 2 * SPECKLE_MM, seed=3)
+    surface = PlaneSurface.create((0.0, 0.0, 1000.0), (0.0, 0.2, 1.0))
+    left, right = render_pair(rig, surface, texture)
+    rng = np.random.default_rng(11)
+    width, height = MC_SIZE
+    uv = np.full((MC_TRIALS, height, width, 2), np.nan)
+    sigma = np.full((MC_TRIALS, height, width), np.nan)
+    direction = np.full((height, width, 2), np.nan)
+    estimated = []
+    for trial in range(MC_TRIALS):
+        noisy = [image + rng.normal(0.0, MC_NOISE, image.shape).astype(np.float32)
+                 for image in (left, right)]
+        matches = match_dense(rig, *noisy, (850.0, 1150.0), noise_sigma=MC_NOISE,
+                              roi=(30, 25, 130, 110))
+        cols, rows = matches.uv_left.astype(int).T
+        uv[trial, rows, cols] = matches.uv_right
+        sigma[trial, rows, cols] = matches.sigma_px
+        direction[rows, cols] = matches.curve_direction
+        if trial < 3:  # σ_n left to the matcher: the noise level and the σ it gives
+            free = match_dense(rig, *noisy, (850.0, 1150.0), roi=(30, 25, 130, 110))
+            assert free.noise_source == "estimated per intensity"
+            np.testing.assert_array_equal(free.uv_right, matches.uv_right)
+            estimated.append((free.noise_sigma, np.median(free.sigma_px / matches.sigma_px)))
+    every = np.all(np.isfinite(uv[..., 0]), axis=0)
+    return uv[:, every], sigma[:, every], direction[every], np.array(estimated)[:, 0], \
+        np.array(estimated)[:, 1]
+
+
+def test_matching_sigma_against_monte_carlo(monte_carlo):
+    """The predicted σ of the right pixel along the epipolar curve against the spread of
+    ``MC_TRIALS`` noisy matches (module fixture ``monte_carlo``), pooled over the pixels
+    matched in every trial: the deviations from each pixel's mean over the trials, divided by
+    the predicted σ and by sqrt((T − 1) / T), have a standard deviation of 1 when the σ is
+    right. Measured (2026-12-02): 1.067 over 8,500 pixels × 50 trials (fraction beyond 1.96:
+    0.067; median predicted σ 0.024 px); the spread across the curve is nil (the matcher moves
+    along it only: at most 4.2e-5 px). Asserted: 0.85-1.15, across < 5e-4 px."""
+    uv, sigma, direction, _, _ = monte_carlo
+    trials = uv.shape[0]
+    deviation = uv - uv.mean(axis=0)
+    along = np.einsum("tnk,nk->tn", deviation, direction)
+    across = np.einsum("tnk,nk->tn", deviation, np.stack([-direction[:, 1], direction[:, 0]], 1))
+    z = along / sigma / np.sqrt((trials - 1) / trials)
+    assert uv.shape[1] > 3000
+    assert 0.85 < z.std() < 1.15
+    assert np.abs(across).max() < 5e-4
+    np.testing.assert_allclose(np.hypot(*direction.T), 1.0, atol=1e-9)
+
+
+def test_estimated_image_noise(monte_carlo):
+    """σ_n left to the matcher (the noise level function from the matched pixels' residuals by
+    intensity) against the σ_n added, and the σ it gives against the σ of the stated σ_n (the
+    same matches). It counts the model's misfit too (the noise-free pair's residual), so it
+    lies a little above. Measured (2026-12-02) over the first 3 trials: σ_n 1.01-1.02 × the
+    added one; the σ per pixel, median ratio to the stated one's 1.018-1.023. Asserted: 0.95-1.2
+    both."""
+    estimated, ratio = monte_carlo[3:]
+    assert np.all((estimated > 0.95 * MC_NOISE) & (estimated < 1.2 * MC_NOISE))
+    assert np.all((ratio > 0.95) & (ratio < 1.2))

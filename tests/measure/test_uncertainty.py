@@ -13,14 +13,15 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from measure import triangulate
+from measure import trace_through_port, triangulate
 from measure.projection import project
 from measure.rig_covariance import RigCovariance
 from measure.selfcal import self_calibrate, tilt_basis
-from measure.uncertainty import (CHI2_3_95, coverage_summary, detection_sigma,
-                                 mahalanobis_squared, perturbed_rig, pixel_jacobians,
-                                 point_covariance, point_covariances, residual_sigma,
-                                 sigma_summary)
+from measure.uncertainty import (CHI2_3_95, coverage_summary, dense_pixel_covariance,
+                                 dense_point_covariances,
+                                 detection_sigma, mahalanobis_squared, perturbed_rig,
+                                 pixel_jacobians, point_covariance, point_covariances,
+                                 point_covariances_full, residual_sigma, sigma_summary)
 from synth.layouts import paper_plane
 from synth.rig import paper_rig
 
@@ -216,3 +217,57 @@ def test_residual_sigma_ignores_a_wrong_match():
     start = triangulate(rig, noisy_left, noisy_right, "optical_path").points
     found = residual_sigma(rig, noisy_left, noisy_right, start)
     assert abs(found["sigma0_px"] / SIGMA_PX - 1) <= 0.10, found
+
+
+def test_full_pixel_covariance_is_the_diagonal_one_when_diagonal():
+    """``point_covariances_full`` with ``diag(σ²)`` gives :func:`point_covariances`' pixel and
+    rig parts (one code path, two ways to state the pixel noise)."""
+    rig = paper_rig()
+    names = ("left.fx", "right.cx", "port.distance", "port.tilt[0]")
+    rig_covariance = RigCovariance(names, np.diag([0.5, 0.3, 0.2, 2e-4]) ** 2, AXES)
+    points = paper_plane(1000.0)[::40]
+    sigma = np.linspace(0.05, 0.3, points.shape[0])
+    diagonal = point_covariances(rig, points, sigma, rig_covariance)
+    full = point_covariances_full(rig, points, (sigma ** 2)[:, None, None] * np.eye(4),
+                                  rig_covariance)
+    np.testing.assert_allclose(full.pixel, diagonal.pixel, rtol=1e-9, atol=1e-15)
+    np.testing.assert_allclose(full.rig, diagonal.rig, rtol=1e-9, atol=1e-15)
+    with pytest.raises(ValueError, match="pixel_covariance must be"):
+        point_covariances_full(rig, points, np.eye(4))
+
+
+def test_dense_covariance_lies_along_the_left_ray():
+    """A dense match: the left pixel exact, the right pixel σ along its epipolar curve (the
+    right pixel's motion when the point slides along the left ray). The point's covariance is
+    then that σ over the curve's rate (px per mm along the ray), along the ray: its largest
+    axis is the ray within 1e-3 rad and its σ within 0.1 % (the 1 % isotropic part adds
+    0.005 %); across the ray σ is about 1 % of it."""
+    rig = paper_rig()
+    points = paper_plane(1000.0)[::60]
+    uv_left = project(rig.left, rig.port, points)
+    rays = trace_through_port(rig.left.center, rig.left.rays(uv_left), rig.port,
+                              keep_interface_points=False).directions  # in the water
+    rays = rays / np.linalg.norm(rays, axis=1, keepdims=True)
+    step = 1e-3  # mm along the ray: central differences of the right projection
+    rate = (project(rig.right, rig.port, points + step * rays)
+            - project(rig.right, rig.port, points - step * rays)) / (2 * step)
+    speed = np.hypot(*rate.T)
+    sigma_px = np.full(points.shape[0], 0.05)
+    covariance = point_covariances_full(
+        rig, points, dense_pixel_covariance(sigma_px, rate / speed[:, None])).total
+    values, vectors = np.linalg.eigh(covariance)
+    along = vectors[:, :, 2]
+    assert np.all(np.abs(np.einsum("ni,ni->n", along, rays)) > np.cos(1e-3))
+    np.testing.assert_allclose(np.sqrt(values[:, 2]), sigma_px / speed, rtol=1e-3)
+    assert np.all(np.sqrt(values[:, 1]) < 0.02 * np.sqrt(values[:, 2]))
+    # the closed-form weights of dense_point_covariances give the same, rig part included
+    names = ("left.fx", "right.cx", "port.distance", "port.tilt[0]")
+    rig_covariance = RigCovariance(names, np.diag([0.5, 0.3, 0.2, 2e-4]) ** 2, AXES)
+    direction = rate / speed[:, None]
+    full = point_covariances_full(rig, points, dense_pixel_covariance(sigma_px, direction),
+                                  rig_covariance)
+    closed = dense_point_covariances(rig, points, sigma_px, direction, rig_covariance)
+    np.testing.assert_allclose(closed.pixel, full.pixel, rtol=1e-6, atol=1e-14)
+    np.testing.assert_allclose(closed.rig, full.rig, rtol=1e-6, atol=1e-12)
+    sigma_px[0] = np.inf  # no information: NaN, like a point without an image
+    assert np.all(np.isnan(dense_point_covariances(rig, points, sigma_px, direction).total[0]))

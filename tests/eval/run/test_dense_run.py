@@ -54,14 +54,22 @@ def test_dense_run_measures_the_plane_and_shows_what_ignoring_refraction_costs(p
     # ignoring the port puts the plane where it appears (~250 mm nearer) and bends it
     assert pinhole["p2m_median_mm"] > 100 and pinhole["fscore_5mm"] < 0.01
     for name in ("report.md", "views.png", "distances.png", "depth_error_optical_path.png",
-                 "points_optical_path.ply", "points_regular.ply"):
+                 "points_optical_path.ply", "points_regular.ply", "sigma_z_optical_path.png"):
         assert os.path.getsize(os.path.join(out, name)) > 0
+    # every matched pixel of optical_path has a σ (regular, which ignores the port, none)
+    assert set(report["uncertainty"]) == {"optical_path"}
+    uncertainty = report["uncertainty"]["optical_path"]
+    assert uncertainty["matching_sigma"]["source"].startswith("matching σ per pixel")
+    assert uncertainty["sigma"]["n"] == refractive["measured_pixels"]
+    sigma_z = np.load(os.path.join(out, "sigma_z_optical_path.npy"))
+    assert sigma_z.shape == (268, 320) and np.isfinite(sigma_z).sum() == uncertainty["sigma"]["n"]
+    assert uncertainty["coverage"]["n"] > 0.9 * uncertainty["sigma"]["n"]
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("argv, fragment", [
     (["--eccentricity"], "applies to target scenes"),
-    (["--pixel-sigma", "0.1"], "--pixel-sigma applies to target scenes"),
+    (["--pixel-sigma", "0"], "--pixel-sigma '0': expected auto or a positive number"),
     (["--methods", "su"], "surface scene is measured with"),
     (["--depth-range", "2000,2100"], "excludes the surface"),
     (["--depth-range", "50,2000"], "NEAR must lie beyond the port"),
@@ -75,6 +83,50 @@ def test_dense_run_bad_options(plane_case, capsys, argv, fragment):
     assert code == 2 and fragment in err and "Traceback" not in err
     assert len([line for line in err.splitlines() if line.startswith("error:")]) == 1
     assert _snapshot(root) == before
+
+
+@pytest.mark.slow
+def test_dense_run_with_a_stated_pixel_sigma(plane_case):
+    """``--pixel-sigma PX`` on a surface scene: the right pixel's σ along the epipolar curve,
+    the same for every pixel; the points' σ scale with it (σ_z ∝ PX: first order)."""
+    root, scene, ds = plane_case
+    sigmas = {}
+    for px in ("0.05", "0.1"):
+        out = str(root / f"stated_{px}")
+        assert eval_main(["run", scene, "--from", ds, "--out", out, "--no-progress",
+                          "--methods", "optical_path", "--pixel-sigma", px]) == 0
+        report = json.load(open(os.path.join(out, "report.json")))
+        matching = report["uncertainty"]["optical_path"]["matching_sigma"]
+        assert matching["stated_px"] == float(px) == matching["median_px"] == matching["max_px"]
+        sigmas[px] = np.load(os.path.join(out, "sigma_z_optical_path.npy"))
+    np.testing.assert_allclose(sigmas["0.1"], 2 * sigmas["0.05"], rtol=1e-5)
+
+
+@pytest.mark.slow
+def test_dense_run_with_a_rig_covariance(plane_case, tmp_path):
+    """``--calib`` with a covariance: the points' σ add the rig's part (larger than the
+    matching σ's alone), the coverage is counted in 3 dimensions (a rig error moves a point off
+    its ray), and the report names the calibration. The scene's own rig is exact, so this one
+    calibration is a draw of zero error: σ overstates, and the report says so."""
+    from measure.rig_covariance import RigCovariance
+    from synth.dataset import read_calib, write_calib
+
+    root, scene, ds = plane_case
+    calib = tmp_path / "with.yaml"
+    write_calib(calib, read_calib(os.path.join(ds, "calib.yaml"))["rig"],
+                covariance=RigCovariance(("port.distance", "port.index[2]", "right.center[0]"),
+                                         np.diag([1.0, 1e-3, 0.5]) ** 2))
+    reports = {}
+    for name, extra in (("plain", []), ("with", ["--calib", str(calib)])):
+        out = str(tmp_path / name)
+        assert eval_main(["run", scene, "--from", ds, "--out", out, "--no-progress",
+                          "--methods", "optical_path", *extra]) == 0
+        reports[name] = json.load(open(os.path.join(out, "report.json")))
+    plain, with_rig = (reports[k]["uncertainty"]["optical_path"] for k in ("plain", "with"))
+    assert "exact" in plain["rig"] and "3 parameters" in with_rig["rig"]
+    assert plain["coverage"]["dof"] == 1 and with_rig["coverage"]["dof"] == 3
+    assert with_rig["sigma"]["median_sigma_mm"]["z"] > 2 * plain["sigma"]["median_sigma_mm"]["z"]
+    assert "one draw of the rig error" in with_rig["coverage"]["verdict"]
 
 
 @pytest.mark.slow
