@@ -41,17 +41,24 @@ def write_error_map(path, depth_error: np.ndarray, title: str) -> str:
     if depth_error.ndim != 2:
         raise ValueError("depth_error must be an (H, W) array")
     limit = symmetric_limit(depth_error)
-    height, width = depth_error.shape
-    fig = new_figure(7.5, 1.2 + 6.0 * height / max(width, 1))
-    ax = fig.add_subplot()
-    cmap = colormaps["RdBu_r"].with_extremes(bad=NO_VALUE_GREY)
-    image = ax.imshow(np.ma.masked_invalid(depth_error), cmap=cmap, vmin=-limit, vmax=limit,
-                      interpolation="nearest")
-    fig.colorbar(image, ax=ax, label="depth error [mm]", extend="both")
     finite = depth_error[np.isfinite(depth_error)]
     summary = (f"RMS {np.sqrt(np.mean(finite ** 2)):.4f} mm, {finite.size} px"
                if finite.size else "no pixel with both values")
-    ax.set_title(f"{title}\n{summary}; grey: no value", fontsize=9)
+    return _pixel_map(path, depth_error, "RdBu_r", (-limit, limit), "depth error [mm]", "both",
+                      f"{title}\n{summary}; grey: no value")
+
+
+def _pixel_map(path, values, cmap_name: str, limits, label: str, extend: str, title: str) -> str:
+    """``values`` ``(H, W)`` over the left image grid with ``cmap_name`` between ``limits``,
+    NaN in grey, a colour bar ``label`` (``extend``: the saturated ends), ``title``; saved."""
+    height, width = values.shape
+    fig = new_figure(7.5, 1.2 + 6.0 * height / max(width, 1))
+    ax = fig.add_subplot()
+    cmap = colormaps[cmap_name].with_extremes(bad=NO_VALUE_GREY)
+    image = ax.imshow(np.ma.masked_invalid(values), cmap=cmap, vmin=limits[0], vmax=limits[1],
+                      interpolation="nearest")
+    fig.colorbar(image, ax=ax, label=label, extend=extend)
+    ax.set_title(title, fontsize=9)
     ax.set_xlabel("u [px]")
     ax.set_ylabel("v [px]")
     return save_figure(fig, path)
@@ -66,19 +73,10 @@ def write_sigma_map(path, sigma: np.ndarray, title: str) -> str:
         raise ValueError("sigma must be an (H, W) array")
     finite = sigma[np.isfinite(sigma)]
     limit = float(np.percentile(finite, 99)) if finite.size else 1.0
-    height, width = sigma.shape
-    fig = new_figure(7.5, 1.2 + 6.0 * height / max(width, 1))
-    ax = fig.add_subplot()
-    cmap = colormaps["viridis"].with_extremes(bad=NO_VALUE_GREY)
-    image = ax.imshow(np.ma.masked_invalid(sigma), cmap=cmap, vmin=0.0,
-                      vmax=limit if limit > 0 else 1.0, interpolation="nearest")
-    fig.colorbar(image, ax=ax, label="σ [mm]", extend="max")
     summary = (f"median {np.median(finite):.4f} mm, max {finite.max():.4f} mm, {finite.size} px"
                if finite.size else "no pixel with a value")
-    ax.set_title(f"{title}\n{summary}; grey: no value", fontsize=9)
-    ax.set_xlabel("u [px]")
-    ax.set_ylabel("v [px]")
-    return save_figure(fig, path)
+    return _pixel_map(path, sigma, "viridis", (0.0, limit if limit > 0 else 1.0), "σ [mm]", "max",
+                      f"{title}\n{summary}; grey: no value")
 
 
 def write_distance_histogram(path, distances_by_method: dict, thresholds=(0.5, 1.0, 5.0)) -> str:
