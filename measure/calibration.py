@@ -19,7 +19,10 @@ sparse structure (a pose's 6 columns touch only its own corners' rows). Starting
 A rig of two domes (:class:`measure.dome.DomePair`, :func:`dome_problem`): the unknowns are
 each camera's decentring — its dome's centre relative to the camera centre, in the camera's
 frame (3 + 3 numbers, mm) — and optionally ``n_water`` (:data:`DOME_PARAMETERS`); radius,
-thickness and glass index stay at the design values; the same poses, residuals and σ.
+thickness and glass index stay at the design values; the same poses, residuals and σ, the
+in-air covariance entering the same two ways (each dome moves with its camera when the
+in-air stereo pose moves); the joint covariance names each dome's centre in the reference
+frame (``left/right.dome_center[k]``, :mod:`measure.rig_covariance`).
 
 Uncertainty: ``s² (JᵀJ)⁻¹`` with ``s² = Σr² / (m − n)``; a parameter is reported not
 identifiable when the column-scaled normal matrix is singular in its direction or two free
@@ -437,9 +440,9 @@ def calibrate_housing(rig: StereoRig, board: Board, detections: Detections,
     :data:`DEFAULT_FREE`, for domes :data:`DEFAULT_DOME_FREE`. ``air_covariance``: the in-air
     calibration's covariance (:attr:`AirCalibration.covariance`, or a calib.yaml's), brought
     into the housing's by ``uncertainty``: ``"propagate"`` (the in-air parameters fixed, their
-    covariance propagated) or ``"prior"`` (freed, with the in-air result as a prior). Without
-    it — and behind domes, whose σ stays conditional on the in-air calibration — the σ is
-    conditional on the in-air calibration."""
+    covariance propagated) or ``"prior"`` (freed, with the in-air result as a prior), for a
+    flat port and for domes alike. Without it the σ is conditional on the in-air
+    calibration."""
     if free is None:
         free = DEFAULT_DOME_FREE if rig.is_dome else DEFAULT_FREE
     if uncertainty not in UNCERTAINTY:
@@ -527,12 +530,13 @@ def calibrate_housing(rig: StereoRig, board: Board, detections: Detections,
             identifiable=False, reason=f"{labels[at_bound[0]]} ran into its physical bound: "
                                        f"these boards do not determine it", **base)
     x, sig_conditional = fit.x, sig[:n_global].copy()
-    air = () if rig.is_dome else _air_parameters(air_covariance, names)
+    air = _air_parameters(air_covariance, names)
     if air:
         sigma_air = _sub_covariance(air_covariance, air)
         if uncertainty == "prior":
             rig, x, joint = _prior_fit(rig, board, detections, names, x, s2, air, sigma_air)
-            port, cameras, Rs, ts = housing_problem(rig, board, detections, names).unpack(x)
+            port, cameras, Rs, ts = (dome_problem if rig.is_dome else housing_problem)(
+                rig, board, detections, names).unpack(x)
             base["poses"] = [(Rs[k], ts[k]) for k in range(P)]
         else:
             J_air = problem.air_jacobian(x, air)
@@ -542,16 +546,17 @@ def calibrate_housing(rig: StereoRig, board: Board, detections: Detections,
         sig = np.sqrt(np.diag(joint))[len(air):]
     else:
         joint = covariance
-    rig_cov = None  # domes: the decentring has no name in measure.rig_covariance's grammar
-    if not rig.is_dome:
+    a = len(air)
+    if rig.is_dome:
+        rig_names, T, axes = _dome_rig_parameters(names, air, cameras, port)
+    else:
         rig_names, transform, axes = _rig_parameters(names, x, basis, rig.port.normal, port,
                                                    n_global)
-        a = len(air)
         T = np.eye(a + n_global)
         T[a:, a:] = transform
-        keep = list(range(a + n_global))
-        joint = T @ joint[np.ix_(keep, keep)] @ T.T
-        rig_cov = RigCovariance(tuple(air) + rig_names, 0.5 * (joint + joint.T), axes)
+    keep = list(range(a + n_global))
+    joint = T @ joint[np.ix_(keep, keep)] @ T.T
+    rig_cov = RigCovariance(tuple(air) + rig_names, 0.5 * (joint + joint.T), axes)
     estimates, sigmas, conditional, k = {}, {}, {}, 0
     for name in names:
         w = table[name]
@@ -576,8 +581,7 @@ def calibrate_housing(rig: StereoRig, board: Board, detections: Detections,
     return HousingCalibration(rig=calibrated, estimates=estimates, sigmas=sigmas,
                               correlation=correlation, identifiable=True, reason="",
                               covariance=rig_cov, sigmas_conditional=conditional,
-                              uncertainty=("dome" if rig.is_dome else uncertainty if air
-                                           else "conditional"), **base)
+                              uncertainty=uncertainty if air else "conditional", **base)
 
 
 def _air_parameters(covariance: RigCovariance | None, names) -> tuple:
@@ -626,6 +630,40 @@ def _rig_parameters(names, x, basis, start_normal, port, n_global):
     return tuple(out), T, axes
 
 
+def _dome_rig_parameters(names, air, cameras, domes):
+    """The dome calibration's free numbers as :mod:`measure.rig_covariance` names —
+    ``left/right.dome_center[0..2]`` (each dome's centre in the reference frame, mm) and
+    ``port.index[2]`` — and the ``(a + g, a + g)`` Jacobian of (in-air parameters ``air``,
+    those names) with respect to (``air``, the free numbers): ``M = C + R·o`` with ``o`` the
+    decentring in the camera's frame, so ``δM = R·δo`` and, for the right camera,
+    ``+ δC − [R·o]× φ`` where its pose is among ``air``. No tilt axes (None)."""
+    a = len(air)
+    out = []
+    g = sum(DOME_PARAMETERS[n] for n in names)
+    T = np.zeros((a + g, a + g))
+    T[:a, :a] = np.eye(a)
+    k = a
+    for name in names:
+        if name == "dome_center":
+            for view, camera in enumerate(("left", "right")):
+                R = cameras[view].R
+                T[k:k + 3, k:k + 3] = R
+                if view == 1:
+                    lever = -_skew(domes[1].center - cameras[1].center)
+                    for i in range(3):
+                        if f"right.rotation[{i}]" in air:
+                            T[k:k + 3, air.index(f"right.rotation[{i}]")] = lever[:, i]
+                        if f"right.center[{i}]" in air:
+                            T[k + i, air.index(f"right.center[{i}]")] = 1.0
+                out += [f"{camera}.dome_center[{i}]" for i in range(3)]
+                k += 3
+        else:
+            out.append(f"port.index[{len(domes.left.indices) - 1}]")
+            T[k, k] = 1.0
+            k += 1
+    return tuple(out), T, None
+
+
 def apply_air_change(rig: StereoRig, air, delta) -> StereoRig:
     """``rig`` with the in-air parameters ``air`` moved by ``delta`` (px, unitless, rad: the
     right camera's ``R → exp([φ]×) R``, mm: its centre)."""
@@ -663,7 +701,8 @@ def _prior_fit(rig, board, detections, names, x, s2, air, sigma_air):
     delta, a = np.zeros(len(air)), len(air)
     for _ in range(PRIOR_ITERATIONS + 1):
         moved = apply_air_change(rig, air, delta)
-        problem = housing_problem(moved, board, detections, names)
+        problem = (dome_problem if rig.is_dome else housing_problem)(moved, board, detections,
+                                                                     names)
         if problem.x0.size != x.size:  # solvePnP found another set of usable poses
             raise CalibrationError("the prior fit lost a board pose when the intrinsics moved; "
                                    "use --air-uncertainty propagate")
@@ -774,6 +813,39 @@ def dome_problem(rig: StereoRig, board: Board, detections: Detections, names):
             poses.append(np.repeat(pose_idx, 2))
         return _rows_jacobian(np.concatenate(blocks), np.concatenate(poses), n_global, x.size)
 
+    def air_jacobian(x, air):
+        """Dense ``(m, len(air))``: d residuals / d the in-air parameters ``air`` at ``x``, as
+        :func:`housing_problem`'s. With ``dome_center`` free each dome moves with its camera
+        (the unknowns are offsets in the camera's frame, ``M = C + R·o``): the right camera's
+        ``rotation`` column adds ``d pixel / d M · (−[R·o]×)``, its ``center`` column
+        ``d pixel / d M``; otherwise the domes stay where they are."""
+        domes, cameras, Rs, ts = unpack(x)
+        column = {name: j for j, name in enumerate(air)}
+        follow = "dome_center" in names
+        out, row = np.zeros((m, len(air))), 0
+        for view, pose_idx, ids, _ in obs:
+            world = np.einsum("nij,nj->ni", Rs[pose_idx], corners[ids]) + ts[pose_idx]
+            pixels, _, jac = project(cameras[view], domes[view], world, parameters=True)
+            n = 2 * pose_idx.size
+            camera = ("left", "right")[view]
+            d_int = intrinsics_jacobian(cameras[view], pixels).reshape(n, -1)
+            for j, p in enumerate(AIR_INTRINSICS):
+                if f"{camera}.{p}" in column:
+                    out[row:row + n, column[f"{camera}.{p}"]] = d_int[:, j]
+            if view == 1:
+                rotation, center = jac.rotation, jac.center
+                if follow:
+                    rotation = rotation - jac.dome_center @ _skew(domes[1].center
+                                                                  - cameras[1].center)
+                    center = center + jac.dome_center
+                for k in range(3):
+                    for what, values in (("rotation", rotation), ("center", center)):
+                        if f"right.{what}[{k}]" in column:
+                            out[row:row + n, column[f"right.{what}[{k}]"]] = (
+                                values[..., k].reshape(n))
+            row += n
+        return np.where(np.isfinite(out), out, 0.0)
+
     x0 = []
     for name in names:
         x0 += (np.concatenate([dome_offset(c, d) for c, d in zip(rig.cameras, domes0)]).tolist()
@@ -788,8 +860,14 @@ def dome_problem(rig: StereoRig, board: Board, detections: Detections, names):
         lower[k], upper[k] = 1.0, MAX_INDEX
         x0[k] = np.clip(x0[k], lower[k] + 1e-9, upper[k] - 1e-9)
     return SimpleNamespace(residuals=residuals, jacobian=jacobian, unpack=unpack, x0=x0,
+                           air_jacobian=air_jacobian,
                            lower=lower, upper=upper, obs=obs, usable=usable, P=P,
                            n_global=n_global, basis=(), m=m)
+
+
+def _skew(v) -> np.ndarray:
+    """``[v]×`` ``(3, 3)``: ``[v]× w = v × w``."""
+    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
 
 
 def _left_jacobian(rotvecs) -> np.ndarray:

@@ -14,7 +14,14 @@ node) and the measurement that propagates it into every point's covariance:
 * ``port.distance`` — mm, D of the first interface;
 * ``port.tilt[0]``, ``port.tilt[1]`` — rad, the normal tilted about :attr:`RigCovariance.normal_axes`
   (``n → normalize(n + a₀·e₀ + a₁·e₁)``, ``e₀``/``e₁`` the two rows, both ⟂ n);
-* ``port.thickness[k]`` — mm, layer k; ``port.index[k]`` — the index of medium k, air first.
+* ``port.thickness[k]`` — mm, layer k; ``port.index[k]`` — the index of medium k, air first
+  (a rig of two domes: medium k of both domes, ``(n_air, n_glass, n_water)``);
+* ``left.dome_center[0..2]``, ``right.dome_center[0..2]`` — mm, a rig of two domes: that
+  camera's dome centre in the **reference frame** (the other parameters held: a change of
+  ``right.rotation`` / ``right.center`` moves the camera inside its dome, not the dome). The
+  dome calibration estimates each camera's decentring in that camera's frame
+  (``o = Rᵀ(M − C)``) and converts its covariance to these names
+  (``M = C + R·o``: ``δM = δC − [R·o]× φ + R·δo``).
 
 The left camera is the reference frame: it has intrinsics but no pose parameters. A parameter
 not named has no uncertainty (exact). Units: mm, px, rad.
@@ -33,10 +40,12 @@ PARAMETER_NAMES = (
     tuple(f"{cam}.{p}" for cam in ("left", "right") for p in _INTRINSICS)
     + tuple(f"right.rotation[{k}]" for k in range(3))
     + tuple(f"right.center[{k}]" for k in range(3))
-    + ("port.distance", "port.tilt[0]", "port.tilt[1]", "port.thickness[k]", "port.index[k]"))
+    + ("port.distance", "port.tilt[0]", "port.tilt[1]", "port.thickness[k]", "port.index[k]")
+    + tuple(f"{cam}.dome_center[{k}]" for cam in ("left", "right") for k in range(3)))
 _NAME = re.compile(r"^(?:(?:left|right)\.(?:fx|fy|cx|cy|k1|k2|p1|p2|k3)"
                    r"|right\.(?:rotation|center)\[[012]\]"
-                   r"|port\.distance|port\.tilt\[[01]\]|port\.(?:thickness|index)\[\d+\])$")
+                   r"|port\.distance|port\.tilt\[[01]\]|port\.(?:thickness|index)\[\d+\]"
+                   r"|(?:left|right)\.dome_center\[[012]\])$")
 #: Smallest eigenvalue, relative to the largest, a covariance may have (below: singular).
 RELATIVE_EIGENVALUE_LIMIT = 1e-15
 

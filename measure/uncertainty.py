@@ -112,15 +112,22 @@ def pixel_jacobians(rig: StereoRig, points, names=(), normal_axes=None):
     derivatives of :class:`measure.projection.ParameterJacobian`, the intrinsics of
     :func:`_distortion_terms`). ``normal_axes`` ``(2, 3)``: the tilt axes of ``port.tilt[*]``.
     A dome rig (each camera through its own dome, :class:`measure.dome_projection.DomeParameterJacobian`)
-    takes the intrinsics and the right camera's pose; the ``port.*`` names describe a flat port
-    and are refused there. Rows without an image are NaN."""
+    takes the intrinsics, the right camera's pose, each dome's centre (``left.dome_center[k]``,
+    ``right.dome_center[k]``: reference frame, mm — that view's own dome) and ``port.index[k]``
+    (medium k of both domes); the flat port's ``port.distance``, ``port.tilt[*]`` and
+    ``port.thickness[*]`` are refused there, and the domes' names on a flat port. Rows without
+    an image are NaN."""
     points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     names = tuple(names)
     if rig.is_dome:
-        flat = [n for n in names if n.startswith("port.")]
+        flat = [n for n in names if n.startswith("port.") and not n.startswith("port.index")]
         if flat:
             raise ValueError(f"{', '.join(flat)}: flat-port parameters, but the rig looks "
                              f"through domes")
+    else:
+        domes = [n for n in names if ".dome_center" in n]
+        if domes:
+            raise ValueError(f"{', '.join(domes)}: dome parameters, but the rig has a flat port")
     want = bool(names)
     views = [project(cam, rig.port_of(view), points, jacobian=True, parameters=want)
              for view, cam in enumerate(rig.cameras)]
@@ -140,6 +147,9 @@ def pixel_jacobians(rig: StereoRig, points, names=(), normal_axes=None):
                     if intrinsics[view] is None:
                         intrinsics[view] = _distortion_terms(camera, views[view][0])
                     column = intrinsics[view][:, :, _INTRINSICS.index(tail)]
+            elif tail.startswith("dome_center"):
+                if head == ("left", "right")[view]:
+                    column = jac.dome_center[:, :, int(tail[-2])]
             elif head == "right" and view == 1:
                 k = int(tail[-2])
                 column = (jac.rotation if tail.startswith("rotation") else jac.center)[:, :, k]
@@ -167,14 +177,20 @@ def pixel_jacobians(rig: StereoRig, points, names=(), normal_axes=None):
 def perturbed_rig(rig: StereoRig, names, delta, normal_axes=None) -> StereoRig:
     """``rig`` with the named parameters (:mod:`measure.rig_covariance`) moved by ``delta``
     ``(P,)`` in their units: the definition :func:`pixel_jacobians` differentiates (used by the
-    tests and by Monte Carlo checks)."""
+    tests and by Monte Carlo checks). A rig of two domes: ``left/right.dome_center[k]`` move
+    that dome's centre (reference frame), ``port.index[k]`` medium k of both domes."""
     cams = [rig.left, rig.right]
     K = [c.K.copy() for c in cams]
     dist = [np.zeros(8) if c.dist is None else np.pad(c.dist, (0, 8 - c.dist.size)) for c in cams]
     R, t = rig.right.R.copy(), rig.right.t.copy()
     port = rig.port
-    normal, distance = port.normal.copy(), port.distance
-    thick, indices = list(port.thicknesses), list(port.indices)
+    if rig.is_dome:
+        centers = [port.left.center.copy(), port.right.center.copy()]
+        normal, distance, thick = None, None, []
+    else:
+        normal, distance = port.normal.copy(), port.distance
+        thick = list(port.thicknesses)
+    indices = list(port.indices) if not rig.is_dome else list(port.left.indices)
     phi = np.zeros(3)
     for name, d in zip(names, np.asarray(delta, dtype=float)):
         head, _, tail = name.partition(".")
@@ -185,6 +201,8 @@ def perturbed_rig(rig: StereoRig, names, delta, normal_axes=None) -> StereoRig:
                 K[v][(0, 1, 0, 1)[k], (0, 1, 2, 2)[k]] += d
             else:
                 dist[v][(0, 1, 2, 3, 4)[k - 4]] += d
+        elif tail.startswith("dome_center"):
+            centers[0 if head == "left" else 1][int(tail[-2])] += d
         elif tail.startswith("rotation"):
             phi[int(tail[-2])] += d
         elif tail.startswith("center"):
@@ -205,6 +223,12 @@ def perturbed_rig(rig: StereoRig, names, delta, normal_axes=None) -> StereoRig:
     size = [c.size for c in cams]
     new = [Camera(K[v], size[v], None if not np.any(dist[v]) else dist[v],
                   cams[v].R if v == 0 else R, cams[v].t if v == 0 else t) for v in range(2)]
+    if rig.is_dome:
+        from .dome import DomePair
+
+        return StereoRig(new[0], new[1], DomePair(*(
+            dome.replace(center=c, indices=tuple(indices))
+            for dome, c in zip((port.left, port.right), centers))))
     return StereoRig(new[0], new[1], FlatPort(normal / np.linalg.norm(normal), distance,
                                                tuple(thick), tuple(indices)))
 

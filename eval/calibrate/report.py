@@ -162,18 +162,27 @@ def dome_summary(housing, truth, start_rig) -> dict:
     from measure.calibration import dome_offset
 
     out = _adjustment_summary(housing)
+    out["uncertainty"] = housing.uncertainty
     params = out["parameters"]
     for name in housing.estimates:
         sigma = housing.sigmas[name]
+        conditional = housing.sigmas_conditional.get(name, sigma)
         if name == "n_water":
             params[name] = _with_sigma(housing.rig.port.n_water, truth.port.n_water, sigma)
+            params[name]["sigma_conditional"] = float(conditional)
+            params[name]["error_in_sigma_conditional"] = (
+                params[name]["error"] / float(conditional))
             continue
         for view, (camera, axes) in enumerate(zip(("left", "right"), ((0, 1, 2), (3, 4, 5)))):
             estimate = dome_offset(housing.rig.cameras[view], housing.rig.port[view])
             true = dome_offset(truth.cameras[view], truth.port[view])
             for axis, k in zip("xyz", axes):
-                params[f"{camera}_dome_{axis}"] = _with_sigma(estimate[k % 3], true[k % 3],
-                                                              sigma[k])
+                p = _with_sigma(estimate[k % 3], true[k % 3], sigma[k])
+                p["sigma_conditional"] = float(conditional[k])
+                p["error_in_sigma_conditional"] = p["error"] / float(conditional[k])
+                params[f"{camera}_dome_{axis}"] = p
+    if housing.uncertainty == "prior":  # the in-air parameters the underwater boards refined
+        out["in_air_refined"] = in_air_changes(housing, start_rig)
     out["start"] = {view: {"offset_mm": dome_offset(c, d).tolist(), "radius": d.radius,
                            "thickness": d.thickness, "indices": list(d.indices)}
                     for view, c, d in zip(("left", "right"), start_rig.cameras,
@@ -191,7 +200,7 @@ def in_air_changes(housing, start_rig) -> dict:
     out, sig = {}, housing.covariance.sigmas
     for name in housing.covariance.names:
         cam, _, key = name.partition(".")
-        if cam not in ("left", "right") or key.startswith(("rotation", "center")):
+        if cam not in ("left", "right") or key.startswith(("rotation", "center", "dome_center")):
             continue
         new, old = getattr(housing.rig, cam), getattr(start_rig, cam)
         if key in ("fx", "fy", "cx", "cy"):
@@ -235,7 +244,6 @@ def write_calibration(path, rig, has_port: bool, housing, report, single: bool =
                      "(centre, distance, thickness), index units",
             "includes": SIGMA_INCLUDES[housing.uncertainty if housing is not None else "air"]}
     if housing is not None:
-        extra.setdefault("uncertainty", {"includes": SIGMA_INCLUDES["dome"]})
         extra["uncertainty"]["housing_labels"] = list(housing.labels)
         extra["uncertainty"]["housing_sigmas_conditional"] = [float(s) for s in np.concatenate(
             [np.atleast_1d(housing.sigmas_conditional[n]) for n in housing.sigmas_conditional])]
@@ -416,7 +424,8 @@ def markdown(report: dict) -> str:
             elif name.endswith(("_dome_x", "_dome_y", "_dome_z")):
                 lines.append(f"| {name.replace('_', ' ')} (mm, camera frame) | "
                              f"{p['estimate']:.4f} | {p['truth']:.4f} | {p['error']:+.4f} | "
-                             f"{_f(p['sigma'])} | {_f(p['error_in_sigma'], 3)} | – |")
+                             f"{_f(p['sigma'])} | {_f(p['error_in_sigma'], 3)} | "
+                             f"{_f(p.get('sigma_conditional'))} |")
             else:
                 lines.append(f"| {name} | {p['estimate']:.6f} | {p['truth']:.6f} | "
                              f"{p['error']:+.6f} | {_f(p['sigma'])} | {_f(p['error_in_sigma'], 3)} "
@@ -453,17 +462,10 @@ SIGMA_INCLUDES = {
     "prior": "the housing adjustment with the in-air parameters free under their in-air "
              "covariance as a prior",
     "conditional": "the housing adjustment's corners only: conditional on the in-air "
-                   "calibration, whose file carried no covariance",
-    "dome": "the housing adjustment's corners only: conditional on the in-air calibration (the "
-            "domes' decentring has no covariance node yet)"}
+                   "calibration, whose file carried no covariance"}
 
 def sigma_note(mode: str) -> str:
     """What the housing σ covers (said in every report), by ``HousingCalibration.uncertainty``."""
-    if mode == "dome":
-        return ("σ is the dome calibration's own: its corners' scatter through the refractive "
-                "bundle adjustment, with the intrinsics and the stereo pose held at the in-air "
-                "calibration. Errors of the in-air calibration are not in it (the propagation "
-                "and the prior are built for flat ports; docs/calibration.md).")
     if mode == "conditional":
         return ("σ is the housing calibration's own: its corners' scatter through the refractive "
                 "bundle adjustment, with the intrinsics (and the stereo extrinsics unless free) "

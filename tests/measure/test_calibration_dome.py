@@ -80,3 +80,124 @@ def test_bad_dome_requests():
     detections = _detections(truth, n_poses=3)
     with pytest.raises(CalibrationError, match="of two domes estimates dome_center, n_water"):
         calibrate_housing(start, BOARD, detections, ("distance",))
+
+
+# ---------------------------------------------------------------------------------------------
+# the in-air calibration's covariance behind domes
+# ---------------------------------------------------------------------------------------------
+SIZE, FOCAL = (480, 402), 225.0
+SMALL_BOARD = Board("chessboard", (7, 6), 60.0)
+
+
+def _observe(rig, poses, sigma, rng):
+    corners = SMALL_BOARD.corners()
+    ids, pixels = [], []
+    for pose in poses:
+        world = pose.apply(corners)
+        ids.append([np.arange(len(world))] * 2)
+        pixels.append([project(c, rig.port_of(v), world) + rng.normal(0, sigma, (len(world), 2))
+                       for v, c in enumerate(rig.cameras)])
+    return Detections(ids, pixels)
+
+
+@pytest.fixture(scope="module")
+def chain():
+    """An in-air calibration (8 poses, σ = 0.05 px) and corners behind two decentred domes
+    (10 poses, σ = 0.05 px) of small cameras; the start: the in-air cameras in centred domes."""
+    from measure.calibration import calibrate_in_air
+
+    cameras = paper_cameras(SIZE, FOCAL)
+    air_rig = StereoRig(*cameras, dome_pair(cameras, 50.0, 8.0, (0.0, 0.0, 0.0),
+                                            (1.0, 1.0, 1.0)))
+    poses = sample_poses(air_rig, SMALL_BOARD, 8, 3, False, (450.0, 650.0))
+    air = calibrate_in_air(SMALL_BOARD, _observe(air_rig, poses, 0.05,
+                                                 np.random.default_rng(1)), SIZE)
+    truth = StereoRig(*cameras, dome_pair(cameras, 50.0, 8.0, OFFSET, INDICES))
+    water = sample_poses(truth, SMALL_BOARD, 10, 4, True, (450.0, 900.0))
+    detections = _observe(truth, water, 0.05, np.random.default_rng(2))
+    start = StereoRig(air.rig.left, air.rig.right,
+                      dome_pair(air.rig.cameras, 50.0, 8.0, (0.0, 0.0, 0.0), INDICES))
+    return {"air": air, "truth": truth, "detections": detections, "start": start}
+
+
+def test_dome_air_jacobian_matches_finite_differences(chain):
+    """d residuals / d in-air parameters (intrinsics; the right camera's pose with its dome
+    moving along) against the residuals of the rig with those parameters moved."""
+    from measure.calibration import apply_air_change
+    from measure.calibration_covariance import AIR_NAMES
+
+    start, detections = chain["start"], chain["detections"]
+    names = ("dome_center",)
+    problem = dome_problem(start, SMALL_BOARD, detections, names)
+    x = problem.x0.copy()
+    x[:6] += [1.5, -0.4, 0.8, 2.2, 0.3, -0.6]  # decentred: the lever arm of the rotation
+    J = problem.air_jacobian(x, AIR_NAMES)
+    steps = {"fx": 1e-3, "cx": 1e-3, "k1": 1e-6, "p2": 1e-7, "rotation": 1e-7, "center": 1e-4}
+    for j, name in enumerate(AIR_NAMES):
+        h = next(v for k, v in steps.items() if k in name) if any(
+            k in name for k in steps) else 1e-4
+        delta = np.zeros(len(AIR_NAMES))
+        delta[j] = h
+        plus = dome_problem(apply_air_change(start, AIR_NAMES, delta), SMALL_BOARD, detections,
+                            names).residuals(x)
+        minus = dome_problem(apply_air_change(start, AIR_NAMES, -delta), SMALL_BOARD,
+                             detections, names).residuals(x)
+        fd = (plus - minus) / (2 * h)
+        np.testing.assert_allclose(J[:, j], fd, rtol=0, atol=1e-4 * max(1.0, np.abs(fd).max()),
+                                   err_msg=name)
+    assert np.abs(J[:, AIR_NAMES.index("right.rotation[1]")]).max() > 0
+
+
+@pytest.mark.parametrize("mode", ["propagate", "prior"])
+def test_dome_sigma_includes_the_in_air_covariance(chain, mode):
+    """With the in-air covariance the decentring's σ grows over the conditional σ, the joint
+    covariance names each dome's centre (reference frame) beside the in-air parameters, and
+    σ of the reference-frame centre of the left dome equals σ of its decentring (the left
+    camera is the reference frame)."""
+    from measure.calibration_covariance import AIR_NAMES
+
+    air, truth = chain["air"], chain["truth"]
+    fit = calibrate_housing(chain["start"], SMALL_BOARD, chain["detections"],
+                            air_covariance=air.covariance, uncertainty=mode)
+    assert fit.identifiable and fit.uncertainty == mode, fit.reason
+    dome_names = tuple(f"{v}.dome_center[{k}]" for v in ("left", "right") for k in range(3))
+    assert fit.covariance.names == AIR_NAMES + dome_names
+    sigma = np.asarray(fit.sigmas["dome_center"])
+    conditional = np.asarray(fit.sigmas_conditional["dome_center"])
+    assert np.all(sigma > conditional)
+    np.testing.assert_allclose([fit.covariance.sigmas[n] for n in dome_names[:3]], sigma[:3],
+                               rtol=1e-9)
+    estimate = np.concatenate([fit.estimates["dome_center"][v] for v in ("left", "right")])
+    assert np.all(np.abs(estimate - np.tile(OFFSET, 2)) < 4 * sigma)
+    centres = np.concatenate([fit.rig.port.left.center, fit.rig.port.right.center])
+    true_centres = np.concatenate([truth.port.left.center, truth.port.right.center])
+    sig_centres = np.array([fit.covariance.sigmas[n] for n in dome_names])
+    assert np.all(np.abs(centres - true_centres) < 4 * sig_centres)
+
+
+def test_dome_propagation_predicts_how_the_domes_move_with_the_intrinsics(chain):
+    """The joint covariance's cross terms: the dome centres (reference frame) move by
+    Cov(M, air) Σ_air⁻¹ δ when the in-air parameters move by δ (re-run adjustment, 5 %)."""
+    from measure.calibration import apply_air_change
+    from measure.calibration_covariance import AIR_NAMES
+
+    air, start = chain["air"], chain["start"]
+    fit = calibrate_housing(start, SMALL_BOARD, chain["detections"],
+                            air_covariance=air.covariance, uncertainty="propagate")
+    cov, a = fit.covariance, len(AIR_NAMES)
+    sigma_air = cov.matrix[:a, :a]
+    delta = np.sqrt(np.diag(sigma_air)) * np.random.default_rng(3).choice([-1.0, 1.0], a)
+    predicted = cov.matrix[a:, :a] @ np.linalg.solve(sigma_air, delta)
+    moved = calibrate_housing(apply_air_change(start, AIR_NAMES, delta), SMALL_BOARD,
+                              chain["detections"])
+    actual = np.concatenate([moved.rig.port.left.center - fit.rig.port.left.center,
+                             moved.rig.port.right.center - fit.rig.port.right.center])
+    np.testing.assert_allclose(actual, predicted, rtol=0,
+                               atol=0.05 * np.abs(actual).max())
+
+
+def test_dome_without_an_in_air_covariance_is_conditional(chain):
+    fit = calibrate_housing(chain["start"], SMALL_BOARD, chain["detections"])
+    assert fit.uncertainty == "conditional" and fit.sigmas == fit.sigmas_conditional
+    assert fit.covariance.names == tuple(f"{v}.dome_center[{k}]" for v in ("left", "right")
+                                         for k in range(3))

@@ -59,3 +59,26 @@ def test_unknown_names_and_tilts_without_axes_are_refused():
         RigCovariance(["port.tilt[0]"], [[1.0]])
     with pytest.raises(CovarianceError, match="repeat"):
         RigCovariance(["port.distance", "port.distance"], np.eye(2))
+
+
+def test_dome_names_round_trip_through_a_dome_calib_yaml(tmp_path):
+    """Each dome's centre (reference frame, mm) and the domes' water index are names of the
+    grammar; a dome rig's calib.yaml keeps them."""
+    from measure import StereoRig
+    from synth.rig import paper_cameras
+    from synth.scene.dome import dome_pair
+
+    names = ("left.fx", "right.rotation[1]", "left.dome_center[0]", "left.dome_center[2]",
+             "right.dome_center[1]", "port.index[2]")
+    cameras = paper_cameras()
+    rig = StereoRig(*cameras, dome_pair(cameras, 50.0, 8.0, (2.0, 0.0, 0.0), (1.0, 1.54, 1.33)))
+    rng = np.random.default_rng(1)
+    a = rng.normal(size=(len(names), len(names)))
+    cov = RigCovariance(names, a @ a.T + 1e-3 * np.eye(len(names)))
+    write_calib(tmp_path / "calib.yaml", rig, covariance=cov)
+    back = read_calib(str(tmp_path / "calib.yaml"))
+    assert back["rig"].is_dome and back["covariance"].names == names
+    np.testing.assert_array_equal(back["covariance"].matrix, cov.matrix)
+    for bad in ("left.dome_center[3]", "dome_center[0]", "port.dome_center[0]"):
+        with pytest.raises(CovarianceError, match="unknown rig parameter"):
+            RigCovariance([bad], [[1.0]])

@@ -271,3 +271,65 @@ def test_dense_covariance_lies_along_the_left_ray():
     np.testing.assert_allclose(closed.rig, full.rig, rtol=1e-6, atol=1e-12)
     sigma_px[0] = np.inf  # no information: NaN, like a point without an image
     assert np.all(np.isnan(dense_point_covariances(rig, points, sigma_px, direction).total[0]))
+
+
+DOME_NAMES = ("left.fx", "left.cy", "left.k1", "right.fx", "right.p2", "right.rotation[0]",
+              "right.rotation[1]", "right.rotation[2]", "right.center[0]", "right.center[1]",
+              "right.center[2]", "left.dome_center[0]", "left.dome_center[1]",
+              "left.dome_center[2]", "right.dome_center[0]", "right.dome_center[1]",
+              "right.dome_center[2]", "port.index[1]", "port.index[2]")
+
+
+def _dome_rig():
+    from measure import StereoRig
+    from synth.rig import paper_cameras
+    from synth.scene.dome import dome_pair
+
+    cameras = paper_cameras()
+    return StereoRig(*cameras, dome_pair(cameras, 50.0, 8.0, (2.0, -1.0, 1.5),
+                                         (1.0, 1.54, 1.33)))
+
+
+def test_dome_parameter_jacobian_matches_central_differences():
+    """Through two decentred domes: the intrinsics, the right camera's pose (its dome held),
+    each dome's centre (reference frame; only its own view moves) and the domes' indices."""
+    rig = _dome_rig()
+    points = paper_plane(1000.0)[::31] + np.array([0.0, 0.0, 1.0]) * np.arange(16)[:, None] * 60
+    _, _, analytic = pixel_jacobians(rig, points, DOME_NAMES)
+
+    def pixels(r):
+        return np.concatenate([project(c, r.port_of(v), points)
+                               for v, c in enumerate(r.cameras)], axis=1)
+
+    for p, name in enumerate(DOME_NAMES):
+        h = _step(name)
+        delta = np.zeros(len(DOME_NAMES))
+        delta[p] = h
+        numeric = (pixels(perturbed_rig(rig, DOME_NAMES, delta))
+                   - pixels(perturbed_rig(rig, DOME_NAMES, -delta))) / (2 * h)
+        error = np.linalg.norm(numeric - analytic[:, :, p], axis=1)
+        allowed = 1e-5 * np.linalg.norm(analytic[:, :, p], axis=1) + 1e-10 / h
+        assert np.all(error <= allowed), (name, float(np.max(error / allowed)))
+        assert np.abs(analytic[:, :, p]).max() > 0, name
+    assert np.all(analytic[:, 2:, DOME_NAMES.index("left.dome_center[0]")] == 0)
+    assert np.all(analytic[:, :2, DOME_NAMES.index("right.dome_center[2]")] == 0)
+
+
+def test_dome_and_flat_names_refused_on_the_other_port():
+    with pytest.raises(ValueError, match="port.distance: flat-port parameters"):
+        pixel_jacobians(_dome_rig(), np.array([[0.0, 0.0, 1000.0]]), ("port.distance",))
+    with pytest.raises(ValueError, match="dome parameters, but the rig has a flat port"):
+        pixel_jacobians(paper_rig(), np.array([[0.0, 0.0, 1000.0]]), ("left.dome_center[0]",))
+
+
+def test_dome_rig_part_of_a_point_covariance():
+    """A covariance of the right dome's centre along x moves the points: a rig part > 0 that
+    grows with the variance."""
+    rig = _dome_rig()
+    points = paper_plane(1000.0)[::61]
+    small = RigCovariance(("right.dome_center[0]",), [[0.01]])
+    large = RigCovariance(("right.dome_center[0]",), [[1.0]])
+    a = point_covariances(rig, points, 0.1, small).rig
+    b = point_covariances(rig, points, 0.1, large).rig
+    assert np.all(np.trace(a, axis1=1, axis2=2) > 0)
+    np.testing.assert_allclose(b, 100 * a, rtol=1e-9)

@@ -36,7 +36,15 @@ def boards(tmp_path_factory):
                             10.0))
     write_boards(load_scene(scene), root / "water", BOARD, n_poses=8, seed=3,
                  distance_range=(450.0, 650.0), progress=False)
-    return {"scene": scene, "water": str(root / "water")}
+    return {"scene": scene, "water": str(root / "water"), "root": root}
+
+
+@pytest.fixture(scope="module")
+def air_boards(boards):
+    """The same cameras' in-air boards (8 poses)."""
+    write_boards(load_scene(boards["scene"]), boards["root"] / "air", BOARD, n_poses=8, seed=5,
+                 air=True, distance_range=(350.0, 600.0), progress=False)
+    return str(boards["root"] / "air")
 
 
 def test_decentring_from_boards_behind_domes(boards, tmp_path, capsys):
@@ -74,3 +82,30 @@ def test_flat_options_refused_for_domes(boards, tmp_path, capsys, extra, fragmen
     err = capsys.readouterr().err
     assert err.startswith("error: ") and fragment in err and err.count("\n") == 1, err
     assert not (tmp_path / "cal").exists()
+
+
+@pytest.mark.parametrize("mode", ["prior", "propagate"])
+def test_the_chain_behind_domes_carries_the_in_air_covariance(boards, air_boards, tmp_path,
+                                                              mode):
+    """In-air boards → their covariance → the domes: σ includes the in-air calibration's (above
+    the conditional σ), the report says how, and calib.yaml's covariance names each dome's
+    centre beside the in-air parameters — read back by eval run's reader."""
+    out = tmp_path / "cal"
+    assert eval_main(["calibrate", boards["water"], "--intrinsics", air_boards,
+                      "--air-uncertainty", mode, "--out", str(out), "--no-progress"]) == 0
+    report = json.loads((out / "report.json").read_text())
+    housing = report["housing"]
+    assert housing["uncertainty"] == mode
+    for name, p in housing["parameters"].items():
+        assert p["sigma"] > p["sigma_conditional"] > 0, (name, p)
+        assert abs(p["error"]) < 0.5 and abs(p["error_in_sigma"]) < 4, (name, p)
+    covariance = read_calib(str(out / "calib.yaml"))["covariance"]
+    dome_names = [f"{v}.dome_center[{k}]" for v in ("left", "right") for k in range(3)]
+    assert list(covariance.names[-6:]) == dome_names and "left.fx" in covariance.names
+    # the left camera is the reference frame: its dome centre's σ is its decentring's
+    assert covariance.sigmas["left.dome_center[0]"] == pytest.approx(
+        housing["parameters"]["left_dome_x"]["sigma"], rel=1e-9)
+    text = (out / "report.md").read_text()
+    assert "σ includes the in-air calibration's uncertainty" in text
+    if mode == "prior":
+        assert "left.fx" in housing["in_air_refined"]

@@ -111,3 +111,28 @@ def test_a_flat_port_calibration_is_refused_for_a_dome_scene(scenes, tmp_path, c
                      str(calib), "--no-progress"]) == 2
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and "a flat-port calibration, but the scene has domes" in err[0]
+
+
+@pytest.mark.slow
+def test_points_through_domes_carry_the_domes_covariance(scenes, tmp_path):
+    """A dome calibration whose covariance names each dome's centre (reference frame): the
+    points measured through the domes carry its rig part (larger σ than the scene's exact rig)."""
+    from measure.rig_covariance import RigCovariance
+    from synth.dataset import read_calib, write_calib, write_dataset
+
+    data = tmp_path / "data"
+    write_dataset(load_scene(scenes["decentred"]), data, spp=SPP, progress=False)
+    rig = read_calib(data / "calib.yaml")["rig"]
+    names = ("left.dome_center[2]", "right.dome_center[0]", "right.dome_center[2]")
+    calib = tmp_path / "dome_cov.yaml"
+    write_calib(calib, rig, covariance=RigCovariance(names, np.diag([0.5, 0.5, 0.5]) ** 2))
+    reports = {}
+    for name, extra in (("exact", []), ("cov", ["--calib", str(calib)])):
+        out = tmp_path / name
+        assert main(["run", scenes["decentred"], "--from", str(data), "--out", str(out),
+                     "--methods", "optical_path", "--no-progress", *extra]) == 0
+        reports[name] = json.loads((out / "report.json").read_text())
+    assert "rig covariance" in reports["cov"]["uncertainty"]["rig"]
+    sz = {k: r["uncertainty"]["summaries"]["optical_path"]["sigma"]["median_sigma_mm"]["z"]
+          for k, r in reports.items()}
+    assert sz["cov"] > 1.5 * sz["exact"], sz
