@@ -289,10 +289,10 @@ def _start_poses(rig: StereoRig, board: Board, detections: Detections):
     return poses
 
 
-def housing_problem(rig: StereoRig, board: Board, detections: Detections, names):
-    """The bundle adjustment of :func:`calibrate_housing` as functions of the unknowns ``x``
-    (free housing numbers, then 6 per usable pose): ``residuals``, its analytic ``jacobian``,
-    ``unpack``, the start ``x0`` and its ``lower`` / ``upper`` bounds, and the bookkeeping."""
+def _usable_poses(rig: StereoRig, board: Board, detections: Detections):
+    """``(starts, usable, detections)``: the starting board poses that ``cv2.solvePnP`` found,
+    the numbers of those poses, and the detections of those poses only (in that order);
+    CalibrationError when fewer than :data:`MIN_POSES` remain."""
     starts = _start_poses(rig, board, detections)
     usable = [k for k, s in enumerate(starts) if s is not None]
     if len(usable) < MIN_POSES:
@@ -300,7 +300,14 @@ def housing_problem(rig: StereoRig, board: Board, detections: Detections, names)
                                f"calibration needs at least {MIN_POSES}")
     detections = Detections([detections.ids[k] for k in usable],
                             [detections.pixels[k] for k in usable])
-    starts = [starts[k] for k in usable]
+    return [starts[k] for k in usable], usable, detections
+
+
+def housing_problem(rig: StereoRig, board: Board, detections: Detections, names):
+    """The bundle adjustment of :func:`calibrate_housing` as functions of the unknowns ``x``
+    (free housing numbers, then 6 per usable pose): ``residuals``, its analytic ``jacobian``,
+    ``unpack``, the start ``x0`` and its ``lower`` / ``upper`` bounds, and the bookkeeping."""
+    starts, usable, detections = _usable_poses(rig, board, detections)
     P = len(starts)
     n_global = sum(HOUSING_PARAMETERS[n] for n in names)
     port0, basis = rig.port, tilt_basis(rig.port.normal)
@@ -743,14 +750,7 @@ def dome_problem(rig: StereoRig, board: Board, detections: Detections, names):
     own dome; the Jacobian from ``project(..., parameters=True)``'s
     :class:`measure.dome_projection.DomeParameterJacobian` (``dome_center`` turned into each
     camera's frame)."""
-    starts = _start_poses(rig, board, detections)
-    usable = [k for k, s in enumerate(starts) if s is not None]
-    if len(usable) < MIN_POSES:
-        raise CalibrationError(f"the board was found in {len(usable)} pose(s); the housing "
-                               f"calibration needs at least {MIN_POSES}")
-    detections = Detections([detections.ids[k] for k in usable],
-                            [detections.pixels[k] for k in usable])
-    starts = [starts[k] for k in usable]
+    starts, usable, detections = _usable_poses(rig, board, detections)
     P = len(starts)
     n_global = sum(DOME_PARAMETERS[n] for n in names)
     domes0 = (rig.port.left, rig.port.right)

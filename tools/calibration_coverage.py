@@ -72,16 +72,20 @@ def errors_and_sigmas(report: dict) -> dict:
                                   *np.radians(n["sigma_conditional_deg"]).tolist()]}
 
 
-def coverage(errors, sigmas) -> dict:
-    """Per parameter: n, fraction of |z| ≤ 2, max |z|, RMS σ / RMS error, the RMS error."""
+def coverage(errors, sigmas, names=PARAMETERS) -> dict:
+    """Per parameter of ``names`` (the columns of ``errors`` and ``sigmas``, one row per seed):
+    n, fraction of |z| ≤ 2, max |z|, counts beyond 3 and 4 σ, mean and RMS z, RMS σ / RMS error,
+    the RMS and mean error, the RMS σ (the parameters' units)."""
     errors, sigmas = np.asarray(errors, float), np.asarray(sigmas, float)
     z = errors / sigmas
     out = {}
-    for j, name in enumerate(PARAMETERS):
+    for j, name in enumerate(names):
         rms_error = float(np.sqrt(np.mean(errors[:, j] ** 2)))
         out[name] = {"n": int(len(z)), "within_2_sigma": float(np.mean(np.abs(z[:, j]) <= 2)),
                      "max_abs_z": float(np.max(np.abs(z[:, j]))),
+                     "beyond_3_sigma": int(np.sum(np.abs(z[:, j]) > 3)),
                      "beyond_4_sigma": int(np.sum(np.abs(z[:, j]) > 4)),
+                     "mean_z": float(np.mean(z[:, j])), "rms_z": float(np.sqrt(np.mean(z[:, j] ** 2))),
                      "sigma_over_spread": float(np.sqrt(np.mean(sigmas[:, j] ** 2)) / rms_error),
                      "rms_error": rms_error, "mean_error": float(np.mean(errors[:, j])),
                      "rms_sigma": float(np.sqrt(np.mean(sigmas[:, j] ** 2)))}

@@ -31,30 +31,14 @@ import os
 import sys
 from pathlib import Path
 
-import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from calibration_coverage import calibrate, coverage, seeds_argument
 
 COMPONENTS = tuple(f"{cam}_dome_{axis}" for cam in ("left", "right") for axis in "xyz")
 MODES = ("exact", "propagate", "prior")
-
-
-def seeds_argument(text: str) -> list[int]:
-    """``1-20`` or ``1,2,5``."""
-    out = []
-    for part in text.split(","):
-        first, _, last = part.partition("-")
-        out += list(range(int(first), int(last or first) + 1))
-    return out
-
-
-def calibrate(argv: list[str]) -> None:
-    """One ``python -m eval calibrate`` run in this process; exits on failure."""
-    from eval.cli import main
-
-    code = main(["calibrate", *argv, "--no-progress"])
-    if code:
-        raise SystemExit(f"eval calibrate {' '.join(argv)}: exit code {code}")
 
 
 def components(report: dict) -> dict:
@@ -66,24 +50,6 @@ def components(report: dict) -> dict:
             "sigma_conditional": [p[c].get("sigma_conditional", p[c]["sigma"])
                                   for c in COMPONENTS],
             "rms_px": report["housing"]["rms_px"]}
-
-
-def coverage(errors, sigmas) -> dict:
-    """Per component: n, fraction of |z| ≤ 2, max |z|, beyond 3 σ, mean z, σ / spread, RMS and
-    mean error, RMS σ (mm)."""
-    errors, sigmas = np.asarray(errors, float), np.asarray(sigmas, float)
-    z = errors / sigmas
-    out = {}
-    for j, name in enumerate(COMPONENTS):
-        rms_error = float(np.sqrt(np.mean(errors[:, j] ** 2)))
-        out[name] = {"n": int(len(z)), "within_2_sigma": float(np.mean(np.abs(z[:, j]) <= 2)),
-                     "max_abs_z": float(np.max(np.abs(z[:, j]))),
-                     "beyond_3_sigma": int(np.sum(np.abs(z[:, j]) > 3)),
-                     "mean_z": float(np.mean(z[:, j])), "rms_z": float(np.sqrt(np.mean(z[:, j] ** 2))),
-                     "sigma_over_spread": float(np.sqrt(np.mean(sigmas[:, j] ** 2)) / rms_error),
-                     "rms_error": rms_error, "mean_error": float(np.mean(errors[:, j])),
-                     "rms_sigma": float(np.sqrt(np.mean(sigmas[:, j] ** 2)))}
-    return out
 
 
 def main(argv=None) -> int:
@@ -133,7 +99,7 @@ def main(argv=None) -> int:
         if not chosen:
             continue
         label = "conditional" if key == "sigma_conditional" or mode == "exact" else mode
-        stats = coverage([r["error"] for r in chosen], [r[key] for r in chosen])
+        stats = coverage([r["error"] for r in chosen], [r[key] for r in chosen], COMPONENTS)
         table[f"{mode}/{label}"] = stats
         for name, s in stats.items():
             print(f"| {source} | {label} | {name} | {s['n']} | {100 * s['within_2_sigma']:.0f} % "
