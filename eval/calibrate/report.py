@@ -470,9 +470,10 @@ def sigma_note(mode: str) -> str:
         return ("σ is the housing calibration's own: its corners' scatter through the refractive "
                 "bundle adjustment, with the intrinsics (and the stereo extrinsics unless free) "
                 "held at the in-air calibration, whose file (--intrinsics) carried no "
-                "covariance. Errors of the in-air calibration are not in it: on rendered boards "
-                "the chain's error was 4–15 σ where the exact intrinsics gave ≤ 2 σ "
-                "(docs/calibration.md).")
+                "covariance (or was the scene's exact rig). Errors of the in-air calibration "
+                "are not in it: on rendered boards of the flat port the chain's error was "
+                "4–15 σ where the exact intrinsics gave ≤ 2 σ, on the domes' decentring up to "
+                "6 σ (docs/calibration.md).")
     how = ("propagated through the adjustment (σ² = s²(JᵀJ)⁻¹ + G Σ_air Gᵀ)" if mode == "propagate"
            else "as a prior on the intrinsics and stereo pose, freed in the adjustment")
     return (f"σ includes the in-air calibration's uncertainty: its full covariance (both "
