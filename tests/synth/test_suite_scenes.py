@@ -81,6 +81,7 @@ render_width = 96
 [[scenes]]
 layout = "surface"
 surface = "wavy"
+speckle_size = 20
 """))
     made = next(iter(spec.generated.values()))
     assert spec.entries[0].scene == "surface_wavy"
@@ -109,7 +110,8 @@ surface = "wavy"
      "port deviations need a port"),
     ('render = "boards"\nscenes = [{layout = "grid"}]\n[grid]\n"error.n_water" = [0.01]',
      "board sequences state no design port"),
-    ('scenes = [{layout = "surface"}]', "render = 'targets' but scene surface_plane is a surface"),
+    ('scenes = [{layout = "surface", speckle_size = 20}]',
+     "render = 'targets' but scene surface_plane is a surface"),
 ])
 def test_spec_errors_name_the_key_and_the_file(tmp_path, text, fragment):
     path = _write(tmp_path, text)
@@ -170,6 +172,7 @@ render_width = 96
 name = "wavy"
 layout = "surface"
 surface = "wavy"
+speckle_size = 20
 water = "coastal"
 [fixed]
 spp = 2
