@@ -15,7 +15,7 @@ lint: setup
 test: lint
 	$(PY) -m pytest -n 2
 
-# everything that does not render with Mitsuba (the `slow` marker), on two processes: about a minute
+# everything that does not render with Mitsuba (the `slow` marker), on two processes: about two minutes
 test-fast: lint
 	$(PY) -m pytest -m "not slow" -n 2
 
