@@ -211,8 +211,8 @@ def score_dataset(data, points: np.ndarray, label: str, gate_mm: float | None = 
     from eval.core.analytic import visible_targets
 
     radius = float(data.manifest["scene"].get("target_radius_mm", 0.0))
-    inside = [visible_targets(camera, data.rig.port, data.targets, radius)[1]
-              for camera in (data.rig.left, data.rig.right)]
+    inside = [visible_targets(camera, data.rig.port_of(view), data.targets, radius)[1]
+              for view, camera in enumerate((data.rig.left, data.rig.right))]
     visible_both = inside[0] & inside[1]
     seed = int(data.manifest.get("seed", 0))
     gate = default_gate_mm(data.targets) if gate_mm is None else gate_mm

@@ -269,6 +269,10 @@ def main(args) -> int:
     options = options_of(args)
     output = OutputDir(args.out, COMMAND).claim()  # before any work
     inputs = load_inputs(args.calib, args.left, args.right, args.encoding)
+    if args.dense and inputs.rig.is_dome:
+        raise CLIError(f"--dense with --calib {args.calib}: a dome-port calibration; dense "
+                       f"photos are measured through a flat port only (the library's "
+                       f"measure.dense.match_dense takes domes)")
     log(f"measure {len(inputs.names)} pair(s) of {inputs.size[0]}x{inputs.size[1]} px photos "
         f"with {args.calib} …")
     results = measure_all(inputs, options, quiet, log)

@@ -58,9 +58,6 @@ def read_calibration(path):
         calib = read_calib(path)
     except DatasetError as exc:
         raise CLIError(f"--calib {exc}") from None
-    if calib["rig"].is_dome:
-        raise CLIError(f"--calib {path}: a dome-port calibration (DOMEPORT); eval measure "
-                       f"measures through a flat port only")
     return (calib["rig"], tuple(int(v) for v in calib["size"]), bool(calib["has_port"]),
             calib.get("covariance"))
 

@@ -137,7 +137,7 @@ def measure_targets(rig, name: str, left, right, options: TargetOptions,
     timings["triangulate"] = time.perf_counter() - t
     t = time.perf_counter()
     covariance_methods = [m for m in COVARIANCE_METHODS if m in result.methods]
-    if covariance_methods and not rig.is_dome:
+    if covariance_methods:
         from eval.core.uncertainty import method_covariances, pair_sigmas
 
         start = (result.methods["optical_path"].points if "optical_path" in result.methods
