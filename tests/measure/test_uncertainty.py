@@ -185,15 +185,21 @@ def test_detection_sigma_from_snr_and_size():
     assert detection_sigma(d, floor_px=1.0)[0] > 1.0
 
 
+def _noisy_pairs(seed: int):
+    """The paper's rig, its plane of targets at 1 m, their exact pixels in both views and the
+    same with Gaussian noise of :data:`SIGMA_PX` (seeded)."""
+    rig = paper_rig()
+    points = paper_plane(1000.0)
+    exact = tuple(project(c, rig.port, points) for c in rig.cameras)
+    rng = np.random.default_rng(seed)
+    noisy = tuple(uv + rng.normal(0, SIGMA_PX, uv.shape) for uv in exact)
+    return rig, points, exact, noisy
+
+
 def test_residual_sigma_recovers_the_pixel_noise():
     """The variance factor of the residuals (no truth) against the σ of the added noise, and
     only what lies beyond a stated part."""
-    rig = paper_rig()
-    points = paper_plane(1000.0)
-    uv_left, uv_right = (project(c, rig.port, points) for c in rig.cameras)
-    rng = np.random.default_rng(5)
-    noisy_left = uv_left + rng.normal(0, SIGMA_PX, uv_left.shape)
-    noisy_right = uv_right + rng.normal(0, SIGMA_PX, uv_right.shape)
+    rig, points, (uv_left, uv_right), (noisy_left, noisy_right) = _noisy_pairs(5)
     start = triangulate(rig, noisy_left, noisy_right, "optical_path").points
     found = residual_sigma(rig, noisy_left, noisy_right, start)
     assert abs(found["sigma0_px"] / SIGMA_PX - 1) <= 0.10, found
@@ -207,12 +213,7 @@ def test_residual_sigma_recovers_the_pixel_noise():
 
 
 def test_residual_sigma_ignores_a_wrong_match():
-    rig = paper_rig()
-    points = paper_plane(1000.0)
-    uv_left, uv_right = (project(c, rig.port, points) for c in rig.cameras)
-    rng = np.random.default_rng(6)
-    noisy_left = uv_left + rng.normal(0, SIGMA_PX, uv_left.shape)
-    noisy_right = uv_right + rng.normal(0, SIGMA_PX, uv_right.shape)
+    rig, points, (uv_left, uv_right), (noisy_left, noisy_right) = _noisy_pairs(6)
     noisy_right[:3, 1] += 5.0  # three pairs 5 px off the epipolar curve
     start = triangulate(rig, noisy_left, noisy_right, "optical_path").points
     found = residual_sigma(rig, noisy_left, noisy_right, start)
