@@ -718,14 +718,17 @@ def _prior_fit(rig, board, detections, names, x, s2, air, sigma_air):
         A = np.block([[J, problem.air_jacobian(x, air)],
                       [np.zeros((a, J.shape[1])), s * L]])
         b = np.concatenate([problem.residuals(x), s * L @ delta])
-        AtA = A.T @ A
-        step = -np.linalg.solve(AtA, A.T @ b)
-        sig = np.sqrt(s2 * np.diag(np.linalg.inv(AtA)))
+        inverse = np.linalg.inv(A.T @ A)
+        step = -inverse @ (A.T @ b)
+        sig = np.sqrt(s2 * np.diag(inverse))
         if np.max(np.abs(step) / sig) < PRIOR_STEP_SIGMA:
             break
         x = x + step[:J.shape[1]]
         delta = delta + step[J.shape[1]:]
-    cov = s2 * np.linalg.inv(AtA)
+    else:
+        raise CalibrationError(f"the prior fit did not converge in {PRIOR_ITERATIONS + 1} "
+                               f"Gauss-Newton steps; use --air-uncertainty propagate")
+    cov = s2 * inverse
     order = np.r_[J.shape[1]:J.shape[1] + a, 0:J.shape[1]]
     return moved, x, cov[np.ix_(order, order)]
 

@@ -21,7 +21,7 @@ import numpy as np
 from .camera import ValueEquality
 from .port import as_vector
 from .reasons import Reason
-from .refraction import WaterRays
+from .refraction import WaterRays, refract
 
 
 @dataclass(frozen=True, eq=False)
@@ -155,7 +155,7 @@ def trace_through_dome(origins: np.ndarray, directions: np.ndarray, dome: DomePo
             position = position + h[:, None] * heading
             points.append(position)
             normals = (position - dome.center) / r
-            heading, tir = _refract_rows(heading, normals, n[k], n[k + 1])
+            heading, tir = refract(heading, normals, n[k], n[k + 1])
             reason[(reason == Reason.OK) & tir] = Reason.TOTAL_INTERNAL_REFLECTION
     interface_points = np.stack(points) if keep_interface_points else None
     bad = reason != Reason.OK
@@ -166,16 +166,6 @@ def trace_through_dome(origins: np.ndarray, directions: np.ndarray, dome: DomePo
         if interface_points is not None:
             interface_points[:, bad] = np.nan
     return WaterRays(position, heading, interface_points, reason)
-
-
-def _refract_rows(directions, normals, n_from, n_to):
-    """:func:`measure.refraction.refract` with a normal per row ``(N, 3)``."""
-    eta = n_from / n_to
-    cos_in = np.einsum("ij,ij->i", directions, normals)
-    sin2_out = eta * eta * (1.0 - cos_in * cos_in)
-    tir = sin2_out > 1.0
-    cos_out = np.sqrt(np.where(tir, np.nan, 1.0 - sin2_out))
-    return eta * directions - ((eta * cos_in - cos_out)[:, None]) * normals, tir
 
 
 __all__ = ["DomePort", "DomePair", "trace_through_dome"]

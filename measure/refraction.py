@@ -15,14 +15,15 @@ from .reasons import Reason
 
 
 def refract(directions: np.ndarray, normal: np.ndarray, n_from: float, n_to: float):
-    """Refract unit ``directions (N, 3)`` at a plane with unit ``normal`` (along propagation).
+    """Refract unit ``directions (N, 3)`` at a plane with unit ``normal`` (along propagation;
+    ``(3,)``, or ``(N, 3)`` one per row — a curved interface such as a dome's).
 
     The paper's equation 7: ``ζ2 = (n1/n2) ζ1 − ((n1/n2) cos α1 − cos α2) N`` with
     ``cos α1 = ζ1·N`` and Snell's law ``n1 sin α1 = n2 sin α2``. Returns the refracted unit
     directions ``(N, 3)`` and a boolean mask of rows with total internal reflection (NaN rows).
     """
     eta = n_from / n_to
-    cos_in = directions @ normal
+    cos_in = np.einsum("...j,...j->...", directions, normal)
     sin2_out = eta * eta * (1.0 - cos_in * cos_in)
     tir = sin2_out > 1.0
     cos_out = np.sqrt(np.where(tir, np.nan, 1.0 - sin2_out))
