@@ -284,8 +284,8 @@ def write_boards(spec: SceneSpec, out_dir, board: Board, n_poses: int = DEFAULT_
         pair, pair_stats = render_pose(mscene, mi, spec, board, pose, k, spp, seed, adaptive)
         images.append(pair)
         stats.append(pair_stats)
-        bar.set_postfix_str(f"lit {pair_stats[0]['lit_fraction'] or 1:.1%} / "
-                            f"{pair_stats[1]['lit_fraction'] or 1:.1%}")
+        lit = [1.0 if v["lit_fraction"] is None else v["lit_fraction"] for v in pair_stats]
+        bar.set_postfix_str(f"lit {lit[0]:.1%} / {lit[1]:.1%}")
     bar.close()
     times["render"] = time.perf_counter() - t
     w, h = spec.size

@@ -39,6 +39,8 @@ def design_rig(truth: StereoRig, port: dict) -> StereoRig:
     ``port`` (``{name: value}``, names of :data:`DESIGN_PORT`; ``port_normal`` 3 numbers, the
     others numbers in mm or index units). ValueError for an unknown name, a glass quantity of a
     port without glass, or a port the values make invalid."""
+    if truth.is_dome:
+        raise ValueError("design port: a rig of domes has no flat port to deviate")
     p = truth.port
     normal, distance = np.asarray(p.normal, float), float(p.distance)
     thicknesses, indices = list(p.thicknesses), list(p.indices)

@@ -154,6 +154,11 @@ def _is_surface(scene) -> bool:
     return b'id="surface"' in scene.data
 
 
+def _is_dome(scene) -> bool:
+    """Whether a scene file puts each camera inside a dome (``synth scene --port dome``)."""
+    return b"dome_left_inner" in scene.data
+
+
 def _read_sources(data: dict, base_dir: str, label: str) -> dict:
     """``{label: Scene or options}`` of the spec's ``scenes`` list: a scene file (a string,
     relative to the spec) or a table of ``synth scene`` options (:mod:`synth.suite_scenes`;
@@ -288,6 +293,9 @@ def parse_suite_spec(data: dict, base_dir: str, label: str) -> SuiteSpec:
             if "n_water" in errors:
                 need("n_water" in scene.defaults, label,
                      f"error.n_water: scene {source_label} has no port (no water index)")
+                need(not _is_dome(scene), label,
+                     f"error.n_water: scene {source_label} looks through domes; a design "
+                     f"port deviates a flat port")
                 base = float(defines.get("n_water", scene.defaults["n_water"]))
                 defines["n_water"] = d_text(base + errors["n_water"])
                 design_port["n_water"] = base

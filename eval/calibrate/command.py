@@ -230,7 +230,8 @@ def _in_air(path, log):
 def main(args) -> int:
 
     from measure import StereoRig
-    from measure.calibration import calibrate_housing, calibrate_in_air, detect_boards
+    from measure.calibration import (CalibrationError, calibrate_housing, calibrate_in_air,
+                                     detect_boards)
     from synth.boards import read_boards
     from synth.fileio import OutputDir
 
@@ -324,8 +325,11 @@ def main(args) -> int:
         log(f"refractive bundle adjustment of {', '.join(free)} over "
             f"{len(detections.found(0))} + {len(detections.found(1))} board views …")
         t = time.perf_counter()
-        housing = calibrate_housing(start_rig, boards.board, detections, free, air_covariance,
-                                    args.air_uncertainty)
+        try:
+            housing = calibrate_housing(start_rig, boards.board, detections, free,
+                                        air_covariance, args.air_uncertainty)
+        except CalibrationError as exc:
+            raise CLIError(f"{args.dir}: {exc}; nothing written") from None
         timings["bundle_adjustment"] = time.perf_counter() - t
         if not housing.identifiable:
             raise CLIError(f"{args.dir}: {housing.reason}; nothing written (free fewer "

@@ -36,8 +36,6 @@ from synth.cli import add_json_option, add_out_option, add_progress_option, refu
 COMMAND = "eval measure"
 DEFAULT_METHODS = ("optical_path",)
 DEFAULT_GATE_MM = 0.5
-#: Default ``--floor-fraction``: JPEG ringing around a target is 2-5 % of its level
-#: (docs/datasets.md); the automatic threshold stays above it.
 
 
 def add_parser(subparsers):

@@ -407,7 +407,8 @@ def uncertainty_lines(u: dict) -> list:
         z = cov["normalized"]["z"]
         lines += ["", f"Against the truth ({cov['n']} pixels of the overlap): coverage_95 "
                       f"{fmt(cov['coverage_95'], 3)} (0.95 expected), mean Mahalanobis² "
-                      f"{fmt(cov['mahalanobis2_mean'], 3)} (3 expected), normalized z error "
+                      f"{fmt(cov['mahalanobis2_mean'], 3)} ({cov.get('dof', 3)} expected), "
+                      f"normalized z error "
                       f"mean {fmt(z['mean'], 3)}, std {fmt(z['std'], 3)} (1 expected)."]
         if cov.get("verdict"):
             lines += ["", cov["verdict"]]

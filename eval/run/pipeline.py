@@ -130,10 +130,10 @@ def covariance_stage(inputs: RunInputs, pixel_sigma, detections, centers, matche
     return covariances, info
 
 
-def attach_covariances(covariances, results, scored, info) -> dict:
+def attach_covariances(covariances, results, scored, info) -> None:
     """Put each method's covariances beside its points in ``scored["per_method"]`` (the
-    correctly matched rows: ``covariance``; every valid row: ``all_covariance``) and return the
-    report's ``{method: summary}`` (σ, coverage against the truth)."""
+    correctly matched rows: ``covariance``; every valid row: ``all_covariance``) and the
+    report's ``{method: summary}`` (σ, coverage against the truth) into ``info["summaries"]``."""
     from eval.core.uncertainty import uncertainty_summary
 
     summaries = {}
@@ -144,7 +144,6 @@ def attach_covariances(covariances, results, scored, info) -> dict:
         data["all_covariance"] = covariance.total[results[method].valid]
         summaries[method] = uncertainty_summary(data["covariance"], data["errors"])
     info["summaries"] = summaries
-    return summaries
 
 
 def crosscheck_stage(inputs: RunInputs, detections):

@@ -206,3 +206,13 @@ def test_a_worker_that_does_not_see_the_folder_renders_a_generated_scene(tmp_pat
     assert {"calib_design.yaml", "cameras_design.json", "left.png"} <= set(result["files"])
     manifest = json.loads(result["files"]["manifest.json"])
     assert manifest["design"] == entry.design
+
+
+def test_a_water_deviation_behind_domes_is_a_spec_error(tmp_path):
+    """A design port deviates a flat port: error.n_water on a dome scene is refused when the
+    spec is read, not after the render."""
+    path = tmp_path / "suite.toml"
+    path.write_text(f'scenes = ["{REPO / "scenes" / "dome_decentred.xml"}"]\n'
+                    'render = "targets"\n[fixed]\n"error.n_water" = 0.01\n')
+    with pytest.raises(SpecError, match="error.n_water: scene .* looks through domes"):
+        load_suite_spec(str(path))
