@@ -118,6 +118,10 @@ class DomePair(ValueEquality):
         """The water index (the left dome's; both see the same water)."""
         return self.left.n_water
 
+    def water_side(self, points: np.ndarray) -> np.ndarray:
+        """Whether points ``(N, 3)`` lie in the water: outside both domes' outer spheres."""
+        return self.left.water_side(points) & self.right.water_side(points)
+
 
 def _exit_parameter(origins, directions, center, radius):
     """Ray parameter ``h`` of the far intersection of rays starting inside a sphere (NaN where

@@ -90,14 +90,6 @@ def board_rig(spec: SceneSpec, air: bool) -> StereoRig:
     return StereoRig(left, right, index_matched_port(left.R[:, 2], np.stack([left.t, right.t])))
 
 
-def in_water(rig: StereoRig, points) -> np.ndarray:
-    """Whether points ``(N, 3)`` (mm) lie in the water: beyond the flat port's last interface,
-    or outside both domes of a dome rig."""
-    if rig.is_dome:
-        return rig.port.left.water_side(points) & rig.port.right.water_side(points)
-    return rig.port.water_side(points)
-
-
 def _fits(rig: StereoRig, board: Board, poses_R, poses_t, water: bool) -> np.ndarray:
     """Which candidate poses ``(M, 3, 3)``, ``(M, 3)`` put every board point inside both images
     (and in the water behind a port)."""
@@ -106,7 +98,7 @@ def _fits(rig: StereoRig, board: Board, poses_R, poses_t, water: bool) -> np.nda
     flat = world.reshape(-1, 3)
     ok = np.ones(flat.shape[0], bool)
     if water:
-        ok &= in_water(rig, flat)
+        ok &= rig.port.water_side(flat)  # beyond the flat port, or outside both domes
     for view, camera in enumerate(rig.cameras):
         ok &= camera.in_image(project(camera, rig.port_of(view), flat), IMAGE_MARGIN_PX)
     return ok.reshape(poses_R.shape[0], -1).all(axis=1)

@@ -65,7 +65,7 @@ from measure.projection import project
 
 from synth.calib_formats import (CalibFormatError, calib_dict, calib_format, read_calibmar,
                                  read_colmap, stereo_extrinsics)
-from synth.exchange import cameras_json, write_cameras_json, write_colmap_model, write_surface_formats
+from synth.exchange import write_cameras_json, write_colmap_model, write_surface_formats
 from synth.fileio import OutputDir, file_sha256, read_marker
 from synth.integrator import RENDERER
 from synth.provenance import package_versions
@@ -484,9 +484,7 @@ def write_dataset(scene, out_dir, spp: int | None = None, defines: dict | None =
             believed = design_rig(spec.rig, design.get("port", {}))
             write_calib(os.path.join(tmp, CALIB_DESIGN), believed, True,
                         extra={"design": {"note": DESIGN_NOTE}})
-            with open(os.path.join(tmp, CAMERAS_DESIGN), "w", encoding="utf-8") as fh:
-                json.dump(cameras_json(believed, True), fh, indent=1)
-                fh.write("\n")
+            write_cameras_json(tmp, believed, True, name=CAMERAS_DESIGN)
         if spec.surface is None:
             write_targets_ply(os.path.join(tmp, "targets.ply"), spec.targets)
             write_pixels_csv(os.path.join(tmp, "pixels.csv"), spec.target_ids, spec.targets,

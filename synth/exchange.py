@@ -92,8 +92,9 @@ def cameras_json(rig: StereoRig, has_port: bool = True) -> dict:
         "port": port_entry}
 
 
-def write_cameras_json(directory: str, rig: StereoRig, has_port: bool = True) -> str:
-    path = os.path.join(directory, CAMERAS_JSON)
+def write_cameras_json(directory: str, rig: StereoRig, has_port: bool = True,
+                       name: str = CAMERAS_JSON) -> str:
+    path = os.path.join(directory, name)
     with open(path, "w", encoding="utf-8") as handle:
         json.dump(cameras_json(rig, has_port), handle, indent=1)
         handle.write("\n")

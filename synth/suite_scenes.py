@@ -41,13 +41,11 @@ SCENE_FILE = "scene.xml"
 
 @dataclass(frozen=True)
 class GeneratedScene:
-    """A scene written from ``options``: ``scene`` (its XML's bytes, hash, defaults; ``path``
-    where the suite writes it once :meth:`placed`), every file's bytes (``files``: the XML, the
-    mesh, the texture), ``digest`` (SHA-256 over all the files) and ``folder`` (relative to the
+    """A scene written from ``synth scene`` options: ``scene`` (its XML's bytes, hash, defaults,
+    its name as ``label``; ``path`` where the suite writes it once :meth:`placed`), every file's
+    bytes (``files``: the XML, the mesh, the texture), ``digest`` (SHA-256 over all the files) and ``folder`` (relative to the
     suite's directory)."""
 
-    name: str
-    options: dict
     scene: Scene
     files: dict
     digest: str
@@ -140,7 +138,7 @@ def generate(name: str, options: dict, base_dir: str, label: str) -> GeneratedSc
         digest.update(f"{entry}\0{hashlib.sha256(data).hexdigest()}\0".encode())
     digest = digest.hexdigest()
     stem = "".join(c if c.isalnum() or c in "_.-" else "_" for c in name)
-    return GeneratedScene(name, dict(options), replace(scene, label=name), files, digest,
+    return GeneratedScene(replace(scene, label=name), files, digest,
                           f"scenes/{stem}_{digest[:12]}")
 
 

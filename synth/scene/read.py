@@ -334,7 +334,7 @@ def load_scene(path, defines: dict | None = None) -> SceneSpec:
             check_field_of_view(rig)
         except ValueError as exc:
             raise SceneError(f"{label}: {exc}") from None
-        in_water = port.left.water_side(centres) & port.right.water_side(centres)
+        in_water = port.water_side(centres)
     else:
         if surface is not None and has_port and not np.all(port.water_side(surface.vertices)):
             raise SceneError(f"{label}: the surface mesh reaches out of the water (through the "
