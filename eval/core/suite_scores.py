@@ -136,6 +136,12 @@ def score_entry(suite_dir: str, sub_dir: str, row: dict, method: str, gate_mm) -
     return out
 
 
+def _suite_warnings(warnings) -> str:
+    """The score's warnings as one line; a suite's submissions have no ``--units``, so the
+    metres warning says what to write instead of naming the option."""
+    return "; ".join(w.replace(" (pass --units m)", ": write millimetres") for w in warnings)
+
+
 def _score_targets(data, kind: str, path: str, method: str, gate_mm) -> dict:
     from measure import triangulate
 
@@ -152,9 +158,7 @@ def _score_targets(data, kind: str, path: str, method: str, gate_mm) -> dict:
     report, _, warnings = score_dataset(data, points, label, gate_mm)
     scores = report["methods"][label]
     a = report["association"]
-    # a suite's submissions have no --units: say "metres" without the option
-    warnings = [w.replace(" (pass --units m)", ": write millimetres") for w in warnings]
-    return {"warnings": "; ".join(warnings), "points": a["points"],
+    return {"warnings": _suite_warnings(warnings), "points": a["points"],
             "associated": a["associated"], "unassociated": a["unassociated"],
             "visible_in_both": a["visible_in_both"],
             "visible_in_both_scored": a["visible_in_both_scored"],
@@ -190,8 +194,7 @@ def _score_surface(data, kind: str, path: str) -> dict:
     pixels = project(data.rig.left, data.rig.port, points)
     scores = score_surface_cloud(vertices, triangles, points, pixels, truth.points,
                                  truth.overlap, data.rig.port.normal)
-    return {"warnings": "; ".join(w.replace(" (pass --units m)", ": write millimetres")
-                                  for w in warnings),
+    return {"warnings": _suite_warnings(warnings),
             "points": int(len(points)),
             **{k: scores.get(k) for k in SURFACE_METRICS}, "scores": scores}
 
