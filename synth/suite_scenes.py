@@ -43,8 +43,8 @@ SCENE_FILE = "scene.xml"
 class GeneratedScene:
     """A scene written from ``synth scene`` options: ``scene`` (its XML's bytes, hash, defaults,
     its name as ``label``; ``path`` where the suite writes it once :meth:`placed`), every file's
-    bytes (``files``: the XML, the mesh, the texture), ``digest`` (SHA-256 over all the files) and ``folder`` (relative to the
-    suite's directory)."""
+    bytes (``files``: the XML, the mesh, the texture), ``digest`` (SHA-256 over all the files)
+    and ``folder`` (relative to the suite's directory)."""
 
     scene: Scene
     files: dict
