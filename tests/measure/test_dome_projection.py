@@ -170,13 +170,18 @@ def test_a_point_on_the_line_through_both_centres_is_seen_straight():
 
 
 def test_rows_do_not_depend_on_their_batch_and_empty_batches_work():
-    """Chunked batches (more than one chunk of rows) give each row what it gets alone."""
+    """Chunked batches (more than one chunk of rows) give each row what it gets alone, to a
+    few units in the last place of the pixel coordinates' scale (the principal point, ~1000
+    px): NumPy's vector loops of the transcendental functions and its one-element path may
+    differ in the last bit (NumPy 2.4.6 here: row 39999, the last of the second chunk, y off by
+    1.1e-13 px, one ulp at 512–1024); a row mixed up between chunks would be pixels off."""
     camera = _camera(8)
     dome = DomePort(camera.center + (2.0, 1.0, -3.0), 50.0, 8.0, INDICES)
     points = _points(camera, n=40000, seed=8)
     pixels = project(camera, dome, points)
     for k in (0, 12345, 39999):
-        np.testing.assert_array_equal(project(camera, dome, points[k]), pixels[k:k + 1])
+        np.testing.assert_allclose(project(camera, dome, points[k]), pixels[k:k + 1],
+                                   rtol=0, atol=4 * np.spacing(1024.0))
     for solver in ("fermat", "shooting"):
         empty = project(camera, dome, np.zeros((0, 3)), solver, parameters=True)
         assert empty[0].shape == (0, 2) and empty[1].shape == (0, 2, 3)
