@@ -62,8 +62,9 @@ def add_parser(subparsers):
                    help=f"largest common-perpendicular length of a matched pair of targets "
                         f"(mm, default {DEFAULT_GATE_MM:g})")
     p.add_argument("--depth-range", metavar="NEAR,FAR",
-                   help="working range along the port normal (mm): targets are matched only "
-                        "there (default: no bound); required with --dense (the sweep's range)")
+                   help="working range along the port normal (behind domes: the left camera's "
+                        "optical axis) (mm): targets are matched only there (default: no "
+                        "bound); required with --dense (the sweep's range)")
     add_detector_options(p)
     add_pixel_sigma_option(p)
     p.add_argument("--floor-fraction", type=floor_fraction, default=None, metavar="F",
@@ -123,8 +124,9 @@ def options_of(args):
                             *(d for d in DETECTOR_OPTIONS if d != "median_filter")],
                      "with --dense (it applies to targets; --median-filter does apply)")
         if depth_range is None:
-            raise CLIError("--dense needs --depth-range NEAR,FAR (mm along the port normal): the "
-                           "range the matcher sweeps")
+            raise CLIError("--dense needs --depth-range NEAR,FAR (mm along the port normal; "
+                           "behind domes along the left camera's optical axis): the range the "
+                           "matcher sweeps")
         return DenseOptions(methods, depth_range, args.median_filter)
     return TargetOptions(methods, DEFAULT_GATE_MM if args.gate_mm is None else args.gate_mm,
                          depth_range or (None, None),
@@ -267,10 +269,6 @@ def main(args) -> int:
     options = options_of(args)
     output = OutputDir(args.out, COMMAND).claim()  # before any work
     inputs = load_inputs(args.calib, args.left, args.right, args.encoding)
-    if args.dense and inputs.rig.is_dome:
-        raise CLIError(f"--dense with --calib {args.calib}: a dome-port calibration; dense "
-                       f"photos are measured through a flat port only (the library's "
-                       f"measure.dense.match_dense takes domes)")
     log(f"measure {len(inputs.names)} pair(s) of {inputs.size[0]}x{inputs.size[1]} px photos "
         f"with {args.calib} …")
     results = measure_all(inputs, options, quiet, log)

@@ -144,8 +144,16 @@ def pinhole_depth_range(port, depth_range) -> tuple[float, float]:
     """The search range of the pinhole baseline: where the refractive range *appears* to it
     (:meth:`measure.FlatPort.apparent_depth`), its near end lowered by :data:`PINHOLE_NEAR_MARGIN` because
     off-axis points appear nearer still than the paraxial estimate — so the baseline finds the
-    surface where the pinhole model sees it and is scored on what it then measures."""
-    near, far = (port.apparent_depth(d) for d in depth_range)
+    surface where the pinhole model sees it and is scored on what it then measures. Behind two
+    domes (a :class:`measure.dome.DomePair`, depths along the left optical axis) a surface
+    appears where it is — exactly so through centred domes, within a few millimetres when they
+    are decentred — so the range is the refractive one with the same lowered near end."""
+    from measure.dome import DomePair
+
+    if isinstance(port, DomePair):
+        near, far = depth_range
+    else:
+        near, far = (port.apparent_depth(d) for d in depth_range)
     return near * (1 - PINHOLE_NEAR_MARGIN), far
 
 
