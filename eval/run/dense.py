@@ -109,13 +109,14 @@ def develop(config: RunConfig, left, right, seed):
 
 
 def surface_inputs(config: RunConfig, log):
-    """``(spec, measured rig, left, right, truth maps of the left view, provenance)``."""
+    """``(spec, measured rig, its covariance or None, left, right, truth maps of the left view,
+    provenance)``."""
     from synth.truth_maps import MeshTracer, read_truth_maps, truth_maps
 
-    from eval.run.inputs import load_run_scene, measurement_rig, read_run_dataset
+    from eval.run.inputs import load_run_scene, measurement_calibration, read_run_dataset
 
     spec = load_run_scene(config)
-    rig = measurement_rig(config, spec)
+    rig, rig_covariance = measurement_calibration(config, spec)
     if config.from_dir:
         data = read_run_dataset(config, spec)
         try:
@@ -123,7 +124,7 @@ def surface_inputs(config: RunConfig, log):
         except ValueError as exc:
             raise CLIError(f"--from {config.from_dir}: {exc}") from None
         log(f"reusing the images and truth maps of {config.from_dir}")
-        return spec, rig, data.left, data.right, truth, {
+        return spec, rig, rig_covariance, data.left, data.right, truth, {
             "from": os.path.abspath(config.from_dir), "variant": data.manifest.get("variant"),
             "spp": data.manifest.get("spp"), "timings": {}}
     from synth.render import render_stereo
@@ -134,7 +135,7 @@ def surface_inputs(config: RunConfig, log):
     t = time.perf_counter()
     tracer = MeshTracer(spec.surface.mesh_path, spec.surface.vertices, spec.surface.triangles)
     truth = truth_maps(tracer, spec.rig.left, spec.rig.right, spec.rig.port)
-    return spec, rig, left, right, truth, {
+    return spec, rig, rig_covariance, left, right, truth, {
         "variant": info["variant"], "spp": info["spp"], "render": info["render"],
         "timings": {"render_left": info["seconds"]["left"], "render_right": info["seconds"]["right"],
                     "truth_maps": time.perf_counter() - t}}
@@ -211,10 +212,8 @@ def measure_surface(config: RunConfig, methods, log):
 
     from eval.core.surface_metrics import SurfaceCase, score_surface, surface_arrays
     from eval.core.uncertainty import rig_covariance_note, uncertainty_summary
-    from eval.run.inputs import measurement_covariance
 
-    spec, rig, left, right, truth, provenance = surface_inputs(config, log)
-    rig_covariance = measurement_covariance(config)
+    spec, rig, rig_covariance, left, right, truth, provenance = surface_inputs(config, log)
     rig_source = f"--calib {config.calib}" if config.calib else None
     left, right, sensor_info = develop(config, left, right,
                                        spec.seed if config.seed is None else config.seed)

@@ -84,14 +84,17 @@ def dataset_params(from_dir: str, defines: dict) -> dict:
     return params
 
 
-def measurement_rig(config: RunConfig, spec):
-    """The rig the measurement believes: the scene's (the truth), or ``--calib``, with
-    ``--assume`` applied."""
+def measurement_calibration(config: RunConfig, spec):
+    """``(rig, covariance)``: the rig the measurement believes — the scene's (the truth), or
+    ``--calib``'s, with ``--assume`` applied — and the covariance of ``--calib``'s rig
+    (:class:`measure.rig_covariance.RigCovariance`; None without ``--calib`` or when the file
+    holds none). The file is read once; a singular or malformed covariance is refused by
+    ``read_calib`` with one line naming the file."""
     from synth.dataset import read_calib
 
     from eval.core.assumption import assumed_rig
 
-    base = None
+    base = covariance = None
     if config.calib:
         calib = read_calib(config.calib)
         _same_kind_of_port(f"--calib {config.calib}", calib["rig"], spec.rig)
@@ -99,8 +102,13 @@ def measurement_rig(config: RunConfig, spec):
             raise CLIError(f"--calib {config.calib}: image size {calib['size'][0]}x"
                            f"{calib['size'][1]} px, but the scene renders {spec.size[0]}x"
                            f"{spec.size[1]} px")
-        base = calib["rig"]
-    return assumed_rig(spec.rig, spec.has_port, config.assumptions, base)
+        base, covariance = calib["rig"], calib["covariance"]
+    return assumed_rig(spec.rig, spec.has_port, config.assumptions, base), covariance
+
+
+def measurement_rig(config: RunConfig, spec):
+    """The rig the measurement believes (:func:`measurement_calibration`'s first part)."""
+    return measurement_calibration(config, spec)[0]
 
 
 def _same_kind_of_port(what: str, calibrated, scene_rig) -> None:
@@ -111,15 +119,6 @@ def _same_kind_of_port(what: str, calibrated, scene_rig) -> None:
                 else "flat-port calibration")
         raise CLIError(f"{what}: a {kind}, but the scene has "
                        f"{'domes' if scene_rig.is_dome else 'a flat port'}")
-
-
-def measurement_covariance(config: RunConfig):
-    """The covariance of ``--calib``'s rig (:class:`measure.rig_covariance.RigCovariance`) or
-    None (no ``--calib``, or a calibration without one); a singular or malformed one is refused
-    by ``read_calib`` with one line naming the file."""
-    from synth.dataset import read_calib
-
-    return read_calib(config.calib)["covariance"] if config.calib else None
 
 
 def load_run_scene(config: RunConfig):
@@ -200,7 +199,7 @@ def load_inputs(config: RunConfig, log) -> RunInputs:
     if spec.rig.is_dome:
         refuse_flat_only(config)
     seed = spec.seed if config.seed is None else config.seed
-    measured_rig = measurement_rig(config, spec)
+    measured_rig, rig_covariance = measurement_calibration(config, spec)
     in_left = visible_targets(spec.rig.left, spec.rig.port_of(0), spec.targets,
                               spec.target_radius)[1]
     in_right = visible_targets(spec.rig.right, spec.rig.port_of(1), spec.targets,
@@ -212,7 +211,7 @@ def load_inputs(config: RunConfig, log) -> RunInputs:
                       targets=spec.targets, target_ids=spec.target_ids,
                       target_radius=spec.target_radius, params=spec.params, seed=seed,
                       target_normals=spec.target_normals, truth_rig=spec.rig,
-                      budget_rigs=budget, rig_covariance=measurement_covariance(config),
+                      budget_rigs=budget, rig_covariance=rig_covariance,
                       rig_covariance_source=(f"--calib {config.calib}" if config.calib
                                              else None))
     if config.from_dir:
@@ -271,5 +270,5 @@ def expose_on_sensor(inputs: RunInputs, sensor, log):
 
 
 __all__ = ["RunInputs", "budget_rigs", "dataset_params", "expose_on_sensor", "expose_views",
-           "load_inputs", "refuse_flat_only", "load_run_scene", "measurement_covariance",
+           "load_inputs", "refuse_flat_only", "load_run_scene", "measurement_calibration",
            "measurement_rig", "read_run_dataset", "same_value"]
