@@ -143,16 +143,27 @@ def _check_depth_range(rig: StereoRig, depth_range) -> tuple[float, float]:
         raise ValueError(f"depth_range must be (near, far) in mm, got {depth_range!r}") from None
     if not (np.isfinite(near) and np.isfinite(far)) or near >= far:
         raise ValueError(f"depth_range must be finite with near < far, got ({near}, {far})")
-    if rig.is_dome:  # beyond both domes' outer spheres along the left optical axis
-        axis = rig.depth_axis
-        water_depth = max(float(axis @ (dome.center - rig.left.center)) + dome.radii[1]
-                          for dome in (rig.port.left, rig.port.right))
-    else:
-        water_depth = rig.port.offsets[-1] - float(rig.port.normal @ rig.left.center)
+    water_depth = glass_depth(rig)
     if near <= water_depth:
-        raise ValueError(f"depth_range starts at {near} mm, not beyond the port's last interface "
-                         f"({water_depth:g} mm from the left camera along the port normal)")
+        where = ("both domes' outer spheres" if rig.is_dome else "the port's last interface")
+        raise ValueError(f"depth_range starts at {near:g} mm, not beyond {where} ({water_depth:g} "
+                         f"mm from the left camera along {_depth_axis_name(rig)})")
     return near, far
+
+
+def glass_depth(rig: StereoRig) -> float:
+    """How far the glass reaches along :attr:`StereoRig.depth_axis` from the left camera's
+    centre (mm): the port's last interface, or the farther of the two domes' outer spheres. A
+    depth plane of the sweep must lie beyond it."""
+    if rig.is_dome:
+        axis = rig.depth_axis
+        return max(float(axis @ (dome.center - rig.left.center)) + dome.radii[1]
+                   for dome in (rig.port.left, rig.port.right))
+    return rig.port.offsets[-1] - float(rig.port.normal @ rig.left.center)
+
+
+def _depth_axis_name(rig: StereoRig) -> str:
+    return "the left camera's optical axis" if rig.is_dome else "the port normal"
 
 
 def _box(image: np.ndarray, window: int) -> np.ndarray:

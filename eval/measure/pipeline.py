@@ -170,7 +170,7 @@ def measure_dense(rig, name: str, left, right, options: DenseOptions, progress=N
     for method in options.methods:
         model, triangulation = DENSE_METHODS[method]
         search = (tuple(options.depth_range) if model == "refractive"
-                  else pinhole_depth_range(rig.port, options.depth_range))
+                  else pinhole_depth_range(rig, options.depth_range))
         t = time.perf_counter()
         matches = match_dense(rig, left_seen, right_seen, search, model=model,
                               progress=progress(method) if progress else None)

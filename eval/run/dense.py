@@ -141,21 +141,58 @@ def surface_inputs(config: RunConfig, log):
                     "truth_maps": time.perf_counter() - t}}
 
 
-def pinhole_depth_range(port, depth_range) -> tuple[float, float]:
-    """The search range of the pinhole baseline: where the refractive range *appears* to it
-    (:meth:`measure.FlatPort.apparent_depth`), its near end lowered by :data:`PINHOLE_NEAR_MARGIN` because
-    off-axis points appear nearer still than the paraxial estimate — so the baseline finds the
-    surface where the pinhole model sees it and is scored on what it then measures. Behind two
-    domes (a :class:`measure.dome.DomePair`, depths along the left optical axis) a surface
-    appears where it is — exactly so through centred domes, within a few millimetres when they
-    are decentred — so the range is the refractive one with the same lowered near end."""
-    from measure.dome import DomePair
+def pinhole_depth_range(rig, depth_range) -> tuple[float, float]:
+    """The search range of the pinhole baseline: where the refractive range ``depth_range``
+    *appears* to it, its near end lowered by :data:`PINHOLE_NEAR_MARGIN` — so the baseline finds
+    the surface where the pinhole model sees it and is scored on what it then measures. Behind a
+    flat port the paraxial apparent depths (:meth:`measure.FlatPort.apparent_depth`; off-axis
+    points appear nearer still, hence the margin). Behind domes, measured from the rig
+    (:func:`_apparent_depths_through_domes`): exactly the range through centred domes, nearer
+    through decentred ones (the test's decentred pair shows a plane at 1000 mm at 783–991 mm).
+    The near end stays beyond the glass (:func:`measure.dense.glass_depth`, + 1 mm), where the
+    matcher's depth planes must lie."""
+    from measure.dense import glass_depth
 
-    if isinstance(port, DomePair):
-        near, far = depth_range
+    if rig.is_dome:
+        near, far = _apparent_depths_through_domes(rig, depth_range)
     else:
-        near, far = (port.apparent_depth(d) for d in depth_range)
-    return near * (1 - PINHOLE_NEAR_MARGIN), far
+        near, far = (rig.port.apparent_depth(d) for d in depth_range)
+    return float(max(near * (1 - PINHOLE_NEAR_MARGIN), glass_depth(rig) + 1.0)), float(far)
+
+
+def _apparent_depths_through_domes(rig, depth_range, grid: int = 9) -> tuple[float, float]:
+    """``(nearest, farthest)`` depth (mm along :attr:`measure.StereoRig.depth_axis` from the
+    left camera's centre) at which the pinhole model triangulates the points that lie at the
+    two ends of ``depth_range`` on the water rays of a ``grid`` × ``grid`` lattice of left
+    pixels, each projected through the right camera's dome. The nearest is at most
+    ``depth_range``'s near end (a near end the right camera does not see at all would otherwise
+    leave only the far end's points); ``depth_range`` itself where the right camera sees none
+    of them."""
+    from measure.projection import project
+    from measure.triangulate import triangulate
+
+    width, height = rig.left.size
+    u, v = np.meshgrid(np.linspace(0.0, width - 1.0, grid), np.linspace(0.0, height - 1.0, grid))
+    uv_left = np.column_stack([u.ravel(), v.ravel()])
+    rays = rig.trace(0, rig.left.rays(uv_left))
+    axis, center = rig.depth_axis, rig.left.center
+    along = rays.directions @ axis
+    seen = []
+    for depth in depth_range:
+        with np.errstate(divide="ignore", invalid="ignore"):
+            step = (depth - (rays.origins - center) @ axis) / along
+        points = rays.origins + step[:, None] * rays.directions
+        uv_right = project(rig.right, rig.port.right, points)
+        ok = (np.isfinite(step) & (step > 0) & np.all(np.isfinite(uv_right), axis=1)
+              & rig.right.in_image(np.nan_to_num(uv_right, nan=-1.0)))
+        if ok.any():
+            pinhole = triangulate(rig, uv_left[ok], uv_right[ok], "regular").points
+            seen.append((pinhole - center) @ axis)
+    depths = np.concatenate(seen) if seen else np.empty(0)
+    depths = depths[np.isfinite(depths)]
+    if depths.size == 0:
+        return float(depth_range[0]), float(depth_range[1])
+    return min(float(depths.min()), float(depth_range[0])), float(depths.max())
 
 
 def default_depth_range(truth) -> tuple[float, float]:
@@ -242,8 +279,7 @@ def measure_surface(config: RunConfig, methods, log):
     arrays = {"left": left, "right": right, "per_method": {}}
     for method in methods:
         model, triangulation = DENSE_METHODS[method]
-        search = depth_range if model == "refractive" else pinhole_depth_range(rig.port,
-                                                                               depth_range)
+        search = depth_range if model == "refractive" else pinhole_depth_range(rig, depth_range)
         log(f"{method}: dense matching ({model} model, depth {search[0]:.0f}-"
             f"{search[1]:.0f} mm) …")
         t = time.perf_counter()

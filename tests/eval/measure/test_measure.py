@@ -334,9 +334,10 @@ def test_dense_measures_a_plane_through_decentred_domes(tmp_path):
     away rendered analytically through two decentred domes (synth.dense_pairs, as
     tests/measure/test_dome_stereo.py), written as 16-bit PNG photos. Measured (2026-12-02):
     74,340 of the 85,760 pixels matched, the plane fit 999.996 mm away, RMS 0.291 mm (a pixel
-    spans 3.5 mm there); the pinhole baseline, searching where a dome shows the surface,
-    matched 20,923 pixels with a plane fit RMS of 10.4 mm (behind centred domes it matches as
-    many as the optical path, RMS 0.30 mm: the pinhole model is exact there)."""
+    spans 3.5 mm there); the pinhole baseline, searching where it sees the surface (592–1094
+    mm, eval.run.dense.pinhole_depth_range), matched 20,785 pixels with a plane fit RMS of
+    10.3 mm (behind centred domes it matches as many as the optical path, RMS 0.30 mm: the
+    pinhole model is exact there)."""
     from measure import StereoRig
     from measure.dome import DomePair, DomePort
     from synth.calib_formats import write_calibmar

@@ -289,3 +289,50 @@ def test_a_dense_run_that_measured_nothing_exits_1(tmp_path, capsys):
     report = json.loads((out / "report.json").read_text())
     assert report["methods"]["optical_path"]["measured_fraction"] == 0
     assert report["verdict"]["passed"] is False
+
+
+def test_the_pinhole_search_range_brackets_where_the_pinhole_model_sees_the_surface():
+    """The pinhole baseline's range (eval.run.dense.pinhole_depth_range): behind centred domes
+    exactly the refractive one with the near end lowered 20 %; behind decentred domes it holds
+    the depths at which the pinhole model triangulates the exact pixels of planes at both ends
+    (the pair below, 2.5–4.6 mm off centre, shows a plane at 900 mm as near as 624 mm: the
+    refractive range lowered 20 %, what the baseline searched before, starts at 720 mm); and
+    its near end never
+    falls inside the glass, where the matcher refuses depth planes (before: a valid
+    --depth-range 70,1100 refused behind domes, 120,1100 behind the paper's port, for a near
+    end the user never gave)."""
+    from measure import StereoRig
+    from measure.dense import glass_depth
+    from measure.dome import DomePair, DomePort
+    from measure.projection import project
+    from measure.triangulate import triangulate
+    from synth.rig import paper_rig
+
+    from eval.run.dense import PINHOLE_NEAR_MARGIN, pinhole_depth_range
+
+    base = paper_rig(size=(320, 268))
+    indices = (1.0, 1.49, 1.33)
+
+    def domes(left_offset, right_offset):
+        return StereoRig(base.left, base.right, DomePair(
+            DomePort(base.left.center + left_offset, 50.0, 8.0, indices),
+            DomePort(base.right.center + right_offset, 50.0, 8.0, indices)))
+
+    centred = pinhole_depth_range(domes((0, 0, 0), (0, 0, 0)), (900.0, 1100.0))
+    np.testing.assert_allclose(centred, (900.0 * (1 - PINHOLE_NEAR_MARGIN), 1100.0), rtol=1e-12)
+    decentred = domes((3.0, -2.0, 4.0), (-4.0, 1.0, -2.0))
+    near, far = pinhole_depth_range(decentred, (900.0, 1100.0))
+    grid = np.stack(np.meshgrid(np.arange(0.0, 320.0, 8.0), np.arange(0.0, 268.0, 8.0)),
+                    axis=-1).reshape(-1, 2)
+    rays = decentred.trace(0, decentred.left.rays(grid))
+    for depth in (900.0, 1000.0, 1100.0):
+        points = rays.origins + ((depth - rays.origins[:, 2]) / rays.directions[:, 2])[:, None] \
+            * rays.directions
+        uv_right = project(decentred.right, decentred.port.right, points)
+        seen = decentred.right.in_image(uv_right)
+        pinhole = triangulate(decentred, grid[seen], uv_right[seen], "regular").points[:, 2]
+        assert seen.sum() > 100 and near <= pinhole.min() and pinhole.max() <= far + 1e-6, (
+            depth, pinhole.min(), pinhole.max(), near, far)
+    # a near end close to the glass: clamped 1 mm beyond it, for domes and the flat port
+    for rig, requested in ((decentred, 70.0), (base, 120.0)):
+        assert pinhole_depth_range(rig, (requested, 1100.0))[0] == glass_depth(rig) + 1.0
