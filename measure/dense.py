@@ -146,8 +146,9 @@ def _check_depth_range(rig: StereoRig, depth_range) -> tuple[float, float]:
     water_depth = glass_depth(rig)
     if near <= water_depth:
         where = ("both domes' outer spheres" if rig.is_dome else "the port's last interface")
+        axis = "the left camera's optical axis" if rig.is_dome else "the port normal"
         raise ValueError(f"depth_range starts at {near:g} mm, not beyond {where} ({water_depth:g} "
-                         f"mm from the left camera along {_depth_axis_name(rig)})")
+                         f"mm from the left camera along {axis})")
     return near, far
 
 
@@ -160,10 +161,6 @@ def glass_depth(rig: StereoRig) -> float:
         return max(float(axis @ (dome.center - rig.left.center)) + dome.radii[1]
                    for dome in (rig.port.left, rig.port.right))
     return rig.port.offsets[-1] - float(rig.port.normal @ rig.left.center)
-
-
-def _depth_axis_name(rig: StereoRig) -> str:
-    return "the left camera's optical axis" if rig.is_dome else "the port normal"
 
 
 def _box(image: np.ndarray, window: int) -> np.ndarray:

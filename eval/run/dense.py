@@ -148,7 +148,8 @@ def pinhole_depth_range(rig, depth_range) -> tuple[float, float]:
     flat port the paraxial apparent depths (:meth:`measure.FlatPort.apparent_depth`; off-axis
     points appear nearer still, hence the margin). Behind domes, measured from the rig
     (:func:`_apparent_depths_through_domes`): exactly the range through centred domes, nearer
-    through decentred ones (the test's decentred pair shows a plane at 1000 mm at 783–991 mm).
+    through decentred ones (domes 2.5–4.6 mm off centre show a plane at 900 mm as near as
+    624 mm).
     The near end stays beyond the glass (:func:`measure.dense.glass_depth`, + 1 mm), where the
     matcher's depth planes must lie."""
     from measure.dense import glass_depth
@@ -249,6 +250,7 @@ def measure_surface(config: RunConfig, methods, log):
 
     from eval.core.surface_metrics import SurfaceCase, score_surface, surface_arrays
     from eval.core.uncertainty import rig_covariance_note, uncertainty_summary
+    from measure.dense import glass_depth
 
     spec, rig, rig_covariance, left, right, truth, provenance = surface_inputs(config, log)
     rig_source = f"--calib {config.calib}" if config.calib else None
@@ -257,9 +259,9 @@ def measure_surface(config: RunConfig, methods, log):
     depth_range = config.depth_range_mm
     if depth_range is None:
         depth_range = default_depth_range(truth)
-    elif depth_range[0] <= rig.port.offsets[-1]:
+    elif depth_range[0] <= glass_depth(rig):
         raise CLIError(f"--depth-range {depth_range[0]:g},{depth_range[1]:g}: NEAR must lie beyond "
-                       f"the port (the water starts at {rig.port.offsets[-1]:g} mm)")
+                       f"the port (the water starts at {glass_depth(rig):g} mm)")
     else:
         seen = truth.depth[truth.overlap]
         if seen.size and (depth_range[1] < seen.min() or depth_range[0] > seen.max()):

@@ -106,11 +106,6 @@ def measurement_calibration(config: RunConfig, spec):
     return assumed_rig(spec.rig, spec.has_port, config.assumptions, base), covariance
 
 
-def measurement_rig(config: RunConfig, spec):
-    """The rig the measurement believes (:func:`measurement_calibration`'s first part)."""
-    return measurement_calibration(config, spec)[0]
-
-
 def _same_kind_of_port(what: str, calibrated, scene_rig) -> None:
     """CLIError unless a calibration's rig has the scene's kind of port (a dome pair for a dome
     scene, a flat port otherwise)."""
@@ -271,4 +266,4 @@ def expose_on_sensor(inputs: RunInputs, sensor, log):
 
 __all__ = ["RunInputs", "budget_rigs", "dataset_params", "expose_on_sensor", "expose_views",
            "load_inputs", "refuse_flat_only", "load_run_scene", "measurement_calibration",
-           "measurement_rig", "read_run_dataset", "same_value"]
+           "read_run_dataset", "same_value"]

@@ -312,7 +312,7 @@ def test_a_dome_calibration_is_one_error_line_where_it_cannot_apply(tmp_path):
 
     from eval.cli import CLIError
     from eval.measure.inputs import read_calibration
-    from eval.run.inputs import budget_rigs, measurement_rig
+    from eval.run.inputs import budget_rigs, measurement_calibration
     from measure import StereoRig
     from measure.dome import DomePair, DomePort
     from synth.calib_formats import write_calibmar
@@ -324,7 +324,7 @@ def test_a_dome_calibration_is_one_error_line_where_it_cannot_apply(tmp_path):
     assert read_calibration(path)[0].is_dome
     flat = SimpleNamespace(rig=StereoRig(left, right, None))  # eval run: a flat-port scene
     with pytest.raises(CLIError, match=r"--calib .*dome\.yaml: a dome-port calibration"):
-        measurement_rig(SimpleNamespace(calib=path, assumptions={}), flat)
+        measurement_calibration(SimpleNamespace(calib=path, assumptions={}), flat)
     with pytest.raises(CLIError, match=r"--compare-calib .*dome\.yaml: a dome-port"):
         budget_rigs(SimpleNamespace(compare_calib=(path,)), flat.rig, None)
 
