@@ -11,8 +11,10 @@ Two kinds (``kind``):
 * ``"chessboard"``: ``cols × rows`` squares, the top-left one black; the inner corners are
   numbered row by row, ``id = i·(cols − 1) + j`` at ``((j + 1)·s, (i + 1)·s, 0)``. Detected with
   ``cv2.findChessboardCornersSB``; its 180° ambiguity (one of ``cols``, ``rows`` must be odd,
-  the other even) is resolved by the colour of the square outside corner 0, which must be
-  black. The corners are then refined to the saddle point of the blurred image
+  the other even) is resolved by the colours of all the squares the corners enclose
+  (:func:`square_parity_contrast`: the top-left square is black; a board printed with its
+  top-left square white is the same board turned by 180°, and is measured in that frame).
+  The corners are then refined to the saddle point of the blurred image
   (:func:`refine_saddle_points`), which is what makes them accurate.
 * ``"charuco"``: OpenCV's ``cv2.aruco.CharucoBoard`` (``dictionary``, default ``DICT_5X5_1000``,
   any of OpenCV's predefined ``DICT_…`` names; markers ``marker_ratio`` of a square); corner
@@ -172,19 +174,20 @@ class Board:
         small = gray
         while small.shape[1] > DETECTION_WIDTH_PX:
             small, levels = cv2.pyrDown(small), levels + 1
-        found, corners = cv2.findChessboardCornersSB(small, pattern, flags=cv2.CALIB_CB_EXHAUSTIVE)
+        found, corners = _find_chessboard_sb(small, pattern)
+        if not found:  # photos as stored (sRGB): SB finds many real boards there it missed
+            found, corners = _find_chessboard_sb(srgb_uint8(small), pattern)
         if not found:  # the classic detector finds some steep views SB misses
             found, corners = cv2.findChessboardCorners(
                 small, pattern, flags=cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE)
         if not found and levels:  # small, steep boards: the full image (about 1 s more)
-            found, corners = cv2.findChessboardCornersSB(gray, pattern,
-                                                         flags=cv2.CALIB_CB_EXHAUSTIVE)
+            found, corners = _find_chessboard_sb(gray, pattern)
             levels = 0 if found else levels
         if not found:
             return np.empty(0, int), np.empty((0, 2))
         scale = 2.0 ** levels  # pyrDown: pixel i of the half image is centred on 2i + 0.5
         uv = corners.reshape(-1, 2).astype(np.float64) * scale + (scale - 1) / 2
-        if not self._first_square_is_black(gray, uv):
+        if not self._squares_agree(gray, uv):
             uv = uv[::-1].copy()
         refined, converged = refine_saddle_points(image, uv)
         ids = np.flatnonzero(converged)
@@ -192,19 +195,57 @@ class Board:
             return np.empty(0, int), np.empty((0, 2))
         return ids, refined[ids]
 
-    def _first_square_is_black(self, gray, uv) -> bool:
-        """Whether the square diagonally outside corner 0 (away from corners 1 and cols−1) is
-        darker than the one outside the last corner."""
-        cols = self.squares[0] - 1
+    def _squares_agree(self, gray, uv) -> bool:
+        """Whether the squares between the detected corners ``uv`` (in the detector's order)
+        are dark where the board's squares are black (:meth:`square_parity_contrast` ≥ 0):
+        otherwise the detector's order is the board's turned by 180°."""
+        return square_parity_contrast(gray, uv, self.squares) >= 0
 
-        def outside(k0, k_row, k_col):
-            p = uv[k0] + 0.5 * (uv[k0] - uv[k_row]) + 0.5 * (uv[k0] - uv[k_col])
-            x, y = int(round(p[0])), int(round(p[1]))
-            h, w = gray.shape
-            return float(gray[min(max(y, 0), h - 1), min(max(x, 0), w - 1)])
 
-        last = uv.shape[0] - 1
-        return outside(0, 1, cols) <= outside(last, last - 1, last - cols)
+#: The seed of OpenCV's random generator before each ``findChessboardCornersSB`` call: the
+#: detector draws from it (on OpenCV's stereo sample the same image was found in 4 of 5 calls,
+#: and calibrations of one folder differed run to run); OpenCV's generator is per thread.
+DETECTOR_SEED = 0x5EED
+
+
+def _find_chessboard_sb(gray, pattern):
+    """``cv2.findChessboardCornersSB`` (exhaustive), reproducible: OpenCV's generator seeded
+    with :data:`DETECTOR_SEED` first, in the calling thread."""
+    cv2.setRNGSeed(DETECTOR_SEED)
+    return cv2.findChessboardCornersSB(gray, pattern, flags=cv2.CALIB_CB_EXHAUSTIVE)
+
+
+def srgb_uint8(gray: np.ndarray) -> np.ndarray:
+    """A linear uint8 image (:func:`to_uint8`) encoded with the sRGB curve, as cameras store
+    photos: the contrast OpenCV's chessboard detectors are used to."""
+    levels = np.arange(256) / 255.0
+    table = np.where(levels <= 0.0031308, 12.92 * levels, 1.055 * levels ** (1 / 2.4) - 0.055)
+    return np.rint(255 * table).astype(np.uint8)[gray]
+
+
+def square_parity_contrast(gray, uv, squares) -> float:
+    """How much brighter the squares that should be white are than those that should be black
+    (grey levels), for inner corners ``uv`` ``((cols−1)·(rows−1), 2)`` numbered row by row.
+
+    Every square enclosed by four corners is sampled at its centre (the mean of its four
+    corners; bilinear, on the image blurred by a quarter of the corner spacing): square
+    ``(i, j)`` between corner rows ``i, i+1`` and columns ``j, j+1`` is the board's square
+    ``(i+1, j+1)``, black when ``i + j`` is even (the top-left square is black). All enclosed
+    squares vote, so a corner near the image's edge or a frame line printed around the board
+    cannot turn the answer (one sample outside the grid did, on OpenCV's own stereo sample).
+    Negative: the order is the board's turned by 180° (for a board with one odd and one even
+    number of squares the two orders have opposite parities)."""
+    cols, rows = squares[0] - 1, squares[1] - 1
+    grid = np.asarray(uv, dtype=np.float64).reshape(rows, cols, 2)
+    centres = (grid[:-1, :-1] + grid[:-1, 1:] + grid[1:, :-1] + grid[1:, 1:]) / 4
+    spacing = float(np.median(np.linalg.norm(np.diff(grid, axis=1), axis=2)))
+    blurred = cv2.GaussianBlur(np.asarray(gray, np.float32), (0, 0), max(spacing / 4, 0.5))
+    maps = centres.reshape(-1, 1, 2).astype(np.float32)
+    values = cv2.remap(blurred, maps[..., 0], maps[..., 1], cv2.INTER_LINEAR,
+                       borderMode=cv2.BORDER_REPLICATE).reshape(rows - 1, cols - 1)
+    i, j = np.mgrid[0:rows - 1, 0:cols - 1]
+    black = (i + j) % 2 == 0
+    return float(values[~black].mean() - values[black].mean())
 
 
 #: Saddle-point refinement: Gaussian blur σ and half window, as fractions of the distance to the

@@ -248,7 +248,7 @@ def add_progress_option(parser) -> None:
 
 
 #: ``dest`` names of the board options (:func:`add_board_options`).
-BOARD_OPTIONS = ("board", "squares", "square_mm", "marker_mm", "dictionary")
+BOARD_OPTIONS = ("board", "squares", "inner_corners", "square_mm", "marker_mm", "dictionary")
 #: The board ``synth boards`` renders when none is given.
 DEFAULT_BOARD = {"board": "chessboard", "squares": "11x8", "square_mm": 40.0}
 
@@ -267,7 +267,11 @@ def add_board_options(parser, defaults: bool = True, needed: str = "") -> None:
     parser.add_argument("--board", choices=("chessboard", "charuco"), default=default("board"),
                         help="board kind (default chessboard)")
     parser.add_argument("--squares", default=default("squares"), metavar="COLSxROWS",
-                        help=f"squares of the board, COLSxROWS ({said('squares')})")
+                        help=f"squares of the board, COLSxROWS ({said('squares')}); or "
+                             f"--inner-corners")
+    parser.add_argument("--inner-corners", default=None, metavar="COLSxROWS",
+                        help="instead of --squares: the inner corners, as OpenCV's pattern "
+                             "size counts them (9x6 is a board of 10x7 squares)")
     parser.add_argument("--square-mm", type=positive_float, default=default("square_mm"),
                         help=f"square side, mm ({said('square_mm', ' mm') if defaults else needed})")
     parser.add_argument("--marker-mm", type=positive_float, default=None,
@@ -283,10 +287,20 @@ def board_from_args(args):
     from measure.board import CHARUCO_DICTIONARY, Board, BoardError
 
     kind = args.board or DEFAULT_BOARD["board"]
+    inner = getattr(args, "inner_corners", None)
+    if inner is not None and given(args, "squares"):
+        raise CLIError(f"--squares {args.squares} and --inner-corners {inner}: give one (a board "
+                       f"of COLSxROWS squares has (COLS-1)x(ROWS-1) inner corners)")
+    option, text = ("--inner-corners", inner) if inner is not None else ("--squares", args.squares)
+    example = "10x7" if inner is None else "9x6"
     try:
-        cols, rows = (int(v) for v in str(args.squares).lower().split("x"))
+        cols, rows = (int(v) for v in str(text).lower().split("x"))
     except ValueError:
-        raise CLIError(f"--squares must be COLSxROWS (e.g. 11x8), got {args.squares!r}") from None
+        raise CLIError(f"{option} must be COLSxROWS (e.g. {example}), got {text!r}") from None
+    if inner is not None:
+        if cols < 2 or rows < 2:
+            raise CLIError(f"--inner-corners {inner}: at least 2x2 inner corners")
+        cols, rows = cols + 1, rows + 1
     if kind != "charuco":
         refuse_given(args, ("marker_mm", "dictionary"), "to a chessboard (ChArUco only)")
     ratio = 0.5 if args.marker_mm is None else args.marker_mm / args.square_mm

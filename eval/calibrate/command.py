@@ -26,7 +26,8 @@ import time
 
 from eval.cli import CLIError, positive_float
 from eval.core.photos import add_encoding_option
-from synth.cli import (BOARD_OPTIONS, WATER_INDEX_HELP, add_board_options, add_out_option,
+from synth.cli import (BOARD_OPTIONS, EXIT_CHECK_FAILED, WATER_INDEX_HELP, add_board_options,
+                       add_out_option,
                        add_progress_option, board_from_args, given, refuse_given,
                        water_index_argument)
 
@@ -36,6 +37,8 @@ HOUSING_OPTIONS = ("free", "design_port", "start_distance", "glass_thickness", "
                    "n_water", "air_uncertainty")
 #: What the printed summary says of ``cameras.txt`` (its header says it too).
 COLMAP_NOTE = "upstream COLMAP and pycolmap read it without an error and drop the port"
+_LENS_UNDERWATER = ("underwater: the lens model is the in-air calibration's (--intrinsics); "
+                    "give --lens to eval calibrate --air")
 #: ``--design-port`` keys and the single option each one stands for.
 DESIGN_KEYS = {"distance": "start_distance", "thickness": "glass_thickness", "n_glass": "n_glass",
                "n_water": "n_water"}
@@ -43,7 +46,8 @@ DESIGN_KEYS = {"distance": "start_distance", "thickness": "glass_thickness", "n_
 
 def add_parser(subparsers):
     from measure.calibration import (DEFAULT_DOME_FREE, DEFAULT_FREE, DEFAULT_UNCERTAINTY,
-                                     DOME_PARAMETERS, HOUSING_PARAMETERS, UNCERTAINTY)
+                                     DOME_PARAMETERS, HOUSING_PARAMETERS, LENS_MODELS,
+                                     UNCERTAINTY)
     from synth.rig import PAPER_GLASS_THICKNESS_MM, PAPER_INDICES, PAPER_PORT_DISTANCE_MM
 
     p = subparsers.add_parser(
@@ -95,6 +99,11 @@ def add_parser(subparsers):
                         "distance=MM, thickness=MM, n_glass=N, n_water=N (e.g. "
                         "distance=120,thickness=8,n_glass=1.49); the keys not given keep the "
                         "defaults above")
+    p.add_argument("--lens", choices=("auto", *LENS_MODELS), default=None,
+                   help="in air: the lens model OpenCV fits — standard (k1 k2 p1 p2), k3, "
+                        "rational (k1…k6 p1 p2: wide and action-camera lenses) or auto "
+                        "(default: the richer model only where it lowers the RMS by 2 %%; the "
+                        "report lists each model's RMS)")
     add_out_option(p, COMMAND)
     add_encoding_option(p)
     add_progress_option(p)
@@ -230,8 +239,8 @@ def _in_air(path, log):
 def main(args) -> int:
 
     from measure import StereoRig
-    from measure.calibration import (CalibrationError, calibrate_housing, calibrate_in_air,
-                                     detect_boards)
+    from measure.calibration import (DEFAULT_LENS_MODEL, CalibrationError, calibrate_housing,
+                                     calibrate_in_air, detect_boards)
     from synth.boards import read_boards
     from synth.fileio import OutputDir
 
@@ -279,6 +288,8 @@ def main(args) -> int:
     if boards.air:
         refuse_given(args, HOUSING_OPTIONS, f"to in-air boards ({args.dir}): they calibrate the "
                                             f"cameras, no housing")
+    else:
+        refuse_given(args, ("lens",), _LENS_UNDERWATER)
     if boards.air and args.intrinsics:
         raise CLIError(f"{args.dir}: in-air boards calibrate the intrinsics themselves; "
                        f"--intrinsics is for underwater boards")
@@ -298,7 +309,8 @@ def main(args) -> int:
     if boards.air:
         log("calibrate in air (OpenCV calibrateCamera, stereoCalibrate) …")
         t = time.perf_counter()
-        air = calibrate_in_air(boards.board, detections, boards.calib["size"])
+        air = calibrate_in_air(boards.board, detections, boards.calib["size"],
+                               args.lens or DEFAULT_LENS_MODEL)
         timings["calibrate"] = time.perf_counter() - t
         rig, air_covariance = air.rig, air.covariance
         report["in_air"] = report_lib.air_summary(air, truth)
@@ -372,8 +384,8 @@ def is_photo_folder(path) -> bool:
 def _calibrate_photos(args, output, log, free, start) -> int:
     """``eval calibrate`` of a user's photo folder (module docs, :mod:`eval.calibrate.photos`)."""
     from measure import StereoRig
-    from measure.calibration import (CalibrationError, calibrate_housing, calibrate_in_air,
-                                     detect_boards)
+    from measure.calibration import (DEFAULT_LENS_MODEL, CalibrationError, calibrate_housing,
+                                     calibrate_in_air, detect_boards)
 
     from eval.calibrate import photos as trust
     from eval.calibrate import report as report_lib
@@ -389,9 +401,13 @@ def _calibrate_photos(args, output, log, free, start) -> int:
     elif not args.intrinsics:
         raise CLIError(f"{where}: say --air (photos taken in air) or --intrinsics calib.yaml "
                        f"(photos taken underwater, with the in-air calibration)")
-    missing = [option for dest, option in (("squares", "--squares COLSxROWS"),
+    else:
+        refuse_given(args, ("lens",), _LENS_UNDERWATER)
+    missing = [option for dest, option in (("squares", "--squares COLSxROWS (or "
+                                                       "--inner-corners)"),
                                            ("square_mm", "--square-mm S"))
-               if getattr(args, dest) is None]
+               if getattr(args, dest) is None
+               and not (dest == "squares" and args.inner_corners is not None)]
     if missing:
         raise CLIError(f"{where}: a photo folder needs the board on the command line: "
                        f"{' and '.join(missing)} (and --board charuco for a ChArUco board)")
@@ -434,7 +450,8 @@ def _calibrate_photos(args, output, log, free, start) -> int:
 
     if args.air:
         log("calibrate in air (OpenCV calibrateCamera, stereoCalibrate) …")
-        result, used_detections, outliers = fit(lambda d: calibrate_in_air(board, d, size))
+        result, used_detections, outliers = fit(
+            lambda d: calibrate_in_air(board, d, size, args.lens or DEFAULT_LENS_MODEL))
         rig, housing, rms_per = result.rig, None, result.rms_px_per
         air_covariance = result.covariance
         poses = {k: result.board_poses.get((k, 0), pose)  # the left camera's where it has one
@@ -463,28 +480,42 @@ def _calibrate_photos(args, output, log, free, start) -> int:
               "not_found": not_found,
               "left_out": [names[k] for k in outliers["left_out"]],
               "outlier_rule": trust.OUTLIER_RULE, "outliers": outliers,
-              "per_pose": trust.per_pose_table(names, detections, used_detections, rms_per,
-                                               outliers, geometry),
+              "per_pose": trust.per_pose_table(
+                  names, detections, used_detections, rms_per, outliers, geometry,
+                  (result.stereo_poses, result.stereo_left_out) if args.air else None),
               "coverage": trust.coverage(used_detections, size),
               "geometry": {"distance_mm": trust.stats_range(g["distance_mm"]
                                                             for g in geometry.values()),
                            "tilt_deg": trust.stats_range(g["tilt_deg"] for g in geometry.values())}}
     if args.air:
         report["in_air"] = trust.air_estimates(result, used)
+        residuals = result.residuals
     else:
         report["housing"] = trust.housing_estimates(housing, start_rig)
         report["sigma_note"] = report_lib.sigma_note(housing.uncertainty)
+        residuals = housing.residuals
+    report["worst_corners"] = trust.worst_corners(residuals, names)
     report["warnings"] = trust.warnings_for(report)
+    report["failures"] = trust.air_failures(report) if args.air else []
     report["timings_s"] = timings
     log("write the calibration, report and figures …")
     with output.staged() as tmp:
         _write_calibrations(tmp, rig, housing, report, None if args.air else start_rig,
                             air_covariance)
-        if housing is not None:
-            report_lib.residual_figure(tmp, used_detections, housing, size)
+        report_lib.residual_figure(tmp, used_detections, residuals, size)
         trust.coverage_figure(tmp, detections, set(used), size, report)
         report = _write_report(tmp, report, trust.markdown, start)
-    return _written(output, trust.summary_lines(report), args, housing is not None)
+    code = _written(output, trust.summary_lines(report), args, housing is not None)
+    return _failed(args.dir, report["failures"], output.path) or code
+
+
+def _failed(where, failures, out) -> int:
+    """0, or — the calibration being known wrong — one line ``failed: …`` on stderr and 1 (the
+    report in ``out`` says the same under its verdict)."""
+    if not failures:
+        return 0
+    print(f"failed: {where}: {'; '.join(failures)} (report in {out})", file=sys.stderr)
+    return EXIT_CHECK_FAILED
 
 
 def _intrinsics_for_photos(path, log):

@@ -29,6 +29,8 @@ from __future__ import annotations
 import os
 
 import numpy as np
+from measure.calibration import (LENS_MODEL_GAIN, LENS_MODEL_ORDER, STEREO_FLOOR_DEG,
+                                 STEREO_FLOOR_FRACTION, STEREO_OUTLIER_FACTOR)
 
 from eval.calibrate.report import format_value as _f
 
@@ -46,6 +48,20 @@ HINT_PHOTOS = 3
 #: squares larger each way a board is looked for once one is found.
 LARGER_PHOTOS, LARGER_SEARCH = 2, 4
 VIEWS = ("left", "right")
+#: An in-air stereo fit has failed when its RMS exceeds :data:`STEREO_RMS_FACTOR` × the worse
+#: camera's own RMS + :data:`STEREO_RMS_MARGIN_PX` (a correct one is a little above the
+#: cameras': OpenCV's stereo sample 0.27 px against 0.23 and 0.29 px).
+STEREO_RMS_FACTOR, STEREO_RMS_MARGIN_PX = 2.0, 0.2
+STEREO_RULE = (f"a pose is left out of the stereo fit when its own stereo pose (from the two "
+               f"cameras' board poses) lies farther from the median pose than "
+               f"max({STEREO_OUTLIER_FACTOR:g} × the median distance, "
+               f"{100 * STEREO_FLOOR_FRACTION:g} % of the baseline) or is turned from it by more "
+               f"than max({STEREO_OUTLIER_FACTOR:g} × the median angle, {STEREO_FLOOR_DEG:g}°); "
+               f"the run then exits 1 naming it")
+LENS_RULE = (f"auto tries {', '.join(LENS_MODEL_ORDER)} in turn and keeps a richer model only "
+             f"when it lowers the RMS by {100 * LENS_MODEL_GAIN:g} % or more")
+#: Corners listed in the report by their residual.
+WORST_CORNERS = 10
 OUTLIER_RULE = (f"a pose is left out when one of its views' RMS in the first fit exceeds "
                 f"max({OUTLIER_FACTOR:g} × median, median + {OUTLIER_MADS:g} × 1.4826 × MAD, "
                 f"median + {OUTLIER_FLOOR_PX:g} px) of all views' RMS; the fit is then run again "
@@ -141,25 +157,13 @@ def stats_range(values) -> list | None:
 
 
 def stereo_scatter(air, poses) -> dict:
-    """The stereo pose seen pose by pose: for each pose found in both views the right camera's
-    position relative to the left from the two cameras' own board extrinsics; the baseline's
-    scatter (std over poses) and that over √n — the σ OpenCV's ``stereoCalibrate`` does not
-    give."""
-    rig = air.rig
-    baselines = []
-    for k in poses:
-        if (k, 0) in air.board_poses and (k, 1) in air.board_poses:
-            (Rl, tl), (Rr, tr) = air.board_poses[(k, 0)], air.board_poses[(k, 1)]
-            # both are board → reference through each camera's own extrinsics; the right
-            # camera's centre as the left camera sees it, through this pose alone
-            R_cl = rig.left.R.T @ Rl
-            t_cl = rig.left.R.T @ (tl - rig.left.t)
-            R_cr = rig.right.R.T @ Rr
-            t_cr = rig.right.R.T @ (tr - rig.right.t)
-            R_rel = R_cr @ R_cl.T
-            T_rel = t_cr - R_rel @ t_cl
-            baselines.append(float(np.linalg.norm(R_rel.T @ T_rel)))
-    b = np.asarray(baselines)
+    """The stereo pose seen pose by pose (:attr:`measure.calibration.AirCalibration.stereo_poses`:
+    each pose's own stereo pose from the two cameras' board extrinsics): the baseline's scatter
+    (std over the poses of the stereo fit) and that over √n — the σ OpenCV's
+    ``stereoCalibrate`` does not give."""
+    left_out = set(air.stereo_left_out)
+    b = np.asarray([air.stereo_poses[k]["baseline_mm"] for k in poses
+                    if k in air.stereo_poses and k not in left_out])
     if b.size < 2:
         return {"poses": int(b.size), "baseline_std_mm": None, "baseline_sigma_mm": None}
     std = float(np.std(b, ddof=1))
@@ -170,14 +174,10 @@ def stereo_scatter(air, poses) -> dict:
 def air_estimates(air, poses) -> dict:
     """The in-air calibration's numbers with OpenCV's σ (no truth)."""
     out = {"rms_px": air.rms_px, "stereo_rms_px": air.stereo_rms_px,
-           "poses_used": air.poses_used, "cameras": {}}
+           "poses_used": air.poses_used, "cameras": {}, "lens_models": air.lens_models,
+           "covariance": air.covariance is not None}
     for name in VIEWS:
-        cam, sig = getattr(air.rig, name), air.sigmas[name]
-        values = {"fx": cam.K[0, 0], "fy": cam.K[1, 1], "cx": cam.K[0, 2], "cy": cam.K[1, 2]}
-        dist = (np.zeros(5) if cam.dist is None else np.ravel(cam.dist))
-        values.update(zip(("k1", "k2", "p1", "p2"), dist[:4]))
-        out["cameras"][name] = {key: {"estimate": float(v), "sigma": sig.get(key)}
-                                for key, v in values.items()}
+        out["cameras"][name] = camera_estimates(getattr(air.rig, name), air.sigmas[name])
     R, t = air.rig.right.R, air.rig.right.t
     from scipy.spatial.transform import Rotation
 
@@ -190,6 +190,19 @@ def air_estimates(air, poses) -> dict:
                      "right_rotation_deg": float(np.degrees(Rotation.from_matrix(R).magnitude())),
                      "right_R": R.tolist()}
     return out
+
+
+def camera_estimates(camera, sigmas: dict) -> dict:
+    """``{name: {estimate, sigma}}`` of one camera's intrinsics: fx, fy, cx, cy and the
+    distortion coefficients its lens model estimated (the names of ``sigmas``)."""
+    from measure.calibration import INTRINSIC_NAMES
+
+    values = {"fx": camera.K[0, 0], "fy": camera.K[1, 1], "cx": camera.K[0, 2],
+              "cy": camera.K[1, 2]}
+    dist = np.zeros(8) if camera.dist is None else np.pad(np.ravel(camera.dist),
+                                                          (0, max(0, 8 - np.size(camera.dist))))
+    values.update((n, d) for n, d in zip(INTRINSIC_NAMES[4:], dist) if n in sigmas)
+    return {key: {"estimate": float(v), "sigma": sigmas.get(key)} for key, v in values.items()}
 
 
 def housing_estimates(housing, start_rig) -> dict:
@@ -262,8 +275,57 @@ def warnings_for(report: dict) -> list[str]:
     return out
 
 
-def per_pose_table(names, detections_all, detections_used, rms_per, outliers, geometry) -> list:
-    """One row per pose: name, corners per view, final RMS per view, status, distance, tilt."""
+def air_failures(report: dict) -> list[str]:
+    """Why an in-air photo calibration is known to be wrong (empty when it is not): poses whose
+    own stereo pose disagrees with the others', a stereo RMS far above the cameras' own
+    (:data:`STEREO_RMS_FACTOR`), an estimate whose σ exceeds it."""
+    a = report["in_air"]
+    out = []
+    for p in report["per_pose"]:
+        s = p.get("stereo") or {}
+        if s.get("left_out"):
+            out.append(f"pair {p['name']} disagrees with the others as a stereo pose (its right "
+                       f"camera {s['deviation_mm']:.1f} mm and {s['deviation_deg']:.2f}° from "
+                       f"the median pose; limits {s['threshold_mm']:.1f} mm, "
+                       f"{s['threshold_deg']:.2f}°): left out of the stereo fit — are left/"
+                       f"{p['name']} and right/{p['name']} one moment's photos, neither turned "
+                       f"nor mirrored?")
+    for cam, m in a["lens_models"].items():
+        if m.get("problem"):
+            out.append(f"the {cam} camera's {m['model']} lens model cannot be used: "
+                       f"{m['problem']} (try --lens standard, or photograph the board near "
+                       f"the image's edges and corners)")
+    worst = max(a["rms_px"].values())
+    if a["stereo_rms_px"] > STEREO_RMS_FACTOR * worst + STEREO_RMS_MARGIN_PX:
+        out.append(f"the stereo RMS {a['stereo_rms_px']:.3g} px is "
+                   f"{a['stereo_rms_px'] / worst:.1f}× the cameras' own ({worst:.3g} px): the "
+                   f"two folders' photos do not fit one rigid pair of cameras")
+    checks = [(f"{cam} {key}", v[key]["estimate"], v[key]["sigma"])
+              for cam, v in a["cameras"].items() for key in ("fx", "fy")]
+    s = a["stereo"]
+    checks.append(("the baseline", s["baseline_mm"], s["baseline_sigma_mm"]))
+    for what, value, sigma in checks:
+        if sigma is not None and sigma > abs(value):
+            out.append(f"the σ of {what} ({sigma:.3g}) exceeds its value ({value:.4g}): the "
+                       f"photos do not determine it")
+    return out
+
+
+def worst_corners(residuals: dict, names, count: int = WORST_CORNERS) -> list[dict]:
+    """The ``count`` corners farthest from the fit: ``{pose, view, id, residual_px}`` of
+    ``residuals`` (per view ``(pose, id, du, dv)`` rows), largest first."""
+    rows = [(float(np.hypot(du, dv)), int(k), view, int(i))
+            for view, res in residuals.items() for k, i, du, dv in np.asarray(res).reshape(-1, 4)]
+    rows.sort(key=lambda r: (-r[0], r[1], r[2], r[3]))
+    return [{"pose": names[k], "view": VIEWS[v] if isinstance(v, int) else v, "id": i,
+             "residual_px": r} for r, k, v, i in rows[:count]]
+
+
+def per_pose_table(names, detections_all, detections_used, rms_per, outliers, geometry,
+                   stereo=None) -> list:
+    """One row per pose: name, corners per view, final RMS per view, status, distance, tilt;
+    in air (``stereo`` = ``(stereo_poses, left_out)`` of the calibration) the pose's own
+    stereo pose: baseline and distance from the median pose, and whether it was left out."""
     rows = []
     for k, name in enumerate(names):
         corners = {v: int(len(detections_all.ids[k][i])) for i, v in enumerate(VIEWS)}
@@ -279,6 +341,10 @@ def per_pose_table(names, detections_all, detections_used, rms_per, outliers, ge
         rms = {v: rms_per.get((k, i)) if status == "used" else None
                for i, v in enumerate(VIEWS)}
         row = {"pose": k, "name": name, "corners": corners, "rms_px": rms, "status": status}
+        if stereo is not None and k in stereo[0]:
+            row["stereo"] = dict(stereo[0][k], left_out=k in stereo[1])
+            if k in stereo[1]:
+                row["status"] = "used alone; left out of the stereo fit (its stereo pose disagrees)"
         row.update(geometry.get(k, {"distance_mm": None, "tilt_deg": None}))
         rows.append(row)
     return rows
@@ -380,16 +446,28 @@ def markdown(report: dict) -> str:
              f"found in {report['found']['left']} left and {report['found']['right']} right "
              f"photos; {report['used']} pose(s) in the final fit. No truth: every number below "
              f"comes from the photos.", ""]
+    if report.get("failures"):
+        lines += ["## Verdict: failed (exit code 1)", ""] + [f"- {w}" for w in
+                                                             report["failures"]] + [""]
     if report["warnings"]:
         lines += ["## Warnings", ""] + [f"- {w}" for w in report["warnings"]] + [""]
+    stereo = "in_air" in report
     lines += ["## Poses", "", f"Outlier rule: {report['outlier_rule']} (threshold here "
-              f"{report['outliers']['threshold_px']:.3f} px).", "",
+              f"{report['outliers']['threshold_px']:.3f} px)."
+              + (f" Stereo rule: {STEREO_RULE}." if stereo else ""), "",
               "| pose | corners L | corners R | RMS L (px) | RMS R (px) | distance (mm) | "
-              "tilt (°) | status |", "|---|---|---|---|---|---|---|---|"]
+              "tilt (°) |" + (" own baseline (mm) | from the median (mm, °) |" if stereo else "")
+              + " status |", "|---|---|---|---|---|---|---|" + ("---|---|" if stereo else "")
+              + "---|"]
     for p in report["per_pose"]:
+        own = ""
+        if stereo:
+            s = p.get("stereo")
+            own = (f" {s['baseline_mm']:.2f} | {s['deviation_mm']:.2f}, "
+                   f"{s['deviation_deg']:.3f} |" if s else " – | – |")
         lines.append(f"| {p['name']} | {p['corners']['left']} | {p['corners']['right']} | "
                      f"{_f(p['rms_px']['left'])} | {_f(p['rms_px']['right'])} | "
-                     f"{_f(p['distance_mm'], 5)} | {_f(p['tilt_deg'], 3)} | {p['status']} |")
+                     f"{_f(p['distance_mm'], 5)} | {_f(p['tilt_deg'], 3)} |{own} {p['status']} |")
     g, c = report["geometry"], report["coverage"]
     lines += ["", f"Board distances {_f(g['distance_mm'], 5)} mm, tilts {_f(g['tilt_deg'], 3)}° "
               f"(poses in the final fit). Corners cover {100 * c['left']['fraction']:.0f} % of "
@@ -397,20 +475,36 @@ def markdown(report: dict) -> str:
               f"({COVERAGE_CELLS}×{COVERAGE_CELLS} cells; `coverage.png`)."]
     if "in_air" in report:
         a = report["in_air"]
+        models = "; ".join(
+            f"{cam} {m['model']} (" + ", ".join(f"{k} {v:.4f} px" for k, v in m["rms_px"].items())
+            + ")" for cam, m in a["lens_models"].items())
         lines += ["", "## In-air calibration (OpenCV)", "",
                   f"Reprojection RMS: left {a['rms_px']['left']:.4f} px, right "
                   f"{a['rms_px']['right']:.4f} px, stereo {a['stereo_rms_px']:.4f} px. σ: "
                   f"OpenCV's `calibrateCameraExtended` standard deviations.", "",
+                  f"Lens models (RMS of each model fitted; {LENS_RULE}): {models}."
+                  + ("" if a["covariance"] else " The joint covariance of the intrinsics and "
+                     "the stereo pose is written for the standard model only: calib.yaml has "
+                     "none, and a housing calibrated from it has σ conditional on these "
+                     "intrinsics."), "",
                   "| parameter | left | σ | right | σ |", "|---|---|---|---|---|"]
-        for key in a["cameras"]["left"]:
-            left, right = a["cameras"]["left"][key], a["cameras"]["right"][key]
-            lines.append(f"| {key} | {left['estimate']:.6g} | {_f(left['sigma'], 3)} | "
-                         f"{right['estimate']:.6g} | {_f(right['sigma'], 3)} |")
+        keys = dict.fromkeys([*a["cameras"]["left"], *a["cameras"]["right"]])
+        for key in keys:
+            cells = [(f"{v[key]['estimate']:.6g}", _f(v[key]["sigma"], 3)) if key in v
+                     else ("–", "–") for v in (a["cameras"]["left"], a["cameras"]["right"])]
+            lines.append(f"| {key} | {cells[0][0]} | {cells[0][1]} | {cells[1][0]} | "
+                         f"{cells[1][1]} |")
         s = a["stereo"]
         lines += ["", f"Baseline {s['baseline_mm']:.4f} mm; σ {_f(s['baseline_sigma_mm'], 3)} mm "
                   f"(the per-pose baselines' scatter {_f(s['baseline_std_over_poses_mm'], 3)} mm "
                   f"over √{s['baseline_poses']}: OpenCV's stereoCalibrate gives no σ); right "
                   f"camera rotated {s['right_rotation_deg']:.4f}° from the left."]
+    if report.get("worst_corners"):
+        lines += ["", "## Worst corners", "", "Farthest from the fit (`residuals.png` draws "
+                  "every residual):", "", "| pose | view | corner id | residual (px) |",
+                  "|---|---|---|---|"]
+        lines += [f"| {c['pose']} | {c['view']} | {c['id']} | {c['residual_px']:.3f} |"
+                  for c in report["worst_corners"]]
     if "housing" in report:
         h = report["housing"]
         lines += ["", "## Housing calibration (refractive bundle adjustment)", "",
@@ -436,7 +530,7 @@ def markdown(report: dict) -> str:
               + (" (with an `uncertainty` map), `calib_in_air_only.yaml` (the in-air calibration "
                  "with the design port), `flatport.txt` (FLATPORT per camera)"
                  if "housing" in report else ""),
-              "- `coverage.png`" + (", `residuals.png`" if "housing" in report else ""),
+              "- `coverage.png`, `residuals.png` (residual vectors per pose and view)",
               "", "## Timings (s)", "",
               " · ".join(f"{k} {v:.2f}" for k, v in report["timings_s"].items())]
     return "\n".join(lines) + "\n"
@@ -449,8 +543,15 @@ def summary_lines(report: dict) -> str:
              + (f", not found in {', '.join(report['not_found'])}" if report["not_found"] else "")
              + (f", left out as outliers: {', '.join(report['left_out'])}"
                 if report["left_out"] else "")]
+    b = report["board"]
+    lines.append(f"board: {b['kind']} of {b['squares'][0]}x{b['squares'][1]} squares "
+                 f"({b['squares'][0] - 1}x{b['squares'][1] - 1} inner corners, OpenCV's pattern "
+                 f"size), {b['square_mm']:g} mm")
     if "in_air" in report:
         a = report["in_air"]
+        lines.append("lens model: " + ", ".join(f"{cam} {m['model']}" for cam, m in
+                                                a["lens_models"].items())
+                     + " (--lens; the report lists the RMS of each model tried)")
         for cam, v in a["cameras"].items():
             lines.append(f"in air {cam}: fx {v['fx']['estimate']:.3f} ± {_f(v['fx']['sigma'], 2)}, "
                          f"fy {v['fy']['estimate']:.3f} ± {_f(v['fy']['sigma'], 2)}, cx "

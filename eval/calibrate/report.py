@@ -286,7 +286,7 @@ def figures(directory, boards, detections, housing, rig) -> None:
     fig.savefig(os.path.join(directory, "detections.png"), dpi=110)
     plt.close(fig)
     if housing is not None:
-        residual_figure(directory, detections, housing, (w, h))
+        residual_figure(directory, detections, housing.residuals, (w, h))
     fig = plt.figure(figsize=(7, 6), constrained_layout=True)
     ax = fig.add_subplot(projection="3d")
     outline = boards.board.outline()
@@ -310,8 +310,10 @@ def figures(directory, boards, detections, housing, rig) -> None:
     plt.close(fig)
 
 
-def residual_figure(directory, detections, housing, size) -> None:
-    """``residuals.png``: the housing's bundle-adjustment residual vectors per pose and view."""
+def residual_figure(directory, detections, residuals, size) -> None:
+    """``residuals.png``: the residual vectors per pose and view (``residuals`` per view
+    ``(pose, id, du, dv)`` rows: the housing's bundle adjustment, or each camera's in-air
+    fit)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -320,14 +322,13 @@ def residual_figure(directory, detections, housing, size) -> None:
     w, h = size
     fig, axes = plt.subplots(1, 2, figsize=(12, 5), constrained_layout=True)
     for view, ax in enumerate(axes):
-        res = housing.residuals[view]
+        res = np.asarray(residuals[view]).reshape(-1, 4)
         where = []
         for k, i in res[:, :2].astype(int):
             ids = detections.ids[k][view]
             where.append(detections.pixels[k][view][int(np.flatnonzero(ids == i)[0])])
         _quiver(ax, res[:, 0], np.asarray(where).reshape(-1, 2), -res[:, 2:4], w, h,
-                f"{'left' if view == 0 else 'right'}: reprojection residual after the "
-                f"adjustment")
+                f"{'left' if view == 0 else 'right'}: reprojection residual after the fit")
     fig.savefig(os.path.join(directory, "residuals.png"), dpi=110)
     plt.close(fig)
 
