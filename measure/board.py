@@ -175,11 +175,11 @@ class Board:
         while small.shape[1] > DETECTION_WIDTH_PX:
             small, levels = cv2.pyrDown(small), levels + 1
         found, corners = _find_chessboard_sb(small, pattern)
-        if not found:  # photos as stored (sRGB): SB finds many real boards there it missed
-            found, corners = _find_chessboard_sb(srgb_uint8(small), pattern)
         if not found:  # the classic detector finds some steep views SB misses
             found, corners = cv2.findChessboardCorners(
                 small, pattern, flags=cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE)
+        if not found:  # photos as stored (sRGB): SB finds real boards there it missed
+            found, corners = _find_chessboard_sb(srgb_uint8(small), pattern)
         if not found and levels:  # small, steep boards: the full image (about 1 s more)
             found, corners = _find_chessboard_sb(gray, pattern)
             levels = 0 if found else levels

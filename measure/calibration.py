@@ -98,19 +98,23 @@ class Detections:
         return [k for k in range(self.n_poses) if len(self.ids[k][view]) >= MIN_CORNERS]
 
 
-def detect_boards(board: Board, images, workers: int | None = None) -> Detections:
-    """Detect ``board`` in every ``(left, right)`` image pair, on ``workers`` threads (default:
-    one per CPU; OpenCV's detectors release the GIL: 15 full-size pairs took 12 s on 2 threads
-    against 21 s on one, on a loaded 2-core machine)."""
+def detect_images(board: Board, images, workers: int | None = None) -> list:
+    """``[(ids, pixels), …]``: :meth:`Board.detect` of every image, on ``workers`` threads
+    (default: one per CPU; OpenCV's detectors release the GIL: 15 full-size pairs took 12 s on
+    2 threads against 21 s on one, on a loaded 2-core machine)."""
     from concurrent.futures import ThreadPoolExecutor
 
-    flat = [img for pair in images for img in pair]
-    workers = max(1, min(workers or os.cpu_count() or 1, len(flat) or 1))
+    images = list(images)
+    workers = max(1, min(workers or os.cpu_count() or 1, len(images) or 1))
     if workers == 1:
-        found = [board.detect(img) for img in flat]
-    else:
-        with ThreadPoolExecutor(workers) as pool:
-            found = list(pool.map(board.detect, flat))
+        return [board.detect(img) for img in images]
+    with ThreadPoolExecutor(workers) as pool:
+        return list(pool.map(board.detect, images))
+
+
+def detect_boards(board: Board, images, workers: int | None = None) -> Detections:
+    """Detect ``board`` in every ``(left, right)`` image pair (:func:`detect_images`)."""
+    found = detect_images(board, [img for pair in images for img in pair], workers)
     ids = [[found[2 * k][0], found[2 * k + 1][0]] for k in range(len(images))]
     pixels = [[found[2 * k][1], found[2 * k + 1][1]] for k in range(len(images))]
     return Detections(ids, pixels)
@@ -270,7 +274,7 @@ def calibrate_in_air(board: Board, detections: Detections, size,
             extrinsics[(k, view)] = (Rotation.from_rotvec(np.ravel(rvec)).as_matrix(),
                                      np.ravel(tvec).astype(np.float64))
         sigmas[name] = dict(zip(INTRINSIC_NAMES[:4 + n_dist], (float(s) for s in std)))
-        residuals[view] = _camera_residuals(obj, img, out, poses, detections.ids, view)
+        residuals[view] = camera_residuals(obj, img, out, poses, detections.ids, view)
         cameras.append((K, D))
         n = sum(len(o) for o in obj)  # OpenCV's RMS is per corner of the 2D residual length
         s2.append(rms[name] ** 2 * n / max(2 * n - 4 - n_dist - 6 * len(poses), 1))
@@ -333,7 +337,7 @@ def calibrate_in_air(board: Board, detections: Detections, size,
                           residuals)
 
 
-def _camera_residuals(obj, img, out, poses, ids, view) -> np.ndarray:
+def camera_residuals(obj, img, out, poses, ids, view) -> np.ndarray:
     """``(pose, id, du, dv)`` rows of one camera's ``calibrateCamera`` (``out``): every corner
     projected with its pose's extrinsics minus where it was detected, px."""
     rows = []
@@ -1044,7 +1048,10 @@ def usable_index(usable, pose_idx) -> np.ndarray:
 
 
 __all__ = ["AirCalibration", "CalibrationError", "DEFAULT_DOME_FREE", "DEFAULT_FREE",
-           "DEFAULT_UNCERTAINTY", "DOME_PARAMETERS", "Detections", "HOUSING_PARAMETERS",
-           "HousingCalibration", "MIN_POSES", "UNCERTAINTY", "apply_air_change",
-           "calibrate_housing", "calibrate_in_air", "detect_boards", "dome_offset",
-           "dome_problem", "housing_problem"]
+           "DEFAULT_LENS_MODEL", "DEFAULT_UNCERTAINTY", "DOME_PARAMETERS", "Detections",
+           "HOUSING_PARAMETERS", "HousingCalibration", "INTRINSIC_NAMES", "LENS_MODELS",
+           "LENS_MODEL_GAIN", "LENS_MODEL_ORDER", "LIBRARY_LENS_MODEL", "MIN_POSES",
+           "STEREO_FLOOR_DEG", "STEREO_FLOOR_FRACTION", "STEREO_OUTLIER_FACTOR", "UNCERTAINTY",
+           "apply_air_change", "calibrate_camera", "calibrate_housing", "calibrate_in_air",
+           "camera_residuals", "detect_boards", "detect_images", "dome_offset", "dome_problem",
+           "housing_problem", "lens_problem", "relative_poses", "stereo_pose_outliers"]

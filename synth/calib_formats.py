@@ -634,6 +634,26 @@ def calib_format(path) -> str:
     return "opencv"
 
 
+def write_single_camera(directory, camera: Camera) -> list[str]:
+    """One camera in air (no port) as calibmar's one-camera file (:data:`CALIBMAR_NAME`) and a
+    one-line COLMAP ``cameras.txt``, into ``directory``, atomically. Returns the paths."""
+    directory = os.fspath(directory)
+    calibmar = os.path.join(directory, CALIBMAR_NAME)
+    atomic_write_text(calibmar, _calibmar_text(camera, None, camera.size,
+                                               (np.eye(3), np.zeros(3)), None, "NONE"))
+    name, params = colmap_camera(camera)
+    cameras = os.path.join(directory, COLMAP_CAMERAS_NAME)
+    atomic_write_text(cameras, "\n".join([
+        "# Camera list with one line of data per camera:",
+        "#   CAMERA_ID, MODEL, WIDTH, HEIGHT, PARAMS[]",
+        "# Number of cameras: 1",
+        "# Written by refractive-stereo: one camera in air. Pixels: COLMAP's, the centre of the "
+        "top-left pixel is (0.5, 0.5) (cx, cy = OpenCV's + 0.5).",
+        " ".join(["1", name, str(int(camera.size[0])), str(int(camera.size[1]))]
+                 + [repr(v) for v in params])]) + "\n")
+    return [calibmar, cameras]
+
+
 def write_calibration_formats(directory, rig: StereoRig, has_port: bool = True) -> list[str]:
     """Write ``rig`` beside a ``calib.yaml`` in ``directory`` as calibmar's stereo pair
     (:data:`CALIBMAR_NAME` and its ``_stereo`` partner) and the COLMAP fork's ``cameras.txt``
@@ -648,4 +668,4 @@ __all__ = ["CALIBMAR_NAME", "COLMAP_CAMERAS_NAME", "COLMAP_MODELS", "COLMAP_PIXE
            "COLMAP_RIG_NAME", "CalibFormatError", "IMAGE_PREFIXES", "PORT_TOLERANCE",
            "PYCOLMAP_WARNING", "calib_dict", "calib_format", "calibmar_partner", "colmap_camera",
            "opencv_camera", "read_calibmar", "read_colmap", "stereo_extrinsics",
-           "write_calibmar", "write_calibration_formats", "write_colmap"]
+           "write_calibmar", "write_calibration_formats", "write_colmap", "write_single_camera"]

@@ -24,6 +24,7 @@ import os
 import sys
 import time
 
+from eval.calibrate.single import single_camera_folder
 from eval.cli import CLIError, positive_float
 from eval.core.photos import add_encoding_option
 from synth.cli import (BOARD_OPTIONS, EXIT_CHECK_FAILED, WATER_INDEX_HELP, add_board_options,
@@ -107,18 +108,6 @@ def add_parser(subparsers):
     add_out_option(p, COMMAND)
     add_encoding_option(p)
     add_progress_option(p)
-
-
-def _write_report(directory, report: dict, markdown, start: float) -> dict:
-    """``report.json`` and ``report.md`` (``markdown(report)``) into ``directory``, with the total
-    time since ``start``; returns the report as written (JSON types)."""
-    from synth.fileio import atomic_write_json, atomic_write_text, jsonable
-
-    report["timings_s"]["total"] = time.perf_counter() - start
-    report = jsonable(report)
-    atomic_write_json(os.path.join(directory, "report.json"), report)
-    atomic_write_text(os.path.join(directory, "report.md"), markdown(report))
-    return report
 
 
 def _write_calibrations(directory, rig, housing, report: dict, start_rig,
@@ -261,9 +250,12 @@ def main(args) -> int:
         refuse_given(args, DOME_DESIGN_OPTIONS, f"to photos ({args.dir}): the housing "
                                                 "calibration of photos models a flat port")
         return _calibrate_photos(args, output, log, _parse_free(free), start)
+    if not os.path.isfile(os.path.join(args.dir, "manifest.json")) and single_camera_folder(
+            args.dir):
+        return _calibrate_single(args, output, log, start)
     if not os.path.isfile(os.path.join(args.dir, "manifest.json")) and os.path.isdir(args.dir):
         raise CLIError(f"{args.dir}: not a boards folder (no manifest.json) nor a photo folder "
-                       f"(no left/ and right/ folders)")
+                       f"(no left/ and right/ folders, no photos)")
     boards = read_boards(args.dir)
     truth = boards.calib["rig"]
     dome = not boards.air and truth.is_dome
@@ -356,7 +348,7 @@ def main(args) -> int:
         _write_calibrations(tmp, rig, housing, report, None if boards.air else start_rig,
                             air_covariance)
         report_lib.figures(tmp, boards, detections, housing, rig)
-        report = _write_report(tmp, report, report_lib.markdown, start)
+        report = report_lib.write_report(tmp, report, report_lib.markdown, start)
     return _written(output, report_lib.summary_lines(report), args, housing is not None)
 
 
@@ -403,14 +395,7 @@ def _calibrate_photos(args, output, log, free, start) -> int:
                        f"(photos taken underwater, with the in-air calibration)")
     else:
         refuse_given(args, ("lens",), _LENS_UNDERWATER)
-    missing = [option for dest, option in (("squares", "--squares COLSxROWS (or "
-                                                       "--inner-corners)"),
-                                           ("square_mm", "--square-mm S"))
-               if getattr(args, dest) is None
-               and not (dest == "squares" and args.inner_corners is not None)]
-    if missing:
-        raise CLIError(f"{where}: a photo folder needs the board on the command line: "
-                       f"{' and '.join(missing)} (and --board charuco for a ChArUco board)")
+    _require_board(args, where)
     board = board_from_args(args)
     if not args.air:
         design_port(args, (0.0, 0.0, 1.0))  # a bad --design-port is refused before any work
@@ -504,7 +489,7 @@ def _calibrate_photos(args, output, log, free, start) -> int:
                             air_covariance)
         report_lib.residual_figure(tmp, used_detections, residuals, size)
         trust.coverage_figure(tmp, detections, set(used), size, report)
-        report = _write_report(tmp, report, trust.markdown, start)
+        report = report_lib.write_report(tmp, report, trust.markdown, start)
     code = _written(output, trust.summary_lines(report), args, housing is not None)
     return _failed(args.dir, report["failures"], output.path) or code
 
@@ -516,6 +501,35 @@ def _failed(where, failures, out) -> int:
         return 0
     print(f"failed: {where}: {'; '.join(failures)} (report in {out})", file=sys.stderr)
     return EXIT_CHECK_FAILED
+
+
+def _calibrate_single(args, output, log, start) -> int:
+    """``eval calibrate`` of one camera's photo folder (:mod:`eval.calibrate.single`)."""
+    from eval.calibrate.single import calibrate_single
+
+    where = f"{args.dir} (one camera's photos)"
+    if not args.air:
+        raise CLIError(f"{where}: one camera is calibrated in air (--air) for now; the housing "
+                       f"of one camera behind its own port needs a stereo pair's photos")
+    refuse_given(args, HOUSING_OPTIONS + DOME_DESIGN_OPTIONS + ("intrinsics",),
+                 "to one camera's in-air photos (--air): they calibrate the camera, no housing")
+    _require_board(args, where)
+    report, summary = calibrate_single(args, output, log, start, board_from_args(args))
+    print(summary)
+    print(f"wrote {output.path} (camera.yaml for OpenCV; calibmar.yaml; cameras.txt for COLMAP)")
+    return _failed(args.dir, report["failures"], output.path)
+
+
+def _require_board(args, where) -> None:
+    """CLIError when a photo folder's board is not on the command line."""
+    missing = [option for dest, option in (("squares", "--squares COLSxROWS (or "
+                                                       "--inner-corners)"),
+                                           ("square_mm", "--square-mm S"))
+               if getattr(args, dest) is None
+               and not (dest == "squares" and args.inner_corners is not None)]
+    if missing:
+        raise CLIError(f"{where}: a photo folder needs the board on the command line: "
+                       f"{' and '.join(missing)} (and --board charuco for a ChArUco board)")
 
 
 def _intrinsics_for_photos(path, log):

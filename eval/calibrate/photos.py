@@ -584,19 +584,21 @@ def summary_lines(report: dict) -> str:
     return "\n".join(lines)
 
 
-def coverage_figure(directory, detections_all, used, size, report) -> None:
+def coverage_figure(directory, detections_all, used, size, report, views=VIEWS) -> None:
     """``coverage.png``: every detected corner on each camera's image frame (colour = pose;
-    poses left out as red crosses), the covered cells shaded."""
+    poses left out as red crosses), the covered cells shaded (``report["coverage"][view]``
+    for each of ``views``)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     w, h = size
-    fig, axes = plt.subplots(1, 2, figsize=(12, 5), constrained_layout=True)
+    fig, axes = plt.subplots(1, len(views), figsize=(6 * len(views), 5),
+                             constrained_layout=True, squeeze=False)
     cmap = plt.get_cmap("tab20")
-    for view, ax in enumerate(axes):
-        name = VIEWS[view]
+    for view, ax in enumerate(axes[0]):
+        name = views[view]
         grid = np.asarray(report["coverage"][name]["cells"])
         n = grid.shape[0]
         ax.imshow(grid, extent=(-0.5, w - 0.5, h - 0.5, -0.5), cmap="Greens", vmin=0, vmax=4,

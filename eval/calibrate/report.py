@@ -310,7 +310,21 @@ def figures(directory, boards, detections, housing, rig) -> None:
     plt.close(fig)
 
 
-def residual_figure(directory, detections, residuals, size) -> None:
+def write_report(directory, report: dict, markdown, start: float) -> dict:
+    """``report.json`` and ``report.md`` (``markdown(report)``) into ``directory``, with the total
+    time since ``start``; returns the report as written (JSON types)."""
+    import time
+
+    from synth.fileio import atomic_write_json, atomic_write_text, jsonable
+
+    report["timings_s"]["total"] = time.perf_counter() - start
+    report = jsonable(report)
+    atomic_write_json(os.path.join(directory, "report.json"), report)
+    atomic_write_text(os.path.join(directory, "report.md"), markdown(report))
+    return report
+
+
+def residual_figure(directory, detections, residuals, size, views=("left", "right")) -> None:
     """``residuals.png``: the residual vectors per pose and view (``residuals`` per view
     ``(pose, id, du, dv)`` rows: the housing's bundle adjustment, or each camera's in-air
     fit)."""
@@ -320,15 +334,16 @@ def residual_figure(directory, detections, residuals, size) -> None:
     import matplotlib.pyplot as plt
 
     w, h = size
-    fig, axes = plt.subplots(1, 2, figsize=(12, 5), constrained_layout=True)
-    for view, ax in enumerate(axes):
+    fig, axes = plt.subplots(1, len(views), figsize=(6 * len(views), 5), constrained_layout=True,
+                             squeeze=False)
+    for view, ax in enumerate(axes[0]):
         res = np.asarray(residuals[view]).reshape(-1, 4)
         where = []
         for k, i in res[:, :2].astype(int):
             ids = detections.ids[k][view]
             where.append(detections.pixels[k][view][int(np.flatnonzero(ids == i)[0])])
         _quiver(ax, res[:, 0], np.asarray(where).reshape(-1, 2), -res[:, 2:4], w, h,
-                f"{'left' if view == 0 else 'right'}: reprojection residual after the fit")
+                f"{views[view]}: reprojection residual after the fit")
     fig.savefig(os.path.join(directory, "residuals.png"), dpi=110)
     plt.close(fig)
 

@@ -1,6 +1,8 @@
 """A user's photos: read one image as grey, and pair a left and a right folder by file name.
 
-Formats: whatever ``cv2.imread`` reads (PNG 8- or 16-bit, JPEG, TIFF, …). Colour images become
+Formats: whatever ``cv2.imread`` reads (PNG 8- or 16-bit, JPEG, TIFF, BMP, …), turned as their
+EXIF orientation says (as ``cv2.imread``'s defaults do; one camera's photos must share one
+orientation: :func:`check_orientations`). Colour images (a 24-bit BMP holding grey too) become
 grey with ``cv2.cvtColor(…, COLOR_BGR2GRAY)`` (0.299 R + 0.587 G + 0.114 B on the stored
 values: what an OpenCV user gets from ``cv2.imread(path, cv2.IMREAD_GRAYSCALE)``, but keeping
 16 bits where the file has them). The grey values are then made **linear** (float32, 1 = the
@@ -65,7 +67,9 @@ def read_photo(path, encoding: str = "auto") -> np.ndarray:
         raise PhotoError(f"{path}: a folder, not a photo")
     if not os.path.isfile(path):
         raise PhotoError(f"{path}: no such file")
-    image = cv2.imread(path, cv2.IMREAD_UNCHANGED)
+    # ANYDEPTH | ANYCOLOR: 16-bit and float kept, and the EXIF orientation applied as
+    # cv2.imread's defaults apply it (IMREAD_UNCHANGED would ignore it)
+    image = cv2.imread(path, cv2.IMREAD_ANYDEPTH | cv2.IMREAD_ANYCOLOR)
     if image is None or image.size == 0:
         raise PhotoError(f"{path}: not an image OpenCV can read")
     if image.ndim == 3:
@@ -102,6 +106,47 @@ def _photos_in(folder: str) -> dict:
     return out
 
 
+def exif_orientation(path) -> int:
+    """The EXIF orientation tag of a photo (1 = as stored; 3 turned 180°; 6 and 8 turned 90°;
+    2, 4, 5, 7 mirrored), 1 when it has none."""
+    from PIL import Image
+
+    try:
+        with Image.open(path) as image:
+            return int(image.getexif().get(0x0112, 1) or 1)
+    except (OSError, ValueError, SyntaxError):
+        return 1
+
+
+def check_orientations(files) -> None:
+    """:class:`PhotoError` when one camera's photos carry different EXIF orientations: each
+    is turned as its tag says (as ``cv2.imread`` does), so photos of one sensor would be
+    calibrated in differently turned frames."""
+    tags = {f: exif_orientation(f) for f in files}
+    if len(set(tags.values())) > 1:
+        common = max(set(tags.values()), key=list(tags.values()).count)
+        odd = [f for f, t in tags.items() if t != common]
+        more = f" and {len(odd) - 3} more" if len(odd) > 3 else ""
+        raise PhotoError(f"{', '.join(odd[:3])}{more}: EXIF orientation "
+                         f"{tags[odd[0]]}, but the other photos of this camera have "
+                         f"{common}; photos are turned as their EXIF orientation says (as "
+                         f"cv2.imread does), so one camera's photos must share it (remove the "
+                         f"tag, e.g. exiftool -Orientation= FILE)")
+
+
+def photo_files(folder) -> list[str]:
+    """The photos of one camera's ``folder``, sorted by name (two files with one stem are
+    refused, and photos whose EXIF orientations differ: :func:`check_orientations`);
+    :class:`PhotoError` when it holds none."""
+    folder = os.fspath(folder)
+    found = _photos_in(folder)
+    if not found:
+        raise PhotoError(f"{folder}: no photos (expected {', '.join(PHOTO_EXTENSIONS)} files)")
+    files = [os.path.join(folder, found[stem]) for stem in sorted(found)]
+    check_orientations(files)
+    return files
+
+
 @dataclass(frozen=True)
 class PhotoPairs:
     """Pairs of a photo folder: ``names`` (the shared stems, sorted), ``left`` / ``right`` the
@@ -132,6 +177,8 @@ def pair_folders(left_dir, right_dir, what: str = "photo") -> PhotoPairs:
         raise PhotoError(f"{', '.join(alone[:3])}{more}: no {what} of the same name in the other "
                          f"camera's folder (pairs are matched by file name)")
     names = tuple(sorted(left))
+    check_orientations([os.path.join(left_dir, left[s]) for s in names])
+    check_orientations([os.path.join(right_dir, right[s]) for s in names])
     return PhotoPairs(os.path.dirname(left_dir.rstrip("/")) or ".", names,
                       tuple(os.path.join(left_dir, left[s]) for s in names),
                       tuple(os.path.join(right_dir, right[s]) for s in names))
@@ -171,5 +218,5 @@ def read_pairs(pairs: PhotoPairs, encoding: str = "auto") -> tuple[list, tuple]:
 
 
 __all__ = ["ENCODING_HELP", "PHOTO_ENCODINGS", "PHOTO_EXTENSIONS", "PhotoError", "PhotoPairs",
-           "add_encoding_option", "pair_folders", "photo_folder", "read_pairs", "read_photo",
-           "srgb_to_linear"]
+           "add_encoding_option", "check_orientations", "exif_orientation", "pair_folders",
+           "photo_files", "photo_folder", "read_pairs", "read_photo", "srgb_to_linear"]

@@ -1,0 +1,268 @@
+"""``python -m eval calibrate DIR --air`` where ``DIR`` holds one camera's photos (no ``left/``
+and ``right/``): OpenCV calibrates that camera alone.
+
+The board on the command line as for a stereo folder; every photo in ``DIR`` (sorted by name) is
+one pose. The lens model is chosen as for a pair (``--lens``, :func:`measure.calibration.
+calibrate_camera`), outlier poses are left out by the same rule
+(:func:`eval.calibrate.photos.outlier_poses`), and the report says what the photos alone can
+say: per pose the corners and RMS, the worst corners, the coverage of the image, the σ of every
+intrinsic (OpenCV's ``stdDeviationsIntrinsics``).
+
+Writes to ``--out``: ``camera.yaml`` (OpenCV ``FileStorage``, the names of OpenCV's calibration
+sample: ``image_width``, ``image_height``, ``camera_matrix``, ``distortion_coefficients``, with
+``lens_model``, ``rms_px`` and the σ), ``calibmar.yaml`` (calibmar's one-camera file, no port),
+``cameras.txt`` (one COLMAP camera), ``report.json``, ``report.md``, ``coverage.png`` and
+``residuals.png``. A calibration the run knows is wrong (a lens model whose distortion folds
+within the image, a σ of fx or fy larger than the value) exits 1 with the files written.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+
+import numpy as np
+
+from eval.calibrate import photos as trust
+from eval.calibrate import report as report_lib
+from eval.calibrate.report import format_value as _f
+from eval.cli import CLIError
+
+#: The view number of the one camera in :class:`measure.calibration.Detections`.
+VIEW = 0
+
+
+def single_camera_folder(path) -> bool:
+    """Whether ``path`` directly holds photos (one camera's folder)."""
+    from eval.core.photos import PHOTO_EXTENSIONS
+
+    return os.path.isdir(path) and any(
+        os.path.splitext(name)[1].lower() in PHOTO_EXTENSIONS and not name.startswith(".")
+        for name in os.listdir(path))
+
+
+def calibrate_single(args, output, log, start, board) -> tuple[dict, str]:
+    """Calibrate the camera of the photo folder ``args.dir``; returns ``(report, summary)``
+    after writing everything into ``output`` (module docs)."""
+    from measure.calibration import (DEFAULT_LENS_MODEL, CalibrationError, Detections,
+                                     calibrate_camera, camera_residuals, detect_images,
+                                     lens_problem)
+
+    from eval.core.photos import photo_files, read_photo
+
+    where = f"{args.dir} (one camera's photos)"
+    files = photo_files(args.dir)
+    log(f"read {len(files)} photos from {args.dir} …")
+    t = time.perf_counter()
+    images = [read_photo(f, args.encoding) for f in files]
+    sizes = {(im.shape[1], im.shape[0]) for im in images}
+    if len(sizes) > 1:
+        first = (images[0].shape[1], images[0].shape[0])
+        odd = next(f for f, im in zip(files, images) if (im.shape[1], im.shape[0]) != first)
+        raise CLIError(f"{odd}: {images[files.index(odd)].shape[1]}x"
+                       f"{images[files.index(odd)].shape[0]} px, but {files[0]} is "
+                       f"{first[0]}x{first[1]} px (one camera's photos must all have one size)")
+    size = sizes.pop()
+    timings = {"read": time.perf_counter() - t}
+    log(f"detect the board in {len(images)} photos …")
+    t = time.perf_counter()
+    found_all = detect_images(board, images)
+    empty = (np.empty(0, int), np.empty((0, 2)))
+    detections = Detections([[ids, empty[0]] for ids, _ in found_all],
+                            [[px, empty[1]] for _, px in found_all])
+    timings["detect"] = time.perf_counter() - t
+    names = [os.path.basename(f) for f in files]
+    found = detections.found(VIEW)
+    if not found:
+        squares = "x".join(map(str, board.squares))
+        raise CLIError(f"{where}: the {board.kind} {squares} was found in none of the "
+                       f"{len(images)} photos{trust.board_hint(board, [(im, im) for im in images])}")
+    lens = args.lens or DEFAULT_LENS_MODEL
+    corners = board.corners().astype(np.float32)
+
+    def fit(dets):
+        poses = dets.found(VIEW)
+        if len(poses) < 3:
+            raise CalibrationError(f"the board was found in {len(poses)} photo(s); a camera "
+                                   f"calibration needs at least 3")
+        obj = [corners[dets.ids[k][VIEW]] for k in poses]
+        img = [dets.pixels[k][VIEW].astype(np.float32) for k in poses]
+        out, model, tried = calibrate_camera(obj, img, size, lens)
+        return {"out": out, "model": model, "tried": tried, "poses": poses,
+                "residuals": camera_residuals(obj, img, out, poses, dets.ids, VIEW),
+                "rms_px_per": {(k, VIEW): float(e) for k, e in zip(poses, out[7].ravel())}}
+
+    t = time.perf_counter()
+    log("calibrate the camera (OpenCV calibrateCamera) …")
+    try:
+        result, used_detections, outliers = trust.fit_without_outliers(
+            fit, lambda r: r["rms_px_per"], detections)
+    except CalibrationError as exc:
+        raise CLIError(f"{where}: {exc}") from None
+    timings["calibrate"] = time.perf_counter() - t
+    camera, sigmas = _camera(result, size)
+    report = _report(args, board, names, size, detections, used_detections, result, outliers,
+                     camera, sigmas, lens_problem(result["out"], result["model"], size))
+    report["timings_s"] = timings
+    log("write the calibration, report and figures …")
+    with output.staged() as tmp:
+        write_camera_files(tmp, camera, report)
+        report_lib.residual_figure(tmp, used_detections, {VIEW: result["residuals"]}, size,
+                                   views=("camera",))
+        trust.coverage_figure(tmp, detections, set(result["poses"]), size,
+                              {"coverage": {"camera": report["coverage"]}}, views=("camera",))
+        report = report_lib.write_report(tmp, report, markdown, start)
+    return report, summary_lines(report)
+
+
+def _camera(result, size):
+    """The :class:`measure.Camera` of a fit and its σ per intrinsic."""
+    from measure import Camera
+    from measure.calibration import INTRINSIC_NAMES, LENS_MODELS
+
+    out, model = result["out"], result["model"]
+    n_dist = LENS_MODELS[model][1]
+    camera = Camera(out[1], size, dist=out[2].ravel()[:max(n_dist, 5)])
+    sigmas = dict(zip(INTRINSIC_NAMES[:4 + n_dist], (float(s) for s in out[5].ravel())))
+    return camera, sigmas
+
+
+def _report(args, board, names, size, detections, used, result, outliers, camera, sigmas,
+            problem) -> dict:
+    used_poses = result["poses"]
+    rms = float(result["out"][0])
+    rows = []
+    for k, name in enumerate(names):
+        n = int(len(detections.ids[k][VIEW]))
+        if not n:
+            status = "board not found"
+        elif k in outliers["left_out"]:
+            status = (f"left out: outlier (first fit RMS "
+                      f"{outliers['first_fit_rms_px'][f'{k}:left']:.3f} px > "
+                      f"{outliers['threshold_px']:.3f} px)")
+        else:
+            status = "used"
+        rows.append({"pose": k, "name": name, "corners": n, "status": status,
+                     "rms_px": result["rms_px_per"].get((k, VIEW)) if status == "used" else None})
+    coverage = trust.coverage(used, size)["left"]
+    estimates = trust.camera_estimates(camera, sigmas)
+    failures = []
+    if problem:
+        failures.append(f"the {result['model']} lens model cannot be used: {problem} (try --lens "
+                        f"standard, or photograph the board near the image's edges and corners)")
+    for key in ("fx", "fy"):
+        e = estimates[key]
+        if e["sigma"] is not None and e["sigma"] > abs(e["estimate"]):
+            failures.append(f"the σ of {key} ({e['sigma']:.3g}) exceeds its value "
+                            f"({e['estimate']:.4g}): the photos do not determine it")
+    warnings = []
+    if len(used_poses) < trust.RECOMMENDED_POSES:
+        warnings.append(f"only {len(used_poses)} photo(s) used; at least "
+                        f"{trust.RECOMMENDED_POSES} are recommended")
+    if coverage["fraction"] < trust.MIN_COVERAGE:
+        warnings.append(f"the corners cover {100 * coverage['fraction']:.0f} % of the image "
+                        f"({trust.COVERAGE_CELLS}×{trust.COVERAGE_CELLS} cells): the lens "
+                        f"distortion is extrapolated outside them")
+    if outliers["left_out"]:
+        warnings.append(f"{len(outliers['left_out'])} outlier photo(s) left out of the final "
+                        f"fit: {', '.join(names[k] for k in outliers['left_out'])}")
+    return {"photos": os.path.abspath(args.dir), "source": "photos", "air": True,
+            "cameras": 1, "board": board.to_dict(), "image_size": list(size),
+            "poses": len(names), "found": len(detections.found(VIEW)), "used": len(used_poses),
+            "outlier_rule": trust.OUTLIER_RULE, "outliers": outliers, "per_pose": rows,
+            "coverage": coverage, "lens_model": {"model": result["model"],
+                                                 "rms_px": result["tried"], "problem": problem},
+            "rms_px": rms, "camera": estimates,
+            "worst_corners": trust.worst_corners({"camera": result["residuals"]}, names),
+            "warnings": warnings, "failures": failures}
+
+
+def write_camera_files(directory, camera, report) -> None:
+    """``camera.yaml``, ``calibmar.yaml`` and ``cameras.txt`` of one camera (module docs)."""
+    import cv2
+
+    from synth.calib_formats import write_single_camera
+
+    if True:  # the output folder is staged whole: its files appear together or not at all
+        fs = cv2.FileStorage(os.path.join(directory, "camera.yaml"), cv2.FILE_STORAGE_WRITE)
+        try:
+            fs.write("image_width", int(camera.size[0]))
+            fs.write("image_height", int(camera.size[1]))
+            fs.write("camera_matrix", camera.K)
+            dist = np.zeros(5) if camera.dist is None else camera.dist
+            fs.write("distortion_coefficients", np.asarray(dist, np.float64).reshape(1, -1))
+            fs.write("lens_model", report["lens_model"]["model"])
+            fs.write("rms_px", float(report["rms_px"]))
+            fs.startWriteStruct("sigmas", cv2.FileNode_MAP)
+            for key, value in report["camera"].items():
+                if value["sigma"] is not None:
+                    fs.write(key, float(value["sigma"]))
+            fs.endWriteStruct()
+            fs.write("units", "px (OpenCV pixels: the centre of the top-left pixel is 0, 0)")
+        finally:
+            fs.release()
+    write_single_camera(directory, camera)
+
+
+def markdown(report: dict) -> str:
+    b = report["board"]
+    lines = [f"# Camera calibration report: `{report['photos']}`", "",
+             f"{report['poses']} photos ({report['image_size'][0]}x{report['image_size'][1]} px) "
+             f"of one camera, in air, a {b['kind']} of {b['squares'][0]}x{b['squares'][1]} "
+             f"squares ({b['squares'][0] - 1}x{b['squares'][1] - 1} inner corners), "
+             f"{b['square_mm']:g} mm; board found in {report['found']}, {report['used']} in the "
+             f"final fit. No truth: every number below comes from the photos.", ""]
+    if report["failures"]:
+        lines += ["## Verdict: failed (exit code 1)", ""] + [f"- {w}" for w in
+                                                             report["failures"]] + [""]
+    if report["warnings"]:
+        lines += ["## Warnings", ""] + [f"- {w}" for w in report["warnings"]] + [""]
+    m = report["lens_model"]
+    lines += ["## Camera (OpenCV)", "",
+              f"Reprojection RMS {report['rms_px']:.4f} px; lens model {m['model']} ("
+              + ", ".join(f"{k} {v:.4f} px" for k, v in m["rms_px"].items())
+              + f"; {trust.LENS_RULE}). σ: OpenCV's `calibrateCameraExtended` standard "
+              f"deviations.", "", "| parameter | value | σ |", "|---|---|---|"]
+    lines += [f"| {k} | {v['estimate']:.6g} | {_f(v['sigma'], 3)} |"
+              for k, v in report["camera"].items()]
+    lines += ["", "## Photos", "", f"Outlier rule: {report['outlier_rule']} (threshold here "
+              f"{report['outliers']['threshold_px']:.3f} px).", "",
+              "| photo | corners | RMS (px) | status |", "|---|---|---|---|"]
+    lines += [f"| {p['name']} | {p['corners']} | {_f(p['rms_px'])} | {p['status']} |"
+              for p in report["per_pose"]]
+    lines += ["", f"Corners cover {100 * report['coverage']['fraction']:.0f} % of the image "
+              f"({trust.COVERAGE_CELLS}×{trust.COVERAGE_CELLS} cells; `coverage.png`).", "",
+              "## Worst corners", "", "| photo | corner id | residual (px) |", "|---|---|---|"]
+    lines += [f"| {c['pose']} | {c['id']} | {c['residual_px']:.3f} |"
+              for c in report["worst_corners"]]
+    lines += ["", "## Files", "", "- `camera.yaml` (OpenCV FileStorage), `calibmar.yaml` "
+              "(calibmar, no port), `cameras.txt` (COLMAP)",
+              "- `coverage.png`, `residuals.png` (residual vectors per photo)", "",
+              "## Timings (s)", "",
+              " · ".join(f"{k} {v:.2f}" for k, v in report["timings_s"].items())]
+    return "\n".join(lines) + "\n"
+
+
+def summary_lines(report: dict) -> str:
+    b, c = report["board"], report["camera"]
+    not_found = [p["name"] for p in report["per_pose"] if p["status"] == "board not found"]
+    lines = [f"{report['photos']}: one camera; board found in {report['found']}/"
+             f"{report['poses']} photos; {report['used']} used"
+             + (f", not found in {', '.join(not_found)}" if not_found else ""),
+             f"board: {b['kind']} of {b['squares'][0]}x{b['squares'][1]} squares "
+             f"({b['squares'][0] - 1}x{b['squares'][1] - 1} inner corners, OpenCV's pattern "
+             f"size), {b['square_mm']:g} mm",
+             f"lens model: {report['lens_model']['model']} (--lens; the report lists the RMS of "
+             f"each model tried)",
+             f"camera: fx {c['fx']['estimate']:.3f} ± {_f(c['fx']['sigma'], 2)}, fy "
+             f"{c['fy']['estimate']:.3f} ± {_f(c['fy']['sigma'], 2)}, cx "
+             f"{c['cx']['estimate']:.3f} ± {_f(c['cx']['sigma'], 2)}, cy "
+             f"{c['cy']['estimate']:.3f} ± {_f(c['cy']['sigma'], 2)} px; RMS "
+             f"{report['rms_px']:.4f} px",
+             f"corners cover {100 * report['coverage']['fraction']:.0f} % of the image"]
+    lines += [f"warning: {w}" for w in report["warnings"]]
+    return "\n".join(lines)
+
+
+__all__ = ["calibrate_single", "markdown", "single_camera_folder", "summary_lines",
+           "write_camera_files"]
