@@ -75,3 +75,45 @@ def test_folder_problems_are_named(tmp_path):
 def _only_left(root):
     (root / "left").mkdir(parents=True)
     return root
+
+
+def test_photo_files_as_they_come(tmp_path):
+    """One grey picture stored as a 24-bit BMP, a grey and a colour PNG, a 16-bit TIFF and a
+    JPEG whose EXIF orientation says 'turned by 180°': every one reads as the same linear grey
+    picture, the JPEG turned as cv2.imread's defaults turn it."""
+    from PIL import Image
+
+    from eval.core.photos import exif_orientation, srgb_to_linear
+
+    rng = np.random.default_rng(5)
+    grey = np.kron(rng.integers(20, 236, (6, 8)), np.ones((8, 8))).astype(np.uint8)
+    cv2.imwrite(str(tmp_path / "bgr.bmp"), cv2.merge([grey] * 3))
+    cv2.imwrite(str(tmp_path / "grey.png"), grey)
+    cv2.imwrite(str(tmp_path / "colour.png"), cv2.merge([grey] * 3))
+    cv2.imwrite(str(tmp_path / "deep.tif"), grey.astype(np.uint16) * 257)
+    stored = Image.fromarray(grey[::-1, ::-1].copy())  # the sensor's pixels, upside down
+    exif = stored.getexif()
+    exif[0x0112] = 3
+    stored.save(tmp_path / "turned.jpg", exif=exif.tobytes(), quality=100, subsampling=0)
+    expected = srgb_to_linear(grey / 255.0)
+    for name in ("bgr.bmp", "grey.png", "colour.png"):
+        np.testing.assert_allclose(read_photo(tmp_path / name), expected, atol=1e-6)
+    np.testing.assert_allclose(read_photo(tmp_path / "deep.tif"), grey / 255.0, atol=1e-6)
+    assert exif_orientation(tmp_path / "turned.jpg") == 3
+    turned = read_photo(tmp_path / "turned.jpg")
+    assert turned.shape == grey.shape
+    assert np.abs(turned - expected).max() < 0.05  # JPEG, turned back upright
+
+
+def test_one_cameras_photos_share_one_orientation(tmp_path):
+    from PIL import Image
+
+    from eval.core.photos import photo_files
+
+    for k, tag in enumerate((1, 1, 6)):
+        image = Image.fromarray(np.full((16, 24), 100, np.uint8))
+        exif = image.getexif()
+        exif[0x0112] = tag
+        image.save(tmp_path / f"{k}.jpg", exif=exif.tobytes())
+    with pytest.raises(PhotoError, match=r"2\.jpg: EXIF orientation 6, but the other photos"):
+        photo_files(tmp_path)
