@@ -3,7 +3,7 @@
 Measures (best of ``--repeat`` runs, wall clock):
 
 * on ``--points`` points behind the paper's port: ``triangulate`` with each method and
-  ``measure.projection.project`` with the Fermat and the Snell solver (points per second);
+  ``measure.geometry.projection.project`` with the Fermat and the Snell solver (points per second);
 * for every batch size of ``--sizes`` (default 10^3 … 10^6; 10^7 on request) and both ports —
   the paper's air–glass–water and a bare air–water interface: ``project`` (Fermat), ``project``
   with ``jacobian=True`` (d pixel / d point) and with ``parameters=True`` (also the port and
@@ -124,7 +124,7 @@ def run_bench(n_points: int, n_reference: int, repeat: int, seed: int, progress=
     """Run the measurements; returns a dict of seconds and points per second."""
     from eval.core.fermat_reference import fermat_pixel_scipy
     from measure import StereoRig, triangulate
-    from measure.projection import project
+    from measure.geometry.projection import project
     from synth.layouts import random_volume
     from synth.rig import paper_rig
 

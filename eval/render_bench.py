@@ -134,7 +134,7 @@ def measure_accuracy(spec, spp_list, variant, log, adaptive: bool = False):
     from eval.run.inputs import RunInputs
     from eval.run.pipeline import crosscheck_stage
     from measure import detect_targets
-    from measure.detect import FLOOR_FRACTION
+    from measure.images.detect import FLOOR_FRACTION
     from synth.render import render_stereo
 
     rows = []

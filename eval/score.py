@@ -47,7 +47,7 @@ COMMAND = "eval score"
 
 
 def add_parser(subparsers):
-    from measure.triangulate import METHODS
+    from measure.stereo.triangulate import METHODS
 
     p = subparsers.add_parser(
         "score", help="score an external reconstruction against a rendered dataset",
@@ -179,7 +179,7 @@ def score_covariances(data, arrays, label, uv, pixel_sigma) -> dict:
     the associated points (into ``arrays["covariance"]``) from ``pixel_sigma`` (``auto``: the
     reprojection residuals; no detections here) and the covariance of the dataset's
     ``calib.yaml``, if it holds one; their σ and coverage against the truth. Only the
-    optical-path points get covariances (:mod:`measure.uncertainty`)."""
+    optical-path points get covariances (:mod:`measure.stereo.uncertainty`)."""
     from synth.dataset import read_calib
 
     from eval.core.uncertainty import (method_covariances, pair_sigmas, rig_covariance_note,

@@ -2,7 +2,7 @@
 cameras behind its port (or in air), written as a folder anyone can calibrate from.
 
 The board is a Mitsuba ``rectangle`` whose ``area`` emitter's radiance is a ``bitmap`` texture
-of the pattern OpenCV draws (:meth:`measure.board.Board.pattern`, nearest-texel lookup, linear
+of the pattern OpenCV draws (:meth:`measure.calibration.board.Board.pattern`, nearest-texel lookup, linear
 values 0 and 1), so its corners are exactly where OpenCV's model of the board says they are.
 One Mitsuba scene is built per folder; each pose only moves the board (``mi.traverse``).
 
@@ -36,9 +36,9 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from measure import StereoRig
-from measure.board import PATTERN_TEXELS_PER_SQUARE, Board, BoardError
-from measure.port import index_matched_port
-from measure.projection import project
+from measure.calibration.board import PATTERN_TEXELS_PER_SQUARE, Board, BoardError
+from measure.geometry.port import index_matched_port
+from measure.geometry.projection import project
 
 from synth.dataset import (DatasetError, adaptive_settings, check_files, manifest_digest,
                            read_calib, write_calib)

@@ -25,12 +25,13 @@ Both come from Kiel's refractive tools (docs/formats.md has the sources, file an
 Conventions of both: COLMAP pixels — the centre of the top-left pixel is (0.5, 0.5), so
 ``cx, cy`` are OpenCV's + 0.5 (calibmar adds 0.5 to OpenCV's corners:
 ``src/calibmar/extractors/chessboard_extractor.cpp`` lines 61–63); the port normal in each
-camera's own frame and its distance from that camera (:mod:`measure.flatport_format`); lengths
+camera's own frame and its distance from that camera (:mod:`measure.geometry.flatport_format`); lengths
 in metres (calibmar: the unit of the target, "expected in meters"). This project keeps one flat
 port for both cameras, so the two cameras' FLATPORTs must agree (:data:`PORT_TOLERANCE`); a
-rig of two domes (:class:`measure.dome.DomePair`) is one DOMEPORT per camera, each camera's
-own (:func:`measure.flatport_format.to_domeport`); both cameras must have the same housing; a rig with a
-skewed K, zero or several port layers cannot be written and raises :class:`CalibFormatError`.
+rig of two domes (:class:`measure.geometry.dome.DomePair`) is one DOMEPORT per camera, each camera's
+own (:func:`measure.geometry.flatport_format.to_domeport`); both cameras must have the same
+housing; a rig with a skewed K, zero or several port layers cannot be written and raises
+:class:`CalibFormatError`.
 Camera models read: SIMPLE_PINHOLE, PINHOLE, SIMPLE_RADIAL, RADIAL, OPENCV, FULL_OPENCV (their
 distortion is OpenCV's); written: OPENCV, or FULL_OPENCV when k3 (or k4–k6) is not zero.
 """
@@ -45,8 +46,8 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from measure import Camera, FlatPort, StereoRig
-from measure.dome import DomePair
-from measure.flatport_format import (DOMEPORT_NAMES, FLATPORT_NAMES, METRES_PER_MM,
+from measure.geometry.dome import DomePair
+from measure.geometry.flatport_format import (DOMEPORT_NAMES, FLATPORT_NAMES, METRES_PER_MM,
                                      from_domeport, from_flatport, to_domeport, to_flatport)
 
 from synth.fileio import atomic_write_text

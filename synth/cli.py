@@ -162,8 +162,8 @@ class WaterIndex(float):
 def water_index_argument(text: str) -> float:
     """An argparse type: a water index, as a number (``1.339``) or from the water's temperature
     and salinity, ``T=12,S=35[,wavelength=550]`` (°C, PSU, nm; Quan & Fry 1995,
-    :mod:`measure.water_index`). Returns a :class:`WaterIndex` whose ``note`` says how."""
-    from measure.water_index import WaterIndexError, parse_water_index
+    :mod:`measure.calibration.water_index`). Returns a :class:`WaterIndex` whose ``note`` says how."""
+    from measure.calibration.water_index import WaterIndexError, parse_water_index
 
     try:
         value, note = parse_water_index(text)
@@ -256,7 +256,7 @@ DEFAULT_BOARD = {"board": "chessboard", "squares": "11x8", "square_mm": 40.0}
 def add_board_options(parser, defaults: bool = True, needed: str = "") -> None:
     """The board of ``synth boards`` and ``eval calibrate``: ``--board chessboard|charuco
     --squares COLSxROWS --square-mm S [--marker-mm M --dictionary NAME]`` (:func:`board_from_args`
-    builds the :class:`measure.board.Board`). With ``defaults`` False nothing has a default
+    builds the :class:`measure.calibration.board.Board`). With ``defaults`` False nothing has a default
     (``needed`` says when they are required)."""
     def default(name):
         return DEFAULT_BOARD[name] if defaults else None
@@ -278,9 +278,9 @@ def add_board_options(parser, defaults: bool = True, needed: str = "") -> None:
 
 
 def board_from_args(args):
-    """The :class:`measure.board.Board` of :func:`add_board_options`' options; CLIError names
+    """The :class:`measure.calibration.board.Board` of :func:`add_board_options`' options; CLIError names
     what does not make a board."""
-    from measure.board import CHARUCO_DICTIONARY, Board, BoardError
+    from measure.calibration.board import CHARUCO_DICTIONARY, Board, BoardError
 
     kind = args.board or DEFAULT_BOARD["board"]
     try:

@@ -11,7 +11,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from measure import Camera
-from measure.detect import FLOOR_FRACTION
+from measure.images.detect import FLOOR_FRACTION
 
 #: Pixels between a detection and the simulator's pixel of a target for them to be associated.
 ASSOCIATION_GATE_PX = 2.0
@@ -91,7 +91,7 @@ def check_dataset(path, rms_px: float = CHECK_RMS_PX, max_px: float = CHECK_MAX_
     (mean offset detected − simulated, (du, dv)); overall ``rms_px``, ``max_px``; the bounds and
     ``passed``.
     """
-    from measure.detect import detect_targets
+    from measure.images.detect import detect_targets
 
     from synth.dataset import read_dataset
 

@@ -4,7 +4,7 @@ benchmarking dense matching.
 A surface (plane or cylinder) carries a band-limited speckle texture defined in surface
 coordinates (mm). Each view is rendered by tracing every pixel's refracted ray
 (``Camera.rays`` → :func:`measure.trace_through_port`, or
-:func:`measure.dome.trace_through_dome` for a dome) to the surface and evaluating the
+:func:`measure.geometry.dome.trace_through_dome` for a dome) to the surface and evaluating the
 texture there, averaging ``supersample²`` sub-pixel rays per pixel (a box pixel footprint).
 No Mitsuba: the images are exact up to the texture interpolation and the supersampling.
 
@@ -19,7 +19,7 @@ import numpy as np
 from scipy import ndimage
 
 from measure import Camera, FlatPort, trace_through_port
-from measure.dome import DomePort, trace_through_dome
+from measure.geometry.dome import DomePort, trace_through_dome
 
 
 @dataclass(frozen=True)
@@ -154,6 +154,6 @@ def render_view(camera: Camera, port: FlatPort | DomePort, surface, texture: Spe
 
 def render_pair(rig, surface, texture, supersample: int = 4):
     """Left and right images of ``surface`` through ``rig.port`` (each camera's dome for a
-    :class:`measure.dome.DomePair`)."""
+    :class:`measure.geometry.dome.DomePair`)."""
     return (render_view(rig.left, rig.port_of(0), surface, texture, supersample),
             render_view(rig.right, rig.port_of(1), surface, texture, supersample))

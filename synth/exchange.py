@@ -28,7 +28,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from measure import StereoRig
-from measure.flatport_format import METRES_PER_MM
+from measure.geometry.flatport_format import METRES_PER_MM
 
 from synth.calib_formats import (COLMAP_PIXEL_OFFSET, CalibFormatError, stereo_extrinsics,
                                  write_colmap)
@@ -242,7 +242,7 @@ def write_surface_formats(directory: str, rig: StereoRig) -> dict:
     ``directory``; returns what the manifest records (the depth PNG scale, the files)."""
     import cv2
 
-    from measure.projection import project
+    from measure.geometry.projection import project
 
     from synth.truth_maps import TRUTH_FILES
 

@@ -377,7 +377,7 @@ def _check_value(key: str, value, label: str):
             bad("a number > 0 (mm)")
         return value
     if key == "squares":
-        from measure.board import Board, BoardError
+        from measure.calibration.board import Board, BoardError
 
         try:
             cols, rows = (int(v) for v in str(value).lower().split("x"))
@@ -479,7 +479,7 @@ def _render_boards(task: dict, scene: str, started: float) -> dict:
     import tempfile
     import time
 
-    from measure.board import Board
+    from measure.calibration.board import Board
 
     from synth.boards import DEFAULT_POSES, DEFAULT_SPP, write_boards
     from synth.scene import load_scene

@@ -173,7 +173,7 @@ def back_facing_fraction(tracer, camera, port) -> float:
     """The fraction of a coarse grid of ``camera``'s pixels that meet the surface whose first
     hit is the *back* of a triangle (the side its winding turns away; Mitsuba's diffuse and
     area-light surfaces are one-sided, so the back renders black). 0 if no pixel meets it."""
-    from measure.refraction import trace_through_port
+    from measure.geometry.refraction import trace_through_port
 
     from synth.truth_maps import pixel_grid
 
@@ -191,7 +191,7 @@ def back_facing_fraction(tracer, camera, port) -> float:
 def dot_pixels(points, left, port, dot_mm: float) -> np.ndarray:
     """About how many pixels of the left image a speckle dot spans at each surface point
     ``(M, 3)`` (its width along x, px)."""
-    from measure.projection import project
+    from measure.geometry.projection import project
 
     shifted = points + [dot_mm, 0.0, 0.0]
     return np.linalg.norm(project(left, port, shifted) - project(left, port, points), axis=1)

@@ -2,7 +2,7 @@
 
 For every pixel centre of a view (OpenCV convention), the ray of the *model* — the camera's ray
 (:meth:`measure.Camera.rays`, lens distortion removed exactly) traced through the port
-(:func:`measure.refraction.trace_through_port`, float64) — is intersected with the scene's
+(:func:`measure.geometry.refraction.trace_through_port`, float64) — is intersected with the scene's
 triangle mesh. Mitsuba's ``ray_intersect_preliminary`` finds the first triangle hit (float32);
 the intersection is then recomputed in float64 against that triangle's plane, so every truth
 point lies on its pixel's float64 ray (its Fermat projection returns to the pixel centre to
@@ -29,8 +29,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from measure import Camera, FlatPort
-from measure.projection import project
-from measure.refraction import trace_through_port
+from measure.geometry.projection import project
+from measure.geometry.refraction import trace_through_port
 
 #: A point seen by the other camera is the first hit of that camera's ray within this, mm
 #: (float32 hit search, float64 refinement: agreement is ~1e-9 mm; occluders are mm away).

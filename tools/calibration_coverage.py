@@ -94,7 +94,7 @@ def coverage(errors, sigmas, names=PARAMETERS) -> dict:
 
 def air_errors(calib_path, truth_path) -> tuple:
     """The in-air calibration's error (estimate − truth) in its covariance's names and that
-    covariance (``measure.calibration_covariance.AIR_NAMES`` order)."""
+    covariance (``measure.calibration.covariance.AIR_NAMES`` order)."""
     from scipy.spatial.transform import Rotation
 
     from synth.dataset import read_calib

@@ -1,4 +1,4 @@
-"""Benchmark :func:`measure.dense.match_dense` on a full-size analytic pair (numbers for the
+"""Benchmark :func:`measure.dense.match.match_dense` on a full-size analytic pair (numbers for the
 report; nothing asserted).
 
 The paper's rig (2448 x 2048 px, f = 1100 px) behind the paper's port looks at a speckled plane
@@ -31,9 +31,9 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from measure import triangulate
-from measure.dense import match_dense
-from measure.projection import project
-from measure.uncertainty import dense_point_covariances
+from measure.dense.match import match_dense
+from measure.geometry.projection import project
+from measure.stereo.uncertainty import dense_point_covariances
 from synth.dense_pairs import PlaneSurface, SpeckleTexture, render_pair, surface_points
 from synth.rig import PAPER_FOCAL_PX, PAPER_IMAGE_SIZE, paper_rig
 

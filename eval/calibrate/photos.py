@@ -72,7 +72,7 @@ def outlier_poses(rms_per: dict) -> tuple[float, list[int]]:
 
 def without(detections, poses):
     """``detections`` with the board of ``poses`` removed (both views; pose numbers kept)."""
-    from measure.calibration import Detections
+    from measure.calibration.air import Detections
 
     drop = set(poses)
     empty = (np.empty(0, int), np.empty((0, 2)))
@@ -93,7 +93,7 @@ def fit_without_outliers(fit, rms_of, detections):
     if not bad:
         return first, detections, info
     kept = without(detections, bad)
-    from measure.calibration import CalibrationError
+    from measure.calibration.air import CalibrationError
 
     try:
         return fit(kept), kept, info
@@ -286,10 +286,10 @@ def per_pose_table(names, detections_all, detections_used, rms_per, outliers, ge
 
 def _small_left(images) -> list:
     """The left images of ``images`` as the detector sees them (uint8, halved to at most
-    :data:`measure.board.DETECTION_WIDTH_PX` wide)."""
+    :data:`measure.calibration.board.DETECTION_WIDTH_PX` wide)."""
     import cv2
 
-    from measure.board import DETECTION_WIDTH_PX, to_uint8
+    from measure.calibration.board import DETECTION_WIDTH_PX, to_uint8
 
     smalls = []
     for left, _ in images:

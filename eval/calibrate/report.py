@@ -159,7 +159,7 @@ def dome_summary(housing, truth, start_rig) -> dict:
     """Every estimated dome parameter beside the truth, with its error in σ: each camera's
     decentring (its dome centre relative to the camera centre, in the camera's frame, mm) and
     the water index."""
-    from measure.calibration import dome_offset
+    from measure.calibration.dome import dome_offset
 
     out = _adjustment_summary(housing)
     out["uncertainty"] = housing.uncertainty
@@ -225,11 +225,11 @@ def in_air_changes(housing, start_rig) -> dict:
 def write_calibration(path, rig, has_port: bool, housing, report, single: bool = False,
                       covariance=None) -> None:
     """``calib.yaml`` and ``flatport.txt`` into directory ``path``; with ``single`` just the
-    calib file at ``path``. ``covariance`` (:class:`measure.rig_covariance.RigCovariance`; the
+    calib file at ``path``. ``covariance`` (:class:`measure.calibration.rig_covariance.RigCovariance`; the
     housing's own when ``housing`` is given) becomes the file's ``covariance`` node and an
     ``uncertainty`` map: every named parameter's σ (``names``, ``sigmas``), what the σ covers
     (``includes``) and, underwater, the housing's σ conditional on the in-air calibration."""
-    from measure.flatport_format import flatport_text
+    from measure.geometry.flatport_format import flatport_text
     from synth.dataset import write_calib
     from synth.fileio import atomic_write_text
 

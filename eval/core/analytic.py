@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from measure import StereoRig, triangulate
-from measure.projection import project
+from measure.geometry.projection import project
 from synth.crosscheck import wholly_in_image
 
 

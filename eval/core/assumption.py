@@ -19,7 +19,7 @@ from __future__ import annotations
 import numpy as np
 
 from measure import Camera, FlatPort, StereoRig
-from measure.dome import DomePair
+from measure.geometry.dome import DomePair
 
 ASSUMABLE = ("n_water", "n_glass", "port_distance", "glass_thickness", "port_normal", "focal",
              "left_focal", "right_focal", "left_dist", "right_dist")
@@ -28,7 +28,7 @@ _PORT_NAMES = ("n_water", "n_glass", "port_distance", "glass_thickness", "port_n
 
 def _water_index(item, text: str):
     """``(array, note)`` of an ``n_water`` value given as ``T=…,S=…[,wavelength=…]``."""
-    from measure.water_index import WaterIndexError, parse_water_index
+    from measure.calibration.water_index import WaterIndexError, parse_water_index
 
     try:
         value, note = parse_water_index(text)
@@ -40,7 +40,7 @@ def _water_index(item, text: str):
 def parse_assumptions(items, notes: list | None = None) -> dict:
     """``["name=value", …]`` → ``{name: numpy array}``; ValueError naming a bad item.
     ``n_water`` also takes the water's temperature and salinity, ``n_water=T=12,S=35[,
-    wavelength=550]`` (Quan & Fry 1995, :mod:`measure.water_index`); the sentence saying which
+    wavelength=550]`` (Quan & Fry 1995, :mod:`measure.calibration.water_index`); the sentence saying which
     index that gave is appended to ``notes`` (when given), to be shown to the user once."""
     out = {}
     for item in items or ():

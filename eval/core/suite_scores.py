@@ -80,7 +80,7 @@ def find_submission(directory: str, render: str, method: str) -> tuple[str, str]
 
 def _depth_points(path: str, data) -> np.ndarray:
     """``(H, W, 3)`` mm: each left pixel's refracted ray at the submitted depth along z."""
-    from measure.refraction import trace_through_port
+    from measure.geometry.refraction import trace_through_port
 
     from synth.exchange import read_pfm
 
@@ -183,7 +183,7 @@ def _score_surface(data, kind: str, path: str) -> dict:
         scores = score_surface(SurfaceCase(vertices, triangles, measured, truth.points,
                                            truth.overlap, data.rig.port.normal))
         return {**{k: scores.get(k) for k in SURFACE_METRICS}, "scores": scores}
-    from measure.projection import project
+    from measure.geometry.projection import project
 
     from eval.core.scoring import plausibility, read_points
 

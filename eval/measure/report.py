@@ -162,7 +162,7 @@ def uncertainty_report(inputs, options, results, pairs) -> dict:
     each pair's ``methods.<m>.sigma`` is filled in ``pairs``. Nothing for a dense run (no
     covariance per pixel yet)."""
     from eval.core.uncertainty import rig_covariance_note
-    from measure.uncertainty import sigma_summary
+    from measure.stereo.uncertainty import sigma_summary
 
     if not hasattr(options, "pixel_sigma"):
         return {"note": "dense: no covariance per pixel (not implemented)"}

@@ -292,13 +292,13 @@ def run_index_in_situ(rig: StereoRig, trials: int, seed: int,
 
     Truth ``n_water · (1 + index_relative)``, the measurement assumes ``n_water``; each trial
     draws Gaussian pixel noise (``numpy.random.default_rng([seed, 1])``: its own stream of the
-    one seed), estimates the index with :func:`measure.selfcal.self_calibrate` and measures
+    one seed), estimates the index with :func:`measure.calibration.selfcal.self_calibrate` and measures
     again. Also the profile of the reprojection RMS against the assumed index (trial 0's pixels,
     every point at its reprojection optimum) for the figure."""
     from tqdm import tqdm
 
-    from measure.reprojection import reprojection_points
-    from measure.selfcal import self_calibrate
+    from measure.stereo.reprojection import reprojection_points
+    from measure.calibration.selfcal import self_calibrate
 
     truth = paper_plane(z)
     true_port = deviate_port(rig.port, "n_water", index_relative)

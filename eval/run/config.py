@@ -128,7 +128,7 @@ def split_names(text: str) -> tuple:
 
 def parse_self_calibration(text: str) -> tuple:
     """``--self-calibrate`` (comma list) as a tuple of port parameters."""
-    from measure.selfcal import PARAMETERS
+    from measure.calibration.selfcal import PARAMETERS
 
     names = split_names(text)
     unknown = [n for n in names if n not in PARAMETERS]

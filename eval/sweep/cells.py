@@ -178,7 +178,7 @@ def analytic_cell(cell: dict, scene_path: str) -> dict:
 
 
 def _self_calibration(truth, believed, uv_left, uv_right, names, cell, targets) -> dict:
-    from measure.selfcal import self_calibrate
+    from measure.calibration.selfcal import self_calibrate
 
     from eval.core.analytic import triangulation_errors
     from eval.core.results import ErrorStats

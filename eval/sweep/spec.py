@@ -262,7 +262,7 @@ def _check_value(key: str, value, label: str):
             bad("true or false")
         return value
     if key == "self_calibrate":
-        from measure.selfcal import PARAMETERS
+        from measure.calibration.selfcal import PARAMETERS
 
         if value is True:
             return "n_water"

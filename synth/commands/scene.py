@@ -406,8 +406,8 @@ def _check_visible(left, right, port, targets, radius: float, layout: str) -> No
     """CLIError unless some target lies wholly inside both images (in front of the cameras)."""
     import numpy as np
 
-    from measure.dome import DomePair
-    from measure.projection import project
+    from measure.geometry.dome import DomePair
+    from measure.geometry.projection import project
 
     from synth.crosscheck import wholly_in_image
 

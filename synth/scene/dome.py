@@ -8,7 +8,7 @@ with ``dielectric`` BSDFs: ``dome_<camera>_inner`` (radius ``R``) and ``dome_<ca
 (``ext_ior``) is on the normal side, so with no ``flip_normals``: inner sphere ``int_ior`` = the
 air's index, ``ext_ior`` = the glass's; outer sphere ``int_ior`` = the glass's, ``ext_ior`` =
 ``$n_water``. Inside the inner sphere is air, between the spheres glass, outside water (checked
-against :func:`measure.dome.trace_through_dome` with Mitsuba's own ``ray_intersect`` and BSDF
+against :func:`measure.geometry.dome.trace_through_dome` with Mitsuba's own ``ray_intersect`` and BSDF
 sampling in ``tests/synth/test_scene_dome.py``).
 """
 
@@ -17,7 +17,7 @@ from __future__ import annotations
 import numpy as np
 
 from measure import StereoRig
-from measure.dome import DomePair, DomePort, trace_through_dome
+from measure.geometry.dome import DomePair, DomePort, trace_through_dome
 
 #: Defaults of ``synth scene --port dome``: inner radius and glass thickness, mm. With the
 #: paper's 200 mm baseline the two outer spheres (58 mm) leave 84 mm between them, and no ray of
@@ -50,7 +50,7 @@ def check_field_of_view(rig: StereoRig, step_px: int = FOV_CHECK_STEP_PX) -> Non
     and misses the other camera's dome.
 
     The rays of a grid of pixels (every ``step_px`` and the image border) are traced through
-    the camera's dome (:func:`measure.dome.trace_through_dome`); each must reach the water (no
+    the camera's dome (:func:`measure.geometry.dome.trace_through_dome`); each must reach the water (no
     total internal reflection) and its water ray must not meet the other dome's outer sphere.
     The two domes must not overlap.
     """

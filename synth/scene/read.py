@@ -19,7 +19,7 @@ import re
 import numpy as np
 
 from measure import Camera, FlatPort, StereoRig
-from measure.port import index_matched_port
+from measure.geometry.port import index_matched_port
 from synth.scene.dome import check_field_of_view, facing_cameras, pair_from_spheres
 from synth.scene.model import (SPECKLE_ID, SURFACE_ID, TARGET_ID_PREFIX, SceneError, SceneSpec,
                                SceneSurface)

@@ -13,8 +13,8 @@ from scipy.spatial.transform import Rotation
 
 from eval.__main__ import main as eval_main
 from measure import FlatPort
-from measure.board import Board
-from measure.projection import project
+from measure.calibration.board import Board
+from measure.geometry.projection import project
 from synth.__main__ import main as synth_main
 from synth.boards import read_boards, write_boards
 from synth.dataset import read_calib
@@ -107,7 +107,7 @@ def test_calibrate_chain_from_images(boards, tmp_path, capsys):
     assert report["detection"]["both"]["rms_px"] < 0.05
     assert abs(report["in_air"]["baseline_mm"]["error"]) < 1.0
     # the in-air calib.yaml carries the full covariance of the intrinsics and the stereo pose
-    from measure.calibration_covariance import AIR_NAMES
+    from measure.calibration.covariance import AIR_NAMES
     air_cov = read_calib(tmp_path / "air" / "calib.yaml")["covariance"]
     assert air_cov.names == AIR_NAMES
     assert report["in_air"]["baseline_sigma_mm"] > 0

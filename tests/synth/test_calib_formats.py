@@ -11,8 +11,8 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from measure import Camera, FlatPort, StereoRig
-from measure.dome import DomePair, DomePort
-from measure.flatport_format import to_domeport, to_flatport
+from measure.geometry.dome import DomePair, DomePort
+from measure.geometry.flatport_format import to_domeport, to_flatport
 from synth.calib_formats import (CALIBMAR_NAME, COLMAP_CAMERAS_NAME, COLMAP_RIG_NAME,
                                  CalibFormatError, calib_format, colmap_camera, write_calibmar,
                                  write_calibration_formats, write_colmap)

@@ -14,7 +14,7 @@ from synth.crosscheck import check_dataset
 from synth.__main__ import main
 from synth.dataset import (PIXELS_HEADER, read_dataset, read_manifest, stereo_extrinsics,
                            write_dataset)
-from measure.projection import project
+from measure.geometry.projection import project
 from synth.scene import load_scene
 
 from tests.conftest import SMALL_SCENE_SIZE as SMALL

@@ -10,8 +10,8 @@ import os
 import numpy as np
 import pytest
 
-from measure.board import Board
-from measure.projection import project
+from measure.calibration.board import Board
+from measure.geometry.projection import project
 from synth.__main__ import main as synth_main
 from synth.boards import read_boards, write_boards
 from synth.dataset import read_calib, read_dataset

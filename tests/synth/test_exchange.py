@@ -17,8 +17,8 @@ import numpy as np
 import pytest
 
 from measure import Camera, FlatPort, StereoRig
-from measure.flatport_format import to_flatport
-from measure.projection import project
+from measure.geometry.flatport_format import to_flatport
+from measure.geometry.projection import project
 from synth.exchange import (cameras_json, read_flo, read_pfm, write_colmap_model, write_flo,
                             write_pfm)
 from synth.rig import paper_rig

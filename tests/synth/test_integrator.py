@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 
 from measure import Camera
-from measure.detect import detect_targets
-from measure.eccentricity import outline_centroid_offsets
-from measure.projection import project
+from measure.images.detect import detect_targets
+from measure.images.eccentricity import outline_centroid_offsets
+from measure.geometry.projection import project
 from synth.crosscheck import associate_detections
 from synth.layouts import grid_plane
 from synth.render import load_mitsuba_scene, render_view

@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 
 from measure import FlatPort
-from measure.detect import detect_targets
-from measure.projection import project
+from measure.images.detect import detect_targets
+from measure.geometry.projection import project
 from synth import layouts
 from synth.crosscheck import associate_detections
 from synth.render import develop_image, load_mitsuba_scene, render_view

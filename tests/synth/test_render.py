@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 
 from measure import Camera
-from measure.detect import detect_targets
+from measure.images.detect import detect_targets
 from synth.layouts import grid_plane
-from measure.projection import project
+from measure.geometry.projection import project
 from synth.render import png16_scale, render_stereo, srgb_preview, to_png16
 from synth.rig import paper_cameras
 from synth.scene import load_scene, write_scene

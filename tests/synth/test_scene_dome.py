@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from measure import StereoRig
-from measure.dome import DomePair, trace_through_dome
+from measure.geometry.dome import DomePair, trace_through_dome
 from synth.layouts import paper_plane
 from synth.rig import paper_cameras
 from synth.scene import SceneError, load_scene, write_scene
@@ -52,7 +52,7 @@ def test_round_trip_gives_a_rig_with_the_same_domes(tmp_path):
 def test_mitsuba_traces_the_domes_like_measure(tmp_path, offset):
     """Rays from each camera centre, followed by Mitsuba's ``ray_intersect`` and the dielectric
     BSDF's transmission: air inside, glass between the spheres, water outside — the same water
-    rays as measure.dome.trace_through_dome (float32 precision)."""
+    rays as measure.geometry.dome.trace_through_dome (float32 precision)."""
     from synth.mitsuba_setup import import_mitsuba
 
     mi, _ = import_mitsuba()

@@ -13,7 +13,7 @@ import cv2
 import numpy as np
 import pytest
 
-from measure.projection import project
+from measure.geometry.projection import project
 from synth import speckle, surfaces
 from synth.__main__ import main as synth_main
 from synth.dataset import read_dataset, write_dataset

@@ -10,8 +10,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from measure.detect import detect_targets
-from measure.projection import solve_paths
+from measure.images.detect import detect_targets
+from measure.geometry.projection import solve_paths
 from synth.crosscheck import associate_detections
 from synth.layouts import grid_plane
 from synth.render import develop_image, load_mitsuba_scene, render_view

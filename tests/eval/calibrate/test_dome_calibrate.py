@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from eval.__main__ import main as eval_main
-from measure.board import Board
+from measure.calibration.board import Board
 from synth.boards import write_boards
 from synth.dataset import read_calib
 from synth.rig import paper_cameras

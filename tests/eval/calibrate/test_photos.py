@@ -16,7 +16,7 @@ from scipy.spatial.transform import Rotation
 
 from eval.__main__ import main as eval_main
 from eval.calibrate.photos import outlier_poses, outlier_threshold
-from measure.board import Board
+from measure.calibration.board import Board
 from synth.boards import board_rig, sample_poses
 from synth.photos import to_photo
 from synth.rig import paper_cameras

@@ -11,7 +11,7 @@ import pytest
 from eval.cli import build_parser
 from eval.core.assumption import parse_assumptions
 from eval.run.config import RunConfig
-from measure.water_index import water_index
+from measure.calibration.water_index import water_index
 from synth.cli import WaterIndex, water_index_argument
 from synth.commands import main as synth_main
 

@@ -10,8 +10,8 @@ import pytest
 from eval.cli import CLIError
 from eval.core.uncertainty import (AUTO, COLUMNS, TRUTH_COLUMNS, pair_sigmas, parse_pixel_sigma,
                                    rig_covariance_note, write_uncertainty_files)
-from measure.projection import project
-from measure.uncertainty import point_covariances
+from measure.geometry.projection import project
+from measure.stereo.uncertainty import point_covariances
 from synth.cloudfile import ply_layout, read_cloud_points
 from synth.layouts import paper_plane
 from synth.rig import paper_rig

@@ -94,7 +94,7 @@ def test_one_pair_measures_the_targets_and_eval_score_reads_the_cloud(photos, ca
 def test_point_covariances_with_and_without_the_calibrations_covariance(photos, capsys):
     """A calibration without covariance is accepted (the points carry the pixel-noise part and
     the report says so); with one, σ grows; the files hold one row per point."""
-    from measure.rig_covariance import RigCovariance
+    from measure.calibration.rig_covariance import RigCovariance
     from synth.dataset import read_calib
 
     root = photos
@@ -215,7 +215,7 @@ def test_an_in_air_calibration_is_said(tmp_path, capsys):
     photos would otherwise come out at the wrong depth with exit 0). The photos: 20 Gaussian
     targets on a plane at 1 m drawn where the in-air rig projects them (no render)."""
     from measure import StereoRig
-    from measure.projection import project
+    from measure.geometry.projection import project
     from synth.rig import air_port
 
     size = (320, 268)
@@ -247,7 +247,7 @@ def user(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     from measure import StereoRig
 
-    from measure.rig_covariance import RigCovariance
+    from measure.calibration.rig_covariance import RigCovariance
 
     for name, size, focal in (("calib.yaml", (320, 268), 150.0),
                               ("big.yaml", (2448, 2048), 1100.0)):
@@ -314,7 +314,7 @@ def test_a_dome_calibration_is_one_error_line_where_it_cannot_apply(tmp_path):
     from eval.measure.inputs import read_calibration
     from eval.run.inputs import budget_rigs, measurement_calibration
     from measure import StereoRig
-    from measure.dome import DomePair, DomePort
+    from measure.geometry.dome import DomePair, DomePort
     from synth.calib_formats import write_calibmar
 
     left, right = paper_cameras()
@@ -332,14 +332,14 @@ def test_a_dome_calibration_is_one_error_line_where_it_cannot_apply(tmp_path):
 def test_dense_measures_a_plane_through_decentred_domes(tmp_path):
     """eval measure --dense with a DOMEPORT calibration (calibmar's YAML): a speckle plane 1 m
     away rendered analytically through two decentred domes (synth.dense_pairs, as
-    tests/measure/test_dome_stereo.py), written as 16-bit PNG photos. Measured (2026-12-02):
+    tests/measure/stereo/test_dome_stereo.py), written as 16-bit PNG photos. Measured (2026-12-02):
     74,340 of the 85,760 pixels matched, the plane fit 999.996 mm away, RMS 0.291 mm (a pixel
     spans 3.5 mm there); the pinhole baseline, searching where it sees the surface (592–1094
     mm, eval.run.dense.pinhole_depth_range), matched 20,785 pixels with a plane fit RMS of
     10.3 mm (behind centred domes it matches as many as the optical path, RMS 0.30 mm: the
     pinhole model is exact there)."""
     from measure import StereoRig
-    from measure.dome import DomePair, DomePort
+    from measure.geometry.dome import DomePair, DomePort
     from synth.calib_formats import write_calibmar
     from synth.dense_pairs import PlaneSurface, SpeckleTexture, render_pair
     from synth.rig import paper_rig

@@ -1,0 +1,2 @@
+"""Stereo: the rig and its triangulators, target matching, reprojection refinement, the
+covariance of every triangulated point."""
