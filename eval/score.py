@@ -35,7 +35,7 @@ import sys
 import time
 
 from eval.cli import CLIError, positive_float
-from synth.cli import add_json_option, add_out_option, add_progress_option
+from synth.infra.cli import add_json_option, add_out_option, add_progress_option
 from eval.core.formatting import format_number as fmt
 from eval.core.uncertainty import AUTO, add_pixel_sigma_option, parse_pixel_sigma
 from eval.core.scoring import (PIXEL_COLUMNS, UNITS, read_pixel_pairs, read_points,
@@ -81,8 +81,8 @@ def add_parser(subparsers):
 
 def main(args) -> int:
     from measure import triangulate
-    from synth.dataset import DatasetError, read_dataset
-    from synth.fileio import OutputDir, atomic_write_json, atomic_write_text, jsonable
+    from synth.products.dataset import DatasetError, read_dataset
+    from synth.infra.fileio import OutputDir, atomic_write_json, atomic_write_text, jsonable
 
     from eval.core.cloud_metrics import write_error_ply
     from eval.core.figures import ellipses_figure, error_maps_figure, histograms_figure
@@ -180,7 +180,7 @@ def score_covariances(data, arrays, label, uv, pixel_sigma) -> dict:
     reprojection residuals; no detections here) and the covariance of the dataset's
     ``calib.yaml``, if it holds one; their σ and coverage against the truth. Only the
     optical-path points get covariances (:mod:`measure.stereo.uncertainty`)."""
-    from synth.dataset import read_calib
+    from synth.products.dataset import read_calib
 
     from eval.core.uncertainty import (method_covariances, pair_sigmas, rig_covariance_note,
                                        uncertainty_summary)
@@ -203,7 +203,7 @@ def score_covariances(data, arrays, label, uv, pixel_sigma) -> dict:
 def score_suite_main(args, output, method, log, start) -> int:
     """``--submission DIR``: every dataset of the suite ``args.dataset`` scored; the summary
     files into ``--out``; exit 1 when a dataset is missing or failed."""
-    from synth.fileio import atomic_write_json, jsonable
+    from synth.infra.fileio import atomic_write_json, jsonable
 
     from eval.core.suite_scores import FAILURES, score_suite, write_summary
 

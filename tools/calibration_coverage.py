@@ -97,7 +97,7 @@ def air_errors(calib_path, truth_path) -> tuple:
     covariance (``measure.calibration.covariance.AIR_NAMES`` order)."""
     from scipy.spatial.transform import Rotation
 
-    from synth.dataset import read_calib
+    from synth.products.dataset import read_calib
 
     calib, truth = read_calib(calib_path), read_calib(truth_path)["rig"]
     errors = []

@@ -26,7 +26,7 @@ import time
 
 from eval.cli import CLIError, positive_float
 from eval.core.photos import add_encoding_option
-from synth.cli import (BOARD_OPTIONS, WATER_INDEX_HELP, add_board_options, add_out_option,
+from synth.infra.cli import (BOARD_OPTIONS, WATER_INDEX_HELP, add_board_options, add_out_option,
                        add_progress_option, board_from_args, given, refuse_given,
                        water_index_argument)
 
@@ -45,7 +45,7 @@ def add_parser(subparsers):
     from measure.calibration.dome import DOME_PARAMETERS
     from measure.calibration.flat import HOUSING_PARAMETERS
     from measure.calibration.housing import DEFAULT_DOME_FREE, DEFAULT_FREE, DEFAULT_UNCERTAINTY, UNCERTAINTY
-    from synth.rig import PAPER_GLASS_THICKNESS_MM, PAPER_INDICES, PAPER_PORT_DISTANCE_MM
+    from synth.scene.rig import PAPER_GLASS_THICKNESS_MM, PAPER_INDICES, PAPER_PORT_DISTANCE_MM
 
     p = subparsers.add_parser(
         "calibrate", help="calibrate from board images (in air, or the housing underwater)",
@@ -104,7 +104,7 @@ def add_parser(subparsers):
 def _write_report(directory, report: dict, markdown, start: float) -> dict:
     """``report.json`` and ``report.md`` (``markdown(report)``) into ``directory``, with the total
     time since ``start``; returns the report as written (JSON types)."""
-    from synth.fileio import atomic_write_json, atomic_write_text, jsonable
+    from synth.infra.fileio import atomic_write_json, atomic_write_text, jsonable
 
     report["timings_s"]["total"] = time.perf_counter() - start
     report = jsonable(report)
@@ -213,8 +213,8 @@ def _in_air(path, log):
     ``--intrinsics``: a boards folder (calibrated here) or a calibration file (its covariance
     node, when it has one)."""
     from measure.calibration.air import calibrate_in_air, detect_boards
-    from synth.boards import read_boards
-    from synth.dataset import read_calib
+    from synth.products.boards import read_boards
+    from synth.products.dataset import read_calib
 
     if os.path.isdir(path):
         boards = read_boards(path)
@@ -234,8 +234,8 @@ def main(args) -> int:
     from measure import StereoRig
     from measure.calibration.air import CalibrationError, calibrate_in_air, detect_boards
     from measure.calibration.housing import calibrate_housing
-    from synth.boards import read_boards
-    from synth.fileio import OutputDir
+    from synth.products.boards import read_boards
+    from synth.infra.fileio import OutputDir
 
     from eval.calibrate import report as report_lib
 

@@ -230,8 +230,8 @@ def write_calibration(path, rig, has_port: bool, housing, report, single: bool =
     ``uncertainty`` map: every named parameter's σ (``names``, ``sigmas``), what the σ covers
     (``includes``) and, underwater, the housing's σ conditional on the in-air calibration."""
     from measure.geometry.flatport_format import flatport_text
-    from synth.dataset import write_calib
-    from synth.fileio import atomic_write_text
+    from synth.products.dataset import write_calib
+    from synth.infra.fileio import atomic_write_text
 
     if housing is not None:
         covariance = housing.covariance
@@ -260,10 +260,10 @@ def write_calibration(path, rig, has_port: bool, housing, report, single: bool =
 def write_other_formats(directory, rig, has_port: bool) -> list[str]:
     """The calibration in the formats of other tools, into ``directory``: calibmar's stereo
     pair (``calibmar.yaml``, ``calibmar_stereo.yaml``) and the refractive COLMAP fork's
-    ``cameras.txt`` with ``rig_config.json`` (:func:`synth.calib_formats.write_calibration_formats`;
+    ``cameras.txt`` with ``rig_config.json`` (:func:`synth.formats.calib_formats.write_calibration_formats`;
     the COLMAP file's header says that upstream COLMAP and pycolmap drop the port). Returns
     the names written."""
-    from synth.calib_formats import write_calibration_formats
+    from synth.formats.calib_formats import write_calibration_formats
 
     return [os.path.basename(p) for p in write_calibration_formats(directory, rig, has_port)]
 

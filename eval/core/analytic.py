@@ -12,7 +12,7 @@ import numpy as np
 
 from measure import StereoRig, triangulate
 from measure.geometry.projection import project
-from synth.crosscheck import wholly_in_image
+from synth.products.crosscheck import wholly_in_image
 
 
 def project_pair(rig: StereoRig, points: np.ndarray, port=None):

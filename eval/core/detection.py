@@ -12,7 +12,7 @@ import argparse
 
 import numpy as np
 
-from synth.cli import finite_float
+from synth.infra.cli import finite_float
 
 #: argparse type of --max-elongation and --max-area-ratio (a blob's axis or area ratio).
 ABOVE_ONE = finite_float(1.0, strict=True, description="finite (> 1)")

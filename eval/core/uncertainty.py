@@ -14,10 +14,10 @@ import os
 
 import numpy as np
 
-from synth.cli import CLIError
+from synth.infra.cli import CLIError
 from measure.stereo.uncertainty import (coverage_summary, detection_sigma, mahalanobis_squared,
                                  point_covariances, residual_sigma, sigma_summary)
-from synth.fileio import atomic_write_bytes, atomic_write_text
+from synth.infra.fileio import atomic_write_bytes, atomic_write_text
 
 #: ``--pixel-sigma``'s default: each detection's σ from the detector (SNR and size) plus what
 #: the reprojection residuals show beyond it (:func:`measure.stereo.uncertainty.residual_sigma`).

@@ -13,7 +13,7 @@ from pathlib import Path
 
 from eval.paper.settings import COMPONENTS, INDEX_METHODS, INDEX_SIDES, NOISE_METHODS, PAPER_REFERENCE
 from eval.core.results import jsonable, method_label
-from synth.fileio import atomic_write_text
+from synth.infra.fileio import atomic_write_text
 
 
 def _distance_key(z: float) -> str:

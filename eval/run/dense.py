@@ -111,7 +111,7 @@ def develop(config: RunConfig, left, right, seed):
 def surface_inputs(config: RunConfig, log):
     """``(spec, measured rig, its covariance or None, left, right, truth maps of the left view,
     provenance)``."""
-    from synth.truth_maps import MeshTracer, read_truth_maps, truth_maps
+    from synth.products.truth_maps import MeshTracer, read_truth_maps, truth_maps
 
     from eval.run.inputs import load_run_scene, measurement_calibration, read_run_dataset
 
@@ -127,7 +127,7 @@ def surface_inputs(config: RunConfig, log):
         return spec, rig, rig_covariance, data.left, data.right, truth, {
             "from": os.path.abspath(config.from_dir), "variant": data.manifest.get("variant"),
             "spp": data.manifest.get("spp"), "timings": {}}
-    from synth.render import render_stereo
+    from synth.rendering.render import render_stereo
 
     log(f"render both views ({spec.size[0]}x{spec.size[1]} px, {config.spp or spec.spp} spp) …")
     left, right, info = render_stereo(spec, spp=config.spp, variant=config.variant,
@@ -373,7 +373,7 @@ def _progress(config: RunConfig, method):
 
 def write_outputs(tmp: str, report: dict, arrays: dict) -> None:
     """Figures and coloured point clouds of a surface run into ``tmp`` (entries in the report)."""
-    from synth.fileio import atomic_write_bytes
+    from synth.infra.fileio import atomic_write_bytes
 
     from eval.run import dense_figures as figures
     from eval.run.figures import views_pair
@@ -479,8 +479,8 @@ def main(config: RunConfig, out: str, print_json: bool, log) -> int:
     (whole or not at all); ``print_json``: also print report.json to stdout."""
     import json
 
-    from synth.fileio import OutputDir, atomic_write_json, atomic_write_text, jsonable
-    from synth.provenance import package_versions
+    from synth.infra.fileio import OutputDir, atomic_write_json, atomic_write_text, jsonable
+    from synth.infra.provenance import package_versions
 
     from eval.core.surface_metrics import surface_table
 

@@ -70,7 +70,7 @@ def dataset_params(from_dir: str, defines: dict) -> dict:
     rendered (the manifest's ``spp`` and ``seed``; datasets before format 3 recorded the
     scene's defaults among the parameters); a conflicting ``-D`` is an error naming both
     values."""
-    from synth.dataset import read_manifest
+    from synth.products.dataset import read_manifest
 
     manifest = read_manifest(from_dir)
     params = {str(k): str(v) for k, v in manifest["scene"]["params"].items()}
@@ -90,7 +90,7 @@ def measurement_calibration(config: RunConfig, spec):
     (:class:`measure.calibration.rig_covariance.RigCovariance`; None without ``--calib`` or when the file
     holds none). The file is read once; a singular or malformed covariance is refused by
     ``read_calib`` with one line naming the file."""
-    from synth.dataset import read_calib
+    from synth.products.dataset import read_calib
 
     from eval.core.assumption import assumed_rig
 
@@ -132,7 +132,7 @@ def load_run_scene(config: RunConfig):
 
 def read_run_dataset(config: RunConfig, spec):
     """The ``--from`` dataset, refused when it was rendered from another scene than ``spec``."""
-    from synth.dataset import read_dataset
+    from synth.products.dataset import read_dataset
 
     data = read_dataset(config.from_dir)
     if data.manifest["scene"].get("sha256") != spec.sha256:
@@ -158,7 +158,7 @@ def read_run_dataset(config: RunConfig, spec):
 def budget_rigs(config: RunConfig, true_rig, measured_rig) -> dict:
     """``{label: rig}`` of the error budget: the exact calibration (when the measurement's rig
     differs from the truth) and every ``--compare-calib`` file."""
-    from synth.dataset import read_calib
+    from synth.products.dataset import read_calib
 
     from eval.core.assumption import rig_difference
 
@@ -217,7 +217,7 @@ def load_inputs(config: RunConfig, log) -> RunInputs:
                          spp=int(data.manifest.get("spp", 0)), render_seconds=0.0,
                          extra={"from": os.path.abspath(config.from_dir),
                                 "from_seed": data.manifest.get("seed")}, **scene_part)
-    from synth.render import render_stereo, render_summary
+    from synth.rendering.render import render_stereo, render_summary
 
     log(f"render both views ({spec.size[0]}x{spec.size[1]} px, {config.spp or spec.spp} spp, "
         f"{'full film' if config.full_film else 'adaptive'}) …")
@@ -246,7 +246,7 @@ def expose_views(left, right, sensor, seed):
     sensor."""
     if sensor is None:
         return left, right, None
-    from synth.sensor_model import sensor_views, to_radiance
+    from synth.rendering.sensor_model import sensor_views, to_radiance
 
     codes_left, codes_right, sensor_info = sensor_views(left, right, sensor, seed)
     left, right = (to_radiance(codes, sensor, sensor_info["electrons_per_unit"])

@@ -20,8 +20,8 @@ from measure.images.detect import (FLOOR_FRACTION, MERGE_AREA_RATIO as DEFAULT_M
                             MERGE_ELONGATION as DEFAULT_MAX_ELONGATION)
 from measure.images.eccentricity import correct_eccentricity, outline_centroid_offsets
 from measure.stereo.matching import match_targets
-from synth.crosscheck import ASSOCIATION_GATE_PX, associate_detections, distance_stats
-from synth.noise import add_pixel_noise
+from synth.products.crosscheck import ASSOCIATION_GATE_PX, associate_detections, distance_stats
+from synth.rendering.noise import add_pixel_noise
 
 from eval.core.detection import detect_view
 from eval.core.cloud_metrics import cloud_distances, flatness, rigid_alignment

@@ -9,7 +9,7 @@ with ``dielectric`` BSDFs: ``dome_<camera>_inner`` (radius ``R``) and ``dome_<ca
 air's index, ``ext_ior`` = the glass's; outer sphere ``int_ior`` = the glass's, ``ext_ior`` =
 ``$n_water``. Inside the inner sphere is air, between the spheres glass, outside water (checked
 against :func:`measure.geometry.dome.trace_through_dome` with Mitsuba's own ``ray_intersect`` and BSDF
-sampling in ``tests/synth/test_scene_dome.py``).
+sampling in ``tests/synth/scene/test_scene_dome.py``).
 """
 
 from __future__ import annotations

@@ -30,7 +30,7 @@ from synth.scene.model import (DEFAULT_MAX_DEPTH, DEFAULT_SEED, DEFAULT_SPP, SPE
                                SURFACE_ID, TARGET_ID_PREFIX, SurfaceFiles)
 from synth.scene.dome import (check_field_of_view, check_targets, dome_placements,
                               facing_cameras)
-from synth.sensor import sensor_parameters
+from synth.rendering.sensor import sensor_parameters
 
 #: Half side (mm) of the square port interfaces: covers both fields of view far beyond 2 m.
 INTERFACE_HALF_SIZE_MM = 2000.0
@@ -129,7 +129,7 @@ def scene_xml(cameras, port: FlatPort | None, targets, target_radius: float, *,
     camera: :mod:`synth.scene.dome`) or None for an all-air scene; ``targets`` ``(N, 3)`` mm,
     reference frame, all in the water; ``target_radius`` mm. When all targets share one ``z``,
     it becomes the ``target_z`` default. ``comment`` goes into an XML comment (for people only).
-    ``water`` (a :class:`synth.water.Water`, needs a port): the water behind the port becomes a
+    ``water`` (a :class:`synth.rendering.water.Water`, needs a port): the water behind the port becomes a
     homogeneous participating medium (defaults ``water_c`` per metre, ``water_albedo``,
     ``water_g``) and the integrator ``volpath``.
     ``target_normals`` ``(N, 3)``: the direction each disk faces (default: all face the cameras,

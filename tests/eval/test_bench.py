@@ -4,7 +4,7 @@ import numpy as np
 
 from eval.cli import main
 from eval.core.fermat_reference import fermat_pixel_scipy
-from synth.layouts import paper_plane
+from synth.scene.layouts import paper_plane
 from measure.geometry.projection import project
 
 

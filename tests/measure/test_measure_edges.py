@@ -9,7 +9,7 @@ import pytest
 from measure import Camera, FlatPort, Reason, StereoRig, triangulate
 from measure.stereo.matching import match_targets
 from measure.geometry.projection import project
-from synth.rig import paper_rig
+from synth.scene.rig import paper_rig
 
 METHODS = ("optical_path", "su", "regular", "reprojection")
 

@@ -11,9 +11,9 @@ import pytest
 
 from eval.__main__ import main as eval_main
 from measure.calibration.board import Board
-from synth.boards import write_boards
-from synth.dataset import read_calib
-from synth.rig import paper_cameras
+from synth.products.boards import write_boards
+from synth.products.dataset import read_calib
+from synth.scene.rig import paper_cameras
 from synth.scene import load_scene, write_scene
 from synth.scene.dome import dome_pair
 

@@ -20,8 +20,8 @@ import pytest
 
 from eval.cli import main as eval_main
 from synth.__main__ import main as synth_main
-from synth.dataset import write_calib, write_dataset
-from synth.rig import paper_cameras, paper_port
+from synth.products.dataset import write_calib, write_dataset
+from synth.scene.rig import paper_cameras, paper_port
 
 SPP = 16
 COLUMNS = ["pair", "method", "x_mm", "y_mm", "z_mm", "gap_mm", "u_left", "v_left", "u_right",
@@ -95,7 +95,7 @@ def test_point_covariances_with_and_without_the_calibrations_covariance(photos, 
     """A calibration without covariance is accepted (the points carry the pixel-noise part and
     the report says so); with one, σ grows; the files hold one row per point."""
     from measure.calibration.rig_covariance import RigCovariance
-    from synth.dataset import read_calib
+    from synth.products.dataset import read_calib
 
     root = photos
     rig = read_calib(root / "ds" / "calib.yaml")["rig"]
@@ -216,7 +216,7 @@ def test_an_in_air_calibration_is_said(tmp_path, capsys):
     targets on a plane at 1 m drawn where the in-air rig projects them (no render)."""
     from measure import StereoRig
     from measure.geometry.projection import project
-    from synth.rig import air_port
+    from synth.scene.rig import air_port
 
     size = (320, 268)
     rig = StereoRig(*paper_cameras(size, 150.0), air_port())
@@ -305,7 +305,7 @@ def test_bad_inputs_exit_2_with_one_line_and_write_nothing(user, capsys, argv, f
 
 
 def test_a_dome_calibration_is_one_error_line_where_it_cannot_apply(tmp_path):
-    """A DOMEPORT calibration reads (synth.calib_formats) and eval measure takes it (targets
+    """A DOMEPORT calibration reads (synth.formats.calib_formats) and eval measure takes it (targets
     and --dense); eval run on a flat-port scene refuses it: one CLIError naming the file, no
     traceback."""
     from types import SimpleNamespace
@@ -315,7 +315,7 @@ def test_a_dome_calibration_is_one_error_line_where_it_cannot_apply(tmp_path):
     from eval.run.inputs import budget_rigs, measurement_calibration
     from measure import StereoRig
     from measure.geometry.dome import DomePair, DomePort
-    from synth.calib_formats import write_calibmar
+    from synth.formats.calib_formats import write_calibmar
 
     left, right = paper_cameras()
     pair = DomePair(DomePort(left.center, 50.0, 8.0, (1.0, 1.49, 1.33)),
@@ -331,7 +331,7 @@ def test_a_dome_calibration_is_one_error_line_where_it_cannot_apply(tmp_path):
 
 def test_dense_measures_a_plane_through_decentred_domes(tmp_path):
     """eval measure --dense with a DOMEPORT calibration (calibmar's YAML): a speckle plane 1 m
-    away rendered analytically through two decentred domes (synth.dense_pairs, as
+    away rendered analytically through two decentred domes (synth.products.dense_pairs, as
     tests/measure/stereo/test_dome_stereo.py), written as 16-bit PNG photos. Measured (2026-12-02):
     74,340 of the 85,760 pixels matched, the plane fit 999.996 mm away, RMS 0.291 mm (a pixel
     spans 3.5 mm there); the pinhole baseline, searching where it sees the surface (592–1094
@@ -340,9 +340,9 @@ def test_dense_measures_a_plane_through_decentred_domes(tmp_path):
     pinhole model is exact there)."""
     from measure import StereoRig
     from measure.geometry.dome import DomePair, DomePort
-    from synth.calib_formats import write_calibmar
-    from synth.dense_pairs import PlaneSurface, SpeckleTexture, render_pair
-    from synth.rig import paper_rig
+    from synth.formats.calib_formats import write_calibmar
+    from synth.products.dense_pairs import PlaneSurface, SpeckleTexture, render_pair
+    from synth.scene.rig import paper_rig
 
     base = paper_rig(size=(320, 268))
     indices = (1.0, 1.49, 1.33)

@@ -17,7 +17,7 @@ import pytest
 
 from eval.__main__ import main as eval_main
 from synth.__main__ import main as synth_main
-from synth.dataset import write_dataset
+from synth.products.dataset import write_dataset
 from tests.conftest import REPO
 
 SMALL = ("--size", "320", "268")
@@ -109,7 +109,7 @@ def test_dense_run_with_a_rig_covariance(plane_case, tmp_path):
     its ray), and the report names the calibration. The scene's own rig is exact, so this one
     calibration is a draw of zero error: σ overstates, and the report says so."""
     from measure.calibration.rig_covariance import RigCovariance
-    from synth.dataset import read_calib, write_calib
+    from synth.products.dataset import read_calib, write_calib
 
     root, scene, ds = plane_case
     calib = tmp_path / "with.yaml"
@@ -306,7 +306,7 @@ def test_the_pinhole_search_range_brackets_where_the_pinhole_model_sees_the_surf
     from measure.geometry.dome import DomePair, DomePort
     from measure.geometry.projection import project
     from measure.stereo.triangulate import triangulate
-    from synth.rig import paper_rig
+    from synth.scene.rig import paper_rig
 
     from eval.run.dense import PINHOLE_NEAR_MARGIN, pinhole_depth_range
 

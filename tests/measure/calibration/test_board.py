@@ -10,7 +10,7 @@ import pytest
 from measure.calibration.board import Board, BoardError, refine_saddle_points
 from measure.geometry.flatport_format import (flatport_text, from_flatport, parse_flatport_text,
                                      to_flatport)
-from synth.rig import paper_rig
+from synth.scene.rig import paper_rig
 
 
 def _pixel_of(board: Board, px_per_square: int, corners_mm):

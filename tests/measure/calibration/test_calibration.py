@@ -12,8 +12,8 @@ from measure.calibration.board import Board
 from measure.calibration.air import CalibrationError, Detections, calibrate_in_air
 from measure.calibration.housing import calibrate_housing
 from measure.geometry.projection import project
-from synth.boards import board_rig, sample_poses
-from synth.rig import paper_rig
+from synth.products.boards import board_rig, sample_poses
+from synth.scene.rig import paper_rig
 
 BOARD = Board("chessboard", (11, 8), 40.0)
 TILT = np.radians(1.0)

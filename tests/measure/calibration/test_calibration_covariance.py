@@ -16,8 +16,8 @@ from measure.calibration.covariance import (AIR_NAMES, intrinsics_jacobian, left
                                             stereo_to_rig)
 from measure.geometry.camera import Camera
 from measure.geometry.projection import project
-from synth.boards import board_rig, sample_poses
-from synth.rig import paper_cameras, paper_rig
+from synth.products.boards import board_rig, sample_poses
+from synth.scene.rig import paper_cameras, paper_rig
 
 BOARD = Board("chessboard", (7, 6), 60.0)
 SIZE, FOCAL = (480, 402), 225.0

@@ -13,8 +13,8 @@ from measure.calibration.air import CalibrationError, Detections
 from measure.calibration.dome import dome_offset, dome_problem
 from measure.calibration.housing import calibrate_housing
 from measure.geometry.projection import project
-from synth.boards import sample_poses
-from synth.rig import paper_cameras
+from synth.products.boards import sample_poses
+from synth.scene.rig import paper_cameras
 from synth.scene.dome import dome_pair
 
 INDICES = (1.0, 1.54, 1.33)

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from measure.calibration.rig_covariance import CovarianceError, RigCovariance
-from synth.dataset import DatasetError, read_calib, write_calib
-from synth.rig import paper_rig
+from synth.products.dataset import DatasetError, read_calib, write_calib
+from synth.scene.rig import paper_rig
 
 NAMES = ("left.fx", "left.cx", "right.center[0]", "port.distance", "port.tilt[0]", "port.tilt[1]")
 
@@ -65,7 +65,7 @@ def test_dome_names_round_trip_through_a_dome_calib_yaml(tmp_path):
     """Each dome's centre (reference frame, mm) and the domes' water index are names of the
     grammar; a dome rig's calib.yaml keeps them."""
     from measure import StereoRig
-    from synth.rig import paper_cameras
+    from synth.scene.rig import paper_cameras
     from synth.scene.dome import dome_pair
 
     names = ("left.fx", "right.rotation[1]", "left.dome_center[0]", "left.dome_center[2]",

@@ -7,8 +7,8 @@ import pytest
 
 from measure.geometry.projection import project
 from measure.calibration.selfcal import self_calibrate
-from synth.layouts import paper_plane
-from synth.rig import paper_rig
+from synth.scene.layouts import paper_plane
+from synth.scene.rig import paper_rig
 
 N_TRUE = 1.331995  # the paper's 0.15 % deviation from the assumed 1.33
 

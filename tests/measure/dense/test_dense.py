@@ -1,6 +1,6 @@
 """Dense matching through the flat port (measure.dense.match) on analytic speckle pairs.
 
-The pairs come from synth.dense_pairs: the paper's rig scaled to 320 x 268 px (f = 143.8 px,
+The pairs come from synth.products.dense_pairs: the paper's rig scaled to 320 x 268 px (f = 143.8 px,
 the same field of view), a speckle texture of ~2.5 px blobs on the surface, each pixel the mean
 of 4 x 4 refracted sub-pixel rays. The truth of a matched left pixel is the surface point of its
 centre ray and that point's exact (Fermat) projection into the right camera. At this image size
@@ -17,9 +17,9 @@ from measure import triangulate
 from measure.dense.match import match_dense
 from measure.dense.warp import PlaneWarp
 from measure.geometry.projection import project
-from synth.dense_pairs import (CylinderSurface, PlaneSurface, SpeckleTexture, render_pair,
+from synth.products.dense_pairs import (CylinderSurface, PlaneSurface, SpeckleTexture, render_pair,
                                surface_points)
-from synth.rig import paper_rig
+from synth.scene.rig import paper_rig
 
 SIZE = (320, 268)
 SPECKLE_MM = 13.0  # ~2.5 px at 1 m for f = 143.8 px (5.3 mm per px on the surface)

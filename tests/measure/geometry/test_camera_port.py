@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from measure import Camera, FlatPort, StereoRig
-from synth.rig import paper_intrinsics, paper_port
+from synth.scene.rig import paper_intrinsics, paper_port
 
 from tests.conftest import rotation
 

@@ -8,7 +8,7 @@ import pytest
 from measure import StereoRig
 from measure.geometry.dome import DomePair, DomePort, trace_through_dome
 from measure.geometry.flatport_format import from_domeport, to_domeport
-from synth.rig import paper_rig
+from synth.scene.rig import paper_rig
 
 INDICES = (1.0, 1.49, 1.33)
 

@@ -8,7 +8,7 @@ from hypothesis import strategies as st
 
 from measure import (Camera, FlatPort, Reason, StereoRig, intersect_plane, refract,
                      trace_through_port, triangulate)
-from synth.layouts import paper_plane
+from synth.scene.layouts import paper_plane
 from measure.geometry.projection import project, solve_paths
 
 from tests.conftest import rotation

@@ -21,7 +21,7 @@ from scipy.spatial.transform import Rotation
 from measure import Camera, Reason
 from measure.geometry.projection import ParameterJacobian, project, solve_paths
 from measure.calibration.selfcal import tilt_basis
-from synth.layouts import paper_plane
+from synth.scene.layouts import paper_plane
 
 from tests.measure.geometry.test_geometry import rigs_and_points
 

@@ -9,8 +9,8 @@ from measure import triangulate
 from measure.images.eccentricity import (correct_eccentricity, local_normals,
                                   outline_centroid_offsets)
 from measure.geometry.projection import project
-from synth.layouts import paper_plane
-from synth.rig import paper_rig
+from synth.scene.layouts import paper_plane
+from synth.scene.rig import paper_rig
 
 FACING = np.array([0.0, 0.0, -1.0])  # the paper's targets face the cameras
 

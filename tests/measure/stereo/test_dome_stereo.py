@@ -18,8 +18,8 @@ from measure.stereo.matching import match_targets
 from measure.geometry.projection import project
 from measure.stereo.reprojection import reprojection_points
 from measure.calibration.selfcal import self_calibrate
-from synth.dense_pairs import PlaneSurface, SpeckleTexture, render_pair, surface_points
-from synth.rig import paper_rig
+from synth.products.dense_pairs import PlaneSurface, SpeckleTexture, render_pair, surface_points
+from synth.scene.rig import paper_rig
 
 INDICES = (1.0, 1.49, 1.33)
 
@@ -147,7 +147,7 @@ def test_flat_port_calibrations_refuse_domes():
 
 def test_dense_matching_through_domes():
     """A speckled plane 1 m away rendered analytically through two decentred domes
-    (synth.dense_pairs) and matched densely (depths along the left optical axis), against the
+    (synth.products.dense_pairs) and matched densely (depths along the left optical axis), against the
     exact forward projection of each matched left pixel's surface point. The speckle is 17 mm
     (~2.4 px at 1 m: a dome does not magnify as a flat port does) on a texture wide enough for
     the dome's wider view. Measured (2026-12-02, the refinement's fourth-order derivative):

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from measure.stereo.matching import match_targets
-from synth.layouts import paper_plane
+from synth.scene.layouts import paper_plane
 from measure.geometry.projection import project
 
 

@@ -22,8 +22,8 @@ from measure.stereo.uncertainty import (CHI2_3_95, coverage_summary, dense_pixel
                                  detection_sigma, mahalanobis_squared, perturbed_rig,
                                  pixel_jacobians, point_covariance, point_covariances,
                                  point_covariances_full, residual_sigma, sigma_summary)
-from synth.layouts import paper_plane
-from synth.rig import paper_rig
+from synth.scene.layouts import paper_plane
+from synth.scene.rig import paper_rig
 
 SIGMA_PX = 0.1
 TRIALS = 200
@@ -283,7 +283,7 @@ DOME_NAMES = ("left.fx", "left.cy", "left.k1", "right.fx", "right.p2", "right.ro
 
 def _dome_rig():
     from measure import StereoRig
-    from synth.rig import paper_cameras
+    from synth.scene.rig import paper_cameras
     from synth.scene.dome import dome_pair
 
     cameras = paper_cameras()
