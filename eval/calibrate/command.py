@@ -4,7 +4,7 @@
 user's own photos (``DIR/left/``, ``DIR/right/``, paired by name; the board on the command line,
 ``--air`` or ``--intrinsics``; the report says what can be trusted without truth:
 :mod:`eval.calibrate.photos`). In air (``--air`` boards): OpenCV calibrates
-both cameras and the stereo pose (:func:`measure.calibration.housing.calibrate_in_air`). Underwater:
+both cameras and the stereo pose (:func:`measure.calibration.air.calibrate_in_air`). Underwater:
 the housing is estimated by refractive bundle adjustment with the in-air intrinsics fixed
 (:func:`measure.calibration.housing.calibrate_housing`); ``--intrinsics`` gives them, as an in-air boards
 folder (calibrated here first) or a ``calib.yaml``.
@@ -234,6 +234,7 @@ def main(args) -> int:
     from measure import StereoRig
     from measure.calibration.air import CalibrationError, calibrate_in_air, detect_boards
     from measure.calibration.housing import calibrate_housing
+    from measure.geometry.dome import DomePair
     from synth.products.boards import read_boards
     from synth.infra.fileio import OutputDir
 
@@ -259,7 +260,7 @@ def main(args) -> int:
                        f"(no left/ and right/ folders)")
     boards = read_boards(args.dir)
     truth = boards.calib["rig"]
-    dome = not boards.air and truth.is_dome
+    dome = not boards.air and isinstance(truth.port, DomePair)
     if dome:
         from measure.calibration.housing import DEFAULT_DOME_FREE
 

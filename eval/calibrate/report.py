@@ -229,6 +229,7 @@ def write_calibration(path, rig, has_port: bool, housing, report, single: bool =
     housing's own when ``housing`` is given) becomes the file's ``covariance`` node and an
     ``uncertainty`` map: every named parameter's σ (``names``, ``sigmas``), what the σ covers
     (``includes``) and, underwater, the housing's σ conditional on the in-air calibration."""
+    from measure.geometry.dome import DomePair
     from measure.geometry.flatport_format import flatport_text
     from synth.products.dataset import write_calib
     from synth.infra.fileio import atomic_write_text
@@ -250,7 +251,7 @@ def write_calibration(path, rig, has_port: bool, housing, report, single: bool =
         extra["calibration"] = {"rms_px": housing.rms_px, "poses": len(housing.poses)}
     target = path if single else os.path.join(path, "calib.yaml")
     write_calib(target, rig, has_port, extra or None, covariance=covariance)
-    if not single and has_port and not rig.is_dome:  # a dome rig: DOMEPORT in cameras.txt
+    if not single and has_port and not isinstance(rig.port, DomePair):  # a dome rig: DOMEPORT in cameras.txt
         atomic_write_text(os.path.join(path, "flatport.txt"),
                           flatport_text(rig.port, {"left": rig.left, "right": rig.right}))
     if not single:

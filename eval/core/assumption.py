@@ -85,7 +85,7 @@ def assumed_rig(truth: StereoRig, has_port: bool, assumptions: dict,
     if not has_port and any(name in assumptions for name in _PORT_NAMES):
         raise ValueError("--assume: the scene has no port (all air); port parameters cannot be "
                          "assumed")
-    if rig.is_dome:
+    if isinstance(rig.port, DomePair):
         return _assumed_dome_rig(rig, assumptions)
     left, right, port = rig.left, rig.right, rig.port
     indices, thicknesses = list(port.indices), list(port.thicknesses)
@@ -159,24 +159,12 @@ def _assumed_cameras(name: str, value, left: Camera, right: Camera):
     return left, right
 
 
-def _describe_dome(dome) -> dict:
-    return {"center_mm": dome.center.tolist(), "radius_mm": dome.radius,
-            "thickness_mm": dome.thickness, "indices": list(dome.indices)}
-
-
 def describe_rig(rig: StereoRig) -> dict:
     """The rig as plain numbers: per camera ``K``, ``dist``, ``R``, ``t_mm``; the port."""
     def camera(c: Camera):
         return {"K": c.K.tolist(), "dist": None if c.dist is None else c.dist.tolist(),
                 "R": c.R.tolist(), "t_mm": c.t.tolist()}
-    p = rig.port
-    if rig.is_dome:
-        return {"left": camera(rig.left), "right": camera(rig.right),
-                "port": {"kind": "dome", "left": _describe_dome(p.left),
-                         "right": _describe_dome(p.right)}}
-    return {"left": camera(rig.left), "right": camera(rig.right),
-            "port": {"normal": p.normal.tolist(), "distance_mm": p.distance,
-                     "thicknesses_mm": list(p.thicknesses), "indices": list(p.indices)}}
+    return {"left": camera(rig.left), "right": camera(rig.right), "port": rig.port.describe()}
 
 
 #: Differences at or below this (mm, px, rad, index units) are round-off — e.g. of a pose
@@ -190,44 +178,12 @@ def rig_difference(truth: StereoRig, assumed: StereoRig) -> dict:
     def differs(a, b) -> bool:
         return bool(np.max(np.abs(np.asarray(a, float) - np.asarray(b, float))) > ROUND_OFF)
 
-    if assumed.is_dome != truth.is_dome:
-        diff["port"] = {"truth": "dome" if truth.is_dome else "flat",
-                        "assumed": "dome" if assumed.is_dome else "flat"}
-    elif truth.is_dome:
-        for view in ("left", "right"):
-            a, b = getattr(assumed.port, view), getattr(truth.port, view)
-            if differs(a.center, b.center):
-                diff[f"{view}_dome_center_mm"] = (a.center - b.center).tolist()
-            if differs(a.radius, b.radius):
-                diff[f"{view}_dome_radius_mm"] = a.radius - b.radius
-            if differs(a.thickness, b.thickness):
-                diff[f"{view}_dome_thickness_mm"] = a.thickness - b.thickness
-            for k, (x, y) in enumerate(zip(a.indices, b.indices)):
-                if differs(x, y):
-                    diff[f"{view}_dome_index_{k}"] = x - y
+    if type(assumed.port) is not type(truth.port):
+        diff["port"] = {"truth": truth.port.kind, "assumed": assumed.port.kind}
     else:
-        _flat_port_difference(truth.port, assumed.port, differs, diff)
+        truth.port.difference(assumed.port, differs, diff)
     _camera_difference(truth, assumed, differs, diff)
     return diff
-
-
-def _flat_port_difference(truth, assumed, differs, diff) -> None:
-    """The flat ports' entries of :func:`rig_difference` (assumed − true), into ``diff``."""
-    if differs(assumed.distance, truth.distance):
-        diff["port_distance_mm"] = assumed.distance - truth.distance
-    if len(assumed.indices) == len(truth.indices):
-        for k, (a, b) in enumerate(zip(assumed.indices, truth.indices)):
-            if differs(a, b):
-                diff[f"index_{k}"] = a - b
-    else:
-        diff["indices"] = {"truth": list(truth.indices), "assumed": list(assumed.indices)}
-    if len(assumed.thicknesses) == len(truth.thicknesses):
-        for k, (a, b) in enumerate(zip(assumed.thicknesses, truth.thicknesses)):
-            if differs(a, b):
-                diff[f"thickness_{k}_mm"] = a - b
-    angle = float(np.degrees(np.arccos(np.clip(assumed.normal @ truth.normal, -1, 1))))
-    if differs(assumed.normal, truth.normal):
-        diff["port_normal_deg"] = angle
 
 
 def _camera_difference(truth: StereoRig, assumed: StereoRig, differs, diff) -> None:

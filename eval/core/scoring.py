@@ -211,7 +211,7 @@ def score_dataset(data, points: np.ndarray, label: str, gate_mm: float | None = 
     from eval.core.analytic import visible_targets
 
     radius = float(data.manifest["scene"].get("target_radius_mm", 0.0))
-    inside = [visible_targets(camera, data.rig.port_of(view), data.targets, radius)[1]
+    inside = [visible_targets(camera, data.rig.view_port(view), data.targets, radius)[1]
               for view, camera in enumerate((data.rig.left, data.rig.right))]
     visible_both = inside[0] & inside[1]
     seed = int(data.manifest.get("seed", 0))

@@ -40,6 +40,7 @@ from dataclasses import fields
 
 import numpy as np
 
+from measure.geometry.dome import DomePair
 from eval.cli import CLIError
 from eval.core.formatting import format_number as fmt
 from eval.run.config import COMMAND, RunConfig
@@ -154,7 +155,7 @@ def pinhole_depth_range(rig, depth_range) -> tuple[float, float]:
     matcher's depth planes must lie."""
     from measure.dense.match import glass_depth
 
-    if rig.is_dome:
+    if isinstance(rig.port, DomePair):
         near, far = _apparent_depths_through_domes(rig, depth_range)
     else:
         near, far = (rig.port.apparent_depth(d) for d in depth_range)

@@ -109,11 +109,9 @@ def measurement_calibration(config: RunConfig, spec):
 def _same_kind_of_port(what: str, calibrated, scene_rig) -> None:
     """CLIError unless a calibration's rig has the scene's kind of port (a dome pair for a dome
     scene, a flat port otherwise)."""
-    if calibrated.is_dome != scene_rig.is_dome:
-        kind = ("dome-port calibration (DOMEPORT)" if calibrated.is_dome
-                else "flat-port calibration")
-        raise CLIError(f"{what}: a {kind}, but the scene has "
-                       f"{'domes' if scene_rig.is_dome else 'a flat port'}")
+    if type(calibrated.port) is not type(scene_rig.port):
+        raise CLIError(f"{what}: a {calibrated.port.calibration_name}, but the scene has "
+                       f"{scene_rig.port.description}")
 
 
 def load_run_scene(config: RunConfig):
@@ -191,13 +189,13 @@ def load_inputs(config: RunConfig, log) -> RunInputs:
     if config.self_calibrate and not spec.has_port:
         raise CLIError(f"--self-calibrate does not apply to {config.scene}: it estimates the "
                        f"port's parameters, and the scene has no port (all air)")
-    if spec.rig.is_dome:
+    if not spec.rig.port.self_calibrates:
         refuse_flat_only(config)
     seed = spec.seed if config.seed is None else config.seed
     measured_rig, rig_covariance = measurement_calibration(config, spec)
-    in_left = visible_targets(spec.rig.left, spec.rig.port_of(0), spec.targets,
+    in_left = visible_targets(spec.rig.left, spec.rig.view_port(0), spec.targets,
                               spec.target_radius)[1]
-    in_right = visible_targets(spec.rig.right, spec.rig.port_of(1), spec.targets,
+    in_right = visible_targets(spec.rig.right, spec.rig.view_port(1), spec.targets,
                                spec.target_radius)[1]
     if not (in_left & in_right).any():
         raise CLIError(f"{config.scene}: no target is visible in both views")

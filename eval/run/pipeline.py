@@ -15,7 +15,6 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from measure import triangulate
-from measure.geometry.dome import DomePair
 from measure.images.detect import (FLOOR_FRACTION, MERGE_AREA_RATIO as DEFAULT_MAX_AREA_RATIO,
                             MERGE_ELONGATION as DEFAULT_MAX_ELONGATION)
 from measure.images.eccentricity import correct_eccentricity, outline_centroid_offsets
@@ -49,7 +48,7 @@ def default_depth_window(params: dict, targets=None, port=None):
     except (KeyError, TypeError, ValueError):
         if targets is None or port is None or len(targets) == 0:
             return (None, None)
-        axis = np.array([0.0, 0.0, 1.0]) if isinstance(port, DomePair) else port.normal
+        axis = port.reference_axis
         depth = np.asarray(targets, dtype=float) @ axis  # domes: the left camera's z
         return (DEPTH_WINDOW_FACTORS[0] * float(depth.min()),
                 DEPTH_WINDOW_FACTORS[1] * float(depth.max()))
@@ -158,7 +157,7 @@ def crosscheck_stage(inputs: RunInputs, detections):
     normals = (inputs.target_normals if inputs.target_normals is not None
                else np.array([0.0, 0.0, -1.0]))
     for view, (name, camera) in enumerate((("left", rig.left), ("right", rig.right))):
-        port = rig.port_of(view)
+        port = rig.view_port(view)
         simulated[name], inside[name] = visible_targets(camera, port, inputs.targets,
                                                         inputs.target_radius)
         centers = np.asarray(detections[name].centers).reshape(-1, 2)

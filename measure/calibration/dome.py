@@ -194,3 +194,18 @@ def _skew(v) -> np.ndarray:
     return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
 
 
+
+
+def check_free(rig: StereoRig, names) -> None:
+    """Every parameter of :data:`DOME_PARAMETERS` applies to every rig of two domes."""
+
+
+def rig_parameters(names, air, x, basis, rig: StereoRig, port, cameras, n_global):
+    """:func:`dome_rig_parameters` (the housing calibration's common signature)."""
+    return dome_rig_parameters(names, air, cameras, port)
+
+
+#: The domes' housing calibration (:data:`measure.calibration.housing.HOUSINGS`).
+DOME_HOUSING = SimpleNamespace(parameters=DOME_PARAMETERS, default_free=("dome_center",),
+                               label="of two domes ", check_free=check_free, problem=dome_problem,
+                               rig_parameters=rig_parameters)

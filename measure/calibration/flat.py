@@ -13,7 +13,7 @@ from ..geometry.camera import Camera
 from ..geometry.port import FlatPort
 from ..geometry.projection import project
 from ..stereo.triangulate import StereoRig
-from .air import Detections
+from .air import CalibrationError, Detections
 from .board import Board
 from .covariance import AIR_INTRINSICS, intrinsics_jacobian, left_jacobian
 from .problem import (MAX_INDEX, MIN_LENGTH_MM, observations, parameter_offset, pose_left_jacobians,
@@ -191,3 +191,26 @@ def flat_rig_parameters(names, x, basis, start_normal, port, n_global):
     return tuple(out), T, axes
 
 
+
+
+def check_free(rig: StereoRig, names) -> None:
+    """CalibrationError for a free parameter this port does not have."""
+    if "thickness" in names and not rig.port.thicknesses:
+        raise CalibrationError("--free thickness: the port has no glass layer")
+
+
+def rig_parameters(names, air, x, basis, rig: StereoRig, port, cameras, n_global):
+    """:func:`flat_rig_parameters` as the ``(a + g, a + g)`` Jacobian of (in-air parameters
+    ``air``, the names) with respect to (``air``, the free numbers)."""
+    a = len(air)
+    rig_names, transform, axes = flat_rig_parameters(names, x, basis, rig.port.normal, port,
+                                                     n_global)
+    T = np.eye(a + n_global)
+    T[a:, a:] = transform
+    return rig_names, T, axes
+
+
+#: The flat port's housing calibration (:data:`measure.calibration.housing.HOUSINGS`).
+FLAT_HOUSING = SimpleNamespace(parameters=HOUSING_PARAMETERS, default_free=("distance", "normal"),
+                               label="", check_free=check_free, problem=housing_problem,
+                               rig_parameters=rig_parameters)

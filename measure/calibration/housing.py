@@ -43,13 +43,17 @@ from ..stereo.triangulate import StereoRig
 from .air import CalibrationError, Detections
 from .board import Board
 from .covariance import AIR_INTRINSICS, AIR_NAMES, POSE_NAMES
-from .dome import DOME_PARAMETERS, dome_offset, dome_problem, dome_rig_parameters
-from .flat import HOUSING_PARAMETERS, flat_rig_parameters, housing_problem
+from .dome import DOME_HOUSING, dome_offset
+from .flat import FLAT_HOUSING
 from .rig_covariance import RigCovariance
 
 #: The free parameters by default: of a flat port, of two domes.
-DEFAULT_FREE = ("distance", "normal")
-DEFAULT_DOME_FREE = ("dome_center",)
+DEFAULT_FREE = FLAT_HOUSING.default_free
+DEFAULT_DOME_FREE = DOME_HOUSING.default_free
+#: What :func:`calibrate_housing` asks of each kind of port (``rig.port.kind``): its free
+#: parameters and their default, its problem (residuals, Jacobian), its names in a covariance.
+#: A new kind of port adds its own here (module docs of :mod:`measure.calibration.flat`).
+HOUSINGS = {"flat": FLAT_HOUSING, "dome": DOME_HOUSING}
 #: How the in-air calibration's covariance enters the housing's (:func:`calibrate_housing`).
 UNCERTAINTY = ("propagate", "prior")
 #: The default: both covered the chain's error on 30 seeds of rendered boards, the prior with
@@ -115,21 +119,21 @@ def calibrate_housing(rig: StereoRig, board: Board, detections: Detections,
     covariance propagated) or ``"prior"`` (freed, with the in-air result as a prior), for a
     flat port and for domes alike. Without it the σ is conditional on the in-air
     calibration."""
+    housing = HOUSINGS[rig.port.kind]
     if free is None:
-        free = DEFAULT_DOME_FREE if rig.is_dome else DEFAULT_FREE
+        free = housing.default_free
     if uncertainty not in UNCERTAINTY:
         raise CalibrationError(f"uncertainty {uncertainty!r}: expected one of "
                                f"{', '.join(UNCERTAINTY)}")
     names = tuple(dict.fromkeys(free))
-    table = DOME_PARAMETERS if rig.is_dome else HOUSING_PARAMETERS
+    table = housing.parameters
     unknown = [n for n in names if n not in table]
     if not names or unknown:
         raise CalibrationError(f"--free {','.join(free) or '(nothing)'}: the housing calibration "
-                               f"{'of two domes ' if rig.is_dome else ''}estimates "
+                               f"{housing.label}estimates "
                                f"{', '.join(table)}")
-    if not rig.is_dome and "thickness" in names and not rig.port.thicknesses:
-        raise CalibrationError("--free thickness: the port has no glass layer")
-    problem = (dome_problem if rig.is_dome else housing_problem)(rig, board, detections, names)
+    housing.check_free(rig, names)
+    problem = housing.problem(rig, board, detections, names)
     residuals, unpack, x0, lower, upper = (problem.residuals, problem.unpack, problem.x0,
                                            problem.lower, problem.upper)
     obs, usable, P, n_global, basis, m = (problem.obs, problem.usable, problem.P,
@@ -207,8 +211,7 @@ def calibrate_housing(rig: StereoRig, board: Board, detections: Detections,
         sigma_air = _sub_covariance(air_covariance, air)
         if uncertainty == "prior":
             rig, x, joint = _prior_fit(rig, board, detections, names, x, s2, air, sigma_air)
-            port, cameras, Rs, ts = (dome_problem if rig.is_dome else housing_problem)(
-                rig, board, detections, names).unpack(x)
+            port, cameras, Rs, ts = housing.problem(rig, board, detections, names).unpack(x)
             base["poses"] = [(Rs[k], ts[k]) for k in range(P)]
         else:
             J_air = problem.air_jacobian(x, air)
@@ -219,13 +222,8 @@ def calibrate_housing(rig: StereoRig, board: Board, detections: Detections,
     else:
         joint = covariance
     a = len(air)
-    if rig.is_dome:
-        rig_names, T, axes = dome_rig_parameters(names, air, cameras, port)
-    else:
-        rig_names, transform, axes = flat_rig_parameters(names, x, basis, rig.port.normal, port,
-                                                   n_global)
-        T = np.eye(a + n_global)
-        T[a:, a:] = transform
+    rig_names, T, axes = housing.rig_parameters(names, air, x, basis, rig, port, cameras,
+                                                n_global)
     keep = list(range(a + n_global))
     joint = T @ joint[np.ix_(keep, keep)] @ T.T
     rig_cov = RigCovariance(tuple(air) + rig_names, 0.5 * (joint + joint.T), axes)
@@ -308,8 +306,7 @@ def _prior_fit(rig, board, detections, names, x, s2, air, sigma_air):
     delta, a = np.zeros(len(air)), len(air)
     for _ in range(PRIOR_ITERATIONS + 1):
         moved = apply_air_change(rig, air, delta)
-        problem = (dome_problem if rig.is_dome else housing_problem)(moved, board, detections,
-                                                                     names)
+        problem = HOUSINGS[rig.port.kind].problem(moved, board, detections, names)
         if problem.x0.size != x.size:  # solvePnP found another set of usable poses
             raise CalibrationError("the prior fit lost a board pose when the intrinsics moved; "
                                    "use --air-uncertainty propagate")

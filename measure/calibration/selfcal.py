@@ -167,7 +167,7 @@ def self_calibrate(rig: StereoRig, uv_left, uv_right, parameters=("n_water",),
     triangulation with ``rig``); ``rig_covariance`` the calibration's covariance, propagated
     into σ (module docs). Raises ``ValueError`` for an unknown parameter or fewer
     targets than free numbers."""
-    if rig.is_dome:
+    if not rig.port.self_calibrates:
         raise ValueError("self-calibration estimates flat-port parameters; a rig of two domes "
                          "(DomePair) is not supported yet")
     names = tuple(dict.fromkeys(parameters))

@@ -145,8 +145,7 @@ def _check_depth_range(rig: StereoRig, depth_range) -> tuple[float, float]:
         raise ValueError(f"depth_range must be finite with near < far, got ({near}, {far})")
     water_depth = glass_depth(rig)
     if near <= water_depth:
-        where = ("both domes' outer spheres" if rig.is_dome else "the port's last interface")
-        axis = "the left camera's optical axis" if rig.is_dome else "the port normal"
+        where, axis = rig.port.glass_name, rig.port.axis_name
         raise ValueError(f"depth_range starts at {near:g} mm, not beyond {where} ({water_depth:g} "
                          f"mm from the left camera along {axis})")
     return near, far
@@ -156,11 +155,7 @@ def glass_depth(rig: StereoRig) -> float:
     """How far the glass reaches along :attr:`StereoRig.depth_axis` from the left camera's
     centre (mm): the port's last interface, or the farther of the two domes' outer spheres. A
     depth plane of the sweep must lie beyond it."""
-    if rig.is_dome:
-        axis = rig.depth_axis
-        return max(float(axis @ (dome.center - rig.left.center)) + dome.radii[1]
-                   for dome in (rig.port.left, rig.port.right))
-    return rig.port.offsets[-1] - float(rig.port.normal @ rig.left.center)
+    return rig.port.glass_depth(rig.left)
 
 
 def _box(image: np.ndarray, window: int) -> np.ndarray:

@@ -58,7 +58,7 @@ class PlaneWarp:
         self.model = model
         self.normal = rig.depth_axis
         self.depth_origin = float(self.normal @ rig.left.center)
-        self.projection_port = rig.port_of(1) if model == "refractive" else index_matched_port(
+        self.projection_port = rig.view_port(1) if model == "refractive" else index_matched_port(
             self.normal, np.stack([rig.left.center, rig.right.center]))
         if grid_step_px is None:
             grid_step_px = grid_step_for(min(rig.left.K[0, 0], rig.left.K[1, 1]))

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .camera import ValueEquality
-from .port import as_vector
+from .port import RigPort, as_vector
 from ..reasons import Reason
 from .refraction import WaterRays, refract
 
@@ -96,9 +96,15 @@ class DomePort(ValueEquality):
         offsets = np.asarray(points, dtype=float) - self.center
         return np.einsum("ij,ij->i", offsets, offsets) > self.radii[1] ** 2
 
+    def trace(self, origins: np.ndarray, directions: np.ndarray,
+              keep_interface_points: bool = True) -> WaterRays:
+        """:func:`trace_through_dome` through this dome."""
+        return trace_through_dome(origins, directions, self,
+                                  keep_interface_points=keep_interface_points)
+
 
 @dataclass(frozen=True, eq=False)
-class DomePair(ValueEquality):
+class DomePair(RigPort, ValueEquality):
     """The two domes of a stereo rig: ``left`` around the left camera, ``right`` around the
     right one (reference frame)."""
 
@@ -121,6 +127,84 @@ class DomePair(ValueEquality):
     def water_side(self, points: np.ndarray) -> np.ndarray:
         """Whether points ``(N, 3)`` lie in the water: outside both domes' outer spheres."""
         return self.left.water_side(points) & self.right.water_side(points)
+
+    # the port interface (RigPort) ---------------------------------------------------------
+    kind = "dome"
+    housing = "DOMEPORT"
+    description = "domes"
+    name = "the domes"
+    calibration_name = "dome-port calibration (DOMEPORT)"
+    glass_name = "both domes' outer spheres"
+    axis_name = "the left camera's optical axis"
+
+    def view(self, view: int) -> DomePort:
+        """Each camera looks through its own dome."""
+        return self[view]
+
+    def check_cameras(self, left, right) -> None:
+        self.left.check_camera(left.center, "left camera")
+        self.right.check_camera(right.center, "right camera")
+
+    def depth_axis(self, left) -> np.ndarray:
+        """The left camera's optical axis (two domes share no normal)."""
+        return left.R[:, 2].copy()
+
+    @property
+    def reference_axis(self) -> np.ndarray:
+        return np.array([0.0, 0.0, 1.0])
+
+    def describe(self) -> dict:
+        def dome(d: DomePort) -> dict:
+            return {"center_mm": d.center.tolist(), "radius_mm": d.radius,
+                    "thickness_mm": d.thickness, "indices": list(d.indices)}
+
+        return {"kind": "dome", "left": dome(self.left), "right": dome(self.right)}
+
+    def difference(self, other, differs, diff) -> None:
+        for view in ("left", "right"):
+            a, b = getattr(other, view), getattr(self, view)
+            if differs(a.center, b.center):
+                diff[f"{view}_dome_center_mm"] = (a.center - b.center).tolist()
+            if differs(a.radius, b.radius):
+                diff[f"{view}_dome_radius_mm"] = a.radius - b.radius
+            if differs(a.thickness, b.thickness):
+                diff[f"{view}_dome_thickness_mm"] = a.thickness - b.thickness
+            for k, (x, y) in enumerate(zip(a.indices, b.indices)):
+                if differs(x, y):
+                    diff[f"{view}_dome_index_{k}"] = x - y
+
+    def check_parameter_names(self, names) -> None:
+        flat = [n for n in names if n.startswith("port.") and not n.startswith("port.index")]
+        if flat:
+            raise ValueError(f"{', '.join(flat)}: flat-port parameters, but the rig looks "
+                             f"through domes")
+
+    def moved(self, changes, normal_axes=None) -> DomePair:
+        """``left/right.dome_center[k]`` move that dome's centre (reference frame),
+        ``port.index[k]`` medium k of both domes."""
+        centers = [self.left.center.copy(), self.right.center.copy()]
+        normal, distance, thick = None, None, []
+        indices = list(self.left.indices)
+        for name, d in changes:
+            head, _, tail = name.partition(".")
+            if tail.startswith("dome_center"):
+                centers[0 if head == "left" else 1][int(tail[-2])] += d
+            elif name == "port.distance":
+                distance += d
+            elif tail.startswith("tilt"):
+                normal = normal + d * np.asarray(normal_axes, dtype=float)[int(tail[-2])]
+            elif tail.startswith("thickness"):
+                thick[int(tail[tail.index("[") + 1:-1])] += d
+            elif tail.startswith("index"):
+                indices[int(tail[tail.index("[") + 1:-1])] += d
+        return DomePair(*(dome.replace(center=c, indices=tuple(indices))
+                          for dome, c in zip((self.left, self.right), centers)))
+
+    def glass_depth(self, left) -> float:
+        """The farther of the two domes' outer spheres."""
+        axis = self.depth_axis(left)
+        return max(float(axis @ (dome.center - left.center)) + dome.radii[1]
+                   for dome in (self.left, self.right))
 
 
 def _exit_parameter(origins, directions, center, radius):

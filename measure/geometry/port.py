@@ -14,6 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .camera import ValueEquality
+from .refraction import trace_through_port
 
 
 def as_vector(value, name: str) -> tuple[float, ...]:
@@ -27,8 +28,83 @@ def as_vector(value, name: str) -> tuple[float, ...]:
     return tuple(float(v) for v in np.atleast_1d(array))
 
 
+class RigPort:
+    """The port interface: what a stereo rig looks through, one implementation per kind of
+    window — :class:`FlatPort` (one port both cameras share; the index-matched one of
+    :func:`index_matched_port` is "no port", all air) and
+    :class:`measure.geometry.dome.DomePair` (each camera inside its own dome). Code that uses a
+    port calls these members and never asks which kind it holds; the port of one camera
+    (:meth:`view`: a FlatPort, or a :class:`measure.geometry.dome.DomePort`) traces rays into
+    the water (``trace``), is checked against a camera (``check_camera``), says which points are
+    in the water (``water_side``) and is projected through by
+    :func:`measure.geometry.projection.project`.
+
+    A new kind of port implements these members (and ``trace`` and the projection of its view
+    ports); docs/architecture.md lists the few places outside the port modules that still
+    branch on the kind, and why."""
+
+    #: The kind, as files and messages name it (``"flat"``, ``"dome"``).
+    kind = ""
+    #: The housing's model name in the refractive COLMAP fork's ``cameras.txt`` and calibmar.
+    housing = ""
+    #: What the rig looks through, in messages (``"a flat port"``, ``"domes"``; ``"the port"``,
+    #: ``"the domes"``).
+    description = ""
+    name = ""
+    #: A calibration of this kind, in messages.
+    calibration_name = ""
+    #: Whether :func:`measure.calibration.selfcal.self_calibrate` estimates this port's
+    #: parameters from matched targets.
+    self_calibrates = False
+    #: Where the glass ends, in messages, and the axis depths are measured along.
+    glass_name = ""
+    axis_name = ""
+
+    def view(self, view: int):
+        """The port camera ``view`` (0 left, 1 right) looks through."""
+        raise NotImplementedError
+
+    def check_cameras(self, left, right) -> None:
+        """Raise ``ValueError`` unless both cameras' centres are on the air side."""
+        raise NotImplementedError
+
+    def depth_axis(self, left) -> np.ndarray:
+        """The unit axis along which depths are measured (reference frame), given the left
+        camera."""
+        raise NotImplementedError
+
+    @property
+    def reference_axis(self) -> np.ndarray:
+        """The depth axis without a camera: the port normal, or the reference frame's z (the
+        left camera's optical axis by convention)."""
+        raise NotImplementedError
+
+    def glass_depth(self, left) -> float:
+        """How far the glass reaches along :meth:`depth_axis` from the left camera's centre (mm)."""
+        raise NotImplementedError
+
+    def describe(self) -> dict:
+        """The port as plain numbers (a report's JSON)."""
+        raise NotImplementedError
+
+    def difference(self, other, differs, diff) -> None:
+        """``other`` − this port (a port of the same kind) as named entries into ``diff``,
+        those where ``differs(a, b)``."""
+        raise NotImplementedError
+
+    def check_parameter_names(self, names) -> None:
+        """ValueError for a :mod:`measure.calibration.rig_covariance` name of another kind of
+        port."""
+        raise NotImplementedError
+
+    def moved(self, changes, normal_axes=None) -> RigPort:
+        """This port with its named parameters moved: ``changes`` ``[(name, delta), …]`` in
+        their units (:func:`measure.stereo.uncertainty.perturbed_rig`)."""
+        raise NotImplementedError
+
+
 @dataclass(frozen=True, eq=False)
-class FlatPort(ValueEquality):
+class FlatPort(RigPort, ValueEquality):
     """A flat port of ``len(thicknesses)`` layers between air and water.
 
     Parameters
@@ -114,6 +190,87 @@ class FlatPort(ValueEquality):
     def water_side(self, points: np.ndarray) -> np.ndarray:
         """Whether points ``(N, 3)`` lie strictly beyond the last interface (in the water)."""
         return np.asarray(points, dtype=float) @ self.normal > self.offsets[-1]
+
+    # the port interface (RigPort) ---------------------------------------------------------
+    kind = "flat"
+    housing = "FLATPORT"
+    description = "a flat port"
+    name = "the port"
+    calibration_name = "flat-port calibration"
+    self_calibrates = True
+    glass_name = "the port's last interface"
+    axis_name = "the port normal"
+
+    def view(self, view: int) -> FlatPort:
+        """Both cameras look through this one port."""
+        return self
+
+    def check_cameras(self, left, right) -> None:
+        self.check_camera(left.center, "left camera")
+        self.check_camera(right.center, "right camera")
+
+    def depth_axis(self, left) -> np.ndarray:
+        """The port normal."""
+        return self.normal
+
+    @property
+    def reference_axis(self) -> np.ndarray:
+        return self.normal
+
+    def glass_depth(self, left) -> float:
+        """The port's last interface."""
+        return self.offsets[-1] - float(self.normal @ left.center)
+
+    def describe(self) -> dict:
+        return {"normal": self.normal.tolist(), "distance_mm": self.distance,
+                "thicknesses_mm": list(self.thicknesses), "indices": list(self.indices)}
+
+    def difference(self, other, differs, diff) -> None:
+        truth, assumed = self, other
+        if differs(assumed.distance, truth.distance):
+            diff["port_distance_mm"] = assumed.distance - truth.distance
+        if len(assumed.indices) == len(truth.indices):
+            for k, (a, b) in enumerate(zip(assumed.indices, truth.indices)):
+                if differs(a, b):
+                    diff[f"index_{k}"] = a - b
+        else:
+            diff["indices"] = {"truth": list(truth.indices), "assumed": list(assumed.indices)}
+        if len(assumed.thicknesses) == len(truth.thicknesses):
+            for k, (a, b) in enumerate(zip(assumed.thicknesses, truth.thicknesses)):
+                if differs(a, b):
+                    diff[f"thickness_{k}_mm"] = a - b
+        angle = float(np.degrees(np.arccos(np.clip(assumed.normal @ truth.normal, -1, 1))))
+        if differs(assumed.normal, truth.normal):
+            diff["port_normal_deg"] = angle
+
+    def check_parameter_names(self, names) -> None:
+        domes = [n for n in names if ".dome_center" in n]
+        if domes:
+            raise ValueError(f"{', '.join(domes)}: dome parameters, but the rig has a flat port")
+
+    def moved(self, changes, normal_axes=None) -> FlatPort:
+        """``port.distance``, ``port.tilt[k]`` (about ``normal_axes[k]``), ``port.thickness[k]``,
+        ``port.index[k]``."""
+        normal, distance = self.normal.copy(), self.distance
+        thick = list(self.thicknesses)
+        indices = list(self.indices)
+        for name, d in changes:
+            tail = name.partition(".")[2]
+            if name == "port.distance":
+                distance += d
+            elif tail.startswith("tilt"):
+                normal = normal + d * np.asarray(normal_axes, dtype=float)[int(tail[-2])]
+            elif tail.startswith("thickness"):
+                thick[int(tail[tail.index("[") + 1:-1])] += d
+            elif tail.startswith("index"):
+                indices[int(tail[tail.index("[") + 1:-1])] += d
+        return FlatPort(normal / np.linalg.norm(normal), distance, tuple(thick), tuple(indices))
+
+    def trace(self, origins: np.ndarray, directions: np.ndarray,
+              keep_interface_points: bool = True):
+        """:func:`measure.trace_through_port` through this port."""
+        return trace_through_port(origins, directions, self,
+                                  keep_interface_points=keep_interface_points)
 
 
 def index_matched_port(normal, camera_centres) -> FlatPort:

@@ -725,7 +725,7 @@ def _run(camera, port, points, solver, paths: bool, jacobian: int):
     if not (port is None or isinstance(port, FlatPort)):
         raise ValueError(f"port must be a measure.FlatPort, a measure.geometry.dome.DomePort or None, got "
                          f"{type(port).__name__}" + (" (a DomePair holds one dome per camera: "
-                                                     "pass rig.port_of(view))"
+                                                     "pass rig.view_port(view))"
                                                      if isinstance(port, DomePair) else ""))
     if solver not in SOLVERS:
         raise ValueError(f"solver must be one of {', '.join(SOLVERS)}, got {solver!r}")

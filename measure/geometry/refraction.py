@@ -10,7 +10,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .port import FlatPort
 from ..reasons import Reason
 
 
@@ -59,9 +58,10 @@ class WaterRays:
     reason: np.ndarray
 
 
-def trace_through_port(origins: np.ndarray, directions: np.ndarray, port: FlatPort,
+def trace_through_port(origins: np.ndarray, directions: np.ndarray, port,
                        keep_interface_points: bool = True) -> WaterRays:
-    """Trace rays from the camera side through every interface of ``port`` into the water.
+    """Trace rays from the camera side through every interface of ``port`` (a
+    :class:`measure.FlatPort`) into the water.
 
     ``origins`` may be ``(N, 3)`` or a single 3-vector (a camera centre); ``directions`` are unit
     vectors ``(N, 3)``. This is the paper's equations 3-10 applied at every interface in turn,

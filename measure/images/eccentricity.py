@@ -137,9 +137,9 @@ def correct_eccentricity(rig: StereoRig, uv_left, uv_right, radius_mm, method: s
     for _ in range(iterations):
         used = (local_normals(result.points, toward=toward) if normals is None
                 else np.broadcast_to(np.asarray(normals, dtype=np.float64), result.points.shape))
-        offset_left = outline_centroid_offsets(rig.left, rig.port_of(0), result.points, used,
+        offset_left = outline_centroid_offsets(rig.left, rig.view_port(0), result.points, used,
                                                radius_mm)
-        offset_right = outline_centroid_offsets(rig.right, rig.port_of(1), result.points, used,
+        offset_right = outline_centroid_offsets(rig.right, rig.view_port(1), result.points, used,
                                                 radius_mm)
         corrected_left = uv_left - np.nan_to_num(offset_left)
         corrected_right = uv_right - np.nan_to_num(offset_right)

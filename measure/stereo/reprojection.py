@@ -8,14 +8,13 @@ import numpy as np
 from scipy.optimize import least_squares
 from scipy.sparse import csr_matrix, lil_matrix
 
-from ..geometry.dome import DomePair
 from ..geometry.projection import project
 
 
 def _view_port(port, view: int):
     """The port of camera ``view``: ``port`` itself, or its dome for a
     :class:`measure.geometry.dome.DomePair` (one dome per camera)."""
-    return port[view] if isinstance(port, DomePair) else port
+    return port.view(view)
 
 
 def stereo_residuals(rig, port, points, observed) -> np.ndarray:

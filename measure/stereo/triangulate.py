@@ -24,14 +24,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..geometry.camera import Camera
+from ..geometry.camera import Camera, ValueEquality
 from ..geometry.lines import common_perpendicular
-from ..geometry.camera import ValueEquality
-from ..geometry.dome import DomePair, trace_through_dome
-from ..geometry.port import FlatPort, index_matched_port
+from ..geometry.port import FlatPort, RigPort, index_matched_port
 from ..batching import map_row_chunks
 from ..reasons import Reason
-from ..geometry.refraction import trace_through_port
 from .reprojection import reprojection_points
 
 METHODS = ("optical_path", "su", "regular", "reprojection")
@@ -57,38 +54,27 @@ class StereoRig(ValueEquality):
         if self.port is None:
             object.__setattr__(self, "port", index_matched_port(
                 self.left.R[:, 2], np.stack([self.left.center, self.right.center])))
-        if isinstance(self.port, DomePair):
-            self.port.left.check_camera(self.left.center, "left camera")
-            self.port.right.check_camera(self.right.center, "right camera")
-            return
-        if not isinstance(self.port, FlatPort):
+        if not isinstance(self.port, RigPort):
             raise ValueError("port must be a measure.FlatPort, a measure.geometry.dome.DomePair or None")
-        self.port.check_camera(self.left.center, "left camera")
-        self.port.check_camera(self.right.center, "right camera")
+        self.port.check_cameras(self.left, self.right)
 
-    @property
-    def is_dome(self) -> bool:
-        """Whether each camera looks through its own dome (``port`` is a DomePair)."""
-        return isinstance(self.port, DomePair)
-
-    def port_of(self, view: int):
+    def view_port(self, view: int):
         """The port camera ``view`` (0 left, 1 right) looks through: the shared FlatPort, or
-        that camera's DomePort."""
-        return self.port[view] if self.is_dome else self.port
+        that camera's DomePort (:meth:`measure.geometry.port.RigPort.view`)."""
+        return self.port.view(view)
 
     @property
     def depth_axis(self) -> np.ndarray:
         """The unit axis along which depths are measured (reference frame): the port normal
         of a flat port, the left camera's optical axis for domes (no shared normal)."""
-        return self.left.R[:, 2].copy() if self.is_dome else self.port.normal
+        return self.port.depth_axis(self.left)
 
     def trace(self, view: int, directions: np.ndarray, keep_interface_points: bool = False):
         """Water rays (:class:`measure.WaterRays`) of unit camera rays ``directions``
         ``(N, 3)`` (reference frame) from camera ``view``'s centre through its port:
         :func:`measure.trace_through_port` or :func:`measure.geometry.dome.trace_through_dome`."""
-        camera, port = self.cameras[view], self.port_of(view)
-        trace = trace_through_dome if self.is_dome else trace_through_port
-        return trace(camera.center, directions, port, keep_interface_points=keep_interface_points)
+        return self.view_port(view).trace(self.cameras[view].center, directions,
+                                          keep_interface_points=keep_interface_points)
 
     @property
     def cameras(self) -> tuple[Camera, Camera]:
@@ -386,7 +372,7 @@ def triangulate(rig: StereoRig, uv_left, uv_right, method: str = "optical_path")
         reason = start.reason.copy()
         points[reason != Reason.OK] = np.nan
         return Triangulation(points, start.gap, reason, method)
-    if method == "optical_path" and not rig.is_dome:  # the fused flat-port form
+    if method == "optical_path" and isinstance(rig.port, FlatPort):  # the fused flat-port form
         n_rows = uv_left.shape[0]
         points, gap, reason = map_row_chunks(
             lambda left, right, out: _optical_path_rows(rig, left, right, out),

@@ -41,7 +41,6 @@ from scipy.optimize import brentq
 from scipy.stats import chi2
 
 from ..geometry.camera import Camera
-from ..geometry.port import FlatPort
 from ..geometry.projection import project
 from ..calibration.rig_covariance import RigCovariance
 from .triangulate import StereoRig
@@ -120,17 +119,9 @@ def pixel_jacobians(rig: StereoRig, points, names=(), normal_axes=None):
     an image are NaN."""
     points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     names = tuple(names)
-    if rig.is_dome:
-        flat = [n for n in names if n.startswith("port.") and not n.startswith("port.index")]
-        if flat:
-            raise ValueError(f"{', '.join(flat)}: flat-port parameters, but the rig looks "
-                             f"through domes")
-    else:
-        domes = [n for n in names if ".dome_center" in n]
-        if domes:
-            raise ValueError(f"{', '.join(domes)}: dome parameters, but the rig has a flat port")
+    rig.port.check_parameter_names(names)
     want = bool(names)
-    views = [project(cam, rig.port_of(view), points, jacobian=True, parameters=want)
+    views = [project(cam, rig.view_port(view), points, jacobian=True, parameters=want)
              for view, cam in enumerate(rig.cameras)]
     pixels = np.concatenate([v[0] for v in views], axis=1)
     d_points = np.concatenate([v[1] for v in views], axis=1)
@@ -184,14 +175,7 @@ def perturbed_rig(rig: StereoRig, names, delta, normal_axes=None) -> StereoRig:
     K = [c.K.copy() for c in cams]
     dist = [np.zeros(8) if c.dist is None else np.pad(c.dist, (0, 8 - c.dist.size)) for c in cams]
     R, t = rig.right.R.copy(), rig.right.t.copy()
-    port = rig.port
-    if rig.is_dome:
-        centers = [port.left.center.copy(), port.right.center.copy()]
-        normal, distance, thick = None, None, []
-    else:
-        normal, distance = port.normal.copy(), port.distance
-        thick = list(port.thicknesses)
-    indices = list(port.indices) if not rig.is_dome else list(port.left.indices)
+    port_changes = []
     phi = np.zeros(3)
     for name, d in zip(names, np.asarray(delta, dtype=float)):
         head, _, tail = name.partition(".")
@@ -203,19 +187,13 @@ def perturbed_rig(rig: StereoRig, names, delta, normal_axes=None) -> StereoRig:
             else:
                 dist[v][(0, 1, 2, 3, 4)[k - 4]] += d
         elif tail.startswith("dome_center"):
-            centers[0 if head == "left" else 1][int(tail[-2])] += d
+            port_changes.append((name, d))
         elif tail.startswith("rotation"):
             phi[int(tail[-2])] += d
         elif tail.startswith("center"):
             t[int(tail[-2])] += d
-        elif name == "port.distance":
-            distance += d
-        elif tail.startswith("tilt"):
-            normal = normal + d * np.asarray(normal_axes, dtype=float)[int(tail[-2])]
-        elif tail.startswith("thickness"):
-            thick[int(tail[tail.index("[") + 1:-1])] += d
-        elif tail.startswith("index"):
-            indices[int(tail[tail.index("[") + 1:-1])] += d
+        else:
+            port_changes.append((name, d))
     angle = np.linalg.norm(phi)
     if angle > 0:
         import cv2  # Rodrigues: exp([φ]×)
@@ -224,14 +202,7 @@ def perturbed_rig(rig: StereoRig, names, delta, normal_axes=None) -> StereoRig:
     size = [c.size for c in cams]
     new = [Camera(K[v], size[v], None if not np.any(dist[v]) else dist[v],
                   cams[v].R if v == 0 else R, cams[v].t if v == 0 else t) for v in range(2)]
-    if rig.is_dome:
-        from ..geometry.dome import DomePair
-
-        return StereoRig(new[0], new[1], DomePair(*(
-            dome.replace(center=c, indices=tuple(indices))
-            for dome, c in zip((port.left, port.right), centers))))
-    return StereoRig(new[0], new[1], FlatPort(normal / np.linalg.norm(normal), distance,
-                                               tuple(thick), tuple(indices)))
+    return StereoRig(new[0], new[1], rig.port.moved(port_changes, normal_axes))
 
 
 def pixel_sigmas(pixel_sigma, n: int, allow_zero: bool = False) -> np.ndarray:

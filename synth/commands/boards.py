@@ -78,7 +78,7 @@ def main(args) -> int:
     w, h = manifest["image_size"]
     print(f"wrote {args.out}: {manifest['poses']} stereo pairs of a {board.kind} "
           f"{cols}x{rows} ({board.square_mm:g} mm) "
-          f"{'in air' if args.air else 'behind the domes' if spec.rig.is_dome else 'behind the port'}, "
+          f"{'in air' if args.air else 'behind ' + spec.rig.port.name}, "
           f"{w}x{h} px, {manifest['spp']} spp with {manifest['variant']}: render "
           f"{manifest['seconds']['render']:.1f} s ({manifest['samples_per_second'] / 1e6:.2f} M "
           f"samples/s), total {manifest['seconds']['total']:.1f} s")

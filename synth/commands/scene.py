@@ -406,14 +406,13 @@ def _check_visible(left, right, port, targets, radius: float, layout: str) -> No
     """CLIError unless some target lies wholly inside both images (in front of the cameras)."""
     import numpy as np
 
-    from measure.geometry.dome import DomePair
     from measure.geometry.projection import project
 
     from synth.products.crosscheck import wholly_in_image
 
     seen = np.ones(len(targets), dtype=bool)
     for view, camera in enumerate((left, right)):
-        uv = project(camera, port[view] if isinstance(port, DomePair) else port, targets)
+        uv = project(camera, port.view(view), targets)
         seen &= wholly_in_image(camera, uv, targets, radius)
     if not seen.any():
         raise CLIError(f"--layout {layout}: none of the {len(targets)} targets is visible in both "

@@ -262,7 +262,7 @@ def _one_port(params_left, params_right, left: Camera, right: Camera, where: str
 
 def _port_params(rig: StereoRig) -> tuple[str, list, list]:
     """``(housing, left parameters, right parameters)``: FLATPORT or DOMEPORT (metres)."""
-    if rig.is_dome:
+    if isinstance(rig.port, DomePair):
         return ("DOMEPORT", to_domeport(rig.port.left, rig.left),
                 to_domeport(rig.port.right, rig.right))
     if len(rig.port.thicknesses) != 1:

@@ -29,6 +29,7 @@ from scipy.spatial.transform import Rotation
 
 from measure import StereoRig
 from measure.geometry.flatport_format import METRES_PER_MM
+from measure.geometry.dome import DomePair
 
 from synth.formats.calib_formats import (COLMAP_PIXEL_OFFSET, CalibFormatError, stereo_extrinsics,
                                  write_colmap)
@@ -60,7 +61,7 @@ def cameras_json(rig: StereoRig, has_port: bool = True) -> dict:
             "pose_camera_to_reference": {"convention": "X_ref = R · X_cam + t",
                                          "R": _list(camera.R), "t": _list(camera.t)}}
     port = rig.port
-    if rig.is_dome:
+    if isinstance(rig.port, DomePair):
         port_entry = {"present": True,
                       "model": "dome port: each camera inside its own spherical glass shell "
                                "(inner radius, thickness; centre in the reference frame); "

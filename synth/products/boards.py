@@ -39,6 +39,7 @@ from measure import StereoRig
 from measure.calibration.board import PATTERN_TEXELS_PER_SQUARE, Board, BoardError
 from measure.geometry.port import index_matched_port
 from measure.geometry.projection import project
+from measure.geometry.dome import DomePair
 
 from synth.products.dataset import (DatasetError, adaptive_settings, check_files, manifest_digest,
                            read_calib, write_calib)
@@ -100,7 +101,7 @@ def _fits(rig: StereoRig, board: Board, poses_R, poses_t, water: bool) -> np.nda
     if water:
         ok &= rig.port.water_side(flat)  # beyond the flat port, or outside both domes
     for view, camera in enumerate(rig.cameras):
-        ok &= camera.in_image(project(camera, rig.port_of(view), flat), IMAGE_MARGIN_PX)
+        ok &= camera.in_image(project(camera, rig.view_port(view), flat), IMAGE_MARGIN_PX)
     return ok.reshape(poses_R.shape[0], -1).all(axis=1)
 
 
@@ -176,7 +177,7 @@ def build_board_scene(spec: SceneSpec, board: Board, air: bool, variant=None):
                        "emitter": {"type": "area", "radiance": {
                            "type": "bitmap", "data": mi.TensorXf(pattern), "raw": True,
                            "filter_type": "nearest"}}}}
-    if not air and spec.rig.is_dome:
+    if not air and isinstance(spec.rig.port, DomePair):
         for sid, centre, radius, ext_ior, int_ior in dome_placements(spec.rig.port):
             scene[sid] = {"type": "sphere", "center": [float(c) for c in centre],
                           "radius": float(radius),
@@ -336,8 +337,8 @@ def _write_truth(directory, rig, board: Board, poses) -> None:
         writer.writerow(CORNERS_HEADER)
         for k, pose in enumerate(poses):
             world = pose.apply(corners)
-            uv_l = project(rig.left, rig.port_of(0), world)
-            uv_r = project(rig.right, rig.port_of(1), world)
+            uv_l = project(rig.left, rig.view_port(0), world)
+            uv_r = project(rig.right, rig.view_port(1), world)
             for i, p, a, b in zip(ids, world, uv_l, uv_r):
                 writer.writerow([k, int(i)] + [f"{v:.17g}" for v in (*p, *a, *b)])
 

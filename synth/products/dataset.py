@@ -126,7 +126,7 @@ def write_calib(path, rig: StereoRig, has_port: bool = True, extra: dict | None 
         fs.write("R", R)
         fs.write("T", T.reshape(3, 1))
         port = rig.port
-        if rig.is_dome:
+        if isinstance(rig.port, DomePair):
             fs.startWriteStruct("dome", cv2.FileNode_MAP)
             for name, dome in (("left", port.left), ("right", port.right)):
                 fs.startWriteStruct(name, cv2.FileNode_MAP)
@@ -469,8 +469,8 @@ def write_dataset(scene, out_dir, spp: int | None = None, defines: dict | None =
             times["truth_maps"] = time.perf_counter() - t
         else:
             t = time.perf_counter()
-            uv_left = project(spec.rig.left, spec.rig.port_of(0), spec.targets)
-            uv_right = project(spec.rig.right, spec.rig.port_of(1), spec.targets)
+            uv_left = project(spec.rig.left, spec.rig.view_port(0), spec.targets)
+            uv_right = project(spec.rig.right, spec.rig.view_port(1), spec.targets)
             times["project"] = time.perf_counter() - t
 
         t = time.perf_counter()
@@ -528,7 +528,7 @@ def write_dataset(scene, out_dir, spp: int | None = None, defines: dict | None =
             "seconds": times,
             "truth_formats": truth_formats,
             **({} if design is None else {"design": design}),
-            "colmap": (f"colmap/: cameras.txt ({'DOMEPORT' if spec.rig.is_dome else 'FLATPORT'}, "
+            "colmap": (f"colmap/: cameras.txt ({spec.rig.port.housing}, "
                        f"metres), images.txt, points3D.txt"
                        if colmap_note is None else f"not written: {colmap_note}"),
             "files": dataset_files(tmp) + ["manifest.json"],

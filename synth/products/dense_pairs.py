@@ -18,8 +18,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import ndimage
 
-from measure import Camera, FlatPort, trace_through_port
-from measure.geometry.dome import DomePort, trace_through_dome
+from measure import Camera, FlatPort
+from measure.geometry.dome import DomePort
 
 
 @dataclass(frozen=True)
@@ -123,8 +123,7 @@ def surface_points(camera: Camera, port: FlatPort | DomePort, surface,
                    uv: np.ndarray) -> np.ndarray:
     """Where the refracted rays of pixels ``uv`` ``(N, 2)`` meet ``surface`` ``(N, 3)``
     (NaN where they miss); ``port`` a flat port or the camera's dome."""
-    trace = trace_through_dome if isinstance(port, DomePort) else trace_through_port
-    water = trace(camera.center, camera.rays(uv), port, keep_interface_points=False)
+    water = port.trace(camera.center, camera.rays(uv), keep_interface_points=False)
     return surface.intersect(water.origins, water.directions)
 
 
@@ -155,5 +154,5 @@ def render_view(camera: Camera, port: FlatPort | DomePort, surface, texture: Spe
 def render_pair(rig, surface, texture, supersample: int = 4):
     """Left and right images of ``surface`` through ``rig.port`` (each camera's dome for a
     :class:`measure.geometry.dome.DomePair`)."""
-    return (render_view(rig.left, rig.port_of(0), surface, texture, supersample),
-            render_view(rig.right, rig.port_of(1), surface, texture, supersample))
+    return (render_view(rig.left, rig.view_port(0), surface, texture, supersample),
+            render_view(rig.right, rig.view_port(1), surface, texture, supersample))

@@ -54,7 +54,7 @@ def check_field_of_view(rig: StereoRig, step_px: int = FOV_CHECK_STEP_PX) -> Non
     total internal reflection) and its water ray must not meet the other dome's outer sphere.
     The two domes must not overlap.
     """
-    if not rig.is_dome:
+    if not isinstance(rig.port, DomePair):
         raise ValueError("check_field_of_view needs a rig with a DomePair")
     left, right = rig.port.left, rig.port.right
     gap = np.linalg.norm(left.center - right.center) - left.radii[1] - right.radii[1]
@@ -69,7 +69,7 @@ def check_field_of_view(rig: StereoRig, step_px: int = FOV_CHECK_STEP_PX) -> Non
         u, v = np.meshgrid(np.r_[-0.5, np.arange(0, w, step_px), w - 0.5],
                            np.r_[-0.5, np.arange(0, h, step_px), h - 0.5])
         uv = np.column_stack([u.ravel(), v.ravel()])
-        water = trace_through_dome(camera.center, camera.rays(uv), rig.port_of(view),
+        water = trace_through_dome(camera.center, camera.rays(uv), rig.view_port(view),
                                    keep_interface_points=False)
         lost = ~np.all(np.isfinite(water.directions), axis=1)
         if lost.any():
@@ -77,7 +77,7 @@ def check_field_of_view(rig: StereoRig, step_px: int = FOV_CHECK_STEP_PX) -> Non
             raise ValueError(f"the {name} camera's field of view does not fit through its dome "
                              f"(the ray of pixel ({worst[0]:g}, {worst[1]:g}) does not reach "
                              f"the water)")
-        other = rig.port_of(1 - view)
+        other = rig.view_port(1 - view)
         hits = _ray_meets_sphere(water.origins, water.directions, other.center, other.radii[1])
         if hits.any():
             worst = uv[np.flatnonzero(hits)[0]]

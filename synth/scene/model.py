@@ -98,7 +98,7 @@ class SceneSpec:
     @property
     def port(self):
         """The port — a :class:`measure.FlatPort`, or a :class:`measure.geometry.dome.DomePair` in a dome
-        scene (``rig.is_dome``) — or None in an all-air scene."""
+        scene (``rig.port.kind == "dome"``) — or None in an all-air scene."""
         return self.rig.port if self.has_port else None
 
     @property

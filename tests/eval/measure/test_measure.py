@@ -321,7 +321,7 @@ def test_a_dome_calibration_is_one_error_line_where_it_cannot_apply(tmp_path):
     pair = DomePair(DomePort(left.center, 50.0, 8.0, (1.0, 1.49, 1.33)),
                     DomePort(right.center, 50.0, 8.0, (1.0, 1.49, 1.33)))
     path = write_calibmar(tmp_path / "dome.yaml", StereoRig(left, right, pair))[0]
-    assert read_calibration(path)[0].is_dome
+    assert read_calibration(path)[0].port.kind == "dome"
     flat = SimpleNamespace(rig=StereoRig(left, right, None))  # eval run: a flat-port scene
     with pytest.raises(CLIError, match=r"--calib .*dome\.yaml: a dome-port calibration"):
         measurement_calibration(SimpleNamespace(calib=path, assumptions={}), flat)

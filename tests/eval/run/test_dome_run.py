@@ -87,7 +87,7 @@ def test_flat_port_options_refused_for_domes(scenes, tmp_path, capsys, extra, fr
 def test_assumed_dome_rig_and_its_difference(scenes):
     truth = load_scene(scenes["decentred"]).rig
     believed = assumed_rig(truth, True, parse_assumptions(["n_water=1.34", "focal=151"]))
-    assert believed.is_dome
+    assert believed.port.kind == "dome"
     assert believed.port.left.indices == believed.port.right.indices == (1.0, 1.54, 1.34)
     np.testing.assert_array_equal(believed.port.right.center, truth.port.right.center)
     diff = rig_difference(truth, believed)

@@ -34,7 +34,7 @@ def _detections(truth, n_poses=15, noise_px=0.0, seed=0):
     ids, pixels = [], []
     for pose in sample_poses(truth, BOARD, n_poses, seed, True, (350.0, 800.0)):
         world = pose.apply(BOARD.corners())
-        uv = [project(truth.cameras[v], truth.port_of(v), world) for v in (0, 1)]
+        uv = [project(truth.cameras[v], truth.view_port(v), world) for v in (0, 1)]
         ids.append([np.arange(len(world))] * 2)
         pixels.append([p + rng.normal(0.0, noise_px, p.shape) if noise_px else p for p in uv])
     return Detections(ids, pixels)
@@ -96,7 +96,7 @@ def _observe(rig, poses, sigma, rng):
     for pose in poses:
         world = pose.apply(corners)
         ids.append([np.arange(len(world))] * 2)
-        pixels.append([project(c, rig.port_of(v), world) + rng.normal(0, sigma, (len(world), 2))
+        pixels.append([project(c, rig.view_port(v), world) + rng.normal(0, sigma, (len(world), 2))
                        for v, c in enumerate(rig.cameras)])
     return Detections(ids, pixels)
 

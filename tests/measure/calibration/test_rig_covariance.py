@@ -77,7 +77,7 @@ def test_dome_names_round_trip_through_a_dome_calib_yaml(tmp_path):
     cov = RigCovariance(names, a @ a.T + 1e-3 * np.eye(len(names)))
     write_calib(tmp_path / "calib.yaml", rig, covariance=cov)
     back = read_calib(str(tmp_path / "calib.yaml"))
-    assert back["rig"].is_dome and back["covariance"].names == names
+    assert back["rig"].port.kind == "dome" and back["covariance"].names == names
     np.testing.assert_array_equal(back["covariance"].matrix, cov.matrix)
     for bad in ("left.dome_center[3]", "dome_center[0]", "port.dome_center[0]"):
         with pytest.raises(CovarianceError, match="unknown rig parameter"):

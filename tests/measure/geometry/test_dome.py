@@ -58,7 +58,7 @@ def test_bad_domes_and_cameras_outside_are_refused():
     with pytest.raises(ValueError, match="right camera centre lies outside its dome"):
         StereoRig(rig.left, rig.right, DomePair(inside, inside))
     pair = DomePair(inside, inside.replace(center=rig.right.center))
-    assert StereoRig(rig.left, rig.right, pair).port_of(1) is pair.right
+    assert StereoRig(rig.left, rig.right, pair).view_port(1) is pair.right
 
 
 def test_domeport_parameters_round_trip():

@@ -192,5 +192,5 @@ def test_a_dome_pair_is_not_a_port_of_one_camera():
     camera = _camera(9)
     dome = DomePort(camera.center, 50.0, 8.0, INDICES)
     with pytest.raises(ValueError, match=r"DomePair holds one dome per camera: pass "
-                                         r"rig.port_of\(view\)"):
+                                         r"rig.view_port\(view\)"):
         project(camera, DomePair(dome, dome), [0.0, 0.0, 900.0])

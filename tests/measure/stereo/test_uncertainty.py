@@ -299,7 +299,7 @@ def test_dome_parameter_jacobian_matches_central_differences():
     _, _, analytic = pixel_jacobians(rig, points, DOME_NAMES)
 
     def pixels(r):
-        return np.concatenate([project(c, r.port_of(v), points)
+        return np.concatenate([project(c, r.view_port(v), points)
                                for v, c in enumerate(r.cameras)], axis=1)
 
     for p, name in enumerate(DOME_NAMES):

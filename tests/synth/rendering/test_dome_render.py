@@ -49,9 +49,9 @@ def test_dataset_and_check_through_the_domes(dome_scene, tmp_path, capsys):
     assert report["rms_px"] < 0.03, report["rms_px"]
     data = read_dataset(out)
     spec = load_scene(dome_scene)
-    assert data.rig.is_dome and data.rig.port == spec.rig.port and data.has_port
+    assert data.rig.port.kind == "dome" and data.rig.port == spec.rig.port and data.has_port
     for view, camera in enumerate(data.rig.cameras):  # pixels.csv: through its own dome
-        want = project(camera, spec.rig.port_of(view), data.targets)
+        want = project(camera, spec.rig.view_port(view), data.targets)
         got = (data.pixels_left, data.pixels_right)[view]
         np.testing.assert_allclose(got, want, rtol=0, atol=1e-9)
     cameras = json.loads((out / "cameras.json").read_text())
@@ -66,7 +66,7 @@ def test_calib_yaml_round_trip_of_a_dome_rig(dome_scene, tmp_path):
     spec = load_scene(dome_scene)
     write_calib(tmp_path / "calib.yaml", spec.rig)
     calib = read_calib(str(tmp_path / "calib.yaml"))
-    assert calib["has_port"] and calib["rig"].is_dome
+    assert calib["has_port"] and calib["rig"].port.kind == "dome"
     for got, want in ((calib["port"].left, spec.rig.port.left),
                       (calib["port"].right, spec.rig.port.right)):
         np.testing.assert_allclose(got.center, want.center, rtol=0, atol=1e-12)
@@ -81,7 +81,7 @@ def test_boards_through_the_domes_match_the_forward_model(dome_scene, tmp_path):
                  progress=False)
     data = read_boards(tmp_path / "b")
     rig = data.calib["rig"]
-    assert rig.is_dome and not data.air
+    assert rig.port.kind == "dome" and not data.air
     assert set(os.listdir(tmp_path / "b")) >= {"calib.yaml", "corners.csv", "left_02.png"}
     errors = []
     for k, pair in enumerate(data.images):
@@ -89,7 +89,7 @@ def test_boards_through_the_domes_match_the_forward_model(dome_scene, tmp_path):
         world = data.poses[k].apply(board.corners())
         for view, image in enumerate(pair):
             np.testing.assert_allclose(rows[:, 5 + 2 * view:7 + 2 * view],
-                                       project(rig.cameras[view], rig.port_of(view), world),
+                                       project(rig.cameras[view], rig.view_port(view), world),
                                        atol=1e-9)
             ids, uv = board.detect(image)
             assert ids.size >= board.n_corners - 1
@@ -104,4 +104,4 @@ def test_synth_boards_command_on_a_dome_scene(dome_scene, tmp_path, capsys):
                        "60", "--distance", "450", "650", "--out", str(out),
                        "--no-progress"]) == 0
     assert "behind the domes" in capsys.readouterr().out
-    assert read_calib(str(out / "calib.yaml"))["rig"].is_dome
+    assert read_calib(str(out / "calib.yaml"))["rig"].port.kind == "dome"

@@ -38,7 +38,7 @@ def test_dome_pair_puts_each_dome_at_the_offset_in_its_camera_frame():
 def test_round_trip_gives_a_rig_with_the_same_domes(tmp_path):
     path, (left, right), pair = _small_dome_scene(tmp_path, offset=(2.0, -0.5, 1.25))
     spec = load_scene(path)
-    assert spec.rig.is_dome and spec.has_port and spec.port is spec.rig.port
+    assert spec.rig.port.kind == "dome" and spec.has_port and spec.port is spec.rig.port
     for got, want in ((spec.rig.port.left, pair.left), (spec.rig.port.right, pair.right)):
         np.testing.assert_allclose(got.center, want.center, rtol=0, atol=1e-12)
         assert got.radius == want.radius and got.thickness == pytest.approx(want.thickness, abs=1e-12)
@@ -176,7 +176,7 @@ def test_committed_dome_scenes(name, offset):
     spec = load_scene(REPO / "scenes" / name)
     left, right = paper_cameras()
     want = dome_pair((left, right), 50.0, 8.0, offset, INDICES)
-    assert spec.rig.is_dome and spec.size == (2448, 2048)
+    assert spec.rig.port.kind == "dome" and spec.size == (2448, 2048)
     for got, dome in ((spec.rig.port.left, want.left), (spec.rig.port.right, want.right)):
         np.testing.assert_allclose(got.center, dome.center, atol=1e-12)
         assert (got.radius, got.thickness, got.indices) == (50.0, 8.0, INDICES)
