@@ -23,10 +23,11 @@ inverse.
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 
 from .camera import Camera
-from .dome import DomePort
+from .dome import DomePair, DomePort
 from .port import FlatPort
 
 FLATPORT_NAMES = ("Nx", "Ny", "Nz", "int_dist", "int_thick", "na", "ng", "nw")
@@ -114,3 +115,74 @@ def parse_flatport_text(text: str) -> dict:
 
 __all__ = ["DOMEPORT_NAMES", "FLATPORT_NAMES", "METRES_PER_MM", "flatport_text", "from_domeport",
            "from_flatport", "parse_flatport_text", "to_domeport", "to_flatport"]
+
+
+def housing_params(port: FlatPort | DomePair, left: Camera, right: Camera,
+                   error=ValueError) -> tuple[str, list, list]:
+    """``(housing, left parameters, right parameters)`` of a rig's port: ``FLATPORT`` (one
+    glass layer, else ``error``) or ``DOMEPORT``, each camera's own (metres)."""
+    if isinstance(port, DomePair):
+        return ("DOMEPORT", to_domeport(port.left, left), to_domeport(port.right, right))
+    if len(port.thicknesses) != 1:
+        raise error(f"FLATPORT holds one glass layer; this port has "
+                    f"{len(port.thicknesses)}")
+    return "FLATPORT", to_flatport(port, left), to_flatport(port, right)
+
+
+def _floats(matrix) -> list:
+    return np.asarray(matrix, dtype=np.float64).tolist()
+
+
+def cameras_json_port(port: FlatPort | DomePair, has_port: bool = True) -> dict:
+    """The ``port`` entry of a dataset's ``cameras.json`` (:func:`synth.formats.exchange.cameras_json`):
+    the flat port's interfaces, or each camera's dome."""
+    if isinstance(port, DomePair):
+        port_entry = {"present": True,
+                      "model": "dome port: each camera inside its own spherical glass shell "
+                               "(inner radius, thickness; centre in the reference frame); "
+                               "indices from the camera side (air, glass, water)",
+                      "domes": {name: {"center": _floats(dome.center), "radius": dome.radius,
+                                       "thickness": dome.thickness,
+                                       "indices": [float(v) for v in dome.indices]}
+                                for name, dome in (("left", port.left), ("right", port.right))}}
+    else:
+        port_entry = {
+            "present": bool(has_port),
+            "model": "flat port: interfaces N · X = distance + cumulative thicknesses, in the "
+                     "reference frame; indices from the camera side (air, glass…, water)",
+            "normal": _floats(port.normal), "distance": float(port.distance),
+            "thicknesses": [float(v) for v in port.thicknesses],
+            "indices": [float(v) for v in port.indices],
+            "note": None if has_port else "an all-air scene: the port is index-matched "
+                                          "(all indices 1) and bends no ray"}
+    return port_entry
+
+
+def write_calib_port(fs, port: FlatPort | DomePair, has_port: bool = True) -> None:
+    """The port's node of a dataset's ``calib.yaml`` (:func:`synth.products.dataset.write_calib`)
+    into the ``cv2.FileStorage`` ``fs``: ``port`` (present, normal, distance, thicknesses,
+    indices) or ``dome`` (per camera: center, radius, thickness, indices)."""
+    if isinstance(port, DomePair):
+        fs.startWriteStruct("dome", cv2.FileNode_MAP)
+        for name, dome in (("left", port.left), ("right", port.right)):
+            fs.startWriteStruct(name, cv2.FileNode_MAP)
+            fs.write("center", dome.center.reshape(3, 1))
+            fs.write("radius", float(dome.radius))
+            fs.write("thickness", float(dome.thickness))
+            fs.startWriteStruct("indices", cv2.FileNode_SEQ)
+            for v in dome.indices:
+                fs.write("", float(v))
+            fs.endWriteStruct()
+            fs.endWriteStruct()
+        fs.endWriteStruct()
+    else:
+        fs.startWriteStruct("port", cv2.FileNode_MAP)
+        fs.write("present", int(has_port))
+        fs.write("normal", port.normal.reshape(3, 1))
+        fs.write("distance", float(port.distance))
+        for name, values in (("thicknesses", port.thicknesses), ("indices", port.indices)):
+            fs.startWriteStruct(name, cv2.FileNode_SEQ)
+            for v in values:
+                fs.write("", float(v))
+            fs.endWriteStruct()
+        fs.endWriteStruct()

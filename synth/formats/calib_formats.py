@@ -48,7 +48,7 @@ from scipy.spatial.transform import Rotation
 from measure import Camera, FlatPort, StereoRig
 from measure.geometry.dome import DomePair
 from measure.geometry.flatport_format import (DOMEPORT_NAMES, FLATPORT_NAMES, METRES_PER_MM,
-                                     from_domeport, from_flatport, to_domeport, to_flatport)
+                                     from_domeport, from_flatport, housing_params)
 
 from synth.infra.fileio import atomic_write_text
 
@@ -262,13 +262,7 @@ def _one_port(params_left, params_right, left: Camera, right: Camera, where: str
 
 def _port_params(rig: StereoRig) -> tuple[str, list, list]:
     """``(housing, left parameters, right parameters)``: FLATPORT or DOMEPORT (metres)."""
-    if isinstance(rig.port, DomePair):
-        return ("DOMEPORT", to_domeport(rig.port.left, rig.left),
-                to_domeport(rig.port.right, rig.right))
-    if len(rig.port.thicknesses) != 1:
-        raise CalibFormatError(f"FLATPORT holds one glass layer; this port has "
-                               f"{len(rig.port.thicknesses)}")
-    return "FLATPORT", to_flatport(rig.port, rig.left), to_flatport(rig.port, rig.right)
+    return housing_params(rig.port, rig.left, rig.right, CalibFormatError)
 
 
 def _numbers(values) -> str:

@@ -28,8 +28,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from measure import StereoRig
-from measure.geometry.flatport_format import METRES_PER_MM
-from measure.geometry.dome import DomePair
+from measure.geometry.flatport_format import METRES_PER_MM, cameras_json_port
 
 from synth.formats.calib_formats import (COLMAP_PIXEL_OFFSET, CalibFormatError, stereo_extrinsics,
                                  write_colmap)
@@ -60,26 +59,7 @@ def cameras_json(rig: StereoRig, has_port: bool = True) -> dict:
             "image_size": {"width": int(camera.size[0]), "height": int(camera.size[1])},
             "pose_camera_to_reference": {"convention": "X_ref = R · X_cam + t",
                                          "R": _list(camera.R), "t": _list(camera.t)}}
-    port = rig.port
-    if isinstance(rig.port, DomePair):
-        port_entry = {"present": True,
-                      "model": "dome port: each camera inside its own spherical glass shell "
-                               "(inner radius, thickness; centre in the reference frame); "
-                               "indices from the camera side (air, glass, water)",
-                      "domes": {name: {"center": _list(dome.center), "radius": dome.radius,
-                                       "thickness": dome.thickness,
-                                       "indices": [float(v) for v in dome.indices]}
-                                for name, dome in (("left", port.left), ("right", port.right))}}
-    else:
-        port_entry = {
-            "present": bool(has_port),
-            "model": "flat port: interfaces N · X = distance + cumulative thicknesses, in the "
-                     "reference frame; indices from the camera side (air, glass…, water)",
-            "normal": _list(port.normal), "distance": float(port.distance),
-            "thicknesses": [float(v) for v in port.thicknesses],
-            "indices": [float(v) for v in port.indices],
-            "note": None if has_port else "an all-air scene: the port is index-matched "
-                                          "(all indices 1) and bends no ray"}
+    port_entry = cameras_json_port(rig.port, has_port)
     return {
         "format": "refractive-stereo cameras.json 1",
         "units": {"length": "mm", "pixels": "OpenCV: integer coordinates are pixel centres, "

@@ -62,6 +62,7 @@ import numpy as np
 from measure import Camera, FlatPort, StereoRig
 from measure.geometry.dome import DomePair, DomePort
 from measure.geometry.projection import project
+from measure.geometry.flatport_format import write_calib_port
 
 from synth.formats.calib_formats import (CalibFormatError, calib_dict, calib_format, read_calibmar,
                                  read_colmap, stereo_extrinsics)
@@ -125,28 +126,7 @@ def write_calib(path, rig: StereoRig, has_port: bool = True, extra: dict | None 
         fs.write("D2", _dist5(right).reshape(1, -1))
         fs.write("R", R)
         fs.write("T", T.reshape(3, 1))
-        port = rig.port
-        if isinstance(rig.port, DomePair):
-            fs.startWriteStruct("dome", cv2.FileNode_MAP)
-            for name, dome in (("left", port.left), ("right", port.right)):
-                fs.startWriteStruct(name, cv2.FileNode_MAP)
-                fs.write("center", dome.center.reshape(3, 1))
-                fs.write("radius", float(dome.radius))
-                fs.write("thickness", float(dome.thickness))
-                _write_node(fs, "indices", [float(v) for v in dome.indices])
-                fs.endWriteStruct()
-            fs.endWriteStruct()
-        else:
-            fs.startWriteStruct("port", cv2.FileNode_MAP)
-            fs.write("present", int(has_port))
-            fs.write("normal", port.normal.reshape(3, 1))
-            fs.write("distance", float(port.distance))
-            for name, values in (("thicknesses", port.thicknesses), ("indices", port.indices)):
-                fs.startWriteStruct(name, cv2.FileNode_SEQ)
-                for v in values:
-                    fs.write("", float(v))
-                fs.endWriteStruct()
-            fs.endWriteStruct()
+        write_calib_port(fs, rig.port, has_port)
         if covariance is not None:
             fs.startWriteStruct("covariance", cv2.FileNode_MAP)
             _write_node(fs, "names", list(covariance.names))
