@@ -225,7 +225,7 @@ def in_air_changes(housing, start_rig) -> dict:
 def write_calibration(path, rig, has_port: bool, housing, report, single: bool = False,
                       covariance=None) -> None:
     """``calib.yaml`` and ``flatport.txt`` into directory ``path``; with ``single`` just the
-    calib file at ``path``. ``covariance`` (:class:`measure.calibration.rig_covariance.RigCovariance`; the
+    calib file at ``path``. ``covariance`` (:class:`measure.stereo.rig_covariance.RigCovariance`; the
     housing's own when ``housing`` is given) becomes the file's ``covariance`` node and an
     ``uncertainty`` map: every named parameter's σ (``names``, ``sigmas``), what the σ covers
     (``includes``) and, underwater, the housing's σ conditional on the in-air calibration."""

@@ -21,7 +21,7 @@ class MeasureInputs:
     (:class:`measure.StereoRig`), ``size`` ``(width, height)`` px, and per pair its ``names``
     (the file stems), ``left`` and ``right`` file paths; ``encoding`` how the stored values
     are read (:data:`eval.core.photos.PHOTO_ENCODINGS`); ``rig_covariance`` the calibration's
-    :class:`measure.calibration.rig_covariance.RigCovariance` (None: it holds none)."""
+    :class:`measure.stereo.rig_covariance.RigCovariance` (None: it holds none)."""
 
     calib_path: str
     rig: object

@@ -27,7 +27,7 @@ class RunInputs:
     ``left``/``right`` float32 linear images ``(H, W)``; ``params`` the scene's resolved
     parameters; ``seed`` the run's one seed (images, added noise, RANSAC); ``budget_rigs``
     ``{label: rig}``: also measure with these rigs (the error budget); ``rig_covariance`` the
-    ``--calib`` file's covariance (:class:`measure.calibration.rig_covariance.RigCovariance`) or None."""
+    ``--calib`` file's covariance (:class:`measure.stereo.rig_covariance.RigCovariance`) or None."""
 
     scene: str
     rig: object
@@ -87,7 +87,7 @@ def dataset_params(from_dir: str, defines: dict) -> dict:
 def measurement_calibration(config: RunConfig, spec):
     """``(rig, covariance)``: the rig the measurement believes — the scene's (the truth), or
     ``--calib``'s, with ``--assume`` applied — and the covariance of ``--calib``'s rig
-    (:class:`measure.calibration.rig_covariance.RigCovariance`; None without ``--calib`` or when the file
+    (:class:`measure.stereo.rig_covariance.RigCovariance`; None without ``--calib`` or when the file
     holds none). The file is read once; a singular or malformed covariance is refused by
     ``read_calib`` with one line naming the file."""
     from synth.products.dataset import read_calib

@@ -21,7 +21,7 @@ from ..geometry.port import index_matched_port
 from ..stereo.triangulate import StereoRig
 from .board import MIN_CORNERS, Board
 from .covariance import air_covariance
-from .rig_covariance import RigCovariance
+from ..stereo.rig_covariance import RigCovariance
 
 #: Fewest board poses a calibration accepts.
 MIN_POSES = 3

@@ -10,7 +10,7 @@ same corners and the intrinsics' error. So ``Σ = M diag(σ²) Mᵀ`` with M the
 each camera's residual variance ``Σr² / (2n − p)`` (the scale OpenCV's
 ``stdDeviationsIntrinsics`` uses; they agree with this σ to 1e-3 relative, tested). The
 Jacobians are ``cv2.projectPoints``' and ``cv2.composeRT``'s. The stereo pose is converted to
-:mod:`measure.calibration.rig_covariance`'s names: ``right.rotation`` (``R → exp([φ]×) R`` of the
+:mod:`measure.stereo.rig_covariance`'s names: ``right.rotation`` (``R → exp([φ]×) R`` of the
 camera-to-reference rotation, reference axes, rad) and ``right.center`` (mm).
 
 **Underwater** (:func:`air_jacobian`): the derivatives of the housing adjustment's residuals
@@ -27,7 +27,7 @@ import cv2
 import numpy as np
 
 from ..geometry.camera import Camera
-from .rig_covariance import RigCovariance
+from ..stereo.rig_covariance import RigCovariance
 
 #: The intrinsics OpenCV's in-air calibration estimates per camera (k3 is fixed at 0).
 AIR_INTRINSICS = ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2")

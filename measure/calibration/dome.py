@@ -1,7 +1,7 @@
 """The housing problem of a rig of two domes (:func:`dome_problem`): each camera's decentring
 (:func:`dome_offset`) and the water index (:data:`DOME_PARAMETERS`), residuals through each
 camera's own dome, the analytic Jacobian, and the free numbers as
-:mod:`measure.calibration.rig_covariance` names (:func:`dome_rig_parameters`)."""
+:mod:`measure.stereo.rig_covariance` names (:func:`dome_rig_parameters`)."""
 
 from __future__ import annotations
 
@@ -156,7 +156,7 @@ def dome_problem(rig: StereoRig, board: Board, detections: Detections, names):
 
 
 def dome_rig_parameters(names, air, cameras, domes):
-    """The dome calibration's free numbers as :mod:`measure.calibration.rig_covariance` names —
+    """The dome calibration's free numbers as :mod:`measure.stereo.rig_covariance` names —
     ``left/right.dome_center[0..2]`` (each dome's centre in the reference frame, mm) and
     ``port.index[2]`` — and the ``(a + g, a + g)`` Jacobian of (in-air parameters ``air``,
     those names) with respect to (``air``, the free numbers): ``M = C + R·o`` with ``o`` the

@@ -1,6 +1,6 @@
 """The housing problem of a flat port (:func:`housing_problem`): its free parameters
 (:data:`HOUSING_PARAMETERS`), residuals and analytic Jacobian, and the free numbers as
-:mod:`measure.calibration.rig_covariance` names (:func:`flat_rig_parameters`)."""
+:mod:`measure.stereo.rig_covariance` names (:func:`flat_rig_parameters`)."""
 
 from __future__ import annotations
 
@@ -161,7 +161,7 @@ def housing_problem(rig: StereoRig, board: Board, detections: Detections, names)
 
 
 def flat_rig_parameters(names, x, basis, start_normal, port, n_global):
-    """The housing's free numbers as :mod:`measure.calibration.rig_covariance` names, the ``(g, g)``
+    """The housing's free numbers as :mod:`measure.stereo.rig_covariance` names, the ``(g, g)``
     Jacobian of those parameters with respect to the free numbers at ``x``, and the tilt axes
     (⟂ the estimated normal; None without a free normal)."""
     out, T, axes, k = [], np.zeros((n_global, n_global)), None, 0

@@ -22,7 +22,7 @@ frame (3 + 3 numbers, mm) — and optionally ``n_water`` (:data:`DOME_PARAMETERS
 thickness and glass index stay at the design values; the same poses, residuals and σ, the
 in-air covariance entering the same two ways (each dome moves with its camera when the
 in-air stereo pose moves); the joint covariance names each dome's centre in the reference
-frame (``left/right.dome_center[k]``, :mod:`measure.calibration.rig_covariance`).
+frame (``left/right.dome_center[k]``, :mod:`measure.stereo.rig_covariance`).
 
 Uncertainty: ``s² (JᵀJ)⁻¹`` with ``s² = Σr² / (m − n)``; a parameter is reported not
 identifiable when the column-scaled normal matrix is singular in its direction or two free
@@ -45,7 +45,7 @@ from .board import Board
 from .covariance import AIR_INTRINSICS, AIR_NAMES, POSE_NAMES
 from .dome import DOME_HOUSING, dome_offset
 from .flat import FLAT_HOUSING
-from .rig_covariance import RigCovariance
+from ..stereo.rig_covariance import RigCovariance
 
 #: The free parameters by default: of a flat port, of two domes.
 DEFAULT_FREE = FLAT_HOUSING.default_free

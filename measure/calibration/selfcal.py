@@ -11,7 +11,7 @@ point touches only its own 4 residuals, each port parameter touches all of them.
 
 Uncertainty: the covariance of the parameters is ``s² (JᵀJ)⁻¹`` restricted to them, with
 ``s² = Σr² / (m − n)`` (m residuals, n unknowns). With the rig's covariance
-(``rig_covariance``, a calibration's :class:`measure.calibration.rig_covariance.RigCovariance`) the fixed
+(``rig_covariance``, a calibration's :class:`measure.stereo.rig_covariance.RigCovariance`) the fixed
 parameters' uncertainty is propagated as in the housing calibration: ``+ G Σ_fixed Gᵀ`` with
 ``G = S⁻¹ J̃ᵀ J_fixed`` (S the Schur complement below, J̃ the parameter columns with the points
 projected out, ``J_fixed`` d residuals / d the rig parameters held: intrinsics, the right
@@ -260,7 +260,7 @@ def self_calibrate(rig: StereoRig, uv_left, uv_right, parameters=("n_water",),
 
 
 def _estimated(names, port) -> set:
-    """The :mod:`measure.calibration.rig_covariance` names of the parameters the refinement estimates."""
+    """The :mod:`measure.stereo.rig_covariance` names of the parameters the refinement estimates."""
     out = set()
     for name in names:
         out |= {"n_water": {f"port.index[{len(port.indices) - 1}]"},
@@ -279,7 +279,7 @@ def _influence(jacobian, n: int, n_free: int, schur) -> np.ndarray:
 
 def _fixed_jacobian(rig, port, points, fixed, normal_axes) -> np.ndarray:
     """``(4N, F)``: d residuals (u_left, v_left, u_right, v_right per point) / d the rig
-    parameters ``fixed`` (:mod:`measure.calibration.rig_covariance` names) at the solution."""
+    parameters ``fixed`` (:mod:`measure.stereo.rig_covariance` names) at the solution."""
     from .covariance import AIR_INTRINSICS, intrinsics_jacobian
 
     predicted, _, views = stereo_projections(rig, port, points, True)

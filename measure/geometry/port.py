@@ -93,7 +93,7 @@ class RigPort:
         raise NotImplementedError
 
     def check_parameter_names(self, names) -> None:
-        """ValueError for a :mod:`measure.calibration.rig_covariance` name of another kind of
+        """ValueError for a :mod:`measure.stereo.rig_covariance` name of another kind of
         port."""
         raise NotImplementedError
 

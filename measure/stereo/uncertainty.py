@@ -2,7 +2,7 @@
 
 A point X is measured from four pixel coordinates ``m = (u_L, v_L, u_R, v_R)``; the forward
 model (:func:`measure.geometry.projection.project`) gives ``m = f(X, θ)`` with θ the rig's parameters
-(named as in :mod:`measure.calibration.rig_covariance`). With ``J = ∂f/∂X`` ``(4, 3)`` at the point,
+(named as in :mod:`measure.stereo.rig_covariance`). With ``J = ∂f/∂X`` ``(4, 3)`` at the point,
 ``W = diag(1/σ²)`` the pixel weights and ``J_θ = ∂f/∂θ`` ``(4, P)``:
 
 * pixel part ``Σ_pix = (JᵀWJ)⁻¹`` — the covariance of the maximum-likelihood point (the
@@ -42,7 +42,7 @@ from scipy.stats import chi2
 
 from ..geometry.camera import Camera
 from ..geometry.projection import project
-from ..calibration.rig_covariance import RigCovariance
+from .rig_covariance import RigCovariance
 from .triangulate import StereoRig
 
 #: χ²₃(0.95): a point lies inside its 95 % ellipsoid when its Mahalanobis distance² to the truth
@@ -107,7 +107,7 @@ def pixel_jacobians(rig: StereoRig, points, names=(), normal_axes=None):
 
     Returns ``pixels`` ``(N, 4)`` (u_L, v_L, u_R, v_R), ``d_points`` ``(N, 4, 3)`` px/mm and
     ``d_parameters`` ``(N, 4, P)``: d pixel / d each named rig parameter of ``names``
-    (:mod:`measure.calibration.rig_covariance`'s grammar, its units), analytic (the port and pose
+    (:mod:`measure.stereo.rig_covariance`'s grammar, its units), analytic (the port and pose
     derivatives of :class:`measure.geometry.projection.ParameterJacobian`, the intrinsics of
     :func:`_distortion_terms`). ``normal_axes`` ``(2, 3)``: the tilt axes of ``port.tilt[*]``.
     A dome rig (each camera through its own dome,
@@ -167,7 +167,7 @@ def pixel_jacobians(rig: StereoRig, points, names=(), normal_axes=None):
 
 
 def perturbed_rig(rig: StereoRig, names, delta, normal_axes=None) -> StereoRig:
-    """``rig`` with the named parameters (:mod:`measure.calibration.rig_covariance`) moved by ``delta``
+    """``rig`` with the named parameters (:mod:`measure.stereo.rig_covariance`) moved by ``delta``
     ``(P,)`` in their units: the definition :func:`pixel_jacobians` differentiates (used by the
     tests and by Monte Carlo checks). A rig of two domes: ``left/right.dome_center[k]`` move
     that dome's centre (reference frame), ``port.index[k]`` medium k of both domes."""

@@ -111,7 +111,7 @@ def write_calib(path, rig: StereoRig, has_port: bool = True, extra: dict | None 
                 covariance=None) -> None:
     """Write ``calib.yaml`` (see module docs) with ``cv2.FileStorage``; ``extra`` adds maps
     (e.g. ``uncertainty``) of numbers, strings, lists and maps after the standard nodes;
-    ``covariance`` (:class:`measure.calibration.rig_covariance.RigCovariance`) a ``covariance`` node:
+    ``covariance`` (:class:`measure.stereo.rig_covariance.RigCovariance`) a ``covariance`` node:
     ``names`` (a sequence of parameter names), ``matrix`` (P x P), ``normal_axes`` (2 x 3)."""
     left, right = rig.left, rig.right
     R, T = stereo_extrinsics(left, right)
@@ -231,10 +231,10 @@ def _read_domes(path, node) -> DomePair:
 
 
 def _read_covariance(path, node):
-    """The ``covariance`` node as a :class:`measure.calibration.rig_covariance.RigCovariance`, or None when
+    """The ``covariance`` node as a :class:`measure.stereo.rig_covariance.RigCovariance`, or None when
     the file has none; DatasetError naming the file when it is malformed, singular or not
     positive definite."""
-    from measure.calibration.rig_covariance import CovarianceError, RigCovariance
+    from measure.stereo.rig_covariance import CovarianceError, RigCovariance
 
     if node.empty():
         return None

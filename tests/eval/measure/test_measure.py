@@ -94,7 +94,7 @@ def test_one_pair_measures_the_targets_and_eval_score_reads_the_cloud(photos, ca
 def test_point_covariances_with_and_without_the_calibrations_covariance(photos, capsys):
     """A calibration without covariance is accepted (the points carry the pixel-noise part and
     the report says so); with one, σ grows; the files hold one row per point."""
-    from measure.calibration.rig_covariance import RigCovariance
+    from measure.stereo.rig_covariance import RigCovariance
     from synth.products.dataset import read_calib
 
     root = photos
@@ -247,7 +247,7 @@ def user(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     from measure import StereoRig
 
-    from measure.calibration.rig_covariance import RigCovariance
+    from measure.stereo.rig_covariance import RigCovariance
 
     for name, size, focal in (("calib.yaml", (320, 268), 150.0),
                               ("big.yaml", (2448, 2048), 1100.0)):

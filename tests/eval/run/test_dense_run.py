@@ -108,7 +108,7 @@ def test_dense_run_with_a_rig_covariance(plane_case, tmp_path):
     matching σ's alone), the coverage is counted in 3 dimensions (a rig error moves a point off
     its ray), and the report names the calibration. The scene's own rig is exact, so this one
     calibration is a draw of zero error: σ overstates, and the report says so."""
-    from measure.calibration.rig_covariance import RigCovariance
+    from measure.stereo.rig_covariance import RigCovariance
     from synth.products.dataset import read_calib, write_calib
 
     root, scene, ds = plane_case

@@ -117,7 +117,7 @@ def test_a_flat_port_calibration_is_refused_for_a_dome_scene(scenes, tmp_path, c
 def test_points_through_domes_carry_the_domes_covariance(scenes, tmp_path):
     """A dome calibration whose covariance names each dome's centre (reference frame): the
     points measured through the domes carry its rig part (larger σ than the scene's exact rig)."""
-    from measure.calibration.rig_covariance import RigCovariance
+    from measure.stereo.rig_covariance import RigCovariance
     from synth.products.dataset import read_calib, write_calib, write_dataset
 
     data = tmp_path / "data"

@@ -255,7 +255,7 @@ def test_self_calibration_sigma_includes_the_calibrations_covariance(small_scene
     """--calib with a covariance (left cx and the port distance, 0.1 px and 0.2 mm): the index's
     σ includes it — larger than the conditional σ, which is the σ without a covariance — and
     the report names what entered."""
-    from measure.calibration.rig_covariance import RigCovariance
+    from measure.stereo.rig_covariance import RigCovariance
     from synth.products.dataset import read_calib, write_calib
 
     data = tmp_path / "data"
@@ -315,7 +315,7 @@ def test_point_covariances_with_and_without_a_rig_covariance(small_scene, tmp_pa
     scene's rig or a calibration without covariance (the report says so), larger with a
     calibration's covariance; their files, coverage and summaries; a singular covariance is
     refused with one line naming the file."""
-    from measure.calibration.rig_covariance import RigCovariance
+    from measure.stereo.rig_covariance import RigCovariance
     from synth.products.dataset import read_calib, write_calib
 
     data = tmp_path / "data"

@@ -128,7 +128,7 @@ def test_the_rigs_covariance_is_propagated_into_sigma():
     estimating again with the parameter moved (to 2 %). The estimated parameter's own entry
     (port.index[2]) does not enter."""
     from measure import Camera, StereoRig
-    from measure.calibration.rig_covariance import RigCovariance
+    from measure.stereo.rig_covariance import RigCovariance
 
     rig = paper_rig()
     truth = paper_plane(1000.0)

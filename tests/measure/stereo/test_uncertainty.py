@@ -15,7 +15,7 @@ import pytest
 
 from measure import trace_through_port, triangulate
 from measure.geometry.projection import project
-from measure.calibration.rig_covariance import RigCovariance
+from measure.stereo.rig_covariance import RigCovariance
 from measure.calibration.selfcal import self_calibrate, tilt_basis
 from measure.stereo.uncertainty import (CHI2_3_95, coverage_summary, dense_pixel_covariance,
                                  dense_point_covariances,

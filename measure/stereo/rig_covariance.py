@@ -70,7 +70,7 @@ class RigCovariance:
         bad = [n for n in names if not _NAME.match(n)]
         if bad:
             raise CovarianceError(f"unknown rig parameter name(s) {bad}; expected names like "
-                                  f"{', '.join(PARAMETER_NAMES[:4])} … (measure.calibration.rig_covariance)")
+                                  f"{', '.join(PARAMETER_NAMES[:4])} … (measure.stereo.rig_covariance)")
         if len(set(names)) != len(names):
             raise CovarianceError(f"rig parameter names repeat: {names}")
         matrix = np.asarray(matrix, dtype=np.float64)

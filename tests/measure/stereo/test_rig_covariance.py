@@ -1,11 +1,11 @@
-"""measure.calibration.rig_covariance: the named covariance of a rig, and its node in calib.yaml."""
+"""measure.stereo.rig_covariance: the named covariance of a rig, and its node in calib.yaml."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from measure.calibration.rig_covariance import CovarianceError, RigCovariance
+from measure.stereo.rig_covariance import CovarianceError, RigCovariance
 from synth.products.dataset import DatasetError, read_calib, write_calib
 from synth.scene.rig import paper_rig
 
