@@ -18,12 +18,16 @@ from __future__ import annotations
 
 import numpy as np
 
-from measure import Camera, FlatPort, StereoRig
+from measure import Camera, StereoRig
 from measure.geometry.dome import DomePair
 
 ASSUMABLE = ("n_water", "n_glass", "port_distance", "glass_thickness", "port_normal", "focal",
              "left_focal", "right_focal", "left_dist", "right_dist")
 _PORT_NAMES = ("n_water", "n_glass", "port_distance", "glass_thickness", "port_normal")
+_CAMERA_NAMES = ("focal", "left_focal", "right_focal", "left_dist", "right_dist")
+#: What ``--assume`` may change in a dome rig (the flat port's distance, glass thickness and
+#: normal have no meaning there).
+DOME_ASSUMABLE = DomePair.assumable + _CAMERA_NAMES
 
 
 def _water_index(item, text: str):
@@ -85,61 +89,25 @@ def assumed_rig(truth: StereoRig, has_port: bool, assumptions: dict,
     if not has_port and any(name in assumptions for name in _PORT_NAMES):
         raise ValueError("--assume: the scene has no port (all air); port parameters cannot be "
                          "assumed")
-    if isinstance(rig.port, DomePair):
-        return _assumed_dome_rig(rig, assumptions)
-    left, right, port = rig.left, rig.right, rig.port
-    indices, thicknesses = list(port.indices), list(port.thicknesses)
-    normal, distance = port.normal, port.distance
+    refused = [name for name in assumptions
+               if name in _PORT_NAMES and name not in rig.port.assumable]
+    if refused:
+        raise ValueError(f"--assume {refused[0]} does not apply to {rig.port.rig_name} "
+                         f"({rig.port.rig_detail}); {rig.port.rig_name} takes "
+                         f"{', '.join(rig.port.assumable + _CAMERA_NAMES)}")
+    left, right, port_values = rig.left, rig.right, {}
     for name, value in assumptions.items():
         v = float(value[0]) if value.size == 1 else value
-        if name == "n_water":
-            indices[-1] = v
-        elif name == "n_glass":
-            if not thicknesses:
-                raise ValueError("--assume n_glass: the port has no glass layer")
-            indices[1] = v
-        elif name == "glass_thickness":
-            if not thicknesses:
-                raise ValueError("--assume glass_thickness: the port has no glass layer")
-            thicknesses[0] = v
-        elif name == "port_distance":
-            distance = v
-        elif name == "port_normal":
-            normal = v
+        if name in _PORT_NAMES:
+            try:
+                rig.port.check_assumption(name)
+            except ValueError as exc:
+                raise ValueError(f"--assume {exc}") from None
+            port_values[name] = v
         else:
             left, right = _assumed_cameras(name, v, left, right)
     try:
-        return StereoRig(left, right, FlatPort(normal, distance, tuple(thicknesses),
-                                               tuple(indices)))
-    except ValueError as exc:
-        raise ValueError(f"--assume: {exc}") from None
-
-
-#: What ``--assume`` may change in a dome rig (the flat port's distance, glass thickness and
-#: normal have no meaning there).
-DOME_ASSUMABLE = ("n_water", "n_glass", "focal", "left_focal", "right_focal", "left_dist",
-                  "right_dist")
-
-
-def _assumed_dome_rig(rig: StereoRig, assumptions: dict) -> StereoRig:
-    """:func:`assumed_rig` of a dome rig: the water or glass index of both domes, the cameras'
-    focal lengths and distortion; a flat port's parameter is refused."""
-    flat = [name for name in assumptions if name not in DOME_ASSUMABLE]
-    if flat:
-        raise ValueError(f"--assume {flat[0]} does not apply to a dome rig (each camera inside "
-                         f"its own dome); a dome rig takes {', '.join(DOME_ASSUMABLE)}")
-    left, right = rig.left, rig.right
-    domes = [rig.port.left, rig.port.right]
-    for name, value in assumptions.items():
-        v = float(value[0]) if value.size == 1 else value
-        if name in ("n_water", "n_glass"):
-            k = 2 if name == "n_water" else 1
-            domes = [d.replace(indices=tuple(v if i == k else n for i, n in enumerate(d.indices)))
-                     for d in domes]
-        else:
-            left, right = _assumed_cameras(name, v, left, right)
-    try:
-        return StereoRig(left, right, DomePair(*domes))
+        return StereoRig(left, right, rig.port.assumed(port_values))
     except ValueError as exc:
         raise ValueError(f"--assume: {exc}") from None
 

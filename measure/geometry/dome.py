@@ -173,6 +173,22 @@ class DomePair(RigPort, ValueEquality):
                 if differs(x, y):
                     diff[f"{view}_dome_index_{k}"] = x - y
 
+    assumable = ("n_water", "n_glass")
+    rig_name = "a dome rig"
+    rig_detail = "each camera inside its own dome"
+
+    def check_assumption(self, name: str) -> None:
+        """Both assumable quantities apply to every rig of two domes."""
+
+    def assumed(self, values: dict) -> DomePair:
+        """``n_water``, ``n_glass``: the water's or the glass's index of both domes."""
+        domes = [self.left, self.right]
+        for name, v in values.items():
+            k = 2 if name == "n_water" else 1
+            domes = [d.replace(indices=tuple(v if i == k else n for i, n in enumerate(d.indices)))
+                     for d in domes]
+        return DomePair(*domes)
+
     def check_parameter_names(self, names) -> None:
         flat = [n for n in names if n.startswith("port.") and not n.startswith("port.index")]
         if flat:

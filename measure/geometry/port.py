@@ -92,6 +92,20 @@ class RigPort:
         those where ``differs(a, b)``."""
         raise NotImplementedError
 
+    #: The port's quantities a measurement may be told to assume (``eval run --assume``, in
+    #: this order), and the rig in messages.
+    assumable: tuple = ()
+    rig_name = ""
+    rig_detail = ""
+
+    def check_assumption(self, name: str) -> None:
+        """ValueError (``"name: why"``) for an assumable quantity this port does not have."""
+
+    def assumed(self, values: dict) -> RigPort:
+        """This port with the quantities ``values`` ``{name: value}`` (of :attr:`assumable`)
+        set, in order; ValueError for a port they make invalid."""
+        raise NotImplementedError
+
     def check_parameter_names(self, names) -> None:
         """ValueError for a :mod:`measure.stereo.rig_covariance` name of another kind of
         port."""
@@ -243,6 +257,32 @@ class FlatPort(RigPort, ValueEquality):
         if differs(assumed.normal, truth.normal):
             diff["port_normal_deg"] = angle
 
+    assumable = ("n_water", "n_glass", "port_distance", "glass_thickness", "port_normal")
+    rig_name = "a flat-port rig"
+    rig_detail = "both cameras behind one port"
+
+    def check_assumption(self, name: str) -> None:
+        if name in ("n_glass", "glass_thickness") and not self.thicknesses:
+            raise ValueError(f"{name}: the port has no glass layer")
+
+    def assumed(self, values: dict) -> FlatPort:
+        """``n_water`` (the last index), ``n_glass`` (the first layer's), ``glass_thickness``
+        (the first layer's, mm), ``port_distance`` (mm), ``port_normal``."""
+        indices, thicknesses = list(self.indices), list(self.thicknesses)
+        normal, distance = self.normal, self.distance
+        for name, v in values.items():
+            if name == "n_water":
+                indices[-1] = v
+            elif name == "n_glass":
+                indices[1] = v
+            elif name == "glass_thickness":
+                thicknesses[0] = v
+            elif name == "port_distance":
+                distance = v
+            elif name == "port_normal":
+                normal = v
+        return FlatPort(normal, distance, tuple(thicknesses), tuple(indices))
+
     def check_parameter_names(self, names) -> None:
         domes = [n for n in names if ".dome_center" in n]
         if domes:
@@ -271,6 +311,15 @@ class FlatPort(RigPort, ValueEquality):
         """:func:`measure.trace_through_port` through this port."""
         return trace_through_port(origins, directions, self,
                                   keep_interface_points=keep_interface_points)
+
+
+def require_flat_port(port, message: str) -> FlatPort:
+    """``port`` if it is a :class:`FlatPort`, else ``ValueError(message)``: the precondition of
+    what is defined on a flat port only (a design port's deviations, a perturbed port). Not a
+    branch: no other kind has another path there."""
+    if not isinstance(port, FlatPort):
+        raise ValueError(message)
+    return port
 
 
 def index_matched_port(normal, camera_centres) -> FlatPort:

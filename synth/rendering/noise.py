@@ -15,6 +15,7 @@ from __future__ import annotations
 import numpy as np
 
 from measure import FlatPort
+from measure.geometry.port import require_flat_port
 
 #: Parameters :func:`deviate_port` knows. ``n_layer`` / ``thickness`` take ``layer`` (0 = the
 #: layer next to the air); ``n_glass`` is ``n_layer`` of layer 0.
@@ -68,8 +69,7 @@ def deviate_port(port: FlatPort, parameter: str = "n_water", relative: float = 0
     value lowers the parameter. The result is validated by :class:`measure.FlatPort` (an index
     below 1 or a non-positive thickness raises ``ValueError``).
     """
-    if not isinstance(port, FlatPort):
-        raise ValueError("port must be a measure.FlatPort")
+    require_flat_port(port, "port must be a measure.FlatPort")
     relative = float(relative)
     if not np.isfinite(relative) or relative <= -1.0:
         raise ValueError(f"relative must be finite and > -1, got {relative}")

@@ -20,7 +20,7 @@ from __future__ import annotations
 import numpy as np
 
 from measure import FlatPort, StereoRig
-from measure.geometry.dome import DomePair
+from measure.geometry.port import require_flat_port
 
 #: The deviations a suite may give (``error.<name>``), with their units.
 ERRORS = {"port_distance": "mm", "port_tilt_x": "deg", "port_tilt_y": "deg",
@@ -40,8 +40,7 @@ def design_rig(truth: StereoRig, port: dict) -> StereoRig:
     ``port`` (``{name: value}``, names of :data:`DESIGN_PORT`; ``port_normal`` 3 numbers, the
     others numbers in mm or index units). ValueError for an unknown name, a glass quantity of a
     port without glass, or a port the values make invalid."""
-    if isinstance(truth.port, DomePair):
-        raise ValueError("design port: a rig of domes has no flat port to deviate")
+    require_flat_port(truth.port, "design port: a rig of domes has no flat port to deviate")
     p = truth.port
     normal, distance = np.asarray(p.normal, float), float(p.distance)
     thicknesses, indices = list(p.thicknesses), list(p.indices)
