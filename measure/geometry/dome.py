@@ -223,6 +223,14 @@ class DomePair(RigPort, ValueEquality):
                    for dome in (self.left, self.right))
 
 
+def require_dome_pair(port, message: str) -> DomePair:
+    """``port`` if it is a :class:`DomePair`, else ``ValueError(message)``: the precondition of
+    what is defined on two domes only (their field of view, their spheres in a scene)."""
+    if not isinstance(port, DomePair):
+        raise ValueError(message)
+    return port
+
+
 def _exit_parameter(origins, directions, center, radius):
     """Ray parameter ``h`` of the far intersection of rays starting inside a sphere (NaN where
     the ray starts outside or misses)."""

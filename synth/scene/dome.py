@@ -17,7 +17,7 @@ from __future__ import annotations
 import numpy as np
 
 from measure import StereoRig
-from measure.geometry.dome import DomePair, DomePort, trace_through_dome
+from measure.geometry.dome import DomePair, DomePort, require_dome_pair, trace_through_dome
 
 #: Defaults of ``synth scene --port dome``: inner radius and glass thickness, mm. With the
 #: paper's 200 mm baseline the two outer spheres (58 mm) leave 84 mm between them, and no ray of
@@ -54,8 +54,7 @@ def check_field_of_view(rig: StereoRig, step_px: int = FOV_CHECK_STEP_PX) -> Non
     total internal reflection) and its water ray must not meet the other dome's outer sphere.
     The two domes must not overlap.
     """
-    if not isinstance(rig.port, DomePair):
-        raise ValueError("check_field_of_view needs a rig with a DomePair")
+    require_dome_pair(rig.port, "check_field_of_view needs a rig with a DomePair")
     left, right = rig.port.left, rig.port.right
     gap = np.linalg.norm(left.center - right.center) - left.radii[1] - right.radii[1]
     if gap <= 0:
