@@ -3,7 +3,7 @@
 Measures (best of ``--repeat`` runs, wall clock):
 
 * on ``--points`` points behind the paper's port: ``triangulate`` with each method and
-  ``measure.projection.project`` with the Fermat and the Snell solver (points per second);
+  ``measure.geometry.projection.project`` with the Fermat and the Snell solver (points per second);
 * for every batch size of ``--sizes`` (default 10^3 … 10^6; 10^7 on request) and both ports —
   the paper's air–glass–water and a bare air–water interface: ``project`` (Fermat), ``project``
   with ``jacobian=True`` (d pixel / d point) and with ``parameters=True`` (also the port and
@@ -27,7 +27,7 @@ import time
 import numpy as np
 
 from eval.cli import non_negative_int, positive_int
-from synth.cli import add_json_option, add_out_option, add_progress_option
+from synth.infra.cli import add_json_option, add_out_option, add_progress_option
 
 COMMAND = "eval bench"
 
@@ -112,7 +112,7 @@ def machine() -> dict:
 
 def _ports():
     from measure import FlatPort
-    from synth.rig import paper_port
+    from synth.scene.rig import paper_port
 
     paper = paper_port()
     return {"air-glass-water": paper,
@@ -124,9 +124,9 @@ def run_bench(n_points: int, n_reference: int, repeat: int, seed: int, progress=
     """Run the measurements; returns a dict of seconds and points per second."""
     from eval.core.fermat_reference import fermat_pixel_scipy
     from measure import StereoRig, triangulate
-    from measure.projection import project
-    from synth.layouts import random_volume
-    from synth.rig import paper_rig
+    from measure.geometry.projection import project
+    from synth.scene.layouts import random_volume
+    from synth.scene.rig import paper_rig
 
     rig = paper_rig()
     results = {"points": n_points, **machine(), "timings": {}, "per_size": []}
@@ -249,7 +249,7 @@ def main(args) -> int:
     import json
     import sys
 
-    from synth.fileio import atomic_write_json, check_file_output
+    from synth.infra.fileio import atomic_write_json, check_file_output
 
     if args.out:  # before the benchmark, not after
         check_file_output(args.out, "--out", may_replace=is_bench_output)

@@ -9,7 +9,7 @@ package ``eval/<name>/`` whose ``command.py`` is the command — exposing
 and add the module to :data:`SUBCOMMANDS`. Keep heavy imports (Open3D, Mitsuba,
 matplotlib) inside ``main`` so that ``--help`` and the other subcommands stay fast.
 
-Errors and exit codes follow :mod:`synth.cli`, shared with ``python -m synth``: one line
+Errors and exit codes follow :mod:`synth.infra.cli`, shared with ``python -m synth``: one line
 ``error: …`` and exit 2 for bad input, 1 for a check that fails, 130 when interrupted.
 """
 
@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import importlib
 
-from synth.cli import (CLIError, Parser, command_parser, non_negative_float, non_negative_int,
+from synth.infra.cli import (CLIError, Parser, command_parser, non_negative_float, non_negative_int,
                        positive_float, positive_int, process_main, run_command)
 
 #: The module of each subcommand, in the order ``--help`` lists them.

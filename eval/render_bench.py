@@ -9,12 +9,12 @@ reading the image back (Dr.Jit is lazy: the work happens when the result is read
 2. **Side by side**: both views at the scene's spp, one ``mi.render`` call per view against
    the pass plan, timed one after the other in the same process.
 3. **Adaptive against full film**, side by side: both views rendered on the full film at
-   ``--full-film-spp`` (default 36), adaptively (:func:`synth.render.render_view_counted`: a
+   ``--full-film-spp`` (default 36), adaptively (:func:`synth.rendering.render.render_view_counted`: a
    pilot, then the samples only where it saw light) at the same spp and adaptively at the
    scene's spp, one after the other in the same process, each with its render seconds,
    samples, lit fraction and cross-check.
 4. **Accuracy against time**: both views rendered on the full film with the project's pass plan
-   (:func:`synth.render.pass_plan`) at each total spp of ``--spp``, and adaptively at each spp
+   (:func:`synth.rendering.render.pass_plan`) at each total spp of ``--spp``, and adaptively at each spp
    of ``--adaptive-spp``, the targets detected and compared with the Fermat simulator (against
    each centre's pixel and against the outline centroid); cross-check RMS (px) against render
    seconds, both curves in one figure.
@@ -33,7 +33,7 @@ import sys
 import time
 
 from eval.cli import CLIError, positive_int
-from synth.cli import add_define_option, add_out_option, add_progress_option, add_scene_argument
+from synth.infra.cli import add_define_option, add_out_option, add_progress_option, add_scene_argument
 
 COMMAND = "eval render-bench"
 #: The measurements ``--parts`` can choose.
@@ -80,8 +80,8 @@ def measure_throughput(mscene, mi, spec, per_call_list, total_spp, log):
     """``[{spp_per_call, calls, seconds, samples_per_second}]`` for the left view."""
     import numpy as np
 
-    from synth.integrator import render_integrator
-    from synth.mitsuba_setup import render
+    from synth.rendering.integrator import render_integrator
+    from synth.rendering.mitsuba_setup import render
 
     w, h = spec.size
     integrator = render_integrator(mi, mscene)
@@ -107,9 +107,9 @@ def measure_side_by_side(mscene, mi, spec, spp: int, log) -> dict:
     same process one after the other (render seconds, both views)."""
     import numpy as np
 
-    from synth.integrator import render_integrator
-    from synth.mitsuba_setup import render
-    from synth.render import pass_plan
+    from synth.rendering.integrator import render_integrator
+    from synth.rendering.mitsuba_setup import render
+    from synth.rendering.render import pass_plan
 
     w, h = spec.size
     integrator = render_integrator(mi, mscene)
@@ -134,8 +134,8 @@ def measure_accuracy(spec, spp_list, variant, log, adaptive: bool = False):
     from eval.run.inputs import RunInputs
     from eval.run.pipeline import crosscheck_stage
     from measure import detect_targets
-    from measure.detect import FLOOR_FRACTION
-    from synth.render import render_stereo
+    from measure.images.detect import FLOOR_FRACTION
+    from synth.rendering.render import render_stereo
 
     rows = []
     for spp in spp_list:
@@ -234,9 +234,9 @@ def curve_figure(path, throughput, accuracy, title, adaptive=()):
 
 
 def main(args) -> int:
-    from synth.fileio import OutputDir, atomic_write_json
-    from synth.provenance import package_versions
-    from synth.render import MAX_SAMPLES_PER_CALL, load_mitsuba_scene
+    from synth.infra.fileio import OutputDir, atomic_write_json
+    from synth.infra.provenance import package_versions
+    from synth.rendering.render import MAX_SAMPLES_PER_CALL, load_mitsuba_scene
     from synth.scene import load_scene, parse_defines
 
     log = (lambda text: None) if args.no_progress else (

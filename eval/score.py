@@ -34,8 +34,9 @@ import os
 import sys
 import time
 
+from measure.geometry.dome import DomePair
 from eval.cli import CLIError, positive_float
-from synth.cli import add_json_option, add_out_option, add_progress_option
+from synth.infra.cli import add_json_option, add_out_option, add_progress_option
 from eval.core.formatting import format_number as fmt
 from eval.core.uncertainty import AUTO, add_pixel_sigma_option, parse_pixel_sigma
 from eval.core.scoring import (PIXEL_COLUMNS, UNITS, read_pixel_pairs, read_points,
@@ -47,7 +48,7 @@ COMMAND = "eval score"
 
 
 def add_parser(subparsers):
-    from measure.triangulate import METHODS
+    from measure.stereo.triangulate import METHODS
 
     p = subparsers.add_parser(
         "score", help="score an external reconstruction against a rendered dataset",
@@ -81,8 +82,8 @@ def add_parser(subparsers):
 
 def main(args) -> int:
     from measure import triangulate
-    from synth.dataset import DatasetError, read_dataset
-    from synth.fileio import OutputDir, atomic_write_json, atomic_write_text, jsonable
+    from synth.products.dataset import DatasetError, read_dataset
+    from synth.infra.fileio import OutputDir, atomic_write_json, atomic_write_text, jsonable
 
     from eval.core.cloud_metrics import write_error_ply
     from eval.core.figures import ellipses_figure, error_maps_figure, histograms_figure
@@ -179,8 +180,8 @@ def score_covariances(data, arrays, label, uv, pixel_sigma) -> dict:
     the associated points (into ``arrays["covariance"]``) from ``pixel_sigma`` (``auto``: the
     reprojection residuals; no detections here) and the covariance of the dataset's
     ``calib.yaml``, if it holds one; their σ and coverage against the truth. Only the
-    optical-path points get covariances (:mod:`measure.uncertainty`)."""
-    from synth.dataset import read_calib
+    optical-path points get covariances (:mod:`measure.stereo.uncertainty`)."""
+    from synth.products.dataset import read_calib
 
     from eval.core.uncertainty import (method_covariances, pair_sigmas, rig_covariance_note,
                                        uncertainty_summary)
@@ -188,7 +189,7 @@ def score_covariances(data, arrays, label, uv, pixel_sigma) -> dict:
     calib_path = os.path.join(data.path, "calib.yaml")
     rig_covariance = read_calib(calib_path)["covariance"]
     info = {"rig": rig_covariance_note(rig_covariance, calib_path)}
-    if label != "optical_path" or data.rig.is_dome:
+    if label != "optical_path" or isinstance(data.rig.port, DomePair):
         info["note"] = f"no covariance for {label} (only optical_path gets one)"
         return info
     ok = arrays["associated"]
@@ -203,7 +204,7 @@ def score_covariances(data, arrays, label, uv, pixel_sigma) -> dict:
 def score_suite_main(args, output, method, log, start) -> int:
     """``--submission DIR``: every dataset of the suite ``args.dataset`` scored; the summary
     files into ``--out``; exit 1 when a dataset is missing or failed."""
-    from synth.fileio import atomic_write_json, jsonable
+    from synth.infra.fileio import atomic_write_json, jsonable
 
     from eval.core.suite_scores import FAILURES, score_suite, write_summary
 

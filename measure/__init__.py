@@ -4,13 +4,13 @@ The field library of the project: numpy, scipy and OpenCV only (no Mitsuba, no O
 Units are millimetres; the reference frame is the left camera's (OpenCV axes).
 """
 
-from .camera import Camera
-from .detect import REJECTION_REASONS, Detections, Rejection, detect_targets
-from .lines import CommonPerpendicular, common_perpendicular
-from .port import FlatPort
+from .geometry.camera import Camera
+from .images.detect import REJECTION_REASONS, Detections, Rejection, detect_targets
+from .geometry.lines import CommonPerpendicular, common_perpendicular
+from .geometry.port import FlatPort
 from .reasons import Reason
-from .refraction import WaterRays, intersect_plane, refract, trace_through_port
-from .triangulate import METHODS, StereoRig, Triangulation, triangulate, triangulate_rays
+from .geometry.refraction import WaterRays, intersect_plane, refract, trace_through_port
+from .stereo.triangulate import METHODS, StereoRig, Triangulation, triangulate, triangulate_rays
 
 __all__ = [
     "Camera", "FlatPort", "StereoRig", "Triangulation", "triangulate", "triangulate_rays",

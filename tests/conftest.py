@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, settings
 
-from synth.rig import paper_rig
+from synth.scene.rig import paper_rig
 
 settings.register_profile("ci", deadline=None, max_examples=60,
                           suppress_health_check=[HealthCheck.too_slow])
@@ -38,7 +38,7 @@ def _guard_renders() -> None:
     fails. Imports Mitsuba once per session (a second or two); without Mitsuba nothing renders
     and nothing needs guarding."""
     try:
-        from synth.mitsuba_setup import import_mitsuba
+        from synth.rendering.mitsuba_setup import import_mitsuba
 
         mi, _ = import_mitsuba()
     except Exception:  # no Mitsuba here: the render tests say so themselves
@@ -76,8 +76,8 @@ SMALL_SCENE_SPP = 36
 def small_scene(tmp_path_factory):
     """A small scene file: the paper's port, a 320x268 rig (f = 150 px), 9x9 targets of radius
     16 mm, 80 mm apart on the plane Z = 1 m."""
-    from synth.layouts import grid_plane
-    from synth.rig import paper_cameras, paper_port
+    from synth.scene.layouts import grid_plane
+    from synth.scene.rig import paper_cameras, paper_port
     from synth.scene import write_scene
 
     left, right = paper_cameras(SMALL_SCENE_SIZE, 150.0)

@@ -223,15 +223,15 @@ def test_render_commands_interrupted(argv, seconds, small_scene, tmp_path):
 @pytest.mark.slow
 def test_mitsubas_interrupt_warning_stays_off_stdout(tmp_path):
     """A SIGINT while ``mi.render`` runs meets Mitsuba's own handler, which logged
-    ``Received interrupt signal, winding down..`` to stdout; :func:`synth.mitsuba_setup.render`
+    ``Received interrupt signal, winding down..`` to stdout; :func:`synth.rendering.mitsuba_setup.render`
     holds Mitsuba to errors during the call. The integrator below sends the signal from inside
     the render call; Dr.Jit then reports the interrupt as a RuntimeError, which
-    :mod:`synth.interrupt` still knows for what it is."""
+    :mod:`synth.infra.interrupt` still knows for what it is."""
     script = tmp_path / "render_interrupted.py"
     script.write_text('''
 import os, signal, sys
 from synth import interrupt
-from synth.mitsuba_setup import import_mitsuba, render
+from synth.rendering.mitsuba_setup import import_mitsuba, render
 mi, _ = import_mitsuba()
 
 class Interrupting(mi.SamplingIntegrator):

@@ -1,5 +1,5 @@
 """One command-line vocabulary for ``python -m synth`` and ``python -m eval``: every subcommand's
-parser is walked and its options checked against the house style of :mod:`synth.cli`."""
+parser is walked and its options checked against the house style of :mod:`synth.infra.cli`."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import argparse
 
 import pytest
 
-from synth.cli import DEFINE_HELP, JSON_HELP, NO_PROGRESS_HELP, SCENE_HELP
+from synth.infra.cli import DEFINE_HELP, JSON_HELP, NO_PROGRESS_HELP, SCENE_HELP
 
 #: Subcommands that show progress (long work): each takes --no-progress.
 WITH_PROGRESS = {("eval", "run"), ("eval", "paper"), ("eval", "sweep"), ("eval", "calibrate"),
@@ -114,7 +114,7 @@ def test_version_falls_back_to_pyproject(monkeypatch, capsys):
         raise importlib.metadata.PackageNotFoundError(name)
 
     monkeypatch.setattr(importlib.metadata, "version", missing)
-    from synth.cli import package_version
+    from synth.infra.cli import package_version
 
     assert package_version() == _pyproject_version()
     assert _main("synth")(["--version"]) == 0

@@ -94,10 +94,10 @@ def coverage(errors, sigmas, names=PARAMETERS) -> dict:
 
 def air_errors(calib_path, truth_path) -> tuple:
     """The in-air calibration's error (estimate − truth) in its covariance's names and that
-    covariance (``measure.calibration_covariance.AIR_NAMES`` order)."""
+    covariance (``measure.calibration.covariance.AIR_NAMES`` order)."""
     from scipy.spatial.transform import Rotation
 
-    from synth.dataset import read_calib
+    from synth.products.dataset import read_calib
 
     calib, truth = read_calib(calib_path), read_calib(truth_path)["rig"]
     errors = []

@@ -1,8 +1,8 @@
-"""Benchmark :func:`measure.dense.match_dense` on a full-size analytic pair (numbers for the
+"""Benchmark :func:`measure.dense.match.match_dense` on a full-size analytic pair (numbers for the
 report; nothing asserted).
 
 The paper's rig (2448 x 2048 px, f = 1100 px) behind the paper's port looks at a speckled plane
-at 1 m facing the cameras (synth.dense_pairs, 3 x 3 supersampled). Both models match the pair
+at 1 m facing the cameras (synth.products.dense_pairs, 3 x 3 supersampled). Both models match the pair
 over the depth range 900-1100 mm (the pinhole model over its own apparent range, which lies
 nearer: straight rays see the plane at ~780 mm). Printed: matched fraction of the overlap (left
 pixels whose true surface point is in the right image, both 7 px inside the borders), the
@@ -31,11 +31,11 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from measure import triangulate
-from measure.dense import match_dense
-from measure.projection import project
-from measure.uncertainty import dense_point_covariances
-from synth.dense_pairs import PlaneSurface, SpeckleTexture, render_pair, surface_points
-from synth.rig import PAPER_FOCAL_PX, PAPER_IMAGE_SIZE, paper_rig
+from measure.dense.match import match_dense
+from measure.geometry.projection import project
+from measure.stereo.uncertainty import dense_point_covariances
+from synth.products.dense_pairs import PlaneSurface, SpeckleTexture, render_pair, surface_points
+from synth.scene.rig import PAPER_FOCAL_PX, PAPER_IMAGE_SIZE, paper_rig
 
 #: Speckle diameter in pixels of the left image at 1 m (the texture scales with the image).
 SPECKLE_PX = 2.5

@@ -4,9 +4,9 @@
 user's own photos (``DIR/left/``, ``DIR/right/``, paired by name; the board on the command line,
 ``--air`` or ``--intrinsics``; the report says what can be trusted without truth:
 :mod:`eval.calibrate.photos`). In air (``--air`` boards): OpenCV calibrates
-both cameras and the stereo pose (:func:`measure.calibration.calibrate_in_air`). Underwater:
+both cameras and the stereo pose (:func:`measure.calibration.air.calibrate_in_air`). Underwater:
 the housing is estimated by refractive bundle adjustment with the in-air intrinsics fixed
-(:func:`measure.calibration.calibrate_housing`); ``--intrinsics`` gives them, as an in-air boards
+(:func:`measure.calibration.housing.calibrate_housing`); ``--intrinsics`` gives them, as an in-air boards
 folder (calibrated here first) or a ``calib.yaml``.
 
 Writes to ``--out``: ``calib.yaml`` (the dataset format, with an ``uncertainty`` map),
@@ -27,10 +27,9 @@ import time
 from eval.calibrate.single import single_camera_folder
 from eval.cli import CLIError, positive_float
 from eval.core.photos import add_encoding_option
-from synth.cli import (BOARD_OPTIONS, EXIT_CHECK_FAILED, WATER_INDEX_HELP, add_board_options,
-                       add_out_option,
-                       add_progress_option, board_from_args, given, refuse_given,
-                       water_index_argument)
+from synth.infra.cli import (BOARD_OPTIONS, EXIT_CHECK_FAILED, WATER_INDEX_HELP,
+                             add_board_options, add_out_option, add_progress_option,
+                             board_from_args, given, refuse_given, water_index_argument)
 
 COMMAND = "eval calibrate"
 #: Options of the housing calibration (underwater boards): refused with in-air boards.
@@ -46,10 +45,11 @@ DESIGN_KEYS = {"distance": "start_distance", "thickness": "glass_thickness", "n_
 
 
 def add_parser(subparsers):
-    from measure.calibration import (DEFAULT_DOME_FREE, DEFAULT_FREE, DEFAULT_UNCERTAINTY,
-                                     DOME_PARAMETERS, HOUSING_PARAMETERS, LENS_MODELS,
-                                     UNCERTAINTY)
-    from synth.rig import PAPER_GLASS_THICKNESS_MM, PAPER_INDICES, PAPER_PORT_DISTANCE_MM
+    from measure.calibration.air import LENS_MODELS
+    from measure.calibration.dome import DOME_PARAMETERS
+    from measure.calibration.flat import HOUSING_PARAMETERS
+    from measure.calibration.housing import DEFAULT_DOME_FREE, DEFAULT_FREE, DEFAULT_UNCERTAINTY, UNCERTAINTY
+    from synth.scene.rig import PAPER_GLASS_THICKNESS_MM, PAPER_INDICES, PAPER_PORT_DISTANCE_MM
 
     p = subparsers.add_parser(
         "calibrate", help="calibrate from board images (in air, or the housing underwater)",
@@ -172,7 +172,8 @@ def design_port(args, normal):
 
 
 def _parse_free(text: str, dome: bool = False) -> tuple:
-    from measure.calibration import DOME_PARAMETERS, HOUSING_PARAMETERS
+    from measure.calibration.dome import DOME_PARAMETERS
+    from measure.calibration.flat import HOUSING_PARAMETERS
 
     table = DOME_PARAMETERS if dome else HOUSING_PARAMETERS
     names = tuple(dict.fromkeys(n.strip() for n in text.split(",") if n.strip()))
@@ -208,9 +209,9 @@ def _in_air(path, log):
     """``(rig, air calibration or None, boards or None, covariance or None)`` from
     ``--intrinsics``: a boards folder (calibrated here) or a calibration file (its covariance
     node, when it has one)."""
-    from measure.calibration import calibrate_in_air, detect_boards
-    from synth.boards import read_boards
-    from synth.dataset import read_calib
+    from measure.calibration.air import calibrate_in_air, detect_boards
+    from synth.products.boards import read_boards
+    from synth.products.dataset import read_calib
 
     if os.path.isdir(path):
         boards = read_boards(path)
@@ -228,10 +229,12 @@ def _in_air(path, log):
 def main(args) -> int:
 
     from measure import StereoRig
-    from measure.calibration import (DEFAULT_LENS_MODEL, CalibrationError, calibrate_housing,
-                                     calibrate_in_air, detect_boards)
-    from synth.boards import read_boards
-    from synth.fileio import OutputDir
+    from measure.calibration.air import (DEFAULT_LENS_MODEL, CalibrationError, calibrate_in_air,
+                                         detect_boards)
+    from measure.calibration.housing import calibrate_housing
+    from measure.geometry.dome import DomePair
+    from synth.products.boards import read_boards
+    from synth.infra.fileio import OutputDir
 
     from eval.calibrate import report as report_lib
 
@@ -258,9 +261,9 @@ def main(args) -> int:
                        f"(no left/ and right/ folders, no photos)")
     boards = read_boards(args.dir)
     truth = boards.calib["rig"]
-    dome = not boards.air and truth.is_dome
+    dome = not boards.air and isinstance(truth.port, DomePair)
     if dome:
-        from measure.calibration import DEFAULT_DOME_FREE
+        from measure.calibration.housing import DEFAULT_DOME_FREE
 
         refuse_given(args, FLAT_DESIGN_OPTIONS, f"to boards behind domes ({args.dir}): the "
                                                 f"design is --dome-radius, --dome-thickness, "
@@ -376,8 +379,9 @@ def is_photo_folder(path) -> bool:
 def _calibrate_photos(args, output, log, free, start) -> int:
     """``eval calibrate`` of a user's photo folder (module docs, :mod:`eval.calibrate.photos`)."""
     from measure import StereoRig
-    from measure.calibration import (DEFAULT_LENS_MODEL, CalibrationError, calibrate_housing,
-                                     calibrate_in_air, detect_boards)
+    from measure.calibration.air import (DEFAULT_LENS_MODEL, CalibrationError, calibrate_in_air,
+                                         detect_boards)
+    from measure.calibration.housing import calibrate_housing
 
     from eval.calibrate import photos as trust
     from eval.calibrate import report as report_lib

@@ -29,7 +29,7 @@ from __future__ import annotations
 import os
 
 import numpy as np
-from measure.calibration import (LENS_MODEL_GAIN, LENS_MODEL_ORDER, STEREO_FLOOR_DEG,
+from measure.calibration.air import (LENS_MODEL_GAIN, LENS_MODEL_ORDER, STEREO_FLOOR_DEG,
                                  STEREO_FLOOR_FRACTION, STEREO_OUTLIER_FACTOR)
 
 from eval.calibrate.report import format_value as _f
@@ -88,7 +88,7 @@ def outlier_poses(rms_per: dict) -> tuple[float, list[int]]:
 
 def without(detections, poses):
     """``detections`` with the board of ``poses`` removed (both views; pose numbers kept)."""
-    from measure.calibration import Detections
+    from measure.calibration.air import Detections
 
     drop = set(poses)
     empty = (np.empty(0, int), np.empty((0, 2)))
@@ -109,7 +109,7 @@ def fit_without_outliers(fit, rms_of, detections):
     if not bad:
         return first, detections, info
     kept = without(detections, bad)
-    from measure.calibration import CalibrationError
+    from measure.calibration.air import CalibrationError
 
     try:
         return fit(kept), kept, info
@@ -195,7 +195,7 @@ def air_estimates(air, poses) -> dict:
 def camera_estimates(camera, sigmas: dict) -> dict:
     """``{name: {estimate, sigma}}`` of one camera's intrinsics: fx, fy, cx, cy and the
     distortion coefficients its lens model estimated (the names of ``sigmas``)."""
-    from measure.calibration import INTRINSIC_NAMES
+    from measure.calibration.air import INTRINSIC_NAMES
 
     values = {"fx": camera.K[0, 0], "fy": camera.K[1, 1], "cx": camera.K[0, 2],
               "cy": camera.K[1, 2]}
@@ -352,10 +352,10 @@ def per_pose_table(names, detections_all, detections_used, rms_per, outliers, ge
 
 def _small_left(images) -> list:
     """The left images of ``images`` as the detector sees them (uint8, halved to at most
-    :data:`measure.board.DETECTION_WIDTH_PX` wide)."""
+    :data:`measure.calibration.board.DETECTION_WIDTH_PX` wide)."""
     import cv2
 
-    from measure.board import DETECTION_WIDTH_PX, to_uint8
+    from measure.calibration.board import DETECTION_WIDTH_PX, to_uint8
 
     smalls = []
     for left, _ in images:

@@ -159,7 +159,7 @@ def dome_summary(housing, truth, start_rig) -> dict:
     """Every estimated dome parameter beside the truth, with its error in σ: each camera's
     decentring (its dome centre relative to the camera centre, in the camera's frame, mm) and
     the water index."""
-    from measure.calibration import dome_offset
+    from measure.calibration.dome import dome_offset
 
     out = _adjustment_summary(housing)
     out["uncertainty"] = housing.uncertainty
@@ -225,13 +225,14 @@ def in_air_changes(housing, start_rig) -> dict:
 def write_calibration(path, rig, has_port: bool, housing, report, single: bool = False,
                       covariance=None) -> None:
     """``calib.yaml`` and ``flatport.txt`` into directory ``path``; with ``single`` just the
-    calib file at ``path``. ``covariance`` (:class:`measure.rig_covariance.RigCovariance`; the
+    calib file at ``path``. ``covariance`` (:class:`measure.stereo.rig_covariance.RigCovariance`; the
     housing's own when ``housing`` is given) becomes the file's ``covariance`` node and an
     ``uncertainty`` map: every named parameter's σ (``names``, ``sigmas``), what the σ covers
     (``includes``) and, underwater, the housing's σ conditional on the in-air calibration."""
-    from measure.flatport_format import flatport_text
-    from synth.dataset import write_calib
-    from synth.fileio import atomic_write_text
+    from measure.geometry.dome import DomePair
+    from measure.geometry.flatport_format import flatport_text
+    from synth.products.dataset import write_calib
+    from synth.infra.fileio import atomic_write_text
 
     if housing is not None:
         covariance = housing.covariance
@@ -250,7 +251,7 @@ def write_calibration(path, rig, has_port: bool, housing, report, single: bool =
         extra["calibration"] = {"rms_px": housing.rms_px, "poses": len(housing.poses)}
     target = path if single else os.path.join(path, "calib.yaml")
     write_calib(target, rig, has_port, extra or None, covariance=covariance)
-    if not single and has_port and not rig.is_dome:  # a dome rig: DOMEPORT in cameras.txt
+    if not single and has_port and not isinstance(rig.port, DomePair):  # a dome rig: DOMEPORT in cameras.txt
         atomic_write_text(os.path.join(path, "flatport.txt"),
                           flatport_text(rig.port, {"left": rig.left, "right": rig.right}))
     if not single:
@@ -260,10 +261,10 @@ def write_calibration(path, rig, has_port: bool, housing, report, single: bool =
 def write_other_formats(directory, rig, has_port: bool) -> list[str]:
     """The calibration in the formats of other tools, into ``directory``: calibmar's stereo
     pair (``calibmar.yaml``, ``calibmar_stereo.yaml``) and the refractive COLMAP fork's
-    ``cameras.txt`` with ``rig_config.json`` (:func:`synth.calib_formats.write_calibration_formats`;
+    ``cameras.txt`` with ``rig_config.json`` (:func:`synth.formats.calib_formats.write_calibration_formats`;
     the COLMAP file's header says that upstream COLMAP and pycolmap drop the port). Returns
     the names written."""
-    from synth.calib_formats import write_calibration_formats
+    from synth.formats.calib_formats import write_calibration_formats
 
     return [os.path.basename(p) for p in write_calibration_formats(directory, rig, has_port)]
 
@@ -315,7 +316,7 @@ def write_report(directory, report: dict, markdown, start: float) -> dict:
     time since ``start``; returns the report as written (JSON types)."""
     import time
 
-    from synth.fileio import atomic_write_json, atomic_write_text, jsonable
+    from synth.infra.fileio import atomic_write_json, atomic_write_text, jsonable
 
     report["timings_s"]["total"] = time.perf_counter() - start
     report = jsonable(report)

@@ -44,9 +44,9 @@ def single_camera_folder(path) -> bool:
 def calibrate_single(args, output, log, start, board) -> tuple[dict, str]:
     """Calibrate the camera of the photo folder ``args.dir``; returns ``(report, summary)``
     after writing everything into ``output`` (module docs)."""
-    from measure.calibration import (DEFAULT_LENS_MODEL, CalibrationError, Detections,
-                                     calibrate_camera, camera_residuals, detect_images,
-                                     lens_problem)
+    from measure.calibration.air import (DEFAULT_LENS_MODEL, CalibrationError, Detections,
+                                         calibrate_camera, camera_residuals, detect_images,
+                                         lens_problem)
 
     from eval.core.photos import photo_files, read_photo
 
@@ -118,7 +118,7 @@ def calibrate_single(args, output, log, start, board) -> tuple[dict, str]:
 def _camera(result, size):
     """The :class:`measure.Camera` of a fit and its σ per intrinsic."""
     from measure import Camera
-    from measure.calibration import INTRINSIC_NAMES, LENS_MODELS
+    from measure.calibration.air import INTRINSIC_NAMES, LENS_MODELS
 
     out, model = result["out"], result["model"]
     n_dist = LENS_MODELS[model][1]
@@ -181,7 +181,7 @@ def write_camera_files(directory, camera, report) -> None:
     """``camera.yaml``, ``calibmar.yaml`` and ``cameras.txt`` of one camera (module docs)."""
     import cv2
 
-    from synth.calib_formats import write_single_camera
+    from synth.formats.calib_formats import write_single_camera
 
     if True:  # the output folder is staged whole: its files appear together or not at all
         fs = cv2.FileStorage(os.path.join(directory, "camera.yaml"), cv2.FILE_STORAGE_WRITE)

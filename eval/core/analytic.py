@@ -11,8 +11,8 @@ from __future__ import annotations
 import numpy as np
 
 from measure import StereoRig, triangulate
-from measure.projection import project
-from synth.crosscheck import wholly_in_image
+from measure.geometry.projection import project
+from synth.products.crosscheck import wholly_in_image
 
 
 def project_pair(rig: StereoRig, points: np.ndarray, port=None):

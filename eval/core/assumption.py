@@ -18,17 +18,21 @@ from __future__ import annotations
 
 import numpy as np
 
-from measure import Camera, FlatPort, StereoRig
-from measure.dome import DomePair
+from measure import Camera, StereoRig
+from measure.geometry.dome import DomePair
 
 ASSUMABLE = ("n_water", "n_glass", "port_distance", "glass_thickness", "port_normal", "focal",
              "left_focal", "right_focal", "left_dist", "right_dist")
 _PORT_NAMES = ("n_water", "n_glass", "port_distance", "glass_thickness", "port_normal")
+_CAMERA_NAMES = ("focal", "left_focal", "right_focal", "left_dist", "right_dist")
+#: What ``--assume`` may change in a dome rig (the flat port's distance, glass thickness and
+#: normal have no meaning there).
+DOME_ASSUMABLE = DomePair.assumable + _CAMERA_NAMES
 
 
 def _water_index(item, text: str):
     """``(array, note)`` of an ``n_water`` value given as ``T=…,S=…[,wavelength=…]``."""
-    from measure.water_index import WaterIndexError, parse_water_index
+    from measure.calibration.water_index import WaterIndexError, parse_water_index
 
     try:
         value, note = parse_water_index(text)
@@ -40,7 +44,7 @@ def _water_index(item, text: str):
 def parse_assumptions(items, notes: list | None = None) -> dict:
     """``["name=value", …]`` → ``{name: numpy array}``; ValueError naming a bad item.
     ``n_water`` also takes the water's temperature and salinity, ``n_water=T=12,S=35[,
-    wavelength=550]`` (Quan & Fry 1995, :mod:`measure.water_index`); the sentence saying which
+    wavelength=550]`` (Quan & Fry 1995, :mod:`measure.calibration.water_index`); the sentence saying which
     index that gave is appended to ``notes`` (when given), to be shown to the user once."""
     out = {}
     for item in items or ():
@@ -85,61 +89,25 @@ def assumed_rig(truth: StereoRig, has_port: bool, assumptions: dict,
     if not has_port and any(name in assumptions for name in _PORT_NAMES):
         raise ValueError("--assume: the scene has no port (all air); port parameters cannot be "
                          "assumed")
-    if rig.is_dome:
-        return _assumed_dome_rig(rig, assumptions)
-    left, right, port = rig.left, rig.right, rig.port
-    indices, thicknesses = list(port.indices), list(port.thicknesses)
-    normal, distance = port.normal, port.distance
+    refused = [name for name in assumptions
+               if name in _PORT_NAMES and name not in rig.port.assumable]
+    if refused:
+        raise ValueError(f"--assume {refused[0]} does not apply to {rig.port.rig_name} "
+                         f"({rig.port.rig_detail}); {rig.port.rig_name} takes "
+                         f"{', '.join(rig.port.assumable + _CAMERA_NAMES)}")
+    left, right, port_values = rig.left, rig.right, {}
     for name, value in assumptions.items():
         v = float(value[0]) if value.size == 1 else value
-        if name == "n_water":
-            indices[-1] = v
-        elif name == "n_glass":
-            if not thicknesses:
-                raise ValueError("--assume n_glass: the port has no glass layer")
-            indices[1] = v
-        elif name == "glass_thickness":
-            if not thicknesses:
-                raise ValueError("--assume glass_thickness: the port has no glass layer")
-            thicknesses[0] = v
-        elif name == "port_distance":
-            distance = v
-        elif name == "port_normal":
-            normal = v
+        if name in _PORT_NAMES:
+            try:
+                rig.port.check_assumption(name)
+            except ValueError as exc:
+                raise ValueError(f"--assume {exc}") from None
+            port_values[name] = v
         else:
             left, right = _assumed_cameras(name, v, left, right)
     try:
-        return StereoRig(left, right, FlatPort(normal, distance, tuple(thicknesses),
-                                               tuple(indices)))
-    except ValueError as exc:
-        raise ValueError(f"--assume: {exc}") from None
-
-
-#: What ``--assume`` may change in a dome rig (the flat port's distance, glass thickness and
-#: normal have no meaning there).
-DOME_ASSUMABLE = ("n_water", "n_glass", "focal", "left_focal", "right_focal", "left_dist",
-                  "right_dist")
-
-
-def _assumed_dome_rig(rig: StereoRig, assumptions: dict) -> StereoRig:
-    """:func:`assumed_rig` of a dome rig: the water or glass index of both domes, the cameras'
-    focal lengths and distortion; a flat port's parameter is refused."""
-    flat = [name for name in assumptions if name not in DOME_ASSUMABLE]
-    if flat:
-        raise ValueError(f"--assume {flat[0]} does not apply to a dome rig (each camera inside "
-                         f"its own dome); a dome rig takes {', '.join(DOME_ASSUMABLE)}")
-    left, right = rig.left, rig.right
-    domes = [rig.port.left, rig.port.right]
-    for name, value in assumptions.items():
-        v = float(value[0]) if value.size == 1 else value
-        if name in ("n_water", "n_glass"):
-            k = 2 if name == "n_water" else 1
-            domes = [d.replace(indices=tuple(v if i == k else n for i, n in enumerate(d.indices)))
-                     for d in domes]
-        else:
-            left, right = _assumed_cameras(name, v, left, right)
-    try:
-        return StereoRig(left, right, DomePair(*domes))
+        return StereoRig(left, right, rig.port.assumed(port_values))
     except ValueError as exc:
         raise ValueError(f"--assume: {exc}") from None
 
@@ -159,24 +127,12 @@ def _assumed_cameras(name: str, value, left: Camera, right: Camera):
     return left, right
 
 
-def _describe_dome(dome) -> dict:
-    return {"center_mm": dome.center.tolist(), "radius_mm": dome.radius,
-            "thickness_mm": dome.thickness, "indices": list(dome.indices)}
-
-
 def describe_rig(rig: StereoRig) -> dict:
     """The rig as plain numbers: per camera ``K``, ``dist``, ``R``, ``t_mm``; the port."""
     def camera(c: Camera):
         return {"K": c.K.tolist(), "dist": None if c.dist is None else c.dist.tolist(),
                 "R": c.R.tolist(), "t_mm": c.t.tolist()}
-    p = rig.port
-    if rig.is_dome:
-        return {"left": camera(rig.left), "right": camera(rig.right),
-                "port": {"kind": "dome", "left": _describe_dome(p.left),
-                         "right": _describe_dome(p.right)}}
-    return {"left": camera(rig.left), "right": camera(rig.right),
-            "port": {"normal": p.normal.tolist(), "distance_mm": p.distance,
-                     "thicknesses_mm": list(p.thicknesses), "indices": list(p.indices)}}
+    return {"left": camera(rig.left), "right": camera(rig.right), "port": rig.port.describe()}
 
 
 #: Differences at or below this (mm, px, rad, index units) are round-off — e.g. of a pose
@@ -190,44 +146,12 @@ def rig_difference(truth: StereoRig, assumed: StereoRig) -> dict:
     def differs(a, b) -> bool:
         return bool(np.max(np.abs(np.asarray(a, float) - np.asarray(b, float))) > ROUND_OFF)
 
-    if assumed.is_dome != truth.is_dome:
-        diff["port"] = {"truth": "dome" if truth.is_dome else "flat",
-                        "assumed": "dome" if assumed.is_dome else "flat"}
-    elif truth.is_dome:
-        for view in ("left", "right"):
-            a, b = getattr(assumed.port, view), getattr(truth.port, view)
-            if differs(a.center, b.center):
-                diff[f"{view}_dome_center_mm"] = (a.center - b.center).tolist()
-            if differs(a.radius, b.radius):
-                diff[f"{view}_dome_radius_mm"] = a.radius - b.radius
-            if differs(a.thickness, b.thickness):
-                diff[f"{view}_dome_thickness_mm"] = a.thickness - b.thickness
-            for k, (x, y) in enumerate(zip(a.indices, b.indices)):
-                if differs(x, y):
-                    diff[f"{view}_dome_index_{k}"] = x - y
+    if type(assumed.port) is not type(truth.port):
+        diff["port"] = {"truth": truth.port.kind, "assumed": assumed.port.kind}
     else:
-        _flat_port_difference(truth.port, assumed.port, differs, diff)
+        truth.port.difference(assumed.port, differs, diff)
     _camera_difference(truth, assumed, differs, diff)
     return diff
-
-
-def _flat_port_difference(truth, assumed, differs, diff) -> None:
-    """The flat ports' entries of :func:`rig_difference` (assumed − true), into ``diff``."""
-    if differs(assumed.distance, truth.distance):
-        diff["port_distance_mm"] = assumed.distance - truth.distance
-    if len(assumed.indices) == len(truth.indices):
-        for k, (a, b) in enumerate(zip(assumed.indices, truth.indices)):
-            if differs(a, b):
-                diff[f"index_{k}"] = a - b
-    else:
-        diff["indices"] = {"truth": list(truth.indices), "assumed": list(assumed.indices)}
-    if len(assumed.thicknesses) == len(truth.thicknesses):
-        for k, (a, b) in enumerate(zip(assumed.thicknesses, truth.thicknesses)):
-            if differs(a, b):
-                diff[f"thickness_{k}_mm"] = a - b
-    angle = float(np.degrees(np.arccos(np.clip(assumed.normal @ truth.normal, -1, 1))))
-    if differs(assumed.normal, truth.normal):
-        diff["port_normal_deg"] = angle
 
 
 def _camera_difference(truth: StereoRig, assumed: StereoRig, differs, diff) -> None:

@@ -12,7 +12,7 @@ import argparse
 
 import numpy as np
 
-from synth.cli import finite_float
+from synth.infra.cli import finite_float
 
 #: argparse type of --max-elongation and --max-area-ratio (a blob's axis or area ratio).
 ABOVE_ONE = finite_float(1.0, strict=True, description="finite (> 1)")
@@ -75,12 +75,12 @@ def detect_view(image, threshold_fraction: float | None = None,
     """The targets of one view (:func:`measure.detect_targets`) with the detector options:
     ``median_filter`` first (:func:`median_filtered`), a fixed threshold at
     ``threshold_fraction`` of the way from the background to the targets' level
-    (:func:`measure.detect.fractional_threshold`) or the automatic one (None), and the merge
+    (:func:`measure.images.detect.fractional_threshold`) or the automatic one (None), and the merge
     tests' limits (None: the detector's defaults); ``floor_fraction``: the automatic threshold
     is at least that fraction of the way to the targets' level (JPEG ringing; see
     :func:`measure.detect_targets`)."""
     from measure import detect_targets
-    from measure.detect import MERGE_AREA_RATIO, MERGE_ELONGATION, fractional_threshold
+    from measure.images.detect import MERGE_AREA_RATIO, MERGE_ELONGATION, fractional_threshold
 
     image = median_filtered(image, median_filter)
     threshold = (None if threshold_fraction is None

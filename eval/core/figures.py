@@ -14,7 +14,7 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 from eval.core.results import method_label
-from synth.fileio import atomic_write_bytes
+from synth.infra.fileio import atomic_write_bytes
 
 #: Resolution of the PNG figures (dots per inch).
 DPI = 110

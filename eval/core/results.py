@@ -15,7 +15,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from synth.fileio import jsonable
+from synth.infra.fileio import jsonable
 
 #: How people read the method names, in tables and figures.
 METHOD_LABELS = {"optical_path": "optical_path (Li et al.)", "su": "su (Su et al.)",

@@ -11,7 +11,7 @@ import os
 
 import numpy as np
 
-from synth.cli import CLIError
+from synth.infra.cli import CLIError
 
 PIXEL_COLUMNS = ("u_left", "v_left", "u_right", "v_right")
 #: ``--units`` of ``--points``: millimetres per unit.
@@ -24,8 +24,8 @@ PLAUSIBILITY_POINTS = 20_000
 
 def read_points(path) -> np.ndarray:
     """``(N, 3)`` float64 points of a point-cloud file, read whole (a truncated file is
-    refused: :mod:`synth.cloudfile`); CLIError when unreadable, empty or not finite."""
-    from synth.cloudfile import CloudFileError, read_cloud_points
+    refused: :mod:`synth.formats.cloudfile`); CLIError when unreadable, empty or not finite."""
+    from synth.formats.cloudfile import CloudFileError, read_cloud_points
 
     if not os.path.isfile(path):
         raise CLIError(f"--points {path}: no such file")
@@ -205,13 +205,13 @@ def plausibility(points: np.ndarray, truth: np.ndarray, gate_mm: float, units=No
 def score_dataset(data, points: np.ndarray, label: str, gate_mm: float | None = None,
                   units: str | None = None) -> tuple[dict, dict, list]:
     """``(report, arrays, warnings)``: ``points`` (N, 3) mm scored against the target dataset
-    ``data`` (:class:`synth.dataset.Dataset`) as ``eval score`` does — the association, the
+    ``data`` (:class:`synth.products.dataset.Dataset`) as ``eval score`` does — the association, the
     metrics under ``report["methods"][label]``, the plausibility warnings (``units`` of the
     points as given: None or "mm", or "m")."""
     from eval.core.analytic import visible_targets
 
     radius = float(data.manifest["scene"].get("target_radius_mm", 0.0))
-    inside = [visible_targets(camera, data.rig.port_of(view), data.targets, radius)[1]
+    inside = [visible_targets(camera, data.rig.view_port(view), data.targets, radius)[1]
               for view, camera in enumerate((data.rig.left, data.rig.right))]
     visible_both = inside[0] & inside[1]
     seed = int(data.manifest.get("seed", 0))

@@ -31,7 +31,7 @@ import os
 
 import numpy as np
 
-from synth.cli import CLIError
+from synth.infra.cli import CLIError
 
 #: Metrics of target datasets carried into the summary (``eval run``'s names).
 TARGET_METRICS = ("rms_dp_mm", "max_dp_mm", "mean_dx_mm", "mean_dy_mm", "mean_dz_mm",
@@ -80,9 +80,9 @@ def find_submission(directory: str, render: str, method: str) -> tuple[str, str]
 
 def _depth_points(path: str, data) -> np.ndarray:
     """``(H, W, 3)`` mm: each left pixel's refracted ray at the submitted depth along z."""
-    from measure.refraction import trace_through_port
+    from measure.geometry.refraction import trace_through_port
 
-    from synth.exchange import read_pfm
+    from synth.formats.exchange import read_pfm
 
     depth = read_pfm(path) if path.endswith(".pfm") else np.load(path, allow_pickle=False)
     w, h = data.rig.left.size
@@ -107,7 +107,7 @@ def score_entry(suite_dir: str, sub_dir: str, row: dict, method: str, gate_mm) -
     """One row of the summary: the index row's folder and parameters, ``status`` (``ok``,
     ``missing``, ``failed``), ``error``, ``submission`` (the file), ``warnings`` and the
     metrics."""
-    from synth.dataset import DatasetError, read_dataset
+    from synth.products.dataset import DatasetError, read_dataset
 
     out = {"status": "ok", "error": None, "submission": None, "warnings": ""}
     if row.get("status") != "ok":
@@ -173,8 +173,8 @@ SURFACE_GATE_MM = 5.0
 
 def _score_surface(data, kind: str, path: str) -> dict:
     from eval.core.surface_metrics import SurfaceCase, score_surface, score_surface_cloud
-    from synth.surfaces import read_ply
-    from synth.truth_maps import SURFACE_FILE, read_truth_maps
+    from synth.scene.surfaces import read_ply
+    from synth.products.truth_maps import SURFACE_FILE, read_truth_maps
 
     truth = read_truth_maps(data.path, "left", data.rig.left.size)
     vertices, triangles = read_ply(os.path.join(data.path, SURFACE_FILE))
@@ -183,7 +183,7 @@ def _score_surface(data, kind: str, path: str) -> dict:
         scores = score_surface(SurfaceCase(vertices, triangles, measured, truth.points,
                                            truth.overlap, data.rig.port.normal))
         return {**{k: scores.get(k) for k in SURFACE_METRICS}, "scores": scores}
-    from measure.projection import project
+    from measure.geometry.projection import project
 
     from eval.core.scoring import plausibility, read_points
 
@@ -268,8 +268,8 @@ def write_summary(directory: str, info: dict, rows: list, suite_dir: str, sub_di
     """``summary.csv`` / ``summary.parquet`` (one row per dataset, then the aggregation rows:
     ``row`` says which), ``summary.md`` and ``figures/error_vs_<param>.png``; returns the files
     written (relative)."""
-    from synth.fileio import atomic_write_text
-    from synth.tables import write_table
+    from synth.infra.fileio import atomic_write_text
+    from synth.infra.tables import write_table
 
     swept = [s for s in info.get("swept", [])]
     aggregated = aggregate(rows, swept)

@@ -1,6 +1,6 @@
 """Point covariances in the commands' outputs (``eval run``, ``eval measure``, ``eval score``):
 the pixel σ of each matched pair (``--pixel-sigma``), the covariances of every method's points
-(:mod:`measure.uncertainty`), their report summaries, the coverage against the truth, and the
+(:mod:`measure.stereo.uncertainty`), their report summaries, the coverage against the truth, and the
 files (``uncertainty_<method>.ply`` / ``.csv``).
 
 Units: mm (points, σ), mm² (covariances), px (pixel σ); frame: the reference frame.
@@ -14,13 +14,13 @@ import os
 
 import numpy as np
 
-from synth.cli import CLIError
-from measure.uncertainty import (coverage_summary, detection_sigma, mahalanobis_squared,
+from synth.infra.cli import CLIError
+from measure.stereo.uncertainty import (coverage_summary, detection_sigma, mahalanobis_squared,
                                  point_covariances, residual_sigma, sigma_summary)
-from synth.fileio import atomic_write_bytes, atomic_write_text
+from synth.infra.fileio import atomic_write_bytes, atomic_write_text
 
 #: ``--pixel-sigma``'s default: each detection's σ from the detector (SNR and size) plus what
-#: the reprojection residuals show beyond it (:func:`measure.uncertainty.residual_sigma`).
+#: the reprojection residuals show beyond it (:func:`measure.stereo.uncertainty.residual_sigma`).
 AUTO = "auto"
 #: Columns of ``uncertainty_<method>.csv`` (and properties of the PLY file, in this order);
 #: the truth columns only where the truth is known.
@@ -102,9 +102,9 @@ def rig_covariance_note(rig_covariance, source: str | None) -> str:
 
 
 def uncertainty_summary(covariance, errors=None, dof: int = 3) -> dict:
-    """A method's ``report.json`` entry: :func:`measure.uncertainty.sigma_summary` and, with
+    """A method's ``report.json`` entry: :func:`measure.stereo.uncertainty.sigma_summary` and, with
     ``errors`` (N, 3) mm (measured − true, the same rows), the coverage and normalized errors
-    (:func:`measure.uncertainty.coverage_summary`, ``dof`` the dimensions the errors span)."""
+    (:func:`measure.stereo.uncertainty.coverage_summary`, ``dof`` the dimensions the errors span)."""
     out = {"sigma": sigma_summary(covariance)}
     if errors is not None:
         out["coverage"] = coverage_summary(errors, covariance, dof)

@@ -1,11 +1,11 @@
 """``python -m eval measure --calib FILE LEFT RIGHT``: measure a user's stereo photos — no truth.
 
 LEFT RIGHT are two photos (one pair) or two folders (pairs by file name). The calibration
-(``calib.yaml`` as ``synth dataset`` writes it; :func:`synth.dataset.read_calib`) must be for
+(``calib.yaml`` as ``synth dataset`` writes it; :func:`synth.products.dataset.read_calib`) must be for
 the photos' size. Targets are detected (the detector options of ``eval run``), matched without
-truth (:func:`measure.matching.match_targets`) and triangulated with ``--methods`` (default
+truth (:func:`measure.stereo.matching.match_targets`) and triangulated with ``--methods`` (default
 ``optical_path``); with ``--dense --depth-range NEAR,FAR`` a speckled surface is matched per
-pixel (:func:`measure.dense.match_dense`) instead.
+pixel (:func:`measure.dense.match.match_dense`) instead.
 
 Writes into ``--out`` (whole or not at all): ``points.ply`` (the first method's points, mm,
 binary; further methods ``points_<method>.ply``), ``points.csv``, ``report.json``,
@@ -30,8 +30,8 @@ from eval.core.detection import DETECTOR_OPTIONS, add_detector_options
 from eval.core.formatting import format_number as fmt
 from eval.core.photos import add_encoding_option
 from eval.core.uncertainty import add_pixel_sigma_option, parse_pixel_sigma
-from measure.detect import FLOOR_FRACTION
-from synth.cli import add_json_option, add_out_option, add_progress_option, refuse_given
+from measure.images.detect import FLOOR_FRACTION
+from synth.infra.cli import add_json_option, add_out_option, add_progress_option, refuse_given
 
 COMMAND = "eval measure"
 DEFAULT_METHODS = ("optical_path",)
@@ -257,8 +257,8 @@ def summary_line(report: dict) -> str:
 
 
 def main(args) -> int:
-    from synth.fileio import OutputDir, atomic_write_json, atomic_write_text, jsonable
-    from synth.provenance import package_versions
+    from synth.infra.fileio import OutputDir, atomic_write_json, atomic_write_text, jsonable
+    from synth.infra.provenance import package_versions
 
     from eval.measure.inputs import load_inputs
     from eval.measure.report import report_markdown

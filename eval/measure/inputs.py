@@ -1,5 +1,5 @@
 """What ``eval measure`` starts from, checked before any work: the calibration
-(:func:`synth.dataset.read_calib`) and the photo pairs (one pair of files, or two folders
+(:func:`synth.products.dataset.read_calib`) and the photo pairs (one pair of files, or two folders
 paired by file name: :func:`eval.core.photos.pair_folders`).
 
 Every problem is a :class:`eval.cli.CLIError` (one ``error:`` line, exit 2) naming the file:
@@ -21,7 +21,7 @@ class MeasureInputs:
     (:class:`measure.StereoRig`), ``size`` ``(width, height)`` px, and per pair its ``names``
     (the file stems), ``left`` and ``right`` file paths; ``encoding`` how the stored values
     are read (:data:`eval.core.photos.PHOTO_ENCODINGS`); ``rig_covariance`` the calibration's
-    :class:`measure.rig_covariance.RigCovariance` (None: it holds none)."""
+    :class:`measure.stereo.rig_covariance.RigCovariance` (None: it holds none)."""
 
     calib_path: str
     rig: object
@@ -46,7 +46,7 @@ def read_calibration(path):
     """``(rig, (width, height), has_port, covariance)`` of a calibration file (``has_port``
     false for an in-air calibration, whose port is index-matched air; ``covariance`` None when
     it holds none); CLIError when it cannot be read (a singular covariance included)."""
-    from synth.dataset import DatasetError, read_calib
+    from synth.products.dataset import DatasetError, read_calib
 
     if os.path.isdir(path):
         inside = os.path.join(path, "calib.yaml")

@@ -15,7 +15,7 @@ import numpy as np
 
 from eval.core.detection import detect_view
 
-#: The methods whose points get a covariance (:mod:`measure.uncertainty`; as ``eval run``).
+#: The methods whose points get a covariance (:mod:`measure.stereo.uncertainty`; as ``eval run``).
 COVARIANCE_METHODS = ("optical_path", "reprojection")
 
 
@@ -92,12 +92,12 @@ def nothing_matched(name: str, found: dict, options: TargetOptions) -> str:
 
 def measure_targets(rig, name: str, left, right, options: TargetOptions,
                     rig_covariance=None) -> PairResult:
-    """Detect, match (:func:`measure.matching.match_targets`, the refractive epipolar gap
+    """Detect, match (:func:`measure.stereo.matching.match_targets`, the refractive epipolar gap
     within ``options.gate_mm``) and triangulate one pair with each method; the covariances of
     the ``optical_path`` and ``reprojection`` points (the pixel noise, and ``rig_covariance``
     if given)."""
     from measure import triangulate
-    from measure.matching import match_targets
+    from measure.stereo.matching import match_targets
 
     timings = {}
     t = time.perf_counter()
@@ -153,11 +153,11 @@ def measure_targets(rig, name: str, left, right, options: TargetOptions,
 
 
 def measure_dense(rig, name: str, left, right, options: DenseOptions, progress=None) -> PairResult:
-    """Dense matching (:func:`measure.dense.match_dense`) and triangulation of one pair, per
+    """Dense matching (:func:`measure.dense.match.match_dense`) and triangulation of one pair, per
     method: one point per matched left pixel. ``progress(method)`` gives the matcher's
     ``(done, total)`` callback (or None)."""
-    from measure.dense import match_dense
-    from measure.triangulate import triangulate
+    from measure.dense.match import match_dense
+    from measure.stereo.triangulate import triangulate
 
     from eval.core.detection import median_filtered
     from eval.run.dense import DENSE_METHODS, pinhole_depth_range

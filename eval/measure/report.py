@@ -97,7 +97,7 @@ def summarize(pairs: list, methods: tuple, results: list) -> dict:
 def write_points_csv(path, results, pixels) -> int:
     """``points.csv`` (:data:`CSV_COLUMNS`): one row per valid point of each pair and method;
     ``pixels(result, method)`` gives that method's ``(uv_left, uv_right)``. Returns the rows."""
-    from synth.fileio import atomic_write_text
+    from synth.infra.fileio import atomic_write_text
 
     buffer = io.StringIO()
     writer = csv.writer(buffer, lineterminator="\n")
@@ -122,7 +122,7 @@ def write_cloud(path, points) -> int:
     """``points`` ``(N, 3)`` mm as a binary PLY (Open3D); returns the number of points."""
     import open3d as o3d
 
-    from synth.fileio import atomic_write_bytes
+    from synth.infra.fileio import atomic_write_bytes
 
     points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points))
@@ -162,7 +162,7 @@ def uncertainty_report(inputs, options, results, pairs) -> dict:
     each pair's ``methods.<m>.sigma`` is filled in ``pairs``. Nothing for a dense run (no
     covariance per pixel yet)."""
     from eval.core.uncertainty import rig_covariance_note
-    from measure.uncertainty import sigma_summary
+    from measure.stereo.uncertainty import sigma_summary
 
     if not hasattr(options, "pixel_sigma"):
         return {"note": "dense: no covariance per pixel (not implemented)"}

@@ -8,7 +8,7 @@ from pathlib import Path
 
 from eval.cli import non_negative_int, positive_int
 from eval.paper.settings import NAME
-from synth.cli import add_out_option, add_progress_option
+from synth.infra.cli import add_out_option, add_progress_option
 
 
 def add_parser(subparsers) -> None:
@@ -28,11 +28,11 @@ def add_parser(subparsers) -> None:
 
 def main(args) -> int:
     """Run the experiments and write the report and figures into ``args.out`` (whole or not at
-    all; the ``--out`` rule of :class:`synth.fileio.OutputDir` is checked first)."""
+    all; the ``--out`` rule of :class:`synth.infra.fileio.OutputDir` is checked first)."""
     from eval.paper.figures import write_figures  # matplotlib: only when needed
     from eval.paper.report import write_reports
     from eval.paper.experiments import run_experiments
-    from synth.fileio import OutputDir
+    from synth.infra.fileio import OutputDir
 
     start = time.perf_counter()
     output = OutputDir(args.out, f"eval {NAME}").claim()

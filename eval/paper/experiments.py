@@ -34,9 +34,9 @@ import numpy as np
 from scipy.stats import spearmanr
 
 from measure import StereoRig, triangulate
-from synth.layouts import paper_plane
-from synth.noise import deviate_port, pixel_noise
-from synth.rig import paper_rig
+from synth.scene.layouts import paper_plane
+from synth.rendering.noise import deviate_port, pixel_noise
+from synth.scene.rig import paper_rig
 
 from eval.paper.settings import (COMPONENTS, DISTANCES_MM, GAP_THRESHOLD_MM,  # noqa: F401
                                  IDEAL_TOLERANCE_MM, INDEX_METHODS, INDEX_RELATIVE, INDEX_SIDES,
@@ -78,7 +78,7 @@ def rig_description(rig: StereoRig, air_rig: StereoRig) -> dict:
     toe_in = np.degrees(np.arctan2(-rig.right.R[0, 2], rig.right.R[2, 2]))
     port = rig.port
     return {
-        "source": "synth.rig.paper_rig() (the paper does not give intrinsics, baseline or size)",
+        "source": "synth.scene.rig.paper_rig() (the paper does not give intrinsics, baseline or size)",
         "left": camera(rig.left), "right": camera(rig.right),
         "baseline_mm": float(np.linalg.norm(rig.right.center - rig.left.center)),
         "right_toe_in_deg": float(toe_in),
@@ -292,13 +292,13 @@ def run_index_in_situ(rig: StereoRig, trials: int, seed: int,
 
     Truth ``n_water · (1 + index_relative)``, the measurement assumes ``n_water``; each trial
     draws Gaussian pixel noise (``numpy.random.default_rng([seed, 1])``: its own stream of the
-    one seed), estimates the index with :func:`measure.selfcal.self_calibrate` and measures
+    one seed), estimates the index with :func:`measure.calibration.selfcal.self_calibrate` and measures
     again. Also the profile of the reprojection RMS against the assumed index (trial 0's pixels,
     every point at its reprojection optimum) for the figure."""
     from tqdm import tqdm
 
-    from measure.reprojection import reprojection_points
-    from measure.selfcal import self_calibrate
+    from measure.stereo.reprojection import reprojection_points
+    from measure.calibration.selfcal import self_calibrate
 
     truth = paper_plane(z)
     true_port = deviate_port(rig.port, "n_water", index_relative)
@@ -363,7 +363,7 @@ def run_experiments(trials: int = 100, seed: int = 0, *, variance: float = NOISE
                                     "same offsets are used for every noisy run (water, air, both "
                                     "index sides)"},
         "rig": rig_description(rig, air_rig),
-        "targets": {"layout": "synth.layouts.paper_plane: centre + 15 circles (40 … 600 mm) "
+        "targets": {"layout": "synth.scene.layouts.paper_plane: centre + 15 circles (40 … 600 mm) "
                               "x 33 points", "count": int(gap["targets"].shape[0])},
         "gap": gap, "ideal": ideal, "noise": noise, "index": index, "in_situ": in_situ,
     }

@@ -13,7 +13,7 @@ from pathlib import Path
 
 from eval.paper.settings import COMPONENTS, INDEX_METHODS, INDEX_SIDES, NOISE_METHODS, PAPER_REFERENCE
 from eval.core.results import jsonable, method_label
-from synth.fileio import atomic_write_text
+from synth.infra.fileio import atomic_write_text
 
 
 def _distance_key(z: float) -> str:
@@ -183,7 +183,7 @@ def render_markdown(report: dict) -> str:
     lines += ["## 4 Future work: the water index estimated in situ", "",
               f"True n_water {s['n_true']:.7g}, assumed {s['n_assumed']:.7g}; {s['trials']} trials "
               f"with σ = {s['sigma_px']:g} px pixel noise at Z = {s['z_mm']:g} mm, each refined by "
-              "`measure.selfcal.self_calibrate` (the targets' positions and n_water, no "
+              "`measure.calibration.selfcal.self_calibrate` (the targets' positions and n_water, no "
               "calibration object).", "",
               "| bias | standard error | spread | mean reported σ | mean dZ assumed → estimated |",
               "|---|---|---|---|---|",

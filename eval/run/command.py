@@ -19,7 +19,7 @@ from eval.core.uncertainty import add_pixel_sigma_option
 from eval.run.config import COMMAND, RunConfig
 from eval.run.report import (budget_table, report_markdown, summary_table, verdict_exit_code,
                              write_outputs)
-from synth.cli import (add_define_option, add_full_film_option, add_json_option,
+from synth.infra.cli import (add_define_option, add_full_film_option, add_json_option,
                        add_out_option, add_progress_option, add_scene_argument, scene_seed)
 
 
@@ -84,8 +84,8 @@ def add_parser(subparsers):
 
 
 def main(args) -> int:
-    from synth.fileio import OutputDir, atomic_write_json, atomic_write_text, jsonable
-    from synth.provenance import package_versions
+    from synth.infra.fileio import OutputDir, atomic_write_json, atomic_write_text, jsonable
+    from synth.infra.provenance import package_versions
 
     from eval.run import dense
     from eval.run.pipeline import measure_scene

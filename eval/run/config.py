@@ -33,7 +33,7 @@ class RunConfig:
     (:func:`eval.core.assumption.parse_assumptions`); ``methods``: None for the default of
     the scene's kind (targets: :data:`DEFAULT_METHODS`; surfaces: both dense methods);
     ``depth_range_mm``: ``(near, far)`` along the port normal or None for the default;
-    ``sensor``: a :class:`synth.sensor_model.SensorModel` or None; ``assumption_notes``: how
+    ``sensor``: a :class:`synth.rendering.sensor_model.SensorModel` or None; ``assumption_notes``: how
     an assumed value was computed (``n_water`` from temperature and salinity), to show once."""
 
     scene: str
@@ -128,7 +128,7 @@ def split_names(text: str) -> tuple:
 
 def parse_self_calibration(text: str) -> tuple:
     """``--self-calibrate`` (comma list) as a tuple of port parameters."""
-    from measure.selfcal import PARAMETERS
+    from measure.calibration.selfcal import PARAMETERS
 
     names = split_names(text)
     unknown = [n for n in names if n not in PARAMETERS]
@@ -142,7 +142,7 @@ def parse_sensor(text):
     """The ``--sensor`` model, or None; CLIError names what is wrong."""
     if text is None:
         return None
-    from synth.sensor_model import SensorError, sensor_from_spec
+    from synth.rendering.sensor_model import SensorError, sensor_from_spec
 
     try:
         return sensor_from_spec(text)

@@ -2,7 +2,7 @@
 dense matching through the port, one point per left pixel, scored against the mesh.
 
 Per method: ``optical_path`` matches along the refractive epipolar curves
-(:func:`measure.dense.match_dense`, model ``"refractive"``) and triangulates with the paper's
+(:func:`measure.dense.match.match_dense`, model ``"refractive"``) and triangulates with the paper's
 optical-path model; ``regular`` is the baseline that ignores refraction — the same plane sweep
 and refinement with straight rays (model ``"pinhole"``) and pinhole triangulation — what a user
 gets who folds nothing for the port. Scores (:mod:`eval.core.surface_metrics`): point-to-mesh
@@ -19,7 +19,7 @@ line.
 Uncertainty (``optical_path`` only; ``regular`` ignores the port and gets none, like the
 sparse runs): every matched pixel's 3 × 3 covariance (:func:`dense_covariances`) from its
 matching σ — the right pixel's σ along the epipolar curve, from the window's registration bound
-and the image noise σ_n estimated from the matched windows (:mod:`measure.dense`), or
+and the image noise σ_n estimated from the matched windows (:mod:`measure.dense.match`), or
 ``--pixel-sigma PX`` stated for every pixel — and the ``--calib`` file's covariance when it
 has one; the report gives the σ summary and, against the truth maps, the coverage.
 
@@ -40,6 +40,7 @@ from dataclasses import fields
 
 import numpy as np
 
+from measure.geometry.dome import DomePair
 from eval.cli import CLIError
 from eval.core.formatting import format_number as fmt
 from eval.run.config import COMMAND, RunConfig
@@ -111,7 +112,7 @@ def develop(config: RunConfig, left, right, seed):
 def surface_inputs(config: RunConfig, log):
     """``(spec, measured rig, its covariance or None, left, right, truth maps of the left view,
     provenance)``."""
-    from synth.truth_maps import MeshTracer, read_truth_maps, truth_maps
+    from synth.products.truth_maps import MeshTracer, read_truth_maps, truth_maps
 
     from eval.run.inputs import load_run_scene, measurement_calibration, read_run_dataset
 
@@ -127,7 +128,7 @@ def surface_inputs(config: RunConfig, log):
         return spec, rig, rig_covariance, data.left, data.right, truth, {
             "from": os.path.abspath(config.from_dir), "variant": data.manifest.get("variant"),
             "spp": data.manifest.get("spp"), "timings": {}}
-    from synth.render import render_stereo
+    from synth.rendering.render import render_stereo
 
     log(f"render both views ({spec.size[0]}x{spec.size[1]} px, {config.spp or spec.spp} spp) …")
     left, right, info = render_stereo(spec, spp=config.spp, variant=config.variant,
@@ -150,11 +151,11 @@ def pinhole_depth_range(rig, depth_range) -> tuple[float, float]:
     (:func:`_apparent_depths_through_domes`): exactly the range through centred domes, nearer
     through decentred ones (domes 2.5–4.6 mm off centre show a plane at 900 mm as near as
     624 mm).
-    The near end stays beyond the glass (:func:`measure.dense.glass_depth`, + 1 mm), where the
+    The near end stays beyond the glass (:func:`measure.dense.match.glass_depth`, + 1 mm), where the
     matcher's depth planes must lie."""
-    from measure.dense import glass_depth
+    from measure.dense.match import glass_depth
 
-    if rig.is_dome:
+    if isinstance(rig.port, DomePair):
         near, far = _apparent_depths_through_domes(rig, depth_range)
     else:
         near, far = (rig.port.apparent_depth(d) for d in depth_range)
@@ -169,8 +170,8 @@ def _apparent_depths_through_domes(rig, depth_range, grid: int = 9) -> tuple[flo
     ``depth_range``'s near end (a near end the right camera does not see at all would otherwise
     leave only the far end's points); ``depth_range`` itself where the right camera sees none
     of them."""
-    from measure.projection import project
-    from measure.triangulate import triangulate
+    from measure.geometry.projection import project
+    from measure.stereo.triangulate import triangulate
 
     width, height = rig.left.size
     u, v = np.meshgrid(np.linspace(0.0, width - 1.0, grid), np.linspace(0.0, height - 1.0, grid))
@@ -207,11 +208,11 @@ def default_depth_range(truth) -> tuple[float, float]:
 
 def dense_covariances(rig, matches, points, pixel_sigma, rig_covariance=None):
     """``(PointCovariance, info)``: the covariance of every dense match's point ``(N, 3)``
-    (:func:`measure.uncertainty.dense_point_covariances`: the left pixel exact, the right one σ
+    (:func:`measure.stereo.uncertainty.dense_point_covariances`: the left pixel exact, the right one σ
     along its epipolar curve) and the rig's covariance (None: the rig taken as exact).
     ``pixel_sigma``: ``"auto"`` (the matcher's σ per pixel) or px (stated for every pixel)."""
     from eval.core.uncertainty import AUTO
-    from measure.uncertainty import PointCovariance, dense_point_covariances
+    from measure.stereo.uncertainty import PointCovariance, dense_point_covariances
 
     n = points.shape[0]
     if pixel_sigma == AUTO:
@@ -245,12 +246,12 @@ def dense_covariances(rig, matches, points, pixel_sigma, rig_covariance=None):
 
 def measure_surface(config: RunConfig, methods, log):
     """Match, triangulate and score every method; returns ``(report, arrays)``."""
-    from measure.dense import match_dense
-    from measure.triangulate import triangulate
+    from measure.dense.match import match_dense
+    from measure.stereo.triangulate import triangulate
 
     from eval.core.surface_metrics import SurfaceCase, score_surface, surface_arrays
     from eval.core.uncertainty import rig_covariance_note, uncertainty_summary
-    from measure.dense import glass_depth
+    from measure.dense.match import glass_depth
 
     spec, rig, rig_covariance, left, right, truth, provenance = surface_inputs(config, log)
     rig_source = f"--calib {config.calib}" if config.calib else None
@@ -373,7 +374,7 @@ def _progress(config: RunConfig, method):
 
 def write_outputs(tmp: str, report: dict, arrays: dict) -> None:
     """Figures and coloured point clouds of a surface run into ``tmp`` (entries in the report)."""
-    from synth.fileio import atomic_write_bytes
+    from synth.infra.fileio import atomic_write_bytes
 
     from eval.run import dense_figures as figures
     from eval.run.figures import views_pair
@@ -479,8 +480,8 @@ def main(config: RunConfig, out: str, print_json: bool, log) -> int:
     (whole or not at all); ``print_json``: also print report.json to stdout."""
     import json
 
-    from synth.fileio import OutputDir, atomic_write_json, atomic_write_text, jsonable
-    from synth.provenance import package_versions
+    from synth.infra.fileio import OutputDir, atomic_write_json, atomic_write_text, jsonable
+    from synth.infra.provenance import package_versions
 
     from eval.core.surface_metrics import surface_table
 

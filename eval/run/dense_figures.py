@@ -1,7 +1,7 @@
 """Figures and coloured clouds of a dense surface score (see :mod:`eval.core.surface_metrics`).
 
 matplotlib with the Agg canvas only (no display). Every file is written whole or not at all:
-PNGs through :func:`synth.fileio.atomic_write_bytes`, PLYs by Open3D to a temporary file beside
+PNGs through :func:`synth.infra.fileio.atomic_write_bytes`, PLYs by Open3D to a temporary file beside
 the target, then renamed. Units mm; images in pixels (OpenCV convention, ``(u, v)`` = column, row).
 """
 

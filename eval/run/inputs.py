@@ -27,7 +27,7 @@ class RunInputs:
     ``left``/``right`` float32 linear images ``(H, W)``; ``params`` the scene's resolved
     parameters; ``seed`` the run's one seed (images, added noise, RANSAC); ``budget_rigs``
     ``{label: rig}``: also measure with these rigs (the error budget); ``rig_covariance`` the
-    ``--calib`` file's covariance (:class:`measure.rig_covariance.RigCovariance`) or None."""
+    ``--calib`` file's covariance (:class:`measure.stereo.rig_covariance.RigCovariance`) or None."""
 
     scene: str
     rig: object
@@ -70,7 +70,7 @@ def dataset_params(from_dir: str, defines: dict) -> dict:
     rendered (the manifest's ``spp`` and ``seed``; datasets before format 3 recorded the
     scene's defaults among the parameters); a conflicting ``-D`` is an error naming both
     values."""
-    from synth.dataset import read_manifest
+    from synth.products.dataset import read_manifest
 
     manifest = read_manifest(from_dir)
     params = {str(k): str(v) for k, v in manifest["scene"]["params"].items()}
@@ -87,10 +87,10 @@ def dataset_params(from_dir: str, defines: dict) -> dict:
 def measurement_calibration(config: RunConfig, spec):
     """``(rig, covariance)``: the rig the measurement believes — the scene's (the truth), or
     ``--calib``'s, with ``--assume`` applied — and the covariance of ``--calib``'s rig
-    (:class:`measure.rig_covariance.RigCovariance`; None without ``--calib`` or when the file
+    (:class:`measure.stereo.rig_covariance.RigCovariance`; None without ``--calib`` or when the file
     holds none). The file is read once; a singular or malformed covariance is refused by
     ``read_calib`` with one line naming the file."""
-    from synth.dataset import read_calib
+    from synth.products.dataset import read_calib
 
     from eval.core.assumption import assumed_rig
 
@@ -109,11 +109,9 @@ def measurement_calibration(config: RunConfig, spec):
 def _same_kind_of_port(what: str, calibrated, scene_rig) -> None:
     """CLIError unless a calibration's rig has the scene's kind of port (a dome pair for a dome
     scene, a flat port otherwise)."""
-    if calibrated.is_dome != scene_rig.is_dome:
-        kind = ("dome-port calibration (DOMEPORT)" if calibrated.is_dome
-                else "flat-port calibration")
-        raise CLIError(f"{what}: a {kind}, but the scene has "
-                       f"{'domes' if scene_rig.is_dome else 'a flat port'}")
+    if type(calibrated.port) is not type(scene_rig.port):
+        raise CLIError(f"{what}: a {calibrated.port.calibration_name}, but the scene has "
+                       f"{scene_rig.port.description}")
 
 
 def load_run_scene(config: RunConfig):
@@ -132,7 +130,7 @@ def load_run_scene(config: RunConfig):
 
 def read_run_dataset(config: RunConfig, spec):
     """The ``--from`` dataset, refused when it was rendered from another scene than ``spec``."""
-    from synth.dataset import read_dataset
+    from synth.products.dataset import read_dataset
 
     data = read_dataset(config.from_dir)
     if data.manifest["scene"].get("sha256") != spec.sha256:
@@ -158,7 +156,7 @@ def read_run_dataset(config: RunConfig, spec):
 def budget_rigs(config: RunConfig, true_rig, measured_rig) -> dict:
     """``{label: rig}`` of the error budget: the exact calibration (when the measurement's rig
     differs from the truth) and every ``--compare-calib`` file."""
-    from synth.dataset import read_calib
+    from synth.products.dataset import read_calib
 
     from eval.core.assumption import rig_difference
 
@@ -191,13 +189,13 @@ def load_inputs(config: RunConfig, log) -> RunInputs:
     if config.self_calibrate and not spec.has_port:
         raise CLIError(f"--self-calibrate does not apply to {config.scene}: it estimates the "
                        f"port's parameters, and the scene has no port (all air)")
-    if spec.rig.is_dome:
+    if not spec.rig.port.self_calibrates:
         refuse_flat_only(config)
     seed = spec.seed if config.seed is None else config.seed
     measured_rig, rig_covariance = measurement_calibration(config, spec)
-    in_left = visible_targets(spec.rig.left, spec.rig.port_of(0), spec.targets,
+    in_left = visible_targets(spec.rig.left, spec.rig.view_port(0), spec.targets,
                               spec.target_radius)[1]
-    in_right = visible_targets(spec.rig.right, spec.rig.port_of(1), spec.targets,
+    in_right = visible_targets(spec.rig.right, spec.rig.view_port(1), spec.targets,
                                spec.target_radius)[1]
     if not (in_left & in_right).any():
         raise CLIError(f"{config.scene}: no target is visible in both views")
@@ -217,7 +215,7 @@ def load_inputs(config: RunConfig, log) -> RunInputs:
                          spp=int(data.manifest.get("spp", 0)), render_seconds=0.0,
                          extra={"from": os.path.abspath(config.from_dir),
                                 "from_seed": data.manifest.get("seed")}, **scene_part)
-    from synth.render import render_stereo, render_summary
+    from synth.rendering.render import render_stereo, render_summary
 
     log(f"render both views ({spec.size[0]}x{spec.size[1]} px, {config.spp or spec.spp} spp, "
         f"{'full film' if config.full_film else 'adaptive'}) …")
@@ -246,7 +244,7 @@ def expose_views(left, right, sensor, seed):
     sensor."""
     if sensor is None:
         return left, right, None
-    from synth.sensor_model import sensor_views, to_radiance
+    from synth.rendering.sensor_model import sensor_views, to_radiance
 
     codes_left, codes_right, sensor_info = sensor_views(left, right, sensor, seed)
     left, right = (to_radiance(codes, sensor, sensor_info["electrons_per_unit"])

@@ -15,13 +15,12 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from measure import triangulate
-from measure.dome import DomePair
-from measure.detect import (FLOOR_FRACTION, MERGE_AREA_RATIO as DEFAULT_MAX_AREA_RATIO,
+from measure.images.detect import (FLOOR_FRACTION, MERGE_AREA_RATIO as DEFAULT_MAX_AREA_RATIO,
                             MERGE_ELONGATION as DEFAULT_MAX_ELONGATION)
-from measure.eccentricity import correct_eccentricity, outline_centroid_offsets
-from measure.matching import match_targets
-from synth.crosscheck import ASSOCIATION_GATE_PX, associate_detections, distance_stats
-from synth.noise import add_pixel_noise
+from measure.images.eccentricity import correct_eccentricity, outline_centroid_offsets
+from measure.stereo.matching import match_targets
+from synth.products.crosscheck import ASSOCIATION_GATE_PX, associate_detections, distance_stats
+from synth.rendering.noise import add_pixel_noise
 
 from eval.core.detection import detect_view
 from eval.core.cloud_metrics import cloud_distances, flatness, rigid_alignment
@@ -49,7 +48,7 @@ def default_depth_window(params: dict, targets=None, port=None):
     except (KeyError, TypeError, ValueError):
         if targets is None or port is None or len(targets) == 0:
             return (None, None)
-        axis = np.array([0.0, 0.0, 1.0]) if isinstance(port, DomePair) else port.normal
+        axis = port.reference_axis
         depth = np.asarray(targets, dtype=float) @ axis  # domes: the left camera's z
         return (DEPTH_WINDOW_FACTORS[0] * float(depth.min()),
                 DEPTH_WINDOW_FACTORS[1] * float(depth.max()))
@@ -97,7 +96,7 @@ def triangulate_stage(inputs: RunInputs, centers, matches, methods):
 
 
 #: The methods whose points get a covariance: the maximum-likelihood point (``reprojection``)
-#: and the optical-path midpoint, the same to first order (:mod:`measure.uncertainty`); ``su``
+#: and the optical-path midpoint, the same to first order (:mod:`measure.stereo.uncertainty`); ``su``
 #: and ``regular`` are other estimators (``regular`` ignores the port) and get none.
 COVARIANCE_METHODS = ("optical_path", "reprojection")
 
@@ -158,7 +157,7 @@ def crosscheck_stage(inputs: RunInputs, detections):
     normals = (inputs.target_normals if inputs.target_normals is not None
                else np.array([0.0, 0.0, -1.0]))
     for view, (name, camera) in enumerate((("left", rig.left), ("right", rig.right))):
-        port = rig.port_of(view)
+        port = rig.view_port(view)
         simulated[name], inside[name] = visible_targets(camera, port, inputs.targets,
                                                         inputs.target_radius)
         centers = np.asarray(detections[name].centers).reshape(-1, 2)
@@ -247,13 +246,13 @@ def eccentricity_stage(inputs: RunInputs, centers, matches, methods, iterations:
 
 
 def self_calibration_stage(inputs: RunInputs, centers, matches, parameters, methods, log):
-    """Estimate port ``parameters`` from the matched pixels (:func:`measure.selfcal.self_calibrate`)
-    and triangulate again with the refined rig. Returns ``(summary, {method: Triangulation} or
-    None)``: None when the refinement did not converge or the data do not determine the
-    parameters (then nothing is refined, and the summary says why). σ includes the ``--calib``
-    file's covariance of the parameters held fixed when it has one (``sigma_includes`` names
-    them; ``sigmas_conditional`` is the σ without)."""
-    from measure.selfcal import self_calibrate
+    """Estimate port ``parameters`` from the matched pixels
+    (:func:`measure.calibration.selfcal.self_calibrate`) and triangulate again with the refined
+    rig. Returns ``(summary, {method: Triangulation} or None)``: None when the refinement did not
+    converge or the data do not determine the parameters (then nothing is refined, and the
+    summary says why). σ includes the ``--calib`` file's covariance of the parameters held fixed
+    when it has one (``sigma_includes`` names them; ``sigmas_conditional`` is the σ without)."""
+    from measure.calibration.selfcal import self_calibrate
 
     uv_left = centers["left"][matches.left]
     uv_right = centers["right"][matches.right]

@@ -7,7 +7,7 @@ import contextlib
 import os
 import sys
 
-from synth.cli import EXIT_CHECK_FAILED
+from synth.infra.cli import EXIT_CHECK_FAILED
 from eval.core.formatting import format_number as fmt
 
 
@@ -73,7 +73,7 @@ def _render_lines(render) -> list:
     (images read with ``--from``)."""
     if not isinstance(render, dict) or not isinstance(render.get("render"), dict):
         return []
-    from synth.render import render_summary
+    from synth.rendering.render import render_summary
 
     views = render["render"]
     return ["## Render", "", *[f"- {view}: {render_summary(views[view])}"
@@ -186,7 +186,7 @@ def write_outputs(tmp: str, result) -> None:
     from eval.core.uncertainty import write_uncertainty_files
     from eval.run.figures import views_figure
 
-    from synth.dataset import write_targets_ply
+    from synth.products.dataset import write_targets_ply
 
     result.report["ply"] = {method: write_error_ply(tmp, f"points_{method}.ply",
                                                     data["points"], data["errors"])

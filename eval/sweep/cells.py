@@ -6,7 +6,7 @@
   report is ``eval run``'s ``report.json`` (without versions and output files).
 * An **analytic cell** is the forward model plus noise, like ``eval paper``'s Monte Carlo: the
   scene's targets projected through the true rig (:func:`eval.core.analytic.project_pair`), Gaussian
-  pixel noise of σ ``noise_px`` drawn from the cell's seed (:func:`synth.noise.pixel_noise`),
+  pixel noise of σ ``noise_px`` drawn from the cell's seed (:func:`synth.rendering.noise.pixel_noise`),
   triangulated with the assumed rig (:func:`eval.core.analytic.triangulation_errors`, numpy over all
   targets at once) and summarized with :class:`eval.core.results.ErrorStats` (the schema of ``eval
   run``'s ``methods``). ``regular_in_air`` triangulates the all-air copy of the rig (indices 1),
@@ -25,7 +25,7 @@ import tempfile
 import time
 import traceback
 
-from synth.cluster import scene_file, setup_worker
+from synth.infra.cluster import scene_file, setup_worker
 
 #: Per worker process: scene files written, scenes parsed, projections computed.
 _CACHE: dict = {}
@@ -73,7 +73,7 @@ def run_config(cell: dict, scene_path: str):
 def render_cell(cell: dict, scene_path: str, save: tuple):
     """``(report, files)``: ``eval run`` on the cell, in this process; ``files`` ``{name:
     bytes}`` holds what ``save`` asks for (``images``, ``ply``, ``figures``)."""
-    from synth.fileio import jsonable
+    from synth.infra.fileio import jsonable
 
     from eval.run.pipeline import measure_scene
 
@@ -88,7 +88,7 @@ def render_cell(cell: dict, scene_path: str, save: tuple):
 
 
 def _saved_files(result, save) -> dict:
-    from synth.render import png16_scale, to_png16, write_png
+    from synth.rendering.render import png16_scale, to_png16, write_png
 
     from eval.run.report import write_outputs
 
@@ -142,7 +142,7 @@ def analytic_cell(cell: dict, scene_path: str) -> dict:
     from eval.core.analytic import air_copy, triangulation_errors
     from eval.core.assumption import assumed_rig, rig_difference
     from eval.core.results import ErrorStats
-    from synth.noise import pixel_noise
+    from synth.rendering.noise import pixel_noise
 
     start = time.perf_counter()
     p = cell["params"]
@@ -178,7 +178,7 @@ def analytic_cell(cell: dict, scene_path: str) -> dict:
 
 
 def _self_calibration(truth, believed, uv_left, uv_right, names, cell, targets) -> dict:
-    from measure.selfcal import self_calibrate
+    from measure.calibration.selfcal import self_calibrate
 
     from eval.core.analytic import triangulation_errors
     from eval.core.results import ErrorStats
@@ -233,7 +233,7 @@ def run_cell(cell: dict, scenes: dict, save: tuple) -> dict:
         if cell["kind"] == "render":
             report, files = render_cell(cell, path, save)
         else:
-            from synth.fileio import jsonable
+            from synth.infra.fileio import jsonable
 
             report = jsonable(analytic_cell(cell, path))
         status, error = "ok", None

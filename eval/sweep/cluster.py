@@ -10,9 +10,9 @@ import time
 
 from eval.sweep.directory import SweepDir
 from eval.sweep.table import write_tables
-from synth import interrupt
-from synth.cluster import MAX_WORKERS_PER_CORE, check_address, default_workers
-from synth.cluster import connect as cluster_connect
+from synth.infra import interrupt
+from synth.infra.cluster import MAX_WORKERS_PER_CORE, check_address, default_workers
+from synth.infra.cluster import connect as cluster_connect
 
 #: Seconds between two rebuilds of the tables while cells come in.
 TABLE_INTERVAL_S = 10.0
@@ -22,7 +22,7 @@ MAX_CELLS_PER_TASK = 250
 def connect(args):
     """``(client, cluster or None, description)``: the scheduler of ``--scheduler`` (CLIError
     when it does not answer within ``--connect-timeout``, has no worker, or its workers cannot
-    run sweep cells), or a new local cluster (:func:`synth.cluster.connect`)."""
+    run sweep cells), or a new local cluster (:func:`synth.infra.cluster.connect`)."""
     return cluster_connect(args.scheduler, args.workers, args.connect_timeout, _probe_worker,
                            "sweep cells")
 

@@ -13,7 +13,7 @@ finished cell at once as ``DIR/cells/<key>.json`` (its record: parameters, seed,
 error, the full report, the row) and appends ``<key> <run id>`` to ``DIR/completions.log``.
 
 Output: ``DIR`` is updated in place, cell by cell — unlike the other commands, whose outputs
-appear whole or not at all (:class:`synth.fileio.OutputDir`): a sweep of hours must keep what
+appear whole or not at all (:class:`synth.infra.fileio.OutputDir`): a sweep of hours must keep what
 it finished when it is killed. The same rule guards it: ``DIR`` must not exist, be empty, or be
 an earlier output of ``eval sweep`` (its marker) holding only what a sweep writes; every file
 is written atomically (temporary file + rename). ``DIR/sweep.json`` records the spec's hash: a
@@ -33,8 +33,8 @@ from eval.cli import CLIError
 from eval.sweep.cluster import check_address, connect, execute
 from eval.sweep.directory import COMMAND, SweepDir
 from eval.sweep.table import table_rows, write_tables
-from synth import interrupt
-from synth.cli import add_cluster_options, add_out_option, add_progress_option, refuse_given
+from synth.infra import interrupt
+from synth.infra.cli import add_cluster_options, add_out_option, add_progress_option, refuse_given
 
 
 def add_parser(subparsers):

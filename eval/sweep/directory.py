@@ -36,7 +36,7 @@ class SweepDir:
 
     def check(self) -> dict | None:
         """The rule (no writes): returns the earlier sweep's ``sweep.json`` or None."""
-        from synth.fileio import directory_problem, read_marker
+        from synth.infra.fileio import directory_problem, read_marker
 
         path = self.path
         problem = directory_problem(path)
@@ -66,7 +66,7 @@ class SweepDir:
 
     @staticmethod
     def _ours(rel: str) -> bool:
-        from synth.fileio import MARKER_NAME, TEMPORARY_FILE
+        from synth.infra.fileio import MARKER_NAME, TEMPORARY_FILE
 
         parts = rel.split(os.sep)
         top = parts[0]
@@ -84,7 +84,7 @@ class SweepDir:
 
     def open(self, spec, allow_changed: bool, previous: dict | None) -> None:
         """Create or reuse the directory for ``spec``; lock it against a second sweep."""
-        from synth.fileio import claim_in_place
+        from synth.infra.fileio import claim_in_place
 
         if previous and previous.get("spec_hash") not in (None, spec.spec_hash()):
             if not allow_changed:
@@ -98,7 +98,7 @@ class SweepDir:
              "note": "updated in place cell by cell (eval sweep)"}, spec.text)
 
     def write_state(self, spec, runs: list) -> None:
-        from synth.fileio import atomic_write_json
+        from synth.infra.fileio import atomic_write_json
 
         atomic_write_json(os.path.join(self.path, "sweep.json"), {
             "spec_path": spec.path, "spec_hash": spec.spec_hash(), "name": spec.name,
@@ -126,7 +126,7 @@ class SweepDir:
         return records
 
     def write_record(self, record: dict, files: dict, durable: bool = False) -> None:
-        from synth.fileio import atomic_write_bytes
+        from synth.infra.fileio import atomic_write_bytes
 
         for name, data in (files or {}).items():
             folder = os.path.join(self.path, "files", record["key"])
@@ -143,7 +143,7 @@ def _write_atomic(path: str, data: bytes, durable: bool) -> None:
     """Temporary file + rename: whole or absent after a ``kill -9``; ``durable`` also fsyncs
     (a cell file need not survive a power cut: its cell would simply run again)."""
     if durable:
-        from synth.fileio import atomic_write_bytes
+        from synth.infra.fileio import atomic_write_bytes
 
         atomic_write_bytes(path, data)
         return

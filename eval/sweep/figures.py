@@ -21,7 +21,7 @@ import math
 import os
 import re
 
-from synth import interrupt
+from synth.infra import interrupt
 
 MAX_SERIES_COMBINATIONS = 4
 _METHOD = re.compile(r"^(?P<prefix>self_calibration\.)?methods\.(?P<method>[^.]+)\.(?P<metric>.+)$")

@@ -47,7 +47,7 @@ and that key (:func:`cell_seed`), so the same cell gives the same numbers wherev
 Errors are one line (:class:`SpecError`, a ``ValueError``: the CLI exits with 2).
 
 The grammar (the file, the sections, the distributions, the expansion order, the scenes) is
-:mod:`synth.grid`, shared with ``python -m synth suite``; this module adds what a cell is.
+:mod:`synth.infra.grid`, shared with ``python -m synth suite``; this module adds what a cell is.
 """
 
 from __future__ import annotations
@@ -56,11 +56,11 @@ import hashlib
 import os
 from dataclasses import dataclass, field
 
-from synth.grid import (MAX_ENTRIES, Scene, SpecError, canonical_json, check_defines,
+from synth.infra.grid import (MAX_ENTRIES, Scene, SpecError, canonical_json, check_defines,
                         check_scene_parameter, check_scene_value, check_top_keys, combinations,
                         entry_key, entry_seed, integer, need, number, parse_sections, read_scenes,
                         read_toml, swept)
-from synth.grid import scene_defines as grid_scene_defines
+from synth.infra.grid import scene_defines as grid_scene_defines
 
 KINDS = ("render", "analytic")
 TOP_KEYS = ("name", "description", "seed", "repeats", "scenes", "methods", "render_width", "save",
@@ -262,7 +262,7 @@ def _check_value(key: str, value, label: str):
             bad("true or false")
         return value
     if key == "self_calibrate":
-        from measure.selfcal import PARAMETERS
+        from measure.calibration.selfcal import PARAMETERS
 
         if value is True:
             return "n_water"

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import re
 
-from synth.tables import write_table
+from synth.infra.tables import write_table
 
 #: Columns that differ from run to run of the same cell (left out when comparing tables).
 TIMING_COLUMNS = re.compile(r"^(seconds$|timings_s\.)")

@@ -13,14 +13,14 @@ Subcommands::
 Bad input (missing or malformed scene, wrong structure, unknown ``-D``, bad option, an ``--out``
 holding files this command did not write) prints one line ``error: ...`` and exits with code 2;
 ``check`` exits with 1 when the dataset is outside the bounds; 130 when interrupted
-(:mod:`synth.cli`, shared with ``python -m eval``). Output directories follow
-:class:`synth.fileio.OutputDir`: whole or not at all, never over someone else's files.
+(:mod:`synth.infra.cli`, shared with ``python -m eval``). Output directories follow
+:class:`synth.infra.fileio.OutputDir`: whole or not at all, never over someone else's files.
 
 One module per command (``synth/commands/<name>.py``, listed in ``--help`` order in
 :data:`COMMANDS`), with the convention of :mod:`eval.cli`: each exposes
 
 * ``add_parser(subparsers)`` -- ``subparsers.add_parser("<name>", …)`` and its arguments,
-* ``main(args) -> int`` -- run it; raise :class:`synth.cli.CLIError` for a user error.
+* ``main(args) -> int`` -- run it; raise :class:`synth.infra.cli.CLIError` for a user error.
 
 What several commands share is in :mod:`synth.commands.common`. Heavy imports (Mitsuba, Open3D,
 matplotlib, SciPy) stay inside the functions so that ``--help`` stays fast.
@@ -28,7 +28,7 @@ matplotlib, SciPy) stay inside the functions so that ``--help`` stays fast.
 
 from __future__ import annotations
 
-from synth.cli import Parser, command_parser, process_main, run_command
+from synth.infra.cli import Parser, command_parser, process_main, run_command
 from synth.commands import boards, check, dataset, photos, render, scene, suite
 
 PROG = "python -m synth"
@@ -44,7 +44,7 @@ def build_parser() -> Parser:
 
 
 def main(argv=None) -> int:
-    """Run the CLI; returns the exit code (:mod:`synth.cli`: 2 on bad input, with one line
+    """Run the CLI; returns the exit code (:mod:`synth.infra.cli`: 2 on bad input, with one line
     ``error: …`` on stderr; 1 when ``check`` fails; 130 when interrupted)."""
     return run_command(build_parser, argv)
 

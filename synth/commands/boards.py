@@ -1,10 +1,10 @@
 """``python -m synth boards SCENE --out DIR [--poses 15] [--board chessboard|charuco]
 [--squares 11x8] [--square-mm 40] [--seed S] [--air]``: stereo pairs of a calibration board at
-random poses behind the scene's port (or in air), :mod:`synth.boards`."""
+random poses behind the scene's port (or in air), :mod:`synth.products.boards`."""
 
 from __future__ import annotations
 
-from synth.cli import (CLIError, add_board_options, add_define_option, add_full_film_option,
+from synth.infra.cli import (CLIError, add_board_options, add_define_option, add_full_film_option,
                        add_out_option, add_progress_option, add_scene_argument, board_from_args,
                        non_negative_float, positive_float, positive_int, scene_seed)
 
@@ -45,7 +45,7 @@ PORT_PARAMETERS = ("n_water",)
 def main(args) -> int:
     """Render stereo pairs of the board at random poses into ``--out`` (skipped when up to
     date)."""
-    from synth import boards as b
+    from synth.products import boards as b
     from synth.scene import apply_seed, apply_spp, load_scene, parse_defines
 
     board = board_from_args(args)
@@ -78,7 +78,7 @@ def main(args) -> int:
     w, h = manifest["image_size"]
     print(f"wrote {args.out}: {manifest['poses']} stereo pairs of a {board.kind} "
           f"{cols}x{rows} ({board.square_mm:g} mm) "
-          f"{'in air' if args.air else 'behind the domes' if spec.rig.is_dome else 'behind the port'}, "
+          f"{'in air' if args.air else 'behind ' + spec.rig.port.name}, "
           f"{w}x{h} px, {manifest['spp']} spp with {manifest['variant']}: render "
           f"{manifest['seconds']['render']:.1f} s ({manifest['samples_per_second'] / 1e6:.2f} M "
           f"samples/s), total {manifest['seconds']['total']:.1f} s")

@@ -1,6 +1,6 @@
 """``python -m synth check DIR [--rms PX] [--max PX] [--json]``: detect the targets of a dataset
-and compare them with its pixels.csv (:mod:`synth.crosscheck`), or check a surface dataset's truth
-maps (:mod:`synth.truth_maps`); exit code 1 when the dataset is outside the bounds."""
+and compare them with its pixels.csv (:mod:`synth.products.crosscheck`), or check a surface dataset's truth
+maps (:mod:`synth.products.truth_maps`); exit code 1 when the dataset is outside the bounds."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import json
 
 import sys
 
-from synth.cli import add_json_option, positive_float, refuse_given
+from synth.infra.cli import add_json_option, positive_float, refuse_given
 
 
 def add_parser(subparsers) -> None:
@@ -22,8 +22,8 @@ def add_parser(subparsers) -> None:
 
 def main(args) -> int:
     """Check the dataset ``dir``; 0 when it passes, 1 when it does not."""
-    from synth.crosscheck import CHECK_MAX_PX, CHECK_RMS_PX, check_dataset
-    from synth.dataset import read_dataset
+    from synth.products.crosscheck import CHECK_MAX_PX, CHECK_RMS_PX, check_dataset
+    from synth.products.dataset import read_dataset
 
     data = read_dataset(args.dir)
     if data.is_surface:
@@ -54,14 +54,14 @@ def main(args) -> int:
 def _print_json(args, report) -> None:
     """With ``--json``, the report as JSON on stdout."""
     if args.json:
-        from synth.fileio import jsonable
+        from synth.infra.fileio import jsonable
 
         print(json.dumps(jsonable(report), indent=2))
 
 
 def _check_surface(args, data) -> int:
-    """``check`` of a surface dataset: the truth maps (see synth.truth_maps.check_truth_maps)."""
-    from synth.truth_maps import check_truth_maps
+    """``check`` of a surface dataset: the truth maps (see synth.products.truth_maps.check_truth_maps)."""
+    from synth.products.truth_maps import check_truth_maps
 
     report = check_truth_maps(data)
     stream = sys.stderr if args.json else sys.stdout

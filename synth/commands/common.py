@@ -3,7 +3,7 @@ and the scene they load (``-D`` and ``--seed`` applied)."""
 
 from __future__ import annotations
 
-from synth.cli import (add_define_option, add_full_film_option, add_out_option,
+from synth.infra.cli import (add_define_option, add_full_film_option, add_out_option,
                        add_progress_option, add_scene_argument, positive_int, scene_seed)
 
 

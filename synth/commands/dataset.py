@@ -1,9 +1,9 @@
 """``python -m synth dataset SCENE --out DIR [--spp N] [--variant V] [--exr] [--sensor PRESET]
-[-D name=value ...]``: render and write a benchmark dataset, atomically (:mod:`synth.dataset`)."""
+[-D name=value ...]``: render and write a benchmark dataset, atomically (:mod:`synth.products.dataset`)."""
 
 from __future__ import annotations
 
-from synth.cli import CLIError
+from synth.infra.cli import CLIError
 from synth.commands.common import add_render_options, scene_from_args
 
 
@@ -18,8 +18,8 @@ def add_parser(subparsers) -> None:
 
 def main(args) -> int:
     """Render the scene and write the benchmark dataset ``--out`` (skipped when up to date)."""
-    from synth.dataset import write_dataset
-    from synth.sensor_model import SensorError, sensor_from_spec
+    from synth.products.dataset import write_dataset
+    from synth.rendering.sensor_model import SensorError, sensor_from_spec
 
     try:
         sensor = None if args.sensor is None else sensor_from_spec(args.sensor)
@@ -37,7 +37,7 @@ def main(args) -> int:
     stages = ", ".join(f"{k} {v:.2f} s" for k, v in s.items() if k != "total")
     print(f"wrote {args.out} with {manifest['variant']}, {manifest['spp']} spp: {stages}; "
           f"total {s['total']:.1f} s")
-    from synth.render import render_summary
+    from synth.rendering.render import render_summary
 
     for name in ("left", "right"):
         print(f"  {name}: {render_summary(manifest['render'][name])}")

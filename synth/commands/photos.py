@@ -1,10 +1,10 @@
 """``python -m synth photos SRC --out DIR [--format jpg|png] [--quality 90]``: a boards folder
 or a dataset written as a camera would store it — 8-bit sRGB photos in ``DIR/left/`` and
-``DIR/right/``, paired by name, with no calibration or truth beside them (:mod:`synth.photos`)."""
+``DIR/right/``, paired by name, with no calibration or truth beside them (:mod:`synth.products.photos`)."""
 
 from __future__ import annotations
 
-from synth.cli import CLIError, add_out_option, positive_int
+from synth.infra.cli import CLIError, add_out_option, positive_int
 
 
 def add_parser(subparsers) -> None:
@@ -22,8 +22,8 @@ def main(args) -> int:
     """Write the photos of ``src`` into ``--out`` (whole or not at all)."""
     import os
 
-    from synth.fileio import OutputDir
-    from synth.photos import export_photos
+    from synth.infra.fileio import OutputDir
+    from synth.products.photos import export_photos
 
     if args.quality is not None and args.format != "jpg":
         raise CLIError(f"--quality does not apply to --format {args.format} (lossless)")

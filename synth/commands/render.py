@@ -17,8 +17,8 @@ def add_parser(subparsers) -> None:
 
 def main(args) -> int:
     """Render both views of the scene into ``--out``."""
-    from synth.fileio import OutputDir
-    from synth.render import (png16_scale, render_stereo, render_summary, srgb_preview,
+    from synth.infra.fileio import OutputDir
+    from synth.rendering.render import (png16_scale, render_stereo, render_summary, srgb_preview,
                               to_png16, write_exr, write_png)
 
     output = OutputDir(args.out, "synth render").claim()

@@ -1,13 +1,13 @@
 """``python -m synth scene --layout paper --z 1000 --out scenes/paper_plane.xml [options]``:
 write a Mitsuba scene of the paper's rig, a port (or none) and targets or a speckled surface
-(units mm, the left camera's frame; :mod:`synth.scene`, :mod:`synth.surface_scene`)."""
+(units mm, the left camera's frame; :mod:`synth.scene`, :mod:`synth.scene.surface_scene`)."""
 
 from __future__ import annotations
 
 import os
 import sys
 
-from synth.cli import (WATER_INDEX_HELP, CLIError, add_out_option, any_float,
+from synth.infra.cli import (WATER_INDEX_HELP, CLIError, add_out_option, any_float,
                        non_negative_float, non_negative_int, positive_float, positive_int,
                        refuse_given, scene_seed, water_index_argument)
 
@@ -136,8 +136,8 @@ def main(args) -> int:
 
     from measure import FlatPort
 
-    from synth import layouts, rig as rigs
-    from synth.fileio import check_file_output
+    from synth.scene import layouts, rig as rigs
+    from synth.infra.fileio import check_file_output
     from synth.scene import (DEFAULT_FULL_FILM_SPP, DEFAULT_SPP, DEFAULT_TARGET_RADIUS_MM,
                              write_scene)
 
@@ -244,7 +244,7 @@ def main(args) -> int:
                + (", lit targets" if args.lighting == "lit" else "")
                + (f", thin lens aperture {thin_lens[0]:g} mm focus {thin_lens[1]:.6g} mm"
                   if thin_lens else ""))
-    from synth.water import PRESETS as WATERS
+    from synth.rendering.water import PRESETS as WATERS
 
     water = WATERS.get(args.water)
     if water is not None and port is None:
@@ -266,10 +266,10 @@ def main(args) -> int:
 
 
 def _surface_scene(args, left, right, port) -> int:
-    """``--layout surface``: see :mod:`synth.surface_scene`."""
+    """``--layout surface``: see :mod:`synth.scene.surface_scene`."""
     from synth.scene import DEFAULT_FULL_FILM_SPP
-    from synth.surface_scene import write_surface_scene
-    from synth.water import PRESETS as WATERS
+    from synth.scene.surface_scene import write_surface_scene
+    from synth.rendering.water import PRESETS as WATERS
 
     if args.lighting == "lit" and port is None:
         raise CLIError("--lighting lit needs a port (the lights are in the water); use "
@@ -406,14 +406,13 @@ def _check_visible(left, right, port, targets, radius: float, layout: str) -> No
     """CLIError unless some target lies wholly inside both images (in front of the cameras)."""
     import numpy as np
 
-    from measure.dome import DomePair
-    from measure.projection import project
+    from measure.geometry.projection import project
 
-    from synth.crosscheck import wholly_in_image
+    from synth.products.crosscheck import wholly_in_image
 
     seen = np.ones(len(targets), dtype=bool)
     for view, camera in enumerate((left, right)):
-        uv = project(camera, port[view] if isinstance(port, DomePair) else port, targets)
+        uv = project(camera, port.view(view), targets)
         seen &= wholly_in_image(camera, uv, targets, radius)
     if not seen.any():
         raise CLIError(f"--layout {layout}: none of the {len(targets)} targets is visible in both "
@@ -429,7 +428,7 @@ def _apparent_distance(port, depth_mm: float) -> float:
 def _indices(args) -> list:
     """``[n_air, n_glass, n_water]``: the paper's, with ``--n-glass`` and ``--n-water`` applied
     (a water index from temperature and salinity prints how it was computed)."""
-    from synth import rig as rigs
+    from synth.scene import rig as rigs
 
     n = list(rigs.PAPER_INDICES)
     if args.n_glass is not None:

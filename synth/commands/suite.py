@@ -1,9 +1,10 @@
 """``python -m synth suite SPEC.toml --out DIR [--workers N | --scheduler tcp://HOST:PORT]``:
 render a benchmark suite — one dataset per entry of the spec — on Dask workers
-(:mod:`synth.suite`, the grammar of :mod:`synth.grid`, the cluster of :mod:`synth.cluster`).
+(:mod:`synth.products.suite`, the grammar of :mod:`synth.infra.grid`, the cluster of
+:mod:`synth.infra.cluster`).
 
 Resumable: a rerun does only the entries without a whole dataset; each dataset appears whole
-(written by :func:`synth.dataset.write_dataset`). A write that fails (a full disk) or an
+(written by :func:`synth.products.dataset.write_dataset`). A write that fails (a full disk) or an
 unreachable scheduler ends with one ``error:`` line; the datasets finished are kept."""
 
 from __future__ import annotations
@@ -12,8 +13,8 @@ import sys
 import time
 import uuid
 
-from synth import interrupt
-from synth.cli import (CLIError, add_cluster_options, add_out_option, add_progress_option, refuse_given)
+from synth.infra import interrupt
+from synth.infra.cli import (CLIError, add_cluster_options, add_out_option, add_progress_option, refuse_given)
 
 
 def add_parser(subparsers) -> None:
@@ -34,8 +35,8 @@ def add_parser(subparsers) -> None:
 
 
 def main(args) -> int:
-    from synth.cluster import check_address, connect
-    from synth.suite import (SuiteDir, load_suite_spec, probe, write_index, write_readme,
+    from synth.infra.cluster import check_address, connect
+    from synth.products.suite import (SuiteDir, load_suite_spec, probe, write_index, write_readme,
                              write_suite_json)
 
     start = time.perf_counter()
@@ -107,7 +108,7 @@ def _execute(client, spec, todo, out, records, token, progress) -> tuple[int, fl
     from distributed import as_completed
     from tqdm import tqdm
 
-    from synth.suite import render_task
+    from synth.products.suite import render_task
 
     started = time.perf_counter()
     futures = {}

@@ -8,8 +8,8 @@ with ``dielectric`` BSDFs: ``dome_<camera>_inner`` (radius ``R``) and ``dome_<ca
 (``ext_ior``) is on the normal side, so with no ``flip_normals``: inner sphere ``int_ior`` = the
 air's index, ``ext_ior`` = the glass's; outer sphere ``int_ior`` = the glass's, ``ext_ior`` =
 ``$n_water``. Inside the inner sphere is air, between the spheres glass, outside water (checked
-against :func:`measure.dome.trace_through_dome` with Mitsuba's own ``ray_intersect`` and BSDF
-sampling in ``tests/synth/test_scene_dome.py``).
+against :func:`measure.geometry.dome.trace_through_dome` with Mitsuba's own ``ray_intersect`` and BSDF
+sampling in ``tests/synth/scene/test_scene_dome.py``).
 """
 
 from __future__ import annotations
@@ -17,7 +17,7 @@ from __future__ import annotations
 import numpy as np
 
 from measure import StereoRig
-from measure.dome import DomePair, DomePort, trace_through_dome
+from measure.geometry.dome import DomePair, DomePort, require_dome_pair, trace_through_dome
 
 #: Defaults of ``synth scene --port dome``: inner radius and glass thickness, mm. With the
 #: paper's 200 mm baseline the two outer spheres (58 mm) leave 84 mm between them, and no ray of
@@ -50,12 +50,11 @@ def check_field_of_view(rig: StereoRig, step_px: int = FOV_CHECK_STEP_PX) -> Non
     and misses the other camera's dome.
 
     The rays of a grid of pixels (every ``step_px`` and the image border) are traced through
-    the camera's dome (:func:`measure.dome.trace_through_dome`); each must reach the water (no
+    the camera's dome (:func:`measure.geometry.dome.trace_through_dome`); each must reach the water (no
     total internal reflection) and its water ray must not meet the other dome's outer sphere.
     The two domes must not overlap.
     """
-    if not rig.is_dome:
-        raise ValueError("check_field_of_view needs a rig with a DomePair")
+    require_dome_pair(rig.port, "check_field_of_view needs a rig with a DomePair")
     left, right = rig.port.left, rig.port.right
     gap = np.linalg.norm(left.center - right.center) - left.radii[1] - right.radii[1]
     if gap <= 0:
@@ -69,7 +68,7 @@ def check_field_of_view(rig: StereoRig, step_px: int = FOV_CHECK_STEP_PX) -> Non
         u, v = np.meshgrid(np.r_[-0.5, np.arange(0, w, step_px), w - 0.5],
                            np.r_[-0.5, np.arange(0, h, step_px), h - 0.5])
         uv = np.column_stack([u.ravel(), v.ravel()])
-        water = trace_through_dome(camera.center, camera.rays(uv), rig.port_of(view),
+        water = trace_through_dome(camera.center, camera.rays(uv), rig.view_port(view),
                                    keep_interface_points=False)
         lost = ~np.all(np.isfinite(water.directions), axis=1)
         if lost.any():
@@ -77,7 +76,7 @@ def check_field_of_view(rig: StereoRig, step_px: int = FOV_CHECK_STEP_PX) -> Non
             raise ValueError(f"the {name} camera's field of view does not fit through its dome "
                              f"(the ray of pixel ({worst[0]:g}, {worst[1]:g}) does not reach "
                              f"the water)")
-        other = rig.port_of(1 - view)
+        other = rig.view_port(1 - view)
         hits = _ray_meets_sphere(water.origins, water.directions, other.center, other.radii[1])
         if hits.any():
             worst = uv[np.flatnonzero(hits)[0]]

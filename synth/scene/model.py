@@ -14,7 +14,7 @@ import numpy as np
 from measure import Camera, StereoRig
 
 #: Defaults written into every scene unless given. ``spp`` is what a lit pixel gets: target
-#: scenes render adaptively (synth.render), where 144 spp on the lit pixels costs about as much
+#: scenes render adaptively (synth.rendering.render), where 144 spp on the lit pixels costs about as much
 #: as 36 (the pilot over the whole film dominates) and halves the centroid noise
 #: (docs/speed.md, "Adaptive rendering").
 DEFAULT_SPP = 144
@@ -35,7 +35,7 @@ SURFACE_ID, SPECKLE_ID = "surface", "speckle"
 @dataclass(frozen=True)
 class SurfaceFiles:
     """The files of a surface scene, as the XML names them (relative to the scene file's
-    directory): ``mesh`` a PLY of :func:`synth.surfaces.write_ply`, ``texture`` an 8-bit grey
+    directory): ``mesh`` a PLY of :func:`synth.scene.surfaces.write_ply`, ``texture`` an 8-bit grey
     speckle PNG (linear reflectance, or radiance when self-luminous)."""
 
     mesh: str
@@ -97,8 +97,8 @@ class SceneSpec:
 
     @property
     def port(self):
-        """The port — a :class:`measure.FlatPort`, or a :class:`measure.dome.DomePair` in a dome
-        scene (``rig.is_dome``) — or None in an all-air scene."""
+        """The port — a :class:`measure.FlatPort`, or a :class:`measure.geometry.dome.DomePair` in a dome
+        scene (``rig.port.kind == "dome"``) — or None in an all-air scene."""
         return self.rig.port if self.has_port else None
 
     @property

@@ -20,7 +20,7 @@ import re
 import xml.etree.ElementTree as ET
 
 from synth.scene.model import SceneError
-from synth.seeds import MAX_SEED, seed_range_text
+from synth.infra.seeds import MAX_SEED, seed_range_text
 
 _NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
 _SUBST = re.compile(r"\$([A-Za-z_][A-Za-z0-9_]*)")

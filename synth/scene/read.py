@@ -19,12 +19,12 @@ import re
 import numpy as np
 
 from measure import Camera, FlatPort, StereoRig
-from measure.port import index_matched_port
+from measure.geometry.port import index_matched_port
 from synth.scene.dome import check_field_of_view, facing_cameras, pair_from_spheres
 from synth.scene.model import (SPECKLE_ID, SURFACE_ID, TARGET_ID_PREFIX, SceneError, SceneSpec,
                                SceneSurface)
 from synth.scene.params import check_params, declared_defaults, override_defaults
-from synth.sensor import intrinsics_from_sensor, pose_from_to_world
+from synth.rendering.sensor import intrinsics_from_sensor, pose_from_to_world
 
 
 def _floats(text: str, what: str) -> np.ndarray:
@@ -42,7 +42,7 @@ def _floats(text: str, what: str) -> np.ndarray:
 def _parse_with_mitsuba(path: str, params: dict, referenced, label: str):
     """Mitsuba's own parser (``mitsuba.parser.parse_file``): ``$`` substitution, transforms
     composed in double precision, references; no plugin is built."""
-    from synth.mitsuba_setup import import_mitsuba
+    from synth.rendering.mitsuba_setup import import_mitsuba
 
     mi, variant = import_mitsuba()
     import mitsuba.parser as mp
@@ -229,7 +229,7 @@ def _texture_filename(nodes: _Nodes, what: str) -> str | None:
 
 def _read_surface(surfaces, scene_path: str, label: str) -> SceneSurface:
     """The scene's one surface, its files resolved next to the scene file and the mesh read."""
-    from synth.surfaces import read_ply
+    from synth.scene.surfaces import read_ply
 
     if len(surfaces) != 1:
         raise SceneError(f"{label}: a surface scene holds exactly one surface, found "

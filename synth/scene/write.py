@@ -11,7 +11,7 @@ the ``<default>`` parameters of :mod:`synth.scene.params` and holds:
 * the port: one ``rectangle`` per interface with a ``dielectric`` BSDF, its normal (local +z)
   turned towards the cameras so that ``ext_ior`` is the camera-side index: air-glass
   ``int_ior = n2, ext_ior = n1``, glass-water ``int_ior = $n_water, ext_ior = n2``.
-* or, for a dome port (a :class:`measure.dome.DomePair`), per camera two concentric analytic
+* or, for a dome port (a :class:`measure.geometry.dome.DomePair`), per camera two concentric analytic
   ``sphere`` shapes with ``dielectric`` BSDFs (:mod:`synth.scene.dome`).
 * the targets: ``disk`` shapes with an ``area`` emitter, facing the cameras (normal −z), shape
   ``id = "target_<k>"`` for target number ``k``; radius = the disk's scale.
@@ -25,12 +25,12 @@ import tempfile
 import numpy as np
 
 from measure import Camera, FlatPort, StereoRig
-from measure.dome import DomePair
+from measure.geometry.dome import DomePair
 from synth.scene.model import (DEFAULT_MAX_DEPTH, DEFAULT_SEED, DEFAULT_SPP, SPECKLE_ID,
                                SURFACE_ID, TARGET_ID_PREFIX, SurfaceFiles)
 from synth.scene.dome import (check_field_of_view, check_targets, dome_placements,
                               facing_cameras)
-from synth.sensor import sensor_parameters
+from synth.rendering.sensor import sensor_parameters
 
 #: Half side (mm) of the square port interfaces: covers both fields of view far beyond 2 m.
 INTERFACE_HALF_SIZE_MM = 2000.0
@@ -125,11 +125,11 @@ def scene_xml(cameras, port: FlatPort | None, targets, target_radius: float, *,
     """The text of a Mitsuba 3 scene of two cameras, a flat port (or none) and disk targets.
 
     ``cameras`` (left, right) :class:`measure.Camera` (same image size; square pixels);
-    ``port`` a :class:`measure.FlatPort`, a :class:`measure.dome.DomePair` (a dome around each
+    ``port`` a :class:`measure.FlatPort`, a :class:`measure.geometry.dome.DomePair` (a dome around each
     camera: :mod:`synth.scene.dome`) or None for an all-air scene; ``targets`` ``(N, 3)`` mm,
     reference frame, all in the water; ``target_radius`` mm. When all targets share one ``z``,
     it becomes the ``target_z`` default. ``comment`` goes into an XML comment (for people only).
-    ``water`` (a :class:`synth.water.Water`, needs a port): the water behind the port becomes a
+    ``water`` (a :class:`synth.rendering.water.Water`, needs a port): the water behind the port becomes a
     homogeneous participating medium (defaults ``water_c`` per metre, ``water_albedo``,
     ``water_g``) and the integrator ``volpath``.
     ``target_normals`` ``(N, 3)``: the direction each disk faces (default: all face the cameras,

@@ -1,11 +1,11 @@
-"""The per-point SciPy baseline of the benchmark solves the same problem as measure.projection."""
+"""The per-point SciPy baseline of the benchmark solves the same problem as measure.geometry.projection."""
 
 import numpy as np
 
 from eval.cli import main
 from eval.core.fermat_reference import fermat_pixel_scipy
-from synth.layouts import paper_plane
-from measure.projection import project
+from synth.scene.layouts import paper_plane
+from measure.geometry.projection import project
 
 
 def test_scipy_reference_agrees_with_the_vectorized_fermat_solver(rig):

@@ -12,7 +12,7 @@ import pytest
 
 from eval.cli import main
 from eval.score import associate_points, default_gate_mm
-from synth.dataset import write_dataset
+from synth.products.dataset import write_dataset
 
 SPP = 16
 

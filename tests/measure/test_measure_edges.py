@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 
 from measure import Camera, FlatPort, Reason, StereoRig, triangulate
-from measure.matching import match_targets
-from measure.projection import project
-from synth.rig import paper_rig
+from measure.stereo.matching import match_targets
+from measure.geometry.projection import project
+from synth.scene.rig import paper_rig
 
 METHODS = ("optical_path", "su", "regular", "reprojection")
 

@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 
 from eval.__main__ import main as eval_main
-from measure.board import Board
-from synth.boards import write_boards
-from synth.dataset import read_calib
-from synth.rig import paper_cameras
+from measure.calibration.board import Board
+from synth.products.boards import write_boards
+from synth.products.dataset import read_calib
+from synth.scene.rig import paper_cameras
 from synth.scene import load_scene, write_scene
 from synth.scene.dome import dome_pair
 
@@ -62,7 +62,7 @@ def test_decentring_from_boards_behind_domes(boards, tmp_path, capsys):
         # small images (~30 px squares): loose bounds; the full-size numbers are in the docs
         assert abs(p["error"]) < 0.5 and abs(p["error_in_sigma"]) < 4, (name, p)
     calib = read_calib(str(out / "calib.yaml"))
-    assert calib["rig"].is_dome
+    assert calib["rig"].port.kind == "dome"
     np.testing.assert_allclose(calib["port"].left.center, OFFSET, atol=0.5)
     assert "DOMEPORT" in (out / "cameras.txt").read_text()
     assert read_calib(str(out / "calib_in_air_only.yaml"))["port"].left.center.tolist() == \

@@ -16,10 +16,10 @@ from scipy.spatial.transform import Rotation
 
 from eval.__main__ import main as eval_main
 from eval.calibrate.photos import outlier_poses, outlier_threshold
-from measure.board import Board
-from synth.boards import board_rig, sample_poses
-from synth.photos import to_photo
-from synth.rig import paper_cameras
+from measure.calibration.board import Board
+from synth.products.boards import board_rig, sample_poses
+from synth.products.photos import to_photo
+from synth.scene.rig import paper_cameras
 
 SIZE, FOCAL = (480, 402), 225.0
 BOARD = Board("chessboard", (7, 6), 60.0)
@@ -216,8 +216,8 @@ def test_bad_photo_folders(drawn, tmp_path, capsys):
     _fails(["calibrate", str(few), "--air"] + board, f"{few} (photos): the board was found in "
            f"2 left image(s); an in-air calibration needs at least 3", capsys)
     # intrinsics of another image size
-    from synth.dataset import write_calib
-    from synth.rig import paper_rig
+    from synth.products.dataset import write_calib
+    from synth.scene.rig import paper_rig
     other = tmp_path / "other.yaml"
     write_calib(other, paper_rig(size=(640, 480)))
     _fails(["calibrate", src, "--intrinsics", str(other)] + board, "image size", capsys)
@@ -249,8 +249,8 @@ def rendered(tmp_path_factory):
     photos and underwater (6 poses) as JPEG, and the truth (which the command never sees)."""
     from measure import FlatPort
     from synth.__main__ import main as synth_main
-    from synth.boards import write_boards
-    from synth.dataset import read_calib
+    from synth.products.boards import write_boards
+    from synth.products.dataset import read_calib
     from synth.scene import load_scene, write_scene
 
     root = tmp_path_factory.mktemp("rendered")
@@ -275,7 +275,7 @@ def test_rendered_photos_in_air_then_underwater(rendered, tmp_path, capsys):
     """The chain from photos alone: in air (PNG), then the housing (JPEG) with the in-air
     calib.yaml; every estimate against the rendered truth, within bounds that 6–8 small poses
     support (the full-size numbers are in docs/calibration.md)."""
-    from synth.dataset import read_calib
+    from synth.products.dataset import read_calib
 
     board = ["--squares", "7x6", "--square-mm", "60", "--no-progress"]
     assert eval_main(["calibrate", rendered["air"], "--air", "--out", str(tmp_path / "air")]

@@ -40,7 +40,7 @@ def _photos(tmp_path) -> Path:
 
 
 def _calib(out: Path) -> dict:
-    from synth.dataset import read_calib
+    from synth.products.dataset import read_calib
 
     return read_calib(str(out / "calib.yaml"))
 

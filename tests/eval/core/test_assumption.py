@@ -1,6 +1,6 @@
 """The water index from temperature and salinity where the command lines take one:
 ``eval run --assume n_water=T=…,S=…`` and ``synth scene --n-water T=…,S=…`` (the argparse type
-:func:`synth.cli.water_index_argument`); the computed index is shown to the user once."""
+:func:`synth.infra.cli.water_index_argument`); the computed index is shown to the user once."""
 
 from __future__ import annotations
 
@@ -11,8 +11,8 @@ import pytest
 from eval.cli import build_parser
 from eval.core.assumption import parse_assumptions
 from eval.run.config import RunConfig
-from measure.water_index import water_index
-from synth.cli import WaterIndex, water_index_argument
+from measure.calibration.water_index import water_index
+from synth.infra.cli import WaterIndex, water_index_argument
 from synth.commands import main as synth_main
 
 

@@ -74,7 +74,7 @@ def test_the_baseline_scores_equal_eval_run_key_by_key(baseline, tmp_path):
 @pytest.mark.slow
 def test_missing_metres_and_offset_submissions_are_failures_and_warnings(baseline, tmp_path,
                                                                          capsys):
-    from synth.cloudfile import read_cloud_points
+    from synth.formats.cloudfile import read_cloud_points
 
     suite, sub, index, _ = baseline
     mine = tmp_path / "mine"
@@ -148,7 +148,7 @@ def surface_suite(tmp_path_factory):
 
 @pytest.mark.slow
 def test_a_surface_suite_scored_with_its_own_truth_depth_is_exact(surface_suite, tmp_path):
-    from synth.exchange import read_pfm, write_pfm
+    from synth.formats.exchange import read_pfm, write_pfm
 
     suite, folder = surface_suite
     sub = tmp_path / "sub"
@@ -164,7 +164,7 @@ def test_a_surface_suite_scored_with_its_own_truth_depth_is_exact(surface_suite,
 
 
 def _truth_cloud(suite, folder):
-    from synth.truth_maps import read_truth_maps
+    from synth.products.truth_maps import read_truth_maps
 
     size = json.loads((suite / folder / "manifest.json").read_text())["image_size"]
     truth = read_truth_maps(str(suite / folder), "left", tuple(size))

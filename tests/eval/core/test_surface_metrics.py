@@ -14,7 +14,7 @@ from matplotlib import image as mpimg
 from eval.run.dense_figures import write_colored_cloud, write_distance_histogram, write_error_map
 from eval.core.surface_metrics import (SurfaceCase, fit_plane, mesh_is_planar, score_surface,
                                   surface_arrays, surface_table)
-from synth.fileio import jsonable
+from synth.infra.fileio import jsonable
 
 from tests.conftest import rotation
 

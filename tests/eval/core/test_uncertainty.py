@@ -10,11 +10,11 @@ import pytest
 from eval.cli import CLIError
 from eval.core.uncertainty import (AUTO, COLUMNS, TRUTH_COLUMNS, pair_sigmas, parse_pixel_sigma,
                                    rig_covariance_note, write_uncertainty_files)
-from measure.projection import project
-from measure.uncertainty import point_covariances
-from synth.cloudfile import ply_layout, read_cloud_points
-from synth.layouts import paper_plane
-from synth.rig import paper_rig
+from measure.geometry.projection import project
+from measure.stereo.uncertainty import point_covariances
+from synth.formats.cloudfile import ply_layout, read_cloud_points
+from synth.scene.layouts import paper_plane
+from synth.scene.rig import paper_rig
 
 
 def test_parse_pixel_sigma():

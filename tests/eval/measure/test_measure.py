@@ -20,8 +20,8 @@ import pytest
 
 from eval.cli import main as eval_main
 from synth.__main__ import main as synth_main
-from synth.dataset import write_calib, write_dataset
-from synth.rig import paper_cameras, paper_port
+from synth.products.dataset import write_calib, write_dataset
+from synth.scene.rig import paper_cameras, paper_port
 
 SPP = 16
 COLUMNS = ["pair", "method", "x_mm", "y_mm", "z_mm", "gap_mm", "u_left", "v_left", "u_right",
@@ -94,8 +94,8 @@ def test_one_pair_measures_the_targets_and_eval_score_reads_the_cloud(photos, ca
 def test_point_covariances_with_and_without_the_calibrations_covariance(photos, capsys):
     """A calibration without covariance is accepted (the points carry the pixel-noise part and
     the report says so); with one, σ grows; the files hold one row per point."""
-    from measure.rig_covariance import RigCovariance
-    from synth.dataset import read_calib
+    from measure.stereo.rig_covariance import RigCovariance
+    from synth.products.dataset import read_calib
 
     root = photos
     rig = read_calib(root / "ds" / "calib.yaml")["rig"]
@@ -215,8 +215,8 @@ def test_an_in_air_calibration_is_said(tmp_path, capsys):
     photos would otherwise come out at the wrong depth with exit 0). The photos: 20 Gaussian
     targets on a plane at 1 m drawn where the in-air rig projects them (no render)."""
     from measure import StereoRig
-    from measure.projection import project
-    from synth.rig import air_port
+    from measure.geometry.projection import project
+    from synth.scene.rig import air_port
 
     size = (320, 268)
     rig = StereoRig(*paper_cameras(size, 150.0), air_port())
@@ -247,7 +247,7 @@ def user(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     from measure import StereoRig
 
-    from measure.rig_covariance import RigCovariance
+    from measure.stereo.rig_covariance import RigCovariance
 
     for name, size, focal in (("calib.yaml", (320, 268), 150.0),
                               ("big.yaml", (2448, 2048), 1100.0)):
@@ -305,7 +305,7 @@ def test_bad_inputs_exit_2_with_one_line_and_write_nothing(user, capsys, argv, f
 
 
 def test_a_dome_calibration_is_one_error_line_where_it_cannot_apply(tmp_path):
-    """A DOMEPORT calibration reads (synth.calib_formats) and eval measure takes it (targets
+    """A DOMEPORT calibration reads (synth.formats.calib_formats) and eval measure takes it (targets
     and --dense); eval run on a flat-port scene refuses it: one CLIError naming the file, no
     traceback."""
     from types import SimpleNamespace
@@ -314,14 +314,14 @@ def test_a_dome_calibration_is_one_error_line_where_it_cannot_apply(tmp_path):
     from eval.measure.inputs import read_calibration
     from eval.run.inputs import budget_rigs, measurement_calibration
     from measure import StereoRig
-    from measure.dome import DomePair, DomePort
-    from synth.calib_formats import write_calibmar
+    from measure.geometry.dome import DomePair, DomePort
+    from synth.formats.calib_formats import write_calibmar
 
     left, right = paper_cameras()
     pair = DomePair(DomePort(left.center, 50.0, 8.0, (1.0, 1.49, 1.33)),
                     DomePort(right.center, 50.0, 8.0, (1.0, 1.49, 1.33)))
     path = write_calibmar(tmp_path / "dome.yaml", StereoRig(left, right, pair))[0]
-    assert read_calibration(path)[0].is_dome
+    assert read_calibration(path)[0].port.kind == "dome"
     flat = SimpleNamespace(rig=StereoRig(left, right, None))  # eval run: a flat-port scene
     with pytest.raises(CLIError, match=r"--calib .*dome\.yaml: a dome-port calibration"):
         measurement_calibration(SimpleNamespace(calib=path, assumptions={}), flat)
@@ -331,18 +331,18 @@ def test_a_dome_calibration_is_one_error_line_where_it_cannot_apply(tmp_path):
 
 def test_dense_measures_a_plane_through_decentred_domes(tmp_path):
     """eval measure --dense with a DOMEPORT calibration (calibmar's YAML): a speckle plane 1 m
-    away rendered analytically through two decentred domes (synth.dense_pairs, as
-    tests/measure/test_dome_stereo.py), written as 16-bit PNG photos. Measured (2026-12-02):
+    away rendered analytically through two decentred domes (synth.products.dense_pairs, as
+    tests/measure/stereo/test_dome_stereo.py), written as 16-bit PNG photos. Measured (2026-12-02):
     74,340 of the 85,760 pixels matched, the plane fit 999.996 mm away, RMS 0.291 mm (a pixel
     spans 3.5 mm there); the pinhole baseline, searching where it sees the surface (592–1094
     mm, eval.run.dense.pinhole_depth_range), matched 20,785 pixels with a plane fit RMS of
     10.3 mm (behind centred domes it matches as many as the optical path, RMS 0.30 mm: the
     pinhole model is exact there)."""
     from measure import StereoRig
-    from measure.dome import DomePair, DomePort
-    from synth.calib_formats import write_calibmar
-    from synth.dense_pairs import PlaneSurface, SpeckleTexture, render_pair
-    from synth.rig import paper_rig
+    from measure.geometry.dome import DomePair, DomePort
+    from synth.formats.calib_formats import write_calibmar
+    from synth.products.dense_pairs import PlaneSurface, SpeckleTexture, render_pair
+    from synth.scene.rig import paper_rig
 
     base = paper_rig(size=(320, 268))
     indices = (1.0, 1.49, 1.33)

@@ -1,4 +1,4 @@
-"""Tests of `python -m eval paper` (section 3 of Li et al. 2024) and synth.noise.
+"""Tests of `python -m eval paper` (section 3 of Li et al. 2024) and synth.rendering.noise.
 
 One run with 5 trials into a temporary directory serves the report and figure tests; the
 numbers asserted are ones that could fail (ideal errors, Su's model error, the ray gap share).
@@ -13,12 +13,12 @@ import sys
 import numpy as np
 import pytest
 
-from synth.fileio import MARKER_NAME
+from synth.infra.fileio import MARKER_NAME
 
 from eval import cli
 from eval.paper.experiments import run_experiments
-from synth.noise import add_pixel_noise, deviate_port, pixel_noise
-from synth.rig import paper_port
+from synth.rendering.noise import add_pixel_noise, deviate_port, pixel_noise
+from synth.scene.rig import paper_port
 from tests.conftest import REPO
 
 FIGURES = ("figure4_gap.png", "figure5_su_1m.png", "figure6_su_2m.png",
@@ -185,7 +185,7 @@ def test_cli_module_entry_point_exit_code(tmp_path):
 
 
 # --------------------------------------------------------------------------------------------
-# synth.noise
+# synth.rendering.noise
 
 
 def test_pixel_noise_same_seed_same_bytes():

@@ -17,7 +17,7 @@ import pytest
 
 from eval.__main__ import main as eval_main
 from synth.__main__ import main as synth_main
-from synth.dataset import write_dataset
+from synth.products.dataset import write_dataset
 from tests.conftest import REPO
 
 SMALL = ("--size", "320", "268")
@@ -108,8 +108,8 @@ def test_dense_run_with_a_rig_covariance(plane_case, tmp_path):
     matching σ's alone), the coverage is counted in 3 dimensions (a rig error moves a point off
     its ray), and the report names the calibration. The scene's own rig is exact, so this one
     calibration is a draw of zero error: σ overstates, and the report says so."""
-    from measure.rig_covariance import RigCovariance
-    from synth.dataset import read_calib, write_calib
+    from measure.stereo.rig_covariance import RigCovariance
+    from synth.products.dataset import read_calib, write_calib
 
     root, scene, ds = plane_case
     calib = tmp_path / "with.yaml"
@@ -261,12 +261,12 @@ def test_damaged_truth_maps_are_refused(plane_case, tmp_path, capsys):
 
 @pytest.mark.slow
 def test_depth_range_needing_too_many_planes(plane_case, monkeypatch, capsys):
-    """A search that needs more sweep planes than measure.dense.MAX_PLANES is refused before
+    """A search that needs more sweep planes than measure.dense.match.MAX_PLANES is refused before
     any image work (at full size 200-1e9 mm needs thousands; here the cap is lowered to 20)."""
-    import measure.dense
+    import measure.dense.match
 
     root, scene, ds = plane_case
-    monkeypatch.setattr(measure.dense, "MAX_PLANES", 20)
+    monkeypatch.setattr(measure.dense.match, "MAX_PLANES", 20)
     before = _snapshot(root)
     code = eval_main(["run", scene, "--from", ds, "--out", str(root / "bad"), "--no-progress",
                       "--depth-range", "200,1e9"])
@@ -302,11 +302,11 @@ def test_the_pinhole_search_range_brackets_where_the_pinhole_model_sees_the_surf
     --depth-range 70,1100 refused behind domes, 120,1100 behind the paper's port, for a near
     end the user never gave)."""
     from measure import StereoRig
-    from measure.dense import glass_depth
-    from measure.dome import DomePair, DomePort
-    from measure.projection import project
-    from measure.triangulate import triangulate
-    from synth.rig import paper_rig
+    from measure.dense.match import glass_depth
+    from measure.geometry.dome import DomePair, DomePort
+    from measure.geometry.projection import project
+    from measure.stereo.triangulate import triangulate
+    from synth.scene.rig import paper_rig
 
     from eval.run.dense import PINHOLE_NEAR_MARGIN, pinhole_depth_range
 

@@ -10,8 +10,8 @@ import pytest
 
 from eval.cli import main
 from eval.core.assumption import assumed_rig, describe_rig, parse_assumptions, rig_difference
-from synth.layouts import grid_plane
-from synth.rig import paper_cameras
+from synth.scene.layouts import grid_plane
+from synth.scene.rig import paper_cameras
 from synth.scene import load_scene, write_scene
 from synth.scene.dome import dome_pair
 
@@ -87,7 +87,7 @@ def test_flat_port_options_refused_for_domes(scenes, tmp_path, capsys, extra, fr
 def test_assumed_dome_rig_and_its_difference(scenes):
     truth = load_scene(scenes["decentred"]).rig
     believed = assumed_rig(truth, True, parse_assumptions(["n_water=1.34", "focal=151"]))
-    assert believed.is_dome
+    assert believed.port.kind == "dome"
     assert believed.port.left.indices == believed.port.right.indices == (1.0, 1.54, 1.34)
     np.testing.assert_array_equal(believed.port.right.center, truth.port.right.center)
     diff = rig_difference(truth, believed)
@@ -101,8 +101,8 @@ def test_assumed_dome_rig_and_its_difference(scenes):
 
 
 def test_a_flat_port_calibration_is_refused_for_a_dome_scene(scenes, tmp_path, capsys):
-    from synth.dataset import write_calib
-    from synth.rig import paper_rig
+    from synth.products.dataset import write_calib
+    from synth.scene.rig import paper_rig
 
     calib = tmp_path / "flat.yaml"
     write_calib(calib, paper_rig(size=SIZE, focal_px=FOCAL))
@@ -117,8 +117,8 @@ def test_a_flat_port_calibration_is_refused_for_a_dome_scene(scenes, tmp_path, c
 def test_points_through_domes_carry_the_domes_covariance(scenes, tmp_path):
     """A dome calibration whose covariance names each dome's centre (reference frame): the
     points measured through the domes carry its rig part (larger σ than the scene's exact rig)."""
-    from measure.rig_covariance import RigCovariance
-    from synth.dataset import read_calib, write_calib, write_dataset
+    from measure.stereo.rig_covariance import RigCovariance
+    from synth.products.dataset import read_calib, write_calib, write_dataset
 
     data = tmp_path / "data"
     write_dataset(load_scene(scenes["decentred"]), data, spp=SPP, progress=False)

@@ -10,7 +10,7 @@ import open3d as o3d
 import pytest
 
 from eval.cli import main
-from synth.dataset import write_dataset
+from synth.products.dataset import write_dataset
 
 SPP = 16
 
@@ -175,7 +175,7 @@ def test_conflicting_define_with_from_dataset(small_scene, tmp_path, capsys):
 
 
 def test_scene_with_no_visible_target(tmp_path, capsys):
-    from synth.rig import paper_cameras, paper_port
+    from synth.scene.rig import paper_cameras, paper_port
     from synth.scene import write_scene
 
     left, right = paper_cameras((320, 268), 150.0)
@@ -255,8 +255,8 @@ def test_self_calibration_sigma_includes_the_calibrations_covariance(small_scene
     """--calib with a covariance (left cx and the port distance, 0.1 px and 0.2 mm): the index's
     σ includes it — larger than the conditional σ, which is the σ without a covariance — and
     the report names what entered."""
-    from measure.rig_covariance import RigCovariance
-    from synth.dataset import read_calib, write_calib
+    from measure.stereo.rig_covariance import RigCovariance
+    from synth.products.dataset import read_calib, write_calib
 
     data = tmp_path / "data"
     write_dataset(small_scene, data, spp=16, progress=False, defines={"n_water": "1.34"})
@@ -315,8 +315,8 @@ def test_point_covariances_with_and_without_a_rig_covariance(small_scene, tmp_pa
     scene's rig or a calibration without covariance (the report says so), larger with a
     calibration's covariance; their files, coverage and summaries; a singular covariance is
     refused with one line naming the file."""
-    from measure.rig_covariance import RigCovariance
-    from synth.dataset import read_calib, write_calib
+    from measure.stereo.rig_covariance import RigCovariance
+    from synth.products.dataset import read_calib, write_calib
 
     data = tmp_path / "data"
     write_dataset(small_scene, data, spp=16, progress=False)

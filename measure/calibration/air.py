@@ -1,0 +1,313 @@
+"""Calibration from board images in air, with OpenCV: the boards found in every image pair
+(:func:`detect_boards`) and the cameras calibrated through no port (:func:`calibrate_in_air`).
+
+``cv2.calibrateCameraExtended`` per camera (the lens model :data:`LENS_MODELS`: k1, k2, p1, p2
+with k3 fixed at 0 by default; k3; OpenCV's rational model) and ``cv2.stereoCalibrate`` with the
+intrinsics fixed give K1, D1, K2, D2 and the stereo pose — OpenCV does it, nothing is
+re-implemented; poses whose own stereo pose disagrees with the others' are left out of the
+stereo fit (:func:`stereo_pose_outliers`). The housing underwater:
+:mod:`measure.calibration.housing`.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from ..geometry.camera import Camera
+from ..geometry.port import index_matched_port
+from ..stereo.triangulate import StereoRig
+from .board import MIN_CORNERS, Board
+from .covariance import air_covariance
+from ..stereo.rig_covariance import RigCovariance
+
+#: Fewest board poses a calibration accepts.
+MIN_POSES = 3
+
+
+class CalibrationError(ValueError):
+    """Board images that cannot calibrate what was asked (too few poses, boards not found)."""
+
+
+@dataclass(frozen=True)
+class Detections:
+    """Per pose and view the detected corners: ``ids[k][v]`` ``(M,)`` and ``pixels[k][v]``
+    ``(M, 2)`` for pose k, view v (0 left, 1 right); empty arrays where the board was not
+    found."""
+
+    ids: list
+    pixels: list
+
+    @property
+    def n_poses(self) -> int:
+        return len(self.ids)
+
+    def found(self, view: int) -> list[int]:
+        return [k for k in range(self.n_poses) if len(self.ids[k][view]) >= MIN_CORNERS]
+
+
+def detect_images(board: Board, images, workers: int | None = None) -> list:
+    """``[(ids, pixels), …]``: :meth:`Board.detect` of every image, on ``workers`` threads
+    (default: one per CPU; OpenCV's detectors release the GIL: 15 full-size pairs took 12 s on
+    2 threads against 21 s on one, on a loaded 2-core machine)."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    images = list(images)
+    workers = max(1, min(workers or os.cpu_count() or 1, len(images) or 1))
+    if workers == 1:
+        return [board.detect(img) for img in images]
+    with ThreadPoolExecutor(workers) as pool:
+        return list(pool.map(board.detect, images))
+
+
+def detect_boards(board: Board, images, workers: int | None = None) -> Detections:
+    """Detect ``board`` in every ``(left, right)`` image pair (:func:`detect_images`)."""
+    found = detect_images(board, [img for pair in images for img in pair], workers)
+    ids = [[found[2 * k][0], found[2 * k + 1][0]] for k in range(len(images))]
+    pixels = [[found[2 * k][1], found[2 * k + 1][1]] for k in range(len(images))]
+    return Detections(ids, pixels)
+
+
+# ---------------------------------------------------------------------------------------------
+# in air, with OpenCV
+# ---------------------------------------------------------------------------------------------
+#: Lens models of the in-air calibration: OpenCV's flags and distortion coefficients.
+#: ``standard`` k1 k2 p1 p2 (k3 fixed at 0), ``k3`` adds k3, ``rational`` k1…k6 p1 p2
+#: (``CALIB_RATIONAL_MODEL``: wide and action-camera lenses).
+LENS_MODELS = {"standard": (cv2.CALIB_FIX_K3, 4), "k3": (0, 5),
+               "rational": (cv2.CALIB_RATIONAL_MODEL, 8)}
+#: ``auto`` fits them in this order and keeps a richer model only when it lowers the
+#: camera's RMS by at least :data:`LENS_MODEL_GAIN` (a fraction) against the one kept before:
+#: on 18 real GoPro frames (2704 × 1520) standard 0.779 px, k3 0.620 px (kept), rational
+#: 0.613 px (1 % lower: not kept) — docs/calibration.md.
+LENS_MODEL_ORDER = ("standard", "k3", "rational")
+DEFAULT_LENS_MODEL = "auto"
+#: What :func:`calibrate_in_air` fits when not told: the model of the renders and of OpenCV's own
+#: default flags here (eval calibrate's --lens defaults to ``auto``).
+LIBRARY_LENS_MODEL = "standard"
+LENS_MODEL_GAIN = 0.02
+#: Names of OpenCV's intrinsics in ``stdDeviationsIntrinsics`` order.
+INTRINSIC_NAMES = ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6")
+#: A pose whose own stereo pose (from the two cameras' board poses) lies farther than
+#: max(:data:`STEREO_OUTLIER_FACTOR` × the median distance, :data:`STEREO_FLOOR_FRACTION` ×
+#: the baseline) or turned by more than max(factor × the median angle,
+#: :data:`STEREO_FLOOR_DEG`) from the poses' median stereo pose is left out of the stereo fit
+#: (:func:`stereo_pose_outliers`): a swapped, turned or mirrored photo, or a pair not taken at
+#: one moment.
+STEREO_OUTLIER_FACTOR, STEREO_FLOOR_FRACTION, STEREO_FLOOR_DEG = 5.0, 0.02, 0.5
+
+
+@dataclass(frozen=True)
+class AirCalibration:
+    """``rig`` (no port: index-matched), per camera ``rms_px`` and ``sigmas`` (fx, fy, cx, cy
+    and the lens model's distortion coefficients, from ``calibrateCameraExtended``), the
+    stereo ``stereo_rms_px`` and the number of poses used per camera and for the pair;
+    ``rms_px_per`` ``{(pose, view): rms}`` (OpenCV's per-view errors: RMS of the 2D residual
+    length, px) and ``board_poses`` ``{(pose, view): (R, t)}`` (board to the reference frame,
+    mm, from that camera's ``calibrateCamera`` extrinsics); ``covariance`` the full covariance
+    of both cameras' intrinsics and the stereo pose
+    (:func:`measure.calibration_covariance.air_covariance`; None for a lens model other than
+    ``standard``: its extra coefficients are not in that covariance yet). ``lens_models`` per
+    camera: the model used and the RMS of each model tried; ``stereo_poses`` per pose seen by
+    both cameras its own stereo pose and its distance from the median
+    (:func:`stereo_pose_outliers`), ``stereo_left_out`` the poses left out of the stereo fit
+    for it; ``stereo_rms_px_per`` ``{pose: rms}`` of the stereo fit (both views);
+    ``residuals`` per view ``(pose, id, du, dv)`` rows of each camera's own fit (projected −
+    detected, px), as :class:`HousingCalibration`'s."""
+
+    rig: StereoRig
+    rms_px: dict
+    sigmas: dict
+    stereo_rms_px: float
+    poses_used: dict
+    rms_px_per: dict = field(default_factory=dict)
+    board_poses: dict = field(default_factory=dict)
+    covariance: RigCovariance | None = None
+    lens_models: dict = field(default_factory=dict)
+    stereo_poses: dict = field(default_factory=dict)
+    stereo_left_out: tuple = ()
+    stereo_rms_px_per: dict = field(default_factory=dict)
+    residuals: dict = field(default_factory=dict)
+
+
+def calibrate_camera(obj, img, size, lens_model: str = DEFAULT_LENS_MODEL):
+    """One camera's ``cv2.calibrateCameraExtended`` with ``lens_model`` (a key of
+    :data:`LENS_MODELS`, or ``auto``: module constants). Returns ``(out, model, tried)``:
+    OpenCV's outputs, the model used and ``{model: rms px}`` of each model fitted."""
+    if lens_model != "auto" and lens_model not in LENS_MODELS:
+        raise CalibrationError(f"lens model {lens_model!r}: choose from auto, "
+                               f"{', '.join(LENS_MODELS)}")
+    criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 200, 1e-12)
+    order = LENS_MODEL_ORDER if lens_model == "auto" else (lens_model,)
+    tried, best, best_model = {}, None, None
+    for model in order:
+        out = cv2.calibrateCameraExtended(obj, img, tuple(size), None, None,
+                                          flags=LENS_MODELS[model][0], criteria=criteria)
+        tried[model] = float(out[0])
+        if best is None or (np.isfinite(out[0]) and out[0] < (1 - LENS_MODEL_GAIN) * best[0]
+                            and lens_problem(out, model, size) is None):
+            best, best_model = out, model
+    return best, best_model, tried
+
+
+def lens_problem(out, model: str, size) -> str | None:
+    """Why the camera of a ``calibrateCameraExtended`` result ``out`` fitted with ``model``
+    cannot be used over its whole image (its distortion folds: a richer model fitted to corners
+    that leave the image's edges uncovered), or None
+    (:meth:`measure.camera.Camera.distortion_problem`)."""
+    dist = out[2].ravel()[:max(LENS_MODELS[model][1], 5)]
+    if not np.all(np.isfinite(dist)) or not np.all(np.isfinite(out[1])):
+        return "the fit gave non-finite intrinsics"
+    return Camera(out[1], size, dist=dist).distortion_problem()
+
+
+def relative_poses(left_extrinsics, right_extrinsics):
+    """Per pose the stereo pose seen through that pose alone, in OpenCV's stereo convention
+    (``X_right = R X_left + T``): ``(R (P, 3, 3), T (P, 3) mm)`` from each camera's
+    board-to-camera ``(R, t)`` pairs."""
+    R_l = np.stack([R for R, _ in left_extrinsics])
+    R_r = np.stack([R for R, _ in right_extrinsics])
+    t_l = np.stack([t for _, t in left_extrinsics])
+    t_r = np.stack([t for _, t in right_extrinsics])
+    R = R_r @ np.transpose(R_l, (0, 2, 1))
+    return R, t_r - np.einsum("pij,pj->pi", R, t_l)
+
+
+def stereo_pose_outliers(R, T) -> dict:
+    """The poses whose own stereo pose ``(R (P, 3, 3), T (P, 3))`` disagrees with the others
+    (module constants): the median pose is the component-wise median of ``T`` and the medoid
+    of the rotations; returns ``{"deviation_mm" (P,), "deviation_deg" (P,),
+    "threshold_mm", "threshold_deg", "outliers" [indices], "baseline_mm" (P,)}``."""
+    T = np.asarray(T, dtype=np.float64)
+    angles = np.degrees(Rotation.from_matrix(
+        np.einsum("pij,qkj->pqik", R, R).reshape(-1, 3, 3)).magnitude()).reshape(len(R), len(R))
+    medoid = int(np.argmin(np.median(angles, axis=1)))
+    deviation_deg = angles[:, medoid]
+    deviation_mm = np.linalg.norm(T - np.median(T, axis=0), axis=1)
+    baseline = float(np.linalg.norm(np.median(T, axis=0)))
+    threshold_mm = max(STEREO_OUTLIER_FACTOR * float(np.median(deviation_mm)),
+                       STEREO_FLOOR_FRACTION * baseline)
+    threshold_deg = max(STEREO_OUTLIER_FACTOR * float(np.median(deviation_deg)), STEREO_FLOOR_DEG)
+    bad = (deviation_mm > threshold_mm) | (deviation_deg > threshold_deg)
+    return {"deviation_mm": deviation_mm, "deviation_deg": deviation_deg,
+            "threshold_mm": threshold_mm, "threshold_deg": threshold_deg,
+            "outliers": [int(i) for i in np.flatnonzero(bad)],
+            "baseline_mm": np.linalg.norm(T, axis=1)}
+
+
+def calibrate_in_air(board: Board, detections: Detections, size,
+                     lens_model: str = LIBRARY_LENS_MODEL) -> AirCalibration:
+    """OpenCV calibration of both cameras (``lens_model``: :func:`calibrate_camera`) and their
+    stereo pose from in-air board images; poses whose own stereo pose disagrees with the
+    others' (:func:`stereo_pose_outliers`) are left out of the stereo fit and named."""
+    corners = board.corners().astype(np.float32)
+    criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 200, 1e-12)
+    cameras, rms, sigmas, used, per, extrinsics = [], {}, {}, {}, {}, {}
+    views, s2, left_poses, models, own, residuals = [], [], {}, {}, {}, {}
+    for view, name in enumerate(("left", "right")):
+        poses = detections.found(view)
+        if len(poses) < MIN_POSES:
+            raise CalibrationError(f"the board was found in {len(poses)} {name} image(s); an "
+                                   f"in-air calibration needs at least {MIN_POSES}")
+        obj = [corners[detections.ids[k][view]] for k in poses]
+        img = [detections.pixels[k][view].astype(np.float32) for k in poses]
+        out, model, tried = calibrate_camera(obj, img, size, lens_model)
+        n_dist = LENS_MODELS[model][1]
+        models[name] = {"model": model, "rms_px": tried,
+                        "problem": lens_problem(out, model, size)}
+        rms[name], K, std = float(out[0]), out[1], out[5].ravel()
+        D = out[2].ravel()[:max(n_dist, 5)]
+        for k, error, rvec, tvec in zip(poses, out[7].ravel(), out[3], out[4]):
+            per[(k, view)] = float(error)
+            extrinsics[(k, view)] = (Rotation.from_rotvec(np.ravel(rvec)).as_matrix(),
+                                     np.ravel(tvec).astype(np.float64))
+        sigmas[name] = dict(zip(INTRINSIC_NAMES[:4 + n_dist], (float(s) for s in std)))
+        residuals[view] = camera_residuals(obj, img, out, poses, detections.ids, view)
+        cameras.append((K, D))
+        n = sum(len(o) for o in obj)  # OpenCV's RMS is per corner of the 2D residual length
+        s2.append(rms[name] ** 2 * n / max(2 * n - 4 - n_dist - 6 * len(poses), 1))
+        views.append({"obj": obj, "keys": [[(k, i) for i in detections.ids[k][view]]
+                                           for k in poses],
+                      "rvecs": out[3], "tvecs": out[4], "K": K, "dist": D})
+        if view == 0:
+            left_poses = {k: (rv, tv) for k, rv, tv in zip(poses, out[3], out[4])}
+        own[view] = {k: extrinsics[(k, view)] for k in poses}
+        used[name] = len(poses)
+    both = [k for k in detections.found(0) if k in set(detections.found(1))]
+    stereo_poses, left_out = {}, ()
+    if len(both) >= MIN_POSES:
+        R_k, T_k = relative_poses([own[0][k] for k in both], [own[1][k] for k in both])
+        check = stereo_pose_outliers(R_k, T_k)
+        left_out = tuple(both[i] for i in check["outliers"])
+        stereo_poses = {k: {"baseline_mm": float(check["baseline_mm"][i]),
+                            "deviation_mm": float(check["deviation_mm"][i]),
+                            "deviation_deg": float(check["deviation_deg"][i]),
+                            "threshold_mm": check["threshold_mm"],
+                            "threshold_deg": check["threshold_deg"]}
+                        for i, k in enumerate(both)}
+        both = [k for k in both if k not in set(left_out)]
+    if len(both) < MIN_POSES:
+        disagree = (f" ({len(left_out)} more left out: their own stereo poses disagree)"
+                    if left_out else "")
+        raise CalibrationError(f"the board was found in both views of {len(both)} pose(s)"
+                               f"{disagree}; the stereo calibration needs at least {MIN_POSES}")
+    obj, img_l, img_r, keys = [], [], [], []
+    for k in both:
+        common, il, ir = np.intersect1d(detections.ids[k][0], detections.ids[k][1],
+                                        return_indices=True)
+        obj.append(corners[common])
+        keys.append([(k, i) for i in common])
+        img_l.append(detections.pixels[k][0][il].astype(np.float32))
+        img_r.append(detections.pixels[k][1][ir].astype(np.float32))
+    (K1, D1), (K2, D2) = cameras
+    out = cv2.stereoCalibrateExtended(obj, img_l, img_r, K1, D1, K2, D2, tuple(size), None,
+                                      None, flags=cv2.CALIB_FIX_INTRINSIC, criteria=criteria)
+    stereo_rms, R, T = float(out[0]), out[5], out[6].ravel()
+    stereo_per = {k: float(np.sqrt(np.mean(np.square(e)))) for k, e in zip(both, out[-1])}
+    used["stereo"] = len(both)
+    left = Camera(K1, size, dist=D1)
+    right = Camera(K2, size, dist=D2, R=_orthonormal(R).T, t=-_orthonormal(R).T @ T)
+    port = index_matched_port(left.R[:, 2], np.stack([left.t, right.t]))
+    board_poses = {}
+    for (k, view), (R_cam, t_cam) in extrinsics.items():
+        camera = (left, right)[view]
+        board_poses[(k, view)] = (camera.R @ R_cam, camera.R @ t_cam + camera.t)
+    covariance = None
+    if all(m["model"] == "standard" for m in models.values()):
+        # linearized at the left camera's own board poses (stereoCalibrate's refinement of
+        # them moves the Jacobian by nothing that matters)
+        covariance = air_covariance(
+            views, {"obj": obj, "keys": keys, "rvecs": [left_poses[k][0] for k in both],
+                    "tvecs": [left_poses[k][1] for k in both], "om": cv2.Rodrigues(R)[0],
+                    "T": T}, s2)
+    return AirCalibration(StereoRig(left, right, port), rms, sigmas, stereo_rms, used, per,
+                          board_poses, covariance, models, stereo_poses, left_out, stereo_per,
+                          residuals)
+
+
+def camera_residuals(obj, img, out, poses, ids, view) -> np.ndarray:
+    """``(pose, id, du, dv)`` rows of one camera's ``calibrateCamera`` (``out``): every corner
+    projected with its pose's extrinsics minus where it was detected, px."""
+    rows = []
+    for k, o, observed, rvec, tvec in zip(poses, obj, img, out[3], out[4]):
+        projected = cv2.projectPoints(o, rvec, tvec, out[1], out[2])[0].reshape(-1, 2)
+        d = projected - np.asarray(observed, np.float64).reshape(-1, 2)
+        rows.append(np.column_stack([np.full(len(d), k), ids[k][view], d]))
+    return np.vstack(rows) if rows else np.empty((0, 4))
+
+
+def _orthonormal(R) -> np.ndarray:
+    u, _, vt = np.linalg.svd(np.asarray(R, dtype=np.float64))
+    return u @ vt
+
+
+__all__ = ["AirCalibration", "CalibrationError", "DEFAULT_LENS_MODEL", "Detections",
+           "INTRINSIC_NAMES", "LENS_MODELS", "LENS_MODEL_GAIN", "LENS_MODEL_ORDER",
+           "LIBRARY_LENS_MODEL", "MIN_POSES", "STEREO_FLOOR_DEG", "STEREO_FLOOR_FRACTION",
+           "STEREO_OUTLIER_FACTOR", "calibrate_camera", "calibrate_in_air", "camera_residuals",
+           "detect_boards", "detect_images", "lens_problem", "relative_poses",
+           "stereo_pose_outliers"]

@@ -1,0 +1,339 @@
+"""Calibration from board images: OpenCV in air, then the housing by refractive bundle adjustment.
+
+In air (:func:`calibrate_in_air`): ``cv2.calibrateCameraExtended`` per camera (k1, k2, p1, p2;
+k3 fixed at 0) and ``cv2.stereoCalibrate`` with the intrinsics fixed give K1, D1, K2, D2 and the
+stereo pose — OpenCV does it, nothing is re-implemented.
+
+Underwater (:func:`calibrate_housing`): the cameras' intrinsics stay as calibrated in air; the
+unknowns are every board pose (6 each) and the free housing parameters
+(:data:`HOUSING_PARAMETERS`): ``distance`` (D, mm), ``normal`` (2 tilts, rad, about axes
+perpendicular to the starting normal), ``thickness`` (first layer, mm), ``n_water``, and
+``extrinsics`` (the right camera's pose: 3 rotation-vector and 3 translation increments, rad and
+mm). Residuals: every detected corner's reprojection through the port with the project's exact
+forward model (:func:`measure.geometry.projection.project`), px. ``scipy.optimize.least_squares`` with the
+analytic Jacobian (``project(..., parameters=True)``: the implicit function theorem on the
+travel time's stationarity, chained with the board poses and SO(3)'s left Jacobian) in its
+sparse structure (a pose's 6 columns touch only its own corners' rows). Starting poses:
+``cv2.solvePnP`` on the refracted images with the in-air intrinsics (a plain pinhole solve).
+
+A rig of two domes (:class:`measure.geometry.dome.DomePair`, :func:`dome_problem`): the unknowns are
+each camera's decentring — its dome's centre relative to the camera centre, in the camera's
+frame (3 + 3 numbers, mm) — and optionally ``n_water`` (:data:`DOME_PARAMETERS`); radius,
+thickness and glass index stay at the design values; the same poses, residuals and σ, the
+in-air covariance entering the same two ways (each dome moves with its camera when the
+in-air stereo pose moves); the joint covariance names each dome's centre in the reference
+frame (``left/right.dome_center[k]``, :mod:`measure.stereo.rig_covariance`).
+
+Uncertainty: ``s² (JᵀJ)⁻¹`` with ``s² = Σr² / (m − n)``; a parameter is reported not
+identifiable when the column-scaled normal matrix is singular in its direction or two free
+parameters correlate at :data:`CORRELATION_LIMIT` or more (then no estimate is returned).
+Units mm, px (OpenCV convention); the reference frame is the left camera's.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.optimize import least_squares
+from scipy.spatial.transform import Rotation
+
+from ..geometry.camera import Camera
+from ..stereo.triangulate import StereoRig
+from .air import CalibrationError, Detections
+from .board import Board
+from .covariance import AIR_INTRINSICS, AIR_NAMES, POSE_NAMES
+from .dome import DOME_HOUSING, dome_offset
+from .flat import FLAT_HOUSING
+from ..stereo.rig_covariance import RigCovariance
+
+#: The free parameters by default: of a flat port, of two domes.
+DEFAULT_FREE = FLAT_HOUSING.default_free
+DEFAULT_DOME_FREE = DOME_HOUSING.default_free
+#: What :func:`calibrate_housing` asks of each kind of port (``rig.port.kind``): its free
+#: parameters and their default, its problem (residuals, Jacobian), its names in a covariance.
+#: A new kind of port adds its own here (module docs of :mod:`measure.calibration.flat`).
+HOUSINGS = {"flat": FLAT_HOUSING, "dome": DOME_HOUSING}
+#: How the in-air calibration's covariance enters the housing's (:func:`calibrate_housing`).
+UNCERTAINTY = ("propagate", "prior")
+#: The default: both covered the chain's error on 30 seeds of rendered boards, the prior with
+#: errors 30–53 % smaller (docs/calibration.md, "σ that covers the chain").
+DEFAULT_UNCERTAINTY = "prior"
+#: Relative eigenvalue of the scaled normal matrix below which a direction is not determined.
+IDENTIFIABILITY_LIMIT = 1e-12
+#: |correlation| at which two free parameters cannot be told apart.
+CORRELATION_LIMIT = 0.9995
+#: A fit that leaves more reprojection RMS than this (px) has not found the housing.
+FIT_RMS_LIMIT_PX = 2.0
+
+
+# ---------------------------------------------------------------------------------------------
+# underwater: refractive bundle adjustment
+# ---------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class HousingCalibration:
+    """Result of :func:`calibrate_housing`.
+
+    ``rig`` the calibrated rig (the starting rig when not identifiable); ``estimates`` /
+    ``sigmas`` per free parameter (``normal``: the unit vector and two tilt sigmas in rad;
+    ``extrinsics``: the right camera's ``R``, ``t`` and six sigmas); ``labels`` and
+    ``correlation`` of the free numbers; ``poses`` ``[(R, t), …]`` of the boards;
+    ``rms_px`` overall and ``rms_px_per`` ``{(pose, view): rms}``; ``residuals`` per view
+    ``(pose, id, du, dv)`` rows; ``identifiable`` / ``reason``; ``pose_ids`` the numbers of
+    the poses used (``poses[i]`` is pose ``pose_ids[i]``). RMS values are per corner, of the
+    2D residual length."""
+
+    rig: StereoRig
+    estimates: dict
+    sigmas: dict
+    labels: tuple
+    correlation: np.ndarray
+    poses: list
+    rms_px: float
+    rms_px_start: float
+    rms_px_per: dict
+    residuals: dict
+    converged: bool
+    identifiable: bool
+    reason: str
+    n_observations: int
+    nfev: int
+    message: str = ""
+    normal_axes: tuple = field(default=())
+    pose_ids: tuple = field(default=())
+    covariance: RigCovariance | None = None
+    sigmas_conditional: dict = field(default_factory=dict)
+    uncertainty: str = "conditional"
+
+
+
+def calibrate_housing(rig: StereoRig, board: Board, detections: Detections,
+                      free=None, air_covariance: RigCovariance | None = None,
+                      uncertainty: str = DEFAULT_UNCERTAINTY) -> HousingCalibration:
+    """Refractive bundle adjustment of the housing (module docs). ``rig``: the in-air cameras
+    with the starting port (its fixed parameters are the design values) — a flat port, or two
+    domes (:func:`dome_problem`: each camera's decentring). ``free`` defaults to
+    :data:`DEFAULT_FREE`, for domes :data:`DEFAULT_DOME_FREE`. ``air_covariance``: the in-air
+    calibration's covariance (:attr:`AirCalibration.covariance`, or a calib.yaml's), brought
+    into the housing's by ``uncertainty``: ``"propagate"`` (the in-air parameters fixed, their
+    covariance propagated) or ``"prior"`` (freed, with the in-air result as a prior), for a
+    flat port and for domes alike. Without it the σ is conditional on the in-air
+    calibration."""
+    housing = HOUSINGS[rig.port.kind]
+    if free is None:
+        free = housing.default_free
+    if uncertainty not in UNCERTAINTY:
+        raise CalibrationError(f"uncertainty {uncertainty!r}: expected one of "
+                               f"{', '.join(UNCERTAINTY)}")
+    names = tuple(dict.fromkeys(free))
+    table = housing.parameters
+    unknown = [n for n in names if n not in table]
+    if not names or unknown:
+        raise CalibrationError(f"--free {','.join(free) or '(nothing)'}: the housing calibration "
+                               f"{housing.label}estimates "
+                               f"{', '.join(table)}")
+    housing.check_free(rig, names)
+    problem = housing.problem(rig, board, detections, names)
+    residuals, unpack, x0, lower, upper = (problem.residuals, problem.unpack, problem.x0,
+                                           problem.lower, problem.upper)
+    obs, usable, P, n_global, basis, m = (problem.obs, problem.usable, problem.P,
+                                          problem.n_global, problem.basis, problem.m)
+    rms_start = float(np.sqrt(np.mean(residuals(x0) ** 2)))
+    fit = least_squares(residuals, x0, jac=problem.jacobian, method="trf", x_scale="jac",
+                        bounds=(lower, upper), xtol=1e-12, ftol=1e-12, gtol=1e-12, max_nfev=300,
+                        tr_solver="lsmr", tr_options={"atol": 1e-14, "btol": 1e-14})
+    r = fit.fun
+    J = fit.jac.toarray() if hasattr(fit.jac, "toarray") else np.asarray(fit.jac)
+    dof = max(r.size - x0.size, 1)
+    s2 = float(r @ r) / dof
+    N = J.T @ J
+    scale = np.sqrt(np.diag(N))
+    scale[scale == 0] = 1.0
+    Ns = N / np.outer(scale, scale)
+    eigval, eigvec = np.linalg.eigh(Ns)
+    labels = tuple(f"{n}[{k}]" if table[n] > 1 else n for n in names for k in range(table[n]))
+    port, cameras, Rs, ts = unpack(fit.x)
+    poses = [(Rs[k], ts[k]) for k in range(P)]
+    per, res = {}, {}
+    offset = 0
+    for view, pose_idx, ids, _ in obs:
+        rv = r[offset:offset + 2 * pose_idx.size].reshape(-1, 2)
+        offset += 2 * pose_idx.size
+        res[view] = np.column_stack([usable_index(usable, pose_idx), ids, rv])
+        for k in np.unique(pose_idx):
+            per[(usable[k], view)] = float(np.sqrt(np.mean(rv[pose_idx == k] ** 2) * 2))
+    base = dict(labels=labels, poses=poses, rms_px=float(np.sqrt(np.mean(r ** 2) * 2)),
+                rms_px_start=rms_start * np.sqrt(2), rms_px_per=per, residuals=res,
+                converged=bool(fit.status > 0), n_observations=m // 2, nfev=int(fit.nfev),
+                message=str(fit.message), normal_axes=tuple(b.tolist() for b in basis),
+                pose_ids=tuple(usable))
+    relative = eigval / eigval[-1] if eigval[-1] > 0 else np.zeros_like(eigval)
+    if relative[0] < IDENTIFIABILITY_LIMIT:
+        worst = int(np.argmax(np.abs(eigvec[:n_global, 0]))) if n_global else 0
+        name = labels[worst] if n_global else "a board pose"
+        return HousingCalibration(
+            rig=rig, estimates={}, sigmas={}, correlation=np.full((n_global, n_global), np.nan),
+            identifiable=False, reason=f"{name} is not determined by these boards (relative "
+                                       f"eigenvalue {relative[0]:.1e})", **base)
+    covariance = s2 * np.linalg.inv(N)
+    sig = np.sqrt(np.diag(covariance))
+    cov_g = covariance[:n_global, :n_global]
+    correlation = cov_g / np.outer(sig[:n_global], sig[:n_global])
+    off = np.abs(np.triu(correlation, 1))  # each pair once, named in the order of labels
+    if n_global > 1 and off.max() >= CORRELATION_LIMIT:
+        i, j = np.unravel_index(np.argmax(off), off.shape)
+        return HousingCalibration(rig=rig, estimates={}, sigmas={}, correlation=correlation,
+                                  identifiable=False,
+                                  reason=f"{labels[i]} and {labels[j]} are correlated at "
+                                         f"{correlation[i, j]:+.4f}: these boards cannot tell "
+                                         f"them apart", **base)
+    if not base["converged"] or base["rms_px"] > FIT_RMS_LIMIT_PX:
+        return HousingCalibration(
+            rig=rig, estimates={}, sigmas={}, correlation=np.full((n_global, n_global), np.nan),
+            identifiable=False, reason=(
+                f"the adjustment did not converge within {fit.nfev} evaluations (reprojection "
+                f"RMS {base['rms_px']:.3g} px): the free parameters are barely determined by "
+                f"these boards (free fewer, or render more varied poses)"
+                if base["rms_px"] <= FIT_RMS_LIMIT_PX else
+                f"the adjustment stopped with a reprojection RMS of {base['rms_px']:.3g} px "
+                f"({fit.message.rstrip('.')}): it did not find a housing that fits the corners "
+                f"(check the design values, the starting distance and --free)"),
+            **{**base, "converged": False})
+    at_bound = np.flatnonzero(fit.active_mask[:n_global] != 0)
+    if at_bound.size:
+        return HousingCalibration(
+            rig=rig, estimates={}, sigmas={}, correlation=np.full((n_global, n_global), np.nan),
+            identifiable=False, reason=f"{labels[at_bound[0]]} ran into its physical bound: "
+                                       f"these boards do not determine it", **base)
+    x, sig_conditional = fit.x, sig[:n_global].copy()
+    air = _air_parameters(air_covariance, names)
+    if air:
+        sigma_air = _sub_covariance(air_covariance, air)
+        if uncertainty == "prior":
+            rig, x, joint = _prior_fit(rig, board, detections, names, x, s2, air, sigma_air)
+            port, cameras, Rs, ts = housing.problem(rig, board, detections, names).unpack(x)
+            base["poses"] = [(Rs[k], ts[k]) for k in range(P)]
+        else:
+            J_air = problem.air_jacobian(x, air)
+            G = np.linalg.solve(N, J.T @ J_air)  # δx = −G δθ_air
+            cross = -(G @ sigma_air)
+            joint = np.block([[sigma_air, cross.T], [cross, covariance + G @ sigma_air @ G.T]])
+        sig = np.sqrt(np.diag(joint))[len(air):]
+    else:
+        joint = covariance
+    a = len(air)
+    rig_names, T, axes = housing.rig_parameters(names, air, x, basis, rig, port, cameras,
+                                                n_global)
+    keep = list(range(a + n_global))
+    joint = T @ joint[np.ix_(keep, keep)] @ T.T
+    rig_cov = RigCovariance(tuple(air) + rig_names, 0.5 * (joint + joint.T), axes)
+    estimates, sigmas, conditional, k = {}, {}, {}, 0
+    for name in names:
+        w = table[name]
+        if name == "dome_center":
+            estimates[name] = {view: dome_offset(cameras[i], port[i]).tolist()
+                               for i, view in enumerate(("left", "right"))}
+        elif name == "distance":
+            estimates[name] = port.distance
+        elif name == "normal":
+            estimates[name] = port.normal.tolist()
+        elif name == "thickness":
+            estimates[name] = port.thicknesses[0]
+        elif name == "n_water":
+            estimates[name] = port.n_water
+        else:
+            estimates[name] = {"R": cameras[1].R.tolist(), "t": cameras[1].t.tolist()}
+        sigmas[name] = float(sig[k]) if w == 1 else sig[k:k + w].tolist()
+        conditional[name] = (float(sig_conditional[k]) if w == 1
+                             else sig_conditional[k:k + w].tolist())
+        k += w
+    calibrated = StereoRig(cameras[0], cameras[1], port)
+    return HousingCalibration(rig=calibrated, estimates=estimates, sigmas=sigmas,
+                              correlation=correlation, identifiable=True, reason="",
+                              covariance=rig_cov, sigmas_conditional=conditional,
+                              uncertainty=uncertainty if air else "conditional", **base)
+
+
+def _air_parameters(covariance: RigCovariance | None, names) -> tuple:
+    """The in-air parameters whose uncertainty enters the housing: the intrinsics in
+    ``covariance`` and — unless the housing frees the extrinsics — the right camera's pose."""
+    if covariance is None:
+        return ()
+    have = set(covariance.names)
+    return tuple(n for n in AIR_NAMES if n in have
+                 and not ("extrinsics" in names and n in POSE_NAMES))
+
+
+def _sub_covariance(covariance: RigCovariance, names) -> np.ndarray:
+    where = [covariance.names.index(n) for n in names]
+    return covariance.matrix[np.ix_(where, where)]
+
+
+def apply_air_change(rig: StereoRig, air, delta) -> StereoRig:
+    """``rig`` with the in-air parameters ``air`` moved by ``delta`` (px, unitless, rad: the
+    right camera's ``R → exp([φ]×) R``, mm: its centre)."""
+    change = dict(zip(air, np.asarray(delta, dtype=np.float64)))
+    cameras = []
+    for name, camera in (("left", rig.left), ("right", rig.right)):
+        K, dist = camera.K.copy(), np.zeros(5)
+        if camera.dist is not None:
+            dist[:min(5, camera.dist.size)] = camera.dist[:5]
+        for (i, j), p in zip(((0, 0), (1, 1), (0, 2), (1, 2)), AIR_INTRINSICS[:4]):
+            K[i, j] += change.get(f"{name}.{p}", 0.0)
+        for i, p in enumerate(AIR_INTRINSICS[4:]):
+            dist[i] += change.get(f"{name}.{p}", 0.0)
+        R, t = camera.R, camera.t
+        if name == "right":
+            phi = [change.get(f"right.rotation[{i}]", 0.0) for i in range(3)]
+            R = Rotation.from_rotvec(phi).as_matrix() @ R
+            t = t + np.array([change.get(f"right.center[{i}]", 0.0) for i in range(3)])
+        cameras.append(Camera(K, camera.size, dist if np.any(dist) else None, R, t))
+    return StereoRig(cameras[0], cameras[1], rig.port)
+
+
+#: Gauss-Newton iterations of the prior fit, and its stop: every step below this many σ.
+PRIOR_ITERATIONS, PRIOR_STEP_SIGMA = 8, 1e-4
+
+
+def _prior_fit(rig, board, detections, names, x, s2, air, sigma_air):
+    """The housing with the in-air parameters ``air`` free under their in-air prior: the rows
+    ``s·L(θ − θ_air)`` (``LᵀL = Σ_air⁻¹``, ``s²`` the corners' variance of the conditional fit)
+    beside the corners' residuals; Gauss-Newton from the conditional solution ``x``. Returns
+    the rig with the refined in-air parameters, the housing unknowns and the joint covariance
+    ``s²(AᵀA)⁻¹`` ordered (in-air parameters, housing unknowns)."""
+    L = np.linalg.inv(np.linalg.cholesky(sigma_air))
+    s = np.sqrt(s2)
+    delta, a = np.zeros(len(air)), len(air)
+    for _ in range(PRIOR_ITERATIONS + 1):
+        moved = apply_air_change(rig, air, delta)
+        problem = HOUSINGS[rig.port.kind].problem(moved, board, detections, names)
+        if problem.x0.size != x.size:  # solvePnP found another set of usable poses
+            raise CalibrationError("the prior fit lost a board pose when the intrinsics moved; "
+                                   "use --air-uncertainty propagate")
+        J = problem.jacobian(x)
+        J = J.toarray() if hasattr(J, "toarray") else np.asarray(J)
+        A = np.block([[J, problem.air_jacobian(x, air)],
+                      [np.zeros((a, J.shape[1])), s * L]])
+        b = np.concatenate([problem.residuals(x), s * L @ delta])
+        inverse = np.linalg.inv(A.T @ A)
+        step = -inverse @ (A.T @ b)
+        sig = np.sqrt(s2 * np.diag(inverse))
+        if np.max(np.abs(step) / sig) < PRIOR_STEP_SIGMA:
+            break
+        x = x + step[:J.shape[1]]
+        delta = delta + step[J.shape[1]:]
+    else:
+        raise CalibrationError(f"the prior fit did not converge in {PRIOR_ITERATIONS + 1} "
+                               f"Gauss-Newton steps; use --air-uncertainty propagate")
+    cov = s2 * inverse
+    order = np.r_[J.shape[1]:J.shape[1] + a, 0:J.shape[1]]
+    return moved, x, cov[np.ix_(order, order)]
+
+
+def usable_index(usable, pose_idx) -> np.ndarray:
+    """Original pose numbers of compacted pose indices."""
+    return np.asarray(usable)[pose_idx]
+
+
+__all__ = ["DEFAULT_DOME_FREE", "DEFAULT_FREE", "DEFAULT_UNCERTAINTY", "HousingCalibration",
+           "UNCERTAINTY", "apply_air_change", "calibrate_housing", "usable_index"]

@@ -1,0 +1,304 @@
+"""Pinhole camera with OpenCV intrinsics, lens distortion and a camera-to-reference pose.
+
+Conventions (docs/architecture.md): millimetres; OpenCV camera axes (x right, y down, z forward);
+pixels in OpenCV convention (integer coordinates are pixel centres), arrays ``(N, 2)`` as
+``(u, v)``; the pose maps camera coordinates to the reference frame, ``X_ref = R @ X_cam + t``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+
+from ..reasons import Reason
+
+#: Largest |distort(undistort(p)) − p| (px) of a pixel that counts as undistorted: 1000× below
+#: any centroid precision (~0.001 px), far above Newton's float64 floor (~1e-13 px).
+UNDISTORT_TOLERANCE_PX = 1e-6
+#: Pixels between the samples of the image border and interior grid that
+#: :meth:`Camera.distortion_problem` checks.
+DISTORTION_CHECK_STEP_PX = 4
+
+#: Numbers of OpenCV distortion coefficients this model evaluates:
+#: (k1, k2, p1, p2), (k1, k2, p1, p2, k3) and the rational (k1, k2, p1, p2, k3, k4, k5, k6).
+SUPPORTED_DISTORTION_LENGTHS = (4, 5, 8)
+
+
+def _as_rotation(R, name: str) -> np.ndarray:
+    R = np.asarray(R, dtype=np.float64)
+    if R.shape != (3, 3) or not np.all(np.isfinite(R)):
+        raise ValueError(f"{name} must be a finite 3x3 rotation matrix, got shape {R.shape}")
+    if not np.allclose(R @ R.T, np.eye(3), atol=1e-9) or np.linalg.det(R) < 0:
+        raise ValueError(f"{name} must be a proper rotation (R @ R.T = I, det R = +1)")
+    return R
+
+
+def _arrays_equal(a, b) -> bool:
+    if a is None or b is None:
+        return a is None and b is None
+    return bool(np.array_equal(a, b))
+
+
+def _hash_value(value):
+    return value.tobytes() if isinstance(value, np.ndarray) else value
+
+
+class ValueEquality:
+    """``==`` and ``hash`` by value for frozen dataclasses with numpy array fields (exact
+    equality of the arrays)."""
+
+    __slots__ = ()
+
+    def __eq__(self, other):
+        if type(other) is not type(self):
+            return NotImplemented
+        for name in self.__dataclass_fields__:
+            a, b = getattr(self, name), getattr(other, name)
+            if isinstance(a, np.ndarray) or isinstance(b, np.ndarray):
+                if not _arrays_equal(a, b):
+                    return False
+            elif a != b:
+                return False
+        return True
+
+    def __hash__(self):
+        return hash((type(self).__name__,)
+                    + tuple(_hash_value(getattr(self, n)) for n in self.__dataclass_fields__))
+
+
+@dataclass(frozen=True, eq=False)
+class Camera(ValueEquality):
+    """A calibrated camera.
+
+    Parameters
+    ----------
+    K : (3, 3) intrinsic matrix in pixels (fx, fy, cx, cy; skew allowed).
+    size : (width, height) of the image in pixels.
+    dist : OpenCV distortion coefficients (k1, k2, p1, p2[, k3[, k4, k5, k6]]) or None.
+    R, t : pose camera-to-reference, ``X_ref = R @ X_cam + t`` (mm). Defaults: identity, zero.
+    """
+
+    K: np.ndarray
+    size: tuple[int, int]
+    dist: np.ndarray | None = None
+    R: np.ndarray = field(default_factory=lambda: np.eye(3))
+    t: np.ndarray = field(default_factory=lambda: np.zeros(3))
+
+    def __init__(self, K, size, dist=None, R=None, t=None):
+        K = np.asarray(K, dtype=np.float64)
+        if K.shape != (3, 3) or not np.all(np.isfinite(K)):
+            raise ValueError(f"K must be a finite 3x3 intrinsic matrix, got shape {K.shape}")
+        if K[0, 0] <= 0 or K[1, 1] <= 0 or not np.allclose(K[2], [0, 0, 1]) or K[1, 0] != 0:
+            raise ValueError("K must be upper triangular with positive fx, fy and last row (0, 0, 1)")
+        try:
+            width, height = (float(s) for s in size)
+        except (TypeError, ValueError):
+            raise ValueError(f"size must be (width, height), got {size!r}") from None
+        if not all(np.isfinite(v) and v == int(v) and v > 0 for v in (width, height)):
+            raise ValueError(f"size must be positive whole numbers of pixels (width, height), "
+                             f"got {size!r}")
+        width, height = int(width), int(height)
+        if dist is not None:
+            dist = np.asarray(dist, dtype=np.float64).ravel()
+            if dist.size not in SUPPORTED_DISTORTION_LENGTHS:
+                raise ValueError(
+                    f"dist must hold 4, 5 or 8 OpenCV coefficients, got {dist.size}")
+            if not np.all(np.isfinite(dist)):
+                raise ValueError(f"dist must be finite, got {dist.tolist()}")
+            if not np.any(dist):
+                dist = None
+        R = np.eye(3) if R is None else _as_rotation(R, "R")
+        t = np.zeros(3) if t is None else np.asarray(t, dtype=np.float64).reshape(-1)
+        if t.shape != (3,) or not np.all(np.isfinite(t)):
+            raise ValueError(f"t must be a finite 3-vector, got shape {t.shape}")
+        object.__setattr__(self, "K", K)
+        object.__setattr__(self, "size", (width, height))
+        object.__setattr__(self, "dist", dist)
+        object.__setattr__(self, "R", R)
+        object.__setattr__(self, "t", t)
+
+    # --- frames -------------------------------------------------------------------------------
+    @property
+    def center(self) -> np.ndarray:
+        """Optical centre in the reference frame (mm)."""
+        return self.t
+
+    def to_camera(self, points_ref: np.ndarray) -> np.ndarray:
+        """Reference-frame points ``(N, 3)`` to camera-frame points ``(N, 3)``."""
+        return (np.asarray(points_ref, dtype=np.float64) - self.t) @ self.R
+
+    # --- distortion ---------------------------------------------------------------------------
+    def distort(self, xy: np.ndarray) -> np.ndarray:
+        """Apply the OpenCV lens distortion to normalized coordinates ``(N, 2)``."""
+        xy = np.asarray(xy, dtype=np.float64)
+        if self.dist is None:
+            return xy.copy()
+        return np.stack(self.distort_columns(xy[:, 0], xy[:, 1]), axis=1)
+
+    def distort_columns(self, x: np.ndarray, y: np.ndarray, jacobian: bool = False):
+        """:meth:`distort` on columns: normalized ``x, y`` ``(N,)`` to distorted ``(xd, yd)``.
+
+        With ``jacobian=True`` also the analytic derivatives ``∂xd/∂x``, ``∂xd/∂y`` (which
+        equals ``∂yd/∂x``) and ``∂yd/∂y``: ``(xd, yd, dxx, dxy, dyy)``. Without distortion
+        ``x, y`` are returned as they are (and the Jacobian is the identity: only two values).
+        """
+        if self.dist is None:
+            return x, y
+        c = np.zeros(8)
+        c[: self.dist.size] = self.dist
+        k1, k2, p1, p2, k3, k4, k5, k6 = c
+        r2 = x * x + y * y
+        numerator = 1 + r2 * (k1 + r2 * (k2 + r2 * k3))
+        denominator = 1 + r2 * (k4 + r2 * (k5 + r2 * k6))
+        radial = numerator / denominator
+        xd = x * radial + 2 * p1 * x * y + p2 * (r2 + 2 * x * x)
+        yd = y * radial + p1 * (r2 + 2 * y * y) + 2 * p2 * x * y
+        if not jacobian:
+            return xd, yd
+        # d radial / d r2 by the quotient rule
+        slope = ((k1 + r2 * (2 * k2 + 3 * k3 * r2)) * denominator
+                 - numerator * (k4 + r2 * (2 * k5 + 3 * k6 * r2))) / (denominator * denominator)
+        dxx = radial + 2 * x * x * slope + 2 * p1 * y + 6 * p2 * x
+        dxy = 2 * x * y * slope + 2 * p1 * x + 2 * p2 * y
+        dyy = radial + 2 * y * y * slope + 6 * p1 * y + 2 * p2 * x
+        return xd, yd, dxx, dxy, dyy
+
+    def undistort(self, xy_distorted: np.ndarray, iterations: int = 8) -> np.ndarray:
+        """Invert :meth:`distort` to machine precision.
+
+        OpenCV's iterative ``cv2.undistortPointsIter`` gives the start; Newton steps with a
+        central-difference Jacobian of :meth:`distort` then converge to ~1e-16 in normalized
+        coordinates (OpenCV's default 5 fixed-point iterations stop near 1e-6).
+        """
+        return self.undistort_with_reason(xy_distorted, iterations)[0]
+
+    def undistort_with_reason(self, xy_distorted: np.ndarray, iterations: int = 8):
+        """:meth:`undistort` and a ``(N,)`` :class:`Reason` array: ``NOT_CONVERGED`` (and NaN)
+        where the round trip ``distort(undistort(p))`` misses ``p`` by more than
+        :data:`UNDISTORT_TOLERANCE_PX` or the solution lies beyond a fold of the distortion
+        (its Jacobian determinant is not positive: another point maps to the same pixel);
+        ``INVALID_INPUT`` for non-finite input."""
+        xy_distorted = np.asarray(xy_distorted, dtype=np.float64).reshape(-1, 2)
+        reason = np.full(xy_distorted.shape[0], Reason.OK, dtype=np.int8)
+        reason[~np.all(np.isfinite(xy_distorted), axis=1)] = Reason.INVALID_INPUT
+        if self.dist is None or xy_distorted.shape[0] == 0:
+            return xy_distorted.copy(), reason
+        criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 50, 1e-12)
+        # OpenCV 4 names the iterative form undistortPointsIter; OpenCV 5 folds it into
+        # undistortPoints with a criteria argument.
+        undistort_iter = getattr(cv2, "undistortPointsIter", cv2.undistortPoints)
+        start = undistort_iter(xy_distorted.reshape(-1, 1, 2), np.eye(3), self.dist,
+                               R=np.eye(3), P=np.eye(3), criteria=criteria).reshape(-1, 2)
+        xy = np.where(np.isfinite(start), start, xy_distorted)
+        step = 1e-6
+        ex, ey = np.array([step, 0.0]), np.array([0.0, step])
+        for _ in range(iterations):
+            residual = self.distort(xy) - xy_distorted
+            jx = (self.distort(xy + ex) - self.distort(xy - ex)) / (2 * step)
+            jy = (self.distort(xy + ey) - self.distort(xy - ey)) / (2 * step)
+            det = jx[:, 0] * jy[:, 1] - jy[:, 0] * jx[:, 1]
+            dx = (jy[:, 1] * residual[:, 0] - jy[:, 0] * residual[:, 1]) / det
+            dy = (jx[:, 0] * residual[:, 1] - jx[:, 1] * residual[:, 0]) / det
+            xy = xy - np.stack([dx, dy], axis=1)
+            if np.nanmax(np.abs(residual), initial=0.0) < 1e-15:
+                break
+        with np.errstate(invalid="ignore", over="ignore"):
+            miss_px = np.max(np.abs(self.distort(xy) - xy_distorted), axis=1) * np.max(
+                np.diag(self.K)[:2])
+            jx = (self.distort(xy + ex) - self.distort(xy - ex)) / (2 * step)
+            jy = (self.distort(xy + ey) - self.distort(xy - ey)) / (2 * step)
+            det = jx[:, 0] * jy[:, 1] - jy[:, 0] * jx[:, 1]
+            failed = ~((miss_px <= UNDISTORT_TOLERANCE_PX) & (det > 0))
+        failed &= reason == Reason.OK
+        reason[failed] = Reason.NOT_CONVERGED
+        xy[reason != Reason.OK] = np.nan
+        return xy, reason
+
+    def distortion_problem(self) -> str | None:
+        """Why the lens distortion cannot be inverted over the whole image, or None.
+
+        Checks every pixel :data:`DISTORTION_CHECK_STEP_PX` apart along the border and on an
+        interior grid (vectorized): each must undistort with a round trip within
+        :data:`UNDISTORT_TOLERANCE_PX` on the monotone side of the distortion."""
+        if self.dist is None:
+            return None
+        w, h = self.size
+        step = DISTORTION_CHECK_STEP_PX
+        us = np.unique(np.append(np.arange(0, w, step), w - 1)).astype(float)
+        vs = np.unique(np.append(np.arange(0, h, step), h - 1)).astype(float)
+        grid = np.stack(np.meshgrid(us, vs), axis=-1).reshape(-1, 2)
+        _, reason = self.normalized_with_reason(grid)
+        bad = np.flatnonzero(reason != Reason.OK)
+        if bad.size == 0:
+            return None
+        u, v = grid[bad[np.argmin(np.abs(grid[bad] - [(w - 1) / 2, (h - 1) / 2]).sum(axis=1))]]
+        return (f"the lens distortion {self.dist.tolist()} cannot be inverted over the "
+                f"{w}x{h} image: {bad.size} of {grid.shape[0]} checked pixels have no "
+                f"undistorted position (the nearest to the centre is ({u:g}, {v:g}))")
+
+    # --- pixels <-> rays ----------------------------------------------------------------------
+    def normalized(self, uv: np.ndarray) -> np.ndarray:
+        """Pixels ``(N, 2)`` to undistorted normalized image coordinates ``(N, 2)`` (NaN where
+        the distortion cannot be inverted, see :meth:`normalized_with_reason`)."""
+        return self.normalized_with_reason(uv)[0]
+
+    def normalized_with_reason(self, uv: np.ndarray):
+        """:meth:`normalized` and a ``(N,)`` :class:`Reason` array (``NOT_CONVERGED`` where
+        undistortion fails, ``INVALID_INPUT`` for non-finite pixels)."""
+        uv = np.asarray(uv, dtype=np.float64).reshape(-1, 2)
+        fx, s, cx = self.K[0]
+        fy, cy = self.K[1, 1], self.K[1, 2]
+        xy = np.empty_like(uv)
+        xy[:, 1] = (uv[:, 1] - cy) / fy
+        xy[:, 0] = (uv[:, 0] - cx - s * xy[:, 1]) / fx
+        return self.undistort_with_reason(xy)
+
+    def rays(self, uv: np.ndarray) -> np.ndarray:
+        """Unit ray directions ``(N, 3)`` in the reference frame through pixels ``(N, 2)``.
+
+        Every ray starts at :attr:`center`. This is the paper's ζ1 / ξ1 (equations 1-2). A pixel
+        whose undistortion fails gives NaN (:meth:`rays_with_reason` says why).
+        """
+        return self.rays_with_reason(uv)[0]
+
+    def rays_with_reason(self, uv: np.ndarray):
+        """:meth:`rays` and their ``(N,)`` :class:`Reason` codes."""
+        xy, reason = self.normalized_with_reason(uv)
+        x, y = xy[:, 0], xy[:, 1]
+        inverse_norm = 1.0 / np.sqrt(1.0 + x * x + y * y)
+        d = np.empty((xy.shape[0], 3))
+        np.multiply(x, inverse_norm, out=d[:, 0])
+        np.multiply(y, inverse_norm, out=d[:, 1])
+        d[:, 2] = inverse_norm
+        return (d if self._identity_rotation else d @ self.R.T), reason
+
+    @property
+    def _identity_rotation(self) -> bool:
+        return bool(np.array_equal(self.R, np.eye(3)))
+
+    def project(self, points_ref: np.ndarray) -> np.ndarray:
+        """Pinhole projection (no refraction) of reference-frame points ``(N, 3)`` to pixels.
+
+        Lens distortion is applied as ``cv2.projectPoints`` does. Points at or behind the camera
+        plane (z_cam <= 0) give NaN.
+        """
+        X = self.to_camera(np.asarray(points_ref, dtype=np.float64).reshape(-1, 3))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            z = np.where(X[:, 2] > 0, X[:, 2], np.nan)
+            xy = self.distort(X[:, :2] / z[:, None])
+        return xy @ self.K[:2, :2].T + self.K[:2, 2]
+
+    def in_image(self, uv: np.ndarray, margin_px=0.0) -> np.ndarray:
+        """Whether pixels ``(N, 2)`` lie inside the image, at least ``margin_px`` (a scalar or
+        ``(N,)``) pixels from its border; NaN pixels are outside.
+
+        The image spans [-0.5, W - 0.5] x [-0.5, H - 0.5] in OpenCV pixel coordinates.
+        """
+        uv = np.asarray(uv, dtype=np.float64).reshape(-1, 2)
+        margin = np.asarray(margin_px, dtype=np.float64)
+        w, h = self.size
+        lo = -0.5 + margin
+        return ((uv[:, 0] >= lo) & (uv[:, 0] <= w - 0.5 - margin)
+                & (uv[:, 1] >= lo) & (uv[:, 1] <= h - 0.5 - margin))

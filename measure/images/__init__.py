@@ -1,0 +1,1 @@
+"""Images: target detection and the disk targets' eccentricity through the port."""

@@ -1,0 +1,442 @@
+"""Rendered calibration boards: a planar board at seeded random poses, seen by the scene's two
+cameras behind its port (or in air), written as a folder anyone can calibrate from.
+
+The board is a Mitsuba ``rectangle`` whose ``area`` emitter's radiance is a ``bitmap`` texture
+of the pattern OpenCV draws (:meth:`measure.calibration.board.Board.pattern`, nearest-texel lookup, linear
+values 0 and 1), so its corners are exactly where OpenCV's model of the board says they are.
+One Mitsuba scene is built per folder; each pose only moves the board (``mi.traverse``).
+
+Poses (reference frame = the left camera's, mm): the board's centre at a depth (along the
+port normal; in a dome rig along the left optical axis) drawn uniformly from
+``distance_range``, at a random place of the left view, tilted about a random in-plane axis by
+up to ``max_tilt_deg`` and turned about its normal by up to :data:`MAX_ROLL_DEG`; a pose is kept
+only when the forward model puts the whole board (its outline and every corner) inside both
+images, :data:`IMAGE_MARGIN_PX` from the border, and in the water (outside both domes).
+
+Folder (same output rule as ``synth dataset``: atomic, rerunnable, never over someone else's
+files): ``left_PP.png``, ``right_PP.png`` (16-bit linear, one ``png_scale``), ``board.json``,
+``poses.csv`` (``pose,rx,ry,rz,tx,ty,tz``: rotation vector in rad and translation in mm of
+``X_ref = R·X_board + t``), ``corners.csv`` (``pose,id,x,y,z,u_left,v_left,u_right,v_right``:
+every corner's 3D position and its forward-model pixel in each view), ``calib.yaml`` (the true
+rig, the dataset format) and ``manifest.json`` (with every other file's SHA-256 and its own,
+checked when the folder is read: :func:`read_boards` reads it whole or refuses it).
+"""
+
+from __future__ import annotations
+
+import csv
+import hashlib
+import json
+import os
+import time
+from dataclasses import dataclass
+from datetime import datetime, timezone
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from measure import StereoRig
+from measure.calibration.board import PATTERN_TEXELS_PER_SQUARE, Board, BoardError
+from measure.geometry.port import index_matched_port
+from measure.geometry.projection import project
+from measure.geometry.dome import DomePair
+
+from synth.products.dataset import (DatasetError, adaptive_settings, check_files, manifest_digest,
+                           read_calib, write_calib)
+from synth.infra.fileio import OutputDir, atomic_write_json, file_sha256, jsonable, read_marker
+from synth.rendering.integrator import RENDERER, integrator_name
+from synth.infra.provenance import package_versions
+from synth.rendering.render import (check_render_request, png16_scale, render_view_counted, sensor_dict,
+                          to_png16, write_png)
+from synth.scene import SceneSpec, interface_placements
+from synth.scene.dome import dome_placements
+
+FORMAT_VERSION = 2  # 2: the manifest holds every file's SHA-256 and its own
+COMMAND = "synth boards"
+DEFAULT_POSES = 15
+DEFAULT_SPP = 16
+DEFAULT_DISTANCE_RANGE_MM = (700.0, 1400.0)
+#: In air the boards come nearer, so that their corners cover about half of each image: the
+#: in-air distortion and principal point are what the housing calibration trusts, and boards at
+#: 0.7–1.4 m (37 % of the image) left them 0.1–0.2 px off, which moved the port distance by
+#: 0.35–0.40 mm; at 0.35–0.8 m (48–52 %) the port came within 0.06 mm (docs/calibration.md).
+DEFAULT_AIR_DISTANCE_RANGE_MM = (350.0, 800.0)
+DEFAULT_MAX_TILT_DEG = 45.0
+#: Largest turn of the board about its own normal (degrees).
+MAX_ROLL_DEG = 20.0
+#: Smallest distance (px) of any board point from the image border.
+IMAGE_MARGIN_PX = 10.0
+#: Candidate poses tried per pose wanted before giving up.
+ATTEMPTS_PER_POSE = 400
+CORNERS_HEADER = ["pose", "id", "x", "y", "z", "u_left", "v_left", "u_right", "v_right"]
+POSES_HEADER = ["pose", "rx", "ry", "rz", "tx", "ty", "tz"]
+
+
+@dataclass(frozen=True)
+class BoardPose:
+    """``X_ref = R @ X_board + t`` (mm)."""
+
+    R: np.ndarray
+    t: np.ndarray
+
+    def apply(self, points_board: np.ndarray) -> np.ndarray:
+        return np.asarray(points_board, float) @ self.R.T + self.t
+
+
+def board_rig(spec: SceneSpec, air: bool) -> StereoRig:
+    """The scene's cameras behind its port, or (``air``) the same cameras with no port."""
+    if not air:
+        return spec.rig
+    left, right = spec.cameras
+    return StereoRig(left, right, index_matched_port(left.R[:, 2], np.stack([left.t, right.t])))
+
+
+def _fits(rig: StereoRig, board: Board, poses_R, poses_t, water: bool) -> np.ndarray:
+    """Which candidate poses ``(M, 3, 3)``, ``(M, 3)`` put every board point inside both images
+    (and in the water behind a port)."""
+    points_board = np.concatenate([board.outline(), board.corners()])
+    world = np.einsum("mij,pj->mpi", poses_R, points_board) + poses_t[:, None, :]
+    flat = world.reshape(-1, 3)
+    ok = np.ones(flat.shape[0], bool)
+    if water:
+        ok &= rig.port.water_side(flat)  # beyond the flat port, or outside both domes
+    for view, camera in enumerate(rig.cameras):
+        ok &= camera.in_image(project(camera, rig.view_port(view), flat), IMAGE_MARGIN_PX)
+    return ok.reshape(poses_R.shape[0], -1).all(axis=1)
+
+
+def sample_poses(rig: StereoRig, board: Board, n: int, seed: int, water: bool,
+                 distance_range=DEFAULT_DISTANCE_RANGE_MM,
+                 max_tilt_deg: float = DEFAULT_MAX_TILT_DEG) -> list[BoardPose]:
+    """``n`` seeded random poses that keep the whole board inside both images (module docs).
+    Raises ``ValueError`` when the working volume cannot hold the board that often."""
+    near, far = (float(v) for v in distance_range)
+    if not (0 < near < far):
+        raise ValueError(f"distance range must satisfy 0 < near < far, got {near:g}, {far:g} mm")
+    if not 0 <= max_tilt_deg < 80:
+        raise ValueError(f"maximum tilt must lie in [0, 80) degrees, got {max_tilt_deg:g}")
+    rng = np.random.default_rng(seed)
+    left = rig.left
+    w, h = left.size
+    half = np.array(board.size_mm + (0.0,)) / 2
+    normal = rig.depth_axis  # the port normal, or the left optical axis for domes
+    poses, tried = [], 0
+    while len(poses) < n:
+        if tried >= ATTEMPTS_PER_POSE * n:
+            raise ValueError(
+                f"only {len(poses)} of {n} board poses keep the whole {board.squares[0]}x"
+                f"{board.squares[1]} board of {board.square_mm:g} mm squares inside both "
+                f"{w}x{h} px images at {near:g}-{far:g} mm (tried {tried}): use a smaller "
+                f"board (--squares, --square-mm) or a farther distance range")
+        m = 256
+        tried += m
+        depth = rng.uniform(near, far, m)
+        uv = np.column_stack([rng.uniform(0.2 * w, 0.8 * w, m), rng.uniform(0.2 * h, 0.8 * h, m)])
+        rays = left.rays(uv)
+        centre = left.t + rays * ((depth - normal @ left.t) / (rays @ normal))[:, None]
+        axis_angle = rng.uniform(0, 2 * np.pi, m)
+        tilt = np.radians(max_tilt_deg) * np.sqrt(rng.uniform(0, 1, m))
+        axes = np.column_stack([np.cos(axis_angle), np.sin(axis_angle), np.zeros(m)])
+        roll = np.radians(rng.uniform(-MAX_ROLL_DEG, MAX_ROLL_DEG, m))
+        R = (Rotation.from_rotvec(axes * tilt[:, None])
+             * Rotation.from_rotvec(np.column_stack([np.zeros(m), np.zeros(m), roll]))).as_matrix()
+        R = left.R @ R  # the untilted board faces the left camera
+        t = centre - R @ half
+        keep = np.flatnonzero(_fits(rig, board, R, t, water))
+        poses += [BoardPose(R[i], t[i]) for i in keep[: n - len(poses)]]
+    return poses
+
+
+# ---------------------------------------------------------------------------------------------
+# rendering
+# ---------------------------------------------------------------------------------------------
+def _board_local_to_board(board: Board) -> np.ndarray:
+    """Mitsuba's rectangle ([-1, 1]², normal +z, uv = ((x+1)/2, (y+1)/2) with v = 0 the
+    texture's first row) to the board frame, its emitting side towards −z_board (the viewer)."""
+    x0, y0 = board.outline()[0, :2]
+    x1, y1 = board.outline()[2, :2]
+    return np.array([[(x1 - x0) / 2, 0, 0, (x0 + x1) / 2], [0, (y1 - y0) / 2, 0, (y0 + y1) / 2],
+                     [0, 0, -1, 0], [0, 0, 0, 1.0]])
+
+
+def build_board_scene(spec: SceneSpec, board: Board, air: bool, variant=None):
+    """``(mitsuba_scene, mi, variant)``: the scene's two sensors (same order), its port
+    interfaces unless ``air``, and the board (moved by :func:`render_pose`)."""
+    from synth.rendering.mitsuba_setup import import_mitsuba
+
+    mi, chosen = import_mitsuba(variant)
+    pattern = board.pattern(PATTERN_TEXELS_PER_SQUARE).astype(np.float32)[..., None]
+    pattern /= np.float32(255)
+    sampler = {"type": "multijitter", "sample_count": 4, "seed": 0}
+    scene = {"type": "scene",
+             "integrator": {"type": "path", "max_depth": int(float(spec.params.get("max_depth", 8)))},
+             "left": sensor_dict(mi, spec.rig.left, sampler),
+             "right": sensor_dict(mi, spec.rig.right, sampler),
+             "board": {"type": "rectangle", "to_world": mi.ScalarTransform4f(np.eye(4).tolist()),
+                       "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": 0.0}},
+                       "emitter": {"type": "area", "radiance": {
+                           "type": "bitmap", "data": mi.TensorXf(pattern), "raw": True,
+                           "filter_type": "nearest"}}}}
+    if not air and isinstance(spec.rig.port, DomePair):
+        for sid, centre, radius, ext_ior, int_ior in dome_placements(spec.rig.port):
+            scene[sid] = {"type": "sphere", "center": [float(c) for c in centre],
+                          "radius": float(radius),
+                          "bsdf": {"type": "dielectric", "ext_ior": float(ext_ior),
+                                   "int_ior": float(int_ior)}}
+    elif not air and spec.has_port:
+        half = 2000.0
+        for k, centre, target, up, ext_ior, int_ior in interface_placements(spec.rig.port):
+            to_world = (mi.ScalarTransform4f().look_at(origin=centre.tolist(),
+                                                       target=target.tolist(), up=up.tolist())
+                        @ mi.ScalarTransform4f().scale([half, half, 1.0]))
+            scene[f"interface_{k}"] = {"type": "rectangle", "to_world": to_world,
+                                       "bsdf": {"type": "dielectric", "ext_ior": float(ext_ior),
+                                                "int_ior": float(int_ior)}}
+    return mi.load_dict(scene), mi, chosen
+
+
+def render_pose(mscene, mi, spec: SceneSpec, board: Board, pose: BoardPose, index: int,
+                spp: int, seed: int, adaptive: bool = True):
+    """Both views (float32 linear) of the board at ``pose`` and, per view, how it was rendered
+    (:func:`synth.rendering.render.render_view_counted`): ``([left, right], [stats_left, stats_right])``;
+    pose ``index`` renders with the scene seeds ``seed + 2·index`` (view 0) and ``+ 1``
+    (view 1)."""
+    M = np.eye(4)
+    M[:3, :3], M[:3, 3] = pose.R, pose.t
+    params = mi.traverse(mscene)
+    params["board.to_world"] = mi.ScalarTransform4f((M @ _board_local_to_board(board)).tolist())
+    params.update()
+    views = [render_view_counted(mscene, mi, view, camera, spp, seed + 2 * index,
+                                 adaptive=adaptive)
+             for view, camera in enumerate(spec.cameras)]
+    return [v[0] for v in views], [v[2] for v in views]
+
+
+# ---------------------------------------------------------------------------------------------
+# the folder
+# ---------------------------------------------------------------------------------------------
+def request_key(spec: SceneSpec, board: Board, n_poses, spp, seed, air, distance_range,
+                max_tilt_deg, variant, adaptive: bool = True) -> str:
+    """Hash of everything that determines the folder; the adaptive settings only for an
+    adaptive render (a full-film request keeps the key of earlier folders, rendered so)."""
+    request = {"format": FORMAT_VERSION, "scene": spec.sha256, "params": spec.params,
+               "board": board.to_dict(), "poses": n_poses, "spp": spp, "seed": seed,
+               "air": bool(air), "distance_range": list(distance_range),
+               "max_tilt_deg": max_tilt_deg, "variant": variant, "renderer": RENDERER}
+    if adaptive:
+        request["adaptive"] = adaptive_settings()
+    return hashlib.sha256(json.dumps(request, sort_keys=True).encode()).hexdigest()
+
+
+def write_boards(spec: SceneSpec, out_dir, board: Board, n_poses: int = DEFAULT_POSES,
+                 spp: int = DEFAULT_SPP, seed: int = 0, air: bool = False,
+                 distance_range=None,
+                 max_tilt_deg: float = DEFAULT_MAX_TILT_DEG, variant=None,
+                 progress: bool = True, adaptive: bool = True) -> dict:
+    """Render ``n_poses`` stereo pairs of ``board`` and write the folder (module docs). Returns
+    the manifest; ``manifest["skipped"]`` when ``out_dir`` already held the same request, whole
+    (:meth:`synth.infra.fileio.OutputDir.damage`); ``manifest["rendered_again"]`` why an earlier output
+    of the same request was rendered again, or None. ``adaptive`` (default) renders each view
+    adaptively, False on the full film (:func:`synth.rendering.render.render_view_counted`); the
+    manifest's ``render`` says how (lit fraction and samples per pose and view)."""
+    from tqdm import tqdm
+
+    t_start = time.perf_counter()
+    if n_poses < 1:
+        raise ValueError(f"--poses must be at least 1, got {n_poses}")
+    if not air and not spec.has_port:
+        raise ValueError(f"{spec.path}: the scene has no port; render its boards with --air")
+    if distance_range is None:
+        distance_range = DEFAULT_AIR_DISTANCE_RANGE_MM if air else DEFAULT_DISTANCE_RANGE_MM
+    key = request_key(spec, board, n_poses, spp, seed, air, distance_range, max_tilt_deg, variant,
+                      adaptive)
+    output = OutputDir(out_dir, COMMAND)
+    damage = None
+    if output.exists_as_output() and (read_marker(output.path) or {}).get("request_key") == key:
+        damage = output.damage()  # up to date only when every file is whole
+        try:
+            if damage is None:
+                with open(os.path.join(output.path, "manifest.json")) as fh:
+                    return {**json.load(fh), "skipped": True}
+        except (OSError, ValueError):
+            damage = "manifest.json cannot be read"
+    output.claim()
+    check_render_request(spec, spp, seed, poses=n_poses,  # pose p renders with seed + 2p
+                         adaptive=adaptive)
+    rig = board_rig(spec, air)
+    poses = sample_poses(rig, board, n_poses, seed, not air, distance_range, max_tilt_deg)
+    times = {}
+    t = time.perf_counter()
+    mscene, mi, chosen = build_board_scene(spec, board, air, variant)
+    times["load_mitsuba"] = time.perf_counter() - t
+    images, stats = [], []
+    t = time.perf_counter()
+    bar = tqdm(poses, desc=f"render boards {chosen} {spp} spp{' adaptive' if adaptive else ''}",
+               unit="pose", disable=not progress, leave=False)
+    for k, pose in enumerate(bar):
+        pair, pair_stats = render_pose(mscene, mi, spec, board, pose, k, spp, seed, adaptive)
+        images.append(pair)
+        stats.append(pair_stats)
+        lit = [1.0 if v["lit_fraction"] is None else v["lit_fraction"] for v in pair_stats]
+        bar.set_postfix_str(f"lit {lit[0]:.1%} / {lit[1]:.1%}")
+    bar.close()
+    times["render"] = time.perf_counter() - t
+    w, h = spec.size
+    samples = sum(s["samples"] for pair in stats for s in pair)
+    with output.staged(extra={"request_key": key}) as tmp:
+        scale = png16_scale(*[img for pair in images for img in pair])
+        for k, pair in enumerate(images):
+            for view, img in zip(("left", "right"), pair):
+                write_png(os.path.join(tmp, f"{view}_{k:02d}.png"), to_png16(img, scale))
+        write_calib(os.path.join(tmp, "calib.yaml"), rig, not air)
+        atomic_write_json(os.path.join(tmp, "board.json"), board.to_dict())
+        _write_truth(tmp, rig, board, poses)
+        times["total"] = time.perf_counter() - t_start
+        manifest = {
+            "format_version": FORMAT_VERSION, "command": COMMAND,
+            "created_utc": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+            "request_key": key, "versions": package_versions(),
+            "scene": {"path": spec.path, "sha256": spec.sha256, "params": spec.params},
+            "air": bool(air), "board": board.to_dict(), "poses": n_poses,
+            "distance_range_mm": list(distance_range), "max_tilt_deg": max_tilt_deg,
+            "variant": chosen, "integrator": integrator_name(mi, mscene), "spp": spp,
+            "seed": seed, "image_size": [w, h],
+            "png_scale": scale, "samples_per_second": samples / times["render"],
+            "render": {"settings": adaptive_settings() if adaptive else None,
+                       "samples": samples,
+                       "views": [{view: {k: s[k] for k in _POSE_STATS if k in s}
+                                  for view, s in zip(("left", "right"), pair)}
+                                 for pair in stats]},
+            "seconds": times,
+        }
+        manifest["files"] = sorted(os.listdir(tmp)) + ["manifest.json"]
+        manifest["sha256"] = {name: file_sha256(os.path.join(tmp, name))
+                              for name in sorted(os.listdir(tmp))}
+        manifest = jsonable(manifest)  # as written: the digest is of what is read back
+        manifest["manifest_sha256"] = manifest_digest(manifest)
+        atomic_write_json(os.path.join(tmp, "manifest.json"), manifest)
+    return {**manifest, "skipped": False, "rendered_again": damage}
+
+
+#: What the manifest keeps of each view's render statistics.
+_POSE_STATS = ("mode", "reason", "lit_fraction", "mask_pixels", "samples_on_mask",
+               "samples_off_mask", "spp_on_mask", "spp_off_mask")
+
+
+def _write_truth(directory, rig, board: Board, poses) -> None:
+    corners = board.corners()
+    ids = np.arange(corners.shape[0])
+    with open(os.path.join(directory, "poses.csv"), "w", newline="") as fh:
+        writer = csv.writer(fh)
+        writer.writerow(POSES_HEADER)
+        for k, pose in enumerate(poses):
+            rv = Rotation.from_matrix(pose.R).as_rotvec()
+            writer.writerow([k] + [f"{v:.17g}" for v in (*rv, *pose.t)])
+    with open(os.path.join(directory, "corners.csv"), "w", newline="") as fh:
+        writer = csv.writer(fh)
+        writer.writerow(CORNERS_HEADER)
+        for k, pose in enumerate(poses):
+            world = pose.apply(corners)
+            uv_l = project(rig.left, rig.view_port(0), world)
+            uv_r = project(rig.right, rig.view_port(1), world)
+            for i, p, a, b in zip(ids, world, uv_l, uv_r):
+                writer.writerow([k, int(i)] + [f"{v:.17g}" for v in (*p, *a, *b)])
+
+
+# ---------------------------------------------------------------------------------------------
+# reading
+# ---------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class BoardImages:
+    """A boards folder read back: ``images`` ``[(left, right), …]`` float32 linear per pose,
+    ``board``, ``calib`` (the truth, :func:`synth.products.dataset.read_calib`), ``poses`` (truth),
+    ``corners`` truth rows ``(M, 9)`` in :data:`CORNERS_HEADER` order, ``air``, ``manifest``."""
+
+    path: str
+    images: list
+    board: Board
+    calib: dict
+    poses: list
+    corners: np.ndarray
+    air: bool
+    manifest: dict
+
+
+def read_boards(path) -> BoardImages:
+    """Read a folder written by :func:`write_boards`; :class:`DatasetError` names what is wrong."""
+    import cv2
+
+    path = os.fspath(path)
+    if not os.path.isdir(path):
+        raise DatasetError(f"{path}: not a boards folder (no such directory)")
+    try:
+        with open(os.path.join(path, "manifest.json")) as fh:
+            manifest = json.load(fh)
+        with open(os.path.join(path, "board.json")) as fh:
+            board = Board.from_dict(json.load(fh))
+    except OSError as exc:
+        raise DatasetError(f"{path}: not a boards folder ({exc.strerror}: "
+                           f"{os.path.basename(exc.filename or '')})") from None
+    except (ValueError, BoardError) as exc:
+        raise DatasetError(f"{path}: {exc}") from None
+    if manifest.get("command") != COMMAND:
+        raise DatasetError(f"{path}: not a boards folder (manifest of {manifest.get('command')!r})")
+    if "board" in manifest and manifest["board"] != board.to_dict():
+        def described(b):
+            return f"{b.get('kind')} {'x'.join(map(str, b.get('squares', [])))}, {b.get('square_mm')} mm"
+
+        raise DatasetError(f"{path}/board.json: a {described(board.to_dict())} board, but "
+                           f"manifest.json says a {described(manifest['board'])} board was "
+                           f"rendered")
+    scale = float(manifest["png_scale"])
+    n = int(manifest["poses"])
+    calib = read_calib(os.path.join(path, "calib.yaml"))
+    images = []
+    for k in range(n):
+        pair = []
+        for view in ("left", "right"):
+            file = os.path.join(path, f"{view}_{k:02d}.png")
+            img = cv2.imread(file, cv2.IMREAD_UNCHANGED)
+            if img is None or img.ndim != 2:
+                raise DatasetError(f"{file}: missing or not a single-channel image")
+            if img.shape[::-1] != tuple(calib["size"]):
+                raise DatasetError(f"{file}: {img.shape[1]}x{img.shape[0]} px, but calib.yaml "
+                                   f"says {calib['size'][0]}x{calib['size'][1]}")
+            pair.append(img.astype(np.float32) / np.float32(scale))
+        images.append(tuple(pair))
+    poses_rows = _read_table(os.path.join(path, "poses.csv"), POSES_HEADER, n)
+    poses = [BoardPose(Rotation.from_rotvec(r[1:4]).as_matrix(), r[4:7]) for r in poses_rows]
+    corners = _read_table(os.path.join(path, "corners.csv"), CORNERS_HEADER, n * board.n_corners)
+    check_files(path, manifest, COMMAND)  # last: the readers above say more precisely what is wrong
+    return BoardImages(path, images, board, calib, poses, corners, bool(manifest.get("air")),
+                       manifest)
+
+
+def _read_table(file, header, rows: int) -> np.ndarray:
+    """``(rows, len(header))`` numbers of a CSV that :func:`_write_truth` wrote, read whole:
+    :class:`DatasetError` unless it has ``header``, exactly ``rows`` complete rows of numbers
+    (what the manifest's pose count says) and ends with its last row's newline."""
+    try:
+        with open(file, newline="") as fh:
+            text = fh.read()
+    except OSError as exc:
+        raise DatasetError(f"{file}: {exc.strerror or exc}") from None
+    table = list(csv.reader(text.splitlines()))
+    if not table or table[0] != header:
+        raise DatasetError(f"{file}: header is {table[0] if table else None}, expected {header}")
+    body = table[1:]
+    bad = next((i for i, row in enumerate(body) if len(row) != len(header)), None)
+    if bad is not None or (body and not text.endswith("\n")):
+        line = (bad if bad is not None else len(body) - 1) + 2
+        raise DatasetError(f"{file}: line {line} is not complete: truncated or malformed")
+    if len(body) != rows:
+        raise DatasetError(f"{file}: {len(body)} rows, but the manifest's poses and board.json "
+                           f"say {rows}")
+    try:
+        return np.array(body, dtype=np.float64).reshape(rows, len(header))
+    except ValueError:
+        raise DatasetError(f"{file}: not numbers") from None
+
+
+__all__ = ["BoardImages", "BoardPose", "board_rig", "build_board_scene", "read_boards",
+           "render_pose", "sample_poses", "write_boards"]

@@ -1,0 +1,128 @@
+"""Detected target centres against the simulator's pixels: association and statistics.
+
+Used by ``python -m synth check`` (a dataset against its ``pixels.csv``) and by
+``python -m eval run`` (to score, after matching without ground truth). Pixels follow OpenCV's
+convention (integer coordinates are pixel centres); distances are in pixels.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from measure import Camera
+from measure.images.detect import FLOOR_FRACTION
+
+#: Pixels between a detection and the simulator's pixel of a target for them to be associated.
+ASSOCIATION_GATE_PX = 2.0
+
+
+def associate_detections(detected, expected, gate_px: float = ASSOCIATION_GATE_PX):
+    """Mutual nearest neighbours within ``gate_px``.
+
+    ``detected`` ``(M, 2)`` and ``expected`` ``(N, 2)`` px (NaN rows of ``expected`` never match).
+    Returns ``(index, distance)``, both ``(M,)``: the index into ``expected`` of each detection's
+    partner and their distance in px (``-1`` and ``inf`` where it has none).
+    """
+    detected = np.asarray(detected, float).reshape(-1, 2)
+    expected = np.asarray(expected, float).reshape(-1, 2)
+    index = np.full(detected.shape[0], -1)
+    distance = np.full(detected.shape[0], np.inf)
+    finite = np.all(np.isfinite(expected), axis=1)
+    if detected.shape[0] == 0 or not finite.any():
+        return index, distance
+    finite_rows = np.flatnonzero(finite)
+    d1, j = cKDTree(expected[finite]).query(detected)
+    _, back = cKDTree(detected).query(expected[finite])
+    ok = (d1 <= gate_px) & (back[j] == np.arange(detected.shape[0]))
+    index[ok], distance[ok] = finite_rows[j[ok]], d1[ok]
+    return index, distance
+
+
+def target_image_margin_px(camera: Camera, points, radius_mm: float) -> np.ndarray:
+    """How far (px) each target's image may reach from its centre's pixel, ``(N,)``.
+
+    The port magnifies a target, so its image may reach twice its pinhole radius
+    (``f · radius / z``) plus 2 px from its centre. ``points`` ``(N, 3)`` mm, reference frame.
+    """
+    z = camera.to_camera(np.asarray(points, float).reshape(-1, 3))[:, 2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        radius_px = camera.K[0, 0] * radius_mm / np.where(z > 0, z, np.nan)
+    return 2.0 * np.nan_to_num(radius_px, nan=0.0) + 2.0
+
+
+def wholly_in_image(camera: Camera, uv, points, radius_mm: float) -> np.ndarray:
+    """Whether each target's image lies wholly inside the image, ``(N,)`` bool.
+
+    ``uv`` ``(N, 2)`` the simulator's pixels of the centres ``points`` (NaN where none)."""
+    return camera.in_image(uv, target_image_margin_px(camera, points, radius_mm))
+
+
+def distance_stats(distances) -> dict:
+    """``{"n", "rms_px", "max_px"}`` of distances in px (NaN when there are none)."""
+    d = np.asarray(distances, float).ravel()
+    if d.size == 0:
+        return {"n": 0, "rms_px": float("nan"), "max_px": float("nan")}
+    return {"n": int(d.size), "rms_px": float(np.sqrt(np.mean(d ** 2))), "max_px": float(d.max())}
+
+
+__all__ = ["ASSOCIATION_GATE_PX", "CHECK_MAX_PX", "CHECK_RMS_PX", "associate_detections",
+           "check_dataset", "distance_stats",
+           "target_image_margin_px", "wholly_in_image"]
+
+
+# ---------------------------------------------------------------------------------------------
+# python -m synth check
+# ---------------------------------------------------------------------------------------------
+#: Bounds of ``python -m synth check``: RMS and max centre distance, px.
+CHECK_RMS_PX = 0.05
+CHECK_MAX_PX = 0.15
+
+
+def check_dataset(path, rms_px: float = CHECK_RMS_PX, max_px: float = CHECK_MAX_PX,
+                  gate_px: float = ASSOCIATION_GATE_PX) -> dict:
+    """Detect the targets in both images of a dataset and compare them with ``pixels.csv``.
+
+    A target is *in the image* when its simulated pixel lies farther inside the image than its
+    image can reach (:func:`target_image_margin_px`): those must all be found. Detections are
+    paired with simulated pixels by :func:`associate_detections`. Returns a dict: per view
+    (``left``, ``right``) ``in_image``, ``found``, ``missed`` (ids), ``detected``,
+    ``unmatched_detections``, ``rejected`` {reason: count}, ``rms_px``, ``max_px``, ``mean_px``
+    (mean offset detected − simulated, (du, dv)); overall ``rms_px``, ``max_px``; the bounds and
+    ``passed``.
+    """
+    from measure.images.detect import detect_targets
+
+    from synth.products.dataset import read_dataset
+
+    data = read_dataset(path)
+    radius = float(data.manifest.get("scene", {}).get("target_radius_mm", 0.0))
+    report = {"path": str(path), "bounds": {"rms_px": rms_px, "max_px": max_px}}
+    all_d = []
+    all_found = True
+    for name, img, camera, expected in (("left", data.left, data.rig.left, data.pixels_left),
+                                        ("right", data.right, data.rig.right, data.pixels_right)):
+        det = detect_targets(img, floor_fraction=FLOOR_FRACTION)
+        inside = wholly_in_image(camera, expected, data.targets, radius)
+        idx, dist = associate_detections(det.centers, expected, gate_px)
+        matched = idx >= 0
+        found = np.isin(np.flatnonzero(inside), idx[matched])
+        missed = data.ids[np.flatnonzero(inside)[~found]].tolist()
+        d = dist[matched]
+        all_d.append(d)
+        offsets = det.centers[matched] - expected[idx[matched]]
+        all_found &= not missed
+        stats = distance_stats(d)
+        report[name] = {
+            "in_image": int(inside.sum()), "found": int(found.sum()), "missed": missed,
+            "detected": det.n_found, "unmatched_detections": int((~matched).sum()),
+            "rejected": {k: int(v) for k, v in det.rejected.items()},
+            "rms_px": stats["rms_px"], "max_px": stats["max_px"],
+            "mean_px": offsets.mean(axis=0).tolist() if d.size else [float("nan")] * 2,
+        }
+    both = distance_stats(np.concatenate(all_d))
+    report["rms_px"], report["max_px"] = both["rms_px"], both["max_px"]
+    report["all_found"] = bool(all_found)
+    report["passed"] = bool(all_found and both["n"] and report["rms_px"] <= rms_px
+                            and report["max_px"] <= max_px)
+    return report
