@@ -14,3 +14,4 @@ class Reason(IntEnum):
     BEHIND_CAMERA = 5  # the solution lies behind a camera / on the wrong side of the port
     NOT_IN_WATER = 6  # a point to project is not beyond the port's last interface
     NOT_CONVERGED = 7  # an iterative solver did not reach its tolerance
+    TOO_FEW_VIEWS = 8  # a target seen (and traced) by fewer than two views: not triangulated

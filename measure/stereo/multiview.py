@@ -1,0 +1,181 @@
+"""The optical path of N views: a target seen by any k ≥ 2 cameras, each behind its own port.
+
+A :class:`View` is a camera and the port it looks through — any port that traces camera rays
+into the water (the port interface, :class:`measure.geometry.port.RigPort`'s ``view(v)``: a flat
+port shared by several cameras, a flat port per camera, a dome per camera, or
+:func:`measure.geometry.port.index_matched_port` for a camera in air). Each view's pixel is
+back-projected (lens distortion inverted) and traced through its port into the water (the
+paper's equations 3–10 at every interface); the point is the one nearest to all k water rays
+in the least-squares sense — the solution of ``Σ (I − d dᵀ) X = Σ (I − d dᵀ) o`` over the
+rays (origin ``o`` on the last interface, unit direction ``d``), solved in closed form (the
+adjugate of the symmetric 3 × 3 matrix, column arithmetic over all points). For k = 2 it is the midpoint of the
+two rays' common perpendicular, the paper's optical-path point. ``gap`` is the RMS distance
+of the point from its k rays (for k = 2 half the common perpendicular's length).
+
+Arrays: ``pixels`` ``(N, V, 2)`` for V views, NaN where a view did not see the target; points
+``(N, 3)`` mm in the reference frame; a row seen by fewer than two views is NaN with
+:attr:`Reason.TOO_FEW_VIEWS` and never triangulated. Vectorized over N: one 3 × 3 solve per
+point, written out.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..geometry.camera import Camera
+from ..reasons import Reason
+
+#: A point's normal matrix Σ (I − d dᵀ) whose determinant is below this times the cube of its
+#: mean eigenvalue has (nearly) parallel rays: no point is determined along them.
+PARALLEL_LIMIT = 1e-14
+#: Fewest points per thread worth a thread of their own (:func:`triangulate_views`).
+CHUNK_ROWS = 50_000
+
+
+@dataclass(frozen=True)
+class View:
+    """A camera and the port it looks through (anything with ``trace(origin, directions,
+    keep_interface_points)`` returning :class:`measure.WaterRays`)."""
+
+    camera: Camera
+    port: object
+
+    def water_rays(self, uv: np.ndarray):
+        """``(origins (N, 3), directions (N, 3), reason (N,))`` of pixels ``uv`` ``(N, 2)``:
+        the rays in the water (NaN rows with their reason)."""
+        uv = np.asarray(uv, dtype=np.float64).reshape(-1, 2)
+        directions, reason = self.camera.rays_with_reason(uv)
+        water = self.port.trace(self.camera.center, directions, keep_interface_points=False)
+        reason = np.where(reason == Reason.OK, water.reason, reason).astype(np.int8)
+        bad = reason != Reason.OK
+        origins, dirs = water.origins, water.directions
+        if bad.any():
+            origins, dirs = origins.copy(), dirs.copy()
+            origins[bad] = np.nan
+            dirs[bad] = np.nan
+        return origins, dirs, reason
+
+
+@dataclass(frozen=True)
+class MultiViewTriangulation:
+    """Result of :func:`triangulate_views`: ``points`` ``(N, 3)`` mm; ``gap`` ``(N,)`` the RMS
+    distance of each point from its rays (mm); ``views`` ``(N,)`` how many views it was
+    triangulated from; ``used`` ``(N, V)`` which; ``reason`` ``(N,)``."""
+
+    points: np.ndarray
+    gap: np.ndarray
+    views: np.ndarray
+    used: np.ndarray
+    reason: np.ndarray
+
+    @property
+    def valid(self) -> np.ndarray:
+        return self.reason == Reason.OK
+
+
+def triangulate_views(views, pixels, workers: int | None = None) -> MultiViewTriangulation:
+    """:func:`triangulate_rows` over chunks of the points on ``workers`` threads (default one
+    per CPU: NumPy's array arithmetic releases the GIL); the rows are independent, so the
+    result does not depend on the chunking."""
+    pixels = np.asarray(pixels, dtype=np.float64)
+    workers = max(1, min(workers or os.cpu_count() or 1, pixels.shape[0] // CHUNK_ROWS or 1))
+    if workers == 1 or pixels.ndim != 3:
+        return triangulate_rows(views, pixels)
+    from concurrent.futures import ThreadPoolExecutor
+
+    chunks = np.array_split(pixels, workers)
+    with ThreadPoolExecutor(workers) as pool:
+        parts = list(pool.map(lambda chunk: triangulate_rows(views, chunk), chunks))
+    return MultiViewTriangulation(*(np.concatenate([getattr(p, name) for p in parts])
+                                    for name in ("points", "gap", "views", "used", "reason")))
+
+
+def triangulate_rows(views, pixels) -> MultiViewTriangulation:
+    """The optical-path point of every target from its pixels in ``views`` (module docs).
+
+    ``pixels`` ``(N, V, 2)``, one column per view in the order of ``views``; NaN where a view
+    did not see the target. A view whose ray cannot be traced (it misses the port, total
+    internal reflection, a distortion that cannot be inverted there) is left out of that
+    point; a point with fewer than two rays left is NaN with ``TOO_FEW_VIEWS``; rays (nearly)
+    parallel give ``PARALLEL_RAYS``; a point behind one of its rays' origins
+    ``BEHIND_CAMERA``."""
+    views = list(views)
+    pixels = np.asarray(pixels, dtype=np.float64)
+    if pixels.ndim != 3 or pixels.shape[1:] != (len(views), 2):
+        raise ValueError(f"pixels must have shape (N, {len(views)}, 2) for {len(views)} views, "
+                         f"got {pixels.shape}")
+    n = pixels.shape[0]
+    # the normal equations Σ (I − d dᵀ) X = Σ (I − d dᵀ) o, their six distinct entries and the
+    # right-hand side accumulated as columns (no (N, 3, 3) arrays)
+    a = np.zeros((6, n))  # xx, yy, zz, xy, xz, yz
+    rhs = np.zeros((3, n))
+    used = np.zeros((n, len(views)), bool)
+    rays = []
+    for v, view in enumerate(views):
+        seen = np.all(np.isfinite(pixels[:, v]), axis=1)
+        if seen.all():
+            origins, dirs, reason = view.water_rays(pixels[:, v])
+            used[:, v] = reason == Reason.OK
+        else:
+            origins = np.full((n, 3), np.nan)
+            dirs = np.full((n, 3), np.nan)
+            if seen.any():
+                o, d, reason = view.water_rays(pixels[seen, v])
+                origins[seen], dirs[seen] = o, d
+                used[np.flatnonzero(seen)[reason == Reason.OK], v] = True
+        # rows this view did not see (NaN) add nothing: weight 0 and a zero ray
+        weight = used[:, v].astype(np.float64)
+        d = np.where(used[:, v], dirs.T, 0.0)
+        o = np.where(used[:, v], origins.T, 0.0)
+        along = d[0] * o[0] + d[1] * o[1] + d[2] * o[2]
+        a[0] += weight - d[0] * d[0]
+        a[1] += weight - d[1] * d[1]
+        a[2] += weight - d[2] * d[2]
+        a[3] -= d[0] * d[1]
+        a[4] -= d[0] * d[2]
+        a[5] -= d[1] * d[2]
+        rhs += o - d * along
+        rays.append((o, d))
+    count = used.sum(axis=1)
+    reason = np.full(n, Reason.OK, dtype=np.int8)
+    reason[count < 2] = Reason.TOO_FEW_VIEWS
+    xx, yy, zz, xy, xz, yz = a
+    # the adjugate of the symmetric matrix, and its determinant
+    c_xx, c_yy, c_zz = yy * zz - yz * yz, xx * zz - xz * xz, xx * yy - xy * xy
+    c_xy, c_xz, c_yz = xz * yz - xy * zz, xy * yz - xz * yy, xy * xz - xx * yz
+    det = xx * c_xx + xy * c_xy + xz * c_xz
+    scale = (xx + yy + zz) / 3
+    with np.errstate(invalid="ignore", divide="ignore"):
+        parallel = ~(det > PARALLEL_LIMIT * scale ** 3)
+    reason[(reason == Reason.OK) & parallel] = Reason.PARALLEL_RAYS
+    ok = reason == Reason.OK
+    points = np.full((n, 3), np.nan)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        bx, by, bz = rhs
+        points[:, 0] = (c_xx * bx + c_xy * by + c_xz * bz) / det
+        points[:, 1] = (c_xy * bx + c_yy * by + c_yz * bz) / det
+        points[:, 2] = (c_xz * bx + c_yz * by + c_zz * bz) / det
+    points[~ok] = np.nan
+    squared = np.zeros(n)
+    behind = np.zeros(n, bool)
+    X = np.where(ok, points.T, 0.0)
+    for v, (o, d) in enumerate(rays):  # unused rows: zero rays, masked below
+        offset = X - o
+        along = d[0] * offset[0] + d[1] * offset[1] + d[2] * offset[2]
+        behind |= used[:, v] & (along < 0)
+        perpendicular = offset - along * d  # not |offset|² − along²: that cancels
+        squared += np.where(used[:, v], (perpendicular * perpendicular).sum(axis=0), 0.0)
+    reason[ok & behind] = Reason.BEHIND_CAMERA
+    ok = reason == Reason.OK
+    with np.errstate(invalid="ignore", divide="ignore"):
+        gap = np.sqrt(np.maximum(squared, 0.0) / np.maximum(count, 1))
+    points[~ok] = np.nan
+    gap[~ok] = np.nan
+    return MultiViewTriangulation(points, gap, count, used, reason)
+
+
+__all__ = ["CHUNK_ROWS", "MultiViewTriangulation", "PARALLEL_LIMIT", "View", "triangulate_rows",
+           "triangulate_views"]
