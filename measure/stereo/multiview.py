@@ -7,10 +7,10 @@ port shared by several cameras, a flat port per camera, a dome per camera, or
 back-projected (lens distortion inverted) and traced through its port into the water (the
 paper's equations 3–10 at every interface); the point is the one nearest to all k water rays
 in the least-squares sense — the solution of ``Σ (I − d dᵀ) X = Σ (I − d dᵀ) o`` over the
-rays (origin ``o`` on the last interface, unit direction ``d``), solved in closed form
-(the adjugate of the symmetric 3 × 3 matrix, column arithmetic over all points). For k = 2 it is the midpoint of the
-two rays' common perpendicular, the paper's optical-path point. ``gap`` is the RMS distance
-of the point from its k rays (for k = 2 half the common perpendicular's length).
+rays (origin ``o`` on the last interface, unit direction ``d``), solved in closed form (the
+adjugate of the symmetric 3 × 3 matrix, column arithmetic over all points). For k = 2 it is
+the midpoint of the two rays' common perpendicular, the paper's optical-path point. ``gap`` is
+the RMS distance of the point from its k rays (for k = 2 half the common perpendicular's length).
 
 Arrays: ``pixels`` ``(N, V, 2)`` for V views, NaN where a view did not see the target; points
 ``(N, 3)`` mm in the reference frame; a row seen by fewer than two views is NaN with
