@@ -245,7 +245,7 @@ def parse_suite_spec(data: dict, base_dir: str, label: str) -> SuiteSpec:
             return
         if key.startswith("D.") and len(key) > 2:
             if render == "boards":
-                from synth.commands.boards import NOT_RENDERED
+                from synth.products.boards import NOT_RENDERED
 
                 need(key[2:] not in NOT_RENDERED, label,
                      f"[{section}] {key} does not apply to board sequences (no targets, water "
