@@ -230,7 +230,7 @@ def test_mitsubas_interrupt_warning_stays_off_stdout(tmp_path):
     script = tmp_path / "render_interrupted.py"
     script.write_text('''
 import os, signal, sys
-from synth import interrupt
+from synth.infra import interrupt
 from synth.rendering.mitsuba_setup import import_mitsuba, render
 mi, _ = import_mitsuba()
 

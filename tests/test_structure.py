@@ -228,3 +228,28 @@ def test_code_asks_the_port_not_its_kind():
     documented = (ROOT / "docs" / "architecture.md").read_text()
     missing = sorted({rel for rel, _, _ in found if f"`{rel}`" not in documented})
     assert not missing, f"port-kind branches not listed in docs/architecture.md: {missing}"
+
+
+def test_measure_rooms_point_one_way():
+    """``measure``'s rooms form no cycle (``calibration`` → ``stereo`` → ``geometry``; ``dense``
+    and ``images`` → ``stereo``, ``geometry``): a reader can take them bottom up."""
+    graph = {}
+    for module, targets in _graph("measure").items():
+        room = module.split(".")[1] if "." in module else ""
+        for target in targets:
+            other = target.split(".")[1] if "." in target else ""
+            if room and other and room != other:
+                graph.setdefault(room, set()).add(other)
+    state = {}
+
+    def visit(node, stack):
+        state[node] = "open"
+        for child in sorted(graph.get(node, ())):
+            assert state.get(child) != "open", f"rooms import each other: {stack + [node, child]}"
+            if child not in state:
+                visit(child, stack + [node])
+        state[node] = "done"
+
+    for room in sorted(graph):
+        if room not in state:
+            visit(room, [])

@@ -1,8 +1,10 @@
-"""Calibration from board images: OpenCV in air, then the housing by refractive bundle adjustment.
+"""Calibration from board images: OpenCV in air (:mod:`measure.calibration.air`), then the
+housing by refractive bundle adjustment (here; each kind of port's problem in
+:mod:`measure.calibration.flat` and :mod:`measure.calibration.dome`, :data:`HOUSINGS`).
 
-In air (:func:`calibrate_in_air`): ``cv2.calibrateCameraExtended`` per camera (k1, k2, p1, p2;
-k3 fixed at 0) and ``cv2.stereoCalibrate`` with the intrinsics fixed give K1, D1, K2, D2 and the
-stereo pose — OpenCV does it, nothing is re-implemented.
+In air (:func:`measure.calibration.air.calibrate_in_air`): ``cv2.calibrateCameraExtended`` per
+camera (k1, k2, p1, p2; k3 fixed at 0) and ``cv2.stereoCalibrate`` with the intrinsics fixed
+give K1, D1, K2, D2 and the stereo pose — OpenCV does it, nothing is re-implemented.
 
 Underwater (:func:`calibrate_housing`): the cameras' intrinsics stay as calibrated in air; the
 unknowns are every board pose (6 each) and the free housing parameters

@@ -33,11 +33,6 @@ def add_parser(subparsers) -> None:
     add_progress_option(p)
 
 
-#: Scene parameters that the boards' scene does not use (it holds the scene's cameras, port and
-#: ``max_depth`` and a board; no targets, no water medium, no lights, pinhole sensors): a
-#: ``-D`` of one of them is refused, never ignored.
-NOT_RENDERED = ("target_radius", "target_z", "target_albedo", "light_intensity", "water_c",
-                "water_albedo", "water_g", "aperture_radius", "focus_distance")
 #: Scene parameters of the port, which boards in air (``--air``) do not have.
 PORT_PARAMETERS = ("n_water",)
 
@@ -52,7 +47,7 @@ def main(args) -> int:
     cols, rows = board.squares
     defines = apply_spp(apply_seed(parse_defines(args.defines), args.seed), args.spp)
     for name in defines:
-        if name in NOT_RENDERED:
+        if name in b.NOT_RENDERED:
             raise CLIError(f"-D {name} does not apply to synth boards: its scene renders the "
                            f"scene's cameras and port with a board (no targets, water medium, "
                            f"lights or thin lens)")

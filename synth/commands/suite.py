@@ -36,8 +36,9 @@ def add_parser(subparsers) -> None:
 
 def main(args) -> int:
     from synth.infra.cluster import check_address, connect
-    from synth.products.suite import (SuiteDir, load_suite_spec, probe, write_index, write_readme,
-                             write_suite_json)
+    from synth.products.suite import load_suite_spec
+    from synth.products.suite_folder import (SuiteDir, probe, write_index, write_readme,
+                                             write_suite_json)
 
     start = time.perf_counter()
     if args.scheduler is None:
@@ -108,7 +109,7 @@ def _execute(client, spec, todo, out, records, token, progress) -> tuple[int, fl
     from distributed import as_completed
     from tqdm import tqdm
 
-    from synth.products.suite import render_task
+    from synth.products.suite_folder import render_task
 
     started = time.perf_counter()
     futures = {}

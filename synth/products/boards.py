@@ -61,6 +61,11 @@ DEFAULT_DISTANCE_RANGE_MM = (700.0, 1400.0)
 #: 0.7–1.4 m (37 % of the image) left them 0.1–0.2 px off, which moved the port distance by
 #: 0.35–0.40 mm; at 0.35–0.8 m (48–52 %) the port came within 0.06 mm (docs/calibration.md).
 DEFAULT_AIR_DISTANCE_RANGE_MM = (350.0, 800.0)
+#: Scene parameters that the boards' scene does not use (it holds the scene's cameras, port and
+#: ``max_depth`` and a board; no targets, no water medium, no lights, pinhole sensors): a
+#: ``-D`` of one of them is refused, never ignored.
+NOT_RENDERED = ("target_radius", "target_z", "target_albedo", "light_intensity", "water_c",
+                "water_albedo", "water_g", "aperture_radius", "focus_distance")
 DEFAULT_MAX_TILT_DEG = 45.0
 #: Largest turn of the board about its own normal (degrees).
 MAX_ROLL_DEG = 20.0

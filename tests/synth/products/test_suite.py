@@ -164,7 +164,7 @@ def test_a_dask_cluster_renders_the_same_bytes(local_suite, dask_cluster, tmp_pa
 
 
 def test_another_spec_for_the_same_folder_is_refused(tmp_path, capsys):
-    from synth.products.suite import SuiteDir
+    from synth.products.suite_folder import SuiteDir
 
     spec = load_suite_spec(_spec(tmp_path))
     out = SuiteDir(tmp_path / "out")
@@ -211,7 +211,7 @@ def test_a_worker_that_does_not_see_the_folder_sends_the_files_back(local_suite,
     """The path of a cluster without a shared file system: the worker renders into a temporary
     folder and returns the bytes; the client writes them as a synth dataset output."""
     from synth.infra import cluster
-    from synth.products.suite import SuiteDir, render_task
+    from synth.products.suite_folder import SuiteDir, render_task
 
     spec_path, out = local_suite
     spec = load_suite_spec(spec_path)

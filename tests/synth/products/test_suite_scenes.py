@@ -191,7 +191,7 @@ def test_a_worker_that_does_not_see_the_folder_renders_a_generated_scene(tmp_pat
     """A generated target scene travels as bytes, like a scene file; the design files come back
     with the dataset's."""
     from synth.infra import cluster
-    from synth.products.suite import render_task
+    from synth.products.suite_folder import render_task
 
     spec = load_suite_spec(_write(tmp_path, TARGETS))
     entry = spec.entries[1]
