@@ -229,8 +229,7 @@ def write_calibration(path, rig, has_port: bool, housing, report, single: bool =
     housing's own when ``housing`` is given) becomes the file's ``covariance`` node and an
     ``uncertainty`` map: every named parameter's σ (``names``, ``sigmas``), what the σ covers
     (``includes``) and, underwater, the housing's σ conditional on the in-air calibration."""
-    from measure.geometry.dome import DomePair
-    from measure.geometry.flatport_format import flatport_text
+    from measure.geometry.flatport_format import port_text_files
     from synth.products.dataset import write_calib
     from synth.infra.fileio import atomic_write_text
 
@@ -251,9 +250,9 @@ def write_calibration(path, rig, has_port: bool, housing, report, single: bool =
         extra["calibration"] = {"rms_px": housing.rms_px, "poses": len(housing.poses)}
     target = path if single else os.path.join(path, "calib.yaml")
     write_calib(target, rig, has_port, extra or None, covariance=covariance)
-    if not single and has_port and not isinstance(rig.port, DomePair):  # a dome rig: DOMEPORT in cameras.txt
-        atomic_write_text(os.path.join(path, "flatport.txt"),
-                          flatport_text(rig.port, {"left": rig.left, "right": rig.right}))
+    if not single and has_port:  # the port's own file (domes: their DOMEPORT is in cameras.txt)
+        for name, text in port_text_files(rig.port, {"left": rig.left, "right": rig.right}).items():
+            atomic_write_text(os.path.join(path, name), text)
     if not single:
         write_other_formats(path, rig, has_port)
 

@@ -186,3 +186,12 @@ def write_calib_port(fs, port: FlatPort | DomePair, has_port: bool = True) -> No
                 fs.write("", float(v))
             fs.endWriteStruct()
         fs.endWriteStruct()
+
+
+def port_text_files(port, cameras: dict) -> dict:
+    """``{file name: text}`` of the port beside a calibration: ``flatport.txt``
+    (:func:`flatport_text`) for a flat port; nothing for domes, whose DOMEPORT lines live in
+    the COLMAP ``cameras.txt`` (:func:`housing_params`)."""
+    if isinstance(port, DomePair):
+        return {}
+    return {"flatport.txt": flatport_text(port, cameras)}
