@@ -34,7 +34,6 @@ import os
 import sys
 import time
 
-from measure.geometry.dome import DomePair
 from eval.cli import CLIError, positive_float
 from synth.infra.cli import add_json_option, add_out_option, add_progress_option
 from eval.core.formatting import format_number as fmt
@@ -189,7 +188,7 @@ def score_covariances(data, arrays, label, uv, pixel_sigma) -> dict:
     calib_path = os.path.join(data.path, "calib.yaml")
     rig_covariance = read_calib(calib_path)["covariance"]
     info = {"rig": rig_covariance_note(rig_covariance, calib_path)}
-    if label != "optical_path" or isinstance(data.rig.port, DomePair):
+    if label != "optical_path":
         info["note"] = f"no covariance for {label} (only optical_path gets one)"
         return info
     ok = arrays["associated"]

@@ -105,6 +105,36 @@ def test_pixels_get_covariances_and_their_coverage(scored_run, tmp_path, capsys)
     assert len(err) == 1 and "--pixel-sigma" in err[0]
 
 
+@pytest.mark.slow
+def test_pixels_through_domes_get_covariances_too(tmp_path):
+    """Behind the decentred domes (a small render) noisy pixels (σ = 0.1 px, seeded) get point
+    covariances like a flat port's (they were left without: the port's kind was asked), and
+    at least 85 % of the points lie inside their 95 % ellipsoid — the flat port's test band.
+    Here the σ is conservative in depth: 0.993 of 423 points covered with this seed, 0.966 of
+    412 with another, the depth errors' normalized std 0.72 (x 0.87, y 0.92)."""
+    from synth.commands import main as synth_main
+
+    data = tmp_path / "ds"
+    assert synth_main(["dataset", "scenes/dome_decentred.xml", "-D", "width=612", "-D",
+                       "height=512", "--spp", "16", "--out", str(data), "--quiet"]) == 0
+    rows = list(csv.DictReader(open(data / "pixels.csv")))
+    rng = np.random.default_rng(12)
+    pairs = tmp_path / "pairs.csv"
+    with open(pairs, "w", newline="") as fh:
+        writer = csv.writer(fh)
+        writer.writerow(["u_left", "v_left", "u_right", "v_right"])
+        for row in rows:
+            exact = np.array([float(row[c]) for c in ("u_left", "v_left", "u_right", "v_right")])
+            if np.all(np.isfinite(exact)):
+                writer.writerow(exact + rng.normal(0, 0.1, 4))
+    out = tmp_path / "score"
+    assert main(["score", str(data), "--pixels", str(pairs), "--out", str(out), "--quiet"]) in (0, 1)
+    scored = json.loads((out / "report.json").read_text())
+    summary = scored["uncertainty"]["summaries"]["optical_path"]
+    assert summary["coverage"]["n"] > 300
+    assert 0.85 <= scored["methods"]["optical_path"]["coverage_95"] <= 1.0
+
+
 def test_association_is_one_to_one_and_gated():
     truth = np.array([[0.0, 0, 1000], [40, 0, 1000], [80, 0, 1000]])
     points = np.array([[0.3, 0, 1000], [0.1, 0, 1000], [41, 0, 1000], [60, 0, 1000]])
