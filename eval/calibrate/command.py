@@ -141,7 +141,11 @@ def design_port(args, normal):
 
     values = {dest: getattr(args, dest) for dest in DESIGN_KEYS.values()}
     seen = set()
-    for item in filter(None, (args.design_port or "").split(",")):
+    items = (args.design_port or "").split(",")
+    if args.design_port is not None and not all(item.strip() for item in items):
+        raise CLIError(f"--design-port {args.design_port!r}: an empty item; expected KEY=VALUE "
+                       f"items separated by commas, KEY one of {', '.join(DESIGN_KEYS)}")
+    for item in filter(None, items):
         key, sep, text = item.partition("=")
         key = key.strip()
         if not sep or key not in DESIGN_KEYS:
@@ -171,12 +175,18 @@ def design_port(args, normal):
                     (1.0, values["n_glass"], values["n_water"]))
 
 
-def _parse_free(text: str, dome: bool = False) -> tuple:
+def parse_free(text: str, dome: bool = False) -> tuple:
     from measure.calibration.dome import DOME_PARAMETERS
     from measure.calibration.flat import HOUSING_PARAMETERS
 
     table = DOME_PARAMETERS if dome else HOUSING_PARAMETERS
-    names = tuple(dict.fromkeys(n.strip() for n in text.split(",") if n.strip()))
+    listed = [n.strip() for n in text.split(",")]
+    twice = sorted({n for n in listed if n and listed.count(n) > 1})
+    if twice or (text.strip() and not all(listed)):
+        what = f"{', '.join(twice)} given twice" if twice else "an empty item"
+        raise CLIError(f"--free {text!r}: {what}; give each parameter once, separated by "
+                       f"commas (from {', '.join(table)})")
+    names = tuple(dict.fromkeys(n for n in listed if n))
     unknown = [n for n in names if n not in table]
     if not names or unknown:
         kind = " of a dome rig" if dome else ""
@@ -252,7 +262,7 @@ def main(args) -> int:
             and not os.path.exists(os.path.join(args.dir, "manifest.json"))):
         refuse_given(args, DOME_DESIGN_OPTIONS, f"to photos ({args.dir}): the housing "
                                                 "calibration of photos models a flat port")
-        return _calibrate_photos(args, output, log, _parse_free(free), start)
+        return _calibrate_photos(args, output, log, parse_free(free), start)
     if not os.path.isfile(os.path.join(args.dir, "manifest.json")) and single_camera_folder(
             args.dir):
         return _calibrate_single(args, output, log, start)
@@ -268,11 +278,11 @@ def main(args) -> int:
         refuse_given(args, FLAT_DESIGN_OPTIONS, f"to boards behind domes ({args.dir}): the "
                                                 f"design is --dome-radius, --dome-thickness, "
                                                 f"--n-glass, --n-water")
-        free = _parse_free(free if given(args, "free") else ",".join(DEFAULT_DOME_FREE), True)
+        free = parse_free(free if given(args, "free") else ",".join(DEFAULT_DOME_FREE), True)
     else:
         refuse_given(args, DOME_DESIGN_OPTIONS, f"to {args.dir}: its boards are not behind "
                                                 f"domes")
-        free = _parse_free(free)
+        free = parse_free(free)
     refuse_given(args, ("encoding",), f"to a boards folder ({args.dir}): its images are "
                                       f"16-bit linear renders")
     refuse_given(args, BOARD_OPTIONS, f"to a boards folder ({args.dir}): the folder's "
@@ -427,6 +437,9 @@ def _calibrate_photos(args, output, log, free, start) -> int:
     larger = trust.larger_board(board, images, found["left"])
     if larger:
         raise CLIError(f"{where}: {larger}")
+    charuco = trust.charuco_check(board, [pair[0] for pair in images])
+    if charuco:
+        raise CLIError(f"{where}: {charuco}")
     not_found = [pairs.names[k] for k in range(len(images))
                  if k not in found["left"] and k not in found["right"]]
     t = time.perf_counter()
@@ -485,6 +498,9 @@ def _calibrate_photos(args, output, log, free, start) -> int:
         residuals = housing.residuals
     report["worst_corners"] = trust.worst_corners(residuals, names)
     report["warnings"] = trust.warnings_for(report)
+    edge = trust.unseen_edge(board, detections, (0, 1))
+    if edge:
+        report["warnings"].append(edge)
     report["failures"] = trust.air_failures(report) if args.air else []
     report["timings_s"] = timings
     log("write the calibration, report and figures …")

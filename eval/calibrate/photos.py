@@ -275,6 +275,45 @@ def warnings_for(report: dict) -> list[str]:
     return out
 
 
+def charuco_check(board, images) -> str | None:
+    """For a ChArUco board: the problem (:meth:`measure.calibration.board.Board.
+    charuco_problem`) that most of the first :data:`HINT_PHOTOS` photos holding the board
+    agree on — a wrong --marker-mm or --squares — or None."""
+    if board.kind != "charuco":
+        return None
+    problems = []
+    for image in images:
+        if board.detect(image)[0].size:
+            problems.append(board.charuco_problem(image))
+            if len(problems) == HINT_PHOTOS:
+                break
+    found = [p for p in problems if p]
+    return found[0] if found and len(found) * 2 > len(problems) else None
+
+
+def unseen_edge(board, detections, views) -> str | None:
+    """A warning when a ChArUco board's last row or column of corners was never detected in
+    any photo: the board may be smaller than --squares says (the corners then still lie where
+    the larger board has them, so the fit is right, but its outline is not)."""
+    if board.kind != "charuco":
+        return None
+    cols, rows = board.squares[0] - 1, board.squares[1] - 1
+    ids = [np.asarray(detections.ids[k][v]) for k in range(detections.n_poses) for v in views]
+    ids = np.concatenate([i for i in ids if i.size]) if any(i.size for i in ids) else np.empty(0)
+    if not ids.size:
+        return None
+    r, c = ids // cols, ids % cols
+    missing = [what for what, seen in (("last row", (r == rows - 1).any()),
+                                       ("last column", (c == cols - 1).any())) if not seen]
+    if not missing:
+        return None
+    smaller = (board.squares[0] - ("last column" in missing),
+               board.squares[1] - ("last row" in missing))
+    return (f"no corner of the board's {' and '.join(missing)} was found in any photo: is the "
+            f"board {smaller[0]}x{smaller[1]} squares, not {board.squares[0]}x"
+            f"{board.squares[1]}?")
+
+
 def air_failures(report: dict) -> list[str]:
     """Why an in-air photo calibration is known to be wrong (empty when it is not): poses whose
     own stereo pose disagrees with the others', a stereo RMS far above the cameras' own

@@ -77,6 +77,9 @@ def calibrate_single(args, output, log, start, board) -> tuple[dict, str]:
         squares = "x".join(map(str, board.squares))
         raise CLIError(f"{where}: the {board.kind} {squares} was found in none of the "
                        f"{len(images)} photos{trust.board_hint(board, [(im, im) for im in images])}")
+    charuco = trust.charuco_check(board, images)
+    if charuco:
+        raise CLIError(f"{where}: {charuco}")
     lens = args.lens or DEFAULT_LENS_MODEL
     corners = board.corners().astype(np.float32)
 
@@ -163,6 +166,9 @@ def _report(args, board, names, size, detections, used, result, outliers, camera
         warnings.append(f"the corners cover {100 * coverage['fraction']:.0f} % of the image "
                         f"({trust.COVERAGE_CELLS}×{trust.COVERAGE_CELLS} cells): the lens "
                         f"distortion is extrapolated outside them")
+    edge = trust.unseen_edge(board, detections, (VIEW,))
+    if edge:
+        warnings.append(edge)
     if outliers["left_out"]:
         warnings.append(f"{len(outliers['left_out'])} outlier photo(s) left out of the final "
                         f"fit: {', '.join(names[k] for k in outliers['left_out'])}")

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 
 import cv2
 import numpy as np
@@ -173,6 +174,30 @@ def test_drawn_charuco_with_its_dictionary_and_marker_size(tmp_path):
     assert not (tmp_path / "c2").exists()
 
 
+def test_charuco_with_a_wrong_marker_size_or_too_many_squares(tmp_path, capsys):
+    """A wrong --marker-mm was calibrated at 2.2–2.9 px RMS with exit 0: the markers are
+    measured on the board (through the corners' homography) and the size named, exit 2. A
+    --squares one row larger than the board finds the same corners (the extra row is never
+    seen): the calibration is right and a warning asks whether the board is smaller."""
+    board = Board("charuco", (7, 6), 60.0, marker_ratio=0.7, dictionary="DICT_4X4_50")
+    rig = _air_rig()
+    poses = sample_poses(rig, board, 8, seed=7, water=False, distance_range=(400, 550),
+                         max_tilt_deg=35)
+    folder = _write_photos(tmp_path / "charuco", rig, poses, ext="png", board=board)
+    common = ["calibrate", str(folder), "--air", "--board", "charuco", "--square-mm", "60",
+              "--dictionary", "DICT_4X4_50"]
+    assert _run(common + ["--squares", "7x6", "--marker-mm", "30", "--out",
+                          str(tmp_path / "m")]) == 2
+    err = capsys.readouterr().err
+    measured = float(re.search(r"the markers measure about (\d+) mm", err).group(1))
+    assert abs(measured / 42 - 1) < 0.08 and "check --marker-mm" in err
+    assert not (tmp_path / "m").exists()
+    assert _run(common + ["--squares", "7x7", "--marker-mm", "42", "--out",
+                          str(tmp_path / "s")]) == 0
+    report = json.loads((tmp_path / "s" / "report.json").read_text())
+    assert any("is the board 7x6 squares, not 7x7" in w for w in report["warnings"])
+
+
 def _fails(argv, text, capsys):
     assert _run(argv) == 2
     err = capsys.readouterr().err
@@ -331,6 +356,22 @@ def test_design_port_gives_the_starting_port_in_one_option():
                            (("--design-port", "thickness=-1"), "positive length"),
                            (("--design-port", "n_water=0.99"), "index >= 1"),
                            (("--design-port", "distance=90,distance=95"), "distance is given twice"),
-                           (("--design-port", "n_water=T=12,S=35"), "--n-water T=…,S=…")):
+                           (("--design-port", "n_water=T=12,S=35"), "--n-water T=…,S=…"),
+                           (("--design-port", ","), "an empty item"),
+                           (("--design-port", "distance=90,"), "an empty item")):
         with pytest.raises(CLIError, match=message):
             design_port(parsed(*extra), np.array([0.0, 0.0, 1.0]))
+
+
+@pytest.mark.parametrize("text,message", [("normal,normal", "normal given twice"),
+                                          ("distance,,normal", "an empty item"),
+                                          (",", "an empty item"),
+                                          ("depth", "unknown parameter depth")])
+def test_free_parameters_are_named_once_each(text, message):
+    """``--free normal,normal`` and ``--design-port ,`` were accepted as if they said less."""
+    from eval.calibrate.command import parse_free
+    from eval.cli import CLIError
+
+    with pytest.raises(CLIError, match=message):
+        parse_free(text)
+    assert parse_free("distance,normal") == ("distance", "normal")
