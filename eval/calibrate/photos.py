@@ -615,6 +615,10 @@ def summary_lines(report: dict) -> str:
                              f"{p['unit']}".rstrip())
         lines.append(f"housing reprojection RMS {h['rms_px']:.4f} px ({h['observations']} "
                      f"corners)")
+        if h.get("uncertainty") == "conditional":
+            lines.append("note: σ is conditional on the in-air calibration, taken as exact: the "
+                         "--intrinsics file carried no covariance (calibmar's YAML and COLMAP's "
+                         "cameras.txt hold none; the calib.yaml of eval calibrate --air does)")
     g, c = report["geometry"], report["coverage"]
     lines.append(f"boards {_range(g['distance_mm'], 4)} mm away, tilted {_range(g['tilt_deg'], 3)}°; "
                  f"corners cover {100 * c['left']['fraction']:.0f} % / "

@@ -72,6 +72,9 @@ def read_photo(path, encoding: str = "auto") -> np.ndarray:
     image = cv2.imread(path, cv2.IMREAD_ANYDEPTH | cv2.IMREAD_ANYCOLOR)
     if image is None or image.size == 0:
         raise PhotoError(f"{path}: not an image OpenCV can read")
+    truncated = jpeg_truncation(path)
+    if truncated:
+        raise PhotoError(f"{path}: {truncated}")
     if image.ndim == 3:
         channels = image.shape[2]
         if channels == 1:
@@ -87,6 +90,10 @@ def read_photo(path, encoding: str = "auto") -> np.ndarray:
         table = (srgb_to_linear(levels) if srgb else levels).astype(np.float32)
         return table[image]
     image = image.astype(np.float32)
+    bad = int(np.count_nonzero(~np.isfinite(image)))
+    if bad:
+        raise PhotoError(f"{path}: {bad} pixel(s) are NaN or infinite (a float image must hold "
+                         f"finite values)")
     return np.ascontiguousarray(srgb_to_linear(np.clip(image, 0, 1)).astype(np.float32)
                                 if encoding == "srgb" else image)
 
@@ -104,6 +111,34 @@ def _photos_in(folder: str) -> dict:
             raise PhotoError(f"{folder}: two photos named {stem} ({out[stem]}, {name})")
         out[stem] = name
     return out
+
+
+#: Bytes at a JPEG's end searched for its end-of-image marker before the file is decoded again
+#: to tell a truncated file from one with data after the marker.
+JPEG_TAIL_BYTES = 4096
+
+
+def jpeg_truncation(path) -> str | None:
+    """Why a JPEG file is cut short, or None (also for other formats): OpenCV decodes a truncated
+    JPEG with a warning on stderr only (libjpeg's "Premature end of JPEG file"), the missing
+    rows grey. A file whose last :data:`JPEG_TAIL_BYTES` bytes hold no end-of-image marker
+    (FF D9) is decoded again with Pillow, which refuses a truncated file."""
+    with open(path, "rb") as fh:
+        if fh.read(2) != b"\xff\xd8":
+            return None
+        fh.seek(0, os.SEEK_END)
+        size = fh.tell()
+        fh.seek(max(0, size - JPEG_TAIL_BYTES))
+        if b"\xff\xd9" in fh.read():
+            return None
+    from PIL import Image
+
+    try:
+        with Image.open(path) as image:
+            image.load()
+    except (OSError, ValueError, SyntaxError) as exc:
+        return f"a truncated JPEG ({' '.join(str(exc).split()) or 'cut short'}; {size} bytes)"
+    return None
 
 
 def exif_orientation(path) -> int:
@@ -218,5 +253,6 @@ def read_pairs(pairs: PhotoPairs, encoding: str = "auto") -> tuple[list, tuple]:
 
 
 __all__ = ["ENCODING_HELP", "PHOTO_ENCODINGS", "PHOTO_EXTENSIONS", "PhotoError", "PhotoPairs",
-           "add_encoding_option", "check_orientations", "exif_orientation", "pair_folders",
+           "JPEG_TAIL_BYTES", "add_encoding_option", "check_orientations", "exif_orientation",
+           "jpeg_truncation", "pair_folders",
            "photo_files", "photo_folder", "read_pairs", "read_photo", "srgb_to_linear"]

@@ -335,6 +335,13 @@ def test_rendered_photos_in_air_then_underwater(rendered, tmp_path, capsys):
     assert read_calib(out / "calib.yaml")["has_port"]
     printed = capsys.readouterr().out
     assert "housing distance" in printed and "truth" not in printed
+    assert "σ is conditional" not in printed  # calib.yaml carries the in-air covariance
+    # the same in-air calibration in calibmar's file, which holds no covariance: the σ is
+    # conditional, and the summary says so (it was reported as if it covered the chain)
+    assert eval_main(["calibrate", rendered["water"], "--intrinsics",
+                      str(tmp_path / "air" / "calibmar.yaml"), "--start-distance", "90", "--out",
+                      str(tmp_path / "water2")] + board) == 0
+    assert "σ is conditional on the in-air calibration" in capsys.readouterr().out
 
 
 def test_design_port_gives_the_starting_port_in_one_option():

@@ -117,3 +117,22 @@ def test_one_cameras_photos_share_one_orientation(tmp_path):
         image.save(tmp_path / f"{k}.jpg", exif=exif.tobytes())
     with pytest.raises(PhotoError, match=r"2\.jpg: EXIF orientation 6, but the other photos"):
         photo_files(tmp_path)
+
+
+def test_a_truncated_jpeg_and_a_float_image_with_nan_are_refused(tmp_path):
+    """OpenCV reads a JPEG cut short with a warning on stderr only (the missing rows grey), and
+    NaN pixels of a float TIFF went on into the measurement: both are one PhotoError."""
+    rng = np.random.default_rng(2)
+    image = rng.integers(0, 256, (120, 160), dtype=np.uint8)
+    cv2.imwrite(str(tmp_path / "whole.jpg"), image)
+    data = (tmp_path / "whole.jpg").read_bytes()
+    (tmp_path / "cut.jpg").write_bytes(data[: len(data) // 2])
+    assert read_photo(tmp_path / "whole.jpg").shape == image.shape
+    assert cv2.imread(str(tmp_path / "cut.jpg")) is not None  # what OpenCV alone accepts
+    with pytest.raises(PhotoError, match=r"cut\.jpg: a truncated JPEG"):
+        read_photo(tmp_path / "cut.jpg")
+    floats = rng.random((30, 40)).astype(np.float32)
+    floats[3, 4], floats[5, 6] = np.nan, np.inf
+    cv2.imwrite(str(tmp_path / "nan.tiff"), floats)
+    with pytest.raises(PhotoError, match=r"nan\.tiff: 2 pixel\(s\) are NaN or infinite"):
+        read_photo(tmp_path / "nan.tiff")
