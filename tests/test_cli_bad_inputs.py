@@ -213,6 +213,10 @@ EVAL_CASES = [
     # too large, distortion
     (None, RUN + ["-D", "width=100000", "-D", "height=100000"], "GiB"),
     (None, RUN + ["-D", "left_dist=-0.5 0 0 0 0"], "dist"),
+    # a distortion that folds within the image: the camera and where it folds (issue 37)
+    (None, RUN + ["-D", "left_dist=-5 0 0 0 0"],
+     "left_dist: the lens distortion [-5.0, 0.0, 0.0, 0.0, 0.0] folds within the 320x268 image, "
+     "about"),
     (None, RUN + ["-D", "left_dist=nan 0 0 0 0"], "dist"),
     (None, RUN + ["-D", "left_dist=1 2"], "dist"),
     # options
