@@ -47,7 +47,7 @@ def read_pixel_pairs(path) -> np.ndarray:
     ignored); CLIError naming what is wrong."""
     if not os.path.isfile(path):
         raise CLIError(f"--pixels {path}: no such file")
-    with open(path, newline="") as fh:
+    with open(path, newline="", encoding="utf-8-sig") as fh:  # a BOM (Excel's "CSV UTF-8")
         reader = csv.DictReader(fh)
         missing = [c for c in PIXEL_COLUMNS if c not in (reader.fieldnames or [])]
         if missing:

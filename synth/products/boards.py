@@ -417,7 +417,7 @@ def _read_table(file, header, rows: int) -> np.ndarray:
     :class:`DatasetError` unless it has ``header``, exactly ``rows`` complete rows of numbers
     (what the manifest's pose count says) and ends with its last row's newline."""
     try:
-        with open(file, newline="") as fh:
+        with open(file, newline="", encoding="utf-8-sig") as fh:  # a BOM (Excel) is read
             text = fh.read()
     except OSError as exc:
         raise DatasetError(f"{file}: {exc.strerror or exc}") from None

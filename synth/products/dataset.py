@@ -273,7 +273,7 @@ def write_pixels_csv(path, ids, points, uv_left, uv_right) -> None:
 
 def read_pixels_csv(path) -> dict:
     """``{"id": (N,), "points": (N, 3), "left": (N, 2), "right": (N, 2)}`` from ``pixels.csv``."""
-    with open(path, newline="") as fh:
+    with open(path, newline="", encoding="utf-8-sig") as fh:
         text = fh.read()
     reader = csv.reader(text.splitlines())
     header = next(reader, None)

@@ -257,3 +257,17 @@ def test_targets_ply_keeps_every_bit(tmp_path):
     import open3d as o3d
     assert np.array_equal(np.asarray(o3d.io.read_point_cloud(str(tmp_path / "t.ply")).points),
                           points)
+
+
+def test_pixels_csv_with_a_byte_order_mark_is_read(tmp_path):
+    """A pixels.csv saved by Excel ("CSV UTF-8") starts with a byte-order mark: same values."""
+    from synth.products.dataset import read_pixels_csv, write_pixels_csv
+
+    plain = tmp_path / "pixels.csv"
+    write_pixels_csv(plain, [0, 1], [[1.0, 2.0, 3.0], [4.0, 5.0, 6.5]], [[10.0, 11.0], [12, 13]],
+                     [[20.0, 21.0], [22, 23]])
+    with_bom = tmp_path / "bom.csv"
+    with_bom.write_bytes(b"\xef\xbb\xbf" + plain.read_bytes())
+    ours, theirs = read_pixels_csv(plain), read_pixels_csv(with_bom)
+    for key in ("id", "points", "left", "right"):
+        np.testing.assert_array_equal(theirs[key], ours[key])
