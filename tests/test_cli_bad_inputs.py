@@ -237,6 +237,10 @@ EVAL_CASES = [
     (None, RUN + ["--depth-range", "5"], "--depth-range"),
     (None, RUN + ["--depth-range", "2,1"], "--depth-range"),
     (None, RUN + ["--depth-range", "nan,5"], "--depth-range"),
+    # a leading minus is the value, not an option (issue 37: "expected one argument")
+    (None, RUN + ["--depth-range", "-100,2000"],
+     "--depth-range -100,2000: the near end must not be negative"),
+    (None, RUN + ["--gate-mm", "-1e9"], "--gate-mm: expected a positive finite number, got '-1e9'"),
     (None, RUN + ["--max-elongation", "1"], "--max-elongation"),
     (None, RUN + ["--max-elongation", "inf"], "--max-elongation"),
     (None, RUN + ["--median-filter", "4"], "--median-filter"),

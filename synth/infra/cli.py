@@ -20,6 +20,7 @@ from __future__ import annotations
 import argparse
 import math
 import os
+import re
 import sys
 import traceback
 
@@ -64,9 +65,21 @@ def _record_given_options(parser: argparse.ArgumentParser) -> None:
             action.__class__ = _RECORDING_CLASSES[cls]
 
 
+#: What argparse takes for a negative number, not an option: ``-100``, ``-.5``, ``-1e9`` and the
+#: lists ``-100,2000`` (argparse's own rule knows only ``-100`` and ``-.5``: ``--depth-range
+#: -100,2000`` was "expected one argument" instead of what is wrong with the value).
+NEGATIVE_NUMBER = re.compile(r"^-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?(,[-+]?[\d.eE+-]*)*$")
+
+
 class Parser(argparse.ArgumentParser):
     """ArgumentParser whose errors are one line ``error: …`` (no usage dump) and exit 2, and
-    which records the options given on the command line (:func:`given`)."""
+    which records the options given on the command line (:func:`given`). A value that starts
+    with a minus and reads as a number or a list of numbers (:data:`NEGATIVE_NUMBER`) is the
+    option's value, which its validator then judges."""
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self._negative_number_matcher = NEGATIVE_NUMBER
 
     def error(self, message):
         raise CLIError(message)
