@@ -238,6 +238,11 @@ EVAL_CASES = [
     (None, RUN + ["--depth-range", "2,1"], "--depth-range"),
     (None, RUN + ["--depth-range", "nan,5"], "--depth-range"),
     # a leading minus is the value, not an option (issue 37: "expected one argument")
+    # an empty --out is named as such (it was "--out exists and holds files this command did
+    # not write": the empty path is the current directory) (issue 37)
+    (None, ["run", "paper_plane.xml", "--out", "", *SMALL], "argument --out: the path is empty"),
+    (None, ["sweep", "sweep.toml", "--out", " "], "argument --out: the path is empty"),
+    (None, ["bench", "--out", ""], "argument --out: the path is empty"),
     (None, RUN + ["--depth-range", "-100,2000"],
      "--depth-range -100,2000: the near end must not be negative"),
     (None, RUN + ["--gate-mm", "-1e9"], "--gate-mm: expected a positive finite number, got '-1e9'"),

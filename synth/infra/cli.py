@@ -208,6 +208,16 @@ def add_scene_argument(parser, default: str | None = None) -> None:
                             help=f"{SCENE_HELP}; default {default}")
 
 
+def out_path(text: str) -> str:
+    """An argparse type: an output path, refused when empty or blank (``--out ''`` was "--out
+    exists and holds files this command did not write": the empty path is the current
+    directory)."""
+    if not text.strip():
+        raise argparse.ArgumentTypeError(f"the path is empty ({text!r}): give a directory or "
+                                         f"file name")
+    return text
+
+
 def add_out_option(parser, command: str, default: str | None = None, *, what: str = "directory",
                    rule: str | None = None, required: bool | None = None) -> None:
     """``--out``: the output ``what`` (directory or file) of ``command`` and the rule that
@@ -219,7 +229,7 @@ def add_out_option(parser, command: str, default: str | None = None, *, what: st
     required = default is None if required is None else required
     where = ("required" if required else "optional" if default is None
              else f"default {default}")
-    parser.add_argument("--out", default=default, required=required,
+    parser.add_argument("--out", default=default, required=required, type=out_path,
                         metavar="FILE" if what == "file" else "DIR",
                         help=f"output {what} ({where}); {rule}")
 
@@ -464,7 +474,7 @@ __all__ = ["BOARD_OPTIONS", "DEFAULT_BOARD", "add_board_options", "add_cluster_o
            "DEFINE_HELP", "DISTRIBUTION", "EXIT_BAD_INPUT", "EXIT_CHECK_FAILED",
            "EXIT_INTERRUPTED", "EXIT_OK", "JSON_HELP", "NO_PROGRESS_HELP", "SCENE_HELP",
            "add_define_option", "add_json_option", "add_out_option", "add_progress_option",
-           "add_scene_argument", "any_float", "CLIError", "command_parser", "finite_float",
+           "add_scene_argument", "any_float", "out_path", "CLIError", "command_parser", "finite_float",
            "given", "int_at_least", "non_negative_float", "non_negative_int", "one_line",
            "package_version", "Parser", "positive_float", "positive_int", "process_main",
            "refuse_given", "run_command", "scene_seed", "WATER_INDEX_HELP", "WaterIndex",
