@@ -3,8 +3,9 @@
 * One argument parser class whose errors are one line ``error: …`` (no usage dump).
 * The same argument validators (integers with a lower bound, finite floats with bounds).
 * The same exit codes: 0 ok, 1 a check that fails, 2 bad input (one line ``error: …`` on
-  stderr), 130 interrupted. An unexpected exception (a bug) prints one line
-  ``error: internal error: …`` and exits with 1; set ``REFSTEREO_TRACEBACK=1`` to see the traceback.
+  stderr), 3 an internal error, 130 interrupted. An unexpected exception (a bug) prints one line
+  ``error: internal error: …`` and exits with 3 (not 1, which says that a check failed); set
+  ``REFSTEREO_TRACEBACK=1`` to see the traceback.
 * The same ``--out`` rule (:mod:`synth.infra.fileio`).
 * The same vocabulary, added by the helpers below: a scene is the positional ``scene``;
   ``--out`` says what it writes and the rule; ``-D NAME=VALUE`` overrides a scene default;
@@ -24,7 +25,7 @@ import re
 import sys
 import traceback
 
-EXIT_OK, EXIT_CHECK_FAILED, EXIT_BAD_INPUT, EXIT_INTERRUPTED = 0, 1, 2, 130
+EXIT_OK, EXIT_CHECK_FAILED, EXIT_BAD_INPUT, EXIT_INTERNAL_ERROR, EXIT_INTERRUPTED = 0, 1, 2, 3, 130
 
 
 class CLIError(Exception):
@@ -437,7 +438,7 @@ def _run(parser, argv) -> tuple[int, str | None]:
     except Exception as exc:  # a bug: one line, the traceback on request
         if os.environ.get("REFSTEREO_TRACEBACK"):
             traceback.print_exc()
-        return EXIT_CHECK_FAILED, (f"internal error: {type(exc).__name__}: {one_line(exc)} "
+        return EXIT_INTERNAL_ERROR, (f"internal error: {type(exc).__name__}: {one_line(exc)} "
                                    f"(set REFSTEREO_TRACEBACK=1 for the traceback)")
 
 
@@ -472,7 +473,8 @@ def process_main(main) -> None:
 
 __all__ = ["BOARD_OPTIONS", "DEFAULT_BOARD", "add_board_options", "add_cluster_options", "board_from_args",
            "DEFINE_HELP", "DISTRIBUTION", "EXIT_BAD_INPUT", "EXIT_CHECK_FAILED",
-           "EXIT_INTERRUPTED", "EXIT_OK", "JSON_HELP", "NO_PROGRESS_HELP", "SCENE_HELP",
+           "EXIT_INTERNAL_ERROR", "EXIT_INTERRUPTED", "EXIT_OK", "JSON_HELP", "NO_PROGRESS_HELP",
+           "SCENE_HELP",
            "add_define_option", "add_json_option", "add_out_option", "add_progress_option",
            "add_scene_argument", "any_float", "out_path", "CLIError", "command_parser", "finite_float",
            "given", "int_at_least", "non_negative_float", "non_negative_int", "one_line",

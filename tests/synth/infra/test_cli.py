@@ -24,3 +24,22 @@ def test_a_value_with_a_leading_minus_is_the_options_value(value):
 def test_an_option_is_still_not_a_value(argv):
     with pytest.raises(CLIError, match="expected one argument"):
         _parser().parse_args(argv)
+
+
+def test_an_internal_error_has_its_own_exit_code(capsys, monkeypatch):
+    """A bug is one line ``error: internal error: …`` and exit 3 — not 1, which says that a
+    check failed, nor 2 (bad input)."""
+    from synth.infra.cli import (EXIT_BAD_INPUT, EXIT_CHECK_FAILED, EXIT_INTERNAL_ERROR,
+                                 run_command)
+
+    monkeypatch.delenv("REFSTEREO_TRACEBACK", raising=False)
+
+    def parser():
+        p = Parser(prog="x")
+        p.set_defaults(_main=lambda args: {}["missing"])
+        return p
+
+    code = run_command(parser, [])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == EXIT_INTERNAL_ERROR == 3 and code not in (EXIT_CHECK_FAILED, EXIT_BAD_INPUT)
+    assert len(err) == 1 and err[0].startswith("error: internal error: KeyError: 'missing'")
