@@ -203,10 +203,12 @@ def score_covariances(data, arrays, label, uv, pixel_sigma) -> dict:
 
 def score_suite_main(args, output, method, log, start) -> int:
     """``--submission DIR``: every dataset of the suite ``args.dataset`` scored; the summary
-    files into ``--out``; exit 1 when a dataset is missing or failed."""
+    files into ``--out``; exit 1 when a dataset is missing or failed, 3 when the scoring of a
+    dataset met an internal error (the others are scored and the summary written)."""
     from synth.infra.fileio import atomic_write_json, jsonable
 
-    from eval.core.suite_scores import FAILURES, score_suite, write_summary
+    from eval.core.suite_scores import FAILURES, INTERNAL_ERROR, score_suite, write_summary
+    from synth.infra.cli import EXIT_CHECK_FAILED, EXIT_INTERNAL_ERROR
 
     if args.units is not None:
         raise CLIError("--units does not apply with --submission: the points of a submission "
@@ -233,7 +235,9 @@ def score_suite_main(args, output, method, log, start) -> int:
           f"{len(failed)} missing or failed, {len(warned)} with warnings; wrote {output.path}/"
           f"{', '.join(files[:3])} and {len(files) - 3} figure(s)",
           file=sys.stderr if args.json else sys.stdout)
-    return 1 if failed else 0
+    if any(str(r.get("error") or "").startswith(INTERNAL_ERROR) for r in failed):
+        return EXIT_INTERNAL_ERROR
+    return EXIT_CHECK_FAILED if failed else 0
 
 
 def markdown(report: dict) -> str:
