@@ -469,6 +469,8 @@ def run_pipeline(inputs: RunInputs, config: RunConfig, log=print) -> RunResult:
             "uncertainty": uncertainty_corrected},
         "timings_s": timings,
         "variant": inputs.variant, "spp": inputs.spp,
+        "spp_rendered": (inputs.extra.get("render") or {}).get(
+            "spp_rendered", inputs.extra.get("spp_rendered")),
     }
     return RunResult(report=report, inputs=inputs, detections=detections, centers=centers,
                      matches=matches, correct=scored["correct"],

@@ -396,3 +396,17 @@ def test_a_magnifying_distortion_that_matches_almost_nothing_exits_1(tmp_path, c
     report = json.loads((out / "report.json").read_text())
     assert report["verdict"]["passed"] is False
     assert report["matching"]["correct"] < report["matching"]["visible_in_both"] / 2
+
+
+@pytest.mark.slow
+def test_spp_that_the_sampler_rounds_up_is_said_and_json_stays_json(small_scene, tmp_path,
+                                                                    capsys):
+    """``--spp 5``: the scenes' multijitter sampler renders 6. The report records both and the
+    summary says 6; Mitsuba's warning goes to stderr, so ``--json`` prints valid JSON."""
+    out = tmp_path / "out"
+    assert main(["run", small_scene, "--out", str(out), "--spp", "5", "--no-progress",
+                 "--json"]) == 0
+    captured = capsys.readouterr()
+    report = json.loads(captured.out)  # Mitsuba's log line made this invalid
+    assert report["spp"] == 5 and report["spp_rendered"] == 6
+    assert "6 spp (5 requested" in captured.err
