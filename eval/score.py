@@ -102,6 +102,8 @@ def main(args) -> int:
         raise CLIError("--pixel-sigma applies with --pixels only: the covariance of a point "
                        "comes from its two pixels")
     method = args.method or "optical_path"
+    if args.submission and args.method is not None:
+        refuse_method_without_pairs(args.dataset, args.submission, method)
     output = OutputDir(args.out, COMMAND).claim()
     if args.submission:
         return score_suite_main(args, output, method, log, start)
@@ -199,6 +201,26 @@ def score_covariances(data, arrays, label, uv, pixel_sigma) -> dict:
     arrays["covariance"] = covariance.total[ok]
     info["summaries"] = {label: uncertainty_summary(arrays["covariance"], arrays["errors"])}
     return info
+
+
+def refuse_method_without_pairs(suite_dir: str, sub_dir: str, method: str) -> None:
+    """CLIError when ``--method`` cannot apply to any submission of ``sub_dir``: it triangulates
+    a ``pairs.csv`` and picks ``points_<method>.ply``; a ``points.ply`` cloud or a depth map is
+    scored as it is."""
+    from eval.core.suite_scores import find_submission, read_suite
+
+    if not os.path.isdir(sub_dir):
+        return  # said by score_suite
+    _, index = read_suite(suite_dir)
+    for row in index:
+        if row.get("status") != "ok" or row.get("render") != "targets":
+            continue
+        found = find_submission(os.path.join(sub_dir, row["folder"]), row["render"], method)
+        if found and (found[0] == "pairs" or os.path.basename(found[1]) != "points.ply"):
+            return
+    raise CLIError(f"--method {method} does not apply: no submission in {sub_dir} is a pairs.csv "
+                   f"or a points_{method}.ply (a points.ply cloud or a depth map is scored as it "
+                   f"is; --method triangulates pairs.csv)")
 
 
 def score_suite_main(args, output, method, log, start) -> int:

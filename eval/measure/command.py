@@ -36,8 +36,8 @@ from eval.core.formatting import format_number as fmt
 from eval.core.photos import add_encoding_option
 from eval.core.uncertainty import add_pixel_sigma_option, parse_pixel_sigma
 from measure.images.detect import FLOOR_FRACTION
-from synth.infra.cli import (EXIT_CHECK_FAILED, add_json_option, add_out_option, add_progress_option,
-                             refuse_given)
+from synth.infra.cli import (EXIT_CHECK_FAILED, add_json_option, add_out_option,
+                             add_progress_option, option_number, refuse_given)
 
 COMMAND = "eval measure"
 DEFAULT_METHODS = ("optical_path",)
@@ -185,8 +185,8 @@ def measure_all(inputs, options, quiet: bool, log) -> list:
                 result = measure_dense(inputs.rig, name, left, right, options,
                                        _progress_bar(quiet))
             except ValueError as exc:
-                raise CLIError(f"--depth-range {options.depth_range[0]:g},"
-                               f"{options.depth_range[1]:g}: {exc}") from None
+                raise CLIError(f"--depth-range {option_number(options.depth_range[0])},"
+                               f"{option_number(options.depth_range[1])}: {exc}") from None
         else:
             result = measure_targets(inputs.rig, name, left, right, options,
                                      inputs.rig_covariance)

@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from eval.core.detection import detect_view
+from synth.infra.cli import option_number
 
 #: The methods whose points get a covariance (:mod:`measure.stereo.uncertainty`; as ``eval run``).
 COVARIANCE_METHODS = ("optical_path", "reprojection")
@@ -86,9 +87,10 @@ def nothing_matched(name: str, found: dict, options: TargetOptions) -> str:
                  f"exposure, the detector options (--threshold-fraction) and that the photos "
                  f"show bright targets on a dark background")
     else:
-        window = "no depth window" if near is None else f"the depth window {near:g}-{far:g} mm"
+        window = ("no depth window" if near is None else
+                  f"the depth window {option_number(near)}-{option_number(far)} mm")
         cause = (f"check that the calibration belongs to these photos (camera order, port, "
-                 f"water index), {window} (--depth-range) and --gate-mm {options.gate_mm:g}")
+                 f"water index), {window} (--depth-range) and --gate-mm {option_number(options.gate_mm)}")
     return (f"{name}: no target was matched between the views (detected {found['left']} left, "
             f"{found['right']} right): {cause}")
 

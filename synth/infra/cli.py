@@ -106,6 +106,20 @@ def refuse_given(args, dests, why: str) -> None:
             raise CLIError(f"{option} does not apply {why}")
 
 
+def option_number(value: float) -> str:
+    """A number as a user types it on the command line: the shorter of its plain and its
+    scientific form (12 significant digits), the exponent without ``+`` and leading zeros
+    (``1e9``, not ``1e+09``; ``0.5``; ``1000``; ``2.5e-5``), so that a message that suggests an
+    option value can be copied back."""
+    mantissa, exponent = f"{float(value):.11e}".split("e")
+    mantissa = mantissa.rstrip("0").rstrip(".")
+    scientific = f"{mantissa}e{int(exponent)}"
+    plain = f"{float(value):.12g}"
+    if "e" in plain or (len(plain) > 6 and len(scientific) < len(plain)):
+        return scientific
+    return plain
+
+
 def int_at_least(minimum: int, description: str):
     """An argparse type: an integer >= ``minimum``; the error says ``description``."""
 
@@ -476,7 +490,8 @@ __all__ = ["BOARD_OPTIONS", "DEFAULT_BOARD", "add_board_options", "add_cluster_o
            "EXIT_INTERNAL_ERROR", "EXIT_INTERRUPTED", "EXIT_OK", "JSON_HELP", "NO_PROGRESS_HELP",
            "SCENE_HELP",
            "add_define_option", "add_json_option", "add_out_option", "add_progress_option",
-           "add_scene_argument", "any_float", "out_path", "CLIError", "command_parser", "finite_float",
+           "add_scene_argument", "any_float", "option_number", "out_path", "CLIError",
+           "command_parser", "finite_float",
            "given", "int_at_least", "non_negative_float", "non_negative_int", "one_line",
            "package_version", "Parser", "positive_float", "positive_int", "process_main",
            "refuse_given", "run_command", "scene_seed", "WATER_INDEX_HELP", "WaterIndex",

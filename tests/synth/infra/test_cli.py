@@ -43,3 +43,13 @@ def test_an_internal_error_has_its_own_exit_code(capsys, monkeypatch):
     err = capsys.readouterr().err.strip().splitlines()
     assert code == EXIT_INTERNAL_ERROR == 3 and code not in (EXIT_CHECK_FAILED, EXIT_BAD_INPUT)
     assert len(err) == 1 and err[0].startswith("error: internal error: KeyError: 'missing'")
+
+
+@pytest.mark.parametrize("value, text", [(1e9, "1e9"), (0.5, "0.5"), (2.5e-5, "2.5e-5"),
+                                         (1000.0, "1000"), (123456.75, "123456.75"), (1e6, "1e6"),
+                                         (-1e-12, "-1e-12")])
+def test_option_number_reads_as_typed(value, text):
+    from synth.infra.cli import option_number
+
+    assert option_number(value) == text
+    assert float(option_number(value)) == value
