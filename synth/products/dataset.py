@@ -234,6 +234,9 @@ def _read_domes(path, node) -> DomePair:
             raise DatasetError(f"{path}: dome map without a {name} dome (center, radius, "
                                f"thickness, indices)")
         try:
+            from synth.scene.dome import check_dome_size
+
+            check_dome_size(sub.getNode("radius").real(), sub.getNode("thickness").real())
             domes.append(DomePort(centre.ravel(), sub.getNode("radius").real(),
                                   sub.getNode("thickness").real(),
                                   tuple(_seq(sub.getNode("indices")))))
