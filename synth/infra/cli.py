@@ -428,6 +428,22 @@ def run_command(parser, argv=None) -> int:
     return code
 
 
+#: The project's own top-level packages (a missing one of these is a bug, not a missing
+#: dependency).
+OWN_PACKAGES = ("measure", "synth", "eval", "tests")
+
+
+def missing_dependency(exc: ModuleNotFoundError) -> str | None:
+    """The one line that says a dependency is not installed in this Python (and how to get the
+    project's environment), or None when the missing module is one of the project's own."""
+    name = exc.name or str(exc)
+    if name.split(".")[0] in OWN_PACKAGES:
+        return None
+    return (f"the Python module {name!r} is not installed in this Python ({sys.executable}): "
+            f"run the commands with the project's environment — source .venv/bin/activate "
+            f"(make setup creates it) or .venv/bin/python -m …")
+
+
 def _run(parser, argv) -> tuple[int, str | None]:
     """``(exit code, the error line or None)`` of one command (see :func:`run_command`)."""
     try:
@@ -450,6 +466,9 @@ def _run(parser, argv) -> tuple[int, str | None]:
         return EXIT_BAD_INPUT, ("out of memory (try a smaller image, fewer samples per pixel or "
                                 "fewer targets)")
     except Exception as exc:  # a bug: one line, the traceback on request
+        missing = missing_dependency(exc) if isinstance(exc, ModuleNotFoundError) else None
+        if missing is not None:  # not a bug: a Python without the project's dependencies
+            return EXIT_BAD_INPUT, missing
         if os.environ.get("REFSTEREO_TRACEBACK"):
             traceback.print_exc()
         return EXIT_INTERNAL_ERROR, (f"internal error: {type(exc).__name__}: {one_line(exc)} "

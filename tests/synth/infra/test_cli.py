@@ -53,3 +53,27 @@ def test_option_number_reads_as_typed(value, text):
 
     assert option_number(value) == text
     assert float(option_number(value)) == value
+
+
+@pytest.mark.parametrize("module, code, fragment", [
+    ("cv2_not_installed_here", 2, "error: the Python module 'cv2_not_installed_here' is not "
+                                  "installed in this Python"),
+    ("measure.no_such_module", 3, "error: internal error: ModuleNotFoundError")])
+def test_a_missing_dependency_says_to_use_the_projects_environment(capsys, module, code,
+                                                                   fragment):
+    """``python -m eval …`` with a Python that lacks the dependencies (the system's) was
+    "internal error: ModuleNotFoundError: cv2"; a missing module of the project is still a bug."""
+    import importlib
+
+    from synth.infra.cli import run_command
+
+    def parser():
+        p = Parser(prog="x")
+        p.set_defaults(_main=lambda args: importlib.import_module(module))
+        return p
+
+    assert run_command(parser, []) == code
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith(fragment), err
+    if code == 2:
+        assert ".venv/bin/activate" in err[0] and "make setup" in err[0]
