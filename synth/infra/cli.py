@@ -441,7 +441,7 @@ def missing_dependency(exc: ModuleNotFoundError) -> str | None:
         return None
     return (f"the Python module {name!r} is not installed in this Python ({sys.executable}): "
             f"run the commands with the project's environment — source .venv/bin/activate "
-            f"(make setup creates it) or .venv/bin/python -m …")
+            f"(created by make setup) or .venv/bin/python -m …")
 
 
 def _run(parser, argv) -> tuple[int, str | None]:
