@@ -78,7 +78,7 @@ def find_submission(directory: str, render: str, method: str) -> tuple[str, str]
     return None
 
 
-def _depth_points(path: str, data) -> np.ndarray:
+def depth_points(path: str, data) -> np.ndarray:
     """``(H, W, 3)`` mm: each left pixel's refracted ray at the submitted depth along z."""
     from measure.geometry.refraction import trace_through_port
 
@@ -228,7 +228,7 @@ def _score_surface(data, kind: str, path: str) -> dict:
     truth = read_truth_maps(data.path, "left", data.rig.left.size)
     vertices, triangles = read_ply(os.path.join(data.path, SURFACE_FILE))
     if kind == "depth":
-        measured = _depth_points(path, data)
+        measured = depth_points(path, data)
         scores = score_surface(SurfaceCase(vertices, triangles, measured, truth.points,
                                            truth.overlap, data.rig.port.normal))
         return {**{k: scores.get(k) for k in SURFACE_METRICS}, "scores": scores}
@@ -411,7 +411,7 @@ def write_figures(directory: str, rows: list, swept: list) -> list:
 
 
 __all__ = ["FAILURES", "HEADLINE", "INTERNAL_ERROR", "PLAUSIBLE_DEPTH_MM", "SURFACE_METRICS",
-           "TARGET_METRICS", "aggregate",
+           "TARGET_METRICS", "aggregate", "depth_points",
            "SURFACE_GATE_MM", "distinct_values", "find_submission",
            "read_suite", "score_entry", "score_suite", "summary_markdown", "write_figures",
            "write_summary"]

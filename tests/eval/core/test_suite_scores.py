@@ -214,7 +214,7 @@ def test_swept_values_are_in_numeric_order():
 
 
 def _data(size=(96, 80)):
-    """What :func:`_depth_points` reads of a dataset: its rig."""
+    """What :func:`depth_points` reads of a dataset: its rig."""
     from types import SimpleNamespace
 
     from measure import StereoRig
@@ -254,17 +254,17 @@ def test_depth_files_that_are_no_depth_maps_are_named(tmp_path):
     """A 0-d, 1-D or string ``depth.npy``, an all-NaN ``depth.pfm``, a PFM whose scale says the
     wrong byte order: one ValueError naming the file and why (they were internal errors that
     aborted the whole suite's scoring, or an all-NaN map "scored")."""
-    from eval.core.suite_scores import _depth_points
+    from eval.core.suite_scores import depth_points
     from synth.formats.exchange import write_pfm
 
     data = _data()
     for name, (path, fragment) in _bad_depth_files(tmp_path).items():
         with pytest.raises(ValueError, match=re.escape(fragment)) as caught:
-            _depth_points(str(path), data)
+            depth_points(str(path), data)
         assert str(path) in str(caught.value), name
     good = tmp_path / "good.pfm"
     write_pfm(str(good), np.full((80, 96), 1000.0, np.float32))
-    assert np.isfinite(_depth_points(str(good), data)).all()
+    assert np.isfinite(depth_points(str(good), data)).all()
 
 
 def test_a_mesh_given_as_points_is_refused(tmp_path):
