@@ -84,8 +84,10 @@ def test_pixel_noise_option_is_seeded(small_scene, tmp_path):
     reports = []
     for name in ("a", "b"):
         out = tmp_path / name
+        # a gate that fits 0.3 px of noise at f = 150 px (0.5 mm matches 10 of 81: exit 1)
         assert main(["run", small_scene, "--out", str(out), "--spp", "4", "--noise-px", "0.3",
-                     "--seed", "5", "--methods", "optical_path", "--no-progress"]) == 0
+                     "--seed", "5", "--methods", "optical_path", "--gate-mm", "5",
+                     "--no-progress"]) == 0
         reports.append(json.loads((out / "report.json").read_text())["methods"]["optical_path"])
     assert reports[0]["rms_dp_mm"] == reports[1]["rms_dp_mm"]
 
@@ -138,8 +140,9 @@ def test_identical_runs_give_identical_reports(small_scene, tmp_path):
     texts = []
     for k in range(5):
         out = tmp_path / f"run{k}"
+        # a gate that fits 0.2 px of noise at f = 150 px (0.5 mm matches 10 of 81: exit 1)
         assert main(["run", small_scene, "--from", str(data), "--out", str(out), "--noise-px",
-                     "0.2", "--seed", "3", "--no-progress"]) == 0
+                     "0.2", "--seed", "3", "--gate-mm", "5", "--no-progress"]) == 0
         texts.append(json.dumps(_without_timings(json.loads((out / "report.json").read_text())),
                                 sort_keys=True).replace(str(out), "OUT"))
     assert all(text == texts[0] for text in texts[1:])
