@@ -101,6 +101,8 @@ def main(args) -> int:
         raise CLIError("--pixel-sigma applies with --pixels only: the covariance of a point "
                        "comes from its two pixels")
     method = args.method or "optical_path"
+    if args.submission and args.method is not None:
+        refuse_method_without_pairs(args.dataset, args.submission, method)
     output = OutputDir(args.out, COMMAND).claim()
     if args.submission:
         return score_suite_main(args, output, method, log, start)
@@ -200,12 +202,34 @@ def score_covariances(data, arrays, label, uv, pixel_sigma) -> dict:
     return info
 
 
+def refuse_method_without_pairs(suite_dir: str, sub_dir: str, method: str) -> None:
+    """CLIError when ``--method`` cannot apply to any submission of ``sub_dir``: it triangulates
+    a ``pairs.csv`` and picks ``points_<method>.ply``; a ``points.ply`` cloud or a depth map is
+    scored as it is."""
+    from eval.core.suite_scores import find_submission, read_suite
+
+    if not os.path.isdir(sub_dir):
+        return  # said by score_suite
+    _, index = read_suite(suite_dir)
+    for row in index:
+        if row.get("status") != "ok" or row.get("render") != "targets":
+            continue
+        found = find_submission(os.path.join(sub_dir, row["folder"]), row["render"], method)
+        if found and (found[0] == "pairs" or os.path.basename(found[1]) != "points.ply"):
+            return
+    raise CLIError(f"--method {method} does not apply: no submission in {sub_dir} is a pairs.csv "
+                   f"or a points_{method}.ply (a points.ply cloud or a depth map is scored as it "
+                   f"is; --method triangulates pairs.csv)")
+
+
 def score_suite_main(args, output, method, log, start) -> int:
     """``--submission DIR``: every dataset of the suite ``args.dataset`` scored; the summary
-    files into ``--out``; exit 1 when a dataset is missing or failed."""
+    files into ``--out``; exit 1 when a dataset is missing or failed, 3 when the scoring of a
+    dataset met an internal error (the others are scored and the summary written)."""
     from synth.infra.fileio import atomic_write_json, jsonable
 
-    from eval.core.suite_scores import FAILURES, score_suite, write_summary
+    from eval.core.suite_scores import FAILURES, INTERNAL_ERROR, score_suite, write_summary
+    from synth.infra.cli import EXIT_CHECK_FAILED, EXIT_INTERNAL_ERROR
 
     if args.units is not None:
         raise CLIError("--units does not apply with --submission: the points of a submission "
@@ -232,7 +256,9 @@ def score_suite_main(args, output, method, log, start) -> int:
           f"{len(failed)} missing or failed, {len(warned)} with warnings; wrote {output.path}/"
           f"{', '.join(files[:3])} and {len(files) - 3} figure(s)",
           file=sys.stderr if args.json else sys.stdout)
-    return 1 if failed else 0
+    if any(str(r.get("error") or "").startswith(INTERNAL_ERROR) for r in failed):
+        return EXIT_INTERNAL_ERROR
+    return EXIT_CHECK_FAILED if failed else 0
 
 
 def markdown(report: dict) -> str:

@@ -213,6 +213,10 @@ EVAL_CASES = [
     # too large, distortion
     (None, RUN + ["-D", "width=100000", "-D", "height=100000"], "GiB"),
     (None, RUN + ["-D", "left_dist=-0.5 0 0 0 0"], "dist"),
+    # a distortion that folds within the image: the camera and where it folds (issue 37)
+    (None, RUN + ["-D", "left_dist=-5 0 0 0 0"],
+     "left_dist: the lens distortion [-5.0, 0.0, 0.0, 0.0, 0.0] folds within the 320x268 image, "
+     "about"),
     (None, RUN + ["-D", "left_dist=nan 0 0 0 0"], "dist"),
     (None, RUN + ["-D", "left_dist=1 2"], "dist"),
     # options
@@ -233,6 +237,15 @@ EVAL_CASES = [
     (None, RUN + ["--depth-range", "5"], "--depth-range"),
     (None, RUN + ["--depth-range", "2,1"], "--depth-range"),
     (None, RUN + ["--depth-range", "nan,5"], "--depth-range"),
+    # a leading minus is the value, not an option (issue 37: "expected one argument")
+    # an empty --out is named as such (it was "--out exists and holds files this command did
+    # not write": the empty path is the current directory) (issue 37)
+    (None, ["run", "paper_plane.xml", "--out", "", *SMALL], "argument --out: the path is empty"),
+    (None, ["sweep", "sweep.toml", "--out", " "], "argument --out: the path is empty"),
+    (None, ["bench", "--out", ""], "argument --out: the path is empty"),
+    (None, RUN + ["--depth-range", "-100,2000"],
+     "--depth-range -100,2000: the near end must not be negative"),
+    (None, RUN + ["--gate-mm", "-1e9"], "--gate-mm: expected a positive finite number, got '-1e9'"),
     (None, RUN + ["--max-elongation", "1"], "--max-elongation"),
     (None, RUN + ["--max-elongation", "inf"], "--max-elongation"),
     (None, RUN + ["--median-filter", "4"], "--median-filter"),

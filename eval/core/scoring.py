@@ -22,14 +22,30 @@ DUPLICATE_MM = 1e-6
 PLAUSIBILITY_POINTS = 20_000
 
 
+def mesh_faces(path) -> int:
+    """The number of faces a PLY file's header declares (0 for a point cloud or another
+    format)."""
+    from synth.formats.cloudfile import ply_layout
+
+    if not os.fspath(path).lower().endswith(".ply"):
+        return 0
+    return sum(int(e["count"]) for e in ply_layout(path, os.fspath(path))["elements"]
+               if e["name"] in ("face", "tristrips"))
+
+
 def read_points(path) -> np.ndarray:
     """``(N, 3)`` float64 points of a point-cloud file, read whole (a truncated file is
-    refused: :mod:`synth.formats.cloudfile`); CLIError when unreadable, empty or not finite."""
+    refused: :mod:`synth.formats.cloudfile`); CLIError when unreadable, empty, not finite or a
+    mesh (a PLY with faces: its vertices are no measurement)."""
     from synth.formats.cloudfile import CloudFileError, read_cloud_points
 
     if not os.path.isfile(path):
         raise CLIError(f"--points {path}: no such file")
     try:
+        faces = mesh_faces(path)
+        if faces:
+            raise CLIError(f"--points {path}: a mesh ({faces} faces), not a point cloud: its "
+                           f"vertices are not measured points; submit the measured points")
         points = read_cloud_points(path)
     except CloudFileError as exc:
         raise CLIError(f"--points {exc}") from None
@@ -47,7 +63,7 @@ def read_pixel_pairs(path) -> np.ndarray:
     ignored); CLIError naming what is wrong."""
     if not os.path.isfile(path):
         raise CLIError(f"--pixels {path}: no such file")
-    with open(path, newline="") as fh:
+    with open(path, newline="", encoding="utf-8-sig") as fh:  # a BOM (Excel's "CSV UTF-8")
         reader = csv.DictReader(fh)
         missing = [c for c in PIXEL_COLUMNS if c not in (reader.fieldnames or [])]
         if missing:
@@ -225,5 +241,5 @@ def score_dataset(data, points: np.ndarray, label: str, gate_mm: float | None = 
 
 
 __all__ = ["DUPLICATE_MM", "FRAMES", "PIXEL_COLUMNS", "PLAUSIBILITY_POINTS", "UNITS",
-           "associate_points", "default_gate_mm", "plausibility", "read_pixel_pairs",
+           "associate_points", "default_gate_mm", "mesh_faces", "plausibility", "read_pixel_pairs",
            "read_points", "score_dataset", "score_points"]

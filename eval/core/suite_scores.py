@@ -78,7 +78,7 @@ def find_submission(directory: str, render: str, method: str) -> tuple[str, str]
     return None
 
 
-def _depth_points(path: str, data) -> np.ndarray:
+def depth_points(path: str, data) -> np.ndarray:
     """``(H, W, 3)`` mm: each left pixel's refracted ray at the submitted depth along z."""
     from measure.geometry.refraction import trace_through_port
 
@@ -86,10 +86,21 @@ def _depth_points(path: str, data) -> np.ndarray:
 
     depth = read_pfm(path) if path.endswith(".pfm") else np.load(path, allow_pickle=False)
     w, h = data.rig.left.size
+    if not (np.issubdtype(depth.dtype, np.integer) or np.issubdtype(depth.dtype, np.floating)):
+        raise ValueError(f"{path}: holds {depth.dtype} values, not depths (numbers, mm)")
+    if depth.ndim != 2:
+        raise ValueError(f"{path}: a {depth.ndim}-d array of shape {depth.shape}, not a depth "
+                         f"map of the left image's {h} x {w} (rows x columns) pixels")
     if depth.shape != (h, w):
         raise ValueError(f"{path}: {depth.shape[1]} x {depth.shape[0]} px, the left image is "
                          f"{w} x {h}")
-    depth = np.where(depth > 0, depth.astype(np.float64), np.nan)
+    with np.errstate(invalid="ignore"):
+        depth = np.where(depth > 0, depth.astype(np.float64), np.nan)
+    depth[~np.isfinite(depth)] = np.nan
+    if not np.isfinite(depth).any():
+        raise ValueError(f"{path}: no pixel has a finite positive depth (all NaN, infinite, zero "
+                         f"or negative): nothing to score")
+    _check_byte_order(path, depth)
     rows, cols = np.nonzero(np.isfinite(depth))
     camera = data.rig.left
     rays = trace_through_port(camera.center, camera.rays(np.column_stack([cols, rows]).astype(
@@ -101,6 +112,39 @@ def _depth_points(path: str, data) -> np.ndarray:
     points = np.full((h, w, 3), np.nan)
     points[rows, cols] = rays.origins + s[:, None] * rays.directions
     return points
+
+
+#: Depths (mm) no scene of this project has: a median finite positive depth outside is a file
+#: misread (a PFM whose scale's sign — its byte order — does not match its data: 1000 mm read
+#: with the other byte order is 1e-41).
+PLAUSIBLE_DEPTH_MM = (1e-3, 1e9)
+
+
+def _check_byte_order(path: str, depth: np.ndarray) -> None:
+    """ValueError when the depths of a PFM are implausible and the same bytes in the other byte
+    order are plausible: the header's scale says the wrong byte order."""
+    lo, hi = PLAUSIBLE_DEPTH_MM
+    median = float(np.nanmedian(depth))
+    if not path.endswith(".pfm") or lo <= median <= hi:
+        return
+    with np.errstate(invalid="ignore", over="ignore"):
+        swapped = depth.astype(np.float32).byteswap()
+    with open(path, "rb") as handle:
+        handle.readline(), handle.readline()
+        scale = float(handle.readline())
+    order = "little" if scale < 0 else "big"
+    other = "big" if scale < 0 else "little"
+    finite = swapped[np.isfinite(swapped) & (swapped > 0)]
+    if finite.size and lo <= float(np.median(finite)) <= hi:
+        raise ValueError(f"{path}: the header's scale {scale:g} says {order}-endian data, but the "
+                         f"data read as {order}-endian are not depths (median {median:.3g} mm) "
+                         f"and read as {other}-endian are (median {float(np.median(finite)):.4g} "
+                         f"mm): write the scale {'positive' if scale < 0 else 'negative'}")
+    raise ValueError(f"{path}: the depths are not millimetres of a scene (median {median:.3g} mm)")
+
+
+#: How the error of a dataset whose scoring met a bug starts (the run then exits 3).
+INTERNAL_ERROR = "internal error"
 
 
 def score_entry(suite_dir: str, sub_dir: str, row: dict, method: str, gate_mm) -> dict:
@@ -133,6 +177,11 @@ def score_entry(suite_dir: str, sub_dir: str, row: dict, method: str, gate_mm) -
             out.update(_score_surface(data, kind, path))
     except (CLIError, DatasetError, ValueError, OSError) as exc:
         return {**out, "status": "failed", "error": " ".join(str(exc).split())}
+    except MemoryError:
+        raise
+    except Exception as exc:  # a bug: this dataset fails, named; the others are scored
+        return {**out, "status": "failed",
+                "error": f"{INTERNAL_ERROR}: {type(exc).__name__}: {' '.join(str(exc).split())}"}
     return out
 
 
@@ -179,7 +228,7 @@ def _score_surface(data, kind: str, path: str) -> dict:
     truth = read_truth_maps(data.path, "left", data.rig.left.size)
     vertices, triangles = read_ply(os.path.join(data.path, SURFACE_FILE))
     if kind == "depth":
-        measured = _depth_points(path, data)
+        measured = depth_points(path, data)
         scores = score_surface(SurfaceCase(vertices, triangles, measured, truth.points,
                                            truth.overlap, data.rig.port.normal))
         return {**{k: scores.get(k) for k in SURFACE_METRICS}, "scores": scores}
@@ -361,7 +410,8 @@ def write_figures(directory: str, rows: list, swept: list) -> list:
     return written
 
 
-__all__ = ["FAILURES", "HEADLINE", "SURFACE_METRICS", "TARGET_METRICS", "aggregate",
+__all__ = ["FAILURES", "HEADLINE", "INTERNAL_ERROR", "PLAUSIBLE_DEPTH_MM", "SURFACE_METRICS",
+           "TARGET_METRICS", "aggregate", "depth_points",
            "SURFACE_GATE_MM", "distinct_values", "find_submission",
            "read_suite", "score_entry", "score_suite", "summary_markdown", "write_figures",
            "write_summary"]

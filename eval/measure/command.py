@@ -15,7 +15,12 @@ Errors (one ``error:`` line, exit 2, nothing written): an unreadable calibration
 photo without a partner, a photo whose size is not the calibration's, an option that does not
 apply, and a pair where nothing is matched — in a run of one pair. In a run of several pairs
 such a pair is reported (``problem`` in the report, a line on stderr) and the others are
-measured; only when no pair is measured is it an error.
+measured; only when no pair is measured is it an error (then only the error is printed).
+
+Exit 1 (the report still written, one ``failed:`` line per pair on stderr): a pair that matched
+fewer than half of the targets its sparser view detected — photos that are not the pair the
+calibration describes (left and right swapped, not a stereo pair, one photo twice);
+:func:`eval.measure.pipeline.pair_mismatch`.
 """
 
 from __future__ import annotations
@@ -31,7 +36,8 @@ from eval.core.formatting import format_number as fmt
 from eval.core.photos import add_encoding_option
 from eval.core.uncertainty import add_pixel_sigma_option, parse_pixel_sigma
 from measure.images.detect import FLOOR_FRACTION
-from synth.infra.cli import add_json_option, add_out_option, add_progress_option, refuse_given
+from synth.infra.cli import (EXIT_CHECK_FAILED, add_json_option, add_out_option,
+                             add_progress_option, option_number, refuse_given)
 
 COMMAND = "eval measure"
 DEFAULT_METHODS = ("optical_path",)
@@ -179,14 +185,17 @@ def measure_all(inputs, options, quiet: bool, log) -> list:
                 result = measure_dense(inputs.rig, name, left, right, options,
                                        _progress_bar(quiet))
             except ValueError as exc:
-                raise CLIError(f"--depth-range {options.depth_range[0]:g},"
-                               f"{options.depth_range[1]:g}: {exc}") from None
+                raise CLIError(f"--depth-range {option_number(options.depth_range[0])},"
+                               f"{option_number(options.depth_range[1])}: {exc}") from None
         else:
             result = measure_targets(inputs.rig, name, left, right, options,
                                      inputs.rig_covariance)
-        if result.problem and len(inputs.names) > 1:
-            print(f"warning: {result.problem}; the other pairs are measured", file=sys.stderr)
         results.append(result)
+    if len(results) > 1 and not all(r.problem for r in results):  # else the error says it
+        for result in results:
+            if result.problem:
+                print(f"warning: {result.problem}; the other pairs are measured",
+                      file=sys.stderr)
     return results
 
 
@@ -296,4 +305,7 @@ def main(args) -> int:
     print(f"wrote {output.path}", file=stream)
     if args.json:
         print(json.dumps(report, indent=2))
-    return 0
+    failures = report["summary"]["failures"]
+    for failure in failures:  # the run knows these points are not to be trusted
+        print(f"failed: {failure} (report in {output.path})", file=sys.stderr)
+    return EXIT_CHECK_FAILED if failures else 0

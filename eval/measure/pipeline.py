@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from eval.core.detection import detect_view
+from synth.infra.cli import option_number
 
 #: The methods whose points get a covariance (:mod:`measure.stereo.uncertainty`; as ``eval run``).
 COVARIANCE_METHODS = ("optical_path", "reprojection")
@@ -57,7 +58,9 @@ class PairResult:
     pixels), ``methods`` ``{method: Triangulation}``; targets only: ``detections``
     ``{view: Detections}`` and ``matches``, ``covariances`` ``{method: PointCovariance}`` (one
     row per pair, NaN where invalid) and ``pixel_sigma`` (how the pixel σ was set); ``problem``:
-    why nothing was measured (a multi-pair run reports it and goes on), else None."""
+    why nothing was measured (a multi-pair run reports it and goes on), else None; ``failure``:
+    why what was measured is not to be trusted (:func:`pair_mismatch`; the run exits 1), else
+    None."""
 
     name: str
     left: np.ndarray
@@ -72,6 +75,7 @@ class PairResult:
     timings: dict = field(default_factory=dict)
     covariances: dict = field(default_factory=dict)
     pixel_sigma: dict | None = None
+    failure: str | None = None
 
 
 def nothing_matched(name: str, found: dict, options: TargetOptions) -> str:
@@ -83,11 +87,42 @@ def nothing_matched(name: str, found: dict, options: TargetOptions) -> str:
                  f"exposure, the detector options (--threshold-fraction) and that the photos "
                  f"show bright targets on a dark background")
     else:
-        window = "no depth window" if near is None else f"the depth window {near:g}-{far:g} mm"
+        window = ("no depth window" if near is None else
+                  f"the depth window {option_number(near)}-{option_number(far)} mm")
         cause = (f"check that the calibration belongs to these photos (camera order, port, "
-                 f"water index), {window} (--depth-range) and --gate-mm {options.gate_mm:g}")
+                 f"water index), {window} (--depth-range) and --gate-mm {option_number(options.gate_mm)}")
     return (f"{name}: no target was matched between the views (detected {found['left']} left, "
             f"{found['right']} right): {cause}")
+
+
+#: Fewest matched pairs, as a fraction of the targets detected in the view that found fewer,
+#: of photos that are the pair the calibration describes. A true pair matches nearly all of
+#: them (81 of 81 in the tests, 496 of 496 on the paper's plane); photos that are not the pair
+#: match by accident only where rows of targets line up with the epipolar curves (swapped: 19
+#: of 81, 162 of 496; one photo twice: 19 of 81).
+MIN_MATCHED_FRACTION = 0.5
+
+
+def pair_mismatch(rig, name: str, centers: dict, matched: int, options: TargetOptions) -> str | None:
+    """Why the photos of a pair are not the pair the calibration describes, or None: fewer
+    matches than :data:`MIN_MATCHED_FRACTION` of the targets the sparser view detected. The
+    views exchanged are matched too: when that matches at least twice as many (and enough), the
+    photos are named as swapped."""
+    from measure.stereo.matching import match_targets
+
+    detected = min(len(centers["left"]), len(centers["right"]))
+    if detected == 0 or matched >= MIN_MATCHED_FRACTION * detected:
+        return None
+    what = (f"{name}: only {matched} targets matched, less than half of the {detected} that "
+            f"the sparser view detected")
+    swapped = match_targets(rig, centers["right"], centers["left"], gate_mm=options.gate_mm,
+                            depth_range=tuple(options.depth_range))
+    n_swapped = int(len(swapped.left))
+    if n_swapped >= max(2 * matched, MIN_MATCHED_FRACTION * detected):
+        return (f"{what}: left and right look swapped ({n_swapped} match with the photos the "
+                f"other way round): give the left camera's photo first")
+    return (f"{what}: the photos do not look like the pair the calibration describes (left and "
+            f"right swapped, not a stereo pair, one photo twice, or another calibration)")
 
 
 def measure_targets(rig, name: str, left, right, options: TargetOptions,
@@ -129,6 +164,7 @@ def measure_targets(rig, name: str, left, right, options: TargetOptions,
     if len(matches.left) == 0:
         result.problem = nothing_matched(name, found, options)
         return result
+    result.failure = pair_mismatch(rig, name, centers, len(matches.left), options)
     result.uv_left = centers["left"][matches.left]
     result.uv_right = centers["right"][matches.right]
     t = time.perf_counter()
@@ -199,5 +235,6 @@ def pair_pixels(result: PairResult, method: str):
     return result.uv_left, result.uv_right
 
 
-__all__ = ["COVARIANCE_METHODS", "DenseOptions", "PairResult", "TargetOptions", "measure_dense",
-           "measure_targets", "nothing_matched", "pair_pixels"]
+__all__ = ["COVARIANCE_METHODS", "DenseOptions", "MIN_MATCHED_FRACTION", "PairResult",
+           "TargetOptions", "measure_dense", "measure_targets", "nothing_matched", "pair_mismatch",
+           "pair_pixels"]

@@ -71,7 +71,7 @@ def method_summary(triangulation) -> dict:
 def pair_entry(result, files: tuple) -> dict:
     """The report's entry of one pair (:class:`eval.measure.pipeline.PairResult`)."""
     return {"name": result.name, "left": files[0], "right": files[1],
-            "problem": result.problem, **result.counts,
+            "problem": result.problem, "failure": result.failure, **result.counts,
             "methods": {m: method_summary(t) for m, t in result.methods.items()},
             "timings_s": result.timings}
 
@@ -90,7 +90,8 @@ def summarize(pairs: list, methods: tuple, results: list) -> dict:
         gaps = np.concatenate(gaps) if gaps else np.zeros(0)
         per_method[method] = {"points": int(gaps.size), **gap_stats(gaps)}
     return {"pairs": len(pairs), "measured_pairs": len(measured),
-            "problems": [p["problem"] for p in pairs if p["problem"]], "matched": matched,
+            "problems": [p["problem"] for p in pairs if p["problem"]],
+            "failures": [p["failure"] for p in pairs if p.get("failure")], "matched": matched,
             "methods": per_method}
 
 
@@ -226,6 +227,8 @@ def report_markdown(report: dict) -> str:
              f"and the calibration say.", ""]
     if not report.get("has_port", True):
         lines += [f"**In air:** {AIR_CALIBRATION.format(calib='`' + report['calib'] + '`')}.", ""]
+    if s.get("failures"):
+        lines += ["## Verdict: failed (exit code 1)", "", *[f"- {p}" for p in s["failures"]], ""]
     if s["problems"]:
         lines += ["## Problems", "", *[f"- {p}" for p in s["problems"]], ""]
     lines += ["## Pairs", ""]

@@ -114,13 +114,15 @@ def main(args) -> int:
         atomic_write_json(os.path.join(tmp, "report.json"), report)
         atomic_write_text(os.path.join(tmp, "report.md"), report_markdown(report))
     out = output.path
+    from synth.rendering.render import spp_text
+
     summary_stream = sys.stderr if args.json else sys.stdout
     m, c = report["matching"], report["crosscheck"]
     print(f"{report['scene']}: {m['visible_in_both']} targets visible in both views, "
           f"{m['pairs']} matched ({m['correct']} correct, {m['wrong']} wrong), cross-check RMS "
           f"{fmt(c['rms_px'], 4)} px, max {fmt(c['max_px'], 4)} px (outline centroid: RMS "
           f"{fmt(c['rms_px_outline'], 4)} px, max {fmt(c['max_px_outline'], 4)} px); "
-          f"{report['variant']} {report['spp']} spp"
+          f"{report['variant']} {spp_text(report['spp'], report.get('spp_rendered'))}"
           f"{'; sensor ' + report['sensor']['model']['name'] if report.get('sensor') else ''}; "
           f"total {report['timings_s']['total']:.1f} s",
           file=summary_stream)

@@ -158,6 +158,9 @@ def parse_depth_range(text):
         near, far = (float(v) for v in text.split(","))
     except ValueError:
         raise CLIError(f"--depth-range must be NEAR,FAR in mm, got {text!r}") from None
+    if math.isfinite(near) and near < 0:
+        raise CLIError(f"--depth-range {text}: the near end must not be negative (NEAR >= 0 mm, "
+                       f"the distance along the port normal)")
     if not (math.isfinite(near) and math.isfinite(far) and 0 <= near < far):
         raise CLIError(f"--depth-range must satisfy 0 <= NEAR < FAR (finite), got {text!r}")
     return near, far

@@ -214,6 +214,7 @@ def load_inputs(config: RunConfig, log) -> RunInputs:
                          variant=data.manifest.get("variant", "?"),
                          spp=int(data.manifest.get("spp", 0)), render_seconds=0.0,
                          extra={"from": os.path.abspath(config.from_dir),
+                                "spp_rendered": data.manifest.get("spp_rendered"),
                                 "from_seed": data.manifest.get("seed")}, **scene_part)
     from synth.rendering.render import render_stereo, render_summary
 

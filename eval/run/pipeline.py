@@ -469,6 +469,8 @@ def run_pipeline(inputs: RunInputs, config: RunConfig, log=print) -> RunResult:
             "uncertainty": uncertainty_corrected},
         "timings_s": timings,
         "variant": inputs.variant, "spp": inputs.spp,
+        "spp_rendered": (inputs.extra.get("render") or {}).get(
+            "spp_rendered", inputs.extra.get("spp_rendered")),
     }
     return RunResult(report=report, inputs=inputs, detections=detections, centers=centers,
                      matches=matches, correct=scored["correct"],
@@ -492,7 +494,8 @@ def measure_scene(config: RunConfig, log=print) -> RunResult:
 
 def run_failures(report: dict) -> list:
     """What the truth shows went wrong in a target run, one phrase each (empty: nothing):
-    wrong matches, no correct match, a cross-check with no detection associated in one view
+    wrong matches, no correct match or fewer correct matches than half the targets visible in
+    both views, a cross-check with no detection associated in one view
     (its headline would then come from the other view alone)."""
     failures = []
     m, c = report["matching"], report["crosscheck"]
@@ -500,6 +503,9 @@ def run_failures(report: dict) -> list:
         failures.append(f"{m['wrong']} of {m['pairs']} matched pairs are wrong")
     if m["correct"] == 0:
         failures.append("no pair was matched correctly")
+    elif m.get("visible_in_both") and m["correct"] < m["visible_in_both"] / 2:
+        failures.append(f"only {m['correct']} of the {m['visible_in_both']} targets visible in "
+                        f"both views were matched correctly (less than half)")
     for view in ("left", "right"):
         if c[view]["associated"] == 0:
             failures.append(f"no {view} detection lies within {ASSOCIATION_GATE_PX:g} px of a "

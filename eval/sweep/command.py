@@ -25,6 +25,7 @@ rebuilt from the cell files every few seconds and at the end; figures go into ``
 
 from __future__ import annotations
 
+import json
 import os
 import time
 import uuid
@@ -60,6 +61,14 @@ def add_parser(subparsers):
 
 # ------------------------------------------------------------------------------------------------
 # the output directory
+
+
+def _figures_digest(spec, table: list) -> str:
+    """What the figures are drawn from: the spec and the table's rows."""
+    import hashlib
+
+    text = json.dumps([spec.spec_hash(), table], sort_keys=True, default=str)
+    return hashlib.sha256(text.encode()).hexdigest()
 
 
 def main(args) -> int:
@@ -114,13 +123,22 @@ def main(args) -> int:
     elapsed = time.perf_counter() - start
     runs[-1].update({"cells_ran": ran, "seconds": elapsed, "compute_seconds": compute})
     out.write_state(spec, runs)
-    figures = []
+    figures, drawn = [], None
     if not args.no_figures and rows:
         from eval.sweep.figures import write_figures
 
         interrupt.check()
-        figures = write_figures(os.path.join(out.path, "figures"), spec,
-                                table_rows(spec, records))
+        table = table_rows(spec, records)
+        digest = _figures_digest(spec, table)
+        # nothing new (a rerun of a finished sweep): the figures drawn from this table are kept
+        # (drawing them took ~20 s of a rerun that had nothing to do)
+        figures = out.drawn_figures(digest)
+        if figures is None:
+            figures = write_figures(os.path.join(out.path, "figures"), spec, table)
+        drawn = {"digest": digest, "files": [os.path.basename(p) for p in figures]}
+    elapsed = time.perf_counter() - start  # the whole command, the figures included
+    runs[-1]["seconds"] = elapsed
+    out.write_state(spec, runs, drawn)
     failed = sum(1 for c in spec.cells if records.get(c.key, {}).get("status") == "failed")
     per_cell = (f" ({compute:.1f} s from the first cell submitted to the last result, "
                 f"{compute / ran:.3f} s per cell)" if ran else "")

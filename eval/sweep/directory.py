@@ -97,12 +97,37 @@ class SweepDir:
             {"command": COMMAND, "files": sorted(TOP_LEVEL),
              "note": "updated in place cell by cell (eval sweep)"}, spec.text)
 
-    def write_state(self, spec, runs: list) -> None:
+    def write_state(self, spec, runs: list, figures: dict | None = None) -> None:
+        """``sweep.json``: the spec, the runs and ``figures`` (``{"digest", "files"}``: what the
+        figures were drawn from, :meth:`drawn_figures`; None keeps the earlier entry, which
+        holds its own digest)."""
         from synth.infra.fileio import atomic_write_json
+
+        if figures is None:
+            try:
+                with open(os.path.join(self.path, "sweep.json"), encoding="utf-8") as handle:
+                    figures = json.load(handle).get("figures")
+            except (OSError, ValueError, AttributeError):
+                figures = None
 
         atomic_write_json(os.path.join(self.path, "sweep.json"), {
             "spec_path": spec.path, "spec_hash": spec.spec_hash(), "name": spec.name,
-            "cells": len(spec.cells), "spec": spec.canonical(), "runs": runs})
+            "cells": len(spec.cells), "spec": spec.canonical(), "runs": runs,
+            **({"figures": figures} if figures is not None else {})})
+
+    def drawn_figures(self, digest: str) -> list | None:
+        """The figure paths of an earlier run that drew them from the same table (``digest``),
+        when every one is still there; None otherwise (they are drawn again)."""
+        try:
+            with open(os.path.join(self.path, "sweep.json"), encoding="utf-8") as handle:
+                figures = json.load(handle).get("figures") or {}
+        except (OSError, ValueError):
+            return None
+        files = figures.get("files")
+        if figures.get("digest") != digest or not isinstance(files, list):
+            return None
+        paths = [os.path.join(self.path, "figures", str(name)) for name in files]
+        return paths if all(os.path.isfile(p) for p in paths) else None
 
     def previous_runs(self) -> list:
         try:

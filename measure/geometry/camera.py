@@ -234,9 +234,11 @@ class Camera(ValueEquality):
         if bad.size == 0:
             return None
         u, v = grid[bad[np.argmin(np.abs(grid[bad] - [(w - 1) / 2, (h - 1) / 2]).sum(axis=1))]]
-        return (f"the lens distortion {self.dist.tolist()} cannot be inverted over the "
-                f"{w}x{h} image: {bad.size} of {grid.shape[0]} checked pixels have no "
-                f"undistorted position (the nearest to the centre is ({u:g}, {v:g}))")
+        radius = float(np.hypot(u - self.K[0, 2], v - self.K[1, 2]))
+        return (f"the lens distortion {self.dist.tolist()} folds within the {w}x{h} image, "
+                f"about {radius:.0f} px from the principal point, and cannot be inverted beyond: "
+                f"{bad.size} of {grid.shape[0]} checked pixels have no undistorted position "
+                f"(the nearest to the centre is ({u:g}, {v:g}))")
 
     # --- pixels <-> rays ----------------------------------------------------------------------
     def normalized(self, uv: np.ndarray) -> np.ndarray:

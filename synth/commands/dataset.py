@@ -35,7 +35,10 @@ def main(args) -> int:
         print(f"{args.out}: {manifest['rendered_again']}; rendering it again")
     s = manifest["seconds"]
     stages = ", ".join(f"{k} {v:.2f} s" for k, v in s.items() if k != "total")
-    print(f"wrote {args.out} with {manifest['variant']}, {manifest['spp']} spp: {stages}; "
+    from synth.rendering.render import spp_text
+
+    print(f"wrote {args.out} with {manifest['variant']}, "
+          f"{spp_text(manifest['spp'], manifest.get('spp_rendered'))}: {stages}; "
           f"total {s['total']:.1f} s")
     from synth.rendering.render import render_summary
 

@@ -35,7 +35,10 @@ def main(args) -> int:
             write_png(os.path.join(tmp, f"{name}_preview.png"), srgb_preview(img, white))
             if args.exr:
                 write_exr(os.path.join(tmp, f"{name}.exr"), img, info["variant"])
-    print(f"rendered {spec.path} with {info['variant']}, {info['spp']} spp, "
+    from synth.rendering.render import spp_text
+
+    print(f"rendered {spec.path} with {info['variant']}, "
+          f"{spp_text(info['spp'], info.get('spp_rendered'))}, "
           f"{info['size'][0]}x{info['size'][1]} px: left {info['seconds']['left']:.1f} s, "
           f"right {info['seconds']['right']:.1f} s, {info['samples_per_second'] / 1e6:.2f} M "
           f"samples/s, total {time.perf_counter() - t0:.1f} s; png_scale {scale:.6g} -> {args.out}")

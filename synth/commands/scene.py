@@ -350,14 +350,20 @@ def _dome_port(args, left, right):
     through the domes."""
     from measure import StereoRig
 
+    from synth.infra.cli import option_number
     from synth.scene.dome import (DEFAULT_DOME_RADIUS_MM, DEFAULT_DOME_THICKNESS_MM,
-                                  check_field_of_view, dome_pair)
+                                  check_dome_size, check_field_of_view, dome_pair)
 
     n = _indices(args)
     radius = args.dome_radius if args.dome_radius is not None else DEFAULT_DOME_RADIUS_MM
     thickness = (args.dome_thickness if args.dome_thickness is not None
                  else DEFAULT_DOME_THICKNESS_MM)
     offset = tuple(args.dome_offset) if args.dome_offset is not None else (0.0, 0.0, 0.0)
+    try:
+        check_dome_size(radius, thickness)
+    except ValueError as exc:
+        raise CLIError(f"--dome-radius {option_number(radius)} --dome-thickness "
+                       f"{option_number(thickness)}: {exc}") from None
     try:
         pair = dome_pair((left, right), radius, thickness, offset, tuple(n))
     except ValueError as exc:

@@ -3,8 +3,9 @@
 * One argument parser class whose errors are one line ``error: …`` (no usage dump).
 * The same argument validators (integers with a lower bound, finite floats with bounds).
 * The same exit codes: 0 ok, 1 a check that fails, 2 bad input (one line ``error: …`` on
-  stderr), 130 interrupted. An unexpected exception (a bug) prints one line
-  ``error: internal error: …`` and exits with 1; set ``REFSTEREO_TRACEBACK=1`` to see the traceback.
+  stderr), 3 an internal error, 130 interrupted. An unexpected exception (a bug) prints one line
+  ``error: internal error: …`` and exits with 3 (not 1, which says that a check failed); set
+  ``REFSTEREO_TRACEBACK=1`` to see the traceback.
 * The same ``--out`` rule (:mod:`synth.infra.fileio`).
 * The same vocabulary, added by the helpers below: a scene is the positional ``scene``;
   ``--out`` says what it writes and the rule; ``-D NAME=VALUE`` overrides a scene default;
@@ -20,10 +21,11 @@ from __future__ import annotations
 import argparse
 import math
 import os
+import re
 import sys
 import traceback
 
-EXIT_OK, EXIT_CHECK_FAILED, EXIT_BAD_INPUT, EXIT_INTERRUPTED = 0, 1, 2, 130
+EXIT_OK, EXIT_CHECK_FAILED, EXIT_BAD_INPUT, EXIT_INTERNAL_ERROR, EXIT_INTERRUPTED = 0, 1, 2, 3, 130
 
 
 class CLIError(Exception):
@@ -64,9 +66,21 @@ def _record_given_options(parser: argparse.ArgumentParser) -> None:
             action.__class__ = _RECORDING_CLASSES[cls]
 
 
+#: What argparse takes for a negative number, not an option: ``-100``, ``-.5``, ``-1e9`` and the
+#: lists ``-100,2000`` (argparse's own rule knows only ``-100`` and ``-.5``: ``--depth-range
+#: -100,2000`` was "expected one argument" instead of what is wrong with the value).
+NEGATIVE_NUMBER = re.compile(r"^-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?(,[-+]?[\d.eE+-]*)*$")
+
+
 class Parser(argparse.ArgumentParser):
     """ArgumentParser whose errors are one line ``error: …`` (no usage dump) and exit 2, and
-    which records the options given on the command line (:func:`given`)."""
+    which records the options given on the command line (:func:`given`). A value that starts
+    with a minus and reads as a number or a list of numbers (:data:`NEGATIVE_NUMBER`) is the
+    option's value, which its validator then judges."""
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self._negative_number_matcher = NEGATIVE_NUMBER
 
     def error(self, message):
         raise CLIError(message)
@@ -90,6 +104,20 @@ def refuse_given(args, dests, why: str) -> None:
         option = given(args, dest)
         if option:
             raise CLIError(f"{option} does not apply {why}")
+
+
+def option_number(value: float) -> str:
+    """A number as a user types it on the command line: the shorter of its plain and its
+    scientific form (12 significant digits), the exponent without ``+`` and leading zeros
+    (``1e9``, not ``1e+09``; ``0.5``; ``1000``; ``2.5e-5``), so that a message that suggests an
+    option value can be copied back."""
+    mantissa, exponent = f"{float(value):.11e}".split("e")
+    mantissa = mantissa.rstrip("0").rstrip(".")
+    scientific = f"{mantissa}e{int(exponent)}"
+    plain = f"{float(value):.12g}"
+    if "e" in plain or (len(plain) > 6 and len(scientific) < len(plain)):
+        return scientific
+    return plain
 
 
 def int_at_least(minimum: int, description: str):
@@ -195,6 +223,16 @@ def add_scene_argument(parser, default: str | None = None) -> None:
                             help=f"{SCENE_HELP}; default {default}")
 
 
+def out_path(text: str) -> str:
+    """An argparse type: an output path, refused when empty or blank (``--out ''`` was "--out
+    exists and holds files this command did not write": the empty path is the current
+    directory)."""
+    if not text.strip():
+        raise argparse.ArgumentTypeError(f"the path is empty ({text!r}): give a directory or "
+                                         f"file name")
+    return text
+
+
 def add_out_option(parser, command: str, default: str | None = None, *, what: str = "directory",
                    rule: str | None = None, required: bool | None = None) -> None:
     """``--out``: the output ``what`` (directory or file) of ``command`` and the rule that
@@ -206,7 +244,7 @@ def add_out_option(parser, command: str, default: str | None = None, *, what: st
     required = default is None if required is None else required
     where = ("required" if required else "optional" if default is None
              else f"default {default}")
-    parser.add_argument("--out", default=default, required=required,
+    parser.add_argument("--out", default=default, required=required, type=out_path,
                         metavar="FILE" if what == "file" else "DIR",
                         help=f"output {what} ({where}); {rule}")
 
@@ -390,6 +428,22 @@ def run_command(parser, argv=None) -> int:
     return code
 
 
+#: The project's own top-level packages (a missing one of these is a bug, not a missing
+#: dependency).
+OWN_PACKAGES = ("measure", "synth", "eval", "tests")
+
+
+def missing_dependency(exc: ModuleNotFoundError) -> str | None:
+    """The one line that says a dependency is not installed in this Python (and how to get the
+    project's environment), or None when the missing module is one of the project's own."""
+    name = exc.name or str(exc)
+    if name.split(".")[0] in OWN_PACKAGES:
+        return None
+    return (f"the Python module {name!r} is not installed in this Python ({sys.executable}): "
+            f"run the commands with the project's environment — source .venv/bin/activate "
+            f"(created by make setup) or .venv/bin/python -m …")
+
+
 def _run(parser, argv) -> tuple[int, str | None]:
     """``(exit code, the error line or None)`` of one command (see :func:`run_command`)."""
     try:
@@ -412,9 +466,12 @@ def _run(parser, argv) -> tuple[int, str | None]:
         return EXIT_BAD_INPUT, ("out of memory (try a smaller image, fewer samples per pixel or "
                                 "fewer targets)")
     except Exception as exc:  # a bug: one line, the traceback on request
+        missing = missing_dependency(exc) if isinstance(exc, ModuleNotFoundError) else None
+        if missing is not None:  # not a bug: a Python without the project's dependencies
+            return EXIT_BAD_INPUT, missing
         if os.environ.get("REFSTEREO_TRACEBACK"):
             traceback.print_exc()
-        return EXIT_CHECK_FAILED, (f"internal error: {type(exc).__name__}: {one_line(exc)} "
+        return EXIT_INTERNAL_ERROR, (f"internal error: {type(exc).__name__}: {one_line(exc)} "
                                    f"(set REFSTEREO_TRACEBACK=1 for the traceback)")
 
 
@@ -449,9 +506,11 @@ def process_main(main) -> None:
 
 __all__ = ["BOARD_OPTIONS", "DEFAULT_BOARD", "add_board_options", "add_cluster_options", "board_from_args",
            "DEFINE_HELP", "DISTRIBUTION", "EXIT_BAD_INPUT", "EXIT_CHECK_FAILED",
-           "EXIT_INTERRUPTED", "EXIT_OK", "JSON_HELP", "NO_PROGRESS_HELP", "SCENE_HELP",
+           "EXIT_INTERNAL_ERROR", "EXIT_INTERRUPTED", "EXIT_OK", "JSON_HELP", "NO_PROGRESS_HELP",
+           "SCENE_HELP",
            "add_define_option", "add_json_option", "add_out_option", "add_progress_option",
-           "add_scene_argument", "any_float", "CLIError", "command_parser", "finite_float",
+           "add_scene_argument", "any_float", "option_number", "out_path", "CLIError",
+           "command_parser", "finite_float",
            "given", "int_at_least", "non_negative_float", "non_negative_int", "one_line",
            "package_version", "Parser", "positive_float", "positive_int", "process_main",
            "refuse_given", "run_command", "scene_seed", "WATER_INDEX_HELP", "WaterIndex",

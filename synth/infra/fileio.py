@@ -124,6 +124,8 @@ class OutputDir:
     """The output directory of one command (``command`` e.g. ``"eval run"``). See module docs."""
 
     def __init__(self, path, command: str, option: str = "--out"):
+        if not os.fspath(path).strip():
+            raise OutputError(f"{option}: the path is empty: give a directory")
         self.path = os.path.abspath(os.fspath(path))
         self.display = os.fspath(path)
         self.command = command
@@ -366,6 +368,8 @@ def check_file_output(path, option: str, may_replace=None) -> str:
     """Check a single output file before the work: its directory exists and is writable, and an
     existing file is replaced only if ``may_replace(path)`` says it is ours. Returns the path."""
     path = os.fspath(path)
+    if not path.strip():
+        raise OutputError(f"{option}: the path is empty: give a file name")
     full = os.path.abspath(path)
     if os.path.isdir(full):
         raise OutputError(f"{option} {path} is a directory")

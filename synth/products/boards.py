@@ -409,20 +409,20 @@ def read_boards(path) -> BoardImages:
                                    f"says {calib['size'][0]}x{calib['size'][1]}")
             pair.append(img.astype(np.float32) / np.float32(scale))
         images.append(tuple(pair))
-    poses_rows = _read_table(os.path.join(path, "poses.csv"), POSES_HEADER, n)
+    poses_rows = read_truth_table(os.path.join(path, "poses.csv"), POSES_HEADER, n)
     poses = [BoardPose(Rotation.from_rotvec(r[1:4]).as_matrix(), r[4:7]) for r in poses_rows]
-    corners = _read_table(os.path.join(path, "corners.csv"), CORNERS_HEADER, n * board.n_corners)
+    corners = read_truth_table(os.path.join(path, "corners.csv"), CORNERS_HEADER, n * board.n_corners)
     check_files(path, manifest, COMMAND)  # last: the readers above say more precisely what is wrong
     return BoardImages(path, images, board, calib, poses, corners, bool(manifest.get("air")),
                        manifest)
 
 
-def _read_table(file, header, rows: int) -> np.ndarray:
+def read_truth_table(file, header, rows: int) -> np.ndarray:
     """``(rows, len(header))`` numbers of a CSV that :func:`_write_truth` wrote, read whole:
     :class:`DatasetError` unless it has ``header``, exactly ``rows`` complete rows of numbers
     (what the manifest's pose count says) and ends with its last row's newline."""
     try:
-        with open(file, newline="") as fh:
+        with open(file, newline="", encoding="utf-8-sig") as fh:  # a BOM (Excel) is read
             text = fh.read()
     except OSError as exc:
         raise DatasetError(f"{file}: {exc.strerror or exc}") from None
@@ -444,4 +444,5 @@ def _read_table(file, header, rows: int) -> np.ndarray:
 
 
 __all__ = ["BoardImages", "BoardPose", "board_rig", "build_board_scene", "read_boards",
+           "read_truth_table",
            "render_pose", "sample_poses", "write_boards"]

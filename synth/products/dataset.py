@@ -10,8 +10,9 @@ A dataset directory holds (units mm, reference frame = the left camera's, OpenCV
   ``left.exr``, ``right.exr`` -- float32 linear, on request;
 * ``calib.yaml`` -- OpenCV FileStorage: ``image_width``, ``image_height``, ``K1``, ``D1``,
   ``K2``, ``D2``, ``R``, ``T`` (OpenCV stereo convention ``X_right = R·X_left + T``), ``units``
-  and a map ``port`` {``normal`` (3x1), ``distance``, ``thicknesses`` (sequence),
-  ``indices`` (sequence), ``present`` (0 for an all-air scene, whose port is index-matched)} —
+  (``mm``, the only one read) and a map ``port`` {``normal`` (3x1), ``distance``,
+  ``thicknesses`` (sequence), ``indices`` (sequence), ``present`` (0 for an all-air scene,
+  whose port is index-matched: read with every index 1, whatever the file says; 1 a port)} —
   or, for a dome scene, a map ``dome`` {``left``, ``right``: {``center`` (3x1, reference
   frame), ``radius`` (inner), ``thickness``, ``indices`` (air, glass, water)}};
 * surface scenes (``python -m synth scene --layout surface``) instead of targets:
@@ -180,6 +181,11 @@ def _read_calib(path) -> dict:
     if not fs.isOpened():
         raise DatasetError(f"{path}: cannot open as OpenCV FileStorage")
     try:
+        units = fs.getNode("units")
+        if not units.empty() and not (units.isString() and units.string().strip() == "mm"):
+            said = units.string() if units.isString() else units.real()
+            raise DatasetError(f"{path}: units: {said!r}: only mm is read (every length of "
+                               f"calib.yaml in millimetres, units: mm)")
         out = {"size": (int(fs.getNode("image_width").real()),
                         int(fs.getNode("image_height").real()))}
         for name in ("K1", "D1", "K2", "D2", "R", "T"):
@@ -196,12 +202,18 @@ def _read_calib(path) -> dict:
             if pnode.empty() or pnode.getNode("normal").mat() is None:
                 raise DatasetError(f"{path}: no port map (normal, distance, thicknesses, "
                                    f"indices) and no dome map")
+            present = pnode.getNode("present")
+            if not present.empty() and not (present.isInt() and present.real() in (0, 1)):
+                said = present.string() if present.isString() else f"{present.real():g}"
+                raise DatasetError(f"{path}: port: present: {said}: must be 0 (in air: the "
+                                   f"port bends no ray) or 1 (the port refracts)")
+            out["has_port"] = bool(present.real()) if not present.empty() else True
+            indices = tuple(_seq(pnode.getNode("indices")))
+            if not out["has_port"]:  # in air: what the rig measures through is index-matched
+                indices = (1.0,) * len(indices)
             out["port"] = FlatPort(pnode.getNode("normal").mat().ravel(),
                                    pnode.getNode("distance").real(),
-                                   tuple(_seq(pnode.getNode("thicknesses"))),
-                                   tuple(_seq(pnode.getNode("indices"))))
-            present = pnode.getNode("present")
-            out["has_port"] = bool(present.real()) if not present.empty() else True
+                                   tuple(_seq(pnode.getNode("thicknesses"))), indices)
         covariance = _read_covariance(path, fs.getNode("covariance"))
     finally:
         fs.release()
@@ -222,6 +234,9 @@ def _read_domes(path, node) -> DomePair:
             raise DatasetError(f"{path}: dome map without a {name} dome (center, radius, "
                                f"thickness, indices)")
         try:
+            from synth.scene.dome import check_dome_size
+
+            check_dome_size(sub.getNode("radius").real(), sub.getNode("thickness").real())
             domes.append(DomePort(centre.ravel(), sub.getNode("radius").real(),
                                   sub.getNode("thickness").real(),
                                   tuple(_seq(sub.getNode("indices")))))
@@ -273,7 +288,7 @@ def write_pixels_csv(path, ids, points, uv_left, uv_right) -> None:
 
 def read_pixels_csv(path) -> dict:
     """``{"id": (N,), "points": (N, 3), "left": (N, 2), "right": (N, 2)}`` from ``pixels.csv``."""
-    with open(path, newline="") as fh:
+    with open(path, newline="", encoding="utf-8-sig") as fh:
         text = fh.read()
     reader = csv.reader(text.splitlines())
     header = next(reader, None)

@@ -187,7 +187,8 @@ class SuiteDir:
             with open(os.path.join(self.path, "suite.json"), encoding="utf-8") as handle:
                 return json.load(handle)
         except (OSError, ValueError):
-            return {}
+            # a suite stopped before its first suite.json: the marker names its spec
+            return {k: marker[k] for k in ("spec_hash", "spec_path") if k in marker}
 
     def open(self, spec: SuiteSpec, previous: dict | None, token: str) -> None:
         """Create or reuse ``DIR`` for ``spec`` (another spec's suite is refused), lock it and
@@ -200,14 +201,18 @@ class SuiteDir:
                          f"write this one elsewhere")
         os.makedirs(self.path, exist_ok=True)
         marker = os.path.join(self.path, MARKER_NAME)
+        # the spec's hash in the marker: a suite stopped before its first suite.json is still
+        # known to be this spec's (another spec on the same DIR is refused, not mixed in)
+        which = {"spec_hash": spec.spec_hash(), "spec_path": spec.path}
         if not os.path.exists(marker):  # first, so that a suite killed now is still ours
             atomic_write_json(marker, {"project": PROJECT_NAME, "schema": MARKER_SCHEMA,
-                                       "command": COMMAND, "files": sorted(TOP_LEVEL)})
+                                       "command": COMMAND, "files": sorted(TOP_LEVEL), **which})
         os.makedirs(self.entries, exist_ok=True)
         self._lock = claim_in_place(
             self.path, ".suite.lock", self._refuse, (self.path, self.entries),
             {"command": COMMAND, "files": sorted(TOP_LEVEL),
-             "note": "updated in place dataset by dataset (synth suite)"}, spec.text, token)
+             "note": "updated in place dataset by dataset (synth suite)", **which}, spec.text,
+            token)
 
     def finished(self, spec: SuiteSpec) -> dict:
         """``{key: record}`` of the entries whose record says ok and whose dataset folder is

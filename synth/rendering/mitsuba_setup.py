@@ -134,7 +134,32 @@ def import_mitsuba(variant: str | None = None):
             reason = " ".join(str(exc).split())
             raise VariantError(f"Mitsuba variant {chosen!r} cannot start here: {reason}") from None
     _selected = chosen
+    log_to_stderr(mi)
     return mi, chosen
+
+
+_LOG_ON_STDERR = False
+
+
+def log_to_stderr(mi) -> None:
+    """Send Mitsuba's log (its warnings, e.g. ``[MultijitterSampler] Sample count rounded up to
+    6``) to stderr instead of its default stdout: stdout holds a command's report (``--json``
+    prints JSON there, which a log line made invalid). Once per process."""
+    global _LOG_ON_STDERR
+    if _LOG_ON_STDERR:
+        return
+    logger = mi.logger() if hasattr(mi, "logger") else mi.Thread.thread().logger()
+
+    class _Stderr(mi.Appender):
+        def append(self, level, text):
+            print(text, file=sys.stderr, flush=True)
+
+        def log_progress(self, progress, name, formatted, eta, ptr=None):
+            pass
+
+    logger.clear_appenders()
+    logger.add_appender(_Stderr())
+    _LOG_ON_STDERR = True
 
 
 def render(mi, scene, **options):

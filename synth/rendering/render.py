@@ -557,6 +557,16 @@ def render_stereo(scene, spp: int | None = None, variant: str | None = None,
     return images[0], images[1], info
 
 
+def spp_text(requested, rendered=None) -> str:
+    """``"5 spp"``, or when the sampler took another count ``"6 spp (5 requested: …)"``: what
+    was rendered, said (the scenes' multijitter sampler rounds 5, 7, 10, 13 … up to a product of
+    two near-equal integers)."""
+    if rendered is None or int(rendered) == int(requested):
+        return f"{requested} spp"
+    return (f"{rendered} spp ({requested} requested: Mitsuba's sampler rounds the count up to "
+            f"what it stratifies)")
+
+
 def render_summary(stats: dict) -> str:
     """One line on how a view was rendered (a ``render`` entry of :func:`render_stereo`)."""
     speed = stats.get("samples_per_second")

@@ -18,6 +18,7 @@ import numpy as np
 
 from measure import StereoRig
 from measure.geometry.dome import DomePair, DomePort, require_dome_pair, trace_through_dome
+from synth.infra.cli import option_number
 
 #: Defaults of ``synth scene --port dome``: inner radius and glass thickness, mm. With the
 #: paper's 200 mm baseline the two outer spheres (58 mm) leave 84 mm between them, and no ray of
@@ -25,6 +26,12 @@ from measure.geometry.dome import DomePair, DomePort, require_dome_pair, trace_t
 #: reaches the other dome (:func:`check_field_of_view`).
 DEFAULT_DOME_RADIUS_MM = 50.0
 DEFAULT_DOME_THICKNESS_MM = 8.0
+#: Smallest inner radius and glass thickness (mm) of a dome: below them a dome is no housing
+#: (a lens's entrance pupil is millimetres across; glass under water pressure is millimetres
+#: thick) and the sphere tracing is asked to resolve sub-micrometre shells (0.001 mm radius,
+#: 1e-9 mm glass were accepted).
+MIN_DOME_RADIUS_MM = 1.0
+MIN_DOME_THICKNESS_MM = 0.1
 #: Shape ids of the spheres: ``DOME_ID.format(camera="left", sphere="inner")``.
 DOME_ID = "dome_{camera}_{sphere}"
 CAMERA_NAMES = ("left", "right")
@@ -33,11 +40,23 @@ SPHERE_NAMES = ("inner", "outer")
 FOV_CHECK_STEP_PX = 16
 
 
+def check_dome_size(radius: float, thickness: float) -> None:
+    """ValueError, stating the minimum, for a dome smaller than :data:`MIN_DOME_RADIUS_MM` or
+    glass thinner than :data:`MIN_DOME_THICKNESS_MM`."""
+    if radius < MIN_DOME_RADIUS_MM:
+        raise ValueError(f"dome radius {option_number(radius)} mm is below the minimum of "
+                         f"{MIN_DOME_RADIUS_MM:g} mm (a dome housing is tens of mm across)")
+    if thickness < MIN_DOME_THICKNESS_MM:
+        raise ValueError(f"dome thickness {option_number(thickness)} mm is below the minimum of "
+                         f"{MIN_DOME_THICKNESS_MM:g} mm (the glass of a dome port is mm thick)")
+
+
 def dome_pair(cameras, radius: float, thickness: float, offset, indices) -> DomePair:
     """The two domes of a rig: each camera inside its own dome whose centre is ``offset`` (mm,
     in that camera's frame) from the camera's centre — the same offset for both cameras;
     ``indices`` ``(n_air, n_glass, n_water)``. Raises ``ValueError`` for a radius or thickness
     that is not positive, or a camera outside its dome."""
+    check_dome_size(radius, thickness)
     offset = np.asarray(offset, dtype=np.float64).reshape(3)
     domes = [DomePort(cam.center + cam.R @ offset, radius, thickness, indices) for cam in cameras]
     pair = DomePair(*domes)
@@ -155,6 +174,7 @@ def pair_from_spheres(spheres: dict) -> DomePair:
         if not r_out > r_in:
             raise ValueError(f"sphere {ids[1]!r} (radius {r_out:g}) must be larger than "
                              f"{ids[0]!r} (radius {r_in:g})")
+        check_dome_size(r_in, r_out - r_in)
         if abs(ext_in - int_out) > 1e-9:
             raise ValueError(f"the glass of the {camera} dome has two indices: ext_ior "
                              f"{ext_in:g} of {ids[0]!r}, int_ior {int_out:g} of {ids[1]!r}")

@@ -258,3 +258,47 @@ def test_units_does_not_apply_to_pixels(tmp_path, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "--units does not apply with --pixels" in err[0]
     assert not (tmp_path / "out").exists()
+
+
+def _fake_suite(root):
+    """A suite folder as far as eval score's option checks read it: suite.json and an index of
+    two target datasets."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    suite = root / "suite"
+    suite.mkdir()
+    (suite / "suite.json").write_text("{}")
+    rows = [{"folder": f"ds{i}", "render": "targets", "status": "ok", "scene": "s", "seed": i}
+            for i in range(2)]
+    pq.write_table(pa.Table.from_pylist(rows), suite / "index.parquet")
+    return suite
+
+
+def test_method_is_refused_when_every_submission_is_a_cloud(tmp_path, capsys):
+    """``--method su`` with only points.ply submissions: nothing is triangulated, the option
+    cannot apply (it was ignored). With a pairs.csv among them it applies."""
+    suite = _fake_suite(tmp_path)
+    sub = tmp_path / "sub"
+    for i in range(2):
+        (sub / f"ds{i}").mkdir(parents=True)
+        (sub / f"ds{i}" / "points.ply").write_text("ply\n")
+    out = tmp_path / "scores"
+    assert main(["score", str(suite), "--submission", str(sub), "--method", "su", "--out",
+                 str(out), "--no-progress"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("error: --method su does not apply"), err
+    assert not out.exists()
+    from eval.score import refuse_method_without_pairs
+
+    (sub / "ds1" / "points.ply").unlink()
+    (sub / "ds1" / "pairs.csv").write_text("u_left,v_left,u_right,v_right\n")
+    refuse_method_without_pairs(str(suite), str(sub), "su")  # applies: no error
+
+
+def test_a_suggested_option_value_reads_as_typed():
+    """``--gate-mm 1e9`` was suggested back as ``--gate-mm 1e+09``."""
+    from eval.measure.pipeline import TargetOptions, nothing_matched
+
+    text = nothing_matched("p", {"left": 3, "right": 4}, TargetOptions(gate_mm=1e9))
+    assert "--gate-mm 1e9" in text and "e+" not in text

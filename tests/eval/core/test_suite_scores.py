@@ -6,6 +6,7 @@ datasets at 4 spp."""
 from __future__ import annotations
 
 import json
+import re
 import shutil
 
 import numpy as np
@@ -210,3 +211,123 @@ def test_swept_values_are_in_numeric_order():
     assert distinct_values(rows, "z") == [600, 1000, 2000, None]
     groups = [a["value"] for a in aggregate([{"status": "ok", **r} for r in rows[:3]], ["z"])]
     assert groups == [None, "600", "1000", "2000"]
+
+
+def _data(size=(96, 80)):
+    """What :func:`depth_points` reads of a dataset: its rig."""
+    from types import SimpleNamespace
+
+    from measure import StereoRig
+    from synth.scene.rig import paper_cameras, paper_port
+
+    return SimpleNamespace(rig=StereoRig(*paper_cameras(size, 45.0), paper_port()))
+
+
+def _bad_depth_files(tmp_path):
+    """``{name: (path, fragment of the reason)}``: depth submissions that are no depth maps."""
+    from synth.formats.exchange import write_pfm
+
+    files = {}
+    for name, array, fragment in (
+            ("zero_d", np.array(1000.0), "a 0-d array of shape ()"),
+            ("one_d", np.full(96 * 80, 1000.0), "a 1-d array of shape (7680,)"),
+            ("string", np.array(["1000"] * 7680).reshape(80, 96), "not depths"),
+            ("string_0d", np.array("abc"), "not depths")):
+        path = tmp_path / name / "depth.npy"
+        path.parent.mkdir()
+        np.save(path, array)
+        files[name] = (path, fragment)
+    path = tmp_path / "all_nan" / "depth.pfm"
+    path.parent.mkdir()
+    write_pfm(str(path), np.full((80, 96), np.nan, np.float32))
+    files["all_nan"] = (path, "no pixel has a finite positive depth")
+    path = tmp_path / "big_endian_header" / "depth.pfm"  # the scale says big-endian
+    path.parent.mkdir()
+    write_pfm(str(path), np.full((80, 96), 1000.0, np.float32))
+    path.write_bytes(path.read_bytes().replace(b"\n-1.0\n", b"\n1.0\n", 1))
+    files["big_endian_header"] = (path, "says big-endian data, but the data read as big-endian "
+                                        "are not depths")
+    return files
+
+
+def test_depth_files_that_are_no_depth_maps_are_named(tmp_path):
+    """A 0-d, 1-D or string ``depth.npy``, an all-NaN ``depth.pfm``, a PFM whose scale says the
+    wrong byte order: one ValueError naming the file and why (they were internal errors that
+    aborted the whole suite's scoring, or an all-NaN map "scored")."""
+    from eval.core.suite_scores import depth_points
+    from synth.formats.exchange import write_pfm
+
+    data = _data()
+    for name, (path, fragment) in _bad_depth_files(tmp_path).items():
+        with pytest.raises(ValueError, match=re.escape(fragment)) as caught:
+            depth_points(str(path), data)
+        assert str(path) in str(caught.value), name
+    good = tmp_path / "good.pfm"
+    write_pfm(str(good), np.full((80, 96), 1000.0, np.float32))
+    assert np.isfinite(depth_points(str(good), data)).all()
+
+
+def test_a_mesh_given_as_points_is_refused(tmp_path):
+    """A mesh PLY (its faces declared) is no point cloud: its vertices were scored as points."""
+    import open3d as o3d
+
+    from eval.cli import CLIError
+    from eval.core.scoring import read_points
+
+    mesh = o3d.geometry.TriangleMesh.create_box(100.0, 100.0, 100.0)
+    path = tmp_path / "points.ply"
+    o3d.io.write_triangle_mesh(str(path), mesh)
+    with pytest.raises(CLIError, match=r"points.ply: a mesh \(12 faces\), not a point cloud"):
+        read_points(str(path))
+    cloud = o3d.geometry.PointCloud(mesh.vertices)
+    o3d.io.write_point_cloud(str(path), cloud)
+    assert len(read_points(str(path))) == 8
+
+
+def test_a_bug_in_one_datasets_scoring_fails_that_dataset_only(tmp_path, monkeypatch):
+    """An unexpected exception while scoring one dataset: that dataset fails with the reason
+    ``internal error: …`` (it aborted the whole suite's scoring)."""
+    import eval.core.suite_scores as suite_scores
+    import synth.products.dataset as dataset
+
+    (tmp_path / "sub" / "ds1").mkdir(parents=True)
+    np.save(tmp_path / "sub" / "ds1" / "depth.npy", np.ones((80, 96)))
+    monkeypatch.setattr(dataset, "read_dataset", lambda path: _data())
+
+    def bug(*args):
+        raise KeyError("oops")
+
+    monkeypatch.setattr(suite_scores, "_score_surface", bug)
+    row = {"status": "ok", "render": "surface", "folder": "ds1"}
+    result = suite_scores.score_entry(str(tmp_path / "suite"), str(tmp_path / "sub"), row,
+                                      "optical_path", None)
+    assert result["status"] == "failed"
+    assert result["error"] == "internal error: KeyError: 'oops'"
+
+
+@pytest.mark.slow
+def test_bad_depth_files_and_a_mesh_are_failures_of_their_dataset(surface_suite, tmp_path,
+                                                                  capsys):
+    """``eval score --submission`` on each: exit 1, the dataset failed with the reason, the
+    summary written."""
+    import open3d as o3d
+
+    suite, folder = surface_suite
+    (tmp_path / "files").mkdir()
+    submissions = _bad_depth_files(tmp_path / "files")
+    mesh = tmp_path / "files" / "mesh.ply"
+    o3d.io.write_triangle_mesh(str(mesh), o3d.geometry.TriangleMesh.create_box(100.0, 100.0, 1.0))
+    submissions["mesh"] = (mesh, "a mesh (12 faces), not a point cloud")
+    for name, (path, fragment) in submissions.items():
+        sub = tmp_path / "sub" / name
+        (sub / folder).mkdir(parents=True)
+        target = "points.ply" if name == "mesh" else path.name
+        shutil.copy(path, sub / folder / target)
+        out = tmp_path / "scores" / name
+        code = main(["score", str(suite), "--submission", str(sub), "--out", str(out),
+                     "--no-progress"])
+        err = capsys.readouterr().err
+        assert code == 1, (name, err)
+        row = json.loads((out / "summary.json").read_text())["datasets"][0]
+        assert row["status"] == "failed" and fragment in row["error"], (name, row["error"])
+        assert "internal error" not in err

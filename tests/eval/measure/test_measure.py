@@ -394,3 +394,67 @@ def test_photos_through_domes_are_measured_and_scored(tmp_path):
     assert scores["association"]["associated"] == report["uncertainty"]["methods"][
         "optical_path"]["sigma"]["n"]
     assert scores["methods"]["theirs"]["rms_dp_mm"] < 1.2
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("order, fragment", [
+    (("right", "left"), "left and right look swapped (81 match with the photos the other way "
+                        "round)"),
+    (("left", "left"), "the photos do not look like the pair the calibration describes")])
+def test_photos_that_are_not_the_calibrations_pair_exit_1_with_the_report(photos, capsys, order,
+                                                                          fragment):
+    """Left and right swapped, or one photo twice: a few targets match by accident (19 of 81)
+    and triangulate far from the plane. Exit 1, one ``failed:`` line naming the problem, the
+    report written (its summary says the same)."""
+    root = photos
+    out = root / f"not_a_pair_{order[0]}_{order[1]}"
+    code = eval_main(["measure", "--calib", str(root / "ds" / "calib.yaml"),
+                      str(root / "ph" / order[0] / "pair.png"),
+                      str(root / "ph" / order[1] / "pair.png"), "--out", str(out), "--quiet"])
+    err = capsys.readouterr().err.splitlines()
+    failed = [line for line in err if line.startswith("failed:")]
+    assert code == 1, err
+    assert len(failed) == 1 and fragment in failed[0] and "less than half of the 81" in failed[0]
+    assert not [line for line in err if line.startswith("error:")]
+    report = json.loads((out / "report.json").read_text())
+    assert report["pairs"][0]["matched"] < 81 / 2
+    assert report["summary"]["failures"] == [report["pairs"][0]["failure"]]
+    assert "Verdict: failed" in (out / "report.md").read_text()
+
+
+def test_the_right_pair_is_not_a_mismatch_and_a_swapped_one_is_named():
+    """:func:`pair_mismatch` on the simulator's exact pixels of the small rig: none for the
+    pair, "swapped" for the views exchanged (no rendering)."""
+    from eval.measure.pipeline import TargetOptions, pair_mismatch
+    from measure.stereo.matching import match_targets
+    from synth.scene.layouts import grid_plane
+    from synth.scene.rig import paper_cameras, paper_port
+    from measure import StereoRig
+    from measure.geometry.projection import project
+
+    left, right = paper_cameras((320, 268), 150.0)
+    rig = StereoRig(left, right, paper_port())
+    targets = grid_plane(1000.0, 320.0, 80.0) + np.array([3.0, -2.0, 0.0])
+    centers = {"left": project(left, rig.port, targets), "right": project(right, rig.port, targets)}
+    options = TargetOptions()
+    matched = len(match_targets(rig, centers["left"], centers["right"], gate_mm=0.5).left)
+    assert matched == len(targets)
+    assert pair_mismatch(rig, "p", centers, matched, options) is None
+    swapped = {"left": centers["right"], "right": centers["left"]}
+    n = len(match_targets(rig, swapped["left"], swapped["right"], gate_mm=0.5).left)
+    assert n < len(targets) / 2
+    problem = pair_mismatch(rig, "p", swapped, n, options)
+    assert problem is not None and "left and right look swapped" in problem
+    assert f"{len(targets)} match with the photos the other way round" in problem
+
+
+def test_when_every_pair_failed_only_the_error_is_printed(user, capsys):
+    """Two pairs, nothing matched in either: one ``error:`` line, no ``warning: …; the other
+    pairs are measured`` before it (there are none)."""
+    for view in ("left", "right"):
+        cv2.imwrite(str(user / view / "p3.png"), np.zeros((268, 320), np.uint8))
+    assert eval_main(["measure", "--calib", "calib.yaml", "left", "right", "--out", "out",
+                      "--quiet"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("error: no pair was measured (2 pairs)"), err
+    assert not (user / "out").exists()

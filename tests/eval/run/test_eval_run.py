@@ -10,6 +10,7 @@ import open3d as o3d
 import pytest
 
 from eval.cli import main
+from tests.conftest import REPO
 from synth.products.dataset import write_dataset
 
 SPP = 16
@@ -83,8 +84,10 @@ def test_pixel_noise_option_is_seeded(small_scene, tmp_path):
     reports = []
     for name in ("a", "b"):
         out = tmp_path / name
+        # a gate that fits 0.3 px of noise at f = 150 px (0.5 mm matches 10 of 81: exit 1)
         assert main(["run", small_scene, "--out", str(out), "--spp", "4", "--noise-px", "0.3",
-                     "--seed", "5", "--methods", "optical_path", "--no-progress"]) == 0
+                     "--seed", "5", "--methods", "optical_path", "--gate-mm", "5",
+                     "--no-progress"]) == 0
         reports.append(json.loads((out / "report.json").read_text())["methods"]["optical_path"])
     assert reports[0]["rms_dp_mm"] == reports[1]["rms_dp_mm"]
 
@@ -137,8 +140,9 @@ def test_identical_runs_give_identical_reports(small_scene, tmp_path):
     texts = []
     for k in range(5):
         out = tmp_path / f"run{k}"
+        # a gate that fits 0.2 px of noise at f = 150 px (0.5 mm matches 10 of 81: exit 1)
         assert main(["run", small_scene, "--from", str(data), "--out", str(out), "--noise-px",
-                     "0.2", "--seed", "3", "--no-progress"]) == 0
+                     "0.2", "--seed", "3", "--gate-mm", "5", "--no-progress"]) == 0
         texts.append(json.dumps(_without_timings(json.loads((out / "report.json").read_text())),
                                 sort_keys=True).replace(str(out), "OUT"))
     assert all(text == texts[0] for text in texts[1:])
@@ -364,3 +368,48 @@ def test_point_covariances_with_and_without_a_rig_covariance(small_scene, tmp_pa
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("error:") and "singular.yaml" in err[0]
     assert not (tmp_path / "bad").exists()
+
+
+def test_a_run_that_matched_fewer_than_half_of_the_visible_targets_fails():
+    """1 correct match of 290 targets visible in both views (a lens distortion that magnifies
+    one view three times): the run fails and says so; half or more passes."""
+    from eval.run.pipeline import run_failures
+
+    crosscheck = {"left": {"associated": 239}, "right": {"associated": 15}}
+    report = {"matching": {"wrong": 0, "correct": 1, "pairs": 1, "visible_in_both": 290},
+              "crosscheck": crosscheck}
+    failures = run_failures(report)
+    assert len(failures) == 1 and "only 1 of the 290 targets" in failures[0]
+    assert "less than half" in failures[0]
+    report["matching"].update(correct=145, pairs=145)
+    assert run_failures(report) == []
+
+
+@pytest.mark.slow
+def test_a_magnifying_distortion_that_matches_almost_nothing_exits_1(tmp_path, capsys):
+    """``-D left_dist=5 0 0 0 0`` is invertible (no fold) but magnifies the left view ~3×:
+    1 of 290 visible targets matched. Exit 1, one ``failed:`` line, the report written."""
+    out = tmp_path / "out"
+    code = main(["run", str(REPO / "scenes" / "paper_plane.xml"), "-D", "left_dist=5 0 0 0 0",
+                 "-D", "width=320", "-D", "height=268", "--spp", "4", "--no-progress", "--out", str(out)])
+    err = capsys.readouterr().err
+    failed = [line for line in err.splitlines() if line.startswith("failed:")]
+    assert code == 1, err
+    assert len(failed) == 1 and "less than half" in failed[0]
+    report = json.loads((out / "report.json").read_text())
+    assert report["verdict"]["passed"] is False
+    assert report["matching"]["correct"] < report["matching"]["visible_in_both"] / 2
+
+
+@pytest.mark.slow
+def test_spp_that_the_sampler_rounds_up_is_said_and_json_stays_json(small_scene, tmp_path,
+                                                                    capsys):
+    """``--spp 5``: the scenes' multijitter sampler renders 6. The report records both and the
+    summary says 6; Mitsuba's warning goes to stderr, so ``--json`` prints valid JSON."""
+    out = tmp_path / "out"
+    assert main(["run", small_scene, "--out", str(out), "--spp", "5", "--no-progress",
+                 "--json"]) == 0
+    captured = capsys.readouterr()
+    report = json.loads(captured.out)  # Mitsuba's log line made this invalid
+    assert report["spp"] == 5 and report["spp_rendered"] == 6
+    assert "6 spp (5 requested" in captured.err

@@ -95,3 +95,24 @@ def test_camera_on_the_water_side_is_rejected():
     right = Camera(K, SIZE, t=(200.0, 0.0, 150.0))
     with pytest.raises(ValueError, match="right camera.*water side"):
         StereoRig(left, right, paper_port())
+
+
+@pytest.mark.parametrize("k1", [-5.0, -2.0])
+def test_a_folding_distortion_names_the_radius_where_it_folds(k1):
+    """r_d = r (1 + k1 r²) with k1 < 0 turns back at r = 1/√(-3 k1): the problem names that
+    radius (in pixels from the principal point, to the checked grid's step)."""
+    import re
+
+    from measure.geometry.camera import DISTORTION_CHECK_STEP_PX
+
+    f = 150.0
+    camera = Camera([[f, 0, 159.5], [0, f, 133.5], [0, 0, 1]], (320, 268),
+                    dist=(k1, 0, 0, 0, 0))
+    problem = camera.distortion_problem()
+    assert problem is not None and "folds within the 320x268 image" in problem
+    radius = float(re.search(r"about (\d+) px from the principal point", problem).group(1))
+    r = 1.0 / np.sqrt(-3.0 * k1)
+    fold_px = f * r * (1.0 + k1 * r * r)
+    assert abs(radius - fold_px) <= DISTORTION_CHECK_STEP_PX * np.sqrt(2) + 0.5
+    # k1 > 0 never folds (r (1 + k1 r²) grows with r): nothing to refuse.
+    assert Camera(camera.K, (320, 268), dist=(-k1, 0, 0, 0, 0)).distortion_problem() is None

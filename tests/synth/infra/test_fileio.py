@@ -148,3 +148,15 @@ def test_atomic_create_never_replaces(tmp_path):
     with pytest.raises(FileExistsError):
         atomic_create_bytes(path, b"second")
     assert path.read_bytes() == b"first" and sorted(p.name for p in tmp_path.iterdir()) == ["f.bin"]
+
+
+@pytest.mark.parametrize("path", ["", "  "])
+def test_an_empty_output_path_is_named(tmp_path, monkeypatch, path):
+    """The empty path is not "the current directory, which holds files of someone else"."""
+    from synth.infra.fileio import check_file_output
+
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(OutputError, match="--out: the path is empty"):
+        OutputDir(path, "eval run")
+    with pytest.raises(OutputError, match="--out: the path is empty"):
+        check_file_output(path, "--out")

@@ -213,3 +213,14 @@ def test_a_rerun_renders_again_unless_every_image_is_whole(boards, tmp_path, cap
     assert "nothing to do" not in printed and "rendering it again" in printed, printed
     assert image.read_bytes() == whole
     assert synth_main(argv) == 0 and "nothing to do" in capsys.readouterr().out
+
+
+def test_truth_tables_with_a_byte_order_mark_are_read(tmp_path):
+    """poses.csv / corners.csv re-saved with a byte-order mark read as before."""
+    from synth.products.boards import POSES_HEADER, read_truth_table
+
+    text = ",".join(POSES_HEADER) + "\n0,0.1,0.2,0.3,1,2,3\n"
+    with_bom = tmp_path / "poses.csv"
+    with_bom.write_bytes(b"\xef\xbb\xbf" + text.encode("utf-8"))
+    np.testing.assert_array_equal(read_truth_table(str(with_bom), POSES_HEADER, 1),
+                                  [[0, 0.1, 0.2, 0.3, 1, 2, 3]])

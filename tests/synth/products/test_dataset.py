@@ -257,3 +257,69 @@ def test_targets_ply_keeps_every_bit(tmp_path):
     import open3d as o3d
     assert np.array_equal(np.asarray(o3d.io.read_point_cloud(str(tmp_path / "t.ply")).points),
                           points)
+
+
+def test_pixels_csv_with_a_byte_order_mark_is_read(tmp_path):
+    """A pixels.csv saved by Excel ("CSV UTF-8") starts with a byte-order mark: same values."""
+    from synth.products.dataset import read_pixels_csv, write_pixels_csv
+
+    plain = tmp_path / "pixels.csv"
+    write_pixels_csv(plain, [0, 1], [[1.0, 2.0, 3.0], [4.0, 5.0, 6.5]], [[10.0, 11.0], [12, 13]],
+                     [[20.0, 21.0], [22, 23]])
+    with_bom = tmp_path / "bom.csv"
+    with_bom.write_bytes(b"\xef\xbb\xbf" + plain.read_bytes())
+    ours, theirs = read_pixels_csv(plain), read_pixels_csv(with_bom)
+    for key in ("id", "points", "left", "right"):
+        np.testing.assert_array_equal(theirs[key], ours[key])
+
+
+def _calib_text(tmp_path):
+    """A calib.yaml of the small rig behind the paper's port, as text."""
+    from measure import StereoRig
+    from synth.products.dataset import write_calib
+    from synth.scene.rig import paper_cameras, paper_port
+
+    path = tmp_path / "calib.yaml"
+    write_calib(path, StereoRig(*paper_cameras((320, 268), 150.0), paper_port()))
+    return path, path.read_text()
+
+
+def test_port_present_0_means_in_air_and_other_values_are_refused(tmp_path):
+    """``present: 0`` with a real port's indices: read as in air (it was reported in air and
+    measured through the port); ``present: 2`` or ``yes``: one error naming the file and the
+    field."""
+    from measure import triangulate
+    from synth.products.dataset import DatasetError, read_calib
+
+    path, text = _calib_text(tmp_path)
+    assert "present: 1" in text
+    through_port = read_calib(path)
+    assert through_port["has_port"] and max(through_port["port"].indices) > 1.3
+    path.write_text(text.replace("present: 1", "present: 0"))
+    air = read_calib(path)
+    assert air["has_port"] is False and set(air["port"].indices) == {1.0}
+    # the points are measured in air: a pixel pair triangulates as without the port
+    from measure import StereoRig
+
+    no_port = StereoRig(air["rig"].left, air["rig"].right, None)
+    uv_l, uv_r = np.array([[180.0, 130.0]]), np.array([[120.0, 130.0]])
+    np.testing.assert_allclose(triangulate(air["rig"], uv_l, uv_r).points,
+                               triangulate(no_port, uv_l, uv_r).points, rtol=1e-9)
+    for bad in ("2", "0.5", "-1", "yes"):
+        path.write_text(text.replace("present: 1", f"present: {bad}"))
+        with pytest.raises(DatasetError, match=rf"calib.yaml: port: present: {bad}: must be 0"):
+            read_calib(path)
+
+
+@pytest.mark.parametrize("units", ["m", "inches", "cm", "1"])
+def test_units_other_than_mm_are_refused(tmp_path, units):
+    """``units:`` was written and never read: ``units: m`` measured as mm."""
+    from synth.products.dataset import DatasetError, read_calib
+
+    path, text = _calib_text(tmp_path)
+    assert 'units: mm' in text
+    path.write_text(text.replace("units: mm", f"units: {units}"))
+    with pytest.raises(DatasetError, match="calib.yaml: units: .*only mm is read"):
+        read_calib(path)
+    path.write_text(text.replace("units: mm\n", ""))  # no units: mm, as before
+    assert read_calib(path)["has_port"]

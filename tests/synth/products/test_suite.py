@@ -259,3 +259,26 @@ def test_board_parameters_are_checked(tmp_path, text, fragment):
     path = _spec(tmp_path, 'scenes = ["{scene}"]\n' + text)
     with pytest.raises(SpecError, match=re.escape(fragment)):
         load_suite_spec(path)
+
+
+def test_another_spec_after_a_suite_stopped_before_its_suite_json_is_refused(tmp_path, capsys):
+    """A suite interrupted before its first ``suite.json`` (only the marker, ``spec.toml`` and
+    ``entries/``), then another spec on the same ``--out``: refused (it was accepted, two suites
+    mixed in one folder and ``spec.toml`` overwritten); the same spec resumes."""
+    from synth.products.suite import SuiteDir
+
+    first = tmp_path / "a"
+    first.mkdir()
+    spec = load_suite_spec(_spec(first))
+    out = SuiteDir(tmp_path / "out")
+    out.open(spec, None, "token")
+    out._lock.close()  # the process was stopped: its lock is gone
+    assert not (tmp_path / "out" / "suite.json").exists()
+    spec_toml = (tmp_path / "out" / "spec.toml").read_text()
+    other = _spec(tmp_path, SPEC.replace("[900, 1100]", "[800, 1200]"))
+    assert main(["suite", str(other), "--out", str(tmp_path / "out"), "--no-progress"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "holds a suite of another spec" in err[0], err
+    assert str(first / "suite.toml") in err[0]
+    assert (tmp_path / "out" / "spec.toml").read_text() == spec_toml
+    assert SuiteDir(tmp_path / "out").check()["spec_hash"] == spec.spec_hash()

@@ -242,3 +242,22 @@ def test_adaptive_render_falls_back_to_the_full_film_where_most_is_lit(tiny_scen
     assert stats["passes"] == [1, 4] and stats["samples_off_mask"] > 0
     full = R.render_stereo(spec, spp=4, progress=False, adaptive=False)[0]
     assert abs(float(left.sum()) - float(full.sum())) < 0.05 * float(full.sum())
+
+
+def test_spp_text_says_what_was_rendered():
+    from synth.rendering.render import spp_text
+
+    assert spp_text(4, 4) == spp_text(4) == "4 spp"
+    assert spp_text(5, 6).startswith("6 spp (5 requested: Mitsuba's sampler rounds")
+
+
+@pytest.mark.slow
+def test_mitsubas_log_goes_to_stderr(capfd):
+    """Mitsuba's warnings (the sampler's rounding of 5 spp to 6) reach stderr, not stdout."""
+    from synth.rendering.mitsuba_setup import import_mitsuba
+
+    mi, _ = import_mitsuba()
+    sampler = mi.load_dict({"type": "multijitter", "sample_count": 5})
+    assert sampler.sample_count() == 6
+    captured = capfd.readouterr()
+    assert "rounded up to 6" in captured.err and "rounded" not in captured.out

@@ -144,6 +144,13 @@ SCENE_BAD = {
     "targets in the glass": (["--layout", "grid", "--z", "55"], "in the glass"),
     "field of view": (["--dome-offset", "0", "0", "45"], "field of view"),
     "domes overlap": (["--dome-radius", "95"], "overlap"),
+    # degenerate domes (issue 37: accepted), refused with the minimum
+    "radius tiny": (["--dome-radius", "0.001"],
+                    "--dome-radius 0.001 --dome-thickness 8: dome radius 0.001 mm is below the "
+                    "minimum of 1 mm"),
+    "thickness tiny": (["--dome-thickness", "1e-9"],
+                       "--dome-thickness 1e-9: dome thickness 1e-9 mm is below the minimum of "
+                       "0.1 mm"),
     "flat option": (["--port-distance", "90"], "--port-distance"),
     "water": (["--water", "coastal"], "--water"),
 }
@@ -181,3 +188,29 @@ def test_committed_dome_scenes(name, offset):
         np.testing.assert_allclose(got.center, dome.center, atol=1e-12)
         assert (got.radius, got.thickness, got.indices) == (50.0, 8.0, INDICES)
     np.testing.assert_array_equal(spec.targets, paper_plane(1000.0))
+
+
+def test_a_degenerate_dome_is_refused_in_a_calibration_and_a_scene(tmp_path):
+    """The minimum holds wherever a dome is read: a calib.yaml's dome map and a scene's
+    spheres, not only synth scene's options."""
+    from measure import StereoRig
+    from synth.products.dataset import DatasetError, read_calib, write_calib
+    from synth.scene.dome import MIN_DOME_THICKNESS_MM, pair_from_spheres
+
+    left, right = paper_cameras(SMALL, 150.0)
+    pair = dome_pair((left, right), 50.0, 8.0, (0.0, 0.0, 0.0), INDICES)
+    path = tmp_path / "calib.yaml"
+    write_calib(path, StereoRig(left, right, pair))
+    assert read_calib(path)["has_port"]
+    path.write_text(path.read_text().replace("thickness: 8.", "thickness: 1.0000000000000001e-09"))
+    with pytest.raises(DatasetError, match="calib.yaml: left dome: dome thickness 1e-9 mm is "
+                                           "below the minimum"):
+        read_calib(path)
+    spheres = {}
+    for name, dome in (("left", pair.left), ("right", pair.right)):
+        n_air, n_glass, n_water = dome.indices
+        spheres[f"dome_{name}_inner"] = (dome.center, 50.0, n_glass, n_air)
+        spheres[f"dome_{name}_outer"] = (dome.center, 50.0 + MIN_DOME_THICKNESS_MM / 2, n_water,
+                                         n_glass)
+    with pytest.raises(ValueError, match="below the minimum of 0.1 mm"):
+        pair_from_spheres(spheres)
