@@ -55,6 +55,11 @@ class CovarianceError(ValueError):
     definite."""
 
 
+#: The largest σ a rig parameter may have (px, mm, rad or unitless): a covariance that says more
+#: is not a calibration's (a variance of 1e30 was reported as σ = 1e15 mm without comment).
+MAX_SIGMA = 1e6
+
+
 @dataclass(frozen=True, eq=False)
 class RigCovariance:
     """``names`` ``(P,)`` (module docs), ``matrix`` ``(P, P)`` in those names' units, and
@@ -82,6 +87,11 @@ class RigCovariance:
         scale = np.sqrt(np.abs(np.diag(matrix)))
         if np.any(np.diag(matrix) <= 0):
             raise CovarianceError("covariance is not positive: a variance is zero or negative")
+        huge = np.flatnonzero(scale > MAX_SIGMA)
+        if huge.size:
+            raise CovarianceError(f"the σ of {names[huge[0]]} is {scale[huge[0]]:.3g}: no "
+                                  f"calibration is that uncertain (σ above {MAX_SIGMA:g} px, mm or "
+                                  f"rad); is the matrix in this project's units (px, mm, rad)?")
         if not np.allclose(matrix, matrix.T, rtol=1e-9, atol=0.0):
             raise CovarianceError("covariance is not symmetric")
         matrix = 0.5 * (matrix + matrix.T)

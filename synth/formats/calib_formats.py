@@ -548,7 +548,7 @@ def _read_rig_config(path, cameras) -> tuple[int, dict]:
             w, x, y, z = (float(v) for v in entry["cam_from_rig_rotation"])
             t = np.array([float(v) for v in entry["cam_from_rig_translation"]], dtype=np.float64)
             norm = float(np.linalg.norm([w, x, y, z]))
-            if t.shape != (3,) or not np.all(np.isfinite(t)) or abs(norm - 1.0) > 1e-6:
+            if t.shape != (3,) or not np.all(np.isfinite(t)) or not abs(norm - 1.0) <= 1e-6:
                 raise CalibFormatError(f"{path}: camera {camera_id}: the rotation must be a unit "
                                        f"quaternion (w, x, y, z) and the translation 3 numbers")
             R_cam = Rotation.from_quat([x, y, z, w]).as_matrix()

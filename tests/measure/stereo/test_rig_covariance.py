@@ -37,6 +37,7 @@ def test_a_calibration_without_covariance_reads_none(tmp_path):
     (np.zeros((6, 6)), "not positive"),
     (np.ones((6, 6)), "singular"),
     (np.triu(np.ones((6, 6))) + np.eye(6), "not symmetric"),
+    (np.diag([1.0, 1e30, 1.0, 1.0, 1.0, 1.0]), "is 1e\\+15: no calibration is that uncertain"),
 ])
 def test_a_bad_covariance_is_refused_naming_the_file(tmp_path, matrix, words):
     with pytest.raises(CovarianceError, match=words):

@@ -269,6 +269,18 @@ def test_cameras_txt_needs_its_rig_config(tmp_path):
         read_calib(folder / COLMAP_CAMERAS_NAME)
 
 
+def test_a_nan_in_the_rig_configs_quaternion_is_refused(tmp_path):
+    """JSON reads NaN; a NaN quaternion's norm compared with 1 was not 'more than 1e-6 off'."""
+    folder = _written(tmp_path)
+    text = (folder / COLMAP_RIG_NAME).read_text()
+    config = json.loads(text)
+    config[0]["cameras"][1]["cam_from_rig_rotation"][2] = float("nan")
+    (folder / COLMAP_RIG_NAME).write_text(json.dumps(config))
+    assert "NaN" in (folder / COLMAP_RIG_NAME).read_text()
+    with pytest.raises(DatasetError, match="camera 2: the rotation must be a unit quaternion"):
+        read_calib(folder / COLMAP_CAMERAS_NAME)
+
+
 def test_three_cameras_are_not_a_stereo_rig(tmp_path):
     folder = _written(tmp_path)
     text = (folder / COLMAP_CAMERAS_NAME).read_text()
