@@ -79,6 +79,12 @@ def add_parser(subparsers):
     add_progress_option(p)
 
 
+def _inside(path, folder) -> bool:
+    """Whether ``path`` is ``folder`` or lies below it (symbolic links resolved)."""
+    path, folder = os.path.realpath(path), os.path.realpath(folder)
+    return path == folder or path.startswith(folder.rstrip(os.sep) + os.sep)
+
+
 def main(args) -> int:
     from measure import triangulate
     from synth.products.dataset import DatasetError, read_dataset
@@ -103,6 +109,10 @@ def main(args) -> int:
     method = args.method or "optical_path"
     if args.submission and args.method is not None:
         refuse_method_without_pairs(args.dataset, args.submission, method)
+    if args.submission and args.out and _inside(args.out, args.dataset):
+        raise CLIError(f"--out {args.out}: inside the suite {args.dataset} (a suite's folder holds "
+                       f"what synth suite wrote; scores there would make it refuse to resume): "
+                       f"write the scores beside it")
     output = OutputDir(args.out, COMMAND).claim()
     if args.submission:
         return score_suite_main(args, output, method, log, start)

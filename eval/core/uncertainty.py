@@ -101,14 +101,16 @@ def rig_covariance_note(rig_covariance, source: str | None) -> str:
     return "the rig is taken as exact (no calibration file): the pixel-noise part only"
 
 
-def uncertainty_summary(covariance, errors=None, dof: int = 3) -> dict:
+def uncertainty_summary(covariance, errors=None, dof: int = 3, rig_differs: dict | None = None
+                        ) -> dict:
     """A method's ``report.json`` entry: :func:`measure.stereo.uncertainty.sigma_summary` and, with
     ``errors`` (N, 3) mm (measured − true, the same rows), the coverage and normalized errors
-    (:func:`measure.stereo.uncertainty.coverage_summary`, ``dof`` the dimensions the errors span)."""
+    (:func:`measure.stereo.uncertainty.coverage_summary`, ``dof`` the dimensions the errors span).
+    ``rig_differs``: how the measurement's rig differs from the truth (its verdict names it)."""
     out = {"sigma": sigma_summary(covariance)}
     if errors is not None:
         out["coverage"] = coverage_summary(errors, covariance, dof)
-        verdict = coverage_verdict(out["coverage"])
+        verdict = coverage_verdict(out["coverage"], rig_differs)
         if verdict:
             out["coverage"]["verdict"] = verdict
     return out
@@ -119,12 +121,19 @@ def uncertainty_summary(covariance, errors=None, dof: int = 3) -> dict:
 HONEST_COVERAGE, VERDICT_MIN_POINTS = (0.90, 0.98), 30
 
 
-def coverage_verdict(coverage: dict) -> str:
+def coverage_verdict(coverage: dict, rig_differs: dict | None = None) -> str:
     """A sentence when ``coverage_95`` is outside :data:`HONEST_COVERAGE` (with at least
-    :data:`VERDICT_MIN_POINTS` points), else ``""``: the σ understated or overstated the error."""
+    :data:`VERDICT_MIN_POINTS` points), else ``""``: the σ understated or overstated the error.
+    When the measurement's rig differs from the truth (``rig_differs``, e.g. ``--assume``) an
+    understated σ is put down to that first: every point shares the rig's error."""
     fraction, n = coverage.get("coverage_95"), coverage.get("n") or 0
     if fraction is None or n < VERDICT_MIN_POINTS:
         return ""
+    if fraction < HONEST_COVERAGE[0] and rig_differs:
+        return (f"σ understates the errors: {fraction:.3f} of the points inside their 95 % "
+                f"ellipsoid (< {HONEST_COVERAGE[0]:.2f}); the measurement's rig differs from "
+                f"the truth ({', '.join(sorted(rig_differs))}: --assume or --calib), an error "
+                f"every point shares and that σ holds only through a calibration's covariance")
     if fraction < HONEST_COVERAGE[0]:
         return (f"σ understates the errors: {fraction:.3f} of the points inside their 95 % "
                 f"ellipsoid (< {HONEST_COVERAGE[0]:.2f}); an error both views share is not in "

@@ -23,6 +23,7 @@ from synth.products.crosscheck import ASSOCIATION_GATE_PX, associate_detections,
 from synth.rendering.noise import add_pixel_noise
 
 from eval.core.detection import detect_view
+from eval.core.uncertainty import VERDICT_MIN_POINTS
 from eval.core.cloud_metrics import cloud_distances, flatness, rigid_alignment
 from eval.core.results import ErrorStats, MethodScores
 from eval.run.config import RunConfig
@@ -129,10 +130,11 @@ def covariance_stage(inputs: RunInputs, pixel_sigma, detections, centers, matche
     return covariances, info
 
 
-def attach_covariances(covariances, results, scored, info) -> None:
+def attach_covariances(covariances, results, scored, info, rig_differs=None) -> None:
     """Put each method's covariances beside its points in ``scored["per_method"]`` (the
     correctly matched rows: ``covariance``; every valid row: ``all_covariance``) and the
-    report's ``{method: summary}`` (σ, coverage against the truth) into ``info["summaries"]``."""
+    report's ``{method: summary}`` (σ, coverage against the truth) into ``info["summaries"]``;
+    ``rig_differs`` how the measurement's rig differs from the truth (its verdict says so)."""
     from eval.core.uncertainty import uncertainty_summary
 
     summaries = {}
@@ -141,7 +143,8 @@ def attach_covariances(covariances, results, scored, info) -> None:
         data = scored["per_method"][method]
         data["covariance"] = covariance.total[ok]
         data["all_covariance"] = covariance.total[results[method].valid]
-        summaries[method] = uncertainty_summary(data["covariance"], data["errors"])
+        summaries[method] = uncertainty_summary(data["covariance"], data["errors"],
+                                                rig_differs=rig_differs)
     info["summaries"] = summaries
 
 
@@ -436,11 +439,14 @@ def run_pipeline(inputs: RunInputs, config: RunConfig, log=print) -> RunResult:
     log("score against the ground truth (Open3D) …")
     start = time.perf_counter()
     scored = score_stage(inputs, detections, matches, window, results, gate_mm)
-    attach_covariances(covariances, results, scored, uncertainty)
+    from eval.core.assumption import rig_difference
+
+    differs = rig_difference(inputs.true_rig, inputs.rig)
+    attach_covariances(covariances, results, scored, uncertainty, differs)
     if corrected is not None:
         scored_corrected = score_stage(inputs, detections, matches, window, corrected, gate_mm)
         attach_covariances(covariances_corrected, corrected, scored_corrected,
-                           uncertainty_corrected)
+                           uncertainty_corrected, differs)
     if refined is not None:
         calibration["methods"] = {m: s.to_json() for m, s in score_stage(
             inputs, detections, matches, window, refined, gate_mm)["scores"].items()}
@@ -492,11 +498,18 @@ def measure_scene(config: RunConfig, log=print) -> RunResult:
     return result
 
 
+#: A method whose points fall inside their 95 % ellipsoids less often than this fails the run
+#: (an optimistic σ, 0.84 on the paper plane, is said in the report; one that covers fewer than
+#: half of the points does not describe the errors at all: a wrong --assume gave 0.000).
+FAILED_COVERAGE = 0.5
+
+
 def run_failures(report: dict) -> list:
     """What the truth shows went wrong in a target run, one phrase each (empty: nothing):
     wrong matches, no correct match or fewer correct matches than half the targets visible in
     both views, a cross-check with no detection associated in one view
-    (its headline would then come from the other view alone)."""
+    (its headline would then come from the other view alone), a method whose σ covers fewer
+    than :data:`FAILED_COVERAGE` of its points."""
     failures = []
     m, c = report["matching"], report["crosscheck"]
     if m["wrong"]:
@@ -511,6 +524,13 @@ def run_failures(report: dict) -> list:
             failures.append(f"no {view} detection lies within {ASSOCIATION_GATE_PX:g} px of a "
                             f"target's simulated pixel, so the cross-check comes from one view "
                             f"at most")
+    for method, summary in report.get("uncertainty", {}).get("summaries", {}).items():
+        coverage = summary.get("coverage") or {}
+        fraction, n = coverage.get("coverage_95"), coverage.get("n") or 0
+        if fraction is not None and n >= VERDICT_MIN_POINTS and fraction < FAILED_COVERAGE:
+            failures.append(f"{method}'s σ does not describe its errors: {fraction:.3f} of its "
+                            f"{n} points inside their 95 % ellipsoids (fewer than "
+                            f"{FAILED_COVERAGE:g})")
     return failures
 
 

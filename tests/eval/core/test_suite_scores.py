@@ -73,6 +73,19 @@ def test_the_baseline_scores_equal_eval_run_key_by_key(baseline, tmp_path):
 
 
 @pytest.mark.slow
+def test_scores_inside_the_suite_are_refused_and_the_suite_resumes(baseline, tmp_path, capsys):
+    """``--out SUITE/scores`` made the suite refuse to resume (a folder it did not write): the
+    scores go beside the suite, and synth suite still finds its own folder."""
+    suite, sub, _, _ = baseline
+    assert main(["score", str(suite), "--submission", str(sub), "--out",
+                 str(suite / "scores"), "--no-progress"]) == 2
+    assert "inside the suite" in capsys.readouterr().err
+    assert not (suite / "scores").exists()
+    assert synth_main(["suite", str(suite.parent / "spec.toml"), "--out", str(suite),
+                       "--workers", "1", "--no-progress"]) == 0
+
+
+@pytest.mark.slow
 def test_missing_metres_and_offset_submissions_are_failures_and_warnings(baseline, tmp_path,
                                                                          capsys):
     from synth.formats.cloudfile import read_cloud_points

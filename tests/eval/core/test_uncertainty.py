@@ -76,3 +76,7 @@ def test_the_coverage_verdict_says_when_sigma_is_dishonest():
     assert "overstates" in coverage_verdict({"coverage_95": 1.0, "n": 496})
     assert coverage_verdict({"coverage_95": 0.5, "n": 10}) == ""  # too few points to judge
     assert coverage_verdict({"coverage_95": None, "n": 0}) == ""
+    # a wrong --assume is the first suspect, not --eccentricity (which it always named)
+    wrong = coverage_verdict({"coverage_95": 0.0, "n": 496}, {"n_water": {"truth": 1.333}})
+    assert "differs from the truth (n_water" in wrong and "--eccentricity" not in wrong
+    assert "--eccentricity" in coverage_verdict({"coverage_95": 0.786, "n": 496}, {})

@@ -313,6 +313,23 @@ def test_a_cross_check_from_one_view_is_a_failure():
     assert run_failures(report) == []
 
 
+def test_a_sigma_that_covers_fewer_than_half_of_the_points_is_a_failure():
+    """A run whose points' σ covered 0.000 of them (RMS dP in millimetres) exited 0: a σ
+    that covers fewer than half fails the run; an optimistic one (0.84) is said, not failed."""
+    from eval.run.pipeline import run_failures
+
+    report = {"matching": {"wrong": 0, "correct": 300, "pairs": 300},
+              "crosscheck": {"left": {"associated": 300}, "right": {"associated": 300}},
+              "uncertainty": {"summaries": {"optical_path": {"coverage": {
+                  "coverage_95": 0.0, "n": 300}}}}}
+    failures = run_failures(report)
+    assert len(failures) == 1 and "optical_path's σ does not describe its errors" in failures[0]
+    report["uncertainty"]["summaries"]["optical_path"]["coverage"]["coverage_95"] = 0.839
+    assert run_failures(report) == []
+    report["uncertainty"]["summaries"]["optical_path"]["coverage"].update(coverage_95=0.1, n=10)
+    assert run_failures(report) == []  # too few points to judge
+
+
 @pytest.mark.slow
 def test_point_covariances_with_and_without_a_rig_covariance(small_scene, tmp_path, capsys):
     """The points of optical_path carry covariances: from the pixel noise alone with the
