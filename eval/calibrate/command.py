@@ -26,7 +26,7 @@ import time
 
 from eval.calibrate.single import single_camera_folder
 from eval.cli import CLIError, positive_float
-from eval.core.photos import add_encoding_option
+from eval.core.photos import add_encoding_option, encoding_note
 from synth.infra.cli import (BOARD_OPTIONS, EXIT_CHECK_FAILED, WATER_INDEX_HELP,
                              add_board_options, add_out_option, add_progress_option,
                              board_from_args, given, refuse_given, water_index_argument)
@@ -418,6 +418,9 @@ def _calibrate_photos(args, output, log, free, start) -> int:
     if not args.air:
         air_rig, air_covariance = _intrinsics_for_photos(args.intrinsics, log)
     log(f"read {len(pairs.names)} photo pairs from {args.dir} …")
+    note = encoding_note(pairs.left[0], args.encoding) if pairs.left else None
+    if note:
+        print(note, file=sys.stderr, flush=True)
     t = time.perf_counter()
     images, size = read_pairs(pairs, args.encoding)
     timings = {"read": time.perf_counter() - t}

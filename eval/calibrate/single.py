@@ -19,6 +19,7 @@ within the image, a σ of fx or fy larger than the value) exits 1 with the files
 from __future__ import annotations
 
 import os
+import sys
 import time
 
 import numpy as np
@@ -48,11 +49,14 @@ def calibrate_single(args, output, log, start, board) -> tuple[dict, str]:
                                          calibrate_camera, camera_residuals, detect_images,
                                          lens_problem)
 
-    from eval.core.photos import photo_files, read_photo
+    from eval.core.photos import encoding_note, photo_files, read_photo
 
     where = f"{args.dir} (one camera's photos)"
     files = photo_files(args.dir)
     log(f"read {len(files)} photos from {args.dir} …")
+    note = encoding_note(files[0], args.encoding)
+    if note:
+        print(note, file=sys.stderr, flush=True)
     t = time.perf_counter()
     images = [read_photo(f, args.encoding) for f in files]
     sizes = {(im.shape[1], im.shape[0]) for im in images}

@@ -141,6 +141,22 @@ def jpeg_truncation(path) -> str | None:
     return None
 
 
+def encoding_note(path, encoding: str) -> str | None:
+    """A note when ``encoding`` ``auto`` takes the photo at ``path`` (the first of a set) as
+    linear because it has 16 bits: some converters store sRGB-encoded values in 16-bit files,
+    and nothing in the file says which (``--encoding srgb`` reads those)."""
+    import cv2
+
+    if encoding != "auto":
+        return None
+    image = cv2.imread(os.fspath(path), cv2.IMREAD_ANYDEPTH | cv2.IMREAD_ANYCOLOR)
+    if image is None or image.dtype != np.uint16:
+        return None
+    return (f"note: 16-bit photos ({os.path.basename(os.fspath(path))} …) are read as linear "
+            f"values; if they hold sRGB-encoded values (as some raw converters write), give "
+            f"--encoding srgb")
+
+
 def exif_orientation(path) -> int:
     """The EXIF orientation tag of a photo (1 = as stored; 3 turned 180°; 6 and 8 turned 90°;
     2, 4, 5, 7 mirrored), 1 when it has none."""
@@ -253,6 +269,7 @@ def read_pairs(pairs: PhotoPairs, encoding: str = "auto") -> tuple[list, tuple]:
 
 
 __all__ = ["ENCODING_HELP", "PHOTO_ENCODINGS", "PHOTO_EXTENSIONS", "PhotoError", "PhotoPairs",
-           "JPEG_TAIL_BYTES", "add_encoding_option", "check_orientations", "exif_orientation",
+           "JPEG_TAIL_BYTES", "add_encoding_option", "check_orientations", "encoding_note",
+           "exif_orientation",
            "jpeg_truncation", "pair_folders",
            "photo_files", "photo_folder", "read_pairs", "read_photo", "srgb_to_linear"]

@@ -33,7 +33,7 @@ import time
 from eval.cli import CLIError, positive_float
 from eval.core.detection import DETECTOR_OPTIONS, add_detector_options
 from eval.core.formatting import format_number as fmt
-from eval.core.photos import add_encoding_option
+from eval.core.photos import add_encoding_option, encoding_note
 from eval.core.uncertainty import add_pixel_sigma_option, parse_pixel_sigma
 from measure.images.detect import FLOOR_FRACTION
 from synth.infra.cli import (EXIT_CHECK_FAILED, add_json_option, add_out_option,
@@ -278,6 +278,9 @@ def main(args) -> int:
     options = options_of(args)
     output = OutputDir(args.out, COMMAND).claim()  # before any work
     inputs = load_inputs(args.calib, args.left, args.right, args.encoding)
+    note = encoding_note(inputs.left[0], args.encoding) if inputs.left else None
+    if note:
+        print(note, file=sys.stderr, flush=True)
     log(f"measure {len(inputs.names)} pair(s) of {inputs.size[0]}x{inputs.size[1]} px photos "
         f"with {args.calib} …")
     results = measure_all(inputs, options, quiet, log)

@@ -57,6 +57,14 @@ def main(args) -> int:
     records = out.finished(spec) if previous is not None else {}
     todo = [e for e in spec.entries if e.key not in records
             or (args.retry_failed and records[e.key].get("status") != "ok")]
+    if not args.no_progress:
+        print(f"suite {spec.name}: {len(spec.entries)} datasets, {len(todo)} to render now "
+              f"({len(spec.entries) - len(todo)} done before)", file=sys.stderr, flush=True)
+        if len(todo) > LARGE_SUITE:
+            print(f"warning: {len(todo)} datasets to render: at 5–60 s each on a 2-core machine "
+                  f"(docs/suites.md) that is {len(todo) * 5 / 3600:.0f}–"
+                  f"{len(todo) * 60 / 3600:.0f} hours; Ctrl-C stops it and a rerun resumes",
+                  file=sys.stderr, flush=True)
     token = uuid.uuid4().hex
     client = cluster = None
     where, ran, compute = "nothing to render", 0, 0.0
@@ -103,6 +111,11 @@ def main(args) -> int:
     return 1 if failed else 0
 
 
+#: Datasets to render above which the suite warns of the hours it will take; progress lines
+#: printed without a terminal (tqdm draws none there).
+LARGE_SUITE, PROGRESS_LINES = 10_000, 20
+
+
 def _execute(client, spec, todo, out, records, token, progress) -> tuple[int, float]:
     import os
 
@@ -125,7 +138,10 @@ def _execute(client, spec, todo, out, records, token, progress) -> tuple[int, fl
         futures[client.submit(render_task, task, pure=False, key=f"suite-{entry.key}")] = entry
     bar = tqdm(total=len(todo), unit="dataset", desc="suite", file=sys.stderr,
                disable=True if not progress else None)
-    ran = 0
+    # without a terminal tqdm draws nothing: a line every twentieth of the suite instead
+    lines = progress and bar.disable
+    every = max(1, len(todo) // PROGRESS_LINES)
+    ran = failed = 0
     try:
         for future in as_completed(futures, loop=client.loop):
             interrupt.check()
@@ -145,7 +161,12 @@ def _execute(client, spec, todo, out, records, token, progress) -> tuple[int, fl
                 out.write_record(record)
             records[entry.key] = record
             ran += 1
+            failed += record.get("status") != "ok"
             bar.update(1)
+            if lines and (ran % every == 0 or ran == len(todo)):
+                print(f"suite: {ran}/{len(todo)} datasets ({100 * ran / len(todo):.0f} %), "
+                      f"{failed} failed, {time.perf_counter() - started:.0f} s", file=sys.stderr,
+                      flush=True)
     finally:
         bar.close()
         for future in futures:

@@ -136,3 +136,14 @@ def test_a_truncated_jpeg_and_a_float_image_with_nan_are_refused(tmp_path):
     cv2.imwrite(str(tmp_path / "nan.tiff"), floats)
     with pytest.raises(PhotoError, match=r"nan\.tiff: 2 pixel\(s\) are NaN or infinite"):
         read_photo(tmp_path / "nan.tiff")
+
+
+def test_16bit_photos_read_as_linear_are_said(tmp_path):
+    """16-bit files that hold sRGB were read as linear without a word."""
+    from eval.core.photos import encoding_note
+
+    cv2.imwrite(str(tmp_path / "deep.png"), np.full((8, 8), 30000, np.uint16))
+    cv2.imwrite(str(tmp_path / "flat.png"), np.full((8, 8), 100, np.uint8))
+    assert "--encoding srgb" in encoding_note(tmp_path / "deep.png", "auto")
+    assert encoding_note(tmp_path / "deep.png", "linear") is None
+    assert encoding_note(tmp_path / "flat.png", "auto") is None

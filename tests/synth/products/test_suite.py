@@ -134,6 +134,18 @@ def test_local_suite_writes_datasets_index_and_readme(local_suite, capsys):
 
 
 @pytest.mark.slow
+def test_the_count_and_progress_lines_without_a_terminal(tmp_path, capsys):
+    """A suite says how many datasets it will render before it starts, and — its stderr not a
+    terminal, where tqdm draws nothing — a progress line as it goes (1000 entries rendered with
+    no word before)."""
+    spec = _spec(tmp_path)
+    assert main(["suite", str(spec), "--out", str(tmp_path / "s"), "--workers", "1"]) == 0
+    err = capsys.readouterr().err
+    assert ": 2 datasets, 2 to render now (0 done before)" in err
+    assert "suite: 2/2 datasets (100 %), 0 failed" in err
+
+
+@pytest.mark.slow
 def test_a_lost_dataset_is_rendered_again_and_the_index_is_the_same(local_suite, tmp_path):
     spec, out = local_suite
     copy = tmp_path / "copy"
