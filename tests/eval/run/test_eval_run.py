@@ -220,9 +220,14 @@ def test_truth_and_assumption(small_scene, tmp_path):
     for name, extra in (("exact", []), ("assumed", ["--assume", "n_water=1.33"]),
                         ("calib", ["--calib", str(data / "calib.yaml")])):
         out = tmp_path / name
+        # the wrong index moves every point by millimetres, far outside its σ: the run knows
+        # (coverage 0.000) and exits 1, its report written
         assert main(["run", small_scene, "--from", str(data), "--out", str(out),
-                     "--methods", "optical_path", "--no-progress", *extra]) == 0
+                     "--methods", "optical_path", "--no-progress", *extra]) == (
+            1 if name == "assumed" else 0)
         reports[name] = json.loads((out / "report.json").read_text())
+    assert any("σ does not describe its errors" in f
+               for f in reports["assumed"]["verdict"]["failures"])
     exact, assumed, calib = (reports[k] for k in ("exact", "assumed", "calib"))
     assert assumed["rigs"]["difference"] == {"index_2": pytest.approx(-0.01)}
     assert assumed["rigs"]["truth"]["port"]["indices"][-1] == 1.34

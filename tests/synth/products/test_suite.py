@@ -277,7 +277,7 @@ def test_another_spec_after_a_suite_stopped_before_its_suite_json_is_refused(tmp
     """A suite interrupted before its first ``suite.json`` (only the marker, ``spec.toml`` and
     ``entries/``), then another spec on the same ``--out``: refused (it was accepted, two suites
     mixed in one folder and ``spec.toml`` overwritten); the same spec resumes."""
-    from synth.products.suite import SuiteDir
+    from synth.products.suite_folder import SuiteDir
 
     first = tmp_path / "a"
     first.mkdir()
