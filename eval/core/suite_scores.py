@@ -176,13 +176,23 @@ def score_entry(suite_dir: str, sub_dir: str, row: dict, method: str, gate_mm) -
         else:
             out.update(_score_surface(data, kind, path))
     except (CLIError, DatasetError, ValueError, OSError) as exc:
-        return {**out, "status": "failed", "error": " ".join(str(exc).split())}
+        return {**out, "status": "failed", "error": _naming(exc, path, out["submission"])}
     except MemoryError:
         raise
     except Exception as exc:  # a bug: this dataset fails, named; the others are scored
         return {**out, "status": "failed",
                 "error": f"{INTERNAL_ERROR}: {type(exc).__name__}: {' '.join(str(exc).split())}"}
     return out
+
+
+def _naming(exc, path: str, name: str) -> str:
+    """A submission's error as one line that names its file (``name``, relative to the
+    submission folder): the single-file readers say ``--points PATH`` or ``--pixels PATH``,
+    options a suite's user never gave, and some errors name no file at all."""
+    message = " ".join(str(exc).split())
+    for option in ("--points ", "--pixels "):
+        message = message.replace(f"{option}{path}", name)
+    return message if name in message or path in message else f"{name}: {message}"
 
 
 def _suite_warnings(warnings) -> str:

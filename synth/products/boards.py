@@ -39,7 +39,6 @@ from measure import StereoRig
 from measure.calibration.board import PATTERN_TEXELS_PER_SQUARE, Board, BoardError
 from measure.geometry.port import index_matched_port
 from measure.geometry.projection import project
-from measure.geometry.dome import DomePair
 
 from synth.products.dataset import (DatasetError, adaptive_settings, check_files, manifest_digest,
                            read_calib, write_calib)
@@ -48,8 +47,8 @@ from synth.rendering.integrator import RENDERER, integrator_name
 from synth.infra.provenance import package_versions
 from synth.rendering.render import (check_render_request, png16_scale, render_view_counted, sensor_dict,
                           to_png16, write_png)
-from synth.scene import SceneSpec, interface_placements
-from synth.scene.dome import dome_placements
+from synth.scene import SceneSpec
+from synth.scene.write import port_shapes
 
 FORMAT_VERSION = 2  # 2: the manifest holds every file's SHA-256 and its own
 COMMAND = "synth boards"
@@ -182,21 +181,8 @@ def build_board_scene(spec: SceneSpec, board: Board, air: bool, variant=None):
                        "emitter": {"type": "area", "radiance": {
                            "type": "bitmap", "data": mi.TensorXf(pattern), "raw": True,
                            "filter_type": "nearest"}}}}
-    if not air and isinstance(spec.rig.port, DomePair):
-        for sid, centre, radius, ext_ior, int_ior in dome_placements(spec.rig.port):
-            scene[sid] = {"type": "sphere", "center": [float(c) for c in centre],
-                          "radius": float(radius),
-                          "bsdf": {"type": "dielectric", "ext_ior": float(ext_ior),
-                                   "int_ior": float(int_ior)}}
-    elif not air and spec.has_port:
-        half = 2000.0
-        for k, centre, target, up, ext_ior, int_ior in interface_placements(spec.rig.port):
-            to_world = (mi.ScalarTransform4f().look_at(origin=centre.tolist(),
-                                                       target=target.tolist(), up=up.tolist())
-                        @ mi.ScalarTransform4f().scale([half, half, 1.0]))
-            scene[f"interface_{k}"] = {"type": "rectangle", "to_world": to_world,
-                                       "bsdf": {"type": "dielectric", "ext_ior": float(ext_ior),
-                                                "int_ior": float(int_ior)}}
+    if not air and spec.has_port:  # the glass as the scene writer makes it, for any port
+        scene.update(port_shapes(mi, spec.rig.port))
     return mi.load_dict(scene), mi, chosen
 
 

@@ -373,6 +373,29 @@ def light_placements(left: Camera, right: Camera, port: FlatPort, targets):
     return [(foot + N * depth + sign * LIGHT_SIDE_OFFSET_MM * side, aim) for sign in (-1.0, 1.0)]
 
 
+def port_shapes(mi, port, half_side_mm: float = 2000.0) -> dict:
+    """The glass of ``port`` as Mitsuba dictionary shapes (``mi.load_dict``; the board scenes'
+    form of what :func:`scene_xml` writes as XML): two spheres per dome
+    (:func:`synth.scene.dome.dome_placements`), or one ``rectangle`` of half side
+    ``half_side_mm`` per flat interface (:func:`interface_placements`), each a ``dielectric``
+    whose ``ext_ior`` is the camera side's. ``{shape id: shape}``."""
+    if isinstance(port, DomePair):
+        return {sid: {"type": "sphere", "center": [float(c) for c in centre],
+                      "radius": float(radius),
+                      "bsdf": {"type": "dielectric", "ext_ior": float(ext_ior),
+                               "int_ior": float(int_ior)}}
+                for sid, centre, radius, ext_ior, int_ior in dome_placements(port)}
+    shapes = {}
+    for k, centre, target, up, ext_ior, int_ior in interface_placements(port):
+        to_world = (mi.ScalarTransform4f().look_at(origin=centre.tolist(), target=target.tolist(),
+                                                   up=up.tolist())
+                    @ mi.ScalarTransform4f().scale([half_side_mm, half_side_mm, 1.0]))
+        shapes[f"interface_{k}"] = {"type": "rectangle", "to_world": to_world,
+                                    "bsdf": {"type": "dielectric", "ext_ior": float(ext_ior),
+                                             "int_ior": float(int_ior)}}
+    return shapes
+
+
 def interface_placements(port: FlatPort):
     """Per interface of ``port``, camera side first: ``(k, centre, lookat target, up, ext_ior,
     int_ior)`` of the ``rectangle`` that models it — centred on the reference normal, its local

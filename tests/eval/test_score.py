@@ -71,6 +71,20 @@ def test_matched_pixels_are_triangulated_with_the_datasets_calibration(scored_ru
     assert st["rms_dp_mm"] < 1e-8
 
 
+def _noisy_pairs(rows, path, sigma_px: float = 0.1, seed: int = 12):
+    """``path``: the finite pixel pairs of a dataset's ``pixels.csv`` rows with Gaussian noise
+    of ``sigma_px`` on each coordinate (seeded)."""
+    rng = np.random.default_rng(seed)
+    with open(path, "w", newline="") as fh:
+        writer = csv.writer(fh)
+        writer.writerow(["u_left", "v_left", "u_right", "v_right"])
+        for row in rows:
+            exact = np.array([float(row[c]) for c in ("u_left", "v_left", "u_right", "v_right")])
+            if np.all(np.isfinite(exact)):
+                writer.writerow(exact + rng.normal(0, sigma_px, 4))
+    return path
+
+
 @pytest.mark.slow
 def test_pixels_get_covariances_and_their_coverage(scored_run, tmp_path, capsys):
     """Noisy pixels (σ = 0.1 px, seeded) triangulated with the dataset's calib.yaml, which holds
@@ -78,14 +92,7 @@ def test_pixels_get_covariances_and_their_coverage(scored_run, tmp_path, capsys)
     residuals, and about 95 % of them lie inside their 95 % ellipsoid."""
     data, _, _ = scored_run
     rows = list(csv.DictReader(open(data / "pixels.csv")))
-    rng = np.random.default_rng(12)
-    pairs = tmp_path / "pairs.csv"
-    with open(pairs, "w", newline="") as fh:
-        writer = csv.writer(fh)
-        writer.writerow(["u_left", "v_left", "u_right", "v_right"])
-        for row in rows:
-            exact = np.array([float(row[c]) for c in ("u_left", "v_left", "u_right", "v_right")])
-            writer.writerow(exact + rng.normal(0, 0.1, 4))
+    pairs = _noisy_pairs(rows, tmp_path / "pairs.csv")
     for extra in ([], ["--pixel-sigma", "0.1"]):
         out = tmp_path / f"score{len(extra)}"
         assert main(["score", str(data), "--pixels", str(pairs), "--out", str(out), *extra]) == 0
@@ -117,16 +124,7 @@ def test_pixels_through_domes_get_covariances_too(tmp_path):
     data = tmp_path / "ds"
     assert synth_main(["dataset", "scenes/dome_decentred.xml", "-D", "width=612", "-D",
                        "height=512", "--spp", "16", "--out", str(data), "--quiet"]) == 0
-    rows = list(csv.DictReader(open(data / "pixels.csv")))
-    rng = np.random.default_rng(12)
-    pairs = tmp_path / "pairs.csv"
-    with open(pairs, "w", newline="") as fh:
-        writer = csv.writer(fh)
-        writer.writerow(["u_left", "v_left", "u_right", "v_right"])
-        for row in rows:
-            exact = np.array([float(row[c]) for c in ("u_left", "v_left", "u_right", "v_right")])
-            if np.all(np.isfinite(exact)):
-                writer.writerow(exact + rng.normal(0, 0.1, 4))
+    pairs = _noisy_pairs(list(csv.DictReader(open(data / "pixels.csv"))), tmp_path / "pairs.csv")
     out = tmp_path / "score"
     assert main(["score", str(data), "--pixels", str(pairs), "--out", str(out), "--quiet"]) in (0, 1)
     scored = json.loads((out / "report.json").read_text())

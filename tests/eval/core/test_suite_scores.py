@@ -343,4 +343,6 @@ def test_bad_depth_files_and_a_mesh_are_failures_of_their_dataset(surface_suite,
         assert code == 1, (name, err)
         row = json.loads((out / "summary.json").read_text())["datasets"][0]
         assert row["status"] == "failed" and fragment in row["error"], (name, row["error"])
+        # the error names the submission's file, not an option the user never gave
+        assert f"{folder}/{target}" in row["error"] and "--points" not in row["error"]
         assert "internal error" not in err
