@@ -65,9 +65,30 @@ def usable_poses(rig: StereoRig, board: Board, detections: Detections):
     if len(usable) < MIN_POSES:
         raise CalibrationError(f"the board was found in {len(usable)} pose(s); the housing "
                                f"calibration needs at least {MIN_POSES}")
+    _check_boards_in_water(rig, board, [starts[k] for k in usable])
     detections = Detections([detections.ids[k] for k in usable],
                             [detections.pixels[k] for k in usable])
     return [starts[k] for k in usable], usable, detections
+
+
+def _check_boards_in_water(rig: StereoRig, board: Board, starts) -> None:
+    """CalibrationError when the starting port puts most boards on the camera side of its
+    glass (their centres, at the pinhole starting poses): a design distance or thickness that
+    cannot be the housing's. The adjustment then has no path through the port to fit, and said
+    that the distance was 'not determined by these boards'."""
+    centre = board.corners().mean(axis=0)
+    centres = np.array([R @ centre + t for R, t in starts])
+    wet = rig.port.water_side(centres)
+    if wet.sum() * 2 > len(starts):
+        return
+    depth = centres @ rig.depth_axis - rig.depth_axis @ rig.left.center
+    raise CalibrationError(
+        f"the design port puts {len(starts) - int(wet.sum())} of the {len(starts)} boards on "
+        f"the cameras' side of its glass (the boards lie {depth.min():.0f}–{depth.max():.0f} mm "
+        f"from the left camera at their starting poses; the water begins "
+        f"{rig.port.glass_depth(rig.left):.0f} mm from it): check the design port's distance "
+        f"and thickness (--start-distance, --glass-thickness, --design-port; domes: "
+        f"--dome-radius, --dome-thickness)")
 
 
 def parameter_offset(names, name, table) -> int:

@@ -342,6 +342,14 @@ def test_rendered_photos_in_air_then_underwater(rendered, tmp_path, capsys):
                       str(tmp_path / "air" / "calibmar.yaml"), "--start-distance", "90", "--out",
                       str(tmp_path / "water2")] + board) == 0
     assert "σ is conditional on the in-air calibration" in capsys.readouterr().out
+    # an absurd design distance put the boards behind the camera side of the glass, and the
+    # error blamed the boards ('distance is not determined by these boards'): it names the
+    # design now
+    assert eval_main(["calibrate", rendered["water"], "--intrinsics", calib, "--start-distance",
+                      "1e6", "--out", str(tmp_path / "absurd")] + board) == 2
+    err = capsys.readouterr().err
+    assert "the design port puts 6 of the 6 boards on the cameras' side of its glass" in err
+    assert "--start-distance" in err and not (tmp_path / "absurd").exists()
 
 
 def test_design_port_gives_the_starting_port_in_one_option():
