@@ -262,6 +262,10 @@ def warnings_for(report: dict) -> list[str]:
                        f"({COVERAGE_CELLS}×{COVERAGE_CELLS} cells; < {100 * MIN_COVERAGE:.0f} %): "
                        f"the lens distortion is extrapolated outside them; photograph the board "
                        f"near the image's edges and corners too")
+    if report.get("in_air"):
+        hint = underwater_hint(report["in_air"]["cameras"])
+        if hint:
+            out.append(hint)
     if report["left_out"]:
         out.append(f"{len(report['left_out'])} outlier pose(s) left out of the final fit: "
                    f"{', '.join(report['left_out'])} (see the outlier rule)")
@@ -358,6 +362,26 @@ def worst_corners(residuals: dict, names, count: int = WORST_CORNERS) -> list[di
     rows.sort(key=lambda r: (-r[0], r[1], r[2], r[3]))
     return [{"pose": names[k], "view": VIEWS[v] if isinstance(v, int) else v, "id": i,
              "residual_px": r} for r, k, v, i in rows[:count]]
+
+
+#: An in-air calibration whose every camera has k1 at least this (pincushion) looks like photos
+#: taken through a flat port: rendered boards behind the paper's port calibrated with --air gave
+#: k1 = +0.30 and fx 1.34 × the in-air one; in-air lenses show barrel distortion or next to none
+#: (OpenCV's stereo sample −0.29, the GoPro frames −0.26).
+PORT_LIKE_K1 = 0.1
+
+
+def underwater_hint(cameras: dict) -> str | None:
+    """A warning when every camera's k1 (``{name: {"k1": {"estimate": …}}}``) is at least
+    :data:`PORT_LIKE_K1`: underwater photos calibrated with ``--air`` (a calibration that absorbs
+    the port)."""
+    k1 = {name: v["k1"]["estimate"] for name, v in cameras.items() if "k1" in v}
+    if not k1 or min(k1.values()) < PORT_LIKE_K1:
+        return None
+    values = ", ".join(f"{name} {value:+.2f}" for name, value in k1.items())
+    return (f"strong pincushion distortion (k1 {values}) is what a flat port does to a lens: if "
+            f"these photos were taken under water, this calibration absorbs the port — calibrate "
+            f"the housing with --intrinsics (the cameras' in-air calibration) instead of --air")
 
 
 def per_pose_table(names, detections_all, detections_used, rms_per, outliers, geometry,
@@ -670,4 +694,4 @@ __all__ = ["COVERAGE_CELLS", "HIGH_CORRELATION", "MIN_COVERAGE", "MIN_TILT_DEG",
            "RECOMMENDED_POSES", "air_estimates", "board_hint", "coverage", "coverage_figure",
            "fit_without_outliers", "housing_estimates", "larger_board", "markdown", "outlier_poses",
            "outlier_threshold", "per_pose_table", "pose_geometry", "stats_range", "stereo_scatter",
-           "summary_lines", "warnings_for", "without"]
+           "summary_lines", "underwater_hint", "warnings_for", "without"]

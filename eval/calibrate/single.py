@@ -170,6 +170,9 @@ def _report(args, board, names, size, detections, used, result, outliers, camera
         warnings.append(f"the corners cover {100 * coverage['fraction']:.0f} % of the image "
                         f"({trust.COVERAGE_CELLS}×{trust.COVERAGE_CELLS} cells): the lens "
                         f"distortion is extrapolated outside them")
+    hint = trust.underwater_hint({"camera": estimates})
+    if hint:
+        warnings.append(hint)
     edge = trust.unseen_edge(board, detections, (VIEW,))
     if edge:
         warnings.append(edge)

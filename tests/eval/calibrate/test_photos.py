@@ -350,6 +350,14 @@ def test_rendered_photos_in_air_then_underwater(rendered, tmp_path, capsys):
     err = capsys.readouterr().err
     assert "the design port puts 6 of the 6 boards on the cameras' side of its glass" in err
     assert "--start-distance" in err and not (tmp_path / "absurd").exists()
+    # the underwater photos calibrated as if in air: a hint that this absorbs the port (the
+    # in-air photos above gave none)
+    assert eval_main(["calibrate", rendered["water"], "--air", "--out",
+                      str(tmp_path / "water_as_air")] + board) == 0
+    out_text = capsys.readouterr().out
+    assert "what a flat port does to a lens" in out_text and "--intrinsics" in out_text
+    air_report = json.loads((tmp_path / "air" / "report.json").read_text())
+    assert not any("pincushion" in w for w in air_report["warnings"])
 
 
 def test_design_port_gives_the_starting_port_in_one_option():
