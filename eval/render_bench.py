@@ -228,7 +228,8 @@ def curve_figure(path, throughput, accuracy, title, adaptive=()):
     b.set_ylabel("cross-check RMS (px)")
     b.set_title("Accuracy against time")
     b.grid(alpha=0.3)
-    b.legend(fontsize=8)
+    if b.get_legend_handles_labels()[1]:  # no accuracy curve measured (--parts): no legend
+        b.legend(fontsize=8)
     fig.suptitle(title, fontsize=10)
     fig.savefig(path, dpi=110)
 
