@@ -236,8 +236,6 @@ def curve_figure(path, throughput, accuracy, title, adaptive=()):
 
 def main(args) -> int:
     from synth.infra.fileio import OutputDir, atomic_write_json
-    from synth.infra.provenance import package_versions
-    from synth.rendering.render import MAX_SAMPLES_PER_CALL, load_mitsuba_scene
     from synth.scene import load_scene, parse_defines
 
     log = (lambda text: None) if args.no_progress else (
@@ -252,6 +250,55 @@ def main(args) -> int:
                        f"{', '.join(PARTS)}")
     output = OutputDir(args.out, COMMAND).claim()
     spec = load_scene(args.scene, parse_defines(args.defines))
+    result = _run_interruptibly(lambda: _measure(args, spec, parts, per_call, spp_list,
+                                                 adaptive_spp, log))
+    w, h = spec.size
+    variant = result["variant"]
+    with output.staged() as tmp:
+        atomic_write_json(os.path.join(tmp, "render_bench.json"), result)
+        curve_figure(os.path.join(tmp, "render_curve.png"), result["throughput"] or [],
+                     result["accuracy"], f"{os.path.basename(args.scene)}, {w}x{h} px, "
+                     f"{variant}, {os.cpu_count()} cores", result["accuracy_adaptive"])
+    print(f"wrote {output.path}")
+    return 0
+
+
+def _run_interruptibly(work):
+    """``work()`` on a daemon thread while the main thread waits in short joins: a Ctrl-C then
+    ends the command at once — one line ``error: interrupted``, exit 130 — instead of after the
+    Dr.Jit kernel under way (an adaptive render or a detection pass cannot be cut: 13–46 s).
+    Nothing is written before the measurements end, so there is nothing to clean up; the
+    thread's exceptions are raised here."""
+    import threading
+
+    from synth.infra.cli import EXIT_INTERRUPTED
+
+    box = {}
+
+    def target():
+        try:
+            box["value"] = work()
+        except BaseException as exc:  # raised again in the main thread
+            box["error"] = exc
+
+    thread = threading.Thread(target=target, name="render-bench", daemon=True)
+    thread.start()
+    try:
+        while thread.is_alive():
+            thread.join(0.1)
+    except KeyboardInterrupt:
+        print("error: interrupted", file=sys.stderr, flush=True)
+        os._exit(EXIT_INTERRUPTED)  # the render thread cannot be stopped from here
+    if "error" in box:
+        raise box["error"]
+    return box["value"]
+
+
+def _measure(args, spec, parts, per_call, spp_list, adaptive_spp, log) -> dict:
+    """The measurements ``parts`` asks for, as ``render_bench.json`` holds them."""
+    from synth.infra.provenance import package_versions
+    from synth.rendering.render import MAX_SAMPLES_PER_CALL, load_mitsuba_scene
+
     mscene, mi, variant = load_mitsuba_scene(spec, args.variant)
     w, h = spec.size
     throughput = side_by_side = adaptive = None
@@ -278,10 +325,4 @@ def main(args) -> int:
               "side_by_side": side_by_side, "adaptive_vs_full_film": adaptive,
               "accuracy": accuracy, "accuracy_adaptive": adaptive_accuracy,
               "versions": package_versions()}
-    with output.staged() as tmp:
-        atomic_write_json(os.path.join(tmp, "render_bench.json"), result)
-        curve_figure(os.path.join(tmp, "render_curve.png"), throughput or [],
-                     accuracy, f"{os.path.basename(args.scene)}, {w}x{h} px, {variant}, "
-                     f"{os.cpu_count()} cores", adaptive_accuracy)
-    print(f"wrote {output.path}")
-    return 0
+    return result

@@ -221,6 +221,28 @@ def test_render_commands_interrupted(argv, seconds, small_scene, tmp_path):
 
 
 @pytest.mark.slow
+def test_render_bench_stops_at_once(tmp_path):
+    """Ctrl-C during eval render-bench's adaptive renders waited for the Dr.Jit kernel under
+    way (13–46 s): the measurements run on a thread the command leaves, so it ends at once —
+    one line, exit 130, nothing written."""
+    stopped = {}
+
+    def ready(process):
+        if time.monotonic() - stopped.setdefault("start", time.monotonic()) >= 8.0:
+            stopped["signal"] = time.monotonic()
+            return True
+        return False
+
+    code, stdout, stderr, sent = _interrupt(
+        ["eval", "render-bench", str(REPO / "scenes" / "paper_plane.xml"), "--parts", "adaptive",
+         "--out", "rb", "--no-progress"], tmp_path, ready)
+    waited = time.monotonic() - stopped["signal"]
+    _assert_interrupted(code, stdout, stderr, sent)
+    assert waited < 5.0, waited
+    assert sorted(p.name for p in tmp_path.iterdir()) == []
+
+
+@pytest.mark.slow
 def test_mitsubas_interrupt_warning_stays_off_stdout(tmp_path):
     """A SIGINT while ``mi.render`` runs meets Mitsuba's own handler, which logged
     ``Received interrupt signal, winding down..`` to stdout; :func:`synth.rendering.mitsuba_setup.render`
