@@ -440,7 +440,7 @@ def _calibrate_photos(args, output, log, free, start) -> int:
     larger = trust.larger_board(board, images, found["left"])
     if larger:
         raise CLIError(f"{where}: {larger}")
-    charuco = trust.charuco_check(board, [pair[0] for pair in images])
+    charuco = trust.charuco_check(board, [images[k][0] for k in found["left"]])
     if charuco:
         raise CLIError(f"{where}: {charuco}")
     not_found = [pairs.names[k] for k in range(len(images))

@@ -281,16 +281,11 @@ def warnings_for(report: dict) -> list[str]:
 
 def charuco_check(board, images) -> str | None:
     """For a ChArUco board: the problem (:meth:`measure.calibration.board.Board.
-    charuco_problem`) that most of the first :data:`HINT_PHOTOS` photos holding the board
-    agree on — a wrong --marker-mm or --squares — or None."""
+    charuco_problem`) that most of the first :data:`HINT_PHOTOS` of ``images`` (photos the
+    board was detected in) agree on — a wrong --marker-mm or --squares — or None."""
     if board.kind != "charuco":
         return None
-    problems = []
-    for image in images:
-        if board.detect(image)[0].size:
-            problems.append(board.charuco_problem(image))
-            if len(problems) == HINT_PHOTOS:
-                break
+    problems = [board.charuco_problem(image) for image in images[:HINT_PHOTOS]]
     found = [p for p in problems if p]
     return found[0] if found and len(found) * 2 > len(problems) else None
 

@@ -46,8 +46,7 @@ def calibrate_single(args, output, log, start, board) -> tuple[dict, str]:
     """Calibrate the camera of the photo folder ``args.dir``; returns ``(report, summary)``
     after writing everything into ``output`` (module docs)."""
     from measure.calibration.air import (DEFAULT_LENS_MODEL, CalibrationError, Detections,
-                                         calibrate_camera, camera_residuals, detect_images,
-                                         lens_problem)
+                                         calibrate_camera, camera_residuals, detect_images)
 
     from eval.core.photos import encoding_note, photo_files, read_photo
 
@@ -81,7 +80,7 @@ def calibrate_single(args, output, log, start, board) -> tuple[dict, str]:
         squares = "x".join(map(str, board.squares))
         raise CLIError(f"{where}: the {board.kind} {squares} was found in none of the "
                        f"{len(images)} photos{trust.board_hint(board, [(im, im) for im in images])}")
-    charuco = trust.charuco_check(board, images)
+    charuco = trust.charuco_check(board, [images[k] for k in found])
     if charuco:
         raise CLIError(f"{where}: {charuco}")
     lens = args.lens or DEFAULT_LENS_MODEL
@@ -94,8 +93,8 @@ def calibrate_single(args, output, log, start, board) -> tuple[dict, str]:
                                    f"calibration needs at least 3")
         obj = [corners[dets.ids[k][VIEW]] for k in poses]
         img = [dets.pixels[k][VIEW].astype(np.float32) for k in poses]
-        out, model, tried = calibrate_camera(obj, img, size, lens)
-        return {"out": out, "model": model, "tried": tried, "poses": poses,
+        out, model, tried, problem = calibrate_camera(obj, img, size, lens)
+        return {"out": out, "model": model, "tried": tried, "problem": problem, "poses": poses,
                 "residuals": camera_residuals(obj, img, out, poses, dets.ids, VIEW),
                 "rms_px_per": {(k, VIEW): float(e) for k, e in zip(poses, out[7].ravel())}}
 
@@ -109,7 +108,7 @@ def calibrate_single(args, output, log, start, board) -> tuple[dict, str]:
     timings["calibrate"] = time.perf_counter() - t
     camera, sigmas = _camera(result, size)
     report = _report(args, board, names, size, detections, used_detections, result, outliers,
-                     camera, sigmas, lens_problem(result["out"], result["model"], size))
+                     camera, sigmas, result["problem"])
     report["timings_s"] = timings
     log("write the calibration, report and figures …")
     with output.staged() as tmp:
@@ -196,24 +195,24 @@ def write_camera_files(directory, camera, report) -> None:
 
     from synth.formats.calib_formats import write_single_camera
 
-    if True:  # the output folder is staged whole: its files appear together or not at all
-        fs = cv2.FileStorage(os.path.join(directory, "camera.yaml"), cv2.FILE_STORAGE_WRITE)
-        try:
-            fs.write("image_width", int(camera.size[0]))
-            fs.write("image_height", int(camera.size[1]))
-            fs.write("camera_matrix", camera.K)
-            dist = np.zeros(5) if camera.dist is None else camera.dist
-            fs.write("distortion_coefficients", np.asarray(dist, np.float64).reshape(1, -1))
-            fs.write("lens_model", report["lens_model"]["model"])
-            fs.write("rms_px", float(report["rms_px"]))
-            fs.startWriteStruct("sigmas", cv2.FileNode_MAP)
-            for key, value in report["camera"].items():
-                if value["sigma"] is not None:
-                    fs.write(key, float(value["sigma"]))
-            fs.endWriteStruct()
-            fs.write("units", "px (OpenCV pixels: the centre of the top-left pixel is 0, 0)")
-        finally:
-            fs.release()
+    # the output folder is staged whole: its files appear together or not at all
+    fs = cv2.FileStorage(os.path.join(directory, "camera.yaml"), cv2.FILE_STORAGE_WRITE)
+    try:
+        fs.write("image_width", int(camera.size[0]))
+        fs.write("image_height", int(camera.size[1]))
+        fs.write("camera_matrix", camera.K)
+        dist = np.zeros(5) if camera.dist is None else camera.dist
+        fs.write("distortion_coefficients", np.asarray(dist, np.float64).reshape(1, -1))
+        fs.write("lens_model", report["lens_model"]["model"])
+        fs.write("rms_px", float(report["rms_px"]))
+        fs.startWriteStruct("sigmas", cv2.FileNode_MAP)
+        for key, value in report["camera"].items():
+            if value["sigma"] is not None:
+                fs.write(key, float(value["sigma"]))
+        fs.endWriteStruct()
+        fs.write("units", "px (OpenCV pixels: the centre of the top-left pixel is 0, 0)")
+    finally:
+        fs.release()
     write_single_camera(directory, camera)
 
 

@@ -329,11 +329,13 @@ def nothing_matched_message(inputs: RunInputs, detections, window) -> str:
             f"left, {found['right']} right): {cause}")
 
 
-def _rigs_report(inputs: RunInputs) -> dict:
-    from eval.core.assumption import describe_rig, rig_difference
+def _rigs_report(inputs: RunInputs, difference: dict) -> dict:
+    """The report's ``rigs``: what was rendered, what the measurement assumed, and
+    ``difference`` (:func:`eval.core.assumption.rig_difference`, computed once per run)."""
+    from eval.core.assumption import describe_rig
 
     return {"truth": describe_rig(inputs.true_rig), "assumed": describe_rig(inputs.rig),
-            "difference": rig_difference(inputs.true_rig, inputs.rig)}
+            "difference": difference}
 
 
 def _with_coverage(scores, uncertainty) -> dict:
@@ -466,7 +468,7 @@ def run_pipeline(inputs: RunInputs, config: RunConfig, log=print) -> RunResult:
         "noise_px": noise_px, "seed": inputs.seed, "threshold_fraction": threshold_fraction,
         "max_elongation": max_elongation, "max_area_ratio": max_area_ratio,
         "median_filter": median_filter,
-        "rigs": _rigs_report(inputs),
+        "rigs": _rigs_report(inputs, differs),
         "self_calibration": calibration,
         "budget": budget,
         "eccentricity": None if corrected is None else {

@@ -90,6 +90,8 @@ DEFAULT_LENS_MODEL = "auto"
 #: default flags here (eval calibrate's --lens defaults to ``auto``).
 LIBRARY_LENS_MODEL = "standard"
 LENS_MODEL_GAIN = 0.02
+#: OpenCV's stopping rule for every calibration here (count, eps).
+CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 200, 1e-12)
 #: Names of OpenCV's intrinsics in ``stdDeviationsIntrinsics`` order.
 INTRINSIC_NAMES = ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6")
 #: A pose whose own stereo pose (from the two cameras' board poses) lies farther than
@@ -136,22 +138,25 @@ class AirCalibration:
 
 def calibrate_camera(obj, img, size, lens_model: str = DEFAULT_LENS_MODEL):
     """One camera's ``cv2.calibrateCameraExtended`` with ``lens_model`` (a key of
-    :data:`LENS_MODELS`, or ``auto``: module constants). Returns ``(out, model, tried)``:
-    OpenCV's outputs, the model used and ``{model: rms px}`` of each model fitted."""
+    :data:`LENS_MODELS`, or ``auto``: module constants). Returns ``(out, model, tried,
+    problem)``: OpenCV's outputs, the model used, ``{model: rms px}`` of each model fitted and
+    the used model's :func:`lens_problem` (None when its distortion can be used)."""
     if lens_model != "auto" and lens_model not in LENS_MODELS:
         raise CalibrationError(f"lens model {lens_model!r}: choose from auto, "
                                f"{', '.join(LENS_MODELS)}")
-    criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 200, 1e-12)
     order = LENS_MODEL_ORDER if lens_model == "auto" else (lens_model,)
-    tried, best, best_model = {}, None, None
+    tried, best, best_model, best_problem = {}, None, None, None
     for model in order:
         out = cv2.calibrateCameraExtended(obj, img, tuple(size), None, None,
-                                          flags=LENS_MODELS[model][0], criteria=criteria)
+                                          flags=LENS_MODELS[model][0], criteria=CRITERIA)
         tried[model] = float(out[0])
-        if best is None or (np.isfinite(out[0]) and out[0] < (1 - LENS_MODEL_GAIN) * best[0]
-                            and lens_problem(out, model, size) is None):
-            best, best_model = out, model
-    return best, best_model, tried
+        if best is None:
+            best, best_model, best_problem = out, model, lens_problem(out, model, size)
+        elif np.isfinite(out[0]) and out[0] < (1 - LENS_MODEL_GAIN) * best[0]:
+            problem = lens_problem(out, model, size)
+            if problem is None:
+                best, best_model, best_problem = out, model, None
+    return best, best_model, tried, best_problem
 
 
 def lens_problem(out, model: str, size) -> str | None:
@@ -205,7 +210,6 @@ def calibrate_in_air(board: Board, detections: Detections, size,
     stereo pose from in-air board images; poses whose own stereo pose disagrees with the
     others' (:func:`stereo_pose_outliers`) are left out of the stereo fit and named."""
     corners = board.corners().astype(np.float32)
-    criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 200, 1e-12)
     cameras, rms, sigmas, used, per, extrinsics = [], {}, {}, {}, {}, {}
     views, s2, left_poses, models, own, residuals = [], [], {}, {}, {}, {}
     for view, name in enumerate(("left", "right")):
@@ -215,10 +219,9 @@ def calibrate_in_air(board: Board, detections: Detections, size,
                                    f"in-air calibration needs at least {MIN_POSES}")
         obj = [corners[detections.ids[k][view]] for k in poses]
         img = [detections.pixels[k][view].astype(np.float32) for k in poses]
-        out, model, tried = calibrate_camera(obj, img, size, lens_model)
+        out, model, tried, problem = calibrate_camera(obj, img, size, lens_model)
         n_dist = LENS_MODELS[model][1]
-        models[name] = {"model": model, "rms_px": tried,
-                        "problem": lens_problem(out, model, size)}
+        models[name] = {"model": model, "rms_px": tried, "problem": problem}
         rms[name], K, std = float(out[0]), out[1], out[5].ravel()
         D = out[2].ravel()[:max(n_dist, 5)]
         for k, error, rvec, tvec in zip(poses, out[7].ravel(), out[3], out[4]):
@@ -265,7 +268,7 @@ def calibrate_in_air(board: Board, detections: Detections, size,
         img_r.append(detections.pixels[k][1][ir].astype(np.float32))
     (K1, D1), (K2, D2) = cameras
     out = cv2.stereoCalibrateExtended(obj, img_l, img_r, K1, D1, K2, D2, tuple(size), None,
-                                      None, flags=cv2.CALIB_FIX_INTRINSIC, criteria=criteria)
+                                      None, flags=cv2.CALIB_FIX_INTRINSIC, criteria=CRITERIA)
     stereo_rms, R, T = float(out[0]), out[5], out[6].ravel()
     stereo_per = {k: float(np.sqrt(np.mean(np.square(e)))) for k, e in zip(both, out[-1])}
     used["stereo"] = len(both)
