@@ -10,7 +10,9 @@ All distances in mm, both clouds in the reference frame (the left camera's).
   correspondences (``TransformationEstimationPointToPoint``): the error left after it is the
   shape error, what it removed the pose error;
 * the flatness of the measured cloud: RMS distance to its plane (a seeded, vectorized RANSAC
-  refined by least squares: reproducible, unlike the multi-threaded ``segment_plane``).
+  refined by least squares: reproducible, unlike the multi-threaded ``segment_plane``);
+* the length error of target pairs (:func:`length_errors`): what a scale bar or a fish-length
+  measurement sees, independent of the frame the points are in.
 """
 
 from __future__ import annotations
@@ -19,6 +21,7 @@ import os
 
 import numpy as np
 import open3d as o3d
+from scipy.spatial.distance import pdist
 
 
 def point_cloud(points: np.ndarray, colors: np.ndarray | None = None) -> o3d.geometry.PointCloud:
@@ -67,6 +70,41 @@ def rigid_alignment(measured: np.ndarray, truth: np.ndarray) -> dict:
     return {"rms_dp_aligned_mm": float(np.sqrt(np.mean(residual ** 2))),
             "max_dp_aligned_mm": float(residual.max()),
             "rotation_deg": float(angle), "translation_mm": transform[:3, 3].tolist()}
+
+
+#: Pairs of targets whose true distance is shorter than this are left out of the length errors
+#: (mm): a length is measured between things apart, and a short one's relative error is noise.
+MIN_LENGTH_MM = 100.0
+#: At most this many points enter the length errors (every k-th point beyond it): the pairs grow
+#: with the square of the points.
+MAX_LENGTH_POINTS = 3000
+
+
+def length_errors(measured: np.ndarray, truth: np.ndarray,
+                  min_length_mm: float = MIN_LENGTH_MM) -> dict:
+    """Relative errors of the distances between every two points (row i ↔ row i of
+    ``measured`` and ``truth``, mm) whose true distance is at least ``min_length_mm``:
+    ``length_median_pct`` (signed: negative = too short), ``length_median_abs_pct``,
+    ``length_p95_abs_pct``, ``length_worst_pct`` (the largest in magnitude, signed) and
+    ``length_pairs``. A rigid motion of the measured points changes none of them."""
+    measured = np.asarray(measured, dtype=np.float64).reshape(-1, 3)
+    truth = np.asarray(truth, dtype=np.float64).reshape(-1, 3)
+    step = max(1, -(-len(truth) // MAX_LENGTH_POINTS))
+    measured, truth = measured[::step], truth[::step]
+    true_lengths = pdist(truth)
+    keep = true_lengths >= min_length_mm
+    relative = 100.0 * (pdist(measured)[keep] / true_lengths[keep] - 1.0)
+    relative = relative[np.isfinite(relative)]
+    nan = float("nan")
+    if len(relative) == 0:
+        return {"length_median_pct": nan, "length_median_abs_pct": nan,
+                "length_p95_abs_pct": nan, "length_worst_pct": nan, "length_pairs": 0}
+    size = np.abs(relative)
+    return {"length_median_pct": float(np.median(relative)),
+            "length_median_abs_pct": float(np.median(size)),
+            "length_p95_abs_pct": float(np.percentile(size, 95)),
+            "length_worst_pct": float(relative[np.argmax(size)]),
+            "length_pairs": int(len(relative))}
 
 
 def flatness(points: np.ndarray, seed: int = 0, threshold_mm: float = 5.0,

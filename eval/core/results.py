@@ -11,7 +11,7 @@ component ``c`` in ``dx, dy, dz, dp``, ``mean_c_mm``, ``std_c_mm``, ``sem_c_mm``
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
@@ -98,18 +98,20 @@ class MethodScores:
     correctly matched targets (mm); ``cloud``: Open3D cloud distances (Chamfer mm, precision /
     recall / F-score at 1 and 5 mm); ``alignment``: the errors left after the best rigid
     alignment (mm, degrees); ``flatness``: RMS and peak-to-valley distance to the fitted plane
-    (mm); ``invalid``: matched pairs with no triangulation."""
+    (mm); ``invalid``: matched pairs with no triangulation; ``lengths``: the relative errors of
+    the distances between target pairs (:func:`eval.core.cloud_metrics.length_errors`)."""
 
     errors: ErrorStats
     cloud: dict
     alignment: dict
     flatness: dict
     invalid: int
+    lengths: dict = field(default_factory=dict)
 
     def to_json(self) -> dict:
         flat = {k: v for k, v in self.flatness.items() if k != "plane"}
         return {**self.errors.to_json(), **self.cloud, **self.alignment, **flat,
-                "plane": self.flatness.get("plane"), "invalid": self.invalid}
+                "plane": self.flatness.get("plane"), "invalid": self.invalid, **self.lengths}
 
 
 __all__ = ["COMPONENTS", "ComponentStats", "ErrorStats", "METHOD_LABELS", "MethodScores",

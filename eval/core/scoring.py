@@ -114,7 +114,7 @@ def score_points(points: np.ndarray, truth: np.ndarray, visible_both: np.ndarray
     ``truth`` ``(M, 3)``; Chamfer and F-scores against ``truth[visible_both]``. The arrays:
     ``points``, ``truth``, ``errors`` of the associated points, ``all_points`` and
     ``associated`` (bool per point of ``points``)."""
-    from eval.core.cloud_metrics import cloud_distances, flatness, rigid_alignment
+    from eval.core.cloud_metrics import cloud_distances, flatness, length_errors, rigid_alignment
     from eval.core.results import ErrorStats, MethodScores
 
     target = associate_points(points, truth, gate_mm)
@@ -123,7 +123,8 @@ def score_points(points: np.ndarray, truth: np.ndarray, visible_both: np.ndarray
     scores = MethodScores(errors=ErrorStats.of(errors),
                           cloud=cloud_distances(points, truth[visible_both]),
                           alignment=rigid_alignment(points[ok], truth[target[ok]]),
-                          flatness=flatness(points, seed=seed), invalid=0)
+                          flatness=flatness(points, seed=seed), invalid=0,
+                          lengths=length_errors(points[ok], truth[target[ok]]))
     arrays = {"points": points[ok], "truth": truth[target[ok]], "errors": errors,
               "all_points": points, "associated": ok}
     association = {"points": int(len(points)), "associated": int(ok.sum()),

@@ -36,7 +36,9 @@ def add_parser(subparsers):
     parser.add_argument("--variant", help="Mitsuba variant (default: automatic)")
     add_full_film_option(parser)
     parser.add_argument("--methods", default=None,
-                        help="comma-separated triangulation methods (default: all three)")
+                        help="comma-separated triangulation methods: optical_path, su, regular, "
+                             "reprojection, absorbed (the port absorbed by a pinhole "
+                             "calibration; default: optical_path,su,regular)")
     parser.add_argument("--noise-px", type=non_negative_float, default=0.0,
                         help="Gaussian noise σ (px) added to the detected centres (default 0)")
     parser.add_argument("--seed", type=scene_seed, default=None,
@@ -65,6 +67,10 @@ def add_parser(subparsers):
                         help="error budget: also measure the same detections with this "
                              "calib.yaml (repeatable); with --calib or --assume the exact "
                              "calibration is always compared")
+    parser.add_argument("--absorbed-calib", metavar="FILE", default=None,
+                        help="the absorbed method's calibration: a calib.yaml without a port "
+                             "(eval calibrate --model absorbed); default: the scene's boards "
+                             "projected through its port and calibrated as pinhole cameras")
     parser.add_argument("--self-calibrate", metavar="NAMES", default="",
                         help="estimate these port parameters from the matched targets "
                              "(comma list of n_water, port_distance, port_normal), measure "

@@ -46,6 +46,7 @@ class RunConfig:
     assumptions: dict = field(default_factory=dict)
     calib: str | None = None
     compare_calib: tuple = ()
+    absorbed_calib: str | None = None
     methods: tuple | None = None
     noise_px: float = 0.0
     gate_mm: float = 0.5
@@ -65,13 +66,32 @@ class RunConfig:
         """The triangulation methods of a target run; CLIError names an unknown one."""
         from measure import METHODS
 
+        from eval.core.absorbed import ABSORBED
+
         if self.methods is None:
             return DEFAULT_METHODS
-        unknown = [m for m in self.methods if m not in METHODS]
+        known = METHODS + (ABSORBED,)
+        unknown = [m for m in self.methods if m not in known]
         if not self.methods or unknown:
             raise CLIError(f"unknown method {', '.join(unknown) or repr(','.join(self.methods))} "
-                           f"in --methods (choose from {', '.join(METHODS)})")
+                           f"in --methods (choose from {', '.join(known)})")
         return self.methods
+
+    @property
+    def port_methods(self) -> tuple:
+        """The target methods that use the port model (all but ``absorbed``): the stages
+        that change the port's rig (self-calibration, the error budget) or correct pixels with
+        it (eccentricity) run these."""
+        from eval.core.absorbed import ABSORBED
+
+        return tuple(m for m in self.target_methods() if m != ABSORBED)
+
+    @property
+    def absorbed(self) -> bool:
+        """Whether the run measures with the absorbed baseline (``--methods …,absorbed``)."""
+        from eval.core.absorbed import ABSORBED
+
+        return self.methods is not None and ABSORBED in self.methods
 
     @property
     def rig_source(self) -> str:
@@ -94,6 +114,7 @@ class RunConfig:
                    full_film=args.full_film,
                    assumptions=parse_assumptions(args.assume, notes), calib=args.calib,
                    compare_calib=tuple(args.compare_calib),
+                   absorbed_calib=getattr(args, "absorbed_calib", None),
                    methods=None if args.methods is None else split_names(args.methods),
                    noise_px=args.noise_px, gate_mm=args.gate_mm,
                    depth_range_mm=parse_depth_range(args.depth_range),
@@ -109,7 +130,12 @@ class RunConfig:
     def refuse_inapplicable(self) -> None:
         """CLIError for an option that cannot apply (refused, never ignored): ``--spp`` and
         ``--variant`` with ``--from`` (the dataset's images are reused as rendered; ``-D spp``
-        is compared with what they were rendered with)."""
+        is compared with what they were rendered with); ``--absorbed-calib`` without the
+        ``absorbed`` method."""
+        if self.absorbed_calib and not self.absorbed:
+            raise CLIError(f"--absorbed-calib {self.absorbed_calib} does not apply without the "
+                           f"absorbed method: add it to --methods (e.g. "
+                           f"--methods optical_path,absorbed)")
         if not self.from_dir:
             return
         for option, value in (("--spp", self.spp), ("--variant", self.variant),

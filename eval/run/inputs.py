@@ -27,7 +27,9 @@ class RunInputs:
     ``left``/``right`` float32 linear images ``(H, W)``; ``params`` the scene's resolved
     parameters; ``seed`` the run's one seed (images, added noise, RANSAC); ``budget_rigs``
     ``{label: rig}``: also measure with these rigs (the error budget); ``rig_covariance`` the
-    ``--calib`` file's covariance (:class:`measure.stereo.rig_covariance.RigCovariance`) or None."""
+    ``--calib`` file's covariance (:class:`measure.stereo.rig_covariance.RigCovariance`) or None;
+    ``absorbed`` the absorbed baseline's calibration
+    (:class:`eval.core.absorbed.AbsorbedCalibration`) when the run measures with it."""
 
     scene: str
     rig: object
@@ -48,6 +50,7 @@ class RunInputs:
     budget_rigs: dict = field(default_factory=dict)
     rig_covariance: object = None
     rig_covariance_source: str | None = None
+    absorbed: object = None
 
     @property
     def true_rig(self):
@@ -104,6 +107,29 @@ def measurement_calibration(config: RunConfig, spec):
                            f"{spec.size[1]} px")
         base, covariance = calib["rig"], calib["covariance"]
     return assumed_rig(spec.rig, spec.has_port, config.assumptions, base), covariance
+
+
+def absorbed_calibration(config: RunConfig, spec, seed: int, log):
+    """The absorbed baseline's calibration (:mod:`eval.core.absorbed`) when ``--methods``
+    holds it: ``--absorbed-calib``'s, or computed from the scene's boards; None otherwise."""
+    if not config.absorbed:
+        return None
+    from eval.core.absorbed import analytic_absorbed_calibration, read_absorbed_calibration
+
+    if not spec.has_port:
+        raise CLIError(f"the absorbed method does not apply to {config.scene}: the scene has no "
+                       f"port (all air), so there is nothing to absorb")
+    if config.absorbed_calib:
+        try:
+            return read_absorbed_calibration(config.absorbed_calib, spec.size)
+        except ValueError as exc:
+            raise CLIError(str(exc)) from None
+    log("absorbed baseline: calibrate the cameras as pinhole cameras from the scene's boards "
+        "seen through its port …")
+    try:
+        return analytic_absorbed_calibration(spec.rig, seed=0)
+    except ValueError as exc:
+        raise CLIError(f"{config.scene}: the absorbed calibration cannot be made: {exc}") from None
 
 
 def _same_kind_of_port(what: str, calibrated, scene_rig) -> None:
@@ -200,13 +226,14 @@ def load_inputs(config: RunConfig, log) -> RunInputs:
     if not (in_left & in_right).any():
         raise CLIError(f"{config.scene}: no target is visible in both views")
     budget = budget_rigs(config, spec.rig, measured_rig)
+    absorbed = absorbed_calibration(config, spec, seed, log)
     scene_part = dict(scene=config.scene, rig=measured_rig, has_port=spec.has_port,
                       targets=spec.targets, target_ids=spec.target_ids,
                       target_radius=spec.target_radius, params=spec.params, seed=seed,
                       target_normals=spec.target_normals, truth_rig=spec.rig,
                       budget_rigs=budget, rig_covariance=rig_covariance,
                       rig_covariance_source=(f"--calib {config.calib}" if config.calib
-                                             else None))
+                                             else None), absorbed=absorbed)
     if config.from_dir:
         data = read_run_dataset(config, spec)
         log(f"reusing the images of {config.from_dir}")

@@ -24,7 +24,7 @@ from synth.rendering.noise import add_pixel_noise
 
 from eval.core.detection import detect_view
 from eval.core.uncertainty import VERDICT_MIN_POINTS
-from eval.core.cloud_metrics import cloud_distances, flatness, rigid_alignment
+from eval.core.cloud_metrics import cloud_distances, flatness, length_errors, rigid_alignment
 from eval.core.results import ErrorStats, MethodScores
 from eval.run.config import RunConfig
 from eval.core.analytic import visible_targets
@@ -93,7 +93,18 @@ def triangulate_stage(inputs: RunInputs, centers, matches, methods):
     """``{method: Triangulation}`` of the matched pairs."""
     uv_left = centers["left"][matches.left]
     uv_right = centers["right"][matches.right]
-    return {m: triangulate(inputs.rig, uv_left, uv_right, m) for m in methods}
+    return {m: triangulate_method(inputs, uv_left, uv_right, m) for m in methods}
+
+
+def triangulate_method(inputs: RunInputs, uv_left, uv_right, method: str):
+    """One method on pixel pairs: a port model's method with the measurement's rig, or the
+    absorbed baseline (:mod:`eval.core.absorbed`) — the pinhole rays of its own calibration
+    (no port), the point nearest to both."""
+    from eval.core.absorbed import ABSORBED
+
+    if method == ABSORBED:
+        return triangulate(inputs.absorbed.rig, uv_left, uv_right, "optical_path")
+    return triangulate(inputs.rig, uv_left, uv_right, method)
 
 
 #: The methods whose points get a covariance: the maximum-likelihood point (``reprojection``)
@@ -220,7 +231,7 @@ def score_stage(inputs: RunInputs, detections, matches, window, results, gate_mm
             errors=ErrorStats.of(errors), cloud=cloud_distances(measured_all, truth_visible),
             alignment=rigid_alignment(result.points[ok], truth),
             flatness=flatness(measured_all, seed=inputs.seed),
-            invalid=int((~result.valid).sum()))
+            invalid=int((~result.valid).sum()), lengths=length_errors(result.points[ok], truth))
         per_method[method] = {"points": result.points[ok], "truth": truth, "errors": errors,
                               "all_points": measured_all}
     return {"matching": matching, "visibility": visibility, "crosscheck": crosscheck,
@@ -377,6 +388,7 @@ def run_pipeline(inputs: RunInputs, config: RunConfig, log=print) -> RunResult:
     the error budget's rigs are ``inputs.budget_rigs``). Raises :class:`NothingMatched` when
     no pair is matched."""
     methods, noise_px, gate_mm = config.target_methods(), config.noise_px, config.gate_mm
+    port_methods = config.port_methods
     depth_window, self_calibrate = config.depth_range_mm, config.self_calibrate
     threshold_fraction, median_filter = config.threshold_fraction, config.median_filter
     max_elongation, max_area_ratio = config.max_elongation, config.max_area_ratio
@@ -414,14 +426,15 @@ def run_pipeline(inputs: RunInputs, config: RunConfig, log=print) -> RunResult:
         log(f"estimate {', '.join(self_calibrate)} from the matched targets …")
         start = time.perf_counter()
         calibration, refined = self_calibration_stage(inputs, centers, matches, self_calibrate,
-                                                      methods, log)
+                                                      port_methods, log)
         timings["self_calibration"] = time.perf_counter() - start
 
     corrected = None
     if config.eccentricity:
         log("correct the targets' eccentricity and triangulate again …")
         start = time.perf_counter()
-        corrected, eccentricity_summary = eccentricity_stage(inputs, centers, matches, methods)
+        corrected, eccentricity_summary = eccentricity_stage(inputs, centers, matches,
+                                                             port_methods)
         timings["eccentricity"] = time.perf_counter() - start
         start = time.perf_counter()
         uv_corrected = eccentricity_summary.pop("uv")
@@ -434,7 +447,7 @@ def run_pipeline(inputs: RunInputs, config: RunConfig, log=print) -> RunResult:
     if budget_rigs:
         log(f"error budget: measure again with {', '.join(budget_rigs)} …")
         start = time.perf_counter()
-        budget = budget_stage(inputs, detections, centers, budget_rigs, methods, gate_mm,
+        budget = budget_stage(inputs, detections, centers, budget_rigs, port_methods, gate_mm,
                               depth_window)
         timings["budget"] = time.perf_counter() - start
 
@@ -469,6 +482,7 @@ def run_pipeline(inputs: RunInputs, config: RunConfig, log=print) -> RunResult:
         "max_elongation": max_elongation, "max_area_ratio": max_area_ratio,
         "median_filter": median_filter,
         "rigs": _rigs_report(inputs, differs),
+        "absorbed": None if inputs.absorbed is None else inputs.absorbed.summary,
         "self_calibration": calibration,
         "budget": budget,
         "eccentricity": None if corrected is None else {

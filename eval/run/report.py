@@ -34,7 +34,9 @@ SUMMARY_COLUMNS = (("n", "n", 0), ("rms_dp_mm", "RMS dP", 3), ("max_dp_mm", "max
                    ("mean_dx_mm", "mean dX", 3), ("mean_dy_mm", "mean dY", 3),
                    ("mean_dz_mm", "mean dZ", 3), ("chamfer_mm", "Chamfer", 3),
                    ("fscore_1mm", "F@1mm", 3), ("fscore_5mm", "F@5mm", 3),
-                   ("rms_dp_aligned_mm", "RMS dP aligned", 3), ("flatness_mm", "flatness", 3))
+                   ("rms_dp_aligned_mm", "RMS dP aligned", 3), ("flatness_mm", "flatness", 3),
+                   ("length_median_abs_pct", "length med %", 3),
+                   ("length_worst_pct", "length worst %", 3))
 
 
 def summary_table(report: dict) -> str:

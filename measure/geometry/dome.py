@@ -141,6 +141,10 @@ class DomePair(RigPort, ValueEquality):
         """Each camera looks through its own dome."""
         return self[view]
 
+    @property
+    def refracts(self) -> bool:
+        return any(len(set(d.indices)) > 1 for d in (self.left, self.right))
+
     def check_cameras(self, left, right) -> None:
         self.left.check_camera(left.center, "left camera")
         self.right.check_camera(right.center, "right camera")

@@ -64,6 +64,12 @@ class RigPort:
         """The port camera ``view`` (0 left, 1 right) looks through."""
         raise NotImplementedError
 
+    @property
+    def refracts(self) -> bool:
+        """Whether the port bends any ray (False: "no port", every index the same — a pinhole
+        calibration in air, or one that absorbs the port)."""
+        raise NotImplementedError
+
     def check_cameras(self, left, right) -> None:
         """Raise ``ValueError`` unless both cameras' centres are on the air side."""
         raise NotImplementedError
@@ -204,6 +210,10 @@ class FlatPort(RigPort, ValueEquality):
     def water_side(self, points: np.ndarray) -> np.ndarray:
         """Whether points ``(N, 3)`` lie strictly beyond the last interface (in the water)."""
         return np.asarray(points, dtype=float) @ self.normal > self.offsets[-1]
+
+    @property
+    def refracts(self) -> bool:
+        return len(set(self.indices)) > 1
 
     # the port interface (RigPort) ---------------------------------------------------------
     kind = "flat"

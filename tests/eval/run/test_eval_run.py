@@ -19,7 +19,8 @@ SPP = 16
 @pytest.fixture(scope="module")
 def run_dir(small_scene, tmp_path_factory):
     out = tmp_path_factory.mktemp("run") / "out"
-    assert main(["run", small_scene, "--out", str(out), "--spp", str(SPP), "--no-progress"]) == 0
+    assert main(["run", small_scene, "--out", str(out), "--spp", str(SPP), "--no-progress",
+                 "--methods", "optical_path,su,regular,absorbed"]) == 0
     return out
 
 
@@ -35,11 +36,19 @@ def test_report_fields_and_numbers(run_dir):
     assert matching["wrong"] == 0 and matching["pairs"] == matching["correct"]
     assert report["crosscheck"]["rms_px"] < 0.1
     methods = report["methods"]
-    assert set(methods) == {"optical_path", "su", "regular"}
+    assert set(methods) == {"optical_path", "su", "regular", "absorbed"}
     for stats in methods.values():
         assert set(stats) >= {"n", "rms_dp_mm", "max_dp_mm", "mean_dx_mm", "mean_dy_mm",
                               "mean_dz_mm", "chamfer_mm", "fscore_1mm", "rms_dp_aligned_mm",
-                              "flatness_mm"}
+                              "flatness_mm", "length_median_pct", "length_worst_pct"}
+    # The absorbed baseline (a pinhole calibration of the boards seen through the port) is in a
+    # virtual frame: its raw error is far above what a rigid alignment leaves, and its lengths
+    # are worse than the optical path's, which models the port.
+    absorbed, optical = methods["absorbed"], methods["optical_path"]
+    assert absorbed["n"] == optical["n"] and absorbed["invalid"] == 0
+    assert absorbed["rms_dp_mm"] > 3 * absorbed["rms_dp_aligned_mm"]
+    assert abs(absorbed["length_worst_pct"]) > 3 * abs(optical["length_worst_pct"])
+    assert report["absorbed"]["stereo_rms_px"] > 0 and report["absorbed"]["lens_model"]
     # At f = 150 px a 0.05 px centroid error is ~0.5 mm of depth at 1 m: the optical path is
     # accurate to a few mm, the regular method (which ignores the port) is off by ~300 mm.
     assert methods["optical_path"]["rms_dp_mm"] < 3.0
@@ -98,6 +107,7 @@ def test_pixel_noise_option_is_seeded(small_scene, tmp_path):
     (["--depth-range", "5"], "--depth-range"),
     (["--threshold-fraction", "1.5"], "--threshold-fraction"),
     (["--sensor", "nikon"], "unknown sensor"),
+    (["--absorbed-calib", "x.yaml"], "absorbed method"),
 ])
 def test_bad_arguments_exit_2_with_one_line(small_scene, tmp_path, capsys, extra, fragment):
     out = tmp_path / "out"
