@@ -1,0 +1,171 @@
+"""Images warped to virtual pinhole cameras, for tools that know no port (COLMAP, SLAM, OpenCV's
+stereo matchers): exact for points on one plane, with the error they leave elsewhere.
+
+A flat port (or a decentred dome) makes each camera non-central: no warp of its image can turn
+it into a pinhole camera for every depth. :func:`rectify` chooses the plane ``n · X = distance``
+(``n`` the rig's depth axis, :attr:`measure.stereo.triangulate.StereoRig.depth_axis`; mm,
+reference frame = the left camera's) and builds, per view, the ``cv2.remap`` maps that send each
+pixel of a virtual pinhole camera — where the camera seems to be from the water (its apparent
+centre and focal length near the principal point), no distortion, rotated for a row-aligned
+stereo pair by ``cv2.stereoRectify`` — to the real pixel that sees the same point of that plane (the Fermat
+forward model through the port). A point off the plane lands on the rectified image away from
+where the virtual pinhole projects it: :func:`warp_errors` measures that, in pixels and, through
+the virtual pair's triangulation, in millimetres.
+
+Pixels follow OpenCV's convention (integer coordinates are pixel centres).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from ..geometry.camera import Camera
+from ..geometry.port import index_matched_port
+from ..geometry.projection import project
+from .triangulate import StereoRig, triangulate
+
+#: The pixel offset from the principal point at which the port's apparent focal length is
+#: measured (px): far enough for round-off to vanish, near enough to be paraxial.
+FOCAL_PROBE_PX = 20.0
+
+
+@dataclass(frozen=True)
+class Rectification:
+    """``rig`` the refractive rig warped, ``distance_mm`` the plane (``rig.depth_axis · X``)
+    the warp is exact on, ``virtual`` the virtual pinhole pair (no port, no distortion,
+    row-aligned), ``maps`` per view ``(map_x, map_y)`` float32 ``(H, W)`` for ``cv2.remap``
+    (−1 where the virtual pixel's point has no real pixel)."""
+
+    rig: StereoRig
+    distance_mm: float
+    virtual: StereoRig
+    maps: tuple
+
+    def warp(self, view: int, image: np.ndarray) -> np.ndarray:
+        """``image`` of camera ``view`` as its virtual pinhole camera sees it (bilinear; black
+        where nothing is seen)."""
+        map_x, map_y = self.maps[view]
+        return cv2.remap(image, map_x, map_y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT,
+                         borderValue=0)
+
+
+def plane_points(camera: Camera, uv: np.ndarray, axis: np.ndarray, distance: float) -> np.ndarray:
+    """Where the pinhole rays of ``camera`` through pixels ``uv`` ``(N, 2)`` meet the plane
+    ``axis · X = distance`` (reference frame, mm); NaN for rays parallel to it or pointing away."""
+    rays = camera.rays(uv)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        s = (distance - axis @ camera.center) / (rays @ axis)
+    s = np.where(s > 0, s, np.nan)
+    return camera.center + rays * s[:, None]
+
+
+def apparent_camera(rig: StereoRig, view: int, distance: float):
+    """Where camera ``view`` seems to be from the water, and how much the port magnifies it,
+    near its principal point: ``(centre (3,) mm, focal scale)``. The centre is the point
+    nearest to the water rays of the principal point and of two pixels
+    :data:`FOCAL_PROBE_PX` from it (a flat port's lies behind the camera, by about the port
+    distance × (n_water − 1) on its axis; a centred dome's is the camera's own); the scale is the
+    ratio of the pinhole rays' angles to the water rays' (≈ n_water / n_air behind a flat port).
+    ``distance`` is the plane the water rays are followed to."""
+    camera = rig.cameras[view]
+    centre_px = camera.K[:2, 2]
+    uv = np.array([centre_px, centre_px + [FOCAL_PROBE_PX, 0.0], centre_px + [0.0, FOCAL_PROBE_PX]])
+    directions = camera.rays(uv)
+    water = rig.trace(view, directions)
+    origins, rays = water.origins, water.directions
+    # the point nearest to the three lines (least squares)
+    projector = np.eye(3)[None] - rays[:, :, None] * rays[:, None, :]
+    centre = np.linalg.solve(projector.sum(axis=0), np.einsum("kij,kj->i", projector, origins))
+    pinhole = camera.to_camera(camera.center + directions)
+    pinhole = pinhole[:, :2] / pinhole[:, 2:3]
+    seen = (rays @ camera.R)  # water directions in the camera's axes
+    seen = seen[:, :2] / seen[:, 2:3]
+    ratios = [np.linalg.norm(pinhole[k] - pinhole[0]) / np.linalg.norm(seen[k] - seen[0])
+              for k in (1, 2)]
+    return centre, float(np.mean(ratios))
+
+
+def virtual_pair(rig: StereoRig, distance: float) -> StereoRig:
+    """The virtual pinhole pair of :func:`rectify`: each camera where it seems to be from the
+    water (:func:`apparent_camera`), its intrinsics without distortion and with the port's
+    apparent focal length, rotated by ``cv2.stereoRectify`` (``alpha = 0``) into a row-aligned
+    pair; no port."""
+    left, right = rig.cameras
+    Ks, centres = [], []
+    for view, camera in enumerate((left, right)):
+        centre, scale = apparent_camera(rig, view, distance)
+        K = camera.K.copy()
+        K[:2, :2] *= scale
+        Ks.append(K)
+        centres.append(centre)
+    # OpenCV's stereo pose: X_right = R X_left + T (camera frames, the apparent centres)
+    R = right.R.T @ left.R
+    T = right.R.T @ (centres[0] - centres[1])
+    zeros = np.zeros(5)
+    R1, R2, P1, P2 = cv2.stereoRectify(Ks[0], zeros, Ks[1], zeros, tuple(left.size), R,
+                                       T.reshape(3, 1), alpha=0)[:4]
+    cameras = []
+    for camera, centre, R_rect, P in ((left, centres[0], R1, P1), (right, centres[1], R2, P2)):
+        cameras.append(Camera(P[:3, :3], camera.size, R=camera.R @ R_rect.T, t=centre))
+    port = index_matched_port(rig.depth_axis, np.stack([c.center for c in cameras]))
+    return StereoRig(cameras[0], cameras[1], port)
+
+
+def rectify(rig: StereoRig, distance: float) -> Rectification:
+    """The maps that warp both views of ``rig`` to its virtual pinhole pair, exact on the
+    plane ``rig.depth_axis · X = distance`` mm (module docs)."""
+    distance = float(distance)
+    if not np.isfinite(distance) or distance <= rig.port.glass_depth(rig.left):
+        raise ValueError(f"distance must lie in the water, beyond the glass "
+                         f"({rig.port.glass_depth(rig.left):.6g} mm), got {distance:g} mm")
+    virtual = virtual_pair(rig, distance)
+    axis = rig.depth_axis
+    w, h = rig.left.size
+    u, v = np.meshgrid(np.arange(w, dtype=np.float64), np.arange(h, dtype=np.float64))
+    grid = np.column_stack([u.ravel(), v.ravel()])
+    maps = []
+    for view, (camera, pinhole) in enumerate(zip(rig.cameras, virtual.cameras)):
+        points = plane_points(pinhole, grid, axis, distance)
+        real = project(camera, rig.view_port(view), points)
+        real = np.where(np.isfinite(real), real, -1.0).astype(np.float32)
+        maps.append((real[:, 0].reshape(h, w), real[:, 1].reshape(h, w)))
+    return Rectification(rig, distance, virtual, tuple(maps))
+
+
+def rectified_pixels(rectification: Rectification, view: int, uv: np.ndarray) -> np.ndarray:
+    """Where real pixels ``uv`` ``(N, 2)`` of camera ``view`` land on its rectified image: the
+    pixel's water ray meets the warp's plane, the virtual camera projects that point (exactly
+    what the maps do, inverted)."""
+    rig, axis = rectification.rig, rectification.rig.depth_axis
+    water = rig.trace(view, rig.cameras[view].rays(uv))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        s = (rectification.distance_mm - water.origins @ axis) / (water.directions @ axis)
+    points = water.origins + water.directions * s[:, None]
+    return rectification.virtual.cameras[view].project(points)
+
+
+def warp_errors(rectification: Rectification, points: np.ndarray) -> dict:
+    """What the warp does to ``points`` ``(N, 3)`` mm (reference frame): per view the rectified
+    pixel minus the virtual pinhole's projection (``offset_px`` ``(N, 2)``, ``error_px``
+    ``(N,)``), and the virtual pair's triangulation of the rectified pixels minus the point
+    (``error_mm`` ``(N, 3)``); NaN where a view does not see the point."""
+    rig = rectification.rig
+    points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    rectified, out = [], {}
+    for view in (0, 1):
+        real = project(rig.cameras[view], rig.view_port(view), points)
+        warped = rectified_pixels(rectification, view, real)
+        ideal = rectification.virtual.cameras[view].project(points)
+        out[view] = {"offset_px": warped - ideal,
+                     "error_px": np.linalg.norm(warped - ideal, axis=1)}
+        rectified.append(warped)
+    measured = triangulate(rectification.virtual, rectified[0], rectified[1], "optical_path")
+    out["error_mm"] = measured.points - points
+    return out
+
+
+__all__ = ["Rectification", "apparent_camera", "plane_points", "rectified_pixels",
+           "rectify", "virtual_pair", "warp_errors"]
