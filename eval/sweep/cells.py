@@ -9,8 +9,11 @@
   pixel noise of σ ``noise_px`` drawn from the cell's seed (:func:`synth.rendering.noise.pixel_noise`),
   triangulated with the assumed rig (:func:`eval.core.analytic.triangulation_errors`, numpy over all
   targets at once) and summarized with :class:`eval.core.results.ErrorStats` (the schema of ``eval
-  run``'s ``methods``). ``regular_in_air`` triangulates the all-air copy of the rig (indices 1),
-  as section 3.3 of the paper does.
+  run``'s ``methods``) with the length errors of target pairs and the error after the best rigid
+  alignment. ``regular_in_air`` triangulates the all-air copy of the rig (indices 1),
+  as section 3.3 of the paper does; ``absorbed`` the pinhole calibration of the scene's boards
+  seen through its true port (:func:`eval.core.absorbed.analytic_absorbed_calibration`, once per
+  rig and worker).
 
 Every cell returns a record (key, status, error, report, row) and never raises: a cell that
 fails records its error. A worker process keeps Mitsuba imported, its JIT kernels, the parsed
@@ -135,6 +138,20 @@ def _projections(scene_path: str, defines: dict, spec, in_air: bool):
     return uv
 
 
+def _absorbed_rig(rig):
+    """The absorbed calibration's rig for the cameras behind ``rig``'s port, once per worker."""
+    import json
+
+    from eval.core.absorbed import analytic_absorbed_calibration
+    from eval.core.assumption import describe_rig
+
+    key = ("absorbed", json.dumps(describe_rig(rig), sort_keys=True, default=str))
+    absorbed = _CACHE.get(key)
+    if absorbed is None:
+        absorbed = _CACHE[key] = analytic_absorbed_calibration(rig).rig
+    return absorbed
+
+
 def analytic_cell(cell: dict, scene_path: str) -> dict:
     """The report of an analytic cell (see module docs)."""
     import numpy as np
@@ -158,15 +175,26 @@ def analytic_cell(cell: dict, scene_path: str) -> dict:
     offset_right = pixel_noise((n, 2), sigma ** 2, rng)
     clean_left, clean_right = _projections(scene_path, cell["defines"], spec, False)
     uv_left, uv_right = clean_left + offset_left, clean_right + offset_right
+    from eval.core.absorbed import ABSORBED
+    from eval.core.cloud_metrics import length_errors, rigid_alignment
+
     methods = {}
     for method in cell["methods"]:
         if method == "regular_in_air":
             air_left, air_right = _projections(scene_path, cell["defines"], spec, True)
             errors = triangulation_errors(air_copy(believed), air_left + offset_left,
                                           air_right + offset_right, "regular", targets)[0]
+        elif method == ABSORBED:
+            errors = triangulation_errors(_absorbed_rig(truth), uv_left, uv_right,
+                                          "optical_path", targets)[0]
         else:
             errors = triangulation_errors(believed, uv_left, uv_right, method, targets)[0]
-        methods[method] = ErrorStats.of(errors).to_json()
+        points = targets + errors
+        ok = np.all(np.isfinite(points), axis=1)
+        methods[method] = {**ErrorStats.of(errors).to_json(),
+                           "rms_dp_aligned_mm": rigid_alignment(points[ok], targets[ok])[
+                               "rms_dp_aligned_mm"],
+                           **length_errors(points[ok], targets[ok])}
     calibration = None
     names = tuple(n for n in p.get("self_calibrate", "").split(",") if n)
     if names:

@@ -176,7 +176,9 @@ def parse_spec(data: dict, base_dir: str, label: str) -> SweepSpec:
          label, "methods must be a non-empty list of method names")
     from measure import METHODS
 
-    known_methods = tuple(METHODS) + ("regular_in_air",)
+    from eval.core.absorbed import ABSORBED
+
+    known_methods = tuple(METHODS) + ("regular_in_air", ABSORBED)
     bad = [m for m in methods if m not in known_methods]
     need(not bad, label, f"unknown method {', '.join(bad)} (choose from "
                          f"{', '.join(known_methods)})")

@@ -167,5 +167,41 @@ def warp_errors(rectification: Rectification, points: np.ndarray) -> dict:
     return out
 
 
-__all__ = ["Rectification", "apparent_camera", "plane_points", "rectified_pixels",
+def sgbm_points(rectification: Rectification, left, right, num_disparities: int | None = None,
+                block_size: int = 7):
+    """OpenCV's ``StereoSGBM`` on the rectified pair of ``left``, ``right`` (grey images of
+    the real cameras; any real dtype, scaled together to 8 bits) and its points: the pinhole
+    triangulation by the virtual pair of each rectified left pixel and its match
+    (mm, reference frame). Returns ``(uv_left (N, 2), points (N, 3))`` where ``uv_left`` is the
+    *real* left pixel the rectified pixel came from (the maps), so that the points can be set
+    beside another matcher's on the same pixels. ``num_disparities`` (a multiple of 16;
+    default: what the plane of the warp needs, × 2, at least 64)."""
+    scale = 255.0 / max(float(np.nanmax(left)), float(np.nanmax(right)), 1e-30)
+    views = [np.clip(np.nan_to_num(rectification.warp(v, np.asarray(image, np.float32))) * scale,
+                     0, 255).astype(np.uint8) for v, image in enumerate((left, right))]
+    virtual = rectification.virtual
+    w, h = virtual.left.size
+    if num_disparities is None:
+        centre = plane_points(virtual.left, np.array([[w / 2, h / 2]]), rectification.rig.depth_axis,
+                              rectification.distance_mm)
+        disparity = float(virtual.left.project(centre)[0, 0] - virtual.right.project(centre)[0, 0])
+        num_disparities = max(64, int(np.ceil(2 * abs(disparity) / 16.0)) * 16)
+    sgbm = cv2.StereoSGBM_create(minDisparity=0, numDisparities=int(num_disparities),
+                                 blockSize=block_size, P1=8 * block_size ** 2,
+                                 P2=32 * block_size ** 2, uniquenessRatio=10,
+                                 speckleWindowSize=100, speckleRange=2,
+                                 mode=cv2.STEREO_SGBM_MODE_HH)
+    disparity = sgbm.compute(views[0], views[1]).astype(np.float64) / 16.0
+    valid = disparity > 0
+    rows, cols = np.nonzero(valid)
+    q_left = np.column_stack([cols, rows]).astype(np.float64)
+    q_right = q_left - np.column_stack([disparity[valid], np.zeros(valid.sum())])
+    points = triangulate(virtual, q_left, q_right, "optical_path").points
+    map_x, map_y = rectification.maps[0]
+    uv_left = np.column_stack([map_x[rows, cols], map_y[rows, cols]]).astype(np.float64)
+    keep = (uv_left[:, 0] >= 0) & np.all(np.isfinite(points), axis=1)
+    return uv_left[keep], points[keep]
+
+
+__all__ = ["Rectification", "sgbm_points", "apparent_camera", "plane_points", "rectified_pixels",
            "rectify", "virtual_pair", "warp_errors"]
