@@ -65,8 +65,13 @@ def add_parser(subparsers):
     source.add_argument("--pixels", metavar="THEIRS.csv",
                         help="your matched pixel pairs: CSV with columns "
                              + ", ".join(PIXEL_COLUMNS))
-    p.add_argument("--method", default=None, choices=METHODS[:3],
-                   help="triangulation of --pixels (default optical_path)")
+    p.add_argument("--method", default=None, choices=METHODS[:3] + ("absorbed",),
+                   help="triangulation of --pixels (default optical_path; absorbed: the port "
+                        "absorbed by a pinhole calibration, docs/absorbed.md)")
+    p.add_argument("--absorbed-calib", metavar="FILE", default=None,
+                   help="with --method absorbed: its calibration, a calib.yaml without a port "
+                        "(default: the dataset's boards seen through its port, calibrated as "
+                        "pinhole cameras)")
     p.add_argument("--units", default=None, choices=UNITS,
                    help="units of --points (default mm; m: the points are multiplied by 1000)")
     p.add_argument("--gate-mm", type=positive_float, default=None,
@@ -107,6 +112,12 @@ def main(args) -> int:
         raise CLIError("--pixel-sigma applies with --pixels only: the covariance of a point "
                        "comes from its two pixels")
     method = args.method or "optical_path"
+    if args.absorbed_calib and method != "absorbed":
+        raise CLIError(f"--absorbed-calib {args.absorbed_calib} applies with --method absorbed "
+                       f"only")
+    if args.submission and method == "absorbed":
+        raise CLIError("--method absorbed does not apply with --submission: score a dataset's "
+                       "--pixels with it")
     if args.submission and args.method is not None:
         refuse_method_without_pairs(args.dataset, args.submission, method)
     if args.submission and args.out and _inside(args.out, args.dataset):
@@ -129,7 +140,11 @@ def main(args) -> int:
         label, source = "theirs", {"points": os.path.abspath(args.points), "units": units}
     else:
         pairs = read_pixel_pairs(args.pixels)
-        result = triangulate(data.rig, pairs[:, :2], pairs[:, 2:], method)
+        if method == "absorbed":
+            result = triangulate(_absorbed_rig(args, data), pairs[:, :2], pairs[:, 2:],
+                                 "optical_path")
+        else:
+            result = triangulate(data.rig, pairs[:, :2], pairs[:, 2:], method)
         if not result.valid.any():
             raise CLIError(f"--pixels {args.pixels}: no pair triangulates with {method} "
                            f"and the dataset's calibration")
@@ -184,6 +199,23 @@ def main(args) -> int:
         print(summary)
     print(f"wrote {output.path}", file=sys.stderr if args.json else sys.stdout)
     return 0
+
+
+def _absorbed_rig(args, data):
+    """The absorbed method's rig for ``data``: ``--absorbed-calib``'s, or the dataset's boards
+    through its port calibrated as pinhole cameras (:mod:`eval.core.absorbed`)."""
+    from eval.core.absorbed import analytic_absorbed_calibration, read_absorbed_calibration
+
+    size = data.rig.left.size
+    try:
+        if args.absorbed_calib:
+            return read_absorbed_calibration(args.absorbed_calib, size).rig
+        if not data.rig.port.refracts:
+            raise ValueError(f"{data.path}: the dataset has no port (all air): there is nothing "
+                             f"for --method absorbed to absorb")
+        return analytic_absorbed_calibration(data.rig).rig
+    except ValueError as exc:
+        raise CLIError(str(exc)) from None
 
 
 def score_covariances(data, arrays, label, uv, pixel_sigma) -> dict:

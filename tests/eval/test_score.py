@@ -69,6 +69,15 @@ def test_matched_pixels_are_triangulated_with_the_datasets_calibration(scored_ru
     assert st["n"] == len(rows) and scored["association"]["unassociated"] == 0
     # Exact pixels through the exact model: round-off only.
     assert st["rms_dp_mm"] < 1e-8
+    # The same pixels with the port absorbed by a pinhole calibration of the dataset's boards
+    # (docs/absorbed.md): its virtual frame puts the points tens of mm off (a wider gate keeps
+    # each with its target), and the lengths between them err where the optical path's do not.
+    out = tmp_path / "score_absorbed"
+    assert main(["score", str(data), "--pixels", str(pairs), "--method", "absorbed",
+                 "--gate-mm", "200", "--out", str(out)]) == 0
+    absorbed = json.loads((out / "report.json").read_text())["methods"]["absorbed"]
+    assert absorbed["n"] == len(rows) and absorbed["rms_dp_mm"] > 1.0
+    assert abs(absorbed["length_worst_pct"]) > 1e3 * abs(st["length_worst_pct"])
 
 
 def _noisy_pairs(rows, path, sigma_px: float = 0.1, seed: int = 12):
