@@ -137,7 +137,8 @@ def coverage_verdict(coverage: dict, rig_differs: dict | None = None) -> str:
     if fraction < HONEST_COVERAGE[0]:
         return (f"σ understates the errors: {fraction:.3f} of the points inside their 95 % "
                 f"ellipsoid (< {HONEST_COVERAGE[0]:.2f}); an error both views share is not in "
-                f"it (disk targets: --eccentricity removes their eccentricity)")
+                f"it (disk targets: --eccentricity, eval run's default, removes their "
+                f"eccentricity)")
     if fraction > HONEST_COVERAGE[1]:
         return (f"σ overstates the errors: {fraction:.3f} of the points inside their 95 % "
                 f"ellipsoid (> {HONEST_COVERAGE[1]:.2f}); with a calibration's covariance one "

@@ -7,6 +7,8 @@ directory appears whole or not at all. See the README for the report's fields.
 
 from __future__ import annotations
 
+import argparse
+
 import json
 import os
 import sys
@@ -17,7 +19,7 @@ from eval.core.formatting import format_number as fmt
 from eval.core.detection import add_detector_options
 from eval.core.uncertainty import add_pixel_sigma_option
 from eval.run.config import COMMAND, RunConfig
-from eval.run.report import (budget_table, report_markdown, summary_table, verdict_exit_code,
+from eval.run.report import (UNCORRECTED, budget_table, report_markdown, summary_table, verdict_exit_code,
                              write_outputs)
 from synth.infra.cli import (add_define_option, add_full_film_option, add_json_option,
                        add_out_option, add_progress_option, add_scene_argument, scene_seed)
@@ -75,9 +77,10 @@ def add_parser(subparsers):
                         help="estimate these port parameters from the matched targets "
                              "(comma list of n_water, port_distance, port_normal), measure "
                              "again with them and report before and after")
-    parser.add_argument("--eccentricity", action="store_true",
-                        help="also measure with the detected centres corrected for the disk "
-                             "targets' eccentricity (reported beside the uncorrected numbers)")
+    parser.add_argument("--eccentricity", action=argparse.BooleanOptionalAction, default=None,
+                        help="correct the detected centres for the disk targets' eccentricity "
+                             "(default on target scenes; the uncorrected numbers are reported "
+                             "beside); --no-eccentricity: the raw centroids only")
     add_detector_options(parser)
     add_pixel_sigma_option(parser)
     parser.add_argument("--sensor", metavar="PRESET[,name=value…]",
@@ -135,15 +138,16 @@ def main(args) -> int:
     print(summary_table(report), file=summary_stream)
     coverage = {m: v["coverage_95"] for m, v in report["methods"].items()
                 if v.get("coverage_95") is not None}
-    corrected = ((report.get("eccentricity") or {}).get("uncertainty") or {}).get("summaries") or {}
-    coverage.update({f"{m}+ecc": v["coverage"]["coverage_95"] for m, v in corrected.items()
+    uncorrected = ((report.get("eccentricity") or {}).get("uncorrected") or {})
+    raw = (uncorrected.get("uncertainty") or {}).get("summaries") or {}
+    coverage.update({f"{m} {UNCORRECTED}": v["coverage"]["coverage_95"] for m, v in raw.items()
                      if (v.get("coverage") or {}).get("coverage_95") is not None})
     if coverage:
         print("coverage of the 95 % ellipsoids: " + ", ".join(
             f"{m} {fmt(v, 3)}" for m, v in coverage.items()) + f" ({report['uncertainty']['rig']})",
             file=summary_stream)
         summaries = dict(report["uncertainty"].get("summaries") or {})
-        summaries.update({f"{m}+ecc": v for m, v in corrected.items()})
+        summaries.update({f"{m} {UNCORRECTED}": v for m, v in raw.items()})
         for method, summary in summaries.items():
             verdict = (summary.get("coverage") or {}).get("verdict")
             if verdict:

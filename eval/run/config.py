@@ -52,7 +52,7 @@ class RunConfig:
     gate_mm: float = 0.5
     depth_range_mm: tuple | None = None
     self_calibrate: tuple = ()
-    eccentricity: bool = False
+    eccentricity: bool | None = None
     threshold_fraction: float | None = None
     max_elongation: float | None = None
     max_area_ratio: float | None = None
@@ -85,6 +85,12 @@ class RunConfig:
         from eval.core.absorbed import ABSORBED
 
         return tuple(m for m in self.target_methods() if m != ABSORBED)
+
+    @property
+    def corrects_eccentricity(self) -> bool:
+        """Whether a target run corrects the disk targets' eccentricity (``--eccentricity``,
+        the default; ``--no-eccentricity`` measures the raw centroids only)."""
+        return True if self.eccentricity is None else bool(self.eccentricity)
 
     @property
     def absorbed(self) -> bool:

@@ -430,11 +430,13 @@ def run_pipeline(inputs: RunInputs, config: RunConfig, log=print) -> RunResult:
         timings["self_calibration"] = time.perf_counter() - start
 
     corrected = None
-    if config.eccentricity:
+    if config.corrects_eccentricity:
         log("correct the targets' eccentricity and triangulate again …")
         start = time.perf_counter()
         corrected, eccentricity_summary = eccentricity_stage(inputs, centers, matches,
                                                              port_methods)
+        # the absorbed baseline has no port model to correct its centroids with
+        corrected.update({m: results[m] for m in methods if m not in corrected})
         timings["eccentricity"] = time.perf_counter() - start
         start = time.perf_counter()
         uv_corrected = eccentricity_summary.pop("uv")
@@ -466,6 +468,9 @@ def run_pipeline(inputs: RunInputs, config: RunConfig, log=print) -> RunResult:
         calibration["methods"] = {m: s.to_json() for m, s in score_stage(
             inputs, detections, matches, window, refined, gate_mm)["scores"].items()}
     timings["evaluate"] = time.perf_counter() - start
+    # the headline numbers: the eccentricity corrected (the default), else the raw centroids
+    primary, primary_uncertainty = ((scored_corrected, uncertainty_corrected)
+                                    if corrected is not None else (scored, uncertainty))
 
     report = {
         "scene": inputs.scene, "targets": int(len(inputs.targets)),
@@ -476,8 +481,8 @@ def run_pipeline(inputs: RunInputs, config: RunConfig, log=print) -> RunResult:
                       for name, d in detections.items()},
         "crosscheck": scored["crosscheck"],
         "matching": scored["matching"],
-        "methods": _with_coverage(scored["scores"], uncertainty),
-        "uncertainty": uncertainty,
+        "methods": _with_coverage(primary["scores"], primary_uncertainty),
+        "uncertainty": primary_uncertainty,
         "noise_px": noise_px, "seed": inputs.seed, "threshold_fraction": threshold_fraction,
         "max_elongation": max_elongation, "max_area_ratio": max_area_ratio,
         "median_filter": median_filter,
@@ -487,8 +492,8 @@ def run_pipeline(inputs: RunInputs, config: RunConfig, log=print) -> RunResult:
         "budget": budget,
         "eccentricity": None if corrected is None else {
             **eccentricity_summary,
-            "methods": _with_coverage(scored_corrected["scores"], uncertainty_corrected),
-            "uncertainty": uncertainty_corrected},
+            "uncorrected": {"methods": _with_coverage(scored["scores"], uncertainty),
+                            "uncertainty": uncertainty}},
         "timings_s": timings,
         "variant": inputs.variant, "spp": inputs.spp,
         "spp_rendered": (inputs.extra.get("render") or {}).get(
@@ -496,8 +501,8 @@ def run_pipeline(inputs: RunInputs, config: RunConfig, log=print) -> RunResult:
     }
     return RunResult(report=report, inputs=inputs, detections=detections, centers=centers,
                      matches=matches, correct=scored["correct"],
-                     per_method=scored["per_method"], simulated=scored["simulated"],
-                     scores=scored["scores"])
+                     per_method=primary["per_method"], simulated=scored["simulated"],
+                     scores=primary["scores"])
 
 
 def measure_scene(config: RunConfig, log=print) -> RunResult:

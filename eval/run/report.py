@@ -49,11 +49,17 @@ def summary_table(report: dict) -> str:
     return "\n".join(lines)
 
 
+#: The label of a method's numbers on the raw centroids, when the run corrected the
+#: eccentricity (its headline numbers are the corrected ones).
+UNCORRECTED = "(raw centroids)"
+
+
 def _method_rows(report: dict):
-    """``(label, stats)`` per method, then per method corrected for eccentricity (``+ecc``)."""
+    """``(label, stats)`` per method (the eccentricity corrected, by default), then per method
+    on the raw centroids."""
     rows = list(report["methods"].items())
-    if report.get("eccentricity"):
-        rows += [(f"{m}+ecc", st) for m, st in report["eccentricity"]["methods"].items()]
+    uncorrected = (report.get("eccentricity") or {}).get("uncorrected") or {}
+    rows += [(f"{m} {UNCORRECTED}", st) for m, st in (uncorrected.get("methods") or {}).items()]
     return rows
 
 
@@ -160,8 +166,8 @@ def uncertainty_lines(report: dict) -> list:
              "", "| method | median σx | median σy | median σz | max σP | coverage 95 % | "
              "mean d² | normalized std x / y / z |", "|---|---|---|---|---|---|---|---|"]
     rows = [(m, v) for m, v in summaries.items()]
-    ecc = (report.get("eccentricity") or {}).get("uncertainty") or {}
-    rows += [(f"{m}+ecc", v) for m, v in (ecc.get("summaries") or {}).items()]
+    raw = ((report.get("eccentricity") or {}).get("uncorrected") or {}).get("uncertainty") or {}
+    rows += [(f"{m} {UNCORRECTED}", v) for m, v in (raw.get("summaries") or {}).items()]
     for method, summary in rows:
         sig, cov = summary["sigma"], summary.get("coverage") or {}
         med = sig.get("median_sigma_mm", {})

@@ -69,7 +69,8 @@ def run_config(cell: dict, scene_path: str):
                      seed=int(cell["seed"]), methods=tuple(cell["methods"]),
                      assumptions=cell_assumptions(p),
                      self_calibrate=parse_self_calibration(p.get("self_calibrate", "")),
-                     eccentricity=bool(p.get("eccentricity", False)),
+                     eccentricity=(None if p.get("eccentricity") is None
+                                   else bool(p["eccentricity"])),
                      median_filter=int(p.get("median_filter") or 0), progress=False, **optional)
 
 

@@ -203,21 +203,33 @@ def test_scene_with_no_visible_target(tmp_path, capsys):
 
 
 @pytest.mark.slow
-def test_eccentricity_option_reports_before_and_after(small_scene, tmp_path):
+def test_eccentricity_is_corrected_by_default_and_reported_before_and_after(small_scene,
+                                                                            tmp_path):
+    """By default the headline numbers are on the centres corrected for the disks'
+    eccentricity, the raw centroids' beside them; --no-eccentricity measures the raw centroids
+    only, and gives back the default run's uncorrected numbers."""
     data = tmp_path / "data"
     write_dataset(small_scene, data, spp=16, progress=False)
     out = tmp_path / "out"
-    assert main(["run", small_scene, "--from", str(data), "--out", str(out), "--eccentricity",
+    assert main(["run", small_scene, "--from", str(data), "--out", str(out),
                  "--no-progress"]) == 0
     report = json.loads((out / "report.json").read_text())
     ecc = report["eccentricity"]
-    assert set(ecc["methods"]) == set(report["methods"]) and ecc["iterations"] == 2
+    raw = ecc["uncorrected"]["methods"]
+    assert set(raw) == set(report["methods"]) and ecc["iterations"] == 2
     # 16 mm disks at f = 150 px: offsets of a few hundredths of a pixel, predicted in both views
     for view in ("left", "right"):
         assert 0.001 < ecc["offset_px"][view]["max_px"] < 0.5
-    assert ecc["methods"]["optical_path"]["n"] == report["methods"]["optical_path"]["n"]
+    assert raw["optical_path"]["n"] == report["methods"]["optical_path"]["n"]
+    assert raw["optical_path"]["rms_dp_mm"] != report["methods"]["optical_path"]["rms_dp_mm"]
     assert report["crosscheck"]["rms_px_outline"] > 0
-    assert "optical_path+ecc" in (out / "report.md").read_text()
+    assert "optical_path (raw centroids)" in (out / "report.md").read_text()
+    plain = tmp_path / "plain"
+    assert main(["run", small_scene, "--from", str(data), "--out", str(plain),
+                 "--no-eccentricity", "--no-progress"]) == 0
+    plain_report = json.loads((plain / "report.json").read_text())
+    assert plain_report["eccentricity"] is None
+    assert plain_report["methods"]["optical_path"] == raw["optical_path"]
 
 
 @pytest.mark.slow
