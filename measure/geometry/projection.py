@@ -724,7 +724,8 @@ def _jacobians(camera, frame, problem, points, x, curvature, ratio, inverse, l1,
 def _run(camera, port, points, solver, paths: bool, jacobian: int):
     if not (port is None or isinstance(port, FlatPort)):
         raise ValueError(f"port must be a measure.FlatPort, a measure.geometry.dome.DomePort or None, got "
-                         f"{type(port).__name__}" + (f" ({port.description}: pass "
+                         f"{type(port).__name__}" + (f" (a {type(port).__name__} holds one port "
+                                                     f"per camera, {port.description}: pass "
                                                      f"rig.view_port(view))"
                                                      if isinstance(port, RigPort) else ""))
     if solver not in SOLVERS:
