@@ -92,16 +92,12 @@ class FlatPair(RigPort, ValueEquality):
     def reference_axis(self) -> np.ndarray:
         return self.left.normal
 
-    def glass_depth(self, left, right=None) -> float:
-        """The farther of the two ports' last interfaces along the depth axis from the left
-        camera's centre, each where the axis line through its own camera meets it (the right
-        camera's centre is taken as the left's when ``right`` is not given)."""
+    def glass_depth(self, left) -> float:
+        """The farther of the two ports' last interfaces where the depth axis through the left
+        camera's centre meets them (mm from that centre)."""
         axis = self.depth_axis(left)
-        depths = []
-        for port, camera in ((self.left, left), (self.right, right or left)):
-            along = (port.offsets[-1] - float(port.normal @ camera.center)) / float(port.normal @ axis)
-            depths.append(float(axis @ (camera.center - left.center)) + along)
-        return max(depths)
+        return max((port.offsets[-1] - float(port.normal @ left.center)) / float(port.normal @ axis)
+                   for port in (self.left, self.right))
 
     def describe(self) -> dict:
         return {"kind": self.kind, "left": self.left.describe(), "right": self.right.describe()}
