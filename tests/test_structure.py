@@ -197,7 +197,8 @@ def test_packages_are_rooms(package):
 
 #: The modules that implement the kinds of port (docs/architecture.md, "The port interface").
 PORT_MODULES = {f"measure/geometry/{name}.py" for name in (
-    "port", "dome", "refraction", "projection", "dome_projection", "flatport_format")}
+    "port", "dome", "flat_pair", "refraction", "projection", "dome_projection",
+    "flatport_format")}
 #: What asks which kind of port it holds (the issue's count: 80 lines in 31 files before the port
 #: interface).
 PORT_KIND = re.compile(r"isinstance\([^)]*(DomePair|DomePort|FlatPort)|is_dome|port_of\(")

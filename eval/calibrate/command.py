@@ -241,7 +241,7 @@ def main(args) -> int:
     from measure import StereoRig
     from measure.calibration.air import (DEFAULT_LENS_MODEL, CalibrationError, calibrate_in_air,
                                          detect_boards)
-    from measure.calibration.housing import calibrate_housing
+    from measure.calibration.housing import HOUSINGS, calibrate_housing
     from measure.geometry.dome import DomePair
     from synth.products.boards import read_boards
     from synth.infra.fileio import OutputDir
@@ -271,6 +271,9 @@ def main(args) -> int:
                        f"(no left/ and right/ folders, no photos)")
     boards = read_boards(args.dir)
     truth = boards.calib["rig"]
+    if not boards.air and truth.port.kind not in HOUSINGS:  # e.g. two housings: not yet
+        raise CLIError(f"{args.dir}: boards behind {truth.port.description}: no housing "
+                       f"calibration of {truth.port.rig_name} yet")
     dome = not boards.air and isinstance(truth.port, DomePair)
     if dome:
         from measure.calibration.housing import DEFAULT_DOME_FREE

@@ -17,9 +17,9 @@ from synth.products.crosscheck import wholly_in_image
 
 def project_pair(rig: StereoRig, points: np.ndarray, port=None):
     """The forward model: the pixels ``(left, right)`` of ``points`` ``(..., 3)`` mm through
-    ``port`` (default the rig's)."""
+    ``port`` (default the rig's; each camera through its own, :meth:`RigPort.view`)."""
     port = rig.port if port is None else port
-    return project(rig.left, port, points), project(rig.right, port, points)
+    return project(rig.left, port.view(0), points), project(rig.right, port.view(1), points)
 
 
 def triangulation_errors(rig: StereoRig, uv_left, uv_right, method: str, truth: np.ndarray):

@@ -200,13 +200,15 @@ def budget_rigs(config: RunConfig, true_rig, measured_rig) -> dict:
     return rigs
 
 
-def refuse_flat_only(config: RunConfig) -> None:
-    """CLIError for an option of a flat port given for a dome scene (each camera inside its
-    own dome): the self-calibration estimates a flat port's parameters. (``--assume`` of a flat
-    port's parameter is refused by :func:`eval.core.assumption.assumed_rig`.)"""
+def refuse_flat_only(config: RunConfig, port=None) -> None:
+    """CLIError for an option of one flat port given for a scene whose port does not
+    self-calibrate (each camera inside its own dome, or behind its own flat port): the
+    self-calibration estimates one flat port's parameters. (``--assume`` of a flat port's
+    parameter is refused by :func:`eval.core.assumption.assumed_rig`.)"""
     if config.self_calibrate:
-        raise CLIError(f"--self-calibrate does not apply to the dome scene {config.scene}: it "
-                       f"estimates a flat port's parameters")
+        kind = "dome" if port is None else port.kind
+        raise CLIError(f"--self-calibrate does not apply to the {kind} scene {config.scene}: it "
+                       f"estimates the parameters of one flat port")
 
 
 def load_inputs(config: RunConfig, log) -> RunInputs:
@@ -216,7 +218,7 @@ def load_inputs(config: RunConfig, log) -> RunInputs:
         raise CLIError(f"--self-calibrate does not apply to {config.scene}: it estimates the "
                        f"port's parameters, and the scene has no port (all air)")
     if not spec.rig.port.self_calibrates:
-        refuse_flat_only(config)
+        refuse_flat_only(config, spec.rig.port)
     seed = spec.seed if config.seed is None else config.seed
     measured_rig, rig_covariance = measurement_calibration(config, spec)
     in_left = visible_targets(spec.rig.left, spec.rig.view_port(0), spec.targets,

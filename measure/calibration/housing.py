@@ -121,7 +121,10 @@ def calibrate_housing(rig: StereoRig, board: Board, detections: Detections,
     covariance propagated) or ``"prior"`` (freed, with the in-air result as a prior), for a
     flat port and for domes alike. Without it the σ is conditional on the in-air
     calibration."""
-    housing = HOUSINGS[rig.port.kind]
+    housing = HOUSINGS.get(rig.port.kind)
+    if housing is None:  # e.g. two housings (a FlatPair): no housing problem yet
+        raise CalibrationError(f"no housing calibration of {rig.port.rig_name} "
+                               f"({rig.port.rig_detail}) yet")
     if free is None:
         free = housing.default_free
     if uncertainty not in UNCERTAINTY:

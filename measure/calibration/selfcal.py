@@ -168,8 +168,9 @@ def self_calibrate(rig: StereoRig, uv_left, uv_right, parameters=("n_water",),
     into σ (module docs). Raises ``ValueError`` for an unknown parameter or fewer
     targets than free numbers."""
     if not rig.port.self_calibrates:
-        raise ValueError("self-calibration estimates flat-port parameters; a rig of two domes "
-                         "(DomePair) is not supported yet")
+        raise ValueError(f"self-calibration estimates the parameters of one flat port; "
+                         f"{rig.port.rig_name} ({type(rig.port).__name__}: "
+                         f"{rig.port.rig_detail}) is not supported yet")
     names = tuple(dict.fromkeys(parameters))
     unknown = [p for p in names if p not in PARAMETERS]
     if not names or unknown:

@@ -194,7 +194,8 @@ class DomePair(RigPort, ValueEquality):
         return DomePair(*domes)
 
     def check_parameter_names(self, names) -> None:
-        flat = [n for n in names if n.startswith("port.") and not n.startswith("port.index")]
+        flat = [n for n in names if (n.startswith("port.") and not n.startswith("port.index"))
+                or n.startswith(("left.port.", "right.port."))]
         if flat:
             raise ValueError(f"{', '.join(flat)}: flat-port parameters, but the rig looks "
                              f"through domes")

@@ -7,10 +7,12 @@ normal of the interface in *that camera's* frame (pointing away from the camera 
 air–glass) interface and the glass thickness, in **metres** (their examples and navigation
 data are metric), and the indices of air, glass and water. One glass layer only.
 
-This project keeps one port in the reference frame (the left camera's, mm) for both cameras, so
-the right camera's ``FLATPORT`` has its own normal ``R_rightᵀ·N`` and distance
-``D − N·t_right``. :func:`to_flatport` and :func:`from_flatport` convert one camera's view; the
-round trip is exact to floating point (tests).
+This project keeps a port in the reference frame (the left camera's, mm). One port shared by
+both cameras (:class:`~measure.geometry.port.FlatPort`) gives the right camera's ``FLATPORT``
+its own normal ``R_rightᵀ·N`` and distance ``D − N·t_right``; a rig of two housings
+(:class:`~measure.geometry.flat_pair.FlatPair`) writes each camera's own port the same way.
+:func:`to_flatport` and :func:`from_flatport` convert one camera's view; the round trip is
+exact to floating point (tests).
 
 ``DOMEPORT`` (the fork's ``src/colmap/sensor/models_refrac.h``, the comment above ``struct
 DomePort`` and ``DomePort::InitializeRefracParamsInfo``): ``Cx, Cy, Cz, int_radius, int_thick,
@@ -28,6 +30,7 @@ import numpy as np
 
 from .camera import Camera
 from .dome import DomePair, DomePort
+from .flat_pair import VIEWS, FlatPair
 from .port import FlatPort
 
 FLATPORT_NAMES = ("Nx", "Ny", "Nz", "int_dist", "int_thick", "na", "ng", "nw")
@@ -86,12 +89,17 @@ def from_domeport(params, camera: Camera) -> DomePort:
                     tuple(values[5:8]))
 
 
-def flatport_text(port: FlatPort, cameras: dict) -> str:
-    """Lines ``<name> FLATPORT Nx Ny Nz int_dist int_thick na ng nw`` for ``{name: camera}``."""
+def flatport_text(port: FlatPort | FlatPair, cameras: dict) -> str:
+    """Lines ``<name> FLATPORT Nx Ny Nz int_dist int_thick na ng nw`` for ``{name: camera}``
+    (a :class:`~measure.geometry.flat_pair.FlatPair`: ``left`` and ``right``, each its own
+    port)."""
     lines = ["# camera FLATPORT " + " ".join(FLATPORT_NAMES)
              + "  (normal in the camera's frame; distances in metres)"]
     for name, camera in cameras.items():
-        lines.append(f"{name} FLATPORT " + " ".join(repr(v) for v in to_flatport(port, camera)))
+        if isinstance(port, FlatPair) and name not in VIEWS:
+            raise ValueError(f"camera {name!r}: a port per camera names them {', '.join(VIEWS)}")
+        own = port.view(VIEWS.index(name)) if isinstance(port, FlatPair) else port
+        lines.append(f"{name} FLATPORT " + " ".join(repr(v) for v in to_flatport(own, camera)))
     return "\n".join(lines) + "\n"
 
 
@@ -117,16 +125,20 @@ __all__ = ["DOMEPORT_NAMES", "FLATPORT_NAMES", "METRES_PER_MM", "flatport_text",
            "from_flatport", "parse_flatport_text", "to_domeport", "to_flatport"]
 
 
-def housing_params(port: FlatPort | DomePair, left: Camera, right: Camera,
+def housing_params(port: FlatPort | FlatPair | DomePair, left: Camera, right: Camera,
                    error=ValueError) -> tuple[str, list, list]:
     """``(housing, left parameters, right parameters)`` of a rig's port: ``FLATPORT`` (one
-    glass layer, else ``error``) or ``DOMEPORT``, each camera's own (metres)."""
+    glass layer, else ``error``) or ``DOMEPORT``, each camera's own (metres): the port it looks
+    through (:meth:`~measure.geometry.port.RigPort.view`)."""
     if isinstance(port, DomePair):
         return ("DOMEPORT", to_domeport(port.left, left), to_domeport(port.right, right))
-    if len(port.thicknesses) != 1:
-        raise error(f"FLATPORT holds one glass layer; this port has "
-                    f"{len(port.thicknesses)}")
-    return "FLATPORT", to_flatport(port, left), to_flatport(port, right)
+    views = (port.view(0), port.view(1))
+    for name, view in zip(VIEWS, views):
+        if len(view.thicknesses) != 1:
+            whose = "this" if view is port else f"the {name} camera's"
+            raise error(f"FLATPORT holds one glass layer; {whose} port has "
+                        f"{len(view.thicknesses)}")
+    return "FLATPORT", to_flatport(views[0], left), to_flatport(views[1], right)
 
 
 def _floats(matrix) -> list:
@@ -136,6 +148,13 @@ def _floats(matrix) -> list:
 def cameras_json_port(port: FlatPort | DomePair, has_port: bool = True) -> dict:
     """The ``port`` entry of a dataset's ``cameras.json`` (:func:`synth.formats.exchange.cameras_json`):
     the flat port's interfaces, or each camera's dome."""
+    if isinstance(port, FlatPair):
+        return {"present": True,
+                "model": "a flat port per camera (two housings): each port's interfaces N · X = "
+                         "distance + cumulative thicknesses, in the reference frame; indices "
+                         "from the camera side (air, glass…, water)",
+                "ports": {name: _flat_entry(view) for name, view in
+                          (("left", port.left), ("right", port.right))}}
     if isinstance(port, DomePair):
         port_entry = {"present": True,
                       "model": "dome port: each camera inside its own spherical glass shell "
@@ -158,11 +177,38 @@ def cameras_json_port(port: FlatPort | DomePair, has_port: bool = True) -> dict:
     return port_entry
 
 
-def write_calib_port(fs, port: FlatPort | DomePair, has_port: bool = True) -> None:
+def _flat_entry(port: FlatPort) -> dict:
+    return {"normal": _floats(port.normal), "distance": float(port.distance),
+            "thicknesses": [float(v) for v in port.thicknesses],
+            "indices": [float(v) for v in port.indices]}
+
+
+def _write_flat_node(fs, name: str, port: FlatPort, present=None) -> None:
+    fs.startWriteStruct(name, cv2.FileNode_MAP)
+    if present is not None:
+        fs.write("present", int(present))
+    fs.write("normal", port.normal.reshape(3, 1))
+    fs.write("distance", float(port.distance))
+    for key, values in (("thicknesses", port.thicknesses), ("indices", port.indices)):
+        fs.startWriteStruct(key, cv2.FileNode_SEQ)
+        for v in values:
+            fs.write("", float(v))
+        fs.endWriteStruct()
+    fs.endWriteStruct()
+
+
+def write_calib_port(fs, port: FlatPort | FlatPair | DomePair, has_port: bool = True) -> None:
     """The port's node of a dataset's ``calib.yaml`` (:func:`synth.products.dataset.write_calib`)
     into the ``cv2.FileStorage`` ``fs``: ``port`` (present, normal, distance, thicknesses,
-    indices) or ``dome`` (per camera: center, radius, thickness, indices)."""
-    if isinstance(port, DomePair):
+    indices), ``ports`` (two housings: ``left`` and ``right`` maps of normal, distance,
+    thicknesses, indices, reference frame) or ``dome`` (per camera: center, radius, thickness,
+    indices)."""
+    if isinstance(port, FlatPair):
+        fs.startWriteStruct("ports", cv2.FileNode_MAP)
+        _write_flat_node(fs, "left", port.left)
+        _write_flat_node(fs, "right", port.right)
+        fs.endWriteStruct()
+    elif isinstance(port, DomePair):
         fs.startWriteStruct("dome", cv2.FileNode_MAP)
         for name, dome in (("left", port.left), ("right", port.right)):
             fs.startWriteStruct(name, cv2.FileNode_MAP)
@@ -176,21 +222,13 @@ def write_calib_port(fs, port: FlatPort | DomePair, has_port: bool = True) -> No
             fs.endWriteStruct()
         fs.endWriteStruct()
     else:
-        fs.startWriteStruct("port", cv2.FileNode_MAP)
-        fs.write("present", int(has_port))
-        fs.write("normal", port.normal.reshape(3, 1))
-        fs.write("distance", float(port.distance))
-        for name, values in (("thicknesses", port.thicknesses), ("indices", port.indices)):
-            fs.startWriteStruct(name, cv2.FileNode_SEQ)
-            for v in values:
-                fs.write("", float(v))
-            fs.endWriteStruct()
-        fs.endWriteStruct()
+        _write_flat_node(fs, "port", port, has_port)
 
 
 def port_text_files(port, cameras: dict) -> dict:
     """``{file name: text}`` of the port beside a calibration: ``flatport.txt``
-    (:func:`flatport_text`) for a flat port; nothing for domes, whose DOMEPORT lines live in
+    (:func:`flatport_text`) for a flat port or a port per camera; nothing for domes, whose
+    DOMEPORT lines live in
     the COLMAP ``cameras.txt`` (:func:`housing_params`)."""
     if isinstance(port, DomePair):
         return {}

@@ -32,7 +32,9 @@ class RigPort:
     """The port interface: what a stereo rig looks through, one implementation per kind of
     window — :class:`FlatPort` (one port both cameras share; the index-matched one of
     :func:`index_matched_port` is "no port", all air) and
-    :class:`measure.geometry.dome.DomePair` (each camera inside its own dome). Code that uses a
+    :class:`measure.geometry.dome.DomePair` (each camera inside its own dome) and
+    :class:`measure.geometry.flat_pair.FlatPair` (each camera behind its own flat port: two
+    housings). Code that uses a
     port calls these members and never asks which kind it holds; the port of one camera
     (:meth:`view`: a FlatPort, or a :class:`measure.geometry.dome.DomePort`) traces rays into
     the water (``trace``), is checked against a camera (``check_camera``), says which points are
@@ -43,7 +45,7 @@ class RigPort:
     ports); docs/architecture.md lists the few places outside the port modules that still
     branch on the kind, and why."""
 
-    #: The kind, as files and messages name it (``"flat"``, ``"dome"``).
+    #: The kind, as files and messages name it (``"flat"``, ``"dome"``, ``"flat pair"``).
     kind = ""
     #: The housing's model name in the refractive COLMAP fork's ``cameras.txt`` and calibmar.
     housing = ""
@@ -297,6 +299,10 @@ class FlatPort(RigPort, ValueEquality):
         domes = [n for n in names if ".dome_center" in n]
         if domes:
             raise ValueError(f"{', '.join(domes)}: dome parameters, but the rig has a flat port")
+        own = [n for n in names if n.startswith(("left.port.", "right.port."))]
+        if own:
+            raise ValueError(f"{', '.join(own)}: parameters of a port per camera, but the rig has "
+                             f"one flat port (port.…)")
 
     def moved(self, changes, normal_axes=None) -> FlatPort:
         """``port.distance``, ``port.tilt[k]`` (about ``normal_axes[k]``), ``port.thickness[k]``,

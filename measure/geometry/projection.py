@@ -32,9 +32,9 @@ from scipy.optimize import elementwise
 
 from ..batching import map_row_chunks
 from .camera import Camera
-from .dome import DomePair, DomePort
+from .dome import DomePort
 from .dome_projection import dome_paths
-from .port import FlatPort, index_matched_port
+from .port import FlatPort, RigPort, index_matched_port
 from ..reasons import Reason
 
 SOLVERS = ("fermat", "snell")
@@ -724,9 +724,10 @@ def _jacobians(camera, frame, problem, points, x, curvature, ratio, inverse, l1,
 def _run(camera, port, points, solver, paths: bool, jacobian: int):
     if not (port is None or isinstance(port, FlatPort)):
         raise ValueError(f"port must be a measure.FlatPort, a measure.geometry.dome.DomePort or None, got "
-                         f"{type(port).__name__}" + (" (a DomePair holds one dome per camera: "
-                                                     "pass rig.view_port(view))"
-                                                     if isinstance(port, DomePair) else ""))
+                         f"{type(port).__name__}" + (f" (a {type(port).__name__} holds one port "
+                                                     f"per camera, {port.description}: pass "
+                                                     f"rig.view_port(view))"
+                                                     if isinstance(port, RigPort) else ""))
     if solver not in SOLVERS:
         raise ValueError(f"solver must be one of {', '.join(SOLVERS)}, got {solver!r}")
     points = np.asarray(points, dtype=np.float64)

@@ -21,7 +21,12 @@ node) and the measurement that propagates it into every point's covariance:
   ``right.rotation`` / ``right.center`` moves the camera inside its dome, not the dome). The
   dome calibration estimates each camera's decentring in that camera's frame
   (``o = Rᵀ(M − C)``) and converts its covariance to these names
-  (``M = C + R·o``: ``δM = δC − [R·o]× φ + R·δo``).
+  (``M = C + R·o``: ``δM = δC − [R·o]× φ + R·δo``);
+* ``left.port.distance``, ``left.port.tilt[0/1]``, ``left.port.thickness[k]``,
+  ``left.port.index[k]`` and the same for ``right.`` — a rig of two housings
+  (:class:`measure.geometry.flat_pair.FlatPair`): that camera's own port, as ``port.…`` above
+  (the tilts about the same :attr:`RigCovariance.normal_axes`, which need not be ⟂ that port's
+  normal: the normal moves by their components ⟂ it); ``port.index[k]`` is medium k of both.
 
 The left camera is the reference frame: it has intrinsics but no pose parameters. A parameter
 not named has no uncertainty (exact). Units: mm, px, rad.
@@ -41,10 +46,13 @@ PARAMETER_NAMES = (
     + tuple(f"right.rotation[{k}]" for k in range(3))
     + tuple(f"right.center[{k}]" for k in range(3))
     + ("port.distance", "port.tilt[0]", "port.tilt[1]", "port.thickness[k]", "port.index[k]")
-    + tuple(f"{cam}.dome_center[{k}]" for cam in ("left", "right") for k in range(3)))
+    + tuple(f"{cam}.dome_center[{k}]" for cam in ("left", "right") for k in range(3))
+    + tuple(f"{cam}.port.{p}" for cam in ("left", "right")
+            for p in ("distance", "tilt[0]", "tilt[1]", "thickness[k]", "index[k]")))
 _NAME = re.compile(r"^(?:(?:left|right)\.(?:fx|fy|cx|cy|k1|k2|p1|p2|k3)"
                    r"|right\.(?:rotation|center)\[[012]\]"
-                   r"|port\.distance|port\.tilt\[[01]\]|port\.(?:thickness|index)\[\d+\]"
+                   r"|(?:(?:left|right)\.)?(?:port\.distance|port\.tilt\[[01]\]"
+                   r"|port\.(?:thickness|index)\[\d+\])"
                    r"|(?:left|right)\.dome_center\[[012]\])$")
 #: Smallest eigenvalue, relative to the largest, a covariance may have (below: singular).
 RELATIVE_EIGENVALUE_LIMIT = 1e-15
@@ -103,7 +111,7 @@ class RigCovariance:
             normal_axes = np.asarray(normal_axes, dtype=np.float64)
             if normal_axes.shape != (2, 3) or not np.all(np.isfinite(normal_axes)):
                 raise CovarianceError(f"normal_axes must be 2x3, got {normal_axes.shape}")
-        elif any(n.startswith("port.tilt") for n in names):
+        elif any("port.tilt" in n for n in names):
             raise CovarianceError("port.tilt[*] named without normal_axes")
         object.__setattr__(self, "names", names)
         object.__setattr__(self, "matrix", matrix)

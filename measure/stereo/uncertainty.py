@@ -115,7 +115,9 @@ def pixel_jacobians(rig: StereoRig, points, names=(), normal_axes=None):
     camera's pose, each dome's centre (``left.dome_center[k]``,
     ``right.dome_center[k]``: reference frame, mm — that view's own dome) and ``port.index[k]``
     (medium k of both domes); the flat port's ``port.distance``, ``port.tilt[*]`` and
-    ``port.thickness[*]`` are refused there, and the domes' names on a flat port. Rows without
+    ``port.thickness[*]`` are refused there, and the domes' names on a flat port. A rig of two
+    housings (:class:`measure.geometry.flat_pair.FlatPair`) takes ``left.port.…`` and
+    ``right.port.…`` (that camera's port) and ``port.index[k]`` (both). Rows without
     an image are NaN."""
     points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     names = tuple(names)
@@ -131,10 +133,14 @@ def pixel_jacobians(rig: StereoRig, points, names=(), normal_axes=None):
     intrinsics = [None, None]
     for p, name in enumerate(names):
         head, _, tail = name.partition(".")
+        own_port = head in ("left", "right") and tail.startswith("port.")
         for view, (camera, rows) in enumerate(zip(rig.cameras, (slice(0, 2), slice(2, 4)))):
             jac = views[view][2]
             column = None
-            if head in ("left", "right") and tail in _INTRINSICS:
+            if own_port:  # a port per camera: that camera's own port
+                if head == ("left", "right")[view]:
+                    column = _port_column(jac, tail, normal_axes, name)
+            elif head in ("left", "right") and tail in _INTRINSICS:
                 if head == ("left", "right")[view]:
                     if intrinsics[view] is None:
                         intrinsics[view] = _distortion_terms(camera, views[view][0])
@@ -145,25 +151,35 @@ def pixel_jacobians(rig: StereoRig, points, names=(), normal_axes=None):
             elif head == "right" and view == 1:
                 k = int(tail[-2])
                 column = (jac.rotation if tail.startswith("rotation") else jac.center)[:, :, k]
-            elif name == "port.distance":
-                column = jac.distance
-            elif tail.startswith("tilt"):
-                if normal_axes is None:
-                    raise ValueError("port.tilt[*] needs normal_axes")
-                column = jac.normal @ np.asarray(normal_axes, dtype=float)[int(tail[-2])]
-            elif tail.startswith("thickness"):
-                k = int(tail[tail.index("[") + 1:-1])
-                if k >= jac.thicknesses.shape[2]:
-                    raise ValueError(f"{name}: the port has {jac.thicknesses.shape[2]} layer(s)")
-                column = jac.thicknesses[:, :, k]
-            elif tail.startswith("index"):
-                k = int(tail[tail.index("[") + 1:-1])
-                if k >= jac.indices.shape[2]:
-                    raise ValueError(f"{name}: the port has {jac.indices.shape[2]} media")
-                column = jac.indices[:, :, k]
+            else:
+                column = _port_column(jac, name, normal_axes, name)
             if column is not None:
                 d_parameters[:, rows, p] = column
     return pixels, d_points, d_parameters
+
+
+def _port_column(jac, name: str, normal_axes, label: str):
+    """d pixel / d the port parameter ``name`` (``port.distance``, ``port.tilt[k]``,
+    ``port.thickness[k]``, ``port.index[k]``) of one view's parameter Jacobian; None for
+    another name. ``label`` names the parameter in errors."""
+    tail = name.partition(".")[2]
+    if name == "port.distance":
+        return jac.distance
+    if tail.startswith("tilt"):
+        if normal_axes is None:
+            raise ValueError(f"{label} needs normal_axes")
+        return jac.normal @ np.asarray(normal_axes, dtype=float)[int(tail[-2])]
+    if tail.startswith("thickness"):
+        k = int(tail[tail.index("[") + 1:-1])
+        if k >= jac.thicknesses.shape[2]:
+            raise ValueError(f"{label}: the port has {jac.thicknesses.shape[2]} layer(s)")
+        return jac.thicknesses[:, :, k]
+    if tail.startswith("index"):
+        k = int(tail[tail.index("[") + 1:-1])
+        if k >= jac.indices.shape[2]:
+            raise ValueError(f"{label}: the port has {jac.indices.shape[2]} media")
+        return jac.indices[:, :, k]
+    return None
 
 
 def perturbed_rig(rig: StereoRig, names, delta, normal_axes=None) -> StereoRig:

@@ -24,6 +24,21 @@ def _coverage(text: str) -> float:
     return value
 
 
+def _per_camera(base):
+    """An argparse type: one number (``base``), or two separated by a comma — one per camera,
+    ``LEFT,RIGHT`` (``--port per-camera``); a tuple of one or two."""
+    import argparse
+
+    def parse(text: str) -> tuple:
+        parts = str(text).split(",")
+        if len(parts) > 2:
+            raise argparse.ArgumentTypeError(f"expected one number, or two separated by a comma "
+                                             f"(LEFT,RIGHT), got {text!r}")
+        return tuple(base(part) for part in parts)
+
+    return parse
+
+
 def add_parser(subparsers) -> None:
     p = subparsers.add_parser("scene",
                               help="write a Mitsuba scene of the rig, the port and targets")
@@ -73,8 +88,11 @@ def add_parser(subparsers) -> None:
     p.add_argument("--z-range", type=positive_float, nargs=2, default=(600.0, 2000.0),
                    metavar=("ZMIN", "ZMAX"), help="random targets' depth range, mm")
     p.add_argument("--layout-seed", type=non_negative_int, default=0, help="seed of the random layout")
-    p.add_argument("--port", choices=("paper", "dome", "none"), default="paper",
-                   help="the paper's air-glass-water port; dome: each camera inside its own "
+    p.add_argument("--port", choices=("paper", "per-camera", "dome", "none"), default="paper",
+                   help="the paper's air-glass-water port; per-camera: two housings, each "
+                        "camera behind its own flat port (a finite window; --port-distance, "
+                        "--port-tilt, --glass-thickness take LEFT,RIGHT values, each port "
+                        "relative to its own camera); dome: each camera inside its own "
                         "glass dome (two concentric spheres, --dome-radius, --dome-thickness, "
                         "--dome-offset); or none (all air)")
     p.add_argument("--dome-radius", type=positive_float,
@@ -87,16 +105,21 @@ def add_parser(subparsers) -> None:
     p.add_argument("--n-water", type=water_index_argument,
                    help=f"{WATER_INDEX_HELP}; default 1.33")
     p.add_argument("--n-glass", type=positive_float, help="glass index (default 1.54)")
-    p.add_argument("--port-distance", type=positive_float, help="D, mm (default 100)")
-    p.add_argument("--glass-thickness", type=positive_float, help="d, mm (default 5)")
+    p.add_argument("--port-distance", type=_per_camera(positive_float),
+                   help="D, mm (default 100); --port per-camera: LEFT,RIGHT, each from its "
+                        "camera's centre along its port's normal (default 40,40)")
+    p.add_argument("--glass-thickness", type=_per_camera(positive_float),
+                   help="d, mm (default 5); --port per-camera: LEFT,RIGHT (default 5,5)")
     p.add_argument("--layer", type=positive_float, nargs=2, action="append",
                    metavar=("INDEX", "THICKNESS"),
                    help="one layer of the port, camera side first: refractive index and "
                         "thickness in mm (repeatable; replaces the glass of --n-glass and "
                         "--glass-thickness; e.g. --layer 1.49 10 --layer 1.54 5)")
-    p.add_argument("--port-tilt", type=any_float, nargs=2, metavar=("ABOUT_X", "ABOUT_Y"),
-                   default=(0.0, 0.0), help="tilt of the port normal from the left optical axis, "
-                                            "degrees about x and about y (default 0 0)")
+    p.add_argument("--port-tilt", type=_per_camera(any_float), nargs=2,
+                   metavar=("ABOUT_X", "ABOUT_Y"), default=((0.0,), (0.0,)),
+                   help="tilt of the port normal from the left optical axis, degrees about x "
+                        "and about y (default 0 0); --port per-camera: each LEFT,RIGHT, each "
+                        "port's from its own camera's optical axis (e.g. 0,0 0,2)")
     p.add_argument("--size", type=positive_int, nargs=2, metavar=("W", "H"),
                    help="image size, px (default 2448 2048); the focal length scales with W")
     p.add_argument("--focal", type=positive_float, help="focal length, px (default 1100·W/2448)")
@@ -174,19 +197,22 @@ def main(args) -> int:
         raise CLIError(f"{'--layer' if args.layer else '--lighting lit'} needs a port (--port paper)")
     if args.port == "paper":
         n = _indices(args)
-        tilt = np.radians(args.port_tilt)
+        port_tilt = [_one(v, "--port-tilt") for v in args.port_tilt]
+        tilt = np.radians(port_tilt)
         if np.any(np.abs(tilt) >= np.radians(30)):
-            raise CLIError(f"--port-tilt must stay below 30 degrees, got {args.port_tilt}")
-        normal = rigs.tilted_port_normal(*args.port_tilt)
-        distance = (args.port_distance if args.port_distance is not None
-                    else rigs.PAPER_PORT_DISTANCE_MM)
+            raise CLIError(f"--port-tilt must stay below 30 degrees, got {port_tilt}")
+        normal = rigs.tilted_port_normal(*port_tilt)
+        distance = _one(args.port_distance, "--port-distance")
+        distance = distance if distance is not None else rigs.PAPER_PORT_DISTANCE_MM
         if args.layer:
             thicknesses = tuple(t for _, t in args.layer)
             n = [n[0], *(index for index, _ in args.layer), n[2]]
         else:
-            thicknesses = (args.glass_thickness if args.glass_thickness is not None
-                           else rigs.PAPER_GLASS_THICKNESS_MM,)
+            thickness = _one(args.glass_thickness, "--glass-thickness")
+            thicknesses = (thickness if thickness is not None else rigs.PAPER_GLASS_THICKNESS_MM,)
         port = FlatPort(normal, distance, thicknesses, tuple(n))
+    elif args.port == "per-camera":
+        port, pair_comment = _pair_port(args, left, right)
     elif args.port == "dome":
         port = _dome_port(args, left, right)
     if args.layout == "surface":
@@ -237,8 +263,9 @@ def main(args) -> int:
                   if args.layout in ("cylinder", "sphere") else "")
                + f", port {args.port}"
                + (_dome_comment(port, left) if args.port == "dome" else "")
-               + (f" tilted {args.port_tilt[0]:g} deg about x, {args.port_tilt[1]:g} deg about y"
-                  if port is not None and any(args.port_tilt) else "")
+               + (pair_comment if args.port == "per-camera" else "")
+               + (f" tilted {args.port_tilt[0][0]:g} deg about x, {args.port_tilt[1][0]:g} deg "
+                  f"about y" if args.port == "paper" and any(sum(args.port_tilt, ())) else "")
                + (f" of {len(args.layer)} layers" if args.layer else "")
                + f", target radius {radius:g} mm"
                + (", lit targets" if args.lighting == "lit" else "")
@@ -260,7 +287,7 @@ def main(args) -> int:
     except ValueError as exc:
         raise CLIError(str(exc)) from None
     print(f"wrote {args.out}: {targets.shape[0]} targets of radius {radius:g} mm, "
-          f"{'no port' if port is None else 'two domes' if args.port == 'dome' else 'port'}, "
+          f"{PORT_WORDS[args.port]}, "
           f"{size[0]}x{size[1]} px")
     return 0
 
@@ -325,6 +352,19 @@ def _refuse_inapplicable(args) -> None:
     if args.port == "none":
         refuse_given(args, ["n_water", "n_glass", "port_distance", "glass_thickness",
                             "port_tilt"], "to --port none (no port: all air)")
+    if args.port == "per-camera":
+        refuse_given(args, ["layer", "aperture_radius", "focus_distance"],
+                     "to --port per-camera (two housings: pinhole cameras, each behind one glass "
+                     "layer)")
+        if layout == "surface":
+            raise CLIError("--layout surface does not apply to --port per-camera (scenes of two "
+                           "housings hold disk targets)")
+        if args.water != "clear":
+            raise CLIError(f"--water {args.water} does not apply to --port per-camera (scenes of "
+                           f"two housings are in clear water)")
+        if args.lighting == "lit":
+            raise CLIError("--lighting lit does not apply to --port per-camera (scenes of two "
+                           "housings hold LED targets)")
     if args.port != "dome":
         refuse_given(args, ["dome_radius", "dome_thickness", "dome_offset"],
                      f"to --port {args.port} (only to --port dome)")
@@ -375,6 +415,65 @@ def _dome_port(args, left, right):
     return pair
 
 
+def _one(values, option: str):
+    """The single value of a ``LEFT,RIGHT`` option where there is one port (None: not given)."""
+    if values is None or len(values) == 1:
+        return None if values is None else values[0]
+    raise CLIError(f"{option} {','.join(f'{v:g}' for v in values)}: two values are for --port "
+                   f"per-camera (a port per camera); this port is one: give one value")
+
+
+def _two(values, option: str, default: float) -> tuple:
+    """``(left, right)`` of a ``LEFT,RIGHT`` option of ``--port per-camera``; one value is
+    refused (a port per camera needs a value per camera)."""
+    if values is None:
+        return (default, default)
+    if len(values) != 2:
+        raise CLIError(f"{option} {values[0]:g}: --port per-camera needs one value per camera, "
+                       f"LEFT,RIGHT (e.g. {option} {values[0]:g},{values[0]:g})")
+    return tuple(values)
+
+
+def _pair_port(args, left, right) -> tuple:
+    """The FlatPair of ``--port per-camera``: per camera ``--port-distance``,
+    ``--glass-thickness`` and ``--port-tilt`` (each ``LEFT,RIGHT``; the tilt from that camera's
+    own optical axis, in its frame), the glass index ``--n-glass`` and the water's ``--n-water``;
+    CLIError for a camera in the other's glass, or windows that cannot keep the two fields of
+    view apart (:func:`synth.scene.windows.check_windows`). Returns ``(pair, comment)``."""
+    import numpy as np
+
+    from measure import StereoRig
+
+    from synth.infra.cli import given
+    from synth.scene.windows import (DEFAULT_PAIR_DISTANCE_MM, DEFAULT_PAIR_THICKNESS_MM,
+                                     check_windows, fit_windows, flat_pair)
+
+    distances = _two(args.port_distance, "--port-distance", DEFAULT_PAIR_DISTANCE_MM)
+    thicknesses = _two(args.glass_thickness, "--glass-thickness", DEFAULT_PAIR_THICKNESS_MM)
+    if given(args, "port_tilt"):
+        tilt_x, tilt_y = (_two(v, "--port-tilt", 0.0) for v in args.port_tilt)
+    else:
+        tilt_x = tilt_y = (0.0, 0.0)
+    if np.any(np.abs([tilt_x, tilt_y]) >= 30):
+        raise CLIError(f"--port-tilt must stay below 30 degrees, got {_csv(tilt_x)} "
+                       f"{_csv(tilt_y)}")
+    what = f"--port per-camera --port-distance {_csv(distances)}"
+    try:
+        pair = flat_pair((left, right), distances, list(zip(tilt_x, tilt_y)), thicknesses,
+                         tuple(_indices(args)))
+        rig = StereoRig(left, right, pair)
+        check_windows(rig, fit_windows(rig))
+    except ValueError as exc:
+        raise CLIError(f"{what}: {exc}") from None
+    comment = (f" distances {_csv(distances)} mm, glass {_csv(thicknesses)} mm, tilts "
+               f"{_csv(tilt_x)} {_csv(tilt_y)} deg about x and y (each port from its own camera)")
+    return pair, comment
+
+
+def _csv(values) -> str:
+    return ",".join(f"{v:g}" for v in values)
+
+
 def _dome_comment(pair, left) -> str:
     """The dome's numbers for the scene file's first comment (the offset in the left camera's
     frame)."""
@@ -384,6 +483,8 @@ def _dome_comment(pair, left) -> str:
             f"{offset[0]:g} {offset[1]:g} {offset[2]:g} mm")
 
 
+#: How the line ``wrote …`` names each ``--port``.
+PORT_WORDS = {"paper": "port", "per-camera": "two ports", "dome": "two domes", "none": "no port"}
 #: Most targets a scene may hold (its XML grows by ~400 bytes per target).
 MAX_TARGETS = 100_000
 

@@ -26,8 +26,10 @@ Conventions of both: COLMAP pixels — the centre of the top-left pixel is (0.5,
 ``cx, cy`` are OpenCV's + 0.5 (calibmar adds 0.5 to OpenCV's corners:
 ``src/calibmar/extractors/chessboard_extractor.cpp`` lines 61–63); the port normal in each
 camera's own frame and its distance from that camera (:mod:`measure.geometry.flatport_format`); lengths
-in metres (calibmar: the unit of the target, "expected in meters"). This project keeps one flat
-port for both cameras, so the two cameras' FLATPORTs must agree (:data:`PORT_TOLERANCE`); a
+in metres (calibmar: the unit of the target, "expected in meters"). Two FLATPORTs that agree
+(:data:`PORT_TOLERANCE`) are one flat port both cameras look through
+(:class:`measure.FlatPort`); two that differ are two housings, each camera behind its own port
+(:class:`measure.geometry.flat_pair.FlatPair`, written back the same way); a
 rig of two domes (:class:`measure.geometry.dome.DomePair`) is one DOMEPORT per camera, each camera's
 own (:func:`measure.geometry.flatport_format.to_domeport`); both cameras must have the same
 housing; a rig with a skewed K, zero or several port layers cannot be written and raises
@@ -47,6 +49,7 @@ from scipy.spatial.transform import Rotation
 
 from measure import Camera, FlatPort, StereoRig
 from measure.geometry.dome import DomePair
+from measure.geometry.flat_pair import FlatPair
 from measure.geometry.flatport_format import (DOMEPORT_NAMES, FLATPORT_NAMES, METRES_PER_MM,
                                      from_domeport, from_flatport, housing_params)
 
@@ -63,8 +66,9 @@ COLMAP_MODELS = {
     "OPENCV": ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2"),
     "FULL_OPENCV": ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6"),
 }
-#: The two cameras' ports must agree this well to be one port (normal in rad, lengths in mm,
-#: indices): calibmar writes 10 significant digits, a rig with two housings differs far more.
+#: Two cameras' FLATPORTs that agree this well are one port (normal in rad, lengths in mm,
+#: indices): calibmar writes 10 significant digits, a rig with two housings differs far more;
+#: beyond it each camera has its own port (a FlatPair).
 PORT_TOLERANCE = {"normal_rad": 1e-6, "mm": 1e-3, "index": 1e-9}
 #: File names :func:`write_calibration_formats` writes.
 CALIBMAR_NAME = "calibmar.yaml"
@@ -242,21 +246,24 @@ def _dome_pair(params_left, params_right, left: Camera, right: Camera) -> DomePa
     return DomePair(*domes)
 
 
-def _one_port(params_left, params_right, left: Camera, right: Camera, where: str) -> FlatPort:
-    """The port (reference frame, mm) of the left camera's FLATPORT, refused unless the right
-    camera's FLATPORT is the same port (:data:`PORT_TOLERANCE`)."""
-    port = from_flatport(params_left, left)
-    other = from_flatport(params_right, right)
+def _flat_ports(params_left, params_right, left: Camera, right: Camera) -> FlatPort | FlatPair:
+    """The port(s) of two ``FLATPORT`` parameter lists (each in its camera's frame, the cameras'
+    poses in any common frame), in the left camera's frame (mm): one :class:`FlatPort` (the left
+    camera's) when the two are the same port (:data:`PORT_TOLERANCE`), else a
+    :class:`~measure.geometry.flat_pair.FlatPair` (two housings)."""
+    ports = []
+    for params, camera in ((params_left, left), (params_right, right)):
+        port = from_flatport(params, camera)
+        ports.append(FlatPort(left.R.T @ port.normal, port.distance - float(port.normal @ left.t),
+                              port.thicknesses, port.indices))
+    port, other = ports
     angle = float(np.arccos(np.clip(port.normal @ other.normal, -1.0, 1.0)))
     lengths = np.abs(np.array([port.distance - other.distance,
                                port.thicknesses[0] - other.thicknesses[0]]))
     indices = float(np.max(np.abs(np.subtract(port.indices, other.indices))))
     if (angle > PORT_TOLERANCE["normal_rad"] or np.max(lengths) > PORT_TOLERANCE["mm"]
             or indices > PORT_TOLERANCE["index"]):
-        raise CalibFormatError(
-            f"{where}: the two cameras' FLATPORTs are not one port (normals {angle:.3g} rad "
-            f"apart, distance and thickness {lengths[0]:.3g} and {lengths[1]:.3g} mm, indices "
-            f"{indices:.3g}); this project models one port in front of both cameras")
+        return FlatPair(port, other)
     return port
 
 
@@ -426,10 +433,7 @@ def read_calibmar(path) -> dict:
     if housing == "DOMEPORT":
         return calib_dict(sizes["left"], *cams["left"], *cams["right"], R, T,
                           _dome_pair(params["left"], params["right"], left, right), True, first)
-    port = _one_port(params["left"], params["right"], left, right, f"{first} and {second}")
-    # the reference frame is the left camera's
-    port = FlatPort(left.R.T @ port.normal, port.distance - float(port.normal @ left.t),
-                    port.thicknesses, port.indices)
+    port = _flat_ports(params["left"], params["right"], left, right)
     return calib_dict(sizes["left"], *cams["left"], *cams["right"], R, T, port, True, first)
 
 
@@ -594,9 +598,7 @@ def read_colmap(path) -> dict:
         return calib_dict(left["size"], left["K"], left["D"], right["K"], right["D"], R, T,
                           _dome_pair(left["port"], right["port"], cam_left, cam_right), True,
                           path)
-    port = _one_port(left["port"], right["port"], cam_left, cam_right, path)
-    port = FlatPort(cam_left.R.T @ port.normal, port.distance - float(port.normal @ cam_left.t),
-                    port.thicknesses, port.indices)
+    port = _flat_ports(left["port"], right["port"], cam_left, cam_right)
     return calib_dict(left["size"], left["K"], left["D"], right["K"], right["D"], R, T, port,
                       True, path)
 

@@ -182,7 +182,7 @@ def build_board_scene(spec: SceneSpec, board: Board, air: bool, variant=None):
                            "type": "bitmap", "data": mi.TensorXf(pattern), "raw": True,
                            "filter_type": "nearest"}}}}
     if not air and spec.has_port:  # the glass as the scene writer makes it, for any port
-        scene.update(port_shapes(mi, spec.rig.port))
+        scene.update(port_shapes(mi, spec.rig.port, cameras=spec.rig.cameras))
     return mi.load_dict(scene), mi, chosen
 
 

@@ -14,7 +14,9 @@ A dataset directory holds (units mm, reference frame = the left camera's, OpenCV
   ``thicknesses`` (sequence), ``indices`` (sequence), ``present`` (0 for an all-air scene,
   whose port is index-matched: read with every index 1, whatever the file says; 1 a port)} —
   or, for a dome scene, a map ``dome`` {``left``, ``right``: {``center`` (3x1, reference
-  frame), ``radius`` (inner), ``thickness``, ``indices`` (air, glass, water)}};
+  frame), ``radius`` (inner), ``thickness``, ``indices`` (air, glass, water)}} — or, for two
+  housings (a flat port per camera), a map ``ports`` {``left``, ``right``: {``normal``,
+  ``distance``, ``thicknesses``, ``indices``}, each in the reference frame};
 * surface scenes (``python -m synth scene --layout surface``) instead of targets:
   ``surface.ply`` (the mesh) and per-view truth maps (:mod:`synth.products.truth_maps`):
   ``{left,right}_truth_points.npy`` (H, W, 3) float64 mm, ``{left,right}_truth_depth.npy``
@@ -62,6 +64,7 @@ import numpy as np
 
 from measure import Camera, FlatPort, StereoRig
 from measure.geometry.dome import DomePair, DomePort
+from measure.geometry.flat_pair import FlatPair
 from measure.geometry.projection import project
 from measure.geometry.flatport_format import write_calib_port
 
@@ -150,7 +153,7 @@ def _seq(node) -> list[float]:
 
 def read_calib(path) -> dict:
     """Read a stereo calibration: a dict with ``size``, ``K1``, ``D1``, ``K2``, ``D2``, ``R``,
-    ``T``, ``port`` (:class:`measure.FlatPort`), ``has_port`` and ``rig``
+    ``T``, ``port`` (:class:`measure.FlatPort`, a FlatPair or a DomePair), ``has_port`` and ``rig``
     (:class:`measure.StereoRig`, the left camera at the reference origin). The file is this
     project's ``calib.yaml``, a calibmar stereo calibration (either of its two YAML files) or
     the COLMAP fork's ``cameras.txt`` with ``rig_config.json`` beside it, told apart by content
@@ -193,11 +196,17 @@ def _read_calib(path) -> dict:
             if mat is None:
                 raise DatasetError(f"{path}: no matrix {name}")
             out[name] = np.asarray(mat, dtype=np.float64)
-        pnode, dnode = fs.getNode("port"), fs.getNode("dome")
+        pnode, dnode, pairnode = fs.getNode("port"), fs.getNode("dome"), fs.getNode("ports")
+        given = [name for name, node in (("port", pnode), ("dome", dnode), ("ports", pairnode))
+                 if not node.empty()]
+        if len(given) > 1:
+            raise DatasetError(f"{path}: holds both a {' and a '.join(given)} map; a calibration "
+                               f"has one (port: one flat port, ports: a flat port per camera, "
+                               f"dome: a dome per camera)")
         if not dnode.empty():
-            if not pnode.empty():
-                raise DatasetError(f"{path}: holds both a port map and a dome map")
             out["port"], out["has_port"] = _read_domes(path, dnode), True
+        elif not pairnode.empty():
+            out["port"], out["has_port"] = _read_flat_pair(path, pairnode), True
         else:
             if pnode.empty() or pnode.getNode("normal").mat() is None:
                 raise DatasetError(f"{path}: no port map (normal, distance, thicknesses, "
@@ -221,6 +230,28 @@ def _read_calib(path) -> dict:
                        out["T"], out["port"], out["has_port"], str(path))
     calib["covariance"] = covariance
     return calib
+
+
+def _read_flat_pair(path, node) -> FlatPair:
+    """The ``ports`` map of ``calib.yaml`` (two housings): ``left`` and ``right`` maps of
+    ``normal`` (3x1), ``distance``, ``thicknesses`` and ``indices`` (reference frame, mm), each
+    the port that camera looks through."""
+    ports = []
+    for name in ("left", "right"):
+        sub = node.getNode(name)
+        normal = None if sub.empty() else sub.getNode("normal").mat()
+        if normal is None:
+            raise DatasetError(f"{path}: ports: no {name} map (normal, distance, thicknesses, "
+                               f"indices): a port per camera needs both left and right")
+        if sub.getNode("distance").empty():
+            raise DatasetError(f"{path}: ports: {name}: no distance")
+        try:
+            ports.append(FlatPort(normal.ravel(), sub.getNode("distance").real(),
+                                  tuple(_seq(sub.getNode("thicknesses"))),
+                                  tuple(_seq(sub.getNode("indices")))))
+        except ValueError as exc:
+            raise DatasetError(f"{path}: ports: {name}: {exc}") from None
+    return FlatPair(*ports)
 
 
 def _read_domes(path, node) -> DomePair:

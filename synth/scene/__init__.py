@@ -11,7 +11,9 @@ job:
 * :mod:`synth.scene.read` -- :func:`load_scene`: the rig, port and targets read back through
   Mitsuba's own parser;
 * :mod:`synth.scene.dome` -- dome ports: the two domes of a rig, the field-of-view check, the
-  Mitsuba spheres.
+  Mitsuba spheres;
+* :mod:`synth.scene.windows` -- two housings: a flat port per camera, each a finite window
+  sized to its camera's field of view and kept out of the other's.
 
 This package re-exports the names the rest of the project uses; the others live in the modules.
 """

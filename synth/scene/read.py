@@ -19,11 +19,13 @@ import re
 import numpy as np
 
 from measure import Camera, FlatPort, StereoRig
+from measure.geometry.flat_pair import VIEWS, FlatPair
 from measure.geometry.port import index_matched_port
 from synth.scene.dome import check_field_of_view, facing_cameras, pair_from_spheres
 from synth.scene.model import (SPECKLE_ID, SURFACE_ID, TARGET_ID_PREFIX, SceneError, SceneSpec,
                                SceneSurface)
 from synth.scene.params import check_params, declared_defaults, override_defaults
+from synth.scene.windows import check_windows, window_from_rectangles
 from synth.rendering.sensor import intrinsics_from_sensor, pose_from_to_world
 
 
@@ -196,7 +198,7 @@ def _read_shapes(nodes: _Nodes, label: str):
             spheres[sid] = _sphere(nodes, node, M, what) + tuple(iors)
             continue
         normal = M[:3, 2] / np.linalg.norm(M[:3, 2])
-        interfaces.append((sid, -normal, M[:3, 3].copy(), iors[0], iors[1]))
+        interfaces.append((sid, -normal, M[:3, 3].copy(), iors[0], iors[1], M))
     return interfaces, targets, surfaces, spheres
 
 
@@ -304,6 +306,7 @@ def load_scene(path, defines: dict | None = None) -> SceneSpec:
     radii = np.array([t[2] for t in targets], dtype=float)
 
     has_port = bool(interfaces or spheres)
+    windows = None
     if interfaces and spheres:
         raise SceneError(f"{label}: a scene holds a flat port (rectangles) or domes (spheres), "
                          f"not both")
@@ -322,9 +325,11 @@ def load_scene(path, defines: dict | None = None) -> SceneSpec:
     else:
         if params.get("port") == "none":
             raise SceneError(f"{label}: port=none but the scene has port interfaces")
-        port = _port_from_interfaces(interfaces, label)
+        port, windows = _ports_from_interfaces(interfaces, (left, right), label)
     try:
         rig = StereoRig(left, right, port)
+        if windows is not None:
+            check_windows(rig, windows)
     except ValueError as exc:
         raise SceneError(f"{label}: {exc}") from None
     if spheres:
@@ -345,7 +350,7 @@ def load_scene(path, defines: dict | None = None) -> SceneSpec:
         raise SceneError(f"{label}: targets {bad[:5].tolist()} are not in the water")
     normals = np.array([t[3] for t in targets]).reshape(-1, 3)
     facing = (facing_cameras(rig, centres, normals) if spheres
-              else normals @ port.normal < 0)
+              else (normals @ rig.view_port(0).normal < 0) & (normals @ rig.view_port(1).normal < 0))
     if not np.all(facing):
         bad = ids[~facing]
         raise SceneError(f"{label}: targets {bad[:5].tolist()} do not face the cameras")
@@ -356,21 +361,51 @@ def load_scene(path, defines: dict | None = None) -> SceneSpec:
                      referenced=referenced, target_normals=normals, surface=surface)
 
 
-def _port_from_interfaces(interfaces, label) -> FlatPort:
+def _ports_from_interfaces(interfaces, cameras, label):
+    """``(port, windows)``: one flat port of every rectangle (``windows`` None), or — when the
+    ids name the cameras (``left_interface_<k>``, ``right_interface_<k>``:
+    :mod:`synth.scene.windows`) — a :class:`measure.geometry.flat_pair.FlatPair` and the two
+    finite windows its rectangles make."""
+    own = {name: [i for i in interfaces if i[0].startswith(name + "_")] for name in VIEWS}
+    if not any(own.values()):
+        return _port_from_interfaces(interfaces, label), None
+    stray = [i[0] for i in interfaces if not i[0].startswith(tuple(f"{n}_" for n in VIEWS))]
+    missing = [name for name in VIEWS if not own[name]]
+    if stray or missing:
+        raise SceneError(f"{label}: a scene of two housings holds the rectangles "
+                         f"left_interface_<k> and right_interface_<k> only; "
+                         + (f"found {stray[0]!r}" if stray else f"no {missing[0]} window"))
+    ports, windows = [], []
+    for name, camera in zip(VIEWS, cameras):
+        port = _port_from_interfaces(own[name], label, camera.center, f"the {name} port")
+        ports.append(port)
+        matrices = [i[5] for i in sorted(own[name], key=lambda i: port.normal @ i[2])]
+        try:
+            windows.append(window_from_rectangles(port, name, matrices))
+        except ValueError as exc:
+            raise SceneError(f"{label}: {exc}") from None
+    if abs(ports[0].n_water - ports[1].n_water) > 1e-12:
+        raise SceneError(f"{label}: the two windows look into different water (int_ior "
+                         f"{ports[0].n_water:g} and {ports[1].n_water:g})")
+    return FlatPair(*ports), windows
+
+
+def _port_from_interfaces(interfaces, label, center=(0.0, 0.0, 0.0), what="the port") -> FlatPort:
     normal = interfaces[0][1]
-    for sid, n, _, _, _ in interfaces:
+    for sid, n, *_ in interfaces:
         if not np.allclose(n, normal, atol=1e-9):
             raise SceneError(f"{label}: interface {sid!r} is not parallel to the others, or its "
                              f"normal does not face the cameras like theirs")
-    offsets = np.array([normal @ c for _, _, c, _, _ in interfaces])
+    offsets = np.array([normal @ i[2] for i in interfaces])
     order = np.argsort(offsets)
     interfaces = [interfaces[i] for i in order]
     offsets = offsets[order]
-    if offsets[0] <= 0:  # the normal must point from the cameras (origin) into the water
-        raise SceneError(f"{label}: the port's interfaces must face the cameras (their "
+    # the normal must point from the camera into the water
+    if offsets[0] <= normal @ np.asarray(center, dtype=float):
+        raise SceneError(f"{label}: {what}'s interfaces must face the cameras (their "
                          f"rectangle normals point back towards the cameras)")
     indices = [interfaces[0][3]]
-    for sid, _, _, ext, inner in interfaces:
+    for sid, _, _, ext, inner, _ in interfaces:
         if abs(ext - indices[-1]) > 1e-9:
             raise SceneError(f"{label}: interface {sid!r} has ext_ior {ext} but the medium "
                              f"before it has index {indices[-1]}")

@@ -12,7 +12,10 @@ the ``<default>`` parameters of :mod:`synth.scene.params` and holds:
   turned towards the cameras so that ``ext_ior`` is the camera-side index: air-glass
   ``int_ior = n2, ext_ior = n1``, glass-water ``int_ior = $n_water, ext_ior = n2``.
 * or, for a dome port (a :class:`measure.geometry.dome.DomePair`), per camera two concentric analytic
-  ``sphere`` shapes with ``dielectric`` BSDFs (:mod:`synth.scene.dome`).
+  ``sphere`` shapes with ``dielectric`` BSDFs (:mod:`synth.scene.dome`);
+* or, for two housings (a :class:`measure.geometry.flat_pair.FlatPair`), per camera a finite
+  window: one ``rectangle`` per interface of its own port, sized to its field of view and clear
+  of the other camera's (:mod:`synth.scene.windows`).
 * the targets: ``disk`` shapes with an ``area`` emitter, facing the cameras (normal −z), shape
   ``id = "target_<k>"`` for target number ``k``; radius = the disk's scale.
 """
@@ -21,15 +24,17 @@ from __future__ import annotations
 
 import os
 import tempfile
+from dataclasses import dataclass
+from collections.abc import Callable
 
 import numpy as np
 
 from measure import Camera, FlatPort, StereoRig
-from measure.geometry.dome import DomePair
 from synth.scene.model import (DEFAULT_MAX_DEPTH, DEFAULT_SEED, DEFAULT_SPP, SPECKLE_ID,
                                SURFACE_ID, TARGET_ID_PREFIX, SurfaceFiles)
 from synth.scene.dome import (check_field_of_view, check_targets, dome_placements,
                               facing_cameras)
+from synth.scene.windows import check_windows, fit_windows, window_placements
 from synth.rendering.sensor import sensor_parameters
 
 #: Half side (mm) of the square port interfaces: covers both fields of view far beyond 2 m.
@@ -167,16 +172,14 @@ def scene_xml(cameras, port: FlatPort | None, targets, target_radius: float, *,
     if target_normals.shape != targets.shape or not np.all(np.isfinite(target_normals)):
         raise ValueError("target_normals must be a finite (N, 3) array like targets")
     target_normals = target_normals / np.linalg.norm(target_normals, axis=1, keepdims=True)
-    dome = isinstance(port, DomePair)
-    if dome:
+    glass = None if port is None else PER_CAMERA_GLASS.get(port.kind)
+    if glass is not None:
         if water is not None or lighting == "lit" or thin_lens is not None or surface is not None:
-            raise ValueError("a dome scene holds LED disk targets seen by pinhole cameras in "
-                             "clear water (no water medium, lit targets, thin lens or surface)")
-        rig = StereoRig(left, right, port)  # each camera inside its dome
-        check_field_of_view(rig)
-        check_targets(port, targets, target_radius)
-        if not np.all(facing_cameras(rig, targets, target_normals)):
-            raise ValueError("every target must face the cameras (its normal towards them)")
+            raise ValueError(f"a {glass.name} scene holds LED disk targets seen by pinhole "
+                             f"cameras in clear water (no water medium, lit targets, thin lens "
+                             f"or surface)")
+        rig = StereoRig(left, right, port)  # each camera behind or inside its own glass
+        glass.check(rig, targets, target_radius, target_normals)
     elif port is not None:
         StereoRig(left, right, port)  # cameras on the air side
         if not np.all(port.water_side(targets)):
@@ -200,7 +203,7 @@ def scene_xml(cameras, port: FlatPort | None, targets, target_radius: float, *,
                      ("water_g", _num(water.g))]
         max_depth = max(int(max_depth), WATER_MAX_DEPTH)
     if port is not None:  # a path crosses every interface once: room for them and a few more
-        crossed = port.left.n_interfaces if dome else port.n_interfaces
+        crossed = max(port.view(v).n_interfaces for v in (0, 1))
         max_depth = max(int(max_depth), 2 * crossed + 4)
     if surface is None:
         defaults.append(("target_radius", _num(target_radius)))
@@ -257,19 +260,8 @@ def scene_xml(cameras, port: FlatPort | None, targets, target_radius: float, *,
         <float name="beam_width" value="{_num(LIGHT_BEAM_WIDTH_DEG)}"/>
     </emitter>""")
 
-    if dome:
-        parts.append("\n    <!-- The domes: per camera two concentric spheres (normals outwards, "
-                     "ext_ior outside): air inside the inner one, glass between, water outside. -->")
-        for sid, centre, radius, ext_ior, int_ior in dome_placements(port):
-            outer = sid.endswith("outer")  # its ext_ior is the water's: $n_water
-            parts.append(f"""    <shape type="sphere" id="{sid}">
-        <point name="center" value="{_vec(centre)}"/>
-        <float name="radius" value="{_num(radius)}"/>
-        <bsdf type="dielectric">
-            <float name="ext_ior" value="{'$n_water' if outer else _num(ext_ior)}"/>
-            <float name="int_ior" value="{_num(int_ior)}"/>
-        </bsdf>
-    </shape>""")
+    if glass is not None:
+        parts.append(glass.xml(StereoRig(left, right, port)))
     elif port is not None:
         for k, centre, target, up, ext_ior, int_ior in interface_placements(port):
             ext = _num(ext_ior)
@@ -326,6 +318,112 @@ def scene_xml(cameras, port: FlatPort | None, targets, target_radius: float, *,
     return "\n".join(parts)
 
 
+def _dome_xml(rig: StereoRig) -> str:
+    """The spheres of a dome scene (:func:`synth.scene.dome.dome_placements`)."""
+    parts = ["\n    <!-- The domes: per camera two concentric spheres (normals outwards, "
+             "ext_ior outside): air inside the inner one, glass between, water outside. -->"]
+    for sid, centre, radius, ext_ior, int_ior in dome_placements(rig.port):
+        outer = sid.endswith("outer")  # its ext_ior is the water's: $n_water
+        parts.append(f"""    <shape type="sphere" id="{sid}">
+        <point name="center" value="{_vec(centre)}"/>
+        <float name="radius" value="{_num(radius)}"/>
+        <bsdf type="dielectric">
+            <float name="ext_ior" value="{'$n_water' if outer else _num(ext_ior)}"/>
+            <float name="int_ior" value="{_num(int_ior)}"/>
+        </bsdf>
+    </shape>""")
+    return "\n".join(parts)
+
+
+def _check_domes(rig: StereoRig, targets, target_radius, target_normals) -> None:
+    check_field_of_view(rig)
+    check_targets(rig.port, targets, target_radius)
+    if not np.all(facing_cameras(rig, targets, target_normals)):
+        raise ValueError("every target must face the cameras (its normal towards them)")
+
+
+def _dome_shapes(mi, port, cameras, half_side_mm: float) -> dict:
+    return {sid: {"type": "sphere", "center": [float(c) for c in centre],
+                  "radius": float(radius),
+                  "bsdf": {"type": "dielectric", "ext_ior": float(ext_ior),
+                           "int_ior": float(int_ior)}}
+            for sid, centre, radius, ext_ior, int_ior in dome_placements(port)}
+
+
+def _window_xml(rig: StereoRig) -> str:
+    """The two windows of a scene of two housings (:mod:`synth.scene.windows`); the last
+    interface of each looks into ``$n_water``."""
+    if rig.port.left.n_water != rig.port.right.n_water:
+        raise ValueError(f"the two ports look into different water (n_water "
+                         f"{rig.port.left.n_water:g} and {rig.port.right.n_water:g})")
+    parts = ["\n    <!-- Two housings: each camera behind its own flat port, a finite window (one "
+             "rectangle per interface, normal towards the cameras, ext_ior on their side). -->"]
+    windows = fit_windows(rig)
+    last = {f"{name}_interface_{w.port.n_interfaces - 1}" for name, w in zip(("left", "right"),
+                                                                             windows)}
+    for sid, centre, target, up, half, ext_ior, int_ior in window_placements(windows):
+        parts.append(f"""    <shape type="rectangle" id="{sid}">
+        <transform name="to_world">
+            <scale x="{_num(half[0])}" y="{_num(half[1])}"/>
+            <lookat origin="{_vec(centre)}" target="{_vec(target)}" up="{_vec(up)}"/>
+        </transform>
+        <bsdf type="dielectric">
+            <float name="ext_ior" value="{_num(ext_ior)}"/>
+            <float name="int_ior" value="{'$n_water' if sid in last else _num(int_ior)}"/>
+        </bsdf>
+    </shape>""")
+    return "\n".join(parts)
+
+
+def _check_windows(rig: StereoRig, targets, target_radius, target_normals) -> None:
+    check_windows(rig, fit_windows(rig))
+    for name, port in (("left", rig.port.left), ("right", rig.port.right)):
+        beyond = targets @ port.normal - port.offsets[-1]
+        if np.any(beyond <= 0):
+            raise ValueError(f"every target must lie in the water, beyond the {name} port's last "
+                             f"interface")
+        if np.any(beyond <= target_radius):
+            raise ValueError(f"targets closer to the {name} port than their radius")
+        if np.any(target_normals @ port.normal >= 0):
+            raise ValueError(f"every target must face the cameras (its normal towards the {name} "
+                             f"port)")
+
+
+def _window_shapes(mi, port, cameras, half_side_mm: float) -> dict:
+    if cameras is None:
+        raise ValueError("the windows of two housings are sized to the cameras: pass cameras")
+    windows = fit_windows(StereoRig(*cameras, port))
+    shapes = {}
+    for sid, centre, target, up, half, ext_ior, int_ior in window_placements(windows):
+        to_world = (mi.ScalarTransform4f().look_at(origin=centre.tolist(), target=target.tolist(),
+                                                   up=up.tolist())
+                    @ mi.ScalarTransform4f().scale([float(half[0]), float(half[1]), 1.0]))
+        shapes[sid] = {"type": "rectangle", "to_world": to_world,
+                       "bsdf": {"type": "dielectric", "ext_ior": float(ext_ior),
+                                "int_ior": float(int_ior)}}
+    return shapes
+
+
+@dataclass(frozen=True)
+class PerCameraGlass:
+    """How a scene holds a port whose glass is per camera: its name in messages, the check of
+    a rig and its targets, the XML of its shapes, its Mitsuba dictionary shapes."""
+
+    name: str
+    check: Callable
+    xml: Callable
+    shapes: Callable
+
+
+#: The kinds of port (:attr:`measure.geometry.port.RigPort.kind`) whose cameras each have
+#: their own glass, and how a scene holds them; the shared flat port is the rest of
+#: :func:`scene_xml` and :func:`port_shapes`.
+PER_CAMERA_GLASS = {
+    "dome": PerCameraGlass("dome", _check_domes, _dome_xml, _dome_shapes),
+    "flat pair": PerCameraGlass("two-housing", _check_windows, _window_xml, _window_shapes),
+}
+
+
 def _surface_xml(surface: SurfaceFiles, lighting: str) -> str:
     """The speckle texture and the mesh of a surface scene (see :func:`scene_xml`)."""
     if lighting == "lit":
@@ -373,18 +471,17 @@ def light_placements(left: Camera, right: Camera, port: FlatPort, targets):
     return [(foot + N * depth + sign * LIGHT_SIDE_OFFSET_MM * side, aim) for sign in (-1.0, 1.0)]
 
 
-def port_shapes(mi, port, half_side_mm: float = 2000.0) -> dict:
+def port_shapes(mi, port, half_side_mm: float = 2000.0, cameras=None) -> dict:
     """The glass of ``port`` as Mitsuba dictionary shapes (``mi.load_dict``; the board scenes'
     form of what :func:`scene_xml` writes as XML): two spheres per dome
-    (:func:`synth.scene.dome.dome_placements`), or one ``rectangle`` of half side
-    ``half_side_mm`` per flat interface (:func:`interface_placements`), each a ``dielectric``
-    whose ``ext_ior`` is the camera side's. ``{shape id: shape}``."""
-    if isinstance(port, DomePair):
-        return {sid: {"type": "sphere", "center": [float(c) for c in centre],
-                      "radius": float(radius),
-                      "bsdf": {"type": "dielectric", "ext_ior": float(ext_ior),
-                               "int_ior": float(int_ior)}}
-                for sid, centre, radius, ext_ior, int_ior in dome_placements(port)}
+    (:func:`synth.scene.dome.dome_placements`), a finite window per camera for two housings
+    (:mod:`synth.scene.windows`: needs ``cameras`` (left, right), whose fields of view size
+    them), or one ``rectangle`` of half side ``half_side_mm`` per flat interface
+    (:func:`interface_placements`), each a ``dielectric`` whose ``ext_ior`` is the camera
+    side's. ``{shape id: shape}``."""
+    glass = PER_CAMERA_GLASS.get(port.kind)
+    if glass is not None:
+        return glass.shapes(mi, port, cameras, half_side_mm)
     shapes = {}
     for k, centre, target, up, ext_ior, int_ior in interface_placements(port):
         to_world = (mi.ScalarTransform4f().look_at(origin=centre.tolist(), target=target.tolist(),

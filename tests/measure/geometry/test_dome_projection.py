@@ -191,6 +191,6 @@ def test_rows_do_not_depend_on_their_batch_and_empty_batches_work():
 def test_a_dome_pair_is_not_a_port_of_one_camera():
     camera = _camera(9)
     dome = DomePort(camera.center, 50.0, 8.0, INDICES)
-    with pytest.raises(ValueError, match=r"DomePair holds one dome per camera: pass "
+    with pytest.raises(ValueError, match=r"DomePair holds one port per camera, domes: pass "
                                          r"rig.view_port\(view\)"):
         project(camera, DomePair(dome, dome), [0.0, 0.0, 900.0])

@@ -12,6 +12,7 @@ from scipy.spatial.transform import Rotation
 
 from measure import Camera, FlatPort, StereoRig
 from measure.geometry.dome import DomePair, DomePort
+from measure.geometry.flat_pair import FlatPair
 from measure.geometry.flatport_format import to_domeport, to_flatport
 from synth.formats.calib_formats import (CALIBMAR_NAME, COLMAP_CAMERAS_NAME, COLMAP_RIG_NAME,
                                  CalibFormatError, calib_format, colmap_camera, write_calibmar,
@@ -216,8 +217,6 @@ def _edit(path, old, new):
     ("calibmar.yaml", "parameters: [1100.3, ", "parameters: [nan, ", r"got fx = nan$"),
     ("calibmar.yaml", "width: 2448", "width: 2000", "image size"),
     ("calibmar.yaml", "model: OPENCV\n", "", "no model"),
-    ("calibmar_stereo.yaml", "0.0053, 1.0, 1.49, 1.3412]", "0.0053, 1.0, 1.49, 1.34]",
-     "not one port"),
     ("calibmar_stereo.yaml", "cam_to_world_translation: [", "cam_to_world_translation: [1.0, ",
      "3 numbers"),
 ])
@@ -379,3 +378,106 @@ def test_cameras_with_two_housings_are_refused(tmp_path):
     (tmp_path / COLMAP_CAMERAS_NAME).write_text("\n".join(text) + "\n")
     with pytest.raises(DatasetError, match="both cameras need the same housing"):
         read_calib(tmp_path / COLMAP_CAMERAS_NAME)
+
+
+# ---------------------------------------------------------------------------------------------
+# two housings: a FLATPORT per camera (measure.geometry.flat_pair.FlatPair)
+# ---------------------------------------------------------------------------------------------
+#: The right camera of the hand-written files: turned 5° about y towards the left one, 200 mm
+#: to its right (camera-to-left: X_left = R·X_right + t).
+RIGHT_R = Rotation.from_rotvec([0.0, -np.radians(5.0), 0.0]).as_matrix()
+RIGHT_T_M = (0.2, 0.0, 0.0)
+#: Each camera's FLATPORT as the tools document it (normal in that camera's frame, metres).
+LEFT_FLATPORT = [0.0, 0.0, 1.0, 0.06, 0.005, 1.0, 1.54, 1.33]
+RIGHT_FLATPORT = [float(np.sin(np.radians(2.0))), 0.0, float(np.cos(np.radians(2.0))), 0.08,
+                  0.008, 1.0, 1.49, 1.33]
+K_TEXT = "1100.0, 1100.0, 1224.0, 1024.0, 0.0, 0.0, 0.0, 0.0"
+
+
+def _expected_pair() -> FlatPair:
+    """The two ports in the left camera's frame (mm), from the FLATPORT definition: the normal
+    rotated into the left frame, the distance from the left origin = int_dist + n·(camera
+    centre)."""
+    t = np.array(RIGHT_T_M) * 1000.0
+    right_normal = RIGHT_R @ RIGHT_FLATPORT[:3]
+    return FlatPair(FlatPort((0, 0, 1), 60.0, (5.0,), (1.0, 1.54, 1.33)),
+                    FlatPort(right_normal, 80.0 + right_normal @ t, (8.0,), (1.0, 1.49, 1.33)))
+
+
+def _assert_same_pair(got, want):
+    assert isinstance(got, FlatPair), type(got)
+    for a, b in ((got.left, want.left), (got.right, want.right)):
+        np.testing.assert_allclose(a.normal, b.normal, rtol=0, atol=1e-15)
+        assert a.distance == pytest.approx(b.distance, rel=1e-13)
+        np.testing.assert_allclose(a.thicknesses, b.thicknesses, rtol=1e-13)
+        np.testing.assert_allclose(a.indices, b.indices, rtol=1e-15)
+
+
+def _numbers(values) -> str:
+    return ", ".join(repr(float(v)) for v in values)
+
+
+def test_calibmar_with_a_flatport_per_camera(tmp_path):
+    """calibmar's two files written by hand (its documented keys), each camera with its own
+    FLATPORT: read as two housings; written back, each file holds its camera's FLATPORT."""
+    pose = (f"cam_to_world_rotation_rowmajor: [{_numbers(RIGHT_R.ravel())}]\n"
+            f"cam_to_world_translation: [{_numbers(RIGHT_T_M)}]\n")
+    for name, params, tail in (("calibration.yaml", LEFT_FLATPORT, ""),
+                               ("calibration_stereo.yaml", RIGHT_FLATPORT, pose)):
+        (tmp_path / name).write_text(
+            f"model: OPENCV\nparameters: [{K_TEXT}]\nnon_svp_model: FLATPORT\n"
+            f"non_svp_parameters: [{_numbers(params)}]\nwidth: 2448\nheight: 2048\n{tail}")
+    got = read_calib(tmp_path / "calibration.yaml")
+    assert got["has_port"] and got["rig"].port.kind == "flat pair"
+    _assert_same_pair(got["port"], _expected_pair())
+    np.testing.assert_allclose(got["rig"].right.t, (200.0, 0.0, 0.0), rtol=0, atol=1e-12)
+    first, second = write_calibmar(tmp_path / "out.yaml", got["rig"])
+    for path, want in ((first, LEFT_FLATPORT), (second, RIGHT_FLATPORT)):
+        line = next(row for row in open(path).read().splitlines()
+                    if row.startswith("non_svp_parameters:"))
+        written = [float(v) for v in line.split("[")[1].rstrip("]").split(",")]
+        np.testing.assert_allclose(written, want, rtol=1e-13, atol=1e-16)
+
+
+def test_colmap_cameras_with_a_flatport_per_camera(tmp_path):
+    """cameras.txt and rig_config.json written by hand (the fork's documented line and rig
+    configuration: cam_from_rig as w, x, y, z and metres): read as two housings and written
+    back with each camera's own FLATPORT."""
+    cam_from_rig = Rotation.from_matrix(RIGHT_R.T)
+    x, y, z, w = cam_from_rig.as_quat()
+    translation = -(RIGHT_R.T @ RIGHT_T_M)
+    (tmp_path / COLMAP_CAMERAS_NAME).write_text(
+        "# CAMERA_ID, MODEL, WIDTH, HEIGHT, PARAMS[]\n"
+        f"1 PINHOLE 2448 2048 1100 1100 1224 1024 FLATPORT {' '.join(map(repr, LEFT_FLATPORT))}\n"
+        f"2 PINHOLE 2448 2048 1100 1100 1224 1024 FLATPORT {' '.join(map(repr, RIGHT_FLATPORT))}\n")
+    (tmp_path / COLMAP_RIG_NAME).write_text(json.dumps([{"ref_camera_id": 1, "cameras": [
+        {"camera_id": 1, "image_prefix": "left/", "cam_from_rig_rotation": [1, 0, 0, 0],
+         "cam_from_rig_translation": [0, 0, 0]},
+        {"camera_id": 2, "image_prefix": "right/", "cam_from_rig_rotation": [w, x, y, z],
+         "cam_from_rig_translation": translation.tolist()}]}]))
+    got = read_calib(tmp_path / COLMAP_CAMERAS_NAME)
+    _assert_same_pair(got["port"], _expected_pair())
+    out = tmp_path / "out"
+    out.mkdir()
+    write_colmap(out / COLMAP_CAMERAS_NAME, got["rig"])
+    rows = [row.split() for row in (out / COLMAP_CAMERAS_NAME).read_text().splitlines()
+            if not row.startswith("#")]
+    for row, want in zip(rows, (LEFT_FLATPORT, RIGHT_FLATPORT)):
+        assert row[12] == "FLATPORT"
+        np.testing.assert_allclose([float(v) for v in row[13:]], want, rtol=1e-13, atol=1e-16)
+
+
+def test_calib_yaml_of_two_housings(tmp_path):
+    """calib.yaml holds a ``ports`` map (left, right) and reads back the same pair; a ``ports``
+    map with one camera's port only is one DatasetError naming the missing one."""
+    pair = _expected_pair()
+    rig = StereoRig(Camera(np.diag([1100.0, 1100.0, 1.0]), (2448, 2048)),
+                    Camera(np.diag([1100.0, 1100.0, 1.0]), (2448, 2048), R=RIGHT_R,
+                           t=np.array(RIGHT_T_M) * 1000.0), pair)
+    got = _project(tmp_path, rig)
+    assert got["rig"].port == pair
+    text = (tmp_path / "calib.yaml").read_text()
+    assert "\nports:\n   left:\n" in text and "\nport:" not in text
+    (tmp_path / "calib.yaml").write_text(text[:text.index("   right:")])
+    with pytest.raises(DatasetError, match=r"calib.yaml: ports: no right map .*needs both"):
+        read_calib(tmp_path / "calib.yaml")
