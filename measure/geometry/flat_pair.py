@@ -70,6 +70,10 @@ class FlatPair(RigPort, ValueEquality):
         """Each camera looks through its own port."""
         return self[view]
 
+    @property
+    def refracts(self) -> bool:
+        return self.left.refracts or self.right.refracts
+
     def check_cameras(self, left, right) -> None:
         """Each camera on the air side of its own port, and neither inside the other's glass
         (between the other port's first and last interfaces)."""
