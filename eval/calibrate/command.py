@@ -527,19 +527,65 @@ def _failed(where, failures, out) -> int:
 
 
 def _calibrate_single(args, output, log, start) -> int:
-    """``eval calibrate`` of one camera's photo folder (:mod:`eval.calibrate.single`)."""
+    """``eval calibrate`` of one camera's photo folder: in air (:mod:`eval.calibrate.single`)
+    or, with ``--intrinsics``, its housing (:mod:`eval.calibrate.single_housing`)."""
     from eval.calibrate.single import calibrate_single
 
     where = f"{args.dir} (one camera's photos)"
+    if not args.air and not args.intrinsics:
+        raise CLIError(f"{where}: say --air (photos taken in air) or --intrinsics camera.yaml "
+                       f"(photos taken underwater, with the camera's in-air calibration)")
     if not args.air:
-        raise CLIError(f"{where}: one camera is calibrated in air (--air) for now; the housing "
-                       f"of one camera behind its own port needs a stereo pair's photos")
+        return _calibrate_single_housing(args, output, log, start, where)
+    if args.intrinsics:
+        raise CLIError("--intrinsics does not apply with --air: in-air photos calibrate the "
+                       "intrinsics themselves")
     refuse_given(args, HOUSING_OPTIONS + DOME_DESIGN_OPTIONS + ("intrinsics",),
                  "to one camera's in-air photos (--air): they calibrate the camera, no housing")
     _require_board(args, where)
     report, summary = calibrate_single(args, output, log, start, board_from_args(args))
     print(summary)
     print(f"wrote {output.path} (camera.yaml for OpenCV; calibmar.yaml; cameras.txt for COLMAP)")
+    return _failed(args.dir, report["failures"], output.path)
+
+
+def _calibrate_single_housing(args, output, log, start, where) -> int:
+    """One camera's underwater photos with its in-air calibration: the housing of that camera
+    (:mod:`eval.calibrate.single_housing`). A dome when a dome design option is given, else a
+    flat port (the stereo calibration's options)."""
+    from measure import StereoRig
+    from measure.calibration.housing import DEFAULT_DOME_FREE
+
+    from eval.calibrate.single_housing import calibrate_single_housing, read_intrinsics
+
+    refuse_given(args, ("lens",), _LENS_UNDERWATER)
+    dome = any(given(args, dest) for dest in DOME_DESIGN_OPTIONS)
+    if dome:
+        refuse_given(args, FLAT_DESIGN_OPTIONS, "to a camera inside a dome (--dome-radius / "
+                                                "--dome-thickness given): the design is "
+                                                "--dome-radius, --dome-thickness, --n-glass, "
+                                                "--n-water")
+    free = parse_free(args.free if given(args, "free") or not dome
+                      else ",".join(DEFAULT_DOME_FREE), dome)
+    if "extrinsics" in free:
+        raise CLIError(f"--free {args.free}: extrinsics is the stereo pose; {args.dir} holds one "
+                       f"camera's photos")
+    _require_board(args, where)
+    board = board_from_args(args)
+    if not dome:
+        design_port(args, (0.0, 0.0, 1.0))  # a bad --design-port is refused before any work
+    intrinsics = read_intrinsics(args.intrinsics)
+    camera = intrinsics["camera"]
+    if dome:
+        start_port = design_domes(args, StereoRig(camera, camera, None)).port
+    else:
+        start_port = design_port(args, camera.R[:, 2])
+    report, summary = calibrate_single_housing(args, output, log, start, board, intrinsics,
+                                               start_port, free, dome)
+    _print_n_water_note(args)
+    print(summary)
+    print(f"wrote {output.path} (camera.yaml for OpenCV; calibmar.yaml; cameras.txt for the "
+          f"refractive COLMAP fork — {COLMAP_NOTE})")
     return _failed(args.dir, report["failures"], output.path)
 
 
