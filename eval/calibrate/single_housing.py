@@ -308,7 +308,8 @@ def summary_lines(report: dict) -> str:
     parts = []
     for name, e in report["estimates"].items():
         if name == "normal":
-            parts.append(f"normal tilt {e['tilt_deg']:.4f}° ± ({_f(e['sigma'], 2)})°")
+            parts.append(f"normal tilt {e['tilt_deg']:.4f}° (σ of the two tilts "
+                         f"{_f(e['sigma'], 2)}°)")
         else:
             parts.append(f"{name} {_value(e)} ± {_f(e['sigma'], 2)}")
     lines = [f"{report['photos']}: one camera behind {'a dome' if report['dome'] else 'a flat port'}"
