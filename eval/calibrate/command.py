@@ -3,7 +3,9 @@
 ``DIR`` is a folder of ``python -m synth boards`` (compared with its truth) or a folder of a
 user's own photos (``DIR/left/``, ``DIR/right/``, paired by name; the board on the command line,
 ``--air`` or ``--intrinsics``; the report says what can be trusted without truth:
-:mod:`eval.calibrate.photos`). In air (``--air`` boards): OpenCV calibrates
+:mod:`eval.calibrate.photos`), or ONE camera's photos (a folder holding them: in air
+:mod:`eval.calibrate.single`, underwater with its ``camera.yaml`` the housing of that camera,
+:mod:`eval.calibrate.single_housing`). In air (``--air`` boards): OpenCV calibrates
 both cameras and the stereo pose (:func:`measure.calibration.air.calibrate_in_air`). Underwater:
 the housing is estimated by refractive bundle adjustment with the in-air intrinsics fixed
 (:func:`measure.calibration.housing.calibrate_housing`); ``--intrinsics`` gives them, as an in-air boards
@@ -64,7 +66,9 @@ def add_parser(subparsers):
     p.add_argument("--intrinsics", metavar="AIR_DIR_or_calib.yaml",
                    help="underwater boards or photos: the in-air calibration, as an --air "
                         "boards folder (calibrated here with OpenCV) or a file: calib.yaml, "
-                        "calibmar's YAML or the COLMAP fork's cameras.txt")
+                        "calibmar's YAML or the COLMAP fork's cameras.txt; one camera's photos: "
+                        "that camera's camera.yaml (eval calibrate PHOTOS --air), calibmar's "
+                        "one-camera YAML or a one-camera cameras.txt")
     add_board_options(p, defaults=False,
                       needed="photos: required; a boards folder's board.json defines it")
     p.add_argument("--free", default=",".join(DEFAULT_FREE),
@@ -91,7 +95,8 @@ def add_parser(subparsers):
                         f"when --free n_water")
     p.add_argument("--dome-radius", type=positive_float, default=50.0,
                    help="boards behind domes: the design inner radius of each dome, mm (default "
-                        "50); the start is a dome centred on each camera")
+                        "50); the start is a dome centred on each camera. One camera's photos: "
+                        "giving it (or --dome-thickness) says the camera is inside a dome")
     p.add_argument("--dome-thickness", type=positive_float, default=8.0,
                    help="boards behind domes: the design glass thickness of each dome, mm "
                         "(default 8)")
