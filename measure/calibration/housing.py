@@ -273,7 +273,8 @@ def calibrate_camera_housing(camera: Camera, port: RigPort, board: Board,
     ignored). ``air_covariance``: the camera's in-air covariance named ``left.fx`` …
     ``left.p2`` (:data:`measure.calibration.covariance.AIR_NAMES`), or None (σ conditional on
     the intrinsics). Returns :class:`HousingCalibration` whose ``rig`` is the camera twice
-    behind the calibrated port: ``rig.left``, ``rig.view_port(0)``."""
+    behind the calibrated port: ``rig.left`` and ``rig.view_port(0)`` are the result (behind
+    domes the pair's right dome stays the start's: no corner sees it)."""
     empty = (np.empty(0, int), np.empty((0, 2)))
     one = Detections([[ids[0], empty[0]] for ids in detections.ids],
                      [[px[0], empty[1]] for px in detections.pixels])
