@@ -10,7 +10,9 @@ intrinsic (OpenCV's ``stdDeviationsIntrinsics``).
 
 Writes to ``--out``: ``camera.yaml`` (OpenCV ``FileStorage``, the names of OpenCV's calibration
 sample: ``image_width``, ``image_height``, ``camera_matrix``, ``distortion_coefficients``, with
-``lens_model``, ``rms_px`` and the σ), ``calibmar.yaml`` (calibmar's one-camera file, no port),
+``lens_model``, ``rms_px``, the σ and — standard lens model — the ``covariance`` of the 8
+intrinsics, :func:`camera_covariance`, which the camera's housing calibration starts from:
+:mod:`eval.calibrate.single_housing`), ``calibmar.yaml`` (calibmar's one-camera file, no port),
 ``cameras.txt`` (one COLMAP camera), ``report.json``, ``report.md``, ``coverage.png`` and
 ``residuals.png``. A calibration the run knows is wrong (a lens model whose distortion folds
 within the image, a σ of fx or fy larger than the value) exits 1 with the files written.
