@@ -3,7 +3,9 @@
 ``DIR`` is a folder of ``python -m synth boards`` (compared with its truth) or a folder of a
 user's own photos (``DIR/left/``, ``DIR/right/``, paired by name; the board on the command line,
 ``--air`` or ``--intrinsics``; the report says what can be trusted without truth:
-:mod:`eval.calibrate.photos`). In air (``--air`` boards): OpenCV calibrates
+:mod:`eval.calibrate.photos`), or ONE camera's photos (a folder holding them: in air
+:mod:`eval.calibrate.single`, underwater with its ``camera.yaml`` the housing of that camera,
+:mod:`eval.calibrate.single_housing`). In air (``--air`` boards): OpenCV calibrates
 both cameras and the stereo pose (:func:`measure.calibration.air.calibrate_in_air`). Underwater:
 the housing is estimated by refractive bundle adjustment with the in-air intrinsics fixed
 (:func:`measure.calibration.housing.calibrate_housing`); ``--intrinsics`` gives them, as an in-air boards
@@ -64,7 +66,9 @@ def add_parser(subparsers):
     p.add_argument("--intrinsics", metavar="AIR_DIR_or_calib.yaml",
                    help="underwater boards or photos: the in-air calibration, as an --air "
                         "boards folder (calibrated here with OpenCV) or a file: calib.yaml, "
-                        "calibmar's YAML or the COLMAP fork's cameras.txt")
+                        "calibmar's YAML or the COLMAP fork's cameras.txt; one camera's photos: "
+                        "that camera's camera.yaml (eval calibrate PHOTOS --air), calibmar's "
+                        "one-camera YAML or a one-camera cameras.txt")
     add_board_options(p, defaults=False,
                       needed="photos: required; a boards folder's board.json defines it")
     p.add_argument("--free", default=",".join(DEFAULT_FREE),
@@ -91,7 +95,8 @@ def add_parser(subparsers):
                         f"when --free n_water")
     p.add_argument("--dome-radius", type=positive_float, default=50.0,
                    help="boards behind domes: the design inner radius of each dome, mm (default "
-                        "50); the start is a dome centred on each camera")
+                        "50); the start is a dome centred on each camera. One camera's photos: "
+                        "giving it (or --dome-thickness) says the camera is inside a dome")
     p.add_argument("--dome-thickness", type=positive_float, default=8.0,
                    help="boards behind domes: the design glass thickness of each dome, mm "
                         "(default 8)")
@@ -530,19 +535,65 @@ def _failed(where, failures, out) -> int:
 
 
 def _calibrate_single(args, output, log, start) -> int:
-    """``eval calibrate`` of one camera's photo folder (:mod:`eval.calibrate.single`)."""
+    """``eval calibrate`` of one camera's photo folder: in air (:mod:`eval.calibrate.single`)
+    or, with ``--intrinsics``, its housing (:mod:`eval.calibrate.single_housing`)."""
     from eval.calibrate.single import calibrate_single
 
     where = f"{args.dir} (one camera's photos)"
+    if not args.air and not args.intrinsics:
+        raise CLIError(f"{where}: say --air (photos taken in air) or --intrinsics camera.yaml "
+                       f"(photos taken underwater, with the camera's in-air calibration)")
     if not args.air:
-        raise CLIError(f"{where}: one camera is calibrated in air (--air) for now; the housing "
-                       f"of one camera behind its own port needs a stereo pair's photos")
+        return _calibrate_single_housing(args, output, log, start, where)
+    if args.intrinsics:
+        raise CLIError("--intrinsics does not apply with --air: in-air photos calibrate the "
+                       "intrinsics themselves")
     refuse_given(args, HOUSING_OPTIONS + DOME_DESIGN_OPTIONS + ("intrinsics",),
                  "to one camera's in-air photos (--air): they calibrate the camera, no housing")
     _require_board(args, where)
     report, summary = calibrate_single(args, output, log, start, board_from_args(args))
     print(summary)
     print(f"wrote {output.path} (camera.yaml for OpenCV; calibmar.yaml; cameras.txt for COLMAP)")
+    return _failed(args.dir, report["failures"], output.path)
+
+
+def _calibrate_single_housing(args, output, log, start, where) -> int:
+    """One camera's underwater photos with its in-air calibration: the housing of that camera
+    (:mod:`eval.calibrate.single_housing`). A dome when a dome design option is given, else a
+    flat port (the stereo calibration's options)."""
+    from measure import StereoRig
+    from measure.calibration.housing import DEFAULT_DOME_FREE
+
+    from eval.calibrate.single_housing import calibrate_single_housing, read_intrinsics
+
+    refuse_given(args, ("lens",), _LENS_UNDERWATER)
+    dome = any(given(args, dest) for dest in DOME_DESIGN_OPTIONS)
+    if dome:
+        refuse_given(args, FLAT_DESIGN_OPTIONS, "to a camera inside a dome (--dome-radius / "
+                                                "--dome-thickness given): the design is "
+                                                "--dome-radius, --dome-thickness, --n-glass, "
+                                                "--n-water")
+    free = parse_free(args.free if given(args, "free") or not dome
+                      else ",".join(DEFAULT_DOME_FREE), dome)
+    if "extrinsics" in free:
+        raise CLIError(f"--free {args.free}: extrinsics is the stereo pose; {args.dir} holds one "
+                       f"camera's photos")
+    _require_board(args, where)
+    board = board_from_args(args)
+    if not dome:
+        design_port(args, (0.0, 0.0, 1.0))  # a bad --design-port is refused before any work
+    intrinsics = read_intrinsics(args.intrinsics)
+    camera = intrinsics["camera"]
+    if dome:
+        start_port = design_domes(args, StereoRig(camera, camera, None)).port
+    else:
+        start_port = design_port(args, camera.R[:, 2])
+    report, summary = calibrate_single_housing(args, output, log, start, board, intrinsics,
+                                               start_port, free, dome)
+    _print_n_water_note(args)
+    print(summary)
+    print(f"wrote {output.path} (camera.yaml for OpenCV; calibmar.yaml; cameras.txt for the "
+          f"refractive COLMAP fork — {COLMAP_NOTE})")
     return _failed(args.dir, report["failures"], output.path)
 
 

@@ -10,7 +10,9 @@ intrinsic (OpenCV's ``stdDeviationsIntrinsics``).
 
 Writes to ``--out``: ``camera.yaml`` (OpenCV ``FileStorage``, the names of OpenCV's calibration
 sample: ``image_width``, ``image_height``, ``camera_matrix``, ``distortion_coefficients``, with
-``lens_model``, ``rms_px`` and the σ), ``calibmar.yaml`` (calibmar's one-camera file, no port),
+``lens_model``, ``rms_px``, the σ and — standard lens model — the ``covariance`` of the 8
+intrinsics, :func:`camera_covariance`, which the camera's housing calibration starts from:
+:mod:`eval.calibrate.single_housing`), ``calibmar.yaml`` (calibmar's one-camera file, no port),
 ``cameras.txt`` (one COLMAP camera), ``report.json``, ``report.md``, ``coverage.png`` and
 ``residuals.png``. A calibration the run knows is wrong (a lens model whose distortion folds
 within the image, a σ of fx or fy larger than the value) exits 1 with the files written.
@@ -42,11 +44,12 @@ def single_camera_folder(path) -> bool:
         for name in os.listdir(path))
 
 
-def calibrate_single(args, output, log, start, board) -> tuple[dict, str]:
-    """Calibrate the camera of the photo folder ``args.dir``; returns ``(report, summary)``
-    after writing everything into ``output`` (module docs)."""
-    from measure.calibration.air import (DEFAULT_LENS_MODEL, CalibrationError, Detections,
-                                         calibrate_camera, camera_residuals, detect_images)
+def read_and_detect(args, board, log, size=None, size_source=""):
+    """One camera's photos ``args.dir`` read and the board detected in each:
+    ``(names, images, size, detections, timings)``, ``detections`` holding view 0 only.
+    ``size``: the image size the photos must have (``size_source`` names where it comes from);
+    CLIError when they differ or the board is found in none of them."""
+    from measure.calibration.air import Detections, detect_images
 
     from eval.core.photos import encoding_note, photo_files, read_photo
 
@@ -65,6 +68,10 @@ def calibrate_single(args, output, log, start, board) -> tuple[dict, str]:
         raise CLIError(f"{odd}: {images[files.index(odd)].shape[1]}x"
                        f"{images[files.index(odd)].shape[0]} px, but {files[0]} is "
                        f"{first[0]}x{first[1]} px (one camera's photos must all have one size)")
+    if size is not None and tuple(size) != next(iter(sizes)):
+        got = next(iter(sizes))
+        raise CLIError(f"{size_source}: image size {size[0]}x{size[1]} px, but the photos are "
+                       f"{got[0]}x{got[1]} px")
     size = sizes.pop()
     timings = {"read": time.perf_counter() - t}
     log(f"detect the board in {len(images)} photos …")
@@ -83,6 +90,17 @@ def calibrate_single(args, output, log, start, board) -> tuple[dict, str]:
     charuco = trust.charuco_check(board, [images[k] for k in found])
     if charuco:
         raise CLIError(f"{where}: {charuco}")
+    return names, images, size, detections, timings
+
+
+def calibrate_single(args, output, log, start, board) -> tuple[dict, str]:
+    """Calibrate the camera of the photo folder ``args.dir``; returns ``(report, summary)``
+    after writing everything into ``output`` (module docs)."""
+    from measure.calibration.air import (DEFAULT_LENS_MODEL, CalibrationError, calibrate_camera,
+                                         camera_residuals)
+
+    where = f"{args.dir} (one camera's photos)"
+    names, images, size, detections, timings = read_and_detect(args, board, log)
     lens = args.lens or DEFAULT_LENS_MODEL
     corners = board.corners().astype(np.float32)
 
@@ -96,7 +114,8 @@ def calibrate_single(args, output, log, start, board) -> tuple[dict, str]:
         out, model, tried, problem = calibrate_camera(obj, img, size, lens)
         return {"out": out, "model": model, "tried": tried, "problem": problem, "poses": poses,
                 "residuals": camera_residuals(obj, img, out, poses, dets.ids, VIEW),
-                "rms_px_per": {(k, VIEW): float(e) for k, e in zip(poses, out[7].ravel())}}
+                "rms_px_per": {(k, VIEW): float(e) for k, e in zip(poses, out[7].ravel())},
+                "covariance": camera_covariance(obj, out) if model == "standard" else None}
 
     t = time.perf_counter()
     log("calibrate the camera (OpenCV calibrateCamera) …")
@@ -112,7 +131,9 @@ def calibrate_single(args, output, log, start, board) -> tuple[dict, str]:
     report["timings_s"] = timings
     log("write the calibration, report and figures …")
     with output.staged() as tmp:
-        write_camera_files(tmp, camera, report)
+        write_camera_files(tmp, camera, report["lens_model"]["model"], report["rms_px"],
+                           {k: v["sigma"] for k, v in report["camera"].items()
+                            if v["sigma"] is not None}, result["covariance"])
         report_lib.residual_figure(tmp, used_detections, {VIEW: result["residuals"]}, size,
                                    views=("camera",))
         trust.coverage_figure(tmp, detections, set(result["poses"]), size,
@@ -189,11 +210,42 @@ def _report(args, board, names, size, detections, used, result, outliers, camera
             "warnings": warnings, "failures": failures}
 
 
-def write_camera_files(directory, camera, report) -> None:
-    """``camera.yaml``, ``calibmar.yaml`` and ``cameras.txt`` of one camera (module docs)."""
+def camera_covariance(obj, out):
+    """The covariance of one camera's 8 intrinsics fx fy cx cy k1 k2 p1 p2 from its
+    ``calibrateCameraExtended`` output ``out`` (the standard lens model, k3 fixed) and the board
+    corners ``obj`` per pose: :func:`measure.calibration.covariance.camera_map` ``A`` (the
+    linear map of the corners' noise to the intrinsics, board poses marginalized) times the
+    residual variance ``Σr² / (2n − 8 − 6P)``: ``s² A Aᵀ``, named ``left.fx`` … (the camera is
+    the reference camera, :data:`measure.calibration.covariance.AIR_NAMES`)."""
+    from measure.calibration.covariance import AIR_INTRINSICS, camera_map
+    from measure.stereo.rig_covariance import CovarianceError, RigCovariance
+
+    n = sum(len(o) for o in obj)
+    A, columns = camera_map([np.asarray(o, np.float64) for o in obj], out[3], out[4], out[1],
+                            out[2])
+    s2 = float(out[0]) ** 2 * n / max(2 * n - columns, 1)
+    try:
+        return RigCovariance([f"left.{p}" for p in AIR_INTRINSICS], s2 * A @ A.T)
+    except CovarianceError:  # e.g. noise-free corners: no covariance to give
+        return None
+
+
+def write_camera_files(directory, camera, lens_model, rms_px, sigmas: dict, covariance=None,
+                       port=None, extra=None) -> None:
+    """``camera.yaml``, ``calibmar.yaml`` and ``cameras.txt`` of one camera (module docs):
+    ``lens_model`` (or None), the fit's ``rms_px``, ``sigmas`` ``{intrinsic: σ}``.
+    ``covariance``: a ``covariance`` node (``names``, ``matrix``, ``normal_axes`` where it has
+    them) in ``camera.yaml``. ``port``:
+    the camera's housing (a rig port whose view 0 is the camera's), written as calib.yaml's
+    ``port`` or a ``dome`` node in ``camera.yaml`` (mm, the camera's frame) and as FLATPORT or
+    DOMEPORT in the other two; ``extra``: further maps (:func:`synth.products.dataset.
+    write_calib`'s ``extra``, e.g. the housing's σ)."""
     import cv2
 
+    from measure.geometry.flatport_format import write_view_port
+
     from synth.formats.calib_formats import write_single_camera
+    from synth.products.dataset import write_node
 
     # the output folder is staged whole: its files appear together or not at all
     fs = cv2.FileStorage(os.path.join(directory, "camera.yaml"), cv2.FILE_STORAGE_WRITE)
@@ -203,17 +255,33 @@ def write_camera_files(directory, camera, report) -> None:
         fs.write("camera_matrix", camera.K)
         dist = np.zeros(5) if camera.dist is None else camera.dist
         fs.write("distortion_coefficients", np.asarray(dist, np.float64).reshape(1, -1))
-        fs.write("lens_model", report["lens_model"]["model"])
-        fs.write("rms_px", float(report["rms_px"]))
-        fs.startWriteStruct("sigmas", cv2.FileNode_MAP)
-        for key, value in report["camera"].items():
-            if value["sigma"] is not None:
-                fs.write(key, float(value["sigma"]))
-        fs.endWriteStruct()
+        if lens_model:
+            fs.write("lens_model", lens_model)
+        fs.write("rms_px", float(rms_px))
+        if sigmas:
+            fs.startWriteStruct("sigmas", cv2.FileNode_MAP)
+            for key, value in sigmas.items():
+                fs.write(key, float(value))
+            fs.endWriteStruct()
         fs.write("units", "px (OpenCV pixels: the centre of the top-left pixel is 0, 0)")
+        if covariance is not None:
+            fs.startWriteStruct("covariance", cv2.FileNode_MAP)
+            fs.startWriteStruct("names", cv2.FileNode_SEQ)
+            for name in covariance.names:
+                fs.write("", name)
+            fs.endWriteStruct()
+            fs.write("matrix", covariance.matrix)
+            if covariance.normal_axes is not None:
+                fs.write("normal_axes", covariance.normal_axes)
+            fs.endWriteStruct()
+        if port is not None:
+            fs.write("port_units", "mm (the camera's frame)")
+            write_view_port(fs, port.view(0))
+        for name, value in (extra or {}).items():
+            write_node(fs, name, value)
     finally:
         fs.release()
-    write_single_camera(directory, camera)
+    write_single_camera(directory, camera, port)
 
 
 def markdown(report: dict) -> str:

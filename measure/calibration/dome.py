@@ -5,6 +5,7 @@ camera's own dome, the analytic Jacobian, and the free numbers as
 
 from __future__ import annotations
 
+from functools import partial
 from types import SimpleNamespace
 
 import numpy as np
@@ -31,19 +32,23 @@ def dome_offset(camera: Camera, dome: DomePort) -> np.ndarray:
     return camera.R.T @ (dome.center - camera.center)
 
 
-def dome_problem(rig: StereoRig, board: Board, detections: Detections, names):
+def dome_problem(rig: StereoRig, board: Board, detections: Detections, names, views=(0, 1)):
     """:func:`housing_problem` of a rig of two domes (:data:`DOME_PARAMETERS`): the unknowns are
     the free dome numbers — ``dome_center``: each camera's decentring in its own frame (left
     x, y, z, then right), mm; ``n_water`` — then 6 per usable pose. Radius, thickness, glass
     index and the cameras stay at the starting rig's values. Residuals through each camera's
     own dome; the Jacobian from ``project(..., parameters=True)``'s
     :class:`measure.geometry.dome_projection.DomeParameterJacobian` (``dome_center`` turned into each
-    camera's frame)."""
+    camera's frame). ``views``: the cameras whose corners enter and whose decentring
+    ``dome_center`` holds (3 numbers each; ``(0,)``: one camera inside its dome,
+    :func:`measure.calibration.housing.calibrate_camera_housing`)."""
+    views = tuple(views)
+    table = parameters_of(views)
     starts, usable, detections = usable_poses(rig, board, detections)
     P = len(starts)
-    n_global = sum(DOME_PARAMETERS[n] for n in names)
+    n_global = sum(table[n] for n in names)
     domes0 = (rig.port.left, rig.port.right)
-    corners, obs = observations(board, detections)
+    corners, obs = observations(board, detections, views)
     m = sum(2 * o[1].size for o in obs)
 
     def unpack(x):
@@ -52,10 +57,11 @@ def dome_problem(rig: StereoRig, board: Board, detections: Detections, names):
         k = 0
         for name in names:
             if name == "dome_center":
-                offsets = [x[k:k + 3], x[k + 3:k + 6]]
+                for i, view in enumerate(views):
+                    offsets[view] = x[k + 3 * i:k + 3 * i + 3]
             else:
                 n_water = x[k]
-            k += DOME_PARAMETERS[name]
+            k += table[name]
         domes = DomePair(*(d.replace(center=c.center + c.R @ o,
                                      indices=d.indices[:-1] + (float(n_water),))
                            for c, d, o in zip(rig.cameras, domes0, offsets)))
@@ -91,8 +97,7 @@ def dome_problem(rig: StereoRig, board: Board, detections: Detections, names):
             for name in names:
                 if name == "dome_center":  # M = C + R·o: d pixel / d o = d pixel / d M · R
                     own = jac.dome_center @ cameras[view].R
-                    zero = np.zeros_like(own)
-                    columns += [own, zero] if view == 0 else [zero, own]
+                    columns += [own if v == view else np.zeros_like(own) for v in views]
                 else:
                     columns.append(jac.indices[..., -1:])
             d_turn = np.einsum("nrj,njk->nrk", np.cross(rotated[:, None, :], d_points),
@@ -137,7 +142,7 @@ def dome_problem(rig: StereoRig, board: Board, detections: Detections, names):
 
     x0 = []
     for name in names:
-        x0 += (np.concatenate([dome_offset(c, d) for c, d in zip(rig.cameras, domes0)]).tolist()
+        x0 += (np.concatenate([dome_offset(rig.cameras[v], domes0[v]) for v in views]).tolist()
                if name == "dome_center" else [domes0[0].n_water])
     for R, t in starts:
         x0 += list(Rotation.from_matrix(R).as_rotvec()) + list(t)
@@ -145,7 +150,7 @@ def dome_problem(rig: StereoRig, board: Board, detections: Detections, names):
     lower = np.full(x0.size, -np.inf)
     upper = np.full(x0.size, np.inf)
     if "n_water" in names:
-        k = parameter_offset(names, "n_water", DOME_PARAMETERS)
+        k = parameter_offset(names, "n_water", table)
         lower[k], upper[k] = 1.0, MAX_INDEX
         x0[k] = np.clip(x0[k], lower[k] + 1e-9, upper[k] - 1e-9)
     return SimpleNamespace(residuals=residuals, jacobian=jacobian, unpack=unpack, x0=x0,
@@ -155,7 +160,12 @@ def dome_problem(rig: StereoRig, board: Board, detections: Detections, names):
 
 
 
-def dome_rig_parameters(names, air, cameras, domes):
+def parameters_of(views) -> dict:
+    """:data:`DOME_PARAMETERS` of the cameras ``views``: 3 decentring numbers per camera."""
+    return {"dome_center": 3 * len(tuple(views)), "n_water": 1}
+
+
+def dome_rig_parameters(names, air, cameras, domes, views=(0, 1)):
     """The dome calibration's free numbers as :mod:`measure.stereo.rig_covariance` names —
     ``left/right.dome_center[0..2]`` (each dome's centre in the reference frame, mm) and
     ``port.index[2]`` — and the ``(a + g, a + g)`` Jacobian of (in-air parameters ``air``,
@@ -164,14 +174,14 @@ def dome_rig_parameters(names, air, cameras, domes):
     ``+ δC − [R·o]× φ`` where its pose is among ``air``. No tilt axes (None)."""
     a = len(air)
     out = []
-    g = sum(DOME_PARAMETERS[n] for n in names)
+    g = sum(parameters_of(views)[n] for n in names)
     T = np.zeros((a + g, a + g))
     T[:a, :a] = np.eye(a)
     k = a
     for name in names:
         if name == "dome_center":
-            for view, camera in enumerate(("left", "right")):
-                R = cameras[view].R
+            for view in views:
+                camera, R = ("left", "right")[view], cameras[view].R
                 T[k:k + 3, k:k + 3] = R
                 if view == 1:
                     lever = -_skew(domes[1].center - cameras[1].center)
@@ -205,7 +215,24 @@ def rig_parameters(names, air, x, basis, rig: StereoRig, port, cameras, n_global
     return dome_rig_parameters(names, air, cameras, port)
 
 
+def for_views(views):
+    """The domes' housing calibration from the corners of the cameras ``views`` only: ``(0,)``
+    is one camera inside its dome (``dome_center``: its decentring, 3 numbers)."""
+    views = tuple(views)
+    if views == (0, 1):
+        return DOME_HOUSING
+
+    def rig_parameters_of_views(names, air, x, basis, rig, port, cameras, n_global):
+        return dome_rig_parameters(names, air, cameras, port, views)
+
+    return SimpleNamespace(parameters=parameters_of(views), default_free=("dome_center",),
+                           label="of one dome ", check_free=check_free,
+                           problem=partial(dome_problem, views=views),
+                           rig_parameters=rig_parameters_of_views, views=views,
+                           for_views=for_views)
+
+
 #: The domes' housing calibration (:data:`measure.calibration.housing.HOUSINGS`).
 DOME_HOUSING = SimpleNamespace(parameters=DOME_PARAMETERS, default_free=("dome_center",),
                                label="of two domes ", check_free=check_free, problem=dome_problem,
-                               rig_parameters=rig_parameters)
+                               rig_parameters=rig_parameters, views=(0, 1), for_views=for_views)

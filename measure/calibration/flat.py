@@ -4,6 +4,7 @@
 
 from __future__ import annotations
 
+from functools import partial
 from types import SimpleNamespace
 
 import numpy as np
@@ -24,15 +25,18 @@ from .selfcal import tilt_basis
 HOUSING_PARAMETERS = {"distance": 1, "normal": 2, "thickness": 1, "n_water": 1, "extrinsics": 6}
 
 
-def housing_problem(rig: StereoRig, board: Board, detections: Detections, names):
+def housing_problem(rig: StereoRig, board: Board, detections: Detections, names,
+                    views=(0, 1)):
     """The bundle adjustment of :func:`calibrate_housing` as functions of the unknowns ``x``
     (free housing numbers, then 6 per usable pose): ``residuals``, its analytic ``jacobian``,
-    ``unpack``, the start ``x0`` and its ``lower`` / ``upper`` bounds, and the bookkeeping."""
+    ``unpack``, the start ``x0`` and its ``lower`` / ``upper`` bounds, and the bookkeeping.
+    ``views``: the cameras whose corners enter (``(0,)``: one camera behind its port,
+    :func:`measure.calibration.housing.calibrate_camera_housing`)."""
     starts, usable, detections = usable_poses(rig, board, detections)
     P = len(starts)
     n_global = sum(HOUSING_PARAMETERS[n] for n in names)
     port0, basis = rig.port, tilt_basis(rig.port.normal)
-    corners, obs = observations(board, detections)
+    corners, obs = observations(board, detections, views)
     m = sum(2 * o[1].size for o in obs)
 
     def unpack(x):
@@ -199,6 +203,19 @@ def check_free(rig: StereoRig, names) -> None:
         raise CalibrationError("--free thickness: the port has no glass layer")
 
 
+def for_views(views):
+    """The flat port's housing calibration from the corners of the cameras ``views`` only:
+    ``(0,)`` is one camera behind its port (no second camera, so no ``extrinsics``)."""
+    views = tuple(views)
+    if views == (0, 1):
+        return FLAT_HOUSING
+    table = {n: w for n, w in HOUSING_PARAMETERS.items() if n != "extrinsics"}
+    return SimpleNamespace(parameters=table, default_free=FLAT_HOUSING.default_free,
+                           label="of one camera ", check_free=check_free,
+                           problem=partial(housing_problem, views=views),
+                           rig_parameters=rig_parameters, views=views, for_views=for_views)
+
+
 def rig_parameters(names, air, x, basis, rig: StereoRig, port, cameras, n_global):
     """:func:`flat_rig_parameters` as the ``(a + g, a + g)`` Jacobian of (in-air parameters
     ``air``, the names) with respect to (``air``, the free numbers)."""
@@ -213,4 +230,5 @@ def rig_parameters(names, air, x, basis, rig: StereoRig, port, cameras, n_global
 #: The flat port's housing calibration (:data:`measure.calibration.housing.HOUSINGS`).
 FLAT_HOUSING = SimpleNamespace(parameters=HOUSING_PARAMETERS, default_free=("distance", "normal"),
                                label="", check_free=check_free, problem=housing_problem,
-                               rig_parameters=rig_parameters)
+                               rig_parameters=rig_parameters, views=(0, 1),
+                               for_views=for_views)

@@ -41,6 +41,7 @@ from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
 
 from ..geometry.camera import Camera
+from ..geometry.port import RigPort
 from ..stereo.triangulate import StereoRig
 from .air import CalibrationError, Detections
 from .board import Board
@@ -111,7 +112,7 @@ class HousingCalibration:
 
 def calibrate_housing(rig: StereoRig, board: Board, detections: Detections,
                       free=None, air_covariance: RigCovariance | None = None,
-                      uncertainty: str = DEFAULT_UNCERTAINTY) -> HousingCalibration:
+                      uncertainty: str = DEFAULT_UNCERTAINTY, views=(0, 1)) -> HousingCalibration:
     """Refractive bundle adjustment of the housing (module docs). ``rig``: the in-air cameras
     with the starting port (its fixed parameters are the design values) — a flat port, or two
     domes (:func:`dome_problem`: each camera's decentring). ``free`` defaults to
@@ -120,11 +121,13 @@ def calibrate_housing(rig: StereoRig, board: Board, detections: Detections,
     into the housing's by ``uncertainty``: ``"propagate"`` (the in-air parameters fixed, their
     covariance propagated) or ``"prior"`` (freed, with the in-air result as a prior), for a
     flat port and for domes alike. Without it the σ is conditional on the in-air
-    calibration."""
+    calibration. ``views``: the cameras whose corners enter (``(0,)``: the left camera alone,
+    :func:`calibrate_camera_housing`)."""
     housing = HOUSINGS.get(rig.port.kind)
     if housing is None:  # e.g. two housings (a FlatPair): no housing problem yet
         raise CalibrationError(f"no housing calibration of {rig.port.rig_name} "
                                f"({rig.port.rig_detail}) yet")
+    housing = housing.for_views(views)
     if free is None:
         free = housing.default_free
     if uncertainty not in UNCERTAINTY:
@@ -215,7 +218,8 @@ def calibrate_housing(rig: StereoRig, board: Board, detections: Detections,
     if air:
         sigma_air = _sub_covariance(air_covariance, air)
         if uncertainty == "prior":
-            rig, x, joint = _prior_fit(rig, board, detections, names, x, s2, air, sigma_air)
+            rig, x, joint = _prior_fit(rig, board, detections, names, x, s2, air, sigma_air,
+                                       housing)
             port, cameras, Rs, ts = housing.problem(rig, board, detections, names).unpack(x)
             base["poses"] = [(Rs[k], ts[k]) for k in range(P)]
         else:
@@ -236,8 +240,8 @@ def calibrate_housing(rig: StereoRig, board: Board, detections: Detections,
     for name in names:
         w = table[name]
         if name == "dome_center":
-            estimates[name] = {view: dome_offset(cameras[i], port[i]).tolist()
-                               for i, view in enumerate(("left", "right"))}
+            estimates[name] = {("left", "right")[i]: dome_offset(cameras[i], port[i]).tolist()
+                               for i in housing.views}
         elif name == "distance":
             estimates[name] = port.distance
         elif name == "normal":
@@ -257,6 +261,32 @@ def calibrate_housing(rig: StereoRig, board: Board, detections: Detections,
                               correlation=correlation, identifiable=True, reason="",
                               covariance=rig_cov, sigmas_conditional=conditional,
                               uncertainty=uncertainty if air else "conditional", **base)
+
+
+def calibrate_camera_housing(camera: Camera, port: RigPort, board: Board,
+                             detections: Detections, free=None,
+                             air_covariance: RigCovariance | None = None,
+                             uncertainty: str = DEFAULT_UNCERTAINTY) -> HousingCalibration:
+    """The housing of ONE camera behind its own port, from that camera's board corners: the
+    stereo fit (:func:`calibrate_housing`, module docs) over the corners of view 0 only, the
+    camera being the reference (left) camera. ``port``: the starting rig port whose view 0 is
+    the camera's — a :class:`measure.FlatPort` (free: ``distance``, ``normal``, ``thickness``,
+    ``n_water``; no ``extrinsics``), or a :class:`measure.geometry.dome.DomePair` whose left dome
+    is the camera's (its right dome is not used; free: ``dome_center``, the camera's decentring
+    in its own frame, 3 numbers, and ``n_water``). ``detections``: view 0 per pose (a view 1 is
+    ignored). ``air_covariance``: the camera's in-air covariance named ``left.fx`` …
+    ``left.p2`` (:data:`measure.calibration.covariance.AIR_NAMES`), or None (σ conditional on
+    the intrinsics). Returns :class:`HousingCalibration` whose ``rig`` is the camera twice
+    behind the calibrated port: ``rig.left`` and ``rig.view_port(0)`` are the result (behind
+    domes the pair's right dome stays the start's: no corner sees it)."""
+    empty = (np.empty(0, int), np.empty((0, 2)))
+    one = Detections([[ids[0], empty[0]] for ids in detections.ids],
+                     [[px[0], empty[1]] for px in detections.pixels])
+    try:
+        rig = StereoRig(camera, camera, port)
+    except ValueError as exc:
+        raise CalibrationError(f"the design port: {exc}") from None
+    return calibrate_housing(rig, board, one, free, air_covariance, uncertainty, views=(0,))
 
 
 def _air_parameters(covariance: RigCovariance | None, names) -> tuple:
@@ -300,7 +330,7 @@ def apply_air_change(rig: StereoRig, air, delta) -> StereoRig:
 PRIOR_ITERATIONS, PRIOR_STEP_SIGMA = 8, 1e-4
 
 
-def _prior_fit(rig, board, detections, names, x, s2, air, sigma_air):
+def _prior_fit(rig, board, detections, names, x, s2, air, sigma_air, housing):
     """The housing with the in-air parameters ``air`` free under their in-air prior: the rows
     ``s·L(θ − θ_air)`` (``LᵀL = Σ_air⁻¹``, ``s²`` the corners' variance of the conditional fit)
     beside the corners' residuals; Gauss-Newton from the conditional solution ``x``. Returns
@@ -311,7 +341,7 @@ def _prior_fit(rig, board, detections, names, x, s2, air, sigma_air):
     delta, a = np.zeros(len(air)), len(air)
     for _ in range(PRIOR_ITERATIONS + 1):
         moved = apply_air_change(rig, air, delta)
-        problem = HOUSINGS[rig.port.kind].problem(moved, board, detections, names)
+        problem = housing.problem(moved, board, detections, names)
         if problem.x0.size != x.size:  # solvePnP found another set of usable poses
             raise CalibrationError("the prior fit lost a board pose when the intrinsics moved; "
                                    "use --air-uncertainty propagate")
@@ -341,4 +371,5 @@ def usable_index(usable, pose_idx) -> np.ndarray:
 
 
 __all__ = ["DEFAULT_DOME_FREE", "DEFAULT_FREE", "DEFAULT_UNCERTAINTY", "HousingCalibration",
-           "UNCERTAINTY", "apply_air_change", "calibrate_housing", "usable_index"]
+           "UNCERTAINTY", "apply_air_change", "calibrate_camera_housing", "calibrate_housing",
+           "usable_index"]

@@ -225,6 +225,24 @@ def write_calib_port(fs, port: FlatPort | FlatPair | DomePair, has_port: bool = 
         _write_flat_node(fs, "port", port, has_port)
 
 
+def write_view_port(fs, port: FlatPort | DomePort) -> None:
+    """One camera's port into its one-camera ``camera.yaml`` (``eval calibrate PHOTOS
+    --intrinsics``): a flat port as :func:`write_calib_port`'s ``port`` node; a dome as a
+    ``dome`` map of ``center`` (3x1, mm), ``radius``, ``thickness`` and ``indices``."""
+    if not isinstance(port, DomePort):
+        write_calib_port(fs, port)
+        return
+    fs.startWriteStruct("dome", cv2.FileNode_MAP)
+    fs.write("center", port.center.reshape(3, 1))
+    fs.write("radius", float(port.radius))
+    fs.write("thickness", float(port.thickness))
+    fs.startWriteStruct("indices", cv2.FileNode_SEQ)
+    for v in port.indices:
+        fs.write("", float(v))
+    fs.endWriteStruct()
+    fs.endWriteStruct()
+
+
 def port_text_files(port, cameras: dict) -> dict:
     """``{file name: text}`` of the port beside a calibration: ``flatport.txt``
     (:func:`flatport_text`) for a flat port or a port per camera; nothing for domes, whose

@@ -94,16 +94,17 @@ def _dist5(camera: Camera) -> np.ndarray:
     return np.zeros(5) if camera.dist is None else camera.dist.copy()
 
 
-def _write_node(fs, name: str, value) -> None:
+def write_node(fs, name: str, value) -> None:
+    """A number, string, list or map as the FileStorage node ``name`` (maps and lists nest)."""
     if isinstance(value, dict):
         fs.startWriteStruct(name, cv2.FileNode_MAP)
         for key, item in value.items():
-            _write_node(fs, str(key), item)
+            write_node(fs, str(key), item)
         fs.endWriteStruct()
     elif isinstance(value, (list, tuple)):
         fs.startWriteStruct(name, cv2.FileNode_SEQ)
         for item in value:
-            _write_node(fs, "", item)
+            write_node(fs, "", item)
         fs.endWriteStruct()
     elif isinstance(value, str):
         fs.write(name, value)
@@ -133,13 +134,13 @@ def write_calib(path, rig: StereoRig, has_port: bool = True, extra: dict | None 
         write_calib_port(fs, rig.port, has_port)
         if covariance is not None:
             fs.startWriteStruct("covariance", cv2.FileNode_MAP)
-            _write_node(fs, "names", list(covariance.names))
+            write_node(fs, "names", list(covariance.names))
             fs.write("matrix", covariance.matrix)
             if covariance.normal_axes is not None:
                 fs.write("normal_axes", covariance.normal_axes)
             fs.endWriteStruct()
         for name, value in (extra or {}).items():
-            _write_node(fs, name, value)
+            write_node(fs, name, value)
     finally:
         fs.release()
 

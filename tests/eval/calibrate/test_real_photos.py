@@ -134,11 +134,15 @@ def test_one_camera_of_a_wide_lens(tmp_path, capsys):
     assert (out / "residuals.png").exists() and (out / "coverage.png").exists()
 
 
-def test_one_camera_underwater_is_refused_for_now(tmp_path, capsys):
+def test_one_camera_underwater_needs_its_in_air_file(tmp_path, capsys):
     out = tmp_path / "cam"
+    assert _run(["calibrate", str(GOPRO), "--inner-corners", "9x6", "--square-mm", "9.35",
+                 "--out", str(out)]) == 2
+    assert "say --air (photos taken in air) or --intrinsics camera.yaml" in (
+        capsys.readouterr().err)
     assert _run(["calibrate", str(GOPRO), "--intrinsics", "x.yaml", "--inner-corners", "9x6",
                  "--square-mm", "9.35", "--out", str(out)]) == 2
-    assert "one camera is calibrated in air (--air) for now" in capsys.readouterr().err
+    assert "error: --intrinsics x.yaml: no such file" in capsys.readouterr().err
     assert not out.exists()
 
 
