@@ -97,10 +97,10 @@ def test_rig_jointly_with_different_subsets():
 
 def test_dome_and_tank():
     """Through a decentred dome (the port interface: its own projection and trace), and through
-    the wall of a tank: air | glass | water | glass | air, the object in the air beyond. For the
-    tank the forward model is checked first against the trace (each pixel's ray, refracted at
-    the four interfaces, passes through its point) and against physics (a parallel slab leaves
-    a ray parallel to itself)."""
+    a tank: air | glass | water | glass | air and air | water | air, the object in the air
+    beyond. For the tank the forward model is checked first against the trace (each pixel's
+    ray, refracted at every interface, passes through its point) and against physics (a
+    parallel slab leaves a ray parallel to itself)."""
     from synth.scene.dome import dome_pair
 
     cameras = paper_cameras()
@@ -111,17 +111,19 @@ def test_dome_and_tank():
     for z in (800.0, 3000.0):
         R, t = _pose(rng, z)
         _assert_exact(estimate_pose(view, obj, _pixels([view], obj, R, t)[0]), R, t)
-    tank = FlatPort((0.0, 0.0, 1.0), 200.0, (10.0, 400.0, 10.0), (1.0, 1.5, 1.33, 1.5, 1.0))
-    view = View(cameras[0], tank)
-    R, t = _pose(rng, 1500.0)
-    X = obj @ R.T + t
-    uv = project(view.camera, tank, X)
-    directions = view.camera.rays(uv)
-    rays = tank.trace(view.camera.center, directions)
-    off_ray = np.linalg.norm(np.cross(X - rays.origins, rays.directions), axis=1)
-    assert np.max(off_ray) < 1e-9
-    np.testing.assert_allclose(rays.directions, directions, atol=1e-15)
-    _assert_exact(estimate_pose(view, obj, uv), R, t)
+    walls = FlatPort((0.0, 0.0, 1.0), 200.0, (10.0, 400.0, 10.0), (1.0, 1.5, 1.33, 1.5, 1.0))
+    bare = FlatPort((0.0, 0.0, 1.0), 200.0, (400.0,), (1.0, 1.33, 1.0))  # air | water | air
+    for tank in (walls, bare):
+        view = View(cameras[0], tank)
+        R, t = _pose(rng, 1500.0)
+        X = obj @ R.T + t
+        uv = project(view.camera, tank, X)
+        directions = view.camera.rays(uv)
+        rays = tank.trace(view.camera.center, directions)
+        off_ray = np.linalg.norm(np.cross(X - rays.origins, rays.directions), axis=1)
+        assert np.max(off_ray) < 1e-9
+        np.testing.assert_allclose(rays.directions, directions, atol=1e-15)
+        _assert_exact(estimate_pose(view, obj, uv), R, t)
 
 
 def _monte_carlo(views, obj, R, t, rng, draws, sigma, rig=None, rig_covariance=None):
