@@ -476,7 +476,7 @@ def estimate_poses(views, object_points, pixels, pixel_sigma=None,
     # the whole object's shape once; a frame that sees a subset checks its own
     whole = None if n_points < 3 else (bool(singular[1] <= COLLINEAR_LIMIT * singular[0]),
                                        bool(singular[2] <= PLANAR_LIMIT * singular[0]))
-    out = []
+    out = [] if frames else [_failed(Reason.OK)]  # zero frames: shapes from a stand-in
     for f in range(frames):
         seen = np.any(np.all(np.isfinite(pixels[f]), axis=2), axis=0)
         shape = whole if whole is not None and seen.all() else (None, None)
@@ -486,12 +486,15 @@ def estimate_poses(views, object_points, pixels, pixel_sigma=None,
         except (np.linalg.LinAlgError, ValueError, cv2.error):
             pose = _failed(Reason.NOT_CONVERGED)  # e.g. a singular system: no pose, go on
         out.append(pose)
-    return Poses(np.stack([p.R for p in out]), np.stack([p.t for p in out]),
-                 np.stack([p.covariance for p in out]), np.stack([p.pixel for p in out]),
-                 np.stack([p.rig for p in out]), np.array([p.rms_px for p in out]),
-                 np.array([p.sigma_px for p in out]),
-                 np.array([p.observations for p in out], dtype=np.int64),
-                 np.array([p.reason for p in out], dtype=np.int8))
+    poses = Poses(np.stack([p.R for p in out]), np.stack([p.t for p in out]),
+                  np.stack([p.covariance for p in out]), np.stack([p.pixel for p in out]),
+                  np.stack([p.rig for p in out]), np.array([p.rms_px for p in out]),
+                  np.array([p.sigma_px for p in out]),
+                  np.array([p.observations for p in out], dtype=np.int64),
+                  np.array([p.reason for p in out], dtype=np.int8))
+    if not frames:
+        poses = Poses(*(getattr(poses, name)[:0] for name in Poses.__dataclass_fields__))
+    return poses
 
 
 def estimate_pose(views, object_points, pixels, pixel_sigma=None,

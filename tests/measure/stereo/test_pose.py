@@ -208,6 +208,8 @@ def test_reason_codes_and_a_batch_that_goes_on():
                                      Reason.TOO_FEW_POINTS, Reason.OK]
     assert np.all(np.isnan(poses.t[1:4])) and np.all(np.isnan(poses.covariance[1:4]))
     np.testing.assert_allclose(poses.t[4], t, atol=POSITION_MM)
+    empty = estimate_poses(view, obj, frames[:0])
+    assert len(empty) == 0 and empty.covariance.shape == (0, 6, 6)
     collinear = estimate_pose(view, line, _pixels([view], line, R, t)[0])
     assert collinear.reason == Reason.DEGENERATE
     with pytest.raises(ValueError, match="pixels must have shape"):
