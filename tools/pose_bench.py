@@ -60,7 +60,7 @@ def _pixels(views, obj, Rs, ts, sigma, rng):
 def _linear_gpnp(origins, directions, X):
     """The linear generalized PnP: ``[d]× (R X + t) = [d]× o`` in the 12 entries of (R, t),
     least squares, R projected onto SO(3)."""
-    S = pose_module._skew(directions)
+    S = pose_module.skew(directions)
     A = np.zeros((X.shape[0], 3, 12))
     for j in range(3):
         A[:, :, 3 * j:3 * j + 3] = S[:, :, j:j + 1] * X[:, None, :]

@@ -167,7 +167,7 @@ def as_views(views) -> tuple[View, ...]:
     return views
 
 
-def _skew(v: np.ndarray) -> np.ndarray:
+def skew(v: np.ndarray) -> np.ndarray:
     """``[v]×`` of vectors ``(N, 3)`` as ``(N, 3, 3)``."""
     out = np.zeros(v.shape[:-1] + (3, 3))
     out[..., 0, 1], out[..., 0, 2] = -v[..., 2], v[..., 1]
@@ -176,14 +176,15 @@ def _skew(v: np.ndarray) -> np.ndarray:
     return out
 
 
-def _exp_so3(phi: np.ndarray) -> np.ndarray:
+def exp_so3(phi: np.ndarray) -> np.ndarray:
+    """``exp([φ]×)``: the rotation matrix of the rotation vector ``φ`` ``(3,)`` (Rodrigues)."""
     return cv2.Rodrigues(np.asarray(phi, dtype=np.float64).reshape(3, 1))[0]
 
 
-def _left_jacobian(phi: np.ndarray) -> np.ndarray:
+def left_jacobian(phi: np.ndarray) -> np.ndarray:
     """``J_l(φ)``: ``exp([φ + δ]×) ≈ exp([J_l δ]×) exp([φ]×)``."""
     theta = float(np.linalg.norm(phi))
-    K = _skew(phi)
+    K = skew(phi)
     if theta < 1e-6:
         return np.eye(3) + 0.5 * K + K @ K / 6.0
     return (np.eye(3) + (1 - np.cos(theta)) / theta ** 2 * K
@@ -294,7 +295,7 @@ def _refine(problem: _Problem, R0, t0, max_nfev: int):
     def evaluate(x):
         key = x.tobytes()
         if key not in cache:  # kept: the solution is among them
-            R = _exp_so3(x[:3]) @ R0
+            R = exp_so3(x[:3]) @ R0
             pixels, d_points, X = problem.project(R, x[3:])
             cache[key] = (R, pixels, d_points, X)
         return cache[key]
@@ -307,7 +308,7 @@ def _refine(problem: _Problem, R0, t0, max_nfev: int):
     def jacobian(x):
         R, _, d_points, X = evaluate(x)
         Xr = X[problem.object_rows] - x[3:]  # R X_obj of every observation
-        d_phi = -_skew(Xr) @ _left_jacobian(x[:3])  # (n, 3, 3)
+        d_phi = -skew(Xr) @ left_jacobian(x[:3])  # (n, 3, 3)
         J = np.concatenate([d_points @ d_phi, d_points], axis=2)  # (n, 2, 6)
         J *= problem.sqrt_weights[:, None, None]
         J = J.reshape(-1, 6)
@@ -319,7 +320,7 @@ def _refine(problem: _Problem, R0, t0, max_nfev: int):
     result = least_squares(residual, x0, jac=jacobian, method="trf", x_scale="jac",
                            xtol=TOLERANCE, ftol=TOLERANCE, gtol=TOLERANCE, max_nfev=max_nfev)
     inside = bool(np.all(np.isfinite(evaluate(result.x)[1])))
-    return _exp_so3(result.x[:3]) @ R0, result.x[3:].copy(), result, inside
+    return exp_so3(result.x[:3]) @ R0, result.x[3:].copy(), result, inside
 
 
 def _cost(problem: _Problem, R, t) -> float:
@@ -381,7 +382,7 @@ def _solve_frame(views, object_points, pixels, weights, stated_sigma, rig, rig_c
     R, t, result, _ = best
     # the weighted Jacobian at the solution, for a rotation applied on the left of R itself
     J = result.jac.copy()
-    J[:, :3] = np.linalg.solve(_left_jacobian(result.x[:3]).T, J[:, :3].T).T
+    J[:, :3] = np.linalg.solve(left_jacobian(result.x[:3]).T, J[:, :3].T).T
     J = (J.reshape(-1, 2, 6) / problem.sqrt_weights[:, None, None])
     r = result.fun.reshape(-1, 2) / problem.sqrt_weights[:, None]
     X = problem.object_points @ R.T + t
@@ -546,5 +547,6 @@ def rotation_error(R_a, R_b) -> np.ndarray:
     return np.arctan2(0.5 * np.linalg.norm(skew, axis=-1), cos)
 
 
-__all__ = ["CANDIDATE_COST_RATIO", "DEGENERATE_CONDITION", "MAX_RMS_PX", "Pose", "Poses",
-           "as_views", "estimate_pose", "estimate_poses", "pinhole_pose", "rotation_error"]
+__all__ = ["CANDIDATE_COST_RATIO", "DEGENERATE_CONDITION", "MAX_RMS_PX", "TOLERANCE", "Pose",
+           "Poses", "as_views", "estimate_pose", "estimate_poses", "exp_so3", "left_jacobian",
+           "pinhole_pose", "rotation_error", "skew"]

@@ -243,7 +243,7 @@ def test_interface_from_a_known_object():
     by 1° and −0.5°: exact pixels give it back exactly; 60 noisy trials (σ = 0.1 px) spread as
     the covariance says (the σ of a spread of 60 draws is known to ±9 %, so 0.75–1.25 is ±2.8
     of that)."""
-    from measure.stereo.interface import estimate_interface
+    from measure.calibration.interface import estimate_interface
     from synth.scene.rig import tilted_port_normal
 
     rig = paper_rig()

@@ -24,12 +24,13 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import least_squares
 
-from ..calibration.selfcal import tilt_basis
+from .selfcal import tilt_basis
 from ..geometry.port import require_flat_port
 from ..geometry.projection import project
 from ..reasons import Reason
-from .multiview import View
-from .pose import DEGENERATE_CONDITION, TOLERANCE, _exp_so3, _left_jacobian, _skew, estimate_poses
+from ..stereo.multiview import View
+from ..stereo.pose import (DEGENERATE_CONDITION, TOLERANCE, estimate_poses, exp_so3, left_jacobian,
+                           skew)
 
 #: The names of the interface's parameters, in the order of :attr:`InterfaceEstimate.covariance`.
 INTERFACE_NAMES = ("port.distance", "port.tilt[0]", "port.tilt[1]")
@@ -93,7 +94,7 @@ def estimate_interface(view: View, object_points, pixels, pixel_sigma=None,
         moved = port.replace(distance=x[0], normal=m / length)
         phi = x[3:].reshape(frames, 6)[:, :3]
         t = x[3:].reshape(frames, 6)[:, 3:]
-        R = np.stack([_exp_so3(phi[f]) @ R0[f] for f in range(frames)])
+        R = np.stack([exp_so3(phi[f]) @ R0[f] for f in range(frames)])
         return moved, length, phi, R, t
 
     cache = {}
@@ -123,10 +124,10 @@ def estimate_interface(view: View, object_points, pixels, pixel_sigma=None,
             return J.reshape(-1, n_params)
         J[:, :, 0] = jac.distance
         J[:, :, 1:3] = (jac.normal / length) @ axes.T
-        d_phi = -_skew(X - t[rows])  # (n, 3, 3), then J_l(φ) per frame
+        d_phi = -skew(X - t[rows])  # (n, 3, 3), then J_l(φ) per frame
         for f in range(frames):
             mine = rows == f
-            block = d_points[mine] @ (d_phi[mine] @ _left_jacobian(phi[f]))
+            block = d_points[mine] @ (d_phi[mine] @ left_jacobian(phi[f]))
             J[mine, :, 3 + 6 * f:6 + 6 * f] = block
             J[mine, :, 6 + 6 * f:9 + 6 * f] = d_points[mine]
         J /= sigma
@@ -148,7 +149,7 @@ def estimate_interface(view: View, object_points, pixels, pixel_sigma=None,
     J = result.jac.copy()
     for f in range(frames):  # rotations applied on the left of each R itself
         cols = slice(3 + 6 * f, 6 + 6 * f)
-        J[:, cols] = np.linalg.solve(_left_jacobian(phi[f]).T, J[:, cols].T).T
+        J[:, cols] = np.linalg.solve(left_jacobian(phi[f]).T, J[:, cols].T).T
     normal = J.T @ J
     scale = np.sqrt(np.diag(normal))
     if not np.all(scale > 0):
