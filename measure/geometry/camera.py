@@ -38,6 +38,12 @@ FISHEYE_ITERATIONS = 20
 NEWTON_ITERATIONS = 12
 
 
+def _one_of(numbers) -> str:
+    """``4, 5 or 8``."""
+    words = [str(n) for n in numbers]
+    return words[0] if len(words) == 1 else f"{', '.join(words[:-1])} or {words[-1]}"
+
+
 def _as_rotation(R, name: str) -> np.ndarray:
     R = np.asarray(R, dtype=np.float64)
     if R.shape != (3, 3) or not np.all(np.isfinite(R)):
@@ -126,7 +132,7 @@ class Camera(ValueEquality):
             lengths = DISTORTION_MODELS[distortion_model]
             if dist.size not in lengths:
                 raise ValueError(f"dist of the {distortion_model} model must hold "
-                                 f"{' or '.join(map(str, lengths))} coefficients, got {dist.size}")
+                                 f"{_one_of(lengths)} coefficients, got {dist.size}")
             if not np.all(np.isfinite(dist)):
                 raise ValueError(f"dist must be finite, got {dist.tolist()}")
             if distortion_model == BROWN_CONRADY and not np.any(dist):
