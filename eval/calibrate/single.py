@@ -10,10 +10,12 @@ intrinsic (OpenCV's ``stdDeviationsIntrinsics``).
 
 Writes to ``--out``: ``camera.yaml`` (OpenCV ``FileStorage``, the names of OpenCV's calibration
 sample: ``image_width``, ``image_height``, ``camera_matrix``, ``distortion_coefficients``, with
-``lens_model``, ``rms_px`` and the σ), ``calibmar.yaml`` (calibmar's one-camera file, no port),
-``cameras.txt`` (one COLMAP camera), ``report.json``, ``report.md``, ``coverage.png`` and
-``residuals.png``. A calibration the run knows is wrong (a lens model whose distortion folds
-within the image, a σ of fx or fy larger than the value) exits 1 with the files written.
+``lens_model``, ``distortion_model`` (``brown_conrady`` or ``fisheye``: OpenCV's fisheye model,
+k1…k4), ``rms_px`` and the σ), ``calibmar.yaml`` (calibmar's one-camera file, no port; model
+OPENCV, FULL_OPENCV or OPENCV_FISHEYE), ``cameras.txt`` (one COLMAP camera), ``report.json``,
+``report.md``, ``coverage.png`` and ``residuals.png``. A calibration the run knows is wrong (a
+lens model whose distortion folds within the image, a σ of fx or fy larger than the value)
+exits 1 with the files written.
 """
 
 from __future__ import annotations
@@ -95,7 +97,7 @@ def calibrate_single(args, output, log, start, board) -> tuple[dict, str]:
         img = [dets.pixels[k][VIEW].astype(np.float32) for k in poses]
         out, model, tried, problem = calibrate_camera(obj, img, size, lens)
         return {"out": out, "model": model, "tried": tried, "problem": problem, "poses": poses,
-                "residuals": camera_residuals(obj, img, out, poses, dets.ids, VIEW),
+                "residuals": camera_residuals(obj, img, out, poses, dets.ids, VIEW, model),
                 "rms_px_per": {(k, VIEW): float(e) for k, e in zip(poses, out[7].ravel())}}
 
     t = time.perf_counter()
@@ -123,13 +125,11 @@ def calibrate_single(args, output, log, start, board) -> tuple[dict, str]:
 
 def _camera(result, size):
     """The :class:`measure.Camera` of a fit and its σ per intrinsic."""
-    from measure import Camera
-    from measure.calibration.air import INTRINSIC_NAMES, LENS_MODELS
+    from measure.calibration.air import intrinsic_names, lens_camera
 
     out, model = result["out"], result["model"]
-    n_dist = LENS_MODELS[model][1]
-    camera = Camera(out[1], size, dist=out[2].ravel()[:max(n_dist, 5)])
-    sigmas = dict(zip(INTRINSIC_NAMES[:4 + n_dist], (float(s) for s in out[5].ravel())))
+    camera = lens_camera(out, model, size)
+    sigmas = dict(zip(intrinsic_names(model), (float(s) for s in out[5].ravel())))
     return camera, sigmas
 
 
@@ -204,6 +204,9 @@ def write_camera_files(directory, camera, report) -> None:
         dist = np.zeros(5) if camera.dist is None else camera.dist
         fs.write("distortion_coefficients", np.asarray(dist, np.float64).reshape(1, -1))
         fs.write("lens_model", report["lens_model"]["model"])
+        # how distortion_coefficients are evaluated: brown_conrady (cv2.projectPoints) or
+        # fisheye (cv2.fisheye, k1…k4)
+        fs.write("distortion_model", camera.distortion_model)
         fs.write("rms_px", float(report["rms_px"]))
         fs.startWriteStruct("sigmas", cv2.FileNode_MAP)
         for key, value in report["camera"].items():
