@@ -196,21 +196,54 @@ class Camera(ValueEquality):
             return self._fisheye_columns(x, y, jacobian)
         c = np.zeros(8)
         c[: self.dist.size] = self.dist
-        k1, k2, p1, p2, k3, k4, k5, k6 = c
-        r2 = x * x + y * y
-        numerator = 1 + r2 * (k1 + r2 * (k2 + r2 * k3))
-        denominator = 1 + r2 * (k4 + r2 * (k5 + r2 * k6))
-        radial = numerator / denominator
-        xd = x * radial + 2 * p1 * x * y + p2 * (r2 + 2 * x * x)
-        yd = y * radial + p1 * (r2 + 2 * y * y) + 2 * p2 * x * y
+        k1, k2, p1, p2, k3, k4, k5, k6 = (float(v) for v in c)
+        rational = bool(k4 or k5 or k6)
+        tangential = bool(p1 or p2)
+        xx, yy, xy = x * x, y * y, x * y
+        r2 = xx + yy
+        # Horner in place: numerator = 1 + r2 (k1 + r2 (k2 + r2 k3)), likewise the denominator
+        numerator = r2 * k3
+        numerator += k2
+        numerator *= r2
+        numerator += k1
+        numerator *= r2
+        numerator += 1.0
+        if rational:
+            denominator = r2 * k6
+            denominator += k5
+            denominator *= r2
+            denominator += k4
+            denominator *= r2
+            denominator += 1.0
+            radial = numerator / denominator
+        else:
+            radial = numerator
+        xd = x * radial
+        yd = y * radial
+        if tangential:
+            xd += (2 * p1) * xy + p2 * (r2 + 2 * xx)
+            yd += p1 * (r2 + 2 * yy) + (2 * p2) * xy
         if not jacobian:
             return xd, yd
-        # d radial / d r2 by the quotient rule
-        slope = ((k1 + r2 * (2 * k2 + 3 * k3 * r2)) * denominator
-                 - numerator * (k4 + r2 * (2 * k5 + 3 * k6 * r2))) / (denominator * denominator)
-        dxx = radial + 2 * x * x * slope + 2 * p1 * y + 6 * p2 * x
-        dxy = 2 * x * y * slope + 2 * p1 * x + 2 * p2 * y
-        dyy = radial + 2 * y * y * slope + 6 * p1 * y + 2 * p2 * x
+        # d radial / d r2 (by the quotient rule for the rational model)
+        slope = r2 * (3 * k3)
+        slope += 2 * k2
+        slope *= r2
+        slope += k1
+        if rational:
+            slope *= denominator
+            slope -= numerator * (k4 + r2 * (2 * k5 + (3 * k6) * r2))
+            slope /= denominator * denominator
+        slope *= 2.0
+        dxy = xy * slope
+        dxx = xx * slope
+        dxx += radial
+        dyy = yy * slope
+        dyy += radial
+        if tangential:
+            dxx += (2 * p1) * y + (6 * p2) * x
+            dxy += (2 * p1) * x + (2 * p2) * y
+            dyy += (6 * p1) * y + (2 * p2) * x
         return xd, yd, dxx, dxy, dyy
 
     def _fisheye_columns(self, x, y, jacobian: bool):
@@ -316,17 +349,16 @@ class Camera(ValueEquality):
         x, y = start[:, 0].copy(), start[:, 1].copy()
         tx, ty = target[:, 0], target[:, 1]
         with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
-            for _ in range(iterations):
+            for step in range(iterations + 1):
                 xd, yd, dxx, dxy, dyy = self.distort_columns(x, y, jacobian=True)
                 rx, ry = xd - tx, yd - ty
-                if not np.nanmax(np.abs(rx), initial=0.0) >= 1e-15 and not np.nanmax(
-                        np.abs(ry), initial=0.0) >= 1e-15:
-                    break
+                if step == iterations or not (np.nanmax(np.abs(rx), initial=0.0) >= 1e-15
+                                              or np.nanmax(np.abs(ry), initial=0.0) >= 1e-15):
+                    break  # the round trip and the Jacobian of this x are checked below
                 det = dxx * dyy - dxy * dxy
                 x -= (dyy * rx - dxy * ry) / det
                 y -= (dxx * ry - dxy * rx) / det
-            xd, yd, dxx, dxy, dyy = self.distort_columns(x, y, jacobian=True)
-            miss_px = np.maximum(np.abs(xd - tx), np.abs(yd - ty)) * np.max(np.diag(self.K)[:2])
+            miss_px = np.maximum(np.abs(rx), np.abs(ry)) * np.max(np.diag(self.K)[:2])
             ok = (miss_px <= UNDISTORT_TOLERANCE_PX) & (dxx * dyy - dxy * dxy > 0)
         return np.column_stack([x, y]), ok
 
@@ -385,10 +417,21 @@ class Camera(ValueEquality):
         x, y = xy[:, 0], xy[:, 1]
         inverse_norm = 1.0 / np.sqrt(1.0 + x * x + y * y)
         d = np.empty((xy.shape[0], 3))
-        np.multiply(x, inverse_norm, out=d[:, 0])
-        np.multiply(y, inverse_norm, out=d[:, 1])
-        d[:, 2] = inverse_norm
-        return (d if self._identity_rotation else d @ self.R.T), reason
+        if self._identity_rotation:
+            np.multiply(x, inverse_norm, out=d[:, 0])
+            np.multiply(y, inverse_norm, out=d[:, 1])
+            d[:, 2] = inverse_norm
+            return d, reason
+        # R (x, y, 1) / |(x, y, 1)| column by column: NumPy's (N, 3) @ (3, 3) took 8 times as
+        # long (0.67 s against 0.08 s for 10^6 rays)
+        x = x * inverse_norm
+        y = y * inverse_norm
+        for j, (a, b, c) in enumerate(self.R):
+            column = x * a
+            column += y * b
+            column += inverse_norm * c
+            d[:, j] = column
+        return d, reason
 
     @property
     def _identity_rotation(self) -> bool:
