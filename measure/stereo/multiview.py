@@ -147,14 +147,16 @@ def triangulate_rows(views, pixels) -> MultiViewTriangulation:
             weight = used[:, v].astype(np.float64)
             d = np.where(used[:, v], dirs.T, 0.0)
             o = np.where(used[:, v], origins.T, 0.0)
-        along = d[0] * o[0] + d[1] * o[1] + d[2] * o[2]
-        a[0] += weight - d[0] * d[0]
-        a[1] += weight - d[1] * d[1]
-        a[2] += weight - d[2] * d[2]
-        a[3] -= d[0] * d[1]
-        a[4] -= d[0] * d[2]
-        a[5] -= d[1] * d[2]
-        rhs += o - d * along
+        # in place, column by column (each intermediate one column of the piece)
+        along = d[0] * o[0]
+        along += d[1] * o[1]
+        along += d[2] * o[2]
+        for j, (p, q) in enumerate(((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))):
+            a[j] -= d[p] * d[q]
+        a[:3] += weight
+        for j in range(3):
+            rhs[j] += o[j]
+            rhs[j] -= d[j] * along
         rays.append((o, d))
     count = used.sum(axis=1)
     reason = np.full(n, Reason.OK, dtype=np.int8)
@@ -181,10 +183,21 @@ def triangulate_rows(views, pixels) -> MultiViewTriangulation:
     X = np.where(ok, points.T, 0.0)
     for v, (o, d) in enumerate(rays):  # unused rows: zero rays, masked below
         offset = X - o
-        along = d[0] * offset[0] + d[1] * offset[1] + d[2] * offset[2]
+        along = d[0] * offset[0]
+        along += d[1] * offset[1]
+        along += d[2] * offset[2]
         behind |= used[:, v] & (along < 0)
-        perpendicular = offset - along * d  # not |offset|² − along²: that cancels
-        squared += np.where(used[:, v], (perpendicular * perpendicular).sum(axis=0), 0.0)
+        # |offset − along d|², not |offset|² − along²: that cancels
+        square = np.zeros(n)
+        for j in range(3):
+            perpendicular = d[j] * along
+            np.subtract(offset[j], perpendicular, out=perpendicular)
+            perpendicular *= perpendicular
+            square += perpendicular
+        if used[:, v].all():
+            squared += square
+        else:
+            squared += np.where(used[:, v], square, 0.0)
     reason[ok & behind] = Reason.BEHIND_CAMERA
     ok = reason == Reason.OK
     with np.errstate(invalid="ignore", divide="ignore"):
