@@ -195,13 +195,14 @@ def air_estimates(air, poses) -> dict:
 def camera_estimates(camera, sigmas: dict) -> dict:
     """``{name: {estimate, sigma}}`` of one camera's intrinsics: fx, fy, cx, cy and the
     distortion coefficients its lens model estimated (the names of ``sigmas``)."""
-    from measure.calibration.air import INTRINSIC_NAMES
+    from measure.calibration.air import FISHEYE_INTRINSIC_NAMES, INTRINSIC_NAMES
 
     values = {"fx": camera.K[0, 0], "fy": camera.K[1, 1], "cx": camera.K[0, 2],
               "cy": camera.K[1, 2]}
     dist = np.zeros(8) if camera.dist is None else np.pad(np.ravel(camera.dist),
                                                           (0, max(0, 8 - np.size(camera.dist))))
-    values.update((n, d) for n, d in zip(INTRINSIC_NAMES[4:], dist) if n in sigmas)
+    names = FISHEYE_INTRINSIC_NAMES if camera.fisheye else INTRINSIC_NAMES
+    values.update((n, d) for n, d in zip(names[4:], dist) if n in sigmas)
     return {key: {"estimate": float(v), "sigma": sigmas.get(key)} for key, v in values.items()}
 
 

@@ -6,7 +6,8 @@ one pose. The lens model is chosen as for a pair (``--lens``, :func:`measure.cal
 calibrate_camera`), outlier poses are left out by the same rule
 (:func:`eval.calibrate.photos.outlier_poses`), and the report says what the photos alone can
 say: per pose the corners and RMS, the worst corners, the coverage of the image, the σ of every
-intrinsic (OpenCV's ``stdDeviationsIntrinsics``).
+intrinsic (OpenCV's ``stdDeviationsIntrinsics``) and the photo-to-photo σ of fx, fy, cx, cy
+(:func:`photo_spread`: the jackknife over the photos).
 
 Writes to ``--out``: ``camera.yaml`` (OpenCV ``FileStorage``, the names of OpenCV's calibration
 sample: ``image_width``, ``image_height``, ``camera_matrix``, ``distortion_coefficients``, with
@@ -109,8 +110,13 @@ def calibrate_single(args, output, log, start, board) -> tuple[dict, str]:
         raise CLIError(f"{where}: {exc}") from None
     timings["calibrate"] = time.perf_counter() - t
     camera, sigmas = _camera(result, size)
+    t = time.perf_counter()
+    spread = photo_spread(used_detections, result, corners, size)
+    timings["leave_one_out"] = time.perf_counter() - t
     report = _report(args, board, names, size, detections, used_detections, result, outliers,
                      camera, sigmas, result["problem"])
+    for key, value in spread.items():
+        report["camera"][key]["sigma_photos"] = value
     report["timings_s"] = timings
     log("write the calibration, report and figures …")
     with output.staged() as tmp:
@@ -121,6 +127,31 @@ def calibrate_single(args, output, log, start, board) -> tuple[dict, str]:
                               {"coverage": {"camera": report["coverage"]}}, views=("camera",))
         report = report_lib.write_report(tmp, report, markdown, start)
     return report, summary_lines(report)
+
+
+def photo_spread(detections, result, corners, size) -> dict:
+    """``{fx, fy, cx, cy: σ}`` (px) from the photos themselves: the jackknife over the photos
+    used, ``sqrt((n − 1)/n Σ (θ_i − θ̄)²)`` of the fits with photo i left out (the same lens
+    model). OpenCV's σ takes every corner's error as independent; on real photos a photo's
+    corners share its errors (motion, a board not quite flat, a rolling shutter), and which
+    photos are kept moves the intrinsics by more (docs/calibration.md: fx ± 0.19 % by OpenCV,
+    0.8 % by the photos, on the GoPro frames). Empty for fewer than 4 photos."""
+    from measure.calibration.air import calibrate_camera
+
+    poses = result["poses"]
+    if len(poses) < 4:
+        return {}
+    values = []
+    for drop in poses:
+        kept = [k for k in poses if k != drop]
+        obj = [corners[detections.ids[k][VIEW]] for k in kept]
+        img = [detections.pixels[k][VIEW].astype(np.float32) for k in kept]
+        K = calibrate_camera(obj, img, size, result["model"])[0][1]
+        values.append((K[0, 0], K[1, 1], K[0, 2], K[1, 2]))
+    values = np.asarray(values)
+    n = len(values)
+    sigma = np.sqrt((n - 1) / n * np.sum((values - values.mean(axis=0)) ** 2, axis=0))
+    return {key: float(v) for key, v in zip(("fx", "fy", "cx", "cy"), sigma)}
 
 
 def _camera(result, size):
@@ -237,8 +268,11 @@ def markdown(report: dict) -> str:
               f"Reprojection RMS {report['rms_px']:.4f} px; lens model {m['model']} ("
               + ", ".join(f"{k} {v:.4f} px" for k, v in m["rms_px"].items())
               + f"; {trust.LENS_RULE}). σ: OpenCV's `calibrateCameraExtended` standard "
-              f"deviations.", "", "| parameter | value | σ |", "|---|---|---|"]
-    lines += [f"| {k} | {v['estimate']:.6g} | {_f(v['sigma'], 3)} |"
+              f"deviations (the fisheye model's computed as it does, s² (JᵀJ)⁻¹); σ photos: "
+              f"the jackknife over the photos, each left out in turn (the spread which photos "
+              f"are kept gives).", "", "| parameter | value | σ | σ photos |", "|---|---|---|---|"]
+    lines += [f"| {k} | {v['estimate']:.6g} | {_f(v['sigma'], 3)} | "
+              f"{_f(v.get('sigma_photos'), 3) if 'sigma_photos' in v else ''} |"
               for k, v in report["camera"].items()]
     lines += ["", "## Photos", "", f"Outlier rule: {report['outlier_rule']} (threshold here "
               f"{report['outliers']['threshold_px']:.3f} px).", "",
@@ -274,10 +308,14 @@ def summary_lines(report: dict) -> str:
              f"{c['cx']['estimate']:.3f} ± {_f(c['cx']['sigma'], 2)}, cy "
              f"{c['cy']['estimate']:.3f} ± {_f(c['cy']['sigma'], 2)} px; RMS "
              f"{report['rms_px']:.4f} px",
+             *([f"photo-to-photo σ (each photo left out in turn): fx ± "
+                f"{c['fx']['sigma_photos']:.2g}, fy ± {c['fy']['sigma_photos']:.2g}, cx ± "
+                f"{c['cx']['sigma_photos']:.2g}, cy ± {c['cy']['sigma_photos']:.2g} px"]
+               if "sigma_photos" in c["fx"] else []),
              f"corners cover {100 * report['coverage']['fraction']:.0f} % of the image"]
     lines += [f"warning: {w}" for w in report["warnings"]]
     return "\n".join(lines)
 
 
-__all__ = ["calibrate_single", "markdown", "single_camera_folder", "summary_lines",
+__all__ = ["calibrate_single", "markdown", "photo_spread", "single_camera_folder", "summary_lines",
            "write_camera_files"]
