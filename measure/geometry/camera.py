@@ -30,8 +30,9 @@ BROWN_CONRADY, FISHEYE = "brown_conrady", "fisheye"
 #: (k1, k2, p1, p2, k3) and the rational (k1, k2, p1, p2, k3, k4, k5, k6); fisheye k1…k4.
 DISTORTION_MODELS = {BROWN_CONRADY: (4, 5, 8), FISHEYE: (4,)}
 SUPPORTED_DISTORTION_LENGTHS = DISTORTION_MODELS[BROWN_CONRADY]
-#: Newton iterations of the fisheye model's inversion θ_d → θ (quadratic convergence from
-#: θ = θ_d; OpenCV's ``cv2.fisheye.undistortPoints`` takes 10).
+#: Most Newton iterations of the fisheye model's inversion θ_d → θ (quadratic convergence from
+#: θ = θ_d: 4 for a wide lens over a whole 2448 × 2048 image; OpenCV's
+#: ``cv2.fisheye.undistortPoints`` takes 10).
 FISHEYE_ITERATIONS = 20
 #: Newton iterations of the Brown–Conrady inversion (3 reach 1e-16 for the renders' lenses, 4
 #: for the GoPro's rational one; points left unconverged start again from OpenCV's estimate).
@@ -287,7 +288,8 @@ class Camera(ValueEquality):
                 slope = 1 + t2 * (3 * k1 + t2 * (5 * k2 + t2 * (7 * k3 + t2 * 9 * k4)))
                 step = (value - target) / slope
                 theta = theta - step
-                if not np.nanmax(np.abs(step), initial=0.0) > 1e-16:
+                # quadratic convergence: after a step below 1e-12 rad the error is at rounding
+                if not np.nanmax(np.abs(step), initial=0.0) > 1e-12:
                     break
             t2 = theta * theta
             value = theta * (1 + t2 * (k1 + t2 * (k2 + t2 * (k3 + t2 * k4))))
