@@ -354,13 +354,15 @@ class Camera(ValueEquality):
         c = np.zeros(8)
         c[: self.dist.size] = self.dist
         k1, k2, _, _, k3, k4, k5, k6 = c
-        r2 = xy_distorted[:, 0] * xy_distorted[:, 0] + xy_distorted[:, 1] * xy_distorted[:, 1]
+        x, y = xy_distorted[:, 0], xy_distorted[:, 1]
+        r2 = x * x + y * y
         radial = 1 + r2 * (k1 + r2 * (k2 + r2 * k3))
         if k4 or k5 or k6:
             radial /= 1 + r2 * (k4 + r2 * (k5 + r2 * k6))
         with np.errstate(invalid="ignore", divide="ignore"):
-            start = xy_distorted / radial[:, None]
-        return np.where(np.isfinite(start) & (radial[:, None] > 0), start, xy_distorted)
+            scale = 1.0 / radial
+        scale[~(np.isfinite(scale) & (radial > 0))] = 1.0
+        return np.column_stack([x * scale, y * scale])
 
     def _newton(self, target: np.ndarray, start: np.ndarray, iterations: int):
         """``(xy, ok)``: Newton's method on ``distort(xy) = target`` from ``start`` (both
