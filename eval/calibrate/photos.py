@@ -264,7 +264,9 @@ def warnings_for(report: dict) -> list[str]:
                        f"the lens distortion is extrapolated outside them; photograph the board "
                        f"near the image's edges and corners too")
     if report.get("in_air"):
-        hint = underwater_hint(report["in_air"]["cameras"])
+        hint = underwater_hint(report["in_air"]["cameras"],
+                               {name: m["model"] for name, m in
+                                report["in_air"].get("lens_models", {}).items()})
         if hint:
             out.append(hint)
     if report["left_out"]:
@@ -367,10 +369,13 @@ def worst_corners(residuals: dict, names, count: int = WORST_CORNERS) -> list[di
 PORT_LIKE_K1 = 0.1
 
 
-def underwater_hint(cameras: dict) -> str | None:
+def underwater_hint(cameras: dict, models: dict | None = None) -> str | None:
     """A warning when every camera's k1 (``{name: {"k1": {"estimate": …}}}``) is at least
     :data:`PORT_LIKE_K1`: underwater photos calibrated with ``--air`` (a calibration that absorbs
-    the port)."""
+    the port). Not for the fisheye model (``models`` ``{name: lens model}``): its k1 is on the
+    angle, and a plain pinhole lens has k1 = 1/3 there."""
+    if models and "fisheye" in models.values():
+        return None
     k1 = {name: v["k1"]["estimate"] for name, v in cameras.items() if "k1" in v}
     if not k1 or min(k1.values()) < PORT_LIKE_K1:
         return None

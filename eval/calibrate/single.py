@@ -200,7 +200,7 @@ def _report(args, board, names, size, detections, used, result, outliers, camera
         warnings.append(f"the corners cover {100 * coverage['fraction']:.0f} % of the image "
                         f"({trust.COVERAGE_CELLS}×{trust.COVERAGE_CELLS} cells): the lens "
                         f"distortion is extrapolated outside them")
-    hint = trust.underwater_hint({"camera": estimates})
+    hint = trust.underwater_hint({"camera": estimates}, {"camera": result["model"]})
     if hint:
         warnings.append(hint)
     edge = trust.unseen_edge(board, detections, (VIEW,))
