@@ -180,7 +180,7 @@ def calibrate_fisheye(obj, img, size):
     img = [np.asarray(i, np.float64).reshape(1, -1, 2) for i in img]
     _, K, D, rvecs, tvecs = cv2.fisheye.calibrate(obj, img, tuple(size), None, None,
                                                   flags=FISHEYE_FLAGS, criteria=CRITERIA)
-    views, n_par = len(obj), 8 + 6 * len(obj)
+    n_par = 8 + 6 * len(obj)
     rows, squares, per = [], 0.0, []
     for v, (o, i, rvec, tvec) in enumerate(zip(obj, img, rvecs, tvecs)):
         projected, jac = cv2.fisheye.projectPoints(o.reshape(-1, 1, 3), np.ravel(rvec),
@@ -200,7 +200,7 @@ def calibrate_fisheye(obj, img, size):
         std = np.sqrt(np.diag(covariance))
     rms = float(np.sqrt(squares / n))
     return (rms, K, D.reshape(4, 1), tuple(rvecs), tuple(tvecs), std[:8].reshape(-1, 1),
-            std[8:].reshape(-1, 1), np.array(per).reshape(-1, 1)) if views else None
+            std[8:].reshape(-1, 1), np.array(per).reshape(-1, 1))
 
 
 def calibrate_camera(obj, img, size, lens_model: str = DEFAULT_LENS_MODEL):
