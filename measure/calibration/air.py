@@ -178,8 +178,12 @@ def calibrate_fisheye(obj, img, size):
     ``cv2.fisheye.projectPoints``."""
     obj = [np.asarray(o, np.float64).reshape(1, -1, 3) for o in obj]
     img = [np.asarray(i, np.float64).reshape(1, -1, 2) for i in img]
-    _, K, D, rvecs, tvecs = cv2.fisheye.calibrate(obj, img, tuple(size), None, None,
-                                                  flags=FISHEYE_FLAGS, criteria=CRITERIA)
+    try:
+        _, K, D, rvecs, tvecs = cv2.fisheye.calibrate(obj, img, tuple(size), None, None,
+                                                      flags=FISHEYE_FLAGS, criteria=CRITERIA)
+    except cv2.error as exc:
+        reason = (str(exc).strip().splitlines() or ["?"])[-1]
+        raise CalibrationError(f"OpenCV's fisheye calibration failed ({reason[:160]})") from None
     n_par = 8 + 6 * len(obj)
     rows, squares, per = [], 0.0, []
     for v, (o, i, rvec, tvec) in enumerate(zip(obj, img, rvecs, tvecs)):
