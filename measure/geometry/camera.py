@@ -306,10 +306,10 @@ class Camera(ValueEquality):
 
         Brown–Conrady: Newton steps with the analytic Jacobian of :meth:`distort_columns` from
         one fixed-point step (:meth:`_radial_start`) converge to ~1e-16 in normalized
-        coordinates; a point they
-        leave unconverged (or beyond a fold) starts again from OpenCV's iterative
-        ``cv2.undistortPoints`` (OpenCV's default 5 fixed-point iterations alone stop near
-        1e-6). Fisheye: Newton on the radial ``θ_d(θ)`` (:meth:`_undistort_fisheye`).
+        coordinates; a point they leave unconverged (or beyond a fold) starts again from
+        OpenCV's iterative ``cv2.undistortPoints`` (OpenCV's default 5 fixed-point iterations
+        alone stop near 1e-6). Fisheye: Newton on the radial ``θ_d(θ)``
+        (:meth:`_undistort_fisheye`).
         """
         return self.undistort_with_reason(xy_distorted, iterations)[0]
 
