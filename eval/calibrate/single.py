@@ -49,7 +49,8 @@ def calibrate_single(args, output, log, start, board) -> tuple[dict, str]:
     """Calibrate the camera of the photo folder ``args.dir``; returns ``(report, summary)``
     after writing everything into ``output`` (module docs)."""
     from measure.calibration.air import (DEFAULT_LENS_MODEL, CalibrationError, Detections,
-                                         calibrate_camera, camera_residuals, detect_images)
+                                         calibrate_camera, calibrate_fisheye, camera_residuals,
+                                         detect_images)
 
     from eval.core.photos import encoding_note, photo_files, read_photo
 
@@ -97,6 +98,11 @@ def calibrate_single(args, output, log, start, board) -> tuple[dict, str]:
         obj = [corners[dets.ids[k][VIEW]] for k in poses]
         img = [dets.pixels[k][VIEW].astype(np.float32) for k in poses]
         out, model, tried, problem = calibrate_camera(obj, img, size, lens)
+        if lens == "auto":  # the fisheye model's RMS beside them, for the user to choose
+            try:
+                tried["fisheye"] = float(calibrate_fisheye(obj, img, size)[0])
+            except CalibrationError:
+                tried["fisheye"] = float("nan")
         return {"out": out, "model": model, "tried": tried, "problem": problem, "poses": poses,
                 "residuals": camera_residuals(obj, img, out, poses, dets.ids, VIEW, model),
                 "rms_px_per": {(k, VIEW): float(e) for k, e in zip(poses, out[7].ravel())}}
@@ -267,10 +273,13 @@ def markdown(report: dict) -> str:
     lines += ["## Camera (OpenCV)", "",
               f"Reprojection RMS {report['rms_px']:.4f} px; lens model {m['model']} ("
               + ", ".join(f"{k} {v:.4f} px" for k, v in m["rms_px"].items())
-              + f"; {trust.LENS_RULE}). σ: OpenCV's `calibrateCameraExtended` standard "
-              f"deviations (the fisheye model's computed as it does, s² (JᵀJ)⁻¹); σ photos: "
-              f"the jackknife over the photos, each left out in turn (the spread which photos "
-              f"are kept gives).", "", "| parameter | value | σ | σ photos |", "|---|---|---|---|"]
+              + f"; {trust.LENS_RULE}"
+              + ("; the fisheye model's RMS is listed for comparison: it is used with --lens "
+                 "fisheye" if "fisheye" in m["rms_px"] and m["model"] != "fisheye" else "")
+              + "). σ: OpenCV's `calibrateCameraExtended` standard "
+              "deviations (the fisheye model's computed as it does, s² (JᵀJ)⁻¹); σ photos: "
+              "the jackknife over the photos, each left out in turn (the spread which photos "
+              "are kept gives).", "", "| parameter | value | σ | σ photos |", "|---|---|---|---|"]
     lines += [f"| {k} | {v['estimate']:.6g} | {_f(v['sigma'], 3)} | "
               f"{_f(v.get('sigma_photos'), 3) if 'sigma_photos' in v else ''} |"
               for k, v in report["camera"].items()]
