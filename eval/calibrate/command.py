@@ -111,7 +111,8 @@ def add_parser(subparsers):
                         "defaults above")
     p.add_argument("--lens", choices=("auto", *LENS_MODELS), default=None,
                    help="in air: the lens model OpenCV fits — standard (k1 k2 p1 p2), k3, "
-                        "rational (k1…k6 p1 p2: wide and action-camera lenses) or auto "
+                        "rational (k1…k6 p1 p2: wide and action-camera lenses), fisheye "
+                        "(OpenCV's fisheye model, k1…k4 on the ray's angle) or auto "
                         "(default: the richer model only where it lowers the RMS by 2 %%; the "
                         "report lists each model's RMS)")
     add_out_option(p, COMMAND)

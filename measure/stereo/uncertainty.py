@@ -82,8 +82,9 @@ def _distortion_terms(camera: Camera, pixels: np.ndarray):
     xd = (pixels[:, 0] - cx - s * yd) / fx
     x, y = camera.undistort(np.column_stack([xd, yd])).T
     c = np.zeros(8)
-    if camera.dist is not None:
-        c[: camera.dist.size] = camera.dist
+    dist = camera.brown_conrady_dist("the intrinsics' σ propagation")
+    if dist is not None:
+        c[: dist.size] = dist
     r2 = x * x + y * y
     denominator = 1 + r2 * (c[5] + r2 * (c[6] + r2 * c[7]))
     out = np.zeros((pixels.shape[0], 2, 9))
@@ -189,7 +190,8 @@ def perturbed_rig(rig: StereoRig, names, delta, normal_axes=None) -> StereoRig:
     that dome's centre (reference frame), ``port.index[k]`` medium k of both domes."""
     cams = [rig.left, rig.right]
     K = [c.K.copy() for c in cams]
-    dist = [np.zeros(8) if c.dist is None else np.pad(c.dist, (0, 8 - c.dist.size)) for c in cams]
+    dist = [np.zeros(8) if c.brown_conrady_dist("perturbed_rig") is None
+            else np.pad(c.dist, (0, 8 - c.dist.size)) for c in cams]
     R, t = rig.right.R.copy(), rig.right.t.copy()
     port_changes = []
     phi = np.zeros(3)
