@@ -194,19 +194,7 @@ def _report(args, board, names, size, detections, used, result, outliers, camera
             problem) -> dict:
     used_poses = result["poses"]
     rms = float(result["out"][0])
-    rows = []
-    for k, name in enumerate(names):
-        n = int(len(detections.ids[k][VIEW]))
-        if not n:
-            status = "board not found"
-        elif k in outliers["left_out"]:
-            status = (f"left out: outlier (first fit RMS "
-                      f"{outliers['first_fit_rms_px'][f'{k}:left']:.3f} px > "
-                      f"{outliers['threshold_px']:.3f} px)")
-        else:
-            status = "used"
-        rows.append({"pose": k, "name": name, "corners": n, "status": status,
-                     "rms_px": result["rms_px_per"].get((k, VIEW)) if status == "used" else None})
+    rows = photo_rows(names, detections, outliers, result["rms_px_per"])
     coverage = trust.coverage(used, size)["left"]
     estimates = trust.camera_estimates(camera, sigmas)
     failures = []
@@ -323,6 +311,44 @@ def write_camera_files(directory, camera, lens_model, rms_px, sigmas: dict, cova
     write_single_camera(directory, camera, port)
 
 
+def photo_rows(names, detections, outliers, rms_px_per, posed=None) -> list:
+    """The report's ``per_pose`` of one camera's photos: each photo's corners, status (board not
+    found, left out as an outlier, left out with no starting pose — where ``posed``, the
+    photos the fit had a pose for, is given — or used) and RMS ``rms_px_per[(k, VIEW)]``."""
+    rows = []
+    for k, name in enumerate(names):
+        n = int(len(detections.ids[k][VIEW]))
+        if not n:
+            status = "board not found"
+        elif k in outliers["left_out"]:
+            status = (f"left out: outlier (first fit RMS "
+                      f"{outliers['first_fit_rms_px'][f'{k}:left']:.3f} px > "
+                      f"{outliers['threshold_px']:.3f} px)")
+        elif posed is not None and k not in posed:
+            status = "left out: no starting pose (solvePnP)"
+        else:
+            status = "used"
+        rows.append({"pose": k, "name": name, "corners": n, "status": status,
+                     "rms_px": rms_px_per.get((k, VIEW)) if status == "used" else None})
+    return rows
+
+
+def photo_lines(report: dict) -> list:
+    """report.md's photos of one camera: the outlier rule, each photo's corners, RMS and status,
+    the coverage of the image and the worst corners (also the one-camera housing's report)."""
+    lines = ["## Photos", "", f"Outlier rule: {report['outlier_rule']} (threshold here "
+             f"{report['outliers']['threshold_px']:.3f} px).", "",
+             "| photo | corners | RMS (px) | status |", "|---|---|---|---|"]
+    lines += [f"| {p['name']} | {p['corners']} | {_f(p['rms_px'])} | {p['status']} |"
+              for p in report["per_pose"]]
+    lines += ["", f"Corners cover {100 * report['coverage']['fraction']:.0f} % of the image "
+              f"({trust.COVERAGE_CELLS}×{trust.COVERAGE_CELLS} cells; `coverage.png`).", "",
+              "## Worst corners", "", "| photo | corner id | residual (px) |", "|---|---|---|"]
+    lines += [f"| {c['pose']} | {c['id']} | {c['residual_px']:.3f} |"
+              for c in report["worst_corners"]]
+    return lines
+
+
 def markdown(report: dict) -> str:
     b = report["board"]
     lines = [f"# Camera calibration report: `{report['photos']}`", "",
@@ -350,16 +376,7 @@ def markdown(report: dict) -> str:
     lines += [f"| {k} | {v['estimate']:.6g} | {_f(v['sigma'], 3)} | "
               f"{_f(v.get('sigma_photos'), 3) if 'sigma_photos' in v else ''} |"
               for k, v in report["camera"].items()]
-    lines += ["", "## Photos", "", f"Outlier rule: {report['outlier_rule']} (threshold here "
-              f"{report['outliers']['threshold_px']:.3f} px).", "",
-              "| photo | corners | RMS (px) | status |", "|---|---|---|---|"]
-    lines += [f"| {p['name']} | {p['corners']} | {_f(p['rms_px'])} | {p['status']} |"
-              for p in report["per_pose"]]
-    lines += ["", f"Corners cover {100 * report['coverage']['fraction']:.0f} % of the image "
-              f"({trust.COVERAGE_CELLS}×{trust.COVERAGE_CELLS} cells; `coverage.png`).", "",
-              "## Worst corners", "", "| photo | corner id | residual (px) |", "|---|---|---|"]
-    lines += [f"| {c['pose']} | {c['id']} | {c['residual_px']:.3f} |"
-              for c in report["worst_corners"]]
+    lines += ["", *photo_lines(report)]
     lines += ["", "## Files", "", "- `camera.yaml` (OpenCV FileStorage), `calibmar.yaml` "
               "(calibmar, no port), `cameras.txt` (COLMAP)",
               "- `coverage.png`, `residuals.png` (residual vectors per photo)", "",
