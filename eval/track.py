@@ -22,6 +22,8 @@ fraction of positions inside their 95 % ellipsoid). Exit 1 when a frame has no p
 
 from __future__ import annotations
 
+import argparse
+
 import json
 import os
 import sys
@@ -50,6 +52,10 @@ def add_parser(subparsers):
     p.add_argument("--gate", type=positive_float, default=DEFAULT_GATE_PX, metavar="PX",
                    help=f"largest distance of a detection from its marker's predicted pixel "
                         f"(default {DEFAULT_GATE_PX:g})")
+    p.add_argument("--eccentricity", action=argparse.BooleanOptionalAction, default=True,
+                   help="correct each detection for its disk's eccentricity, predicted from the "
+                        "pose (the markers' normal and radius are known; default on); "
+                        "--no-eccentricity: the raw centroids")
     add_out_option(p, COMMAND, default="out/track")
     add_json_option(p)
     add_progress_option(p)
@@ -116,6 +122,24 @@ def associate(predicted, detections, gate_px: float) -> np.ndarray:
     return out
 
 
+#: The markers' normal in the object frame (the docking frame faces the cameras: −z).
+MARKER_NORMAL = np.array([0.0, 0.0, -1.0])
+
+
+def eccentricity_offsets(rig, obj, pose, radius_mm):
+    """``(2, M, 2)`` px: per view the area centroid of each marker disk's image minus its
+    centre's pixel (:func:`measure.images.eccentricity.outline_centroid_offsets`) at ``pose``
+    — the bias of a detected centroid the two views share, removed before the pose is
+    estimated again."""
+    from measure.images.eccentricity import outline_centroid_offsets
+
+    centres = obj @ pose.R.T + pose.t
+    normal = pose.R @ MARKER_NORMAL
+    return np.stack([outline_centroid_offsets(camera, rig.view_port(v), centres, normal,
+                                              radius_mm)
+                     for v, camera in enumerate(rig.cameras)])
+
+
 def main(args) -> int:
     import cv2
 
@@ -131,6 +155,11 @@ def main(args) -> int:
            else (lambda text: print(text, file=sys.stderr, flush=True)))
     start = time.perf_counter()
     manifest, rig, obj, (frames, R_true, t_true), true_pixels = read_sequence(args.dataset)
+    radius = float((manifest.get("object") or {}).get("marker_radius_mm") or 0.0)
+    if args.eccentricity and radius <= 0:
+        raise CLIError(f"{args.dataset}: its manifest gives no marker radius, which the "
+                       f"eccentricity correction needs (--no-eccentricity measures the raw "
+                       f"centroids)")
     output = OutputDir(args.out, COMMAND).claim()
     R_prev, t_prev = R_true[0], t_true[0]  # locked on at the first frame's true pose
     velocity = np.zeros(3)  # mm per frame, of the last two poses
@@ -153,6 +182,10 @@ def main(args) -> int:
             pixels[v] = associate(predicted, centres, args.gate)
         t0 = time.perf_counter()
         pose = estimate_pose(rig, obj, pixels, args.pixel_sigma)
+        if args.eccentricity and pose.valid:
+            pixels = pixels - np.nan_to_num(eccentricity_offsets(rig, obj, pose, radius))
+            corrected = estimate_pose(rig, obj, pixels, args.pixel_sigma)
+            pose = corrected if corrected.valid else pose
         seconds["pose"] += time.perf_counter() - t0
         estimates.append(pose)
         miss = (pixels - true_pixels[k]).reshape(-1, 2)
@@ -193,7 +226,8 @@ def main(args) -> int:
                         "coverage_95": float(np.mean(d2 <= CHI2_3_95))})
     report = {"dataset": args.dataset, "sequence": {k: manifest.get(k) for k in (
         "approach_mm", "yaw_deg", "frames", "fps", "object", "image_size")},
-        "pixel_sigma_px": args.pixel_sigma, "gate_px": args.gate, "summary": summary,
+        "pixel_sigma_px": args.pixel_sigma, "gate_px": args.gate,
+        "eccentricity": bool(args.eccentricity), "summary": summary,
         "frames": rows}
     ok = np.array([p.valid for p in estimates])
     with output.staged() as tmp:
