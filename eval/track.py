@@ -146,7 +146,7 @@ def main(args) -> int:
     from measure import detect_targets
     from measure.geometry.projection import project
     from measure.reasons import Reason
-    from measure.stereo.pose import estimate_pose, rotation_error
+    from measure.stereo.pose import estimate_pose, pinhole_pose, rotation_error
     from measure.stereo.uncertainty import CHI2_3_95, mahalanobis_squared
     from synth.infra.fileio import OutputDir, atomic_write_json, jsonable
     from synth.products.sequence import write_tum
@@ -180,6 +180,8 @@ def main(args) -> int:
             predicted = project(rig.cameras[v], rig.view_port(v),
                                 obj @ R_prev.T + t_prev + velocity)
             pixels[v] = associate(predicted, centres, args.gate)
+        # the baseline: the left camera's raw detections as a pinhole that ignores the port
+        _, t_pinhole = pinhole_pose(rig.left, obj, pixels[0])
         t0 = time.perf_counter()
         pose = estimate_pose(rig, obj, pixels, args.pixel_sigma)
         if args.eccentricity and pose.valid:
@@ -198,7 +200,12 @@ def main(args) -> int:
             velocity = pose.t - t_prev if k > 0 else np.zeros(3)
             R_prev, t_prev = pose.R, pose.t
             error = pose.t - t_true[k]
+            distance = float(np.linalg.norm(t_true[k]))
             row.update({"position_error_mm": float(np.linalg.norm(error)),
+                        "position_error_pct": float(100 * np.linalg.norm(error) / distance),
+                        "distance_mm": distance,
+                        "pinhole_position_error_pct": float(
+                            100 * np.linalg.norm(t_pinhole - t_true[k]) / distance),
                         "error_mm": error.tolist(),
                         "rotation_error_rad": float(rotation_error(pose.R, R_true[k])),
                         "mahalanobis2": float(mahalanobis_squared(
@@ -217,8 +224,14 @@ def main(args) -> int:
         dr = np.array([r["rotation_error_rad"] for r in valid])
         d2 = np.array([r["mahalanobis2"] for r in valid])
         miss = [r["detection_rms_px"] for r in rows if r["detection_rms_px"] is not None]
+        pct = np.array([r["position_error_pct"] for r in valid])
+        pinhole = np.array([r["pinhole_position_error_pct"] for r in valid])
         summary.update({"detection_rms_px": {"median": float(np.median(miss)),
                                              "max": float(np.max(miss))},
+                        "position_error_pct": {"median": float(np.median(pct)),
+                                               "max": float(pct.max())},
+                        "pinhole_position_error_pct": {"median": float(np.nanmedian(pinhole)),
+                                                       "max": float(np.nanmax(pinhole))},
                         "position_error_mm": {"median": float(np.median(dt)),
                                               "max": float(dt.max())},
                         "rotation_error_rad": {"median": float(np.median(dr)),
@@ -255,7 +268,9 @@ def main(args) -> int:
     if valid:
         print(f"tracked {summary['tracked']} of {summary['frames']} frames: position error "
               f"median {summary['position_error_mm']['median']:.3g} mm (max "
-              f"{summary['position_error_mm']['max']:.3g}), rotation median "
+              f"{summary['position_error_mm']['max']:.3g}; max {summary['position_error_pct']['max']:.3g} % "
+              f"of the distance, the left camera as a pinhole: "
+              f"{summary['pinhole_position_error_pct']['max']:.3g} %), rotation median "
               f"{summary['rotation_error_rad']['median']:.3g} rad (max "
               f"{summary['rotation_error_rad']['max']:.3g}); {summary['coverage_95']:.0%} of "
               f"the positions inside their 95 % ellipsoid; detections "
