@@ -46,8 +46,8 @@ from ..stereo.triangulate import StereoRig
 from .air import CalibrationError, Detections
 from .board import Board
 from .covariance import AIR_INTRINSICS, AIR_NAMES, POSE_NAMES
-from .dome import DOME_HOUSING, dome_offset
-from .flat import FLAT_HOUSING
+from .dome import DOME_HOUSING
+from .flat import FLAT_HOUSING, FLAT_PAIR_HOUSING
 from ..stereo.rig_covariance import RigCovariance
 
 #: The free parameters by default: of a flat port, of two domes.
@@ -56,7 +56,7 @@ DEFAULT_DOME_FREE = DOME_HOUSING.default_free
 #: What :func:`calibrate_housing` asks of each kind of port (``rig.port.kind``): its free
 #: parameters and their default, its problem (residuals, Jacobian), its names in a covariance.
 #: A new kind of port adds its own here (module docs of :mod:`measure.calibration.flat`).
-HOUSINGS = {"flat": FLAT_HOUSING, "dome": DOME_HOUSING}
+HOUSINGS = {"flat": FLAT_HOUSING, "dome": DOME_HOUSING, "flat pair": FLAT_PAIR_HOUSING}
 #: How the in-air calibration's covariance enters the housing's (:func:`calibrate_housing`).
 UNCERTAINTY = ("propagate", "prior")
 #: The default: both covered the chain's error on 30 seeds of rendered boards, the prior with
@@ -124,7 +124,7 @@ def calibrate_housing(rig: StereoRig, board: Board, detections: Detections,
     calibration. ``views``: the cameras whose corners enter (``(0,)``: the left camera alone,
     :func:`calibrate_camera_housing`)."""
     housing = HOUSINGS.get(rig.port.kind)
-    if housing is None:  # e.g. two housings (a FlatPair): no housing problem yet
+    if housing is None:  # a kind of port without a housing problem
         raise CalibrationError(f"no housing calibration of {rig.port.rig_name} "
                                f"({rig.port.rig_detail}) yet")
     housing = housing.for_views(views)
@@ -239,19 +239,7 @@ def calibrate_housing(rig: StereoRig, board: Board, detections: Detections,
     estimates, sigmas, conditional, k = {}, {}, {}, 0
     for name in names:
         w = table[name]
-        if name == "dome_center":
-            estimates[name] = {("left", "right")[i]: dome_offset(cameras[i], port[i]).tolist()
-                               for i in housing.views}
-        elif name == "distance":
-            estimates[name] = port.distance
-        elif name == "normal":
-            estimates[name] = port.normal.tolist()
-        elif name == "thickness":
-            estimates[name] = port.thicknesses[0]
-        elif name == "n_water":
-            estimates[name] = port.n_water
-        else:
-            estimates[name] = {"R": cameras[1].R.tolist(), "t": cameras[1].t.tolist()}
+        estimates[name] = housing.estimate(name, port, cameras)
         sigmas[name] = float(sig[k]) if w == 1 else sig[k:k + w].tolist()
         conditional[name] = (float(sig_conditional[k]) if w == 1
                              else sig_conditional[k:k + w].tolist())
