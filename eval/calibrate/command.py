@@ -9,7 +9,9 @@ user's own photos (``DIR/left/``, ``DIR/right/``, paired by name; the board on t
 both cameras and the stereo pose (:func:`measure.calibration.air.calibrate_in_air`). Underwater:
 the housing is estimated by refractive bundle adjustment with the in-air intrinsics fixed
 (:func:`measure.calibration.housing.calibrate_housing`); ``--intrinsics`` gives them, as an in-air boards
-folder (calibrated here first) or a ``calib.yaml``.
+folder (calibrated here first) or a ``calib.yaml``. Behind two housings (each camera its own
+flat port: boards whose truth says so, or photos with ``--port-distance``) each camera's port is
+estimated, starting ``--port-distance LEFT,RIGHT`` mm from its camera (:func:`design_pair`).
 
 Writes to ``--out``: ``calib.yaml`` (the dataset format, with an ``uncertainty`` map),
 ``calib_in_air_only.yaml`` (underwater: the in-air calibration with the design port — what a

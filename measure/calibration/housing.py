@@ -26,6 +26,15 @@ in-air covariance entering the same two ways (each dome moves with its camera wh
 in-air stereo pose moves); the joint covariance names each dome's centre in the reference
 frame (``left/right.dome_center[k]``, :mod:`measure.stereo.rig_covariance`).
 
+A rig of two housings (:class:`measure.geometry.flat_pair.FlatPair`, each camera behind its own
+flat port; :data:`measure.calibration.flat.FLAT_PAIR_HOUSING`): the flat port's problem with
+``distance``, ``normal`` and ``thickness`` per camera (left, then right: 2, 4, 2 numbers; each
+port's tilts about axes ⟂ its own starting normal), one ``n_water`` and the ``extrinsics``;
+each camera's corners through its own port. The estimates are ``{"left": …, "right": …}``;
+the joint covariance names ``left/right.port.distance``, ``left/right.port.tilt[0/1]`` (both
+about one pair of axes ⟂ the left port's normal), ``left/right.port.thickness[0]`` and
+``port.index[2]``.
+
 Uncertainty: ``s² (JᵀJ)⁻¹`` with ``s² = Σr² / (m − n)``; a parameter is reported not
 identifiable when the column-scaled normal matrix is singular in its direction or two free
 parameters correlate at :data:`CORRELATION_LIMIT` or more (then no estimate is returned).
