@@ -15,3 +15,5 @@ class Reason(IntEnum):
     NOT_IN_WATER = 6  # a point to project is not beyond the port's last interface
     NOT_CONVERGED = 7  # an iterative solver did not reach its tolerance
     TOO_FEW_VIEWS = 8  # a target seen (and traced) by fewer than two views: not triangulated
+    TOO_FEW_POINTS = 9  # a pose from fewer than four observations or three object points
+    DEGENERATE = 10  # the data do not fix the answer (collinear points, a singular normal matrix)

@@ -13,10 +13,11 @@ from synth.infra.cli import DEFINE_HELP, JSON_HELP, NO_PROGRESS_HELP, SCENE_HELP
 WITH_PROGRESS = {("eval", "run"), ("eval", "paper"), ("eval", "sweep"), ("eval", "calibrate"),
                  ("eval", "bench"), ("eval", "render-bench"), ("eval", "measure"),
                  ("synth", "render"),
-                 ("synth", "dataset"), ("synth", "suite"), ("synth", "boards")}
+                 ("synth", "dataset"), ("synth", "suite"), ("synth", "boards"),
+                 ("synth", "sequence"), ("eval", "track")}
 #: Subcommands that read a scene file: each takes it as the positional ``scene``.
 WITH_SCENE = {("eval", "run"), ("eval", "render-bench"), ("synth", "render"),
-              ("synth", "dataset"), ("synth", "boards")}
+              ("synth", "dataset"), ("synth", "boards"), ("synth", "sequence")}
 
 
 def _synth_parser():
@@ -42,7 +43,7 @@ SUBCOMMANDS = list(_subcommands())
 def test_every_subcommand_is_walked():
     names = {(prog, name) for prog, name, _ in SUBCOMMANDS}
     assert WITH_PROGRESS <= names and WITH_SCENE <= names
-    assert len(names) == 15
+    assert len(names) == 18
 
 
 @pytest.mark.parametrize("prog, name, parser", SUBCOMMANDS,

@@ -62,6 +62,10 @@ def add_parser(subparsers):
                     "paired by name (give the board, and --air or --intrinsics).")
     p.add_argument("dir", help="boards folder (python -m synth boards) or photo folder "
                                "(DIR/left/, DIR/right/)")
+    p.add_argument("--model", choices=("port", "absorbed"), default="port",
+                   help="port (default): the cameras in air, then the housing's port; absorbed: "
+                        "underwater boards or photos calibrated as pinhole cameras, the port "
+                        "absorbed by focal length and distortion (docs/absorbed.md)")
     p.add_argument("--air", action="store_true",
                    help="photos: taken in air (OpenCV calibrates both cameras and the stereo "
                         "pose); a boards folder says it itself")
@@ -118,7 +122,8 @@ def add_parser(subparsers):
                         "defaults above")
     p.add_argument("--lens", choices=("auto", *LENS_MODELS), default=None,
                    help="in air: the lens model OpenCV fits — standard (k1 k2 p1 p2), k3, "
-                        "rational (k1…k6 p1 p2: wide and action-camera lenses) or auto "
+                        "rational (k1…k6 p1 p2: wide and action-camera lenses), fisheye "
+                        "(OpenCV's fisheye model, k1…k4 on the ray's angle) or auto "
                         "(default: the richer model only where it lowers the RMS by 2 %%; the "
                         "report lists each model's RMS)")
     add_out_option(p, COMMAND)
@@ -316,6 +321,15 @@ def main(args) -> int:
         what = "a file, not a folder" if os.path.exists(args.dir) else "no such folder"
         raise CLIError(f"{args.dir}: {what} (give a photo folder, DIR/left/ and DIR/right/, or a "
                        f"synth boards folder)")
+    if args.model == "absorbed":
+        from eval.calibrate.absorbed import calibrate_absorbed_main
+
+        if args.air or args.intrinsics:
+            raise CLIError(f"--model absorbed: {'--air' if args.air else '--intrinsics'} does not "
+                           f"apply: the underwater photos themselves calibrate the cameras")
+        refuse_given(args, HOUSING_OPTIONS + DOME_DESIGN_OPTIONS + ("air_uncertainty",),
+                     "with --model absorbed: it has no port")
+        return calibrate_absorbed_main(args, output, log, start)
     if is_photo_folder(args.dir) or (
             any(os.path.isdir(os.path.join(args.dir, sub)) for sub in ("left", "right"))
             and not os.path.exists(os.path.join(args.dir, "manifest.json"))):

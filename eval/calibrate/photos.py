@@ -195,13 +195,14 @@ def air_estimates(air, poses) -> dict:
 def camera_estimates(camera, sigmas: dict) -> dict:
     """``{name: {estimate, sigma}}`` of one camera's intrinsics: fx, fy, cx, cy and the
     distortion coefficients its lens model estimated (the names of ``sigmas``)."""
-    from measure.calibration.air import INTRINSIC_NAMES
+    from measure.calibration.air import FISHEYE_INTRINSIC_NAMES, INTRINSIC_NAMES
 
     values = {"fx": camera.K[0, 0], "fy": camera.K[1, 1], "cx": camera.K[0, 2],
               "cy": camera.K[1, 2]}
     dist = np.zeros(8) if camera.dist is None else np.pad(np.ravel(camera.dist),
                                                           (0, max(0, 8 - np.size(camera.dist))))
-    values.update((n, d) for n, d in zip(INTRINSIC_NAMES[4:], dist) if n in sigmas)
+    names = FISHEYE_INTRINSIC_NAMES if camera.fisheye else INTRINSIC_NAMES
+    values.update((n, d) for n, d in zip(names[4:], dist) if n in sigmas)
     return {key: {"estimate": float(v), "sigma": sigmas.get(key)} for key, v in values.items()}
 
 
@@ -281,7 +282,9 @@ def warnings_for(report: dict) -> list[str]:
                        f"the lens distortion is extrapolated outside them; photograph the board "
                        f"near the image's edges and corners too")
     if report.get("in_air"):
-        hint = underwater_hint(report["in_air"]["cameras"])
+        hint = underwater_hint(report["in_air"]["cameras"],
+                               {name: m["model"] for name, m in
+                                report["in_air"].get("lens_models", {}).items()})
         if hint:
             out.append(hint)
     if report["left_out"]:
@@ -384,10 +387,13 @@ def worst_corners(residuals: dict, names, count: int = WORST_CORNERS) -> list[di
 PORT_LIKE_K1 = 0.1
 
 
-def underwater_hint(cameras: dict) -> str | None:
+def underwater_hint(cameras: dict, models: dict | None = None) -> str | None:
     """A warning when every camera's k1 (``{name: {"k1": {"estimate": …}}}``) is at least
     :data:`PORT_LIKE_K1`: underwater photos calibrated with ``--air`` (a calibration that absorbs
-    the port)."""
+    the port). Not for the fisheye model (``models`` ``{name: lens model}``): its k1 is on the
+    angle, and a plain pinhole lens has k1 = 1/3 there."""
+    if models and "fisheye" in models.values():
+        return None
     k1 = {name: v["k1"]["estimate"] for name, v in cameras.items() if "k1" in v}
     if not k1 or min(k1.values()) < PORT_LIKE_K1:
         return None

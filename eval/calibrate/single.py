@@ -6,16 +6,19 @@ one pose. The lens model is chosen as for a pair (``--lens``, :func:`measure.cal
 calibrate_camera`), outlier poses are left out by the same rule
 (:func:`eval.calibrate.photos.outlier_poses`), and the report says what the photos alone can
 say: per pose the corners and RMS, the worst corners, the coverage of the image, the σ of every
-intrinsic (OpenCV's ``stdDeviationsIntrinsics``).
+intrinsic (OpenCV's ``stdDeviationsIntrinsics``) and the photo-to-photo σ of fx, fy, cx, cy
+(:func:`photo_spread`: the jackknife over the photos).
 
 Writes to ``--out``: ``camera.yaml`` (OpenCV ``FileStorage``, the names of OpenCV's calibration
 sample: ``image_width``, ``image_height``, ``camera_matrix``, ``distortion_coefficients``, with
-``lens_model``, ``rms_px``, the σ and — standard lens model — the ``covariance`` of the 8
+``lens_model``, ``distortion_model`` (``brown_conrady`` or ``fisheye``: OpenCV's fisheye model,
+k1…k4), ``rms_px``, the σ and — standard lens model — the ``covariance`` of the 8
 intrinsics, :func:`camera_covariance`, which the camera's housing calibration starts from:
-:mod:`eval.calibrate.single_housing`), ``calibmar.yaml`` (calibmar's one-camera file, no port),
-``cameras.txt`` (one COLMAP camera), ``report.json``, ``report.md``, ``coverage.png`` and
-``residuals.png``. A calibration the run knows is wrong (a lens model whose distortion folds
-within the image, a σ of fx or fy larger than the value) exits 1 with the files written.
+:mod:`eval.calibrate.single_housing`), ``calibmar.yaml`` (calibmar's one-camera file, no port;
+model OPENCV, FULL_OPENCV or OPENCV_FISHEYE), ``cameras.txt`` (one COLMAP camera),
+``report.json``, ``report.md``, ``coverage.png`` and ``residuals.png``. A calibration the run
+knows is wrong (a lens model whose distortion folds within the image, a σ of fx or fy larger
+than the value) exits 1 with the files written.
 """
 
 from __future__ import annotations
@@ -97,7 +100,7 @@ def calibrate_single(args, output, log, start, board) -> tuple[dict, str]:
     """Calibrate the camera of the photo folder ``args.dir``; returns ``(report, summary)``
     after writing everything into ``output`` (module docs)."""
     from measure.calibration.air import (DEFAULT_LENS_MODEL, CalibrationError, calibrate_camera,
-                                         camera_residuals)
+                                         calibrate_fisheye, camera_residuals)
 
     where = f"{args.dir} (one camera's photos)"
     names, images, size, detections, timings = read_and_detect(args, board, log)
@@ -112,8 +115,13 @@ def calibrate_single(args, output, log, start, board) -> tuple[dict, str]:
         obj = [corners[dets.ids[k][VIEW]] for k in poses]
         img = [dets.pixels[k][VIEW].astype(np.float32) for k in poses]
         out, model, tried, problem = calibrate_camera(obj, img, size, lens)
+        if lens == "auto":  # the fisheye model's RMS beside them, for the user to choose
+            try:
+                tried["fisheye"] = float(calibrate_fisheye(obj, img, size)[0])
+            except CalibrationError:
+                tried["fisheye"] = float("nan")
         return {"out": out, "model": model, "tried": tried, "problem": problem, "poses": poses,
-                "residuals": camera_residuals(obj, img, out, poses, dets.ids, VIEW),
+                "residuals": camera_residuals(obj, img, out, poses, dets.ids, VIEW, model),
                 "rms_px_per": {(k, VIEW): float(e) for k, e in zip(poses, out[7].ravel())},
                 "covariance": camera_covariance(obj, out) if model == "standard" else None}
 
@@ -126,8 +134,13 @@ def calibrate_single(args, output, log, start, board) -> tuple[dict, str]:
         raise CLIError(f"{where}: {exc}") from None
     timings["calibrate"] = time.perf_counter() - t
     camera, sigmas = _camera(result, size)
+    t = time.perf_counter()
+    spread = photo_spread(used_detections, result, corners, size)
+    timings["leave_one_out"] = time.perf_counter() - t
     report = _report(args, board, names, size, detections, used_detections, result, outliers,
                      camera, sigmas, result["problem"])
+    for key, value in spread.items():
+        report["camera"][key]["sigma_photos"] = value
     report["timings_s"] = timings
     log("write the calibration, report and figures …")
     with output.staged() as tmp:
@@ -142,15 +155,38 @@ def calibrate_single(args, output, log, start, board) -> tuple[dict, str]:
     return report, summary_lines(report)
 
 
+def photo_spread(detections, result, corners, size) -> dict:
+    """``{fx, fy, cx, cy: σ}`` (px) from the photos themselves: the jackknife over the photos
+    used, ``sqrt((n − 1)/n Σ (θ_i − θ̄)²)`` of the fits with photo i left out (the same lens
+    model). OpenCV's σ takes every corner's error as independent; on real photos a photo's
+    corners share its errors (motion, a board not quite flat, a rolling shutter), and which
+    photos are kept moves the intrinsics by more (docs/calibration.md: fx ± 0.19 % by OpenCV,
+    0.8 % by the photos, on the GoPro frames). Empty for fewer than 4 photos."""
+    from measure.calibration.air import calibrate_camera
+
+    poses = result["poses"]
+    if len(poses) < 4:
+        return {}
+    values = []
+    for drop in poses:
+        kept = [k for k in poses if k != drop]
+        obj = [corners[detections.ids[k][VIEW]] for k in kept]
+        img = [detections.pixels[k][VIEW].astype(np.float32) for k in kept]
+        K = calibrate_camera(obj, img, size, result["model"])[0][1]
+        values.append((K[0, 0], K[1, 1], K[0, 2], K[1, 2]))
+    values = np.asarray(values)
+    n = len(values)
+    sigma = np.sqrt((n - 1) / n * np.sum((values - values.mean(axis=0)) ** 2, axis=0))
+    return {key: float(v) for key, v in zip(("fx", "fy", "cx", "cy"), sigma)}
+
+
 def _camera(result, size):
     """The :class:`measure.Camera` of a fit and its σ per intrinsic."""
-    from measure import Camera
-    from measure.calibration.air import INTRINSIC_NAMES, LENS_MODELS
+    from measure.calibration.air import intrinsic_names, lens_camera
 
     out, model = result["out"], result["model"]
-    n_dist = LENS_MODELS[model][1]
-    camera = Camera(out[1], size, dist=out[2].ravel()[:max(n_dist, 5)])
-    sigmas = dict(zip(INTRINSIC_NAMES[:4 + n_dist], (float(s) for s in out[5].ravel())))
+    camera = lens_camera(out, model, size)
+    sigmas = dict(zip(intrinsic_names(model), (float(s) for s in out[5].ravel())))
     return camera, sigmas
 
 
@@ -158,19 +194,7 @@ def _report(args, board, names, size, detections, used, result, outliers, camera
             problem) -> dict:
     used_poses = result["poses"]
     rms = float(result["out"][0])
-    rows = []
-    for k, name in enumerate(names):
-        n = int(len(detections.ids[k][VIEW]))
-        if not n:
-            status = "board not found"
-        elif k in outliers["left_out"]:
-            status = (f"left out: outlier (first fit RMS "
-                      f"{outliers['first_fit_rms_px'][f'{k}:left']:.3f} px > "
-                      f"{outliers['threshold_px']:.3f} px)")
-        else:
-            status = "used"
-        rows.append({"pose": k, "name": name, "corners": n, "status": status,
-                     "rms_px": result["rms_px_per"].get((k, VIEW)) if status == "used" else None})
+    rows = photo_rows(names, detections, outliers, result["rms_px_per"])
     coverage = trust.coverage(used, size)["left"]
     estimates = trust.camera_estimates(camera, sigmas)
     failures = []
@@ -190,7 +214,7 @@ def _report(args, board, names, size, detections, used, result, outliers, camera
         warnings.append(f"the corners cover {100 * coverage['fraction']:.0f} % of the image "
                         f"({trust.COVERAGE_CELLS}×{trust.COVERAGE_CELLS} cells): the lens "
                         f"distortion is extrapolated outside them")
-    hint = trust.underwater_hint({"camera": estimates})
+    hint = trust.underwater_hint({"camera": estimates}, {"camera": result["model"]})
     if hint:
         warnings.append(hint)
     edge = trust.unseen_edge(board, detections, (VIEW,))
@@ -257,6 +281,9 @@ def write_camera_files(directory, camera, lens_model, rms_px, sigmas: dict, cova
         fs.write("distortion_coefficients", np.asarray(dist, np.float64).reshape(1, -1))
         if lens_model:
             fs.write("lens_model", lens_model)
+        # how distortion_coefficients are evaluated: brown_conrady (cv2.projectPoints) or
+        # fisheye (cv2.fisheye, k1…k4)
+        fs.write("distortion_model", camera.distortion_model)
         fs.write("rms_px", float(rms_px))
         if sigmas:
             fs.startWriteStruct("sigmas", cv2.FileNode_MAP)
@@ -284,6 +311,44 @@ def write_camera_files(directory, camera, lens_model, rms_px, sigmas: dict, cova
     write_single_camera(directory, camera, port)
 
 
+def photo_rows(names, detections, outliers, rms_px_per, posed=None) -> list:
+    """The report's ``per_pose`` of one camera's photos: each photo's corners, status (board not
+    found, left out as an outlier, left out with no starting pose — where ``posed``, the
+    photos the fit had a pose for, is given — or used) and RMS ``rms_px_per[(k, VIEW)]``."""
+    rows = []
+    for k, name in enumerate(names):
+        n = int(len(detections.ids[k][VIEW]))
+        if not n:
+            status = "board not found"
+        elif k in outliers["left_out"]:
+            status = (f"left out: outlier (first fit RMS "
+                      f"{outliers['first_fit_rms_px'][f'{k}:left']:.3f} px > "
+                      f"{outliers['threshold_px']:.3f} px)")
+        elif posed is not None and k not in posed:
+            status = "left out: no starting pose (solvePnP)"
+        else:
+            status = "used"
+        rows.append({"pose": k, "name": name, "corners": n, "status": status,
+                     "rms_px": rms_px_per.get((k, VIEW)) if status == "used" else None})
+    return rows
+
+
+def photo_lines(report: dict) -> list:
+    """report.md's photos of one camera: the outlier rule, each photo's corners, RMS and status,
+    the coverage of the image and the worst corners (also the one-camera housing's report)."""
+    lines = ["## Photos", "", f"Outlier rule: {report['outlier_rule']} (threshold here "
+             f"{report['outliers']['threshold_px']:.3f} px).", "",
+             "| photo | corners | RMS (px) | status |", "|---|---|---|---|"]
+    lines += [f"| {p['name']} | {p['corners']} | {_f(p['rms_px'])} | {p['status']} |"
+              for p in report["per_pose"]]
+    lines += ["", f"Corners cover {100 * report['coverage']['fraction']:.0f} % of the image "
+              f"({trust.COVERAGE_CELLS}×{trust.COVERAGE_CELLS} cells; `coverage.png`).", "",
+              "## Worst corners", "", "| photo | corner id | residual (px) |", "|---|---|---|"]
+    lines += [f"| {c['pose']} | {c['id']} | {c['residual_px']:.3f} |"
+              for c in report["worst_corners"]]
+    return lines
+
+
 def markdown(report: dict) -> str:
     b = report["board"]
     lines = [f"# Camera calibration report: `{report['photos']}`", "",
@@ -301,20 +366,17 @@ def markdown(report: dict) -> str:
     lines += ["## Camera (OpenCV)", "",
               f"Reprojection RMS {report['rms_px']:.4f} px; lens model {m['model']} ("
               + ", ".join(f"{k} {v:.4f} px" for k, v in m["rms_px"].items())
-              + f"; {trust.LENS_RULE}). σ: OpenCV's `calibrateCameraExtended` standard "
-              f"deviations.", "", "| parameter | value | σ |", "|---|---|---|"]
-    lines += [f"| {k} | {v['estimate']:.6g} | {_f(v['sigma'], 3)} |"
+              + f"; {trust.LENS_RULE}"
+              + ("; the fisheye model's RMS is listed for comparison: it is used with --lens "
+                 "fisheye" if "fisheye" in m["rms_px"] and m["model"] != "fisheye" else "")
+              + "). σ: OpenCV's `calibrateCameraExtended` standard "
+              "deviations (the fisheye model's computed as it does, s² (JᵀJ)⁻¹); σ photos: "
+              "the jackknife over the photos, each left out in turn (the spread which photos "
+              "are kept gives).", "", "| parameter | value | σ | σ photos |", "|---|---|---|---|"]
+    lines += [f"| {k} | {v['estimate']:.6g} | {_f(v['sigma'], 3)} | "
+              f"{_f(v.get('sigma_photos'), 3) if 'sigma_photos' in v else ''} |"
               for k, v in report["camera"].items()]
-    lines += ["", "## Photos", "", f"Outlier rule: {report['outlier_rule']} (threshold here "
-              f"{report['outliers']['threshold_px']:.3f} px).", "",
-              "| photo | corners | RMS (px) | status |", "|---|---|---|---|"]
-    lines += [f"| {p['name']} | {p['corners']} | {_f(p['rms_px'])} | {p['status']} |"
-              for p in report["per_pose"]]
-    lines += ["", f"Corners cover {100 * report['coverage']['fraction']:.0f} % of the image "
-              f"({trust.COVERAGE_CELLS}×{trust.COVERAGE_CELLS} cells; `coverage.png`).", "",
-              "## Worst corners", "", "| photo | corner id | residual (px) |", "|---|---|---|"]
-    lines += [f"| {c['pose']} | {c['id']} | {c['residual_px']:.3f} |"
-              for c in report["worst_corners"]]
+    lines += ["", *photo_lines(report)]
     lines += ["", "## Files", "", "- `camera.yaml` (OpenCV FileStorage), `calibmar.yaml` "
               "(calibmar, no port), `cameras.txt` (COLMAP)",
               "- `coverage.png`, `residuals.png` (residual vectors per photo)", "",
@@ -339,10 +401,14 @@ def summary_lines(report: dict) -> str:
              f"{c['cx']['estimate']:.3f} ± {_f(c['cx']['sigma'], 2)}, cy "
              f"{c['cy']['estimate']:.3f} ± {_f(c['cy']['sigma'], 2)} px; RMS "
              f"{report['rms_px']:.4f} px",
+             *([f"photo-to-photo σ (each photo left out in turn): fx ± "
+                f"{c['fx']['sigma_photos']:.2g}, fy ± {c['fy']['sigma_photos']:.2g}, cx ± "
+                f"{c['cx']['sigma_photos']:.2g}, cy ± {c['cy']['sigma_photos']:.2g} px"]
+               if "sigma_photos" in c["fx"] else []),
              f"corners cover {100 * report['coverage']['fraction']:.0f} % of the image"]
     lines += [f"warning: {w}" for w in report["warnings"]]
     return "\n".join(lines)
 
 
-__all__ = ["calibrate_single", "markdown", "single_camera_folder", "summary_lines",
+__all__ = ["calibrate_single", "markdown", "photo_spread", "single_camera_folder", "summary_lines",
            "write_camera_files"]

@@ -40,7 +40,8 @@ import numpy as np
 from eval.calibrate import photos as trust
 from eval.calibrate import report as report_lib
 from eval.calibrate.report import format_value as _f
-from eval.calibrate.single import VIEW, read_and_detect, write_camera_files
+from eval.calibrate.single import (VIEW, photo_lines, photo_rows, read_and_detect,
+                                   write_camera_files)
 from eval.cli import CLIError
 
 #: Issue 35: the housing fit may leave at most this much more RMS than the in-air calibration.
@@ -148,21 +149,7 @@ def _estimates(housing) -> dict:
 
 def _report(args, board, names, size, detections, used, housing, outliers, intrinsics,
             absorbed, dome: bool) -> dict:
-    rows = []
-    for k, name in enumerate(names):
-        n = int(len(detections.ids[k][VIEW]))
-        if not n:
-            status = "board not found"
-        elif k in outliers["left_out"]:
-            status = (f"left out: outlier (first fit RMS "
-                      f"{outliers['first_fit_rms_px'][f'{k}:left']:.3f} px > "
-                      f"{outliers['threshold_px']:.3f} px)")
-        elif k not in housing.pose_ids:
-            status = "left out: no starting pose (solvePnP)"
-        else:
-            status = "used"
-        rows.append({"pose": k, "name": name, "corners": n, "status": status,
-                     "rms_px": housing.rms_px_per.get((k, VIEW)) if status == "used" else None})
+    rows = photo_rows(names, detections, outliers, housing.rms_px_per, housing.pose_ids)
     in_air = intrinsics["rms_px"]
     rms = {"housing": housing.rms_px, "in_air": in_air, "absorbed_pinhole": absorbed["rms_px"],
            "absorbed_pinhole_model": absorbed["model"],
@@ -284,16 +271,7 @@ def markdown(report: dict) -> str:
               f"Checks (issue 35): housing RMS ≤ in-air RMS + {r['margin_px']:g} px"
               + ("" if report["dome"] else "; behind a flat port, housing RMS ≤ the absorbed "
                                            "pinhole fit's") + ".", "",
-              "## Photos", "", f"Outlier rule: {report['outlier_rule']} (threshold here "
-              f"{report['outliers']['threshold_px']:.3f} px).", "",
-              "| photo | corners | RMS (px) | status |", "|---|---|---|---|"]
-    lines += [f"| {p['name']} | {p['corners']} | {_f(p['rms_px'])} | {p['status']} |"
-              for p in report["per_pose"]]
-    lines += ["", f"Corners cover {100 * report['coverage']['fraction']:.0f} % of the image "
-              f"({trust.COVERAGE_CELLS}×{trust.COVERAGE_CELLS} cells; `coverage.png`).", "",
-              "## Worst corners", "", "| photo | corner id | residual (px) |", "|---|---|---|"]
-    lines += [f"| {c['pose']} | {c['id']} | {c['residual_px']:.3f} |"
-              for c in report["worst_corners"]]
+              *photo_lines(report)]
     lines += ["", "## Files", "", "- `camera.yaml` (OpenCV FileStorage: the camera, its port or "
               "dome in its frame, mm, the housing's σ and covariance), `calibmar.yaml` "
               "(calibmar, FLATPORT/DOMEPORT), `cameras.txt` (the refractive COLMAP fork)",

@@ -76,7 +76,7 @@ def _with_focal(camera: Camera, focal: float) -> Camera:
         raise ValueError(f"--assume: focal length must be positive, got {focal:g}")
     K = camera.K.copy()
     K[0, 0] = K[1, 1] = focal
-    return Camera(K, camera.size, camera.dist, camera.R, camera.t)
+    return Camera(K, camera.size, camera.dist, camera.R, camera.t, camera.distortion_model)
 
 
 def assumed_rig(truth: StereoRig, has_port: bool, assumptions: dict,
@@ -121,9 +121,9 @@ def _assumed_cameras(name: str, value, left: Camera, right: Camera):
     if name in ("focal", "right_focal"):
         right = _with_focal(right, value)
     elif name == "left_dist":
-        left = Camera(left.K, left.size, value, left.R, left.t)
+        left = Camera(left.K, left.size, value, left.R, left.t, left.distortion_model)
     elif name == "right_dist":
-        right = Camera(right.K, right.size, value, right.R, right.t)
+        right = Camera(right.K, right.size, value, right.R, right.t, right.distortion_model)
     return left, right
 
 

@@ -60,25 +60,34 @@ def pair_sigmas(mode, uv_left, uv_right, start, rig, detections=None, matches=No
     ``mode`` a number: that σ (the stated σ, with ``noise_px`` — noise the run added — in
     quadrature). :data:`AUTO`: the detector's σ of each detection (``detections`` per view and
     ``matches``' indices; none: 0) and, for every pair, the extra σ₀ the reprojection residuals
-    of the ``start`` points show beyond it (added noise included)."""
+    of the ``start`` points show beyond it (added noise included), scaled by the pair's flux
+    as the residuals show (:func:`measure.stereo.uncertainty.residual_sigma`: faint — small,
+    oblique, far — targets' centres scatter more)."""
     n = len(uv_left)
     if mode != AUTO:
         sigma = np.full((n, 2), float(np.hypot(float(mode), noise_px)))
         return sigma, {"source": "stated (--pixel-sigma)", "stated_px": float(mode),
                        "added_noise_px": noise_px, "median_px": float(sigma[0, 0]) if n else None}
     detector = np.zeros((n, 2))
+    flux = None
     if detections is not None and matches is not None:
+        light = np.ones(n)
         for k, (view, index) in enumerate((("left", matches.left), ("right", matches.right))):
             detector[:, k] = detection_sigma(detections[view])[index]
-    found = residual_sigma(rig, uv_left, uv_right, start, detector)
+            light = light * np.asarray(detections[view].flux, dtype=np.float64)[index]
+        flux = np.sqrt(light)
+    found = residual_sigma(rig, uv_left, uv_right, start, detector, flux=flux)
     sigma0 = found["sigma0_px"] or 0.0
-    sigma = np.sqrt(detector ** 2 + sigma0 ** 2)
+    weights = found.get("weights")
+    weights = np.ones(n) if weights is None else np.where(np.isfinite(weights), weights, 1.0)
+    sigma = np.sqrt(detector ** 2 + (sigma0 * weights[:, None]) ** 2)
     if n and not np.all(sigma > 0):  # exact pixels and a noise-free background
         sigma = np.where(sigma > 0, sigma, np.nan)
     finite = sigma[np.isfinite(sigma)]
     return sigma, {"source": "detector (SNR and size) + reprojection residuals",
                    "detector_median_px": float(np.median(detector)) if n else None,
                    "residual_sigma0_px": found["sigma0_px"],
+                   "flux_exponent": found.get("flux_exponent"),
                    "rms_residual_px": found["rms_residual_px"],
                    "median_px": float(np.median(finite)) if finite.size else None,
                    "max_px": float(finite.max()) if finite.size else None}

@@ -214,6 +214,7 @@ def build_report(inputs, options, results) -> dict:
     from eval.measure.report import uncertainty_report
 
     return {"command": COMMAND, "calib": inputs.calib_path, "has_port": inputs.has_port,
+            "model": calibration_model(inputs.calib_path),
             "encoding": inputs.encoding,
             "image_size": list(inputs.size), "mode": "dense" if dense else "targets",
             "methods": list(options.methods), "options": settings, "pairs": pairs,
@@ -265,6 +266,24 @@ def summary_line(report: dict) -> str:
             f"matched; {check} {checks}; total {report['timings_s']['total']:.1f} s")
 
 
+def calibration_model(path) -> str | None:
+    """The ``model`` node of a calib.yaml (``absorbed`` for ``eval calibrate --model
+    absorbed``), or None (another file, or none)."""
+    import cv2
+
+    if not str(path).lower().endswith((".yaml", ".yml")):
+        return None
+    try:
+        fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_READ)
+    except cv2.error:
+        return None
+    try:
+        node = fs.getNode("model") if fs.isOpened() else None
+        return node.string() if node is not None and node.isString() else None
+    finally:
+        fs.release()
+
+
 def main(args) -> int:
     from synth.infra.fileio import OutputDir, atomic_write_json, atomic_write_text, jsonable
     from synth.infra.provenance import package_versions
@@ -300,9 +319,10 @@ def main(args) -> int:
         atomic_write_json(os.path.join(tmp, "report.json"), report)
         atomic_write_text(os.path.join(tmp, "report.md"), report_markdown(report))
     if not inputs.has_port:
-        from eval.measure.report import AIR_CALIBRATION
+        from eval.measure.report import calibration_note
 
-        print(f"warning: {AIR_CALIBRATION.format(calib=args.calib)}", file=sys.stderr)
+        print(f"warning: {calibration_note(args.calib, calibration_model(args.calib))}",
+              file=sys.stderr)
     stream = sys.stderr if args.json else sys.stdout
     print(summary_line(report), file=stream)
     print(f"wrote {output.path}", file=stream)

@@ -26,6 +26,15 @@ CSV_COLUMNS = ("pair", "method", "x_mm", "y_mm", "z_mm", "gap_mm", "u_left", "v_
 AIR_CALIBRATION = ("--calib {calib} is an in-air calibration (no port): the photos are measured "
                    "as if taken in air; photos taken through the port need the housing's "
                    "calibration (eval calibrate PHOTOS --intrinsics …)")
+ABSORBED_CALIBRATION = ("--calib {calib} is an absorbed calibration (eval calibrate --model "
+                        "absorbed: underwater photos fitted as pinhole cameras): the port is "
+                        "absorbed, not modelled, and its error grows away from the boards' "
+                        "distances (docs/absorbed.md)")
+
+
+def calibration_note(calib: str, model: str | None) -> str:
+    """What a report says of a calibration without a port: absorbed, or in air."""
+    return (ABSORBED_CALIBRATION if model == "absorbed" else AIR_CALIBRATION).format(calib=calib)
 
 
 def gap_stats(gap) -> dict:
@@ -226,7 +235,8 @@ def report_markdown(report: dict) -> str:
              f"{', '.join(report['methods'])}. No truth: the numbers below are what the photos "
              f"and the calibration say.", ""]
     if not report.get("has_port", True):
-        lines += [f"**In air:** {AIR_CALIBRATION.format(calib='`' + report['calib'] + '`')}.", ""]
+        lines += [f"**No port:** {calibration_note('`' + report['calib'] + '`', report.get('model'))}.",
+                  ""]
     if s.get("failures"):
         lines += ["## Verdict: failed (exit code 1)", "", *[f"- {p}" for p in s["failures"]], ""]
     if s["problems"]:

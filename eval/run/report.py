@@ -41,11 +41,13 @@ SUMMARY_COLUMNS = (("n", "n", 0), ("rms_dp_mm", "RMS dP", 3), ("max_dp_mm", "max
 
 def summary_table(report: dict) -> str:
     """The per-method table (mm) as fixed-width text."""
-    header = f"{'method':<17}" + "".join(f"{title:>15}" for _, title, _ in SUMMARY_COLUMNS)
+    rows = _method_rows(report)
+    width = max([17] + [len(method) + 2 for method, _ in rows])
+    header = f"{'method':<{width}}" + "".join(f"{title:>15}" for _, title, _ in SUMMARY_COLUMNS)
     lines = [header]
-    for method, stats in _method_rows(report):
-        lines.append(f"{method:<17}" + "".join(f"{fmt(stats.get(key), digits):>15}"
-                                                for key, _, digits in SUMMARY_COLUMNS))
+    for method, stats in rows:
+        lines.append(f"{method:<{width}}" + "".join(f"{fmt(stats.get(key), digits):>15}"
+                                                    for key, _, digits in SUMMARY_COLUMNS))
     return "\n".join(lines)
 
 

@@ -18,7 +18,7 @@ import cv2
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from ..geometry.camera import Camera
+from ..geometry.camera import BROWN_CONRADY, FISHEYE, Camera
 from ..geometry.port import index_matched_port
 from ..stereo.triangulate import StereoRig
 from .board import MIN_CORNERS, Board
@@ -77,13 +77,18 @@ def detect_boards(board: Board, images, workers: int | None = None) -> Detection
 # ---------------------------------------------------------------------------------------------
 #: Lens models of the in-air calibration: OpenCV's flags and distortion coefficients.
 #: ``standard`` k1 k2 p1 p2 (k3 fixed at 0), ``k3`` adds k3, ``rational`` k1…k6 p1 p2
-#: (``CALIB_RATIONAL_MODEL``: wide and action-camera lenses).
+#: (``CALIB_RATIONAL_MODEL``: wide and action-camera lenses) — OpenCV's Brown–Conrady model,
+#: ``cv2.calibrateCameraExtended``; ``fisheye`` OpenCV's fisheye model (Kannala–Brandt: k1…k4
+#: on the angle θ, skew fixed at 0), ``cv2.fisheye.calibrate``.
+FISHEYE_FLAGS = cv2.fisheye.CALIB_RECOMPUTE_EXTRINSIC | cv2.fisheye.CALIB_FIX_SKEW
 LENS_MODELS = {"standard": (cv2.CALIB_FIX_K3, 4), "k3": (0, 5),
-               "rational": (cv2.CALIB_RATIONAL_MODEL, 8)}
+               "rational": (cv2.CALIB_RATIONAL_MODEL, 8), "fisheye": (FISHEYE_FLAGS, 4)}
 #: ``auto`` fits them in this order and keeps a richer model only when it lowers the
 #: camera's RMS by at least :data:`LENS_MODEL_GAIN` (a fraction) against the one kept before:
 #: on 18 real GoPro frames (2704 × 1520) standard 0.779 px, k3 0.620 px (kept), rational
 #: 0.613 px (1 % lower: not kept) — docs/calibration.md.
+#: (``fisheye`` is fitted when asked for: it is no richer Brown–Conrady model; on the GoPro
+#: frames it leaves 0.540 px against rational's 0.529 px, docs/calibration.md.)
 LENS_MODEL_ORDER = ("standard", "k3", "rational")
 DEFAULT_LENS_MODEL = "auto"
 #: What :func:`calibrate_in_air` fits when not told: the model of the renders and of OpenCV's own
@@ -94,6 +99,8 @@ LENS_MODEL_GAIN = 0.02
 CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 200, 1e-12)
 #: Names of OpenCV's intrinsics in ``stdDeviationsIntrinsics`` order.
 INTRINSIC_NAMES = ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6")
+#: Those of the fisheye model (:func:`calibrate_fisheye`).
+FISHEYE_INTRINSIC_NAMES = ("fx", "fy", "cx", "cy", "k1", "k2", "k3", "k4")
 #: A pose whose own stereo pose (from the two cameras' board poses) lies farther than
 #: max(:data:`STEREO_OUTLIER_FACTOR` × the median distance, :data:`STEREO_FLOOR_FRACTION` ×
 #: the baseline) or turned by more than max(factor × the median angle,
@@ -136,6 +143,70 @@ class AirCalibration:
     residuals: dict = field(default_factory=dict)
 
 
+def intrinsic_names(model: str) -> tuple:
+    """The names of the σ of ``model``'s intrinsics, in the order of its fit's output."""
+    if model == "fisheye":
+        return FISHEYE_INTRINSIC_NAMES
+    return INTRINSIC_NAMES[:4 + LENS_MODELS[model][1]]
+
+
+def lens_camera(out, model: str, size, R=None, t=None) -> Camera:
+    """The :class:`Camera` of a fit ``out`` (:func:`calibrate_camera`) with ``model``."""
+    dist = np.ravel(out[2])
+    if model == "fisheye":
+        return Camera(out[1], size, dist[:4], R, t, FISHEYE)
+    return Camera(out[1], size, dist[:max(LENS_MODELS[model][1], 5)], R, t, BROWN_CONRADY)
+
+
+def project_board(model: str, obj, rvec, tvec, K, D) -> np.ndarray:
+    """``(M, 2)`` pixels of board points ``obj`` ``(M, 3)`` at one pose, by OpenCV's own
+    projection of ``model`` (``cv2.projectPoints`` or ``cv2.fisheye.projectPoints``)."""
+    obj = np.asarray(obj, np.float64).reshape(-1, 1, 3)
+    if model == "fisheye":
+        return cv2.fisheye.projectPoints(obj, np.ravel(rvec).astype(np.float64),
+                                         np.ravel(tvec).astype(np.float64), K,
+                                         np.ravel(D)[:4])[0].reshape(-1, 2)
+    return cv2.projectPoints(obj, rvec, tvec, K, D)[0].reshape(-1, 2)
+
+
+def calibrate_fisheye(obj, img, size):
+    """``cv2.fisheye.calibrate`` (:data:`FISHEYE_FLAGS`) in ``cv2.calibrateCameraExtended``'s
+    layout: ``(rms, K, D (4, 1), rvecs, tvecs, σ intrinsics (8, 1), σ extrinsics, per-view
+    RMS)`` — the RMS as OpenCV's (of the 2D residual length per corner, px); the σ as
+    ``calibrateCameraExtended`` computes them: ``s² (JᵀJ)⁻¹`` over the intrinsics and every
+    pose, ``s²`` the residual sum of squares over its degrees of freedom, J from
+    ``cv2.fisheye.projectPoints``."""
+    obj = [np.asarray(o, np.float64).reshape(1, -1, 3) for o in obj]
+    img = [np.asarray(i, np.float64).reshape(1, -1, 2) for i in img]
+    try:
+        _, K, D, rvecs, tvecs = cv2.fisheye.calibrate(obj, img, tuple(size), None, None,
+                                                      flags=FISHEYE_FLAGS, criteria=CRITERIA)
+    except cv2.error as exc:
+        reason = (str(exc).strip().splitlines() or ["?"])[-1]
+        raise CalibrationError(f"OpenCV's fisheye calibration failed ({reason[:160]})") from None
+    n_par = 8 + 6 * len(obj)
+    rows, squares, per = [], 0.0, []
+    for v, (o, i, rvec, tvec) in enumerate(zip(obj, img, rvecs, tvecs)):
+        projected, jac = cv2.fisheye.projectPoints(o.reshape(-1, 1, 3), np.ravel(rvec),
+                                                   np.ravel(tvec), K, D)
+        e = projected.reshape(-1, 2) - i.reshape(-1, 2)
+        per.append(np.sqrt(np.sum(e * e) / len(e)))
+        squares += float(np.sum(e * e))
+        block = np.zeros((jac.shape[0], n_par))
+        block[:, :8] = jac[:, :8]  # f (2), c (2), k (4); then om (3), T (3), alpha
+        block[:, 8 + 6 * v: 14 + 6 * v] = jac[:, 8:14]
+        rows.append(block)
+    n = sum(o.shape[1] for o in obj)
+    J = np.vstack(rows)
+    s2 = squares / max(2 * n - n_par, 1)
+    with np.errstate(invalid="ignore"):
+        covariance = s2 * np.linalg.pinv(J.T @ J)
+        std = np.sqrt(np.diag(covariance))
+    rms = float(np.sqrt(squares / n))
+    return (rms, K, D.reshape(4, 1), tuple(rvecs), tuple(tvecs), std[:8].reshape(-1, 1),
+            std[8:].reshape(-1, 1), np.array(per).reshape(-1, 1))
+
+
 def calibrate_camera(obj, img, size, lens_model: str = DEFAULT_LENS_MODEL):
     """One camera's ``cv2.calibrateCameraExtended`` with ``lens_model`` (a key of
     :data:`LENS_MODELS`, or ``auto``: module constants). Returns ``(out, model, tried,
@@ -147,8 +218,11 @@ def calibrate_camera(obj, img, size, lens_model: str = DEFAULT_LENS_MODEL):
     order = LENS_MODEL_ORDER if lens_model == "auto" else (lens_model,)
     tried, best, best_model, best_problem = {}, None, None, None
     for model in order:
-        out = cv2.calibrateCameraExtended(obj, img, tuple(size), None, None,
-                                          flags=LENS_MODELS[model][0], criteria=CRITERIA)
+        if model == "fisheye":
+            out = calibrate_fisheye(obj, img, size)
+        else:
+            out = cv2.calibrateCameraExtended(obj, img, tuple(size), None, None,
+                                              flags=LENS_MODELS[model][0], criteria=CRITERIA)
         tried[model] = float(out[0])
         if best is None:
             best, best_model, best_problem = out, model, lens_problem(out, model, size)
@@ -164,10 +238,9 @@ def lens_problem(out, model: str, size) -> str | None:
     cannot be used over its whole image (its distortion folds: a richer model fitted to corners
     that leave the image's edges uncovered), or None
     (:meth:`measure.camera.Camera.distortion_problem`)."""
-    dist = out[2].ravel()[:max(LENS_MODELS[model][1], 5)]
-    if not np.all(np.isfinite(dist)) or not np.all(np.isfinite(out[1])):
+    if not np.all(np.isfinite(out[2])) or not np.all(np.isfinite(out[1])):
         return "the fit gave non-finite intrinsics"
-    return Camera(out[1], size, dist=dist).distortion_problem()
+    return lens_camera(out, model, size).distortion_problem()
 
 
 def relative_poses(left_extrinsics, right_extrinsics):
@@ -223,13 +296,14 @@ def calibrate_in_air(board: Board, detections: Detections, size,
         n_dist = LENS_MODELS[model][1]
         models[name] = {"model": model, "rms_px": tried, "problem": problem}
         rms[name], K, std = float(out[0]), out[1], out[5].ravel()
-        D = out[2].ravel()[:max(n_dist, 5)]
+        D = np.ravel(lens_camera(out, model, size).dist if model == "fisheye"
+                     else out[2].ravel()[:max(n_dist, 5)])
         for k, error, rvec, tvec in zip(poses, out[7].ravel(), out[3], out[4]):
             per[(k, view)] = float(error)
             extrinsics[(k, view)] = (Rotation.from_rotvec(np.ravel(rvec)).as_matrix(),
                                      np.ravel(tvec).astype(np.float64))
-        sigmas[name] = dict(zip(INTRINSIC_NAMES[:4 + n_dist], (float(s) for s in std)))
-        residuals[view] = camera_residuals(obj, img, out, poses, detections.ids, view)
+        sigmas[name] = dict(zip(intrinsic_names(model), (float(s) for s in std)))
+        residuals[view] = camera_residuals(obj, img, out, poses, detections.ids, view, model)
         cameras.append((K, D))
         n = sum(len(o) for o in obj)  # OpenCV's RMS is per corner of the 2D residual length
         s2.append(rms[name] ** 2 * n / max(2 * n - 4 - n_dist - 6 * len(poses), 1))
@@ -267,13 +341,23 @@ def calibrate_in_air(board: Board, detections: Detections, size,
         img_l.append(detections.pixels[k][0][il].astype(np.float32))
         img_r.append(detections.pixels[k][1][ir].astype(np.float32))
     (K1, D1), (K2, D2) = cameras
-    out = cv2.stereoCalibrateExtended(obj, img_l, img_r, K1, D1, K2, D2, tuple(size), None,
-                                      None, flags=cv2.CALIB_FIX_INTRINSIC, criteria=CRITERIA)
-    stereo_rms, R, T = float(out[0]), out[5], out[6].ravel()
-    stereo_per = {k: float(np.sqrt(np.mean(np.square(e)))) for k, e in zip(both, out[-1])}
+    kinds = {m["model"] == "fisheye" for m in models.values()}
+    if len(kinds) > 1:
+        raise CalibrationError("one camera fitted with the fisheye model and the other not: "
+                               "give both the same --lens")
+    fisheye = kinds == {True}
+    if fisheye:
+        stereo_rms, R, T, stereo_per = _fisheye_stereo(obj, img_l, img_r, cameras, size, both)
+    else:
+        out = cv2.stereoCalibrateExtended(obj, img_l, img_r, K1, D1, K2, D2, tuple(size), None,
+                                          None, flags=cv2.CALIB_FIX_INTRINSIC, criteria=CRITERIA)
+        stereo_rms, R, T = float(out[0]), out[5], out[6].ravel()
+        stereo_per = {k: float(np.sqrt(np.mean(np.square(e)))) for k, e in zip(both, out[-1])}
     used["stereo"] = len(both)
-    left = Camera(K1, size, dist=D1)
-    right = Camera(K2, size, dist=D2, R=_orthonormal(R).T, t=-_orthonormal(R).T @ T)
+    lens = FISHEYE if fisheye else BROWN_CONRADY
+    left = Camera(K1, size, dist=D1, distortion_model=lens)
+    right = Camera(K2, size, dist=D2, R=_orthonormal(R).T, t=-_orthonormal(R).T @ T,
+                   distortion_model=lens)
     port = index_matched_port(left.R[:, 2], np.stack([left.t, right.t]))
     board_poses = {}
     for (k, view), (R_cam, t_cam) in extrinsics.items():
@@ -292,12 +376,36 @@ def calibrate_in_air(board: Board, detections: Detections, size,
                           residuals)
 
 
-def camera_residuals(obj, img, out, poses, ids, view) -> np.ndarray:
-    """``(pose, id, du, dv)`` rows of one camera's ``calibrateCamera`` (``out``): every corner
-    projected with its pose's extrinsics minus where it was detected, px."""
+def _fisheye_stereo(obj, img_l, img_r, cameras, size, poses):
+    """``cv2.fisheye.stereoCalibrate`` with both cameras' intrinsics fixed: ``(rms, R, T,
+    {pose: rms of both views})`` (px, OpenCV's stereo convention)."""
+    (K1, D1), (K2, D2) = cameras
+    as3 = [np.asarray(o, np.float64).reshape(1, -1, 3) for o in obj]
+    as2 = [[np.asarray(i, np.float64).reshape(1, -1, 2) for i in img] for img in (img_l, img_r)]
+    out = cv2.fisheye.stereoCalibrate(as3, as2[0], as2[1], K1, D1, K2, D2, tuple(size),
+                                      flags=cv2.fisheye.CALIB_FIX_INTRINSIC, criteria=CRITERIA)
+    R, T = out[5], np.ravel(out[6])
+    squares, count, per = 0.0, 0, {}
+    for k, o, il, ir, rvec, tvec in zip(poses, as3, *as2, out[7], out[8]):
+        # each pose as the fit holds it: the left camera's, and through (R, T) the right's
+        e_l = project_board("fisheye", o, rvec, tvec, K1, D1) - il.reshape(-1, 2)
+        R_r = R @ cv2.Rodrigues(np.ravel(rvec))[0]
+        e_r = (project_board("fisheye", o, cv2.Rodrigues(R_r)[0], R @ np.ravel(tvec) + T, K2,
+                             D2) - ir.reshape(-1, 2))
+        both = np.vstack([e_l, e_r])
+        per[k] = float(np.sqrt(np.mean(np.sum(both * both, axis=1))))
+        squares += float(np.sum(both * both))
+        count += len(both)
+    return float(np.sqrt(squares / max(count, 1))), R, T, per
+
+
+def camera_residuals(obj, img, out, poses, ids, view, model: str = "standard") -> np.ndarray:
+    """``(pose, id, du, dv)`` rows of one camera's fit ``out`` with ``model``
+    (:func:`calibrate_camera`): every corner projected with its pose's extrinsics minus where
+    it was detected, px."""
     rows = []
     for k, o, observed, rvec, tvec in zip(poses, obj, img, out[3], out[4]):
-        projected = cv2.projectPoints(o, rvec, tvec, out[1], out[2])[0].reshape(-1, 2)
+        projected = project_board(model, o, rvec, tvec, out[1], out[2])
         d = projected - np.asarray(observed, np.float64).reshape(-1, 2)
         rows.append(np.column_stack([np.full(len(d), k), ids[k][view], d]))
     return np.vstack(rows) if rows else np.empty((0, 4))
@@ -309,8 +417,9 @@ def _orthonormal(R) -> np.ndarray:
 
 
 __all__ = ["AirCalibration", "CalibrationError", "DEFAULT_LENS_MODEL", "Detections",
-           "INTRINSIC_NAMES", "LENS_MODELS", "LENS_MODEL_GAIN", "LENS_MODEL_ORDER",
-           "LIBRARY_LENS_MODEL", "MIN_POSES", "STEREO_FLOOR_DEG", "STEREO_FLOOR_FRACTION",
-           "STEREO_OUTLIER_FACTOR", "calibrate_camera", "calibrate_in_air", "camera_residuals",
-           "detect_boards", "detect_images", "lens_problem", "relative_poses",
-           "stereo_pose_outliers"]
+           "FISHEYE_FLAGS", "FISHEYE_INTRINSIC_NAMES", "INTRINSIC_NAMES", "LENS_MODELS",
+           "LENS_MODEL_GAIN", "LENS_MODEL_ORDER", "LIBRARY_LENS_MODEL", "MIN_POSES",
+           "STEREO_FLOOR_DEG", "STEREO_FLOOR_FRACTION", "STEREO_OUTLIER_FACTOR",
+           "calibrate_camera", "calibrate_fisheye", "calibrate_in_air", "camera_residuals",
+           "detect_boards", "detect_images", "intrinsic_names", "lens_camera", "lens_problem",
+           "project_board", "relative_poses", "stereo_pose_outliers"]

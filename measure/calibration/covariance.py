@@ -171,7 +171,8 @@ def intrinsics_jacobian(camera: Camera, pixels) -> np.ndarray:
         return out
     xy = camera.normalized(pixels[ok])
     points = np.column_stack([xy, np.ones(len(xy))])
-    _, jac = _project(points, np.zeros(3), np.zeros(3), camera.K, camera.dist)
+    _, jac = _project(points, np.zeros(3), np.zeros(3), camera.K,
+                      camera.brown_conrady_dist("the intrinsics' Jacobian"))
     out[ok] = jac[:, _PROJECT_COLUMNS].reshape(-1, 2, 8)
     return out
 

@@ -45,7 +45,7 @@ def _start_poses(rig: StereoRig, board: Board, detections: Detections):
             ids = detections.ids[k][view]
             if len(ids) >= MIN_CORNERS:
                 ok, rvec, tvec = cv2.solvePnP(corners[ids], detections.pixels[k][view], camera.K,
-                                              camera.dist if camera.dist is not None else None,
+                                              camera.brown_conrady_dist("the housing calibration"),
                                               flags=cv2.SOLVEPNP_ITERATIVE)
                 if ok:
                     R_cam = Rotation.from_rotvec(rvec.ravel()).as_matrix()

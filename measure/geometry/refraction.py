@@ -79,8 +79,12 @@ def trace_through_port(origins: np.ndarray, directions: np.ndarray, port,
     normal = port.normal
     indices = np.asarray(port.indices)
     cos_first = directions @ normal
-    tangential = np.multiply.outer(cos_first, normal)
-    np.subtract(directions, tangential, out=tangential)
+    # vectors as (3, N) rows, returned transposed: NumPy broadcasts a 3-vector over (N, 3)
+    # rows 10 times slower than it multiplies whole rows (32 768 rays: 0.4 ms against 0.03 ms)
+    tangential = np.empty((3, n_rays))
+    for j in range(3):
+        np.multiply(cos_first, -normal[j], out=tangential[j])
+        tangential[j] += directions[:, j]
     sin2_first = 1.0 - cos_first * cos_first
     heights = port.offsets - (origins @ normal)[..., None]  # (K,) or (N, K): O to each interface
     reason = np.zeros(n_rays, dtype=np.int8)
@@ -95,15 +99,26 @@ def trace_through_port(origins: np.ndarray, directions: np.ndarray, port,
         for k in range(1, port.n_interfaces):
             step = heights[..., k] - heights[..., k - 1]
             advance.append(advance[-1] + step * eta[k - 1] / cos_media[k])
-        water_dirs = np.multiply.outer(cos_media[-1], normal)
-        water_dirs += eta[-1] * tangential
-        position = advance[-1][:, None] * tangential
-        position += origins + heights[..., -1, None] * normal
+
+        def at_interface(k):
+            """``(3, N)``: O + H_k N + a_k T."""
+            out = np.empty((3, n_rays))
+            for j in range(3):
+                np.multiply(advance[k], tangential[j], out=out[j])
+                out[j] += heights[..., k] * normal[j]
+                out[j] += origins[..., j]
+            return out
+
+        water_dirs = np.empty((3, n_rays))
+        for j in range(3):
+            np.multiply(cos_media[-1], normal[j], out=water_dirs[j])
+            water_dirs[j] += eta[-1] * tangential[j]
+        position = at_interface(port.n_interfaces - 1)
         interface_points = None
         if keep_interface_points:
-            interface_points = np.stack([origins + heights[..., k, None] * normal
-                                         + advance[k][:, None] * tangential
+            interface_points = np.stack([at_interface(k).T
                                          for k in range(port.n_interfaces)])
+    position, water_dirs = position.T, water_dirs.T
     bad = reason != Reason.OK
     if bad.any():
         position[bad] = np.nan

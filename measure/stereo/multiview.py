@@ -31,8 +31,10 @@ from ..reasons import Reason
 #: A point's normal matrix Σ (I − d dᵀ) whose determinant is below this times the cube of its
 #: mean eigenvalue has (nearly) parallel rays: no point is determined along them.
 PARALLEL_LIMIT = 1e-14
-#: Fewest points per thread worth a thread of their own (:func:`triangulate_views`).
-CHUNK_ROWS = 50_000
+#: Points per piece of :func:`triangulate_views`: every intermediate column of a piece stays in
+#: the processor's cache (4 views, 10^6 points, one thread on a loaded 2-core machine: 5.1 s in
+#: one piece, 2.9 s in pieces of 131 072, 2.2 s of 32 768, 2.5 s of 8 192).
+CHUNK_ROWS = 32_768
 
 
 @dataclass(frozen=True)
@@ -77,20 +79,33 @@ class MultiViewTriangulation:
 
 
 def triangulate_views(views, pixels, workers: int | None = None) -> MultiViewTriangulation:
-    """:func:`triangulate_rows` over chunks of the points on ``workers`` threads (default one
-    per CPU: NumPy's array arithmetic releases the GIL); the rows are independent, so the
-    result does not depend on the chunking."""
+    """:func:`triangulate_rows` over pieces of :data:`CHUNK_ROWS` points on ``workers``
+    threads (default one per CPU: NumPy's array arithmetic releases the GIL); the rows are
+    independent, so the result does not depend on the pieces."""
     pixels = np.asarray(pixels, dtype=np.float64)
-    workers = max(1, min(workers or os.cpu_count() or 1, pixels.shape[0] // CHUNK_ROWS or 1))
-    if workers == 1 or pixels.ndim != 3:
+    n = pixels.shape[0] if pixels.ndim == 3 else 0
+    if n <= CHUNK_ROWS:
         return triangulate_rows(views, pixels)
-    from concurrent.futures import ThreadPoolExecutor
+    views = list(views)
+    out = MultiViewTriangulation(np.empty((n, 3)), np.empty(n), np.empty(n, np.int64),
+                                 np.empty((n, len(views)), bool), np.empty(n, np.int8))
+    starts = range(0, n, CHUNK_ROWS)
 
-    chunks = np.array_split(pixels, workers)
-    with ThreadPoolExecutor(workers) as pool:
-        parts = list(pool.map(lambda chunk: triangulate_rows(views, chunk), chunks))
-    return MultiViewTriangulation(*(np.concatenate([getattr(p, name) for p in parts])
-                                    for name in ("points", "gap", "views", "used", "reason")))
+    def piece(start):
+        part = triangulate_rows(views, pixels[start:start + CHUNK_ROWS])
+        for name in ("points", "gap", "views", "used", "reason"):
+            getattr(out, name)[start:start + CHUNK_ROWS] = getattr(part, name)
+
+    workers = max(1, min(workers or os.cpu_count() or 1, len(starts)))
+    if workers == 1:
+        for start in starts:
+            piece(start)
+    else:
+        from concurrent.futures import ThreadPoolExecutor
+
+        with ThreadPoolExecutor(workers) as pool:
+            list(pool.map(piece, starts))
+    return out
 
 
 def triangulate_rows(views, pixels) -> MultiViewTriangulation:
@@ -115,7 +130,7 @@ def triangulate_rows(views, pixels) -> MultiViewTriangulation:
     used = np.zeros((n, len(views)), bool)
     rays = []
     for v, view in enumerate(views):
-        seen = np.all(np.isfinite(pixels[:, v]), axis=1)
+        seen = np.isfinite(pixels[:, v, 0]) & np.isfinite(pixels[:, v, 1])
         if seen.all():
             origins, dirs, reason = view.water_rays(pixels[:, v])
             used[:, v] = reason == Reason.OK
@@ -126,18 +141,22 @@ def triangulate_rows(views, pixels) -> MultiViewTriangulation:
                 o, d, reason = view.water_rays(pixels[seen, v])
                 origins[seen], dirs[seen] = o, d
                 used[np.flatnonzero(seen)[reason == Reason.OK], v] = True
-        # rows this view did not see (NaN) add nothing: weight 0 and a zero ray
-        weight = used[:, v].astype(np.float64)
-        d = np.where(used[:, v], dirs.T, 0.0)
-        o = np.where(used[:, v], origins.T, 0.0)
-        along = d[0] * o[0] + d[1] * o[1] + d[2] * o[2]
-        a[0] += weight - d[0] * d[0]
-        a[1] += weight - d[1] * d[1]
-        a[2] += weight - d[2] * d[2]
-        a[3] -= d[0] * d[1]
-        a[4] -= d[0] * d[2]
-        a[5] -= d[1] * d[2]
-        rhs += o - d * along
+        if used[:, v].all():  # every row: the rays as they are
+            weight, d, o = 1.0, dirs.T, origins.T
+        else:  # rows this view did not see (NaN) add nothing: weight 0 and a zero ray
+            weight = used[:, v].astype(np.float64)
+            d = np.where(used[:, v], dirs.T, 0.0)
+            o = np.where(used[:, v], origins.T, 0.0)
+        # in place, column by column (each intermediate one column of the piece)
+        along = d[0] * o[0]
+        along += d[1] * o[1]
+        along += d[2] * o[2]
+        for j, (p, q) in enumerate(((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))):
+            a[j] -= d[p] * d[q]
+        a[:3] += weight
+        for j in range(3):
+            rhs[j] += o[j]
+            rhs[j] -= d[j] * along
         rays.append((o, d))
     count = used.sum(axis=1)
     reason = np.full(n, Reason.OK, dtype=np.int8)
@@ -164,10 +183,21 @@ def triangulate_rows(views, pixels) -> MultiViewTriangulation:
     X = np.where(ok, points.T, 0.0)
     for v, (o, d) in enumerate(rays):  # unused rows: zero rays, masked below
         offset = X - o
-        along = d[0] * offset[0] + d[1] * offset[1] + d[2] * offset[2]
+        along = d[0] * offset[0]
+        along += d[1] * offset[1]
+        along += d[2] * offset[2]
         behind |= used[:, v] & (along < 0)
-        perpendicular = offset - along * d  # not |offset|² − along²: that cancels
-        squared += np.where(used[:, v], (perpendicular * perpendicular).sum(axis=0), 0.0)
+        # |offset − along d|², not |offset|² − along²: that cancels
+        square = np.zeros(n)
+        for j in range(3):
+            perpendicular = d[j] * along
+            np.subtract(offset[j], perpendicular, out=perpendicular)
+            perpendicular *= perpendicular
+            square += perpendicular
+        if used[:, v].all():
+            squared += square
+        else:
+            squared += np.where(used[:, v], square, 0.0)
     reason[ok & behind] = Reason.BEHIND_CAMERA
     ok = reason == Reason.OK
     with np.errstate(invalid="ignore", divide="ignore"):

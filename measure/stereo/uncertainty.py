@@ -37,7 +37,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import brentq
+from scipy.optimize import brentq, minimize_scalar
 from scipy.stats import chi2
 
 from ..geometry.camera import Camera
@@ -82,8 +82,9 @@ def _distortion_terms(camera: Camera, pixels: np.ndarray):
     xd = (pixels[:, 0] - cx - s * yd) / fx
     x, y = camera.undistort(np.column_stack([xd, yd])).T
     c = np.zeros(8)
-    if camera.dist is not None:
-        c[: camera.dist.size] = camera.dist
+    dist = camera.brown_conrady_dist("the intrinsics' σ propagation")
+    if dist is not None:
+        c[: dist.size] = dist
     r2 = x * x + y * y
     denominator = 1 + r2 * (c[5] + r2 * (c[6] + r2 * c[7]))
     out = np.zeros((pixels.shape[0], 2, 9))
@@ -189,7 +190,8 @@ def perturbed_rig(rig: StereoRig, names, delta, normal_axes=None) -> StereoRig:
     that dome's centre (reference frame), ``port.index[k]`` medium k of both domes."""
     cams = [rig.left, rig.right]
     K = [c.K.copy() for c in cams]
-    dist = [np.zeros(8) if c.dist is None else np.pad(c.dist, (0, 8 - c.dist.size)) for c in cams]
+    dist = [np.zeros(8) if c.brown_conrady_dist("perturbed_rig") is None
+            else np.pad(c.dist, (0, 8 - c.dist.size)) for c in cams]
     R, t = rig.right.R.copy(), rig.right.t.copy()
     port_changes = []
     phi = np.zeros(3)
@@ -359,7 +361,12 @@ CHI2_1_MEDIAN = 0.454936423119572
 OUTLIER_CHI2_1 = 20.0
 
 
-def residual_sigma(rig: StereoRig, uv_left, uv_right, points, pixel_sigma=0.0) -> dict:
+#: The largest exponent of :func:`residual_sigma`'s flux model, ``σ ∝ flux^(−p)``.
+MAX_FLUX_EXPONENT = 2.0
+
+
+def residual_sigma(rig: StereoRig, uv_left, uv_right, points, pixel_sigma=0.0,
+                   flux=None) -> dict:
     """The pixel noise the data show beyond ``pixel_sigma`` (px; a number, ``(N,)`` or
     ``(N, 2)``): the a-posteriori variance factor of the triangulation, no truth needed.
 
@@ -374,7 +381,15 @@ def residual_sigma(rig: StereoRig, uv_left, uv_right, points, pixel_sigma=0.0) -
     with the median and ``median(χ²₁)``): a wrong match does not inflate it. What it cannot
     see: an error the two views share (the disks' eccentricity moves both images of a target
     consistently, and so does a calibration error along the rays). Returns ``{"sigma0_px",
-    "rms_residual_px", "n"}``."""
+    "rms_residual_px", "n"}``.
+
+    ``flux`` ``(N,)`` (each pair's detections' light, e.g. the geometric mean of the two
+    fluxes): the extra noise is then not the same for every detection but
+    ``σ₀ · (flux / median flux)^(−p)`` — faint (small, oblique, far) targets' centres scatter more
+    — with ``p`` in [0, :data:`MAX_FLUX_EXPONENT`] and σ₀ fitted together by maximum
+    likelihood of the residuals (``|r|² ~ (σ_i² + σ₀² w²) χ²₁``), no truth needed; the result
+    also holds ``"flux_exponent"`` and ``"weights"`` ``(N,)`` (``w``, 1 where the flux is not a
+    positive number; NaN for the rows without a residual)."""
     points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     observed = np.concatenate([np.asarray(uv_left, dtype=float).reshape(-1, 2),
                                np.asarray(uv_right, dtype=float).reshape(-1, 2)], axis=1)
@@ -407,8 +422,40 @@ def residual_sigma(rig: StereoRig, uv_left, uv_right, points, pixel_sigma=0.0) -
     everything = np.ones(q.shape, dtype=bool)
     robust = solve(np.median, CHI2_1_MEDIAN, everything)
     inliers = q <= OUTLIER_CHI2_1 * (known + robust)
-    sigma0 = float(np.sqrt(solve(np.mean, 1.0, inliers)))
-    return {"sigma0_px": sigma0, "rms_residual_px": float(np.sqrt(np.mean(q))),
+    if flux is None:
+        sigma0 = float(np.sqrt(solve(np.mean, 1.0, inliers)))
+        return {"sigma0_px": sigma0, "rms_residual_px": float(np.sqrt(np.mean(q))),
+                "n": int(ok.sum())}
+    light = np.asarray(flux, dtype=np.float64).reshape(-1)[ok]
+    positive = np.isfinite(light) & (light > 0)
+    relative = np.ones_like(light)
+    if positive.any():
+        relative[positive] = light[positive] / np.median(light[positive])
+    q_all, known_all = q, known
+
+    def fit(p):  # σ₀² for exponent p, and the negative log-likelihood of the inliers
+        nonlocal q, known
+        w2 = relative ** (-2.0 * p)
+        q, known = q_all / w2, known_all / w2  # the equation of the constant model, per w
+        variance = solve(np.mean, 1.0, inliers)
+        q, known = q_all, known_all
+        total = known_all[inliers] + variance * w2[inliers]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            nll = float(np.sum(np.log(np.where(total > 0, total, np.inf))
+                               + np.where(total > 0, q_all[inliers] / total, 0.0)))
+        return variance, nll
+
+    if np.ptp(np.log(relative)) > 0:
+        best = minimize_scalar(lambda p: fit(p)[1], bounds=(0.0, MAX_FLUX_EXPONENT),
+                               method="bounded", options={"xatol": 1e-3})
+        exponent = float(best.x) if fit(best.x)[1] < fit(0.0)[1] else 0.0
+    else:
+        exponent = 0.0
+    variance = fit(exponent)[0]
+    weights = np.full(points.shape[0], np.nan)
+    weights[ok] = relative ** (-exponent)
+    return {"sigma0_px": float(np.sqrt(variance)), "flux_exponent": exponent,
+            "weights": weights, "rms_residual_px": float(np.sqrt(np.mean(q_all))),
             "n": int(ok.sum())}
 
 

@@ -8,6 +8,7 @@ Subcommands::
     python -m synth suite   SPEC.toml --out DIR [--workers N | --scheduler tcp://HOST:PORT]
     python -m synth boards  SCENE --out DIR [--poses 15] [--board chessboard|charuco]
                             [--squares 11x8] [--square-mm 40] [--seed S] [--air]
+    python -m synth sequence SCENE --approach FROM,TO --frames N --out DIR [--yaw DEG]
     python -m synth check   DIR [--rms PX] [--max PX] [--json]
 
 Bad input (missing or malformed scene, wrong structure, unknown ``-D``, bad option, an ``--out``
@@ -29,11 +30,11 @@ matplotlib, SciPy) stay inside the functions so that ``--help`` stays fast.
 from __future__ import annotations
 
 from synth.infra.cli import Parser, command_parser, process_main, run_command
-from synth.commands import boards, check, dataset, photos, render, scene, suite
+from synth.commands import boards, check, dataset, photos, render, scene, sequence, suite
 
 PROG = "python -m synth"
 #: The command modules, in the order ``--help`` lists them.
-COMMANDS = (scene, render, dataset, suite, boards, photos, check)
+COMMANDS = (scene, render, dataset, suite, boards, sequence, photos, check)
 
 
 def build_parser() -> Parser:

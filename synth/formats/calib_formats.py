@@ -35,7 +35,9 @@ own (:func:`measure.geometry.flatport_format.to_domeport`); both cameras must ha
 housing; a rig with a skewed K, zero or several port layers cannot be written and raises
 :class:`CalibFormatError`.
 Camera models read: SIMPLE_PINHOLE, PINHOLE, SIMPLE_RADIAL, RADIAL, OPENCV, FULL_OPENCV (their
-distortion is OpenCV's); written: OPENCV, or FULL_OPENCV when k3 (or k4–k6) is not zero.
+distortion is OpenCV's Brown–Conrady model) and OPENCV_FISHEYE (OpenCV's fisheye model, k1…k4);
+written: OPENCV, or FULL_OPENCV when k3 (or k4–k6) is not zero; OPENCV_FISHEYE for a fisheye
+camera.
 """
 
 from __future__ import annotations
@@ -48,6 +50,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from measure import Camera, FlatPort, StereoRig
+from measure.geometry.camera import BROWN_CONRADY, FISHEYE
 from measure.geometry.dome import DomePair
 from measure.geometry.flat_pair import FlatPair
 from measure.geometry.flatport_format import (DOMEPORT_NAMES, FLATPORT_NAMES, METRES_PER_MM,
@@ -65,6 +68,7 @@ COLMAP_MODELS = {
     "RADIAL": ("f", "cx", "cy", "k1", "k2"),
     "OPENCV": ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2"),
     "FULL_OPENCV": ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6"),
+    "OPENCV_FISHEYE": ("fx", "fy", "cx", "cy", "k1", "k2", "k3", "k4"),
 }
 #: Two cameras' FLATPORTs that agree this well are one port (normal in rad, lengths in mm,
 #: indices): calibmar writes 10 significant digits, a rig with two housings differs far more;
@@ -102,21 +106,27 @@ def stereo_extrinsics(left: Camera, right: Camera) -> tuple[np.ndarray, np.ndarr
 
 
 def calib_dict(size, K1, D1, K2, D2, R, T, port: FlatPort, has_port: bool,
-               where: str = "calibration") -> dict:
+               where: str = "calibration", models=(BROWN_CONRADY, BROWN_CONRADY)) -> dict:
     """The dictionary :func:`synth.products.dataset.read_calib` returns: ``size``, ``K1``, ``D1``, ``K2``,
     ``D2``, ``R``, ``T`` (OpenCV's stereo pose, 3x1), ``port``, ``has_port``, ``rig`` (the
-    left camera at the reference origin) and ``covariance`` (None here; ``calib.yaml`` may
-    hold one); ``where`` (the file) starts a CalibFormatError."""
+    left camera at the reference origin), ``covariance`` (None here; ``calib.yaml`` may
+    hold one) and ``models``, the two cameras' distortion models (``D1``, ``D2`` are theirs);
+    ``where`` (the file) starts a CalibFormatError."""
     out = {"size": (int(size[0]), int(size[1])),
            "K1": np.asarray(K1, dtype=np.float64), "D1": np.asarray(D1, dtype=np.float64),
            "K2": np.asarray(K2, dtype=np.float64), "D2": np.asarray(D2, dtype=np.float64),
            "R": np.asarray(R, dtype=np.float64), "T": np.asarray(T, dtype=np.float64),
-           "port": port, "has_port": bool(has_port), "covariance": None}
+           "port": port, "has_port": bool(has_port), "covariance": None,
+           "models": tuple(models)}
     if out["R"].shape != (3, 3) or out["T"].size != 3:
         raise CalibFormatError(f"{where}: R must be 3x3 and T 3x1")
-    left = Camera(out["K1"], out["size"], dist=out["D1"].ravel())
-    R, T = out["R"], out["T"].ravel()
-    right = Camera(out["K2"], out["size"], dist=out["D2"].ravel(), R=R.T, t=-R.T @ T)
+    try:
+        left = Camera(out["K1"], out["size"], dist=out["D1"].ravel(), distortion_model=models[0])
+        R, T = out["R"], out["T"].ravel()
+        right = Camera(out["K2"], out["size"], dist=out["D2"].ravel(), R=R.T, t=-R.T @ T,
+                       distortion_model=models[1])
+    except ValueError as exc:
+        raise CalibFormatError(f"{where}: {exc}") from None
     out["rig"] = StereoRig(left, right, port)
     return out
 
@@ -144,12 +154,25 @@ def _air_port() -> FlatPort:
 # ---------------------------------------------------------------------------------------------
 # cameras as COLMAP models
 # ---------------------------------------------------------------------------------------------
+def distortion_model_of(colmap_model: str) -> str:
+    """The :class:`Camera` distortion model of a COLMAP camera model."""
+    return FISHEYE if colmap_model == "OPENCV_FISHEYE" else BROWN_CONRADY
+
+
 def colmap_camera(camera: Camera, model: str | None = None) -> tuple[str, list[float]]:
     """``(model, params)`` of ``camera`` in COLMAP's pixels: OPENCV, or FULL_OPENCV when k3 or
-    the rational k4–k6 are not zero (``model=None``); ``model="OPENCV"`` refuses those."""
+    the rational k4–k6 are not zero (``model=None``); ``model="OPENCV"`` refuses those; a
+    fisheye camera is OPENCV_FISHEYE (fx fy cx cy k1 k2 k3 k4)."""
     K = camera.K
     if K[0, 1] != 0:
         raise CalibFormatError(f"K has a skew of {K[0, 1]:g}: COLMAP's camera models have none")
+    if camera.fisheye or model == "OPENCV_FISHEYE":
+        if not camera.fisheye or model not in (None, "OPENCV_FISHEYE"):
+            raise CalibFormatError(f"OPENCV_FISHEYE holds OpenCV's fisheye model only; this "
+                                   f"camera's is {camera.distortion_model}, model {model}")
+        return "OPENCV_FISHEYE", [float(v) for v in (
+            K[0, 0], K[1, 1], K[0, 2] + COLMAP_PIXEL_OFFSET, K[1, 2] + COLMAP_PIXEL_OFFSET,
+            *camera.dist)]
     dist = np.zeros(8) if camera.dist is None else np.pad(camera.dist, (0, 8 - camera.dist.size))
     needs_full = bool(np.any(dist[4:]))
     model = model or ("FULL_OPENCV" if needs_full else "OPENCV")
@@ -167,7 +190,8 @@ def colmap_camera(camera: Camera, model: str | None = None) -> tuple[str, list[f
 
 def opencv_camera(model: str, params, where: str) -> tuple[np.ndarray, np.ndarray]:
     """``(K, D)`` in OpenCV's pixels of a COLMAP model and its parameters; ``D`` is ``(1, 5)``
-    (``(1, 8)`` with rational terms). CalibFormatError names ``where`` and what is wrong."""
+    (``(1, 8)`` with rational terms; ``(1, 4)``, k1…k4 of the fisheye model, for
+    OPENCV_FISHEYE: :func:`distortion_model_of`). CalibFormatError names ``where`` and what is wrong."""
     if model not in COLMAP_MODELS:
         raise CalibFormatError(f"{where}: unknown or unsupported camera model {model!r} "
                                f"(read: {', '.join(COLMAP_MODELS)})")
@@ -182,6 +206,8 @@ def opencv_camera(model: str, params, where: str) -> tuple[np.ndarray, np.ndarra
         raise CalibFormatError(f"{where}: focal lengths must be positive, got {fx:g}, {fy:g}")
     K = np.array([[fx, 0.0, p["cx"] - COLMAP_PIXEL_OFFSET],
                   [0.0, fy, p["cy"] - COLMAP_PIXEL_OFFSET], [0.0, 0.0, 1.0]])
+    if distortion_model_of(model) == FISHEYE:
+        return K, np.array([[p["k1"], p["k2"], p["k3"], p["k4"]]])
     dist = np.zeros(8)
     dist[0] = p.get("k1", p.get("k", 0.0))
     dist[1] = p.get("k2", 0.0)
@@ -411,6 +437,7 @@ def read_calibmar(path) -> dict:
         raise CalibFormatError(f"{second}: image size {sizes['right']} differs from {first}'s "
                                f"{sizes['left']}; this project's calibration has one image size")
     cams, poses = {}, {}
+    models = tuple(distortion_model_of(str(files[view][1]["model"])) for view in ("left", "right"))
     for view, (name, values) in files.items():
         K, D = opencv_camera(str(values["model"]), values["parameters"], name)
         cams[view] = (K, D)
@@ -419,7 +446,7 @@ def read_calibmar(path) -> dict:
     housings = {view: str(values["non_svp_model"]) for view, (_, values) in files.items()}
     if housings["left"] == housings["right"] == "NONE":
         return calib_dict(sizes["left"], *cams["left"], *cams["right"], R, T, _air_port(), False,
-                          first)
+                          first, models)
     for view, (name, _) in files.items():
         if housings[view] not in HOUSINGS or housings[view] != housings["left"]:
             raise CalibFormatError(f"{name}: non_svp_model {housings[view]}; this project reads "
@@ -432,9 +459,11 @@ def read_calibmar(path) -> dict:
     right = Camera(cams["right"][0], sizes["left"], R=poses["right"][0], t=poses["right"][1])
     if housing == "DOMEPORT":
         return calib_dict(sizes["left"], *cams["left"], *cams["right"], R, T,
-                          _dome_pair(params["left"], params["right"], left, right), True, first)
+                          _dome_pair(params["left"], params["right"], left, right), True, first,
+                          models)
     port = _flat_ports(params["left"], params["right"], left, right)
-    return calib_dict(sizes["left"], *cams["left"], *cams["right"], R, T, port, True, first)
+    return calib_dict(sizes["left"], *cams["left"], *cams["right"], R, T, port, True, first,
+                      models)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -522,6 +551,7 @@ def _parse_cameras_txt(path) -> dict:
             raise CalibFormatError(f"{where}: camera {camera_id} given twice")
         K, D = opencv_camera(model, params, where)
         cameras[camera_id] = {"size": (int(parts[2]), int(parts[3])), "K": K, "D": D,
+                              "model": distortion_model_of(model),
                               "housing": housing,
                               "port": None if port is None else _check_port(port, where,
                                                                             housing)}
@@ -583,9 +613,10 @@ def read_colmap(path) -> dict:
                                f"{left['size']} and {right['size']}; this project's calibration "
                                f"has one image size")
     R, T = _from_relative(poses[ref], poses[other])
+    models = (left["model"], right["model"])
     if left["port"] is None and right["port"] is None:
         return calib_dict(left["size"], left["K"], left["D"], right["K"], right["D"], R, T,
-                          _air_port(), False, path)
+                          _air_port(), False, path, models)
     if left["port"] is None or right["port"] is None:
         raise CalibFormatError(f"{path}: one camera has a {left['housing'] or right['housing']} "
                                f"and the other none")
@@ -597,10 +628,10 @@ def read_colmap(path) -> dict:
     if left["housing"] == "DOMEPORT":
         return calib_dict(left["size"], left["K"], left["D"], right["K"], right["D"], R, T,
                           _dome_pair(left["port"], right["port"], cam_left, cam_right), True,
-                          path)
+                          path, models)
     port = _flat_ports(left["port"], right["port"], cam_left, cam_right)
     return calib_dict(left["size"], left["K"], left["D"], right["K"], right["D"], R, T, port,
-                      True, path)
+                      True, path, models)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -701,6 +732,7 @@ def read_single_camera(path) -> dict:
                                    f"calibration; give one camera's file")
         K, D = opencv_camera(str(values["model"]), values["parameters"], path)
         size = values["size"]
+        model = distortion_model_of(str(values["model"]))
     elif kind == "colmap":
         cameras = _parse_cameras_txt(path)
         if len(cameras) != 1:
@@ -710,7 +742,7 @@ def read_single_camera(path) -> dict:
         if only["housing"] is not None:
             raise CalibFormatError(f"{path}: the camera has a {only['housing']}: already a "
                                    f"housing calibration; give the camera's in-air calibration")
-        K, D, size = only["K"], only["D"], only["size"]
+        K, D, size, model = only["K"], only["D"], only["size"], only["model"]
     else:
         try:
             fs = cv2.FileStorage(path, cv2.FILE_STORAGE_READ)
@@ -738,6 +770,8 @@ def read_single_camera(path) -> dict:
             out["rms_px"] = None if node.empty() else float(node.real())
             node = fs.getNode("lens_model")
             out["lens_model"] = None if node.empty() else node.string()
+            node = fs.getNode("distortion_model")
+            model = BROWN_CONRADY if node.empty() else node.string()
             out["covariance"] = _camera_covariance(path, fs.getNode("covariance"))
         finally:
             fs.release()
@@ -747,7 +781,8 @@ def read_single_camera(path) -> dict:
     dist = np.asarray(D, dtype=np.float64).ravel()
     try:
         out["camera"] = Camera(np.asarray(K, dtype=np.float64), size,
-                               dist=dist if np.any(dist) else None)
+                               dist=dist if np.any(dist) or model == FISHEYE else None,
+                               distortion_model=model)
     except ValueError as exc:
         raise CalibFormatError(f"{path}: {exc}") from None
     out["size"] = tuple(size)
@@ -783,5 +818,6 @@ def write_calibration_formats(directory, rig: StereoRig, has_port: bool = True) 
 __all__ = ["CALIBMAR_NAME", "COLMAP_CAMERAS_NAME", "COLMAP_MODELS", "COLMAP_PIXEL_OFFSET",
            "COLMAP_RIG_NAME", "CalibFormatError", "IMAGE_PREFIXES", "PORT_TOLERANCE",
            "PYCOLMAP_WARNING", "calib_dict", "calib_format", "calibmar_partner", "colmap_camera",
+           "distortion_model_of",
            "opencv_camera", "read_calibmar", "read_colmap", "read_single_camera", "stereo_extrinsics",
            "write_calibmar", "write_calibration_formats", "write_colmap", "write_single_camera"]

@@ -54,8 +54,10 @@ def cameras_json(rig: StereoRig, has_port: bool = True) -> dict:
         dist = np.zeros(5) if camera.dist is None else np.asarray(camera.dist, np.float64)
         cameras[name] = {
             "K": _list(camera.K),
-            "distortion": {"model": "opencv", "order": "k1 k2 p1 p2 [k3 [k4 k5 k6]]",
-                           "coefficients": _list(dist)},
+            "distortion": ({"model": "opencv_fisheye", "order": "k1 k2 k3 k4 (cv2.fisheye)",
+                            "coefficients": _list(dist)} if camera.fisheye else
+                           {"model": "opencv", "order": "k1 k2 p1 p2 [k3 [k4 k5 k6]]",
+                            "coefficients": _list(dist)}),
             "image_size": {"width": int(camera.size[0]), "height": int(camera.size[1])},
             "pose_camera_to_reference": {"convention": "X_ref = R · X_cam + t",
                                          "R": _list(camera.R), "t": _list(camera.t)}}

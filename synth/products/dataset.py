@@ -9,7 +9,9 @@ A dataset directory holds (units mm, reference frame = the left camera's, OpenCV
   ``left_preview.png``, ``right_preview.png`` -- 8-bit sRGB;
   ``left.exr``, ``right.exr`` -- float32 linear, on request;
 * ``calib.yaml`` -- OpenCV FileStorage: ``image_width``, ``image_height``, ``K1``, ``D1``,
-  ``K2``, ``D2``, ``R``, ``T`` (OpenCV stereo convention ``X_right = R·X_left + T``), ``units``
+  ``K2``, ``D2``, ``R``, ``T`` (OpenCV stereo convention ``X_right = R·X_left + T``),
+  ``D1_model``, ``D2_model`` (``fisheye`` for OpenCV's fisheye model, k1…k4; absent for
+  OpenCV's Brown–Conrady model), ``units``
   (``mm``, the only one read) and a map ``port`` {``normal`` (3x1), ``distance``,
   ``thicknesses`` (sequence), ``indices`` (sequence), ``present`` (0 for an all-air scene,
   whose port is index-matched: read with every index 1, whatever the file says; 1 a port)} —
@@ -63,6 +65,7 @@ import cv2
 import numpy as np
 
 from measure import Camera, FlatPort, StereoRig
+from measure.geometry.camera import BROWN_CONRADY
 from measure.geometry.dome import DomePair, DomePort
 from measure.geometry.flat_pair import FlatPair
 from measure.geometry.projection import project
@@ -129,6 +132,9 @@ def write_calib(path, rig: StereoRig, has_port: bool = True, extra: dict | None 
         fs.write("D1", _dist5(left).reshape(1, -1))
         fs.write("K2", right.K)
         fs.write("D2", _dist5(right).reshape(1, -1))
+        for key, camera in (("D1_model", left), ("D2_model", right)):
+            if camera.distortion_model != BROWN_CONRADY:  # absent: OpenCV's Brown–Conrady
+                fs.write(key, camera.distortion_model)
         fs.write("R", R)
         fs.write("T", T.reshape(3, 1))
         write_calib_port(fs, rig.port, has_port)
@@ -225,10 +231,14 @@ def _read_calib(path) -> dict:
                                    pnode.getNode("distance").real(),
                                    tuple(_seq(pnode.getNode("thicknesses"))), indices)
         covariance = _read_covariance(path, fs.getNode("covariance"))
+        models = []
+        for key in ("D1_model", "D2_model"):
+            node = fs.getNode(key)
+            models.append(BROWN_CONRADY if node.empty() else node.string().strip())
     finally:
         fs.release()
     calib = calib_dict(out["size"], out["K1"], out["D1"], out["K2"], out["D2"], out["R"],
-                       out["T"], out["port"], out["has_port"], str(path))
+                       out["T"], out["port"], out["has_port"], str(path), tuple(models))
     calib["covariance"] = covariance
     return calib
 

@@ -102,3 +102,14 @@ def sphere_cap(z: float = 1000.0, radius: float = 400.0, half_angle_deg: float =
                                            np.full(count, -np.cos(polar))]))
     normals = np.concatenate(directions)
     return centre + radius * normals, normals
+
+
+def docking_frame(size: float = 1000.0, post: float = 100.0) -> np.ndarray:
+    """A docking frame's 12 markers ``(12, 3)`` mm in its own frame (origin at its centre, z
+    away from the cameras when it faces them): the corners and side midpoints of a square of
+    side ``size`` in the plane z = 0, and four markers on posts ``post`` mm towards the cameras
+    at ``(±size/5, ±size/5, −post)`` (``post = 0``: all in one plane)."""
+    h, q = size / 2.0, size / 5.0
+    rim = [(-h, -h), (0.0, -h), (h, -h), (h, 0.0), (h, h), (0.0, h), (-h, h), (-h, 0.0)]
+    inner = [(-q, -q), (q, -q), (q, q), (-q, q)]
+    return np.array([(x, y, 0.0) for x, y in rim] + [(x, y, -float(post)) for x, y in inner])

@@ -398,3 +398,35 @@ def test_free_parameters_are_named_once_each(text, message):
     with pytest.raises(CLIError, match=message):
         parse_free(text)
     assert parse_free("distance,normal") == ("distance", "normal")
+
+
+@pytest.mark.slow
+def test_underwater_photos_calibrated_as_pinhole_cameras_absorb_the_port(rendered, tmp_path):
+    """--model absorbed: the underwater photos alone, as pinhole cameras. A flat port magnifies
+    by about n_water / n_air near the axis, so the absorbed focal length is about 1.33 × the
+    true in-air one (physics, not the project's earlier output); the file has no port."""
+    from synth.products.dataset import read_calib
+
+    out = tmp_path / "absorbed"
+    assert eval_main(["calibrate", rendered["water"], "--model", "absorbed", "--squares", "7x6",
+                      "--square-mm", "60", "--out", str(out), "--no-progress"]) == 0
+    rig = read_calib(out / "calib.yaml")["rig"]
+    assert not rig.port.refracts
+    ratio = rig.left.K[0, 0] / rendered["water_truth"].left.K[0, 0]
+    assert 1.25 < ratio < 1.40, ratio
+    report = json.loads((out / "report.json").read_text())
+    assert report["model"] == "absorbed" and report["stereo_rms_px"] > 0
+    assert report["lens_model"] in report["stereo_rms_px_by_lens_model"]
+
+
+def test_absorbed_model_refuses_the_port_models_options(tmp_path, capsys):
+    (tmp_path / "left").mkdir()
+    (tmp_path / "right").mkdir()
+    for extra, fragment in ((["--intrinsics", "calib.yaml"], "--intrinsics"),
+                            (["--start-distance", "90"], "no port")):
+        out = tmp_path / "out"
+        assert eval_main(["calibrate", str(tmp_path), "--model", "absorbed", "--out", str(out),
+                          *extra]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and err[0].startswith("error:") and fragment in err[0], err
+        assert not out.exists()

@@ -109,10 +109,12 @@ def test_a_pair_that_is_not_a_pair_is_named_and_exits_1(damage, tmp_path, capsys
 def test_one_camera_of_a_wide_lens(tmp_path, capsys):
     """20 frames of a GoPro-type camera, halved (its reference scaled exactly: f/2,
     (c − 0.5)/2). OpenCV's k3 model folds within this image, so ``auto`` keeps the rational
-    one, as the reference did. The tolerance is 1 %: two rational fits of these frames that
-    keep different frames differ by that much (the repository's detector kept 17, this one 18
-    and leaves one out as an outlier: fx +0.84 % at full size; all 18 kept: +0.31 %); the
-    issue's 0.5 % is not reached by default."""
+    one, as the reference did. The reference's own recipe (OpenCV's classic detector, rational
+    model) kept frame 820, whose residuals are no lens's (a shear across a central board: RMS
+    1.93 px against 0.34–1.25 px); without it that recipe gives fx +0.74 % and this run, which
+    leaves it out as an outlier, +0.85 % (docs/calibration.md). So fx, fy within 1 % of the
+    published numbers, and within 2 of the photo-to-photo σ (the jackknife over the photos),
+    which exceeds OpenCV's σ."""
     out = tmp_path / "cam"
     assert _run(["calibrate", str(GOPRO), "--air", "--inner-corners", "9x6", "--square-mm",
                  "9.35", "--out", str(out)]) == 0
@@ -125,8 +127,11 @@ def test_one_camera_of_a_wide_lens(tmp_path, capsys):
     dist = fs.getNode("distortion_coefficients").mat().ravel()
     fs.release()
     assert dist.size == 8
-    for i in (0, 1):
+    report = json.loads((out / "report.json").read_text())["camera"]
+    for i, key in ((0, "fx"), (1, "fy")):
         assert abs(K[i, i] / (K_ref[i, i] / 2) - 1) < 0.01
+        assert report[key]["sigma_photos"] > report[key]["sigma"]
+        assert abs(K[i, i] - K_ref[i, i] / 2) < 2 * report[key]["sigma_photos"]
         # the principal point within 0.5 % of the image width (6 px of 1352)
         assert abs(K[i, 2] - (K_ref[i, 2] - 0.5) / 2) < 6
     assert (out / "calibmar.yaml").read_text().startswith("model: FULL_OPENCV")

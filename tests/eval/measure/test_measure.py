@@ -238,6 +238,16 @@ def test_an_in_air_calibration_is_said(tmp_path, capsys):
     assert captured.err.startswith("warning: --calib ") and "in-air calibration" in captured.err
     report = json.loads((out / "report.json").read_text())
     assert report["has_port"] is False and "in-air calibration" in (out / "report.md").read_text()
+    # the same rig written as an absorbed calibration (eval calibrate --model absorbed) is said
+    # to be one: the port absorbed, not modelled
+    write_calib(tmp_path / "absorbed.yaml", rig, has_port=False, extra={"model": "absorbed"})
+    out = tmp_path / "out_absorbed"
+    assert eval_main(["measure", "--calib", str(tmp_path / "absorbed.yaml"),
+                      str(tmp_path / "left.png"), str(tmp_path / "right.png"), "--depth-range",
+                      "900,1100", "--out", str(out), "--quiet"]) == 0
+    err = capsys.readouterr().err
+    assert "absorbed calibration" in err and "in-air calibration" not in err
+    assert json.loads((out / "report.json").read_text())["model"] == "absorbed"
 
 
 @pytest.fixture

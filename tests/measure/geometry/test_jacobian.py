@@ -54,8 +54,7 @@ def _assert_close(analytic, numeric, name, step):
 
 
 def _with_camera(camera, R=None, t=None):
-    return Camera(camera.K, camera.size, camera.dist, camera.R if R is None else R,
-                  camera.t if t is None else t)
+    return camera.with_pose(camera.R if R is None else R, camera.t if t is None else t)
 
 
 def _check_all(camera, port, points, solver="fermat"):
@@ -132,6 +131,14 @@ def test_paper_rig_jacobians_for_both_solvers(rig, solver):
     points = paper_plane(1000.0)[::7]
     for camera in rig.cameras:
         _check_all(camera, rig.port, points, solver)
+
+
+def test_jacobians_with_a_fisheye_lens(rig):
+    """OpenCV's fisheye model (Kannala–Brandt) through the projector's chain rule."""
+    points = paper_plane(1000.0)[::7]
+    right = rig.right
+    camera = Camera(right.K, right.size, (0.05, 0.01, 0.004, -0.01), right.R, right.t, "fisheye")
+    _check_all(camera, rig.port, points)
 
 
 def test_jacobian_on_the_normal_through_the_camera_and_nan_rows(rig):

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from measure.geometry.camera import Camera
+from measure.geometry.camera import BROWN_CONRADY, FISHEYE, Camera
 from measure.geometry.dome import DomePort
 from measure.geometry.port import FlatPort, index_matched_port
 from measure.geometry.projection import project
@@ -21,9 +21,9 @@ K = np.array([[FOCAL, 0, 1223.5], [0, FOCAL, 1023.5], [0, 0, 1.0]])
 GLASS = (1.0, 1.54, 1.33)
 
 
-def _ring(count, rng):
+def _ring(count, rng, model=BROWN_CONRADY):
     """``count`` cameras on an arc of radius 700 mm (0.3 rad apart, at most 1.2 rad in all),
-    each turned towards a point 1.5 m ahead, with a little lens distortion."""
+    each turned towards a point 1.5 m ahead, with a little lens distortion of ``model``."""
     cameras = []
     for k in range(count):
         angle = (k - (count - 1) / 2) * min(0.3, 1.2 / max(count - 1, 1))
@@ -33,8 +33,9 @@ def _ring(count, rng):
         x = np.cross([0, 1, 0], z)
         x /= np.linalg.norm(x)
         R = np.column_stack([x, np.cross(z, x), z])
-        dist = rng.normal(0, [0.05, 0.02, 0.0005, 0.0005])
-        cameras.append(Camera(K, SIZE, dist=dist, R=R, t=centre))
+        dist = rng.normal(0, [0.05, 0.02, 0.0005, 0.0005] if model == BROWN_CONRADY
+                          else [0.05, 0.02, 0.005, 0.002])
+        cameras.append(Camera(K, SIZE, dist=dist, R=R, t=centre, distortion_model=model))
     return cameras
 
 
@@ -65,11 +66,13 @@ def _targets(rng, n=300):
                             rng.uniform(1100, 2000, n)])
 
 
-@pytest.mark.parametrize("count,mix", [(2, "shared"), (3, "own"), (4, "dome"), (5, "air"),
-                                       (7, "mixed"), (13, "mixed")])
-def test_ideal_pixels_come_back_exactly(count, mix):
+@pytest.mark.parametrize("count,mix,model", [(2, "shared", BROWN_CONRADY),
+                                             (3, "own", BROWN_CONRADY), (4, "dome", BROWN_CONRADY),
+                                             (5, "air", BROWN_CONRADY), (7, "mixed", BROWN_CONRADY),
+                                             (13, "mixed", BROWN_CONRADY), (4, "mixed", FISHEYE)])
+def test_ideal_pixels_come_back_exactly(count, mix, model):
     rng = np.random.default_rng(count)
-    cameras = _ring(count, rng)
+    cameras = _ring(count, rng, model)
     ports = _ports(cameras, mix, rng)
     points = _targets(rng)
     pixels = np.stack([project(c, p, points) for c, p in zip(cameras, ports)], axis=1)

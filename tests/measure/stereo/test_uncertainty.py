@@ -212,6 +212,27 @@ def test_residual_sigma_recovers_the_pixel_noise():
     assert exact["sigma0_px"] < 1e-6
 
 
+def test_residual_sigma_finds_how_the_noise_grows_for_faint_targets():
+    """Noise whose σ grows as flux^(−1) (faint targets scatter more, as oblique disks on a
+    cylinder did) is found from the residuals alone: the exponent and σ₀ against the noise
+    that was drawn; noise of one σ for every flux gives an exponent near 0."""
+    rig = paper_rig()
+    points = paper_plane(1000.0)
+    exact = [project(c, rig.port, points) for c in rig.cameras]
+    rng = np.random.default_rng(11)
+    flux = np.exp(rng.uniform(np.log(5.0), np.log(25.0), len(points)))
+    sigma = SIGMA_PX * (flux / np.median(flux)) ** -1.0
+    noisy = [uv + rng.normal(0, 1, uv.shape) * sigma[:, None] for uv in exact]
+    start = triangulate(rig, *noisy, "optical_path").points
+    found = residual_sigma(rig, *noisy, start, flux=flux)
+    assert abs(found["flux_exponent"] - 1.0) < 0.2, found["flux_exponent"]
+    assert abs(found["sigma0_px"] / SIGMA_PX - 1) < 0.15, found["sigma0_px"]
+    assert np.allclose(found["weights"], (flux / np.median(flux)) ** -found["flux_exponent"])
+    even = [uv + rng.normal(0, SIGMA_PX, uv.shape) for uv in exact]
+    start = triangulate(rig, *even, "optical_path").points
+    assert residual_sigma(rig, *even, start, flux=flux)["flux_exponent"] < 0.15
+
+
 def test_residual_sigma_ignores_a_wrong_match():
     rig, points, (uv_left, uv_right), (noisy_left, noisy_right) = _noisy_pairs(6)
     noisy_right[:3, 1] += 5.0  # three pairs 5 px off the epipolar curve

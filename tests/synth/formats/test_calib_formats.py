@@ -20,7 +20,8 @@ from synth.formats.calib_formats import (CALIBMAR_NAME, COLMAP_CAMERAS_NAME, COL
 from synth.products.dataset import DatasetError, read_calib, write_calib
 from synth.scene.rig import air_port, paper_rig
 
-KEYS = ("size", "K1", "D1", "K2", "D2", "R", "T", "port", "has_port", "rig", "covariance")
+KEYS = ("size", "K1", "D1", "K2", "D2", "R", "T", "port", "has_port", "rig", "covariance",
+        "models")
 
 
 def _rig(dist_left=(0.1, -0.02, 0.001, -0.002, 0.0), dist_right=(-0.1, 0.02, 0.0, 0.001, 0.0),
@@ -71,6 +72,31 @@ def test_round_trip_through_each_format(tmp_path, fmt):
         assert got["port"] == want["port"]
         for key in ("K1", "D1", "K2", "D2"):
             np.testing.assert_array_equal(got[key], want[key])
+
+
+def test_fisheye_cameras_round_trip_as_opencv_fisheye(tmp_path):
+    """OpenCV's fisheye model: calib.yaml (D1_model), calibmar and COLMAP as OPENCV_FISHEYE
+    with COLMAP's parameter order fx, fy, cx, cy, k1, k2, k3, k4 (its documentation)."""
+    plain = _rig()
+    dist = (0.05, 0.01, -0.003, 0.0007)
+    rig = StereoRig(*(Camera(c.K, c.size, dist, c.R, c.t, "fisheye") for c in plain.cameras),
+                    plain.port)
+    want = _project(tmp_path, rig)
+    assert want["models"] == ("fisheye", "fisheye") and want["rig"].left.fisheye
+    paths = [write_calibmar(tmp_path / "cal.yaml", rig)[0],
+             write_colmap(tmp_path / "cameras.txt", rig)[0]]
+    line = next(x for x in open(paths[1]).read().splitlines() if x and x[0] != "#").split()
+    assert line[1] == "OPENCV_FISHEYE"
+    K = rig.left.K
+    np.testing.assert_array_equal([float(v) for v in line[4:12]],
+                                  [K[0, 0], K[1, 1], K[0, 2] + 0.5, K[1, 2] + 0.5, *dist])
+    assert "model: OPENCV_FISHEYE" in open(paths[0]).read()
+    for path in paths:
+        got = read_calib(path)
+        _assert_same(got, want)
+        assert got["models"] == ("fisheye", "fisheye")
+        for camera in got["rig"].cameras:
+            assert camera.fisheye and np.array_equal(camera.dist, dist)
 
 
 def test_half_pixel_shift_is_in_the_files(tmp_path):
@@ -211,7 +237,7 @@ def _edit(path, old, new):
      "non_svp_parameters: [0.2", "unit vector"),
     ("calibmar.yaml", "0.1017, 0.0053", "-0.1017, 0.0053", "int_dist must be > 0"),
     ("calibmar.yaml", "0.0053, 1.0, 1.49", "0.0053, 0.9, 1.49", "indices"),
-    ("calibmar.yaml", "model: OPENCV", "model: OPENCV_FISHEYE", "unsupported camera model"),
+    ("calibmar.yaml", "model: OPENCV", "model: THIN_PRISM_FISHEYE", "unsupported camera model"),
     ("calibmar.yaml", "parameters: [1100.3, ", "parameters: [", "needs 8 finite parameters"),
     # the right count with a number that is not finite: which one is named
     ("calibmar.yaml", "parameters: [1100.3, ", "parameters: [nan, ", r"got fx = nan$"),

@@ -1,0 +1,235 @@
+"""``python -m eval track DATASET --out DIR [--pixel-sigma PX] [--gate PX] [--json]``: follow the
+known object of a ``synth sequence`` folder through its frames and score the poses against the
+true ones.
+
+Per frame: the markers are detected in both views (:func:`measure.detect_targets`); each marker
+is given the detection nearest to where the previous frame's pose, moved on by the last
+frame-to-frame translation (constant velocity), puts it (the forward model through the port;
+an optimal assignment, :func:`scipy.optimize.linear_sum_assignment`, within ``--gate`` px);
+the pose comes from both views jointly (:func:`measure.stereo.pose.estimate_pose`, with its
+covariance). The track locks on at the first frame's **true** pose (a docking run starts from
+a known approach): no search over the markers' identities is done. A frame without a pose
+keeps the last pose for the next prediction.
+
+Writes to ``--out``: ``poses.csv`` (the estimated poses, the columns of the sequence's
+``poses.csv`` plus ``sigma_t_mm`` = sqrt(trace) of the position covariance, ``rms_px``,
+``observations``, ``reason``), ``poses_tum.txt`` (TUM format, metres, the frames with a pose) and
+``report.json``: per frame the detections' RMS distance from the simulator's pixels
+(``pixels.csv``), the position error (mm), the rotation error (rad), the squared
+Mahalanobis distance of the position error, and a summary (median and largest errors, the
+fraction of positions inside their 95 % ellipsoid). Exit 1 when a frame has no pose.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import sys
+import time
+
+import numpy as np
+
+from eval.cli import CLIError, positive_float
+from synth.infra.cli import add_json_option, add_out_option, add_progress_option
+
+COMMAND = "eval track"
+#: Largest distance (px) between a marker's predicted pixel and the detection it is given.
+DEFAULT_GATE_PX = 20.0
+
+
+def add_parser(subparsers):
+    p = subparsers.add_parser(
+        "track", help="follow a synth sequence's known object with the refractive pose",
+        description="Detect the markers of a synth sequence frame by frame, estimate the "
+                    "object's pose from both views through the port, and score it against "
+                    "the true poses.")
+    p.add_argument("dataset", help="a folder written by python -m synth sequence")
+    p.add_argument("--pixel-sigma", type=positive_float, default=None, metavar="PX",
+                   help="the detections' σ (px) for the covariance (default: from each "
+                        "frame's residuals)")
+    p.add_argument("--gate", type=positive_float, default=DEFAULT_GATE_PX, metavar="PX",
+                   help=f"largest distance of a detection from its marker's predicted pixel "
+                        f"(default {DEFAULT_GATE_PX:g})")
+    add_out_option(p, COMMAND, default="out/track")
+    add_json_option(p)
+    add_progress_option(p)
+    p.set_defaults(_main=main)
+    return p
+
+
+def read_sequence(path):
+    """``(manifest, rig, object_points (M, 3), truth (frames, R, t), pixels (F, 2, M, 2))`` of a
+    sequence folder (``pixels``: the Fermat simulator's, for the detections' error);
+    CLIError naming the file for anything missing or malformed."""
+    from synth.products.dataset import DatasetError, read_calib
+    from synth.products.sequence import COMMAND as SEQUENCE, read_poses
+
+    if not os.path.isdir(path):
+        raise CLIError(f"{path}: no such folder")
+    manifest_path = os.path.join(path, "manifest.json")
+    try:
+        with open(manifest_path) as fh:
+            manifest = json.load(fh)
+    except (OSError, ValueError) as exc:
+        raise CLIError(f"{manifest_path}: cannot be read ({exc})") from None
+    if manifest.get("command") != SEQUENCE:
+        raise CLIError(f"{path}: not a folder written by python -m {SEQUENCE}")
+    try:
+        rig = read_calib(os.path.join(path, "calib.yaml"))["rig"]
+    except DatasetError as exc:
+        raise CLIError(str(exc)) from None
+    object_path = os.path.join(path, "object.csv")
+    try:
+        data = np.genfromtxt(object_path, delimiter=",", names=True, ndmin=1)
+        obj = np.column_stack([data["x_mm"], data["y_mm"], data["z_mm"]])
+    except (OSError, ValueError, KeyError) as exc:
+        raise CLIError(f"{object_path}: not an object.csv ({exc})") from None
+    try:
+        truth = read_poses(os.path.join(path, "poses.csv"))
+    except ValueError as exc:
+        raise CLIError(str(exc)) from None
+    pixels_path = os.path.join(path, "pixels.csv")
+    try:
+        data = np.genfromtxt(pixels_path, delimiter=",", names=True, ndmin=1)
+        pixels = np.full((len(truth[0]), 2, obj.shape[0], 2), np.nan)
+        f, i = np.asarray(data["frame"], dtype=int), np.asarray(data["id"], dtype=int)
+        pixels[f, 0, i] = np.column_stack([data["u_left"], data["v_left"]])
+        pixels[f, 1, i] = np.column_stack([data["u_right"], data["v_right"]])
+    except (OSError, ValueError, KeyError, IndexError) as exc:
+        raise CLIError(f"{pixels_path}: not a sequence's pixels.csv ({exc})") from None
+    return manifest, rig, obj, truth, pixels
+
+
+def associate(predicted, detections, gate_px: float) -> np.ndarray:
+    """``(M, 2)``: for each marker's predicted pixel ``(M, 2)`` the detection ``(D, 2)`` the
+    optimal assignment gives it within ``gate_px`` (NaN: none)."""
+    from scipy.optimize import linear_sum_assignment
+
+    out = np.full(predicted.shape, np.nan)
+    ok = np.flatnonzero(np.all(np.isfinite(predicted), axis=1))
+    if ok.size == 0 or detections.shape[0] == 0:
+        return out
+    cost = np.linalg.norm(predicted[ok, None, :] - detections[None, :, :], axis=2)
+    rows, cols = linear_sum_assignment(np.where(cost <= gate_px, cost, 1e9))
+    keep = cost[rows, cols] <= gate_px
+    out[ok[rows[keep]]] = detections[cols[keep]]
+    return out
+
+
+def main(args) -> int:
+    import cv2
+
+    from measure import detect_targets
+    from measure.geometry.projection import project
+    from measure.reasons import Reason
+    from measure.stereo.pose import estimate_pose, rotation_error
+    from measure.stereo.uncertainty import CHI2_3_95, mahalanobis_squared
+    from synth.infra.fileio import OutputDir, atomic_write_json, jsonable
+    from synth.products.sequence import write_tum
+
+    log = ((lambda text: None) if args.no_progress
+           else (lambda text: print(text, file=sys.stderr, flush=True)))
+    start = time.perf_counter()
+    manifest, rig, obj, (frames, R_true, t_true), true_pixels = read_sequence(args.dataset)
+    output = OutputDir(args.out, COMMAND).claim()
+    R_prev, t_prev = R_true[0], t_true[0]  # locked on at the first frame's true pose
+    velocity = np.zeros(3)  # mm per frame, of the last two poses
+    estimates, rows = [], []
+    seconds = {"detect": 0.0, "pose": 0.0}
+    for k, frame in enumerate(frames):
+        pixels = np.full((2, obj.shape[0], 2), np.nan)
+        detected = []
+        for v, name in enumerate(("left", "right")):
+            path = os.path.join(args.dataset, "frames", f"{int(frame):04d}_{name}.png")
+            image = cv2.imread(path, cv2.IMREAD_ANYDEPTH)
+            if image is None:
+                raise CLIError(f"{path}: missing or not an image OpenCV can read")
+            t0 = time.perf_counter()
+            centres = detect_targets(image).centers
+            seconds["detect"] += time.perf_counter() - t0
+            detected.append(int(centres.shape[0]))
+            predicted = project(rig.cameras[v], rig.view_port(v),
+                                obj @ R_prev.T + t_prev + velocity)
+            pixels[v] = associate(predicted, centres, args.gate)
+        t0 = time.perf_counter()
+        pose = estimate_pose(rig, obj, pixels, args.pixel_sigma)
+        seconds["pose"] += time.perf_counter() - t0
+        estimates.append(pose)
+        miss = (pixels - true_pixels[k]).reshape(-1, 2)
+        miss = miss[np.all(np.isfinite(miss), axis=1)]
+        row = {"frame": int(frame), "detections": detected,
+               "detection_rms_px": float(np.sqrt(np.mean(np.sum(miss ** 2, axis=1))))
+               if miss.size else None,
+               "observations": pose.observations, "reason": Reason(pose.reason).name}
+        if pose.valid:
+            velocity = pose.t - t_prev if k > 0 else np.zeros(3)
+            R_prev, t_prev = pose.R, pose.t
+            error = pose.t - t_true[k]
+            row.update({"position_error_mm": float(np.linalg.norm(error)),
+                        "error_mm": error.tolist(),
+                        "rotation_error_rad": float(rotation_error(pose.R, R_true[k])),
+                        "mahalanobis2": float(mahalanobis_squared(
+                            error, pose.covariance[3:, 3:])[0]),
+                        "sigma_t_mm": float(np.sqrt(np.trace(pose.covariance[3:, 3:]))),
+                        "rms_px": pose.rms_px})
+        rows.append(row)
+        log(f"frame {int(frame)}: {row['reason']}"
+            + (f", |dt| {row['position_error_mm']:.3g} mm, rotation "
+               f"{row['rotation_error_rad']:.3g} rad, {pose.observations} pixels"
+               if pose.valid else ""))
+    valid = [r for r in rows if r["reason"] == "OK"]
+    summary = {"frames": len(rows), "tracked": len(valid)}
+    if valid:
+        dt = np.array([r["position_error_mm"] for r in valid])
+        dr = np.array([r["rotation_error_rad"] for r in valid])
+        d2 = np.array([r["mahalanobis2"] for r in valid])
+        miss = [r["detection_rms_px"] for r in rows if r["detection_rms_px"] is not None]
+        summary.update({"detection_rms_px": {"median": float(np.median(miss)),
+                                             "max": float(np.max(miss))},
+                        "position_error_mm": {"median": float(np.median(dt)),
+                                              "max": float(dt.max())},
+                        "rotation_error_rad": {"median": float(np.median(dr)),
+                                               "max": float(dr.max())},
+                        "coverage_95": float(np.mean(d2 <= CHI2_3_95))})
+    report = {"dataset": args.dataset, "sequence": {k: manifest.get(k) for k in (
+        "approach_mm", "yaw_deg", "frames", "fps", "object", "image_size")},
+        "pixel_sigma_px": args.pixel_sigma, "gate_px": args.gate, "summary": summary,
+        "frames": rows}
+    ok = np.array([p.valid for p in estimates])
+    with output.staged() as tmp:
+        from scipy.spatial.transform import Rotation
+
+        fps = float(manifest.get("fps") or 10.0)
+        times = np.asarray(frames, dtype=float) / fps
+        with open(os.path.join(tmp, "poses.csv"), "w") as fh:
+            fh.write("frame,time_s,tx_mm,ty_mm,tz_mm,qx,qy,qz,qw,sigma_t_mm,rms_px,"
+                     "observations,reason\n")
+            for k, p in enumerate(estimates):
+                q = Rotation.from_matrix(p.R).as_quat() if p.valid else np.full(4, np.nan)
+                sigma = np.sqrt(np.trace(p.covariance[3:, 3:]))
+                fh.write(",".join([str(int(frames[k])), f"{times[k]:.6f}",
+                                   *(repr(float(v)) for v in p.t), *(repr(float(v)) for v in q),
+                                   repr(float(sigma)), repr(float(p.rms_px)),
+                                   str(p.observations), Reason(p.reason).name]) + "\n")
+        if ok.any():
+            write_tum(os.path.join(tmp, "poses_tum.txt"), times[ok],
+                      np.stack([p.R for p in estimates])[ok], np.stack([p.t for p in estimates])[ok])
+        report["timings_s"] = {**seconds, "total": time.perf_counter() - start}
+        report = jsonable(report)
+        atomic_write_json(os.path.join(tmp, "report.json"), report)
+    stream = sys.stderr if args.json else sys.stdout
+    if valid:
+        print(f"tracked {summary['tracked']} of {summary['frames']} frames: position error "
+              f"median {summary['position_error_mm']['median']:.3g} mm (max "
+              f"{summary['position_error_mm']['max']:.3g}), rotation median "
+              f"{summary['rotation_error_rad']['median']:.3g} rad (max "
+              f"{summary['rotation_error_rad']['max']:.3g}); {summary['coverage_95']:.0%} of "
+              f"the positions inside their 95 % ellipsoid; detections "
+              f"{summary['detection_rms_px']['median']:.3g} px RMS from the simulator's pixels "
+              f"(median over frames)", file=stream)
+    else:
+        print(f"tracked 0 of {summary['frames']} frames", file=stream)
+    print(f"wrote {output.path}", file=stream)
+    if args.json:
+        print(json.dumps(report, indent=2))
+    return 0 if summary["tracked"] == summary["frames"] else 1

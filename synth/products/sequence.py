@@ -1,0 +1,201 @@
+"""A known object moving along a trajectory, rendered frame by frame with its true pose
+(``python -m synth sequence``; ``python -m eval track`` follows it with
+:mod:`measure.stereo.pose`).
+
+The object is the docking frame of :func:`synth.scene.layouts.docking_frame` (12 self-luminous
+disk markers facing the cameras). It approaches the rig along the rig's depth axis (the port
+normal; for domes the left optical axis): frame k of N has its origin at ``z_k`` mm along that
+axis from the left camera's centre, ``z`` running linearly from ``FROM`` to ``TO``, and its axes
+turned by ``yaw_k`` about the reference y axis, running linearly from 0 to ``yaw_deg``. The
+rig, the port, the image size and the renderer settings come from the scene file; its targets
+and water are not used (the markers are rendered in clear water).
+
+A sequence directory holds (units mm, reference frame = the left camera's, OpenCV axes):
+
+* ``frames/NNNN_left.png``, ``frames/NNNN_right.png`` — 16-bit linear images, each frame
+  scaled so its brightest pixel is 65535 (``manifest["png_scales"]``);
+* ``object.csv`` — ``id,x_mm,y_mm,z_mm``: the markers in the object frame;
+* ``poses.csv`` — ``frame,time_s,tx_mm,ty_mm,tz_mm,qx,qy,qz,qw``: the true pose of each frame,
+  ``X_ref = R · X_obj + t`` (R as a unit quaternion, scalar last);
+* ``poses_tum.txt`` — the same in the TUM RGB-D format ``timestamp tx ty tz qx qy qz qw``
+  (**metres**, as TUM tools expect; the object's pose in the reference frame);
+* ``pixels.csv`` — ``frame,id,u_left,v_left,u_right,v_right``: the Fermat simulator's pixel of
+  every marker (NaN where it has none; pixels outside the image are kept);
+* ``calib.yaml`` — the rig (:func:`synth.products.dataset.write_calib`); ``manifest.json``.
+
+The directory is written whole or not at all (:class:`synth.infra.fileio.OutputDir`).
+"""
+
+from __future__ import annotations
+
+import csv
+import os
+import tempfile
+import time
+from datetime import datetime, timezone
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from measure.geometry.projection import project
+from synth.infra.fileio import OutputDir, atomic_write_json, file_sha256, jsonable
+from synth.infra.provenance import package_versions
+from synth.scene import SceneSpec, load_scene
+from synth.scene.layouts import docking_frame
+
+COMMAND = "synth sequence"
+FORMAT_VERSION = 1
+#: Marker disk radius (mm): about 3 px at 5 m behind the paper's port at full size.
+DEFAULT_MARKER_RADIUS_MM = 10.0
+DEFAULT_FPS = 10.0
+POSES_HEADER = ["frame", "time_s", "tx_mm", "ty_mm", "tz_mm", "qx", "qy", "qz", "qw"]
+PIXELS_HEADER = ["frame", "id", "u_left", "v_left", "u_right", "v_right"]
+OBJECT_HEADER = ["id", "x_mm", "y_mm", "z_mm"]
+
+
+def trajectory(spec: SceneSpec, approach, frames: int, yaw_deg: float = 0.0):
+    """The true poses ``(R (N, 3, 3), t (N, 3))`` of the approach (module docs)."""
+    start, end = (float(v) for v in approach)
+    axis = spec.rig.depth_axis
+    z = np.linspace(start, end, frames) if frames > 1 else np.array([start])
+    yaw = np.radians(np.linspace(0.0, yaw_deg, frames)) if frames > 1 else np.zeros(1)
+    R = Rotation.from_rotvec(np.outer(yaw, [0.0, 1.0, 0.0])).as_matrix()
+    t = spec.rig.left.center + z[:, None] * axis
+    return R, t
+
+
+def write_poses(directory, R, t, fps: float) -> None:
+    """``poses.csv`` and ``poses_tum.txt`` (module docs) of poses ``R (N, 3, 3)``, ``t (N, 3)``."""
+    q = Rotation.from_matrix(R).as_quat()  # x, y, z, w
+    times = np.arange(len(t)) / fps
+    with open(os.path.join(directory, "poses.csv"), "w", newline="") as fh:
+        writer = csv.writer(fh)
+        writer.writerow(POSES_HEADER)
+        for k in range(len(t)):
+            writer.writerow([k, f"{times[k]:.6f}", *(repr(float(v)) for v in t[k]),
+                             *(repr(float(v)) for v in q[k])])
+    write_tum(os.path.join(directory, "poses_tum.txt"), times, R, t)
+
+
+def write_tum(path, times, R, t) -> None:
+    """Poses in the TUM RGB-D format: ``timestamp tx ty tz qx qy qz qw`` per line, metres."""
+    q = Rotation.from_matrix(R).as_quat()
+    with open(path, "w") as fh:
+        fh.write("# timestamp tx ty tz qx qy qz qw (metres; the object's pose in the left "
+                 "camera's frame)\n")
+        for k in range(len(t)):
+            fh.write(" ".join([f"{times[k]:.6f}", *(f"{v / 1000.0:.9f}" for v in t[k]),
+                               *(f"{v:.12f}" for v in q[k])]) + "\n")
+
+
+def read_poses(path):
+    """``(frames (N,), R (N, 3, 3), t (N, 3))`` from a ``poses.csv``; ValueError naming the
+    file when it is not one."""
+    try:
+        data = np.genfromtxt(path, delimiter=",", names=True, ndmin=1)
+        frames = np.asarray(data["frame"], dtype=int)
+        t = np.column_stack([data["tx_mm"], data["ty_mm"], data["tz_mm"]])
+        q = np.column_stack([data["qx"], data["qy"], data["qz"], data["qw"]])
+        R = Rotation.from_quat(q).as_matrix()
+    except (OSError, ValueError, KeyError) as exc:
+        raise ValueError(f"{path}: not a poses.csv ({exc})") from None
+    return frames, R, t
+
+
+def write_sequence(spec: SceneSpec, out_dir, approach, frames: int, *,
+                   yaw_deg: float = 0.0, size_mm: float = 1000.0,
+                   marker_radius_mm: float = DEFAULT_MARKER_RADIUS_MM, fps: float = DEFAULT_FPS,
+                   spp: int | None = None, seed: int | None = None, variant=None,
+                   progress: bool = True, adaptive: bool = True) -> dict:
+    """Render the sequence into ``out_dir`` (module docs); returns the manifest. ValueError
+    for a request that cannot work (a marker not in the water, fewer than one frame)."""
+    from tqdm import tqdm
+
+    from synth.products.dataset import write_calib
+    from synth.rendering.render import (check_render_request, png16_scale, render_stereo,
+                                        to_png16, write_png)
+    from synth.scene.write import scene_xml
+
+    t_start = time.perf_counter()
+    if frames < 1:
+        raise ValueError(f"--frames must be at least 1, got {frames}")
+    spp = spec.spp if spp is None else int(spp)
+    seed = spec.seed if seed is None else int(seed)
+    output = OutputDir(out_dir, COMMAND).claim()
+    check_render_request(spec, spp, seed, poses=frames, adaptive=adaptive)
+    obj = docking_frame(size_mm)
+    R, t = trajectory(spec, approach, frames, yaw_deg)
+    markers = np.einsum("fij,mj->fmi", R, obj) + t[:, None, :]
+    port = spec.rig.port
+    for k in range(frames):
+        inside = np.all([port.view(v).water_side(markers[k]) for v in range(2)], axis=0)
+        if not inside.all():
+            raise ValueError(f"frame {k}: marker {int(np.flatnonzero(~inside)[0])} at "
+                             f"{np.round(markers[k][~inside][0], 1).tolist()} mm is not in the "
+                             f"water (--approach starts or ends too near)")
+    normals = np.einsum("fij,j->fi", R, [0.0, 0.0, -1.0])
+    images, scales, stats = [], [], []
+    bar = tqdm(range(frames), desc=f"render sequence {spp} spp", unit="frame",
+               disable=not progress, leave=False)
+    t_render = time.perf_counter()
+    with tempfile.TemporaryDirectory(prefix="synth-sequence-") as scratch:
+        for k in bar:
+            path = os.path.join(scratch, f"frame_{k:04d}.xml")
+            with open(path, "w", encoding="utf-8") as fh:
+                fh.write(scene_xml(spec.cameras, spec.port, markers[k], marker_radius_mm,
+                                   spp=spp, seed=seed + 2 * k,
+                                   target_normals=np.tile(normals[k], (len(obj), 1)),
+                                   comment=f"{COMMAND}: frame {k} of {spec.path}"))
+            left, right, info = render_stereo(load_scene(path), spp=spp, variant=variant,
+                                              progress=False, seed=seed + 2 * k,
+                                              adaptive=adaptive)
+            images.append((left, right))
+            stats.append({"variant": info["variant"], "seconds": info["seconds"]})
+    render_seconds = time.perf_counter() - t_render
+    rig = spec.rig
+    pixels = [np.stack([project(c, rig.view_port(v), markers[k])
+                        for v, c in enumerate(rig.cameras)]) for k in range(frames)]
+    with output.staged() as tmp:
+        os.makedirs(os.path.join(tmp, "frames"))
+        for k, pair in enumerate(images):
+            scale = png16_scale(*pair)
+            scales.append(scale)
+            for name, image in zip(("left", "right"), pair):
+                write_png(os.path.join(tmp, "frames", f"{k:04d}_{name}.png"),
+                          to_png16(image, scale))
+        write_calib(os.path.join(tmp, "calib.yaml"), rig, spec.has_port)
+        with open(os.path.join(tmp, "object.csv"), "w", newline="") as fh:
+            writer = csv.writer(fh)
+            writer.writerow(OBJECT_HEADER)
+            for i, p in enumerate(obj):
+                writer.writerow([i, *(repr(float(v)) for v in p)])
+        write_poses(tmp, R, t, fps)
+        with open(os.path.join(tmp, "pixels.csv"), "w", newline="") as fh:
+            writer = csv.writer(fh)
+            writer.writerow(PIXELS_HEADER)
+            for k, uv in enumerate(pixels):
+                for i in range(len(obj)):
+                    writer.writerow([k, i, *(repr(float(v)) for v in uv[:, i].ravel())])
+        files = sorted(os.path.relpath(os.path.join(d, f), tmp)
+                       for d, _, names in os.walk(tmp) for f in names)
+        manifest = {
+            "format_version": FORMAT_VERSION, "command": COMMAND,
+            "created_utc": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+            "versions": package_versions(),
+            "scene": {"path": spec.path, "sha256": spec.sha256, "params": spec.params},
+            "object": {"kind": "docking_frame", "size_mm": size_mm,
+                       "marker_radius_mm": marker_radius_mm, "markers": len(obj)},
+            "approach_mm": [float(v) for v in approach], "yaw_deg": yaw_deg,
+            "frames": frames, "fps": fps, "spp": spp, "seed": seed,
+            "variant": stats[0]["variant"], "image_size": list(spec.size),
+            "png_scales": scales, "adaptive": adaptive,
+            "seconds": {"render": render_seconds, "total": time.perf_counter() - t_start},
+            "sha256": {name: file_sha256(os.path.join(tmp, name)) for name in files},
+        }
+        manifest = jsonable(manifest)
+        atomic_write_json(os.path.join(tmp, "manifest.json"), manifest)
+    return manifest
+
+
+__all__ = ["COMMAND", "DEFAULT_MARKER_RADIUS_MM", "read_poses", "trajectory", "write_poses",
+           "write_sequence", "write_tum"]
