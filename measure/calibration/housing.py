@@ -88,7 +88,8 @@ class HousingCalibration:
 
     ``rig`` the calibrated rig (the starting rig when not identifiable); ``estimates`` /
     ``sigmas`` per free parameter (``normal``: the unit vector and two tilt sigmas in rad;
-    ``extrinsics``: the right camera's ``R``, ``t`` and six sigmas); ``labels`` and
+    ``extrinsics``: the right camera's ``R``, ``t`` and six sigmas; two housings: ``distance``,
+    ``normal``, ``thickness`` as ``{"left": …, "right": …}``, their sigmas left then right); ``labels`` and
     ``correlation`` of the free numbers; ``poses`` ``[(R, t), …]`` of the boards;
     ``rms_px`` overall and ``rms_px_per`` ``{(pose, view): rms}``; ``residuals`` per view
     ``(pose, id, du, dv)`` rows; ``identifiable`` / ``reason``; ``pose_ids`` the numbers of
