@@ -65,12 +65,12 @@ def test_exact_corners_give_both_ports_exactly():
 
 
 def test_noisy_corners_sigmas_cover_the_error_of_each_port():
-    """0.05 px of pixel noise on five seeds: each port's D and both tilts within 3σ (σ from
+    """0.05 px of pixel noise on five seeds of 8 poses: each port's D and both tilts within 3σ (σ from
     s²(JᵀJ)⁻¹, the tilts about the covariance's common axes), σ_D below 0.3 mm."""
     truth, start = _rigs()
     worst = 0.0
     for seed in range(5):
-        cal = calibrate_housing(start, BOARD, _corners(truth, 0.05, seed))
+        cal = calibrate_housing(start, BOARD, _corners(truth, 0.05, seed, n_poses=8))
         assert cal.identifiable, cal.reason
         axes = cal.covariance.normal_axes
         sig = cal.covariance.sigmas
@@ -85,3 +85,26 @@ def test_noisy_corners_sigmas_cover_the_error_of_each_port():
             for k in range(2):
                 worst = max(worst, abs(a[k]) / sig[f"{camera}.port.tilt[{k}]"])
     assert worst < 3.0, worst
+
+
+def test_the_in_air_jacobian_of_two_housings_is_the_residuals_derivative():
+    """d residuals / d the in-air parameters (what carries the in-air covariance into the
+    housings' σ) against central differences of the residuals of the moved rig: each port
+    stays in the reference frame when the right camera moves."""
+    from measure.calibration.flat import housing_problem
+    from measure.calibration.housing import apply_air_change
+
+    truth, start = _rigs()
+    detections = _corners(truth, 0.0, 1, n_poses=6)
+    names = ("distance", "normal")
+    problem = housing_problem(start, BOARD, detections, names, pair=True)
+    air = ("left.fx", "right.k1", "right.rotation[1]", "right.center[2]")
+    analytic = problem.air_jacobian(problem.x0, air)
+    for j, h in enumerate((1e-4, 1e-6, 1e-6, 1e-4)):
+        step = np.zeros(len(air))
+        step[j] = h
+        moved = [housing_problem(apply_air_change(start, air, s), BOARD, detections, names,
+                                 pair=True).residuals(problem.x0) for s in (step, -step)]
+        numeric = (moved[0] - moved[1]) / (2 * h)
+        np.testing.assert_allclose(analytic[:, j], numeric, atol=1e-6 * np.abs(numeric).max(),
+                                   err_msg=air[j])
