@@ -9,7 +9,9 @@ user's own photos (``DIR/left/``, ``DIR/right/``, paired by name; the board on t
 both cameras and the stereo pose (:func:`measure.calibration.air.calibrate_in_air`). Underwater:
 the housing is estimated by refractive bundle adjustment with the in-air intrinsics fixed
 (:func:`measure.calibration.housing.calibrate_housing`); ``--intrinsics`` gives them, as an in-air boards
-folder (calibrated here first) or a ``calib.yaml``.
+folder (calibrated here first) or a ``calib.yaml``. Behind two housings (each camera its own
+flat port: boards whose truth says so, or photos with ``--port-distance``) each camera's port is
+estimated, starting ``--port-distance LEFT,RIGHT`` mm from its camera (:func:`design_pair`).
 
 Writes to ``--out``: ``calib.yaml`` (the dataset format, with an ``uncertainty`` map),
 ``calib_in_air_only.yaml`` (underwater: the in-air calibration with the design port — what a
@@ -36,7 +38,7 @@ from synth.infra.cli import (BOARD_OPTIONS, EXIT_CHECK_FAILED, WATER_INDEX_HELP,
 COMMAND = "eval calibrate"
 #: Options of the housing calibration (underwater boards): refused with in-air boards.
 HOUSING_OPTIONS = ("free", "design_port", "start_distance", "glass_thickness", "n_glass",
-                   "n_water", "air_uncertainty")
+                   "n_water", "air_uncertainty", "port_distance")
 #: What the printed summary says of ``cameras.txt`` (its header says it too).
 COLMAP_NOTE = "upstream COLMAP and pycolmap read it without an error and drop the port"
 _LENS_UNDERWATER = ("underwater: the lens model is the in-air calibration's (--intrinsics); "
@@ -97,6 +99,15 @@ def add_parser(subparsers):
     p.add_argument("--n-water", type=water_index_argument, default=PAPER_INDICES[2],
                    help=f"design {WATER_INDEX_HELP}; default {PAPER_INDICES[2]:g}; the start "
                         f"when --free n_water")
+    p.add_argument("--port-distance", type=per_camera_lengths, metavar="LEFT,RIGHT",
+                   help="two housings (each camera behind its own flat port): the design "
+                        "distance of each port from its camera's centre along the camera's "
+                        "optical axis, mm, as python -m synth scene --port per-camera gives it "
+                        "(default 40,40; one number: both); the start of each port's D and "
+                        "normal (each ⟂ its camera); photos: giving it says that the photos "
+                        "were taken behind two housings. --glass-thickness, --n-glass, "
+                        "--n-water (or --design-port without distance=) give both ports' glass "
+                        "and water")
     p.add_argument("--dome-radius", type=positive_float, default=50.0,
                    help="boards behind domes: the design inner radius of each dome, mm (default "
                         "50); the start is a dome centred on each camera. One camera's photos: "
@@ -183,6 +194,49 @@ def design_port(args, normal):
         values[DESIGN_KEYS[key]] = value
     return FlatPort(normal, values["start_distance"], (values["glass_thickness"],),
                     (1.0, values["n_glass"], values["n_water"]))
+
+
+def per_camera_lengths(text: str) -> tuple:
+    """An argparse type: ``LEFT,RIGHT`` positive lengths (mm), or one for both."""
+    import argparse
+
+    parts = str(text).split(",")
+    if len(parts) > 2:
+        raise argparse.ArgumentTypeError(f"expected one number, or two separated by a comma "
+                                         f"(LEFT,RIGHT), got {text!r}")
+    values = tuple(positive_float(part) for part in parts)
+    return values * 2 if len(values) == 1 else values
+
+
+def design_pair(args, rig):
+    """The starting rig of a two-housing calibration: ``rig``'s cameras, each behind its own
+    flat port ⟂ its optical axis, ``--port-distance`` from its centre
+    (:func:`synth.scene.windows.flat_pair`), the glass and water of :func:`design_port`
+    (``--design-port distance=`` and ``--start-distance`` are refused: the distances are per
+    camera)."""
+    from measure import StereoRig
+    from synth.scene.windows import DEFAULT_PAIR_DISTANCE_MM, flat_pair
+
+    shared = pair_glass(args)
+    distances = args.port_distance or (DEFAULT_PAIR_DISTANCE_MM,) * 2
+    try:
+        pair = flat_pair(rig.cameras, distances, [(0.0, 0.0)] * 2, shared.thicknesses * 2,
+                         shared.indices)
+    except ValueError as exc:
+        raise CLIError(f"--port-distance {','.join(f'{d:g}' for d in distances)}: {exc}") from None
+    return StereoRig(rig.left, rig.right, pair)
+
+
+def pair_glass(args):
+    """The glass and water both ports of two housings share (a :func:`design_port`); the
+    options that give one port's distance are refused (the distances are per camera)."""
+    refuse_given(args, ("start_distance",), "to two housings: give each port's distance with "
+                                            "--port-distance LEFT,RIGHT")
+    if any(item.partition("=")[0].strip() == "distance"
+           for item in (args.design_port or "").split(",")):
+        raise CLIError("--design-port distance= does not apply to two housings: give each "
+                       "port's distance with --port-distance LEFT,RIGHT")
+    return design_port(args, (0.0, 0.0, 1.0))
 
 
 def parse_free(text: str, dome: bool = False) -> tuple:
@@ -290,10 +344,15 @@ def main(args) -> int:
                        f"(no left/ and right/ folders, no photos)")
     boards = read_boards(args.dir)
     truth = boards.calib["rig"]
-    if not boards.air and truth.port.kind not in HOUSINGS:  # e.g. two housings: not yet
+    if not boards.air and truth.port.kind not in HOUSINGS:  # a kind without a housing problem
         raise CLIError(f"{args.dir}: boards behind {truth.port.description}: no housing "
                        f"calibration of {truth.port.rig_name} yet")
     dome = not boards.air and isinstance(truth.port, DomePair)
+    pair = not boards.air and truth.port.kind == "flat pair"  # two housings: --port-distance
+    if not pair and not boards.air:
+        refuse_given(args, ("port_distance",), f"to {args.dir}: its boards are not behind two "
+                                               f"housings (the design distance is "
+                                               f"--start-distance)")
     if dome:
         from measure.calibration.housing import DEFAULT_DOME_FREE
 
@@ -323,7 +382,9 @@ def main(args) -> int:
     if not boards.air and not args.intrinsics:
         raise CLIError(f"{args.dir}: underwater boards need --intrinsics (an --air boards "
                        f"folder or a calib.yaml)")
-    if not boards.air and not dome:
+    if pair:
+        pair_glass(args)  # a bad design is refused before any work
+    elif not boards.air and not dome:
         design_port(args, (0.0, 0.0, 1.0))  # a bad --design-port is refused before any work
     log(f"detect the boards in {boards.path} ({len(boards.images)} poses) …")
     t = time.perf_counter()
@@ -355,6 +416,11 @@ def main(args) -> int:
             report["in_air"] = report_lib.air_summary(air, air_boards.calib["rig"])
         if dome:
             start_rig = design_domes(args, air_rig)
+        elif pair:
+            if any(len(truth.view_port(v).thicknesses) != 1 for v in (0, 1)):
+                raise CLIError(f"{args.dir}: the housing calibration models one glass layer "
+                               f"per port")
+            start_rig = design_pair(args, air_rig)
         else:
             if len(truth.port.thicknesses) != 1:
                 raise CLIError(f"{args.dir}: the housing calibration models one glass layer; "
@@ -433,7 +499,10 @@ def _calibrate_photos(args, output, log, free, start) -> int:
         refuse_given(args, ("lens",), _LENS_UNDERWATER)
     _require_board(args, where)
     board = board_from_args(args)
-    if not args.air:
+    pair = given(args, "port_distance")  # two housings: a port per camera
+    if pair and not args.air:
+        pair_glass(args)  # a bad design is refused before any work
+    elif not args.air:
         design_port(args, (0.0, 0.0, 1.0))  # a bad --design-port is refused before any work
     pairs = photo_folder(args.dir)
     air_rig = air_covariance = None
@@ -485,8 +554,11 @@ def _calibrate_photos(args, output, log, free, start) -> int:
                  for (k, _), pose in result.board_poses.items()}
         timings["calibrate"] = time.perf_counter() - t
     else:
-        design = design_port(args, air_rig.left.R[:, 2])
-        start_rig = StereoRig(air_rig.left, air_rig.right, design)
+        if pair:
+            start_rig = design_pair(args, air_rig)
+        else:
+            start_rig = StereoRig(air_rig.left, air_rig.right,
+                                  design_port(args, air_rig.left.R[:, 2]))
         log(f"refractive bundle adjustment of {', '.join(free)} …")
         result, used_detections, outliers = fit(
             lambda d: calibrate_housing(start_rig, board, d, free, air_covariance,
@@ -581,6 +653,9 @@ def _calibrate_single_housing(args, output, log, start, where) -> int:
     from eval.calibrate.single_housing import calibrate_single_housing, read_intrinsics
 
     refuse_given(args, ("lens",), _LENS_UNDERWATER)
+    refuse_given(args, ("port_distance",), f"to one camera's photos ({args.dir}): it is the "
+                                           f"design of two housings (one camera's port: "
+                                           f"--start-distance)")
     dome = any(given(args, dest) for dest in DOME_DESIGN_OPTIONS)
     if dome:
         refuse_given(args, FLAT_DESIGN_OPTIONS, "to a camera inside a dome (--dome-radius / "

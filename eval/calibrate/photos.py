@@ -213,34 +213,52 @@ def housing_estimates(housing, start_rig) -> dict:
            "rms_px": housing.rms_px, "rms_px_start": housing.rms_px_start,
            "observations": housing.n_observations, "evaluations": housing.nfev,
            "parameters": {}}
-    port = housing.rig.port
     for name in housing.estimates:
         sigma = housing.sigmas[name]
-        if name == "distance":
-            out["parameters"][name] = {"estimate": port.distance, "sigma": sigma, "unit": "mm"}
-        elif name == "thickness":
-            out["parameters"][name] = {"estimate": port.thicknesses[0], "sigma": sigma,
-                                       "unit": "mm"}
-        elif name == "n_water":
-            out["parameters"][name] = {"estimate": port.n_water, "sigma": sigma, "unit": ""}
-        elif name == "normal":
-            tilt = float(np.degrees(np.arccos(np.clip(port.normal @ housing.rig.left.R[:, 2],
-                                                      -1, 1))))
-            out["parameters"][name] = {"estimate": port.normal.tolist(),
-                                       "sigma_deg": np.degrees(sigma).tolist(),
-                                       "tilt_from_left_axis_deg": tilt}
-        elif name == "extrinsics":
+        if name == "extrinsics":
             out["parameters"][name] = {"R": housing.rig.right.R.tolist(),
                                        "t": housing.rig.right.t.tolist(),
                                        "sigma_rotation_deg": np.degrees(sigma[:3]).tolist(),
-                                       "sigma_position_mm": list(sigma[3:])}
-    for name, p in out["parameters"].items():  # σ with the in-air calibration taken as exact
-        p["sigma_conditional"] = housing.sigmas_conditional.get(name)
+                                       "sigma_position_mm": list(sigma[3:]),
+                                       "sigma_conditional": housing.sigmas_conditional.get(name)}
+            continue
+        for key, port, part, view in _ports(housing, name):
+            s = np.atleast_1d(sigma)[part]
+            conditional = np.atleast_1d(housing.sigmas_conditional.get(name, sigma))[part]
+            if name == "normal":
+                axis = housing.rig.cameras[view].R[:, 2]
+                tilt = float(np.degrees(np.arccos(np.clip(port.normal @ axis, -1, 1))))
+                p = {"estimate": port.normal.tolist(), "sigma_deg": np.degrees(s).tolist(),
+                     "tilt_from_left_axis_deg" if view == 0 else "tilt_from_right_axis_deg": tilt}
+                p["sigma_conditional"] = conditional.tolist()
+            else:
+                value, unit = {"distance": (port.distance, "mm"),
+                               "thickness": (port.thicknesses[0] if port.thicknesses else None,
+                                             "mm"),
+                               "n_water": (port.n_water, "")}[name]
+                p = {"estimate": value, "sigma": float(s[0]), "unit": unit,
+                     "sigma_conditional": float(conditional[0])}
+            out["parameters"][key] = p
     out["uncertainty"] = housing.uncertainty
-    out["start"] = {"distance": start_rig.port.distance,
-                    "thickness": list(start_rig.port.thicknesses),
-                    "indices": list(start_rig.port.indices)}
+    ports = [start_rig.view_port(v) for v in (0, 1)]
+    shared = ports[0] is ports[1]
+    out["start"] = {"distance": ports[0].distance if shared else [p.distance for p in ports],
+                    "thickness": list(ports[0].thicknesses),
+                    "indices": list(ports[0].indices)}
     return out
+
+
+def _ports(housing, name):
+    """``(key, port, slice of the σ, view)``: the shared port (view 0), or — two housings, the
+    estimate ``{"left": …, "right": …}`` — each camera's own (``left_distance`` …)."""
+    estimate = housing.estimates[name]
+    if not isinstance(estimate, dict):
+        yield name, housing.rig.view_port(0), slice(None), 0
+        return
+    width = np.size(housing.sigmas[name]) // len(estimate)
+    for i, camera in enumerate(estimate):
+        view = VIEWS.index(camera)
+        yield f"{camera}_{name}", housing.rig.view_port(view), slice(i * width, (i + 1) * width), view
 
 
 def warnings_for(report: dict) -> list[str]:
@@ -575,13 +593,15 @@ def markdown(report: dict) -> str:
                   f"Free: {', '.join(h['free'])}; {h['observations']} corner observations; "
                   f"reprojection RMS {h['rms_px_start']:.3f} px at the start, {h['rms_px']:.4f} "
                   f"px after ({h['evaluations']} evaluations). Start (design port): distance "
-                  f"{h['start']['distance']:g} mm, glass {_f(h['start']['thickness'])} mm, "
+                  f"{_f(h['start']['distance'])} mm, glass {_f(h['start']['thickness'])} mm, "
                   f"indices {_f(h['start']['indices'])}.", "", report["sigma_note"], "",
                   "| parameter | estimate | σ |", "|---|---|---|"]
         for name, p in h["parameters"].items():
-            if name == "normal":
-                lines.append(f"| normal | {_f(p['estimate'], 7)} ({p['tilt_from_left_axis_deg']:.4f}° "
-                             f"from the left optical axis) | {_f(p['sigma_deg'], 3)}° (two tilts) |")
+            if name.endswith("normal"):
+                camera = "right" if "tilt_from_right_axis_deg" in p else "left"
+                lines.append(f"| {name.replace('_', ' ')} | {_f(p['estimate'], 7)} "
+                             f"({p[f'tilt_from_{camera}_axis_deg']:.4f}° from the {camera} "
+                             f"optical axis) | {_f(p['sigma_deg'], 3)}° (two tilts) |")
             elif name == "extrinsics":
                 lines.append(f"| right camera position | {_f(p['t'], 6)} mm | "
                              f"{_f(p['sigma_position_mm'], 3)} mm; rotation "
@@ -628,10 +648,11 @@ def summary_lines(report: dict) -> str:
     if "housing" in report:
         h = report["housing"]
         for name, p in h["parameters"].items():
-            if name == "normal":
-                lines.append(f"housing normal: {_f(p['estimate'], 6)}, "
-                             f"{p['tilt_from_left_axis_deg']:.4f}° from the left optical axis, "
-                             f"σ {_f(p['sigma_deg'], 2)}°")
+            if name.endswith("normal"):
+                camera = "right" if "tilt_from_right_axis_deg" in p else "left"
+                lines.append(f"housing {name.replace('_', ' ')}: {_f(p['estimate'], 6)}, "
+                             f"{p[f'tilt_from_{camera}_axis_deg']:.4f}° from the {camera} "
+                             f"optical axis, σ {_f(p['sigma_deg'], 2)}°")
             elif name == "extrinsics":
                 lines.append(f"housing right camera: position {_f(p['t'], 6)} mm, σ "
                              f"{_f(p['sigma_position_mm'], 2)} mm")

@@ -109,33 +109,18 @@ def _adjustment_summary(housing) -> dict:
 
 
 def housing_summary(housing, truth, start_rig) -> dict:
-    """Every estimated housing parameter beside the truth, with its error in σ."""
+    """Every estimated housing parameter beside the truth, with its error in σ. Two housings
+    (a port per camera: the estimates are ``{"left": …, "right": …}``): each camera's
+    ``distance``, ``normal``, ``thickness`` as ``left_distance`` …, the distance also from the
+    camera's centre along the port's normal (``from_camera``: what the scene's
+    ``--port-distance`` says)."""
     out = _adjustment_summary(housing)
     out["uncertainty"] = housing.uncertainty
-    est, tru = housing.rig.port, truth.port
     params = out["parameters"]
     for name in housing.estimates:
         sigma = housing.sigmas[name]
         conditional = housing.sigmas_conditional.get(name, sigma)
-        if name in ("distance", "thickness", "n_water"):
-            value, true = {"distance": (est.distance, tru.distance),
-                           "thickness": (est.thicknesses[0], tru.thicknesses[0]),
-                           "n_water": (est.n_water, tru.n_water)}[name]
-            params[name] = _with_sigma(value, true, sigma)
-            params[name]["sigma_conditional"] = float(conditional)
-            params[name]["error_in_sigma_conditional"] = (value - true) / conditional
-        elif name == "normal":
-            a, b = (np.asarray(v) for v in housing.normal_axes)
-            tilt_error = [float((est.normal - tru.normal) @ a), float((est.normal - tru.normal) @ b)]
-            angle = float(np.degrees(np.arccos(np.clip(est.normal @ tru.normal, -1, 1))))
-            params[name] = {"estimate": est.normal.tolist(), "truth": tru.normal.tolist(),
-                            "error_deg": angle, "sigma_deg": np.degrees(sigma).tolist(),
-                            "tilt_error_rad": tilt_error,
-                            "error_in_sigma": [e / s for e, s in zip(tilt_error, sigma)],
-                            "sigma_conditional_deg": np.degrees(conditional).tolist(),
-                            "error_in_sigma_conditional": [e / s for e, s in
-                                                           zip(tilt_error, conditional)]}
-        elif name == "extrinsics":
+        if name == "extrinsics":
             R, t = housing.rig.right.R, housing.rig.right.t
             params[name] = {"rotation_error_deg": _rotation_deg(R, truth.right.R),
                             "position_error_mm": (t - truth.right.t).tolist(),
@@ -144,14 +129,66 @@ def housing_summary(housing, truth, start_rig) -> dict:
                             "error_in_sigma": [float(e / s) for e, s in
                                                zip(t - truth.right.t, sigma[3:])],
                             "sigma_conditional": list(conditional)}
+            continue
+        for key, est, tru, part, axes, view in _estimated_ports(housing, truth, name):
+            params[key] = _port_parameter(name, est, tru, np.atleast_1d(sigma)[part],
+                                          np.atleast_1d(conditional)[part], axes)
+            if view is not None and name == "distance":
+                params[key]["from_camera"] = {
+                    side: port.distance - float(port.normal @ rig.cameras[view].center)
+                    for side, port, rig in (("estimate", est, housing.rig), ("truth", tru, truth))}
+                params[key]["from_camera"]["error"] = (params[key]["from_camera"]["estimate"]
+                                                       - params[key]["from_camera"]["truth"])
     if housing.uncertainty == "prior":  # the in-air parameters the underwater boards refined
         out["in_air_refined"] = in_air_changes(housing, start_rig)
-    out["start"] = {"distance": start_rig.port.distance, "normal": start_rig.port.normal.tolist(),
-                    "thickness": list(start_rig.port.thicknesses),
-                    "indices": list(start_rig.port.indices)}
+    ports = {camera: start_rig.view_port(v) for v, camera in enumerate(("left", "right"))}
+    out["start"] = ({camera: _port_start(port) for camera, port in ports.items()}
+                    if ports["left"] is not ports["right"] else _port_start(start_rig.port))
     zs = [abs(z) for p in params.values()
           for z in np.atleast_1d(p.get("error_in_sigma") if p.get("error_in_sigma") is not None else [])]
     out["max_abs_error_in_sigma"] = max(zs) if zs else None
+    return out
+
+
+def _port_start(port) -> dict:
+    return {"distance": port.distance, "normal": port.normal.tolist(),
+            "thickness": list(port.thicknesses), "indices": list(port.indices)}
+
+
+def _estimated_ports(housing, truth, name):
+    """``(key, estimated port, true port, slice of the σ, tilt axes, view)`` of the ports free
+    parameter ``name`` belongs to: the shared port (``view`` None), or — its estimate
+    ``{"left": …, "right": …}`` — each camera's own."""
+    estimate = housing.estimates[name]
+    if not isinstance(estimate, dict) or name == "extrinsics":
+        yield name, housing.rig.port, truth.port, slice(None), housing.normal_axes, None
+        return
+    width = np.size(housing.sigmas[name]) // len(estimate)
+    for i, camera in enumerate(estimate):
+        view = ("left", "right").index(camera)
+        yield (f"{camera}_{name}", housing.rig.view_port(view), truth.view_port(view),
+               slice(i * width, (i + 1) * width), housing.normal_axes[i], view)
+
+
+def _port_parameter(name, est, tru, sigma, conditional, axes) -> dict:
+    """One flat port's estimated ``name`` (``distance``, ``thickness``, ``n_water``, ``normal``)
+    beside the truth; the normal's error as its components along the two tilt ``axes``."""
+    if name == "normal":
+        a, b = (np.asarray(v) for v in axes)
+        tilt_error = [float((est.normal - tru.normal) @ a), float((est.normal - tru.normal) @ b)]
+        angle = float(np.degrees(np.arccos(np.clip(est.normal @ tru.normal, -1, 1))))
+        return {"estimate": est.normal.tolist(), "truth": tru.normal.tolist(),
+                "error_deg": angle, "sigma_deg": np.degrees(sigma).tolist(),
+                "tilt_error_rad": tilt_error,
+                "error_in_sigma": [e / s for e, s in zip(tilt_error, sigma)],
+                "sigma_conditional_deg": np.degrees(conditional).tolist(),
+                "error_in_sigma_conditional": [e / s for e, s in zip(tilt_error, conditional)]}
+    value, true = {"distance": (est.distance, tru.distance),
+                   "thickness": (est.thicknesses[0], tru.thicknesses[0]),
+                   "n_water": (est.n_water, tru.n_water)}[name]
+    out = _with_sigma(value, true, float(sigma[0]))
+    out["sigma_conditional"] = float(conditional[0])
+    out["error_in_sigma_conditional"] = (value - true) / float(conditional[0])
     return out
 
 
@@ -200,7 +237,8 @@ def in_air_changes(housing, start_rig) -> dict:
     out, sig = {}, housing.covariance.sigmas
     for name in housing.covariance.names:
         cam, _, key = name.partition(".")
-        if cam not in ("left", "right") or key.startswith(("rotation", "center", "dome_center")):
+        if cam not in ("left", "right") or key.startswith(("rotation", "center", "dome_center",
+                                                           "port.")):
             continue
         new, old = getattr(housing.rig, cam), getattr(start_rig, cam)
         if key in ("fx", "fy", "cx", "cy"):
@@ -426,8 +464,8 @@ def markdown(report: dict) -> str:
                   "| parameter | estimate | truth | error | σ | error / σ | σ (conditional) |",
                   "|---|---|---|---|---|---|---|"]
         for name, p in hs["parameters"].items():
-            if name == "normal":
-                lines.append(f"| normal | {_f(p['estimate'], 7)} | {_f(p['truth'], 7)} | "
+            if name.endswith("normal"):
+                lines.append(f"| {name.replace('_', ' ')} | {_f(p['estimate'], 7)} | {_f(p['truth'], 7)} | "
                              f"{p['error_deg'] * 3600:.2f}″ | {_f([s * 3600 for s in p['sigma_deg']], 3)}″ "
                              f"(two tilts) | {_f(p['error_in_sigma'], 3)} | "
                              f"{_f([s * 3600 for s in p['sigma_conditional_deg']], 3)}″ |")
@@ -446,6 +484,10 @@ def markdown(report: dict) -> str:
                 lines.append(f"| {name} | {p['estimate']:.6f} | {p['truth']:.6f} | "
                              f"{p['error']:+.6f} | {_f(p['sigma'])} | {_f(p['error_in_sigma'], 3)} "
                              f"| {_f(p.get('sigma_conditional'))} |")
+                if "from_camera" in p:  # two housings: D from the camera's centre
+                    c = p["from_camera"]
+                    lines.append(f"| {name} from its camera | {c['estimate']:.6f} | "
+                                 f"{c['truth']:.6f} | {c['error']:+.6f} | – | – | – |")
         if hs.get("in_air_refined"):
             lines += ["", "In-air parameters refined by the underwater boards (the prior fit; "
                       "change from the in-air value, σ): " + ", ".join(
@@ -514,8 +556,8 @@ def summary_lines(report: dict) -> str:
     if "housing" in report:
         hs = report["housing"]
         for name, p in hs["parameters"].items():
-            if name == "normal":
-                lines.append(f"housing normal: error {p['error_deg'] * 3600:.2f}″ "
+            if name.endswith("normal"):
+                lines.append(f"housing {name.replace('_', ' ')}: error {p['error_deg'] * 3600:.2f}″ "
                              f"({p['error_deg']:.5f}°), σ {_f([s * 3600 for s in p['sigma_deg']], 3)}″, "
                              f"error/σ {_f(p['error_in_sigma'], 3)}")
             elif name == "extrinsics":
@@ -525,7 +567,10 @@ def summary_lines(report: dict) -> str:
             else:
                 lines.append(f"housing {name}: {p['estimate']:.6f} (truth {p['truth']:.6f}, error "
                              f"{p['error']:+.6f}, σ {_f(p['sigma'])}, error/σ "
-                             f"{_f(p['error_in_sigma'], 3)})")
+                             f"{_f(p['error_in_sigma'], 3)})"
+                             + (f"; from its camera {p['from_camera']['estimate']:.6f} (error "
+                                f"{p['from_camera']['error']:+.6f})" if "from_camera" in p
+                                else ""))
         lines.append(f"housing reprojection RMS {hs['rms_px']:.4f} px ({hs['observations']} "
                      f"corners, {len(hs['poses_used'])} poses, {hs['evaluations']} evaluations, "
                      f"{report['timings_s'].get('bundle_adjustment', 0):.2f} s)")

@@ -210,6 +210,14 @@ def check_free(rig: StereoRig, names) -> None:
     """Every parameter of :data:`DOME_PARAMETERS` applies to every rig of two domes."""
 
 
+def estimate(name, domes, cameras, views=(0, 1)):
+    """The estimate of free parameter ``name`` (:attr:`HousingCalibration.estimates`): each
+    camera's decentring ``{"left": [x, y, z], …}`` of ``views``, or the water index."""
+    if name == "dome_center":
+        return {("left", "right")[i]: dome_offset(cameras[i], domes[i]).tolist() for i in views}
+    return domes.n_water
+
+
 def rig_parameters(names, air, x, basis, rig: StereoRig, port, cameras, n_global):
     """:func:`dome_rig_parameters` (the housing calibration's common signature)."""
     return dome_rig_parameters(names, air, cameras, port)
@@ -228,11 +236,13 @@ def for_views(views):
     return SimpleNamespace(parameters=parameters_of(views), default_free=("dome_center",),
                            label="of one dome ", check_free=check_free,
                            problem=partial(dome_problem, views=views),
-                           rig_parameters=rig_parameters_of_views, views=views,
+                           rig_parameters=rig_parameters_of_views,
+                           estimate=partial(estimate, views=views), views=views,
                            for_views=for_views)
 
 
 #: The domes' housing calibration (:data:`measure.calibration.housing.HOUSINGS`).
 DOME_HOUSING = SimpleNamespace(parameters=DOME_PARAMETERS, default_free=("dome_center",),
                                label="of two domes ", check_free=check_free, problem=dome_problem,
-                               rig_parameters=rig_parameters, views=(0, 1), for_views=for_views)
+                               rig_parameters=rig_parameters, estimate=estimate, views=(0, 1),
+                               for_views=for_views)

@@ -11,6 +11,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from ..geometry.camera import Camera
+from ..geometry.flat_pair import FlatPair
 from ..geometry.port import FlatPort
 from ..geometry.projection import project
 from ..stereo.triangulate import StereoRig
@@ -25,39 +26,73 @@ from .selfcal import tilt_basis
 HOUSING_PARAMETERS = {"distance": 1, "normal": 2, "thickness": 1, "n_water": 1, "extrinsics": 6}
 
 
+def parameters_of(views=(0, 1), pair: bool = False) -> dict:
+    """:data:`HOUSING_PARAMETERS` of the cameras ``views``: behind two housings (``pair``) a
+    ``distance``, ``normal`` and ``thickness`` per camera (left first), one ``n_water``; the
+    ``extrinsics`` only with both cameras."""
+    ports = len(tuple(views)) if pair else 1
+    table = {"distance": ports, "normal": 2 * ports, "thickness": ports, "n_water": 1}
+    if tuple(views) == (0, 1):
+        table["extrinsics"] = 6
+    return table
+
+
 def housing_problem(rig: StereoRig, board: Board, detections: Detections, names,
-                    views=(0, 1)):
+                    views=(0, 1), pair: bool = False):
     """The bundle adjustment of :func:`calibrate_housing` as functions of the unknowns ``x``
     (free housing numbers, then 6 per usable pose): ``residuals``, its analytic ``jacobian``,
     ``unpack``, the start ``x0`` and its ``lower`` / ``upper`` bounds, and the bookkeeping.
     ``views``: the cameras whose corners enter (``(0,)``: one camera behind its port,
-    :func:`measure.calibration.housing.calibrate_camera_housing`)."""
+    :func:`measure.calibration.housing.calibrate_camera_housing`). ``pair``: ``rig.port`` is a
+    :class:`measure.geometry.flat_pair.FlatPair` (two housings) and each camera of ``views``
+    has its own port's ``distance``, ``normal`` and ``thickness`` (:func:`parameters_of`; the
+    same flat-port residuals and Jacobian, each camera's rows touching its own port's
+    columns); ``unpack`` then returns the pair."""
+    views = tuple(views)
+    table = parameters_of(views, pair)
     starts, usable, detections = usable_poses(rig, board, detections)
     P = len(starts)
-    n_global = sum(HOUSING_PARAMETERS[n] for n in names)
-    port0, basis = rig.port, tilt_basis(rig.port.normal)
+    n_global = sum(table[n] for n in names)
+    ports0 = [rig.port.view(v) for v in views] if pair else [rig.port]
+    slot = {v: (i if pair else 0) for i, v in enumerate(views)}  # the port each camera sees
+    S = len(ports0)
+    bases = [tilt_basis(p.normal) for p in ports0]
     corners, obs = observations(board, detections, views)
     m = sum(2 * o[1].size for o in obs)
 
     def unpack(x):
-        indices, thick, distance = list(port0.indices), list(port0.thicknesses), port0.distance
-        normal, right = port0.normal, rig.right
+        distances = [p.distance for p in ports0]
+        normals = [p.normal for p in ports0]
+        thick = [list(p.thicknesses) for p in ports0]
+        n_water, right = None, rig.right
         k = 0
         for name in names:
             if name == "distance":
-                distance = x[k]
+                distances = list(x[k:k + S])
             elif name == "normal":
-                normal = port0.normal + x[k] * basis[0] + x[k + 1] * basis[1]
+                normals = [p.normal + x[k + 2 * s] * b[0] + x[k + 2 * s + 1] * b[1]
+                           for s, (p, b) in enumerate(zip(ports0, bases))]
             elif name == "thickness":
-                thick[0] = x[k]
+                for s in range(S):
+                    thick[s][0] = x[k + s]
             elif name == "n_water":
-                indices[-1] = x[k]
+                n_water = x[k]
             elif name == "extrinsics":
                 dR = Rotation.from_rotvec(x[k:k + 3]).as_matrix()
                 right = Camera(rig.right.K, rig.right.size, rig.right.dist,
                                dR @ rig.right.R, rig.right.t + x[k + 3:k + 6])
-            k += HOUSING_PARAMETERS[name]
-        port = FlatPort(normal, distance, tuple(thick), tuple(indices))
+            k += table[name]
+        water = {} if n_water is None else {"n_water": float(n_water)}
+        ports = [FlatPort(normals[s], distances[s], tuple(thick[s]),
+                          p.indices[:-1] + (water.get("n_water", p.indices[-1]),))
+                 for s, p in enumerate(ports0)]
+        if not pair:
+            port = ports[0]
+        else:  # a camera not in views keeps its port (in the same water)
+            both = [rig.port.view(v).assumed(water) for v in (0, 1)]
+            for v in views:
+                both[v] = ports[slot[v]]
+            port = FlatPair(*both)
         Rs = Rotation.from_rotvec(x[n_global:].reshape(P, 6)[:, :3]).as_matrix()
         ts = x[n_global:].reshape(P, 6)[:, 3:]
         return port, (rig.left, right), Rs, ts
@@ -70,9 +105,15 @@ def housing_problem(rig: StereoRig, board: Board, detections: Detections, names,
         out = []
         for view, pose_idx, ids, uv in obs:
             world = np.einsum("nij,nj->ni", Rs[pose_idx], corners[ids]) + ts[pose_idx]
-            r = (project(cameras[view], port, world) - uv).ravel()
+            r = (project(cameras[view], port.view(view), world) - uv).ravel()
             out.append(np.where(np.isfinite(r), r, 1e3))
         return np.concatenate(out)
+
+    def own(values, s, width=1):
+        """``values`` ``(n, 2, width)`` in port ``s``'s place among the ports' columns."""
+        out = np.zeros(values.shape[:2] + (S * width,))
+        out[..., s * width:(s + 1) * width] = values
+        return out
 
     def jacobian(x):
         """Analytic (:func:`measure.geometry.projection.project` with ``parameters=True``): a row touches
@@ -85,23 +126,26 @@ def housing_problem(rig: StereoRig, board: Board, detections: Detections, names,
         turn = pose_left_jacobians(x[n_global:].reshape(P, 6)[:, :3])
         blocks, poses = [], []
         for view, pose_idx, ids, _ in obs:
+            s = slot[view]
             rotated = np.einsum("nij,nj->ni", Rs[pose_idx], corners[ids])
-            _, d_points, jac = project(cameras[view], port, rotated + ts[pose_idx],
+            _, d_points, jac = project(cameras[view], port.view(view), rotated + ts[pose_idx],
                                        parameters=True)
             columns = []
             for name in names:
                 if name == "distance":
-                    columns.append(jac.distance[..., None])
+                    columns.append(own(jac.distance[..., None], s))
                 elif name == "normal":  # normal = m / |m|, m = N0 + a·x_a + b·x_b
-                    k = parameter_offset(names, name, HOUSING_PARAMETERS)
-                    length = np.linalg.norm(port0.normal + x[k] * basis[0] + x[k + 1] * basis[1])
-                    columns.append(np.stack([jac.normal @ axis / length for axis in basis], -1))
+                    k = parameter_offset(names, name, table) + 2 * s
+                    length = np.linalg.norm(ports0[s].normal + x[k] * bases[s][0]
+                                            + x[k + 1] * bases[s][1])
+                    columns.append(own(np.stack([jac.normal @ axis / length
+                                                 for axis in bases[s]], -1), s, 2))
                 elif name == "thickness":
-                    columns.append(jac.thicknesses[..., :1])
+                    columns.append(own(jac.thicknesses[..., :1], s))
                 elif name == "n_water":
                     columns.append(jac.indices[..., -1:])
                 elif view == 1:  # the right camera: R = exp(ω) R0, t = t0 + δt
-                    k = parameter_offset(names, name, HOUSING_PARAMETERS)
+                    k = parameter_offset(names, name, table)
                     columns.append(jac.rotation @ pose_left_jacobians(x[None, k:k + 3])[0])
                     columns.append(jac.center)
                 else:
@@ -123,7 +167,7 @@ def housing_problem(rig: StereoRig, board: Board, detections: Detections, names,
         out, row = np.zeros((m, len(air))), 0
         for view, pose_idx, ids, _ in obs:
             world = np.einsum("nij,nj->ni", Rs[pose_idx], corners[ids]) + ts[pose_idx]
-            pixels, _, jac = project(cameras[view], port, world, parameters=True)
+            pixels, _, jac = project(cameras[view], port.view(view), world, parameters=True)
             n = 2 * pose_idx.size
             camera = ("left", "right")[view]
             d_int = intrinsics_jacobian(cameras[view], pixels).reshape(n, -1)
@@ -141,9 +185,9 @@ def housing_problem(rig: StereoRig, board: Board, detections: Detections, names,
 
     x0 = []
     for name in names:
-        x0 += {"distance": [port0.distance], "normal": [0.0, 0.0],
-               "thickness": list(port0.thicknesses[:1]), "n_water": [port0.n_water],
-               "extrinsics": [0.0] * 6}[name]
+        x0 += {"distance": [p.distance for p in ports0], "normal": [0.0, 0.0] * S,
+               "thickness": [p.thicknesses[0] for p in ports0 if p.thicknesses],
+               "n_water": [ports0[0].n_water], "extrinsics": [0.0] * 6}[name]
     for R, t in starts:
         x0 += list(Rotation.from_matrix(R).as_rotvec()) + list(t)
     x0 = np.asarray(x0, dtype=np.float64)
@@ -152,11 +196,12 @@ def housing_problem(rig: StereoRig, board: Board, detections: Detections, names,
     k = 0
     for name in names:  # keep the port physical on the way: a layer, indices >= 1
         if name in ("distance", "thickness"):
-            lower[k] = MIN_LENGTH_MM
+            lower[k:k + S] = MIN_LENGTH_MM
         elif name == "n_water":
             lower[k], upper[k] = 1.0, MAX_INDEX
-        k += HOUSING_PARAMETERS[name]
+        k += table[name]
     x0[:n_global] = np.clip(x0[:n_global], lower[:n_global] + 1e-9, upper[:n_global] - 1e-9)
+    basis = np.array(bases) if pair else bases[0]
     return SimpleNamespace(residuals=residuals, jacobian=jacobian, unpack=unpack, x0=x0,
                            air_jacobian=air_jacobian,
                            lower=lower, upper=upper, obs=obs, usable=usable, P=P,
@@ -164,64 +209,110 @@ def housing_problem(rig: StereoRig, board: Board, detections: Detections, names,
 
 
 
-def flat_rig_parameters(names, x, basis, start_normal, port, n_global):
+def flat_rig_parameters(names, x, basis, start_normal, port, n_global, views=None):
     """The housing's free numbers as :mod:`measure.stereo.rig_covariance` names, the ``(g, g)``
     Jacobian of those parameters with respect to the free numbers at ``x``, and the tilt axes
-    (⟂ the estimated normal; None without a free normal)."""
+    (⟂ the estimated normal; None without a free normal). ``views``: two housings — the
+    cameras whose ports are free (``basis`` and ``start_normal`` one per port, ``port`` the
+    pair); their numbers are named ``left.port.…`` / ``right.port.…`` and both ports' tilts
+    are about the first port's tilt axes (``n → normalize(n + a₀e₀ + a₁e₁)``: the tilts
+    that move each normal as its own two numbers do, by the pseudo-inverse of the axes
+    projected ⟂ that normal)."""
+    pair = views is not None
+    prefixes = [f"{('left', 'right')[v]}." for v in views] if pair else [""]
+    bases = list(basis) if pair else [basis]
+    starts = list(start_normal) if pair else [start_normal]
+    S = len(prefixes)
+    table = parameters_of(views if pair else (0, 1), pair)
     out, T, axes, k = [], np.zeros((n_global, n_global)), None, 0
     for name in names:
         if name == "distance":
-            out.append("port.distance")
-            T[k, k] = 1.0
-        elif name == "normal":  # n = m/|m|, m = n0 + a e0 + b e1; new tilts about axes ⟂ n
-            m = start_normal + basis[0] * x[k] + basis[1] * x[k + 1]
-            length = np.linalg.norm(m)
-            n = m / length
-            axes = np.array(tilt_basis(n))
-            T[k:k + 2, k:k + 2] = axes @ (np.eye(3) - np.outer(n, n)) @ np.array(basis).T / length
-            out += ["port.tilt[0]", "port.tilt[1]"]
+            out += [f"{p}port.distance" for p in prefixes]
+            T[k:k + S, k:k + S] = np.eye(S)
+        elif name == "normal":  # n = m/|m|, m = n0 + a e0 + b e1; new tilts about the axes
+            for s in range(S):
+                j = k + 2 * s
+                m = starts[s] + bases[s][0] * x[j] + bases[s][1] * x[j + 1]
+                length = np.linalg.norm(m)
+                n = m / length
+                if axes is None:
+                    axes = np.array(tilt_basis(n))
+                away = np.eye(3) - np.outer(n, n)
+                T[j:j + 2, j:j + 2] = (np.linalg.pinv(away @ axes.T) @ away
+                                       @ np.array(bases[s]).T / length)
+                out += [f"{prefixes[s]}port.tilt[0]", f"{prefixes[s]}port.tilt[1]"]
         elif name == "thickness":
-            out.append("port.thickness[0]")
-            T[k, k] = 1.0
+            out += [f"{p}port.thickness[0]" for p in prefixes]
+            T[k:k + S, k:k + S] = np.eye(S)
         elif name == "n_water":
-            out.append(f"port.index[{len(port.indices) - 1}]")
+            out.append(f"port.index[{len(port.view(0).indices) - 1}]")
             T[k, k] = 1.0
         else:  # R = exp(ω) R0: φ = J_l(ω) δω; the centre t = t0 + δt
             out += [f"right.rotation[{i}]" for i in range(3)]
             out += [f"right.center[{i}]" for i in range(3)]
             T[k:k + 3, k:k + 3] = left_jacobian(x[k:k + 3])
             T[k + 3:k + 6, k + 3:k + 6] = np.eye(3)
-        k += HOUSING_PARAMETERS[name]
+        k += table[name]
     return tuple(out), T, axes
 
 
 
 
 def check_free(rig: StereoRig, names) -> None:
-    """CalibrationError for a free parameter this port does not have."""
-    if "thickness" in names and not rig.port.thicknesses:
-        raise CalibrationError("--free thickness: the port has no glass layer")
+    """CalibrationError for a free parameter this port does not have (two housings: each
+    port)."""
+    if "thickness" in names and not all(rig.port.view(v).thicknesses for v in (0, 1)):
+        raise CalibrationError(f"--free thickness: {rig.port.name} has no glass layer"
+                               if rig.port.view(0) is rig.port.view(1) else
+                               "--free thickness: a port of the pair has no glass layer")
 
 
-def for_views(views):
+def estimate(name, port, cameras, views=(0, 1)):
+    """The estimate of free parameter ``name`` (:attr:`HousingCalibration.estimates`) of the
+    calibrated shared ``port``."""
+    if name == "distance":
+        return port.distance
+    if name == "normal":
+        return port.normal.tolist()
+    if name == "thickness":
+        return port.thicknesses[0]
+    if name == "n_water":
+        return port.n_water
+    return {"R": cameras[1].R.tolist(), "t": cameras[1].t.tolist()}
+
+
+def pair_estimate(name, port, cameras, views=(0, 1)):
+    """:func:`estimate` of two housings: ``distance``, ``normal``, ``thickness`` as
+    ``{"left": …, "right": …}`` (the ports of ``views``), each its port's."""
+    if name in ("n_water", "extrinsics"):
+        return estimate(name, port.view(0), cameras)
+    return {("left", "right")[v]: estimate(name, port.view(v), cameras) for v in views}
+
+
+def for_views(views, pair: bool = False):
     """The flat port's housing calibration from the corners of the cameras ``views`` only:
-    ``(0,)`` is one camera behind its port (no second camera, so no ``extrinsics``)."""
+    ``(0,)`` is one camera behind its port (no second camera, so no ``extrinsics``). ``pair``:
+    two housings (:data:`FLAT_PAIR_HOUSING`), the port of each camera in ``views`` free."""
     views = tuple(views)
     if views == (0, 1):
-        return FLAT_HOUSING
-    table = {n: w for n, w in HOUSING_PARAMETERS.items() if n != "extrinsics"}
-    return SimpleNamespace(parameters=table, default_free=FLAT_HOUSING.default_free,
+        return FLAT_PAIR_HOUSING if pair else FLAT_HOUSING
+    return SimpleNamespace(parameters=parameters_of(views, pair),
+                           default_free=FLAT_HOUSING.default_free,
                            label="of one camera ", check_free=check_free,
-                           problem=partial(housing_problem, views=views),
-                           rig_parameters=rig_parameters, views=views, for_views=for_views)
+                           problem=partial(housing_problem, views=views, pair=pair),
+                           rig_parameters=partial(rig_parameters, views=views if pair else None),
+                           estimate=partial(pair_estimate if pair else estimate, views=views),
+                           views=views, for_views=partial(for_views, pair=pair))
 
 
-def rig_parameters(names, air, x, basis, rig: StereoRig, port, cameras, n_global):
+def rig_parameters(names, air, x, basis, rig: StereoRig, port, cameras, n_global, views=None):
     """:func:`flat_rig_parameters` as the ``(a + g, a + g)`` Jacobian of (in-air parameters
-    ``air``, the names) with respect to (``air``, the free numbers)."""
+    ``air``, the names) with respect to (``air``, the free numbers). ``views``: two housings,
+    the cameras whose ports are free."""
     a = len(air)
-    rig_names, transform, axes = flat_rig_parameters(names, x, basis, rig.port.normal, port,
-                                                     n_global)
+    start = rig.port.normal if views is None else [rig.port.view(v).normal for v in views]
+    rig_names, transform, axes = flat_rig_parameters(names, x, basis, start, port, n_global,
+                                                     views)
     T = np.eye(a + n_global)
     T[a:, a:] = transform
     return rig_names, T, axes
@@ -230,5 +321,14 @@ def rig_parameters(names, air, x, basis, rig: StereoRig, port, cameras, n_global
 #: The flat port's housing calibration (:data:`measure.calibration.housing.HOUSINGS`).
 FLAT_HOUSING = SimpleNamespace(parameters=HOUSING_PARAMETERS, default_free=("distance", "normal"),
                                label="", check_free=check_free, problem=housing_problem,
-                               rig_parameters=rig_parameters, views=(0, 1),
+                               rig_parameters=rig_parameters, estimate=estimate, views=(0, 1),
                                for_views=for_views)
+#: Two housings (a :class:`measure.geometry.flat_pair.FlatPair`): the flat port's problem with
+#: a ``distance``, ``normal`` and ``thickness`` per camera (:func:`parameters_of`).
+FLAT_PAIR_HOUSING = SimpleNamespace(parameters=parameters_of((0, 1), True),
+                                    default_free=("distance", "normal"),
+                                    label="of two housings ", check_free=check_free,
+                                    problem=partial(housing_problem, pair=True),
+                                    rig_parameters=partial(rig_parameters, views=(0, 1)),
+                                    estimate=pair_estimate, views=(0, 1),
+                                    for_views=partial(for_views, pair=True))

@@ -26,6 +26,15 @@ in-air covariance entering the same two ways (each dome moves with its camera wh
 in-air stereo pose moves); the joint covariance names each dome's centre in the reference
 frame (``left/right.dome_center[k]``, :mod:`measure.stereo.rig_covariance`).
 
+A rig of two housings (:class:`measure.geometry.flat_pair.FlatPair`, each camera behind its own
+flat port; :data:`measure.calibration.flat.FLAT_PAIR_HOUSING`): the flat port's problem with
+``distance``, ``normal`` and ``thickness`` per camera (left, then right: 2, 4, 2 numbers; each
+port's tilts about axes ⟂ its own starting normal), one ``n_water`` and the ``extrinsics``;
+each camera's corners through its own port. The estimates are ``{"left": …, "right": …}``;
+the joint covariance names ``left/right.port.distance``, ``left/right.port.tilt[0/1]`` (both
+about one pair of axes ⟂ the left port's normal), ``left/right.port.thickness[0]`` and
+``port.index[2]``.
+
 Uncertainty: ``s² (JᵀJ)⁻¹`` with ``s² = Σr² / (m − n)``; a parameter is reported not
 identifiable when the column-scaled normal matrix is singular in its direction or two free
 parameters correlate at :data:`CORRELATION_LIMIT` or more (then no estimate is returned).
@@ -46,8 +55,8 @@ from ..stereo.triangulate import StereoRig
 from .air import CalibrationError, Detections
 from .board import Board
 from .covariance import AIR_INTRINSICS, AIR_NAMES, POSE_NAMES
-from .dome import DOME_HOUSING, dome_offset
-from .flat import FLAT_HOUSING
+from .dome import DOME_HOUSING
+from .flat import FLAT_HOUSING, FLAT_PAIR_HOUSING
 from ..stereo.rig_covariance import RigCovariance
 
 #: The free parameters by default: of a flat port, of two domes.
@@ -56,7 +65,7 @@ DEFAULT_DOME_FREE = DOME_HOUSING.default_free
 #: What :func:`calibrate_housing` asks of each kind of port (``rig.port.kind``): its free
 #: parameters and their default, its problem (residuals, Jacobian), its names in a covariance.
 #: A new kind of port adds its own here (module docs of :mod:`measure.calibration.flat`).
-HOUSINGS = {"flat": FLAT_HOUSING, "dome": DOME_HOUSING}
+HOUSINGS = {"flat": FLAT_HOUSING, "dome": DOME_HOUSING, "flat pair": FLAT_PAIR_HOUSING}
 #: How the in-air calibration's covariance enters the housing's (:func:`calibrate_housing`).
 UNCERTAINTY = ("propagate", "prior")
 #: The default: both covered the chain's error on 30 seeds of rendered boards, the prior with
@@ -79,7 +88,8 @@ class HousingCalibration:
 
     ``rig`` the calibrated rig (the starting rig when not identifiable); ``estimates`` /
     ``sigmas`` per free parameter (``normal``: the unit vector and two tilt sigmas in rad;
-    ``extrinsics``: the right camera's ``R``, ``t`` and six sigmas); ``labels`` and
+    ``extrinsics``: the right camera's ``R``, ``t`` and six sigmas; two housings: ``distance``,
+    ``normal``, ``thickness`` as ``{"left": …, "right": …}``, their sigmas left then right); ``labels`` and
     ``correlation`` of the free numbers; ``poses`` ``[(R, t), …]`` of the boards;
     ``rms_px`` overall and ``rms_px_per`` ``{(pose, view): rms}``; ``residuals`` per view
     ``(pose, id, du, dv)`` rows; ``identifiable`` / ``reason``; ``pose_ids`` the numbers of
@@ -124,7 +134,7 @@ def calibrate_housing(rig: StereoRig, board: Board, detections: Detections,
     calibration. ``views``: the cameras whose corners enter (``(0,)``: the left camera alone,
     :func:`calibrate_camera_housing`)."""
     housing = HOUSINGS.get(rig.port.kind)
-    if housing is None:  # e.g. two housings (a FlatPair): no housing problem yet
+    if housing is None:  # a kind of port without a housing problem
         raise CalibrationError(f"no housing calibration of {rig.port.rig_name} "
                                f"({rig.port.rig_detail}) yet")
     housing = housing.for_views(views)
@@ -239,19 +249,7 @@ def calibrate_housing(rig: StereoRig, board: Board, detections: Detections,
     estimates, sigmas, conditional, k = {}, {}, {}, 0
     for name in names:
         w = table[name]
-        if name == "dome_center":
-            estimates[name] = {("left", "right")[i]: dome_offset(cameras[i], port[i]).tolist()
-                               for i in housing.views}
-        elif name == "distance":
-            estimates[name] = port.distance
-        elif name == "normal":
-            estimates[name] = port.normal.tolist()
-        elif name == "thickness":
-            estimates[name] = port.thicknesses[0]
-        elif name == "n_water":
-            estimates[name] = port.n_water
-        else:
-            estimates[name] = {"R": cameras[1].R.tolist(), "t": cameras[1].t.tolist()}
+        estimates[name] = housing.estimate(name, port, cameras)
         sigmas[name] = float(sig[k]) if w == 1 else sig[k:k + w].tolist()
         conditional[name] = (float(sig_conditional[k]) if w == 1
                              else sig_conditional[k:k + w].tolist())
