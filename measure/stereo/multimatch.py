@@ -6,8 +6,10 @@ Every pair of views (i < j) is matched with the refractive epipolar constraint
 detections; a *track* is a connected group of them (the union of the pairwise matches,
 ``scipy.sparse.csgraph.connected_components``). A track that holds two detections of one view
 is a conflict — some pairwise match is wrong, and which cannot be told — and is dropped as
-ambiguous, never guessed. A detection that no pair matched stays alone: it is reported (seen
-once, or not matched), never triangulated.
+ambiguous, never guessed; so is a track whose rays, all together, do not meet within the
+pairwise gate (RMS distance of the optical-path point from its rays above ``gate_mm / 2``:
+joined through a chain of pairs that do not agree). A detection that no pair matched stays
+alone: it is reported (seen once, or not matched), never triangulated.
 
 Units: mm; pixels in the OpenCV convention.
 """
@@ -21,6 +23,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
 from .matching import Matches, match_targets
+from .multiview import triangulate_views
 
 
 @dataclass(frozen=True)
@@ -102,7 +105,22 @@ def match_views(rig, centers, gate_mm: float = 0.5, depth_range=(None, None),
     conflicted = [(int(v), int(d)) for v, d in zip(view_of[in_conflict], index_of[in_conflict])]
     alone = [index_of[(view_of == v) & ~in_good] for v in range(n_views)]
     order = np.lexsort(detections.T[::-1]) if len(detections) else np.zeros(0, int)
-    return Tracks(detections[order], pairs, int(conflict.sum()), conflicted, alone)
+    detections = detections[order]
+    n_conflicts = int(conflict.sum())
+    # a track joined through a chain (a–b, b–c) must also meet as a whole: its rays within
+    # the pairwise gate of one point (a pair's RMS gap is half its common perpendicular)
+    if len(detections):
+        partial = Tracks(detections, pairs, 0, [], alone)
+        gap = triangulate_views(rig.views(), partial.pixels(centers)).gap
+        apart = ~(gap <= 0.5 * gate_mm)
+        if apart.any():
+            n_conflicts += int(apart.sum())
+            for row in detections[apart]:
+                conflicted += [(v, int(d)) for v, d in enumerate(row) if d >= 0]
+            alone = [np.union1d(alone[v], detections[apart, v][detections[apart, v] >= 0])
+                     for v in range(n_views)]
+            detections = detections[~apart]
+    return Tracks(detections, pairs, n_conflicts, conflicted, alone)
 
 
 __all__ = ["Tracks", "match_views"]
