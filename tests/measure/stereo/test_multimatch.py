@@ -65,3 +65,37 @@ def test_four_views_match_every_target_seen_twice_and_none_wrong():
     error = np.linalg.norm(result.points - points[first], axis=1)
     # noise of 0.02 px: a pair's depth error at 1 m is a few hundredths of a mm
     assert np.all(result.valid) and error.max() < 0.5
+
+
+def test_conflicts_and_chains_that_do_not_meet_are_dropped(monkeypatch):
+    """Pairwise matches given by hand (the union's logic alone): a group with two detections of
+    one view is dropped, and so is a chain a–b, b–c whose rays do not meet as a whole; a
+    consistent track of three views is kept."""
+    import measure.stereo.multimatch as multimatch
+    from measure.stereo.matching import Matches
+
+    cameras = _row(3)
+    rig = MultiRig(cameras, [PORT] * 3)
+    points = np.array([[0.0, 0.0, 1000.0], [150.0, 100.0, 1000.0], [300.0, -100.0, 1000.0]])
+    centers = [project(c, PORT, points) for c in cameras]
+    given = {(0, 1): ([0, 1], [0, 1]), (0, 2): ([0, 1], [0, 1]), (1, 2): ([0, 1], [0, 2])}
+
+    def fake(pair_rig, uv_a, uv_b, **_):
+        i = next(k for k, c in enumerate(cameras) if c == pair_rig.left)
+        j = next(k for k, c in enumerate(cameras) if c == pair_rig.right)
+        a, b = given[(i, j)]
+        empty = np.zeros(0, int)
+        return Matches(np.array(a), np.array(b), np.zeros(len(a)), len(a), 0, empty, empty)
+
+    monkeypatch.setattr(multimatch, "match_targets", fake)
+    tracks = multimatch.match_views(rig, centers, gate_mm=0.5)
+    # target 0: 0–0–0 in all pairs: kept; target 1: (0,2) says a1–c1 and (1,2) b1–c2, so
+    # {a1, b1, c1, c2} holds two detections of view 2: a conflict
+    np.testing.assert_array_equal(tracks.detections, [[0, 0, 0]])
+    assert tracks.n_conflicts == 1 and sorted(tracks.conflicted) == [(0, 1), (1, 1), (2, 1), (2, 2)]
+    given = {(0, 1): ([0, 1], [0, 1]), (0, 2): ([0], [0]), (1, 2): ([0, 1], [0, 2])}
+    tracks = multimatch.match_views(rig, centers, gate_mm=0.5)
+    # a1–b1 and b1–c2 chain into one group of one detection per view, but target 1's rays
+    # and target 2's do not meet: dropped
+    np.testing.assert_array_equal(tracks.detections, [[0, 0, 0]])
+    assert tracks.n_conflicts == 1 and sorted(tracks.alone[2]) == [1, 2]
