@@ -106,6 +106,10 @@ def main(args) -> int:
         log(note)
     if dense.is_surface_scene(config.scene):
         return dense.main(config, args.out, args.json, log)
+    from eval.run import multiview
+
+    if multiview.is_multiview_scene(config.scene):  # more than two cameras
+        return multiview.main(config, args.out, args.json, log)
     config.target_methods()  # refuses an unknown --methods before any expensive work
     output = OutputDir(args.out, COMMAND).claim()  # before any expensive work
     start = time.perf_counter()

@@ -25,7 +25,7 @@ def main(args) -> int:
         sensor = None if args.sensor is None else sensor_from_spec(args.sensor)
     except SensorError as exc:
         raise CLIError(f"--sensor {args.sensor}: {exc}") from None
-    manifest = write_dataset(scene_from_args(args), args.out, spp=args.spp,
+    manifest = write_dataset(scene_from_args(args, "synth dataset"), args.out, spp=args.spp,
                              variant=args.variant, exr=args.exr, progress=not args.no_progress,
                              sensor=sensor, adaptive=not args.full_film)
     if manifest.get("skipped"):

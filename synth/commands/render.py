@@ -1,5 +1,6 @@
 """``python -m synth render SCENE --out DIR [--spp N] [--variant V] [--exr]
-[-D name=value ...]``: both views as 16-bit linear PNGs (scale in the summary line) and sRGB
+[-D name=value ...]``: every view (``left``, ``right``; ``cam0``, ``cam1``, … of a scene of N
+cameras) as 16-bit linear PNGs (scale in the summary line) and sRGB
 previews, optionally float32 EXR."""
 
 from __future__ import annotations
@@ -16,21 +17,22 @@ def add_parser(subparsers) -> None:
 
 
 def main(args) -> int:
-    """Render both views of the scene into ``--out``."""
+    """Render every view of the scene into ``--out`` (``left``, ``right``; a scene of N
+    cameras ``cam0``, ``cam1``, …)."""
     from synth.infra.fileio import OutputDir
-    from synth.rendering.render import (png16_scale, render_stereo, render_summary, srgb_preview,
+    from synth.rendering.render import (png16_scale, render_summary, render_views, srgb_preview,
                               to_png16, write_exr, write_png)
 
     output = OutputDir(args.out, "synth render").claim()
     spec = scene_from_args(args)
     t0 = time.perf_counter()
-    left, right, info = render_stereo(spec, spp=args.spp, variant=args.variant,
-                                      progress=not args.no_progress,
-                                      adaptive=not args.full_film)
-    scale = png16_scale(left, right)
-    white = max(float(left.max()), float(right.max()))
+    images, info = render_views(spec, spp=args.spp, variant=args.variant,
+                                progress=not args.no_progress, adaptive=not args.full_film)
+    names = spec.camera_names
+    scale = png16_scale(*images)
+    white = max(float(img.max()) for img in images)
     with output.staged() as tmp:
-        for name, img in (("left", left), ("right", right)):
+        for name, img in zip(names, images):
             write_png(os.path.join(tmp, f"{name}.png"), to_png16(img, scale))
             write_png(os.path.join(tmp, f"{name}_preview.png"), srgb_preview(img, white))
             if args.exr:
@@ -39,9 +41,10 @@ def main(args) -> int:
 
     print(f"rendered {spec.path} with {info['variant']}, "
           f"{spp_text(info['spp'], info.get('spp_rendered'))}, "
-          f"{info['size'][0]}x{info['size'][1]} px: left {info['seconds']['left']:.1f} s, "
-          f"right {info['seconds']['right']:.1f} s, {info['samples_per_second'] / 1e6:.2f} M "
+          f"{info['size'][0]}x{info['size'][1]} px: "
+          + ", ".join(f"{name} {info['seconds'][name]:.1f} s" for name in names)
+          + f", {info['samples_per_second'] / 1e6:.2f} M "
           f"samples/s, total {time.perf_counter() - t0:.1f} s; png_scale {scale:.6g} -> {args.out}")
-    for name in ("left", "right"):
+    for name in names:
         print(f"  {name}: {render_summary(info['render'][name])}")
     return 0

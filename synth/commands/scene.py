@@ -39,6 +39,15 @@ def _per_camera(base):
     return parse
 
 
+def _camera_count(text: str) -> int:
+    import argparse
+
+    value = positive_int(text)
+    if value < 2:
+        raise argparse.ArgumentTypeError(f"a rig has at least two cameras, got {text!r}")
+    return value
+
+
 def add_parser(subparsers) -> None:
     p = subparsers.add_parser("scene",
                               help="write a Mitsuba scene of the rig, the port and targets")
@@ -120,6 +129,16 @@ def add_parser(subparsers) -> None:
                    help="tilt of the port normal from the left optical axis, degrees about x "
                         "and about y (default 0 0); --port per-camera: each LEFT,RIGHT, each "
                         "port's from its own camera's optical axis (e.g. 0,0 0,2)")
+    p.add_argument("--cameras", type=_camera_count, default=2, metavar="N",
+                   help="how many cameras (default 2: left, right): a row of N, --baseline "
+                        "apart along x, camera k turned k × --toe-in about y towards the "
+                        "targets, all behind the one flat port (--port paper) or none; their "
+                        "sensors are cam0, cam1, …")
+    p.add_argument("--baseline", type=positive_float, default=None,
+                   help="distance between neighbouring cameras, mm (default 200)")
+    p.add_argument("--toe-in", type=any_float, default=None, metavar="DEG",
+                   help="each camera turned this much more than its neighbour about y, "
+                        "towards the first (default 5 degrees)")
     p.add_argument("--size", type=positive_int, nargs=2, metavar=("W", "H"),
                    help="image size, px (default 2448 2048); the focal length scales with W")
     p.add_argument("--focal", type=positive_float, help="focal length, px (default 1100·W/2448)")
@@ -184,7 +203,12 @@ def main(args) -> int:
                        f"({args.half_width:g} / {args.spacing:g})")
     size = tuple(args.size) if args.size else rigs.PAPER_IMAGE_SIZE
     focal = args.focal if args.focal else rigs.PAPER_FOCAL_PX * size[0] / rigs.PAPER_IMAGE_SIZE[0]
-    left, right = rigs.paper_cameras(size, focal, args.dist)
+    baseline = rigs.PAPER_BASELINE_MM if args.baseline is None else args.baseline
+    toe_in = rigs.PAPER_TOE_IN_DEG if args.toe_in is None else args.toe_in
+    if not abs(toe_in) < 45:
+        raise CLIError(f"--toe-in must stay below 45 degrees, got {toe_in:g}")
+    cameras = rigs.row_cameras(args.cameras, size, focal, args.dist, baseline, toe_in)
+    left, right = cameras[:2]
     port = None
     if args.layer and (args.n_glass is not None or args.glass_thickness is not None):
         raise CLIError("--layer replaces --n-glass and --glass-thickness; give one or the other")
@@ -250,7 +274,7 @@ def main(args) -> int:
             check_targets(port, targets, radius)
         except ValueError as exc:
             raise CLIError(f"--layout {args.layout}: {exc}") from None
-    _check_visible(left, right, port, targets, radius, args.layout)
+    _check_visible(cameras, port, targets, radius, args.layout)
     thin_lens = None
     if args.aperture_radius is not None:
         focus = (args.focus_distance if args.focus_distance is not None
@@ -267,6 +291,8 @@ def main(args) -> int:
                + (f" tilted {args.port_tilt[0][0]:g} deg about x, {args.port_tilt[1][0]:g} deg "
                   f"about y" if args.port == "paper" and any(sum(args.port_tilt, ())) else "")
                + (f" of {len(args.layer)} layers" if args.layer else "")
+               + (f", {args.cameras} cameras {baseline:g} mm apart, each turned {toe_in:g} deg "
+                  f"more" if args.cameras != 2 else "")
                + f", target radius {radius:g} mm"
                + (", lit targets" if args.lighting == "lit" else "")
                + (f", thin lens aperture {thin_lens[0]:g} mm focus {thin_lens[1]:.6g} mm"
@@ -280,7 +306,7 @@ def main(args) -> int:
         comment += f", water {args.water}"
     try:
         default_spp = DEFAULT_SPP if water is None else DEFAULT_FULL_FILM_SPP  # haze: full film
-        write_scene(args.out, (left, right), port, targets, radius,
+        write_scene(args.out, cameras, port, targets, radius,
                     spp=args.spp if args.spp else default_spp, seed=args.seed, comment=comment,
                     water=water, target_normals=normals, lighting=args.lighting,
                     thin_lens=thin_lens)
@@ -288,7 +314,8 @@ def main(args) -> int:
         raise CLIError(str(exc)) from None
     print(f"wrote {args.out}: {targets.shape[0]} targets of radius {radius:g} mm, "
           f"{PORT_WORDS[args.port]}, "
-          f"{size[0]}x{size[1]} px")
+          + (f"{args.cameras} cameras, " if args.cameras != 2 else "")
+          + f"{size[0]}x{size[1]} px")
     return 0
 
 
@@ -365,6 +392,15 @@ def _refuse_inapplicable(args) -> None:
         if args.lighting == "lit":
             raise CLIError("--lighting lit does not apply to --port per-camera (scenes of two "
                            "housings hold LED targets)")
+    if args.cameras != 2:
+        if args.port not in ("paper", "none"):
+            raise CLIError(f"--cameras {args.cameras}: the cameras share one flat port "
+                           f"(--port paper) or none (--port none), not --port {args.port}")
+        if layout == "surface":
+            raise CLIError(f"--layout surface does not apply to --cameras {args.cameras} "
+                           f"(scenes of more cameras hold disk targets)")
+        refuse_given(args, ["aperture_radius", "focus_distance"],
+                     f"to --cameras {args.cameras} (pinhole cameras)")
     if args.port != "dome":
         refuse_given(args, ["dome_radius", "dome_thickness", "dome_offset"],
                      f"to --port {args.port} (only to --port dome)")
@@ -509,19 +545,20 @@ def _check_target_count(args) -> None:
                        f"more than {MAX_TARGETS}")
 
 
-def _check_visible(left, right, port, targets, radius: float, layout: str) -> None:
-    """CLIError unless some target lies wholly inside both images (in front of the cameras)."""
+def _check_visible(cameras, port, targets, radius: float, layout: str) -> None:
+    """CLIError unless some target lies wholly inside two images (in front of the cameras;
+    of two cameras, both)."""
     import numpy as np
 
     from measure.geometry.projection import project
 
     from synth.products.crosscheck import wholly_in_image
 
-    seen = np.ones(len(targets), dtype=bool)
-    for view, camera in enumerate((left, right)):
-        uv = project(camera, port.view(view), targets)
-        seen &= wholly_in_image(camera, uv, targets, radius)
-    if not seen.any():
+    seen = np.zeros(len(targets), dtype=int)
+    for view, camera in enumerate(cameras):
+        uv = project(camera, None if port is None else port.view(min(view, 1)), targets)
+        seen += wholly_in_image(camera, uv, targets, radius)
+    if not (seen >= 2).any():
         raise CLIError(f"--layout {layout}: none of the {len(targets)} targets is visible in both "
                        f"views (move them with --z or make the layout smaller)")
 

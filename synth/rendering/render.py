@@ -114,7 +114,7 @@ def check_render_request(spec: SceneSpec, spp: int | None = None, seed: int | No
     spp = spec.spp if spp is None else int(spp)
     if spp <= 0:
         raise ValueError(f"spp must be positive, got {spp}")
-    for name, camera in zip(("left", "right"), spec.cameras):
+    for name, camera in zip(spec.camera_names, spec.all_cameras):
         if camera.dist is not None:
             problem = camera.distortion_problem()
             if problem:
@@ -517,6 +517,19 @@ def render_stereo(scene, spp: int | None = None, variant: str | None = None,
     per view) and ``render`` (per view: ``mode`` "adaptive" or "full film" and why,
     ``lit_fraction`` of the film in the mask, samples on and off the mask, ...).
     """
+    images, info = render_views(scene, spp, variant, defines, progress, seed, adaptive,
+                                all_views=False)
+    return images[0], images[1], info
+
+
+def render_views(scene, spp: int | None = None, variant: str | None = None,
+                 defines: dict | None = None, progress: bool = True, seed: int | None = None,
+                 adaptive: bool = True, all_views: bool = True):
+    """:func:`render_stereo` of every camera of the scene (``all_views``; False: the first
+    two, ``left`` and ``right``): ``(images, info)``, one float32 image per camera in the
+    order of :attr:`SceneSpec.all_cameras`, the ``info`` keyed by
+    :attr:`SceneSpec.camera_names` (view k is rendered with the sampler seeds of
+    :func:`pass_seed` for view k)."""
     from tqdm import tqdm
 
     spec = scene if isinstance(scene, SceneSpec) else load_scene(scene, defines)
@@ -527,11 +540,12 @@ def render_stereo(scene, spp: int | None = None, variant: str | None = None,
     mscene, mi, chosen = load_mitsuba_scene(spec, variant)
     seconds = {"load": time.perf_counter() - t0}
     images = []
-    names = ("left", "right")
+    cameras = spec.all_cameras if all_views else spec.cameras
+    names = spec.camera_names if all_views else ("left", "right")
     bar = tqdm(names, desc=f"render {chosen} {spp} spp{' adaptive' if adaptive else ''}",
                unit="view", disable=not progress, leave=False)
     speeds, taken, stats = {}, {}, {}
-    for i, (name, camera) in enumerate(zip(bar, spec.cameras)):
+    for i, (name, camera) in enumerate(zip(bar, cameras)):
         t = time.perf_counter()
         image, taken[name], stats[name] = render_view_counted(mscene, mi, i, camera, spp, seed,
                                                               adaptive=adaptive)
@@ -543,10 +557,10 @@ def render_stereo(scene, spp: int | None = None, variant: str | None = None,
         bar.set_postfix_str(f"{name} {render_summary(stats[name])}")
     bar.close()
     # Samplers may round each pass up (multijitter: to a product of two near-equal integers).
-    spp_rendered = int(taken["left"])
+    spp_rendered = int(taken[names[0]])
     samples = sum(stats[name]["samples"] for name in names)
     w, h = spec.size
-    render_seconds = seconds["left"] + seconds["right"]
+    render_seconds = sum(seconds[name] for name in names)
     info = {"variant": chosen, "integrator": integrator_name(mi, mscene), "spp": spp,
             "spp_rendered": spp_rendered, "seed": seed,
             "size": [w, h], "seconds": seconds,
@@ -554,7 +568,7 @@ def render_stereo(scene, spp: int | None = None, variant: str | None = None,
             "samples_per_second": samples / render_seconds if render_seconds > 0 else None,
             "samples_per_second_per_view": speeds,
             "render": {"adaptive": bool(adaptive), **stats}}
-    return images[0], images[1], info
+    return images, info
 
 
 def spp_text(requested, rendered=None) -> str:

@@ -84,6 +84,9 @@ class SceneSpec:
     referenced: frozenset = frozenset()
     target_normals: np.ndarray | None = None
     surface: SceneSurface | None = None
+    #: The cameras after the first two of a scene of N (``synth scene --cameras N``), all
+    #: behind the one flat port (or none): :attr:`all_cameras`, :attr:`multirig`.
+    extra_cameras: tuple = ()
 
     @property
     def mitsuba_params(self) -> dict:
@@ -94,6 +97,28 @@ class SceneSpec:
     @property
     def cameras(self) -> tuple[Camera, Camera]:
         return self.rig.left, self.rig.right
+
+    @property
+    def all_cameras(self) -> tuple:
+        """Every camera of the scene, in the order of its sensors."""
+        return (self.rig.left, self.rig.right) + tuple(self.extra_cameras)
+
+    @property
+    def camera_names(self) -> tuple:
+        """``left``, ``right`` — or ``cam0``, ``cam1``, … in a scene of more cameras."""
+        from measure.stereo.multirig import default_names
+
+        return default_names(len(self.all_cameras))
+
+    @property
+    def multirig(self):
+        """The scene's rig as a :class:`measure.stereo.multirig.MultiRig` (every camera, each
+        with the port it looks through)."""
+        from measure.stereo.multirig import MultiRig
+
+        if not self.extra_cameras:
+            return MultiRig.from_stereo(self.rig)
+        return MultiRig(self.all_cameras, [self.rig.port] * len(self.all_cameras))
 
     @property
     def port(self):

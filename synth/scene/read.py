@@ -290,6 +290,9 @@ def load_scene(path, defines: dict | None = None) -> SceneSpec:
     right = _read_sensor(nodes, sensors[1], params, label)
     if left.size != right.size:
         raise SceneError(f"{label}: the two sensors have different film sizes")
+    extra = tuple(_read_sensor(nodes, s, params, label) for s in sensors[2:])
+    if any(camera.size != left.size for camera in extra):
+        raise SceneError(f"{label}: the sensors have different film sizes")
     interfaces, targets, surfaces, spheres = _read_shapes(nodes, label)
     surface = _read_surface(surfaces, path, label) if surfaces else None
     if surface is not None and targets:
@@ -321,7 +324,8 @@ def load_scene(path, defines: dict | None = None) -> SceneSpec:
         if params.get("port") != "none":
             raise SceneError(f"{label}: no port (no dielectric rectangle); an all-air scene "
                              f"must declare <default name=\"port\" value=\"none\"/>")
-        port = index_matched_port(left.R[:, 2], np.stack([left.center, right.center]))
+        port = index_matched_port(left.R[:, 2], np.stack(
+            [left.center, right.center] + [c.center for c in extra]))
     else:
         if params.get("port") == "none":
             raise SceneError(f"{label}: port=none but the scene has port interfaces")
@@ -332,6 +336,8 @@ def load_scene(path, defines: dict | None = None) -> SceneSpec:
             check_windows(rig, windows)
     except ValueError as exc:
         raise SceneError(f"{label}: {exc}") from None
+    if extra:
+        _check_extra_cameras(rig, extra, bool(spheres or windows is not None), label)
     if spheres:
         if surface is not None:
             raise SceneError(f"{label}: a dome scene holds disk targets, not a surface")
@@ -358,7 +364,22 @@ def load_scene(path, defines: dict | None = None) -> SceneSpec:
                      target_radii=radii, params=params, path=path,
                      sha256=(hashlib.sha256(data).hexdigest() if surface is None else
                              hashlib.sha256(data + surface.sha256.encode()).hexdigest()),
-                     referenced=referenced, target_normals=normals, surface=surface)
+                     referenced=referenced, target_normals=normals, surface=surface,
+                     extra_cameras=extra)
+
+
+def _check_extra_cameras(rig, extra, own_glass: bool, label) -> None:
+    """A scene of more than two sensors: every camera behind the one flat port (or none),
+    none at another's centre (:class:`measure.stereo.multirig.MultiRig`)."""
+    from measure.stereo.multirig import MultiRig
+
+    if own_glass:
+        raise SceneError(f"{label}: a scene of {2 + len(extra)} cameras has one flat port for all "
+                         f"of them (or none), not a dome or window per camera")
+    try:
+        MultiRig((rig.left, rig.right) + extra, [rig.port] * (2 + len(extra)))
+    except ValueError as exc:
+        raise SceneError(f"{label}: {exc}") from None
 
 
 def _ports_from_interfaces(interfaces, cameras, label):

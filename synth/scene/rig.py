@@ -68,6 +68,18 @@ def paper_cameras(size=PAPER_IMAGE_SIZE, focal_px=PAPER_FOCAL_PX, dist=None):
     return left, right
 
 
+def row_cameras(count: int, size=PAPER_IMAGE_SIZE, focal_px=PAPER_FOCAL_PX, dist=None,
+                baseline_mm: float = PAPER_BASELINE_MM, toe_in_deg: float = PAPER_TOE_IN_DEG):
+    """``count`` cameras in a row along x, ``baseline_mm`` apart: camera k at
+    ``(k · baseline, 0, 0)`` turned ``k · toe_in_deg`` about y towards the first (which is the
+    reference, at the origin, unturned), so that all look in towards the targets ahead of the
+    row. Two of them are :func:`paper_cameras`."""
+    K = paper_intrinsics(size, focal_px)
+    return tuple(Camera(K, size, dist=dist, R=None if k == 0 else
+                        rotation_y(-np.deg2rad(toe_in_deg * k)), t=(baseline_mm * k, 0.0, 0.0))
+                 for k in range(count))
+
+
 def paper_rig(in_air: bool = False, size=PAPER_IMAGE_SIZE, focal_px=None, dist=None,
               n_water: float = PAPER_INDICES[2]) -> StereoRig:
     """The full stereo rig behind the paper's port (``in_air=True``: the all-air copy)."""

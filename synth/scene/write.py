@@ -151,10 +151,14 @@ def scene_xml(cameras, port: FlatPort | None, targets, target_radius: float, *,
     reflectance of a diffuse surface lit by the spot lights, ``"led"`` its radiance
     (self-luminous).
     """
-    left, right = cameras
+    cameras = tuple(cameras)
+    left, right = cameras[:2]
     if left.size != right.size:
         raise ValueError(f"both cameras must have the same image size, got {left.size} and "
                          f"{right.size}")
+    names = ("left", "right") if len(cameras) == 2 else tuple(f"cam{k}" for k in range(len(cameras)))
+    if len(cameras) > 2:
+        _check_more_cameras(cameras, names, port, surface, thin_lens)
     targets = np.asarray(targets, dtype=np.float64).reshape(-1, 3)
     if not np.all(np.isfinite(targets)) or targets.shape[0] == 0:
         raise ValueError("targets must be a non-empty finite (N, 3) array")
@@ -219,7 +223,7 @@ def scene_xml(cameras, port: FlatPort | None, targets, target_radius: float, *,
     if plane:
         defaults.append(("target_z", _num(targets[0, 2])))
     defaults.append(("max_depth", str(int(max_depth))))
-    for name, cam in (("left", left), ("right", right)):
+    for name, cam in zip(names, cameras):
         dist = np.zeros(5) if cam.dist is None else cam.dist
         defaults.append((f"{name}_dist", " ".join(_num(c) for c in dist)))
 
@@ -246,8 +250,8 @@ def scene_xml(cameras, port: FlatPort | None, targets, target_radius: float, *,
             <float name="g" value="$water_g"/>
         </phase>
     </medium>""")
-    parts.append(_sensor_xml("left", left, True, thin_lens is not None))
-    parts.append(_sensor_xml("right", right, True, thin_lens is not None))
+    for name, cam in zip(names, cameras):
+        parts.append(_sensor_xml(name, cam, True, thin_lens is not None))
     if lighting == "lit":
         for k, (origin, target) in enumerate(light_placements(left, right, port, targets)):
             parts.append(f"""
@@ -316,6 +320,25 @@ def scene_xml(cameras, port: FlatPort | None, targets, target_radius: float, *,
     </shape>""")
     parts.append("</scene>\n")
     return "\n".join(parts)
+
+
+def _check_more_cameras(cameras, names, port, surface, thin_lens) -> None:
+    """A scene of more than two cameras: the same film for all, all behind one flat port (or
+    none), none at another's centre; LED disk targets seen by pinholes."""
+    from measure.stereo.multirig import MultiRig
+
+    for name, camera in zip(names, cameras):
+        if camera.size != cameras[0].size:
+            raise ValueError(f"{name}: every camera must have the same image size, got "
+                             f"{camera.size} and {cameras[0].size}")
+    if port is not None and PER_CAMERA_GLASS.get(port.kind) is not None:
+        raise ValueError(f"a scene of {len(cameras)} cameras has one flat port for all of them "
+                         f"(or none), not {port.description}")
+    if surface is not None or thin_lens is not None:
+        raise ValueError(f"a scene of {len(cameras)} cameras holds disk targets seen by pinhole "
+                         f"cameras (no surface, no thin lens)")
+    if port is not None:
+        MultiRig(cameras, [port] * len(cameras), names)
 
 
 def _dome_xml(rig: StereoRig) -> str:

@@ -1,0 +1,350 @@
+"""``python -m eval run`` on a scene of more than two cameras (``synth scene --cameras N``).
+
+Every view is rendered (:func:`synth.rendering.render.render_views`) and its targets detected
+(the two-camera run's detector and options); the detections are matched across all views
+without ground truth (:func:`measure.stereo.multimatch.match_views`: pairwise refractive
+epipolar matching, tracks from their union, a track with a conflict dropped); every track is
+triangulated from all its views with the optical path (:func:`measure.stereo.multiview.
+triangulate_views`), after the disk targets' eccentricity is removed from every view's centre
+(as the two-camera run does, :func:`correct_views`). Only then is the truth used: each
+detection is associated with the simulator's pixel of a target (the cross-check's mutual
+nearest neighbours), a track is correct when all its detections belong to one target, and the
+points are scored against the targets. The report gives, per target, how many views saw it
+(the simulator: wholly inside the image), how many its track joined, and its error; the RMS
+error against the number of views k; and, from the same detections, the first two cameras
+measured as a stereo pair (the two-camera run's optical path) for comparison.
+
+A target seen by one view only is reported, never triangulated. Exit 1 when a track joins
+detections of different targets. Units mm, reference frame the first camera's.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+import time
+import xml.etree.ElementTree as ET
+
+import numpy as np
+
+from eval.cli import CLIError
+from eval.run.config import RunConfig
+
+#: The options of a two-camera run that a run of N cameras does not take (refused, never
+#: ignored): (config field, option).
+NOT_FOR_N_CAMERAS = (("from_dir", "--from"), ("assumptions", "--assume"),
+                     ("compare_calib", "--compare-calib"), ("absorbed_calib", "--absorbed-calib"),
+                     ("self_calibrate", "--self-calibrate"), ("sensor", "--sensor"))
+#: The one method of a run of N cameras.
+METHOD = "optical_path"
+
+
+def is_multiview_scene(path: str) -> bool:
+    """Whether the scene file holds more than two sensors — read with ElementTree, no Mitsuba;
+    False for anything unreadable (the scene loader then says what is wrong)."""
+    try:
+        root = ET.parse(path).getroot()
+    except (OSError, ET.ParseError):
+        return False
+    return sum(1 for _ in root.iter("sensor")) > 2
+
+
+def refuse_inapplicable(config: RunConfig, cameras: int) -> None:
+    for field_name, option in NOT_FOR_N_CAMERAS:
+        if getattr(config, field_name):
+            raise CLIError(f"{option} does not apply to {config.scene}, a scene of {cameras} "
+                           f"cameras")
+    if config.methods is not None and tuple(config.methods) != (METHOD,):
+        raise CLIError(f"--methods: a scene of {cameras} cameras is measured with {METHOD} only "
+                       f"(the optical path of N views)")
+
+
+def measurement_rig(config: RunConfig, spec):
+    """The scene's rig, or ``--calib`` (a ``calib.yaml`` of N cameras) when given; CLIError
+    (exit 2) for a file that cannot be used or does not fit the scene."""
+    if not config.calib:
+        return spec.multirig
+    from synth.products.dataset import DatasetError
+    from synth.products.rig_file import read_rig_file
+
+    try:
+        rig = read_rig_file(config.calib)
+    except DatasetError as exc:
+        raise CLIError(f"--calib {exc}") from None
+    if len(rig) != len(spec.all_cameras):
+        raise CLIError(f"--calib {config.calib}: {len(rig)} cameras, but the scene has "
+                       f"{len(spec.all_cameras)}")
+    for name, camera in zip(rig.names, rig.cameras):
+        if tuple(camera.size) != tuple(spec.size):
+            raise CLIError(f"--calib {config.calib}: {name}: image size {camera.size[0]}x"
+                           f"{camera.size[1]} px, but the scene renders {spec.size[0]}x"
+                           f"{spec.size[1]} px")
+    return rig
+
+
+def correct_views(rig, pixels, radius_mm, iterations: int = 2):
+    """The N-view form of :func:`measure.images.eccentricity.correct_eccentricity`: the disk
+    targets' outline-centroid offsets predicted in every view from the triangulated points and
+    the normals of their neighbours, removed, and triangulated again. ``pixels`` ``(T, V, 2)``;
+    returns ``(MultiViewTriangulation, corrected pixels, offsets (T, V, 2))``."""
+    from measure.images.eccentricity import local_normals, outline_centroid_offsets
+    from measure.stereo.multiview import triangulate_views
+
+    views = rig.views()
+    result = triangulate_views(views, pixels)
+    corrected, offsets = pixels, np.zeros_like(pixels)
+    toward = np.mean([c.center for c in rig.cameras], axis=0)
+    for _ in range(iterations):
+        normals = local_normals(result.points, toward=toward)
+        offsets = np.full_like(pixels, np.nan)
+        ok = result.valid
+        for v, view in enumerate(views):
+            seen = ok & np.all(np.isfinite(pixels[:, v]), axis=1)
+            if seen.any():
+                offsets[seen, v] = outline_centroid_offsets(view.camera, view.port,
+                                                            result.points[seen], normals[seen],
+                                                            radius_mm)
+        corrected = pixels - np.nan_to_num(offsets)
+        result = triangulate_views(views, corrected)
+    return result, corrected, offsets
+
+
+def _rms(values) -> float | None:
+    values = np.asarray(values, dtype=float)
+    values = values[np.isfinite(values)]
+    return float(np.sqrt(np.mean(values ** 2))) if values.size else None
+
+
+def measure(config: RunConfig, log) -> tuple[dict, dict]:
+    """The run (module docs): ``(report, arrays)``."""
+    from measure import triangulate
+    from measure.images.detect import FLOOR_FRACTION
+    from measure.images.eccentricity import correct_eccentricity
+    from measure.stereo.multimatch import match_views
+    from synth.products.crosscheck import ASSOCIATION_GATE_PX, associate_detections
+    from synth.rendering.noise import add_pixel_noise
+    from synth.rendering.render import render_summary, render_views
+
+    from eval.core.analytic import visible_targets
+    from eval.core.detection import detect_view
+    from eval.core.results import ErrorStats
+    from eval.run.inputs import load_run_scene
+    from eval.run.pipeline import default_depth_window
+
+    timings = {}
+    spec = load_run_scene(config)
+    names = spec.camera_names
+    refuse_inapplicable(config, len(names))
+    rig = measurement_rig(config, spec)
+    truth_rig = spec.multirig
+    seed = spec.seed if config.seed is None else config.seed
+    simulated, inside = [], []
+    for k, camera in enumerate(truth_rig.cameras):
+        uv, wholly = visible_targets(camera, truth_rig.view_port(k), spec.targets,
+                                     spec.target_radius)
+        simulated.append(uv)
+        inside.append(wholly)
+    visible_views = np.sum(inside, axis=0)
+    if not (visible_views >= 2).any():
+        raise CLIError(f"{config.scene}: no target is visible in two views")
+
+    log(f"render {len(names)} views ({spec.size[0]}x{spec.size[1]} px, "
+        f"{config.spp or spec.spp} spp, {'full film' if config.full_film else 'adaptive'}) …")
+    t = time.perf_counter()
+    images, info = render_views(spec, spp=config.spp, variant=config.variant,
+                                progress=config.progress, adaptive=not config.full_film)
+    timings["render"] = time.perf_counter() - t
+    for name in names:
+        log(f"  {name}: {render_summary(info['render'][name])}")
+
+    t = time.perf_counter()
+    detections = [detect_view(image, config.threshold_fraction, config.max_elongation,
+                              config.max_area_ratio, config.median_filter,
+                              floor_fraction=FLOOR_FRACTION) for image in images]
+    raw = [np.array(d.centers, dtype=float).reshape(-1, 2) for d in detections]
+    centers = raw
+    if config.noise_px > 0:
+        rng = np.random.default_rng(seed)
+        centers = [add_pixel_noise(c, variance=config.noise_px ** 2, rng=rng) for c in raw]
+    timings["detect"] = time.perf_counter() - t
+
+    t = time.perf_counter()
+    window = (default_depth_window(spec.params, spec.targets, spec.rig.port)
+              if config.depth_range_mm is None else tuple(config.depth_range_mm))
+    tracks = match_views(rig, centers, gate_mm=config.gate_mm, depth_range=window)
+    timings["match"] = time.perf_counter() - t
+
+    t = time.perf_counter()
+    pixels = tracks.pixels(centers)
+    if config.corrects_eccentricity:
+        result, _, _ = correct_views(rig, pixels, spec.target_radius)
+    else:
+        from measure.stereo.multiview import triangulate_views
+
+        result = triangulate_views(rig.views(), pixels)
+    timings["triangulate"] = time.perf_counter() - t
+
+    # the truth, for scoring only
+    truth_of = [associate_detections(raw[k], simulated[k], ASSOCIATION_GATE_PX)[0]
+                for k in range(len(names))]
+    ids = np.full(tracks.detections.shape, -1)
+    for k in range(len(names)):
+        seen = tracks.detections[:, k] >= 0
+        ids[seen, k] = truth_of[k][tracks.detections[seen, k]]
+    target = ids.max(axis=1) if len(ids) else np.zeros(0, int)
+    correct = np.array([(row[row >= 0] == row.max()).all() and
+                        (row >= 0).sum() == (tracks.detections[i] >= 0).sum()
+                        for i, row in enumerate(ids)], dtype=bool)
+    k_views = tracks.views_per_track
+    ok = correct & result.valid
+    errors = np.full((len(target), 3), np.nan)
+    errors[ok] = result.points[ok] - spec.targets[target[ok]]
+    detected_views = np.zeros(len(spec.targets), int)
+    for k in range(len(names)):
+        np.add.at(detected_views, truth_of[k][truth_of[k] >= 0], 1)
+    matched = np.zeros(len(spec.targets), bool)
+    matched[target[correct]] = True
+    twice = visible_views >= 2
+    by_k = {}
+    for k in range(2, len(names) + 1):
+        rows = ok & (k_views == k)
+        by_k[str(k)] = {"tracks": int((k_views == k).sum()), "scored": int(rows.sum()),
+                        "rms_dp_mm": _rms(np.linalg.norm(errors[rows], axis=1)),
+                        "stats": ErrorStats.of(errors[rows]).to_json()}
+
+    # the first two cameras as a stereo pair, from the same detections (the two-camera run)
+    pair = tracks.pairs.get((0, 1))
+    pair_report = None
+    if pair is not None and len(pair.left):
+        stereo = rig.pair(0, 1)
+        uv0, uv1 = centers[0][pair.left], centers[1][pair.right]
+        pair_result = (correct_eccentricity(stereo, uv0, uv1, spec.target_radius).triangulation
+                       if config.corrects_eccentricity else triangulate(stereo, uv0, uv1))
+        t0, t1 = truth_of[0][pair.left], truth_of[1][pair.right]
+        pair_ok = (t0 >= 0) & (t0 == t1) & pair_result.valid
+        pair_errors = pair_result.points[pair_ok] - spec.targets[t0[pair_ok]]
+        pair_report = {"cameras": [names[0], names[1]], "pairs": int(len(pair.left)),
+                       "correct": int(((t0 >= 0) & (t0 == t1)).sum()),
+                       "stats": ErrorStats.of(pair_errors).to_json(),
+                       "rms_dp_mm": _rms(np.linalg.norm(pair_errors, axis=1))}
+    stats = ErrorStats.of(errors[ok])
+    rms = _rms(np.linalg.norm(errors[ok], axis=1))
+    matching = {"tracks": int(len(target)), "correct": int(correct.sum()),
+                "wrong": int((~correct).sum()), "conflicts_dropped": int(tracks.n_conflicts),
+                "visible_in_two_or_more": int(twice.sum()),
+                "visible_in_two_or_more_matched": int((twice & matched).sum()),
+                "detected_in_two_or_more": int((detected_views >= 2).sum()),
+                "detected_in_two_or_more_matched": int(((detected_views >= 2) & matched).sum()),
+                "seen_once": int((visible_views == 1).sum()),
+                "gate_mm": config.gate_mm,
+                "depth_window_mm": [None if v is None else float(v) for v in window],
+                "pairs": {f"{names[i]}-{names[j]}": int(len(m.left))
+                          for (i, j), m in tracks.pairs.items()}}
+    failures = []
+    if matching["wrong"]:
+        failures.append(f"{matching['wrong']} tracks join detections of different targets")
+    report = {
+        "scene": config.scene, "cameras": list(names), "method": METHOD,
+        "rig": "--calib " + config.calib if config.calib else "the scene's rig",
+        "variant": info["variant"], "spp": info["spp"], "spp_rendered": info["spp_rendered"],
+        "seed": seed, "noise_px": config.noise_px,
+        "eccentricity": bool(config.corrects_eccentricity),
+        "detections": {name: int(len(c)) for name, c in zip(names, centers)},
+        "matching": matching,
+        "scores": {"n": stats.n, "rms_dp_mm": rms, "stats": stats.to_json(), "by_views": by_k},
+        "stereo_pair": pair_report,
+        "ratio_to_pair": (rms / pair_report["rms_dp_mm"] if pair_report and rms
+                          and pair_report["rms_dp_mm"] else None),
+        "timings_s": timings, "render": info,
+        "verdict": {"passed": not failures, "failures": failures},
+    }
+    per_target = np.full((len(spec.targets), 8), np.nan)
+    per_target[:, 0] = spec.target_ids
+    per_target[:, 1] = visible_views
+    per_target[:, 2] = detected_views
+    per_target[:, 3] = 0
+    per_target[target[ok], 3] = k_views[ok]
+    per_target[target[ok], 4:7] = result.points[ok]
+    per_target[target[ok], 7] = np.linalg.norm(errors[ok], axis=1)
+    return report, {"targets": per_target}
+
+
+def report_markdown(report: dict) -> str:
+    m, s = report["matching"], report["scores"]
+
+    def mm(v):
+        return "–" if v is None else f"{v:.4f}"
+
+    lines = [f"# eval run: {report['scene']} ({len(report['cameras'])} cameras)", "",
+             f"{m['tracks']} tracks ({m['correct']} correct, {m['wrong']} wrong, "
+             f"{m['conflicts_dropped']} dropped for a conflict); "
+             f"{m['visible_in_two_or_more_matched']} of {m['visible_in_two_or_more']} targets "
+             f"visible in two or more views matched; {m['seen_once']} seen by one view only "
+             f"(reported, not triangulated).", "",
+             "| views k | tracks | RMS dP (mm) |", "|---|---|---|"]
+    for k, row in s["by_views"].items():
+        lines.append(f"| {k} | {row['tracks']} | {mm(row['rms_dp_mm'])} |")
+    lines.append(f"| all | {s['n']} | {mm(s['rms_dp_mm'])} |")
+    pair = report.get("stereo_pair")
+    if pair:
+        lines += ["", f"Stereo pair {pair['cameras'][0]}–{pair['cameras'][1]} from the same "
+                      f"detections: {pair['pairs']} pairs, RMS dP {mm(pair['rms_dp_mm'])} mm; "
+                      f"all views / pair: {report['ratio_to_pair']:.3f}."
+                  if report.get("ratio_to_pair") else ""]
+    if report["verdict"]["failures"]:
+        lines += ["", "Failed: " + "; ".join(report["verdict"]["failures"])]
+    return "\n".join(lines) + "\n"
+
+
+def main(config: RunConfig, out: str, print_json: bool, log) -> int:
+    """The command's body for a scene of N cameras: measure, write ``report.json``,
+    ``report.md`` and ``targets.csv`` (per target: id, views it is visible in, views it was
+    detected in, views of its track (0: not triangulated), the point, its error dP) into
+    ``out``, print the summary."""
+    import json
+
+    from synth.infra.cli import EXIT_CHECK_FAILED
+    from synth.infra.fileio import OutputDir, atomic_write_json, atomic_write_text, jsonable
+    from synth.infra.provenance import package_versions
+
+    from eval.run.config import COMMAND
+
+    output = OutputDir(out, COMMAND).claim()
+    start = time.perf_counter()
+    report, arrays = measure(config, log)
+    with output.staged() as tmp:
+        report["versions"] = package_versions()
+        report["timings_s"]["total"] = time.perf_counter() - start
+        report = jsonable(report)
+        atomic_write_json(os.path.join(tmp, "report.json"), report)
+        atomic_write_text(os.path.join(tmp, "report.md"), report_markdown(report))
+        np.savetxt(os.path.join(tmp, "targets.csv"), arrays["targets"], delimiter=",",
+                   header="id,views_visible,views_detected,views_triangulated,x,y,z,dp_mm",
+                   comments="", fmt="%.10g")
+    stream = sys.stderr if print_json else sys.stdout
+    m, s = report["matching"], report["scores"]
+    pair = report.get("stereo_pair") or {}
+    print(f"{report['scene']}: {len(report['cameras'])} cameras, "
+          f"{m['visible_in_two_or_more']} targets visible in two or more views, "
+          f"{m['visible_in_two_or_more_matched']} matched ({m['correct']} tracks correct, "
+          f"{m['wrong']} wrong, {m['conflicts_dropped']} dropped), {m['seen_once']} seen once; "
+          f"RMS dP {s['rms_dp_mm']:.4f} mm"
+          + (f" (stereo pair {pair['cameras'][0]}-{pair['cameras'][1]}: "
+             f"{pair['rms_dp_mm']:.4f} mm, ratio {report['ratio_to_pair']:.3f})"
+             if pair.get("rms_dp_mm") and report.get("ratio_to_pair") else "")
+          + f"; total {report['timings_s']['total']:.1f} s", file=stream)
+    print("  by views: " + ", ".join(
+        f"k={k}: {row['tracks']} tracks, RMS dP "
+        + ("–" if row["rms_dp_mm"] is None else f"{row['rms_dp_mm']:.4f} mm")
+        for k, row in s["by_views"].items()), file=stream)
+    print(f"wrote {output.path}", file=stream)
+    if print_json:
+        print(json.dumps(report, indent=2))
+    if report["verdict"]["failures"]:
+        print(f"failed: {report['scene']}: {'; '.join(report['verdict']['failures'])} "
+              f"(report in {output.path})", file=sys.stderr)
+        return EXIT_CHECK_FAILED
+    return 0
+
+
+__all__ = ["correct_views", "is_multiview_scene", "main", "measure", "report_markdown"]

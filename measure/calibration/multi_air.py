@@ -1,0 +1,179 @@
+"""In-air calibration of a rig of N cameras from board images: every camera and every board
+pose jointly.
+
+Each camera is first calibrated on its own (``cv2.calibrateCameraExtended``,
+:func:`measure.calibration.air.calibrate_camera`), which gives its intrinsics and the board's
+pose in its frame for every image it found the board in. The cameras' poses relative to the
+first (the reference) follow from the board poses they share — the median (rotations: their
+chordal mean, ``scipy.spatial.transform.Rotation.mean``) over the shared poses, chained
+breadth-first through the cameras when one shares no pose with the first. Then one bundle
+adjustment (``scipy.optimize.least_squares``, Levenberg–Marquardt, OpenCV's
+``projectPoints``) refines every camera's pose (the first held at the origin), every board
+pose and, with ``intrinsics="free"``, every camera's intrinsics and distortion together, over
+the pixel residuals of all corners in all views.
+
+Units: mm, pixels in the OpenCV convention; poses camera-to-reference ``X_ref = R · X_cam + t``.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+from scipy.optimize import least_squares
+from scipy.spatial.transform import Rotation
+
+from ..geometry.camera import Camera
+from ..stereo.multirig import MultiRig, default_names
+from .air import LENS_MODELS, MIN_POSES, CalibrationError, Detections, calibrate_camera
+from .board import Board
+
+
+@dataclass(frozen=True)
+class MultiAirCalibration:
+    """``rig`` (a :class:`measure.stereo.multirig.MultiRig`, every camera in air: no port),
+    ``rms_px`` per camera of its own calibration, ``joint_rms_px`` of the bundle adjustment
+    (RMS of the residual length over all corners, px), ``poses_used`` per camera, and
+    ``board_poses`` ``{pose: (R, t)}`` (board to the reference frame, mm)."""
+
+    rig: MultiRig
+    rms_px: dict
+    joint_rms_px: float
+    poses_used: dict
+    board_poses: dict
+
+
+def _pose_matrix(rvec, tvec):
+    return Rotation.from_rotvec(np.ravel(rvec)).as_matrix(), np.ravel(tvec).astype(np.float64)
+
+
+def _chain_poses(own: list[dict], n_views: int, names) -> list:
+    """Camera-to-reference poses ``[(R, t)…]`` from each camera's board poses ``own[v]``
+    ``{pose: (R board→camera, t)}``, breadth-first from camera 0."""
+    poses = [None] * n_views
+    poses[0] = (np.eye(3), np.zeros(3))
+    queue = deque([0])
+    while queue:
+        a = queue.popleft()
+        for b in range(n_views):
+            if poses[b] is not None:
+                continue
+            shared = sorted(set(own[a]) & set(own[b]))
+            if not shared:
+                continue
+            # camera b in camera a's frame: X_a = R_a R_b^T (X_b − t_b) + t_a
+            Rs = [own[a][k][0] @ own[b][k][0].T for k in shared]
+            ts = [own[a][k][1] - R @ own[b][k][1] for k, R in zip(shared, Rs)]
+            R_ab = Rotation.from_matrix(np.array(Rs)).mean().as_matrix()
+            t_ab = np.median(np.array(ts), axis=0)
+            R_a, t_a = poses[a]
+            poses[b] = (R_a @ R_ab, R_a @ t_ab + t_a)
+            queue.append(b)
+    missing = [names[v] for v in range(n_views) if poses[v] is None]
+    if missing:
+        raise CalibrationError(f"{missing[0]} shares no board pose with the other cameras "
+                               f"(directly or through others): its pose cannot be found")
+    return poses
+
+
+def calibrate_rig_in_air(board: Board, detections: Detections, size, names=None,
+                         lens_model: str = "standard",
+                         intrinsics: str = "fixed") -> MultiAirCalibration:
+    """The rig of N cameras (``detections.ids[k][v]`` for pose k, view v of N) in air (module
+    docs). ``intrinsics``: ``"fixed"`` (each camera's own calibration) or ``"free"`` (refined
+    in the joint adjustment too). CalibrationError (one line naming the camera) when a camera
+    found the board in fewer than :data:`measure.calibration.air.MIN_POSES` images or shares
+    no pose with the others."""
+    if intrinsics not in ("fixed", "free"):
+        raise CalibrationError(f"intrinsics must be fixed or free, got {intrinsics!r}")
+    n_views = len(detections.ids[0]) if detections.n_poses else 0
+    names = default_names(n_views) if names is None else tuple(names)
+    corners = board.corners().astype(np.float64)
+    cams, own, rms, used = [], [], {}, {}
+    for v, name in enumerate(names):
+        found = detections.found(v)
+        if len(found) < MIN_POSES:
+            raise CalibrationError(f"{name}: the board was found in {len(found)} image(s); a "
+                                   f"calibration needs at least {MIN_POSES}")
+        obj = [corners[detections.ids[k][v]].astype(np.float32) for k in found]
+        img = [detections.pixels[k][v].astype(np.float32) for k in found]
+        out, model, _, _ = calibrate_camera(obj, img, size, lens_model)
+        n_dist = max(LENS_MODELS[model][1], 5)
+        cams.append((np.asarray(out[1], float), np.asarray(out[2], float).ravel()[:n_dist]))
+        own.append({k: _pose_matrix(r, t) for k, r, t in zip(found, out[3], out[4])})
+        rms[name], used[name] = float(out[0]), len(found)
+    camera_poses = _chain_poses(own, n_views, names)
+    board_poses = {}
+    for k in range(detections.n_poses):
+        for v in range(n_views):
+            if k in own[v]:
+                R_v, t_v = camera_poses[v]
+                R_b, t_b = own[v][k]
+                board_poses[k] = (R_v @ R_b, R_v @ t_b + t_v)
+                break
+    pose_ids = sorted(board_poses)
+    observations = [(k, v) for k in pose_ids for v in range(n_views) if k in own[v]]
+
+    n_cam = 6 * (n_views - 1)
+    n_intr = 4 + len(cams[0][1])
+    free = intrinsics == "free"
+
+    def pack():
+        x = [np.concatenate([Rotation.from_matrix(R).as_rotvec(), t])
+             for R, t in camera_poses[1:]]
+        x += [np.concatenate([Rotation.from_matrix(board_poses[k][0]).as_rotvec(),
+                              board_poses[k][1]]) for k in pose_ids]
+        if free:
+            x += [np.concatenate([[K[0, 0], K[1, 1], K[0, 2], K[1, 2]], D]) for K, D in cams]
+        return np.concatenate(x) if x else np.zeros(0)
+
+    board_at = {k: n_cam + 6 * i for i, k in enumerate(pose_ids)}
+    intr_at = n_cam + 6 * len(pose_ids)
+
+    def unpack_camera(x, v):
+        if v == 0:
+            R, t = np.eye(3), np.zeros(3)
+        else:
+            p = x[6 * (v - 1):6 * v]
+            R, t = Rotation.from_rotvec(p[:3]).as_matrix(), p[3:]
+        if free:
+            q = x[intr_at + n_intr * v:intr_at + n_intr * (v + 1)]
+            K = np.array([[q[0], 0, q[2]], [0, q[1], q[3]], [0, 0, 1.0]])
+            D = q[4:]
+        else:
+            K, D = cams[v]
+        return R, t, K, D
+
+    def residuals(x):
+        out = []
+        cameras = [unpack_camera(x, v) for v in range(n_views)]
+        for (k, v) in observations:
+            p = x[board_at[k]:board_at[k] + 6]
+            R_b, t_b = Rotation.from_rotvec(p[:3]).as_matrix(), p[3:]
+            R_c, t_c, K, D = cameras[v]
+            # board → camera: X_cam = R_cᵀ (R_b X + t_b − t_c)
+            R = R_c.T @ R_b
+            t = R_c.T @ (t_b - t_c)
+            uv = cv2.projectPoints(corners[detections.ids[k][v]], cv2.Rodrigues(R)[0], t, K,
+                                   D)[0].reshape(-1, 2)
+            out.append((uv - detections.pixels[k][v]).ravel())
+        return np.concatenate(out)
+
+    x0 = pack()
+    # dense forward differences: a few hundred parameters, each a pass over the corners
+    fit = least_squares(residuals, x0, method="lm", x_scale="jac", xtol=1e-12, ftol=1e-12)
+    r = fit.fun.reshape(-1, 2)
+    joint = float(np.sqrt(np.mean(np.sum(r * r, axis=1))))
+    cameras = []
+    for v in range(n_views):
+        R, t, K, D = unpack_camera(fit.x, v)
+        cameras.append(Camera(K, size, dist=D, R=None if v == 0 else R, t=None if v == 0 else t))
+    poses = {k: (Rotation.from_rotvec(fit.x[board_at[k]:board_at[k] + 3]).as_matrix(),
+                 fit.x[board_at[k] + 3:board_at[k] + 6].copy()) for k in pose_ids}
+    return MultiAirCalibration(MultiRig(cameras, [None] * n_views, names), rms, joint, used,
+                               poses)
+
+
+__all__ = ["MultiAirCalibration", "calibrate_rig_in_air"]
