@@ -249,7 +249,8 @@ def main(args) -> int:
         raise CLIError(f"--parts: {', '.join(unknown) or 'nothing'} is not one of "
                        f"{', '.join(PARTS)}")
     output = OutputDir(args.out, COMMAND).claim()
-    spec = load_scene(args.scene, parse_defines(args.defines))
+    spec = load_scene(args.scene, parse_defines(args.defines)).require_two_cameras(
+        "eval render-bench")
     result = _run_interruptibly(lambda: _measure(args, spec, parts, per_call, spp_list,
                                                  adaptive_spp, log))
     w, h = spec.size

@@ -149,9 +149,11 @@ def load_run_scene(config: RunConfig):
     defines = dict(config.defines)
     if config.from_dir:
         apply_seed(dict(defines), config.seed)
-        return load_scene(config.scene, dataset_params(config.from_dir, defines))
+        return load_scene(config.scene, dataset_params(config.from_dir, defines)
+                          ).require_two_cameras("a stereo run (eval sweep's render cells)")
     defines = apply_spp(apply_seed(defines, config.seed), config.spp)
-    return load_scene(config.scene, defines).rendered_with(spp=config.spp)
+    return load_scene(config.scene, defines).rendered_with(spp=config.spp).require_two_cameras(
+        "a stereo run (eval sweep's render cells)")
 
 
 def read_run_dataset(config: RunConfig, spec):

@@ -124,7 +124,8 @@ def _scene_spec(scene_path: str, defines: dict):
     if spec is None:
         from synth.scene import load_scene
 
-        spec = _CACHE[key] = load_scene(scene_path, dict(defines))
+        spec = _CACHE[key] = load_scene(scene_path, dict(defines)).require_two_cameras(
+            "an analytic sweep cell")
     return spec
 
 

@@ -54,7 +54,7 @@ def main(args) -> int:
         if args.air and name in PORT_PARAMETERS:
             raise CLIError(f"-D {name} does not apply with --air: the boards are seen in air, "
                            f"with no port")
-    spec = load_scene(args.scene, defines)
+    spec = load_scene(args.scene, defines).require_two_cameras("synth boards")
     # -D spp / -D seed mean what they mean everywhere (the scene's defaults overridden); without
     # them the boards' own defaults hold
     spp = args.spp or (spec.spp if "spp" in defines else b.DEFAULT_SPP)

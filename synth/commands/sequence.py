@@ -60,7 +60,8 @@ def main(args) -> int:
     if abs(args.yaw) >= 60:
         raise CLIError(f"--yaw {args.yaw:g}: at most 60 degrees in magnitude (the markers "
                        f"face the cameras)")
-    spec = load_scene(args.scene, parse_defines(args.defines))
+    spec = load_scene(args.scene, parse_defines(args.defines)).require_two_cameras(
+        "synth sequence")
     try:
         manifest = s.write_sequence(
             spec, args.out, args.approach, args.frames, yaw_deg=args.yaw,

@@ -103,6 +103,16 @@ class SceneSpec:
         """Every camera of the scene, in the order of its sensors."""
         return (self.rig.left, self.rig.right) + tuple(self.extra_cameras)
 
+    def require_two_cameras(self, command: str) -> SceneSpec:
+        """This scene, or ValueError (one line naming the scene and ``command``) when it has
+        more than two cameras: a command that handles a stereo pair refuses such a scene rather
+        than use its first two cameras alone."""
+        if self.extra_cameras:
+            raise ValueError(f"{self.path}: a scene of {len(self.all_cameras)} cameras; "
+                             f"{command} handles two (python -m synth render writes every view, "
+                             f"python -m eval run measures them)")
+        return self
+
     @property
     def camera_names(self) -> tuple:
         """``left``, ``right`` — or ``cam0``, ``cam1``, … in a scene of more cameras."""

@@ -65,3 +65,21 @@ def test_bad_input_names_the_camera(scene, tmp_path, capsys):
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and err[0].startswith("error:") and fragment in err[0], err
     assert not (tmp_path / "out").exists()
+
+
+def test_commands_of_a_stereo_pair_refuse_more_cameras(scene, tmp_path, capsys):
+    """A command that handles two views refuses a scene of three rather than use its first two
+    cameras alone: one error line naming the scene and the command."""
+    from synth.__main__ import main as synth_main
+
+    for main, argv, command in (
+            (synth_main, ["boards", scene, "--poses", "2"], "synth boards"),
+            (synth_main, ["sequence", scene, "--approach", "2000,1000", "--frames", "2"],
+             "synth sequence"),
+            (eval_main, ["render-bench", scene, "--parts", "throughput"], "eval render-bench")):
+        out = tmp_path / command.replace(" ", "_")
+        assert main([*argv, "--out", str(out), "--no-progress"]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and err[0].startswith("error:"), err
+        assert "3 cameras" in err[0] and command in err[0], err
+        assert not out.exists()
