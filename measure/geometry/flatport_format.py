@@ -89,6 +89,30 @@ def from_domeport(params, camera: Camera) -> DomePort:
                     tuple(values[5:8]))
 
 
+def view_port_params(port, camera: Camera):
+    """``(housing, parameters)`` of the port one camera looks through: ``("FLATPORT",
+    to_flatport)`` for a :class:`FlatPort` that bends rays, ``("DOMEPORT", to_domeport)`` for a
+    :class:`DomePort`, ``(None, None)`` for none (a camera in air)."""
+    if port is None or not port_refracts(port):
+        return None, None
+    if isinstance(port, DomePort):
+        return "DOMEPORT", to_domeport(port, camera)
+    return "FLATPORT", to_flatport(port, camera)
+
+
+def view_port_from_params(housing: str | None, params, camera: Camera):
+    """The inverse of :func:`view_port_params` (reference frame, mm): a FlatPort, a DomePort
+    or None."""
+    if housing is None:
+        return None
+    return (from_domeport if housing == "DOMEPORT" else from_flatport)(params, camera)
+
+
+def port_refracts(port) -> bool:
+    """Whether one camera's port (FlatPort or DomePort) bends any ray."""
+    return len(set(port.indices)) > 1
+
+
 def flatport_text(port: FlatPort | FlatPair, cameras: dict) -> str:
     """Lines ``<name> FLATPORT Nx Ny Nz int_dist int_thick na ng nw`` for ``{name: camera}``
     (a :class:`~measure.geometry.flat_pair.FlatPair`: ``left`` and ``right``, each its own

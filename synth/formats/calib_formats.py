@@ -513,6 +513,86 @@ def write_colmap(path, rig: StereoRig, has_port: bool = True,
     return path, rig_path
 
 
+def write_colmap_rig(path, rig) -> tuple[str, str]:
+    """Write a rig of N cameras (:class:`measure.stereo.multirig.MultiRig`) as the COLMAP
+    fork's ``cameras.txt`` at ``path`` (camera k + 1 = the rig's camera k, each with its own
+    FLATPORT or DOMEPORT in its frame, none for a camera in air) and ``rig_config.json`` beside
+    it (every camera's ``cam_from_rig`` pose; the rig frame is the first camera's, the reference
+    frame), atomically. A two-camera rig is written as :func:`write_colmap` writes it."""
+    from measure.geometry.flatport_format import view_port_params
+
+    path = os.fspath(path)
+    size = rig.cameras[0].size
+    lines = ["# Camera list with one line of data per camera:",
+             "#   CAMERA_ID, MODEL, WIDTH, HEIGHT, PARAMS[] OPTIONAL[REFRAC_MODEL REFRAC_PARAMS[]]",
+             f"# Number of cameras: {len(rig.cameras)}",
+             "# Written by refractive-stereo for the refractive COLMAP fork (MDSKiel/"
+             "colmap_underwater): camera k + 1 is the rig's camera k ("
+             + ", ".join(f"{k + 1} {name}" for k, name in enumerate(rig.names)) + ");",
+             f"# the poses are in {COLMAP_RIG_NAME} beside this file. Pixels: COLMAP's, the "
+             "centre of the top-left pixel is (0.5, 0.5) (cx, cy = OpenCV's + 0.5).",
+             "# FLATPORT: Nx Ny Nz (unit normal in that camera's frame) int_dist int_thick "
+             "(metres) na ng nw.",
+             "# DOMEPORT: Cx Cy Cz (dome centre in that camera's frame) int_radius int_thick "
+             "(metres) na ng nw.",
+             f"# WARNING: {PYCOLMAP_WARNING}."]
+    cameras = []
+    for k, (camera, port) in enumerate(zip(rig.cameras, rig.ports)):
+        try:
+            housing, params = view_port_params(port, camera)
+        except ValueError as exc:
+            raise CalibFormatError(f"{rig.names[k]}: {exc}") from None
+        name, values = colmap_camera(camera)
+        items = [str(k + 1), name, str(int(size[0])), str(int(size[1]))]
+        items += [repr(v) for v in values]
+        if housing is not None:
+            items += [housing] + [repr(float(v)) for v in params]
+        lines.append(" ".join(items))
+        R_cam = camera.R.T  # cam_from_rig: the rig frame is the reference frame
+        t_cam = -R_cam @ camera.t * METRES_PER_MM
+        x, y, z, w = Rotation.from_matrix(R_cam).as_quat()
+        quat = [float(w), float(x), float(y), float(z)]
+        if quat[0] < 0:
+            quat = [-q for q in quat]
+        cameras.append({"camera_id": k + 1, "image_prefix": f"{rig.names[k]}/",
+                        "cam_from_rig_rotation": quat,
+                        "cam_from_rig_translation": [float(v) for v in t_cam]})
+    rig_path = os.path.join(os.path.dirname(path), COLMAP_RIG_NAME)
+    atomic_write_text(path, "\n".join(lines) + "\n")
+    atomic_write_text(rig_path, json.dumps([{"ref_camera_id": 1, "cameras": cameras}],
+                                           indent=2) + "\n")
+    return path, rig_path
+
+
+def read_colmap_rig(path):
+    """The rig of N cameras (:class:`measure.stereo.multirig.MultiRig`, the reference frame
+    the rig configuration's reference camera's) of the COLMAP fork's ``cameras.txt`` and the
+    ``rig_config.json`` beside it; CalibFormatError names the file and what is wrong."""
+    from measure.geometry.flatport_format import view_port_from_params
+    from measure.stereo.multirig import MultiRig
+
+    cameras = _parse_cameras_txt(path)
+    ref, poses = _read_rig_config(os.path.join(os.path.dirname(os.fspath(path)),
+                                               COLMAP_RIG_NAME), cameras)
+    R_ref, t_ref = poses[ref]
+    ids = [ref] + sorted(i for i in cameras if i != ref)
+    built, ports = [], []
+    for camera_id in ids:
+        entry = cameras[camera_id]
+        R, t = poses[camera_id]
+        camera = Camera(entry["K"], entry["size"], dist=entry["D"],
+                        R=R_ref.T @ R, t=R_ref.T @ (t - t_ref), distortion_model=entry["model"])
+        try:
+            ports.append(view_port_from_params(entry["housing"], entry["port"], camera))
+        except ValueError as exc:
+            raise CalibFormatError(f"{path}: camera {camera_id}: {exc}") from None
+        built.append(camera)
+    try:
+        return MultiRig(built, ports, [f"cam{k}" for k in range(len(built))])
+    except ValueError as exc:
+        raise CalibFormatError(f"{path}: {exc}") from None
+
+
 def _parse_cameras_txt(path) -> dict:
     text = _read_text(path)
     cameras = {}
@@ -820,4 +900,5 @@ __all__ = ["CALIBMAR_NAME", "COLMAP_CAMERAS_NAME", "COLMAP_MODELS", "COLMAP_PIXE
            "PYCOLMAP_WARNING", "calib_dict", "calib_format", "calibmar_partner", "colmap_camera",
            "distortion_model_of",
            "opencv_camera", "read_calibmar", "read_colmap", "read_single_camera", "stereo_extrinsics",
-           "write_calibmar", "write_calibration_formats", "write_colmap", "write_single_camera"]
+           "read_colmap_rig", "write_calibmar", "write_calibration_formats", "write_colmap",
+           "write_colmap_rig", "write_single_camera"]

@@ -507,3 +507,42 @@ def test_calib_yaml_of_two_housings(tmp_path):
     (tmp_path / "calib.yaml").write_text(text[:text.index("   right:")])
     with pytest.raises(DatasetError, match=r"calib.yaml: ports: no right map .*needs both"):
         read_calib(tmp_path / "calib.yaml")
+
+
+def test_a_rig_of_four_cameras_in_the_colmap_forks_files(tmp_path):
+    """N cameras, each with its own housing line (a shared flat port, a dome, none): each
+    FLATPORT line is the port seen from that camera (normal R_kᵀ N, distance D − N·t_k, metres,
+    written by hand here from the documented format), rig_config.json holds cam_from_rig of
+    every camera, and reading both gives the rig back."""
+    from measure.geometry.dome import DomePort
+    from measure.stereo.multirig import MultiRig
+    from synth.formats.calib_formats import read_colmap_rig, write_colmap_rig
+    from synth.scene.rig import paper_port, row_cameras
+
+    cameras = row_cameras(4)
+    port = paper_port()
+    dome = DomePort(cameras[3].center + [0.0, 0.0, 2.0], 50.0, 8.0, (1.0, 1.5, 1.33))
+    rig = MultiRig(cameras, [port, port, port, dome])
+    path = tmp_path / "cameras.txt"
+    write_colmap_rig(path, rig)
+    lines = [line.split() for line in path.read_text().splitlines() if not line.startswith("#")]
+    assert [int(line[0]) for line in lines] == [1, 2, 3, 4]
+    for k in (1, 2):
+        flat = [float(v) for v in lines[k][lines[k].index("FLATPORT") + 1:]]
+        normal = cameras[k].R.T @ port.normal
+        np.testing.assert_allclose(flat[:3], normal, atol=1e-12)
+        assert flat[3] == pytest.approx((port.distance - port.normal @ cameras[k].t) / 1000.0)
+        assert flat[4] == pytest.approx(0.005) and flat[5:] == [1.0, 1.54, 1.33]
+    assert "DOMEPORT" in lines[3]
+    config = json.loads((tmp_path / "rig_config.json").read_text())[0]
+    assert config["ref_camera_id"] == 1 and len(config["cameras"]) == 4
+    np.testing.assert_allclose(config["cameras"][2]["cam_from_rig_translation"],
+                               -cameras[2].R.T @ cameras[2].t / 1000.0, atol=1e-12)
+    back = read_colmap_rig(path)
+    for a, b in zip(back.cameras, rig.cameras):
+        np.testing.assert_allclose(a.R, b.R, atol=1e-12)
+        np.testing.assert_allclose(a.t, b.t, atol=1e-9)
+    for a, b in zip(back.ports[:3], rig.ports[:3]):
+        np.testing.assert_allclose(a.normal, b.normal, atol=1e-12)
+        assert a.distance == pytest.approx(b.distance, abs=1e-9)
+    np.testing.assert_allclose(back.ports[3].center, dome.center, atol=1e-9)
