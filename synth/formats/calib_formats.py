@@ -469,6 +469,23 @@ def read_calibmar(path) -> dict:
 # ---------------------------------------------------------------------------------------------
 # the COLMAP fork: cameras.txt and rig_config.json
 # ---------------------------------------------------------------------------------------------
+def _colmap_header(count: int, which: str, poses: str) -> list:
+    """The comment lines that open a ``cameras.txt`` of ``count`` cameras (``which``: how they
+    are numbered; ``poses``: "the stereo pose is" / "the poses are")."""
+    return ["# Camera list with one line of data per camera:",
+            "#   CAMERA_ID, MODEL, WIDTH, HEIGHT, PARAMS[] OPTIONAL[REFRAC_MODEL REFRAC_PARAMS[]]",
+            f"# Number of cameras: {count}",
+            "# Written by refractive-stereo for the refractive COLMAP fork (MDSKiel/"
+            f"colmap_underwater): {which};",
+            f"# {poses} in {COLMAP_RIG_NAME} beside this file. Pixels: COLMAP's, the "
+            "centre of the top-left pixel is (0.5, 0.5) (cx, cy = OpenCV's + 0.5).",
+            "# FLATPORT: Nx Ny Nz (unit normal in that camera's frame) int_dist int_thick "
+            "(metres) na ng nw.",
+            "# DOMEPORT: Cx Cy Cz (dome centre in that camera's frame) int_radius int_thick "
+            "(metres) na ng nw.",
+            f"# WARNING: {PYCOLMAP_WARNING}."]
+
+
 def write_colmap(path, rig: StereoRig, has_port: bool = True,
                  model: str | None = None) -> tuple[str, str]:
     """Write ``rig`` as the COLMAP fork's ``cameras.txt`` at ``path`` (camera 1 = left,
@@ -476,18 +493,8 @@ def write_colmap(path, rig: StereoRig, has_port: bool = True,
     beside it (the stereo pose), atomically. Returns both paths."""
     path = os.fspath(path)
     housing, *ports = _port_params(rig) if has_port else ("NONE", None, None)
-    lines = ["# Camera list with one line of data per camera:",
-             "#   CAMERA_ID, MODEL, WIDTH, HEIGHT, PARAMS[] OPTIONAL[REFRAC_MODEL REFRAC_PARAMS[]]",
-             "# Number of cameras: 2",
-             "# Written by refractive-stereo for the refractive COLMAP fork (MDSKiel/"
-             "colmap_underwater): camera 1 is the left (reference) camera, 2 the right;",
-             f"# the stereo pose is in {COLMAP_RIG_NAME} beside this file. Pixels: COLMAP's, the "
-             "centre of the top-left pixel is (0.5, 0.5) (cx, cy = OpenCV's + 0.5).",
-             "# FLATPORT: Nx Ny Nz (unit normal in that camera's frame) int_dist int_thick "
-             "(metres) na ng nw.",
-             "# DOMEPORT: Cx Cy Cz (dome centre in that camera's frame) int_radius int_thick "
-             "(metres) na ng nw.",
-             f"# WARNING: {PYCOLMAP_WARNING}."]
+    lines = _colmap_header(2, "camera 1 is the left (reference) camera, 2 the right",
+                           "the stereo pose is")
     for camera_id, (camera, port) in enumerate(zip((rig.left, rig.right), ports), start=1):
         name, params = colmap_camera(camera, model)
         items = [str(camera_id), name, str(int(rig.left.size[0])), str(int(rig.left.size[1]))]
@@ -523,19 +530,9 @@ def write_colmap_rig(path, rig) -> tuple[str, str]:
 
     path = os.fspath(path)
     size = rig.cameras[0].size
-    lines = ["# Camera list with one line of data per camera:",
-             "#   CAMERA_ID, MODEL, WIDTH, HEIGHT, PARAMS[] OPTIONAL[REFRAC_MODEL REFRAC_PARAMS[]]",
-             f"# Number of cameras: {len(rig.cameras)}",
-             "# Written by refractive-stereo for the refractive COLMAP fork (MDSKiel/"
-             "colmap_underwater): camera k + 1 is the rig's camera k ("
-             + ", ".join(f"{k + 1} {name}" for k, name in enumerate(rig.names)) + ");",
-             f"# the poses are in {COLMAP_RIG_NAME} beside this file. Pixels: COLMAP's, the "
-             "centre of the top-left pixel is (0.5, 0.5) (cx, cy = OpenCV's + 0.5).",
-             "# FLATPORT: Nx Ny Nz (unit normal in that camera's frame) int_dist int_thick "
-             "(metres) na ng nw.",
-             "# DOMEPORT: Cx Cy Cz (dome centre in that camera's frame) int_radius int_thick "
-             "(metres) na ng nw.",
-             f"# WARNING: {PYCOLMAP_WARNING}."]
+    lines = _colmap_header(len(rig.cameras), "camera k + 1 is the rig's camera k ("
+                           + ", ".join(f"{k + 1} {name}" for k, name in enumerate(rig.names))
+                           + ")", "the poses are")
     cameras = []
     for k, (camera, port) in enumerate(zip(rig.cameras, rig.ports)):
         try:
@@ -852,7 +849,7 @@ def read_single_camera(path) -> dict:
             out["lens_model"] = None if node.empty() else node.string()
             node = fs.getNode("distortion_model")
             model = BROWN_CONRADY if node.empty() else node.string()
-            out["covariance"] = _camera_covariance(path, fs.getNode("covariance"))
+            out["covariance"] = read_covariance_node(path, fs.getNode("covariance"))
         finally:
             fs.release()
         if K is None or np.shape(K) != (3, 3) or D is None or not np.all(np.isfinite(K)):
@@ -869,8 +866,11 @@ def read_single_camera(path) -> dict:
     return out
 
 
-def _camera_covariance(path, node):
-    """A camera file's ``covariance`` node (``names``, ``matrix``) or None."""
+def read_covariance_node(path, node, error=CalibFormatError):
+    """A calibration file's ``covariance`` node (``names``, ``matrix``, ``normal_axes`` where
+    given) as a :class:`measure.stereo.rig_covariance.RigCovariance`, or None when the file has
+    none; ``error`` (naming ``path``) when it is malformed, singular or not positive
+    definite."""
     from measure.stereo.rig_covariance import CovarianceError, RigCovariance
 
     if node.empty():
@@ -879,10 +879,11 @@ def _camera_covariance(path, node):
     names = ([names_node.at(i).string() for i in range(names_node.size())]
              if names_node.isSeq() else [])
     matrix = node.getNode("matrix").mat()
+    axes = node.getNode("normal_axes").mat()
     try:
-        return RigCovariance(names, np.zeros((0, 0)) if matrix is None else matrix)
+        return RigCovariance(names, np.zeros((0, 0)) if matrix is None else matrix, axes)
     except CovarianceError as exc:
-        raise CalibFormatError(f"{path}: covariance: {exc}") from None
+        raise error(f"{path}: covariance: {exc}") from None
 
 
 def write_calibration_formats(directory, rig: StereoRig, has_port: bool = True) -> list[str]:
@@ -900,5 +901,5 @@ __all__ = ["CALIBMAR_NAME", "COLMAP_CAMERAS_NAME", "COLMAP_MODELS", "COLMAP_PIXE
            "PYCOLMAP_WARNING", "calib_dict", "calib_format", "calibmar_partner", "colmap_camera",
            "distortion_model_of",
            "opencv_camera", "read_calibmar", "read_colmap", "read_single_camera", "stereo_extrinsics",
-           "read_colmap_rig", "write_calibmar", "write_calibration_formats", "write_colmap",
-           "write_colmap_rig", "write_single_camera"]
+           "read_colmap_rig", "read_covariance_node", "write_calibmar",
+           "write_calibration_formats", "write_colmap", "write_colmap_rig", "write_single_camera"]

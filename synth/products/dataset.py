@@ -290,20 +290,10 @@ def _read_domes(path, node) -> DomePair:
 def _read_covariance(path, node):
     """The ``covariance`` node as a :class:`measure.stereo.rig_covariance.RigCovariance`, or None when
     the file has none; DatasetError naming the file when it is malformed, singular or not
-    positive definite."""
-    from measure.stereo.rig_covariance import CovarianceError, RigCovariance
+    positive definite (:func:`synth.formats.calib_formats.read_covariance_node`)."""
+    from synth.formats.calib_formats import read_covariance_node
 
-    if node.empty():
-        return None
-    names_node = node.getNode("names")
-    names = ([names_node.at(i).string() for i in range(names_node.size())]
-             if names_node.isSeq() else [])
-    matrix = node.getNode("matrix").mat()
-    axes = node.getNode("normal_axes").mat()
-    try:
-        return RigCovariance(names, np.zeros((0, 0)) if matrix is None else matrix, axes)
-    except CovarianceError as exc:
-        raise DatasetError(f"{path}: covariance: {exc}") from None
+    return read_covariance_node(path, node, DatasetError)
 
 
 # ---------------------------------------------------------------------------------------------
