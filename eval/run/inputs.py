@@ -149,11 +149,9 @@ def load_run_scene(config: RunConfig):
     defines = dict(config.defines)
     if config.from_dir:
         apply_seed(dict(defines), config.seed)
-        return load_scene(config.scene, dataset_params(config.from_dir, defines)
-                          ).require_two_cameras("a stereo run (eval sweep's render cells)")
+        return load_scene(config.scene, dataset_params(config.from_dir, defines))
     defines = apply_spp(apply_seed(defines, config.seed), config.spp)
-    return load_scene(config.scene, defines).rendered_with(spp=config.spp).require_two_cameras(
-        "a stereo run (eval sweep's render cells)")
+    return load_scene(config.scene, defines).rendered_with(spp=config.spp)
 
 
 def read_run_dataset(config: RunConfig, spec):
@@ -215,7 +213,8 @@ def refuse_flat_only(config: RunConfig, port=None) -> None:
 
 def load_inputs(config: RunConfig, log) -> RunInputs:
     """The scene (rig and truth) and its two images, rendered now or read from ``--from``."""
-    spec = load_run_scene(config)
+    spec = load_run_scene(config).require_two_cameras(
+        "a stereo run (eval sweep's render cells; eval run itself measures N cameras)")
     if config.self_calibrate and not spec.has_port:
         raise CLIError(f"--self-calibrate does not apply to {config.scene}: it estimates the "
                        f"port's parameters, and the scene has no port (all air)")
