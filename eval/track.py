@@ -122,6 +122,9 @@ def associate(predicted, detections, gate_px: float) -> np.ndarray:
     return out
 
 
+#: A frame whose detections meet fewer than this share of the markers the last pose puts inside
+#: the images is lost (no pose; the run exits 1): a pose from the few left could be anywhere.
+LOST_FRACTION = 0.5
 #: The markers' normal in the object frame (the docking frame faces the cameras: −z).
 MARKER_NORMAL = np.array([0.0, 0.0, -1.0])
 
@@ -167,7 +170,7 @@ def main(args) -> int:
     seconds = {"detect": 0.0, "pose": 0.0}
     for k, frame in enumerate(frames):
         pixels = np.full((2, obj.shape[0], 2), np.nan)
-        detected = []
+        detected, expected = [], 0
         for v, name in enumerate(("left", "right")):
             path = os.path.join(args.dataset, "frames", f"{int(frame):04d}_{name}.png")
             image = cv2.imread(path, cv2.IMREAD_ANYDEPTH)
@@ -180,6 +183,11 @@ def main(args) -> int:
             predicted = project(rig.cameras[v], rig.view_port(v),
                                 obj @ R_prev.T + t_prev + velocity)
             pixels[v] = associate(predicted, centres, args.gate)
+            expected += int(rig.cameras[v].in_image(predicted).sum())
+        associated = int(np.all(np.isfinite(pixels), axis=2).sum())
+        lost = associated < LOST_FRACTION * expected
+        if lost:  # most markers found no detection where the last pose put them
+            pixels = np.full_like(pixels, np.nan)
         # the baseline: the left camera's raw detections as a pinhole that ignores the port
         _, t_pinhole = pinhole_pose(rig.left, obj, pixels[0])
         t0 = time.perf_counter()
@@ -195,7 +203,9 @@ def main(args) -> int:
         row = {"frame": int(frame), "detections": detected,
                "detection_rms_px": float(np.sqrt(np.mean(np.sum(miss ** 2, axis=1))))
                if miss.size else None,
-               "observations": pose.observations, "reason": Reason(pose.reason).name}
+               "observations": pose.observations,
+               "reason": "LOST" if lost else Reason(pose.reason).name,
+               "markers_expected": expected, "markers_associated": associated}
         if pose.valid:
             velocity = pose.t - t_prev if k > 0 else np.zeros(3)
             R_prev, t_prev = pose.R, pose.t

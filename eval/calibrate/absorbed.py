@@ -16,12 +16,17 @@ corners with the rendered truth (the port model's own fit, for comparison).
 from __future__ import annotations
 
 import os
+import sys
 import time
+
+import numpy as np
 
 from eval.cli import CLIError
 
 #: ``calib.yaml``'s ``model`` node of an absorbed calibration.
 MODEL = "absorbed"
+#: A stereo RMS above this (px) is a stereo fit that diverged.
+DIVERGED_PX = 1e3
 
 
 def _boards_or_photos(args, log):
@@ -82,7 +87,7 @@ def calibrate_absorbed_main(args, output, log, start) -> int:
         report = jsonable(report)
         atomic_write_json(os.path.join(tmp, "report.json"), report)
         atomic_write_text(os.path.join(tmp, "report.md"), _markdown(report))
-    diverged = [m for m, rms in stereo_rms.items() if rms is None or rms > 1e3]
+    diverged = [m for m, rms in stereo_rms.items() if rms is None or rms > DIVERGED_PX]
     line = (f"absorbed calibration ({model} model): RMS left {air.rms_px['left']:.4f} px, right "
             f"{air.rms_px['right']:.4f} px, stereo {air.stereo_rms_px:.4f} px")
     if diverged:
@@ -91,6 +96,13 @@ def calibrate_absorbed_main(args, output, log, start) -> int:
         line += f"; the port model on the same corners: {report['housing']['rms_px']:.4f} px"
     print(line)
     print(f"wrote {output.path} (calib.yaml without a port: eval run --absorbed-calib)")
+    if not np.isfinite(air.stereo_rms_px) or air.stereo_rms_px > DIVERGED_PX:
+        from synth.infra.cli import EXIT_CHECK_FAILED
+
+        print(f"failed: {args.dir}: the stereo fit with the {model} model diverged (stereo RMS "
+              f"{air.stereo_rms_px:.3g} px): choose another --lens (report in {output.path})",
+              file=sys.stderr)
+        return EXIT_CHECK_FAILED
     return 0
 
 

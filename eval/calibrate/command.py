@@ -450,7 +450,13 @@ def main(args) -> int:
                             air_covariance)
         report_lib.figures(tmp, boards, detections, housing, rig)
         report = report_lib.write_report(tmp, report, report_lib.markdown, start)
-    return _written(output, report_lib.summary_lines(report), args, housing is not None)
+    code = _written(output, report_lib.summary_lines(report), args, housing is not None)
+    if boards.air:  # a stereo fit the cameras' own fits contradict (e.g. --lens rational)
+        from eval.calibrate import photos as trust
+
+        return _failed(args.dir, trust.stereo_rms_failure(
+            air.rms_px, air.stereo_rms_px, "boards (with this lens model)"), output.path) or code
+    return code
 
 
 def written_line(path, has_port: bool) -> str:

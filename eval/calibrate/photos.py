@@ -334,6 +334,17 @@ def unseen_edge(board, detections, views) -> str | None:
             f"{board.squares[1]}?")
 
 
+def stereo_rms_failure(rms_px: dict, stereo_rms_px: float, what: str) -> list[str]:
+    """The failure of an in-air stereo fit whose RMS is far above the cameras' own
+    (:data:`STEREO_RMS_FACTOR`), as a one-item list; empty otherwise. ``what``: the images, in
+    words."""
+    worst = max(rms_px.values())
+    if stereo_rms_px > STEREO_RMS_FACTOR * worst + STEREO_RMS_MARGIN_PX:
+        return [f"the stereo RMS {stereo_rms_px:.3g} px is {stereo_rms_px / worst:.1f}× the "
+                f"cameras' own ({worst:.3g} px): the {what} do not fit one rigid pair of cameras"]
+    return []
+
+
 def air_failures(report: dict) -> list[str]:
     """Why an in-air photo calibration is known to be wrong (empty when it is not): poses whose
     own stereo pose disagrees with the others', a stereo RMS far above the cameras' own
@@ -354,11 +365,7 @@ def air_failures(report: dict) -> list[str]:
             out.append(f"the {cam} camera's {m['model']} lens model cannot be used: "
                        f"{m['problem']} (try --lens standard, or photograph the board near "
                        f"the image's edges and corners)")
-    worst = max(a["rms_px"].values())
-    if a["stereo_rms_px"] > STEREO_RMS_FACTOR * worst + STEREO_RMS_MARGIN_PX:
-        out.append(f"the stereo RMS {a['stereo_rms_px']:.3g} px is "
-                   f"{a['stereo_rms_px'] / worst:.1f}× the cameras' own ({worst:.3g} px): the "
-                   f"two folders' photos do not fit one rigid pair of cameras")
+    out += stereo_rms_failure(a["rms_px"], a["stereo_rms_px"], "two folders' photos")
     checks = [(f"{cam} {key}", v[key]["estimate"], v[key]["sigma"])
               for cam, v in a["cameras"].items() for key in ("fx", "fy")]
     s = a["stereo"]

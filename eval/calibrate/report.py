@@ -82,8 +82,13 @@ def air_summary(air, truth) -> dict:
 
 def stereo_sigmas(air) -> dict:
     """The stereo pose's σ from the in-air covariance: the right camera's centre (mm, reference
-    axes), its rotation (degrees, about reference axes) and the baseline (mm)."""
+    axes), its rotation (degrees, about reference axes) and the baseline (mm); NaN without a
+    covariance (a lens model other than the standard one)."""
     cov = air.covariance
+    if cov is None:
+        nan = float("nan")
+        return {"right_center_sigma_mm": [nan] * 3, "right_rotation_sigma_deg": [nan] * 3,
+                "baseline_sigma_mm": nan}
     where = [cov.names.index(f"right.center[{k}]") for k in range(3)]
     centre = cov.matrix[np.ix_(where, where)]
     direction = (air.rig.right.t - air.rig.left.t)

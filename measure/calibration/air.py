@@ -347,7 +347,8 @@ def calibrate_in_air(board: Board, detections: Detections, size,
                                "give both the same --lens")
     fisheye = kinds == {True}
     if fisheye:
-        stereo_rms, R, T, stereo_per = _fisheye_stereo(obj, img_l, img_r, cameras, size, both)
+        stereo_rms, R, T, stereo_per = _fisheye_stereo(obj, img_l, img_r, cameras, size, both,
+                                                       [[i for _, i in k] for k in keys])
     else:
         out = cv2.stereoCalibrateExtended(obj, img_l, img_r, K1, D1, K2, D2, tuple(size), None,
                                           None, flags=cv2.CALIB_FIX_INTRINSIC, criteria=CRITERIA)
@@ -376,9 +377,27 @@ def calibrate_in_air(board: Board, detections: Detections, size,
                           residuals)
 
 
-def _fisheye_stereo(obj, img_l, img_r, cameras, size, poses):
+#: The fewest corners every pose must share for OpenCV's fisheye stereo fit.
+MIN_COMMON_CORNERS = 12
+
+
+def _fisheye_stereo(obj, img_l, img_r, cameras, size, poses, ids):
     """``cv2.fisheye.stereoCalibrate`` with both cameras' intrinsics fixed: ``(rms, R, T,
-    {pose: rms of both views})`` (px, OpenCV's stereo convention)."""
+    {pose: rms of both views})`` (px, OpenCV's stereo convention). OpenCV's fisheye stereo fit
+    needs the same number of corners in every pose (OpenCV 5.1 fails on a reshape otherwise):
+    where the poses hold different corners (``ids`` per pose), the corners every pose holds
+    are used; CalibrationError when fewer than :data:`MIN_COMMON_CORNERS` are left."""
+    if len({len(i) for i in ids}) > 1:
+        common = set(ids[0]).intersection(*map(set, ids[1:]))
+        if len(common) < MIN_COMMON_CORNERS:
+            raise CalibrationError(f"OpenCV's fisheye stereo fit needs the same corners in every "
+                                   f"pose; the poses seen by both cameras share {len(common)} "
+                                   f"(fewer than {MIN_COMMON_CORNERS}): photograph the whole "
+                                   f"board in both views")
+        keep = [np.isin(i, sorted(common)) for i in ids]
+        obj = [o[k] for o, k in zip(obj, keep)]
+        img_l = [p[k] for p, k in zip(img_l, keep)]
+        img_r = [p[k] for p, k in zip(img_r, keep)]
     (K1, D1), (K2, D2) = cameras
     as3 = [np.asarray(o, np.float64).reshape(1, -1, 3) for o in obj]
     as2 = [[np.asarray(i, np.float64).reshape(1, -1, 2) for i in img] for img in (img_l, img_r)]

@@ -211,7 +211,7 @@ def calibrate_housing(rig: StereoRig, board: Board, detections: Detections,
             identifiable=False, reason=(
                 f"the adjustment did not converge within {fit.nfev} evaluations (reprojection "
                 f"RMS {base['rms_px']:.3g} px): the free parameters are barely determined by "
-                f"these boards (free fewer, or render more varied poses)"
+                f"these boards"
                 if base["rms_px"] <= FIT_RMS_LIMIT_PX else
                 f"the adjustment stopped with a reprojection RMS of {base['rms_px']:.3g} px "
                 f"({fit.message.rstrip('.')}): it did not find a housing that fits the corners "

@@ -37,7 +37,7 @@ class Rectification:
     """``rig`` the refractive rig warped, ``distance_mm`` the plane (``rig.depth_axis · X``)
     the warp is exact on, ``virtual`` the virtual pinhole pair (no port, no distortion,
     row-aligned), ``maps`` per view ``(map_x, map_y)`` float32 ``(H, W)`` for ``cv2.remap``
-    (−1 where the virtual pixel's point has no real pixel)."""
+    (−1 where the virtual pixel's point has no real pixel inside the real image)."""
 
     rig: StereoRig
     distance_mm: float
@@ -130,7 +130,8 @@ def rectify(rig: StereoRig, distance: float) -> Rectification:
     for view, (camera, pinhole) in enumerate(zip(rig.cameras, virtual.cameras)):
         points = plane_points(pinhole, grid, axis, distance)
         real = project(camera, rig.view_port(view), points)
-        real = np.where(np.isfinite(real), real, -1.0).astype(np.float32)
+        seen = camera.in_image(real)  # NaN, and pixels outside the real image: nothing seen
+        real = np.where(seen[:, None], real, -1.0).astype(np.float32)
         maps.append((real[:, 0].reshape(h, w), real[:, 1].reshape(h, w)))
     return Rectification(rig, distance, virtual, tuple(maps))
 

@@ -66,3 +66,19 @@ def test_refusals_are_one_line(tmp_path, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "not in the water" in err[0], err
     assert not (tmp_path / "near").exists()
+
+
+@pytest.mark.slow
+def test_a_frame_that_loses_its_markers_is_lost_not_posed(tmp_path):
+    """A jump of 1 m between two frames: the last pose predicts the markers far from where
+    they are, few detections associate, and the frame is lost (no pose, exit 1) rather than
+    posed from the few left (a pose 1.28 m off passed as OK before)."""
+    seq = tmp_path / "jump"
+    assert synth_main(["sequence", *SEQUENCE[:5], "--approach", "2000,1000", "--frames", "2",
+                       "--spp", "4", "--marker-radius-mm", "15", "--no-progress",
+                       "--out", str(seq)]) == 0
+    out = tmp_path / "track"
+    assert eval_main(["track", str(seq), "--out", str(out), "--no-progress"]) == 1
+    frames = json.loads((out / "report.json").read_text())["frames"]
+    assert frames[0]["reason"] == "OK" and frames[1]["reason"] == "LOST"
+    assert frames[1]["markers_associated"] < 0.5 * frames[1]["markers_expected"]
