@@ -74,7 +74,7 @@ REFINE_TOLERANCE_PX = 1e-3
 #: every step falls below the tolerance): then each window's depth follows the plane fitted
 #: to the depths of its pixels whose last step was at most :data:`SLOPE_STEP_PX`
 #: (:func:`_surface_slopes`) and the iterations go on with those slanted windows.
-SLANT_AFTER_ITERATIONS = 3
+SLANT_AFTER_ITERATIONS = (3,)
 SLOPE_STEP_PX = 0.05
 #: Most sweep planes :func:`match_dense` accepts by default (the widest committed search, a
 #: tilted plane over 693-1500 mm at full size, needs 692; each plane costs ~0.1 s at full size).
@@ -306,7 +306,7 @@ def _sweep(warp: PlaneWarp, left, right, depths, window, progress):
 def match_dense(rig: StereoRig, left, right, depth_range, *, model: str = "refractive",
                 window: int = 11, min_score: float = 0.8, step_px: float = 0.5, roi=None,
                 progress=None, max_planes: int | None = None,
-                noise_sigma: float | None = None) -> DenseMatches:
+                noise_sigma: float | None = None, slanted: bool = True) -> DenseMatches:
     """Dense matches of a rectification-free stereo pair through the rig's port.
 
     ``left``, ``right``: 2D grey images of the cameras' sizes (any real dtype; scaled to
@@ -322,7 +322,10 @@ def match_dense(rig: StereoRig, left, right, depth_range, *, model: str = "refra
     planes is refused
     (ValueError naming the count) before any image work. ``noise_sigma``: the images' noise σ_n
     (their units) for the matching σ; None (default): estimated from the matched windows'
-    residuals (module docs). Rejected: score below ``min_score``, best
+    residuals (module docs). ``slanted`` (default): after :data:`SLANT_AFTER_ITERATIONS`
+    fronto-parallel refinement steps every window tilts with the surface (the plane fitted to
+    its pixels' depths, :func:`_surface_slopes`); False keeps the windows fronto-parallel.
+    Rejected: score below ``min_score``, best
     plane at an end of the range, a
     window leaving either image, a right pixel leaving the right image, a refinement that does
     not converge.
@@ -370,7 +373,7 @@ def match_dense(rig: StereoRig, left, right, depth_range, *, model: str = "refra
     refine_times = {}
     fit = {"noise_levels": noise_sigma is None}
     depth, score, uv_right, converged = _refine(warp, left, right, start, candidate, window,
-                                                (near, far), refine_times, fit)
+                                                (near, far), refine_times, fit, slanted)
     timings["refinement"] = time.perf_counter() - t0
     timings.update(refine_times)
     keep = candidate & converged & (score >= min_score)
@@ -791,19 +794,21 @@ def _refine(warp: PlaneWarp, left, right, start, candidate, window, depth_range,
     last_change = np.zeros((height, width))
     speed = np.zeros((height, width))
     bands = _row_bands(height, window // 2, _workers())
-    slant, settled = None, False
+    slant, settled, fits = None, False, 0
+    schedule = SLANT_AFTER_ITERATIONS if slanted else ()
     with ThreadPoolExecutor(max_workers=_workers()) as pool:
         t_setup = time.perf_counter() - t_start
         for iteration in range(REFINE_ITERATIONS + 1):
             t0 = time.perf_counter()
-            if slanted and slant is None and (iteration >= SLANT_AFTER_ITERATIONS or settled):
+            if fits < len(schedule) and (iteration >= schedule[fits] or settled):
                 # tilt every window with the surface: the plane through its settled depths
                 slant = _surface_slopes(depth, candidate & (step_px <= SLOPE_STEP_PX), window)
+                fits, settled = fits + 1, False
                 previous = depth.copy()
                 depth[followers] = depth[leaders] \
                     + slant[0][leaders] * (followers[1] - leaders[1]) \
                     + slant[1][leaders] * (followers[0] - leaders[0])
-                moved = position[active & (depth != previous)]
+                moved = np.union1d(moved, position[active & (depth != previous)])
             if moved.size:
                 r, c = rows[moved], cols[moved]
                 pixels, rate = warp.right_pixels_at_depth(origins[moved], directions[moved],
@@ -841,7 +846,7 @@ def _refine(warp: PlaneWarp, left, right, start, candidate, window, depth_range,
             t_project += t1 - t0
             t_sums += time.perf_counter() - t1
             if not np.any(step_px[candidate] > REFINE_TOLERANCE_PX):
-                if slant is not None or not slanted:
+                if fits == len(schedule):
                     break
                 settled = True
         t_fit = time.perf_counter()
