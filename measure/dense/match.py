@@ -13,7 +13,12 @@ sub-pixel refinement.
    derivative along the curve. Every pixel's window is evaluated at the centre pixel's depth,
    using each neighbour's own sample to first order (``g(d_p) ≈ g(d_q) + g'(d_q) (d_p − d_q)``),
    so all window sums are box filters; the affine photometric model (gain, offset) makes the
-   least-squares step the ZNCC maximiser. A pixel whose step is at most
+   least-squares step the ZNCC maximiser. After :data:`SLANT_AFTER_ITERATIONS` steps the
+   windows tilt with the surface (``slanted``): window pixel q of p is taken at the depth of
+   the plane fitted to p's window of depths (:func:`_surface_slopes`), ``d_p + α_p Δu + β_p Δv``,
+   again to first order from q's own sample (:class:`_PlaneMoments`), which removes the
+   fronto-parallel window's error on slanted and curved surfaces (its depth was the window's
+   texture-weighted mean depth). A pixel whose step is at most
    :data:`REFINE_TOLERANCE_PX` keeps its depth, so only the pixels that moved are projected
    again; the window sums are recomputed everywhere each step.
 
