@@ -164,6 +164,10 @@ def main(args) -> int:
         if (image.shape[1], image.shape[0]) != tuple(size):
             raise CLIError(f"{path}: {image.shape[1]}x{image.shape[0]} px, but --calib "
                            f"{args.calib} is for {size[0]}x{size[1]} px images")
+    glass = rig.port.glass_depth(rig.left)
+    if args.distance <= glass:  # refused before any work or progress line
+        raise CLIError(f"--distance {args.distance:g}: distance must lie in the water, beyond "
+                       f"the glass ({glass:.6g} mm)")
     log(f"maps exact at {args.distance:g} mm for {size[0]}x{size[1]} px …")
     try:
         rectification = rectify(rig, args.distance)

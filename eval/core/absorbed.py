@@ -121,9 +121,13 @@ def calibrate_absorbed(board: Board, detections: Detections, size,
 def read_absorbed_calibration(path: str, size) -> AbsorbedCalibration:
     """An absorbed calibration from a calibration file without a port (ValueError naming the
     file when it has one, or another image size)."""
-    from synth.products.dataset import read_calib
+    from synth.products.dataset import DatasetError, read_calib
 
-    calib = read_calib(path)
+    try:
+        calib = read_calib(path)
+    except DatasetError as exc:
+        raise ValueError(f"--absorbed-calib {exc} (expected a stereo calib.yaml without a port: "
+                         f"eval calibrate DIR --model absorbed)") from None
     rig = calib["rig"]
     if rig.port.refracts:
         raise ValueError(f"--absorbed-calib {path}: the file calibrates "

@@ -492,8 +492,10 @@ def run_pipeline(inputs: RunInputs, config: RunConfig, log=print) -> RunResult:
         "budget": budget,
         "eccentricity": None if corrected is None else {
             **eccentricity_summary,
-            "uncorrected": {"methods": _with_coverage(scored["scores"], uncertainty),
-                            "uncertainty": uncertainty}},
+            # absorbed stays on the raw centroids: its row would repeat itself
+            "uncorrected": {"methods": _with_coverage(
+                {m: v for m, v in scored["scores"].items() if m in port_methods}, uncertainty),
+                "uncertainty": uncertainty}},
         "timings_s": timings,
         "variant": inputs.variant, "spp": inputs.spp,
         "spp_rendered": (inputs.extra.get("render") or {}).get(
