@@ -11,11 +11,11 @@ setup:
 lint: setup
 	$(PY) -m ruff check .
 
-# the whole suite, the renders included, on two processes (about 5 minutes on 2 cores)
+# the whole suite, the renders included, on two processes (about 9 minutes on 2 cores)
 test: lint
 	$(PY) -m pytest -n 2
 
-# everything that does not render with Mitsuba (the `slow` marker), on two processes: about two minutes
+# everything that does not render with Mitsuba (the `slow` marker), on two processes
 test-fast: lint
 	$(PY) -m pytest -m "not slow" -n 2
 
