@@ -465,8 +465,10 @@ def _two(values, option: str, default: float) -> tuple:
     if values is None:
         return (default, default)
     if len(values) != 2:
+        pair = f"{values[0]:g},{values[0]:g}"
+        example = f"{option} {pair} {pair}" if option == "--port-tilt" else f"{option} {pair}"
         raise CLIError(f"{option} {values[0]:g}: --port per-camera needs one value per camera, "
-                       f"LEFT,RIGHT (e.g. {option} {values[0]:g},{values[0]:g})")
+                       f"LEFT,RIGHT (e.g. {example})")
     return tuple(values)
 
 
