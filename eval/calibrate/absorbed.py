@@ -32,11 +32,14 @@ DIVERGED_PX = 1e3
 def _boards_or_photos(args, log):
     """``(board, images [(left, right)], size, source, truth rig or None)``."""
     from synth.products.boards import read_boards
-    from synth.infra.cli import board_from_args
+    from synth.infra.cli import BOARD_OPTIONS, board_from_args, refuse_given
 
     from eval.core.photos import PhotoError, photo_folder, read_pairs
 
     if os.path.isfile(os.path.join(args.dir, "manifest.json")):
+        refuse_given(args, BOARD_OPTIONS + ("encoding",),
+                     f"to a boards folder ({args.dir}): its board.json defines the board and "
+                     f"its images are 16-bit linear renders")
         boards = read_boards(args.dir)
         if boards.air:
             raise CLIError(f"--model absorbed: {args.dir} holds boards rendered in air; the "

@@ -327,7 +327,7 @@ def main(args) -> int:
         if args.air or args.intrinsics:
             raise CLIError(f"--model absorbed: {'--air' if args.air else '--intrinsics'} does not "
                            f"apply: the underwater photos themselves calibrate the cameras")
-        refuse_given(args, HOUSING_OPTIONS + DOME_DESIGN_OPTIONS + ("air_uncertainty",),
+        refuse_given(args, HOUSING_OPTIONS + DOME_DESIGN_OPTIONS,
                      "with --model absorbed: it has no port")
         return calibrate_absorbed_main(args, output, log, start)
     if is_photo_folder(args.dir) or (

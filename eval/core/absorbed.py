@@ -27,9 +27,8 @@ import numpy as np
 from measure.calibration.air import (LENS_MODEL_GAIN, LENS_MODEL_ORDER, CalibrationError,
                                      Detections, calibrate_in_air)
 from measure.calibration.board import Board
-from measure.geometry.projection import project
 from synth.products.boards import (DEFAULT_DISTANCE_RANGE_MM, DEFAULT_MAX_TILT_DEG, DEFAULT_POSES,
-                                   sample_poses)
+                                   corner_pixels, sample_poses)
 from synth.infra.cli import DEFAULT_BOARD
 
 #: The method's name in ``--methods`` and the reports.
@@ -60,14 +59,9 @@ def default_board() -> Board:
 def board_corner_detections(rig, board: Board, poses) -> Detections:
     """Every corner of ``board`` at each of ``poses`` (:class:`synth.products.boards.BoardPose`)
     projected through ``rig``'s port into both cameras (the Fermat forward model, px)."""
-    corners = board.corners()
-    ids, pixels = [], []
-    for pose in poses:
-        world = pose.apply(corners)
-        ids.append([np.arange(len(world))] * 2)
-        pixels.append([project(camera, rig.view_port(view), world)
-                       for view, camera in enumerate(rig.cameras)])
-    return Detections(ids, pixels)
+    views = corner_pixels(rig, board, poses)
+    return Detections([[np.arange(len(world))] * 2 for world, _ in views],
+                      [list(pixels) for _, pixels in views])
 
 
 def analytic_absorbed_calibration(rig, seed: int = 0, board: Board | None = None,

@@ -52,24 +52,29 @@ class Rectification:
                          borderValue=0)
 
 
+def _meet_plane(origins, directions, axis, distance) -> np.ndarray:
+    """Where rays ``origins + s · directions`` (s > 0) meet the plane ``axis · X = distance``
+    (mm); NaN for rays parallel to it or pointing away."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        s = (distance - origins @ axis) / (directions @ axis)
+    s = np.where(s > 0, s, np.nan)
+    return origins + directions * s[:, None]
+
+
 def plane_points(camera: Camera, uv: np.ndarray, axis: np.ndarray, distance: float) -> np.ndarray:
     """Where the pinhole rays of ``camera`` through pixels ``uv`` ``(N, 2)`` meet the plane
     ``axis · X = distance`` (reference frame, mm); NaN for rays parallel to it or pointing away."""
     rays = camera.rays(uv)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        s = (distance - axis @ camera.center) / (rays @ axis)
-    s = np.where(s > 0, s, np.nan)
-    return camera.center + rays * s[:, None]
+    return _meet_plane(np.broadcast_to(camera.center, rays.shape), rays, axis, distance)
 
 
-def apparent_camera(rig: StereoRig, view: int, distance: float):
+def apparent_camera(rig: StereoRig, view: int):
     """Where camera ``view`` seems to be from the water, and how much the port magnifies it,
     near its principal point: ``(centre (3,) mm, focal scale)``. The centre is the point
     nearest to the water rays of the principal point and of two pixels
     :data:`FOCAL_PROBE_PX` from it (a flat port's lies behind the camera, by about the port
     distance × (n_water − 1) on its axis; a centred dome's is the camera's own); the scale is the
-    ratio of the pinhole rays' angles to the water rays' (≈ n_water / n_air behind a flat port).
-    ``distance`` is the plane the water rays are followed to."""
+    ratio of the pinhole rays' angles to the water rays' (≈ n_water / n_air behind a flat port)."""
     camera = rig.cameras[view]
     centre_px = camera.K[:2, 2]
     uv = np.array([centre_px, centre_px + [FOCAL_PROBE_PX, 0.0], centre_px + [0.0, FOCAL_PROBE_PX]])
@@ -88,7 +93,7 @@ def apparent_camera(rig: StereoRig, view: int, distance: float):
     return centre, float(np.mean(ratios))
 
 
-def virtual_pair(rig: StereoRig, distance: float) -> StereoRig:
+def virtual_pair(rig: StereoRig) -> StereoRig:
     """The virtual pinhole pair of :func:`rectify`: each camera where it seems to be from the
     water (:func:`apparent_camera`), its intrinsics without distortion and with the port's
     apparent focal length, rotated by ``cv2.stereoRectify`` (``alpha = 0``) into a row-aligned
@@ -96,7 +101,7 @@ def virtual_pair(rig: StereoRig, distance: float) -> StereoRig:
     left, right = rig.cameras
     Ks, centres = [], []
     for view, camera in enumerate((left, right)):
-        centre, scale = apparent_camera(rig, view, distance)
+        centre, scale = apparent_camera(rig, view)
         K = camera.K.copy()
         K[:2, :2] *= scale
         Ks.append(K)
@@ -121,7 +126,7 @@ def rectify(rig: StereoRig, distance: float) -> Rectification:
     if not np.isfinite(distance) or distance <= rig.port.glass_depth(rig.left):
         raise ValueError(f"distance must lie in the water, beyond the glass "
                          f"({rig.port.glass_depth(rig.left):.6g} mm), got {distance:g} mm")
-    virtual = virtual_pair(rig, distance)
+    virtual = virtual_pair(rig)
     axis = rig.depth_axis
     w, h = rig.left.size
     u, v = np.meshgrid(np.arange(w, dtype=np.float64), np.arange(h, dtype=np.float64))
@@ -142,9 +147,7 @@ def rectified_pixels(rectification: Rectification, view: int, uv: np.ndarray) ->
     what the maps do, inverted)."""
     rig, axis = rectification.rig, rectification.rig.depth_axis
     water = rig.trace(view, rig.cameras[view].rays(uv))
-    with np.errstate(divide="ignore", invalid="ignore"):
-        s = (rectification.distance_mm - water.origins @ axis) / (water.directions @ axis)
-    points = water.origins + water.directions * s[:, None]
+    points = _meet_plane(water.origins, water.directions, axis, rectification.distance_mm)
     return rectification.virtual.cameras[view].project(points)
 
 

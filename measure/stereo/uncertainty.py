@@ -406,17 +406,22 @@ def residual_sigma(rig: StereoRig, uv_left, uv_right, points, pixel_sigma=0.0,
     q = np.einsum("nk,nk->n", r, r)
     known = np.mean(stated[ok] ** 2, axis=1)
 
-    def excess(variance, statistic, rows):  # residuals in units of their expected size
-        with np.errstate(divide="ignore", invalid="ignore"):
-            return float(statistic(np.where(q[rows] > 0, q[rows] / (known[rows] + variance),
-                                            0.0)))
+    ones = np.ones_like(q)
 
-    def solve(statistic, target, rows):
-        upper = 2.0 * float(statistic(q[rows]) / target) + float(known.max())
-        if upper <= 0 or excess(0.0, statistic, rows) <= target:
+    def excess(variance, statistic, rows, w2):  # residuals in units of their expected size
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return float(statistic(np.where(q[rows] > 0,
+                                            q[rows] / (known[rows] + variance * w2[rows]), 0.0)))
+
+    def solve(statistic, target, rows, w2=ones):
+        """The extra variance σ₀² (of weight ``w2`` per row) that brings the statistic of the
+        residuals in units of their expected size to ``target``."""
+        upper = (2.0 * float(statistic(q[rows] / w2[rows]) / target)
+                 + float(np.max(known / w2)))
+        if upper <= 0 or excess(0.0, statistic, rows, w2) <= target:
             return 0.0
         # the excess falls from > target at 0 to < target at ``upper``
-        return brentq(lambda v: excess(v, statistic, rows) - target, 0.0, upper,
+        return brentq(lambda v: excess(v, statistic, rows, w2) - target, 0.0, upper,
                       xtol=1e-12 * upper)
 
     everything = np.ones(q.shape, dtype=bool)
@@ -431,18 +436,14 @@ def residual_sigma(rig: StereoRig, uv_left, uv_right, points, pixel_sigma=0.0,
     relative = np.ones_like(light)
     if positive.any():
         relative[positive] = light[positive] / np.median(light[positive])
-    q_all, known_all = q, known
 
     def fit(p):  # σ₀² for exponent p, and the negative log-likelihood of the inliers
-        nonlocal q, known
         w2 = relative ** (-2.0 * p)
-        q, known = q_all / w2, known_all / w2  # the equation of the constant model, per w
-        variance = solve(np.mean, 1.0, inliers)
-        q, known = q_all, known_all
-        total = known_all[inliers] + variance * w2[inliers]
+        variance = solve(np.mean, 1.0, inliers, w2)
+        total = known[inliers] + variance * w2[inliers]
         with np.errstate(divide="ignore", invalid="ignore"):
             nll = float(np.sum(np.log(np.where(total > 0, total, np.inf))
-                               + np.where(total > 0, q_all[inliers] / total, 0.0)))
+                               + np.where(total > 0, q[inliers] / total, 0.0)))
         return variance, nll
 
     if np.ptp(np.log(relative)) > 0:
@@ -455,7 +456,7 @@ def residual_sigma(rig: StereoRig, uv_left, uv_right, points, pixel_sigma=0.0,
     weights = np.full(points.shape[0], np.nan)
     weights[ok] = relative ** (-exponent)
     return {"sigma0_px": float(np.sqrt(variance)), "flux_exponent": exponent,
-            "weights": weights, "rms_residual_px": float(np.sqrt(np.mean(q_all))),
+            "weights": weights, "rms_residual_px": float(np.sqrt(np.mean(q))),
             "n": int(ok.sum())}
 
 

@@ -314,9 +314,21 @@ _POSE_STATS = ("mode", "reason", "lit_fraction", "mask_pixels", "samples_on_mask
                "samples_off_mask", "spp_on_mask", "spp_off_mask")
 
 
-def _write_truth(directory, rig, board: Board, poses) -> None:
+def corner_pixels(rig: StereoRig, board: Board, poses):
+    """Per pose ``(corners (M, 3) mm, (left pixels, right pixels) (M, 2))``: every corner of
+    ``board`` at that :class:`BoardPose` in the reference frame and where each camera sees it
+    through its port (the Fermat forward model)."""
     corners = board.corners()
-    ids = np.arange(corners.shape[0])
+    out = []
+    for pose in poses:
+        world = pose.apply(corners)
+        out.append((world, tuple(project(camera, rig.view_port(view), world)
+                                 for view, camera in enumerate(rig.cameras))))
+    return out
+
+
+def _write_truth(directory, rig, board: Board, poses) -> None:
+    ids = np.arange(board.corners().shape[0])
     with open(os.path.join(directory, "poses.csv"), "w", newline="") as fh:
         writer = csv.writer(fh)
         writer.writerow(POSES_HEADER)
@@ -326,10 +338,7 @@ def _write_truth(directory, rig, board: Board, poses) -> None:
     with open(os.path.join(directory, "corners.csv"), "w", newline="") as fh:
         writer = csv.writer(fh)
         writer.writerow(CORNERS_HEADER)
-        for k, pose in enumerate(poses):
-            world = pose.apply(corners)
-            uv_l = project(rig.left, rig.view_port(0), world)
-            uv_r = project(rig.right, rig.view_port(1), world)
+        for k, (world, (uv_l, uv_r)) in enumerate(corner_pixels(rig, board, poses)):
             for i, p, a, b in zip(ids, world, uv_l, uv_r):
                 writer.writerow([k, int(i)] + [f"{v:.17g}" for v in (*p, *a, *b)])
 
