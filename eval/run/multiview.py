@@ -54,6 +54,11 @@ def refuse_inapplicable(config: RunConfig, cameras: int) -> None:
         if getattr(config, field_name):
             raise CLIError(f"{option} does not apply to {config.scene}, a scene of {cameras} "
                            f"cameras")
+    from eval.core.uncertainty import AUTO
+
+    if config.pixel_sigma != AUTO:  # accepted by eval run, used by its covariances only
+        raise CLIError(f"--pixel-sigma does not apply to {config.scene}, a scene of {cameras} "
+                       f"cameras: its points get no covariance yet")
     if config.methods is not None and tuple(config.methods) != (METHOD,):
         raise CLIError(f"--methods: a scene of {cameras} cameras is measured with {METHOD} only "
                        f"(the optical path of N views)")
