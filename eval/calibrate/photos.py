@@ -334,6 +334,18 @@ def unseen_edge(board, detections, views) -> str | None:
             f"{board.squares[1]}?")
 
 
+def verdict_lines(report: dict) -> list:
+    """report.md's verdict (the failures: exit code 1) and warnings of a calibration from
+    photos, each a section only when it has entries."""
+    lines = []
+    if report.get("failures"):
+        lines += ["## Verdict: failed (exit code 1)", ""] + [f"- {w}" for w in
+                                                             report["failures"]] + [""]
+    if report["warnings"]:
+        lines += ["## Warnings", ""] + [f"- {w}" for w in report["warnings"]] + [""]
+    return lines
+
+
 def stereo_rms_failure(rms_px: dict, stereo_rms_px: float, what: str) -> list[str]:
     """The failure of an in-air stereo fit whose RMS is far above the cameras' own
     (:data:`STEREO_RMS_FACTOR`), as a one-item list; empty otherwise. ``what``: the images, in
@@ -535,11 +547,7 @@ def markdown(report: dict) -> str:
              f"found in {report['found']['left']} left and {report['found']['right']} right "
              f"photos; {report['used']} pose(s) in the final fit. No truth: every number below "
              f"comes from the photos.", ""]
-    if report.get("failures"):
-        lines += ["## Verdict: failed (exit code 1)", ""] + [f"- {w}" for w in
-                                                             report["failures"]] + [""]
-    if report["warnings"]:
-        lines += ["## Warnings", ""] + [f"- {w}" for w in report["warnings"]] + [""]
+    lines += verdict_lines(report)
     stereo = "in_air" in report
     lines += ["## Poses", "", f"Outlier rule: {report['outlier_rule']} (threshold here "
               f"{report['outliers']['threshold_px']:.3f} px)."

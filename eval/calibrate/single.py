@@ -357,11 +357,7 @@ def markdown(report: dict) -> str:
              f"squares ({b['squares'][0] - 1}x{b['squares'][1] - 1} inner corners), "
              f"{b['square_mm']:g} mm; board found in {report['found']}, {report['used']} in the "
              f"final fit. No truth: every number below comes from the photos.", ""]
-    if report["failures"]:
-        lines += ["## Verdict: failed (exit code 1)", ""] + [f"- {w}" for w in
-                                                             report["failures"]] + [""]
-    if report["warnings"]:
-        lines += ["## Warnings", ""] + [f"- {w}" for w in report["warnings"]] + [""]
+    lines += trust.verdict_lines(report)
     m = report["lens_model"]
     lines += ["## Camera (OpenCV)", "",
               f"Reprojection RMS {report['rms_px']:.4f} px; lens model {m['model']} ("

@@ -248,11 +248,7 @@ def markdown(report: dict) -> str:
              f"{report['used']} in the final fit; in-air calibration `{report['intrinsics']}` "
              f"({report['intrinsics_format']}). No truth: every number below comes from the "
              f"photos.", ""]
-    if report["failures"]:
-        lines += ["## Verdict: failed (exit code 1)", ""] + [f"- {w}" for w in
-                                                             report["failures"]] + [""]
-    if report["warnings"]:
-        lines += ["## Warnings", ""] + [f"- {w}" for w in report["warnings"]] + [""]
+    lines += trust.verdict_lines(report)
     lines += ["## Housing", "", f"Behind {'a dome' if report['dome'] else 'a flat port'}; free: "
               f"{', '.join(report['free'])}. {report['sigma_note']}", "",
               "| parameter | estimate | σ | σ (conditional) | unit |", "|---|---|---|---|---|"]
