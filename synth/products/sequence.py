@@ -102,6 +102,36 @@ def read_poses(path):
     return frames, R, t
 
 
+#: The fewest markers whose centres a frame must show inside one camera's image: a pose needs four
+#: observations (:func:`measure.stereo.pose.estimate_pose`).
+MIN_MARKERS_IN_VIEW = 4
+
+
+def check_marker_spacing(object_points: np.ndarray, marker_radius_mm: float) -> None:
+    """ValueError when two markers' disks (radius ``marker_radius_mm``, mm) would overlap:
+    their centres nearer than two radii."""
+    gaps = np.linalg.norm(object_points[:, None] - object_points[None], axis=2)
+    gaps[np.diag_indices_from(gaps)] = np.inf
+    i, j = np.unravel_index(np.argmin(gaps), gaps.shape)
+    if gaps[i, j] <= 2.0 * marker_radius_mm:
+        raise ValueError(f"--marker-radius-mm {marker_radius_mm:g}: markers {min(i, j)} and "
+                         f"{max(i, j)} are {gaps[i, j]:.1f} mm apart, so their disks overlap "
+                         f"(a radius below {gaps[i, j] / 2:.1f} mm, or a larger --size-mm)")
+
+
+def check_markers_in_view(rig, pixels, approach) -> None:
+    """ValueError naming the first frame in which no camera sees
+    :data:`MIN_MARKERS_IN_VIEW` markers inside its image (``pixels``: per frame ``(views, M,
+    2)`` px, the Fermat simulator's; NaN where there is none)."""
+    for k, uv in enumerate(pixels):
+        seen = [int(camera.in_image(uv[v]).sum()) for v, camera in enumerate(rig.cameras)]
+        if max(seen) < MIN_MARKERS_IN_VIEW:
+            raise ValueError(f"frame {k}: the cameras see {'/'.join(map(str, seen))} markers "
+                             f"inside their images, fewer than the {MIN_MARKERS_IN_VIEW} a pose "
+                             f"needs (--approach {approach[0]:g},{approach[1]:g} goes beyond "
+                             f"the field of view: a larger end distance or a smaller --size-mm)")
+
+
 def write_sequence(spec: SceneSpec, out_dir, approach, frames: int, *,
                    yaw_deg: float = 0.0, size_mm: float = 1000.0,
                    marker_radius_mm: float = DEFAULT_MARKER_RADIUS_MM, fps: float = DEFAULT_FPS,
@@ -121,9 +151,8 @@ def write_sequence(spec: SceneSpec, out_dir, approach, frames: int, *,
         raise ValueError(f"--frames must be at least 1, got {frames}")
     spp = spec.spp if spp is None else int(spp)
     seed = spec.seed if seed is None else int(seed)
-    output = OutputDir(out_dir, COMMAND).claim()
-    check_render_request(spec, spp, seed, poses=frames, adaptive=adaptive)
     obj = docking_frame(size_mm)
+    check_marker_spacing(obj, marker_radius_mm)
     R, t = trajectory(spec, approach, frames, yaw_deg)
     markers = np.einsum("fij,mj->fmi", R, obj) + t[:, None, :]
     port = spec.rig.port
@@ -133,6 +162,12 @@ def write_sequence(spec: SceneSpec, out_dir, approach, frames: int, *,
             raise ValueError(f"frame {k}: marker {int(np.flatnonzero(~inside)[0])} at "
                              f"{np.round(markers[k][~inside][0], 1).tolist()} mm is not in the "
                              f"water (--approach starts or ends too near)")
+    rig = spec.rig
+    pixels = [np.stack([project(c, rig.view_port(v), markers[k])
+                        for v, c in enumerate(rig.cameras)]) for k in range(frames)]
+    check_markers_in_view(rig, pixels, approach)
+    output = OutputDir(out_dir, COMMAND).claim()
+    check_render_request(spec, spp, seed, poses=frames, adaptive=adaptive)
     normals = np.einsum("fij,j->fi", R, [0.0, 0.0, -1.0])
     images, scales, stats = [], [], []
     bar = tqdm(range(frames), desc=f"render sequence {spp} spp", unit="frame",
@@ -152,9 +187,6 @@ def write_sequence(spec: SceneSpec, out_dir, approach, frames: int, *,
             images.append((left, right))
             stats.append({"variant": info["variant"], "seconds": info["seconds"]})
     render_seconds = time.perf_counter() - t_render
-    rig = spec.rig
-    pixels = [np.stack([project(c, rig.view_port(v), markers[k])
-                        for v, c in enumerate(rig.cameras)]) for k in range(frames)]
     with output.staged() as tmp:
         os.makedirs(os.path.join(tmp, "frames"))
         for k, pair in enumerate(images):

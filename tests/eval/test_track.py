@@ -82,3 +82,19 @@ def test_a_frame_that_loses_its_markers_is_lost_not_posed(tmp_path):
     frames = json.loads((out / "report.json").read_text())["frames"]
     assert frames[0]["reason"] == "OK" and frames[1]["reason"] == "LOST"
     assert frames[1]["markers_associated"] < 0.5 * frames[1]["markers_expected"]
+
+
+def test_sequences_that_cannot_be_tracked_are_refused(tmp_path, capsys):
+    """Disks that overlap (a side marker and a post marker 374.2 mm apart, radius 200 mm) and
+    an approach whose frames show no camera four marker centres (a 5 m frame at 1–1.3 m: every
+    marker beyond the field of view): one line each, exit 2, nothing written."""
+    base = [*SEQUENCE[:5], "--frames", "2", "--no-progress"]
+    assert synth_main(["sequence", *base, "--approach", "1800,1300", "--marker-radius-mm",
+                       "200", "--out", str(tmp_path / "overlap")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "overlap" in err[0] and "374.2 mm apart" in err[0], err
+    assert synth_main(["sequence", *base, "--approach", "1300,1000", "--size-mm", "5000",
+                       "--out", str(tmp_path / "wide")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "frame 0" in err[0] and "field of view" in err[0], err
+    assert not (tmp_path / "overlap").exists() and not (tmp_path / "wide").exists()
