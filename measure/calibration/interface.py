@@ -10,8 +10,9 @@ indices stay as given. Start: the given port (a design value) and each frame's p
 :func:`measure.stereo.pose.estimate_pose` through it; then one ``least_squares`` over
 everything on the refractive reprojection error, with the analytic Jacobian (the port's from
 ``project(..., parameters=True)``, the poses' as in :mod:`measure.stereo.pose`). Agrawal et
-al.'s closed-form start (the axis from a linear "flat refraction constraint", the distance from
-a polynomial) is not implemented: a housing's design values are a start within reach.
+al.'s start is :func:`interface_start`, for when no design value is at hand: the normal in
+closed form from their flat refraction constraint, the distance from a one-dimensional search
+(where they solve a polynomial).
 
 Where this differs from :func:`measure.calibration.housing.calibrate_housing`: one camera, any
 known object (not only a board), no in-air stereo calibration. Units mm, rad, px.
@@ -31,6 +32,9 @@ from ..reasons import Reason
 from ..stereo.multiview import View
 from ..stereo.pose import (DEGENERATE_CONDITION, TOLERANCE, estimate_poses, exp_so3, left_jacobian,
                            skew)
+
+#: The distances (mm beyond the camera centre, along the normal) :func:`interface_start` tries.
+START_DISTANCES_MM = np.geomspace(1.0, 1000.0, 31)
 
 #: The names of the interface's parameters, in the order of :attr:`InterfaceEstimate.covariance`.
 INTERFACE_NAMES = ("port.distance", "port.tilt[0]", "port.tilt[1]")
@@ -170,4 +174,87 @@ def estimate_interface(view: View, object_points, pixels, pixel_sigma=None,
                              sigma_px, int(Reason.OK))
 
 
-__all__ = ["INTERFACE_NAMES", "InterfaceEstimate", "estimate_interface"]
+def refraction_axis(camera, object_points, pixels) -> np.ndarray:
+    """The interface normal (unit, reference frame, pointing into the water) from pixels
+    ``(F, M, 2)`` of a known object ``(M, 3)`` seen through any stack of parallel flat layers,
+    in closed form (Agrawal et al. 2012, the "flat refraction constraint"): every refraction
+    keeps a ray in the plane through the camera centre ``c`` spanned by its pixel's ray ``v``
+    and the normal ``n``, and the object point ``X = R·p + t`` lies in that plane:
+    ``vᵀ [n]ₓ R p + vᵀ [n]ₓ (t − c) = 0`` — linear in ``E = [n]ₓR`` and ``s = [n]ₓ(t − c)``
+    (12 unknowns, 11 points per frame; a planar object 9 and 8). ``n`` is the common left null
+    vector of every frame's ``[E, s]``. NaN where a frame has too few points or the pixels do
+    not fix the axis (no refraction: a pinhole's rays pass through their points whatever
+    ``n``). Units mm, px."""
+    object_points = np.asarray(object_points, dtype=np.float64)
+    pixels = np.asarray(pixels, dtype=np.float64)
+    centred = object_points - object_points.mean(axis=0)
+    _, sv, vt = np.linalg.svd(centred, full_matrices=False)
+    rank = int(np.sum(sv > 1e-9 * sv[0])) if sv[0] > 0 else 0
+    if rank < 2:
+        return np.full(3, np.nan)
+    basis = vt[:rank].T  # (3, k): the object's points span these directions
+    q = centred @ basis / np.sqrt(np.mean(sv[:rank] ** 2) / len(object_points))
+    blocks = []
+    for uv in pixels:
+        seen = np.all(np.isfinite(uv), axis=1)
+        if seen.sum() < 3 * rank + 2:
+            continue
+        v = camera.rays(uv[seen])
+        design = np.column_stack([np.einsum("ni,nj->nij", v, q[seen]).reshape(seen.sum(), -1),
+                                  v])
+        _, sv, vt = np.linalg.svd(design, full_matrices=False)
+        if sv[-2] <= 1e-9 * sv[0]:  # more than one null vector: no refraction to see
+            return np.full(3, np.nan)
+        null = vt[-1]
+        blocks.append(np.column_stack([null[:3 * rank].reshape(3, rank), null[3 * rank:]]))
+    if not blocks:
+        return np.full(3, np.nan)
+    u, sv, _ = np.linalg.svd(np.hstack(blocks))
+    if sv[1] <= 1e-9 * sv[0]:  # a second null direction: the axis is not fixed
+        return np.full(3, np.nan)
+    n = u[:, -1]
+    ahead = camera.rays(np.array([[(camera.size[0] - 1) / 2.0, (camera.size[1] - 1) / 2.0]]))[0]
+    return n if n @ ahead > 0 else -n
+
+
+def interface_start(view: View, object_points, pixels, distances=START_DISTANCES_MM):
+    """A start for :func:`estimate_interface` without a design value: ``view.port`` (a
+    :class:`measure.FlatPort`: its layers' thicknesses and indices are kept) with the normal
+    from :func:`refraction_axis` and the distance, beyond the camera centre along it, of the
+    ``distances`` (mm) whose poses (:func:`measure.stereo.pose.estimate_poses` through that
+    port) reproject best, refined by a bounded search between its neighbours. None where the
+    axis is not fixed or no distance gives every frame a pose."""
+    from scipy.optimize import minimize_scalar
+
+    port = require_flat_port(view.port, "interface_start needs a flat port (a FlatPort)")
+    camera = view.camera
+    normal = refraction_axis(camera, object_points, pixels)
+    if not np.all(np.isfinite(normal)):
+        return None
+    offset = float(normal @ camera.center)
+
+    def cost(distance):
+        try:
+            trial = port.replace(normal=normal, distance=offset + distance)
+            poses = estimate_poses(View(camera, trial), object_points, pixels,
+                                   max_rms_px=np.inf)
+        except ValueError:
+            return np.inf
+        if not poses.valid.all():
+            return np.inf
+        return float(np.sum(poses.rms_px ** 2 * poses.observations))
+
+    distances = np.asarray(distances, dtype=np.float64)
+    costs = np.array([cost(d) for d in distances])
+    if not np.isfinite(costs).any():
+        return None
+    best = int(np.argmin(costs))
+    lo, hi = distances[max(best - 1, 0)], distances[min(best + 1, distances.size - 1)]
+    found = minimize_scalar(lambda x: cost(np.exp(x)), bounds=(np.log(lo), np.log(hi)),
+                            method="bounded", options={"xatol": 1e-4})
+    distance = float(np.exp(found.x)) if found.fun <= costs[best] else float(distances[best])
+    return port.replace(normal=normal, distance=offset + distance)
+
+
+__all__ = ["INTERFACE_NAMES", "InterfaceEstimate", "estimate_interface", "interface_start",
+           "refraction_axis"]

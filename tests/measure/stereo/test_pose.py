@@ -271,3 +271,41 @@ def test_interface_from_a_known_object():
         covariance = e.covariance
     ratio = np.std(estimates, axis=0) / np.sqrt(np.diag(covariance))
     assert np.all((ratio > 0.75) & (ratio < 1.25)), ratio
+
+
+def test_interface_started_without_a_design_value():
+    """Agrawal et al.'s flat refraction constraint gives the tilted normal (1°, −0.5°) exactly
+    from exact pixels, and the distance search then starts the refinement in the basin of the
+    truth (D 103 mm) from nothing but the layers: exact back to 1e-6 mm; with 0.1 px of noise
+    the refined D and normal lie within 3σ of the truth. Without refraction (every index 1) the
+    constraint holds for any axis, and no start is given."""
+    from measure.calibration.interface import (estimate_interface, interface_start,
+                                               refraction_axis)
+    from synth.scene.rig import tilted_port_normal
+
+    rig = paper_rig()
+    truth = rig.port.replace(distance=103.0, normal=tilted_port_normal(1.0, -0.5))
+    layers_only = rig.port.replace(distance=1.0, normal=[0.0, 0.0, 1.0])
+    obj = docking_frame()
+    rng = np.random.default_rng(7)
+    Rs = Rotation.from_rotvec(rng.uniform(-0.35, 0.35, (4, 3))).as_matrix()
+    ts = np.array([[100.0, -50.0, 800.0], [-200.0, 100.0, 1400.0], [150.0, 200.0, 2200.0],
+                   [0.0, 0.0, 3000.0]])
+    exact = np.stack([_pixels([View(rig.left, truth)], obj, R, t)[0] for R, t in zip(Rs, ts)])
+    axis = refraction_axis(rig.left, obj, exact)
+    assert np.linalg.norm(np.cross(axis, truth.normal)) <= 1e-9 and axis[2] > 0
+    start = interface_start(View(rig.left, layers_only), obj, exact)
+    found = estimate_interface(View(rig.left, start), obj, exact)
+    assert found.reason == Reason.OK
+    assert abs(found.port.distance - 103.0) <= 1e-6
+    assert np.linalg.norm(np.cross(found.port.normal, truth.normal)) <= 1e-8
+    noisy = exact + rng.normal(scale=0.1, size=exact.shape)
+    start = interface_start(View(rig.left, layers_only), obj, noisy)
+    e = estimate_interface(View(rig.left, start), obj, noisy, 0.1)
+    assert e.reason == Reason.OK
+    error = np.array([e.port.distance - 103.0, *((e.port.normal - truth.normal) @ e.normal_axes.T)])
+    assert np.all(np.abs(error) <= 3.0 * np.sqrt(np.diag(e.covariance))), error
+    air = rig.port.replace(indices=(1.0, 1.0, 1.0))
+    pinhole = np.stack([_pixels([View(rig.left, air)], obj, R, t)[0] for R, t in zip(Rs, ts)])
+    assert not np.isfinite(refraction_axis(rig.left, obj, pinhole)).any()
+    assert interface_start(View(rig.left, air), obj, pinhole) is None
