@@ -12,7 +12,9 @@ print their own tracebacks. So:
   :func:`requested` says it was interrupted, and the command line prints ``error: interrupted``
   and exits 130. :func:`check` raises it again where a command can stop cleanly (between cells,
   passes, figures), so a swallowed interrupt still stops the work, and
-  :meth:`synth.infra.fileio.OutputDir.staged` never commits an output once it is set.
+  :meth:`synth.infra.fileio.OutputDir.staged` never commits an output once it is set. An
+  interrupt lost in a finalizer or weakref callback is not printed (``Exception ignored in …``):
+  it is recorded, and that is what counts.
 * :func:`deferred` holds SIGINT back for a block that must not be cut in half (starting or
   closing a Dask cluster, writing a sweep's record and its log line): the signal is blocked in
   this thread and recorded, and raised as ``KeyboardInterrupt`` when the block ends. Threads and
@@ -25,6 +27,7 @@ Only the main thread can install handlers; elsewhere (a Dask worker thread) thes
 from __future__ import annotations
 
 import signal
+import sys
 import threading
 from contextlib import contextmanager
 
@@ -39,6 +42,18 @@ def _raise(signum, frame):
 
 def _record(signum, frame):
     _STATE["interrupted"] = True
+
+
+def _quiet_lost_interrupts(previous_hook):
+    """An unraisable-exception hook that drops a ``KeyboardInterrupt`` Python could not raise
+    (it landed in a finalizer or a weakref callback: ``Exception ignored in …``) — it is already
+    recorded, and :func:`check` raises it where the work can stop — and passes anything else to
+    ``previous_hook``."""
+    def hook(unraisable):
+        if isinstance(unraisable.exc_value, KeyboardInterrupt) and _STATE["interrupted"]:
+            return
+        previous_hook(unraisable)
+    return hook
 
 
 def _main_thread() -> bool:
@@ -59,11 +74,14 @@ def handling():
         yield
         return
     previous = signal.signal(signal.SIGINT, _raise)
+    previous_hook = sys.unraisablehook
+    sys.unraisablehook = _quiet_lost_interrupts(previous_hook)
     _STATE.update(interrupted=False, handling=True)
     try:
         yield
     finally:
         signal.signal(signal.SIGINT, previous if previous is not None else signal.SIG_DFL)
+        sys.unraisablehook = previous_hook
         _STATE.update(interrupted=False, handling=False)
 
 

@@ -95,3 +95,34 @@ def test_deferred_holds_the_signal_until_the_block_ends():
         assert steps == ["the block went on"] and interrupt.requested()
         # SIGINT is unblocked again
         assert signal.SIGINT not in signal.pthread_sigmask(signal.SIG_BLOCK, set())
+
+
+def test_an_interrupt_lost_in_a_weakref_callback_is_not_printed(capsys, monkeypatch):
+    """Before: ``Exception ignored in: <function WeakSet…_remove>`` and a traceback above
+    ``error: interrupted`` when the SIGINT landed in a weakref callback (seen in a sweep). Other
+    unraisable exceptions still reach the hook that was there."""
+    import gc
+    import sys
+    import weakref
+
+    seen = []
+    monkeypatch.setattr(sys, "unraisablehook", lambda unraisable: seen.append(unraisable.exc_type))
+
+    class Thing:
+        pass
+
+    def lost(callback):
+        thing = Thing()
+        ref = weakref.ref(thing, callback)
+        del thing
+        gc.collect()
+        assert ref() is None
+
+    def body():
+        lost(lambda _ref: _sigint())
+        lost(lambda _ref: 1 / 0)
+        return 0
+
+    assert run_command(_parser(body), []) == 130
+    assert seen == [ZeroDivisionError]
+    assert capsys.readouterr().err == "error: interrupted\n"
