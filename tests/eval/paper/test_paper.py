@@ -7,6 +7,7 @@ numbers asserted are ones that could fail (ideal errors, Su's model error, the r
 from __future__ import annotations
 
 import json
+import shutil
 import subprocess
 import sys
 
@@ -237,7 +238,8 @@ def test_deviate_port():
         deviate_port(port, "n_air", -0.01)  # an index below 1
 
 
-def test_out_rule_refuses_a_strangers_directory_and_replaces_its_own(tmp_path, capsys):
+def test_out_rule_refuses_a_strangers_directory_and_replaces_its_own(paper_run, tmp_path,
+                                                                      capsys):
     out = tmp_path / "out"
     out.mkdir()
     (out / "notes.txt").write_text("keep me")
@@ -245,8 +247,9 @@ def test_out_rule_refuses_a_strangers_directory_and_replaces_its_own(tmp_path, c
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "exists and holds files this command did not write" in err[0]
     assert sorted(p.name for p in out.iterdir()) == ["notes.txt"]
-    own = tmp_path / "own"
-    for _ in range(2):  # the second run replaces the first run's output
-        assert cli.main(["paper", "--out", str(own), "--trials", "2", "--no-progress"]) == 0
-    assert (own / "report.json").is_file() and sorted(p.name for p in tmp_path.iterdir()) == [
-        "out", "own"]
+    own = tmp_path / "own"  # a copy of an earlier run's output: replaced by this run's
+    shutil.copytree(paper_run[0], own)
+    (own / "report.json").write_text("{}")
+    assert cli.main(["paper", "--out", str(own), "--trials", "2", "--no-progress"]) == 0
+    assert json.loads((own / "report.json").read_text())["settings"]["trials"] == 2
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out", "own"]
