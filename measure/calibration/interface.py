@@ -2,17 +2,19 @@
 al., "A Theory of Multi-Layer Flat Refractive Geometry", CVPR 2012: the interface's normal and
 distance are determined by the images of a known object through it).
 
-Unknowns: the port's distance ``D`` (mm) and its normal, tilted from the starting normal
-``n₀`` by ``(a₀, a₁)`` rad about the two axes of :func:`measure.calibration.selfcal.tilt_basis`
-(``n = normalize(n₀ + a₀ e₀ + a₁ e₁)``, as the rig covariance's ``port.tilt[k]``), and the
-object's pose in each of F frames (``X_ref = R · X_obj + t``). The layers' thicknesses and the
-indices stay as given. Start: the given port (a design value) and each frame's pose from
-:func:`measure.stereo.pose.estimate_pose` through it; then one ``least_squares`` over
-everything on the refractive reprojection error, with the analytic Jacobian (the port's from
-``project(..., parameters=True)``, the poses' as in :mod:`measure.stereo.pose`). Agrawal et
-al.'s start is :func:`interface_start`, for when no design value is at hand: the normal in
-closed form from their flat refraction constraint, the distance from a one-dimensional search
-(where they solve a polynomial).
+Unknowns: the port's distance ``D`` (mm) and its normal, tilted from the starting normal ``n₀``
+by ``(a₀, a₁)`` rad about the two axes of :func:`measure.calibration.selfcal.tilt_basis` (``n =
+normalize(n₀ + a₀ e₀ + a₁ e₁)``, as the rig covariance's ``port.tilt[k]``), and the object's
+pose in each of F frames (``X_ref = R · X_obj + t``), and optionally the thicknesses of some
+layers (``free_thicknesses``: e.g. the water of a tank, air | glass | water | glass | air,
+whose thickness is unknown; Agrawal et al. show the layers' thicknesses are fixed by a known
+object). The indices and the other thicknesses stay as given. Start: the given port (a design
+value) and each frame's pose from :func:`measure.stereo.pose.estimate_pose` through it; then
+one ``least_squares`` over everything on the refractive reprojection error, with the analytic
+Jacobian (the port's from ``project(..., parameters=True)``, the poses' as in
+:mod:`measure.stereo.pose`). Agrawal et al.'s start is :func:`interface_start`, for when no
+design value is at hand: the normal in closed form from their flat refraction constraint, the
+distance from a one-dimensional search (where they solve a polynomial).
 
 Where this differs from :func:`measure.calibration.housing.calibrate_housing`: one camera, any
 known object (not only a board), no in-air stereo calibration. Units mm, rad, px.
@@ -36,17 +38,24 @@ from ..stereo.pose import (DEGENERATE_CONDITION, TOLERANCE, estimate_poses, exp_
 #: The distances (mm beyond the camera centre, along the normal) :func:`interface_start` tries.
 START_DISTANCES_MM = np.geomspace(1.0, 1000.0, 31)
 
+#: A column of the Jacobian below this fraction of the largest is a number no pixel moves with:
+#: its column holds rounding only (3e-16 px/mm for a tank's distance, where a layer's thickness
+#: moves the pixels 0.05 px/mm), which the column scaling would otherwise blow up to one.
+NO_EFFECT = 1e-9
+
 #: The names of the interface's parameters, in the order of :attr:`InterfaceEstimate.covariance`.
 INTERFACE_NAMES = ("port.distance", "port.tilt[0]", "port.tilt[1]")
 
 
 @dataclass(frozen=True)
 class InterfaceEstimate:
-    """``port`` (the given port with the estimated distance and normal), ``R`` ``(F, 3, 3)``
-    and ``t`` ``(F, 3)`` the object's poses, ``covariance`` ``(3, 3)`` of
-    ``(D mm, tilt₀ rad, tilt₁ rad)`` about ``normal_axes`` ``(2, 3)`` (the axes ⟂ the start
-    normal; the marginal of the joint covariance with the poses), ``rms_px``, ``sigma_px`` (the
-    pixel σ the covariance holds: stated, or from the residuals), ``reason``."""
+    """``port`` (the given port with the estimated distance, normal and free thicknesses),
+    ``R`` ``(F, 3, 3)`` and ``t`` ``(F, 3)`` the object's poses, ``covariance`` of the
+    estimated numbers named in ``names`` (of ``port.distance`` mm, ``port.tilt[0]``,
+    ``port.tilt[1]`` rad about ``normal_axes`` ``(2, 3)`` — the axes ⟂ the start normal — and
+    ``port.thickness[j]`` mm of each free layer; the marginal of the joint covariance with the
+    poses), ``rms_px``, ``sigma_px`` (the pixel σ the covariance holds: stated,
+    or from the residuals), ``reason``, ``residuals_px`` ``(F, M, 2)`` (NaN where unseen)."""
 
     port: object
     R: np.ndarray
@@ -56,6 +65,8 @@ class InterfaceEstimate:
     rms_px: float
     sigma_px: float
     reason: int
+    names: tuple = INTERFACE_NAMES
+    residuals_px: np.ndarray | None = None
 
     @property
     def valid(self) -> bool:
@@ -63,12 +74,17 @@ class InterfaceEstimate:
 
 
 def estimate_interface(view: View, object_points, pixels, pixel_sigma=None,
-                       max_nfev: int = 200) -> InterfaceEstimate:
+                       max_nfev: int = 200, free_thicknesses=(),
+                       free_distance: bool = True) -> InterfaceEstimate:
     """The distance and normal of ``view.port`` (a :class:`measure.FlatPort`, the start) and
     the object's poses from ``pixels`` ``(F, M, 2)`` of ``object_points`` ``(M, 3)`` (module
-    docs). NaN results with a reason where a frame has no starting pose (its reason), the
-    refinement does not converge (``NOT_CONVERGED``) or the data do not fix the interface
-    (``DEGENERATE``)."""
+    docs); ``free_thicknesses``: the layers (indices into ``port.thicknesses``) whose thickness
+    is estimated too; ``free_distance`` False keeps the distance (an object in the camera's own
+    medium beyond a tank: parallel layers shift a ray by their thicknesses only, wherever they
+    stand, and no image fixes their distance). NaN results with a reason where a frame has no
+    starting pose (its reason), the refinement does not converge (``NOT_CONVERGED``) or the
+    data do not fix the interface (``DEGENERATE``). ValueError for a layer that is not one of
+    the port's."""
     port = require_flat_port(view.port, "estimate_interface needs a flat port (a FlatPort)")
     camera = view.camera
     object_points = np.asarray(object_points, dtype=np.float64)
@@ -76,10 +92,23 @@ def estimate_interface(view: View, object_points, pixels, pixel_sigma=None,
     if pixels.ndim != 3 or pixels.shape[1:] != (object_points.shape[0], 2):
         raise ValueError(f"pixels must have shape (F, {object_points.shape[0]}, 2), got "
                          f"{pixels.shape}")
+    layers = tuple(int(j) for j in free_thicknesses)
+    if len(set(layers)) != len(layers) or any(not 0 <= j < len(port.thicknesses)
+                                              for j in layers):
+        raise ValueError(f"free_thicknesses {list(layers)}: the port has "
+                         f"{len(port.thicknesses)} layer(s) with a thickness (0 … "
+                         f"{len(port.thicknesses) - 1}), each at most once")
     frames = pixels.shape[0]
     axes = np.array(tilt_basis(port.normal))
+    active = np.array(([0] if free_distance else []) + [1, 2]
+                      + [3 + i for i in range(len(layers))])
+    k = active.size
+    names = tuple((INTERFACE_NAMES + tuple(f"port.thickness[{j}]" for j in layers))[i]
+                  for i in active)
+    design = np.concatenate([[port.distance, 0.0, 0.0], [port.thicknesses[j] for j in layers]])
     nan = InterfaceEstimate(port, np.full((frames, 3, 3), np.nan), np.full((frames, 3), np.nan),
-                            np.full((3, 3), np.nan), axes, np.nan, np.nan, int(Reason.OK))
+                            np.full((k, k), np.nan), axes, np.nan, np.nan, int(Reason.OK),
+                            names, np.full(pixels.shape, np.nan))
     starts = estimate_poses(view, object_points, pixels, pixel_sigma)
     if not starts.valid.all():
         first = int(starts.reason[~starts.valid][0])
@@ -90,14 +119,19 @@ def estimate_interface(view: View, object_points, pixels, pixel_sigma=None,
     points = np.concatenate([s for s in seen])
     observed = np.concatenate([pixels[f][s] for f, s in enumerate(seen)])
     R0 = starts.R
-    n_params = 3 + 6 * frames
+    n_params = k + 6 * frames
 
     def unpack(x):
-        m = port.normal + x[1] * axes[0] + x[2] * axes[1]
+        g = design.copy()
+        g[active] = x[:k]
+        m = port.normal + g[1] * axes[0] + g[2] * axes[1]
         length = np.linalg.norm(m)
-        moved = port.replace(distance=x[0], normal=m / length)
-        phi = x[3:].reshape(frames, 6)[:, :3]
-        t = x[3:].reshape(frames, 6)[:, 3:]
+        thick = list(port.thicknesses)
+        for i, j in enumerate(layers):
+            thick[j] = g[3 + i]
+        moved = port.replace(distance=g[0], normal=m / length, thicknesses=tuple(thick))
+        phi = x[k:].reshape(frames, 6)[:, :3]
+        t = x[k:].reshape(frames, 6)[:, 3:]
         R = np.stack([exp_so3(phi[f]) @ R0[f] for f in range(frames)])
         return moved, length, phi, R, t
 
@@ -110,7 +144,7 @@ def estimate_interface(view: View, object_points, pixels, pixel_sigma=None,
             X = np.einsum("nij,nj->ni", R[rows], object_points[points]) + t[rows]
             try:
                 uv, d_points, jac = project(camera, moved, X, parameters=True)
-            except ValueError:  # the camera ended up on the water side
+            except ValueError:  # the camera on the water side, a layer of no thickness
                 uv = np.full((X.shape[0], 2), np.nan)
                 d_points = jac = None
             cache[key] = (moved, length, phi, R, t, X, uv, d_points, jac)
@@ -126,24 +160,30 @@ def estimate_interface(view: View, object_points, pixels, pixel_sigma=None,
         J = np.zeros((observed.shape[0], 2, n_params))
         if jac is None:
             return J.reshape(-1, n_params)
-        J[:, :, 0] = jac.distance
-        J[:, :, 1:3] = (jac.normal / length) @ axes.T
+        interface = np.zeros((observed.shape[0], 2, design.size))
+        interface[:, :, 0] = jac.distance
+        interface[:, :, 1:3] = (jac.normal / length) @ axes.T
+        for i, j in enumerate(layers):
+            interface[:, :, 3 + i] = jac.thicknesses[..., j]
+        J[:, :, :k] = interface[:, :, active]
         d_phi = -skew(X - t[rows])  # (n, 3, 3), then J_l(φ) per frame
         for f in range(frames):
             mine = rows == f
             block = d_points[mine] @ (d_phi[mine] @ left_jacobian(phi[f]))
-            J[mine, :, 3 + 6 * f:6 + 6 * f] = block
-            J[mine, :, 6 + 6 * f:9 + 6 * f] = d_points[mine]
+            J[mine, :, k + 6 * f:k + 3 + 6 * f] = block
+            J[mine, :, k + 3 + 6 * f:k + 6 + 6 * f] = d_points[mine]
         J /= sigma
         J = J.reshape(-1, n_params)
         return np.where(np.isfinite(J), J, 0.0)
 
-    x0 = np.concatenate([[port.distance, 0.0, 0.0],
+    x0 = np.concatenate([design[active],
                          np.column_stack([np.zeros((frames, 3)), starts.t]).ravel()])
+    lower = np.full(n_params, -np.inf)
+    lower[:k][active >= 3] = 0.0  # a thickness stays positive (FlatPort refuses 0)
     try:
         result = least_squares(residual, x0, jac=jacobian, method="trf", x_scale="jac",
-                               xtol=TOLERANCE, ftol=TOLERANCE, gtol=TOLERANCE,
-                               max_nfev=max_nfev)
+                               bounds=(lower, np.inf), xtol=TOLERANCE, ftol=TOLERANCE,
+                               gtol=TOLERANCE, max_nfev=max_nfev)
     except ValueError:
         return InterfaceEstimate(**{**nan.__dict__, "reason": int(Reason.NOT_CONVERGED)})
     moved, length, phi, R, t, X, uv, _, _ = evaluate(result.x)
@@ -152,17 +192,19 @@ def estimate_interface(view: View, object_points, pixels, pixel_sigma=None,
         return InterfaceEstimate(**{**nan.__dict__, "reason": int(Reason.NOT_CONVERGED)})
     J = result.jac.copy()
     for f in range(frames):  # rotations applied on the left of each R itself
-        cols = slice(3 + 6 * f, 6 + 6 * f)
+        cols = slice(k + 6 * f, k + 3 + 6 * f)
         J[:, cols] = np.linalg.solve(left_jacobian(phi[f]).T, J[:, cols].T).T
     normal = J.T @ J
     scale = np.sqrt(np.diag(normal))
-    if not np.all(scale > 0):
+    if not np.all(scale > NO_EFFECT * scale.max()):  # a number no pixel moves with (rounding)
         return InterfaceEstimate(**{**nan.__dict__, "reason": int(Reason.DEGENERATE)})
     eig = np.linalg.eigvalsh(normal / np.outer(scale, scale))
     if eig[0] <= eig[-1] / DEGENERATE_CONDITION:
         return InterfaceEstimate(**{**nan.__dict__, "reason": int(Reason.DEGENERATE)})
-    covariance = np.linalg.inv(normal)[:3, :3]
+    covariance = np.linalg.inv(normal)[:k, :k]
     rms = float(np.sqrt(np.mean(np.sum(r * r, axis=1))))
+    residuals = np.full(pixels.shape, np.nan)
+    residuals[rows, points] = r
     if pixel_sigma is None:
         dof = r.size - n_params
         sigma_px = float(np.sqrt(np.sum(r * r) / dof)) if dof > 0 else np.nan
@@ -171,7 +213,7 @@ def estimate_interface(view: View, object_points, pixels, pixel_sigma=None,
         sigma_px = float(pixel_sigma)
     # the tilts reported about the start normal's axes: at the solution the normal is m/|m|
     return InterfaceEstimate(moved, R, t, 0.5 * (covariance + covariance.T), axes, rms,
-                             sigma_px, int(Reason.OK))
+                             sigma_px, int(Reason.OK), names, residuals)
 
 
 def refraction_axis(camera, object_points, pixels) -> np.ndarray:
