@@ -23,7 +23,7 @@ from synth.infra.cli import (CLIError, Parser, command_parser, non_negative_floa
 #: The module of each subcommand, in the order ``--help`` lists them.
 SUBCOMMANDS = ("eval.run.command", "eval.score", "eval.paper.command", "eval.sweep.command",
                "eval.calibrate.command", "eval.measure.command", "eval.bench",
-               "eval.render_bench", "eval.rectify", "eval.track")
+               "eval.render_bench", "eval.rectify", "eval.track", "eval.interface")
 
 
 def build_parser() -> Parser:

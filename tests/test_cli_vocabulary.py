@@ -14,7 +14,7 @@ WITH_PROGRESS = {("eval", "run"), ("eval", "paper"), ("eval", "sweep"), ("eval",
                  ("eval", "bench"), ("eval", "render-bench"), ("eval", "measure"),
                  ("synth", "render"),
                  ("synth", "dataset"), ("synth", "suite"), ("synth", "boards"),
-                 ("synth", "sequence"), ("eval", "track")}
+                 ("synth", "sequence"), ("eval", "track"), ("eval", "interface")}
 #: Subcommands that read a scene file: each takes it as the positional ``scene``.
 WITH_SCENE = {("eval", "run"), ("eval", "render-bench"), ("synth", "render"),
               ("synth", "dataset"), ("synth", "boards"), ("synth", "sequence")}
@@ -43,7 +43,7 @@ SUBCOMMANDS = list(_subcommands())
 def test_every_subcommand_is_walked():
     names = {(prog, name) for prog, name, _ in SUBCOMMANDS}
     assert WITH_PROGRESS <= names and WITH_SCENE <= names
-    assert len(names) == 18
+    assert len(names) == 19
 
 
 @pytest.mark.parametrize("prog, name, parser", SUBCOMMANDS,

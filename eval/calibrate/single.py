@@ -255,7 +255,7 @@ def camera_covariance(obj, out):
 
 
 def write_camera_files(directory, camera, lens_model, rms_px, sigmas: dict, covariance=None,
-                       port=None, extra=None) -> None:
+                       port=None, extra=None, other_formats: bool = True) -> None:
     """``camera.yaml``, ``calibmar.yaml`` and ``cameras.txt`` of one camera (module docs):
     ``lens_model`` (or None), the fit's ``rms_px``, ``sigmas`` ``{intrinsic: σ}``.
     ``covariance``: a ``covariance`` node (``names``, ``matrix``, ``normal_axes`` where it has
@@ -263,7 +263,8 @@ def write_camera_files(directory, camera, lens_model, rms_px, sigmas: dict, cova
     the camera's housing (a rig port whose view 0 is the camera's), written as calib.yaml's
     ``port`` or a ``dome`` node in ``camera.yaml`` (mm, the camera's frame) and as FLATPORT or
     DOMEPORT in the other two; ``extra``: further maps (:func:`synth.products.dataset.
-    write_calib`'s ``extra``, e.g. the housing's σ)."""
+    write_calib`'s ``extra``, e.g. the housing's σ). ``other_formats`` False: ``camera.yaml``
+    only (a port of several layers, which FLATPORT cannot hold)."""
     import cv2
 
     from measure.geometry.flatport_format import write_view_port
@@ -308,7 +309,8 @@ def write_camera_files(directory, camera, lens_model, rms_px, sigmas: dict, cova
             write_node(fs, name, value)
     finally:
         fs.release()
-    write_single_camera(directory, camera, port)
+    if other_formats:
+        write_single_camera(directory, camera, port)
 
 
 def photo_rows(names, detections, outliers, rms_px_per, posed=None) -> list:

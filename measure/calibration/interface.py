@@ -75,7 +75,7 @@ class InterfaceEstimate:
 
 def estimate_interface(view: View, object_points, pixels, pixel_sigma=None,
                        max_nfev: int = 200, free_thicknesses=(),
-                       free_distance: bool = True) -> InterfaceEstimate:
+                       free_distance: bool = True, camera_covariance=None) -> InterfaceEstimate:
     """The distance and normal of ``view.port`` (a :class:`measure.FlatPort`, the start) and
     the object's poses from ``pixels`` ``(F, M, 2)`` of ``object_points`` ``(M, 3)`` (module
     docs); ``free_thicknesses``: the layers (indices into ``port.thicknesses``) whose thickness
@@ -84,7 +84,10 @@ def estimate_interface(view: View, object_points, pixels, pixel_sigma=None,
     stand, and no image fixes their distance). NaN results with a reason where a frame has no
     starting pose (its reason), the refinement does not converge (``NOT_CONVERGED``) or the
     data do not fix the interface (``DEGENERATE``). ValueError for a layer that is not one of
-    the port's."""
+    the port's. ``camera_covariance``: the in-air calibration's covariance of the camera's
+    intrinsics (a :class:`measure.stereo.rig_covariance.RigCovariance` of ``left.fx`` …, as
+    ``camera.yaml`` carries it); the intrinsics stay held and their covariance is propagated
+    into the interface's (:func:`camera_term`), else the covariance is conditional on them."""
     port = require_flat_port(view.port, "estimate_interface needs a flat port (a FlatPort)")
     camera = view.camera
     object_points = np.asarray(object_points, dtype=np.float64)
@@ -201,7 +204,8 @@ def estimate_interface(view: View, object_points, pixels, pixel_sigma=None,
     eig = np.linalg.eigvalsh(normal / np.outer(scale, scale))
     if eig[0] <= eig[-1] / DEGENERATE_CONDITION:
         return InterfaceEstimate(**{**nan.__dict__, "reason": int(Reason.DEGENERATE)})
-    covariance = np.linalg.inv(normal)[:k, :k]
+    inverse = np.linalg.inv(normal)
+    covariance = inverse[:k, :k]
     rms = float(np.sqrt(np.mean(np.sum(r * r, axis=1))))
     residuals = np.full(pixels.shape, np.nan)
     residuals[rows, points] = r
@@ -211,9 +215,41 @@ def estimate_interface(view: View, object_points, pixels, pixel_sigma=None,
         covariance = covariance * sigma_px ** 2
     else:
         sigma_px = float(pixel_sigma)
+    if camera_covariance is not None:
+        covariance = covariance + camera_term(camera, moved, X, J, inverse, k, sigma,
+                                              camera_covariance)
     # the tilts reported about the start normal's axes: at the solution the normal is m/|m|
     return InterfaceEstimate(moved, R, t, 0.5 * (covariance + covariance.T), axes, rms,
                              sigma_px, int(Reason.OK), names, residuals)
+
+
+def camera_term(camera, port, X, J, inverse, k: int, sigma: float, camera_covariance):
+    """``(k, k)``: the in-air intrinsics' covariance carried into the first ``k`` estimated
+    numbers at the solution, ``A Σ_c Aᵀ`` with ``A = −(JᵀJ)⁻¹ Jᵀ J_c`` (the shift of the least
+    squares solution per shift of the held intrinsics; ``J`` the residuals' Jacobian, scaled by
+    the pixel σ ``sigma``, ``inverse`` ``(JᵀJ)⁻¹``). ``J_c``: the pixels of the points ``X``
+    ``(n, 3)`` (mm) through ``port`` per intrinsic, by central differences of
+    :func:`measure.geometry.projection.project` over steps of 1e-4 σ
+    (:func:`measure.stereo.uncertainty.perturbed_rig`'s definition of each name)."""
+    from ..stereo.triangulate import StereoRig
+    from ..stereo.uncertainty import perturbed_rig
+
+    names = list(camera_covariance.names)
+    bad = [n for n in names if not n.startswith("left.")]
+    if bad:
+        raise ValueError(f"camera_covariance: {bad} are not the camera's intrinsics (left.fx …)")
+    steps = 1e-4 * np.sqrt(np.diag(camera_covariance.matrix))
+    rig = StereoRig(camera, camera, port)
+    columns = []
+    for i, h in enumerate(steps):
+        delta = np.zeros(len(names))
+        delta[i] = h
+        plus = project(perturbed_rig(rig, names, delta).left, port, X)
+        minus = project(perturbed_rig(rig, names, -delta).left, port, X)
+        columns.append(((plus - minus) / (2.0 * h)).ravel() / sigma)
+    A = -(inverse @ (J.T @ np.column_stack(columns)))[:k]
+    term = A @ camera_covariance.matrix @ A.T
+    return 0.5 * (term + term.T)
 
 
 def refraction_axis(camera, object_points, pixels) -> np.ndarray:

@@ -147,3 +147,47 @@ def test_a_stereo_calibration_is_not_one_camera(drawn, tmp_path, capsys):
                  "--out", str(out)]) == 2
     assert "a stereo calibration (K1, K2); give one camera's" in capsys.readouterr().err
     assert not out.exists()
+
+
+#: A water tank between the camera and the board (the board in the air beyond it), its walls
+#: tilted 1° from the optical axis; air | glass | water | glass | air.
+TANK = FlatPort((np.sin(TILT), 0.0, np.cos(TILT)), 60.0, (8.0, 250.0, 8.0),
+                (1.0, 1.54, 1.33, 1.54, 1.0))
+
+
+def test_the_water_of_a_tank_from_photos_of_a_board_beyond_it(drawn, tmp_path, capsys):
+    """``eval interface``: the tank's tilt and water thickness (the design says 200 mm) and the
+    board's poses from 10 drawn photos, given the in-air camera.yaml; the residuals at the
+    pixel noise (the in-air RMS), the pinhole with no tank beside (far worse)."""
+    rng = np.random.default_rng(11)
+    camera = drawn["camera"]
+    rig = StereoRig(camera, camera, TANK)
+    poses = sample_poses(rig, BOARD, 10, 12, True, (500.0, 800.0))
+    folder = tmp_path / "tank"
+    folder.mkdir()
+    for k, pose in enumerate(poses):
+        cv2.imwrite(str(folder / f"{k:02d}.png"), _draw(camera, TANK, pose, rng))
+    out = tmp_path / "interface"
+    media = "air,glass:8,water:200,glass:8,air"
+    assert _run(["interface", str(folder), "--intrinsics", str(drawn["camera_yaml"]),
+                 *BOARD_ARGS, "--media", media, "--free", "normal,thickness:water",
+                 "--out", str(out)]) == 0, capsys.readouterr()
+    report = json.loads((out / "report.json").read_text())
+    e, r = report["estimates"], report["rms_px"]
+    water = e["thickness:1"]
+    assert abs(water["estimate"] - 250.0) < 3 * water["sigma"] and water["sigma"] < 10.0, water
+    angle = np.degrees(np.arccos(min(1.0, np.asarray(e["normal"]["estimate"]) @ TANK.normal)))
+    assert angle < 3 * max(e["normal"]["sigma_deg"]), (angle, e["normal"])
+    assert r["interface"] <= r["in_air"] + 0.15 and r["interface"] < 0.5 * r["pinhole_no_interface"]
+    truth = np.array([pose.t for pose in poses])  # the board's origin, camera frame = reference
+    rows = np.genfromtxt(out / "poses.csv", delimiter=",", names=True, dtype=None,
+                         encoding="utf-8")
+    found = np.column_stack([rows["tx_mm"], rows["ty_mm"], rows["tz_mm"]])
+    assert np.max(np.linalg.norm(found - truth[rows["photo"]], axis=1)) < 5.0
+    assert "port" in (out / "camera.yaml").read_text()
+    # the distance of a tank with air on both sides: refused, with the reason
+    assert _run(["interface", str(folder), "--intrinsics", str(drawn["camera_yaml"]),
+                 *BOARD_ARGS, "--media", media, "--free", "normal,distance",
+                 "--out", str(tmp_path / "no")]) == 2
+    assert "only shift a ray" in capsys.readouterr().err
+    assert not (tmp_path / "no").exists()
