@@ -81,3 +81,33 @@ def test_a_tank_wall_and_the_object_in_the_water():
     assert abs(found.port.thicknesses[0] - 12.0) <= 1e-6
     assert np.linalg.norm(np.cross(found.port.normal, wall.normal)) <= 1e-8
     assert np.max(np.abs(found.t - ts)) <= 1e-6
+
+
+def test_the_in_air_calibrations_uncertainty_carried_into_the_tanks():
+    """``camera_covariance``: the linear propagation of a held intrinsic's σ into the water's
+    thickness and the normal agrees with refitting with that intrinsic moved by ±σ (half the
+    difference of the two refits; exact pixels, so the pixel term is nil and the covariance is
+    the propagated term alone). At σ(fx) = 0.2 px the thickness moves 1.14 mm per σ."""
+    from measure.stereo.rig_covariance import RigCovariance
+    from measure.stereo.triangulate import StereoRig
+    from measure.stereo.uncertainty import perturbed_rig
+
+    camera = paper_cameras()[0]
+    obj = docking_frame()
+    _, _, exact = _frames(View(camera, TANK), obj, 3, [1600.0, 2200.0, 3000.0, 4000.0])
+    design = TANK.replace(normal=[0.0, 0.0, 1.0], thicknesses=(10.0, 300.0, 10.0))
+    for name, sigma in (("left.fx", 0.2), ("left.cx", 0.2)):
+        cov = RigCovariance((name,), [[sigma ** 2]])
+        found = estimate_interface(View(camera, design), obj, exact, free_thicknesses=(1,),
+                                   free_distance=False, camera_covariance=cov)
+        assert found.reason == Reason.OK
+        refits = []
+        for step in (sigma, -sigma):
+            moved = perturbed_rig(StereoRig(camera, camera, TANK), (name,), [step]).left
+            refit = estimate_interface(View(moved, design), obj, exact, free_thicknesses=(1,),
+                                       free_distance=False)
+            refits.append([*(refit.port.normal @ found.normal_axes.T),
+                           refit.port.thicknesses[1]])
+        shift = np.abs(np.subtract(*refits)) / 2.0
+        predicted = np.sqrt(np.diag(found.covariance))
+        assert np.all(np.abs(shift - predicted) <= 0.05 * predicted), (name, shift, predicted)
