@@ -7,7 +7,8 @@ is given the detection nearest to where the previous frame's pose, moved on by t
 frame-to-frame translation (constant velocity), puts it (the forward model through the port;
 an optimal assignment, :func:`scipy.optimize.linear_sum_assignment`, within ``--gate`` px);
 the pose comes from both views jointly (:func:`measure.stereo.pose.estimate_pose`, with its
-covariance). The track locks on at the first frame's **true** pose (a docking run starts from
+covariance); each camera's pose alone, through its own port on the same pixels, is scored
+beside it. The track locks on at the first frame's **true** pose (a docking run starts from
 a known approach): no search over the markers' identities is done. A frame without a pose
 keeps the last pose for the next prediction.
 
@@ -17,7 +18,9 @@ Writes to ``--out``: ``poses.csv`` (the estimated poses, the columns of the sequ
 ``report.json``: per frame the detections' RMS distance from the simulator's pixels
 (``pixels.csv``), the position error (mm), the rotation error (rad), the squared
 Mahalanobis distance of the position error, and a summary (median and largest errors, the
-fraction of positions inside their 95 % ellipsoid). Exit 1 when a frame has no pose.
+fraction of positions inside their 95 % ellipsoid; the same per camera alone; poses per
+second after detection), and ``track.png`` (:func:`track_figure`). Exit 1 when a frame has no
+pose.
 """
 
 from __future__ import annotations
@@ -143,12 +146,85 @@ def eccentricity_offsets(rig, obj, pose, radius_mm):
                      for v, camera in enumerate(rig.cameras)])
 
 
+VIEW_NAMES = ("left", "right")
+
+
+def _scored(pose, t_true, R_true, distance, rotation_error, mahalanobis_squared) -> dict:
+    """One camera's pose of a frame against the truth (NaN where it has none)."""
+    from measure.reasons import Reason
+
+    if not pose.valid:
+        return {"reason": Reason(pose.reason).name}
+    error = pose.t - t_true
+    return {"reason": "OK", "position_error_mm": float(np.linalg.norm(error)),
+            "position_error_pct": float(100 * np.linalg.norm(error) / distance),
+            "rotation_error_rad": float(rotation_error(pose.R, R_true)),
+            "mahalanobis2": float(mahalanobis_squared(error, pose.covariance[3:, 3:])[0]),
+            "sigma_t_mm": float(np.sqrt(np.trace(pose.covariance[3:, 3:])))}
+
+
+def _per_camera_summary(valid, chi2_95) -> dict:
+    """Per camera alone: frames with a pose, median and largest position error (mm, % of the
+    distance), rotation error, and the share of positions inside their 95 % ellipsoid."""
+    out = {}
+    for name in VIEW_NAMES:
+        got = [r["per_camera"][name] for r in valid if r["per_camera"][name]["reason"] == "OK"]
+        if not got:
+            out[name] = {"posed": 0}
+            continue
+        dt = np.array([g["position_error_mm"] for g in got])
+        pct = np.array([g["position_error_pct"] for g in got])
+        dr = np.array([g["rotation_error_rad"] for g in got])
+        d2 = np.array([g["mahalanobis2"] for g in got])
+        out[name] = {"posed": len(got),
+                     "position_error_mm": {"median": float(np.median(dt)), "max": float(dt.max())},
+                     "position_error_pct": {"median": float(np.median(pct)),
+                                            "max": float(pct.max())},
+                     "rotation_error_rad": {"median": float(np.median(dr)),
+                                            "max": float(dr.max())},
+                     "coverage_95": float(np.mean(d2 <= chi2_95))}
+    return out
+
+
+def track_figure(path, rows) -> None:
+    """``track.png``: the distance along the approach (true and estimated) and, per frame, the
+    position error of the rig, of each camera alone and of the left camera as a pinhole, with
+    the rig's 2σ (sqrt of the position covariance's trace) as a band."""
+    from eval.core.figures import new_figure, save_figure
+
+    ok = [r for r in rows if r["reason"] == "OK"]
+    frame = np.array([r["frame"] for r in ok])
+    fig = new_figure(11, 4)
+    a, b = fig.subplots(1, 2)
+    a.plot(frame, [r["distance_mm"] for r in ok], "k-", label="true")
+    a.plot(frame, [r["distance_mm"] + r["error_mm"][2] for r in ok], "C0.", label="rig (z)")
+    a.set_xlabel("frame")
+    a.set_ylabel("distance (mm)")
+    a.set_title("the approach", fontsize=9)
+    a.legend(fontsize=8)
+    sigma = np.array([r["sigma_t_mm"] for r in ok])
+    floor = 0.3 * min(min(r["position_error_mm"] for r in ok), float(sigma.min()))
+    b.fill_between(frame, floor, 2 * sigma, color="C0", alpha=0.2, label="rig 2σ")
+    b.semilogy(frame, [r["position_error_mm"] for r in ok], "C0o-", label="rig")
+    for c, name in zip(("C1", "C2"), VIEW_NAMES):
+        b.semilogy(frame, [r["per_camera"][name].get("position_error_mm", np.nan) for r in ok],
+                   f"{c}.--", label=f"{name} alone")
+    pinhole = [r["pinhole_position_error_pct"] * r["distance_mm"] / 100 for r in ok]
+    b.semilogy(frame, pinhole, "C3x:", label="left as a pinhole")
+    b.set_xlabel("frame")
+    b.set_ylabel("position error (mm)")
+    b.set_title("position error against the true pose", fontsize=9)
+    b.legend(fontsize=8)
+    save_figure(fig, path)
+
+
 def main(args) -> int:
     import cv2
 
     from measure import detect_targets
     from measure.geometry.projection import project
     from measure.reasons import Reason
+    from measure.stereo.multiview import View
     from measure.stereo.pose import estimate_pose, pinhole_pose, rotation_error
     from measure.stereo.uncertainty import CHI2_3_95, mahalanobis_squared
     from synth.infra.fileio import OutputDir, atomic_write_json, jsonable
@@ -167,7 +243,7 @@ def main(args) -> int:
     R_prev, t_prev = R_true[0], t_true[0]  # locked on at the first frame's true pose
     velocity = np.zeros(3)  # mm per frame, of the last two poses
     estimates, rows = [], []
-    seconds = {"detect": 0.0, "pose": 0.0}
+    seconds = {"detect": 0.0, "pose": 0.0, "pose_per_camera": 0.0}
     for k, frame in enumerate(frames):
         pixels = np.full((2, obj.shape[0], 2), np.nan)
         detected, expected = [], 0
@@ -197,6 +273,10 @@ def main(args) -> int:
             corrected = estimate_pose(rig, obj, pixels, args.pixel_sigma)
             pose = corrected if corrected.valid else pose
         seconds["pose"] += time.perf_counter() - t0
+        t0 = time.perf_counter()  # each camera alone, through its port, on the same pixels
+        alone = [estimate_pose(View(camera, rig.view_port(v)), obj, pixels[v],
+                               args.pixel_sigma) for v, camera in enumerate(rig.cameras)]
+        seconds["pose_per_camera"] += time.perf_counter() - t0
         estimates.append(pose)
         miss = (pixels - true_pixels[k]).reshape(-1, 2)
         miss = miss[np.all(np.isfinite(miss), axis=1)]
@@ -222,6 +302,10 @@ def main(args) -> int:
                             error, pose.covariance[3:, 3:])[0]),
                         "sigma_t_mm": float(np.sqrt(np.trace(pose.covariance[3:, 3:]))),
                         "rms_px": pose.rms_px})
+            row["per_camera"] = {
+                name: _scored(p, t_true[k], R_true[k], distance, rotation_error,
+                              mahalanobis_squared)
+                for name, p in zip(VIEW_NAMES, alone)}
         rows.append(row)
         log(f"frame {int(frame)}: {row['reason']}"
             + (f", |dt| {row['position_error_mm']:.3g} mm, rotation "
@@ -246,7 +330,15 @@ def main(args) -> int:
                                               "max": float(dt.max())},
                         "rotation_error_rad": {"median": float(np.median(dr)),
                                                "max": float(dr.max())},
-                        "coverage_95": float(np.mean(d2 <= CHI2_3_95))})
+                        "coverage_95": float(np.mean(d2 <= CHI2_3_95)),
+                        "per_camera": _per_camera_summary(valid, CHI2_3_95),
+                        "poses_per_s": {
+                            "rig": len(rows) / seconds["pose"] if seconds["pose"] else None,
+                            "each_camera": 2 * len(rows) / seconds["pose_per_camera"]
+                            if seconds["pose_per_camera"] else None,
+                            "note": "after detection; rig: both views jointly, with the "
+                                    "eccentricity correction's second solve; each camera: "
+                                    "one view, one solve"}})
     report = {"dataset": args.dataset, "sequence": {k: manifest.get(k) for k in (
         "approach_mm", "yaw_deg", "frames", "fps", "object", "image_size")},
         "pixel_sigma_px": args.pixel_sigma, "gate_px": args.gate,
@@ -271,6 +363,8 @@ def main(args) -> int:
         if ok.any():
             write_tum(os.path.join(tmp, "poses_tum.txt"), times[ok],
                       np.stack([p.R for p in estimates])[ok], np.stack([p.t for p in estimates])[ok])
+        if valid:
+            track_figure(os.path.join(tmp, "track.png"), rows)
         report["timings_s"] = {**seconds, "total": time.perf_counter() - start}
         report = jsonable(report)
         atomic_write_json(os.path.join(tmp, "report.json"), report)
@@ -286,6 +380,14 @@ def main(args) -> int:
               f"the positions inside their 95 % ellipsoid; detections "
               f"{summary['detection_rms_px']['median']:.3g} px RMS from the simulator's pixels "
               f"(median over frames)", file=stream)
+        alone = summary["per_camera"]
+        print("each camera alone through its port: " + "; ".join(
+            f"{name} {a['posed']} posed, median {a['position_error_mm']['median']:.3g} mm (max "
+            f"{a['position_error_pct']['max']:.3g} %), {a['coverage_95']:.0%} inside"
+            if a["posed"] else f"{name} 0 posed" for name, a in alone.items())
+            + f"; {summary['poses_per_s']['rig']:.0f} rig poses/s, "
+              f"{summary['poses_per_s']['each_camera']:.0f} one-camera poses/s after detection",
+            file=stream)
     else:
         print(f"tracked 0 of {summary['frames']} frames", file=stream)
     print(f"wrote {output.path}", file=stream)

@@ -46,6 +46,11 @@ def test_sequence_is_tracked_against_its_true_poses(tmp_path, capsys):
                               encoding="utf-8")
     assert list(estimated["reason"]) == ["OK"] * 6
     assert np.loadtxt(out / "poses_tum.txt").shape == (6, 8)
+    assert (out / "track.png").stat().st_size > 10_000
+    for name, alone in report["summary"]["per_camera"].items():  # one view: depth is weaker
+        assert alone["posed"] == 6, (name, alone)
+        assert (report["summary"]["position_error_mm"]["median"]
+                <= alone["position_error_mm"]["median"] <= 5.0), (name, alone)
     raw = tmp_path / "raw"
     assert eval_main(["track", str(seq), "--out", str(raw), "--no-eccentricity",
                       "--no-progress"]) == 0
