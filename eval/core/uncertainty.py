@@ -15,8 +15,10 @@ import os
 import numpy as np
 
 from synth.infra.cli import CLIError
-from measure.stereo.uncertainty import (coverage_summary, detection_sigma, mahalanobis_squared,
-                                 point_covariances, residual_sigma, sigma_summary)
+from measure.stereo.uncertainty import (MINOR_AXIS_EXPONENT, coverage_summary, detection_sigma,
+                                        elongated_pixel_covariance, mahalanobis_squared,
+                                        point_covariances, point_covariances_full,
+                                        residual_sigma, sigma_summary)
 from synth.infra.fileio import atomic_write_bytes, atomic_write_text
 
 #: ``--pixel-sigma``'s default: each detection's σ from the detector (SNR and size) plus what
@@ -62,19 +64,28 @@ def pair_sigmas(mode, uv_left, uv_right, start, rig, detections=None, matches=No
     ``matches``' indices; none: 0) and, for every pair, the extra σ₀ the reprojection residuals
     of the ``start`` points show beyond it (added noise included), scaled by the pair's flux
     as the residuals show (:func:`measure.stereo.uncertainty.residual_sigma`: faint — small,
-    oblique, far — targets' centres scatter more)."""
+    oblique, far — targets' centres scatter more); with the detections' shapes the answer is
+    the ``(N, 4, 4)`` px² covariance of each pair's four coordinates instead, that σ along each
+    ellipse's major axis and σ · elongation^k across it
+    (:func:`measure.stereo.uncertainty.elongated_pixel_covariance`)."""
     n = len(uv_left)
     if mode != AUTO:
         sigma = np.full((n, 2), float(np.hypot(float(mode), noise_px)))
         return sigma, {"source": "stated (--pixel-sigma)", "stated_px": float(mode),
                        "added_noise_px": noise_px, "median_px": float(sigma[0, 0]) if n else None}
     detector = np.zeros((n, 2))
-    flux = None
+    flux = shape = None
     if detections is not None and matches is not None:
         light = np.ones(n)
+        shape = (np.ones((n, 2)), np.zeros((n, 2)))
         for k, (view, index) in enumerate((("left", matches.left), ("right", matches.right))):
             detector[:, k] = detection_sigma(detections[view])[index]
             light = light * np.asarray(detections[view].flux, dtype=np.float64)[index]
+            if getattr(detections[view], "orientation", None) is None:
+                shape = None
+            elif shape is not None:
+                shape[0][:, k] = np.asarray(detections[view].elongation)[index]
+                shape[1][:, k] = np.asarray(detections[view].orientation)[index]
         flux = np.sqrt(light)
     found = residual_sigma(rig, uv_left, uv_right, start, detector, flux=flux)
     sigma0 = found["sigma0_px"] or 0.0
@@ -84,7 +95,15 @@ def pair_sigmas(mode, uv_left, uv_right, start, rig, detections=None, matches=No
     if n and not np.all(sigma > 0):  # exact pixels and a noise-free background
         sigma = np.where(sigma > 0, sigma, np.nan)
     finite = sigma[np.isfinite(sigma)]
-    return sigma, {"source": "detector (SNR and size) + reprojection residuals",
+    anisotropy = None
+    if shape is not None and n:
+        anisotropy = {"minor_axis_exponent": MINOR_AXIS_EXPONENT,
+                      "note": "across each ellipse's minor axis σ · elongation^k",
+                      "median_elongation": float(np.median(shape[0]))}
+        sigma = elongated_pixel_covariance(sigma, *shape)
+    return sigma, {"source": "detector (SNR and size) + reprojection residuals"
+                             + (" + the ellipses' elongation" if anisotropy else ""),
+                   "anisotropy": anisotropy,
                    "detector_median_px": float(np.median(detector)) if n else None,
                    "residual_sigma0_px": found["sigma0_px"],
                    "flux_exponent": found.get("flux_exponent"),
@@ -96,6 +115,9 @@ def pair_sigmas(mode, uv_left, uv_right, start, rig, detections=None, matches=No
 def method_covariances(rig, points_by_method: dict, sigma, rig_covariance=None) -> dict:
     """``{method: PointCovariance}`` of each method's points ``(N, 3)`` (NaN rows stay NaN) with
     the pairs' ``sigma`` ``(N, 2)``."""
+    if np.ndim(sigma) == 3:  # (N, 4, 4): pair_sigmas' covariance of elongated detections
+        return {m: point_covariances_full(rig, points, sigma, rig_covariance)
+                for m, points in points_by_method.items()}
     return {m: point_covariances(rig, points, sigma, rig_covariance)
             for m, points in points_by_method.items()}
 

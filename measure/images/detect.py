@@ -204,6 +204,9 @@ class Detections:
     peak : (N,) largest background-subtracted pixel value.
     snr : (N,) ``flux / (sigma * sqrt(window pixels))``; ``inf`` when ``sigma == 0``.
     elongation : (N,) major/minor axis ratio (>= 1) of the weighted second moments.
+    orientation : (N,) rad, the direction of the major axis of those moments, from +u towards
+        +v, in ``(-π/2, π/2]`` (0 for a round blob; an oblique disk's minor axis is the
+        direction it is foreshortened in).
     quality : (N,) ``(1 / elongation) * snr / (snr + 10)`` in ``[0, 1]`` (see module docs).
     rejected : ``{reason: count}`` for every reason of :data:`REJECTION_REASONS` (zeros included).
     rejected_centers : (M, 2) centroids of the rejected blobs, sorted by ``v`` then ``u``.
@@ -234,6 +237,7 @@ class Detections:
     threshold: float
     labels: np.ndarray | None = None
     threshold_rule: str = "noise"
+    orientation: np.ndarray | None = None
 
     @property
     def n_found(self) -> int:
@@ -486,6 +490,7 @@ class _Measures:
     elongation: np.ndarray
     quality: np.ndarray
     no_weight: np.ndarray
+    orientation: np.ndarray
 
 
 def _measure_blobs(f, window, blobs: _Blobs, bg, sigma) -> _Measures:
@@ -524,6 +529,8 @@ def _measure_blobs(f, window, blobs: _Blobs, bg, sigma) -> _Measures:
         lam2 = np.maximum(half_tr - disc, 0.0)
         elongation = np.sqrt(lam1 / lam2)
         elongation = np.where(np.isfinite(elongation), np.maximum(elongation, 1.0), np.inf)
+        orientation = 0.5 * np.arctan2(2.0 * cuv, cuu - cvv)
+        orientation = np.where(np.isfinite(orientation), orientation, 0.0)
         if sigma > 0:
             snr = flux / (sigma * np.sqrt(np.maximum(n_window, 1)))
         else:
@@ -536,7 +543,7 @@ def _measure_blobs(f, window, blobs: _Blobs, bg, sigma) -> _Measures:
     no_weight = ~(s0 > 0)
     centers[no_weight] = blobs.plain_centroids[no_weight]
     peak[np.isinf(peak)] = np.nan
-    return _Measures(centers, flux, peak, snr, elongation, quality, no_weight)
+    return _Measures(centers, flux, peak, snr, elongation, quality, no_weight, orientation)
 
 
 def _classify(f, blobs: _Blobs, measures: _Measures, border_margin, ghost_ratio,
@@ -694,6 +701,7 @@ def detect_targets(
         peak=_frozen(measures.peak[accepted]),
         snr=_frozen(measures.snr[accepted]),
         elongation=_frozen(measures.elongation[accepted]),
+        orientation=_frozen(measures.orientation[accepted]),
         quality=_frozen(measures.quality[accepted]),
         rejected=rejected,
         rejected_centers=_frozen(centers[rej].astype(np.float64)),

@@ -80,3 +80,20 @@ def test_the_coverage_verdict_says_when_sigma_is_dishonest():
     wrong = coverage_verdict({"coverage_95": 0.0, "n": 496}, {"n_water": {"truth": 1.333}})
     assert "differs from the truth (n_water" in wrong and "--eccentricity" not in wrong
     assert "--eccentricity" in coverage_verdict({"coverage_95": 0.786, "n": 496}, {})
+
+
+def test_elongated_detections_scatter_more_across_their_minor_axis():
+    """``elongated_pixel_covariance``: per view the eigenvectors are the ellipse's axes, σ along
+    the major one and σ · e^k across it; a round detection (e = 1) is isotropic; the views do not
+    correlate. Reference: the rotation written out by hand for one angle."""
+    from measure.stereo.uncertainty import MINOR_AXIS_EXPONENT, elongated_pixel_covariance
+
+    sigma = np.array([[0.01, 0.02]])
+    cov = elongated_pixel_covariance(sigma, [[3.0, 1.0]], [[np.radians(30.0), 1.0]])[0]
+    c, s = np.cos(np.radians(30.0)), np.sin(np.radians(30.0))
+    major, minor = 0.01 ** 2, (0.01 * 3.0 ** MINOR_AXIS_EXPONENT) ** 2
+    expected = np.array([[major * c * c + minor * s * s, (major - minor) * c * s],
+                         [(major - minor) * c * s, major * s * s + minor * c * c]])
+    np.testing.assert_allclose(cov[:2, :2], expected, rtol=1e-12)
+    np.testing.assert_allclose(cov[2:, 2:], 0.02 ** 2 * np.eye(2), rtol=1e-12)
+    assert np.all(cov[:2, 2:] == 0)
