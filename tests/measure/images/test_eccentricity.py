@@ -103,3 +103,38 @@ def test_correction_with_a_known_normal_and_bad_arguments():
         correct_eccentricity(rig, uv[0], uv[1], 2.5, iterations=0)
     empty = correct_eccentricity(rig, np.zeros((0, 2)), np.zeros((0, 2)), 2.5)
     assert empty.triangulation.points.shape == (0, 3)
+
+
+def test_the_ports_transmittance_pulls_the_centroid_inwards():
+    """Behind a flat port the image of a disk is dimmer towards the edge of the field (Fresnel):
+    its intensity centroid, integrated numerically over the disk (a 241 × 241 grid in the disk's
+    plane, each node weighted by its image area — the Jacobian — and by the transmittance of
+    its ray), against the offsets' first-order term ``C · ∇ln T``. Reference: the integral, and
+    the Fresnel equations at normal incidence for the transmittance."""
+    from measure.images.eccentricity import disk_basis, port_transmittance
+
+    rig = paper_rig()
+    camera, port = rig.left, rig.view_port(0)
+    centre = np.array([[650.0, 420.0, 1100.0]])
+    normal = np.array([[np.sin(0.5), 0.0, -np.cos(0.5)]])
+    radius = 10.0
+    on_axis = port_transmittance(camera, port, np.array([camera.K[:2, 2]]))[0]
+    n = port.indices
+    expected = np.prod([1 - ((a - b) / (a + b)) ** 2 for a, b in zip(n[:-1], n[1:])])
+    assert on_axis == pytest.approx(expected, rel=1e-9)
+    u, v = disk_basis(normal)
+    g = np.linspace(-radius, radius, 241)
+    s, t = np.meshgrid(g, g)
+    points = centre[0] + s[..., None] * u[0] + t[..., None] * v[0]
+    uv = project(camera, port, points.reshape(-1, 3)).reshape(241, 241, 2)
+    du, dv = np.gradient(uv, axis=1), np.gradient(uv, axis=0)
+    area = np.abs(du[..., 0] * dv[..., 1] - du[..., 1] * dv[..., 0]) * (s ** 2 + t ** 2 <= radius ** 2)
+    bright = area * port_transmittance(camera, port, uv.reshape(-1, 2)).reshape(241, 241)
+    centre_px = project(camera, port, centre)[0]
+    uniform = np.einsum("ij,ijk->k", area, uv) / area.sum() - centre_px
+    dimmed = np.einsum("ij,ijk->k", bright, uv) / bright.sum() - centre_px
+    offset = outline_centroid_offsets(camera, port, centre, normal, radius)[0]
+    pull = dimmed - uniform
+    assert np.linalg.norm(pull) > 1e-3  # 0.0024 px here, towards the image centre
+    assert pull @ (centre_px - camera.K[:2, 2]) < 0
+    np.testing.assert_allclose(offset, dimmed, atol=0.05 * np.linalg.norm(pull))
