@@ -187,6 +187,8 @@ def main(args) -> int:
                f"views scored; RMS dP {fmt(st['rms_dp_mm'])} mm, max dP "
                f"{fmt(st['max_dp_mm'])} mm, mean dZ {fmt(st['mean_dz_mm'])} mm, Chamfer "
                f"{fmt(st['chamfer_mm'])} mm, F@1mm {fmt(st['fscore_1mm'])}")
+    if not summary_of and report["uncertainty"].get("note", "").startswith("no coverage"):
+        summary += f"; {report['uncertainty']['note'].split(' (')[0]}"
     if summary_of:
         summary += (f"; coverage of the 95 % ellipsoids {fmt(summary_of['coverage']['coverage_95'])}"
                     f" (median σz {fmt(summary_of['sigma']['median_sigma_mm']['z'], 4)} mm)")
@@ -238,10 +240,23 @@ def score_covariances(data, arrays, label, uv, pixel_sigma) -> dict:
     ok = arrays["associated"]
     points = arrays["all_points"]
     sigma, info["pixel_sigma"] = pair_sigmas(pixel_sigma, uv[0], uv[1], points, data.rig)
+    noise = info["pixel_sigma"].get("median_px")
+    if pixel_sigma == AUTO and rig_covariance is None and (noise is None or noise < EXACT_PX):
+        info["note"] = (f"no coverage: the pixels carry no noise (σ from the reprojection "
+                        f"residuals {noise if noise is not None else float('nan'):.2g} px, below "
+                        f"{EXACT_PX:g} px: exact pixels, e.g. a simulator's), so the errors are "
+                        f"rounding and ellipsoids of that size say nothing (--pixel-sigma PX "
+                        f"states a σ)")
+        return info
     covariance = method_covariances(data.rig, {label: points}, sigma, rig_covariance)[label]
     arrays["covariance"] = covariance.total[ok]
     info["summaries"] = {label: uncertainty_summary(arrays["covariance"], arrays["errors"])}
     return info
+
+
+#: A pixel σ (px) from the residuals below this is rounding: the pixels carry no noise (a
+#: detector's σ is 1e-3 px and more; a float32 render's ray positions 1e-4 px).
+EXACT_PX = 1e-9
 
 
 def refuse_method_without_pairs(suite_dir: str, sub_dir: str, method: str) -> None:

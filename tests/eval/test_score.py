@@ -67,8 +67,11 @@ def test_matched_pixels_are_triangulated_with_the_datasets_calibration(scored_ru
     scored = json.loads((out / "report.json").read_text())
     st = scored["methods"]["optical_path"]
     assert st["n"] == len(rows) and scored["association"]["unassociated"] == 0
-    # Exact pixels through the exact model: round-off only.
+    # Exact pixels through the exact model: round-off only — and no ellipsoids of round-off
+    # size whose "coverage" would say σ fails (it read 0.008 here before)
     assert st["rms_dp_mm"] < 1e-8
+    assert st["coverage_95"] is None
+    assert scored["uncertainty"]["note"].startswith("no coverage: the pixels carry no noise")
     # The same pixels with the port absorbed by a pinhole calibration of the dataset's boards
     # (docs/absorbed.md): its virtual frame puts the points tens of mm off (a wider gate keeps
     # each with its target), and the lengths between them err where the optical path's do not.
