@@ -200,6 +200,18 @@ def main(args) -> int:
     else:
         print(summary)
     print(f"wrote {output.path}", file=sys.stderr if args.json else sys.stdout)
+    a = report["association"]
+    if args.pixels and a["points"] and not a["associated"]:
+        # the pixels were triangulated here and none of the points was scored
+        hint = (" --method absorbed puts its points in the pinhole model's virtual frame, tens "
+                "of mm off the targets: give a wider --gate-mm (e.g. 200) and read its length "
+                "errors" if label == "absorbed" else
+                " the pixels do not fit this dataset's calibration (another rig, or left and "
+                "right swapped), or give a wider --gate-mm")
+        log(f"FAIL: none of the {a['points']} points lies within {a['gate_mm']:g} mm of a "
+            f"target (Chamfer {fmt(report['methods'][label]['chamfer_mm'])} mm): nothing was "
+            f"scored;{hint}")
+        return 1
     return 0
 
 

@@ -53,7 +53,8 @@ def test_scoring_a_runs_own_points_reproduces_its_numbers(scored_run, tmp_path, 
 
 
 @pytest.mark.slow
-def test_matched_pixels_are_triangulated_with_the_datasets_calibration(scored_run, tmp_path):
+def test_matched_pixels_are_triangulated_with_the_datasets_calibration(scored_run, tmp_path,
+                                                                        capsys):
     data, _, _ = scored_run
     rows = list(csv.DictReader(open(data / "pixels.csv")))
     pairs = tmp_path / "pairs.csv"
@@ -76,6 +77,11 @@ def test_matched_pixels_are_triangulated_with_the_datasets_calibration(scored_ru
     # (docs/absorbed.md): its virtual frame puts the points tens of mm off (a wider gate keeps
     # each with its target), and the lengths between them err where the optical path's do not.
     out = tmp_path / "score_absorbed"
+    # with a gate narrower than its offset none of them is associated: a fail that says what
+    # to do, not a score of nothing with exit 0
+    assert main(["score", str(data), "--pixels", str(pairs), "--method", "absorbed",
+                 "--gate-mm", "10", "--out", str(tmp_path / "narrow")]) == 1
+    assert "give a wider --gate-mm" in capsys.readouterr().err
     assert main(["score", str(data), "--pixels", str(pairs), "--method", "absorbed",
                  "--gate-mm", "200", "--out", str(out)]) == 0
     absorbed = json.loads((out / "report.json").read_text())["methods"]["absorbed"]
