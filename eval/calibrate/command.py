@@ -279,6 +279,19 @@ def design_domes(args, rig):
     return StereoRig(rig.left, rig.right, pair)
 
 
+def underwater_note(path, calib) -> str | None:
+    """The line that says an ``--intrinsics`` calibration is an underwater one (``calib``:
+    :func:`synth.products.dataset.read_calib` of ``path``) whose port is not used; None for an
+    in-air one."""
+    if not calib["has_port"]:
+        return None
+    housing = getattr(calib["port"], "housing", "port")
+    return (f"note: --intrinsics {path} is an underwater calibration (it holds a {housing}): its "
+            f"cameras' intrinsics and stereo pose are used, its {housing} and the {housing}'s "
+            f"part of its covariance are not (the housing is estimated here, from the design "
+            f"options)")
+
+
 def _in_air(path, log):
     """``(rig, air calibration or None, boards or None, covariance or None)`` from
     ``--intrinsics``: a boards folder (calibrated here) or a calibration file (its covariance
@@ -297,7 +310,19 @@ def _in_air(path, log):
         air = calibrate_in_air(boards.board, detections, boards.calib["size"])
         return air.rig, air, boards, air.covariance
     calib = read_calib(path)
-    return calib["rig"], None, None, calib.get("covariance")
+    covariance = calib.get("covariance")
+    if calib["has_port"]:  # said, not silently ignored: only its cameras are used
+        log(underwater_note(path, calib))
+        if covariance is not None:  # the cameras' part of it: the port's is not a prior here
+            import numpy as np
+
+            from measure.stereo.rig_covariance import RigCovariance
+
+            keep = [i for i, n in enumerate(covariance.names) if not n.startswith("port.")
+                    and ".dome_center" not in n]
+            covariance = (RigCovariance([covariance.names[i] for i in keep],
+                                        covariance.matrix[np.ix_(keep, keep)]) if keep else None)
+    return calib["rig"], None, None, covariance
 
 
 def main(args) -> int:
@@ -601,6 +626,12 @@ def _calibrate_photos(args, output, log, free, start) -> int:
         residuals = housing.residuals
     report["worst_corners"] = trust.worst_corners(residuals, names)
     report["warnings"] = trust.warnings_for(report)
+    if args.intrinsics and os.path.isfile(args.intrinsics):
+        from synth.products.dataset import read_calib
+
+        said = underwater_note(args.intrinsics, read_calib(args.intrinsics))
+        if said:
+            report["warnings"].append(said[len("note: "):])
     edge = trust.unseen_edge(board, detections, (0, 1))
     if edge:
         report["warnings"].append(edge)

@@ -244,8 +244,13 @@ def test_bad_photo_folders(drawn, tmp_path, capsys):
     from synth.products.dataset import write_calib
     from synth.scene.rig import paper_rig
     other = tmp_path / "other.yaml"
-    write_calib(other, paper_rig(size=(640, 480)))
+    write_calib(other, paper_rig(size=(640, 480)), has_port=False)  # an in-air calibration
     _fails(["calibrate", src, "--intrinsics", str(other)] + board, "image size", capsys)
+    # an underwater calibration as the in-air one: read (its port is not used; said where the
+    # calibration goes on, in its progress and its report), and refused here for its size
+    water = tmp_path / "water.yaml"
+    write_calib(water, paper_rig(size=(640, 480)))
+    _fails(["calibrate", src, "--intrinsics", str(water)] + board, "image size", capsys)
     # the folder of a calibration instead of its file: the file is named
     os.makedirs(tmp_path / "cal_air")
     write_calib(tmp_path / "cal_air" / "calib.yaml", paper_rig(size=SIZE))
