@@ -117,6 +117,10 @@ def surface_inputs(config: RunConfig, log):
     from eval.run.inputs import load_run_scene, measurement_calibration, read_run_dataset
 
     spec = load_run_scene(config)
+    if spec.extra_cameras:  # never the first two of them silently
+        raise CLIError(f"{config.scene}: a surface scene of {len(spec.all_cameras)} cameras; "
+                       f"dense matching is a method of two views (keep two sensors; scenes of "
+                       f"more cameras are measured on disk targets)")
     rig, rig_covariance = measurement_calibration(config, spec)
     if config.from_dir:
         data = read_run_dataset(config, spec)
