@@ -340,7 +340,7 @@ def main(args) -> int:
                                     "eccentricity correction's second solve; each camera: "
                                     "one view, one solve"}})
     report = {"dataset": args.dataset, "sequence": {k: manifest.get(k) for k in (
-        "approach_mm", "yaw_deg", "frames", "fps", "object", "image_size")},
+        "approach_mm", "yaw_deg", "trajectory", "frames", "fps", "object", "image_size")},
         "pixel_sigma_px": args.pixel_sigma, "gate_px": args.gate,
         "eccentricity": bool(args.eccentricity), "summary": summary,
         "frames": rows}
@@ -348,8 +348,9 @@ def main(args) -> int:
     with output.staged() as tmp:
         from scipy.spatial.transform import Rotation
 
-        fps = float(manifest.get("fps") or 10.0)
-        times = np.asarray(frames, dtype=float) / fps
+        # the sequence's own time stamps (a --trajectory sequence's need not be regular)
+        times = np.atleast_1d(np.genfromtxt(os.path.join(args.dataset, "poses.csv"),
+                                            delimiter=",", names=True)["time_s"]).astype(float)
         with open(os.path.join(tmp, "poses.csv"), "w") as fh:
             fh.write("frame,time_s,tx_mm,ty_mm,tz_mm,qx,qy,qz,qw,sigma_t_mm,rms_px,"
                      "observations,reason\n")

@@ -1,6 +1,7 @@
-"""``python -m synth sequence SCENE --approach FROM,TO --frames N --out DIR [--yaw DEG]
-[--size-mm 1000] [--marker-radius-mm 10] [--fps 10] [--spp N] [--seed S]``: a docking frame
-approaching the scene's rig, rendered frame by frame with its true pose
+"""``python -m synth sequence SCENE (--approach FROM,TO --frames N [--yaw DEG] [--fps 10] |
+--trajectory FILE) --out DIR [--size-mm 1000] [--marker-radius-mm 10] [--spp N] [--seed S]``: a
+docking frame approaching the scene's rig, or along a TUM trajectory or ``poses.csv``, rendered
+frame by frame with its true pose
 (:mod:`synth.products.sequence`; ``python -m eval track`` follows it)."""
 
 from __future__ import annotations
@@ -29,10 +30,16 @@ def add_parser(subparsers) -> None:
                                                "frame by frame with its true pose")
     add_scene_argument(p)
     add_out_option(p, "synth sequence")
-    p.add_argument("--approach", type=approach, required=True, metavar="FROM,TO",
+    p.add_argument("--approach", type=approach, default=None, metavar="FROM,TO",
                    help="the frame's distance (mm, along the port normal from the left camera) "
-                        "in the first and the last frame")
-    p.add_argument("--frames", type=positive_int, required=True, help="number of frames")
+                        "in the first and the last frame (or --trajectory)")
+    p.add_argument("--trajectory", default=None, metavar="FILE",
+                   help="instead of --approach: the object's pose per frame, a TUM trajectory "
+                        "(timestamp tx ty tz qx qy qz qw, metres; the reference frame = the left "
+                        "camera's) or a poses.csv of synth sequence (mm); its time stamps are "
+                        "the frames' (--frames, --yaw and --fps do not apply)")
+    p.add_argument("--frames", type=positive_int, default=None,
+                   help="number of frames (with --approach)")
     p.add_argument("--yaw", type=float, default=0.0, metavar="DEG",
                    help="the frame turns about y from 0 to this angle (degrees; default 0)")
     p.add_argument("--size-mm", type=positive_float, default=1000.0,
@@ -57,6 +64,22 @@ def main(args) -> int:
     from synth.products import sequence as s
     from synth.scene import load_scene, parse_defines
 
+    trajectory = None
+    if (args.approach is None) == (args.trajectory is None):
+        raise CLIError("give --approach FROM,TO with --frames N, or --trajectory FILE (one of "
+                       "them)")
+    if args.trajectory is not None:
+        for option, value in (("--frames", args.frames), ("--fps", args.fps),
+                              ("--yaw", args.yaw or None)):
+            if value is not None:
+                raise CLIError(f"{option} does not apply with --trajectory (the file gives "
+                               f"every pose and its time)")
+        try:
+            trajectory = (args.trajectory, *s.read_trajectory(args.trajectory))
+        except ValueError as exc:
+            raise CLIError(f"--trajectory {exc}") from None
+    elif args.frames is None:
+        raise CLIError("--approach needs --frames N (the number of frames)")
     if abs(args.yaw) >= 60:
         raise CLIError(f"--yaw {args.yaw:g}: at most 60 degrees in magnitude (the markers "
                        f"face the cameras)")
@@ -68,13 +91,14 @@ def main(args) -> int:
             size_mm=args.size_mm,
             marker_radius_mm=args.marker_radius_mm or s.DEFAULT_MARKER_RADIUS_MM,
             fps=args.fps or s.DEFAULT_FPS, spp=args.spp, seed=args.seed, variant=args.variant,
-            progress=not args.no_progress, adaptive=not args.full_film)
+            progress=not args.no_progress, adaptive=not args.full_film, trajectory=trajectory)
     except ValueError as exc:
         raise CLIError(f"{args.scene}: {exc}") from None
     w, h = manifest["image_size"]
+    path = (f"from {args.approach[0]:g} to {args.approach[1]:g} mm" if trajectory is None
+            else f"along {args.trajectory}")
     print(f"wrote {args.out}: {manifest['frames']} frames of a docking frame "
-          f"({manifest['object']['size_mm']:g} mm) from {args.approach[0]:g} to "
-          f"{args.approach[1]:g} mm, {w}x{h} px, {manifest['spp']} spp with "
+          f"({manifest['object']['size_mm']:g} mm) {path}, {w}x{h} px, {manifest['spp']} spp with "
           f"{manifest['variant']}: render {manifest['seconds']['render']:.1f} s, total "
           f"{manifest['seconds']['total']:.1f} s; true poses in poses.csv and poses_tum.txt")
     return 0

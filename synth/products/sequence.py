@@ -3,7 +3,8 @@
 :mod:`measure.stereo.pose`).
 
 The object is the docking frame of :func:`synth.scene.layouts.docking_frame` (12 self-luminous
-disk markers facing the cameras). It approaches the rig along the rig's depth axis (the port
+disk markers facing the cameras). It follows the poses of a trajectory file
+(:func:`read_trajectory`), or approaches the rig along the rig's depth axis (the port
 normal; for domes the left optical axis): frame k of N has its origin at ``z_k`` mm along that
 axis from the left camera's centre, ``z`` running linearly from ``FROM`` to ``TO``, and its axes
 turned by ``yaw_k`` about the reference y axis, running linearly from 0 to ``yaw_deg``. The
@@ -53,7 +54,7 @@ PIXELS_HEADER = ["frame", "id", "u_left", "v_left", "u_right", "v_right"]
 OBJECT_HEADER = ["id", "x_mm", "y_mm", "z_mm"]
 
 
-def trajectory(spec: SceneSpec, approach, frames: int, yaw_deg: float = 0.0):
+def approach_poses(spec: SceneSpec, approach, frames: int, yaw_deg: float = 0.0):
     """The true poses ``(R (N, 3, 3), t (N, 3))`` of the approach (module docs)."""
     start, end = (float(v) for v in approach)
     axis = spec.rig.depth_axis
@@ -64,10 +65,54 @@ def trajectory(spec: SceneSpec, approach, frames: int, yaw_deg: float = 0.0):
     return R, t
 
 
-def write_poses(directory, R, t, fps: float) -> None:
-    """``poses.csv`` and ``poses_tum.txt`` (module docs) of poses ``R (N, 3, 3)``, ``t (N, 3)``."""
+def read_trajectory(path):
+    """``(times (N,) s, R (N, 3, 3), t (N, 3) mm)`` of a trajectory file: a TUM trajectory
+    (``timestamp tx ty tz qx qy qz qw`` per line, **metres**, ``#`` comments; what
+    ``poses_tum.txt`` holds) or a ``poses.csv`` (module docs, mm), told apart by its first
+    line; the object's pose in the reference frame. ValueError naming the file and the line
+    for anything else (a quaternion that is not a rotation, times that do not increase)."""
+    try:
+        with open(path, encoding="utf-8") as fh:
+            lines = fh.read().splitlines()
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ValueError(f"{path}: cannot be read ({exc})") from None
+    if lines and lines[0].startswith("frame,"):
+        frames, R, t = read_poses(path)
+        data = np.genfromtxt(path, delimiter=",", names=True, ndmin=1)
+        times = np.asarray(data["time_s"], dtype=float)
+    else:
+        rows = []
+        for number, line in enumerate(lines, 1):
+            if not line.strip() or line.lstrip().startswith("#"):
+                continue
+            try:
+                values = [float(v) for v in line.split()]
+            except ValueError:
+                values = []
+            if len(values) != 8 or not np.all(np.isfinite(values)):
+                raise ValueError(f"{path}: line {number}: expected 8 numbers (a TUM trajectory: "
+                                 f"timestamp tx ty tz qx qy qz qw, metres), got {line.strip()!r}")
+            rows.append(values)
+        if not rows:
+            raise ValueError(f"{path}: no poses (a TUM trajectory or a poses.csv)")
+        rows = np.array(rows)
+        norm = np.linalg.norm(rows[:, 4:], axis=1)
+        if np.any(np.abs(norm - 1.0) > 1e-3):
+            bad = int(np.argmax(np.abs(norm - 1.0)))
+            raise ValueError(f"{path}: pose {bad}: the quaternion's norm is {norm[bad]:.6g}, "
+                             f"not 1")
+        times, t = rows[:, 0], rows[:, 1:4] * 1000.0
+        R = Rotation.from_quat(rows[:, 4:]).as_matrix()
+    if np.any(np.diff(times) <= 0):
+        raise ValueError(f"{path}: the time stamps do not increase")
+    return times, R, t
+
+
+def write_poses(directory, R, t, fps: float, times=None) -> None:
+    """``poses.csv`` and ``poses_tum.txt`` (module docs) of poses ``R (N, 3, 3)``, ``t (N, 3)``
+    at ``times`` (s; default frame k at k / ``fps``)."""
     q = Rotation.from_matrix(R).as_quat()  # x, y, z, w
-    times = np.arange(len(t)) / fps
+    times = np.arange(len(t)) / fps if times is None else np.asarray(times, dtype=float)
     with open(os.path.join(directory, "poses.csv"), "w", newline="") as fh:
         writer = csv.writer(fh)
         writer.writerow(POSES_HEADER)
@@ -122,23 +167,28 @@ def check_marker_spacing(object_points: np.ndarray, marker_radius_mm: float) -> 
 def check_markers_in_view(rig, pixels, approach) -> None:
     """ValueError naming the first frame in which no camera sees
     :data:`MIN_MARKERS_IN_VIEW` markers inside its image (``pixels``: per frame ``(views, M,
-    2)`` px, the Fermat simulator's; NaN where there is none)."""
+    2)`` px, the Fermat simulator's; NaN where there is none). ``approach``: ``(FROM, TO)``
+    mm, or the trajectory file's path, for the message."""
+    what = (f"--trajectory {approach}" if isinstance(approach, (str, os.PathLike))
+            else f"--approach {approach[0]:g},{approach[1]:g}")
     for k, uv in enumerate(pixels):
         seen = [int(camera.in_image(uv[v]).sum()) for v, camera in enumerate(rig.cameras)]
         if max(seen) < MIN_MARKERS_IN_VIEW:
             raise ValueError(f"frame {k}: the cameras see {'/'.join(map(str, seen))} markers "
                              f"inside their images, fewer than the {MIN_MARKERS_IN_VIEW} a pose "
-                             f"needs (--approach {approach[0]:g},{approach[1]:g} goes beyond "
-                             f"the field of view: a larger end distance or a smaller --size-mm)")
+                             f"needs ({what} goes beyond the field of view: a larger "
+                             f"distance or a smaller --size-mm)")
 
 
 def write_sequence(spec: SceneSpec, out_dir, approach, frames: int, *,
                    yaw_deg: float = 0.0, size_mm: float = 1000.0,
                    marker_radius_mm: float = DEFAULT_MARKER_RADIUS_MM, fps: float = DEFAULT_FPS,
                    spp: int | None = None, seed: int | None = None, variant=None,
-                   progress: bool = True, adaptive: bool = True) -> dict:
+                   progress: bool = True, adaptive: bool = True, trajectory=None) -> dict:
     """Render the sequence into ``out_dir`` (module docs); returns the manifest. ValueError
-    for a request that cannot work (a marker not in the water, fewer than one frame)."""
+    for a request that cannot work (a marker not in the water, fewer than one frame).
+    ``trajectory``: ``(path, times, R, t)`` of :func:`read_trajectory` — the poses to render
+    instead of the approach (``approach``, ``frames``, ``yaw_deg`` and ``fps`` then unused)."""
     from tqdm import tqdm
 
     from synth.products.dataset import write_calib
@@ -147,13 +197,20 @@ def write_sequence(spec: SceneSpec, out_dir, approach, frames: int, *,
     from synth.scene.write import scene_xml
 
     t_start = time.perf_counter()
+    if trajectory is not None:
+        frames = len(trajectory[3])
     if frames < 1:
         raise ValueError(f"--frames must be at least 1, got {frames}")
     spp = spec.spp if spp is None else int(spp)
     seed = spec.seed if seed is None else int(seed)
     obj = docking_frame(size_mm)
     check_marker_spacing(obj, marker_radius_mm)
-    R, t = trajectory(spec, approach, frames, yaw_deg)
+    if trajectory is None:
+        R, t = approach_poses(spec, approach, frames, yaw_deg)
+        times, source = None, None
+    else:
+        source, times, R, t = trajectory
+        frames, approach, yaw_deg = len(t), None, None
     markers = np.einsum("fij,mj->fmi", R, obj) + t[:, None, :]
     port = spec.rig.port
     for k in range(frames):
@@ -161,11 +218,12 @@ def write_sequence(spec: SceneSpec, out_dir, approach, frames: int, *,
         if not inside.all():
             raise ValueError(f"frame {k}: marker {int(np.flatnonzero(~inside)[0])} at "
                              f"{np.round(markers[k][~inside][0], 1).tolist()} mm is not in the "
-                             f"water (--approach starts or ends too near)")
+                             f"water (" + ("--approach starts or ends too near)" if source is None
+                                           else f"--trajectory {source} comes too near)"))
     rig = spec.rig
     pixels = [np.stack([project(c, rig.view_port(v), markers[k])
                         for v, c in enumerate(rig.cameras)]) for k in range(frames)]
-    check_markers_in_view(rig, pixels, approach)
+    check_markers_in_view(rig, pixels, approach if source is None else source)
     output = OutputDir(out_dir, COMMAND).claim()
     check_render_request(spec, spp, seed, poses=frames, adaptive=adaptive)
     normals = np.einsum("fij,j->fi", R, [0.0, 0.0, -1.0])
@@ -201,7 +259,7 @@ def write_sequence(spec: SceneSpec, out_dir, approach, frames: int, *,
             writer.writerow(OBJECT_HEADER)
             for i, p in enumerate(obj):
                 writer.writerow([i, *(repr(float(v)) for v in p)])
-        write_poses(tmp, R, t, fps)
+        write_poses(tmp, R, t, fps, times)
         with open(os.path.join(tmp, "pixels.csv"), "w", newline="") as fh:
             writer = csv.writer(fh)
             writer.writerow(PIXELS_HEADER)
@@ -217,8 +275,9 @@ def write_sequence(spec: SceneSpec, out_dir, approach, frames: int, *,
             "scene": {"path": spec.path, "sha256": spec.sha256, "params": spec.params},
             "object": {"kind": "docking_frame", "size_mm": size_mm,
                        "marker_radius_mm": marker_radius_mm, "markers": len(obj)},
-            "approach_mm": [float(v) for v in approach], "yaw_deg": yaw_deg,
-            "frames": frames, "fps": fps, "spp": spp, "seed": seed,
+            "approach_mm": None if approach is None else [float(v) for v in approach],
+            "yaw_deg": yaw_deg, "trajectory": None if source is None else os.path.abspath(source),
+            "frames": frames, "fps": fps if source is None else None, "spp": spp, "seed": seed,
             "variant": stats[0]["variant"], "image_size": list(spec.size),
             "png_scales": scales, "adaptive": adaptive,
             "seconds": {"render": render_seconds, "total": time.perf_counter() - t_start},
@@ -229,5 +288,5 @@ def write_sequence(spec: SceneSpec, out_dir, approach, frames: int, *,
     return manifest
 
 
-__all__ = ["COMMAND", "DEFAULT_MARKER_RADIUS_MM", "read_poses", "trajectory", "write_poses",
-           "write_sequence", "write_tum"]
+__all__ = ["COMMAND", "DEFAULT_MARKER_RADIUS_MM", "approach_poses", "read_poses",
+           "read_trajectory", "write_poses", "write_sequence", "write_tum"]

@@ -103,3 +103,40 @@ def test_sequences_that_cannot_be_tracked_are_refused(tmp_path, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "frame 0" in err[0] and "field of view" in err[0], err
     assert not (tmp_path / "overlap").exists() and not (tmp_path / "wide").exists()
+
+
+@pytest.mark.slow
+def test_a_sequence_along_a_given_trajectory(tmp_path, capsys):
+    """``--trajectory``: the TUM file of one sequence rendered again gives the same poses (to the
+    file's 1e-9 m), its own irregular time stamps, and a track of every frame; options that the
+    file replaces are refused."""
+    first = tmp_path / "first"
+    assert synth_main(["sequence", *SEQUENCE[:5], "--approach", "1800,1300", "--frames", "3",
+                       "--yaw", "4", "--spp", "16", "--marker-radius-mm", "15", "--out",
+                       str(first), "--no-progress"]) == 0
+    tum = np.loadtxt(first / "poses_tum.txt")
+    tum[:, 0] = [0.0, 0.25, 1.0]  # irregular times
+    path = tmp_path / "moved.txt"
+    np.savetxt(path, tum, fmt="%.12f", header="timestamp tx ty tz qx qy qz qw")
+    again = tmp_path / "again"
+    assert synth_main(["sequence", *SEQUENCE[:5], "--trajectory", str(path), "--spp", "16",
+                       "--marker-radius-mm", "15", "--out", str(again), "--no-progress"]) == 0
+    a = np.genfromtxt(first / "poses.csv", delimiter=",", names=True)
+    b = np.genfromtxt(again / "poses.csv", delimiter=",", names=True)
+    for column in ("tx_mm", "ty_mm", "tz_mm", "qx", "qy", "qz", "qw"):
+        np.testing.assert_allclose(b[column], a[column], atol=1e-6)
+    np.testing.assert_allclose(b["time_s"], [0.0, 0.25, 1.0])
+    out = tmp_path / "track"
+    assert eval_main(["track", str(again), "--out", str(out), "--no-progress"]) == 0
+    np.testing.assert_allclose(np.loadtxt(out / "poses_tum.txt")[:, 0], [0.0, 0.25, 1.0])
+    capsys.readouterr()
+    for extra in (["--frames", "3"], ["--yaw", "5"], ["--approach", "1800,1300"]):
+        assert synth_main(["sequence", *SEQUENCE[:5], "--trajectory", str(path), *extra,
+                           "--out", str(tmp_path / "no"), "--no-progress"]) == 2
+    bad = tmp_path / "bad.txt"
+    bad.write_text("0 0 0 1.5 0 0 0 2\n")
+    assert synth_main(["sequence", *SEQUENCE[:5], "--trajectory", str(bad), "--out",
+                       str(tmp_path / "no"), "--no-progress"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 4 and "norm is 2" in err[-1], err
+    assert not (tmp_path / "no").exists()
