@@ -84,6 +84,11 @@ class DomePort(ValueEquality):
         values.update(changes)
         return DomePort(**values)
 
+    def transmittance(self, camera, uv) -> None:
+        """Not modelled for a dome (None): its rays cross the glass near normal incidence when
+        the camera sits near the centre, so the Fresnel gradient a flat port has is small."""
+        return None
+
     def check_camera(self, center, name: str = "camera") -> None:
         """Raise ``ValueError`` unless a camera centre lies strictly inside the inner sphere."""
         distance = float(np.linalg.norm(np.asarray(center, dtype=float) - self.center))

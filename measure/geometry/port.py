@@ -217,6 +217,28 @@ class FlatPort(RigPort, ValueEquality):
     def refracts(self) -> bool:
         return len(set(self.indices)) > 1
 
+    def transmittance(self, camera, uv) -> np.ndarray | None:
+        """``(N,)``: the fraction of light the port's interfaces pass along the rays of pixels
+        ``uv`` ``(N, 2)`` of ``camera`` (this port's frame): the product over its interfaces of
+        the unpolarized Fresnel transmittance ``1 − (R_s + R_p) / 2`` at each interface's
+        incidence angle (Snell's law from the ray's angle to the normal; multiple reflections
+        inside the glass left out). 0 beyond total internal reflection; None for a port that
+        bends no ray (every index the same: nothing is reflected)."""
+        if not self.refracts:
+            return None
+        d = camera.rays(np.asarray(uv, dtype=np.float64).reshape(-1, 2))
+        cos_i = np.abs(d @ self.normal) / np.linalg.norm(d, axis=1)
+        total = np.ones_like(cos_i)
+        for n1, n2 in zip(self.indices[:-1], self.indices[1:]):
+            sin_t = n1 / n2 * np.sqrt(np.maximum(0.0, 1.0 - cos_i ** 2))
+            cos_t = np.sqrt(np.maximum(0.0, 1.0 - sin_t ** 2))
+            with np.errstate(invalid="ignore", divide="ignore"):
+                rs = ((n1 * cos_i - n2 * cos_t) / (n1 * cos_i + n2 * cos_t)) ** 2
+                rp = ((n1 * cos_t - n2 * cos_i) / (n1 * cos_t + n2 * cos_i)) ** 2
+            total = total * np.where(sin_t < 1.0, 1.0 - 0.5 * (rs + rp), 0.0)
+            cos_i = cos_t
+        return total
+
     # the port interface (RigPort) ---------------------------------------------------------
     kind = "flat"
     housing = "FLATPORT"

@@ -16,9 +16,9 @@ uniformly bright: each interface transmits the unpolarized Fresnel fraction of i
 angle, which falls towards the edge of the field, so the intensity centroid sits nearer the image
 centre. To first order it moves by ``C · ∇ln T`` (``C`` the 2 × 2 second central moments of the
 outline's image, from the same polygon; ``∇ln T`` the gradient in pixels of the log of the
-port's transmittance at the centre's pixel, :func:`port_transmittance`): 0.0011 px inward for the
-10 mm markers of a docking frame at 1.14 m near the edge of the paper's field, 1e-4 px for its
-2.5 mm targets at 1 m.
+port's transmittance at the centre's pixel, the port's ``transmittance``; a dome's is not
+modelled): 0.0011 px inward for the 10 mm markers of a docking frame at 1.14 m near the edge
+of the paper's field, 1e-4 px for its 2.5 mm targets at 1 m.
 
 Correction (:func:`correct_eccentricity`): triangulate, estimate each target's normal from its
 neighbours (a plane through its ``k`` nearest triangulated targets) or take a given one, predict
@@ -86,33 +86,14 @@ def outline_centroid_offsets(camera: Camera, port: FlatPort | None, centres, nor
         iyy = (cross * (y * y + y * y1 + y1 * y1)).sum(axis=1) / (12.0 * area) - cy * cy
         ixy = ((cross * (x * y1 + 2 * x * y + 2 * x1 * y1 + x1 * y)).sum(axis=1)
                / (24.0 * area) - cx * cy)
-    if isinstance(port, FlatPort) and len(set(port.indices)) > 1:
-        steps = np.array([[1.0, 0.0], [-1.0, 0.0], [0.0, 1.0], [0.0, -1.0]])
-        around = (centre_px[:, None, :] + steps[None]).reshape(-1, 2)
-        log_t = np.log(port_transmittance(camera, port, around)).reshape(n, 4)
+    steps = np.array([[1.0, 0.0], [-1.0, 0.0], [0.0, 1.0], [0.0, -1.0]])
+    around = (centre_px[:, None, :] + steps[None]).reshape(-1, 2)
+    transmittance = None if port is None else port.transmittance(camera, around)
+    if transmittance is not None:
+        log_t = np.log(transmittance).reshape(n, 4)
         gx, gy = 0.5 * (log_t[:, 0] - log_t[:, 1]), 0.5 * (log_t[:, 2] - log_t[:, 3])
         cx, cy = cx + ixx * gx + ixy * gy, cy + ixy * gx + iyy * gy
     return np.column_stack([cx, cy])
-
-
-def port_transmittance(camera: Camera, port: FlatPort, uv) -> np.ndarray:
-    """``(N,)``: the fraction of light a flat port's interfaces pass along the rays of pixels
-    ``uv`` ``(N, 2)``: the product over its interfaces of the unpolarized Fresnel
-    transmittance ``1 − (R_s + R_p) / 2`` at each interface's incidence angle (Snell's law from
-    the ray's angle to the normal; multiple reflections inside the glass left out). 0 beyond
-    total internal reflection."""
-    d = camera.rays(np.asarray(uv, dtype=np.float64).reshape(-1, 2))
-    cos_i = np.abs(d @ port.normal) / np.linalg.norm(d, axis=1)
-    total = np.ones_like(cos_i)
-    for n1, n2 in zip(port.indices[:-1], port.indices[1:]):
-        sin_t = n1 / n2 * np.sqrt(np.maximum(0.0, 1.0 - cos_i ** 2))
-        cos_t = np.sqrt(np.maximum(0.0, 1.0 - sin_t ** 2))
-        with np.errstate(invalid="ignore", divide="ignore"):
-            rs = ((n1 * cos_i - n2 * cos_t) / (n1 * cos_i + n2 * cos_t)) ** 2
-            rp = ((n1 * cos_t - n2 * cos_i) / (n1 * cos_t + n2 * cos_i)) ** 2
-        total = total * np.where(sin_t < 1.0, 1.0 - 0.5 * (rs + rp), 0.0)
-        cos_i = cos_t
-    return total
 
 
 def local_normals(points, k: int = NORMAL_NEIGHBOURS, toward=(0.0, 0.0, 0.0)) -> np.ndarray:
@@ -188,4 +169,4 @@ def correct_eccentricity(rig: StereoRig, uv_left, uv_right, radius_mm, method: s
 
 
 __all__ = ["EccentricityCorrection", "OUTLINE_POINTS", "correct_eccentricity", "disk_basis", "local_normals",
-           "outline_centroid_offsets", "port_transmittance"]
+           "outline_centroid_offsets"]

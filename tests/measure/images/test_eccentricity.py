@@ -111,14 +111,14 @@ def test_the_ports_transmittance_pulls_the_centroid_inwards():
     plane, each node weighted by its image area — the Jacobian — and by the transmittance of
     its ray), against the offsets' first-order term ``C · ∇ln T``. Reference: the integral, and
     the Fresnel equations at normal incidence for the transmittance."""
-    from measure.images.eccentricity import disk_basis, port_transmittance
+    from measure.images.eccentricity import disk_basis
 
     rig = paper_rig()
     camera, port = rig.left, rig.view_port(0)
     centre = np.array([[650.0, 420.0, 1100.0]])
     normal = np.array([[np.sin(0.5), 0.0, -np.cos(0.5)]])
     radius = 10.0
-    on_axis = port_transmittance(camera, port, np.array([camera.K[:2, 2]]))[0]
+    on_axis = port.transmittance(camera, np.array([camera.K[:2, 2]]))[0]
     n = port.indices
     expected = np.prod([1 - ((a - b) / (a + b)) ** 2 for a, b in zip(n[:-1], n[1:])])
     assert on_axis == pytest.approx(expected, rel=1e-9)
@@ -129,7 +129,7 @@ def test_the_ports_transmittance_pulls_the_centroid_inwards():
     uv = project(camera, port, points.reshape(-1, 3)).reshape(241, 241, 2)
     du, dv = np.gradient(uv, axis=1), np.gradient(uv, axis=0)
     area = np.abs(du[..., 0] * dv[..., 1] - du[..., 1] * dv[..., 0]) * (s ** 2 + t ** 2 <= radius ** 2)
-    bright = area * port_transmittance(camera, port, uv.reshape(-1, 2)).reshape(241, 241)
+    bright = area * port.transmittance(camera, uv.reshape(-1, 2)).reshape(241, 241)
     centre_px = project(camera, port, centre)[0]
     uniform = np.einsum("ij,ijk->k", area, uv) / area.sum() - centre_px
     dimmed = np.einsum("ij,ijk->k", bright, uv) / bright.sum() - centre_px
