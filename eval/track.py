@@ -8,9 +8,12 @@ frame-to-frame translation (constant velocity), puts it (the forward model throu
 an optimal assignment, :func:`scipy.optimize.linear_sum_assignment`, within ``--gate`` px);
 the pose comes from both views jointly (:func:`measure.stereo.pose.estimate_pose`, with its
 covariance); each camera's pose alone, through its own port on the same pixels, is scored
-beside it. The track locks on at the first frame's **true** pose (a docking run starts from
-a known approach): no search over the markers' identities is done. A frame without a pose
-keeps the last pose for the next prediction.
+beside it. The track locks on from the first frame's detections with no guess
+(:func:`measure.stereo.lockon.lock_on`: the detections matched across the views, triangulated and
+registered to the object's shape; a frame where that fails is ``NOT_LOCKED`` and the next one
+tries again); an object symmetric under turns (the docking frame under quarter turns) takes
+the turn nearest upright. ``--lock-on truth`` starts at the first frame's true pose instead. A
+frame without a pose keeps the last pose for the next prediction.
 
 Writes to ``--out``: ``poses.csv`` (the estimated poses, the columns of the sequence's
 ``poses.csv`` plus ``sigma_t_mm`` = sqrt(trace) of the position covariance, ``rms_px``,
@@ -59,6 +62,11 @@ def add_parser(subparsers):
                    help="correct each detection for its disk's eccentricity, predicted from the "
                         "pose (the markers' normal and radius are known; default on); "
                         "--no-eccentricity: the raw centroids")
+    p.add_argument("--lock-on", choices=("detect", "truth"), default="detect",
+                   help="how the track starts: detect (default) — the object found from the "
+                        "first frame's detections by its shape, no guess (a symmetric object "
+                        "takes the turn nearest upright); truth — at the first frame's true "
+                        "pose")
     add_out_option(p, COMMAND, default="out/track")
     add_json_option(p)
     add_progress_option(p)
@@ -224,6 +232,7 @@ def main(args) -> int:
     from measure import detect_targets
     from measure.geometry.projection import project
     from measure.reasons import Reason
+    from measure.stereo.lockon import lock_on
     from measure.stereo.multiview import View
     from measure.stereo.pose import estimate_pose, pinhole_pose, rotation_error
     from measure.stereo.uncertainty import CHI2_3_95, mahalanobis_squared
@@ -240,28 +249,49 @@ def main(args) -> int:
                        f"eccentricity correction needs (--no-eccentricity measures the raw "
                        f"centroids)")
     output = OutputDir(args.out, COMMAND).claim()
-    R_prev, t_prev = R_true[0], t_true[0]  # locked on at the first frame's true pose
+    if args.lock_on == "truth":
+        R_prev, t_prev = R_true[0], t_true[0]  # locked on at the first frame's true pose
+    else:
+        R_prev = t_prev = None  # locked on from the detections (measure.stereo.lockon)
+    lock = None
     velocity = np.zeros(3)  # mm per frame, of the last two poses
     estimates, rows = [], []
-    seconds = {"detect": 0.0, "pose": 0.0, "pose_per_camera": 0.0}
+    seconds = {"detect": 0.0, "lock_on": 0.0, "pose": 0.0, "pose_per_camera": 0.0}
     for k, frame in enumerate(frames):
         pixels = np.full((2, obj.shape[0], 2), np.nan)
-        detected, expected = [], 0
-        for v, name in enumerate(("left", "right")):
+        found = []
+        for name in VIEW_NAMES:
             path = os.path.join(args.dataset, "frames", f"{int(frame):04d}_{name}.png")
             image = cv2.imread(path, cv2.IMREAD_ANYDEPTH)
             if image is None:
                 raise CLIError(f"{path}: missing or not an image OpenCV can read")
             t0 = time.perf_counter()
-            centres = detect_targets(image).centers
+            found.append(detect_targets(image).centers)
             seconds["detect"] += time.perf_counter() - t0
-            detected.append(int(centres.shape[0]))
+        detected, expected = [int(c.shape[0]) for c in found], 0
+        if R_prev is None:  # not locked on yet: the object's identities from its shape
+            t0 = time.perf_counter()
+            attempt = lock_on(rig, obj, found[0], found[1])
+            seconds["lock_on"] += time.perf_counter() - t0
+            log(f"frame {int(frame)}: lock-on "
+                + (attempt.reason if attempt.reason else
+                   f"{attempt.assigned} markers, fit RMS {attempt.rms_mm:.3g} mm, "
+                   f"{attempt.ambiguous} equally good turn(s)"))
+            if attempt.reason is None:
+                lock = {"frame": int(frame), "markers": attempt.assigned,
+                        "rms_mm": attempt.rms_mm, "ambiguous": attempt.ambiguous,
+                        "position_error_mm": float(np.linalg.norm(attempt.t - t_true[k])),
+                        "rotation_error_rad": float(rotation_error(attempt.R, R_true[k]))}
+                R_prev, t_prev = attempt.R, attempt.t
+        for v in range(2):
+            if R_prev is None:
+                continue
             predicted = project(rig.cameras[v], rig.view_port(v),
                                 obj @ R_prev.T + t_prev + velocity)
-            pixels[v] = associate(predicted, centres, args.gate)
+            pixels[v] = associate(predicted, found[v], args.gate)
             expected += int(rig.cameras[v].in_image(predicted).sum())
         associated = int(np.all(np.isfinite(pixels), axis=2).sum())
-        lost = associated < LOST_FRACTION * expected
+        lost = R_prev is None or associated < LOST_FRACTION * expected
         if lost:  # most markers found no detection where the last pose put them
             pixels = np.full_like(pixels, np.nan)
         # the baseline: the left camera's raw detections as a pinhole that ignores the port
@@ -284,7 +314,8 @@ def main(args) -> int:
                "detection_rms_px": float(np.sqrt(np.mean(np.sum(miss ** 2, axis=1))))
                if miss.size else None,
                "observations": pose.observations,
-               "reason": "LOST" if lost else Reason(pose.reason).name,
+               "reason": ("NOT_LOCKED" if R_prev is None else "LOST") if lost
+               else Reason(pose.reason).name,
                "markers_expected": expected, "markers_associated": associated}
         if pose.valid:
             velocity = pose.t - t_prev if k > 0 else np.zeros(3)
@@ -342,7 +373,8 @@ def main(args) -> int:
     report = {"dataset": args.dataset, "sequence": {k: manifest.get(k) for k in (
         "approach_mm", "yaw_deg", "trajectory", "frames", "fps", "object", "image_size")},
         "pixel_sigma_px": args.pixel_sigma, "gate_px": args.gate,
-        "eccentricity": bool(args.eccentricity), "summary": summary,
+        "eccentricity": bool(args.eccentricity), "lock_on": {"mode": args.lock_on, **(lock or {})},
+        "summary": summary,
         "frames": rows}
     ok = np.array([p.valid for p in estimates])
     with output.staged() as tmp:

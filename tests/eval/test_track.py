@@ -38,6 +38,9 @@ def test_sequence_is_tracked_against_its_true_poses(tmp_path, capsys):
     assert eval_main(["track", str(seq), "--out", str(out), "--no-progress"]) == 0
     report = json.loads((out / "report.json").read_text())
     assert report["summary"]["tracked"] == 6
+    lock = report["lock_on"]  # from the first frame's detections, no guess: the true turn
+    assert lock["mode"] == "detect" and lock["frame"] == 0 and lock["markers"] >= 10, lock
+    assert lock["position_error_mm"] < 20.0 and lock["rotation_error_rad"] < 0.02, lock
     for frame in report["frames"]:
         assert frame["observations"] >= 20, frame
         assert frame["position_error_mm"] <= 0.5, frame
