@@ -29,6 +29,7 @@ from ..geometry.camera import Camera
 from ..stereo.multirig import MultiRig, default_names
 from .air import LENS_MODELS, MIN_POSES, CalibrationError, Detections, calibrate_camera
 from .board import Board
+from .covariance import left_jacobian
 
 
 @dataclass(frozen=True)
@@ -36,13 +37,43 @@ class MultiAirCalibration:
     """``rig`` (a :class:`measure.stereo.multirig.MultiRig`, every camera in air: no port),
     ``rms_px`` per camera of its own calibration, ``joint_rms_px`` of the bundle adjustment
     (RMS of the residual length over all corners, px), ``poses_used`` per camera, and
-    ``board_poses`` ``{pose: (R, t)}`` (board to the reference frame, mm)."""
+    ``board_poses`` ``{pose: (R, t)}`` (board to the reference frame, mm); ``parameter_names``
+    and ``covariance`` (:func:`camera_parameter_names`: every camera's pose but the first's and,
+    with free intrinsics, every camera's intrinsics; the board poses marginalized),
+    ``s² (JᵀJ)⁻¹`` of the joint adjustment with ``s² = Σr² / (m − n)``."""
 
     rig: MultiRig
     rms_px: dict
     joint_rms_px: float
     poses_used: dict
     board_poses: dict
+    parameter_names: tuple = ()
+    covariance: np.ndarray | None = None
+
+    def sigmas(self) -> dict:
+        """``{name: σ}`` of :attr:`parameter_names` (px, rad, mm)."""
+        if self.covariance is None:
+            return {}
+        return dict(zip(self.parameter_names, np.sqrt(np.diag(self.covariance)).tolist()))
+
+
+#: The intrinsics of a camera in :attr:`MultiAirCalibration.parameter_names`, before its
+#: distortion coefficients (``k1 k2 p1 p2 k3 …``, OpenCV's order).
+INTRINSIC_NAMES = ("fx", "fy", "cx", "cy")
+DISTORTION_NAMES = ("k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6")
+
+
+def camera_parameter_names(names, n_dist: int, free_intrinsics: bool) -> tuple:
+    """The camera parameters of a joint in-air calibration, in order: per camera but the first
+    ``NAME.rotation[0..2]`` (rad, ``R → exp([φ]×) R`` about the reference axes) and
+    ``NAME.center[0..2]`` (mm, reference frame); then, with free intrinsics, per camera
+    ``NAME.fx`` … ``NAME.cy`` (px) and its ``n_dist`` distortion coefficients."""
+    out = [f"{name}.{what}[{k}]" for name in names[1:] for what in ("rotation", "center")
+           for k in range(3)]
+    if free_intrinsics:
+        out += [f"{name}.{p}" for name in names
+                for p in INTRINSIC_NAMES + DISTORTION_NAMES[:n_dist]]
+    return tuple(out)
 
 
 def _pose_matrix(rvec, tvec):
@@ -172,8 +203,20 @@ def calibrate_rig_in_air(board: Board, detections: Detections, size, names=None,
         cameras.append(Camera(K, size, dist=D, R=None if v == 0 else R, t=None if v == 0 else t))
     poses = {k: (Rotation.from_rotvec(fit.x[board_at[k]:board_at[k] + 3]).as_matrix(),
                  fit.x[board_at[k] + 3:board_at[k] + 6].copy()) for k in pose_ids}
+    # σ: s² (JᵀJ)⁻¹ at the solution (the forward-difference Jacobian of the fit), the board
+    # poses marginalized; rotation vectors turned into reference-axes angles (φ = J_l(ω) δω)
+    J = np.asarray(fit.jac)
+    s2 = float(fit.fun @ fit.fun) / max(fit.fun.size - fit.x.size, 1)
+    full = s2 * np.linalg.pinv(J.T @ J)
+    keep = np.r_[np.arange(n_cam), np.arange(intr_at, fit.x.size) if free else []].astype(int)
+    T = np.eye(keep.size)
+    for v in range(1, n_views):
+        i = 6 * (v - 1)
+        T[i:i + 3, i:i + 3] = left_jacobian(fit.x[i:i + 3])
+    covariance = T @ full[np.ix_(keep, keep)] @ T.T
     return MultiAirCalibration(MultiRig(cameras, [None] * n_views, names), rms, joint, used,
-                               poses)
+                               poses, camera_parameter_names(names, n_intr - 4, free),
+                               0.5 * (covariance + covariance.T))
 
 
-__all__ = ["MultiAirCalibration", "calibrate_rig_in_air"]
+__all__ = ["MultiAirCalibration", "calibrate_rig_in_air", "camera_parameter_names"]
