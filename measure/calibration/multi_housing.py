@@ -28,7 +28,7 @@ from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
 
 from ..geometry.camera import Camera
-from ..geometry.port import FlatPort
+from ..geometry.port import FlatPort, require_flat_port
 from ..geometry.projection import project
 from ..stereo.multirig import MultiRig
 from .air import CalibrationError, Detections
@@ -104,11 +104,13 @@ def calibrate_rig_housing(rig: MultiRig, board: Board, detections: Detections, f
     (:class:`measure.calibration.multi_air.MultiAirCalibration`), propagated into σ.
     CalibrationError (one line) for a rig that is not behind one shared flat port, unknown free
     parameters, too few boards, or a fit that does not determine them."""
-    ports = rig.ports
-    port0 = ports[0]
-    if not isinstance(port0, FlatPort) or any(p != port0 for p in ports):
-        raise CalibrationError("the housing calibration of N cameras models one flat port that "
-                               "every camera shares")
+    message = "the housing calibration of N cameras models one flat port that every camera shares"
+    try:
+        port0 = require_flat_port(rig.ports[0], message)
+    except ValueError as exc:
+        raise CalibrationError(str(exc)) from None
+    if any(p != port0 for p in rig.ports):
+        raise CalibrationError(message)
     names = tuple(dict.fromkeys(free))
     unknown = [n for n in names if n not in PARAMETERS]
     if not names or unknown:
