@@ -368,6 +368,14 @@ def main(args) -> int:
         raise CLIError(f"{args.dir}: not a boards folder (no manifest.json) nor a photo folder "
                        f"(no left/ and right/ folders, no photos)")
     boards = read_boards(args.dir)
+    if "multirig" in boards.calib:  # a folder of N > 2 cameras
+        from eval.calibrate.cameras import calibrate_cameras_main
+
+        if boards.air:
+            refuse_given(args, HOUSING_OPTIONS, f"to in-air boards ({args.dir}): they calibrate "
+                                                f"the cameras, no housing")
+        design = None if boards.air else design_port(args, (0.0, 0.0, 1.0))
+        return calibrate_cameras_main(args, output, log, start, boards, design)
     truth = boards.calib["rig"]
     if not boards.air and truth.port.kind not in HOUSINGS:  # a kind without a housing problem
         raise CLIError(f"{args.dir}: boards behind {truth.port.description}: no housing "

@@ -54,7 +54,7 @@ def main(args) -> int:
         if args.air and name in PORT_PARAMETERS:
             raise CLIError(f"-D {name} does not apply with --air: the boards are seen in air, "
                            f"with no port")
-    spec = load_scene(args.scene, defines).require_two_cameras("synth boards")
+    spec = load_scene(args.scene, defines)
     # -D spp / -D seed mean what they mean everywhere (the scene's defaults overridden); without
     # them the boards' own defaults hold
     spp = args.spp or (spec.spp if "spp" in defines else b.DEFAULT_SPP)
@@ -71,7 +71,9 @@ def main(args) -> int:
     if manifest.get("rendered_again"):
         print(f"{args.out}: {manifest['rendered_again']}; rendering it again")
     w, h = manifest["image_size"]
-    print(f"wrote {args.out}: {manifest['poses']} stereo pairs of a {board.kind} "
+    views = (f"poses × {len(manifest['cameras'])} cameras" if manifest.get("cameras")
+             else "stereo pairs")
+    print(f"wrote {args.out}: {manifest['poses']} {views} of a {board.kind} "
           f"{cols}x{rows} ({board.square_mm:g} mm) "
           f"{'in air' if args.air else 'behind ' + spec.rig.port.name}, "
           f"{w}x{h} px, {manifest['spp']} spp with {manifest['variant']}: render "

@@ -87,41 +87,82 @@ class BoardPose:
         return np.asarray(points_board, float) @ self.R.T + self.t
 
 
-def board_rig(spec: SceneSpec, air: bool) -> StereoRig:
-    """The scene's cameras behind its port, or (``air``) the same cameras with no port."""
+@dataclass(frozen=True)
+class BoardCameras:
+    """The N > 2 cameras of a boards folder behind one shared ``port`` (a flat port, or an
+    index-matched one in air): what :func:`sample_poses` and :func:`corner_pixels` ask of a
+    :class:`measure.StereoRig` (``cameras``, ``left``, ``port``, ``view_port``,
+    ``depth_axis``), and the cameras' ``names``."""
+
+    cameras: tuple
+    names: tuple
+    port: object
+
+    @property
+    def left(self):
+        return self.cameras[0]
+
+    @property
+    def depth_axis(self) -> np.ndarray:
+        return self.port.depth_axis(self.cameras[0])
+
+    def view_port(self, view: int):
+        return self.port
+
+    def multirig(self):
+        """As a :class:`measure.stereo.multirig.MultiRig` (``calib.yaml`` of N cameras)."""
+        from measure.stereo.multirig import MultiRig
+
+        return MultiRig(self.cameras, [self.port] * len(self.cameras), self.names)
+
+
+def board_rig(spec: SceneSpec, air: bool):
+    """The scene's cameras behind its port, or (``air``) the same cameras with no port: a
+    :class:`measure.StereoRig` for two cameras, :class:`BoardCameras` for more."""
+    if spec.extra_cameras:
+        cameras = spec.all_cameras
+        port = (index_matched_port(cameras[0].R[:, 2], np.stack([c.t for c in cameras]))
+                if air else spec.rig.port)
+        return BoardCameras(tuple(cameras), tuple(spec.camera_names), port)
     if not air:
         return spec.rig
     left, right = spec.cameras
     return StereoRig(left, right, index_matched_port(left.R[:, 2], np.stack([left.t, right.t])))
 
 
-def _fits(rig: StereoRig, board: Board, poses_R, poses_t, water: bool) -> np.ndarray:
+def _fits(rig, board: Board, poses_R, poses_t, water: bool, anchor: int | None = None
+          ) -> np.ndarray:
     """Which candidate poses ``(M, 3, 3)``, ``(M, 3)`` put every board point inside both images
-    (and in the water behind a port)."""
+    (and in the water behind a port) — of N > 2 cameras (``anchor`` given): inside the image
+    of camera ``anchor`` and of at least one other."""
     points_board = np.concatenate([board.outline(), board.corners()])
     world = np.einsum("mij,pj->mpi", poses_R, points_board) + poses_t[:, None, :]
     flat = world.reshape(-1, 3)
-    ok = np.ones(flat.shape[0], bool)
-    if water:
-        ok &= rig.port.water_side(flat)  # beyond the flat port, or outside both domes
-    for view, camera in enumerate(rig.cameras):
-        ok &= camera.in_image(project(camera, rig.view_port(view), flat), IMAGE_MARGIN_PX)
-    return ok.reshape(poses_R.shape[0], -1).all(axis=1)
+    wet = rig.port.water_side(flat) if water else np.ones(flat.shape[0], bool)
+    inside = np.stack([camera.in_image(project(camera, rig.view_port(view), flat),
+                                       IMAGE_MARGIN_PX)
+                       for view, camera in enumerate(rig.cameras)])
+    whole = (inside & wet).reshape(len(rig.cameras), poses_R.shape[0], -1).all(axis=2)
+    if anchor is None:
+        return whole.all(axis=0)
+    return whole[anchor] & (whole.sum(axis=0) >= 2)
 
 
 def sample_poses(rig: StereoRig, board: Board, n: int, seed: int, water: bool,
                  distance_range=DEFAULT_DISTANCE_RANGE_MM,
                  max_tilt_deg: float = DEFAULT_MAX_TILT_DEG) -> list[BoardPose]:
-    """``n`` seeded random poses that keep the whole board inside both images (module docs).
-    Raises ``ValueError`` when the working volume cannot hold the board that often."""
+    """``n`` seeded random poses that keep the whole board inside both images (module docs);
+    of N > 2 cameras (:class:`BoardCameras`), pose k centred in the view of camera k mod N and
+    wholly inside it and at least one other. Raises ``ValueError`` when the working volume
+    cannot hold the board that often."""
     near, far = (float(v) for v in distance_range)
     if not (0 < near < far):
         raise ValueError(f"distance range must satisfy 0 < near < far, got {near:g}, {far:g} mm")
     if not 0 <= max_tilt_deg < 80:
         raise ValueError(f"maximum tilt must lie in [0, 80) degrees, got {max_tilt_deg:g}")
     rng = np.random.default_rng(seed)
-    left = rig.left
-    w, h = left.size
+    several = isinstance(rig, BoardCameras)
+    w, h = rig.left.size
     half = np.array(board.size_mm + (0.0,)) / 2
     normal = rig.depth_axis  # the port normal, or the left optical axis for domes
     poses, tried = [], 0
@@ -134,6 +175,8 @@ def sample_poses(rig: StereoRig, board: Board, n: int, seed: int, water: bool,
                 f"board (--squares, --square-mm) or a farther distance range")
         m = 256
         tried += m
+        anchor = len(poses) % len(rig.cameras) if several else None
+        left = rig.cameras[anchor] if several else rig.left
         depth = rng.uniform(near, far, m)
         uv = np.column_stack([rng.uniform(0.2 * w, 0.8 * w, m), rng.uniform(0.2 * h, 0.8 * h, m)])
         rays = left.rays(uv)
@@ -146,8 +189,8 @@ def sample_poses(rig: StereoRig, board: Board, n: int, seed: int, water: bool,
              * Rotation.from_rotvec(np.column_stack([np.zeros(m), np.zeros(m), roll]))).as_matrix()
         R = left.R @ R  # the untilted board faces the left camera
         t = centre - R @ half
-        keep = np.flatnonzero(_fits(rig, board, R, t, water))
-        poses += [BoardPose(R[i], t[i]) for i in keep[: n - len(poses)]]
+        keep = np.flatnonzero(_fits(rig, board, R, t, water, anchor))
+        poses += [BoardPose(R[i], t[i]) for i in keep[: (1 if several else n - len(poses))]]
     return poses
 
 
@@ -164,8 +207,9 @@ def _board_local_to_board(board: Board) -> np.ndarray:
 
 
 def build_board_scene(spec: SceneSpec, board: Board, air: bool, variant=None):
-    """``(mitsuba_scene, mi, variant)``: the scene's two sensors (same order), its port
-    interfaces unless ``air``, and the board (moved by :func:`render_pose`)."""
+    """``(mitsuba_scene, mi, variant)``: the scene's sensors (same order: ``left``, ``right``
+    or ``cam0`` …), its port interfaces unless ``air``, and the board (moved by
+    :func:`render_pose`)."""
     from synth.rendering.mitsuba_setup import import_mitsuba
 
     mi, chosen = import_mitsuba(variant)
@@ -174,32 +218,33 @@ def build_board_scene(spec: SceneSpec, board: Board, air: bool, variant=None):
     sampler = {"type": "multijitter", "sample_count": 4, "seed": 0}
     scene = {"type": "scene",
              "integrator": {"type": "path", "max_depth": int(float(spec.params.get("max_depth", 8)))},
-             "left": sensor_dict(mi, spec.rig.left, sampler),
-             "right": sensor_dict(mi, spec.rig.right, sampler),
+             **{name: sensor_dict(mi, camera, sampler)
+                for name, camera in zip(spec.camera_names, spec.all_cameras)},
              "board": {"type": "rectangle", "to_world": mi.ScalarTransform4f(np.eye(4).tolist()),
                        "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": 0.0}},
                        "emitter": {"type": "area", "radiance": {
                            "type": "bitmap", "data": mi.TensorXf(pattern), "raw": True,
                            "filter_type": "nearest"}}}}
     if not air and spec.has_port:  # the glass as the scene writer makes it, for any port
-        scene.update(port_shapes(mi, spec.rig.port, cameras=spec.rig.cameras))
+        scene.update(port_shapes(mi, spec.rig.port, cameras=spec.all_cameras))
     return mi.load_dict(scene), mi, chosen
 
 
 def render_pose(mscene, mi, spec: SceneSpec, board: Board, pose: BoardPose, index: int,
                 spp: int, seed: int, adaptive: bool = True):
-    """Both views (float32 linear) of the board at ``pose`` and, per view, how it was rendered
+    """Every view (float32 linear) of the board at ``pose`` and, per view, how it was rendered
     (:func:`synth.rendering.render.render_view_counted`): ``([left, right], [stats_left, stats_right])``;
     pose ``index`` renders with the scene seeds ``seed + 2·index`` (view 0) and ``+ 1``
-    (view 1)."""
+    (view 1) — of N cameras ``seed + N·index + view``."""
     M = np.eye(4)
     M[:3, :3], M[:3, 3] = pose.R, pose.t
     params = mi.traverse(mscene)
     params["board.to_world"] = mi.ScalarTransform4f((M @ _board_local_to_board(board)).tolist())
     params.update()
-    views = [render_view_counted(mscene, mi, view, camera, spp, seed + 2 * index,
+    cameras = spec.all_cameras
+    views = [render_view_counted(mscene, mi, view, camera, spp, seed + len(cameras) * index,
                                  adaptive=adaptive)
-             for view, camera in enumerate(spec.cameras)]
+             for view, camera in enumerate(cameras)]
     return [v[0] for v in views], [v[2] for v in views]
 
 
@@ -252,8 +297,8 @@ def write_boards(spec: SceneSpec, out_dir, board: Board, n_poses: int = DEFAULT_
         except (OSError, ValueError):
             damage = "manifest.json cannot be read"
     output.claim()
-    check_render_request(spec, spp, seed, poses=n_poses,  # pose p renders with seed + 2p
-                         adaptive=adaptive)
+    n_views = len(spec.all_cameras)  # pose p renders with seed + N·p (N = 2: seed + 2p)
+    check_render_request(spec, spp, seed, poses=-(-n_poses * n_views // 2), adaptive=adaptive)
     rig = board_rig(spec, air)
     poses = sample_poses(rig, board, n_poses, seed, not air, distance_range, max_tilt_deg)
     times = {}
@@ -269,19 +314,25 @@ def write_boards(spec: SceneSpec, out_dir, board: Board, n_poses: int = DEFAULT_
         images.append(pair)
         stats.append(pair_stats)
         lit = [1.0 if v["lit_fraction"] is None else v["lit_fraction"] for v in pair_stats]
-        bar.set_postfix_str(f"lit {lit[0]:.1%} / {lit[1]:.1%}")
+        bar.set_postfix_str("lit " + " / ".join(f"{v:.1%}" for v in lit))
     bar.close()
     times["render"] = time.perf_counter() - t
     w, h = spec.size
+    names = tuple(spec.camera_names)
     samples = sum(s["samples"] for pair in stats for s in pair)
     with output.staged(extra={"request_key": key}) as tmp:
         scale = png16_scale(*[img for pair in images for img in pair])
         for k, pair in enumerate(images):
-            for view, img in zip(("left", "right"), pair):
+            for view, img in zip(names, pair):
                 write_png(os.path.join(tmp, f"{view}_{k:02d}.png"), to_png16(img, scale))
-        write_calib(os.path.join(tmp, "calib.yaml"), rig, not air)
+        if isinstance(rig, BoardCameras):
+            from synth.products.rig_file import write_rig_file
+
+            write_rig_file(os.path.join(tmp, "calib.yaml"), rig.multirig())
+        else:
+            write_calib(os.path.join(tmp, "calib.yaml"), rig, not air)
         atomic_write_json(os.path.join(tmp, "board.json"), board.to_dict())
-        _write_truth(tmp, rig, board, poses)
+        _write_truth(tmp, rig, board, poses, names)
         times["total"] = time.perf_counter() - t_start
         manifest = {
             "format_version": FORMAT_VERSION, "command": COMMAND,
@@ -289,6 +340,7 @@ def write_boards(spec: SceneSpec, out_dir, board: Board, n_poses: int = DEFAULT_
             "request_key": key, "versions": package_versions(),
             "scene": {"path": spec.path, "sha256": spec.sha256, "params": spec.params},
             "air": bool(air), "board": board.to_dict(), "poses": n_poses,
+            **({"cameras": list(names)} if len(names) > 2 else {}),
             "distance_range_mm": list(distance_range), "max_tilt_deg": max_tilt_deg,
             "variant": chosen, "integrator": integrator_name(mi, mscene), "spp": spp,
             "seed": seed, "image_size": [w, h],
@@ -296,7 +348,7 @@ def write_boards(spec: SceneSpec, out_dir, board: Board, n_poses: int = DEFAULT_
             "render": {"settings": adaptive_settings() if adaptive else None,
                        "samples": samples,
                        "views": [{view: {k: s[k] for k in _POSE_STATS if k in s}
-                                  for view, s in zip(("left", "right"), pair)}
+                                  for view, s in zip(names, pair)}
                                  for pair in stats]},
             "seconds": times,
         }
@@ -327,7 +379,15 @@ def corner_pixels(rig: StereoRig, board: Board, poses):
     return out
 
 
-def _write_truth(directory, rig, board: Board, poses) -> None:
+def corners_header(names) -> list:
+    """The header of ``corners.csv``: :data:`CORNERS_HEADER` for ``left``, ``right``; for N
+    cameras ``u_NAME, v_NAME`` per camera."""
+    if tuple(names) == ("left", "right"):
+        return CORNERS_HEADER
+    return CORNERS_HEADER[:5] + [f"{a}_{name}" for name in names for a in ("u", "v")]
+
+
+def _write_truth(directory, rig, board: Board, poses, names=("left", "right")) -> None:
     ids = np.arange(board.corners().shape[0])
     with open(os.path.join(directory, "poses.csv"), "w", newline="") as fh:
         writer = csv.writer(fh)
@@ -337,10 +397,11 @@ def _write_truth(directory, rig, board: Board, poses) -> None:
             writer.writerow([k] + [f"{v:.17g}" for v in (*rv, *pose.t)])
     with open(os.path.join(directory, "corners.csv"), "w", newline="") as fh:
         writer = csv.writer(fh)
-        writer.writerow(CORNERS_HEADER)
-        for k, (world, (uv_l, uv_r)) in enumerate(corner_pixels(rig, board, poses)):
-            for i, p, a, b in zip(ids, world, uv_l, uv_r):
-                writer.writerow([k, int(i)] + [f"{v:.17g}" for v in (*p, *a, *b)])
+        writer.writerow(corners_header(names))
+        for k, (world, views) in enumerate(corner_pixels(rig, board, poses)):
+            pixels = np.concatenate(views, axis=1)
+            for i, p, uv in zip(ids, world, pixels):
+                writer.writerow([k, int(i)] + [f"{v:.17g}" for v in (*p, *uv)])
 
 
 # ---------------------------------------------------------------------------------------------
@@ -350,7 +411,9 @@ def _write_truth(directory, rig, board: Board, poses) -> None:
 class BoardImages:
     """A boards folder read back: ``images`` ``[(left, right), …]`` float32 linear per pose,
     ``board``, ``calib`` (the truth, :func:`synth.products.dataset.read_calib`), ``poses`` (truth),
-    ``corners`` truth rows ``(M, 9)`` in :data:`CORNERS_HEADER` order, ``air``, ``manifest``."""
+    ``corners`` truth rows ``(M, 9)`` in :data:`CORNERS_HEADER` order, ``air``, ``manifest``.
+    Of N > 2 cameras: ``images`` ``[(cam0, cam1, …), …]``, ``calib`` ``{"multirig": MultiRig,
+    "size", "names"}``, ``corners`` in :func:`corners_header` order."""
 
     path: str
     images: list
@@ -390,11 +453,21 @@ def read_boards(path) -> BoardImages:
                            f"rendered")
     scale = float(manifest["png_scale"])
     n = int(manifest["poses"])
-    calib = read_calib(os.path.join(path, "calib.yaml"))
+    names = tuple(manifest.get("cameras") or ("left", "right"))
+    if len(names) > 2:  # N cameras: calib.yaml of N (synth.products.rig_file)
+        from synth.products.rig_file import read_rig_file
+
+        multirig = read_rig_file(os.path.join(path, "calib.yaml"))
+        if multirig.names != names:
+            raise DatasetError(f"{path}/calib.yaml: cameras {', '.join(multirig.names)}, but "
+                               f"manifest.json says {', '.join(names)}")
+        calib = {"multirig": multirig, "size": multirig.cameras[0].size, "names": names}
+    else:
+        calib = read_calib(os.path.join(path, "calib.yaml"))
     images = []
     for k in range(n):
         pair = []
-        for view in ("left", "right"):
+        for view in names:
             file = os.path.join(path, f"{view}_{k:02d}.png")
             img = cv2.imread(file, cv2.IMREAD_UNCHANGED)
             if img is None or img.ndim != 2:
@@ -406,7 +479,8 @@ def read_boards(path) -> BoardImages:
         images.append(tuple(pair))
     poses_rows = read_truth_table(os.path.join(path, "poses.csv"), POSES_HEADER, n)
     poses = [BoardPose(Rotation.from_rotvec(r[1:4]).as_matrix(), r[4:7]) for r in poses_rows]
-    corners = read_truth_table(os.path.join(path, "corners.csv"), CORNERS_HEADER, n * board.n_corners)
+    corners = read_truth_table(os.path.join(path, "corners.csv"), corners_header(names),
+                               n * board.n_corners)
     check_files(path, manifest, COMMAND)  # last: the readers above say more precisely what is wrong
     return BoardImages(path, images, board, calib, poses, corners, bool(manifest.get("air")),
                        manifest)

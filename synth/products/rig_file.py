@@ -88,10 +88,16 @@ def shared_port(rig: MultiRig):
     return None
 
 
-def write_rig_file(path, rig: MultiRig) -> None:
-    """Write ``calib.yaml`` (module docs): today's two-camera file for a rig that is one."""
+def write_rig_file(path, rig: MultiRig, covariance=None) -> None:
+    """Write ``calib.yaml`` (module docs): today's two-camera file for a rig that is one.
+    ``covariance`` ``(names, matrix)`` (a rig of more than two cameras): the calibration's
+    covariance of the named parameters (px, mm, rad), as the map ``uncertainty`` {``names``
+    (sequence of strings), ``covariance`` (P x P)} that :func:`read_rig_covariance` reads."""
     stereo = rig.stereo()
     if stereo is not None:
+        if covariance is not None:
+            raise ValueError("a two-camera calib.yaml carries its covariance as "
+                             "synth.products.dataset.write_calib writes it")
         write_calib(path, stereo, has_port=rig.refracts)
         return
     shared = shared_port(rig)
@@ -123,8 +129,37 @@ def write_rig_file(path, rig: MultiRig) -> None:
                 else:
                     PORT_WRITERS[type(port).__name__](fs, port)
             fs.endWriteStruct()
+        if covariance is not None:
+            names, matrix = covariance
+            fs.startWriteStruct("uncertainty", cv2.FileNode_MAP)
+            fs.startWriteStruct("names", cv2.FileNode_SEQ)
+            for name in names:
+                fs.write("", str(name))
+            fs.endWriteStruct()
+            fs.write("covariance", np.asarray(matrix, dtype=np.float64))
+            fs.endWriteStruct()
     finally:
         fs.release()
+
+
+def read_rig_covariance(path):
+    """``(names, matrix)`` of a ``calib.yaml`` of N cameras' ``uncertainty`` map
+    (:func:`write_rig_file`), or None when it has none. :class:`DatasetError` for a map that
+    does not hold one name per row of a square matrix."""
+    fs = cv2.FileStorage(os.fspath(path), cv2.FILE_STORAGE_READ)
+    try:
+        node = fs.getNode("uncertainty")
+        if node.empty():
+            return None
+        names_node = node.getNode("names")
+        names = tuple(names_node.at(i).string() for i in range(names_node.size()))
+        matrix = node.getNode("covariance").mat()
+    finally:
+        fs.release()
+    if matrix is None or matrix.shape != (len(names), len(names)) or not names:
+        raise DatasetError(f"{path}: uncertainty: expected one name per row of a square "
+                           f"covariance, got {len(names)} names")
+    return names, np.asarray(matrix, dtype=np.float64)
 
 
 def _is_rig_file(path) -> bool:
@@ -254,4 +289,4 @@ def _read_ports(path, node, shared, names) -> list:
     return ports
 
 
-__all__ = ["NONE", "SHARED", "read_rig_file", "shared_port", "write_rig_file"]
+__all__ = ["NONE", "SHARED", "read_rig_covariance", "read_rig_file", "shared_port", "write_rig_file"]

@@ -32,6 +32,7 @@ SUPER = 4
 class _Spec:  # what board_rig needs of a SceneSpec
     def __init__(self, cameras):
         self.cameras = cameras
+        self.extra_cameras = ()
 
 
 def _air_rig():

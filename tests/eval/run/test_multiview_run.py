@@ -73,7 +73,6 @@ def test_commands_of_a_stereo_pair_refuse_more_cameras(scene, tmp_path, capsys):
     from synth.__main__ import main as synth_main
 
     for main, argv, command in (
-            (synth_main, ["boards", scene, "--poses", "2"], "synth boards"),
             (synth_main, ["sequence", scene, "--approach", "2000,1000", "--frames", "2"],
              "synth sequence"),
             (eval_main, ["render-bench", scene, "--parts", "throughput"], "eval render-bench")):

@@ -26,6 +26,7 @@ SIZE, FOCAL = (480, 402), 225.0
 class _Spec:  # what board_rig needs of a SceneSpec
     def __init__(self, cameras):
         self.cameras = cameras
+        self.extra_cameras = ()
 
 
 def _observe(rig, poses, sigma, rng):

@@ -1,0 +1,209 @@
+"""``python -m eval calibrate BOARDS`` of a ``synth boards`` folder of N > 2 cameras: every camera
+and every board pose jointly, in air (:func:`measure.calibration.multi_air.calibrate_rig_in_air`,
+intrinsics free) or the shared flat port under water given that in-air calibration
+(:func:`measure.calibration.multi_housing.calibrate_rig_housing`), each estimate beside the
+folder's truth with its error in σ.
+
+Writes ``calib.yaml`` (N cameras, :mod:`synth.products.rig_file`, with the calibration's
+covariance as its ``uncertainty`` map: in air every camera pose and intrinsic, under water the
+port's free numbers), ``report.json`` and ``report.md``. Units px, mm, rad (printed in degrees);
+the reference frame is the first camera's.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+
+import numpy as np
+
+from eval.cli import CLIError
+
+#: Options of a two-camera calibration that a calibration of N cameras does not take.
+NOT_FOR_N_CAMERAS = (("port_distance", "--port-distance"), ("dome_radius", "--dome-radius"),
+                     ("dome_thickness", "--dome-thickness"), ("encoding", "--encoding"),
+                     ("air_uncertainty", "--air-uncertainty"))
+
+
+def _detect(board, images, names):
+    """:class:`measure.calibration.air.Detections` of N views per pose."""
+    from measure.calibration.air import Detections, detect_images
+
+    n = len(names)
+    found = detect_images(board, [img for views in images for img in views])
+    ids = [[found[n * k + v][0] for v in range(n)] for k in range(len(images))]
+    pixels = [[found[n * k + v][1] for v in range(n)] for k in range(len(images))]
+    return Detections(ids, pixels)
+
+
+def _air_errors(rig, truth) -> dict:
+    """Each camera parameter's estimate − truth, named as
+    :func:`measure.calibration.multi_air.camera_parameter_names` names them."""
+    from scipy.spatial.transform import Rotation
+
+    from measure.calibration.multi_air import DISTORTION_NAMES
+
+    out = {}
+    for v, (name, camera, true) in enumerate(zip(rig.names, rig.cameras, truth.cameras)):
+        if v > 0:
+            phi = Rotation.from_matrix(camera.R @ true.R.T).as_rotvec()
+            for k in range(3):
+                out[f"{name}.rotation[{k}]"] = float(phi[k])
+                out[f"{name}.center[{k}]"] = float(camera.t[k] - true.t[k])
+        for p, (r, c) in (("fx", (0, 0)), ("fy", (1, 1)), ("cx", (0, 2)), ("cy", (1, 2))):
+            out[f"{name}.{p}"] = float(camera.K[r, c] - true.K[r, c])
+        true_dist = np.zeros(8)
+        if true.dist is not None:
+            true_dist[:np.ravel(true.dist).size] = np.ravel(true.dist)[:8]
+        for k, value in enumerate(np.ravel(camera.dist)):
+            out[f"{name}.{DISTORTION_NAMES[k]}"] = float(value - true_dist[k])
+    return out
+
+
+def _table(rows) -> str:
+    lines = ["| parameter | estimate − truth | σ | error / σ |", "|---|---|---|---|"]
+    lines += [f"| {n} | {e:+.4g} | {s:.3g} | {e / s:+.2f} |" for n, e, s in rows]
+    return "\n".join(lines)
+
+
+def calibrate_cameras_main(args, output, log, start, boards, design) -> int:
+    """``eval calibrate`` of an N-camera boards folder (module docs); ``design``: the starting
+    flat port under water (normal along the first camera's axis; None in air)."""
+    from measure.calibration.air import CalibrationError
+    from measure.calibration.multi_air import calibrate_rig_in_air
+    from measure.calibration.multi_housing import PARAMETERS, calibrate_rig_housing
+    from measure.stereo.multirig import MultiRig
+    from synth.infra.cli import BOARD_OPTIONS, given, refuse_given
+    from synth.infra.fileio import atomic_write_json, jsonable
+    from synth.products.dataset import DatasetError
+    from synth.products.rig_file import read_rig_covariance, read_rig_file, write_rig_file
+
+    names, truth = boards.calib["names"], boards.calib["multirig"]
+    where = f"{args.dir} ({len(names)} cameras)"
+    for dest, flag in NOT_FOR_N_CAMERAS:
+        if given(args, dest):
+            raise CLIError(f"{flag} does not apply to {where}: the calibration of N cameras "
+                           f"models one flat port they share, its σ propagates the in-air "
+                           f"covariance")
+    refuse_given(args, BOARD_OPTIONS, f"to a boards folder ({args.dir}): the folder's "
+                                      f"board.json defines the board")
+    if args.air and not boards.air:
+        raise CLIError(f"--air: {args.dir} holds boards rendered underwater (its manifest says "
+                       f"so; --air is for photos)")
+    if boards.air:
+        if args.intrinsics:
+            raise CLIError(f"{args.dir}: in-air boards calibrate the intrinsics themselves; "
+                           f"--intrinsics is for underwater boards")
+    else:
+        if given(args, "lens"):
+            raise CLIError("--lens does not apply underwater: the lens model is the in-air "
+                           "calibration's (--intrinsics)")
+        if not args.intrinsics:
+            raise CLIError(f"{where}: underwater boards need --intrinsics (the calib.yaml of "
+                           f"eval calibrate on in-air boards of the same cameras)")
+        free = tuple(n.strip() for n in args.free.split(",") if n.strip())
+        unknown = [n for n in free if n not in PARAMETERS]
+        if not free or unknown:
+            raise CLIError(f"--free {args.free!r}: the housing of N cameras estimates "
+                           f"{', '.join(PARAMETERS)}")
+    log(f"detect the boards in {boards.path} ({len(boards.images)} poses × {len(names)} "
+        f"cameras) …")
+    t = time.perf_counter()
+    detections = _detect(boards.board, boards.images, names)
+    timings = {"detect": time.perf_counter() - t}
+    found = {name: len(detections.found(v)) for v, name in enumerate(names)}
+    report = {"boards": os.path.abspath(boards.path), "air": boards.air, "cameras": list(names),
+              "board": boards.board.to_dict(), "poses": len(boards.images), "found": found}
+    t = time.perf_counter()
+    try:
+        if boards.air:
+            lens = args.lens if given(args, "lens") else "standard"
+            log("calibrate every camera and pose jointly (OpenCV per camera, then one bundle "
+                "adjustment) …")
+            cal = calibrate_rig_in_air(boards.board, detections, boards.calib["size"], names,
+                                       lens_model=lens, intrinsics="free")
+            rig, sigmas = cal.rig, cal.sigmas()
+            covariance = (cal.parameter_names, cal.covariance)
+            errors = _air_errors(rig, truth)
+            rows = [(n, errors[n], sigmas[n]) for n in cal.parameter_names if n in errors]
+            report.update({"rms_px": cal.rms_px, "joint_rms_px": cal.joint_rms_px,
+                           "poses_used": cal.poses_used})
+            rms = cal.joint_rms_px
+        else:
+            try:
+                air = read_rig_file(args.intrinsics)
+                air_cov = read_rig_covariance(args.intrinsics)
+            except DatasetError as exc:
+                raise CLIError(str(exc)) from None
+            if air.names != names:
+                raise CLIError(f"{args.intrinsics}: cameras {', '.join(air.names)}, but "
+                               f"{args.dir} holds {', '.join(names)}")
+            if air.refracts:
+                raise CLIError(f"{args.intrinsics}: already holds a port; give the in-air "
+                               f"calibration")
+            start_rig = MultiRig(air.cameras, [design] * len(names), names)
+            log(f"the shared port's {', '.join(free)} from every camera's corners …")
+            air_names, air_matrix = air_cov if air_cov is not None else ((), None)
+            cal = calibrate_rig_housing(start_rig, boards.board, detections, free, air_names,
+                                        air_matrix)
+            rig = cal.rig
+            covariance = (tuple(f"port.{n}" for n in cal.labels), cal.covariance)
+            port, true_port = rig.ports[0], truth.ports[0]
+            rows = []
+            if "distance" in free:
+                rows.append(("port.distance", port.distance - true_port.distance,
+                             cal.sigmas["distance"]))
+            if "normal" in free:
+                axes = np.asarray(cal.normal_axes)
+                tilt = axes @ (port.normal - true_port.normal)
+                rows += [(f"port.tilt[{k}]", float(tilt[k]), cal.sigmas["normal"][k])
+                         for k in range(2)]
+                report["normal_error_deg"] = float(np.degrees(np.arctan2(
+                    np.linalg.norm(np.cross(port.normal, true_port.normal)),
+                    port.normal @ true_port.normal)))
+            if "thickness" in free:
+                rows.append(("port.thickness", port.thicknesses[0] - true_port.thicknesses[0],
+                             cal.sigmas["thickness"]))
+            if "n_water" in free:
+                rows.append(("port.n_water", port.n_water - true_port.n_water,
+                             cal.sigmas["n_water"]))
+            report.update({"rms_px": cal.rms_px_per, "joint_rms_px": cal.rms_px,
+                           "uncertainty": cal.uncertainty,
+                           "sigmas_conditional": cal.sigmas_conditional,
+                           "design": design.describe()})
+            rms = cal.rms_px
+    except CalibrationError as exc:
+        raise CLIError(f"{where}: {exc}") from None
+    timings["calibrate"] = time.perf_counter() - t
+    z = np.array([e / s for _, e, s in rows])
+    report.update({
+        "estimates": {n: {"error": e, "sigma": s, "error_in_sigma": e / s} for n, e, s in rows},
+        "within_3_sigma": int(np.sum(np.abs(z) <= 3)), "parameters": len(rows),
+        "largest_error_in_sigma": float(np.abs(z).max()) if z.size else None,
+        "timings_s": {**timings, "total": time.perf_counter() - start}})
+    report = jsonable(report)
+    kind = "in air" if boards.air else "the shared port"
+    with output.staged() as tmp:
+        write_rig_file(os.path.join(tmp, "calib.yaml"), rig, covariance)
+        atomic_write_json(os.path.join(tmp, "report.json"), report)
+        with open(os.path.join(tmp, "report.md"), "w") as fh:
+            fh.write(f"# eval calibrate: {len(names)} cameras, {kind}\n\n"
+                     f"Boards: `{args.dir}` ({len(boards.images)} poses); found per camera: "
+                     + ", ".join(f"{n} {c}" for n, c in found.items())
+                     + f". Reprojection RMS {rms:.4f} px.\n\n"
+                     f"Every estimate against the folder's truth (rotation: rad about the "
+                     f"reference axes; centre, distance: mm; focal, principal point: px):\n\n"
+                     + _table(rows) + "\n\n"
+                     f"{report['within_3_sigma']} of {len(rows)} within 3 σ.\n")
+    print(f"{len(names)} cameras, {kind}: RMS {rms:.4f} px; {report['within_3_sigma']} of "
+          f"{len(rows)} estimates within 3 σ of the truth (largest "
+          f"{report['largest_error_in_sigma']:.2f} σ)"
+          + (f"; D {rows[0][1]:+.4f} mm (σ {rows[0][2]:.3g}), normal "
+             f"{report['normal_error_deg']:.4f}° from the truth"
+             if not boards.air and "distance" in free and "normal" in free else ""))
+    print(f"wrote {output.path} (calib.yaml of {len(names)} cameras with its covariance, "
+          f"report.json, report.md)")
+    return 0
+
+
+__all__ = ["calibrate_cameras_main"]
