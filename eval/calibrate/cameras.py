@@ -17,12 +17,15 @@ import time
 
 import numpy as np
 
+from types import SimpleNamespace
+
 from eval.cli import CLIError
 
 #: Options of a two-camera calibration that a calibration of N cameras does not take.
+#: (``--encoding`` last: it applies to photos.)
 NOT_FOR_N_CAMERAS = (("port_distance", "--port-distance"), ("dome_radius", "--dome-radius"),
-                     ("dome_thickness", "--dome-thickness"), ("encoding", "--encoding"),
-                     ("air_uncertainty", "--air-uncertainty"))
+                     ("dome_thickness", "--dome-thickness"),
+                     ("air_uncertainty", "--air-uncertainty"), ("encoding", "--encoding"))
 
 
 def _detect(board, images, names):
@@ -66,9 +69,32 @@ def _table(rows) -> str:
     return "\n".join(lines)
 
 
+def boards_source(boards):
+    """What :func:`calibrate_cameras_main` calibrates, from a ``synth boards`` folder of N
+    cameras (:func:`synth.products.boards.read_boards`): with its truth."""
+    return SimpleNamespace(path=boards.path, images=boards.images, board=boards.board,
+                           air=boards.air, names=boards.calib["names"],
+                           truth=boards.calib["multirig"], size=boards.calib["size"],
+                           photos=False)
+
+
+def photos_source(path, names, board, air: bool, encoding: str):
+    """What :func:`calibrate_cameras_main` calibrates, from a user's photo folder of N cameras
+    (``cam0/``, ``cam1/``, … matched by file name): no truth."""
+    from eval.core.photos import PhotoError, read_camera_photos
+
+    try:
+        images, size, _ = read_camera_photos(path, names, encoding)
+    except PhotoError as exc:
+        raise CLIError(str(exc)) from None
+    return SimpleNamespace(path=path, images=images, board=board, air=air, names=names,
+                           truth=None, size=size, photos=True)
+
+
 def calibrate_cameras_main(args, output, log, start, boards, design) -> int:
-    """``eval calibrate`` of an N-camera boards folder (module docs); ``design``: the starting
-    flat port under water (normal along the first camera's axis; None in air)."""
+    """``eval calibrate`` of N cameras (module docs): ``boards`` from :func:`boards_source` or
+    :func:`photos_source`; ``design``: the starting flat port under water (normal along the
+    first camera's axis; None in air)."""
     from measure.calibration.air import CalibrationError
     from measure.calibration.multi_air import calibrate_rig_in_air
     from measure.calibration.multi_housing import PARAMETERS, calibrate_rig_housing
@@ -78,15 +104,16 @@ def calibrate_cameras_main(args, output, log, start, boards, design) -> int:
     from synth.products.dataset import DatasetError
     from synth.products.rig_file import read_rig_covariance, read_rig_file, write_rig_file
 
-    names, truth = boards.calib["names"], boards.calib["multirig"]
-    where = f"{args.dir} ({len(names)} cameras)"
-    for dest, flag in NOT_FOR_N_CAMERAS:
+    names, truth = boards.names, boards.truth
+    where = f"{args.dir} ({len(names)} cameras{', photos' if boards.photos else ''})"
+    for dest, flag in NOT_FOR_N_CAMERAS[:-1] if boards.photos else NOT_FOR_N_CAMERAS:
         if given(args, dest):
             raise CLIError(f"{flag} does not apply to {where}: the calibration of N cameras "
                            f"models one flat port they share, its σ propagates the in-air "
                            f"covariance")
-    refuse_given(args, BOARD_OPTIONS, f"to a boards folder ({args.dir}): the folder's "
-                                      f"board.json defines the board")
+    if not boards.photos:
+        refuse_given(args, BOARD_OPTIONS, f"to a boards folder ({args.dir}): the folder's "
+                                          f"board.json defines the board")
     if args.air and not boards.air:
         raise CLIError(f"--air: {args.dir} holds boards rendered underwater (its manifest says "
                        f"so; --air is for photos)")
@@ -120,12 +147,12 @@ def calibrate_cameras_main(args, output, log, start, boards, design) -> int:
             lens = args.lens if given(args, "lens") else "standard"
             log("calibrate every camera and pose jointly (OpenCV per camera, then one bundle "
                 "adjustment) …")
-            cal = calibrate_rig_in_air(boards.board, detections, boards.calib["size"], names,
+            cal = calibrate_rig_in_air(boards.board, detections, boards.size, names,
                                        lens_model=lens, intrinsics="free")
             rig, sigmas = cal.rig, cal.sigmas()
             covariance = (cal.parameter_names, cal.covariance)
-            errors = _air_errors(rig, truth)
-            rows = [(n, errors[n], sigmas[n]) for n in cal.parameter_names if n in errors]
+            errors = _air_errors(rig, truth) if truth is not None else {}
+            rows = [(n, errors.get(n), sigmas[n]) for n in cal.parameter_names]
             report.update({"rms_px": cal.rms_px, "joint_rms_px": cal.joint_rms_px,
                            "poses_used": cal.poses_used})
             rms = cal.joint_rms_px
@@ -138,6 +165,10 @@ def calibrate_cameras_main(args, output, log, start, boards, design) -> int:
             if air.names != names:
                 raise CLIError(f"{args.intrinsics}: cameras {', '.join(air.names)}, but "
                                f"{args.dir} holds {', '.join(names)}")
+            if tuple(air.cameras[0].size) != tuple(boards.size):
+                raise CLIError(f"--intrinsics {args.intrinsics}: image size "
+                               f"{air.cameras[0].size[0]}x{air.cameras[0].size[1]} px, but the "
+                               f"images are {boards.size[0]}x{boards.size[1]} px")
             if air.refracts:
                 raise CLIError(f"{args.intrinsics}: already holds a port; give the in-air "
                                f"calibration")
@@ -148,25 +179,32 @@ def calibrate_cameras_main(args, output, log, start, boards, design) -> int:
                                         air_matrix)
             rig = cal.rig
             covariance = (tuple(f"port.{n}" for n in cal.labels), cal.covariance)
-            port, true_port = rig.ports[0], truth.ports[0]
+            port = rig.ports[0]
+            true_port = truth.ports[0] if truth is not None else None
+
+            def diff(value):
+                return None if true_port is None else value(port) - value(true_port)
+
             rows = []
             if "distance" in free:
-                rows.append(("port.distance", port.distance - true_port.distance,
+                rows.append(("port.distance", diff(lambda q: q.distance),
                              cal.sigmas["distance"]))
             if "normal" in free:
                 axes = np.asarray(cal.normal_axes)
-                tilt = axes @ (port.normal - true_port.normal)
-                rows += [(f"port.tilt[{k}]", float(tilt[k]), cal.sigmas["normal"][k])
-                         for k in range(2)]
-                report["normal_error_deg"] = float(np.degrees(np.arctan2(
-                    np.linalg.norm(np.cross(port.normal, true_port.normal)),
-                    port.normal @ true_port.normal)))
+                tilt = (None if true_port is None
+                        else axes @ (port.normal - true_port.normal))
+                rows += [(f"port.tilt[{k}]", None if tilt is None else float(tilt[k]),
+                          cal.sigmas["normal"][k]) for k in range(2)]
+                if true_port is not None:
+                    report["normal_error_deg"] = float(np.degrees(np.arctan2(
+                        np.linalg.norm(np.cross(port.normal, true_port.normal)),
+                        port.normal @ true_port.normal)))
             if "thickness" in free:
-                rows.append(("port.thickness", port.thicknesses[0] - true_port.thicknesses[0],
+                rows.append(("port.thickness", diff(lambda q: q.thicknesses[0]),
                              cal.sigmas["thickness"]))
             if "n_water" in free:
-                rows.append(("port.n_water", port.n_water - true_port.n_water,
-                             cal.sigmas["n_water"]))
+                rows.append(("port.n_water", diff(lambda q: q.n_water), cal.sigmas["n_water"]))
+            report["port"] = port.describe()
             report.update({"rms_px": cal.rms_px_per, "joint_rms_px": cal.rms_px,
                            "uncertainty": cal.uncertainty,
                            "sigmas_conditional": cal.sigmas_conditional,
@@ -175,10 +213,13 @@ def calibrate_cameras_main(args, output, log, start, boards, design) -> int:
     except CalibrationError as exc:
         raise CLIError(f"{where}: {exc}") from None
     timings["calibrate"] = time.perf_counter() - t
-    z = np.array([e / s for _, e, s in rows])
+    scored = truth is not None
+    z = np.array([e / s for _, e, s in rows]) if scored else np.zeros(0)
     report.update({
-        "estimates": {n: {"error": e, "sigma": s, "error_in_sigma": e / s} for n, e, s in rows},
-        "within_3_sigma": int(np.sum(np.abs(z) <= 3)), "parameters": len(rows),
+        "estimates": {n: ({"error": e, "sigma": s, "error_in_sigma": e / s} if scored
+                          else {"sigma": s}) for n, e, s in rows},
+        "within_3_sigma": int(np.sum(np.abs(z) <= 3)) if scored else None,
+        "parameters": len(rows),
         "largest_error_in_sigma": float(np.abs(z).max()) if z.size else None,
         "timings_s": {**timings, "total": time.perf_counter() - start}})
     report = jsonable(report)
@@ -191,16 +232,29 @@ def calibrate_cameras_main(args, output, log, start, boards, design) -> int:
                      f"Boards: `{args.dir}` ({len(boards.images)} poses); found per camera: "
                      + ", ".join(f"{n} {c}" for n, c in found.items())
                      + f". Reprojection RMS {rms:.4f} px.\n\n"
-                     f"Every estimate against the folder's truth (rotation: rad about the "
-                     f"reference axes; centre, distance: mm; focal, principal point: px):\n\n"
-                     + _table(rows) + "\n\n"
-                     f"{report['within_3_sigma']} of {len(rows)} within 3 σ.\n")
-    print(f"{len(names)} cameras, {kind}: RMS {rms:.4f} px; {report['within_3_sigma']} of "
-          f"{len(rows)} estimates within 3 σ of the truth (largest "
-          f"{report['largest_error_in_sigma']:.2f} σ)"
-          + (f"; D {rows[0][1]:+.4f} mm (σ {rows[0][2]:.3g}), normal "
-             f"{report['normal_error_deg']:.4f}° from the truth"
-             if not boards.air and "distance" in free and "normal" in free else ""))
+                     + ("Every estimate against the folder's truth (rotation: rad about the "
+                        "reference axes; centre, distance: mm; focal, principal point: px):"
+                        "\n\n" + _table(rows) + "\n\n"
+                        f"{report['within_3_sigma']} of {len(rows)} within 3 σ.\n" if scored else
+                        "No truth (photos): σ of every estimate (rotation rad, centre and "
+                        "distance mm, focal and principal point px):\n\n"
+                        "| parameter | σ |\n|---|---|\n"
+                        + "".join(f"| {n} | {s:.3g} |\n" for n, _, s in rows)))
+    if scored:
+        print(f"{len(names)} cameras, {kind}: RMS {rms:.4f} px; {report['within_3_sigma']} of "
+              f"{len(rows)} estimates within 3 σ of the truth (largest "
+              f"{report['largest_error_in_sigma']:.2f} σ)"
+              + (f"; D {rows[0][1]:+.4f} mm (σ {rows[0][2]:.3g}), normal "
+                 f"{report['normal_error_deg']:.4f}° from the truth"
+                 if not boards.air and "distance" in free and "normal" in free else ""))
+    else:
+        port_line = ""
+        if not boards.air and "distance" in free:
+            port_line = (f"; the port: D {report['port']['distance_mm']:.4f} ± "
+                         f"{rows[0][2]:.3g} mm, normal "
+                         + ", ".join(f"{v:.5f}" for v in report["port"]["normal"]))
+        print(f"{len(names)} cameras, {kind}: RMS {rms:.4f} px, the board found per camera "
+              + ", ".join(f"{n} {c}" for n, c in found.items()) + port_line)
     print(f"wrote {output.path} (calib.yaml of {len(names)} cameras with its covariance, "
           f"report.json, report.md)")
     return 0

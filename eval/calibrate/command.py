@@ -355,6 +355,15 @@ def main(args) -> int:
         refuse_given(args, HOUSING_OPTIONS + DOME_DESIGN_OPTIONS,
                      "with --model absorbed: it has no port")
         return calibrate_absorbed_main(args, output, log, start)
+    if not os.path.exists(os.path.join(args.dir, "manifest.json")):
+        from eval.core.photos import PhotoError, camera_folder_names
+
+        try:
+            cameras = camera_folder_names(args.dir)
+        except PhotoError as exc:
+            raise CLIError(str(exc)) from None
+        if cameras:
+            return _calibrate_camera_photos(args, output, log, start, cameras)
     if is_photo_folder(args.dir) or (
             any(os.path.isdir(os.path.join(args.dir, sub)) for sub in ("left", "right"))
             and not os.path.exists(os.path.join(args.dir, "manifest.json"))):
@@ -369,13 +378,13 @@ def main(args) -> int:
                        f"(no left/ and right/ folders, no photos)")
     boards = read_boards(args.dir)
     if "multirig" in boards.calib:  # a folder of N > 2 cameras
-        from eval.calibrate.cameras import calibrate_cameras_main
+        from eval.calibrate.cameras import boards_source, calibrate_cameras_main
 
         if boards.air:
             refuse_given(args, HOUSING_OPTIONS, f"to in-air boards ({args.dir}): they calibrate "
                                                 f"the cameras, no housing")
         design = None if boards.air else design_port(args, (0.0, 0.0, 1.0))
-        return calibrate_cameras_main(args, output, log, start, boards, design)
+        return calibrate_cameras_main(args, output, log, start, boards_source(boards), design)
     truth = boards.calib["rig"]
     if not boards.air and truth.port.kind not in HOUSINGS:  # a kind without a housing problem
         raise CLIError(f"{args.dir}: boards behind {truth.port.description}: no housing "
@@ -511,6 +520,39 @@ def _print_n_water_note(args) -> None:
 def is_photo_folder(path) -> bool:
     """Whether ``path`` is a photo folder (it holds ``left/`` and ``right/``)."""
     return all(os.path.isdir(os.path.join(path, sub)) for sub in ("left", "right"))
+
+
+def _calibrate_camera_photos(args, output, log, start, cameras) -> int:
+    """``eval calibrate`` of a user's photo folder of N > 2 cameras (``cam0/``, ``cam1/``, …:
+    :mod:`eval.calibrate.cameras`)."""
+    from eval.calibrate.cameras import calibrate_cameras_main, photos_source
+
+    where = f"{args.dir} (photos of {len(cameras)} cameras)"
+    if len(cameras) == 2:
+        raise CLIError(f"{args.dir}: two camera folders (cam0/, cam1/); a stereo pair's photos "
+                       f"are left/ and right/ (the two-camera calibration)")
+    if args.air:
+        refuse_given(args, HOUSING_OPTIONS, "to in-air photos (--air): they calibrate the "
+                                            "cameras, no housing")
+        if args.intrinsics:
+            raise CLIError("--intrinsics does not apply with --air: in-air photos calibrate the "
+                           "intrinsics themselves")
+    elif not args.intrinsics:
+        raise CLIError(f"{where}: say --air (photos taken in air) or --intrinsics calib.yaml "
+                       f"(photos taken underwater, with the in-air calibration of these cameras)")
+    _require_board(args, where)
+    board = board_from_args(args)
+    design = None if args.air else design_port(args, (0.0, 0.0, 1.0))
+    note = None
+    first = os.path.join(args.dir, cameras[0])
+    photos = sorted(f for f in os.listdir(first) if not f.startswith("."))
+    if photos:
+        note = encoding_note(os.path.join(first, photos[0]), args.encoding)
+    log(f"read the photos of {', '.join(cameras)} from {args.dir} …")
+    source = photos_source(args.dir, cameras, board, bool(args.air), args.encoding)
+    if note:  # once the photos are read: a refused folder prints its error line only
+        print(note, file=sys.stderr, flush=True)
+    return calibrate_cameras_main(args, output, log, start, source, design)
 
 
 def _calibrate_photos(args, output, log, free, start) -> int:

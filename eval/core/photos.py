@@ -21,6 +21,7 @@ Layout of a photo folder: ``DIR/left/`` and ``DIR/right/``, files paired by name
 from __future__ import annotations
 
 import os
+import re
 from dataclasses import dataclass
 
 import numpy as np
@@ -248,6 +249,67 @@ def photo_folder(path) -> PhotoPairs:
     return PhotoPairs(path, pairs.names, pairs.left, pairs.right)
 
 
+#: The folders of one camera each in a photo folder of N cameras: ``cam0``, ``cam1``, …
+CAMERA_FOLDER = re.compile(r"^cam(\d+)$")
+
+
+def camera_folder_names(path) -> tuple:
+    """The camera folders of a photo folder of N cameras (``cam0/``, ``cam1/``, … in order; an
+    empty tuple when it holds none). :class:`PhotoError` when their numbers do not run 0, 1, …
+    without a gap (``cam3/`` with no ``cam2/``) or there is one only."""
+    path = os.fspath(path)
+    numbers = sorted(int(m.group(1)) for m in (CAMERA_FOLDER.match(n) for n in os.listdir(path))
+                     if m and os.path.isdir(os.path.join(path, m.group(0))))
+    if not numbers:
+        return ()
+    missing = [k for k in range(numbers[-1] + 1) if k not in numbers]
+    if missing:
+        raise PhotoError(f"{path}/cam{numbers[-1]}: there is no cam{missing[0]}/ folder (the "
+                         f"cameras are cam0/, cam1/, … without a gap)")
+    if len(numbers) < 2:
+        raise PhotoError(f"{path}: one camera folder (cam0/); a rig needs two or more (one "
+                         f"camera's photos: give the folder that holds them)")
+    return tuple(f"cam{k}" for k in numbers)
+
+
+def read_camera_photos(path, names, encoding: str = "auto") -> tuple[list, tuple, tuple]:
+    """Every capture of a photo folder of N cameras (one folder per camera, photos matched by
+    file name): ``([(cam0, cam1, …), …], (width, height), stems)``. :class:`PhotoError` when a
+    camera's folder has no photos, a photo has no partner of the same name in every other
+    camera's folder (the camera and file named), or the photos differ in size."""
+    path = os.fspath(path)
+    found = {name: _photos_in(os.path.join(path, name)) for name in names}
+    for name, photos in found.items():
+        if not photos:
+            raise PhotoError(f"{path}/{name}: no photos (expected "
+                             f"{', '.join(PHOTO_EXTENSIONS)} files)")
+    stems = sorted(set().union(*found.values()))
+    for name, photos in found.items():
+        lacking = [s for s in stems if s not in photos]
+        if lacking:
+            other = next(n for n in names if lacking[0] in found[n])
+            raise PhotoError(f"{path}/{name}: {len(photos)} photos, {len(stems)} captures; no "
+                             f"photo {lacking[0]}.* beside {path}/{other}/{found[other][lacking[0]]}"
+                             f" (captures are matched by file name)")
+    for name in names:
+        check_orientations([os.path.join(path, name, found[name][s]) for s in stems])
+    images, size = [], None
+    for stem in stems:
+        views = []
+        for name in names:
+            file = os.path.join(path, name, found[name][stem])
+            image = read_photo(file, encoding)
+            shape = (image.shape[1], image.shape[0])
+            if size is None:
+                size = (shape, file)
+            elif shape != size[0]:
+                raise PhotoError(f"{file}: {shape[0]}x{shape[1]} px, but {size[1]} is "
+                                 f"{size[0][0]}x{size[0][1]} px (the rig model needs one size)")
+            views.append(image)
+        images.append(tuple(views))
+    return images, size[0], tuple(stems)
+
+
 def read_pairs(pairs: PhotoPairs, encoding: str = "auto") -> tuple[list, tuple]:
     """Every pair read: ``([(left, right), …], (width, height))``. :class:`PhotoError` when one
     camera's photos differ in size (the first that differs is named)."""
@@ -268,8 +330,10 @@ def read_pairs(pairs: PhotoPairs, encoding: str = "auto") -> tuple[list, tuple]:
     return images, size[0][0] if size else (0, 0)
 
 
-__all__ = ["ENCODING_HELP", "PHOTO_ENCODINGS", "PHOTO_EXTENSIONS", "PhotoError", "PhotoPairs",
+__all__ = ["CAMERA_FOLDER", "ENCODING_HELP", "PHOTO_ENCODINGS", "PHOTO_EXTENSIONS", "PhotoError",
+           "PhotoPairs",
            "JPEG_TAIL_BYTES", "add_encoding_option", "check_orientations", "encoding_note",
            "exif_orientation",
            "jpeg_truncation", "pair_folders",
-           "photo_files", "photo_folder", "read_pairs", "read_photo", "srgb_to_linear"]
+           "photo_files", "photo_folder", "read_camera_photos", "camera_folder_names", "read_pairs",
+           "read_photo", "srgb_to_linear"]

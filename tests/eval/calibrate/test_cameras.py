@@ -69,3 +69,53 @@ def test_bad_input_is_one_line(chain, tmp_path, capsys):
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and err[0].startswith("error:") and fragment in err[0], err
     assert not any((tmp_path / n).exists() for n in "abc")
+
+
+def _photo_folder(boards, out):
+    """The boards' renders as a user's photo folder of four cameras: ``camK/PP.png``."""
+    import shutil
+
+    for k in range(4):
+        (out / f"cam{k}").mkdir(parents=True)
+        for file in boards.glob(f"cam{k}_*.png"):
+            shutil.copy(file, out / f"cam{k}" / file.name.split("_", 1)[1])
+    return out
+
+
+def test_photo_folders_of_four_cameras(chain, tmp_path, capsys):
+    """``cam0/`` … ``cam3/`` photos matched by name (no truth in the folder): in air and then
+    the shared port, each estimate checked here against the boards' own truth."""
+    photos = _photo_folder(chain / "b_air", tmp_path / "air_photos")
+    board = ["--squares", "7x6", "--square-mm", "60"]
+    assert eval_main(["calibrate", str(photos), "--air", *board, "--out", str(tmp_path / "a"),
+                      "--no-progress"]) == 0
+    truth = read_rig_file(chain / "b_air" / "calib.yaml")
+    rig = read_rig_file(tmp_path / "a" / "calib.yaml")
+    names, matrix = read_rig_covariance(tmp_path / "a" / "calib.yaml")
+    sigma = dict(zip(names, np.sqrt(np.diag(matrix))))
+    for k in range(1, 4):
+        for i in range(3):
+            error = rig.cameras[k].center[i] - truth.cameras[k].center[i]
+            assert abs(error) <= 3 * sigma[f"cam{k}.center[{i}]"], (k, i, error)
+    for k in range(4):
+        error = rig.cameras[k].K[0, 0] - truth.cameras[k].K[0, 0]
+        assert abs(error) <= 3 * sigma[f"cam{k}.fx"], (k, error)
+    water = _photo_folder(chain / "b_water", tmp_path / "water_photos")
+    assert eval_main(["calibrate", str(water), "--intrinsics", str(tmp_path / "a" / "calib.yaml"),
+                      *board, "--out", str(tmp_path / "w"), "--no-progress"]) == 0
+    port, true_port = (read_rig_file(f).ports[0] for f in (tmp_path / "w" / "calib.yaml",
+                                                           chain / "b_water" / "calib.yaml"))
+    names, matrix = read_rig_covariance(tmp_path / "w" / "calib.yaml")
+    assert abs(port.distance - true_port.distance) <= 3 * np.sqrt(matrix[0, 0])
+    capsys.readouterr()
+    (water / "cam2" / "00.png").unlink()  # a capture one camera lacks
+    assert eval_main(["calibrate", str(water), "--intrinsics", str(tmp_path / "a" / "calib.yaml"),
+                      *board, "--out", str(tmp_path / "x"), "--no-progress"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "cam2" in err[0] and "00" in err[0], err
+    (water / "cam2").rename(water / "cam5")  # a gap in the cameras' numbers
+    assert eval_main(["calibrate", str(water), "--air", *board, "--out", str(tmp_path / "y"),
+                      "--no-progress"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "cam5" in err[0] and "no cam2/" in err[0], err
+    assert not (tmp_path / "x").exists() and not (tmp_path / "y").exists()
