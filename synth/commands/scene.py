@@ -129,6 +129,12 @@ def add_parser(subparsers) -> None:
                    help="tilt of the port normal from the left optical axis, degrees about x "
                         "and about y (default 0 0); --port per-camera: each LEFT,RIGHT, each "
                         "port's from its own camera's optical axis (e.g. 0,0 0,2)")
+    p.add_argument("--rig", metavar="FILE",
+                   help="render exactly the rig of a calibration file — calib.yaml of two or N "
+                        "cameras, calibmar's stereo YAML or the COLMAP fork's cameras.txt: its "
+                        "cameras (size, K, distortion, poses) and its port(s) replace the rig "
+                        "options (--cameras, --baseline, --toe-in, --size, --focal, --dist, "
+                        "--port and the port's options, which are refused with it)")
     p.add_argument("--cameras", type=_camera_count, default=2, metavar="N",
                    help="how many cameras (default 2: left, right): a row of N, --baseline "
                         "apart along x, camera k turned k × --toe-in about y towards the "
@@ -184,6 +190,7 @@ def main(args) -> int:
                              write_scene)
 
     check_file_output(args.out, "--out", may_replace=_is_our_scene)
+    from_file = _rig_from_file(args) if args.rig else None
     _refuse_inapplicable(args)
     if args.lighting is None and args.layout == "surface" and args.port == "none":
         raise CLIError("--port none: a surface in air needs --lighting led (the default, lit, "
@@ -207,9 +214,14 @@ def main(args) -> int:
     toe_in = rigs.PAPER_TOE_IN_DEG if args.toe_in is None else args.toe_in
     if not abs(toe_in) < 45:
         raise CLIError(f"--toe-in must stay below 45 degrees, got {toe_in:g}")
-    cameras = rigs.row_cameras(args.cameras, size, focal, args.dist, baseline, toe_in)
+    if from_file is not None:
+        cameras, port = from_file
+        size = tuple(cameras[0].size)
+    else:
+        cameras = rigs.row_cameras(args.cameras, size, focal, args.dist, baseline, toe_in)
+        port = None
     left, right = cameras[:2]
-    port = None
+    pair_comment = ""
     if args.layer and (args.n_glass is not None or args.glass_thickness is not None):
         raise CLIError("--layer replaces --n-glass and --glass-thickness; give one or the other")
     if args.layer and any(index < 1 for index, _ in args.layer):
@@ -219,7 +231,9 @@ def main(args) -> int:
         raise CLIError("--focus-distance needs --aperture-radius (the thin lens)")
     if args.port == "none" and (args.layer or args.lighting == "lit"):
         raise CLIError(f"{'--layer' if args.layer else '--lighting lit'} needs a port (--port paper)")
-    if args.port == "paper":
+    if from_file is not None:
+        pass  # the file's port, as it is
+    elif args.port == "paper":
         n = _indices(args)
         port_tilt = [_one(v, "--port-tilt") for v in args.port_tilt]
         tilt = np.radians(port_tilt)
@@ -286,13 +300,14 @@ def main(args) -> int:
                + (f", surface radius {args.surface_radius:g} mm"
                   if args.layout in ("cylinder", "sphere") else "")
                + f", port {args.port}"
+               + (f", the rig of {os.path.basename(args.rig)}" if args.rig else "")
                + (_dome_comment(port, left) if args.port == "dome" else "")
                + (pair_comment if args.port == "per-camera" else "")
                + (f" tilted {args.port_tilt[0][0]:g} deg about x, {args.port_tilt[1][0]:g} deg "
                   f"about y" if args.port == "paper" and any(sum(args.port_tilt, ())) else "")
                + (f" of {len(args.layer)} layers" if args.layer else "")
                + (f", {args.cameras} cameras {baseline:g} mm apart, each turned {toe_in:g} deg "
-                  f"more" if args.cameras != 2 else "")
+                  f"more" if args.cameras != 2 and not args.rig else "")
                + f", target radius {radius:g} mm"
                + (", lit targets" if args.lighting == "lit" else "")
                + (f", thin lens aperture {thin_lens[0]:g} mm focus {thin_lens[1]:.6g} mm"
@@ -353,6 +368,52 @@ def _surface_scene(args, left, right, port) -> int:
     except ValueError as exc:
         raise CLIError(str(exc)) from None
     return 0
+
+
+#: The options that describe the rig, which ``--rig FILE`` gives instead (refused with it).
+RIG_OPTIONS = ("cameras", "baseline", "toe_in", "size", "focal", "dist", "port", "dome_radius",
+               "dome_thickness", "dome_offset", "n_water", "n_glass", "port_distance",
+               "glass_thickness", "layer", "port_tilt")
+
+
+def _rig_from_file(args):
+    """``(cameras, port)`` of ``--rig FILE`` (:func:`synth.products.rig_file.read_rig_file`),
+    with ``args.port`` and ``args.cameras`` set to what the file holds (the kind of port
+    decides which layout options apply). CLIError (one line naming the file) for a file that is
+    not a calibration, or a rig of more than two cameras with a port of each its own."""
+    from synth.infra.cli import given
+    from synth.products.dataset import DatasetError
+    from synth.products.rig_file import read_rig_file
+
+    taken = [f"--{d.replace('_', '-')}" for d in RIG_OPTIONS if given(args, d)]
+    if taken:
+        raise CLIError(f"{taken[0]} does not apply with --rig {args.rig}: the file gives the "
+                       f"cameras and the port")
+    try:
+        rig = read_rig_file(args.rig)
+    except DatasetError as exc:
+        raise CLIError(str(exc)) from None
+    for name, camera in zip(rig.names, rig.cameras):
+        fx, fy, skew = camera.K[0, 0], camera.K[1, 1], camera.K[0, 1]
+        if abs(fx - fy) > 1e-9 * fx or skew != 0:
+            raise CLIError(f"--rig {args.rig}: {name} has fx = {fx:.6g}, fy = {fy:.6g} px"
+                           f"{f', skew {skew:g}' if skew else ''}; Mitsuba's perspective sensor "
+                           f"renders square pixels only (fx = fy, no skew), so this rig cannot "
+                           f"be rendered exactly")
+    stereo = rig.stereo()
+    if stereo is not None:
+        port = stereo.port if stereo.port is not None and stereo.port.refracts else None
+        kind = {"flat": "paper", "flat pair": "per-camera", "dome": "dome"}.get(
+            port.kind if port is not None else "", "none")
+    elif all(p is None for p in rig.ports) or not rig.refracts:
+        port, kind = None, "none"
+    elif all(p == rig.ports[0] for p in rig.ports):
+        port, kind = rig.ports[0], "paper"
+    else:
+        raise CLIError(f"--rig {args.rig}: {len(rig.cameras)} cameras with ports of their own; "
+                       f"a scene of more than two cameras has them behind one flat port or none")
+    args.port, args.cameras = kind, len(rig.cameras)
+    return list(rig.cameras), port
 
 
 def _refuse_inapplicable(args) -> None:
