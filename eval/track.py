@@ -67,6 +67,14 @@ def add_parser(subparsers):
                         "first frame's detections by its shape, no guess (a symmetric object "
                         "takes the turn nearest upright); truth — at the first frame's true "
                         "pose")
+    p.add_argument("--absorbed", action=argparse.BooleanOptionalAction, default=True,
+                   help="the absorbed baseline beside the refractive pose: both views as pinhole "
+                        "cameras whose focal length and distortion absorb the port (default on; "
+                        "from --absorbed-calib, or calibrated from boards projected through the "
+                        "sequence's port); --no-absorbed leaves it out")
+    p.add_argument("--absorbed-calib", metavar="FILE", default=None,
+                   help="the absorbed calibration (a calib.yaml without a port: eval calibrate "
+                        "--model absorbed)")
     add_out_option(p, COMMAND, default="out/track")
     add_json_option(p)
     add_progress_option(p)
@@ -194,6 +202,63 @@ def _per_camera_summary(valid, chi2_95) -> dict:
     return out
 
 
+def _absorbed(args, rig, log):
+    """The absorbed calibration the track's absorbed baseline uses (:mod:`eval.core.absorbed`):
+    ``--absorbed-calib``'s, or the sequence's cameras calibrated as pinhole cameras from boards
+    projected through their port; None with ``--no-absorbed`` or without a port."""
+    from eval.core.absorbed import analytic_absorbed_calibration, read_absorbed_calibration
+
+    if not args.absorbed:
+        return None
+    if not rig.port.refracts:
+        if args.absorbed_calib:
+            raise CLIError(f"--absorbed-calib does not apply to {args.dataset}: its rig has no "
+                           f"port, so there is nothing to absorb")
+        return None
+    if args.absorbed_calib:
+        try:
+            return read_absorbed_calibration(args.absorbed_calib, rig.left.size)
+        except ValueError as exc:
+            raise CLIError(str(exc)) from None
+    log("absorbed baseline: the cameras calibrated as pinhole cameras from boards seen through "
+        "the port …")
+    try:
+        return analytic_absorbed_calibration(rig, seed=0)
+    except ValueError as exc:
+        raise CLIError(f"{args.dataset}: the absorbed calibration cannot be made: {exc} "
+                       f"(--no-absorbed leaves the baseline out)") from None
+
+
+def absorbed_errors(rows, t_true, frames) -> dict:
+    """The absorbed baseline's positions against the truth: as they come (its frame is a
+    virtual one, the calibration's) and after the one rigid motion that best aligns all of them
+    with the true positions (Kabsch: what remains is the model's distortion of the approach),
+    each in % of the distance — median and largest — and its reprojection RMS."""
+    from measure.stereo.lockon import kabsch
+
+    got = [r for r in rows if r.get("absorbed_t_mm") is not None]
+    if not got:
+        return {"posed": 0}
+    index = {int(f): k for k, f in enumerate(frames)}
+    est = np.array([r["absorbed_t_mm"] for r in got])
+    true = np.array([t_true[index[r["frame"]]] for r in got])
+    distance = np.linalg.norm(true, axis=1)
+    raw = 100 * np.linalg.norm(est - true, axis=1) / distance
+    out = {"posed": len(got),
+           "position_error_pct": {"median": float(np.median(raw)), "max": float(raw.max())},
+           "rms_px": {"median": float(np.median([r["absorbed_rms_px"] for r in got]))}}
+    if len(got) >= 3:
+        R, t = kabsch(est, true)
+        aligned = 100 * np.linalg.norm(est @ R.T + t - true, axis=1) / distance
+        out["aligned_position_error_pct"] = {"median": float(np.median(aligned)),
+                                             "max": float(aligned.max())}
+        for r, e in zip(got, aligned):
+            r["absorbed_aligned_error_pct"] = float(e)
+    for r, e in zip(got, raw):
+        r["absorbed_position_error_pct"] = float(e)
+    return out
+
+
 def track_figure(path, rows) -> None:
     """``track.png``: the distance along the approach (true and estimated) and, per frame, the
     position error of the rig, of each camera alone and of the left camera as a pinhole, with
@@ -219,6 +284,9 @@ def track_figure(path, rows) -> None:
                    f"{c}.--", label=f"{name} alone")
     pinhole = [r["pinhole_position_error_pct"] * r["distance_mm"] / 100 for r in ok]
     b.semilogy(frame, pinhole, "C3x:", label="left as a pinhole")
+    if any("absorbed_aligned_error_pct" in r for r in ok):
+        b.semilogy(frame, [r.get("absorbed_aligned_error_pct", np.nan) * r["distance_mm"] / 100
+                           for r in ok], "C4+:", label="absorbed, aligned")
     b.set_xlabel("frame")
     b.set_ylabel("position error (mm)")
     b.set_title("position error against the true pose", fontsize=9)
@@ -242,12 +310,15 @@ def main(args) -> int:
     log = ((lambda text: None) if args.no_progress
            else (lambda text: print(text, file=sys.stderr, flush=True)))
     start = time.perf_counter()
+    if not args.absorbed and args.absorbed_calib:
+        raise CLIError("--absorbed-calib does not apply with --no-absorbed")
     manifest, rig, obj, (frames, R_true, t_true), true_pixels = read_sequence(args.dataset)
     radius = float((manifest.get("object") or {}).get("marker_radius_mm") or 0.0)
     if args.eccentricity and radius <= 0:
         raise CLIError(f"{args.dataset}: its manifest gives no marker radius, which the "
                        f"eccentricity correction needs (--no-eccentricity measures the raw "
                        f"centroids)")
+    absorbed = _absorbed(args, rig, log)
     output = OutputDir(args.out, COMMAND).claim()
     if args.lock_on == "truth":
         R_prev, t_prev = R_true[0], t_true[0]  # locked on at the first frame's true pose
@@ -294,8 +365,12 @@ def main(args) -> int:
         lost = R_prev is None or associated < LOST_FRACTION * expected
         if lost:  # most markers found no detection where the last pose put them
             pixels = np.full_like(pixels, np.nan)
-        # the baseline: the left camera's raw detections as a pinhole that ignores the port
+        # the baselines: the left camera's raw detections as a pinhole that ignores the port,
+        # and both views' raw detections through the absorbed calibration (pinhole cameras
+        # whose focal length and distortion absorb the port, in their own virtual frame)
         _, t_pinhole = pinhole_pose(rig.left, obj, pixels[0])
+        absorbed_pose = (estimate_pose(absorbed.rig, obj, pixels, args.pixel_sigma)
+                         if absorbed is not None else None)
         t0 = time.perf_counter()
         pose = estimate_pose(rig, obj, pixels, args.pixel_sigma)
         if args.eccentricity and pose.valid:
@@ -327,6 +402,11 @@ def main(args) -> int:
                         "distance_mm": distance,
                         "pinhole_position_error_pct": float(
                             100 * np.linalg.norm(t_pinhole - t_true[k]) / distance),
+                        "absorbed_t_mm": (absorbed_pose.t.tolist()
+                                          if absorbed_pose is not None and absorbed_pose.valid
+                                          else None),
+                        "absorbed_rms_px": (absorbed_pose.rms_px if absorbed_pose is not None
+                                            and absorbed_pose.valid else None),
                         "error_mm": error.tolist(),
                         "rotation_error_rad": float(rotation_error(pose.R, R_true[k])),
                         "mahalanobis2": float(mahalanobis_squared(
@@ -351,6 +431,9 @@ def main(args) -> int:
         miss = [r["detection_rms_px"] for r in rows if r["detection_rms_px"] is not None]
         pct = np.array([r["position_error_pct"] for r in valid])
         pinhole = np.array([r["pinhole_position_error_pct"] for r in valid])
+        if absorbed is not None:
+            summary["absorbed"] = {**absorbed_errors(valid, t_true, frames),
+                                   "calibration": absorbed.summary}
         summary.update({"detection_rms_px": {"median": float(np.median(miss)),
                                              "max": float(np.max(miss))},
                         "position_error_pct": {"median": float(np.median(pct)),
@@ -413,6 +496,15 @@ def main(args) -> int:
               f"the positions inside their 95 % ellipsoid; detections "
               f"{summary['detection_rms_px']['median']:.3g} px RMS from the simulator's pixels "
               f"(median over frames)", file=stream)
+        if summary.get("absorbed", {}).get("posed"):
+            a = summary["absorbed"]
+            print(f"absorbed baseline (pinhole cameras that absorb the port): position error "
+                  f"median {a['position_error_pct']['median']:.3g} %, max "
+                  f"{a['position_error_pct']['max']:.3g} % of the distance"
+                  + (f"; after the best rigid alignment of the whole track median "
+                     f"{a['aligned_position_error_pct']['median']:.3g} %, max "
+                     f"{a['aligned_position_error_pct']['max']:.3g} %"
+                     if "aligned_position_error_pct" in a else ""), file=stream)
         alone = summary["per_camera"]
         print("each camera alone through its port: " + "; ".join(
             f"{name} {a['posed']} posed, median {a['position_error_mm']['median']:.3g} mm (max "

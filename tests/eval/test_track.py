@@ -54,9 +54,16 @@ def test_sequence_is_tracked_against_its_true_poses(tmp_path, capsys):
         assert alone["posed"] == 6, (name, alone)
         assert (report["summary"]["position_error_mm"]["median"]
                 <= alone["position_error_mm"]["median"] <= 5.0), (name, alone)
+    absorbed = report["summary"]["absorbed"]  # pinhole cameras that absorb the port
+    assert absorbed["posed"] == 6
+    assert (absorbed["position_error_pct"]["median"]
+            > 10 * report["summary"]["position_error_pct"]["median"]), absorbed
+    assert (absorbed["aligned_position_error_pct"]["median"]
+            > 10 * report["summary"]["position_error_pct"]["median"]), absorbed
     raw = tmp_path / "raw"
     assert eval_main(["track", str(seq), "--out", str(raw), "--no-eccentricity",
-                      "--no-progress"]) == 0
+                      "--no-absorbed", "--no-progress"]) == 0
+    assert "absorbed" not in json.loads((raw / "report.json").read_text())["summary"]
     uncorrected = json.loads((raw / "report.json").read_text())["summary"]
     corrected = report["summary"]
     assert (corrected["position_error_mm"]["median"]
@@ -69,6 +76,10 @@ def test_refusals_are_one_line(tmp_path, capsys):
                       "--no-progress"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("error:") and "manifest.json" in err[0], err
+    assert eval_main(["track", str(tmp_path), "--no-absorbed", "--absorbed-calib", "x.yaml",
+                      "--out", str(tmp_path / "out"), "--no-progress"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--absorbed-calib" in err[0] and "--no-absorbed" in err[0], err
     assert synth_main(["sequence", *SEQUENCE[:5], "--approach", "50,1000", "--frames", "2",
                        "--out", str(tmp_path / "near"), "--no-progress"]) == 2
     err = capsys.readouterr().err.strip().splitlines()

@@ -37,9 +37,10 @@ def _observe(rig, poses, sigma, rng, board=BOARD):
     return Detections(ids, pixels)
 
 
-class _Spec:  # the two attributes board_rig needs of a SceneSpec
+class _Spec:  # the attributes board_rig needs of a SceneSpec
     def __init__(self, rig):
         self.cameras = rig.cameras
+        self.extra_cameras = ()
 
 
 def test_housing_bundle_adjustment_recovers_a_tilted_port():
