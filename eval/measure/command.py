@@ -54,6 +54,9 @@ def add_parser(subparsers):
     p.add_argument("left", metavar="LEFT", help="left photo, or folder of left photos")
     p.add_argument("right", metavar="RIGHT", help="right photo, or folder of right photos "
                                                   "(paired with the left ones by file name)")
+    p.add_argument("more", metavar="MORE", nargs="*",
+                   help="a rig of N > 2 cameras: the photos of the third camera on, one capture "
+                        "(LEFT RIGHT MORE… are cam0 cam1 cam2 … in the calibration's order)")
     p.add_argument("--calib", required=True, metavar="FILE",
                    help="the rig's calibration for the photos' image size: calib.yaml (as "
                         "python -m synth dataset and eval calibrate write it), calibmar's YAML "
@@ -266,6 +269,18 @@ def summary_line(report: dict) -> str:
             f"matched; {check} {checks}; total {report['timings_s']['total']:.1f} s")
 
 
+def _cameras_in(path) -> int:
+    """How many cameras a calibration file holds (2 unless it is a calib.yaml of N cameras;
+    an unreadable file is left to the reader that names the problem)."""
+    from synth.products.dataset import DatasetError
+    from synth.products.rig_file import read_rig_file
+
+    try:
+        return len(read_rig_file(path).cameras)
+    except (DatasetError, ValueError, OSError):
+        return 2
+
+
 def calibration_model(path) -> str | None:
     """The ``model`` node of a calib.yaml (``absorbed`` for ``eval calibrate --model
     absorbed``), or None (another file, or none)."""
@@ -294,6 +309,15 @@ def main(args) -> int:
     quiet = args.no_progress
     log = (lambda text: None) if quiet else (lambda text: print(text, file=sys.stderr, flush=True))
     start = time.perf_counter()
+    if args.more or _cameras_in(args.calib) > 2:  # one capture of N cameras
+        from eval.measure.views import measure_views_main
+
+        if args.dense:
+            raise CLIError(f"--dense does not apply to a capture of {2 + len(args.more)} "
+                           f"cameras (dense matching is a two-view method)")
+        options = options_of(args)
+        output = OutputDir(args.out, COMMAND).claim()
+        return measure_views_main(args, output, options, start, log)
     options = options_of(args)
     output = OutputDir(args.out, COMMAND).claim()  # before any work
     inputs = load_inputs(args.calib, args.left, args.right, args.encoding)

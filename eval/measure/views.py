@@ -1,0 +1,157 @@
+"""``python -m eval measure --calib calib.yaml CAM0 CAM1 CAM2 …``: one capture of a rig of N > 2
+cameras measured with its calibration (a ``calib.yaml`` of N cameras, as ``eval calibrate``
+writes it) — no truth.
+
+Each photo is one camera's, in the order of the calibration's cameras. The targets are detected
+in every photo (the detector options of ``eval run``), matched across all views without truth
+(:func:`measure.stereo.multimatch.match_views`: every pair through the refractive epipolar
+constraint, then consistent tracks) and each track triangulated from all its views with the
+optical path of N views (:func:`measure.stereo.multiview.triangulate_views`). A target one view
+alone saw is counted, never triangulated.
+
+Writes into ``--out``: ``points.ply`` (mm, binary), ``points.csv`` (``track,x_mm,y_mm,z_mm,
+gap_mm,views`` and ``u_NAME,v_NAME`` per camera, NaN where a camera did not see it),
+``report.json`` and ``report.md`` (detections per camera, tracks and how many views each has,
+the gap RMS by the number of views). Exit 1 (everything written, a ``failed:`` line) when fewer
+than half of the sparsest camera's detections end in a track: photos that are not the rig's
+capture (cameras swapped, another rig). Units mm, px; the reference frame is the first
+camera's.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+import time
+
+import numpy as np
+
+from eval.cli import CLIError
+
+#: The options of a stereo pair's measurement that a capture of N cameras does not take.
+NOT_FOR_N_CAMERAS = (("dense", "--dense"), ("pixel_sigma", "--pixel-sigma"))
+
+
+def measure_views_main(args, output, options, start, log) -> int:
+    """``eval measure`` of one capture of N cameras (module docs); ``options`` the target
+    options (:func:`eval.measure.command.options_of`)."""
+    from measure.stereo.multimatch import match_views
+    from measure.stereo.multiview import triangulate_views
+    from synth.infra.cli import EXIT_CHECK_FAILED, given
+    from synth.infra.fileio import atomic_write_json, atomic_write_text, jsonable
+    from synth.products.dataset import DatasetError
+    from synth.products.rig_file import read_rig_file
+
+    from eval.core.detection import detect_view
+    from eval.core.photos import PhotoError, encoding_note, read_photo
+    from eval.measure.report import write_cloud
+
+    photos = [args.left, args.right, *args.more]
+    for dest, flag in NOT_FOR_N_CAMERAS:
+        if given(args, dest):
+            raise CLIError(f"{flag} does not apply to a capture of {len(photos)} cameras")
+    if tuple(options.methods) != ("optical_path",):
+        raise CLIError(f"--methods {args.methods}: a capture of {len(photos)} cameras is "
+                       f"measured with the optical path of N views (optical_path)")
+    try:
+        rig = read_rig_file(args.calib)
+    except DatasetError as exc:
+        raise CLIError(str(exc)) from None
+    if len(rig.cameras) != len(photos):
+        raise CLIError(f"--calib {args.calib}: {len(rig.cameras)} cameras "
+                       f"({', '.join(rig.names)}), but {len(photos)} photos were given (one per "
+                       f"camera, in that order)")
+    images = []
+    for name, camera, photo in zip(rig.names, rig.cameras, photos):
+        if os.path.isdir(photo):
+            raise CLIError(f"{photo}: a folder; a capture of N cameras is given as one photo "
+                           f"per camera")
+        try:
+            image = read_photo(photo, args.encoding)
+        except PhotoError as exc:
+            raise CLIError(str(exc)) from None
+        if (image.shape[1], image.shape[0]) != tuple(camera.size):
+            raise CLIError(f"{photo}: {image.shape[1]}x{image.shape[0]} px, but {name} of "
+                           f"{args.calib} is {camera.size[0]}x{camera.size[1]} px")
+        images.append(image)
+    note = encoding_note(photos[0], args.encoding)
+    if note:
+        print(note, file=sys.stderr, flush=True)
+    log(f"detect the targets in {len(photos)} photos …")
+    timings = {}
+    t = time.perf_counter()
+    centers = [np.asarray(detect_view(image, options.threshold_fraction, options.max_elongation,
+                                      options.max_area_ratio, options.median_filter,
+                                      floor_fraction=options.floor_fraction).centers,
+                          dtype=float).reshape(-1, 2) for image in images]
+    timings["detect"] = time.perf_counter() - t
+    t = time.perf_counter()
+    tracks = match_views(rig, centers, gate_mm=options.gate_mm,
+                         depth_range=tuple(options.depth_range))
+    pixels = tracks.pixels(centers)
+    result = triangulate_views(rig.views(), pixels)
+    timings["match_and_triangulate"] = time.perf_counter() - t
+    ok = result.valid
+    if not ok.any():
+        raise CLIError(f"{', '.join(photos)}: no target was matched in two or more views "
+                       f"(detections per camera: "
+                       + ", ".join(f"{n} {len(c)}" for n, c in zip(rig.names, centers)) + ")")
+    in_tracks = [int((tracks.detections[ok, v] >= 0).sum()) for v in range(len(photos))]
+    sparsest = int(np.argmin([len(c) for c in centers]))
+    failures = []
+    if in_tracks[sparsest] < 0.5 * len(centers[sparsest]):
+        failures.append(f"{rig.names[sparsest]}: {in_tracks[sparsest]} of its "
+                        f"{len(centers[sparsest])} detections in a track: these photos are "
+                        f"not this rig's capture (cameras swapped, or another rig)")
+    by_views = {}
+    for k in sorted(set(result.views[ok].tolist())):
+        sel = ok & (result.views == k)
+        by_views[str(k)] = {"targets": int(sel.sum()),
+                            "gap_rms_mm": float(np.sqrt(np.mean(result.gap[sel] ** 2)))}
+    report = {"command": "eval measure", "calib": args.calib, "cameras": list(rig.names),
+              "photos": photos, "encoding": args.encoding, "image_size": list(rig.cameras[0].size),
+              "methods": ["optical_path"],
+              "options": {"gate_mm": options.gate_mm,
+                          "depth_range_mm": [None if v is None else float(v)
+                                             for v in options.depth_range]},
+              "detections": {n: len(c) for n, c in zip(rig.names, centers)},
+              "in_tracks": dict(zip(rig.names, in_tracks)),
+              "tracks": int(len(tracks.detections)), "triangulated": int(ok.sum()),
+              "in_no_track": {n: int(len(a)) for n, a in zip(rig.names, tracks.alone)},
+              "conflicts_dropped": int(tracks.n_conflicts), "by_views": by_views,
+              "gap_rms_mm": float(np.sqrt(np.mean(result.gap[ok] ** 2))),
+              "failures": failures}
+    with output.staged() as tmp:
+        write_cloud(os.path.join(tmp, "points.ply"), result.points[ok])
+        header = ["track", "x_mm", "y_mm", "z_mm", "gap_mm", "views"] + [
+            f"{a}_{n}" for n in rig.names for a in ("u", "v")]
+        lines = [",".join(header)]
+        for i in np.flatnonzero(ok):
+            lines.append(",".join([str(int(i)), *(repr(float(v)) for v in result.points[i]),
+                                   repr(float(result.gap[i])), str(int(result.views[i])),
+                                   *(repr(float(v)) for v in pixels[i].ravel())]))
+        atomic_write_text(os.path.join(tmp, "points.csv"), "\n".join(lines) + "\n")
+        report["timings_s"] = {**timings, "total": time.perf_counter() - start}
+        report = jsonable(report)
+        atomic_write_json(os.path.join(tmp, "report.json"), report)
+        atomic_write_text(os.path.join(tmp, "report.md"), "\n".join([
+            f"# eval measure: one capture of {len(photos)} cameras", "",
+            f"Calibration `{args.calib}`. Detections per camera: "
+            + ", ".join(f"{n} {c}" for n, c in report["detections"].items()) + ".", "",
+            f"{report['triangulated']} targets triangulated (optical path of N views); "
+            f"detections in no track (seen by one view, or ambiguous; not triangulated): "
+            + ", ".join(f"{n} {c}" for n, c in report["in_no_track"].items())
+            + f"; {report['conflicts_dropped']} ambiguous tracks dropped.", "",
+            "| views | targets | gap RMS (mm) |", "|---|---|---|",
+            *(f"| {k} | {v['targets']} | {v['gap_rms_mm']:.4g} |" for k, v in by_views.items()),
+            "", *(f"**Failed:** {f}" for f in failures)]) + "\n")
+    print(f"{len(photos)} cameras: {report['triangulated']} targets triangulated ("
+          + ", ".join(f"{v['targets']} from {k} views" for k, v in by_views.items())
+          + f"), gap RMS {report['gap_rms_mm']:.4g} mm; total {report['timings_s']['total']:.1f} s")
+    print(f"wrote {output.path}")
+    for failure in failures:
+        print(f"failed: {failure} (report in {output.path})", file=sys.stderr)
+    return EXIT_CHECK_FAILED if failures else 0
+
+
+__all__ = ["measure_views_main"]

@@ -1,0 +1,72 @@
+"""``eval measure`` of one capture of three cameras (small renders of a grid of large targets):
+the points against the scene's true targets, every target two views see triangulated, and bad
+input one line."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.spatial import cKDTree
+
+from eval.cli import main as eval_main
+from eval.core.analytic import visible_targets
+from synth.__main__ import main as synth_main
+from synth.products.rig_file import write_rig_file
+from synth.scene import load_scene
+
+pytestmark = pytest.mark.slow
+
+
+@pytest.fixture(scope="module")
+def capture(tmp_path_factory):
+    root = tmp_path_factory.mktemp("capture")
+    scene = root / "three.xml"
+    assert synth_main(["scene", "--cameras", "3", "--layout", "grid", "--spacing", "150",
+                       "--half-width", "600", "--target-radius", "10", "--size", "320", "268",
+                       "--out", str(scene)]) == 0
+    assert synth_main(["render", str(scene), "--spp", "16", "--out", str(root / "img"),
+                       "--no-progress"]) == 0
+    spec = load_scene(str(scene))
+    write_rig_file(root / "calib.yaml", spec.multirig)
+    return root, spec
+
+
+def test_three_photos_give_the_true_targets(capture, tmp_path):
+    root, spec = capture
+    photos = [str(root / "img" / f"cam{k}.png") for k in range(3)]
+    out = tmp_path / "m"
+    assert eval_main(["measure", "--calib", str(root / "calib.yaml"), *photos, "--out",
+                      str(out), "--no-progress"]) == 0
+    data = np.genfromtxt(out / "points.csv", delimiter=",", names=True)
+    points = np.column_stack([data["x_mm"], data["y_mm"], data["z_mm"]])
+    rig = spec.multirig
+    seen = sum(visible_targets(c, rig.view_port(k), spec.targets, spec.target_radius)[1]
+               for k, c in enumerate(rig.cameras))
+    assert len(points) >= (seen >= 2).sum() - 1
+    distance, index = cKDTree(spec.targets).query(points)
+    assert len(set(index)) == len(index)  # one point per target
+    # the depth that 0.1 px of disparity moves a point at the targets' distance over the
+    # first baseline (z² / (f·b) · 0.1): the raw centroids of 10 mm disks on 320 px images
+    z = float(np.mean(spec.targets[:, 2]))
+    focal = rig.cameras[0].K[0, 0]
+    baseline = np.linalg.norm(rig.cameras[1].center - rig.cameras[0].center)
+    assert distance.max() < 0.1 * z ** 2 / (focal * baseline), distance.max()
+    assert set(np.unique(data["views"])) <= {2.0, 3.0}
+
+
+def test_bad_captures_are_refused(capture, tmp_path, capsys):
+    root, _ = capture
+    photos = [str(root / "img" / f"cam{k}.png") for k in range(3)]
+    calib = str(root / "calib.yaml")
+    for argv, fragment in (([*photos[:2]], "3 cameras"),
+                           ([*photos, photos[0]], "4 photos"),
+                           ([*photos, "--dense"], "--dense"),
+                           ([*photos, "--methods", "su"], "--methods")):
+        assert eval_main(["measure", "--calib", calib, *argv, "--out", str(tmp_path / "x"),
+                          "--no-progress"]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and err[0].startswith("error:") and fragment in err[0], err
+    assert not (tmp_path / "x").exists()
+    swapped = [photos[2], photos[1], photos[0]]  # not the rig's capture: never exit 0
+    assert eval_main(["measure", "--calib", calib, *swapped, "--out", str(tmp_path / "s"),
+                      "--no-progress"]) in (1, 2)
