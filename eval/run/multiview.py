@@ -1,7 +1,8 @@
 """``python -m eval run`` on a scene of more than two cameras (``synth scene --cameras N``).
 
-Every view is rendered (:func:`synth.rendering.render.render_views`) and its targets detected
-(the two-camera run's detector and options); the detections are matched across all views
+Every view is rendered (:func:`synth.rendering.render.render_views`) — or read from a ``--from``
+dataset of N cameras (:mod:`synth.products.views_dataset`, :func:`dataset_views`) — and its
+targets detected (the two-camera run's detector and options); the detections are matched across all views
 without ground truth (:func:`measure.stereo.multimatch.match_views`: pairwise refractive
 epipolar matching, tracks from their union, a track with a conflict dropped); every track is
 triangulated from all its views with the optical path (:func:`measure.stereo.multiview.
