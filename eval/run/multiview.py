@@ -1,7 +1,8 @@
 """``python -m eval run`` on a scene of more than two cameras (``synth scene --cameras N``).
 
-Every view is rendered (:func:`synth.rendering.render.render_views`) and its targets detected
-(the two-camera run's detector and options); the detections are matched across all views
+Every view is rendered (:func:`synth.rendering.render.render_views`) — or read from a ``--from``
+dataset of N cameras (:mod:`synth.products.views_dataset`, :func:`dataset_views`) — and its
+targets detected (the two-camera run's detector and options); the detections are matched across all views
 without ground truth (:func:`measure.stereo.multimatch.match_views`: pairwise refractive
 epipolar matching, tracks from their union, a track with a conflict dropped); every track is
 triangulated from all its views with the optical path (:func:`measure.stereo.multiview.
@@ -32,7 +33,7 @@ from eval.run.config import RunConfig
 
 #: The options of a two-camera run that a run of N cameras does not take (refused, never
 #: ignored): (config field, option).
-NOT_FOR_N_CAMERAS = (("from_dir", "--from"), ("assumptions", "--assume"),
+NOT_FOR_N_CAMERAS = (("assumptions", "--assume"),
                      ("compare_calib", "--compare-calib"), ("absorbed_calib", "--absorbed-calib"),
                      ("self_calibrate", "--self-calibrate"), ("sensor", "--sensor"))
 #: The one method of a run of N cameras.
@@ -85,6 +86,73 @@ def measurement_rig(config: RunConfig, spec):
                            f"{camera.size[1]} px, but the scene renders {spec.size[0]}x"
                            f"{spec.size[1]} px")
     return rig
+
+
+def rig_differences(truth, other) -> list[str]:
+    """What differs (beyond :data:`eval.core.assumption.ROUND_OFF`) between two rigs of N
+    cameras (:class:`measure.stereo.multirig.MultiRig`): per camera its name, intrinsics,
+    distortion, pose and port, as ``camK K``, ``camK port normal`` …; ``[]`` when they agree."""
+    from eval.core.assumption import ROUND_OFF
+
+    if len(truth) != len(other):
+        return [f"{len(other)} cameras, not {len(truth)}"]
+
+    def differs(a, b) -> bool:
+        a, b = np.asarray(a, float).ravel(), np.asarray(b, float).ravel()
+        return a.shape != b.shape or bool(np.max(np.abs(a - b), initial=0.0) > ROUND_OFF)
+
+    out = []
+    for k, (name, a, b) in enumerate(zip(truth.names, truth.cameras, other.cameras)):
+        if other.names[k] != name:
+            out.append(f"camera {k} named {other.names[k]}, not {name}")
+        dist_a = np.zeros(8) if a.dist is None else np.pad(a.dist, (0, 8 - a.dist.size))
+        dist_b = np.zeros(8) if b.dist is None else np.pad(b.dist, (0, 8 - b.dist.size))
+        for what, x, y in (("K", a.K, b.K), ("distortion", dist_a, dist_b),
+                           ("size", a.size, b.size), ("pose", np.r_[a.R.ravel(), a.t],
+                                                      np.r_[b.R.ravel(), b.t])):
+            if differs(x, y):
+                out.append(f"{name} {what}")
+        p, q = truth.view_port(k), other.view_port(k)
+        if type(p) is not type(q):
+            out.append(f"{name} port")
+            continue
+        diff = {}
+        p.difference(q, differs, diff)
+        out += [f"{name} {key}" for key in diff]
+    return out
+
+
+def dataset_views(config: RunConfig, spec) -> tuple[list, dict]:
+    """The images of the ``--from`` dataset of N cameras and the render's ``info``
+    (variant, spp, seed, the per-view render entries, as the manifest recorded them); CLIError
+    (exit 2, one line) for a dataset that is not one of this scene, or whose ``calib.yaml``
+    disagrees with the scene rendered with the manifest's parameters."""
+    from synth.products.dataset import DatasetError
+    from synth.products.views_dataset import is_views_dataset, read_views_dataset
+
+    if not is_views_dataset(config.from_dir):
+        raise CLIError(f"--from {config.from_dir}: not a dataset of {len(spec.all_cameras)} "
+                       f"cameras (cam0/, cam1/, …), but {config.scene} is a scene of "
+                       f"{len(spec.all_cameras)}")
+    try:
+        data = read_views_dataset(config.from_dir)
+    except DatasetError as exc:
+        raise CLIError(f"--from {exc}") from None
+    if data.manifest["scene"].get("sha256") != spec.sha256:
+        raise CLIError(f"--from {config.from_dir}: the dataset was rendered from another scene "
+                       f"than {config.scene}")
+    difference = rig_differences(spec.multirig, data.rig)
+    if difference:
+        raise CLIError(f"--from {config.from_dir}: calib.yaml disagrees with the scene rendered "
+                       f"with manifest.json's parameters (in {', '.join(difference)}); the run "
+                       f"takes the scene as the truth: render the dataset again, or measure "
+                       f"with --calib {os.path.join(config.from_dir, 'calib.yaml')} to believe it")
+    m = data.manifest
+    info = {"variant": m.get("variant", "?"), "spp": m.get("spp"),
+            "spp_rendered": m.get("spp_rendered"), "seed": m.get("seed"),
+            "from": os.path.abspath(config.from_dir),
+            "render": {name: (m.get("render") or {}).get(name) for name in data.names}}
+    return list(data.images), info
 
 
 def correct_views(rig, pixels, radius_mm, iterations: int = 2):
@@ -153,14 +221,18 @@ def measure(config: RunConfig, log) -> tuple[dict, dict]:
     if not (visible_views >= 2).any():
         raise CLIError(f"{config.scene}: no target is visible in two views")
 
-    log(f"render {len(names)} views ({spec.size[0]}x{spec.size[1]} px, "
-        f"{config.spp or spec.spp} spp, {'full film' if config.full_film else 'adaptive'}) …")
     t = time.perf_counter()
-    images, info = render_views(spec, spp=config.spp, variant=config.variant,
-                                progress=config.progress, adaptive=not config.full_film)
+    if config.from_dir:
+        images, info = dataset_views(config, spec)
+        log(f"reusing the images of {config.from_dir}")
+    else:
+        log(f"render {len(names)} views ({spec.size[0]}x{spec.size[1]} px, "
+            f"{config.spp or spec.spp} spp, {'full film' if config.full_film else 'adaptive'}) …")
+        images, info = render_views(spec, spp=config.spp, variant=config.variant,
+                                    progress=config.progress, adaptive=not config.full_film)
+        for name in names:
+            log(f"  {name}: {render_summary(info['render'][name])}")
     timings["render"] = time.perf_counter() - t
-    for name in names:
-        log(f"  {name}: {render_summary(info['render'][name])}")
 
     t = time.perf_counter()
     detections = [detect_view(image, config.threshold_fraction, config.max_elongation,
@@ -352,4 +424,5 @@ def main(config: RunConfig, out: str, print_json: bool, log) -> int:
     return 0
 
 
-__all__ = ["correct_views", "is_multiview_scene", "main", "measure", "report_markdown"]
+__all__ = ["correct_views", "dataset_views", "is_multiview_scene", "main", "measure",
+           "report_markdown", "rig_differences"]

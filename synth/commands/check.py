@@ -25,8 +25,10 @@ def main(args) -> int:
     from synth.products.crosscheck import CHECK_MAX_PX, CHECK_RMS_PX, check_dataset
     from synth.products.dataset import read_dataset
 
-    data = read_dataset(args.dir)
-    if data.is_surface:
+    from synth.products.views_dataset import is_views_dataset
+
+    data = None if is_views_dataset(args.dir) else read_dataset(args.dir)
+    if data is not None and data.is_surface:
         refuse_given(args, ["rms", "max"], f"to the surface dataset {args.dir}: its truth maps "
                                            f"are checked, no detection")
         return _check_surface(args, data)
@@ -34,16 +36,18 @@ def main(args) -> int:
     report = check_dataset(args.dir, rms_px=args.rms if args.rms is not None else CHECK_RMS_PX,
                            max_px=args.max if args.max is not None else CHECK_MAX_PX)
     stream = sys.stderr if args.json else sys.stdout
-    for view in ("left", "right"):
+    width = max(len(view) for view in report["views"])
+    for view in report["views"]:
         r = report[view]
         rej = ", ".join(f"{k} {v}" for k, v in r["rejected"].items() if v) or "none"
-        print(f"{view:5s}: found {r['found']}/{r['in_image']} in-image targets "
+        print(f"{view:{width}s}: found {r['found']}/{r['in_image']} in-image targets "
                   f"({r['detected']} detections, {r['unmatched_detections']} unmatched; "
               f"rejected {rej}); RMS {r['rms_px']:.4f} px, max {r['max_px']:.4f} px, "
               f"mean offset ({r['mean_px'][0]:+.4f}, {r['mean_px'][1]:+.4f}) px"
               + (f"; missed ids {r['missed'][:10]}" if r["missed"] else ""), file=stream)
     b = report["bounds"]
-    print(f"both : RMS {report['rms_px']:.4f} px (<= {b['rms_px']}), max "
+    label = "both" if len(report["views"]) == 2 else "all"
+    print(f"{label:{width}s}: RMS {report['rms_px']:.4f} px (<= {b['rms_px']}), max "
           f"{report['max_px']:.4f} px (<= {b['max_px']}), all found: "
           f"{'yes' if report['all_found'] else 'no'} -> "
           f"{'PASS' if report['passed'] else 'FAIL'}", file=stream)

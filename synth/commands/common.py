@@ -3,7 +3,7 @@ and the scene they load (``-D`` and ``--seed`` applied)."""
 
 from __future__ import annotations
 
-from synth.infra.cli import (CLIError, add_define_option, add_full_film_option, add_out_option,
+from synth.infra.cli import (add_define_option, add_full_film_option, add_out_option,
                        add_progress_option, add_scene_argument, positive_int, scene_seed)
 
 
@@ -23,17 +23,12 @@ def add_render_options(p, command: str) -> None:
     add_progress_option(p)
 
 
-def scene_from_args(args, two_cameras: str | None = None):
+def scene_from_args(args):
     """The scene with ``-D``, ``--seed`` and ``--spp`` applied (``--seed S`` is ``-D seed=S``,
-    ``--spp N`` is ``-D spp=N``: a ``-D`` with another value is refused). ``two_cameras``
-    (the command, for a command that writes a stereo pair): a scene of more cameras is
-    refused, never cut to its first two."""
+    ``--spp N`` is ``-D spp=N``: a ``-D`` with another value is refused). A scene of N
+    cameras has :attr:`synth.scene.model.SceneSpec.extra_cameras`: each command writes every
+    view (``render``, ``dataset``)."""
     from synth.scene import apply_seed, apply_spp, load_scene, parse_defines
 
     defines = apply_spp(apply_seed(parse_defines(args.defines), args.seed), args.spp)
-    spec = load_scene(args.scene, defines).rendered_with(spp=args.spp)
-    if two_cameras and spec.extra_cameras:
-        raise CLIError(f"{args.scene}: a scene of {len(spec.all_cameras)} cameras; "
-                       f"{two_cameras} writes two views (python -m synth render writes every "
-                       f"view, python -m eval run measures them)")
-    return spec
+    return load_scene(args.scene, defines).rendered_with(spp=args.spp)

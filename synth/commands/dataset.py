@@ -1,5 +1,6 @@
 """``python -m synth dataset SCENE --out DIR [--spp N] [--variant V] [--exr] [--sensor PRESET]
-[-D name=value ...]``: render and write a benchmark dataset, atomically (:mod:`synth.products.dataset`)."""
+[-D name=value ...]``: render and write a benchmark dataset, atomically (:mod:`synth.products.dataset`;
+a scene of more than two cameras: one folder per camera, :mod:`synth.products.views_dataset`)."""
 
 from __future__ import annotations
 
@@ -25,9 +26,13 @@ def main(args) -> int:
         sensor = None if args.sensor is None else sensor_from_spec(args.sensor)
     except SensorError as exc:
         raise CLIError(f"--sensor {args.sensor}: {exc}") from None
-    manifest = write_dataset(scene_from_args(args, "synth dataset"), args.out, spp=args.spp,
-                             variant=args.variant, exr=args.exr, progress=not args.no_progress,
-                             sensor=sensor, adaptive=not args.full_film)
+    spec = scene_from_args(args)
+    if spec.extra_cameras:
+        manifest = _write_views(args, spec, sensor)
+    else:
+        manifest = write_dataset(spec, args.out, spp=args.spp, variant=args.variant,
+                                 exr=args.exr, progress=not args.no_progress, sensor=sensor,
+                                 adaptive=not args.full_film)
     if manifest.get("skipped"):
         print(f"{args.out}: up to date (same scene, parameters and options); nothing to do")
         return 0
@@ -42,6 +47,22 @@ def main(args) -> int:
           f"total {s['total']:.1f} s")
     from synth.rendering.render import render_summary
 
-    for name in ("left", "right"):
+    for name in manifest.get("cameras") or ("left", "right"):
         print(f"  {name}: {render_summary(manifest['render'][name])}")
     return 0
+
+
+def _write_views(args, spec, sensor) -> dict:
+    """The dataset of a scene of more than two cameras (one folder per camera); a surface scene
+    and ``--sensor`` are refused (one line)."""
+    from synth.products.views_dataset import write_views_dataset
+
+    cameras = len(spec.all_cameras)
+    if spec.surface is not None:
+        raise CLIError(f"{args.scene}: a surface scene of {cameras} cameras; synth dataset "
+                       f"writes a surface's truth maps for two cameras")
+    if sensor is not None:
+        raise CLIError(f"--sensor does not apply to {args.scene}, a scene of {cameras} cameras "
+                       f"(the sensor model exposes a stereo pair)")
+    return write_views_dataset(spec, args.out, spp=args.spp, variant=args.variant, exr=args.exr,
+                               progress=not args.no_progress, adaptive=not args.full_film)

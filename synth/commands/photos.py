@@ -1,6 +1,7 @@
 """``python -m synth photos SRC --out DIR [--format jpg|png] [--quality 90]``: a boards folder
 or a dataset written as a camera would store it — 8-bit sRGB photos in ``DIR/left/`` and
-``DIR/right/``, paired by name, with no calibration or truth beside them (:mod:`synth.products.photos`)."""
+``DIR/right/`` (``DIR/cam0/``, … for a dataset of more cameras), paired by name, with no
+calibration or truth beside them (:mod:`synth.products.photos`)."""
 
 from __future__ import annotations
 
@@ -23,7 +24,7 @@ def main(args) -> int:
     import os
 
     from synth.infra.fileio import OutputDir
-    from synth.products.photos import export_photos
+    from synth.products.photos import export_views
 
     if args.quality is not None and args.format != "jpg":
         raise CLIError(f"--quality does not apply to --format {args.format} (lossless)")
@@ -34,7 +35,12 @@ def main(args) -> int:
         raise CLIError(f"{args.src}: no such folder")
     output = OutputDir(args.out, "synth photos").claim()
     with output.staged() as tmp:
-        pairs = export_photos(args.src, tmp, args.format, quality)
+        views, count = export_views(args.src, tmp, args.format, quality)
     detail = f"JPEG quality {quality}" if args.format == "jpg" else "8-bit PNG"
-    print(f"wrote {args.out}: {pairs} pair(s) as {detail} in left/ and right/ (sRGB, no truth)")
+    if len(views) == 2:
+        print(f"wrote {args.out}: {count} pair(s) as {detail} in left/ and right/ (sRGB, no "
+              f"truth)")
+    else:
+        print(f"wrote {args.out}: {count} photo(s) per camera as {detail} in "
+              f"{', '.join(f'{v}/' for v in views)} (sRGB, no truth)")
     return 0

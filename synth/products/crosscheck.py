@@ -67,7 +67,7 @@ def distance_stats(distances) -> dict:
 
 
 __all__ = ["ASSOCIATION_GATE_PX", "CHECK_MAX_PX", "CHECK_RMS_PX", "associate_detections",
-           "check_dataset", "distance_stats",
+           "check_dataset", "check_view", "distance_stats",
            "target_image_margin_px", "wholly_in_image"]
 
 
@@ -79,47 +79,71 @@ CHECK_RMS_PX = 0.05
 CHECK_MAX_PX = 0.15
 
 
+def check_view(image, camera: Camera, expected, targets, ids, radius_mm: float,
+               gate_px: float = ASSOCIATION_GATE_PX) -> tuple[dict, np.ndarray]:
+    """One view of :func:`check_dataset`: detect the targets of ``image`` (linear, ``(H, W)``)
+    and compare them with ``expected`` ``(T, 2)`` px, the simulator's pixels of the targets
+    ``targets`` ``(T, 3)`` mm (reference frame) numbered ``ids``, seen by ``camera``.
+    Returns ``(entry, distances)``: the view's report entry (``in_image``, ``found``,
+    ``missed``, ``detected``, ``unmatched_detections``, ``rejected``, ``rms_px``, ``max_px``,
+    ``mean_px``) and the associated detections' distances in px."""
+    from measure.images.detect import detect_targets
+
+    det = detect_targets(image, floor_fraction=FLOOR_FRACTION)
+    inside = wholly_in_image(camera, expected, targets, radius_mm)
+    idx, dist = associate_detections(det.centers, expected, gate_px)
+    matched = idx >= 0
+    found = np.isin(np.flatnonzero(inside), idx[matched])
+    missed = np.asarray(ids)[np.flatnonzero(inside)[~found]].tolist()
+    d = dist[matched]
+    offsets = det.centers[matched] - expected[idx[matched]]
+    stats = distance_stats(d)
+    entry = {
+        "in_image": int(inside.sum()), "found": int(found.sum()), "missed": missed,
+        "detected": det.n_found, "unmatched_detections": int((~matched).sum()),
+        "rejected": {k: int(v) for k, v in det.rejected.items()},
+        "rms_px": stats["rms_px"], "max_px": stats["max_px"],
+        "mean_px": offsets.mean(axis=0).tolist() if d.size else [float("nan")] * 2,
+    }
+    return entry, d
+
+
 def check_dataset(path, rms_px: float = CHECK_RMS_PX, max_px: float = CHECK_MAX_PX,
                   gate_px: float = ASSOCIATION_GATE_PX) -> dict:
-    """Detect the targets in both images of a dataset and compare them with ``pixels.csv``.
+    """Detect the targets in every image of a dataset and compare them with ``pixels.csv``.
 
     A target is *in the image* when its simulated pixel lies farther inside the image than its
     image can reach (:func:`target_image_margin_px`): those must all be found. Detections are
-    paired with simulated pixels by :func:`associate_detections`. Returns a dict: per view
-    (``left``, ``right``) ``in_image``, ``found``, ``missed`` (ids), ``detected``,
-    ``unmatched_detections``, ``rejected`` {reason: count}, ``rms_px``, ``max_px``, ``mean_px``
-    (mean offset detected − simulated, (du, dv)); overall ``rms_px``, ``max_px``; the bounds and
-    ``passed``.
+    paired with simulated pixels by :func:`associate_detections`. Returns a dict: ``views``
+    (the views' names: ``left``, ``right``, or ``cam0``, ``cam1``, … of a dataset of N cameras,
+    :mod:`synth.products.views_dataset`) and per view (:func:`check_view`) ``in_image``,
+    ``found``, ``missed`` (ids), ``detected``, ``unmatched_detections``, ``rejected``
+    {reason: count}, ``rms_px``, ``max_px``, ``mean_px`` (mean offset detected − simulated,
+    (du, dv)); over all views ``rms_px``, ``max_px``; the bounds and ``passed``.
     """
-    from measure.images.detect import detect_targets
+    from synth.products.views_dataset import is_views_dataset
 
-    from synth.products.dataset import read_dataset
+    if is_views_dataset(path):
+        from synth.products.views_dataset import read_views_dataset
 
-    data = read_dataset(path)
+        data = read_views_dataset(path)
+        views = [(name, image, camera, data.pixels[:, k]) for k, (name, image, camera)
+                 in enumerate(zip(data.names, data.images, data.rig.cameras))]
+    else:
+        from synth.products.dataset import read_dataset
+
+        data = read_dataset(path)
+        views = [("left", data.left, data.rig.left, data.pixels_left),
+                 ("right", data.right, data.rig.right, data.pixels_right)]
     radius = float(data.manifest.get("scene", {}).get("target_radius_mm", 0.0))
-    report = {"path": str(path), "bounds": {"rms_px": rms_px, "max_px": max_px}}
+    report = {"path": str(path), "views": [v[0] for v in views],
+              "bounds": {"rms_px": rms_px, "max_px": max_px}}
     all_d = []
-    all_found = True
-    for name, img, camera, expected in (("left", data.left, data.rig.left, data.pixels_left),
-                                        ("right", data.right, data.rig.right, data.pixels_right)):
-        det = detect_targets(img, floor_fraction=FLOOR_FRACTION)
-        inside = wholly_in_image(camera, expected, data.targets, radius)
-        idx, dist = associate_detections(det.centers, expected, gate_px)
-        matched = idx >= 0
-        found = np.isin(np.flatnonzero(inside), idx[matched])
-        missed = data.ids[np.flatnonzero(inside)[~found]].tolist()
-        d = dist[matched]
+    for name, image, camera, expected in views:
+        report[name], d = check_view(image, camera, expected, data.targets, data.ids, radius,
+                                     gate_px)
         all_d.append(d)
-        offsets = det.centers[matched] - expected[idx[matched]]
-        all_found &= not missed
-        stats = distance_stats(d)
-        report[name] = {
-            "in_image": int(inside.sum()), "found": int(found.sum()), "missed": missed,
-            "detected": det.n_found, "unmatched_detections": int((~matched).sum()),
-            "rejected": {k: int(v) for k, v in det.rejected.items()},
-            "rms_px": stats["rms_px"], "max_px": stats["max_px"],
-            "mean_px": offsets.mean(axis=0).tolist() if d.size else [float("nan")] * 2,
-        }
+    all_found = not any(report[name]["missed"] for name, *_ in views)
     both = distance_stats(np.concatenate(all_d))
     report["rms_px"], report["max_px"] = both["rms_px"], both["max_px"]
     report["all_found"] = bool(all_found)

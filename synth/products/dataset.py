@@ -339,7 +339,7 @@ def read_pixels_csv(path) -> dict:
             "right": rows[:, 6:8]}
 
 
-def _image_stats(image: np.ndarray) -> dict:
+def image_stats(image: np.ndarray) -> dict:
     return {"min": float(image.min()), "max": float(image.max()), "mean": float(image.mean()),
             "lit_fraction": float(np.mean(image > 0))}
 
@@ -387,7 +387,8 @@ def manifest_request_key(manifest: dict) -> str:
     settings = render.get("settings") if isinstance(render, dict) else None
     return _request_key(manifest.get("format_version"), manifest["scene"].get("sha256"),
                         manifest["scene"]["params"], manifest.get("spp"), manifest.get("seed"),
-                        manifest.get("variant_requested"), "left.exr" in files,
+                        manifest.get("variant_requested"),
+                        "left.exr" in files or "cam0/image.exr" in files,
                         sensor.get("model") if isinstance(sensor, dict) else None, RENDERER,
                         settings, manifest.get("design"))
 
@@ -403,6 +404,29 @@ def manifest_digest(manifest: dict) -> str:
 # ---------------------------------------------------------------------------------------------
 # write / read / check
 # ---------------------------------------------------------------------------------------------
+def existing_output(out_dir, key: str):
+    """``(output, old, damage)`` for a dataset of request ``key`` about to be written to
+    ``out_dir``: the :class:`synth.infra.fileio.OutputDir` (not yet claimed); ``old`` the
+    manifest already there (``old["skipped"]`` True) when that output holds the same request,
+    whole — nothing is to be done —, else None; ``damage`` why an output of the same request is
+    not whole (a file missing or changed), or None."""
+    output = OutputDir(out_dir, "synth dataset")
+    damage = None
+    if output.exists_as_output():
+        marker = read_marker(output.path) or {}
+        if marker.get("request_key") == key:
+            damage = output.damage()  # up to date only when every file is whole
+            try:
+                if damage is None:
+                    with open(os.path.join(output.path, "manifest.json")) as fh:
+                        old = json.load(fh)
+                    old["skipped"] = True
+                    return output, old, None
+            except (OSError, ValueError):
+                damage = "manifest.json cannot be read"
+    return output, None, damage
+
+
 def write_dataset(scene, out_dir, spp: int | None = None, defines: dict | None = None,
                   variant: str | None = None, exr: bool = False, progress: bool = True,
                   seed: int | None = None, sensor=None, adaptive: bool = True,
@@ -443,20 +467,9 @@ def write_dataset(scene, out_dir, spp: int | None = None, defines: dict | None =
     spec = spec.rendered_with(spp=spp, seed=seed)  # the parameters say what was rendered
     key = request_key(spec, spp, seed, variant, exr, sensor, adaptive, design)
 
-    output = OutputDir(out_dir, "synth dataset")
-    damage = None
-    if output.exists_as_output():
-        marker = read_marker(output.path) or {}
-        if marker.get("request_key") == key:
-            damage = output.damage()  # up to date only when every file is whole
-            try:
-                if damage is None:
-                    with open(os.path.join(output.path, "manifest.json")) as fh:
-                        old = json.load(fh)
-                    old["skipped"] = True
-                    return old
-            except (OSError, ValueError):
-                damage = "manifest.json cannot be read"
+    output, old, damage = existing_output(out_dir, key)
+    if old is not None:
+        return old
     output.claim()
 
     with output.staged(extra={"request_key": key}) as tmp:
@@ -546,7 +559,7 @@ def write_dataset(scene, out_dir, spp: int | None = None, defines: dict | None =
             "png_scale": scale,
             "png_offset": offset,
             "sensor": sensor_info,
-            "images": {"left": _image_stats(left), "right": _image_stats(right)},
+            "images": {"left": image_stats(left), "right": image_stats(right)},
             "samples_per_second": info["samples_per_second"],
             "samples_per_second_per_view": info["samples_per_second_per_view"],
             "passes": info["passes"],
@@ -610,7 +623,7 @@ class Dataset:
         return bool(self.manifest["scene"].get("surface"))
 
 
-def _read_png16(path) -> np.ndarray:
+def read_png16(path) -> np.ndarray:
     if not os.path.isfile(path):
         raise DatasetError(f"{path}: no such file")
     img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
@@ -679,6 +692,12 @@ def read_dataset(path) -> Dataset:
     missing or inconsistent."""
     path = os.fspath(path)
     manifest = read_manifest(path)
+    cameras = manifest.get("cameras")
+    if isinstance(cameras, list) and len(cameras) > 2:
+        raise DatasetError(f"{path}: a dataset of {len(cameras)} cameras "
+                           f"({', '.join(f'{c}/' for c in cameras)}), not a stereo pair "
+                           f"(left.png, right.png): this reads two views (synth check, synth "
+                           f"photos and eval run --from read every camera)")
     try:
         scale = float(manifest["png_scale"])
     except (KeyError, TypeError, ValueError):
@@ -689,7 +708,7 @@ def read_dataset(path) -> Dataset:
         offset = float(manifest.get("png_offset", 0.0))
     except (TypeError, ValueError):
         raise DatasetError(f"{path}/manifest.json: png_offset must be a number") from None
-    left, right = ((_read_png16(os.path.join(path, f"{view}.png")).astype(np.float32)
+    left, right = ((read_png16(os.path.join(path, f"{view}.png")).astype(np.float32)
                     - np.float32(offset)) / np.float32(scale) for view in ("left", "right"))
     calib = read_calib(os.path.join(path, "calib.yaml"))
     for name, image in (("left.png", left), ("right.png", right)):

@@ -108,3 +108,45 @@ def test_a_surface_scene_of_three_cameras_is_refused_by_dense_matching(tmp_path,
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "3 cameras" in err[0] and "two views" in err[0], err
     assert not out.exists()
+
+
+@pytest.mark.slow
+def test_from_a_dataset_of_three_cameras_measures_its_images(scene, tmp_path, capsys):
+    """``eval run --from DIR`` on a dataset of three cameras: the dataset's images, matched
+    without truth and scored here against the scene's true targets; a changed file, or an
+    option of a render, is one error line."""
+    from synth.__main__ import main as synth_main
+    from synth.scene import load_scene
+
+    data = tmp_path / "ds"
+    assert synth_main(["dataset", scene, "--out", str(data), "--spp", "16",
+                       "--no-progress"]) == 0
+    out = tmp_path / "run"
+    assert eval_main(["run", scene, "--from", str(data), "--out", str(out),
+                      "--no-progress"]) == 0
+    report = json.loads((out / "report.json").read_text())
+    assert report["render"]["from"].endswith("ds") and report["spp"] == 16
+    spec = load_scene(scene)
+    rig = spec.multirig
+    seen = sum(visible_targets(c, rig.view_port(k), spec.targets, spec.target_radius)[1]
+               for k, c in enumerate(rig.cameras))
+    m = report["matching"]
+    assert m["wrong"] == 0 and m["visible_in_two_or_more"] == int((seen >= 2).sum())
+    assert m["visible_in_two_or_more_matched"] == m["visible_in_two_or_more"]
+    with open(out / "targets.csv") as fh:
+        rows = list(csv.DictReader(fh))
+    points = np.array([[float(r[a]) for a in "xyz"] for r in rows])
+    used = np.array([float(r["views_triangulated"]) for r in rows]) >= 2
+    errors = np.linalg.norm(points[used] - spec.targets[used], axis=1)  # the true targets
+    assert used.sum() == m["visible_in_two_or_more"] and errors.max() < 3.0
+    assert np.sqrt(np.mean(errors ** 2)) < 1.0
+    assert set(report["scores"]["by_views"]) == {"2", "3"}
+
+    (data / "cam2" / "preview.png").write_bytes(b"not the preview")
+    for argv, fragment in ((["--from", str(data)], "cam2/preview.png"),
+                           (["--from", str(data), "--spp", "4"], "--spp does not apply")):
+        assert eval_main(["run", scene, *argv, "--out", str(tmp_path / "bad"),
+                          "--no-progress"]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and err[0].startswith("error:") and fragment in err[0], err
+    assert not (tmp_path / "bad").exists()

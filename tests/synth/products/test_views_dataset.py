@@ -1,0 +1,204 @@
+"""Datasets of a scene of three cameras (synth dataset, check, photos): one folder per camera,
+checked against independent references — the scene's cameras and targets, the Fermat
+simulator's pixels computed here, the files' own SHA-256 — and bad folders refused in one line
+naming the file or camera."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import shutil
+
+import cv2
+import numpy as np
+import pytest
+
+from measure.geometry.projection import project
+from synth.__main__ import main
+from synth.products.crosscheck import check_dataset
+from synth.products.photos import to_photo
+from synth.products.rig_file import read_rig_file
+from synth.products.views_dataset import read_views_dataset, write_views_dataset
+from synth.scene import load_scene
+
+SIZE = (320, 268)
+SPP = 16
+
+
+@pytest.fixture(scope="module")
+def scene(tmp_path_factory):
+    path = tmp_path_factory.mktemp("three") / "three.xml"
+    assert main(["scene", "--cameras", "3", "--layout", "grid", "--spacing", "150",
+                 "--half-width", "600", "--target-radius", "10", "--size", *map(str, SIZE),
+                 "--out", str(path)]) == 0
+    return str(path)
+
+
+@pytest.fixture(scope="module")
+def dataset(scene, tmp_path_factory):
+    out = tmp_path_factory.mktemp("ds") / "ds"
+    manifest = write_views_dataset(load_scene(scene), out, spp=SPP, progress=False)
+    assert manifest["skipped"] is False
+    return out
+
+
+def _copy(dataset, tmp_path):
+    copy = tmp_path / "copy"
+    shutil.copytree(dataset, copy)
+    return copy
+
+
+def _one_error(capsys) -> str:
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("error:"), err
+    return err[0]
+
+
+@pytest.mark.slow
+def test_one_folder_per_camera_and_the_truth(scene, dataset):
+    spec = load_scene(scene)
+    names = ["cam0", "cam1", "cam2"]
+    manifest = json.loads((dataset / "manifest.json").read_text())
+    assert manifest["cameras"] == names
+    visible = sorted(os.path.relpath(os.path.join(d, f), dataset)
+                     for d, _, fs in os.walk(dataset) for f in fs if not f.startswith("."))
+    assert visible == sorted(["calib.yaml", "manifest.json", "pixels.csv", "targets.ply"]
+                             + [f"{n}/{f}" for n in names for f in ("image.png", "preview.png")])
+    images = [cv2.imread(str(dataset / n / "image.png"), cv2.IMREAD_UNCHANGED) for n in names]
+    for image in images:
+        assert image.dtype == np.uint16 and image.shape == (SIZE[1], SIZE[0])
+        assert image.max() > 0  # every view sees targets
+    assert max(int(i.max()) for i in images) == 65535  # one scale for every view
+    for name in manifest["files"]:  # every file's SHA-256, computed here
+        if name != "manifest.json":
+            digest = hashlib.sha256((dataset / name).read_bytes()).hexdigest()
+            assert manifest["sha256"][name] == digest, name
+
+    rig = read_rig_file(dataset / "calib.yaml")
+    assert list(rig.names) == names
+    for camera, truth in zip(rig.cameras, spec.all_cameras):
+        np.testing.assert_allclose(camera.K, truth.K, atol=1e-12)
+        np.testing.assert_allclose(camera.R, truth.R, atol=1e-12)
+        np.testing.assert_allclose(camera.t, truth.t, atol=1e-12)
+    data = read_views_dataset(dataset)
+    np.testing.assert_array_equal(data.targets, spec.targets)
+    np.testing.assert_array_equal(data.ids, spec.target_ids)
+    for k, camera in enumerate(spec.all_cameras):  # the simulator through the one port
+        expected = project(camera, spec.rig.port, spec.targets)
+        np.testing.assert_array_equal(np.isnan(data.pixels[:, k]), np.isnan(expected))
+        np.testing.assert_allclose(data.pixels[:, k], expected, atol=1e-9, equal_nan=True)
+        linear = images[k].astype(np.float32) / np.float32(manifest["png_scale"])
+        np.testing.assert_array_equal(data.images[k], linear)
+
+
+@pytest.mark.slow
+def test_rerun_does_nothing(scene, dataset, capsys):
+    assert main(["dataset", scene, "--out", str(dataset), "--spp", str(SPP),
+                 "--no-progress"]) == 0
+    assert "up to date" in capsys.readouterr().out
+
+
+@pytest.mark.slow
+def test_check_compares_every_camera_with_the_simulator(dataset, capsys):
+    report = check_dataset(dataset, rms_px=0.2, max_px=0.5)
+    assert report["views"] == ["cam0", "cam1", "cam2"]
+    for view in report["views"]:
+        r = report[view]
+        assert r["in_image"] > 20 and r["found"] == r["in_image"] and not r["missed"], view
+        assert r["rms_px"] < 0.2, (view, r["rms_px"])
+    assert report["passed"]
+    assert main(["check", str(dataset), "--rms", "0.2", "--max", "0.5"]) == 0
+    lines = capsys.readouterr().out.strip().splitlines()
+    assert [line.split(":")[0].strip() for line in lines] == ["cam0", "cam1", "cam2", "all"]
+    assert lines[-1].endswith("PASS")
+
+
+@pytest.mark.slow
+def test_photos_one_folder_per_camera(dataset, tmp_path, capsys):
+    out = tmp_path / "photos"
+    assert main(["photos", str(dataset), "--out", str(out), "--format", "png"]) == 0
+    assert "cam0/, cam1/, cam2/" in capsys.readouterr().out
+    visible = sorted(os.path.relpath(os.path.join(d, f), out)
+                     for d, _, fs in os.walk(out) for f in fs if not f.startswith("."))
+    assert visible == ["cam0/image.png", "cam1/image.png", "cam2/image.png"]
+    for view in ("cam0", "cam1", "cam2"):
+        png16 = cv2.imread(str(dataset / view / "image.png"), cv2.IMREAD_UNCHANGED)
+        stored = cv2.imread(str(out / view / "image.png"), cv2.IMREAD_UNCHANGED)
+        assert stored.dtype == np.uint8
+        np.testing.assert_array_equal(stored, to_photo(png16))
+    assert main(["photos", str(dataset), "--out", str(tmp_path / "jpg")]) == 0
+    assert (tmp_path / "jpg" / "cam2" / "image.jpg").is_file()
+
+
+def _gap(d):
+    os.rename(d / "cam2", d / "cam3")
+    return "cam3"
+
+
+def _missing(d):
+    os.remove(d / "cam1" / "image.png")
+    return "cam1"
+
+
+def _changed(d):
+    image = cv2.imread(str(d / "cam1" / "image.png"), cv2.IMREAD_UNCHANGED)
+    image[0, 0] += 1
+    cv2.imwrite(str(d / "cam1" / "image.png"), image)
+    return "cam1/image.png"
+
+
+def _manifest(d):
+    m = json.loads((d / "manifest.json").read_text())
+    m["png_scale"] *= 2
+    (d / "manifest.json").write_text(json.dumps(m))
+    return "manifest.json"
+
+
+def _preview(d):
+    os.remove(d / "cam2" / "preview.png")
+    return "cam2/preview.png"
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("damage", [_gap, _missing, _changed, _manifest, _preview])
+def test_a_bad_folder_is_one_line_naming_it(dataset, tmp_path, capsys, damage):
+    d = _copy(dataset, tmp_path)
+    named = damage(d)
+    for argv, out in ((["check", str(d)], None),
+                      (["photos", str(d), "--out", str(tmp_path / "p")], tmp_path / "p")):
+        assert main(argv) == 2
+        assert named in _one_error(capsys)
+        assert out is None or not out.exists()
+
+
+def test_a_surface_scene_of_three_cameras_is_refused(tmp_path, capsys):
+    """The committed speckled plane with a third sensor added by hand: one line, nothing
+    written (a surface's truth maps are written for two cameras)."""
+    import re
+    from pathlib import Path
+
+    scenes = Path(__file__).resolve().parents[3] / "scenes"
+    text = (scenes / "speckle_plane.xml").read_text()
+    for name in re.findall(r'(?:filename|value)="([^"]+\.(?:ply|png))"', text):
+        shutil.copy(scenes / Path(name).name, tmp_path / Path(name).name)
+    third = re.findall(r"<sensor.*?</sensor>", text, re.S)[1]
+    third = third.replace('id="right"', 'id="cam2"').replace('origin="200, 0, 0"',
+                                                            'origin="400, 0, 0"')
+    text = text.replace('id="left"', 'id="cam0"').replace('id="right"', 'id="cam1"')
+    at = text.rindex("</sensor>") + len("</sensor>")
+    path = tmp_path / "three.xml"
+    path.write_text(text[:at] + "\n    " + third + text[at:])
+    out = tmp_path / "ds"
+    assert main(["dataset", str(path), "--out", str(out), "--no-progress"]) == 2
+    line = _one_error(capsys)
+    assert "surface scene of 3 cameras" in line, line
+    assert not out.exists()
+
+
+def test_sensor_is_refused_for_three_cameras(scene, tmp_path, capsys):
+    out = tmp_path / "ds"
+    assert main(["dataset", scene, "--out", str(out), "--sensor", "imx174",
+                 "--no-progress"]) == 2
+    assert "--sensor does not apply" in _one_error(capsys)
+    assert not out.exists()
