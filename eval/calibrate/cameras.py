@@ -23,7 +23,7 @@ from eval.cli import CLIError
 
 #: Options of a two-camera calibration that a calibration of N cameras does not take.
 #: (``--encoding`` last: it applies to photos.)
-NOT_FOR_N_CAMERAS = (("port_distance", "--port-distance"), ("dome_radius", "--dome-radius"),
+NOT_FOR_N_CAMERAS = (("dome_radius", "--dome-radius"),
                      ("dome_thickness", "--dome-thickness"),
                      ("air_uncertainty", "--air-uncertainty"), ("encoding", "--encoding"))
 
@@ -172,39 +172,65 @@ def calibrate_cameras_main(args, output, log, start, boards, design) -> int:
             if air.refracts:
                 raise CLIError(f"{args.intrinsics}: already holds a port; give the in-air "
                                f"calibration")
-            start_rig = MultiRig(air.cameras, [design] * len(names), names)
-            log(f"the shared port's {', '.join(free)} from every camera's corners …")
+            per_camera = given(args, "port_distance")
+            if per_camera:  # each camera behind its own port, ⟂ its axis, D from its centre
+                from measure import FlatPort
+
+                from eval.calibrate.port_lengths import lengths_for
+
+                distances = lengths_for(args.port_distance, len(names))
+                starts = [FlatPort(c.R[:, 2], d + float(c.R[:, 2] @ c.center),
+                                   design.thicknesses, design.indices)
+                          for c, d in zip(air.cameras, distances)]
+            else:
+                starts = [design] * len(names)
+            start_rig = MultiRig(air.cameras, starts, names)
+            log(f"{'each camera' + chr(39) + 's own port' if per_camera else 'the shared port'}"
+                f": {', '.join(free)} from every camera's corners …")
             air_names, air_matrix = air_cov if air_cov is not None else ((), None)
             cal = calibrate_rig_housing(start_rig, boards.board, detections, free, air_names,
-                                        air_matrix)
+                                        air_matrix, per_camera=bool(per_camera))
             rig = cal.rig
-            covariance = (tuple(f"port.{n}" for n in cal.labels), cal.covariance)
-            port = rig.ports[0]
-            true_port = truth.ports[0] if truth is not None else None
-
-            def diff(value):
-                return None if true_port is None else value(port) - value(true_port)
-
+            covariance = (tuple(f"port.{n}" if cal.shared else n.replace(".", ".port.", 1)
+                                if "." in n else f"port.{n}" for n in cal.labels),
+                          cal.covariance)
             rows = []
-            if "distance" in free:
-                rows.append(("port.distance", diff(lambda q: q.distance),
-                             cal.sigmas["distance"]))
-            if "normal" in free:
-                axes = np.asarray(cal.normal_axes)
-                tilt = (None if true_port is None
-                        else axes @ (port.normal - true_port.normal))
-                rows += [(f"port.tilt[{k}]", None if tilt is None else float(tilt[k]),
-                          cal.sigmas["normal"][k]) for k in range(2)]
-                if true_port is not None:
-                    report["normal_error_deg"] = float(np.degrees(np.arctan2(
-                        np.linalg.norm(np.cross(port.normal, true_port.normal)),
-                        port.normal @ true_port.normal)))
-            if "thickness" in free:
-                rows.append(("port.thickness", diff(lambda q: q.thicknesses[0]),
-                             cal.sigmas["thickness"]))
+            slots = [None] if cal.shared else list(range(len(names)))
+            for s_ in slots:
+                v = 0 if s_ is None else s_
+                port = rig.ports[v]
+                true_port = truth.ports[v] if truth is not None else None
+                label = "port" if s_ is None else f"{names[v]}.port"
+
+                def pick(entry, s_=s_):
+                    return entry if s_ is None else entry[s_]
+
+                def diff(value, port=port, true_port=true_port):
+                    return None if true_port is None else value(port) - value(true_port)
+
+                if "distance" in free:
+                    rows.append((f"{label}.distance", diff(lambda q: q.distance),
+                                 pick(cal.sigmas["distance"])))
+                if "normal" in free:
+                    axes = np.asarray(cal.normal_axes if s_ is None else cal.normal_axes[s_])
+                    tilt = (None if true_port is None
+                            else axes @ (port.normal - true_port.normal))
+                    rows += [(f"{label}.tilt[{k}]", None if tilt is None else float(tilt[k]),
+                              pick(cal.sigmas["normal"])[k]) for k in range(2)]
+                    if true_port is not None:
+                        report.setdefault("normal_error_deg", {})[label] = float(np.degrees(
+                            np.arctan2(np.linalg.norm(np.cross(port.normal, true_port.normal)),
+                                       port.normal @ true_port.normal)))
+                if "thickness" in free:
+                    rows.append((f"{label}.thickness", diff(lambda q: q.thicknesses[0]),
+                                 pick(cal.sigmas["thickness"])))
             if "n_water" in free:
-                rows.append(("port.n_water", diff(lambda q: q.n_water), cal.sigmas["n_water"]))
-            report["port"] = port.describe()
+                rows.append(("port.n_water", None if truth is None
+                             else rig.ports[0].n_water - truth.ports[0].n_water,
+                             cal.sigmas["n_water"]))
+            port = rig.ports[0]
+            report["port"] = (port.describe() if cal.shared else
+                              {n: p.describe() for n, p in zip(names, rig.ports)})
             report.update({"rms_px": cal.rms_px_per, "joint_rms_px": cal.rms_px,
                            "uncertainty": cal.uncertainty,
                            "sigmas_conditional": cal.sigmas_conditional,
@@ -223,7 +249,8 @@ def calibrate_cameras_main(args, output, log, start, boards, design) -> int:
         "largest_error_in_sigma": float(np.abs(z).max()) if z.size else None,
         "timings_s": {**timings, "total": time.perf_counter() - start}})
     report = jsonable(report)
-    kind = "in air" if boards.air else "the shared port"
+    kind = ("in air" if boards.air else "the shared port" if cal.shared
+            else "each camera's own port")
     with output.staged() as tmp:
         write_rig_file(os.path.join(tmp, "calib.yaml"), rig, covariance)
         atomic_write_json(os.path.join(tmp, "report.json"), report)
@@ -245,14 +272,24 @@ def calibrate_cameras_main(args, output, log, start, boards, design) -> int:
               f"{len(rows)} estimates within 3 σ of the truth (largest "
               f"{report['largest_error_in_sigma']:.2f} σ)"
               + (f"; D {rows[0][1]:+.4f} mm (σ {rows[0][2]:.3g}), normal "
-                 f"{report['normal_error_deg']:.4f}° from the truth"
-                 if not boards.air and "distance" in free and "normal" in free else ""))
+                 f"{report['normal_error_deg']['port']:.4f}° from the truth"
+                 if not boards.air and "distance" in free and "normal" in free
+                 and "port" in report.get("normal_error_deg", {}) else "")
+              + ("; each camera's port: " + ", ".join(
+                  f"{n.split('.')[0]} D {e:+.4f} mm ({e / sg:+.2f} σ)" for n, e, sg in rows
+                  if n.endswith(".port.distance"))
+                 if not boards.air and "distance" in free and not cal.shared else ""))
     else:
         port_line = ""
-        if not boards.air and "distance" in free:
+        if not boards.air and "distance" in free and cal.shared:
             port_line = (f"; the port: D {report['port']['distance_mm']:.4f} ± "
                          f"{rows[0][2]:.3g} mm, normal "
                          + ", ".join(f"{v:.5f}" for v in report["port"]["normal"]))
+        elif not boards.air and "distance" in free:
+            port_line = "; each camera's port: " + ", ".join(
+                f"{n} D {report['port'][n]['distance_mm']:.4f} ± {sg:.3g} mm"
+                for n, (_, _, sg) in zip(names, [r for r in rows
+                                                 if r[0].endswith(".port.distance")]))
         print(f"{len(names)} cameras, {kind}: RMS {rms:.4f} px, the board found per camera "
               + ", ".join(f"{n} {c}" for n, c in found.items()) + port_line)
     print(f"wrote {output.path} (calib.yaml of {len(names)} cameras with its covariance, "

@@ -11,7 +11,8 @@ the housing is estimated by refractive bundle adjustment with the in-air intrins
 (:func:`measure.calibration.housing.calibrate_housing`); ``--intrinsics`` gives them, as an in-air boards
 folder (calibrated here first) or a ``calib.yaml``. Behind two housings (each camera its own
 flat port: boards whose truth says so, or photos with ``--port-distance``) each camera's port is
-estimated, starting ``--port-distance LEFT,RIGHT`` mm from its camera (:func:`design_pair`).
+estimated, starting ``--port-distance LEFT,RIGHT`` mm from its camera (:func:`design_pair`;
+N cameras ``D0,D1,…``, :mod:`eval.calibrate.cameras`).
 
 Writes to ``--out``: ``calib.yaml`` (the dataset format, with an ``uncertainty`` map),
 ``calib_in_air_only.yaml`` (underwater: the in-air calibration with the design port — what a
@@ -28,6 +29,7 @@ import os
 import sys
 import time
 
+from eval.calibrate.port_lengths import lengths_for, per_camera_lengths
 from eval.calibrate.single import single_camera_folder
 from eval.cli import CLIError, positive_float
 from eval.core.photos import add_encoding_option, encoding_note
@@ -100,12 +102,12 @@ def add_parser(subparsers):
                    help=f"design {WATER_INDEX_HELP}; default {PAPER_INDICES[2]:g}; the start "
                         f"when --free n_water")
     p.add_argument("--port-distance", type=per_camera_lengths, metavar="LEFT,RIGHT",
-                   help="two housings (each camera behind its own flat port): the design "
+                   help="a port per camera (two housings; N cameras D0,D1,…): the design "
                         "distance of each port from its camera's centre along the camera's "
                         "optical axis, mm, as python -m synth scene --port per-camera gives it "
-                        "(default 40,40; one number: both); the start of each port's D and "
-                        "normal (each ⟂ its camera); photos: giving it says that the photos "
-                        "were taken behind two housings. --glass-thickness, --n-glass, "
+                        "(default 40 each; one number: every camera); the start of each port's "
+                        "D and normal (each ⟂ its camera); photos: giving it says that the "
+                        "photos were taken behind a housing per camera. --glass-thickness, --n-glass, "
                         "--n-water (or --design-port without distance=) give both ports' glass "
                         "and water")
     p.add_argument("--dome-radius", type=positive_float, default=50.0,
@@ -196,18 +198,6 @@ def design_port(args, normal):
                     (1.0, values["n_glass"], values["n_water"]))
 
 
-def per_camera_lengths(text: str) -> tuple:
-    """An argparse type: ``LEFT,RIGHT`` positive lengths (mm), or one for both."""
-    import argparse
-
-    parts = str(text).split(",")
-    if len(parts) > 2:
-        raise argparse.ArgumentTypeError(f"expected one number, or two separated by a comma "
-                                         f"(LEFT,RIGHT), got {text!r}")
-    values = tuple(positive_float(part) for part in parts)
-    return values * 2 if len(values) == 1 else values
-
-
 def design_pair(args, rig):
     """The starting rig of a two-housing calibration: ``rig``'s cameras, each behind its own
     flat port ⟂ its optical axis, ``--port-distance`` from its centre
@@ -218,7 +208,7 @@ def design_pair(args, rig):
     from synth.scene.windows import DEFAULT_PAIR_DISTANCE_MM, flat_pair
 
     shared = pair_glass(args)
-    distances = args.port_distance or (DEFAULT_PAIR_DISTANCE_MM,) * 2
+    distances = lengths_for(args.port_distance or (DEFAULT_PAIR_DISTANCE_MM,), 2)
     try:
         pair = flat_pair(rig.cameras, distances, [(0.0, 0.0)] * 2, shared.thicknesses * 2,
                          shared.indices)
@@ -383,7 +373,7 @@ def main(args) -> int:
         if boards.air:
             refuse_given(args, HOUSING_OPTIONS, f"to in-air boards ({args.dir}): they calibrate "
                                                 f"the cameras, no housing")
-        design = None if boards.air else design_port(args, (0.0, 0.0, 1.0))
+        design = None if boards.air else _n_camera_design(args)
         return calibrate_cameras_main(args, output, log, start, boards_source(boards), design)
     truth = boards.calib["rig"]
     if not boards.air and truth.port.kind not in HOUSINGS:  # a kind without a housing problem
@@ -522,6 +512,13 @@ def is_photo_folder(path) -> bool:
     return all(os.path.isdir(os.path.join(path, sub)) for sub in ("left", "right"))
 
 
+def _n_camera_design(args):
+    """The starting glass of N cameras under water: one shared port (:func:`design_port`), or
+    — ``--port-distance`` given, each camera behind its own port — the glass and water each
+    port has (:func:`pair_glass`: the shared distance options refused)."""
+    return pair_glass(args) if given(args, "port_distance") else design_port(args, (0.0, 0.0, 1.0))
+
+
 def _calibrate_camera_photos(args, output, log, start, cameras) -> int:
     """``eval calibrate`` of a user's photo folder of N > 2 cameras (``cam0/``, ``cam1/``, …:
     :mod:`eval.calibrate.cameras`)."""
@@ -542,7 +539,9 @@ def _calibrate_camera_photos(args, output, log, start, cameras) -> int:
                        f"(photos taken underwater, with the in-air calibration of these cameras)")
     _require_board(args, where)
     board = board_from_args(args)
-    design = None if args.air else design_port(args, (0.0, 0.0, 1.0))
+    design = None if args.air else _n_camera_design(args)
+    if design is not None and given(args, "port_distance"):
+        lengths_for(args.port_distance, len(cameras))  # refused before any photo is read
     note = None
     first = os.path.join(args.dir, cameras[0])
     photos = sorted(f for f in os.listdir(first) if not f.startswith("."))
@@ -583,6 +582,7 @@ def _calibrate_photos(args, output, log, free, start) -> int:
     pair = given(args, "port_distance")  # two housings: a port per camera
     if pair and not args.air:
         pair_glass(args)  # a bad design is refused before any work
+        lengths_for(args.port_distance, 2)
     elif not args.air:
         design_port(args, (0.0, 0.0, 1.0))  # a bad --design-port is refused before any work
     pairs = photo_folder(args.dir)

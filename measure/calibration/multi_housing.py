@@ -1,10 +1,13 @@
-"""The housing of a rig of N cameras behind one shared flat port, from board corners under water.
+"""The housing of a rig of N cameras behind one shared flat port — or each behind its own — from
+board corners under water.
 
 The cameras stay as calibrated in air (:func:`measure.calibration.multi_air.calibrate_rig_in_air`:
 every camera's intrinsics and pose); the unknowns are every board pose (6 each) and the free
 port parameters (:data:`PARAMETERS`): ``distance`` (D, mm, the first interface ``N·X = D`` in
 the reference frame), ``normal`` (2 tilts, rad, about axes ⟂ the starting normal),
-``thickness`` (the first layer, mm) and ``n_water``. Residuals: every detected corner of every
+``thickness`` (the first layer, mm) and ``n_water``; with a port per camera a distance, two tilts
+and a thickness per camera (each camera's rows touching its own port's columns) and one
+``n_water``. Residuals: every detected corner of every
 camera reprojected through the port with the exact forward model
 (:func:`measure.geometry.projection.project`), px; ``scipy.optimize.least_squares`` with the
 analytic Jacobian (``project(..., parameters=True)``) in its sparse structure (a pose's 6
@@ -47,8 +50,9 @@ STEPS = {"rotation": 1e-6, "center": 1e-4, "f": 1e-3, "c": 1e-3, "dist": 1e-6}
 
 @dataclass(frozen=True)
 class MultiHousingCalibration:
-    """``rig`` (the in-air cameras behind the calibrated shared port), ``estimates``
-    ``{distance, normal (unit 3-vector), thickness, n_water}`` of the free ones, ``sigmas``
+    """``rig`` (the in-air cameras behind the calibrated port or ports), ``estimates``
+    ``{distance, normal (unit 3-vector), thickness, n_water}`` of the free ones (of a port per
+    camera: a list, one per camera, but ``n_water``), ``sigmas``
     (distance mm, normal: its two tilts rad, thickness mm, n_water) with the in-air covariance
     propagated when one was given, ``sigmas_conditional`` without, ``labels`` of the free
     numbers, ``covariance`` of those numbers, ``normal_axes`` the tilt axes, ``rms_px`` (all
@@ -68,6 +72,12 @@ class MultiHousingCalibration:
     poses: dict
     n_observations: int
     uncertainty: str
+    port_names: tuple = ("port",)
+
+    @property
+    def shared(self) -> bool:
+        """Whether every camera looks through one port (else each its own)."""
+        return self.port_names == ("port",)
 
 
 def _camera_moved(camera: Camera, name: str, step: float) -> Camera:
@@ -96,93 +106,122 @@ def _step(name: str) -> float:
     return STEPS["dist"]
 
 
+def _widths(S: int) -> dict:
+    """How many numbers each free parameter is with ``S`` ports (1: shared): a distance, two
+    tilts and a thickness per port, one water index."""
+    return {"distance": S, "normal": 2 * S, "thickness": S, "n_water": 1}
+
+
 def calibrate_rig_housing(rig: MultiRig, board: Board, detections: Detections, free=DEFAULT_FREE,
-                          air_names=(), air_covariance=None) -> MultiHousingCalibration:
-    """The shared flat port of ``rig`` (its cameras in air, every camera's port the starting
-    one: the design values) from the corners ``detections`` (``ids[k][v]`` for pose k, camera
-    v) of ``board`` (module docs). ``air_names``, ``air_covariance``: the in-air calibration's
+                          air_names=(), air_covariance=None,
+                          per_camera: bool | None = None) -> MultiHousingCalibration:
+    """The flat port(s) of ``rig`` (its cameras in air behind the starting ports: the design
+    values) from the corners ``detections`` (``ids[k][v]`` for pose k, camera v) of ``board``
+    (module docs): one port every camera shares when all of ``rig.ports`` are one, else each
+    camera's own (a distance, normal and thickness per camera, one ``n_water``; each camera's
+    corners through its own port) — ``per_camera`` True or False says which whatever the
+    starting ports are. ``air_names``, ``air_covariance``: the in-air calibration's
     (:class:`measure.calibration.multi_air.MultiAirCalibration`), propagated into σ.
-    CalibrationError (one line) for a rig that is not behind one shared flat port, unknown free
-    parameters, too few boards, or a fit that does not determine them."""
-    message = "the housing calibration of N cameras models one flat port that every camera shares"
+    CalibrationError (one line) for a camera not behind a flat port, unknown free parameters,
+    too few boards, or a fit that does not determine them."""
+    message = "the housing calibration of N cameras models flat ports"
     try:
-        port0 = require_flat_port(rig.ports[0], message)
+        ports0 = [require_flat_port(p, f"{name}: {message}")
+                  for name, p in zip(rig.names, rig.ports)]
     except ValueError as exc:
         raise CalibrationError(str(exc)) from None
-    if any(p != port0 for p in rig.ports):
-        raise CalibrationError(message)
+    shared = all(p == ports0[0] for p in ports0) if per_camera is None else not per_camera
+    if shared and any(p != ports0[0] for p in ports0):
+        raise CalibrationError("one shared port asked for, but the cameras start behind "
+                               "different ports")
+    if shared:
+        ports0 = ports0[:1]
+    S = len(ports0)
+    slot = [0 if shared else v for v in range(len(rig.cameras))]
+    table = _widths(S)
     names = tuple(dict.fromkeys(free))
     unknown = [n for n in names if n not in PARAMETERS]
     if not names or unknown:
         raise CalibrationError(f"--free {','.join(free) or '(nothing)'}: the housing calibration "
                                f"of N cameras estimates {', '.join(PARAMETERS)}")
-    if "thickness" in names and not port0.thicknesses:
-        raise CalibrationError("--free thickness: the port has no glass layer")
+    if "thickness" in names and not all(p.thicknesses for p in ports0):
+        raise CalibrationError("--free thickness: a port has no glass layer")
     cameras = rig.cameras
     views = tuple(range(len(cameras)))
-    start_rig = SimpleNamespace(cameras=cameras, port=port0, depth_axis=port0.normal,
+    start_rig = SimpleNamespace(cameras=cameras, port=ports0[0], depth_axis=ports0[0].normal,
                                 left=cameras[0])
     starts, usable, detections = usable_poses(start_rig, board, detections)
     P = len(starts)
-    n_global = sum(PARAMETERS[n] for n in names)
-    basis = tilt_basis(port0.normal)
+    n_global = sum(table[n] for n in names)
+    bases = [tilt_basis(p.normal) for p in ports0]
     corners, obs = observations(board, detections, views)
     m = sum(2 * o[1].size for o in obs)
     if m == 0:
         raise CalibrationError("no camera found the board in the underwater images")
+    at = {}
+    k = 0
+    for name in names:
+        at[name] = k
+        k += table[name]
+
+    def normal_vector(x, s):
+        k = at["normal"] + 2 * s
+        return ports0[s].normal + x[k] * bases[s][0] + x[k + 1] * bases[s][1]
 
     def unpack(x):
-        distance, normal = port0.distance, port0.normal
-        thick, n_water = list(port0.thicknesses), port0.n_water
-        k = 0
-        for name in names:
-            if name == "distance":
-                distance = x[k]
-            elif name == "normal":
-                normal = port0.normal + x[k] * basis[0] + x[k + 1] * basis[1]
-            elif name == "thickness":
-                thick[0] = x[k]
-            else:
-                n_water = x[k]
-            k += PARAMETERS[name]
-        port = FlatPort(normal, distance, tuple(thick), port0.indices[:-1] + (float(n_water),))
+        n_water = x[at["n_water"]] if "n_water" in at else ports0[0].n_water
+        ports = []
+        for s, p in enumerate(ports0):
+            thick = list(p.thicknesses)
+            if "thickness" in at:
+                thick[0] = x[at["thickness"] + s]
+            ports.append(FlatPort(normal_vector(x, s) if "normal" in at else p.normal,
+                                  x[at["distance"] + s] if "distance" in at else p.distance,
+                                  tuple(thick), p.indices[:-1] + (float(n_water),)))
         Rs = Rotation.from_rotvec(x[n_global:].reshape(P, 6)[:, :3]).as_matrix()
-        return port, Rs, x[n_global:].reshape(P, 6)[:, 3:]
+        return ports, Rs, x[n_global:].reshape(P, 6)[:, 3:]
 
     def residuals(x, cams=cameras):
         try:
-            port, Rs, ts = unpack(x)
+            ports, Rs, ts = unpack(x)
         except ValueError:  # a non-physical index or thickness on the way
             return np.full(m, 1e3)
         out = []
         for view, pose_idx, ids, uv in obs:
             world = np.einsum("nij,nj->ni", Rs[pose_idx], corners[ids]) + ts[pose_idx]
-            r = (project(cams[view], port, world) - uv).ravel()
+            r = (project(cams[view], ports[slot[view]], world) - uv).ravel()
             out.append(np.where(np.isfinite(r), r, 1e3))
         return np.concatenate(out)
+
+    def own(values, s, width=1):
+        """``values`` ``(n, 2, width)`` in port ``s``'s place among the ports' columns."""
+        out = np.zeros(values.shape[:2] + (S * width,))
+        out[..., s * width:(s + 1) * width] = values
+        return out
 
     def jacobian(x):
         width = n_global + 6
         try:
-            port, Rs, ts = unpack(x)
+            ports, Rs, ts = unpack(x)
         except ValueError:
             return rows_jacobian(np.zeros((m, width)), np.zeros(m, int), n_global, x.size)
         turn = pose_left_jacobians(x[n_global:].reshape(P, 6)[:, :3])
-        length = np.linalg.norm(port0.normal + sum(
-            x[k] * b for k, b in zip(_offsets(names, "normal"), basis)))
         blocks, rows = [], []
         for view, pose_idx, ids, _ in obs:
+            s = slot[view]
             rotated = np.einsum("nij,nj->ni", Rs[pose_idx], corners[ids])
-            _, d_points, jac = project(cameras[view], port, rotated + ts[pose_idx],
+            _, d_points, jac = project(cameras[view], ports[s], rotated + ts[pose_idx],
                                        parameters=True)
             columns = []
             for name in names:
                 if name == "distance":
-                    columns.append(jac.distance[..., None])
+                    columns.append(own(jac.distance[..., None], s))
                 elif name == "normal":  # normal = m / |m|, m = N0 + a·x_a + b·x_b
-                    columns.append(np.stack([jac.normal @ axis / length for axis in basis], -1))
+                    length = np.linalg.norm(normal_vector(x, s))
+                    columns.append(own(np.stack([jac.normal @ axis / length
+                                                 for axis in bases[s]], -1), s, 2))
                 elif name == "thickness":
-                    columns.append(jac.thicknesses[..., :1])
+                    columns.append(own(jac.thicknesses[..., :1], s))
                 else:
                     columns.append(jac.indices[..., -1:])
             d_turn = np.einsum("nrj,njk->nrk", np.cross(rotated[:, None, :], d_points),
@@ -194,19 +233,18 @@ def calibrate_rig_housing(rig: MultiRig, board: Board, detections: Detections, f
 
     x0 = []
     for name in names:
-        x0 += {"distance": [port0.distance], "normal": [0.0, 0.0],
-               "thickness": list(port0.thicknesses[:1]), "n_water": [port0.n_water]}[name]
+        x0 += {"distance": [p.distance for p in ports0], "normal": [0.0, 0.0] * S,
+               "thickness": [p.thicknesses[0] for p in ports0 if p.thicknesses],
+               "n_water": [ports0[0].n_water]}[name]
     for R, t in starts:
         x0 += list(Rotation.from_matrix(R).as_rotvec()) + list(t)
     x0 = np.asarray(x0, dtype=np.float64)
     lower, upper = np.full(x0.size, -np.inf), np.full(x0.size, np.inf)
-    k = 0
-    for name in names:
-        if name in ("distance", "thickness"):
-            lower[k] = MIN_LENGTH_MM
+    for name in names:  # a port per camera: D in the reference frame may be negative
+        if name == "thickness" or (name == "distance" and shared):
+            lower[at[name]:at[name] + S] = MIN_LENGTH_MM
         elif name == "n_water":
-            lower[k], upper[k] = 1.0, MAX_INDEX
-        k += PARAMETERS[name]
+            lower[at[name]], upper[at[name]] = 1.0, MAX_INDEX
     fit = least_squares(residuals, x0, jac=jacobian, method="trf", x_scale="jac",
                         bounds=(lower, upper), xtol=1e-12, ftol=1e-12, gtol=1e-12, max_nfev=300,
                         tr_solver="lsmr", tr_options={"atol": 1e-14, "btol": 1e-14})
@@ -240,20 +278,35 @@ def calibrate_rig_housing(rig: MultiRig, board: Board, detections: Detections, f
         G = np.linalg.solve(N, J.T @ J_air)
         covariance = conditional + G @ np.asarray(air_covariance) @ G.T
         uncertainty = "propagate"
-    port, Rs, ts = unpack(fit.x)
-    labels = tuple(f"{n}[{k}]" if PARAMETERS[n] > 1 else n for n in names
-                   for k in range(PARAMETERS[n]))
+    ports, Rs, ts = unpack(fit.x)
+    port_names = ["port"] if shared else [f"{n}.port" for n in rig.names]
+    labels = []
+    for name in names:
+        for s in range(S if name != "n_water" else 1):
+            prefix = "" if shared or name == "n_water" else f"{rig.names[s]}."
+            labels += ([f"{prefix}normal[0]", f"{prefix}normal[1]"] if name == "normal"
+                       else [f"{prefix}{name}"])
     sig = np.sqrt(np.diag(covariance))[:n_global]
     sig_c = np.sqrt(np.diag(conditional))[:n_global]
-    estimates, sigmas, sigmas_c, k = {}, {}, {}, 0
+
+    def value(name, port):
+        return {"distance": port.distance, "normal": port.normal.tolist(),
+                "thickness": port.thicknesses[0] if port.thicknesses else None,
+                "n_water": port.n_water}[name]
+
+    estimates, sigmas, sigmas_c = {}, {}, {}
     for name in names:
-        w = PARAMETERS[name]
-        estimates[name] = {"distance": port.distance, "normal": port.normal.tolist(),
-                           "thickness": port.thicknesses[0] if port.thicknesses else None,
-                           "n_water": port.n_water}[name]
-        sigmas[name] = float(sig[k]) if w == 1 else sig[k:k + w].tolist()
-        sigmas_c[name] = float(sig_c[k]) if w == 1 else sig_c[k:k + w].tolist()
-        k += w
+        k, w = at[name], table[name] // (S if name != "n_water" else 1)
+        if shared or name == "n_water":
+            estimates[name] = value(name, ports[0])
+            sigmas[name] = float(sig[k]) if w == 1 else sig[k:k + w].tolist()
+            sigmas_c[name] = float(sig_c[k]) if w == 1 else sig_c[k:k + w].tolist()
+        else:  # one entry per camera
+            estimates[name] = [value(name, p) for p in ports]
+            sigmas[name] = [float(sig[k + s]) if w == 1 else sig[k + 2 * s:k + 2 * s + 2].tolist()
+                            for s in range(S)]
+            sigmas_c[name] = [float(sig_c[k + s]) if w == 1
+                              else sig_c[k + 2 * s:k + 2 * s + 2].tolist() for s in range(S)]
     per, offset = {}, 0
     for view, pose_idx, _, _ in obs:
         rv = r[offset:offset + 2 * pose_idx.size].reshape(-1, 2)
@@ -261,20 +314,13 @@ def calibrate_rig_housing(rig: MultiRig, board: Board, detections: Detections, f
         if rv.size:
             per[rig.names[view]] = float(np.sqrt(np.mean(rv ** 2) * 2))
     return MultiHousingCalibration(
-        rig=MultiRig(cameras, [port] * len(cameras), rig.names), estimates=estimates,
-        sigmas=sigmas, sigmas_conditional=sigmas_c, labels=labels,
-        covariance=covariance[:n_global, :n_global], normal_axes=tuple(b.tolist() for b in basis),
-        rms_px=rms, rms_px_per=per,
-        poses={usable[i]: (Rs[i], ts[i]) for i in range(P)}, n_observations=m // 2,
-        uncertainty=uncertainty)
-
-
-def _offsets(names, name) -> list:
-    """The positions of ``name``'s numbers among the free numbers (empty when not free)."""
-    if name not in names:
-        return []
-    start = sum(PARAMETERS[n] for n in names[:names.index(name)])
-    return list(range(start, start + PARAMETERS[name]))
+        rig=MultiRig(cameras, [ports[slot[v]] for v in range(len(cameras))], rig.names),
+        estimates=estimates, sigmas=sigmas, sigmas_conditional=sigmas_c, labels=tuple(labels),
+        covariance=covariance[:n_global, :n_global],
+        normal_axes=(tuple(b.tolist() for b in bases[0]) if shared
+                     else tuple(tuple(b.tolist() for b in basis) for basis in bases)),
+        rms_px=rms, rms_px_per=per, poses={usable[i]: (Rs[i], ts[i]) for i in range(P)},
+        n_observations=m // 2, uncertainty=uncertainty, port_names=tuple(port_names))
 
 
 __all__ = ["DEFAULT_FREE", "MultiHousingCalibration", "PARAMETERS", "calibrate_rig_housing"]

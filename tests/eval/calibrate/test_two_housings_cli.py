@@ -17,7 +17,7 @@ PHOTOS = ["--intrinsics", "calib.yaml", "--squares", "7x6", "--square-mm", "60"]
      "--port-distance LEFT,RIGHT"),
     (["--port-distance", "60,80", "--design-port", "thickness=6,distance=90"],
      "--design-port distance= does not apply to two housings"),
-    (["--port-distance", "60,80,90"], "expected one number, or two separated by a comma"),
+    (["--port-distance", "60,80,90"], "3 values for 2 cameras"),
 ])
 def test_one_ports_distance_is_refused_for_two_housings(tmp_path, monkeypatch, capsys, extra,
                                                          fragment):

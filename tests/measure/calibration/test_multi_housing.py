@@ -9,7 +9,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from measure import FlatPort
-from measure.calibration.air import CalibrationError, Detections
+from measure.calibration.air import Detections
 from measure.calibration.board import Board
 from measure.calibration.multi_housing import calibrate_rig_housing
 from measure.geometry.projection import project
@@ -89,9 +89,34 @@ def test_sigma_covers_the_errors_of_noisy_corners():
     assert 0.6 <= np.sqrt(np.mean(z ** 2)) <= 1.5, z
 
 
-def test_cameras_with_their_own_ports_are_refused():
-    cameras = _cameras(3)
-    ports = [TRUE_PORT, TRUE_PORT.replace(distance=120.0), TRUE_PORT]
+def test_exact_pixels_give_each_cameras_own_port():
+    """Three cameras each behind its own port (distances 100, 104 and 97 mm, tilted 1°, 0.5°
+    and −0.5°), started all at 103 mm untilted: every port to 1e-6 mm and 1e-8."""
     board = Board("chessboard", (9, 6), 50.0)
-    with pytest.raises(CalibrationError, match="one flat port"):
-        calibrate_rig_housing(MultiRig(cameras, ports), board, Detections([], []))
+    cameras = _cameras(3)
+    true = [TRUE_PORT.replace(normal=Rotation.from_rotvec([np.radians(a), np.radians(b), 0])
+                              .apply([0, 0, 1.0]), distance=d)
+            for a, b, d in ((1.0, 0.0, 100.0), (0.5, 0.3, 104.0), (-0.5, 0.0, 97.0))]
+    rig = MultiRig(cameras, true)
+    corners = board.corners()
+    rng = np.random.default_rng(3)
+    ids, pixels = [], []
+    while len(ids) < 12:
+        R = Rotation.from_rotvec(np.radians(rng.uniform(-25, 25, 3))).as_matrix()
+        centre = np.array([rng.uniform(0, 300), rng.uniform(-150, 150), rng.uniform(800, 1300)])
+        world = corners @ R.T + centre - R @ np.array([200.0, 140.0, 0])
+        row = [project(c, p, world) for c, p in zip(cameras, true)]
+        inside = [c.in_image(uv, 5.0).all() for c, uv in zip(cameras, row)]
+        if sum(inside) >= 2:
+            ids.append([np.arange(len(corners)) if ok else np.zeros(0, int) for ok in inside])
+            pixels.append([uv if ok else np.zeros((0, 2)) for uv, ok in zip(row, inside)])
+    design = [p.replace(normal=np.array([0, 0, 1.0]), distance=103.0) for p in true]
+    result = calibrate_rig_housing(MultiRig(cameras, design), board, Detections(ids, pixels),
+                                   per_camera=True)
+    assert not result.shared and len(result.estimates["distance"]) == 3
+    for k, port in enumerate(true):
+        assert abs(result.estimates["distance"][k] - port.distance) < 1e-6
+        assert np.linalg.norm(np.cross(result.estimates["normal"][k], port.normal)) < 1e-8
+        assert result.rig.ports[k].distance == result.estimates["distance"][k]
+    assert result.labels[:3] == ("cam0.distance", "cam1.distance", "cam2.distance")
+    assert rig.ports[1] != rig.ports[0]
