@@ -439,7 +439,7 @@ SYNTH_CASES = [
     (None, SCENE + ["--port", "per-camera", "--port-tilt", "0", "0,2"],
      "--port-tilt 0: --port per-camera needs one value per camera"),
     (None, SCENE + ["--port", "paper", "--glass-thickness", "5,6"],
-     "--glass-thickness 5,6: two values are for --port per-camera"),
+     "--glass-thickness 5,6: 2 values are for --port per-camera"),
     (None, SCENE + ["--port", "per-camera", "--port-distance", "100,120"],
      "the left camera's field of view passes through the right window"),
     (None, DATASET + ["-D", "spp=8"], "--spp 4 conflicts with -D spp=8"),

@@ -72,10 +72,11 @@ def _table(rows) -> str:
 def boards_source(boards):
     """What :func:`calibrate_cameras_main` calibrates, from a ``synth boards`` folder of N
     cameras (:func:`synth.products.boards.read_boards`): with its truth."""
+    truth = boards.calib["multirig"]
     return SimpleNamespace(path=boards.path, images=boards.images, board=boards.board,
-                           air=boards.air, names=boards.calib["names"],
-                           truth=boards.calib["multirig"], size=boards.calib["size"],
-                           photos=False)
+                           air=boards.air, names=boards.calib["names"], truth=truth,
+                           size=boards.calib["size"], photos=False,
+                           own_ports=len(set(truth.ports)) > 1)
 
 
 def photos_source(path, names, board, air: bool, encoding: str):
@@ -88,7 +89,7 @@ def photos_source(path, names, board, air: bool, encoding: str):
     except PhotoError as exc:
         raise CLIError(str(exc)) from None
     return SimpleNamespace(path=path, images=images, board=board, air=air, names=names,
-                           truth=None, size=size, photos=True)
+                           truth=None, size=size, photos=True, own_ports=False)
 
 
 def calibrate_cameras_main(args, output, log, start, boards, design) -> int:
@@ -172,13 +173,15 @@ def calibrate_cameras_main(args, output, log, start, boards, design) -> int:
             if air.refracts:
                 raise CLIError(f"{args.intrinsics}: already holds a port; give the in-air "
                                f"calibration")
-            per_camera = given(args, "port_distance")
+            per_camera = given(args, "port_distance") or boards.own_ports
             if per_camera:  # each camera behind its own port, ⟂ its axis, D from its centre
                 from measure import FlatPort
 
                 from eval.calibrate.port_lengths import lengths_for
+                from synth.scene.windows import DEFAULT_PAIR_DISTANCE_MM
 
-                distances = lengths_for(args.port_distance, len(names))
+                distances = lengths_for(args.port_distance or (DEFAULT_PAIR_DISTANCE_MM,),
+                                        len(names))
                 starts = [FlatPort(c.R[:, 2], d + float(c.R[:, 2] @ c.center),
                                    design.thicknesses, design.indices)
                           for c, d in zip(air.cameras, distances)]

@@ -373,8 +373,9 @@ def main(args) -> int:
         if boards.air:
             refuse_given(args, HOUSING_OPTIONS, f"to in-air boards ({args.dir}): they calibrate "
                                                 f"the cameras, no housing")
-        design = None if boards.air else _n_camera_design(args)
-        return calibrate_cameras_main(args, output, log, start, boards_source(boards), design)
+        source = boards_source(boards)
+        design = None if boards.air else _n_camera_design(args, source.own_ports)
+        return calibrate_cameras_main(args, output, log, start, source, design)
     truth = boards.calib["rig"]
     if not boards.air and truth.port.kind not in HOUSINGS:  # a kind without a housing problem
         raise CLIError(f"{args.dir}: boards behind {truth.port.description}: no housing "
@@ -512,11 +513,14 @@ def is_photo_folder(path) -> bool:
     return all(os.path.isdir(os.path.join(path, sub)) for sub in ("left", "right"))
 
 
-def _n_camera_design(args):
+def _n_camera_design(args, own_ports: bool = False):
     """The starting glass of N cameras under water: one shared port (:func:`design_port`), or
-    — ``--port-distance`` given, each camera behind its own port — the glass and water each
-    port has (:func:`pair_glass`: the shared distance options refused)."""
-    return pair_glass(args) if given(args, "port_distance") else design_port(args, (0.0, 0.0, 1.0))
+    — ``--port-distance`` given, or boards whose truth has a port per camera (``own_ports``) —
+    the glass and water each camera's own port has (:func:`pair_glass`: the shared distance
+    options refused)."""
+    if own_ports or given(args, "port_distance"):
+        return pair_glass(args)
+    return design_port(args, (0.0, 0.0, 1.0))
 
 
 def _calibrate_camera_photos(args, output, log, start, cameras) -> int:

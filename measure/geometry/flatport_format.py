@@ -201,6 +201,18 @@ def cameras_json_port(port: FlatPort | DomePair, has_port: bool = True) -> dict:
     return port_entry
 
 
+def cameras_json_view_port(port) -> dict:
+    """The ``port`` entry of one camera in a ``cameras.json`` of N cameras: its own flat port's
+    interfaces (reference frame), its dome, or ``{"present": False}`` for a camera in air."""
+    if port is None or not port_refracts(port):
+        return {"present": False}
+    if isinstance(port, DomePort):
+        return {"present": True, "model": "dome", "center": _floats(port.center),
+                "radius": port.radius, "thickness": port.thickness,
+                "indices": [float(v) for v in port.indices]}
+    return {"present": True, "model": "flat", **_flat_entry(port)}
+
+
 def _flat_entry(port: FlatPort) -> dict:
     return {"normal": _floats(port.normal), "distance": float(port.distance),
             "thicknesses": [float(v) for v in port.thicknesses],

@@ -75,7 +75,7 @@ def main(args) -> int:
              else "stereo pairs")
     print(f"wrote {args.out}: {manifest['poses']} {views} of a {board.kind} "
           f"{cols}x{rows} ({board.square_mm:g} mm) "
-          f"{'in air' if args.air else 'behind ' + spec.rig.port.name}, "
+          f"{'in air' if args.air else 'behind ' + _port_name(spec)}, "
           f"{w}x{h} px, {manifest['spp']} spp with {manifest['variant']}: render "
           f"{manifest['seconds']['render']:.1f} s ({manifest['samples_per_second'] / 1e6:.2f} M "
           f"samples/s), total {manifest['seconds']['total']:.1f} s")
@@ -85,3 +85,10 @@ def main(args) -> int:
     print(f"  render: {' and '.join(modes)}"
           + (f"; lit fraction {min(lit):.1%} to {max(lit):.1%} of the film" if lit else ""))
     return 0
+
+
+def _port_name(spec) -> str:
+    """The glass the boards were rendered behind, in the line ``wrote …``."""
+    if spec.extra_ports:
+        return f"each camera's own port ({len(spec.all_cameras)} ports)"
+    return spec.rig.port.name

@@ -25,16 +25,12 @@ def _coverage(text: str) -> float:
 
 
 def _per_camera(base):
-    """An argparse type: one number (``base``), or two separated by a comma — one per camera,
-    ``LEFT,RIGHT`` (``--port per-camera``); a tuple of one or two."""
-    import argparse
+    """An argparse type: one number (``base``), or one per camera separated by commas —
+    ``LEFT,RIGHT``, or ``V0,V1,…`` for N cameras (``--port per-camera``); a tuple. Whether the
+    count fits the cameras is checked where the cameras are known (:func:`_each`)."""
 
     def parse(text: str) -> tuple:
-        parts = str(text).split(",")
-        if len(parts) > 2:
-            raise argparse.ArgumentTypeError(f"expected one number, or two separated by a comma "
-                                             f"(LEFT,RIGHT), got {text!r}")
-        return tuple(base(part) for part in parts)
+        return tuple(base(part) for part in str(text).split(","))
 
     return parse
 
@@ -98,10 +94,10 @@ def add_parser(subparsers) -> None:
                    metavar=("ZMIN", "ZMAX"), help="random targets' depth range, mm")
     p.add_argument("--layout-seed", type=non_negative_int, default=0, help="seed of the random layout")
     p.add_argument("--port", choices=("paper", "per-camera", "dome", "none"), default="paper",
-                   help="the paper's air-glass-water port; per-camera: two housings, each "
-                        "camera behind its own flat port (a finite window; --port-distance, "
-                        "--port-tilt, --glass-thickness take LEFT,RIGHT values, each port "
-                        "relative to its own camera); dome: each camera inside its own "
+                   help="the paper's air-glass-water port; per-camera: a housing per camera, "
+                        "each camera behind its own flat port (a finite window; --port-distance, "
+                        "--port-tilt, --glass-thickness take LEFT,RIGHT values — N cameras: "
+                        "V0,V1,… —, each port relative to its own camera); dome: each camera inside its own "
                         "glass dome (two concentric spheres, --dome-radius, --dome-thickness, "
                         "--dome-offset); or none (all air)")
     p.add_argument("--dome-radius", type=positive_float,
@@ -115,10 +111,12 @@ def add_parser(subparsers) -> None:
                    help=f"{WATER_INDEX_HELP}; default 1.33")
     p.add_argument("--n-glass", type=positive_float, help="glass index (default 1.54)")
     p.add_argument("--port-distance", type=_per_camera(positive_float),
-                   help="D, mm (default 100); --port per-camera: LEFT,RIGHT, each from its "
-                        "camera's centre along its port's normal (default 40,40)")
+                   help="D, mm (default 100); --port per-camera: LEFT,RIGHT (N cameras D0,D1,…), "
+                        "each from its camera's centre along its port's normal (default 40 "
+                        "each)")
     p.add_argument("--glass-thickness", type=_per_camera(positive_float),
-                   help="d, mm (default 5); --port per-camera: LEFT,RIGHT (default 5,5)")
+                   help="d, mm (default 5); --port per-camera: LEFT,RIGHT or d0,d1,… (default 5 "
+                        "each)")
     p.add_argument("--layer", type=positive_float, nargs=2, action="append",
                    metavar=("INDEX", "THICKNESS"),
                    help="one layer of the port, camera side first: refractive index and "
@@ -127,8 +125,9 @@ def add_parser(subparsers) -> None:
     p.add_argument("--port-tilt", type=_per_camera(any_float), nargs=2,
                    metavar=("ABOUT_X", "ABOUT_Y"), default=((0.0,), (0.0,)),
                    help="tilt of the port normal from the left optical axis, degrees about x "
-                        "and about y (default 0 0); --port per-camera: each LEFT,RIGHT, each "
-                        "port's from its own camera's optical axis (e.g. 0,0 0,2)")
+                        "and about y (default 0 0); --port per-camera: each LEFT,RIGHT (N cameras "
+                        "one value per camera), each port's from its own camera's optical axis "
+                        "(e.g. 0,0 0,2)")
     p.add_argument("--rig", metavar="FILE",
                    help="render exactly the rig of a calibration file — calib.yaml of two or N "
                         "cameras, calibmar's stereo YAML or the COLMAP fork's cameras.txt: its "
@@ -138,8 +137,8 @@ def add_parser(subparsers) -> None:
     p.add_argument("--cameras", type=_camera_count, default=2, metavar="N",
                    help="how many cameras (default 2: left, right): a row of N, --baseline "
                         "apart along x, camera k turned k × --toe-in about y towards the "
-                        "targets, all behind the one flat port (--port paper) or none; their "
-                        "sensors are cam0, cam1, …")
+                        "targets, all behind the one flat port (--port paper), each behind its own "
+                        "(--port per-camera) or none; their sensors are cam0, cam1, …")
     p.add_argument("--baseline", type=positive_float, default=None,
                    help="distance between neighbouring cameras, mm (default 200)")
     p.add_argument("--toe-in", type=any_float, default=None, metavar="DEG",
@@ -250,7 +249,7 @@ def main(args) -> int:
             thicknesses = (thickness if thickness is not None else rigs.PAPER_GLASS_THICKNESS_MM,)
         port = FlatPort(normal, distance, thicknesses, tuple(n))
     elif args.port == "per-camera":
-        port, pair_comment = _pair_port(args, left, right)
+        port, pair_comment = _own_ports(args, cameras)
     elif args.port == "dome":
         port = _dome_port(args, left, right)
     if args.layout == "surface":
@@ -328,7 +327,7 @@ def main(args) -> int:
     except ValueError as exc:
         raise CLIError(str(exc)) from None
     print(f"wrote {args.out}: {targets.shape[0]} targets of radius {radius:g} mm, "
-          f"{PORT_WORDS[args.port]}, "
+          f"{_port_words(args.port, len(cameras))}, "
           + (f"{args.cameras} cameras, " if args.cameras != 2 else "")
           + f"{size[0]}x{size[1]} px")
     return 0
@@ -409,9 +408,20 @@ def _rig_from_file(args):
         port, kind = None, "none"
     elif all(p == rig.ports[0] for p in rig.ports):
         port, kind = rig.ports[0], "paper"
-    else:
-        raise CLIError(f"--rig {args.rig}: {len(rig.cameras)} cameras with ports of their own; "
-                       f"a scene of more than two cameras has them behind one flat port or none")
+    else:  # a window per camera: each port must be flat (a precondition, no other path)
+        from measure.geometry.port import require_flat_port
+
+        from synth.scene.windows import check_windows, fit_windows
+
+        try:
+            for name, each in zip(rig.names, rig.ports):
+                require_flat_port(each, f"{len(rig.cameras)} cameras with ports of their own, "
+                                        f"{name}'s not flat; a scene of more than two cameras has "
+                                        f"them behind one flat port, a flat port each, or none")
+            check_windows(rig, fit_windows(rig))
+        except ValueError as exc:
+            raise CLIError(f"--rig {args.rig}: {exc}") from None
+        port, kind = list(rig.ports), "per-camera"
     args.port, args.cameras = kind, len(rig.cameras)
     return list(rig.cameras), port
 
@@ -442,21 +452,22 @@ def _refuse_inapplicable(args) -> None:
                             "port_tilt"], "to --port none (no port: all air)")
     if args.port == "per-camera":
         refuse_given(args, ["layer", "aperture_radius", "focus_distance"],
-                     "to --port per-camera (two housings: pinhole cameras, each behind one glass "
-                     "layer)")
+                     "to --port per-camera (a housing per camera: pinhole cameras, each behind "
+                     "one glass layer)")
         if layout == "surface":
-            raise CLIError("--layout surface does not apply to --port per-camera (scenes of two "
-                           "housings hold disk targets)")
+            raise CLIError("--layout surface does not apply to --port per-camera (scenes of a "
+                           "housing per camera hold disk targets)")
         if args.water != "clear":
             raise CLIError(f"--water {args.water} does not apply to --port per-camera (scenes of "
-                           f"two housings are in clear water)")
+                           f"a housing per camera are in clear water)")
         if args.lighting == "lit":
-            raise CLIError("--lighting lit does not apply to --port per-camera (scenes of two "
-                           "housings hold LED targets)")
+            raise CLIError("--lighting lit does not apply to --port per-camera (scenes of a "
+                           "housing per camera hold LED targets)")
     if args.cameras != 2:
-        if args.port not in ("paper", "none"):
+        if args.port not in ("paper", "per-camera", "none"):
             raise CLIError(f"--cameras {args.cameras}: the cameras share one flat port "
-                           f"(--port paper) or none (--port none), not --port {args.port}")
+                           f"(--port paper), have one each (--port per-camera) or none "
+                           f"(--port none), not --port {args.port}")
         if layout == "surface":
             raise CLIError(f"--layout surface does not apply to --cameras {args.cameras} "
                            f"(scenes of more cameras hold disk targets)")
@@ -516,57 +527,68 @@ def _one(values, option: str):
     """The single value of a ``LEFT,RIGHT`` option where there is one port (None: not given)."""
     if values is None or len(values) == 1:
         return None if values is None else values[0]
-    raise CLIError(f"{option} {','.join(f'{v:g}' for v in values)}: two values are for --port "
-                   f"per-camera (a port per camera); this port is one: give one value")
+    raise CLIError(f"{option} {','.join(f'{v:g}' for v in values)}: {len(values)} values are for "
+                   f"--port per-camera (a port per camera); this port is one: give one value")
 
 
-def _two(values, option: str, default: float) -> tuple:
-    """``(left, right)`` of a ``LEFT,RIGHT`` option of ``--port per-camera``; one value is
-    refused (a port per camera needs a value per camera)."""
+def _each(values, option: str, default: float, count: int) -> tuple:
+    """One value per camera of a ``LEFT,RIGHT`` (``V0,V1,…``) option of ``--port per-camera``;
+    any other count — one value too — is refused (a port per camera needs a value per
+    camera)."""
     if values is None:
-        return (default, default)
-    if len(values) != 2:
-        pair = f"{values[0]:g},{values[0]:g}"
-        example = f"{option} {pair} {pair}" if option == "--port-tilt" else f"{option} {pair}"
-        raise CLIError(f"{option} {values[0]:g}: --port per-camera needs one value per camera, "
-                       f"LEFT,RIGHT (e.g. {example})")
+        return (default,) * count
+    if len(values) != count:
+        each = ",".join([f"{values[0]:g}"] * count)
+        example = f"{option} {each} {each}" if option == "--port-tilt" else f"{option} {each}"
+        which = "LEFT,RIGHT" if count == 2 else f"{count} values, V0,…,V{count - 1}"
+        raise CLIError(f"{option} {','.join(f'{v:g}' for v in values)}: --port per-camera needs "
+                       f"one value per camera, {which} (e.g. {example})")
     return tuple(values)
 
 
-def _pair_port(args, left, right) -> tuple:
-    """The FlatPair of ``--port per-camera``: per camera ``--port-distance``,
-    ``--glass-thickness`` and ``--port-tilt`` (each ``LEFT,RIGHT``; the tilt from that camera's
-    own optical axis, in its frame), the glass index ``--n-glass`` and the water's ``--n-water``;
-    CLIError for a camera in the other's glass, or windows that cannot keep the two fields of
-    view apart (:func:`synth.scene.windows.check_windows`). Returns ``(pair, comment)``."""
+def _own_ports(args, cameras) -> tuple:
+    """The ports of ``--port per-camera``: per camera ``--port-distance``,
+    ``--glass-thickness`` and ``--port-tilt`` (each ``LEFT,RIGHT``, or one per camera of N; the
+    tilt from that camera's own optical axis, in its frame), the glass index ``--n-glass`` and
+    the water's ``--n-water``; a FlatPair of two cameras, a list of N flat ports of more.
+    CLIError for a camera in another's glass, or windows that cannot keep the fields of view
+    apart (:func:`synth.scene.windows.check_windows`). Returns ``(port, comment)``."""
     import numpy as np
 
     from measure import StereoRig
+    from measure.stereo.multirig import MultiRig
 
     from synth.infra.cli import given
     from synth.scene.windows import (DEFAULT_PAIR_DISTANCE_MM, DEFAULT_PAIR_THICKNESS_MM,
-                                     check_windows, fit_windows, flat_pair)
+                                     check_windows, fit_windows, flat_pair, flat_ports)
 
-    distances = _two(args.port_distance, "--port-distance", DEFAULT_PAIR_DISTANCE_MM)
-    thicknesses = _two(args.glass_thickness, "--glass-thickness", DEFAULT_PAIR_THICKNESS_MM)
+    count = len(cameras)
+    distances = _each(args.port_distance, "--port-distance", DEFAULT_PAIR_DISTANCE_MM, count)
+    thicknesses = _each(args.glass_thickness, "--glass-thickness", DEFAULT_PAIR_THICKNESS_MM,
+                        count)
     if given(args, "port_tilt"):
-        tilt_x, tilt_y = (_two(v, "--port-tilt", 0.0) for v in args.port_tilt)
+        tilt_x, tilt_y = (_each(v, "--port-tilt", 0.0, count) for v in args.port_tilt)
     else:
-        tilt_x = tilt_y = (0.0, 0.0)
+        tilt_x = tilt_y = (0.0,) * count
     if np.any(np.abs([tilt_x, tilt_y]) >= 30):
         raise CLIError(f"--port-tilt must stay below 30 degrees, got {_csv(tilt_x)} "
                        f"{_csv(tilt_y)}")
     what = f"--port per-camera --port-distance {_csv(distances)}"
+    indices = tuple(_indices(args))
     try:
-        pair = flat_pair((left, right), distances, list(zip(tilt_x, tilt_y)), thicknesses,
-                         tuple(_indices(args)))
-        rig = StereoRig(left, right, pair)
+        if count == 2:
+            port = flat_pair(cameras, distances, list(zip(tilt_x, tilt_y)), thicknesses, indices)
+            rig = StereoRig(cameras[0], cameras[1], port)
+        else:
+            port = flat_ports(cameras, distances, list(zip(tilt_x, tilt_y)), thicknesses,
+                              indices)
+            rig = MultiRig(cameras, port)
         check_windows(rig, fit_windows(rig))
     except ValueError as exc:
         raise CLIError(f"{what}: {exc}") from None
     comment = (f" distances {_csv(distances)} mm, glass {_csv(thicknesses)} mm, tilts "
                f"{_csv(tilt_x)} {_csv(tilt_y)} deg about x and y (each port from its own camera)")
-    return pair, comment
+    return port, comment
 
 
 def _csv(values) -> str:
@@ -584,6 +606,11 @@ def _dome_comment(pair, left) -> str:
 
 #: How the line ``wrote …`` names each ``--port``.
 PORT_WORDS = {"paper": "port", "per-camera": "two ports", "dome": "two domes", "none": "no port"}
+
+
+def _port_words(kind: str, cameras: int) -> str:
+    """:data:`PORT_WORDS` for a rig of ``cameras`` (``4 ports`` for four housings)."""
+    return f"{cameras} ports" if kind == "per-camera" and cameras != 2 else PORT_WORDS[kind]
 #: Most targets a scene may hold (its XML grows by ~400 bytes per target).
 MAX_TARGETS = 100_000
 
@@ -619,7 +646,9 @@ def _check_visible(cameras, port, targets, radius: float, layout: str) -> None:
 
     seen = np.zeros(len(targets), dtype=int)
     for view, camera in enumerate(cameras):
-        uv = project(camera, None if port is None else port.view(min(view, 1)), targets)
+        through = (None if port is None else port[view] if isinstance(port, list)
+                   else port.view(min(view, 1)))
+        uv = project(camera, through, targets)
         seen += wholly_in_image(camera, uv, targets, radius)
     if not (seen >= 2).any():
         raise CLIError(f"--layout {layout}: none of the {len(targets)} targets is visible in both "

@@ -75,11 +75,47 @@ def cameras_json(rig: StereoRig, has_port: bool = True) -> dict:
         "port": port_entry}
 
 
-def write_cameras_json(directory: str, rig: StereoRig, has_port: bool = True,
+def cameras_json_views(rig) -> dict:
+    """A rig of N cameras (:class:`measure.stereo.multirig.MultiRig`) as plain JSON: per camera
+    (by name, in order) ``K``, distortion, image size, pose ``X_ref = R·X_cam + t`` and the port
+    it looks through (its own flat port, a share of one, a dome, or none); ``shared_port``
+    says whether every camera looks through the same flat port."""
+    from measure.geometry.flatport_format import cameras_json_view_port
+
+    cameras = {}
+    for name, camera, port in zip(rig.names, rig.cameras, rig.ports):
+        dist = np.zeros(5) if camera.dist is None else np.asarray(camera.dist, np.float64)
+        cameras[name] = {
+            "K": _list(camera.K),
+            "distortion": ({"model": "opencv_fisheye", "order": "k1 k2 k3 k4 (cv2.fisheye)",
+                            "coefficients": _list(dist)} if camera.fisheye else
+                           {"model": "opencv", "order": "k1 k2 p1 p2 [k3 [k4 k5 k6]]",
+                            "coefficients": _list(dist)}),
+            "image_size": {"width": int(camera.size[0]), "height": int(camera.size[1])},
+            "pose_camera_to_reference": {"convention": "X_ref = R · X_cam + t",
+                                         "R": _list(camera.R), "t": _list(camera.t)},
+            "port": cameras_json_view_port(port)}
+    return {
+        "format": "refractive-stereo cameras.json 1",
+        "units": {"length": "mm", "pixels": "OpenCV: integer coordinates are pixel centres, "
+                                            "(0, 0) is the centre of the top-left pixel"},
+        "reference_frame": f"the first camera's ({rig.names[0]}), OpenCV axes: x right, y "
+                           f"down, z forward (through the port into the water)",
+        "port_model": "per camera: a flat port's interfaces N · X = distance + cumulative "
+                      "thicknesses (reference frame), or a dome (centre, inner radius, "
+                      "thickness); indices from the camera side (air, glass…, water)",
+        "shared_port": len(set(rig.ports)) == 1,
+        "cameras": cameras}
+
+
+def write_cameras_json(directory: str, rig, has_port: bool = True,
                        name: str = CAMERAS_JSON) -> str:
+    """``directory/name``: :func:`cameras_json` of a stereo rig, or :func:`cameras_json_views`
+    of a rig of N cameras (a MultiRig)."""
     path = os.path.join(directory, name)
+    data = cameras_json_views(rig) if hasattr(rig, "names") else cameras_json(rig, has_port)
     with open(path, "w", encoding="utf-8") as handle:
-        json.dump(cameras_json(rig, has_port), handle, indent=1)
+        json.dump(data, handle, indent=1)
         handle.write("\n")
     return path
 
@@ -158,6 +194,80 @@ def write_colmap_model(directory: str, rig: StereoRig, has_port: bool, ids, poin
             "camera's frame, metres); rig_config.json: the stereo pose for the fork's rig "
             "bundle adjuster.\nimages.txt: the two views, world-to-camera (world = the left "
             "camera). points3D.txt: the targets seen in both views (id = pixels.csv id + 1).\n"
+            f"WARNING: {COLMAP_NOTE}.\n")
+    return None
+
+
+def write_colmap_views(directory: str, rig, ids, points, pixels, image_names) -> str | None:
+    """``directory/colmap/`` of a rig of N cameras (a MultiRig): ``cameras.txt`` with each
+    camera's own FLATPORT or DOMEPORT and ``rig_config.json``
+    (:func:`synth.formats.calib_formats.write_colmap_rig`), ``images.txt`` (one image per
+    camera, world-to-camera, the world the first camera's frame, metres), ``points3D.txt`` (the
+    targets inside two or more images, each with its track over those images) and
+    ``README.txt``. ``pixels`` ``(T, V, 2)`` OpenCV px (NaN where none). Returns None, or why
+    the model cannot be written (nothing is written then)."""
+    from synth.formats.calib_formats import write_colmap_rig
+
+    folder = os.path.join(directory, COLMAP_DIR)
+    try:
+        os.makedirs(folder, exist_ok=True)
+        write_colmap_rig(os.path.join(folder, "cameras.txt"), rig)
+    except CalibFormatError as exc:
+        import shutil
+
+        shutil.rmtree(folder, ignore_errors=True)
+        return str(exc)
+    points = np.asarray(points, np.float64).reshape(-1, 3)
+    pixels = np.asarray(pixels, np.float64).reshape(points.shape[0], len(rig.cameras), 2)
+    ids = np.asarray(ids, dtype=np.int64)
+    inside = np.stack([_inside(pixels[:, v], camera.size)
+                       for v, camera in enumerate(rig.cameras)], axis=1)  # (T, V)
+    rows = np.flatnonzero(inside.sum(axis=1) >= 2)
+    lines = ["# Image list with two lines of data per image:",
+             "#   IMAGE_ID, QW, QX, QY, QZ, TX, TY, TZ, CAMERA_ID, NAME",
+             "#   POINTS2D[] as (X, Y, POINT3D_ID)",
+             f"# Number of images: {len(rig.cameras)}, mean observations per image: "
+             f"{inside[rows].sum() / len(rig.cameras):g}",
+             f"# World frame: the first camera's ({rig.names[0]}, metres); poses are "
+             f"world-to-camera. Pixels: COLMAP's, the centre of the top-left pixel is (0.5, 0.5).",
+             f"# NAME is relative to the dataset folder (the parent of this folder). {COLMAP_NOTE}."]
+    index_in_image = {}
+    for view, (camera, name) in enumerate(zip(rig.cameras, image_names)):
+        quat, t = _world_to_camera(camera)
+        lines.append(" ".join([str(view + 1), *(repr(v) for v in quat), *(repr(v) for v in t),
+                               str(view + 1), name]))
+        seen = rows[inside[rows, view]]
+        index_in_image[view] = {int(i): k for k, i in enumerate(seen)}
+        lines.append(" ".join(f"{float(pixels[i, view, 0]) + COLMAP_PIXEL_OFFSET!r} "
+                              f"{float(pixels[i, view, 1]) + COLMAP_PIXEL_OFFSET!r} "
+                              f"{int(ids[i]) + 1}" for i in seen))
+    with open(os.path.join(folder, "images.txt"), "w", encoding="utf-8") as handle:
+        handle.write("\n".join(lines) + "\n")
+    lengths = inside[rows].sum(axis=1)
+    lines = ["# 3D point list with one line of data per point:",
+             "#   POINT3D_ID, X, Y, Z, R, G, B, ERROR, TRACK[] as (IMAGE_ID, POINT2D_IDX)",
+             f"# Number of points: {rows.size}, mean track length: "
+             f"{float(lengths.mean()) if rows.size else 0:g}",
+             "# Coordinates in metres, in the first camera's frame (OpenCV axes); the true "
+             "target centres of targets.ply (mm there)."]
+    for i in rows:
+        x, y, z = (float(v) * METRES_PER_MM for v in points[i])
+        track = " ".join(f"{view + 1} {index_in_image[view][int(i)]}"
+                         for view in range(len(rig.cameras)) if inside[i, view])
+        lines.append(f"{int(ids[i]) + 1} {x!r} {y!r} {z!r} 255 255 255 0 {track}")
+    with open(os.path.join(folder, "points3D.txt"), "w", encoding="utf-8") as handle:
+        handle.write("\n".join(lines) + "\n")
+    with open(os.path.join(folder, "README.txt"), "w", encoding="utf-8") as handle:
+        handle.write(
+            "A COLMAP text model of this dataset (metres; COLMAP's pixels: the top-left pixel's "
+            "centre is (0.5, 0.5)).\ncameras.txt: camera k + 1 = "
+            + ", ".join(f"{k + 1} {n}" for k, n in enumerate(rig.names))
+            + "; OPENCV (or FULL_OPENCV) with each camera's own FLATPORT Nx Ny Nz int_dist "
+            "int_thick na ng nw or DOMEPORT Cx Cy Cz int_radius int_thick na ng nw (in that "
+            "camera's frame, metres); rig_config.json: every camera's pose for the fork's rig "
+            "bundle adjuster.\nimages.txt: one image per camera, world-to-camera (world = the "
+            "first camera). points3D.txt: the targets seen in two or more images (id = "
+            "pixels.csv id + 1).\n"
             f"WARNING: {COLMAP_NOTE}.\n")
     return None
 

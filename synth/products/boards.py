@@ -89,14 +89,15 @@ class BoardPose:
 
 @dataclass(frozen=True)
 class BoardCameras:
-    """The N > 2 cameras of a boards folder behind one shared ``port`` (a flat port, or an
-    index-matched one in air): what :func:`sample_poses` and :func:`corner_pixels` ask of a
-    :class:`measure.StereoRig` (``cameras``, ``left``, ``port``, ``view_port``,
+    """The N > 2 cameras of a boards folder, each behind the port it looks through
+    (``ports``, one per camera: one shared flat port, an index-matched one in air, or a flat
+    port each): what :func:`sample_poses` and :func:`corner_pixels` ask of a
+    :class:`measure.StereoRig` (``cameras``, ``left``, ``view_port``, ``water_side``,
     ``depth_axis``), and the cameras' ``names``."""
 
     cameras: tuple
     names: tuple
-    port: object
+    ports: tuple
 
     @property
     def left(self):
@@ -104,26 +105,30 @@ class BoardCameras:
 
     @property
     def depth_axis(self) -> np.ndarray:
-        return self.port.depth_axis(self.cameras[0])
+        return self.ports[0].depth_axis(self.cameras[0])
 
     def view_port(self, view: int):
-        return self.port
+        return self.ports[view]
+
+    def water_side(self, points) -> np.ndarray:
+        """Whether points ``(P, 3)`` lie in the water of every camera's port."""
+        return np.all([port.water_side(points) for port in set(self.ports)], axis=0)
 
     def multirig(self):
         """As a :class:`measure.stereo.multirig.MultiRig` (``calib.yaml`` of N cameras)."""
         from measure.stereo.multirig import MultiRig
 
-        return MultiRig(self.cameras, [self.port] * len(self.cameras), self.names)
+        return MultiRig(self.cameras, list(self.ports), self.names)
 
 
 def board_rig(spec: SceneSpec, air: bool):
-    """The scene's cameras behind its port, or (``air``) the same cameras with no port: a
+    """The scene's cameras behind their ports, or (``air``) the same cameras with no port: a
     :class:`measure.StereoRig` for two cameras, :class:`BoardCameras` for more."""
     if spec.extra_cameras:
         cameras = spec.all_cameras
-        port = (index_matched_port(cameras[0].R[:, 2], np.stack([c.t for c in cameras]))
-                if air else spec.rig.port)
-        return BoardCameras(tuple(cameras), tuple(spec.camera_names), port)
+        ports = ((index_matched_port(cameras[0].R[:, 2], np.stack([c.t for c in cameras])),)
+                 * len(cameras) if air else spec.multirig.ports)
+        return BoardCameras(tuple(cameras), tuple(spec.camera_names), tuple(ports))
     if not air:
         return spec.rig
     left, right = spec.cameras
@@ -138,7 +143,8 @@ def _fits(rig, board: Board, poses_R, poses_t, water: bool, anchor: int | None =
     points_board = np.concatenate([board.outline(), board.corners()])
     world = np.einsum("mij,pj->mpi", poses_R, points_board) + poses_t[:, None, :]
     flat = world.reshape(-1, 3)
-    wet = rig.port.water_side(flat) if water else np.ones(flat.shape[0], bool)
+    wet = ((rig.water_side(flat) if isinstance(rig, BoardCameras) else rig.port.water_side(flat))
+           if water else np.ones(flat.shape[0], bool))
     inside = np.stack([camera.in_image(project(camera, rig.view_port(view), flat),
                                        IMAGE_MARGIN_PX)
                        for view, camera in enumerate(rig.cameras)])
@@ -226,7 +232,7 @@ def build_board_scene(spec: SceneSpec, board: Board, air: bool, variant=None):
                            "type": "bitmap", "data": mi.TensorXf(pattern), "raw": True,
                            "filter_type": "nearest"}}}}
     if not air and spec.has_port:  # the glass as the scene writer makes it, for any port
-        scene.update(port_shapes(mi, spec.rig.port, cameras=spec.all_cameras))
+        scene.update(port_shapes(mi, spec.camera_ports, cameras=spec.all_cameras))
     return mi.load_dict(scene), mi, chosen
 
 

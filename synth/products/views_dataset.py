@@ -13,7 +13,14 @@ under one name per kind (:data:`VIEW_FILES`):
 Beside them (units mm, reference frame = ``cam0``'s, OpenCV axes):
 
 * ``calib.yaml`` -- the rig of N cameras (:func:`synth.products.rig_file.write_rig_file`:
-  ``cameras`` with each pose ``X_ref = R · X_cam + t``, the shared ``port``);
+  ``cameras`` with each pose ``X_ref = R · X_cam + t``, the shared ``port`` or each camera's
+  own);
+* ``cameras.json`` -- the same rig as plain JSON, every camera with its port
+  (:func:`synth.formats.exchange.cameras_json_views`), and ``colmap/`` -- a COLMAP text model
+  for the refractive COLMAP fork (``cameras.txt`` with each camera's FLATPORT or DOMEPORT and
+  ``rig_config.json``, ``images.txt`` of one image per camera, ``points3D.txt`` with each
+  target's track over the images it lies inside: :func:`synth.formats.exchange.write_colmap_views`;
+  not written, with the reason in the manifest, for a rig the format cannot hold);
 * ``targets.ply`` -- the true target centres (binary doubles, mm), in target order;
 * ``pixels.csv`` -- ``id,x,y,z,u_cam0,v_cam0,u_cam1,v_cam1,…``: the Fermat simulator's pixel
   of every target in every view (:func:`measure.geometry.projection.project` through the port
@@ -23,12 +30,12 @@ Beside them (units mm, reference frame = ``cam0``'s, OpenCV axes):
   every other file, ``manifest_sha256``) with ``cameras`` (the folders' names, in order) and the
   per-view entries keyed by those names.
 
-Not written for N cameras (yet): ``cameras.json``, ``colmap/``; a surface scene, ``--sensor``
-and a design port are refused. Writing is atomic and a rerun of the same request on a whole
-dataset does nothing (:func:`synth.products.dataset.existing_output`). Reading
-(:func:`read_views_dataset`) checks the folders against the manifest (``cam3/`` with no
-``cam2/``, a folder missing a file, a file whose SHA-256 is not the manifest's: one
-:class:`synth.products.dataset.DatasetError` line naming the file or camera).
+A surface scene, ``--sensor`` and a design port are refused for N cameras. Writing is atomic
+and a rerun of the same request on a whole dataset does nothing
+(:func:`synth.products.dataset.existing_output`). Reading (:func:`read_views_dataset`) checks
+the folders against the manifest (``cam3/`` with no ``cam2/``, a folder missing a file, a file
+whose SHA-256 is not the manifest's: one :class:`synth.products.dataset.DatasetError` line
+naming the file or camera).
 """
 
 from __future__ import annotations
@@ -150,6 +157,7 @@ def write_views_dataset(spec: SceneSpec, out_dir, spp: int | None = None,
     :func:`synth.products.dataset.write_dataset`."""
     from synth.rendering.render import (pass_seed, png16_scale, render_views, srgb_preview,
                                         to_png16, write_exr, write_png)
+    from synth.formats.exchange import write_cameras_json, write_colmap_views
     from synth.products.rig_file import write_rig_file
 
     t_start = time.perf_counter()
@@ -198,6 +206,9 @@ def write_views_dataset(spec: SceneSpec, out_dir, spp: int | None = None,
 
         t = time.perf_counter()
         write_rig_file(os.path.join(tmp, "calib.yaml"), rig)
+        write_cameras_json(tmp, rig)
+        colmap_note = write_colmap_views(tmp, rig, spec.target_ids, spec.targets, pixels,
+                                         [f"{name}/{VIEW_FILES['image']}" for name in names])
         write_targets_ply(os.path.join(tmp, "targets.ply"), spec.targets)
         write_views_pixels_csv(os.path.join(tmp, "pixels.csv"), names, spec.target_ids,
                                spec.targets, pixels)
@@ -211,6 +222,8 @@ def write_views_dataset(spec: SceneSpec, out_dir, spp: int | None = None,
             "request_key": key,
             "versions": package_versions(),
             "cameras": names,
+            "colmap": ("colmap/: cameras.txt (each camera's port), rig_config.json, images.txt, "
+                       "points3D.txt" if colmap_note is None else f"not written: {colmap_note}"),
             "view_files": {kind: name for kind, name in VIEW_FILES.items()
                            if kind != "exr" or exr},
             "scene": {"path": spec.path, "sha256": spec.sha256, "params": spec.params,

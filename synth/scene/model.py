@@ -85,8 +85,13 @@ class SceneSpec:
     target_normals: np.ndarray | None = None
     surface: SceneSurface | None = None
     #: The cameras after the first two of a scene of N (``synth scene --cameras N``), all
-    #: behind the one flat port (or none): :attr:`all_cameras`, :attr:`multirig`.
+    #: behind the one flat port (or none) or each behind its own: :attr:`all_cameras`,
+    #: :attr:`multirig`.
     extra_cameras: tuple = ()
+    #: In a scene of N cameras each behind its own flat port (``--cameras N --port
+    #: per-camera``): the ports of :attr:`extra_cameras` (``rig.port`` is then the
+    #: :class:`measure.geometry.flat_pair.FlatPair` of the first two); empty otherwise.
+    extra_ports: tuple = ()
 
     @property
     def mitsuba_params(self) -> dict:
@@ -128,7 +133,19 @@ class SceneSpec:
 
         if not self.extra_cameras:
             return MultiRig.from_stereo(self.rig)
+        if self.extra_ports:
+            return MultiRig(self.all_cameras, [self.rig.view_port(0), self.rig.view_port(1),
+                                               *self.extra_ports])
         return MultiRig(self.all_cameras, [self.rig.port] * len(self.all_cameras))
+
+    @property
+    def camera_ports(self):
+        """What the scene writer takes as the port (:func:`synth.scene.write.scene_xml`): the
+        list of every camera's flat port in a scene of N cameras each behind its own, else
+        :attr:`port`."""
+        if self.extra_ports:
+            return list(self.multirig.ports)
+        return self.port
 
     @property
     def port(self):

@@ -19,7 +19,7 @@ import re
 import numpy as np
 
 from measure import Camera, FlatPort, StereoRig
-from measure.geometry.flat_pair import VIEWS, FlatPair
+from measure.geometry.flat_pair import FlatPair
 from measure.geometry.port import index_matched_port
 from synth.scene.dome import check_field_of_view, facing_cameras, pair_from_spheres
 from synth.scene.model import (SPECKLE_ID, SURFACE_ID, TARGET_ID_PREFIX, SceneError, SceneSpec,
@@ -329,15 +329,18 @@ def load_scene(path, defines: dict | None = None) -> SceneSpec:
     else:
         if params.get("port") == "none":
             raise SceneError(f"{label}: port=none but the scene has port interfaces")
-        port, windows = _ports_from_interfaces(interfaces, (left, right), label)
+        port, windows = _ports_from_interfaces(interfaces, (left, right) + extra, label)
+    extra_ports = ()
+    if isinstance(port, tuple):  # N > 2 cameras, each behind its own window
+        port, extra_ports = FlatPair(*port[:2]), port[2:]
     try:
         rig = StereoRig(left, right, port)
-        if windows is not None:
+        if windows is not None and not extra_ports:
             check_windows(rig, windows)
     except ValueError as exc:
         raise SceneError(f"{label}: {exc}") from None
     if extra:
-        _check_extra_cameras(rig, extra, bool(spheres or windows is not None), label)
+        _check_extra_cameras(rig, extra, extra_ports, windows, bool(spheres), label)
     if spheres:
         if surface is not None:
             raise SceneError(f"{label}: a dome scene holds disk targets, not a surface")
@@ -351,12 +354,15 @@ def load_scene(path, defines: dict | None = None) -> SceneSpec:
             raise SceneError(f"{label}: the surface mesh reaches out of the water (through the "
                              f"port)")
         in_water = port.water_side(centres) if has_port else np.ones(len(centres), dtype=bool)
+        for extra_port in extra_ports:
+            in_water &= extra_port.water_side(centres)
     if not np.all(in_water):
         bad = ids[~in_water]
         raise SceneError(f"{label}: targets {bad[:5].tolist()} are not in the water")
     normals = np.array([t[3] for t in targets]).reshape(-1, 3)
     facing = (facing_cameras(rig, centres, normals) if spheres
-              else (normals @ rig.view_port(0).normal < 0) & (normals @ rig.view_port(1).normal < 0))
+              else np.all([normals @ p.normal < 0
+                           for p in (rig.view_port(0), rig.view_port(1), *extra_ports)], axis=0))
     if not np.all(facing):
         bad = ids[~facing]
         raise SceneError(f"{label}: targets {bad[:5].tolist()} do not face the cameras")
@@ -365,39 +371,54 @@ def load_scene(path, defines: dict | None = None) -> SceneSpec:
                      sha256=(hashlib.sha256(data).hexdigest() if surface is None else
                              hashlib.sha256(data + surface.sha256.encode()).hexdigest()),
                      referenced=referenced, target_normals=normals, surface=surface,
-                     extra_cameras=extra)
+                     extra_cameras=extra, extra_ports=tuple(extra_ports))
 
 
-def _check_extra_cameras(rig, extra, own_glass: bool, label) -> None:
-    """A scene of more than two sensors: every camera behind the one flat port (or none),
-    none at another's centre (:class:`measure.stereo.multirig.MultiRig`)."""
+def _check_extra_cameras(rig, extra, extra_ports, windows, domes: bool, label) -> None:
+    """A scene of more than two sensors: every camera behind the one flat port, its own window
+    (``extra_ports`` the ports of the cameras after the first two, ``windows`` every camera's)
+    or none, none at another's centre or inside another's glass
+    (:class:`measure.stereo.multirig.MultiRig`, :func:`synth.scene.windows.check_windows`)."""
     from measure.stereo.multirig import MultiRig
 
-    if own_glass:
-        raise SceneError(f"{label}: a scene of {2 + len(extra)} cameras has one flat port for all "
-                         f"of them (or none), not a dome or window per camera")
+    count = 2 + len(extra)
+    if domes:
+        raise SceneError(f"{label}: a scene of {count} cameras has one flat port for all of them, "
+                         f"a window each, or none; not a dome per camera")
     try:
-        MultiRig((rig.left, rig.right) + extra, [rig.port] * (2 + len(extra)))
+        if extra_ports:
+            multirig = MultiRig((rig.left, rig.right) + extra,
+                                [rig.view_port(0), rig.view_port(1), *extra_ports])
+            check_windows(multirig, windows)
+        else:
+            MultiRig((rig.left, rig.right) + extra, [rig.port] * count)
     except ValueError as exc:
         raise SceneError(f"{label}: {exc}") from None
 
 
 def _ports_from_interfaces(interfaces, cameras, label):
     """``(port, windows)``: one flat port of every rectangle (``windows`` None), or — when the
-    ids name the cameras (``left_interface_<k>``, ``right_interface_<k>``:
-    :mod:`synth.scene.windows`) — a :class:`measure.geometry.flat_pair.FlatPair` and the two
-    finite windows its rectangles make."""
-    own = {name: [i for i in interfaces if i[0].startswith(name + "_")] for name in VIEWS}
+    ids name the cameras (``left_interface_<k>``, ``right_interface_<k>``; of N > 2 cameras
+    ``cam0_interface_<k>``, …: :mod:`synth.scene.windows`) — a
+    :class:`measure.geometry.flat_pair.FlatPair` (of N > 2 cameras a tuple of their flat
+    ports) and the finite windows its rectangles make, one per camera."""
+    from measure.stereo.multirig import default_names
+
+    names = default_names(len(cameras))
+    own = {name: [i for i in interfaces if i[0].startswith(name + "_")] for name in names}
     if not any(own.values()):
         return _port_from_interfaces(interfaces, label), None
-    stray = [i[0] for i in interfaces if not i[0].startswith(tuple(f"{n}_" for n in VIEWS))]
-    missing = [name for name in VIEWS if not own[name]]
+    stray = [i[0] for i in interfaces if not i[0].startswith(tuple(f"{n}_" for n in names))]
+    missing = [name for name in names if not own[name]]
     if stray or missing:
-        raise SceneError(f"{label}: a scene of two housings holds the rectangles "
-                         f"left_interface_<k> and right_interface_<k> only; "
+        what = ("two housings holds the rectangles left_interface_<k> and right_interface_<k>"
+                if len(names) == 2 else
+                f"{len(names)} housings holds the rectangles {names[0]}_interface_<k> … "
+                f"{names[-1]}_interface_<k>")
+        raise SceneError(f"{label}: a scene of {what} only; "
                          + (f"found {stray[0]!r}" if stray else f"no {missing[0]} window"))
     ports, windows = [], []
-    for name, camera in zip(VIEWS, cameras):
+    for name, camera in zip(names, cameras):
         port = _port_from_interfaces(own[name], label, camera.center, f"the {name} port")
         ports.append(port)
         matrices = [i[5] for i in sorted(own[name], key=lambda i: port.normal @ i[2])]
@@ -405,9 +426,12 @@ def _ports_from_interfaces(interfaces, cameras, label):
             windows.append(window_from_rectangles(port, name, matrices))
         except ValueError as exc:
             raise SceneError(f"{label}: {exc}") from None
-    if abs(ports[0].n_water - ports[1].n_water) > 1e-12:
-        raise SceneError(f"{label}: the two windows look into different water (int_ior "
-                         f"{ports[0].n_water:g} and {ports[1].n_water:g})")
+    waters = {p.n_water for p in ports}
+    if max(waters) - min(waters) > 1e-12:
+        raise SceneError(f"{label}: the windows look into different water (int_ior "
+                         f"{', '.join(f'{p.n_water:g}' for p in ports)})")
+    if len(ports) > 2:
+        return tuple(ports), windows
     return FlatPair(*ports), windows
 
 

@@ -1,17 +1,23 @@
-"""Two housings in scene files: each camera behind its own flat port, a finite glass window.
+"""A port per camera in scene files: each camera behind its own flat port, a finite glass window.
 
 Units mm, reference frame = the left camera's (OpenCV axes). The measurement models each port
 as infinite planes (:class:`measure.geometry.flat_pair.FlatPair`); a scene must make that true
 for every ray it renders: each camera's rays, over its whole image, cross its own window and
-nothing of the other one. So each window is finite — per interface one Mitsuba ``rectangle``
-with a ``dielectric`` BSDF (ids ``left_interface_<k>``, ``right_interface_<k>``, camera side
-first; the rectangle's normal, local +z, turned towards the cameras like the shared port's),
-all of one window the same size, aligned with its camera's image axes and covering the
+nothing of another's. So each window is finite — per interface one Mitsuba ``rectangle``
+with a ``dielectric`` BSDF (ids ``left_interface_<k>``, ``right_interface_<k>`` — in a rig of
+N > 2 cameras ``cam0_interface_<k>``, ``cam1_interface_<k>``, … —, camera side first; the
+rectangle's normal, local +z, turned towards the cameras like the shared port's), all of one
+window the same size, aligned with its camera's image axes and covering the
 footprint of the camera's image on every interface with :data:`WINDOW_MARGIN_MM` to spare
-(:func:`fit_windows`). :func:`check_windows` refuses a rig where the two windows overlap, where a
-camera's rays leave its window, or where they pass through the other window — in the air
-before their own port, or in the water after it (the usual cause: the ports too far from the
-cameras for their baseline, so the two fields of view already overlap at the glass).
+(:func:`fit_windows`). :func:`check_windows` refuses a rig where two windows overlap, where a
+camera's rays leave its window, or where they pass through another camera's window — in the
+air before their own port, or in the water after it (the usual cause: the ports too far from
+the cameras for their baseline, so two fields of view already overlap at the glass).
+
+A rig here is anything with ``cameras`` and ``view_port(k)``: a :class:`measure.StereoRig`
+with a :class:`measure.geometry.flat_pair.FlatPair` (cameras ``left``, ``right``) or a
+:class:`measure.stereo.multirig.MultiRig` whose cameras each have their own flat port (named
+by its ``names``).
 """
 
 from __future__ import annotations
@@ -65,19 +71,25 @@ class Window:
                 np.vstack([self.axes, self.port.normal]), np.r_[self.half, depth])
 
 
-def flat_pair(cameras, distances, tilts, thicknesses, indices) -> FlatPair:
-    """The two ports of a rig of two housings: camera k's port has its unit normal tilted from
-    that camera's optical axis by ``tilts[k]`` = (about x, about y) degrees (in the camera's
-    frame, :func:`synth.scene.rig.tilted_port_normal`), its first interface ``distances[k]`` mm
-    from the camera's centre along that normal, glass ``thicknesses[k]`` mm and ``indices``
-    ``(n_air, n_glass, n_water)``. ValueError (from :class:`measure.StereoRig`) for a camera on
-    the water side of its port or inside the other's glass."""
+def flat_ports(cameras, distances, tilts, thicknesses, indices) -> list:
+    """A flat port per camera: camera k's port has its unit normal tilted from that camera's
+    optical axis by ``tilts[k]`` = (about x, about y) degrees (in the camera's frame,
+    :func:`synth.scene.rig.tilted_port_normal`), its first interface ``distances[k]`` mm from
+    the camera's centre along that normal, glass ``thicknesses[k]`` mm and ``indices``
+    ``(n_air, n_glass, n_water)``; reference frame."""
     ports = []
     for camera, distance, tilt, thickness in zip(cameras, distances, tilts, thicknesses):
         normal = camera.R @ tilted_port_normal(*tilt)
         ports.append(FlatPort(normal, float(distance) + float(normal @ camera.center),
                               (float(thickness),), tuple(indices)))
-    pair = FlatPair(*ports)
+    return ports
+
+
+def flat_pair(cameras, distances, tilts, thicknesses, indices) -> FlatPair:
+    """The two ports of a rig of two housings (:func:`flat_ports`). ValueError (from
+    :class:`measure.StereoRig`) for a camera on the water side of its port or inside the
+    other's glass."""
+    pair = FlatPair(*flat_ports(cameras[:2], distances, tilts, thicknesses, indices))
     StereoRig(cameras[0], cameras[1], pair)
     return pair
 
@@ -96,7 +108,7 @@ def _pixels(camera, border_step: int, grid_step: int | None) -> np.ndarray:
     return np.concatenate(edges).astype(float)
 
 
-def _trace(rig: StereoRig, view: int, uv):
+def _trace(rig, view: int, uv):
     camera = rig.cameras[view]
     return rig.view_port(view).trace(camera.center, camera.rays(uv), keep_interface_points=True)
 
@@ -109,23 +121,29 @@ def _axes(normal: np.ndarray, camera) -> np.ndarray:
     return np.stack([u, np.cross(normal, u)])
 
 
-def fit_windows(rig: StereoRig, margin: float = WINDOW_MARGIN_MM) -> tuple[Window, Window]:
-    """Each camera's window: the smallest rectangle (on its image axes) holding the footprint
-    of the camera's image on every interface of its port, plus ``margin`` mm on each side.
-    ValueError when a ray of the image does not reach the water."""
+def camera_names(rig) -> tuple:
+    """The names of ``rig``'s cameras in messages and shape ids: a MultiRig's ``names``, or
+    ``left``, ``right``."""
+    return tuple(getattr(rig, "names", VIEWS))
+
+
+def fit_windows(rig, margin: float = WINDOW_MARGIN_MM) -> tuple:
+    """Each camera's window (one per camera, in order): the smallest rectangle (on its image
+    axes) holding the footprint of the camera's image on every interface of its port, plus
+    ``margin`` mm on each side. ValueError when a ray of the image does not reach the water."""
     windows = []
-    for view, camera in enumerate(rig.cameras):
+    for view, (name, camera) in enumerate(zip(camera_names(rig), rig.cameras)):
         port = rig.view_port(view)
         uv = _pixels(camera, BORDER_STEP_PX, None)
         water = _trace(rig, view, uv)
-        _refuse_lost(water, uv, VIEWS[view])
+        _refuse_lost(water, uv, name)
         axes = _axes(port.normal, camera)
         foot = port.normal * port.offsets[0]
         coords = (water.interface_points - foot) @ axes.T  # (K, N, 2)
         low, high = coords.reshape(-1, 2).min(axis=0), coords.reshape(-1, 2).max(axis=0)
         windows.append(Window(port, foot + 0.5 * (low + high) @ axes, axes,
                               0.5 * (high - low) + margin))
-    return windows[0], windows[1]
+    return tuple(windows)
 
 
 def _refuse_lost(water, uv, name: str) -> None:
@@ -167,19 +185,22 @@ def _hits(origins, directions, window: Window, longest, clearance: float) -> np.
     return hit
 
 
-def check_windows(rig: StereoRig, windows) -> None:
-    """Raise ``ValueError`` (one line naming the cameras and the overlap) unless the two
-    windows ``(left, right)`` keep :data:`CLEARANCE_MM` apart and every ray of each camera's
-    image (its border every :data:`BORDER_STEP_PX` px and a grid every :data:`GRID_STEP_PX`)
-    crosses each interface of its own window inside its rectangle and misses the other window
-    — from the camera to its port and from its port into the water."""
-    if _boxes_overlap(windows[0].box(), windows[1].box(), CLEARANCE_MM):
-        raise ValueError(f"the left and right windows overlap (their glass comes nearer than "
-                         f"{CLEARANCE_MM:g} mm): move the ports nearer the cameras or the "
-                         f"cameras apart")
+def check_windows(rig, windows) -> None:
+    """Raise ``ValueError`` (one line naming the cameras and the overlap) unless every two
+    windows (one per camera of ``rig``, in order) keep :data:`CLEARANCE_MM` apart and every ray
+    of each camera's image (its border every :data:`BORDER_STEP_PX` px and a grid every
+    :data:`GRID_STEP_PX`) crosses each interface of its own window inside its rectangle and
+    misses every other window — from the camera to its port and from its port into the
+    water."""
+    names = camera_names(rig)
+    for i in range(len(windows)):
+        for j in range(i + 1, len(windows)):
+            if _boxes_overlap(windows[i].box(), windows[j].box(), CLEARANCE_MM):
+                raise ValueError(f"the {names[i]} and {names[j]} windows overlap (their glass "
+                                 f"comes nearer than {CLEARANCE_MM:g} mm): move the ports nearer "
+                                 f"the cameras or the cameras apart")
     for view, camera in enumerate(rig.cameras):
-        name, other_name = VIEWS[view], VIEWS[1 - view]
-        own, other = windows[view], windows[1 - view]
+        name, own = names[view], windows[view]
         uv = _pixels(camera, BORDER_STEP_PX, GRID_STEP_PX)
         water = _trace(rig, view, uv)
         _refuse_lost(water, uv, name)
@@ -192,23 +213,26 @@ def check_windows(rig: StereoRig, windows) -> None:
                              f"window (the ray of pixel ({u:g}, {v:g}) passes beside it)")
         air = points[0] - camera.center
         length = np.linalg.norm(air, axis=1)
-        crossing = (_hits(np.broadcast_to(camera.center, air.shape), air / length[:, None],
-                          other, length, CLEARANCE_MM)
-                    | _hits(water.origins, water.directions, other, np.inf, CLEARANCE_MM))
-        if crossing.any():
-            u, v = uv[np.flatnonzero(crossing)[0]]
-            raise ValueError(f"the {name} camera's field of view passes through the "
-                             f"{other_name} window (the ray of pixel ({u:g}, {v:g})): the two "
-                             f"windows overlap in its view; move the ports nearer the cameras "
-                             f"or the cameras apart")
+        for other_view, other in enumerate(windows):
+            if other_view == view:
+                continue
+            crossing = (_hits(np.broadcast_to(camera.center, air.shape), air / length[:, None],
+                              other, length, CLEARANCE_MM)
+                        | _hits(water.origins, water.directions, other, np.inf, CLEARANCE_MM))
+            if crossing.any():
+                u, v = uv[np.flatnonzero(crossing)[0]]
+                raise ValueError(f"the {name} camera's field of view passes through the "
+                                 f"{names[other_view]} window (the ray of pixel ({u:g}, {v:g})): "
+                                 f"the two windows overlap in its view; move the ports nearer "
+                                 f"the cameras or the cameras apart")
 
 
-def window_placements(windows):
-    """Per interface of each window, left first, camera side first: ``(shape id, centre,
-    lookat target, up, half sides (2,), ext_ior, int_ior)`` of its ``rectangle`` — local +z
-    turned towards the cameras (``ext_ior`` the camera side's), local x and y along the
-    window's axes."""
-    for name, window in zip(VIEWS, windows):
+def window_placements(windows, names=VIEWS):
+    """Per interface of each window (camera ``names[k]``'s, in order), camera side first:
+    ``(shape id, centre, lookat target, up, half sides (2,), ext_ior, int_ior)`` of its
+    ``rectangle`` — local +z turned towards the cameras (``ext_ior`` the camera side's), local
+    x and y along the window's axes."""
+    for name, window in zip(names, windows):
         port = window.port
         n = port.indices
         for k, centre in enumerate(window.centres()):
@@ -234,7 +258,7 @@ def window_from_rectangles(port: FlatPort, name: str, matrices) -> Window:
     return window
 
 
-__all__ = ["BORDER_STEP_PX", "CLEARANCE_MM", "DEFAULT_PAIR_DISTANCE_MM",
+__all__ = ["BORDER_STEP_PX", "CLEARANCE_MM", "camera_names", "DEFAULT_PAIR_DISTANCE_MM",
            "DEFAULT_PAIR_THICKNESS_MM", "GRID_STEP_PX", "WINDOW_ID", "WINDOW_MARGIN_MM", "Window",
-           "check_windows", "fit_windows", "flat_pair", "window_from_rectangles",
+           "check_windows", "fit_windows", "flat_pair", "flat_ports", "window_from_rectangles",
            "window_placements"]

@@ -13,9 +13,10 @@ the ``<default>`` parameters of :mod:`synth.scene.params` and holds:
   ``int_ior = n2, ext_ior = n1``, glass-water ``int_ior = $n_water, ext_ior = n2``.
 * or, for a dome port (a :class:`measure.geometry.dome.DomePair`), per camera two concentric analytic
   ``sphere`` shapes with ``dielectric`` BSDFs (:mod:`synth.scene.dome`);
-* or, for two housings (a :class:`measure.geometry.flat_pair.FlatPair`), per camera a finite
-  window: one ``rectangle`` per interface of its own port, sized to its field of view and clear
-  of the other camera's (:mod:`synth.scene.windows`).
+* or, for two housings (a :class:`measure.geometry.flat_pair.FlatPair`) — and for N > 2 cameras
+  each behind its own flat port (a list of :class:`measure.FlatPort`, one per camera) — per
+  camera a finite window: one ``rectangle`` per interface of its own port, sized to its field
+  of view and clear of every other camera's (:mod:`synth.scene.windows`).
 * the targets: ``disk`` shapes with an ``area`` emitter, facing the cameras (normal −z), shape
   ``id = "target_<k>"`` for target number ``k``; radius = the disk's scale.
 """
@@ -30,11 +31,12 @@ from collections.abc import Callable
 import numpy as np
 
 from measure import Camera, FlatPort, StereoRig
+from measure.geometry.port import require_flat_port
 from synth.scene.model import (DEFAULT_MAX_DEPTH, DEFAULT_SEED, DEFAULT_SPP, SPECKLE_ID,
                                SURFACE_ID, TARGET_ID_PREFIX, SurfaceFiles)
 from synth.scene.dome import (check_field_of_view, check_targets, dome_placements,
                               facing_cameras)
-from synth.scene.windows import check_windows, fit_windows, window_placements
+from synth.scene.windows import camera_names, check_windows, fit_windows, window_placements
 from synth.rendering.sensor import sensor_parameters
 
 #: Half side (mm) of the square port interfaces: covers both fields of view far beyond 2 m.
@@ -129,9 +131,11 @@ def scene_xml(cameras, port: FlatPort | None, targets, target_radius: float, *,
               thin_lens=None, surface: SurfaceFiles | None = None) -> str:
     """The text of a Mitsuba 3 scene of two cameras, a flat port (or none) and disk targets.
 
-    ``cameras`` (left, right) :class:`measure.Camera` (same image size; square pixels);
+    ``cameras`` (left, right) :class:`measure.Camera` (same image size; square pixels), or N > 2
+    of them (``cam0``, ``cam1``, …);
     ``port`` a :class:`measure.FlatPort`, a :class:`measure.geometry.dome.DomePair` (a dome around each
-    camera: :mod:`synth.scene.dome`) or None for an all-air scene; ``targets`` ``(N, 3)`` mm,
+    camera: :mod:`synth.scene.dome`), a FlatPair (a window per camera), a list of one
+    FlatPort per camera of N > 2 (a window each) or None for an all-air scene; ``targets`` ``(N, 3)`` mm,
     reference frame, all in the water; ``target_radius`` mm. When all targets share one ``z``,
     it becomes the ``target_z`` default. ``comment`` goes into an XML comment (for people only).
     ``water`` (a :class:`synth.rendering.water.Water`, needs a port): the water behind the port becomes a
@@ -176,13 +180,13 @@ def scene_xml(cameras, port: FlatPort | None, targets, target_radius: float, *,
     if target_normals.shape != targets.shape or not np.all(np.isfinite(target_normals)):
         raise ValueError("target_normals must be a finite (N, 3) array like targets")
     target_normals = target_normals / np.linalg.norm(target_normals, axis=1, keepdims=True)
-    glass = None if port is None else PER_CAMERA_GLASS.get(port.kind)
+    glass = _glass_of(port)
     if glass is not None:
         if water is not None or lighting == "lit" or thin_lens is not None or surface is not None:
             raise ValueError(f"a {glass.name} scene holds LED disk targets seen by pinhole "
                              f"cameras in clear water (no water medium, lit targets, thin lens "
                              f"or surface)")
-        rig = StereoRig(left, right, port)  # each camera behind or inside its own glass
+        rig = _glass_rig(cameras, port, names)  # each camera behind or inside its own glass
         glass.check(rig, targets, target_radius, target_normals)
     elif port is not None:
         StereoRig(left, right, port)  # cameras on the air side
@@ -197,7 +201,7 @@ def scene_xml(cameras, port: FlatPort | None, targets, target_radius: float, *,
     defaults = [("spp", str(int(spp))), ("seed", str(int(seed))), ("width", str(w)),
                 ("height", str(h))]
     if port is not None:
-        defaults.append(("n_water", _num(port.n_water)))
+        defaults.append(("n_water", _num(_views_of(port, len(cameras))[0].n_water)))
     else:
         defaults.append(("port", "none"))
     if water is not None:
@@ -207,7 +211,7 @@ def scene_xml(cameras, port: FlatPort | None, targets, target_radius: float, *,
                      ("water_g", _num(water.g))]
         max_depth = max(int(max_depth), WATER_MAX_DEPTH)
     if port is not None:  # a path crosses every interface once: room for them and a few more
-        crossed = max(port.view(v).n_interfaces for v in (0, 1))
+        crossed = max(p.n_interfaces for p in _views_of(port, len(cameras)))
         max_depth = max(int(max_depth), 2 * crossed + 4)
     if surface is None:
         defaults.append(("target_radius", _num(target_radius)))
@@ -265,7 +269,7 @@ def scene_xml(cameras, port: FlatPort | None, targets, target_radius: float, *,
     </emitter>""")
 
     if glass is not None:
-        parts.append(glass.xml(StereoRig(left, right, port)))
+        parts.append(glass.xml(rig))
     elif port is not None:
         for k, centre, target, up, ext_ior, int_ior in interface_placements(port):
             ext = _num(ext_ior)
@@ -323,22 +327,58 @@ def scene_xml(cameras, port: FlatPort | None, targets, target_radius: float, *,
 
 
 def _check_more_cameras(cameras, names, port, surface, thin_lens) -> None:
-    """A scene of more than two cameras: the same film for all, all behind one flat port (or
-    none), none at another's centre; LED disk targets seen by pinholes."""
+    """A scene of more than two cameras: the same film for all, all behind one flat port, each
+    behind its own flat port (a list of them, one per camera) or none, no camera at another's
+    centre or inside another's glass; LED disk targets seen by pinholes."""
     from measure.stereo.multirig import MultiRig
 
     for name, camera in zip(names, cameras):
         if camera.size != cameras[0].size:
             raise ValueError(f"{name}: every camera must have the same image size, got "
                              f"{camera.size} and {cameras[0].size}")
-    if port is not None and PER_CAMERA_GLASS.get(port.kind) is not None:
-        raise ValueError(f"a scene of {len(cameras)} cameras has one flat port for all of them "
-                         f"(or none), not {port.description}")
+    if isinstance(port, (list, tuple)):
+        message = (f"a port per camera of {len(cameras)} cameras is a list of {len(cameras)} "
+                   f"flat ports (a window each), got {len(port)} values")
+        if len(port) != len(cameras):
+            raise ValueError(message)
+        for each in port:
+            require_flat_port(each, message)
+    elif port is not None and PER_CAMERA_GLASS.get(port.kind) is not None:
+        raise ValueError(f"a scene of {len(cameras)} cameras has one flat port for all of them, "
+                         f"a flat port each, or none; not {port.description}")
     if surface is not None or thin_lens is not None:
         raise ValueError(f"a scene of {len(cameras)} cameras holds disk targets seen by pinhole "
                          f"cameras (no surface, no thin lens)")
     if port is not None:
-        MultiRig(cameras, [port] * len(cameras), names)
+        ports = list(port) if isinstance(port, (list, tuple)) else [port] * len(cameras)
+        MultiRig(cameras, ports, names)
+
+
+def _glass_of(port):
+    """How a scene holds ``port``'s glass (:data:`PER_CAMERA_GLASS`), or None for one shared
+    flat port or none; a list of flat ports (one per camera) is held as windows."""
+    if port is None:
+        return None
+    if isinstance(port, (list, tuple)):
+        return PER_CAMERA_GLASS["flat pair"]
+    return PER_CAMERA_GLASS.get(port.kind)
+
+
+def _glass_rig(cameras, port, names=None):
+    """The rig whose cameras each have their own glass: a StereoRig of two cameras and their
+    FlatPair or DomePair, or a MultiRig of N cameras and a list of their flat ports."""
+    from measure.stereo.multirig import MultiRig
+
+    if isinstance(port, (list, tuple)):
+        return MultiRig(tuple(cameras), list(port), names)
+    return StereoRig(cameras[0], cameras[1], port)
+
+
+def _views_of(port, count: int) -> list:
+    """The port each of ``count`` cameras looks through (a shared port, a pair's, or a list's)."""
+    if isinstance(port, (list, tuple)):
+        return list(port)
+    return [port.view(min(v, 1)) for v in range(count)]
 
 
 def _dome_xml(rig: StereoRig) -> str:
@@ -373,18 +413,21 @@ def _dome_shapes(mi, port, cameras, half_side_mm: float) -> dict:
             for sid, centre, radius, ext_ior, int_ior in dome_placements(port)}
 
 
-def _window_xml(rig: StereoRig) -> str:
-    """The two windows of a scene of two housings (:mod:`synth.scene.windows`); the last
+def _window_xml(rig) -> str:
+    """The windows of a scene of a port per camera (:mod:`synth.scene.windows`); the last
     interface of each looks into ``$n_water``."""
-    if rig.port.left.n_water != rig.port.right.n_water:
-        raise ValueError(f"the two ports look into different water (n_water "
-                         f"{rig.port.left.n_water:g} and {rig.port.right.n_water:g})")
-    parts = ["\n    <!-- Two housings: each camera behind its own flat port, a finite window (one "
-             "rectangle per interface, normal towards the cameras, ext_ior on their side). -->"]
+    names = camera_names(rig)
+    ports = [rig.view_port(k) for k in range(len(rig.cameras))]
+    waters = {p.n_water for p in ports}
+    if len(waters) > 1:
+        raise ValueError(f"the ports look into different water (n_water "
+                         f"{', '.join(f'{p.n_water:g}' for p in ports)})")
+    parts = [f"\n    <!-- {'Two housings' if len(ports) == 2 else f'{len(ports)} housings'}: each "
+             f"camera behind its own flat port, a finite window (one rectangle per interface, "
+             f"normal towards the cameras, ext_ior on their side). -->"]
     windows = fit_windows(rig)
-    last = {f"{name}_interface_{w.port.n_interfaces - 1}" for name, w in zip(("left", "right"),
-                                                                             windows)}
-    for sid, centre, target, up, half, ext_ior, int_ior in window_placements(windows):
+    last = {f"{name}_interface_{w.port.n_interfaces - 1}" for name, w in zip(names, windows)}
+    for sid, centre, target, up, half, ext_ior, int_ior in window_placements(windows, names):
         parts.append(f"""    <shape type="rectangle" id="{sid}">
         <transform name="to_world">
             <scale x="{_num(half[0])}" y="{_num(half[1])}"/>
@@ -398,9 +441,10 @@ def _window_xml(rig: StereoRig) -> str:
     return "\n".join(parts)
 
 
-def _check_windows(rig: StereoRig, targets, target_radius, target_normals) -> None:
+def _check_windows(rig, targets, target_radius, target_normals) -> None:
     check_windows(rig, fit_windows(rig))
-    for name, port in (("left", rig.port.left), ("right", rig.port.right)):
+    for k, name in enumerate(camera_names(rig)):
+        port = rig.view_port(k)
         beyond = targets @ port.normal - port.offsets[-1]
         if np.any(beyond <= 0):
             raise ValueError(f"every target must lie in the water, beyond the {name} port's last "
@@ -414,10 +458,13 @@ def _check_windows(rig: StereoRig, targets, target_radius, target_normals) -> No
 
 def _window_shapes(mi, port, cameras, half_side_mm: float) -> dict:
     if cameras is None:
-        raise ValueError("the windows of two housings are sized to the cameras: pass cameras")
-    windows = fit_windows(StereoRig(*cameras, port))
+        raise ValueError("the windows of a port per camera are sized to the cameras: pass "
+                         "cameras")
+    rig = _glass_rig(cameras, port)
+    windows = fit_windows(rig)
     shapes = {}
-    for sid, centre, target, up, half, ext_ior, int_ior in window_placements(windows):
+    for sid, centre, target, up, half, ext_ior, int_ior in window_placements(
+            windows, camera_names(rig)):
         to_world = (mi.ScalarTransform4f().look_at(origin=centre.tolist(), target=target.tolist(),
                                                    up=up.tolist())
                     @ mi.ScalarTransform4f().scale([float(half[0]), float(half[1]), 1.0]))
@@ -498,11 +545,11 @@ def port_shapes(mi, port, half_side_mm: float = 2000.0, cameras=None) -> dict:
     """The glass of ``port`` as Mitsuba dictionary shapes (``mi.load_dict``; the board scenes'
     form of what :func:`scene_xml` writes as XML): two spheres per dome
     (:func:`synth.scene.dome.dome_placements`), a finite window per camera for two housings
-    (:mod:`synth.scene.windows`: needs ``cameras`` (left, right), whose fields of view size
-    them), or one ``rectangle`` of half side ``half_side_mm`` per flat interface
+    (:mod:`synth.scene.windows`: needs ``cameras`` (left, right; or N of them with a list of
+    their flat ports), whose fields of view size them), or one ``rectangle`` of half side ``half_side_mm`` per flat interface
     (:func:`interface_placements`), each a ``dielectric`` whose ``ext_ior`` is the camera
     side's. ``{shape id: shape}``."""
-    glass = PER_CAMERA_GLASS.get(port.kind)
+    glass = _glass_of(port)
     if glass is not None:
         return glass.shapes(mi, port, cameras, half_side_mm)
     shapes = {}

@@ -63,7 +63,10 @@ def test_one_folder_per_camera_and_the_truth(scene, dataset):
     assert manifest["cameras"] == names
     visible = sorted(os.path.relpath(os.path.join(d, f), dataset)
                      for d, _, fs in os.walk(dataset) for f in fs if not f.startswith("."))
-    assert visible == sorted(["calib.yaml", "manifest.json", "pixels.csv", "targets.ply"]
+    colmap = [f"colmap/{f}" for f in ("cameras.txt", "rig_config.json", "images.txt",
+                                      "points3D.txt", "README.txt")]
+    assert visible == sorted(["calib.yaml", "cameras.json", "manifest.json", "pixels.csv",
+                              "targets.ply"] + colmap
                              + [f"{n}/{f}" for n in names for f in ("image.png", "preview.png")])
     images = [cv2.imread(str(dataset / n / "image.png"), cv2.IMREAD_UNCHANGED) for n in names]
     for image in images:
@@ -90,6 +93,47 @@ def test_one_folder_per_camera_and_the_truth(scene, dataset):
         np.testing.assert_allclose(data.pixels[:, k], expected, atol=1e-9, equal_nan=True)
         linear = images[k].astype(np.float32) / np.float32(manifest["png_scale"])
         np.testing.assert_array_equal(data.images[k], linear)
+
+
+@pytest.mark.slow
+def test_cameras_json_and_the_colmap_model(scene, dataset):
+    """``cameras.json`` holds the scene's cameras and port; ``colmap/`` the same cameras in the
+    fork's files (COLMAP's pixels +0.5, metres), one image per camera, and every target that
+    lies inside two or more images (by the simulator's pixels computed here) with its track."""
+    from synth.formats.calib_formats import read_colmap_rig
+
+    spec = load_scene(scene)
+    data = json.loads((dataset / "cameras.json").read_text())
+    assert list(data["cameras"]) == ["cam0", "cam1", "cam2"] and data["shared_port"] is True
+    for entry, truth in zip(data["cameras"].values(), spec.all_cameras):
+        np.testing.assert_allclose(entry["K"], truth.K, atol=1e-12)
+        np.testing.assert_allclose(entry["pose_camera_to_reference"]["t"], truth.t, atol=1e-12)
+        np.testing.assert_allclose(entry["port"]["normal"], spec.rig.port.normal, atol=1e-12)
+        assert entry["port"]["distance"] == pytest.approx(spec.rig.port.distance, abs=1e-12)
+    rig = read_colmap_rig(dataset / "colmap" / "cameras.txt")
+    for camera, truth in zip(rig.cameras, spec.all_cameras):
+        np.testing.assert_allclose(camera.K, truth.K, atol=1e-9)
+        np.testing.assert_allclose(camera.t, truth.t, atol=1e-9)
+    for port in rig.ports:
+        assert port.distance == pytest.approx(spec.rig.port.distance, abs=1e-9)
+    expected = np.stack([project(c, spec.rig.port, spec.targets) for c in spec.all_cameras], 1)
+    w, h = SIZE
+    inside = ((expected[..., 0] >= -0.5) & (expected[..., 0] <= w - 0.5)
+              & (expected[..., 1] >= -0.5) & (expected[..., 1] <= h - 0.5))
+    points = [line.split() for line in (dataset / "colmap" / "points3D.txt").read_text()
+              .splitlines() if not line.startswith("#")]
+    want = {int(spec.target_ids[i]) + 1: int(inside[i].sum()) for i in range(len(inside))
+            if inside[i].sum() >= 2}
+    assert {int(p[0]): (len(p) - 8) // 2 for p in points} == want
+    images = [line.split() for line in (dataset / "colmap" / "images.txt").read_text()
+              .splitlines() if not line.startswith("#")]
+    assert [row[-1] for row in images[0::2]] == [f"cam{k}/image.png" for k in range(3)]
+    for view, row in enumerate(images[1::2]):
+        xy = np.array(row, dtype=float).reshape(-1, 3)
+        index = {int(i): k for k, i in enumerate(spec.target_ids)}
+        for x, y, pid in xy:
+            np.testing.assert_allclose([x - 0.5, y - 0.5], expected[index[int(pid) - 1], view],
+                                       atol=1e-9)
 
 
 @pytest.mark.slow
