@@ -57,6 +57,7 @@ def render_task(task: dict) -> dict:
                 "task_seconds": time.perf_counter() - started,
                 "variant": manifest["variant"], "spp": manifest["spp"],
                 "n_targets": manifest["scene"]["n_targets"],
+                "cameras": len(manifest.get("cameras") or (0, 0)),
                 "image_size": manifest["image_size"], "skipped": bool(manifest.get("skipped"))}
     except OSError as exc:  # the output cannot be written (a full disk): the suite stops
         return {"key": task["key"], "status": "failed", "write_error": True, "files": None,
@@ -106,6 +107,7 @@ def _render_boards(task: dict, scene: str, started: float) -> dict:
             "render_seconds": manifest["seconds"]["total"],
             "task_seconds": time.perf_counter() - started, "variant": manifest["variant"],
             "spp": manifest["spp"], "n_targets": None, "poses": manifest["poses"],
+            "cameras": len(manifest.get("cameras") or (0, 0)),
             "image_size": manifest["image_size"], "skipped": bool(manifest.get("skipped"))}
 
 
@@ -297,6 +299,7 @@ def index_rows(spec: SuiteSpec, records: dict) -> list:
                                                              and "n_water" in deviated)})
         row.update({"width": (record.get("image_size") or [None, None])[0],
                     "height": (record.get("image_size") or [None, None])[1],
+                    "cameras": record.get("cameras"),
                     "n_targets": record.get("n_targets"), "poses": record.get("poses"),
                     "variant": record.get("variant"),
                     "status": record["status"], "error": record.get("error"),
@@ -309,7 +312,7 @@ def index_columns(rows: list) -> list:
     first = ["folder", "key", "render", "scene", "repeat", "sample", "seed"]
     if any("scene_file" in row for row in rows):
         first.insert(4, "scene_file")
-    last = ["width", "height", "n_targets", "poses", "variant", "status", "error",
+    last = ["width", "height", "cameras", "n_targets", "poses", "variant", "status", "error",
             "render_seconds"]
     middle = sorted({k for row in rows for k in row} - set(first) - set(last))
     return first + middle + last

@@ -261,6 +261,29 @@ def test_a_suite_of_board_sequences(tmp_path):
         assert boards.manifest["air"] == row["air"] and boards.manifest["board"]["squares"] == [7, 4]
 
 
+@pytest.mark.slow
+def test_a_suite_of_a_scene_of_three_cameras_renders_every_camera(tmp_path):
+    """A scene of three cameras (each behind its own port): each entry is a dataset of three
+    camera folders with the truth of all three — never the first two as a stereo pair — and
+    the index says how many cameras."""
+    from synth.products.views_dataset import read_views_dataset
+
+    scene = tmp_path / "three.xml"
+    assert main(["scene", "--cameras", "3", "--port", "per-camera", "--layout", "grid",
+                 "--spacing", "300", "--half-width", "600", "--target-radius", "15",
+                 "--size", "96", "80", "--out", str(scene)]) == 0
+    spec = tmp_path / "suite.toml"
+    spec.write_text(SPEC.replace("{scene}", str(scene)))
+    out = tmp_path / "three"
+    assert main(["suite", str(spec), "--out", str(out), "--workers", "1", "--no-progress"]) == 0
+    rows = pq.read_table(out / "index.parquet").to_pylist()
+    assert [r["cameras"] for r in rows] == [3, 3] and all(r["status"] == "ok" for r in rows)
+    for row in rows:
+        data = read_views_dataset(out / row["folder"])
+        assert data.names == ("cam0", "cam1", "cam2") and len(data.images) == 3
+        assert data.targets[0, 2] == row["D.target_z"]
+
+
 @pytest.mark.parametrize("text, fragment", [
     ('render = "boards"\n[fixed]\nsensor = "imx174"', "board sequences have no sensor"),
     ('[fixed]\nposes = 3', "a parameter of board sequences"),
