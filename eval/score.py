@@ -127,11 +127,18 @@ def main(args) -> int:
     output = OutputDir(args.out, COMMAND).claim()
     if args.submission:
         return score_suite_main(args, output, method, log, start)
+    from synth.products.views_dataset import is_views_dataset, read_views_dataset
+
+    several = is_views_dataset(args.dataset)
+    if several and not args.points:
+        raise CLIError(f"--pixels {args.pixels}: pairs of pixels are two views, and "
+                       f"{args.dataset} is a dataset of N cameras: score its --points (eval run "
+                       f"--from measures its images with every view)")
     try:
-        data = read_dataset(args.dataset)
+        data = read_views_dataset(args.dataset) if several else read_dataset(args.dataset)
     except DatasetError as exc:
         raise CLIError(str(exc)) from None
-    if data.is_surface:
+    if not several and data.is_surface:
         raise CLIError(f"{args.dataset}: a surface dataset (per-pixel truth maps, no targets); "
                        f"eval score scores target datasets")
     if args.points:
@@ -183,10 +190,11 @@ def main(args) -> int:
     a = report["association"]
     summary = (f"{data.path}: {a['associated']} of {a['points']} points within "
                f"{a['gate_mm']:g} mm of a target ({a['unassociated']} not); "
-               f"{a['visible_in_both_scored']} of {a['visible_in_both']} targets visible in both "
-               f"views scored; RMS dP {fmt(st['rms_dp_mm'])} mm, max dP "
-               f"{fmt(st['max_dp_mm'])} mm, mean dZ {fmt(st['mean_dz_mm'])} mm, Chamfer "
-               f"{fmt(st['chamfer_mm'])} mm, F@1mm {fmt(st['fscore_1mm'])}")
+               f"{a['visible_in_both_scored']} of {a['visible_in_both']} targets visible in "
+               f"{'two or more' if several else 'both'} views scored; RMS dP "
+               f"{fmt(st['rms_dp_mm'])} mm, max dP {fmt(st['max_dp_mm'])} mm, mean dZ "
+               f"{fmt(st['mean_dz_mm'])} mm, Chamfer {fmt(st['chamfer_mm'])} mm, F@1mm "
+               f"{fmt(st['fscore_1mm'])}")
     if not summary_of and report["uncertainty"].get("note", "").startswith("no coverage"):
         summary += f"; {report['uncertainty']['note'].split(' (')[0]}"
     if summary_of:

@@ -222,15 +222,17 @@ def plausibility(points: np.ndarray, truth: np.ndarray, gate_mm: float, units=No
 def score_dataset(data, points: np.ndarray, label: str, gate_mm: float | None = None,
                   units: str | None = None) -> tuple[dict, dict, list]:
     """``(report, arrays, warnings)``: ``points`` (N, 3) mm scored against the target dataset
-    ``data`` (:class:`synth.products.dataset.Dataset`) as ``eval score`` does — the association, the
+    ``data`` (:class:`synth.products.dataset.Dataset`, or a dataset of N cameras,
+    :class:`synth.products.views_dataset.ViewsDataset`: the targets inside two or more images
+    count as visible) as ``eval score`` does — the association, the
     metrics under ``report["methods"][label]``, the plausibility warnings (``units`` of the
     points as given: None or "mm", or "m")."""
     from eval.core.analytic import visible_targets
 
     radius = float(data.manifest["scene"].get("target_radius_mm", 0.0))
     inside = [visible_targets(camera, data.rig.view_port(view), data.targets, radius)[1]
-              for view, camera in enumerate((data.rig.left, data.rig.right))]
-    visible_both = inside[0] & inside[1]
+              for view, camera in enumerate(data.rig.cameras)]
+    visible_both = np.sum(inside, axis=0) >= 2  # of two cameras both; of N, two or more
     seed = int(data.manifest.get("seed", 0))
     gate = default_gate_mm(data.targets) if gate_mm is None else gate_mm
     warnings = plausibility(points, data.targets[visible_both], gate, units=units)

@@ -152,6 +152,7 @@ def score_entry(suite_dir: str, sub_dir: str, row: dict, method: str, gate_mm) -
     ``missing``, ``failed``), ``error``, ``submission`` (the file), ``warnings`` and the
     metrics."""
     from synth.products.dataset import DatasetError, read_dataset
+    from synth.products.views_dataset import is_views_dataset, read_views_dataset
 
     out = {"status": "ok", "error": None, "submission": None, "warnings": ""}
     if row.get("status") != "ok":
@@ -170,7 +171,14 @@ def score_entry(suite_dir: str, sub_dir: str, row: dict, method: str, gate_mm) -
     kind, path = found
     out["submission"] = os.path.relpath(path, sub_dir)
     try:
-        data = read_dataset(os.path.join(suite_dir, row["folder"]))
+        folder = os.path.join(suite_dir, row["folder"])
+        if is_views_dataset(folder):  # N cameras: points are scored, pairs are two views
+            if kind != "points":
+                raise ValueError(f"{row['folder']}: a dataset of N cameras; pairs of pixels are "
+                                 f"two views: submit points.ply")
+            data = read_views_dataset(folder)
+        else:
+            data = read_dataset(folder)
         if row["render"] == "targets":
             out.update(_score_targets(data, kind, path, method, gate_mm))
         else:

@@ -139,8 +139,14 @@ def add_parser(subparsers) -> None:
                         "apart along x, camera k turned k × --toe-in about y towards the "
                         "targets, all behind the one flat port (--port paper), each behind its own "
                         "(--port per-camera) or none; their sensors are cam0, cam1, …")
+    p.add_argument("--arrangement", choices=("row", "ring"), default=None,
+                   help="--cameras N: row (default: a row along x, --baseline apart) or ring "
+                        "(cam0 in the centre, the others evenly on a circle of radius "
+                        "--baseline round its optical axis, each turned --toe-in degrees "
+                        "towards that axis; N ≥ 3)")
     p.add_argument("--baseline", type=positive_float, default=None,
-                   help="distance between neighbouring cameras, mm (default 200)")
+                   help="distance between neighbouring cameras, mm (default 200); --arrangement "
+                        "ring: the ring's radius")
     p.add_argument("--toe-in", type=any_float, default=None, metavar="DEG",
                    help="each camera turned this much more than its neighbour about y, "
                         "towards the first (default 5 degrees)")
@@ -217,7 +223,13 @@ def main(args) -> int:
         cameras, port = from_file
         size = tuple(cameras[0].size)
     else:
-        cameras = rigs.row_cameras(args.cameras, size, focal, args.dist, baseline, toe_in)
+        if args.arrangement == "ring":
+            if args.cameras < 3:
+                raise CLIError(f"--arrangement ring needs --cameras 3 or more (a centre camera "
+                               f"and two or more round it), got {args.cameras}")
+            cameras = rigs.ring_cameras(args.cameras, size, focal, args.dist, baseline, toe_in)
+        else:
+            cameras = rigs.row_cameras(args.cameras, size, focal, args.dist, baseline, toe_in)
         port = None
     left, right = cameras[:2]
     pair_comment = ""
@@ -306,7 +318,11 @@ def main(args) -> int:
                   f"about y" if args.port == "paper" and any(sum(args.port_tilt, ())) else "")
                + (f" of {len(args.layer)} layers" if args.layer else "")
                + (f", {args.cameras} cameras {baseline:g} mm apart, each turned {toe_in:g} deg "
-                  f"more" if args.cameras != 2 and not args.rig else "")
+                  f"more" if args.cameras != 2 and not args.rig and args.arrangement != "ring"
+                  else "")
+               + (f", {args.cameras} cameras: cam0 in the centre, {args.cameras - 1} on a ring "
+                  f"of radius {baseline:g} mm, each turned {toe_in:g} deg towards its axis"
+                  if args.arrangement == "ring" else "")
                + f", target radius {radius:g} mm"
                + (", lit targets" if args.lighting == "lit" else "")
                + (f", thin lens aperture {thin_lens[0]:g} mm focus {thin_lens[1]:.6g} mm"
@@ -370,8 +386,8 @@ def _surface_scene(args, left, right, port) -> int:
 
 
 #: The options that describe the rig, which ``--rig FILE`` gives instead (refused with it).
-RIG_OPTIONS = ("cameras", "baseline", "toe_in", "size", "focal", "dist", "port", "dome_radius",
-               "dome_thickness", "dome_offset", "n_water", "n_glass", "port_distance",
+RIG_OPTIONS = ("cameras", "arrangement", "baseline", "toe_in", "size", "focal", "dist", "port",
+               "dome_radius", "dome_thickness", "dome_offset", "n_water", "n_glass", "port_distance",
                "glass_thickness", "layer", "port_tilt")
 
 

@@ -431,9 +431,9 @@ def write_dataset(scene, out_dir, spp: int | None = None, defines: dict | None =
                   variant: str | None = None, exr: bool = False, progress: bool = True,
                   seed: int | None = None, sensor=None, adaptive: bool = True,
                   design: dict | None = None) -> dict:
-    """Render ``scene`` (a path or :class:`SceneSpec`) and write a dataset to ``out_dir`` (a
-    scene of N > 2 cameras: :func:`synth.products.views_dataset.write_views_dataset`, a folder
-    per camera; ``sensor`` and ``design`` are refused for it).
+    """Render ``scene`` (a path or :class:`SceneSpec`) of two cameras and write a dataset to
+    ``out_dir`` (a scene of N > 2 cameras is refused:
+    :func:`synth.products.views_dataset.write_views_dataset` writes it, a folder per camera).
 
     ``design`` (``{"error": {name: truth − design}, "port": {name: design value}}``,
     :mod:`synth.scene.design`): the scene is the truth; the dataset also states the design port a
@@ -460,16 +460,10 @@ def write_dataset(scene, out_dir, spp: int | None = None, defines: dict | None =
     t = time.perf_counter()
     spec = scene if isinstance(scene, SceneSpec) else load_scene(scene, defines)
     times["load_scene"] = time.perf_counter() - t
-    if spec.extra_cameras:  # every camera, a folder each — never the first two alone
-        from synth.products.views_dataset import write_views_dataset
-
-        for given_, what in ((sensor, "a sensor model (it exposes a stereo pair)"),
-                             (design, "a design port")):
-            if given_ is not None:
-                raise SceneError(f"{spec.path}: a scene of {len(spec.all_cameras)} cameras "
-                                 f"is written without {what}")
-        return write_views_dataset(spec, out_dir, spp=spp, variant=variant, exr=exr,
-                                   progress=progress, seed=seed, adaptive=adaptive)
+    if spec.extra_cameras:  # never the first two alone
+        raise SceneError(f"{spec.path}: a scene of {len(spec.all_cameras)} cameras is written "
+                         f"a folder per camera (synth.products.views_dataset."
+                         f"write_views_dataset), not as a stereo pair")
     left_cam = spec.rig.left
     if not (np.allclose(left_cam.R, np.eye(3), atol=1e-12) and np.allclose(left_cam.t, 0)):
         raise SceneError(f"{spec.path}: the left sensor must sit at the reference origin with "

@@ -80,6 +80,26 @@ def row_cameras(count: int, size=PAPER_IMAGE_SIZE, focal_px=PAPER_FOCAL_PX, dist
                  for k in range(count))
 
 
+def ring_cameras(count: int, size=PAPER_IMAGE_SIZE, focal_px=PAPER_FOCAL_PX, dist=None,
+                 radius_mm: float = PAPER_BASELINE_MM, toe_in_deg: float = PAPER_TOE_IN_DEG):
+    """``count`` ≥ 3 cameras as a ring round a centre camera: camera 0 at the origin, unturned
+    (the reference), looking along +z; cameras 1 … count − 1 evenly on the circle of
+    ``radius_mm`` about its optical axis in the plane z = 0, camera k at angle
+    ``2π (k − 1) / (count − 1)`` from +x towards +y, each turned ``toe_in_deg`` towards the
+    centre's axis (about the circle's tangent), so that all look in at the targets ahead."""
+    if count < 3:
+        raise ValueError(f"a ring holds a centre camera and at least two round it, got {count}")
+    K = paper_intrinsics(size, focal_px)
+    cameras = [Camera(K, size, dist=dist)]
+    for k in range(1, count):
+        angle = 2.0 * np.pi * (k - 1) / (count - 1)
+        tangent = np.array([-np.sin(angle), np.cos(angle), 0.0])
+        R = Rotation.from_rotvec(-np.deg2rad(toe_in_deg) * tangent).as_matrix()
+        cameras.append(Camera(K, size, dist=dist, R=R,
+                              t=(radius_mm * np.cos(angle), radius_mm * np.sin(angle), 0.0)))
+    return tuple(cameras)
+
+
 def paper_rig(in_air: bool = False, size=PAPER_IMAGE_SIZE, focal_px=None, dist=None,
               n_water: float = PAPER_INDICES[2]) -> StereoRig:
     """The full stereo rig behind the paper's port (``in_air=True``: the all-air copy)."""

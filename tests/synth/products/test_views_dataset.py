@@ -246,3 +246,29 @@ def test_sensor_is_refused_for_three_cameras(scene, tmp_path, capsys):
                  "--no-progress"]) == 2
     assert "--sensor does not apply" in _one_error(capsys)
     assert not out.exists()
+
+
+@pytest.mark.slow
+def test_eval_score_takes_points_of_a_dataset_of_three_cameras(dataset, tmp_path, capsys):
+    """``eval score DIR --points`` of a dataset of three cameras: the truth moved by a known
+    offset scores that offset (RMS dP = |offset|, every visible target associated); --pixels
+    (pairs of two views) is refused in one line."""
+    from eval.cli import main as eval_main
+
+    data = read_views_dataset(dataset)
+    offset = np.array([0.03, -0.04, 0.12])  # |offset| = 0.13 mm
+    ply = tmp_path / "mine.ply"
+    lines = ["ply", "format ascii 1.0", f"element vertex {len(data.targets)}",
+             "property double x", "property double y", "property double z", "end_header"]
+    lines += [" ".join(f"{v:.9f}" for v in p) for p in data.targets + offset]
+    ply.write_text("\n".join(lines) + "\n")
+    out = tmp_path / "score"
+    assert eval_main(["score", str(dataset), "--points", str(ply), "--out", str(out),
+                      "--no-progress"]) == 0
+    report = json.loads((out / "report.json").read_text())
+    assert report["association"]["visible_in_both_scored"] == report["association"]["visible_in_both"]
+    assert report["methods"]["theirs"]["rms_dp_mm"] == pytest.approx(0.13, abs=1e-6)
+    assert "two or more views" in capsys.readouterr().out
+    assert eval_main(["score", str(dataset), "--pixels", str(ply), "--out",
+                      str(tmp_path / "x"), "--no-progress"]) == 2
+    assert "dataset of N cameras" in _one_error(capsys)

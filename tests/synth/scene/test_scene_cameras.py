@@ -32,6 +32,35 @@ def test_cameras_option_writes_a_row_behind_one_port(tmp_path, capsys):
     assert capsys.readouterr().err.count("error:") == 2
 
 
+def test_a_ring_round_a_centre_camera(tmp_path, capsys):
+    """``--arrangement ring``: cam0 at the origin looking along +z, the others evenly on the
+    circle of radius --baseline round its axis, each turned --toe-in degrees towards that axis
+    (about the circle's tangent); read back from the scene file."""
+    from synth.__main__ import main
+
+    out = tmp_path / "ring.xml"
+    assert main(["scene", "--cameras", "5", "--arrangement", "ring", "--baseline", "150",
+                 "--toe-in", "6", "--size", "320", "268", "--out", str(out)]) == 0
+    spec = load_scene(out)
+    cameras = spec.all_cameras
+    np.testing.assert_allclose(cameras[0].R, np.eye(3), atol=1e-12)
+    np.testing.assert_allclose(cameras[0].t, 0, atol=1e-12)
+    for k, camera in enumerate(cameras[1:]):
+        angle = 2 * np.pi * k / 4
+        np.testing.assert_allclose(camera.t, [150 * np.cos(angle), 150 * np.sin(angle), 0],
+                                   atol=1e-9)
+        inward = -camera.t / np.linalg.norm(camera.t)
+        axis = camera.R[:, 2]
+        assert np.degrees(np.arccos(axis[2])) == pytest.approx(6.0, abs=1e-7)
+        horizontal = axis[:2] / np.linalg.norm(axis[:2])
+        np.testing.assert_allclose(horizontal, inward[:2], atol=1e-9)  # towards the axis
+        assert np.linalg.det(camera.R) == pytest.approx(1.0)
+    assert spec.multirig.view_port(3) == spec.rig.port
+    assert main(["scene", "--cameras", "2", "--arrangement", "ring",
+                 "--out", str(tmp_path / "x.xml")]) == 2
+    assert "--arrangement ring needs --cameras 3" in capsys.readouterr().err
+
+
 @pytest.mark.slow
 def test_every_camera_is_rendered(tmp_path):
     """Tiny render of 3 cameras: the brightest blob of each view is where the forward model
