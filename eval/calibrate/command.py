@@ -217,15 +217,19 @@ def design_pair(args, rig):
     return StereoRig(rig.left, rig.right, pair)
 
 
-def pair_glass(args):
-    """The glass and water both ports of two housings share (a :func:`design_port`); the
-    options that give one port's distance are refused (the distances are per camera)."""
-    refuse_given(args, ("start_distance",), "to two housings: give each port's distance with "
-                                            "--port-distance LEFT,RIGHT")
+def pair_glass(args, cameras: int = 2):
+    """The glass and water every port of a housing per camera shares (a :func:`design_port`);
+    the options that give one port's distance are refused (the distances are per camera; two
+    housings, or ``cameras`` > 2)."""
+    what = "two housings" if cameras == 2 else f"a port per camera ({cameras} cameras)"
+    each = ("LEFT,RIGHT" if cameras == 2
+            else ",".join(f"D{k}" for k in range(cameras)))
+    refuse_given(args, ("start_distance",), f"to {what}: give each port's distance with "
+                                            f"--port-distance {each}")
     if any(item.partition("=")[0].strip() == "distance"
            for item in (args.design_port or "").split(",")):
-        raise CLIError("--design-port distance= does not apply to two housings: give each "
-                       "port's distance with --port-distance LEFT,RIGHT")
+        raise CLIError(f"--design-port distance= does not apply to {what}: give each "
+                       f"port's distance with --port-distance {each}")
     return design_port(args, (0.0, 0.0, 1.0))
 
 
@@ -374,7 +378,8 @@ def main(args) -> int:
             refuse_given(args, HOUSING_OPTIONS, f"to in-air boards ({args.dir}): they calibrate "
                                                 f"the cameras, no housing")
         source = boards_source(boards)
-        design = None if boards.air else _n_camera_design(args, source.own_ports)
+        design = None if boards.air else _n_camera_design(args, source.own_ports,
+                                                            len(source.names))
         return calibrate_cameras_main(args, output, log, start, source, design)
     truth = boards.calib["rig"]
     if not boards.air and truth.port.kind not in HOUSINGS:  # a kind without a housing problem
@@ -513,13 +518,13 @@ def is_photo_folder(path) -> bool:
     return all(os.path.isdir(os.path.join(path, sub)) for sub in ("left", "right"))
 
 
-def _n_camera_design(args, own_ports: bool = False):
+def _n_camera_design(args, own_ports: bool = False, cameras: int = 3):
     """The starting glass of N cameras under water: one shared port (:func:`design_port`), or
     — ``--port-distance`` given, or boards whose truth has a port per camera (``own_ports``) —
     the glass and water each camera's own port has (:func:`pair_glass`: the shared distance
     options refused)."""
     if own_ports or given(args, "port_distance"):
-        return pair_glass(args)
+        return pair_glass(args, cameras)
     return design_port(args, (0.0, 0.0, 1.0))
 
 
@@ -543,7 +548,7 @@ def _calibrate_camera_photos(args, output, log, start, cameras) -> int:
                        f"(photos taken underwater, with the in-air calibration of these cameras)")
     _require_board(args, where)
     board = board_from_args(args)
-    design = None if args.air else _n_camera_design(args)
+    design = None if args.air else _n_camera_design(args, cameras=len(cameras))
     if design is not None and given(args, "port_distance"):
         lengths_for(args.port_distance, len(cameras))  # refused before any photo is read
     note = None

@@ -63,12 +63,16 @@ def test_bad_input_is_one_line(chain, tmp_path, capsys):
          "--free"),
         (["calibrate", str(chain / "b_water"), "--intrinsics", str(chain / "c_air" / "calib.yaml"),
           "--port-distance", "90,110", "--out", str(tmp_path / "c")], "2 values for 4 cameras"),
+        (["calibrate", str(chain / "b_water"), "--intrinsics", str(chain / "c_air" / "calib.yaml"),
+          "--port-distance", "90", "--start-distance", "90", "--out", str(tmp_path / "d")],
+         "a port per camera (4 cameras): give each port's distance with --port-distance "
+         "D0,D1,D2,D3"),
     ]
     for argv, fragment in cases:
         assert eval_main([*argv, "--no-progress"]) == 2
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and err[0].startswith("error:") and fragment in err[0], err
-    assert not any((tmp_path / n).exists() for n in "abc")
+    assert not any((tmp_path / n).exists() for n in "abcd")
 
 
 def _photo_folder(boards, out):
