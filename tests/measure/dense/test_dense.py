@@ -196,6 +196,38 @@ def test_slanted_windows_follow_a_tilted_plane(small_rig, texture, front_pair, f
     assert np.sqrt(np.mean(flat ** 2)) <= 1.02 * np.sqrt(np.mean(flat_fronto ** 2))
 
 
+def test_windows_across_a_silhouette_are_rejected(small_rig, texture, monkeypatch):
+    """A cylinder of radius 300 mm (near side at 900 mm) against a black background: the
+    windows of background pixels near its silhouette hold only the cylinder's texture, on one
+    side, and match its edge. Whether a left ray meets the cylinder is analytic. Measured
+    (2026-12-06): with no limit on the texture offset, 1,054 of 21,671 matches are off the
+    cylinder, 470 of them 4–6 px outside its image (distance transform); with
+    :data:`MAX_TEXTURE_OFFSET` (a quarter of the 11-px window), 559 of 21,056, none farther out
+    than 3 px, 120 matches on the cylinder lost (0.6 %), the on-cylinder point RMS 0.745 →
+    0.734 mm. Asserted: none beyond 3 px with the limit, over 200 without; on-cylinder matches
+    lose at most 2 %."""
+    from scipy import ndimage
+    import measure.dense.match as dense_match
+    surface = CylinderSurface.create((0.0, 0.0, 1200.0), 300.0)
+    left, right = render_pair(small_rig, surface, texture)
+    width, height = SIZE
+    us, vs = np.meshgrid(np.arange(width, dtype=float), np.arange(height, dtype=float))
+    hit = np.isfinite(surface_points(small_rig.left, small_rig.port, surface, np.stack(
+        [us.ravel(), vs.ravel()], axis=1))).all(axis=1).reshape(height, width)
+    outside_px = ndimage.distance_transform_edt(~hit)
+
+    def off_and_on(matches):
+        cols, rows = matches.uv_left.astype(int).T
+        return outside_px[rows, cols], hit[rows, cols].sum()
+
+    limited, on_limited = off_and_on(match_dense(small_rig, left, right, (850.0, 1250.0)))
+    monkeypatch.setattr(dense_match, "MAX_TEXTURE_OFFSET", np.inf)
+    unlimited, on_unlimited = off_and_on(match_dense(small_rig, left, right, (850.0, 1250.0)))
+    assert limited.max() <= 3
+    assert (unlimited > 3).sum() > 200
+    assert on_limited >= 0.98 * on_unlimited
+
+
 @pytest.mark.parametrize("change, message", [
     (dict(right=np.zeros((268, 321))), "right is 321x268 px but the camera is 320x268"),
     (dict(left=np.zeros((268, 320, 3))), "left must be a 2D"),
