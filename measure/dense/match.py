@@ -20,11 +20,12 @@ sub-pixel refinement.
    fronto-parallel window's error on slanted and curved surfaces (its depth was the window's
    texture-weighted mean depth). A pixel whose step is at most
    :data:`REFINE_TOLERANCE_PX` keeps its depth, so only the pixels that moved are projected
-   again; the window sums are recomputed everywhere each step.
+   again and only the windows near them are summed again (:func:`_dirty_blocks`).
 
-The heavy per-pixel work runs in row bands on a thread pool (NumPy and OpenCV release the GIL);
-a band's window filters also read the halo rows half a window beyond it, so the bands give the
-whole image's result (up to the rounding of the filters' running sums).
+The heavy per-pixel work runs in row bands (the sweep) or blocks (the refinement) on a thread
+pool (NumPy and OpenCV release the GIL); a band's or block's window filters also read the halo
+half a window beyond it, so they give the whole image's result (up to the rounding of the
+filters' running sums).
 
 The result per pixel is the refined depth parameter d (the depth map, mm along the rig's
 :attr:`~measure.StereoRig.depth_axis` — the port normal, or the left optical axis for domes —
@@ -226,12 +227,16 @@ def _row_bands(height: int, halo: int, workers: int):
             for r0, r1 in zip(edges[:-1], edges[1:]) if r1 > r0]
 
 
+def _chunks(items: np.ndarray, workers: int, chunk: int) -> list[np.ndarray]:
+    """``items`` split into at most ``4 · workers`` pieces of at least ``chunk`` items."""
+    return np.array_split(items, max(1, min(4 * workers, len(items) // chunk)))
+
+
 def _in_chunks(function, items: np.ndarray, workers: int, chunk: int = 100_000):
     """``function(items)`` (a tuple of arrays, each with a row per item) evaluated on chunks of
     at least ``chunk`` items on ``workers`` threads and concatenated."""
-    count = max(1, min(4 * workers, len(items) // chunk))
     with ThreadPoolExecutor(max_workers=workers) as pool:
-        parts = list(pool.map(function, np.array_split(items, count)))
+        parts = list(pool.map(function, _chunks(items, workers, chunk)))
     return tuple(np.concatenate(column) for column in zip(*parts))
 
 
@@ -282,7 +287,7 @@ def _tiled_blocks(shape, halo: int, block_shape=SUM_BLOCK_SHAPE) -> list[_Block]
 
 #: Side (px) of the tiles in which the refinement recomputes only the window sums near the
 #: pixels that moved; when more than :data:`SUM_TILE_FULL_SHARE` of the tiles hold such pixels
-#: it recomputes the whole image in row bands.
+#: it recomputes the whole image (:func:`_tiled_blocks`).
 SUM_TILE_PX = 64
 SUM_TILE_FULL_SHARE = 0.5
 
@@ -866,7 +871,7 @@ def _refine(warp: PlaneWarp, left, right, start, candidate, window, depth_range,
 
     A pixel whose step falls to :data:`REFINE_TOLERANCE_PX` or below keeps its depth (its step
     is not applied), so its projection and samples stay valid; only pixels whose depth moved
-    are projected and sampled again, while every window's sums are recomputed from all samples
+    are projected and sampled again, and only the windows that hold such a pixel are summed again
     (a kept pixel moves again if its neighbours' moves push its step above the tolerance).
 
     Returns the refined depth ``(H, W)``, the ZNCC at it, the right pixels ``(H, W, 2)`` and
@@ -951,8 +956,7 @@ def _refine(warp: PlaneWarp, left, right, start, candidate, window, depth_range,
         """:func:`project` the pixels ``mask`` (bool ``(H, W)``) in chunks on the pool."""
         chosen = position[np.flatnonzero(mask)]
         if chosen.size:
-            chunks = np.array_split(chosen, max(1, min(4 * workers, chosen.size // 50_000)))
-            list(pool.map(project, chunks))
+            list(pool.map(project, _chunks(chosen, workers, 50_000)))
 
     def follow(slopes):
         """Followers take their leader's depth (on its slanted window's plane, if any)."""
@@ -961,8 +965,7 @@ def _refine(warp: PlaneWarp, left, right, start, candidate, window, depth_range,
             depth[followers] += slopes[0][leaders] * follower_du \
                 + slopes[1][leaders] * follower_dv
 
-    moved = np.ones((height, width), bool)  # pixels whose depth changed: project them again
-    moved &= active
+    moved = active.copy()  # pixels whose depth changed: project them again
     score = np.full((height, width), np.nan)
     step = np.zeros((height, width))  # the last Gauss–Newton step of every pixel (mm)
     last_change = np.zeros((height, width))
