@@ -7,8 +7,10 @@ is given the detection nearest to where the previous frame's pose, moved on by t
 frame-to-frame translation (constant velocity), puts it (the forward model through the port;
 an optimal assignment, :func:`scipy.optimize.linear_sum_assignment`, within ``--gate`` px);
 the pose comes from both views jointly (:func:`measure.stereo.pose.estimate_pose`, with its
-covariance); each camera's pose alone, through its own port on the same pixels, is scored
-beside it. The track locks on from the first frame's detections with no guess
+covariance), the detections corrected for the markers' eccentricity at that pose and the pose
+estimated again, its covariance then holding the shared radial error the correction leaves
+(:func:`radial_bias_covariance`) beside the pixel noise; each camera's pose alone, through its
+own port on the same pixels, is scored beside it. The track locks on from the first frame's detections with no guess
 (:func:`measure.stereo.lockon.lock_on`: the detections matched across the views, triangulated and
 registered to the object's shape; a frame where that fails is ``NOT_LOCKED`` and the next one
 tries again); an object symmetric under turns (the docking frame under quarter turns) takes
@@ -160,6 +162,56 @@ def eccentricity_offsets(rig, obj, pose, radius_mm):
     return np.stack([outline_centroid_offsets(camera, rig.view_port(v), centres, normal,
                                               radius_mm)
                      for v, camera in enumerate(rig.cameras)])
+
+
+#: What the eccentricity correction leaves: the corrected centroids of a frame's markers share a
+#: radial error (about each view's principal point) that the residuals cannot see. Measured on
+#: the full-size approach (``synth sequence scenes/paper_plane.xml --approach 5000,500 --frames
+#: 50``, 24 detections a frame against the simulator's pixels): per frame the mean radial
+#: residual varies beyond its noise by σ² = (κ r)² + β₀² (maximum likelihood over the 50
+#: frames), ``r`` the disk image's radius (px, of the equal area): κ = 5.6e-5 (inwards,
+#: 0.0028 px at 0.5 m: the 50 px disks) and β₀ = 6.8e-4 px (at every range). One N(0, σ²) scale of the constellation's
+#: image goes into the pose's covariance (:func:`measure.stereo.pose.shared_offset_covariance`).
+RESIDUAL_RADIAL_FRACTION = 5.6e-5
+#: β₀ above (px).
+RESIDUAL_RADIAL_FLOOR_PX = 6.8e-4
+
+
+def radial_bias_covariance(views, obj, pixels, pose, radius_mm,
+                           fraction: float = RESIDUAL_RADIAL_FRACTION,
+                           floor_px: float = RESIDUAL_RADIAL_FLOOR_PX):
+    """``(6, 6)`` (rad, mm): the pose's covariance from the corrected centroids' shared radial
+    error (σ = ``hypot(fraction · r, floor_px)`` px for a marker image of radius ``r`` px,
+    along the direction from its view's principal point; :data:`RESIDUAL_RADIAL_FRACTION`).
+    ``views``: the rig or one ``View``; ``pixels`` ``(V, M, 2)``."""
+    from measure.geometry.projection import project
+    from measure.images.eccentricity import disk_basis
+    from measure.stereo.pose import as_views, shared_offset_covariance
+
+    views = as_views(views)
+    pixels = np.asarray(pixels, dtype=np.float64).reshape(len(views), -1, 2)
+    centres = obj @ pose.R.T + pose.t
+    u, w = disk_basis(np.broadcast_to(pose.R @ MARKER_NORMAL, centres.shape))
+    offsets = np.full(pixels.shape, np.nan)
+    for v, view in enumerate(views):
+        _, d_points = project(view.camera, view.port, centres, jacobian=True)  # (M, 2, 3)
+        disk = d_points @ np.stack([u, w], axis=2)  # d pixel / d (disk coordinates), (M, 2, 2)
+        image_radius = radius_mm * np.sqrt(np.abs(np.linalg.det(disk)))  # of the equal area
+        outward = pixels[v] - view.camera.K[:2, 2]
+        outward /= np.linalg.norm(outward, axis=1, keepdims=True)
+        offsets[v] = np.hypot(fraction * image_radius, floor_px)[:, None] * outward
+    return shared_offset_covariance(views, obj, pixels, pose, offsets)
+
+
+def with_radial_bias(views, obj, pixels, pose, radius_mm):
+    """``pose`` with :func:`radial_bias_covariance` added to its covariance (unchanged where
+    it has none)."""
+    from dataclasses import replace
+
+    if not pose.valid:
+        return pose
+    extra = radial_bias_covariance(views, obj, pixels, pose, radius_mm)
+    return replace(pose, covariance=pose.covariance + np.nan_to_num(extra))
 
 
 VIEW_NAMES = ("left", "right")
@@ -377,10 +429,14 @@ def main(args) -> int:
             pixels = pixels - np.nan_to_num(eccentricity_offsets(rig, obj, pose, radius))
             corrected = estimate_pose(rig, obj, pixels, args.pixel_sigma)
             pose = corrected if corrected.valid else pose
+            pose = with_radial_bias(rig, obj, pixels, pose, radius)
         seconds["pose"] += time.perf_counter() - t0
         t0 = time.perf_counter()  # each camera alone, through its port, on the same pixels
         alone = [estimate_pose(View(camera, rig.view_port(v)), obj, pixels[v],
                                args.pixel_sigma) for v, camera in enumerate(rig.cameras)]
+        if args.eccentricity:
+            alone = [with_radial_bias(View(camera, rig.view_port(v)), obj, pixels[v], p, radius)
+                     for v, (camera, p) in enumerate(zip(rig.cameras, alone))]
         seconds["pose_per_camera"] += time.perf_counter() - t0
         estimates.append(pose)
         miss = (pixels - true_pixels[k]).reshape(-1, 2)

@@ -18,7 +18,8 @@ from measure import FlatPort, Reason
 from measure.calibration.selfcal import tilt_basis
 from measure.geometry.projection import project
 from measure.stereo.multiview import View
-from measure.stereo.pose import estimate_pose, estimate_poses, pinhole_pose, rotation_error
+from measure.stereo.pose import (estimate_pose, estimate_poses, pinhole_pose, rotation_error,
+                                 shared_offset_covariance)
 from measure.stereo.rig_covariance import RigCovariance
 from measure.stereo.uncertainty import CHI2_3_95, mahalanobis_squared, perturbed_rig
 from synth.scene.layouts import docking_frame
@@ -93,6 +94,32 @@ def test_rig_jointly_with_different_subsets():
         alone[v] = three[v]
         assert estimate_pose(rig, obj, alone).reason == Reason.TOO_FEW_POINTS
     _assert_exact(estimate_pose(rig, obj, three), R, t)
+
+
+@pytest.mark.parametrize("joint", [True, False], ids=["rig", "left alone"])
+def test_shared_offset_covariance_is_the_pose_that_the_offset_moves(joint):
+    """One error shared by every observation (all pixels moved by ε · a pattern): the pose
+    re-estimated from the moved exact pixels moves by ε · g, and the covariance is g gᵀ —
+    against finite differences of the estimator itself (ε = 1e-3 px, first order to ~1e-3)."""
+    rig = paper_rig()
+    obj = docking_frame()
+    rng = np.random.default_rng(11)
+    R, t = _pose(rng, 1200.0)
+    views = [View(c, rig.view_port(v)) for v, c in enumerate(rig.cameras)]
+    uv = _pixels(views, obj, R, t)
+    pattern = rng.normal(0.0, 1.0, uv.shape)
+    target = rig if joint else views[0]
+    uv, pattern = (uv, pattern) if joint else (uv[:1], pattern[:1])
+    base = estimate_pose(target, obj, uv if joint else uv[0])
+    _assert_exact(base, R, t)
+    eps = 1e-3
+    moved = estimate_pose(target, obj, (uv + eps * pattern) if joint else (uv + eps * pattern)[0])
+    phi = Rotation.from_matrix(moved.R @ base.R.T).as_rotvec()
+    g = np.concatenate([phi, moved.t - base.t]) / eps
+    covariance = shared_offset_covariance(target, obj, uv, base, pattern)
+    np.testing.assert_allclose(covariance, np.outer(g, g), rtol=0,
+                               atol=2e-3 * np.outer(np.abs(g), np.abs(g)).max())
+    assert np.all(np.linalg.eigvalsh(covariance)[:5] < 1e-9 * np.trace(covariance))  # rank one
 
 
 def test_dome_and_tank():
