@@ -4,18 +4,18 @@ true ones.
 
 Per frame: the markers are detected in both views (:func:`measure.detect_targets`); each marker
 is given the detection nearest to where the previous frame's pose, moved on by the last
-frame-to-frame translation (constant velocity), puts it (the forward model through the port;
-an optimal assignment, :func:`scipy.optimize.linear_sum_assignment`, within ``--gate`` px);
-the pose comes from both views jointly (:func:`measure.stereo.pose.estimate_pose`, with its
+frame-to-frame translation (constant velocity), puts it (the forward model through the port; an
+optimal assignment, :func:`scipy.optimize.linear_sum_assignment`, within ``--gate`` px); the
+pose comes from both views jointly (:func:`measure.stereo.pose.estimate_pose`, with its
 covariance), the detections corrected for the markers' eccentricity at that pose and the pose
 estimated again, its covariance then holding the shared radial error the correction leaves
 (:func:`radial_bias_covariance`) beside the pixel noise; each camera's pose alone, through its
-own port on the same pixels, is scored beside it. The track locks on from the first frame's detections with no guess
-(:func:`measure.stereo.lockon.lock_on`: the detections matched across the views, triangulated and
-registered to the object's shape; a frame where that fails is ``NOT_LOCKED`` and the next one
-tries again); an object symmetric under turns (the docking frame under quarter turns) takes
-the turn nearest upright. ``--lock-on truth`` starts at the first frame's true pose instead. A
-frame without a pose keeps the last pose for the next prediction.
+own port on the same pixels, is scored beside it. The track locks on from the first frame's
+detections with no guess (:func:`measure.stereo.lockon.lock_on`: the detections matched across
+the views, triangulated and registered to the object's shape; a frame where that fails is
+``NOT_LOCKED`` and the next one tries again); an object symmetric under turns (the docking frame
+under quarter turns) takes the turn nearest upright. ``--lock-on truth`` starts at the first
+frame's true pose instead. A frame without a pose keeps the last pose for the next prediction.
 
 Writes to ``--out``: ``poses.csv`` (the estimated poses, the columns of the sequence's
 ``poses.csv`` plus ``sigma_t_mm`` = sqrt(trace) of the position covariance, ``rms_px``,
@@ -170,8 +170,9 @@ def eccentricity_offsets(rig, obj, pose, radius_mm):
 #: 50``, 24 detections a frame against the simulator's pixels): per frame the mean radial
 #: residual varies beyond its noise by σ² = (κ r)² + β₀² (maximum likelihood over the 50
 #: frames), ``r`` the disk image's radius (px, of the equal area): κ = 5.6e-5 (inwards,
-#: 0.0028 px at 0.5 m: the 50 px disks) and β₀ = 6.8e-4 px (at every range). One N(0, σ²) scale of the constellation's
-#: image goes into the pose's covariance (:func:`measure.stereo.pose.shared_offset_covariance`).
+#: 0.0028 px at 0.5 m: the 50 px disks) and β₀ = 6.8e-4 px (at every range). One N(0, σ²)
+#: scale of the constellation's image goes into the pose's covariance
+#: (:func:`measure.stereo.pose.shared_offset_covariance`).
 RESIDUAL_RADIAL_FRACTION = 5.6e-5
 #: β₀ above (px).
 RESIDUAL_RADIAL_FLOOR_PX = 6.8e-4
