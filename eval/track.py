@@ -199,20 +199,22 @@ def radial_bias_covariance(views, obj, pixels, pose, radius_mm,
         disk = d_points @ np.stack([u, w], axis=2)  # d pixel / d (disk coordinates), (M, 2, 2)
         image_radius = radius_mm * np.sqrt(np.abs(np.linalg.det(disk)))  # of the equal area
         outward = pixels[v] - view.camera.K[:2, 2]
-        outward /= np.linalg.norm(outward, axis=1, keepdims=True)
+        length = np.linalg.norm(outward, axis=1, keepdims=True)
+        outward = np.divide(outward, length, out=np.zeros_like(outward), where=length > 0)
         offsets[v] = np.hypot(fraction * image_radius, floor_px)[:, None] * outward
     return shared_offset_covariance(views, obj, pixels, pose, offsets)
 
 
 def with_radial_bias(views, obj, pixels, pose, radius_mm):
-    """``pose`` with :func:`radial_bias_covariance` added to its covariance (unchanged where
-    it has none)."""
+    """``pose`` with :func:`radial_bias_covariance` added to its covariance and to its pixel
+    part (an error of the pixels: ``covariance = pixel + rig`` still holds); unchanged where it
+    has none."""
     from dataclasses import replace
 
     if not pose.valid:
         return pose
-    extra = radial_bias_covariance(views, obj, pixels, pose, radius_mm)
-    return replace(pose, covariance=pose.covariance + np.nan_to_num(extra))
+    extra = np.nan_to_num(radial_bias_covariance(views, obj, pixels, pose, radius_mm))
+    return replace(pose, covariance=pose.covariance + extra, pixel=pose.pixel + extra)
 
 
 VIEW_NAMES = ("left", "right")
@@ -426,16 +428,18 @@ def main(args) -> int:
                          if absorbed is not None else None)
         t0 = time.perf_counter()
         pose = estimate_pose(rig, obj, pixels, args.pixel_sigma)
+        corrected_pixels = False  # whether the pixels hold the eccentricity correction
         if args.eccentricity and pose.valid:
             pixels = pixels - np.nan_to_num(eccentricity_offsets(rig, obj, pose, radius))
+            corrected_pixels = True
             corrected = estimate_pose(rig, obj, pixels, args.pixel_sigma)
-            pose = corrected if corrected.valid else pose
-            pose = with_radial_bias(rig, obj, pixels, pose, radius)
+            if corrected.valid:  # the term is what the correction leaves
+                pose = with_radial_bias(rig, obj, pixels, corrected, radius)
         seconds["pose"] += time.perf_counter() - t0
         t0 = time.perf_counter()  # each camera alone, through its port, on the same pixels
         alone = [estimate_pose(View(camera, rig.view_port(v)), obj, pixels[v],
                                args.pixel_sigma) for v, camera in enumerate(rig.cameras)]
-        if args.eccentricity:
+        if corrected_pixels:
             alone = [with_radial_bias(View(camera, rig.view_port(v)), obj, pixels[v], p, radius)
                      for v, (camera, p) in enumerate(zip(rig.cameras, alone))]
         seconds["pose_per_camera"] += time.perf_counter() - t0
@@ -508,8 +512,9 @@ def main(args) -> int:
                             "each_camera": 2 * len(rows) / seconds["pose_per_camera"]
                             if seconds["pose_per_camera"] else None,
                             "note": "after detection; rig: both views jointly, with the "
-                                    "eccentricity correction's second solve; each camera: "
-                                    "one view, one solve"}})
+                                    "eccentricity correction's second solve and the shared "
+                                    "radial term; each camera: one view, one solve and the "
+                                    "term"}})
     report = {"dataset": args.dataset, "sequence": {k: manifest.get(k) for k in (
         "approach_mm", "yaw_deg", "trajectory", "frames", "fps", "object", "image_size")},
         "pixel_sigma_px": args.pixel_sigma, "gate_px": args.gate,

@@ -547,11 +547,6 @@ def rotation_error(R_a, R_b) -> np.ndarray:
     return np.arctan2(0.5 * np.linalg.norm(skew, axis=-1), cos)
 
 
-__all__ = ["CANDIDATE_COST_RATIO", "DEGENERATE_CONDITION", "MAX_RMS_PX", "TOLERANCE", "Pose",
-           "Poses", "as_views", "estimate_pose", "estimate_poses", "exp_so3", "left_jacobian",
-           "pinhole_pose", "rotation_error", "skew"]
-
-
 def shared_offset_covariance(views, object_points, pixels, pose: Pose, offsets,
                              pixel_sigma=None) -> np.ndarray:
     """``(6, 6)`` of ``(φ, t)`` (rad, mm; as :attr:`Pose.covariance`): the pose's covariance
@@ -561,25 +556,33 @@ def shared_offset_covariance(views, object_points, pixels, pose: Pose, offsets,
     weights ``1/σ²`` of ``pixel_sigma`` as :func:`estimate_pose` takes it, unit for None).
     Such an error (a scale of the constellation's image, say) leaves the residuals as they are,
     so the residuals' σ never holds it. ``views``, ``object_points`` and ``pixels`` ``(V, M, 2)``
-    as for :func:`estimate_pose` (NaN rows: not seen); ``offsets`` ``(V, M, 2)`` px, the
-    pattern of one σ. NaN where ``pose`` is not valid."""
+    as for :func:`estimate_pose` (NaN rows and NaN σ: not seen); ``offsets`` ``(V, M, 2)`` px,
+    the pattern of one σ (NaN rows: left out). The observations are those given: one without a
+    water ray, which :func:`estimate_pose` drops, should be NaN here too. NaN where ``pose``
+    is not valid or fewer than six pixel coordinates remain."""
     views = as_views(views)
     object_points = np.asarray(object_points, dtype=np.float64)
     pixels = np.asarray(pixels, dtype=np.float64).reshape(len(views), -1, 2)
     offsets = np.asarray(offsets, dtype=np.float64).reshape(pixels.shape)
     if not pose.valid:
         return np.full((6, 6), np.nan)
-    seen = np.where(np.all(np.isfinite(offsets), axis=2)[..., None], pixels, np.nan)
     weights, _ = _weights(pixel_sigma, len(views), object_points.shape[0], 1)
-    problem = _Problem(views, object_points, seen, weights[0])
+    used = np.isfinite(weights[0]) & np.all(np.isfinite(offsets), axis=2)  # as estimate_pose
+    problem = _Problem(views, object_points, np.where(used[..., None], pixels, np.nan),
+                       weights[0])
     _, d_points, X = problem.project(pose.R, pose.t)
     Xr = X[problem.object_rows] - pose.t  # R X_obj; φ applied on the left of R
     J = np.concatenate([d_points @ -skew(Xr), d_points], axis=2).reshape(-1, 6)
     shift = np.concatenate([offsets[v][rows] for v, rows in enumerate(problem.rows)]).ravel()
     w = np.repeat(problem.weights, 2)
-    ok = np.all(np.isfinite(J), axis=1) & np.isfinite(shift)
+    ok = np.all(np.isfinite(J), axis=1) & np.isfinite(shift) & np.isfinite(w)
     if ok.sum() < 6:
         return np.full((6, 6), np.nan)
     Jw = J[ok] * w[ok, None]
     g = np.linalg.solve(J[ok].T @ Jw, Jw.T @ shift[ok])
     return np.outer(g, g)
+
+
+__all__ = ["CANDIDATE_COST_RATIO", "DEGENERATE_CONDITION", "MAX_RMS_PX", "TOLERANCE", "Pose",
+           "Poses", "as_views", "estimate_pose", "estimate_poses", "exp_so3", "left_jacobian",
+           "pinhole_pose", "rotation_error", "shared_offset_covariance", "skew"]
