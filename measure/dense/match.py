@@ -930,8 +930,7 @@ def _refine(warp: PlaneWarp, left, right, start, candidate, window, depth_range,
     rate_v = np.zeros((height, width))
     # flat views of the per-pixel images, indexed by the active pixels' flat indices
     at_active = rows * width + cols
-    flat = {name: image.reshape(height * width, -1).squeeze(-1) if image.ndim == 2
-            else image.reshape(height * width, 2)
+    flat = {name: image.reshape(height * width, *image.shape[2:])
             for name, image in (("depth", depth), ("uv", uv_right), ("map_u", map_u),
                                 ("map_v", map_v), ("g", g), ("h", h), ("rate_u", rate_u),
                                 ("rate_v", rate_v))}

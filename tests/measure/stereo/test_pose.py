@@ -56,6 +56,17 @@ def _assert_exact(pose, R, t):
     assert pose.rms_px < 1e-8
 
 
+def _rig_and_frame(seed, z):
+    """The paper's rig, the docking frame at a random pose at depth ``z`` (``_pose``) and its
+    pixels in both views: ``(rig, obj, rng, R, t, views, uv)``; ``rng`` goes on drawing."""
+    rig = paper_rig()
+    obj = docking_frame()
+    rng = np.random.default_rng(seed)
+    R, t = _pose(rng, z)
+    views = [View(c, rig.view_port(v)) for v, c in enumerate(rig.cameras)]
+    return rig, obj, rng, R, t, views, _pixels(views, obj, R, t)
+
+
 @pytest.mark.parametrize("post", [100.0, 0.0], ids=["posts", "planar"])
 def test_one_camera_exact_from_no_guess(post):
     """0.5–5 m from the left camera behind the paper's port, only the markers inside the image
@@ -75,12 +86,7 @@ def test_one_camera_exact_from_no_guess(post):
 def test_rig_jointly_with_different_subsets():
     """Both cameras, each seeing a different subset; and three markers per camera, where no
     camera alone has a pose (TOO_FEW_POINTS) but the two together do."""
-    rig = paper_rig()
-    obj = docking_frame()
-    rng = np.random.default_rng(5)
-    R, t = _pose(rng, 1500.0)
-    views = [View(c, rig.view_port(v)) for v, c in enumerate(rig.cameras)]
-    uv = _pixels(views, obj, R, t)
+    rig, obj, _, R, t, _, uv = _rig_and_frame(5, 1500.0)
     assert np.all(np.isfinite(uv))  # the whole frame in both images at 1.5 m
     subsets = uv.copy()
     subsets[0, :4] = np.nan
@@ -104,12 +110,7 @@ def test_shared_offset_covariance_is_the_pose_that_the_offset_moves(case):
     components on its own scale (the rotation's are ~1e-3 of the translation's). The third
     case weights the pixels by their own σ (0.05–0.5 px) and leaves out rows: NaN offsets and
     a NaN σ (not seen, as estimate_pose takes it)."""
-    rig = paper_rig()
-    obj = docking_frame()
-    rng = np.random.default_rng(11)
-    R, t = _pose(rng, 1200.0)
-    views = [View(c, rig.view_port(v)) for v, c in enumerate(rig.cameras)]
-    uv = _pixels(views, obj, R, t)
+    rig, obj, rng, R, t, views, uv = _rig_and_frame(11, 1200.0)
     pattern = rng.normal(0.0, 1.0, uv.shape)
     sigma = None
     target = views[0] if case == "left alone" else rig
