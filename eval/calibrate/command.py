@@ -548,6 +548,11 @@ def _calibrate_camera_photos(args, output, log, start, cameras) -> int:
                        f"(photos taken underwater, with the in-air calibration of these cameras)")
     _require_board(args, where)
     board = board_from_args(args)
+    if board.symmetric:
+        raise CLIError(f"{where}: a {board.squares[0]}x{board.squares[1]} chessboard looks the "
+                       f"same turned by 180°; a rig of N cameras does not settle its turn yet "
+                       f"(one camera and a pair do): use a board with one odd and one even "
+                       f"number of squares")
     design = None if args.air else _n_camera_design(args, cameras=len(cameras))
     if design is not None and given(args, "port_distance"):
         lengths_for(args.port_distance, len(cameras))  # refused before any photo is read
@@ -630,7 +635,8 @@ def _calibrate_photos(args, output, log, free, start) -> int:
 
     def fit(calibrate):  # a CalibrationError (too few poses) names the photo folder
         try:
-            return trust.fit_without_outliers(calibrate, lambda r: r.rms_px_per, detections)
+            return trust.fit_without_outliers(calibrate, lambda r: r.rms_px_per, detections,
+                                              lambda r: r.residuals, board)
         except CalibrationError as exc:
             raise CLIError(f"{where}: {exc}") from None
 

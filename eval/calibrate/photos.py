@@ -9,8 +9,10 @@ nothing but images, so every number reported here comes from the photos themselv
   fit when one of its views' RMS in the first fit exceeds :func:`outlier_threshold` =
   max(3 × median, median + 5 × 1.4826 × MAD, median + 0.1 px) of all views' RMS (MAD the
   median absolute deviation; 1.4826 × MAD is σ for Gaussian scatter; the 0.1 px floor keeps a
-  set of nearly equal, very small residuals from shedding poses). The fit is then run once more
-  without them, and the report says so;
+  set of nearly equal, very small residuals from shedding poses); once no pose is, single
+  corners whose residual exceeds 5 robust σ (:func:`outlier_corners`). The fit is run again
+  after each round until nothing more drops out (:func:`fit_without_outliers`), and the report
+  names every pose and corner left out;
 * the σ and correlations of every estimate (in air OpenCV's ``calibrateCameraExtended``
   standard deviations; the stereo pose has none from OpenCV, so the per-pose scatter of the
   baseline over √n is given; underwater the housing's σ and correlation matrix);
@@ -62,10 +64,17 @@ LENS_RULE = (f"auto tries {', '.join(LENS_MODEL_ORDER)} in turn and keeps a rich
              f"when it lowers the RMS by {100 * LENS_MODEL_GAIN:g} % or more")
 #: Corners listed in the report by their residual.
 WORST_CORNERS = 10
-OUTLIER_RULE = (f"a pose is left out when one of its views' RMS in the first fit exceeds "
+#: Single corners (:func:`outlier_corners`): left out beyond this many robust σ, at least
+#: this many px; the rounds of :func:`fit_without_outliers` at most.
+CORNER_SIGMAS, CORNER_FLOOR_PX, MAX_OUTLIER_ROUNDS = 8.0, 0.1, 6
+#: A corner's neighbours for :func:`outlier_corners`: within this many squares on the board.
+NEIGHBOUR_SQUARES = 1.5
+OUTLIER_RULE = (f"a pose is left out when one of its views' RMS exceeds "
                 f"max({OUTLIER_FACTOR:g} × median, median + {OUTLIER_MADS:g} × 1.4826 × MAD, "
-                f"median + {OUTLIER_FLOOR_PX:g} px) of all views' RMS; the fit is then run again "
-                f"without it")
+                f"median + {OUTLIER_FLOOR_PX:g} px) of all views' RMS, and once no pose is, a "
+                f"single corner whose residual exceeds max({CORNER_SIGMAS:g} robust σ of its photo, "
+                f"{CORNER_FLOOR_PX:g} px), its residual taken less the median of its board "
+                f"neighbours'; the fit is run again after each, until nothing more drops out")
 
 
 def outlier_threshold(rms_values) -> float:
@@ -97,25 +106,140 @@ def without(detections, poses):
     return Detections(ids, pixels)
 
 
-def fit_without_outliers(fit, rms_of, detections):
-    """``(result, detections used, outliers)``: ``fit(detections)``, then, when
-    :func:`outlier_poses` of ``rms_of(result)`` names poses, ``fit`` again without them.
-    ``outliers`` holds the threshold, the poses left out and the first fit's per-view RMS."""
-    first = fit(detections)
-    per = rms_of(first)
-    threshold, bad = outlier_poses(per)
-    info = {"threshold_px": threshold, "left_out": bad,
-            "first_fit_rms_px": {f"{k}:{VIEWS[v]}": r for (k, v), r in sorted(per.items())}}
-    if not bad:
-        return first, detections, info
-    kept = without(detections, bad)
+def outlier_corners(residuals: dict, board=None) -> tuple[float, list]:
+    """``(largest threshold, [(pose, view, id, residual px), …])`` of a fit's ``residuals``
+    ``{view: (pose, id, du, dv) rows}``: the corners whose residual, less the median residual
+    of its board neighbours in the same photo (within :data:`NEIGHBOUR_SQUARES` squares, with
+    ``board``; a lens model that misfits the image's edges moves neighbours alike, a corner the
+    detector put on another feature moves alone), is longer than max(:data:`CORNER_SIGMAS` ×
+    σ, :data:`CORNER_FLOOR_PX`), σ the robust per-axis scatter of those in its photo (1.4826 ×
+    the median of |du|, |dv|; photos differ: blur, light). Real corners' errors have heavier
+    tails than a Gaussian's: at 5 σ, 8–22 ordinary corners (0.35–0.7 px) of each real set in
+    docs/calibration.md went; at 8 σ none of them, while a corner on another feature is off
+    by a pixel or more."""
+    rows = [np.column_stack([np.full(len(r), view), np.asarray(r, np.float64)])
+            for view, r in residuals.items() if len(r)]
+    if not rows:
+        return 0.0, []
+    rows = np.vstack(rows)
+    local = rows[:, 3:5] - _neighbour_medians(rows, board) if board is not None else rows[:, 3:5]
+    photo = np.unique(rows[:, :2], axis=0, return_inverse=True)[1].ravel()
+    sigma = 1.4826 * np.array([np.median(np.abs(local[photo == p]))
+                               for p in range(photo.max() + 1)])
+    threshold = np.maximum(CORNER_SIGMAS * sigma, CORNER_FLOOR_PX)[photo]
+    length = np.hypot(local[:, 0], local[:, 1])
+    bad = np.flatnonzero(length > threshold)
+    worst = bad[np.argsort(-length[bad])]
+    return (float(threshold[bad].max()) if bad.size else 0.0,
+            [(int(rows[i, 1]), int(rows[i, 0]), int(rows[i, 2]), float(length[i]))
+             for i in worst])
+
+
+def _neighbour_medians(rows, board) -> np.ndarray:
+    """``(N, 2)`` per residual row ``(view, pose, id, du, dv)`` the median residual of the
+    other corners of its photo within :data:`NEIGHBOUR_SQUARES` squares on the board (zero
+    where it has none)."""
+    from scipy.spatial import cKDTree
+
+    xy = board.corners()[:, :2]
+    out = np.zeros((len(rows), 2))
+    for key in np.unique(rows[:, :2], axis=0):       # one photo (view, pose) at a time
+        members = np.flatnonzero(np.all(rows[:, :2] == key, axis=1))
+        points = xy[rows[members, 2].astype(int)]
+        tree = cKDTree(points)
+        for i, near in zip(members, tree.query_ball_point(points,
+                                                          NEIGHBOUR_SQUARES * board.square_mm)):
+            others = [members[n] for n in near if members[n] != i]
+            if others:
+                out[i] = np.median(rows[others, 3:5], axis=0)
+    return out
+
+
+def without_corners(detections, corners):
+    """``detections`` without the single ``corners`` ``[(pose, view, id, …)]``; a view left
+    with fewer than :data:`measure.calibration.board.MIN_CORNERS` corners loses them all."""
+    from measure.calibration.air import Detections
+    from measure.calibration.board import MIN_CORNERS
+
+    drop = {}
+    for pose, view, i, *_ in corners:
+        drop.setdefault((pose, view), set()).add(i)
+    ids = [list(v) for v in detections.ids]
+    pixels = [list(v) for v in detections.pixels]
+    for (pose, view), gone in drop.items():
+        keep = ~np.isin(ids[pose][view], sorted(gone))
+        if np.count_nonzero(keep) < MIN_CORNERS:
+            keep[:] = False
+        ids[pose][view] = ids[pose][view][keep]
+        pixels[pose][view] = pixels[pose][view][keep]
+    return Detections(ids, pixels)
+
+
+def fit_without_outliers(fit, rms_of, detections, residuals_of=None, board=None):
+    """``(result, detections used, outliers)``: ``fit(detections)`` repeated until nothing
+    more drops out (at most :data:`MAX_OUTLIER_ROUNDS` refits): each round leaves out the
+    poses :func:`outlier_poses` of ``rms_of(result)`` names, or — when none — the single
+    corners :func:`outlier_corners` of ``residuals_of(result)`` names (``{view: (pose, id,
+    du, dv) rows}``, each against its neighbours on ``board``; not done without it).
+    ``outliers`` holds the first round's threshold, every pose left out, the first fit's
+    per-view RMS, each round (its threshold, the poses and their RMS, or the corners) and the
+    corners left out."""
     from measure.calibration.air import CalibrationError
 
-    try:
-        return fit(kept), kept, info
-    except CalibrationError as exc:
-        raise CalibrationError(f"{exc} (after leaving out {len(bad)} outlier pose(s) whose "
-                               f"RMS exceeded {threshold:.3g} px)") from None
+    result = fit(detections)
+    per = rms_of(result)
+    threshold, _ = outlier_poses(per)
+    info = {"threshold_px": threshold, "left_out": [],
+            "first_fit_rms_px": {f"{k}:{VIEWS[v]}": r for (k, v), r in sorted(per.items())},
+            "rounds": [], "corners_left_out": []}
+    used = detections
+    for _ in range(MAX_OUTLIER_ROUNDS):
+        limit, bad = outlier_poses(rms_of(result))
+        if bad:
+            rms = rms_of(result)
+            info["rounds"].append({"threshold_px": limit, "poses": bad, "rms_px": {
+                f"{k}:{VIEWS[v]}": r for (k, v), r in sorted(rms.items()) if k in bad}})
+            info["left_out"] = sorted(set(info["left_out"]) | set(bad))
+            used = without(used, bad)
+        else:
+            corners = outlier_corners(residuals_of(result), board) if residuals_of else (0, [])
+            if not corners[1]:
+                break
+            info["rounds"].append({"threshold_px": corners[0], "corners": len(corners[1])})
+            info["corners_left_out"] += [{"pose": k, "view": VIEWS[v], "id": i,
+                                          "residual_px": r} for k, v, i, r in corners[1]]
+            used = without_corners(used, corners[1])
+        try:
+            result = fit(used)
+        except CalibrationError as exc:
+            raise CalibrationError(f"{exc} (after leaving out {len(info['left_out'])} outlier "
+                                   f"pose(s) and {len(info['corners_left_out'])} corner(s))"
+                                   ) from None
+    return result, used, info
+
+
+def corners_warning(outliers: dict) -> str | None:
+    """The warning that names how many single corners were left out, or None."""
+    corners = outliers.get("corners_left_out", [])
+    if not corners:
+        return None
+    smallest = min(c["residual_px"] for c in corners)
+    return (f"{len(corners)} single corner(s) left out of the final fit (each off its "
+            f"neighbours by over {CORNER_SIGMAS:g} σ of its photo, {smallest:.3g} px or more; "
+            f"the report's outliers list them)")
+
+
+def outlier_status(outliers: dict, pose: int) -> str:
+    """The report's status of a pose left out as an outlier: its worst view's RMS in the fit
+    that left it out, and that round's threshold."""
+    for rounds in outliers.get("rounds", []):
+        if pose in rounds.get("poses", ()):
+            worst = max(r for key, r in rounds["rms_px"].items() if key.startswith(f"{pose}:"))
+            return (f"left out: outlier (fit RMS {worst:.3f} px > {rounds['threshold_px']:.3f} "
+                    f"px)")
+    first = [r for key, r in outliers["first_fit_rms_px"].items() if key.startswith(f"{pose}:")]
+    return (f"left out: outlier (first fit RMS {max(first):.3f} px > "
+            f"{outliers['threshold_px']:.3f} px)")
 
 
 def coverage(detections, size, cells: int = COVERAGE_CELLS) -> dict:
@@ -290,6 +414,9 @@ def warnings_for(report: dict) -> list[str]:
     if report["left_out"]:
         out.append(f"{len(report['left_out'])} outlier pose(s) left out of the final fit: "
                    f"{', '.join(report['left_out'])} (see the outlier rule)")
+    corners = corners_warning(report["outliers"])
+    if corners:
+        out.append(corners)
     housing = report.get("housing")
     if housing and len(housing["labels"]) > 1:
         c = np.abs(np.triu(np.asarray(housing["correlation"]), 1))
@@ -433,10 +560,7 @@ def per_pose_table(names, detections_all, detections_used, rms_per, outliers, ge
         if not any(corners.values()):
             status = "board not found"
         elif k in outliers["left_out"]:
-            first = {v: outliers["first_fit_rms_px"].get(f"{k}:{v}") for v in VIEWS}
-            worst = max(r for r in first.values() if r is not None)
-            status = (f"left out: outlier (first fit RMS {worst:.3f} px > "
-                      f"{outliers['threshold_px']:.3f} px)")
+            status = outlier_status(outliers, k)
         else:
             status = "used"
         rms = {v: rms_per.get((k, i)) if status == "used" else None
@@ -452,19 +576,31 @@ def per_pose_table(names, detections_all, detections_used, rms_per, outliers, ge
 
 
 def _small_left(images) -> list:
-    """The left images of ``images`` as the detector sees them (uint8, halved to at most
-    :data:`measure.calibration.board.DETECTION_WIDTH_PX` wide)."""
+    """The left images of ``images`` (linear) halved to at most
+    :data:`measure.calibration.board.DETECTION_WIDTH_PX` wide: enough to tell which board they
+    show."""
     import cv2
 
-    from measure.calibration.board import DETECTION_WIDTH_PX, to_uint8
+    from measure.calibration.board import DETECTION_WIDTH_PX
 
     smalls = []
     for left, _ in images:
-        small = to_uint8(left)
+        small = np.asarray(left, np.float32)
         while small.shape[1] > DETECTION_WIDTH_PX:
             small = cv2.pyrDown(small)
         smalls.append(small)
     return smalls
+
+
+def _whole_board_in(squares, image) -> bool:
+    """Whether a chessboard of ``squares`` is in ``image`` with every corner checked
+    (:meth:`measure.calibration.board.Board.detect`: the grid refined and validated; OpenCV's
+    ``findChessboardCornersSB`` alone also returns grids one row larger than the board, onto its
+    edge)."""
+    from measure.calibration.board import Board
+
+    ids, _ = Board("chessboard", squares).detect(image)
+    return len(ids) == (squares[0] - 1) * (squares[1] - 1)
 
 
 def larger_board(board, images, found_left) -> str:
@@ -477,7 +613,6 @@ def larger_board(board, images, found_left) -> str:
     never found, either way round)."""
     import functools
 
-    import cv2
 
     if board.kind != "chessboard" or not found_left:
         return ""
@@ -485,7 +620,7 @@ def larger_board(board, images, found_left) -> str:
 
     @functools.cache
     def seen(c, r):
-        return any(cv2.findChessboardCornersSB(s, (c - 1, r - 1))[0] for s in smalls)
+        return any(_whole_board_in((c, r), s) for s in smalls)
 
     cols, rows = board.squares
     if not any(seen(c, r) for c, r in ((cols + 1, rows), (cols, rows + 1), (cols + 1, rows + 1))):
@@ -494,11 +629,9 @@ def larger_board(board, images, found_left) -> str:
                      for r in range(rows, rows + LARGER_SEARCH + 1) if (c, r) != (cols, rows)),
                     key=lambda cr: (-cr[0] * cr[1], (cr[0] >= cr[1]) != (cols >= rows)))
     c, r = next(cr for cr in bigger if seen(*cr))
-    note = ("" if (c + r) % 2 else "; a board with an even number of squares both ways looks "
-            "the same turned by 180° and cannot be used")
     return (f"the photos show a chessboard of at least {c}x{r} squares, not {cols}x{rows} (OpenCV "
             f"also finds a part of a board, a different part in each photo): give the whole "
-            f"board, e.g. --squares {c}x{r}{note}")
+            f"board, e.g. --squares {c}x{r}")
 
 
 def board_hint(board, images) -> str:
@@ -507,7 +640,6 @@ def board_hint(board, images) -> str:
     none is). OpenCV also finds a smaller pattern inside a larger board (a 10x6 inside an 11x8),
     so every candidate is tried and the largest one found is named (then the one found in more
     photos): a pattern larger than the board is never found."""
-    import cv2
 
     if board.kind != "chessboard":
         return (" (check --squares, --marker-mm and --dictionary: no ChArUco corners of this "
@@ -519,16 +651,13 @@ def board_hint(board, images) -> str:
                                       (cols - 1, rows + 1))
                   if c >= 3 and r >= 3]
     smalls = _small_left(images[:HINT_PHOTOS])
-    found = {(c, r): sum(bool(cv2.findChessboardCornersSB(s, (c - 1, r - 1))[0])
-                         for s in smalls) for c, r in candidates}
+    found = {(c, r): sum(_whole_board_in((c, r), s) for s in smalls) for c, r in candidates}
     seen = [cr for cr in candidates if found[cr]]
     if seen:
         c, r = max(seen, key=lambda cr: (cr[0] * cr[1], found[cr]))
-        note = ("" if (c + r) % 2 else "; a board with an even number of squares both ways "
-                "looks the same turned by 180° and cannot be used")
         return (f"; the photos show a {c}x{r} chessboard, not {cols}x{rows} (found in "
                 f"{found[(c, r)]} of the first {len(smalls)} left photos with --squares "
-                f"{c}x{r}{note})")
+                f"{c}x{r})")
     return (f" (no chessboard of {cols}x{rows} squares, nor one square more or fewer, in the "
             f"first {len(smalls)} left photos: check --board and --squares)")
 
@@ -728,7 +857,8 @@ def coverage_figure(directory, detections_all, used, size, report, views=VIEWS) 
 
 
 __all__ = ["COVERAGE_CELLS", "HIGH_CORRELATION", "MIN_COVERAGE", "MIN_TILT_DEG", "OUTLIER_RULE",
-           "RECOMMENDED_POSES", "air_estimates", "board_hint", "coverage", "coverage_figure",
-           "fit_without_outliers", "housing_estimates", "larger_board", "markdown", "outlier_poses",
-           "outlier_threshold", "per_pose_table", "pose_geometry", "stats_range", "stereo_scatter",
-           "summary_lines", "underwater_hint", "warnings_for", "without"]
+           "RECOMMENDED_POSES", "air_estimates", "board_hint", "corners_warning", "coverage",
+           "coverage_figure", "fit_without_outliers", "housing_estimates", "larger_board",
+           "markdown", "outlier_corners", "outlier_poses", "outlier_status", "outlier_threshold",
+           "per_pose_table", "pose_geometry", "stats_range", "stereo_scatter", "summary_lines",
+           "underwater_hint", "warnings_for", "without", "without_corners"]

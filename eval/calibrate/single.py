@@ -13,7 +13,8 @@ Writes to ``--out``: ``camera.yaml`` (OpenCV ``FileStorage``, the names of OpenC
 sample: ``image_width``, ``image_height``, ``camera_matrix``, ``distortion_coefficients``, with
 ``lens_model``, ``distortion_model`` (``brown_conrady`` or ``fisheye``: OpenCV's fisheye model,
 k1…k4), ``rms_px``, the σ and — standard lens model — the ``covariance`` of the 8
-intrinsics, :func:`camera_covariance`, which the camera's housing calibration starts from:
+intrinsics, :func:`camera_covariance`, and their photo-to-photo ``covariance_photos``
+(:func:`photo_spread`), which the camera's housing calibration starts from:
 :mod:`eval.calibrate.single_housing`), ``calibmar.yaml`` (calibmar's one-camera file, no port;
 model OPENCV, FULL_OPENCV or OPENCV_FISHEYE), ``cameras.txt`` (one COLMAP camera),
 ``report.json``, ``report.md``, ``coverage.png`` and ``residuals.png``. A calibration the run
@@ -129,13 +130,14 @@ def calibrate_single(args, output, log, start, board) -> tuple[dict, str]:
     log("calibrate the camera (OpenCV calibrateCamera) …")
     try:
         result, used_detections, outliers = trust.fit_without_outliers(
-            fit, lambda r: r["rms_px_per"], detections)
+            fit, lambda r: r["rms_px_per"], detections, lambda r: {VIEW: r["residuals"]},
+            board)
     except CalibrationError as exc:
         raise CLIError(f"{where}: {exc}") from None
     timings["calibrate"] = time.perf_counter() - t
     camera, sigmas = _camera(result, size)
     t = time.perf_counter()
-    spread = photo_spread(used_detections, result, corners, size)
+    spread, spread_covariance = photo_spread(used_detections, result, corners, size)
     timings["leave_one_out"] = time.perf_counter() - t
     report = _report(args, board, names, size, detections, used_detections, result, outliers,
                      camera, sigmas, result["problem"])
@@ -146,7 +148,8 @@ def calibrate_single(args, output, log, start, board) -> tuple[dict, str]:
     with output.staged() as tmp:
         write_camera_files(tmp, camera, report["lens_model"]["model"], report["rms_px"],
                            {k: v["sigma"] for k, v in report["camera"].items()
-                            if v["sigma"] is not None}, result["covariance"])
+                            if v["sigma"] is not None}, result["covariance"],
+                           extra_covariances={"covariance_photos": spread_covariance})
         report_lib.residual_figure(tmp, used_detections, {VIEW: result["residuals"]}, size,
                                    views=("camera",))
         trust.coverage_figure(tmp, detections, set(result["poses"]), size,
@@ -155,29 +158,43 @@ def calibrate_single(args, output, log, start, board) -> tuple[dict, str]:
     return report, summary_lines(report)
 
 
-def photo_spread(detections, result, corners, size) -> dict:
-    """``{fx, fy, cx, cy: σ}`` (px) from the photos themselves: the jackknife over the photos
-    used, ``sqrt((n − 1)/n Σ (θ_i − θ̄)²)`` of the fits with photo i left out (the same lens
-    model). OpenCV's σ takes every corner's error as independent; on real photos a photo's
-    corners share its errors (motion, a board not quite flat, a rolling shutter), and which
-    photos are kept moves the intrinsics by more (docs/calibration.md: fx ± 0.19 % by OpenCV,
-    0.8 % by the photos, on the GoPro frames). Empty for fewer than 4 photos."""
+def photo_spread(detections, result, corners, size):
+    """``({fx, fy, cx, cy: σ}, covariance)`` from the photos themselves: the jackknife over
+    the photos used, ``(n − 1)/n Σ (θ_i − θ̄)(θ_i − θ̄)ᵀ`` of the fits with photo i left out
+    (the same lens model), σ in px. OpenCV's σ takes every corner's error as independent; on
+    real photos a photo's corners share its errors (motion, a board not quite flat, a rolling
+    shutter), and which photos are kept moves the intrinsics by more (docs/calibration.md: fx ±
+    0.19 % by OpenCV, 0.8 % by the photos, on the GoPro frames). ``covariance``: of the 8
+    intrinsics fx fy cx cy k1 k2 p1 p2 named as :func:`camera_covariance`'s (standard lens
+    model; else None), what a housing calibration can take as the in-air calibration's
+    spread. Empty and None for fewer than 4 photos."""
     from measure.calibration.air import calibrate_camera
+    from measure.calibration.covariance import AIR_INTRINSICS
+    from measure.stereo.rig_covariance import CovarianceError, RigCovariance
 
     poses = result["poses"]
     if len(poses) < 4:
-        return {}
+        return {}, None
     values = []
     for drop in poses:
         kept = [k for k in poses if k != drop]
         obj = [corners[detections.ids[k][VIEW]] for k in kept]
         img = [detections.pixels[k][VIEW].astype(np.float32) for k in kept]
-        K = calibrate_camera(obj, img, size, result["model"])[0][1]
-        values.append((K[0, 0], K[1, 1], K[0, 2], K[1, 2]))
+        out = calibrate_camera(obj, img, size, result["model"])[0]
+        K, dist = out[1], np.ravel(out[2])
+        values.append([K[0, 0], K[1, 1], K[0, 2], K[1, 2], *dist[:4]])
     values = np.asarray(values)
     n = len(values)
-    sigma = np.sqrt((n - 1) / n * np.sum((values - values.mean(axis=0)) ** 2, axis=0))
-    return {key: float(v) for key, v in zip(("fx", "fy", "cx", "cy"), sigma)}
+    centred = values - values.mean(axis=0)
+    covariance = (n - 1) / n * centred.T @ centred
+    sigma = np.sqrt(np.diag(covariance))
+    named = None
+    if result["model"] == "standard":
+        try:
+            named = RigCovariance([f"left.{p}" for p in AIR_INTRINSICS], covariance)
+        except CovarianceError:
+            named = None
+    return {key: float(v) for key, v in zip(("fx", "fy", "cx", "cy"), sigma)}, named
 
 
 def _camera(result, size):
@@ -223,6 +240,8 @@ def _report(args, board, names, size, detections, used, result, outliers, camera
     if outliers["left_out"]:
         warnings.append(f"{len(outliers['left_out'])} outlier photo(s) left out of the final "
                         f"fit: {', '.join(names[k] for k in outliers['left_out'])}")
+    if trust.corners_warning(outliers):
+        warnings.append(trust.corners_warning(outliers))
     return {"photos": os.path.abspath(args.dir), "source": "photos", "air": True,
             "cameras": 1, "board": board.to_dict(), "image_size": list(size),
             "poses": len(names), "found": len(detections.found(VIEW)), "used": len(used_poses),
@@ -255,11 +274,13 @@ def camera_covariance(obj, out):
 
 
 def write_camera_files(directory, camera, lens_model, rms_px, sigmas: dict, covariance=None,
-                       port=None, extra=None, other_formats: bool = True) -> None:
+                       port=None, extra=None, other_formats: bool = True,
+                       extra_covariances=None) -> None:
     """``camera.yaml``, ``calibmar.yaml`` and ``cameras.txt`` of one camera (module docs):
     ``lens_model`` (or None), the fit's ``rms_px``, ``sigmas`` ``{intrinsic: σ}``.
     ``covariance``: a ``covariance`` node (``names``, ``matrix``, ``normal_axes`` where it has
-    them) in ``camera.yaml``. ``port``:
+    them) in ``camera.yaml``; ``extra_covariances`` ``{node: covariance}`` more of them (the
+    photo-to-photo ``covariance_photos``). ``port``:
     the camera's housing (a rig port whose view 0 is the camera's), written as calib.yaml's
     ``port`` or a ``dome`` node in ``camera.yaml`` (mm, the camera's frame) and as FLATPORT or
     DOMEPORT in the other two; ``extra``: further maps (:func:`synth.products.dataset.
@@ -292,16 +313,9 @@ def write_camera_files(directory, camera, lens_model, rms_px, sigmas: dict, cova
                 fs.write(key, float(value))
             fs.endWriteStruct()
         fs.write("units", "px (OpenCV pixels: the centre of the top-left pixel is 0, 0)")
-        if covariance is not None:
-            fs.startWriteStruct("covariance", cv2.FileNode_MAP)
-            fs.startWriteStruct("names", cv2.FileNode_SEQ)
-            for name in covariance.names:
-                fs.write("", name)
-            fs.endWriteStruct()
-            fs.write("matrix", covariance.matrix)
-            if covariance.normal_axes is not None:
-                fs.write("normal_axes", covariance.normal_axes)
-            fs.endWriteStruct()
+        for node, value in {"covariance": covariance, **(extra_covariances or {})}.items():
+            if value is not None:
+                _write_covariance(fs, node, value)
         if port is not None:
             fs.write("port_units", "mm (the camera's frame)")
             write_view_port(fs, port.view(0))
@@ -311,6 +325,22 @@ def write_camera_files(directory, camera, lens_model, rms_px, sigmas: dict, cova
         fs.release()
     if other_formats:
         write_single_camera(directory, camera, port)
+
+
+def _write_covariance(fs, node: str, covariance) -> None:
+    """A :class:`RigCovariance` as a FileStorage map ``node`` (``names``, ``matrix``,
+    ``normal_axes`` where it has them)."""
+    import cv2
+
+    fs.startWriteStruct(node, cv2.FileNode_MAP)
+    fs.startWriteStruct("names", cv2.FileNode_SEQ)
+    for name in covariance.names:
+        fs.write("", name)
+    fs.endWriteStruct()
+    fs.write("matrix", covariance.matrix)
+    if covariance.normal_axes is not None:
+        fs.write("normal_axes", covariance.normal_axes)
+    fs.endWriteStruct()
 
 
 def photo_rows(names, detections, outliers, rms_px_per, posed=None) -> list:
@@ -323,9 +353,7 @@ def photo_rows(names, detections, outliers, rms_px_per, posed=None) -> list:
         if not n:
             status = "board not found"
         elif k in outliers["left_out"]:
-            status = (f"left out: outlier (first fit RMS "
-                      f"{outliers['first_fit_rms_px'][f'{k}:left']:.3f} px > "
-                      f"{outliers['threshold_px']:.3f} px)")
+            status = trust.outlier_status(outliers, k)
         elif posed is not None and k not in posed:
             status = "left out: no starting pose (solvePnP)"
         else:

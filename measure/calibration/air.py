@@ -314,6 +314,8 @@ def calibrate_in_air(board: Board, detections: Detections, size,
             left_poses = {k: (rv, tv) for k, rv, tv in zip(poses, out[3], out[4])}
         own[view] = {k: extrinsics[(k, view)] for k in poses}
         used[name] = len(poses)
+    if board.symmetric:  # the right camera's numbering of each pose settled by the rig
+        detections = _settle_turns(board, detections, own, extrinsics)
     both = [k for k in detections.found(0) if k in set(detections.found(1))]
     stereo_poses, left_out = {}, ()
     if len(both) >= MIN_POSES:
@@ -375,6 +377,20 @@ def calibrate_in_air(board: Board, detections: Detections, size,
     return AirCalibration(StereoRig(left, right, port), rms, sigmas, stereo_rms, used, per,
                           board_poses, covariance, models, stereo_poses, left_out, stereo_per,
                           residuals)
+
+
+def _settle_turns(board, detections, own, extrinsics):
+    """A symmetric board's right view renumbered where the rig says it is turned
+    (:func:`measure.calibration.symmetry.settle_in_air`): ``own[1]`` and ``extrinsics`` follow
+    (in place; the residual rows keep the numbers the photos were detected with); returns the
+    renumbered detections."""
+    from .symmetry import relabelled, settle_in_air, turned_pose
+
+    symmetries = board.symmetries()
+    turns = {k: s for k, s in settle_in_air(board, own[0], own[1]).items() if s}
+    for k, s in turns.items():
+        own[1][k] = extrinsics[(k, 1)] = turned_pose(*own[1][k], symmetries[s])
+    return relabelled(detections, 1, turns, board)
 
 
 #: The fewest corners every pose must share for OpenCV's fisheye stereo fit.

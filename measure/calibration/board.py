@@ -10,12 +10,15 @@ Two kinds (``kind``):
 
 * ``"chessboard"``: ``cols × rows`` squares, the top-left one black; the inner corners are
   numbered row by row, ``id = i·(cols − 1) + j`` at ``((j + 1)·s, (i + 1)·s, 0)``. Detected with
-  ``cv2.findChessboardCornersSB``; its 180° ambiguity (one of ``cols``, ``rows`` must be odd,
-  the other even) is resolved by the colours of all the squares the corners enclose
+  OpenCV's classic detector or ``cv2.findChessboardCornersSB`` (:func:`grid_candidates`), the
+  corners refined to their point of symmetry and every grid checked before it is accepted
+  (:mod:`measure.calibration.corners`). The 180° ambiguity of a board with one odd and one
+  even count is resolved by the colours of all the squares the corners enclose
   (:func:`square_parity_contrast`: the top-left square is black; a board printed with its
-  top-left square white is the same board turned by 180°, and is measured in that frame).
-  The corners are then refined to the saddle point of the blurred image
-  (:func:`refine_saddle_points`), which is what makes them accurate.
+  top-left square white is the same board turned by 180°, and is measured in that frame); a
+  board of odd × odd or even × even squares (ROS's 8 × 6 inner corners) looks the same turned
+  by 180° (:attr:`Board.symmetric`, :meth:`Board.symmetries`): one camera's calibration does
+  not care, a rig's settles the turn by its cameras' consistency.
 * ``"charuco"``: OpenCV's ``cv2.aruco.CharucoBoard`` (``dictionary``, default ``DICT_5X5_1000``,
   any of OpenCV's predefined ``DICT_…`` names; markers ``marker_ratio`` of a square); corner
   ids and positions are OpenCV's (``getChessboardCorners``). Detected with
@@ -29,6 +32,8 @@ from dataclasses import asdict, dataclass
 import cv2
 import numpy as np
 
+from .corners import check_grid, corner_spacing, refine_corners
+
 BOARD_KINDS = ("chessboard", "charuco")
 CHARUCO_DICTIONARY = "DICT_5X5_1000"
 #: Texels per square of the printed pattern as renderers use it (ChArUco marker bits stay whole
@@ -38,8 +43,9 @@ PATTERN_TEXELS_PER_SQUARE = 140
 MIN_CORNERS = 6
 #: Chessboards are found on the image halved until it is at most this wide (OpenCV's search
 #: takes ~3 s on a 2448 px image with CALIB_CB_ACCURACY, 0.14 s at 1224 px without it); the
-#: corners are then refined on the full image (:func:`refine_saddle_points`). Where nothing is
-#: found there, the full image is searched as well (small, steep boards).
+#: corners are then refined on the full image (:func:`measure.calibration.corners.
+#: refine_corners`). Where nothing is found there, the full image is searched as well (small,
+#: steep boards).
 DETECTION_WIDTH_PX = 1300
 
 
@@ -75,9 +81,6 @@ class Board:
                              f"{self.squares!r}") from None
         if cols < 3 or rows < 3 or cols > 100 or rows > 100:
             raise BoardError(f"board squares must be 3..100 each, got {cols}x{rows}")
-        if self.kind == "chessboard" and (cols + rows) % 2 == 0:
-            raise BoardError(f"a {cols}x{rows} chessboard looks the same turned by 180°: one of "
-                             f"the two numbers of squares must be odd and the other even")
         if not (np.isfinite(self.square_mm) and self.square_mm > 0):
             raise BoardError(f"square size must be positive, got {self.square_mm!r} mm")
         if not 0.1 <= self.marker_ratio <= 0.9:
@@ -157,7 +160,7 @@ class Board:
         if H is None:
             return None
         fitted = cv2.perspectiveTransform(board_xy.reshape(-1, 1, 2), H).reshape(-1, 2)
-        spacing = float(np.median(saddle_scales(uv)[0]))
+        spacing = float(np.median(corner_spacing(uv)))
         miss = float(np.sqrt(np.mean(np.sum((fitted - uv) ** 2, axis=1))))
         if miss > LAYOUT_TOLERANCE * spacing:
             return (f"the ChArUco corners found do not lie on a {self.squares[0]}x"
@@ -203,48 +206,75 @@ class Board:
             raise BoardError(f"not a board definition ({exc})") from None
 
     # --- detection ----------------------------------------------------------------------------
+    @property
+    def symmetric(self) -> bool:
+        """Whether the board looks the same turned by 180° (a chessboard of odd × odd or
+        even × even squares): one photo cannot tell its corner 0 from its last; see
+        :meth:`symmetries`."""
+        return self.kind == "chessboard" and sum(self.squares) % 2 == 0
+
+    def symmetries(self) -> list:
+        """The renumberings of the corners that a photo cannot tell apart, ``[(ids (n,), R
+        (3, 3), t (3,))]``: corner ``i`` may be the board's ``ids[i]``, which is the board turned
+        by ``X' = R X + t`` (board frame, mm). The identity first; a symmetric chessboard adds
+        the turn by 180° about its centre (a square one, cols = rows, the turns by 90° too)."""
+        n = self.n_corners
+        out = [(np.arange(n), np.eye(3), np.zeros(3))]
+        if not self.symmetric:
+            return out
+        cols, rows = self.squares[0] - 1, self.squares[1] - 1
+        centre = np.array([self.squares[0], self.squares[1], 0.0]) * self.square_mm / 2
+        i, j = np.divmod(np.arange(n), cols)
+        turns = [(180, (rows - 1 - i) * cols + (cols - 1 - j))]
+        if cols == rows:
+            turns += [(90, j * cols + (cols - 1 - i)), (270, (rows - 1 - j) * cols + i)]
+        for degrees, ids in turns:
+            c, s = np.cos(np.radians(degrees)), np.sin(np.radians(degrees))
+            R = np.array([[c, -s, 0], [s, c, 0], [0, 0, 1.0]])
+            out.append((ids, R, centre - R @ centre))
+        return out
+
     def detect(self, image: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Corners of the board in a single-channel image (any dtype, linear): ``(ids (M,),
-        pixels (M, 2))`` in OpenCV pixel coordinates; empty when the board is not found (or
-        fewer than :data:`MIN_CORNERS` corners)."""
-        gray = to_uint8(image)
+        """Corners of the board in a single-channel image (any dtype; linear values — a photo
+        decoded, a render as it is): ``(ids (M,), pixels (M, 2))`` in OpenCV pixel coordinates;
+        empty when the board is not found (or fewer than :data:`MIN_CORNERS` corners).
+
+        Chessboards: the detectors (:func:`grid_candidates`: the classic detector, then
+        ``findChessboardCornersSB``) search the image as a camera stores it
+        (:func:`detector_view`); each grid they return is numbered as the board
+        (:meth:`_oriented`), refined on the linear image
+        (:func:`measure.calibration.corners.refine_corners`) and checked
+        (:func:`measure.calibration.corners.check_grid`): the first grid that is the board is
+        kept, without the corners that fail the checks."""
         if self.kind == "charuco":
-            corners, ids, _, _ = cv2.aruco.CharucoDetector(self._charuco()).detectBoard(gray)
+            corners, ids, _, _ = cv2.aruco.CharucoDetector(self._charuco()).detectBoard(
+                to_uint8(image))
             if ids is None or len(ids) < MIN_CORNERS:
                 return np.empty(0, int), np.empty((0, 2))
             return ids.ravel().astype(int), corners.reshape(-1, 2).astype(np.float64)
-        cols, rows = self.squares
-        pattern = (cols - 1, rows - 1)
-        levels = 0  # find the board on a reduced image: the saddle refinement gives accuracy
-        small = gray
-        while small.shape[1] > DETECTION_WIDTH_PX:
-            small, levels = cv2.pyrDown(small), levels + 1
-        found, corners = _find_chessboard_sb(small, pattern)
-        if not found:  # the classic detector finds some steep views SB misses
-            found, corners = cv2.findChessboardCorners(
-                small, pattern, flags=cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE)
-        if not found:  # photos as stored (sRGB): SB finds real boards there it missed
-            found, corners = _find_chessboard_sb(srgb_uint8(small), pattern)
-        if not found and levels:  # small, steep boards: the full image (about 1 s more)
-            found, corners = _find_chessboard_sb(gray, pattern)
-            levels = 0 if found else levels
-        if not found:
-            return np.empty(0, int), np.empty((0, 2))
-        scale = 2.0 ** levels  # pyrDown: pixel i of the half image is centred on 2i + 0.5
-        uv = corners.reshape(-1, 2).astype(np.float64) * scale + (scale - 1) / 2
-        if not self._squares_agree(gray, uv):
-            uv = uv[::-1].copy()
-        refined, converged = refine_saddle_points(image, uv)
-        ids = np.flatnonzero(converged)
-        if ids.size < MIN_CORNERS:
-            return np.empty(0, int), np.empty((0, 2))
-        return ids, refined[ids]
+        cols, rows = self.squares[0] - 1, self.squares[1] - 1
+        view = detector_view(image)
+        for uv in grid_candidates(view, (cols, rows)):
+            uv = self._oriented(view, uv)
+            refined, converged = refine_corners(image, uv)
+            check = check_grid(image, refined, converged, rows, cols)
+            if check.valid and np.count_nonzero(check.keep) >= MIN_CORNERS:
+                ids = np.flatnonzero(check.keep)
+                return ids, refined[ids]
+        return np.empty(0, int), np.empty((0, 2))
 
-    def _squares_agree(self, gray, uv) -> bool:
-        """Whether the squares between the detected corners ``uv`` (in the detector's order)
-        are dark where the board's squares are black (:meth:`square_parity_contrast` ≥ 0):
-        otherwise the detector's order is the board's turned by 180°."""
-        return square_parity_contrast(gray, uv, self.squares) >= 0
+    def _oriented(self, gray, uv) -> np.ndarray:
+        """A detector's grid ``uv`` numbered as the board: turned by 180° where the squares
+        between its corners are light where the board's are black
+        (:func:`square_parity_contrast`); a symmetric board (:attr:`symmetric`), which no photo
+        can orient, numbered from the corner nearest the image's top-left (the pair's and the
+        rig's calibrations settle the turn between cameras by their consistency)."""
+        if self.symmetric:
+            candidates = [uv[ids] for ids, _, _ in self.symmetries()]
+            return min(candidates, key=lambda c: (float(c[0].sum()), float(c[0][1])))
+        if square_parity_contrast(gray, uv, self.squares) < 0:
+            return uv[::-1].copy()
+        return uv
 
 
 #: The seed of OpenCV's random generator before each ``findChessboardCornersSB`` call: the
@@ -260,12 +290,47 @@ def _find_chessboard_sb(gray, pattern):
     return cv2.findChessboardCornersSB(gray, pattern, flags=cv2.CALIB_CB_EXHAUSTIVE)
 
 
-def srgb_uint8(gray: np.ndarray) -> np.ndarray:
-    """A linear uint8 image (:func:`to_uint8`) encoded with the sRGB curve, as cameras store
-    photos: the contrast OpenCV's chessboard detectors are used to."""
-    levels = np.arange(256) / 255.0
-    table = np.where(levels <= 0.0031308, 12.92 * levels, 1.055 * levels ** (1 / 2.4) - 0.055)
-    return np.rint(255 * table).astype(np.uint8)[gray]
+def _find_chessboard_classic(gray, pattern):
+    """``cv2.findChessboardCorners`` with adaptive thresholds and normalisation."""
+    return cv2.findChessboardCorners(
+        gray, pattern, flags=cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE)
+
+
+def grid_candidates(view: np.ndarray, pattern):
+    """The grids ``(cols·rows, 2)`` OpenCV's chessboard detectors find in ``view`` (uint8, as
+    stored), cheapest first: on the image halved until at most :data:`DETECTION_WIDTH_PX`
+    wide the classic detector, then ``findChessboardCornersSB``; on a halved image also SB on
+    the full one (small, steep boards). Pixels of the full image (a pixel ``i`` of a halved
+    image is centred on ``2i + 0.5``). A generator: the caller stops at the first grid it
+    accepts."""
+    small, levels = view, 0
+    while small.shape[1] > DETECTION_WIDTH_PX:
+        small, levels = cv2.pyrDown(small), levels + 1
+    tries = [(_find_chessboard_classic, small, levels), (_find_chessboard_sb, small, levels)]
+    if levels:
+        tries.append((_find_chessboard_sb, view, 0))
+    for find, image, level in tries:
+        found, corners = find(image, pattern)
+        if found:
+            scale = 2.0 ** level
+            yield corners.reshape(-1, 2).astype(np.float64) * scale + (scale - 1) / 2
+
+
+def detector_view(image: np.ndarray) -> np.ndarray:
+    """The image as a camera stores it, for OpenCV's detectors (uint8): ``image`` itself when
+    it is uint8, else its linear values over their white (the 99.9th percentile) encoded with
+    the sRGB curve before they are rounded — an 8-bit sRGB photo read as linear comes back as
+    its own stored levels; rounding linear values to 8 bits first would crush the darks (sRGB
+    levels 0–55 into 0–9)."""
+    image = np.asarray(image)
+    if image.dtype == np.uint8:
+        return image
+    a = image.astype(np.float64)
+    white = float(np.percentile(a, 99.9)) if a.size else 1.0
+    white = white if white > 0 else (float(a.max()) or 1.0)
+    x = np.clip(a / white, 0.0, 1.0)
+    encoded = np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055)
+    return np.rint(255 * encoded).astype(np.uint8)
 
 
 def square_parity_contrast(gray, uv, squares) -> float:
@@ -293,82 +358,6 @@ def square_parity_contrast(gray, uv, squares) -> float:
     return float(values[~black].mean() - values[black].mean())
 
 
-#: Saddle-point refinement: Gaussian blur σ and half window, as fractions of the distance to the
-#: nearest corner (the local square size in pixels); Newton iterations.
-SADDLE_BLUR, SADDLE_HALF_WINDOW, SADDLE_ITERATIONS = 0.15, 0.3, 8
-#: Last Newton step (px) below which a corner's refinement has converged.
-SADDLE_TOLERANCE_PX = 1e-3
-
-
-def saddle_scales(uv: np.ndarray):
-    """``(spacing (N,), blur σ)`` of :func:`refine_saddle_points` for corners ``uv`` ``(N, 2)``:
-    each corner's distance to its nearest neighbour (px) and the blur, :data:`SADDLE_BLUR` ×
-    their median."""
-    uv = np.asarray(uv, dtype=np.float64).reshape(-1, 2)
-    gaps = np.linalg.norm(uv[:, None] - uv[None], axis=2)
-    np.fill_diagonal(gaps, np.inf)
-    spacing = gaps.min(axis=1)
-    return spacing, SADDLE_BLUR * float(np.median(spacing))
-
-
-def refine_saddle_points(image: np.ndarray, uv: np.ndarray, spacing=None, blur_sigma=None):
-    """Chessboard corners ``(N, 2)`` refined to the saddle point of the blurred image, and
-    whether each converged ``(N,)``.
-
-    An X-junction of two straight edges is point-symmetric about the corner, and so is its image
-    blurred with an isotropic Gaussian: the corner is the saddle point, whatever the angle
-    between the edges (perspective). Each corner's neighbourhood (half window
-    :data:`SADDLE_HALF_WINDOW` × the distance to its nearest corner, Gaussian weights) is fitted
-    with a quadratic by weighted least squares and the corner moved to its stationary point, a
-    few times (vectorized over corners). On rendered tilted boards in air this gave 0.013 px
-    RMS where ``findChessboardCornersSB`` gave 0.08–0.42 px and ``cornerSubPix`` 0.05–0.08 px
-    (docs/architecture.md). Through a flat port the board's straight edges image as curves;
-    the rendered corners then sit 0.02–0.04 px outwards of the forward model (docs/architecture.md:
-    about half of it is the renderer's ray-spawn offset at the port). A corner converged when its
-    last step is below
-    :data:`SADDLE_TOLERANCE_PX` and it stayed within its window; others keep their input
-    position and are flagged (an outlier of the detector, or not a corner). ``spacing`` and
-    ``blur_sigma`` default to :func:`saddle_scales` of ``uv``."""
-    uv = np.asarray(uv, dtype=np.float64).reshape(-1, 2)
-    if uv.shape[0] < 2 and spacing is None:
-        return uv.copy(), np.zeros(uv.shape[0], bool)
-    if spacing is None or blur_sigma is None:
-        spacing, blur_sigma = saddle_scales(uv)
-    spacing = np.asarray(spacing, dtype=np.float64)
-    blurred = cv2.GaussianBlur(np.asarray(image, np.float32), (0, 0),
-                               float(blur_sigma)).astype(np.float64)
-    h, w = blurred.shape
-    half = SADDLE_HALF_WINDOW * spacing
-    r = int(np.ceil(half.max()))
-    dy, dx = (g.ravel() for g in np.mgrid[-r:r + 1, -r:r + 1])
-    out = uv.copy()
-    last = np.full(uv.shape[0], np.inf)
-    for _ in range(SADDLE_ITERATIONS):
-        c = np.rint(out).astype(int)
-        xs, ys = c[:, :1] + dx, c[:, 1:] + dy
-        inside = (xs >= 0) & (xs < w) & (ys >= 0) & (ys < h)
-        values = blurred[np.clip(ys, 0, h - 1), np.clip(xs, 0, w - 1)]
-        X, Y = xs - out[:, :1], ys - out[:, 1:]
-        rr = X * X + Y * Y
-        weight = np.exp(-rr / (2 * (half[:, None] / 2) ** 2)) * inside * (rr <= half[:, None] ** 2)
-        A = np.stack([X * X, X * Y, Y * Y, X, Y, np.ones_like(X)], axis=-1)
-        normal = np.einsum("nk,nki,nkj->nij", weight, A, A)
-        rhs = np.einsum("nk,nki,nk->ni", weight, A, values)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            ok = np.abs(np.linalg.det(normal)) > 0
-            p = np.zeros((uv.shape[0], 6))
-            p[ok] = np.linalg.solve(normal[ok], rhs[ok][..., None])[..., 0]
-            a, b, cc, d, e = p[:, 0], p[:, 1], p[:, 2], p[:, 3], p[:, 4]
-            det = 4 * a * cc - b * b
-            ok &= det < 0  # a saddle, not an extremum
-            step = np.column_stack([(-2 * cc * d + b * e), (b * d - 2 * a * e)]) / det[:, None]
-            ok &= np.all(np.isfinite(step), axis=1) & (np.linalg.norm(step, axis=1) < half)
-        out[ok] += step[ok]
-        last = np.where(ok, np.linalg.norm(np.where(np.isfinite(step), step, 0), axis=1), np.inf)
-    converged = (last < SADDLE_TOLERANCE_PX) & (np.linalg.norm(out - uv, axis=1) < half)
-    return np.where(converged[:, None], out, uv), converged
-
-
 def to_uint8(image: np.ndarray) -> np.ndarray:
     """A linear image scaled so that its 99.9th percentile is 255 (uint8), for the detectors."""
     image = np.asarray(image)
@@ -380,6 +369,6 @@ def to_uint8(image: np.ndarray) -> np.ndarray:
     return np.clip(np.rint(a * (255.0 / white)), 0, 255).astype(np.uint8)
 
 
-__all__ = ["BOARD_KINDS", "Board", "BoardError", "LAYOUT_TOLERANCE", "MARKER_TOLERANCE",
-           "MIN_CORNERS", "PATTERN_TEXELS_PER_SQUARE",
-           "refine_saddle_points", "saddle_scales", "to_uint8"]
+__all__ = ["BOARD_KINDS", "Board", "BoardError", "DETECTION_WIDTH_PX", "LAYOUT_TOLERANCE",
+           "MARKER_TOLERANCE", "MIN_CORNERS", "PATTERN_TEXELS_PER_SQUARE", "detector_view",
+           "grid_candidates", "square_parity_contrast", "to_uint8"]

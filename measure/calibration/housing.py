@@ -151,6 +151,12 @@ def calibrate_housing(rig: StereoRig, board: Board, detections: Detections,
                                f"{housing.label}estimates "
                                f"{', '.join(table)}")
     housing.check_free(rig, names)
+    turns = {}
+    if board.symmetric and tuple(views) == (0, 1):  # each pose's right numbering by the rig
+        from .symmetry import relabelled, settle_by_rig
+
+        turns = {k: s for k, s in settle_by_rig(rig, board, detections).items() if s}
+        detections = relabelled(detections, 1, turns, board)
     problem = housing.problem(rig, board, detections, names)
     residuals, unpack, x0, lower, upper = (problem.residuals, problem.unpack, problem.x0,
                                            problem.lower, problem.upper)
@@ -172,19 +178,12 @@ def calibrate_housing(rig: StereoRig, board: Board, detections: Detections,
     labels = tuple(f"{n}[{k}]" if table[n] > 1 else n for n in names for k in range(table[n]))
     port, cameras, Rs, ts = unpack(fit.x)
     poses = [(Rs[k], ts[k]) for k in range(P)]
-    per, res = {}, {}
-    offset = 0
-    for view, pose_idx, ids, _ in obs:
-        rv = r[offset:offset + 2 * pose_idx.size].reshape(-1, 2)
-        offset += 2 * pose_idx.size
-        res[view] = np.column_stack([usable_index(usable, pose_idx), ids, rv])
-        for k in np.unique(pose_idx):
-            per[(usable[k], view)] = float(np.sqrt(np.mean(rv[pose_idx == k] ** 2) * 2))
-    base = dict(labels=labels, poses=poses, rms_px=float(np.sqrt(np.mean(r ** 2) * 2)),
-                rms_px_start=rms_start * np.sqrt(2), rms_px_per=per, residuals=res,
+    base = dict(labels=labels, poses=poses, **_residual_summary(r, obs, usable),
+                rms_px_start=rms_start * np.sqrt(2),
                 converged=bool(fit.status > 0), n_observations=m // 2, nfev=int(fit.nfev),
                 message=str(fit.message), normal_axes=tuple(b.tolist() for b in basis),
                 pose_ids=tuple(usable))
+    base["residuals"] = _detected_numbers(base["residuals"], turns, board)
     relative = eigval / eigval[-1] if eigval[-1] > 0 else np.zeros_like(eigval)
     if relative[0] < IDENTIFIABILITY_LIMIT:
         worst = int(np.argmax(np.abs(eigvec[:n_global, 0]))) if n_global else 0
@@ -228,9 +227,11 @@ def calibrate_housing(rig: StereoRig, board: Board, detections: Detections,
     if air:
         sigma_air = _sub_covariance(air_covariance, air)
         if uncertainty == "prior":
-            rig, x, joint = _prior_fit(rig, board, detections, names, x, s2, air, sigma_air,
-                                       housing)
+            rig, x, joint, r = _prior_fit(rig, board, detections, names, x, s2, air,
+                                          sigma_air, housing)
             port, cameras, Rs, ts = housing.problem(rig, board, detections, names).unpack(x)
+            base.update(_residual_summary(r, obs, usable))
+            base["residuals"] = _detected_numbers(base["residuals"], turns, board)
             base["poses"] = [(Rs[k], ts[k]) for k in range(P)]
         else:
             J_air = problem.air_jacobian(x, air)
@@ -259,6 +260,33 @@ def calibrate_housing(rig: StereoRig, board: Board, detections: Detections,
                               correlation=correlation, identifiable=True, reason="",
                               covariance=rig_cov, sigmas_conditional=conditional,
                               uncertainty=uncertainty if air else "conditional", **base)
+
+
+def _residual_summary(r, obs, usable) -> dict:
+    """``rms_px``, ``rms_px_per`` ``{(pose, view): rms}`` and ``residuals`` ``{view: (pose,
+    id, du, dv) rows}`` of the corners' residual vector ``r`` (px, ``obs`` order)."""
+    per, res, offset = {}, {}, 0
+    for view, pose_idx, ids, _ in obs:
+        rv = r[offset:offset + 2 * pose_idx.size].reshape(-1, 2)
+        offset += 2 * pose_idx.size
+        res[view] = np.column_stack([usable_index(usable, pose_idx), ids, rv])
+        for k in np.unique(pose_idx):
+            per[(usable[k], view)] = float(np.sqrt(np.mean(rv[pose_idx == k] ** 2) * 2))
+    return {"rms_px": float(np.sqrt(np.mean(r ** 2) * 2)), "rms_px_per": per, "residuals": res}
+
+
+def _detected_numbers(residuals: dict, turns: dict, board: Board) -> dict:
+    """Residual rows ``{view: (pose, id, du, dv)}`` with the right view's ids of the poses in
+    ``turns`` (renumbered by :func:`measure.calibration.symmetry.settle_by_rig`) back to the
+    numbers they were detected with."""
+    if not turns or 1 not in residuals:
+        return residuals
+    symmetries = board.symmetries()
+    rows = residuals[1].copy()
+    for k, s in turns.items():
+        here = rows[:, 0] == k
+        rows[here, 1] = np.argsort(symmetries[s][0])[rows[here, 1].astype(int)]
+    return {**residuals, 1: rows}
 
 
 def calibrate_camera_housing(camera: Camera, port: RigPort, board: Board,
@@ -324,43 +352,64 @@ def apply_air_change(rig: StereoRig, air, delta) -> StereoRig:
     return StereoRig(cameras[0], cameras[1], rig.port)
 
 
-#: Gauss-Newton iterations of the prior fit, and its stop: every step below this many σ.
-PRIOR_ITERATIONS, PRIOR_STEP_SIGMA = 8, 1e-4
+#: Gauss-Newton iterations of the prior fit at most, its stop (every step below this many σ),
+#: and the halvings of a step that does not lower the cost. On a real flat port (OUC's, D ≈ 40
+#: mm, the intrinsics moving D by several mm per σ) the undamped iteration needed 12 steps
+#: where 9 were allowed and stopped; damped it converges in fewer.
+PRIOR_ITERATIONS, PRIOR_STEP_SIGMA, PRIOR_HALVINGS = 40, 1e-4, 8
 
 
 def _prior_fit(rig, board, detections, names, x, s2, air, sigma_air, housing):
     """The housing with the in-air parameters ``air`` free under their in-air prior: the rows
     ``s·L(θ − θ_air)`` (``LᵀL = Σ_air⁻¹``, ``s²`` the corners' variance of the conditional fit)
-    beside the corners' residuals; Gauss-Newton from the conditional solution ``x``. Returns
-    the rig with the refined in-air parameters, the housing unknowns and the joint covariance
-    ``s²(AᵀA)⁻¹`` ordered (in-air parameters, housing unknowns)."""
+    beside the corners' residuals; Gauss-Newton from the conditional solution ``x``, a step
+    halved while it raises the cost. Returns the rig with the refined in-air parameters, the
+    housing unknowns, the joint covariance ``s²(AᵀA)⁻¹`` ordered (in-air parameters, housing
+    unknowns) and the corners' residuals at the solution."""
     L = np.linalg.inv(np.linalg.cholesky(sigma_air))
     s = np.sqrt(s2)
     delta, a = np.zeros(len(air)), len(air)
-    for _ in range(PRIOR_ITERATIONS + 1):
+
+    def state(delta):
         moved = apply_air_change(rig, air, delta)
         problem = housing.problem(moved, board, detections, names)
         if problem.x0.size != x.size:  # solvePnP found another set of usable poses
             raise CalibrationError("the prior fit lost a board pose when the intrinsics moved; "
                                    "use --air-uncertainty propagate")
+        return moved, problem
+
+    def cost(problem, x, delta):
+        r = problem.residuals(x)
+        return float(r @ r) + float(np.sum((s * L @ delta) ** 2)), r
+
+    moved, problem = state(delta)
+    current, r = cost(problem, x, delta)
+    for _ in range(PRIOR_ITERATIONS):
         J = problem.jacobian(x)
         J = J.toarray() if hasattr(J, "toarray") else np.asarray(J)
         A = np.block([[J, problem.air_jacobian(x, air)],
                       [np.zeros((a, J.shape[1])), s * L]])
-        b = np.concatenate([problem.residuals(x), s * L @ delta])
+        b = np.concatenate([r, s * L @ delta])
         inverse = np.linalg.inv(A.T @ A)
         step = -inverse @ (A.T @ b)
-        sig = np.sqrt(s2 * np.diag(inverse))
-        if np.max(np.abs(step) / sig) < PRIOR_STEP_SIGMA:
+        if np.max(np.abs(step) / np.sqrt(s2 * np.diag(inverse))) < PRIOR_STEP_SIGMA:
             break
-        x = x + step[:J.shape[1]]
-        delta = delta + step[J.shape[1]:]
+        for _ in range(PRIOR_HALVINGS):
+            trial = state(delta + step[J.shape[1]:])
+            value, r_trial = cost(trial[1], x + step[:J.shape[1]], delta + step[J.shape[1]:])
+            if value <= current:
+                break
+            step = step / 2
+        else:
+            break  # no step lowers the cost: the minimum, to the cost's rounding
+        x, delta = x + step[:J.shape[1]], delta + step[J.shape[1]:]
+        (moved, problem), current, r = trial, value, r_trial
     else:
-        raise CalibrationError(f"the prior fit did not converge in {PRIOR_ITERATIONS + 1} "
-                               f"Gauss-Newton steps; use --air-uncertainty propagate")
+        raise CalibrationError(f"the prior fit did not converge in {PRIOR_ITERATIONS} "
+                               f"Gauss-Newton steps (free fewer parameters with --free)")
     cov = s2 * inverse
     order = np.r_[J.shape[1]:J.shape[1] + a, 0:J.shape[1]]
-    return moved, x, cov[np.ix_(order, order)]
+    return moved, x, cov[np.ix_(order, order)], r
 
 
 def usable_index(usable, pose_idx) -> np.ndarray:

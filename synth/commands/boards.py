@@ -45,6 +45,11 @@ def main(args) -> int:
 
     board = board_from_args(args)
     cols, rows = board.squares
+    if board.symmetric:
+        raise CLIError(f"a {cols}x{rows} chessboard looks the same turned by 180°: its rendered "
+                       f"corners could not be matched to their truth; render a board with one "
+                       f"odd and one even number of squares (eval calibrate takes symmetric "
+                       f"boards in real photos)")
     defines = apply_spp(apply_seed(parse_defines(args.defines), args.seed), args.spp)
     for name in defines:
         if name in b.NOT_RENDERED:

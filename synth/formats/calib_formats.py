@@ -785,7 +785,8 @@ CAMERA_FILE_NODES = ("image_width", "image_height", "camera_matrix", "distortion
 def read_single_camera(path) -> dict:
     """One camera's in-air calibration: ``camera`` (:class:`measure.Camera` at the reference
     origin), ``size``, ``rms_px`` (or None), ``lens_model`` (or None), ``covariance`` (a
-    :class:`measure.stereo.rig_covariance.RigCovariance` of ``left.fx`` … or None) and
+    :class:`measure.stereo.rig_covariance.RigCovariance` of ``left.fx`` … or None),
+    ``covariance_photos`` (the same intrinsics' photo-to-photo spread, or None) and
     ``format``. The file is an OpenCV ``camera.yaml`` (:data:`CAMERA_FILE_NODES`; ``eval
     calibrate PHOTOS --air`` writes it, with ``rms_px``, ``lens_model`` and a ``covariance``
     node), calibmar's one-camera YAML (``non_svp_model: NONE``) or a COLMAP ``cameras.txt`` of
@@ -797,7 +798,8 @@ def read_single_camera(path) -> dict:
     if not os.path.isfile(path):
         raise CalibFormatError(f"{path}: no such file")
     kind = calib_format(path)
-    out = {"rms_px": None, "lens_model": None, "covariance": None, "format": kind}
+    out = {"rms_px": None, "lens_model": None, "covariance": None, "covariance_photos": None,
+           "format": kind}
     if kind == "calibmar":
         values = _parse_calibmar(path)
         if str(values["non_svp_model"]) != "NONE":
@@ -850,6 +852,8 @@ def read_single_camera(path) -> dict:
             node = fs.getNode("distortion_model")
             model = BROWN_CONRADY if node.empty() else node.string()
             out["covariance"] = read_covariance_node(path, fs.getNode("covariance"))
+            out["covariance_photos"] = read_covariance_node(path,
+                                                            fs.getNode("covariance_photos"))
         finally:
             fs.release()
         if K is None or np.shape(K) != (3, 3) or D is None or not np.all(np.isfinite(K)):

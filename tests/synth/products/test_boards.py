@@ -145,7 +145,7 @@ def test_bad_inputs_are_one_line_and_exit_2(boards, tmp_path, capsys):
     fails(["boards", boards["scene"], "--out", str(tmp_path / "b"), "--squares", "7by5"],
           synth_main, "--squares")
     fails(["boards", boards["scene"], "--out", str(tmp_path / "b"), "--squares", "7x5"],
-          synth_main, "must be odd")
+          synth_main, "looks the same turned by 180°")
     fails(["boards", boards["scene"], "--out", str(tmp_path / "b"), "--square-mm", "400",
            "--poses", "2"], synth_main, "board poses")
     fails(["calibrate", boards["water"], "--out", str(tmp_path / "c")], eval_main,
