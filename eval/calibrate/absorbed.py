@@ -30,12 +30,19 @@ DIVERGED_PX = 1e3
 
 
 def _boards_or_photos(args, log):
-    """``(board, images [(left, right)], size, source, truth rig or None)``."""
+    """``(board, detections, size, source, truth rig or None, names)``: the board detected in
+    a boards folder's or a photo folder's pairs, or a pair's ``--detections`` read."""
+    from measure.calibration.air import detect_boards
     from synth.products.boards import read_boards
     from synth.infra.cli import BOARD_OPTIONS, board_from_args, refuse_given
 
+    from eval.calibrate.sources import read_detection_views
     from eval.core.photos import PhotoError, photo_folder, read_pairs
 
+    if args.detections:
+        board = board_from_args(args)
+        names, detections, size = read_detection_views(args, board, 2)
+        return board, detections, size, "detections", None, names
     if os.path.isfile(os.path.join(args.dir, "manifest.json")):
         refuse_given(args, BOARD_OPTIONS + ("encoding",),
                      f"to a boards folder ({args.dir}): its board.json defines the board and "
@@ -44,43 +51,55 @@ def _boards_or_photos(args, log):
         if boards.air:
             raise CLIError(f"--model absorbed: {args.dir} holds boards rendered in air; the "
                            f"absorbed calibration is of boards seen through the port")
-        return (boards.board, boards.images, tuple(boards.calib["size"]), "boards",
-                boards.calib["rig"])
-    if args.squares is None or args.square_mm is None:
+        log(f"detect the board in {len(boards.images)} pairs …")
+        return (boards.board, detect_boards(boards.board, boards.images),
+                tuple(boards.calib["size"]), "boards", boards.calib["rig"],
+                [f"{k:02d}" for k in range(len(boards.images))])
+    if args.board not in ("circles", "acircles") and (args.squares is None and args.inner_corners
+                                                       is None or args.square_mm is None):
         raise CLIError(f"{args.dir} (photos): give the board: --squares COLSxROWS (or "
                        f"--inner-corners) and --square-mm")
+    board = board_from_args(args)
     try:
         pairs = photo_folder(args.dir)
         log(f"read {len(pairs.names)} photo pairs from {args.dir} …")
         images, size = read_pairs(pairs, args.encoding)
     except PhotoError as exc:
         raise CLIError(str(exc)) from None
-    return board_from_args(args), images, tuple(size), "photos", None
+    log(f"detect the board in {len(images)} pairs …")
+    return board, detect_boards(board, images), tuple(size), "photos", None, list(pairs.names)
 
 
 def calibrate_absorbed_main(args, output, log, start) -> int:
     """The command (module docs); returns the exit code."""
-    from measure.calibration.air import CalibrationError, detect_boards
+    from measure.calibration.air import CalibrationError
     from synth.infra.fileio import atomic_write_json, atomic_write_text, jsonable
     from synth.products.dataset import write_calib
 
+    from eval.calibrate.sources import repeat_lines, repeated_views, without_repeats
     from eval.core.absorbed import calibrate_absorbed
 
-    board, images, size, source, truth = _boards_or_photos(args, log)
-    log(f"detect the board in {len(images)} pairs …")
-    detections = detect_boards(board, images)
+    board, detections, size, source, truth, names = _boards_or_photos(args, log)
+    repeats = repeated_views(detections)
+    detections = without_repeats(detections, repeats)
     log("calibrate as pinhole cameras (OpenCV calibrateCamera, stereoCalibrate; each lens "
         "model) …")
     try:
-        air, stereo_rms = calibrate_absorbed(board, detections, size, args.lens or "auto")
+        air, stereo_rms = calibrate_absorbed(board, detections, size, args.lens or "auto",
+                                             args.stereo_intrinsics or "fixed")
     except CalibrationError as exc:
         raise CLIError(f"{args.dir}: {exc}") from None
     model = air.lens_models["left"]["model"]
+    right = air.rig.right
+    baseline = float(np.linalg.norm(right.t))
+    angle = float(np.degrees(np.arccos(np.clip((np.trace(right.R) - 1) / 2, -1, 1))))
     report = {"source": source, "dir": os.path.abspath(args.dir), "model": MODEL,
-              "board": board.to_dict(), "pairs": len(images), "lens_model": model,
+              "board": board.to_dict(), "pairs": len(names), "lens_model": model,
               "stereo_rms_px_by_lens_model": stereo_rms, "rms_px": air.rms_px,
               "stereo_rms_px": air.stereo_rms_px, "poses": air.poses_used,
-              "stereo_left_out": list(air.stereo_left_out)}
+              "baseline_mm": baseline, "rotation_deg": angle,
+              "repeats": repeat_lines(repeats, names),
+              "stereo_left_out": [names[k] for k in air.stereo_left_out]}
     if truth is not None:
         report["housing"] = _housing_rms(truth, board, detections, log)
     with output.staged() as tmp:
@@ -92,12 +111,15 @@ def calibrate_absorbed_main(args, output, log, start) -> int:
         atomic_write_text(os.path.join(tmp, "report.md"), _markdown(report))
     diverged = [m for m, rms in stereo_rms.items() if rms is None or rms > DIVERGED_PX]
     line = (f"absorbed calibration ({model} model): RMS left {air.rms_px['left']:.4f} px, right "
-            f"{air.rms_px['right']:.4f} px, stereo {air.stereo_rms_px:.4f} px")
+            f"{air.rms_px['right']:.4f} px, stereo {air.stereo_rms_px:.4f} px; baseline "
+            f"{baseline:.2f} mm, the cameras turned {angle:.2f}° from each other")
     if diverged:
         line += f"; the stereo fit failed or diverged with {', '.join(diverged)}"
     if "housing" in report and report["housing"].get("rms_px") is not None:
         line += f"; the port model on the same corners: {report['housing']['rms_px']:.4f} px"
     print(line)
+    for repeat in report["repeats"]:
+        print(f"warning: {repeat}: left out (a photo given twice is one pose)")
     print(f"wrote {output.path} (calib.yaml without a port: eval run --absorbed-calib)")
     if not np.isfinite(air.stereo_rms_px) or air.stereo_rms_px > DIVERGED_PX:
         from synth.infra.cli import EXIT_CHECK_FAILED

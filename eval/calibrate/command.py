@@ -77,7 +77,7 @@ def add_parser(subparsers):
                         "calibmar's YAML or the COLMAP fork's cameras.txt; one camera's photos: "
                         "that camera's camera.yaml (eval calibrate PHOTOS --air), calibmar's "
                         "one-camera YAML or a one-camera cameras.txt")
-    add_board_options(p, defaults=False,
+    add_board_options(p, defaults=False, circles=True,
                       needed="photos: required; a boards folder's board.json defines it")
     p.add_argument("--free", default=",".join(DEFAULT_FREE),
                    help=f"housing parameters to estimate, comma list of "
@@ -128,6 +128,15 @@ def add_parser(subparsers):
                         "(OpenCV's fisheye model, k1…k4 on the ray's angle) or auto "
                         "(default: the richer model only where it lowers the RMS by 2 %%; the "
                         "report lists each model's RMS)")
+    from measure.calibration.air import STEREO_INTRINSICS
+
+    from eval.calibrate.sources import add_detection_options
+
+    p.add_argument("--stereo-intrinsics", choices=STEREO_INTRINSICS, default=None,
+                   help="--model absorbed: fixed (default: each camera's own calibration held "
+                        "in the stereo fit) or refined (the stereo fit refines both cameras' "
+                        "intrinsics too, as MATLAB's stereo calibrator does)")
+    add_detection_options(p)
     add_out_option(p, COMMAND)
     add_encoding_option(p)
     add_progress_option(p)
@@ -340,6 +349,12 @@ def main(args) -> int:
         what = "a file, not a folder" if os.path.exists(args.dir) else "no such folder"
         raise CLIError(f"{args.dir}: {what} (give a photo folder, DIR/left/ and DIR/right/, or a "
                        f"synth boards folder)")
+    from eval.calibrate.sources import check_detection_options
+
+    check_detection_options(args)
+    if args.model != "absorbed":
+        refuse_given(args, ("stereo_intrinsics",), "without --model absorbed (the port model's "
+                                                   "stereo fit holds the in-air intrinsics)")
     if args.model == "absorbed":
         from eval.calibrate.absorbed import calibrate_absorbed_main
 
@@ -349,6 +364,8 @@ def main(args) -> int:
         refuse_given(args, HOUSING_OPTIONS + DOME_DESIGN_OPTIONS,
                      "with --model absorbed: it has no port")
         return calibrate_absorbed_main(args, output, log, start)
+    if args.detections:
+        return _calibrate_detections(args, output, log, start, free)
     if not os.path.exists(os.path.join(args.dir, "manifest.json")):
         from eval.core.photos import PhotoError, camera_folder_names
 
@@ -571,15 +588,19 @@ def _calibrate_camera_photos(args, output, log, start, cameras) -> int:
 def _calibrate_photos(args, output, log, free, start) -> int:
     """``eval calibrate`` of a user's photo folder (module docs, :mod:`eval.calibrate.photos`)."""
     from measure import StereoRig
-    from measure.calibration.air import (DEFAULT_LENS_MODEL, CalibrationError, calibrate_in_air,
-                                         detect_boards)
+    from measure.calibration.air import (DEFAULT_LENS_MODEL, CalibrationError, calibrate_in_air)
     from measure.calibration.housing import calibrate_housing
 
     from eval.calibrate import photos as trust
     from eval.calibrate import report as report_lib
-    from eval.core.photos import photo_folder, read_pairs
+    from measure.calibration.housing import FIT_RMS_LIMIT_PX
 
-    where = f"{args.dir} (photos)"
+    from eval.calibrate.consistency import (cameras_alone, rig_inconsistency,
+                                            start_from_cameras, uniqueness)
+    from eval.calibrate.sources import repeat_lines, repeated_views, without_repeats
+
+    where = f"{args.dir} ({'detections' if args.detections else 'photos'})"
+    source = "detections" if args.detections else "photos"
     if args.air:
         refuse_given(args, HOUSING_OPTIONS, "to in-air photos (--air): they calibrate the "
                                             "cameras, no housing")
@@ -599,44 +620,27 @@ def _calibrate_photos(args, output, log, free, start) -> int:
         lengths_for(args.port_distance, 2)
     elif not args.air:
         design_port(args, (0.0, 0.0, 1.0))  # a bad --design-port is refused before any work
-    pairs = photo_folder(args.dir)
     air_rig = air_covariance = None
     if not args.air:
         air_rig, air_covariance = _intrinsics_for_photos(args.intrinsics, log)
-    log(f"read {len(pairs.names)} photo pairs from {args.dir} …")
-    note = encoding_note(pairs.left[0], args.encoding) if pairs.left else None
-    if note:
-        print(note, file=sys.stderr, flush=True)
-    t = time.perf_counter()
-    images, size = read_pairs(pairs, args.encoding)
-    timings = {"read": time.perf_counter() - t}
+    names, images, size, detections, timings = _pair_corners(args, board, log, where)
     if air_rig is not None and tuple(air_rig.left.size) != tuple(size):
         raise CLIError(f"--intrinsics {args.intrinsics}: image size "
-                       f"{air_rig.left.size[0]}x{air_rig.left.size[1]} px, but the photos are "
+                       f"{air_rig.left.size[0]}x{air_rig.left.size[1]} px, but the "
+                       f"{'detections are' if args.detections else 'photos are'} "
                        f"{size[0]}x{size[1]} px")
-    log(f"detect the board in {len(images)} photo pairs …")
-    t = time.perf_counter()
-    detections = detect_boards(board, images)
-    timings["detect"] = time.perf_counter() - t
     found = {v: detections.found(i) for i, v in enumerate(trust.VIEWS)}
-    if not found["left"] and not found["right"]:
-        squares = "x".join(map(str, board.squares))
-        raise CLIError(f"{where}: the {board.kind} {squares} was found in none of the "
-                       f"{len(images)} photo pairs{trust.board_hint(board, images)}")
-    larger = trust.larger_board(board, images, found["left"])
-    if larger:
-        raise CLIError(f"{where}: {larger}")
-    charuco = trust.charuco_check(board, [images[k][0] for k in found["left"]])
-    if charuco:
-        raise CLIError(f"{where}: {charuco}")
-    not_found = [pairs.names[k] for k in range(len(images))
+    not_found = [names[k] for k in range(len(names))
                  if k not in found["left"] and k not in found["right"]]
+    repeats = repeated_views(detections)
+    detections_all, detections = detections, without_repeats(detections, repeats)
     t = time.perf_counter()
 
     def fit(calibrate):  # a CalibrationError (too few poses) names the photo folder
         try:
-            return trust.fit_without_outliers(calibrate, lambda r: r.rms_px_per, detections,
-                                              lambda r: r.residuals, board)
+            return trust.fit_without_outliers(
+                calibrate, lambda r: r.rms_px_per, detections, lambda r: r.residuals, board,
+                lambda r: getattr(r, "identifiable", True))
         except CalibrationError as exc:
             raise CLIError(f"{where}: {exc}") from None
 
@@ -659,25 +663,44 @@ def _calibrate_photos(args, output, log, free, start) -> int:
         result, used_detections, outliers = fit(
             lambda d: calibrate_housing(start_rig, board, d, free, air_covariance,
                                         args.air_uncertainty))
-        housing = result
+        housing, alone = result, None
+        if not housing.identifiable and housing.rms_px > FIT_RMS_LIMIT_PX:
+            log("the design start failed: again from each camera's own port …")
+            alone = cameras_alone(start_rig, board, detections)  # the design far off
+            better = start_from_cameras(start_rig, alone)
+            if better is not None:
+                again, again_used, again_outliers = fit(
+                    lambda d: calibrate_housing(better, board, d, free, air_covariance,
+                                                args.air_uncertainty))
+                if again.identifiable or again.rms_px < housing.rms_px:
+                    start_rig, housing = better, again
+                    result, used_detections, outliers = again, again_used, again_outliers
         timings["bundle_adjustment"] = time.perf_counter() - t
         if not housing.identifiable:
+            inconsistent = rig_inconsistency(housing, start_rig, board, detections, free, alone)
+            if inconsistent is None and "extrinsics" in free:
+                inconsistent = uniqueness(housing, start_rig, board, detections, free,
+                                          air_covariance, args.air_uncertainty)["note"]
+            if inconsistent:
+                print(f"failed: {where}: {inconsistent}; nothing written", file=sys.stderr)
+                return EXIT_CHECK_FAILED
             raise CLIError(f"{where}: {housing.reason}; nothing written (free fewer parameters "
                            f"with --free, or photograph more varied poses)")
         rig, rms_per = housing.rig, housing.rms_px_per
         poses = dict(zip(housing.pose_ids, housing.poses))
     used = sorted({k for k, _ in rms_per})
     geometry = trust.pose_geometry(board, {k: poses[k] for k in used if k in poses}, rig)
-    names = list(pairs.names)
-    report = {"photos": os.path.abspath(args.dir), "source": "photos", "air": bool(args.air),
-              "board": board.to_dict(), "image_size": list(size), "poses": len(images),
+    report = {"photos": os.path.abspath(args.dir), "source": source, "air": bool(args.air),
+              "board": board.to_dict(), "image_size": list(size), "poses": len(names),
+              "repeats": repeat_lines(repeats, names),
               "found": {v: len(found[v]) for v in trust.VIEWS}, "used": len(used),
               "not_found": not_found,
               "left_out": [names[k] for k in outliers["left_out"]],
               "outlier_rule": trust.OUTLIER_RULE, "outliers": outliers,
               "per_pose": trust.per_pose_table(
-                  names, detections, used_detections, rms_per, outliers, geometry,
-                  (result.stereo_poses, result.stereo_left_out) if args.air else None),
+                  names, detections_all, used_detections, rms_per, outliers, geometry,
+                  (result.stereo_poses, result.stereo_left_out) if args.air else None,
+                  {r["pose"] for r in repeats}),
               "coverage": trust.coverage(used_detections, size),
               "geometry": {"distance_mm": trust.stats_range(g["distance_mm"]
                                                             for g in geometry.values()),
@@ -689,8 +712,14 @@ def _calibrate_photos(args, output, log, free, start) -> int:
         report["housing"] = trust.housing_estimates(housing, start_rig)
         report["sigma_note"] = report_lib.sigma_note(housing.uncertainty)
         residuals = housing.residuals
+        if "extrinsics" in free:  # the rig's own pose freed: is the port determined at all?
+            log("the same fit from other starting port distances …")
+            report["housing"]["uniqueness"] = uniqueness(
+                housing, start_rig, board, used_detections, free, air_covariance,
+                args.air_uncertainty)
     report["worst_corners"] = trust.worst_corners(residuals, names)
-    report["warnings"] = trust.warnings_for(report)
+    report["warnings"] = trust.warnings_for(report) + [
+        f"{line}: left out (a photo given twice is one pose)" for line in report["repeats"]]
     if args.intrinsics and os.path.isfile(args.intrinsics):
         from synth.products.dataset import read_calib
 
@@ -701,6 +730,8 @@ def _calibrate_photos(args, output, log, free, start) -> int:
     if edge:
         report["warnings"].append(edge)
     report["failures"] = trust.air_failures(report) if args.air else []
+    if not args.air and report["housing"].get("uniqueness", {}).get("note"):
+        report["failures"].append(report["housing"]["uniqueness"]["note"])
     report["timings_s"] = timings
     log("write the calibration, report and figures …")
     with output.staged() as tmp:
@@ -711,6 +742,61 @@ def _calibrate_photos(args, output, log, free, start) -> int:
         report = report_lib.write_report(tmp, report, trust.markdown, start)
     code = _written(output, trust.summary_lines(report), args, housing is not None)
     return _failed(args.dir, report["failures"], output.path) or code
+
+
+def _pair_corners(args, board, log, where):
+    """``(names, images or None, size, detections, timings)`` of a pair's photos (read and
+    detected) or, ``--detections``, of its detection files; CLIError where the board is in no
+    photo, or the photos show another board (photos only: the checks need the images)."""
+    from measure.calibration.air import detect_boards
+
+    from eval.calibrate import photos as trust
+    from eval.calibrate.sources import read_detection_views
+    from eval.core.photos import photo_folder, read_pairs
+
+    t = time.perf_counter()
+    if args.detections:
+        names, detections, size = read_detection_views(args, board, 2)
+        return names, None, size, detections, {"read": time.perf_counter() - t}
+    pairs = photo_folder(args.dir)
+    log(f"read {len(pairs.names)} photo pairs from {args.dir} …")
+    note = encoding_note(pairs.left[0], args.encoding) if pairs.left else None
+    if note:
+        print(note, file=sys.stderr, flush=True)
+    images, size = read_pairs(pairs, args.encoding)
+    timings = {"read": time.perf_counter() - t}
+    log(f"detect the board in {len(images)} photo pairs …")
+    t = time.perf_counter()
+    detections = detect_boards(board, images)
+    timings["detect"] = time.perf_counter() - t
+    found = {v: detections.found(i) for i, v in enumerate(trust.VIEWS)}
+    if not found["left"] and not found["right"]:
+        squares = "x".join(map(str, board.squares))
+        raise CLIError(f"{where}: the {board.kind} {squares} was found in none of the "
+                       f"{len(images)} photo pairs{trust.board_hint(board, images)}")
+    larger = trust.larger_board(board, images, found["left"])
+    if larger:
+        raise CLIError(f"{where}: {larger}")
+    charuco = trust.charuco_check(board, [images[k][0] for k in found["left"]])
+    if charuco:
+        raise CLIError(f"{where}: {charuco}")
+    return list(pairs.names), images, size, detections, timings
+
+
+def _calibrate_detections(args, output, log, start, free) -> int:
+    """``--detections``: one camera's files, or a pair's in ``left/`` and ``right/``, through
+    the paths of photos (:mod:`eval.calibrate.sources`)."""
+    from eval.core.detections import DetectionError, detection_layout
+
+    try:
+        layout = detection_layout(args.dir)
+    except DetectionError as exc:
+        raise CLIError(str(exc)) from None
+    if not layout:
+        return _calibrate_single(args, output, log, start)
+    refuse_given(args, DOME_DESIGN_OPTIONS, f"to a pair's detections ({args.dir}): the housing "
+                                            "calibration of a pair's photos models flat ports")
+    return _calibrate_photos(args, output, log, parse_free(free), start)
 
 
 def _failed(where, failures, out) -> int:
@@ -789,7 +875,10 @@ def _calibrate_single_housing(args, output, log, start, where) -> int:
 
 
 def _require_board(args, where) -> None:
-    """CLIError when a photo folder's board is not on the command line."""
+    """CLIError when a photo folder's board is not on the command line (a circle grid's
+    options are checked where it is made)."""
+    if args.board in ("circles", "acircles"):
+        return
     missing = [option for dest, option in (("squares", "--squares COLSxROWS (or "
                                                        "--inner-corners)"),
                                            ("square_mm", "--square-mm S"))

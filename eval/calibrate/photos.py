@@ -67,14 +67,18 @@ WORST_CORNERS = 10
 #: Single corners (:func:`outlier_corners`): left out beyond this many robust σ, at least
 #: this many px; the rounds of :func:`fit_without_outliers` at most.
 CORNER_SIGMAS, CORNER_FLOOR_PX, MAX_OUTLIER_ROUNDS = 8.0, 0.1, 6
-#: A corner's neighbours for :func:`outlier_corners`: within this many squares on the board.
-NEIGHBOUR_SQUARES = 1.5
+#: A corner's neighbours for :func:`outlier_corners`: within this many squares on the board;
+#: more than this fraction of the corners beyond the threshold says the model misfits (the
+#: Minions rig with its stereo pose freed: 855 of 4056, 0.32 px and more), and none is dropped.
+NEIGHBOUR_SQUARES, MAX_CORNER_FRACTION = 1.5, 0.02
 OUTLIER_RULE = (f"a pose is left out when one of its views' RMS exceeds "
                 f"max({OUTLIER_FACTOR:g} × median, median + {OUTLIER_MADS:g} × 1.4826 × MAD, "
                 f"median + {OUTLIER_FLOOR_PX:g} px) of all views' RMS, and once no pose is, a "
                 f"single corner whose residual exceeds max({CORNER_SIGMAS:g} robust σ of its photo, "
                 f"{CORNER_FLOOR_PX:g} px), its residual taken less the median of its board "
-                f"neighbours'; the fit is run again after each, until nothing more drops out")
+                f"neighbours' (none when more than {100 * MAX_CORNER_FRACTION:g} % of the "
+                f"corners are: then the model misfits); the fit is run again after each, until "
+                f"nothing more drops out")
 
 
 def outlier_threshold(rms_values) -> float:
@@ -129,6 +133,8 @@ def outlier_corners(residuals: dict, board=None) -> tuple[float, list]:
     threshold = np.maximum(CORNER_SIGMAS * sigma, CORNER_FLOOR_PX)[photo]
     length = np.hypot(local[:, 0], local[:, 1])
     bad = np.flatnonzero(length > threshold)
+    if bad.size > MAX_CORNER_FRACTION * len(rows):  # the model misfits, not single corners
+        return 0.0, []
     worst = bad[np.argsort(-length[bad])]
     return (float(threshold[bad].max()) if bad.size else 0.0,
             [(int(rows[i, 1]), int(rows[i, 0]), int(rows[i, 2]), float(length[i]))
@@ -175,12 +181,14 @@ def without_corners(detections, corners):
     return Detections(ids, pixels)
 
 
-def fit_without_outliers(fit, rms_of, detections, residuals_of=None, board=None):
+def fit_without_outliers(fit, rms_of, detections, residuals_of=None, board=None,
+                         usable=None):
     """``(result, detections used, outliers)``: ``fit(detections)`` repeated until nothing
     more drops out (at most :data:`MAX_OUTLIER_ROUNDS` refits): each round leaves out the
     poses :func:`outlier_poses` of ``rms_of(result)`` names, or — when none — the single
     corners :func:`outlier_corners` of ``residuals_of(result)`` names (``{view: (pose, id,
-    du, dv) rows}``, each against its neighbours on ``board``; not done without it).
+    du, dv) rows}``, each against its neighbours on ``board``; not done without it). No round
+    when ``usable(result)`` is false (a fit that failed says nothing of single poses).
     ``outliers`` holds the first round's threshold, every pose left out, the first fit's
     per-view RMS, each round (its threshold, the poses and their RMS, or the corners) and the
     corners left out."""
@@ -193,7 +201,7 @@ def fit_without_outliers(fit, rms_of, detections, residuals_of=None, board=None)
             "first_fit_rms_px": {f"{k}:{VIEWS[v]}": r for (k, v), r in sorted(per.items())},
             "rounds": [], "corners_left_out": []}
     used = detections
-    for _ in range(MAX_OUTLIER_ROUNDS):
+    for _ in range(MAX_OUTLIER_ROUNDS if usable is None or usable(result) else 0):
         limit, bad = outlier_poses(rms_of(result))
         if bad:
             rms = rms_of(result)
@@ -550,15 +558,18 @@ def underwater_hint(cameras: dict, models: dict | None = None) -> str | None:
 
 
 def per_pose_table(names, detections_all, detections_used, rms_per, outliers, geometry,
-                   stereo=None) -> list:
+                   stereo=None, repeats=()) -> list:
     """One row per pose: name, corners per view, final RMS per view, status, distance, tilt;
     in air (``stereo`` = ``(stereo_poses, left_out)`` of the calibration) the pose's own
-    stereo pose: baseline and distance from the median pose, and whether it was left out."""
+    stereo pose: baseline and distance from the median pose, and whether it was left out.
+    ``repeats``: the poses left out because a view repeats another's."""
     rows = []
     for k, name in enumerate(names):
         corners = {v: int(len(detections_all.ids[k][i])) for i, v in enumerate(VIEWS)}
         if not any(corners.values()):
             status = "board not found"
+        elif k in repeats:
+            status = "left out: a view repeats another pose's (the report's repeats)"
         elif k in outliers["left_out"]:
             status = outlier_status(outliers, k)
         else:

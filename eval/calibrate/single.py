@@ -49,15 +49,28 @@ def single_camera_folder(path) -> bool:
 
 
 def read_and_detect(args, board, log, size=None, size_source=""):
-    """One camera's photos ``args.dir`` read and the board detected in each:
-    ``(names, images, size, detections, timings)``, ``detections`` holding view 0 only.
+    """One camera's photos ``args.dir`` read and the board detected in each (``--detections``:
+    its detections files read): ``(names, images or None, size, detections, timings,
+    repeats)``, ``detections`` holding view 0 only, without the photos that repeat an earlier
+    one (``repeats`` names them, :func:`eval.calibrate.sources.repeated_views`).
     ``size``: the image size the photos must have (``size_source`` names where it comes from);
     CLIError when they differ or the board is found in none of them."""
     from measure.calibration.air import Detections, detect_images
 
+    from eval.calibrate.sources import read_detection_views, repeat_lines, repeated_views
     from eval.core.photos import encoding_note, photo_files, read_photo
 
     where = f"{args.dir} (one camera's photos)"
+    if getattr(args, "detections", False):
+        t = time.perf_counter()
+        names, detections, found_size = read_detection_views(args, board, 1)
+        if size is not None and tuple(size) != tuple(found_size):
+            raise CLIError(f"{size_source}: image size {size[0]}x{size[1]} px, but --image-size "
+                           f"says {found_size[0]}x{found_size[1]} px")
+        repeats = repeated_views(detections, views=(0,))
+        detections = trust.without(detections, sorted({r["pose"] for r in repeats}))
+        return (names, None, found_size, detections, {"read": time.perf_counter() - t},
+                repeat_lines(repeats, names, ("",)))
     files = photo_files(args.dir)
     log(f"read {len(files)} photos from {args.dir} …")
     note = encoding_note(files[0], args.encoding)
@@ -86,6 +99,8 @@ def read_and_detect(args, board, log, size=None, size_source=""):
                             [[px, empty[1]] for _, px in found_all])
     timings["detect"] = time.perf_counter() - t
     names = [os.path.basename(f) for f in files]
+    repeats = repeated_views(detections, views=(0,))
+    detections = trust.without(detections, sorted({r["pose"] for r in repeats}))
     found = detections.found(VIEW)
     if not found:
         squares = "x".join(map(str, board.squares))
@@ -94,7 +109,7 @@ def read_and_detect(args, board, log, size=None, size_source=""):
     charuco = trust.charuco_check(board, [images[k] for k in found])
     if charuco:
         raise CLIError(f"{where}: {charuco}")
-    return names, images, size, detections, timings
+    return names, images, size, detections, timings, repeat_lines(repeats, names, ("",))
 
 
 def calibrate_single(args, output, log, start, board) -> tuple[dict, str]:
@@ -104,7 +119,7 @@ def calibrate_single(args, output, log, start, board) -> tuple[dict, str]:
                                          calibrate_fisheye, camera_residuals)
 
     where = f"{args.dir} (one camera's photos)"
-    names, images, size, detections, timings = read_and_detect(args, board, log)
+    names, images, size, detections, timings, repeats = read_and_detect(args, board, log)
     lens = args.lens or DEFAULT_LENS_MODEL
     corners = board.corners().astype(np.float32)
 
@@ -141,6 +156,9 @@ def calibrate_single(args, output, log, start, board) -> tuple[dict, str]:
     timings["leave_one_out"] = time.perf_counter() - t
     report = _report(args, board, names, size, detections, used_detections, result, outliers,
                      camera, sigmas, result["problem"])
+    report["repeats"] = repeats
+    report["warnings"] += [f"{line}: left out (a photo given twice is one pose)"
+                           for line in repeats]
     for key, value in spread.items():
         report["camera"][key]["sigma_photos"] = value
     report["timings_s"] = timings

@@ -80,7 +80,7 @@ def calibrate_single_housing(args, output, log, start, board, intrinsics, start_
 
     where = f"{args.dir} (one camera's photos)"
     camera = intrinsics["camera"]
-    names, images, size, detections, timings = read_and_detect(
+    names, images, size, detections, timings, repeats = read_and_detect(
         args, board, log, camera.size, f"--intrinsics {args.intrinsics}")
 
     def fit(dets):
@@ -92,7 +92,8 @@ def calibrate_single_housing(args, output, log, start, board, intrinsics, start_
     t = time.perf_counter()
     try:
         housing, used_detections, outliers = trust.fit_without_outliers(
-            fit, lambda r: r.rms_px_per, detections, lambda r: r.residuals, board)
+            fit, lambda r: r.rms_px_per, detections, lambda r: r.residuals, board,
+            lambda r: r.identifiable)
     except CalibrationError as exc:
         raise CLIError(f"{where}: {exc}; nothing written") from None
     timings["bundle_adjustment"] = time.perf_counter() - t
@@ -119,6 +120,9 @@ def calibrate_single_housing(args, output, log, start, board, intrinsics, start_
                      intrinsics, {"rms_px": float(absorbed[0]), "model": model, "tried": tried,
                                   "cross_validation": validation}, dome)
     report["in_air_dependence"] = in_air_dependence(housing, intrinsics)
+    report["repeats"] = repeats
+    report["warnings"] += [f"{line}: left out (a photo given twice is one pose)"
+                           for line in repeats]
     report["timings_s"] = timings
     log("write the calibration, report and figures …")
     with output.staged() as tmp:

@@ -88,16 +88,18 @@ def analytic_absorbed_calibration(rig, seed: int = 0, board: Board | None = None
 
 
 def calibrate_absorbed(board: Board, detections: Detections, size,
-                       lens_model: str = ABSORBED_LENS_MODEL):
+                       lens_model: str = ABSORBED_LENS_MODEL, stereo_intrinsics: str = "fixed"):
     """The absorbed calibration of underwater board ``detections``: both cameras with one lens
-    model (``auto``: :data:`ABSORBED_LENS_MODEL`) and the stereo pose. Returns
-    ``(AirCalibration, {model: stereo RMS px or None where the fit failed})``; raises
+    model (``auto``: :data:`ABSORBED_LENS_MODEL`) and the stereo pose (``stereo_intrinsics``:
+    :data:`measure.calibration.air.STEREO_INTRINSICS`). Returns ``(AirCalibration, {model:
+    stereo RMS px or None where the fit failed})``; raises
     :class:`measure.calibration.air.CalibrationError` when no model gives a stereo fit."""
     order = LENS_MODEL_ORDER if lens_model == "auto" else (lens_model,)
     best, stereo_rms, failures = None, {}, []
     for model in order:
         try:
-            air = calibrate_in_air(board, detections, size, lens_model=model)
+            air = calibrate_in_air(board, detections, size, lens_model=model,
+                                   stereo_intrinsics=stereo_intrinsics)
         except CalibrationError as exc:
             stereo_rms[model] = None
             failures.append(f"{model}: {exc}")

@@ -34,7 +34,9 @@ import numpy as np
 
 from .corners import check_grid, corner_spacing, refine_corners
 
-BOARD_KINDS = ("chessboard", "charuco")
+BOARD_KINDS = ("chessboard", "charuco", "circles", "acircles")
+#: The circle grids: OpenCV's symmetric (``circles``) and asymmetric (``acircles``) grids.
+CIRCLE_KINDS = ("circles", "acircles")
 CHARUCO_DICTIONARY = "DICT_5X5_1000"
 #: Texels per square of the printed pattern as renderers use it (ChArUco marker bits stay whole
 #: texels).
@@ -63,13 +65,18 @@ class BoardError(ValueError):
 class Board:
     """A planar calibration board (see module docs). ``squares`` = (cols, rows);
     ``square_mm`` the side of one square; ``marker_ratio`` the ArUco marker side over the
-    square side and ``dictionary`` OpenCV's predefined ArUco dictionary (ChArUco only)."""
+    square side and ``dictionary`` OpenCV's predefined ArUco dictionary (ChArUco only).
+    A circle grid (:data:`CIRCLE_KINDS`): ``squares`` = (dots per row, rows), OpenCV's
+    ``patternSize``; ``square_mm`` the grid's pitch (OpenCV's object points: ``(j·s, i·s)``,
+    asymmetric ``((2j + i mod 2)·s, i·s)``, the first dot at the origin); ``circle_mm`` the
+    dots' diameter (0: not given; their eccentricity is then not corrected)."""
 
     kind: str = "chessboard"
     squares: tuple = (11, 8)
     square_mm: float = 40.0
     marker_ratio: float = 0.5
     dictionary: str = CHARUCO_DICTIONARY
+    circle_mm: float = 0.0
 
     def __post_init__(self):
         if self.kind not in BOARD_KINDS:
@@ -79,8 +86,16 @@ class Board:
         except (TypeError, ValueError):
             raise BoardError(f"board squares must be two integers (cols, rows), got "
                              f"{self.squares!r}") from None
-        if cols < 3 or rows < 3 or cols > 100 or rows > 100:
-            raise BoardError(f"board squares must be 3..100 each, got {cols}x{rows}")
+        least = 2 if self.kind in CIRCLE_KINDS else 3
+        if cols < least or rows < least or cols > 100 or rows > 100:
+            what = "dots per row and rows" if self.kind in CIRCLE_KINDS else "board squares"
+            raise BoardError(f"{what} must be {least}..100 each, got {cols}x{rows}")
+        if not (np.isfinite(self.circle_mm) and self.circle_mm >= 0):
+            raise BoardError(f"dot diameter must be positive, got {self.circle_mm!r} mm")
+        if self.kind in CIRCLE_KINDS and self.circle_mm >= self.square_mm * (
+                2 if self.kind == "acircles" else 1):
+            raise BoardError(f"dots of {self.circle_mm:g} mm do not fit a pitch of "
+                             f"{self.square_mm:g} mm")
         if not (np.isfinite(self.square_mm) and self.square_mm > 0):
             raise BoardError(f"square size must be positive, got {self.square_mm!r} mm")
         if not 0.1 <= self.marker_ratio <= 0.9:
@@ -92,6 +107,7 @@ class Board:
         object.__setattr__(self, "squares", (cols, rows))
         object.__setattr__(self, "square_mm", float(self.square_mm))
         object.__setattr__(self, "marker_ratio", float(self.marker_ratio))
+        object.__setattr__(self, "circle_mm", float(self.circle_mm))
 
     # --- geometry -----------------------------------------------------------------------------
     @property
@@ -101,12 +117,20 @@ class Board:
 
     @property
     def n_corners(self) -> int:
+        """The board's points: inner corners, or a circle grid's dots."""
+        if self.kind in CIRCLE_KINDS:
+            return self.squares[0] * self.squares[1]
         return (self.squares[0] - 1) * (self.squares[1] - 1)
 
     def corners(self) -> np.ndarray:
-        """Inner corners ``(n_corners, 3)`` in the board frame (mm), in id order."""
+        """Inner corners (a circle grid: its dots' centres) ``(n_corners, 3)`` in the board
+        frame (mm), in id order."""
         if self.kind == "charuco":
             return np.asarray(self._charuco().getChessboardCorners(), dtype=np.float64)
+        if self.kind in CIRCLE_KINDS:
+            i, j = (g.ravel() for g in np.mgrid[0:self.squares[1], 0:self.squares[0]])
+            x = 2 * j + i % 2 if self.kind == "acircles" else j
+            return np.column_stack([x, i, np.zeros(i.size)]).astype(np.float64) * self.square_mm
         cols, rows = self.squares
         j, i = np.meshgrid(np.arange(1, cols), np.arange(1, rows))
         return np.column_stack([j.ravel(), i.ravel(), np.zeros(j.size)]) * self.square_mm
@@ -126,6 +150,12 @@ class Board:
 
     # --- the pattern --------------------------------------------------------------------------
     def pattern(self, px_per_square: int) -> np.ndarray:
+        """The printed sheet (module docs below); a chessboard or ChArUco board only."""
+        if self.kind in CIRCLE_KINDS:
+            raise BoardError("a circle grid is not rendered here (chessboard or charuco)")
+        return self._squares_pattern(px_per_square)
+
+    def _squares_pattern(self, px_per_square: int) -> np.ndarray:
         """The printed sheet, uint8 ``(rows·p + 2p, cols·p + 2p)`` (black 0, white 255): the
         squares inside a white border one square wide (the corners on the outer rows stay
         X-junctions, not T-junctions against a dark background); pixel edges fall on the
@@ -191,6 +221,9 @@ class Board:
                         "the printed side; mm")
         if self.kind != "charuco":  # a chessboard has no markers: its file says nothing of them
             del out["dictionary"]
+            del out["marker_ratio"]
+        if self.kind not in CIRCLE_KINDS:
+            del out["circle_mm"]
         return out
 
     @classmethod
@@ -199,7 +232,8 @@ class Board:
             return cls(kind=data["kind"], squares=tuple(data["squares"]),
                        square_mm=float(data["square_mm"]),
                        marker_ratio=float(data.get("marker_ratio", 0.5)),
-                       dictionary=str(data.get("dictionary", CHARUCO_DICTIONARY)))
+                       dictionary=str(data.get("dictionary", CHARUCO_DICTIONARY)),
+                       circle_mm=float(data.get("circle_mm", 0.0)))
         except (KeyError, TypeError, ValueError) as exc:
             if isinstance(exc, BoardError):
                 raise
@@ -208,31 +242,42 @@ class Board:
     # --- detection ----------------------------------------------------------------------------
     @property
     def symmetric(self) -> bool:
-        """Whether the board looks the same turned by 180° (a chessboard of odd × odd or
-        even × even squares): one photo cannot tell its corner 0 from its last; see
-        :meth:`symmetries`."""
-        return self.kind == "chessboard" and sum(self.squares) % 2 == 0
+        """Whether the board looks the same turned (a chessboard of odd × odd or even × even
+        squares, a symmetric circle grid): one photo cannot tell its corner 0 from its last;
+        see :meth:`symmetries`."""
+        return len(self.symmetries()) > 1
 
     def symmetries(self) -> list:
-        """The renumberings of the corners that a photo cannot tell apart, ``[(ids (n,), R
-        (3, 3), t (3,))]``: corner ``i`` may be the board's ``ids[i]``, which is the board turned
-        by ``X' = R X + t`` (board frame, mm). The identity first; a symmetric chessboard adds
-        the turn by 180° about its centre (a square one, cols = rows, the turns by 90° too)."""
-        n = self.n_corners
-        out = [(np.arange(n), np.eye(3), np.zeros(3))]
-        if not self.symmetric:
+        """The renumberings of the points that a photo cannot tell apart, ``[(ids (n,), R
+        (3, 3), t (3,))]``: point ``i`` may be the board's ``ids[i]``, which is the board turned
+        by ``X' = R X + t`` (board frame, mm). The identity first, then each turn by 90°, 180°
+        or 270° about the points' centre that maps the board onto itself (a chessboard's
+        squares' colours too; a ChArUco board's markers never)."""
+        points = self.corners()
+        out = [(np.arange(len(points)), np.eye(3), np.zeros(3))]
+        if self.kind == "charuco":
             return out
-        cols, rows = self.squares[0] - 1, self.squares[1] - 1
-        centre = np.array([self.squares[0], self.squares[1], 0.0]) * self.square_mm / 2
-        i, j = np.divmod(np.arange(n), cols)
-        turns = [(180, (rows - 1 - i) * cols + (cols - 1 - j))]
-        if cols == rows:
-            turns += [(90, j * cols + (cols - 1 - i)), (270, (rows - 1 - j) * cols + i)]
-        for degrees, ids in turns:
+        from scipy.spatial import cKDTree
+
+        centre = points.mean(axis=0)
+        tree = cKDTree(points[:, :2])
+        for degrees in (180, 90, 270):
             c, s = np.cos(np.radians(degrees)), np.sin(np.radians(degrees))
-            R = np.array([[c, -s, 0], [s, c, 0], [0, 0, 1.0]])
-            out.append((ids, R, centre - R @ centre))
+            R = np.array([[np.rint(c), -np.rint(s), 0], [np.rint(s), np.rint(c), 0], [0, 0, 1.0]])
+            t = centre - R @ centre
+            distance, ids = tree.query((points @ R.T + t)[:, :2])
+            if np.all(distance < 1e-6 * self.square_mm) and len(set(ids)) == len(ids) and (
+                    self.kind != "chessboard" or self._colours_kept(R)):
+                out.append((ids, R, t))
         return out
+
+    def _colours_kept(self, R) -> bool:
+        """Whether turning a chessboard by ``R`` (about its centre) keeps black squares black:
+        a turn by 180° does when cols + rows is even, by 90° (cols = rows) when cols is odd."""
+        cols, rows = self.squares
+        if abs(R[0, 0] + 1) < 1e-9:  # 180°
+            return (cols + rows) % 2 == 0
+        return cols % 2 == 1
 
     def detect(self, image: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Corners of the board in a single-channel image (any dtype; linear values — a photo
@@ -252,6 +297,8 @@ class Board:
             if ids is None or len(ids) < MIN_CORNERS:
                 return np.empty(0, int), np.empty((0, 2))
             return ids.ravel().astype(int), corners.reshape(-1, 2).astype(np.float64)
+        if self.kind in CIRCLE_KINDS:
+            return self._detect_dots(image)
         cols, rows = self.squares[0] - 1, self.squares[1] - 1
         view = detector_view(image)
         for uv in grid_candidates(view, (cols, rows)):
@@ -263,6 +310,34 @@ class Board:
                 return ids, refined[ids]
         return np.empty(0, int), np.empty((0, 2))
 
+    def _detect_dots(self, image) -> tuple[np.ndarray, np.ndarray]:
+        """A circle grid's dots (:mod:`measure.calibration.circles`): OpenCV's grid, numbered
+        as the board (a grid seen mirrored — its rows running the other way round the first
+        dot than the board's — renumbered row by row backwards; a symmetric grid from the dot
+        nearest the image's top-left), each centre measured on the linear image."""
+        from .circles import find_circle_grid, refine_dot_centres
+
+        found = find_circle_grid(detector_view(image), self.squares, self.kind == "acircles")
+        if found is None:
+            return np.empty(0, int), np.empty((0, 2))
+        uv, light = found
+        cols, rows = self.squares
+        if _handedness(uv, self.corners()) < 0 and self.kind == "circles":
+            uv = uv.reshape(rows, cols, 2)[::-1].reshape(-1, 2)
+        if self.symmetric:
+            uv = self._canonical(uv)
+        refined, ok = refine_dot_centres(image, uv, corner_spacing(uv), light)
+        ids = np.flatnonzero(ok)
+        if ids.size < MIN_CORNERS:
+            return np.empty(0, int), np.empty((0, 2))
+        return ids, refined[ids]
+
+    def _canonical(self, uv) -> np.ndarray:
+        """Of the numberings :meth:`symmetries` allows, the one whose point 0 lies nearest the
+        image's top-left (smallest u + v, then v)."""
+        candidates = [uv[np.argsort(ids)] for ids, _, _ in self.symmetries()]
+        return min(candidates, key=lambda c: (float(c[0].sum()), float(c[0][1])))
+
     def _oriented(self, gray, uv) -> np.ndarray:
         """A detector's grid ``uv`` numbered as the board: turned by 180° where the squares
         between its corners are light where the board's are black
@@ -270,11 +345,30 @@ class Board:
         can orient, numbered from the corner nearest the image's top-left (the pair's and the
         rig's calibrations settle the turn between cameras by their consistency)."""
         if self.symmetric:
-            candidates = [uv[ids] for ids, _, _ in self.symmetries()]
-            return min(candidates, key=lambda c: (float(c[0].sum()), float(c[0][1])))
+            return self._canonical(uv)
         if square_parity_contrast(gray, uv, self.squares) < 0:
             return uv[::-1].copy()
         return uv
+
+
+def _handedness(uv, points) -> float:
+    """The sign with which the image ``uv`` of board ``points`` (the same order) turns: +1 when
+    the board is seen from its printed side (x then y of the board turn as u then v of the
+    image), −1 mirrored; from the signed areas of the two point sets."""
+    # the signed area of the points taken in id order round their hull, image against board
+    order = _hull_order(points)
+    return float(np.sign(_signed_area(uv[order]) * _signed_area(points[order, :2])))
+
+
+def _hull_order(points) -> np.ndarray:
+    """Ids of the board points on their convex hull, in the hull's order."""
+    xy = np.ascontiguousarray(np.asarray(points, np.float32)[:, :2])
+    return cv2.convexHull(xy, returnPoints=False).ravel()
+
+
+def _signed_area(polygon) -> float:
+    x, y = np.asarray(polygon, np.float64)[:, 0], np.asarray(polygon, np.float64)[:, 1]
+    return float(np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y) / 2)
 
 
 #: The seed of OpenCV's random generator before each ``findChessboardCornersSB`` call: the
@@ -369,6 +463,6 @@ def to_uint8(image: np.ndarray) -> np.ndarray:
     return np.clip(np.rint(a * (255.0 / white)), 0, 255).astype(np.uint8)
 
 
-__all__ = ["BOARD_KINDS", "Board", "BoardError", "DETECTION_WIDTH_PX", "LAYOUT_TOLERANCE",
+__all__ = ["BOARD_KINDS", "Board", "CIRCLE_KINDS", "BoardError", "DETECTION_WIDTH_PX", "LAYOUT_TOLERANCE",
            "MARKER_TOLERANCE", "MIN_CORNERS", "PATTERN_TEXELS_PER_SQUARE", "detector_view",
            "grid_candidates", "square_parity_contrast", "to_uint8"]

@@ -93,8 +93,9 @@ class HousingCalibration:
     ``correlation`` of the free numbers; ``poses`` ``[(R, t), …]`` of the boards;
     ``rms_px`` overall and ``rms_px_per`` ``{(pose, view): rms}``; ``residuals`` per view
     ``(pose, id, du, dv)`` rows; ``identifiable`` / ``reason``; ``pose_ids`` the numbers of
-    the poses used (``poses[i]`` is pose ``pose_ids[i]``). RMS values are per corner, of the
-    2D residual length."""
+    the poses used (``poses[i]`` is pose ``pose_ids[i]``); ``fitted`` the rig where the
+    adjustment stopped (also when not identifiable: ``rig`` is then the start). RMS values are
+    per corner, of the 2D residual length."""
 
     rig: StereoRig
     estimates: dict
@@ -117,6 +118,7 @@ class HousingCalibration:
     covariance: RigCovariance | None = None
     sigmas_conditional: dict = field(default_factory=dict)
     uncertainty: str = "conditional"
+    fitted: StereoRig | None = None
 
 
 
@@ -163,9 +165,7 @@ def calibrate_housing(rig: StereoRig, board: Board, detections: Detections,
     obs, usable, P, n_global, basis, m = (problem.obs, problem.usable, problem.P,
                                           problem.n_global, problem.basis, problem.m)
     rms_start = float(np.sqrt(np.mean(residuals(x0) ** 2)))
-    fit = least_squares(residuals, x0, jac=problem.jacobian, method="trf", x_scale="jac",
-                        bounds=(lower, upper), xtol=1e-12, ftol=1e-12, gtol=1e-12, max_nfev=300,
-                        tr_solver="lsmr", tr_options={"atol": 1e-14, "btol": 1e-14})
+    fit = _least_squares(residuals, problem.jacobian, x0, lower, upper, m)
     r = fit.fun
     J = fit.jac.toarray() if hasattr(fit.jac, "toarray") else np.asarray(fit.jac)
     dof = max(r.size - x0.size, 1)
@@ -182,7 +182,7 @@ def calibrate_housing(rig: StereoRig, board: Board, detections: Detections,
                 rms_px_start=rms_start * np.sqrt(2),
                 converged=bool(fit.status > 0), n_observations=m // 2, nfev=int(fit.nfev),
                 message=str(fit.message), normal_axes=tuple(b.tolist() for b in basis),
-                pose_ids=tuple(usable))
+                pose_ids=tuple(usable), fitted=StereoRig(cameras[0], cameras[1], port))
     base["residuals"] = _detected_numbers(base["residuals"], turns, board)
     relative = eigval / eigval[-1] if eigval[-1] > 0 else np.zeros_like(eigval)
     if relative[0] < IDENTIFIABILITY_LIMIT:
@@ -256,10 +256,32 @@ def calibrate_housing(rig: StereoRig, board: Board, detections: Detections,
                              else sig_conditional[k:k + w].tolist())
         k += w
     calibrated = StereoRig(cameras[0], cameras[1], port)
+    base["fitted"] = calibrated
     return HousingCalibration(rig=calibrated, estimates=estimates, sigmas=sigmas,
                               correlation=correlation, identifiable=True, reason="",
                               covariance=rig_cov, sigmas_conditional=conditional,
                               uncertainty=uncertainty if air else "conditional", **base)
+
+
+#: The trust-region steps are solved exactly (dense SVD) while the Jacobian has at most this
+#: many columns and entries; beyond, by LSMR on the sparse Jacobian. LSMR's inexact steps
+#: stalled on an ill-conditioned real rig (the Minions pair, f ≈ 12,000 px: 18 px where the
+#: exact steps reach 0.69 px, the stereo pose freed) and cost nothing there.
+DENSE_COLUMNS, DENSE_ENTRIES = 400, 8_000_000
+
+
+def _least_squares(residuals, jacobian, x0, lower, upper, m):
+    """``scipy.optimize.least_squares`` (trf, Jacobian-scaled) of the housing problem."""
+    common = dict(method="trf", x_scale="jac", bounds=(lower, upper), xtol=1e-12, ftol=1e-12,
+                  gtol=1e-12, max_nfev=300)
+    if x0.size <= DENSE_COLUMNS and x0.size * m <= DENSE_ENTRIES:
+        def dense(x):
+            J = jacobian(x)
+            return J.toarray() if hasattr(J, "toarray") else np.asarray(J)
+
+        return least_squares(residuals, x0, jac=dense, tr_solver="exact", **common)
+    return least_squares(residuals, x0, jac=jacobian, tr_solver="lsmr",
+                         tr_options={"atol": 1e-14, "btol": 1e-14}, **common)
 
 
 def _residual_summary(r, obs, usable) -> dict:

@@ -5,10 +5,11 @@ camera does not care (each photo has its own pose). A rig settles it by its cons
 turn that makes a pose agree with the rig is the board's.
 
 In air (:func:`settle_in_air`): each candidate turn of the right camera's board pose gives
-that pose's own stereo pose; the candidates of all poses are pooled, their medoid (the one
-with the smallest median distance to the others) is the rig's stereo pose — every pose has
-one candidate near it, the wrong ones lie turned by 180° about the board's normal — and each
-pose keeps the candidate nearest it. Underwater (:func:`settle_by_rig`): the board's pose from
+that pose's own stereo pose; the medoid of the poses' stereo poses as numbered by the
+detector (the one with the smallest median distance to the others: most poses are numbered
+alike by both cameras) is the rig's stereo pose, and each pose keeps the turn whose stereo pose
+lies nearest it (a wrong turn is off by the turn's angle about the board's normal).
+Underwater (:func:`settle_by_rig`): the board's pose from
 the left camera's corners (``cv2.solvePnP``, the port ignored: a wrong turn moves the corners
 by the board's size) predicts the right camera's corners through the rig; each pose keeps the
 turn that predicts them best.
@@ -69,7 +70,10 @@ def settle_in_air(board: Board, left: dict, right: dict) -> dict:
     gaps = np.linalg.norm(translations[:, None] - translations[None], axis=2)
     scale = max(float(np.median(np.linalg.norm(translations, axis=1))), 1e-9)
     distance = angles + gaps / scale  # radians and baselines: both about one at a wrong turn
-    medoid = int(np.argmin(np.median(distance, axis=1)))
+    # the rig's pose: the medoid of the numberings as found (most poses are numbered alike in
+    # both cameras; boards facing the rig alike make each wrong turn a tight cluster too)
+    found = [i for i, (_, s) in enumerate(owner) if s == 0]
+    medoid = found[int(np.argmin(np.median(distance[np.ix_(found, found)], axis=1)))]
     best = {}
     for i, (k, s) in enumerate(owner):
         if k not in best or distance[i, medoid] < distance[best[k][1], medoid]:

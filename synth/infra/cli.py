@@ -286,24 +286,33 @@ def add_progress_option(parser) -> None:
 
 
 #: ``dest`` names of the board options (:func:`add_board_options`).
-BOARD_OPTIONS = ("board", "squares", "inner_corners", "square_mm", "marker_mm", "dictionary")
+BOARD_OPTIONS = ("board", "squares", "inner_corners", "square_mm", "marker_mm", "dictionary",
+                 "circles", "pitch_mm")
+#: The options of a chessboard or ChArUco board, and of a circle grid.
+SQUARE_OPTIONS = ("squares", "inner_corners", "square_mm", "marker_mm", "dictionary")
+CIRCLE_OPTIONS = ("circles", "pitch_mm")
 #: The board ``synth boards`` renders when none is given.
 DEFAULT_BOARD = {"board": "chessboard", "squares": "11x8", "square_mm": 40.0}
 
 
-def add_board_options(parser, defaults: bool = True, needed: str = "") -> None:
+def add_board_options(parser, defaults: bool = True, needed: str = "",
+                      circles: bool = False) -> None:
     """The board of ``synth boards`` and ``eval calibrate``: ``--board chessboard|charuco
     --squares COLSxROWS --square-mm S [--marker-mm M --dictionary NAME]`` (:func:`board_from_args`
     builds the :class:`measure.calibration.board.Board`). With ``defaults`` False nothing has a default
-    (``needed`` says when they are required)."""
+    (``needed`` says when they are required). ``circles``: the circle grids too (``--board
+    circles|acircles --circles COLSxROWS --pitch-mm P``)."""
     def default(name):
         return DEFAULT_BOARD[name] if defaults else None
 
     def said(name, unit=""):
         return f"default {DEFAULT_BOARD[name]}{unit}" if defaults else needed
 
-    parser.add_argument("--board", choices=("chessboard", "charuco"), default=default("board"),
-                        help="board kind (default chessboard)")
+    kinds = ("chessboard", "charuco") + (("circles", "acircles") if circles else ())
+    parser.add_argument("--board", choices=kinds, default=default("board"),
+                        help="board kind (default chessboard)" + (
+                            "; circles, acircles: OpenCV's symmetric and asymmetric circle "
+                            "grids (findCirclesGrid)" if circles else ""))
     parser.add_argument("--squares", default=default("squares"), metavar="COLSxROWS",
                         help=f"squares of the board, COLSxROWS ({said('squares')}); or "
                              f"--inner-corners")
@@ -317,6 +326,13 @@ def add_board_options(parser, defaults: bool = True, needed: str = "") -> None:
     parser.add_argument("--dictionary", default=None,
                         help="ChArUco only: OpenCV's predefined ArUco dictionary (default "
                              "DICT_5X5_1000)")
+    if circles:
+        parser.add_argument("--circles", default=None, metavar="COLSxROWS",
+                            help="circle grid: dots per row x rows, OpenCV's pattern size "
+                                 "(e.g. 4x11 for its asymmetric sample)")
+        parser.add_argument("--pitch-mm", type=positive_float, default=None,
+                            help="circle grid: OpenCV's spacing s, mm (dots at (j·s, i·s); "
+                                 "asymmetric ((2j + i mod 2)·s, i·s))")
 
 
 def board_from_args(args):
@@ -325,6 +341,9 @@ def board_from_args(args):
     from measure.calibration.board import CHARUCO_DICTIONARY, Board, BoardError
 
     kind = args.board or DEFAULT_BOARD["board"]
+    if kind in ("circles", "acircles"):
+        return _circle_board(args, kind)
+    refuse_given(args, CIRCLE_OPTIONS, f"to a {kind} (circle grids only)")
     inner = getattr(args, "inner_corners", None)
     if inner is not None and given(args, "squares"):
         raise CLIError(f"--squares {args.squares} and --inner-corners {inner}: give one (a board "
@@ -348,6 +367,25 @@ def board_from_args(args):
     try:
         return Board(kind, (cols, rows), args.square_mm, ratio,
                      args.dictionary or CHARUCO_DICTIONARY)
+    except BoardError as exc:
+        raise CLIError(str(exc)) from None
+
+
+def _circle_board(args, kind: str):
+    """:func:`board_from_args` of a circle grid."""
+    from measure.calibration.board import Board, BoardError
+
+    refuse_given(args, SQUARE_OPTIONS, f"to a circle grid (--board {kind}: give --circles "
+                                       f"and --pitch-mm)")
+    if args.circles is None or args.pitch_mm is None:
+        raise CLIError(f"--board {kind}: give --circles COLSxROWS (dots per row x rows) and "
+                       f"--pitch-mm")
+    try:
+        cols, rows = (int(v) for v in str(args.circles).lower().split("x"))
+    except ValueError:
+        raise CLIError(f"--circles must be COLSxROWS (e.g. 4x11), got {args.circles!r}") from None
+    try:
+        return Board(kind, (cols, rows), args.pitch_mm)
     except BoardError as exc:
         raise CLIError(str(exc)) from None
 

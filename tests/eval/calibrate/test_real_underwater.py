@@ -148,3 +148,86 @@ def test_sixer_dome(sixer_air, tmp_path):
     centre = report["estimates"]["dome_center"]
     assert np.linalg.norm(centre["estimate"]) < 10
     assert all(0 < s < 5 for s in centre["sigma"])
+
+
+# --- minions_uw_stereo: a real underwater stereo rig's circle-grid detections, no photos -----
+MINIONS = ("--detections", "--image-size", "2592x1944", "--board", "circles", "--circles",
+           "26x26", "--pitch-mm", "1")
+
+
+@pytest.fixture(scope="module")
+def minions(tmp_path_factory):
+    """The 9 pairs' detection files as a pair's folder (``left/pairK.txt``: the authors'
+    ``cam_1_K.txt``, ``right/``: ``cam_2_K.txt``) and the same rig's in-air MATLAB calibration
+    (decoded in the set's ``params_decoded.json``) as a calib.yaml without a port."""
+    from measure import Camera, StereoRig
+    from measure.geometry.port import index_matched_port
+    from synth.products.dataset import write_calib
+
+    tmp = tmp_path_factory.mktemp("minions")
+    source = ROOT / "minions_uw_stereo"
+    for side, camera in (("left", 1), ("right", 2)):
+        (tmp / "dets" / side).mkdir(parents=True)
+        for k in range(1, 10):
+            text = (source / "detections" / f"cam_{camera}_{k}.txt").read_text()
+            (tmp / "dets" / side / f"pair{k}.txt").write_text(text)
+    air = json.loads((source / "matlab_params" / "params_decoded.json").read_text())["air"]
+    size = (2592, 1944)
+    R, T = (np.asarray(air["stereo"][key], np.float64)
+            for key in ("R_opencv_cam1_to_cam2", "t_opencv"))
+    u, _, vt = np.linalg.svd(R)
+    R = u @ vt                      # the decoded matrix to 8 digits: made a rotation exactly
+
+    def camera(name, R=None, t=None):
+        k1, k2 = air[name]["radial_k1k2"]
+        return Camera(np.asarray(air[name]["K_opencv"]), size, [k1, k2, 0, 0, 0], R, t)
+
+    left, right = camera("camera1"), camera("camera2", R.T, -R.T @ T)
+    write_calib(tmp / "air.yaml", StereoRig(left, right, index_matched_port(
+        (0, 0, 1), np.stack([left.t, right.t]))), has_port=False)
+    return tmp
+
+
+def test_minions_absorbed_fit_and_repeats(minions, capsys):
+    """Read without photos; pairs 7 and 9 repeat 3 and 1, pair 8's right file is pair 2's:
+    named and left out; the absorbed stereo fit of the 6 independent pairs (k1 k2, the
+    intrinsics refined in the stereo fit, as MATLAB's calibrator and OpenCV's reproduction
+    in the set's README do): 0.49 ± 0.02 px, baseline 144.4 ± 0.5 units, 24.3 ± 0.2°."""
+    out = minions / "absorbed"
+    assert _run(["calibrate", str(minions / "dets"), *MINIONS, "--model", "absorbed",
+                 "--lens", "radial", "--stereo-intrinsics", "refined", "--out", str(out)]) == 0
+    printed = capsys.readouterr().out
+    for line in ("pair7 repeats pair3 (both photos)", "pair8's right photo repeats pair2's",
+                 "pair9 repeats pair1 (both photos)"):
+        assert line in printed
+    report = _report(out)
+    assert report["poses"]["stereo"] == 6
+    assert abs(report["stereo_rms_px"] - 0.49) <= 0.02
+    assert abs(report["baseline_mm"] - 144.4) <= 0.5
+    assert abs(report["rotation_deg"] - 24.3) <= 0.2
+
+
+def test_minions_in_air_rig_held_is_inconsistent(minions, capsys):
+    """With the in-air intrinsics and stereo pose held, a flat port per camera leaves about
+    4 px where each camera alone fits at about 0.2 px: exit 1 naming the stereo pose, nothing
+    written."""
+    out = minions / "held"
+    assert _run(["calibrate", str(minions / "dets"), *MINIONS, "--intrinsics",
+                 str(minions / "air.yaml"), "--port-distance", "20,20", "--out", str(out)]) == 1
+    err = capsys.readouterr().err
+    assert "the in-air stereo pose does not describe these photos" in err
+    held = float(err.split("the ports leave ")[1].split(" px")[0])
+    assert 3.0 < held < 5.0 and not out.exists()
+
+
+def test_minions_freed_stereo_pose_is_not_unique(minions, capsys):
+    """The stereo pose freed: fits of 0.75 px or less from several starts, with port distances
+    far apart: exit 1 saying the solution is not unique."""
+    out = minions / "freed"
+    assert _run(["calibrate", str(minions / "dets"), *MINIONS, "--intrinsics",
+                 str(minions / "air.yaml"), "--port-distance", "20,20", "--free",
+                 "distance,normal,extrinsics", "--out", str(out)]) == 1
+    err = capsys.readouterr().err
+    assert "the solution is not unique" in err
+    worst = float(err.split("fits that leave ")[1].split("–")[1].split(" px")[0])
+    assert worst <= 0.75

@@ -42,7 +42,7 @@ def test_board_validation():
     assert Board("chessboard", (9, 7)).symmetric and Board("chessboard", (8, 6)).symmetric
     assert not Board("chessboard", (10, 7)).symmetric and not Board("charuco", (8, 6)).symmetric
     with pytest.raises(BoardError, match="kind"):
-        Board("circles")
+        Board("dots")
     with pytest.raises(BoardError, match="square size"):
         Board(square_mm=0)
     with pytest.raises(BoardError, match="not a board definition"):
