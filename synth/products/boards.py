@@ -40,6 +40,7 @@ from measure.calibration.board import PATTERN_TEXELS_PER_SQUARE, Board, BoardErr
 from measure.geometry.port import index_matched_port
 from measure.geometry.projection import project
 
+from synth.products.board_light import BoardLight
 from synth.products.dataset import (DatasetError, adaptive_settings, check_files, manifest_digest,
                            read_calib, write_calib)
 from synth.infra.fileio import OutputDir, atomic_write_json, file_sha256, jsonable, read_marker
@@ -212,25 +213,36 @@ def _board_local_to_board(board: Board) -> np.ndarray:
                      [0, 0, -1, 0], [0, 0, 0, 1.0]])
 
 
-def build_board_scene(spec: SceneSpec, board: Board, air: bool, variant=None):
+def build_board_scene(spec: SceneSpec, board: Board, air: bool, variant=None,
+                      light: BoardLight | None = None):
     """``(mitsuba_scene, mi, variant)``: the scene's sensors (same order: ``left``, ``right``
     or ``cam0`` …), its port interfaces unless ``air``, and the board (moved by
-    :func:`render_pose`)."""
+    :func:`render_pose`): self-luminous, or with ``light`` (aimed,
+    :meth:`synth.products.board_light.BoardLight.aimed`) printed on diffuse paper and lit by
+    that lamp."""
     from synth.rendering.mitsuba_setup import import_mitsuba
 
     mi, chosen = import_mitsuba(variant)
-    pattern = board.pattern(PATTERN_TEXELS_PER_SQUARE).astype(np.float32)[..., None]
-    pattern /= np.float32(255)
+    pattern = board.pattern(PATTERN_TEXELS_PER_SQUARE)
     sampler = {"type": "multijitter", "sample_count": 4, "seed": 0}
+    if light is None:
+        texture = pattern.astype(np.float32)[..., None] / np.float32(255)
+        surface = {"bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": 0.0}},
+                   "emitter": {"type": "area", "radiance": {
+                       "type": "bitmap", "data": mi.TensorXf(texture), "raw": True,
+                       "filter_type": "nearest"}}}
+    else:
+        surface = {"bsdf": {"type": "diffuse", "reflectance": {
+            "type": "bitmap", "data": mi.TensorXf(light.reflectance(pattern)), "raw": True,
+            "filter_type": "nearest"}}}
     scene = {"type": "scene",
              "integrator": {"type": "path", "max_depth": int(float(spec.params.get("max_depth", 8)))},
              **{name: sensor_dict(mi, camera, sampler)
                 for name, camera in zip(spec.camera_names, spec.all_cameras)},
              "board": {"type": "rectangle", "to_world": mi.ScalarTransform4f(np.eye(4).tolist()),
-                       "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": 0.0}},
-                       "emitter": {"type": "area", "radiance": {
-                           "type": "bitmap", "data": mi.TensorXf(pattern), "raw": True,
-                           "filter_type": "nearest"}}}}
+                       **surface}}
+    if light is not None:
+        scene["lamp"] = light.emitter_dict(mi, spec.all_cameras[0])
     if not air and spec.has_port:  # the glass as the scene writer makes it, for any port
         scene.update(port_shapes(mi, spec.camera_ports, cameras=spec.all_cameras))
     return mi.load_dict(scene), mi, chosen
@@ -258,15 +270,19 @@ def render_pose(mscene, mi, spec: SceneSpec, board: Board, pose: BoardPose, inde
 # the folder
 # ---------------------------------------------------------------------------------------------
 def request_key(spec: SceneSpec, board: Board, n_poses, spp, seed, air, distance_range,
-                max_tilt_deg, variant, adaptive: bool = True) -> str:
+                max_tilt_deg, variant, adaptive: bool = True,
+                light: BoardLight | None = None) -> str:
     """Hash of everything that determines the folder; the adaptive settings only for an
-    adaptive render (a full-film request keeps the key of earlier folders, rendered so)."""
+    adaptive render (a full-film request keeps the key of earlier folders, rendered so), the
+    lamp only for a lit board (a luminous board keeps the key of before)."""
     request = {"format": FORMAT_VERSION, "scene": spec.sha256, "params": spec.params,
                "board": board.to_dict(), "poses": n_poses, "spp": spp, "seed": seed,
                "air": bool(air), "distance_range": list(distance_range),
                "max_tilt_deg": max_tilt_deg, "variant": variant, "renderer": RENDERER}
     if adaptive:
         request["adaptive"] = adaptive_settings()
+    if light is not None:
+        request["light"] = light.to_dict()
     return hashlib.sha256(json.dumps(request, sort_keys=True).encode()).hexdigest()
 
 
@@ -274,13 +290,18 @@ def write_boards(spec: SceneSpec, out_dir, board: Board, n_poses: int = DEFAULT_
                  spp: int = DEFAULT_SPP, seed: int = 0, air: bool = False,
                  distance_range=None,
                  max_tilt_deg: float = DEFAULT_MAX_TILT_DEG, variant=None,
-                 progress: bool = True, adaptive: bool = True) -> dict:
+                 progress: bool = True, adaptive: bool = True,
+                 light: BoardLight | None = None) -> dict:
     """Render ``n_poses`` stereo pairs of ``board`` and write the folder (module docs). Returns
     the manifest; ``manifest["skipped"]`` when ``out_dir`` already held the same request, whole
     (:meth:`synth.infra.fileio.OutputDir.damage`); ``manifest["rendered_again"]`` why an earlier output
     of the same request was rendered again, or None. ``adaptive`` (default) renders each view
     adaptively, False on the full film (:func:`synth.rendering.render.render_view_counted`); the
-    manifest's ``render`` says how (lit fraction and samples per pose and view)."""
+    manifest's ``render`` says how (lit fraction and samples per pose and view). ``light``: the
+    board printed and lit by that lamp (:mod:`synth.products.board_light`; placed by
+    :meth:`~synth.products.board_light.BoardLight.placed`, its aim by default the left optical
+    axis at the middle of ``distance_range``); ValueError when the
+    lamp is not in the water of a port."""
     from tqdm import tqdm
 
     t_start = time.perf_counter()
@@ -290,8 +311,12 @@ def write_boards(spec: SceneSpec, out_dir, board: Board, n_poses: int = DEFAULT_
         raise ValueError(f"{spec.path}: the scene has no port; render its boards with --air")
     if distance_range is None:
         distance_range = DEFAULT_AIR_DISTANCE_RANGE_MM if air else DEFAULT_DISTANCE_RANGE_MM
+    rig = board_rig(spec, air)
+    if light is not None:
+        light = light.placed(air, 0.5 * sum(distance_range))
+        check_light(rig, light, air)
     key = request_key(spec, board, n_poses, spp, seed, air, distance_range, max_tilt_deg, variant,
-                      adaptive)
+                      adaptive, light)
     output = OutputDir(out_dir, COMMAND)
     damage = None
     if output.exists_as_output() and (read_marker(output.path) or {}).get("request_key") == key:
@@ -305,11 +330,10 @@ def write_boards(spec: SceneSpec, out_dir, board: Board, n_poses: int = DEFAULT_
     output.claim()
     n_views = len(spec.all_cameras)  # pose p renders with seed + N·p (N = 2: seed + 2p)
     check_render_request(spec, spp, seed, poses=-(-n_poses * n_views // 2), adaptive=adaptive)
-    rig = board_rig(spec, air)
     poses = sample_poses(rig, board, n_poses, seed, not air, distance_range, max_tilt_deg)
     times = {}
     t = time.perf_counter()
-    mscene, mi, chosen = build_board_scene(spec, board, air, variant)
+    mscene, mi, chosen = build_board_scene(spec, board, air, variant, light)
     times["load_mitsuba"] = time.perf_counter() - t
     images, stats = [], []
     t = time.perf_counter()
@@ -346,6 +370,7 @@ def write_boards(spec: SceneSpec, out_dir, board: Board, n_poses: int = DEFAULT_
             "request_key": key, "versions": package_versions(),
             "scene": {"path": spec.path, "sha256": spec.sha256, "params": spec.params},
             "air": bool(air), "board": board.to_dict(), "poses": n_poses,
+            **({} if light is None else {"light": _light_record(light, rig)}),
             **({"cameras": list(names)} if len(names) > 2 else {}),
             "distance_range_mm": list(distance_range), "max_tilt_deg": max_tilt_deg,
             "variant": chosen, "integrator": integrator_name(mi, mscene), "spp": spp,
@@ -365,6 +390,27 @@ def write_boards(spec: SceneSpec, out_dir, board: Board, n_poses: int = DEFAULT_
         manifest["manifest_sha256"] = manifest_digest(manifest)
         atomic_write_json(os.path.join(tmp, "manifest.json"), manifest)
     return {**manifest, "skipped": False, "rendered_again": damage}
+
+
+def check_light(rig, light: BoardLight, air: bool) -> None:
+    """ValueError unless the lamp can light the boards: behind a port it must be in the water
+    (a lamp inside the housing would light the board only through the glass, which the
+    renderer's next-event estimation cannot see through)."""
+    position, _ = light.placement(rig.left)
+    wet = (rig.water_side(position[None]) if isinstance(rig, BoardCameras)
+           else rig.port.water_side(position[None]))[0]
+    if not air and not wet:
+        x, y, z = light.position_mm
+        raise ValueError(f"the light at {x:g},{y:g},{z:g} mm (left camera frame) is not in the "
+                         f"water: behind a port it must sit beyond the glass (like a strobe on "
+                         f"an arm); move it farther along z")
+
+
+def _light_record(light: BoardLight, rig) -> dict:
+    """The manifest's ``light``: its options and where it was, in the reference frame."""
+    position, aim = light.placement(rig.left)
+    return {**light.to_dict(), "position_reference_mm": position.tolist(),
+            "aim_reference_mm": aim.tolist()}
 
 
 #: What the manifest keeps of each view's render statistics.
