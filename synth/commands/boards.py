@@ -32,6 +32,7 @@ def add_parser(subparsers) -> None:
                    help="seed of the poses and the renderer, same as -D seed=S (default 0)")
     p.add_argument("--air", action="store_true", help="the same cameras with no port (in air)")
     add_light_options(p)
+    add_camera_options(p)
     p.add_argument("--variant", help="Mitsuba variant (default: automatic)")
     add_full_film_option(p)
     add_define_option(p)
@@ -103,6 +104,48 @@ def light_from_args(args):
         raise CLIError(str(exc)) from None
 
 
+def add_camera_options(p) -> None:
+    """Vignetting, a thin lens and a rolling shutter
+    (:class:`synth.products.board_camera.CameraEffects`), each off by default."""
+    p.add_argument("--vignetting", action="store_true",
+                   help="natural vignetting: each pixel times cos^4 of its ray's angle to the "
+                        "optical axis")
+    p.add_argument("--lens-falloff", type=non_negative_float, default=None, metavar="F",
+                   help="lens (mechanical) vignetting: each pixel times 1 - F (r/r_corner)^2, "
+                        "r from the principal point (0 <= F < 1)")
+    p.add_argument("--aperture-radius", type=positive_float, default=None, metavar="MM",
+                   help="defocus: thin-lens cameras of this aperture radius (mm)")
+    p.add_argument("--focus-distance", type=positive_float, default=None, metavar="MM",
+                   help="with --aperture-radius: the focus distance (mm; default where the "
+                        "middle of --distance appears through the port, paraxially)")
+    p.add_argument("--readout-ms", type=positive_float, default=None, metavar="MS",
+                   help="rolling shutter: the time from the first row to the last (ms); needs "
+                        "--board-velocity; the truth follows each corner's row")
+    p.add_argument("--board-velocity", type=numbers(3, "VX,VY,VZ in mm/s"), default=None,
+                   metavar="VX,VY,VZ", help="with --readout-ms: the board's velocity during "
+                                            "the readout, mm/s in the reference frame")
+
+
+def effects_from_args(args):
+    """The :class:`synth.products.board_camera.CameraEffects` of the camera options, or None
+    when none is given; CLIError for an option without its partner."""
+    from synth.products.board_camera import CameraEffects
+
+    if args.aperture_radius is None:
+        refuse_given(args, ("focus_distance",), "without --aperture-radius (a pinhole has no "
+                                                "focus)")
+    if (args.readout_ms is None) != (args.board_velocity is None):
+        raise CLIError("--readout-ms and --board-velocity go together (a rolling shutter shows "
+                       "nothing on a still board, and a moving board needs a readout time)")
+    effects = CameraEffects(
+        cos4=args.vignetting, lens_falloff=args.lens_falloff or 0.0,
+        aperture_radius_mm=args.aperture_radius or 0.0,
+        focus_distance_mm=args.focus_distance or 0.0,
+        readout_s=(args.readout_ms or 0.0) / 1000.0,
+        velocity_mm_s=args.board_velocity or (0.0, 0.0, 0.0))
+    return None if effects == CameraEffects() else effects
+
+
 #: Scene parameters of the port, which boards in air (``--air``) do not have.
 PORT_PARAMETERS = ("n_water",)
 
@@ -115,6 +158,10 @@ def main(args) -> int:
 
     board = board_from_args(args)
     light = light_from_args(args)
+    try:
+        effects = effects_from_args(args)
+    except ValueError as exc:
+        raise CLIError(str(exc)) from None
     cols, rows = board.squares
     if board.symmetric:
         raise CLIError(f"a {cols}x{rows} chessboard looks the same turned by 180°: its rendered "
@@ -141,7 +188,7 @@ def main(args) -> int:
         distance_range=tuple(args.distance) if args.distance else None,
         max_tilt_deg=b.DEFAULT_MAX_TILT_DEG if args.max_tilt is None else args.max_tilt,
         variant=args.variant, progress=not args.no_progress, adaptive=not args.full_film,
-        light=light)
+        light=light, effects=effects)
     if manifest.get("skipped"):
         print(f"{args.out}: up to date (same scene, board and options); nothing to do")
         return 0

@@ -181,9 +181,30 @@ def board_radiance(light: BoardLight, left_camera, points, normal, reflectance) 
     return np.asarray(reflectance) / np.pi * light.intensity * falloff * cos_board / r ** 2
 
 
+def check_light(rig, light: BoardLight, air: bool) -> None:
+    """ValueError unless the lamp can light the boards: behind a port it must be in the water
+    (a lamp inside the housing would light the board only through the glass, which the
+    renderer's next-event estimation cannot see through)."""
+    position, _ = light.placement(rig.left)
+    water_side = getattr(rig, "water_side", None) or rig.port.water_side  # N cameras, or a pair
+    wet = water_side(position[None])[0]
+    if not air and not wet:
+        x, y, z = light.position_mm
+        raise ValueError(f"the light at {x:g},{y:g},{z:g} mm (left camera frame) is not in the "
+                         f"water: behind a port it must sit beyond the glass (like a strobe on "
+                         f"an arm); move it farther along z")
+
+
+def light_record(light: BoardLight, rig) -> dict:
+    """The manifest's ``light``: its options and where it was, in the reference frame."""
+    position, aim = light.placement(rig.left)
+    return {**light.to_dict(), "position_reference_mm": position.tolist(),
+            "aim_reference_mm": aim.tolist()}
+
+
 __all__ = ["BoardLight", "DEFAULT_AIR_LIGHT_POSITION_MM", "DEFAULT_LIGHT_INTENSITY",
            "DEFAULT_LIGHT_POSITION_MM", "LIGHT_KINDS",
-           "board_radiance", "spot_falloff", "white_square_centres",
+           "board_radiance", "check_light", "light_record", "spot_falloff", "white_square_centres",
            "white_square_levels"]
 
 
