@@ -4,9 +4,13 @@ random poses behind the scene's port (or in air), :mod:`synth.products.boards`."
 
 from __future__ import annotations
 
+import argparse
+import math
+
 from synth.infra.cli import (CLIError, add_board_options, add_define_option, add_full_film_option,
                        add_out_option, add_progress_option, add_scene_argument, board_from_args,
-                       non_negative_float, positive_float, positive_int, scene_seed)
+                       non_negative_float, positive_float, positive_int, refuse_given,
+                       scene_seed)
 
 
 def add_parser(subparsers) -> None:
@@ -27,10 +31,119 @@ def add_parser(subparsers) -> None:
     p.add_argument("--seed", type=scene_seed, default=None,
                    help="seed of the poses and the renderer, same as -D seed=S (default 0)")
     p.add_argument("--air", action="store_true", help="the same cameras with no port (in air)")
+    add_light_options(p)
+    add_camera_options(p)
     p.add_argument("--variant", help="Mitsuba variant (default: automatic)")
     add_full_film_option(p)
     add_define_option(p)
     add_progress_option(p)
+
+
+def numbers(count: int, what: str):
+    """An argparse type: ``count`` comma-separated finite numbers."""
+    def parse(text: str) -> tuple:
+        try:
+            values = tuple(float(v) for v in text.split(","))
+        except ValueError:
+            values = ()
+        if len(values) != count or not all(math.isfinite(v) for v in values):
+            raise argparse.ArgumentTypeError(f"expected {what}, got {text!r}")
+        return values
+    return parse
+
+
+def add_light_options(p) -> None:
+    """``--light`` and its lamp (:class:`synth.products.board_light.BoardLight`)."""
+    from synth.products import board_light as bl
+
+    water = ",".join(f"{v:g}" for v in bl.DEFAULT_LIGHT_POSITION_MM)
+    air = ",".join(f"{v:g}" for v in bl.DEFAULT_AIR_LIGHT_POSITION_MM)
+    p.add_argument("--light", choices=bl.LIGHT_KINDS, default=None,
+                   help="the board printed on diffuse paper and lit by a lamp (a Mitsuba spot "
+                        "or point light) instead of glowing evenly; the corners' truth is the "
+                        "same")
+    p.add_argument("--light-position", type=numbers(3, "X,Y,Z in mm"), default=None,
+                   metavar="X,Y,Z", help=f"the lamp's position, mm in the left camera's frame "
+                                         f"(default {water}: left of, above and ahead of the "
+                                         f"camera, in the water; with --air {air}, behind it)")
+    p.add_argument("--light-aim", type=numbers(3, "X,Y,Z in mm"), default=None, metavar="X,Y,Z",
+                   help="the point the spot aims at, mm in the left camera's frame (default "
+                        "the left optical axis at the middle of --distance)")
+    p.add_argument("--light-intensity", type=positive_float, default=None,
+                   help="the lamp's radiant intensity, linear units (default pi/0.8*1e6: white "
+                        "paper at 1 m facing it is as bright as the luminous board's white)")
+    p.add_argument("--light-angle", type=positive_float, default=None, metavar="DEG",
+                   help=f"spot only: the cut-off half-angle, degrees (default "
+                        f"{bl.DEFAULT_SPOT_CUTOFF_DEG:g}; full intensity within "
+                        f"{bl.BEAM_FRACTION:g} of it)")
+    p.add_argument("--print-reflectance", type=numbers(2, "BLACK,WHITE (two reflectances)"),
+                   default=None, metavar="BLACK,WHITE",
+                   help=f"the printed board's reflectances (default {bl.DEFAULT_PAPER_BLACK:g},"
+                        f"{bl.DEFAULT_PAPER_WHITE:g})")
+
+
+def light_from_args(args):
+    """The :class:`synth.products.board_light.BoardLight` of ``--light`` and its options, or
+    None; CLIError for a lamp option without ``--light`` or one that does not apply."""
+    from synth.products.board_light import BoardLight
+
+    lamp = ("light_position", "light_aim", "light_intensity", "light_angle", "print_reflectance")
+    if args.light is None:
+        refuse_given(args, lamp, "without --light (the board glows evenly; --light spot|point "
+                                 "prints and lights it)")
+        return None
+    if args.light == "point":
+        refuse_given(args, ("light_angle", "light_aim"), "to a point light (spot only)")
+    defaults = BoardLight()
+    black, white = args.print_reflectance or (defaults.black, defaults.white)
+    try:
+        return BoardLight(args.light, args.light_position,
+                          args.light_aim, args.light_intensity or defaults.intensity,
+                          args.light_angle or defaults.cutoff_deg, black, white)
+    except ValueError as exc:
+        raise CLIError(str(exc)) from None
+
+
+def add_camera_options(p) -> None:
+    """Vignetting, a thin lens and a rolling shutter
+    (:class:`synth.products.board_camera.CameraEffects`), each off by default."""
+    p.add_argument("--vignetting", action="store_true",
+                   help="natural vignetting: each pixel times cos^4 of its ray's angle to the "
+                        "optical axis")
+    p.add_argument("--lens-falloff", type=non_negative_float, default=None, metavar="F",
+                   help="lens (mechanical) vignetting: each pixel times 1 - F (r/r_corner)^2, "
+                        "r from the principal point (0 <= F < 1)")
+    p.add_argument("--aperture-radius", type=positive_float, default=None, metavar="MM",
+                   help="defocus: thin-lens cameras of this aperture radius (mm)")
+    p.add_argument("--focus-distance", type=positive_float, default=None, metavar="MM",
+                   help="with --aperture-radius: the focus distance (mm; default where the "
+                        "middle of --distance appears through the port, paraxially)")
+    p.add_argument("--readout-ms", type=positive_float, default=None, metavar="MS",
+                   help="rolling shutter: the time from the first row to the last (ms); needs "
+                        "--board-velocity; the truth follows each corner's row")
+    p.add_argument("--board-velocity", type=numbers(3, "VX,VY,VZ in mm/s"), default=None,
+                   metavar="VX,VY,VZ", help="with --readout-ms: the board's velocity during "
+                                            "the readout, mm/s in the reference frame")
+
+
+def effects_from_args(args):
+    """The :class:`synth.products.board_camera.CameraEffects` of the camera options, or None
+    when none is given; CLIError for an option without its partner."""
+    from synth.products.board_camera import CameraEffects
+
+    if args.aperture_radius is None:
+        refuse_given(args, ("focus_distance",), "without --aperture-radius (a pinhole has no "
+                                                "focus)")
+    if (args.readout_ms is None) != (args.board_velocity is None):
+        raise CLIError("--readout-ms and --board-velocity go together (a rolling shutter shows "
+                       "nothing on a still board, and a moving board needs a readout time)")
+    effects = CameraEffects(
+        cos4=args.vignetting, lens_falloff=args.lens_falloff or 0.0,
+        aperture_radius_mm=args.aperture_radius or 0.0,
+        focus_distance_mm=args.focus_distance or 0.0,
+        readout_s=(args.readout_ms or 0.0) / 1000.0,
+        velocity_mm_s=args.board_velocity or (0.0, 0.0, 0.0))
+    return None if effects == CameraEffects() else effects
 
 
 #: Scene parameters of the port, which boards in air (``--air``) do not have.
@@ -44,6 +157,11 @@ def main(args) -> int:
     from synth.scene import apply_seed, apply_spp, load_scene, parse_defines
 
     board = board_from_args(args)
+    light = light_from_args(args)
+    try:
+        effects = effects_from_args(args)
+    except ValueError as exc:
+        raise CLIError(str(exc)) from None
     cols, rows = board.squares
     if board.symmetric:
         raise CLIError(f"a {cols}x{rows} chessboard looks the same turned by 180°: its rendered "
@@ -69,7 +187,8 @@ def main(args) -> int:
         n_poses=args.poses or b.DEFAULT_POSES, spp=spp, seed=seed, air=args.air,
         distance_range=tuple(args.distance) if args.distance else None,
         max_tilt_deg=b.DEFAULT_MAX_TILT_DEG if args.max_tilt is None else args.max_tilt,
-        variant=args.variant, progress=not args.no_progress, adaptive=not args.full_film)
+        variant=args.variant, progress=not args.no_progress, adaptive=not args.full_film,
+        light=light, effects=effects)
     if manifest.get("skipped"):
         print(f"{args.out}: up to date (same scene, board and options); nothing to do")
         return 0

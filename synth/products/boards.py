@@ -40,6 +40,10 @@ from measure.calibration.board import PATTERN_TEXELS_PER_SQUARE, Board, BoardErr
 from measure.geometry.port import index_matched_port
 from measure.geometry.projection import project
 
+from synth.products.board_camera import (CameraEffects, check_band_seeds, prepared_effects,
+                                         render_rolling_view, rolling_pixels, thin_lens_sensor)
+from synth.products.board_light import BoardLight, check_light, light_record
+from synth.rendering.camera_effects import vignetting_map
 from synth.products.dataset import (DatasetError, adaptive_settings, check_files, manifest_digest,
                            read_calib, write_calib)
 from synth.infra.fileio import OutputDir, atomic_write_json, file_sha256, jsonable, read_marker
@@ -135,11 +139,15 @@ def board_rig(spec: SceneSpec, air: bool):
     return StereoRig(left, right, index_matched_port(left.R[:, 2], np.stack([left.t, right.t])))
 
 
-def _fits(rig, board: Board, poses_R, poses_t, water: bool, anchor: int | None = None
-          ) -> np.ndarray:
+def _fits(rig, board: Board, poses_R, poses_t, water: bool, anchor: int | None = None,
+          shifts=()) -> np.ndarray:
     """Which candidate poses ``(M, 3, 3)``, ``(M, 3)`` put every board point inside both images
     (and in the water behind a port) — of N > 2 cameras (``anchor`` given): inside the image
-    of camera ``anchor`` and of at least one other."""
+    of camera ``anchor`` and of at least one other; with ``shifts`` (mm, (3,) each) also
+    every pose moved by each of them (a moving board's ends)."""
+    if len(shifts):
+        return np.all([_fits(rig, board, poses_R, poses_t + shift, water, anchor)
+                       for shift in [np.zeros(3), *shifts]], axis=0)
     points_board = np.concatenate([board.outline(), board.corners()])
     world = np.einsum("mij,pj->mpi", poses_R, points_board) + poses_t[:, None, :]
     flat = world.reshape(-1, 3)
@@ -156,11 +164,12 @@ def _fits(rig, board: Board, poses_R, poses_t, water: bool, anchor: int | None =
 
 def sample_poses(rig: StereoRig, board: Board, n: int, seed: int, water: bool,
                  distance_range=DEFAULT_DISTANCE_RANGE_MM,
-                 max_tilt_deg: float = DEFAULT_MAX_TILT_DEG) -> list[BoardPose]:
+                 max_tilt_deg: float = DEFAULT_MAX_TILT_DEG, shifts=()) -> list[BoardPose]:
     """``n`` seeded random poses that keep the whole board inside both images (module docs);
     of N > 2 cameras (:class:`BoardCameras`), pose k centred in the view of camera k mod N and
-    wholly inside it and at least one other. Raises ``ValueError`` when the working volume
-    cannot hold the board that often."""
+    wholly inside it and at least one other; also when moved by each of ``shifts`` (mm: a
+    moving board's ends). Raises ``ValueError`` when the working volume cannot hold the board
+    that often."""
     near, far = (float(v) for v in distance_range)
     if not (0 < near < far):
         raise ValueError(f"distance range must satisfy 0 < near < far, got {near:g}, {far:g} mm")
@@ -195,7 +204,7 @@ def sample_poses(rig: StereoRig, board: Board, n: int, seed: int, water: bool,
              * Rotation.from_rotvec(np.column_stack([np.zeros(m), np.zeros(m), roll]))).as_matrix()
         R = left.R @ R  # the untilted board faces the left camera
         t = centre - R @ half
-        keep = np.flatnonzero(_fits(rig, board, R, t, water, anchor))
+        keep = np.flatnonzero(_fits(rig, board, R, t, water, anchor, shifts))
         poses += [BoardPose(R[i], t[i]) for i in keep[: (1 if several else n - len(poses))]]
     return poses
 
@@ -212,61 +221,102 @@ def _board_local_to_board(board: Board) -> np.ndarray:
                      [0, 0, -1, 0], [0, 0, 0, 1.0]])
 
 
-def build_board_scene(spec: SceneSpec, board: Board, air: bool, variant=None):
+def build_board_scene(spec: SceneSpec, board: Board, air: bool, variant=None,
+                      light: BoardLight | None = None, effects: CameraEffects | None = None):
     """``(mitsuba_scene, mi, variant)``: the scene's sensors (same order: ``left``, ``right``
     or ``cam0`` …), its port interfaces unless ``air``, and the board (moved by
-    :func:`render_pose`)."""
+    :func:`render_pose`): self-luminous, or with ``light`` (aimed,
+    :meth:`synth.products.board_light.BoardLight.aimed`) printed on diffuse paper and lit by
+    that lamp; with ``effects`` of a thin lens, ``thinlens`` sensors
+    (:func:`synth.products.board_camera.thin_lens_sensor`)."""
     from synth.rendering.mitsuba_setup import import_mitsuba
 
     mi, chosen = import_mitsuba(variant)
-    pattern = board.pattern(PATTERN_TEXELS_PER_SQUARE).astype(np.float32)[..., None]
-    pattern /= np.float32(255)
+    pattern = board.pattern(PATTERN_TEXELS_PER_SQUARE)
     sampler = {"type": "multijitter", "sample_count": 4, "seed": 0}
+    if light is None:
+        texture = pattern.astype(np.float32)[..., None] / np.float32(255)
+        surface = {"bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": 0.0}},
+                   "emitter": {"type": "area", "radiance": {
+                       "type": "bitmap", "data": mi.TensorXf(texture), "raw": True,
+                       "filter_type": "nearest"}}}
+    else:
+        surface = {"bsdf": {"type": "diffuse", "reflectance": {
+            "type": "bitmap", "data": mi.TensorXf(light.reflectance(pattern)), "raw": True,
+            "filter_type": "nearest"}}}
     scene = {"type": "scene",
              "integrator": {"type": "path", "max_depth": int(float(spec.params.get("max_depth", 8)))},
              **{name: sensor_dict(mi, camera, sampler)
                 for name, camera in zip(spec.camera_names, spec.all_cameras)},
              "board": {"type": "rectangle", "to_world": mi.ScalarTransform4f(np.eye(4).tolist()),
-                       "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": 0.0}},
-                       "emitter": {"type": "area", "radiance": {
-                           "type": "bitmap", "data": mi.TensorXf(pattern), "raw": True,
-                           "filter_type": "nearest"}}}}
+                       **surface}}
+    if effects is not None and effects.aperture_radius_mm > 0:
+        for name in spec.camera_names:
+            scene[name] = thin_lens_sensor(scene[name], effects)
+    if light is not None:
+        scene["lamp"] = light.emitter_dict(mi, spec.all_cameras[0])
     if not air and spec.has_port:  # the glass as the scene writer makes it, for any port
         scene.update(port_shapes(mi, spec.camera_ports, cameras=spec.all_cameras))
     return mi.load_dict(scene), mi, chosen
 
 
-def render_pose(mscene, mi, spec: SceneSpec, board: Board, pose: BoardPose, index: int,
-                spp: int, seed: int, adaptive: bool = True):
-    """Every view (float32 linear) of the board at ``pose`` and, per view, how it was rendered
-    (:func:`synth.rendering.render.render_view_counted`): ``([left, right], [stats_left, stats_right])``;
-    pose ``index`` renders with the scene seeds ``seed + 2·index`` (view 0) and ``+ 1``
-    (view 1) — of N cameras ``seed + N·index + view``."""
+def place_board(mscene, mi, board: Board, pose: BoardPose) -> None:
+    """Move the board of a scene of :func:`build_board_scene` to ``pose``."""
     M = np.eye(4)
     M[:3, :3], M[:3, 3] = pose.R, pose.t
     params = mi.traverse(mscene)
     params["board.to_world"] = mi.ScalarTransform4f((M @ _board_local_to_board(board)).tolist())
     params.update()
+
+
+def render_pose(mscene, mi, spec: SceneSpec, board: Board, pose: BoardPose, index: int,
+                spp: int, seed: int, adaptive: bool = True, rig=None,
+                effects: CameraEffects | None = None):
+    """Every view (float32 linear) of the board at ``pose`` and, per view, how it was rendered
+    (:func:`synth.rendering.render.render_view_counted`): ``([left, right], [stats_left, stats_right])``;
+    pose ``index`` renders with the scene seeds ``seed + 2·index`` (view 0) and ``+ 1``
+    (view 1) — of N cameras ``seed + N·index + view``. ``effects``: a rolling shutter (needs
+    ``rig``) and vignetting (:mod:`synth.products.board_camera`)."""
     cameras = spec.all_cameras
-    views = [render_view_counted(mscene, mi, view, camera, spp, seed + len(cameras) * index,
-                                 adaptive=adaptive)
-             for view, camera in enumerate(cameras)]
-    return [v[0] for v in views], [v[2] for v in views]
+    scene_seed = seed + len(cameras) * index
+    if effects is not None and effects.rolling:
+        views = [render_rolling_view(
+            mscene, mi, view, camera, rig.view_port(view),
+            np.concatenate([board.outline(), board.corners()]), pose, effects, spp, scene_seed,
+            lambda shift: place_board(mscene, mi, board, BoardPose(pose.R, pose.t + shift)))
+            for view, camera in
+            enumerate(cameras)]
+    else:
+        place_board(mscene, mi, board, pose)
+        views = [render_view_counted(mscene, mi, view, camera, spp, scene_seed,
+                                     adaptive=adaptive)
+                 for view, camera in enumerate(cameras)]
+    images = [v[0] for v in views]
+    if effects is not None and effects.vignetting:
+        images = [image * vignetting_map(camera, effects.cos4, effects.lens_falloff)
+                  for image, camera in zip(images, cameras)]
+    return images, [v[2] for v in views]
 
 
 # ---------------------------------------------------------------------------------------------
 # the folder
 # ---------------------------------------------------------------------------------------------
 def request_key(spec: SceneSpec, board: Board, n_poses, spp, seed, air, distance_range,
-                max_tilt_deg, variant, adaptive: bool = True) -> str:
+                max_tilt_deg, variant, adaptive: bool = True,
+                light: BoardLight | None = None,
+                effects: CameraEffects | None = None) -> str:
     """Hash of everything that determines the folder; the adaptive settings only for an
-    adaptive render (a full-film request keeps the key of earlier folders, rendered so)."""
+    adaptive render (a full-film request keeps the key of earlier folders, rendered so), a lamp
+    and camera effects only when given (without them the key of before)."""
     request = {"format": FORMAT_VERSION, "scene": spec.sha256, "params": spec.params,
                "board": board.to_dict(), "poses": n_poses, "spp": spp, "seed": seed,
                "air": bool(air), "distance_range": list(distance_range),
                "max_tilt_deg": max_tilt_deg, "variant": variant, "renderer": RENDERER}
     if adaptive:
         request["adaptive"] = adaptive_settings()
+    for name, given in (("light", light), ("camera_effects", effects)):  # only when given
+        if given is not None:
+            request[name] = given.to_dict()
     return hashlib.sha256(json.dumps(request, sort_keys=True).encode()).hexdigest()
 
 
@@ -274,13 +324,20 @@ def write_boards(spec: SceneSpec, out_dir, board: Board, n_poses: int = DEFAULT_
                  spp: int = DEFAULT_SPP, seed: int = 0, air: bool = False,
                  distance_range=None,
                  max_tilt_deg: float = DEFAULT_MAX_TILT_DEG, variant=None,
-                 progress: bool = True, adaptive: bool = True) -> dict:
+                 progress: bool = True, adaptive: bool = True,
+                 light: BoardLight | None = None,
+                 effects: CameraEffects | None = None) -> dict:
     """Render ``n_poses`` stereo pairs of ``board`` and write the folder (module docs). Returns
     the manifest; ``manifest["skipped"]`` when ``out_dir`` already held the same request, whole
     (:meth:`synth.infra.fileio.OutputDir.damage`); ``manifest["rendered_again"]`` why an earlier output
     of the same request was rendered again, or None. ``adaptive`` (default) renders each view
     adaptively, False on the full film (:func:`synth.rendering.render.render_view_counted`); the
-    manifest's ``render`` says how (lit fraction and samples per pose and view)."""
+    manifest's ``render`` says how (lit fraction and samples per pose and view). ``light``: the
+    board printed and lit by that lamp (:mod:`synth.products.board_light`; placed by
+    :meth:`~synth.products.board_light.BoardLight.placed`, its aim by default the left optical
+    axis at the middle of ``distance_range``); ValueError when the
+    lamp is not in the water of a port. ``effects``: vignetting, a thin lens, a rolling shutter
+    (:mod:`synth.products.board_camera`; None or all off: the board of before)."""
     from tqdm import tqdm
 
     t_start = time.perf_counter()
@@ -290,8 +347,13 @@ def write_boards(spec: SceneSpec, out_dir, board: Board, n_poses: int = DEFAULT_
         raise ValueError(f"{spec.path}: the scene has no port; render its boards with --air")
     if distance_range is None:
         distance_range = DEFAULT_AIR_DISTANCE_RANGE_MM if air else DEFAULT_DISTANCE_RANGE_MM
+    rig = board_rig(spec, air)
+    if light is not None:
+        light = light.placed(air, 0.5 * sum(distance_range))
+        check_light(rig, light, air)
+    effects = prepared_effects(effects, rig, air, distance_range)  # None: the board of before
     key = request_key(spec, board, n_poses, spp, seed, air, distance_range, max_tilt_deg, variant,
-                      adaptive)
+                      adaptive, light, effects)
     output = OutputDir(out_dir, COMMAND)
     damage = None
     if output.exists_as_output() and (read_marker(output.path) or {}).get("request_key") == key:
@@ -305,18 +367,23 @@ def write_boards(spec: SceneSpec, out_dir, board: Board, n_poses: int = DEFAULT_
     output.claim()
     n_views = len(spec.all_cameras)  # pose p renders with seed + N·p (N = 2: seed + 2p)
     check_render_request(spec, spp, seed, poses=-(-n_poses * n_views // 2), adaptive=adaptive)
-    rig = board_rig(spec, air)
-    poses = sample_poses(rig, board, n_poses, seed, not air, distance_range, max_tilt_deg)
+    shifts = ([effects.board_shift(s * effects.readout_s / 2) for s in (-1.0, 1.0)]
+              if effects is not None and effects.rolling else ())
+    poses = sample_poses(rig, board, n_poses, seed, not air, distance_range, max_tilt_deg,
+                         shifts)
+    if shifts:
+        check_band_seeds(seed, n_poses, n_views)
     times = {}
     t = time.perf_counter()
-    mscene, mi, chosen = build_board_scene(spec, board, air, variant)
+    mscene, mi, chosen = build_board_scene(spec, board, air, variant, light, effects)
     times["load_mitsuba"] = time.perf_counter() - t
     images, stats = [], []
     t = time.perf_counter()
     bar = tqdm(poses, desc=f"render boards {chosen} {spp} spp{' adaptive' if adaptive else ''}",
                unit="pose", disable=not progress, leave=False)
     for k, pose in enumerate(bar):
-        pair, pair_stats = render_pose(mscene, mi, spec, board, pose, k, spp, seed, adaptive)
+        pair, pair_stats = render_pose(mscene, mi, spec, board, pose, k, spp, seed, adaptive,
+                                       rig, effects)
         images.append(pair)
         stats.append(pair_stats)
         lit = [1.0 if v["lit_fraction"] is None else v["lit_fraction"] for v in pair_stats]
@@ -338,7 +405,7 @@ def write_boards(spec: SceneSpec, out_dir, board: Board, n_poses: int = DEFAULT_
         else:
             write_calib(os.path.join(tmp, "calib.yaml"), rig, not air)
         atomic_write_json(os.path.join(tmp, "board.json"), board.to_dict())
-        _write_truth(tmp, rig, board, poses, names)
+        _write_truth(tmp, rig, board, poses, names, effects)
         times["total"] = time.perf_counter() - t_start
         manifest = {
             "format_version": FORMAT_VERSION, "command": COMMAND,
@@ -346,6 +413,8 @@ def write_boards(spec: SceneSpec, out_dir, board: Board, n_poses: int = DEFAULT_
             "request_key": key, "versions": package_versions(),
             "scene": {"path": spec.path, "sha256": spec.sha256, "params": spec.params},
             "air": bool(air), "board": board.to_dict(), "poses": n_poses,
+            **({} if light is None else {"light": light_record(light, rig)}),
+            **({} if effects is None else {"camera_effects": effects.to_dict()}),
             **({"cameras": list(names)} if len(names) > 2 else {}),
             "distance_range_mm": list(distance_range), "max_tilt_deg": max_tilt_deg,
             "variant": chosen, "integrator": integrator_name(mi, mscene), "spp": spp,
@@ -369,19 +438,24 @@ def write_boards(spec: SceneSpec, out_dir, board: Board, n_poses: int = DEFAULT_
 
 #: What the manifest keeps of each view's render statistics.
 _POSE_STATS = ("mode", "reason", "lit_fraction", "mask_pixels", "samples_on_mask",
-               "samples_off_mask", "spp_on_mask", "spp_off_mask")
+               "samples_off_mask", "spp_on_mask", "spp_off_mask", "bands")
 
 
-def corner_pixels(rig: StereoRig, board: Board, poses):
+def corner_pixels(rig: StereoRig, board: Board, poses, effects: CameraEffects | None = None):
     """Per pose ``(corners (M, 3) mm, (left pixels, right pixels) (M, 2))``: every corner of
     ``board`` at that :class:`BoardPose` in the reference frame and where each camera sees it
-    through its port (the Fermat forward model)."""
+    through its port (the Fermat forward model); with a rolling shutter (``effects``) where
+    it sees it at the instant of the corner's own row
+    (:func:`synth.products.board_camera.rolling_pixels`)."""
     corners = board.corners()
+    rolling = effects is not None and effects.rolling
     out = []
     for pose in poses:
         world = pose.apply(corners)
-        out.append((world, tuple(project(camera, rig.view_port(view), world)
-                                 for view, camera in enumerate(rig.cameras))))
+        out.append((world, tuple(
+            rolling_pixels(camera, rig.view_port(view), corners, pose, effects)[0] if rolling
+            else project(camera, rig.view_port(view), world)
+            for view, camera in enumerate(rig.cameras))))
     return out
 
 
@@ -393,7 +467,8 @@ def corners_header(names) -> list:
     return CORNERS_HEADER[:5] + [f"{a}_{name}" for name in names for a in ("u", "v")]
 
 
-def _write_truth(directory, rig, board: Board, poses, names=("left", "right")) -> None:
+def _write_truth(directory, rig, board: Board, poses, names=("left", "right"),
+                 effects: CameraEffects | None = None) -> None:
     ids = np.arange(board.corners().shape[0])
     with open(os.path.join(directory, "poses.csv"), "w", newline="") as fh:
         writer = csv.writer(fh)
@@ -404,7 +479,7 @@ def _write_truth(directory, rig, board: Board, poses, names=("left", "right")) -
     with open(os.path.join(directory, "corners.csv"), "w", newline="") as fh:
         writer = csv.writer(fh)
         writer.writerow(corners_header(names))
-        for k, (world, views) in enumerate(corner_pixels(rig, board, poses)):
+        for k, (world, views) in enumerate(corner_pixels(rig, board, poses, effects)):
             pixels = np.concatenate(views, axis=1)
             for i, p, uv in zip(ids, world, pixels):
                 writer.writerow([k, int(i)] + [f"{v:.17g}" for v in (*p, *uv)])

@@ -13,7 +13,7 @@ inverse of the OpenCV distortion (``Camera.undistort``, Newton to ~1e-16).
 
 Adaptive rendering (the default, :func:`render_view_counted`): a pilot of
 :data:`ADAPTIVE_PILOT_SPP` over the whole film, the mask of the pixels it saw light on grown by
-:data:`ADAPTIVE_MARGIN_PX`, and the requested samples only on the mask (:func:`_render_pixels`:
+:data:`ADAPTIVE_MARGIN_PX`, and the requested samples only on the mask (:func:`render_pixels`:
 the scene's own sampler and integrator on an explicit list of pixels); a pixel off the mask
 keeps its pilot. A film lit on more than :data:`ADAPTIVE_MAX_LIT_FRACTION` of its pixels is
 rendered whole. ``adaptive=False`` renders the full film in passes, as below, with the seeds
@@ -334,7 +334,7 @@ def _sensor_object(scene, sensor):
     return scene.sensors()[sensor] if isinstance(sensor, int) else sensor
 
 
-def _render_pixels(mi, scene, sensor, integrator, pixels: np.ndarray, spp: int, seed: int):
+def render_pixels(mi, scene, sensor, integrator, pixels: np.ndarray, spp: int, seed: int):
     """Render only the film pixels ``pixels`` (flat indices, row-major) of ``sensor`` with
     ``spp`` samples each through ``integrator``, as ``mi.render`` renders a pixel: a sample at
     ``pixel + sampler.next_2d()`` on the film, the sensor's ray there, the integrator's
@@ -418,7 +418,7 @@ def _render_adaptive(mi, scene, sensor, spp: int, seed: int, view: int, size, ma
     chunks = masked_chunks(count, spp)
     for k, n in enumerate(chunks):
         interrupt.check()
-        values, taken = _render_pixels(mi, scene, sensor, integrator, flat[start:start + n],
+        values, taken = render_pixels(mi, scene, sensor, integrator, flat[start:start + n],
                                        spp, pass_seed(seed, view, 1 + k))
         image.ravel()[flat[start:start + n]] = values.astype(np.float32)
         start += n
