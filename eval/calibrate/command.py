@@ -597,6 +597,7 @@ def _calibrate_photos(args, output, log, free, start) -> int:
 
     from eval.calibrate.consistency import (cameras_alone, rig_inconsistency,
                                             start_from_cameras, uniqueness)
+    from eval.calibrate.dots import views_of_air, views_of_housing, with_eccentricity
     from eval.calibrate.sources import repeat_lines, repeated_views, without_repeats
 
     where = f"{args.dir} ({'detections' if args.detections else 'photos'})"
@@ -647,7 +648,9 @@ def _calibrate_photos(args, output, log, free, start) -> int:
     if args.air:
         log("calibrate in air (OpenCV calibrateCamera, stereoCalibrate) …")
         result, used_detections, outliers = fit(
-            lambda d: calibrate_in_air(board, d, size, args.lens or DEFAULT_LENS_MODEL))
+            with_eccentricity(lambda d: calibrate_in_air(board, d, size,
+                                                         args.lens or DEFAULT_LENS_MODEL),
+                              board, views_of_air))
         rig, housing, rms_per = result.rig, None, result.rms_px_per
         air_covariance = result.covariance
         poses = {k: result.board_poses.get((k, 0), pose)  # the left camera's where it has one
@@ -661,8 +664,9 @@ def _calibrate_photos(args, output, log, free, start) -> int:
                                   design_port(args, air_rig.left.R[:, 2]))
         log(f"refractive bundle adjustment of {', '.join(free)} …")
         result, used_detections, outliers = fit(
-            lambda d: calibrate_housing(start_rig, board, d, free, air_covariance,
-                                        args.air_uncertainty))
+            with_eccentricity(lambda d: calibrate_housing(start_rig, board, d, free,
+                                                          air_covariance, args.air_uncertainty),
+                              board, views_of_housing))
         housing, alone = result, None
         if not housing.identifiable and housing.rms_px > FIT_RMS_LIMIT_PX:
             log("the design start failed: again from each camera's own port …")
@@ -670,8 +674,9 @@ def _calibrate_photos(args, output, log, free, start) -> int:
             better = start_from_cameras(start_rig, alone)
             if better is not None:
                 again, again_used, again_outliers = fit(
-                    lambda d: calibrate_housing(better, board, d, free, air_covariance,
-                                                args.air_uncertainty))
+                    with_eccentricity(lambda d: calibrate_housing(
+                        better, board, d, free, air_covariance, args.air_uncertainty),
+                        board, views_of_housing))
                 if again.identifiable or again.rms_px < housing.rms_px:
                     start_rig, housing = better, again
                     result, used_detections, outliers = again, again_used, again_outliers

@@ -118,6 +118,8 @@ def calibrate_single(args, output, log, start, board) -> tuple[dict, str]:
     from measure.calibration.air import (DEFAULT_LENS_MODEL, CalibrationError, calibrate_camera,
                                          calibrate_fisheye, camera_residuals)
 
+    from eval.calibrate.dots import views_of_camera, with_eccentricity
+
     where = f"{args.dir} (one camera's photos)"
     names, images, size, detections, timings, repeats = read_and_detect(args, board, log)
     lens = args.lens or DEFAULT_LENS_MODEL
@@ -145,8 +147,8 @@ def calibrate_single(args, output, log, start, board) -> tuple[dict, str]:
     log("calibrate the camera (OpenCV calibrateCamera) …")
     try:
         result, used_detections, outliers = trust.fit_without_outliers(
-            fit, lambda r: r["rms_px_per"], detections, lambda r: {VIEW: r["residuals"]},
-            board)
+            with_eccentricity(fit, board, views_of_camera(size)), lambda r: r["rms_px_per"],
+            detections, lambda r: {VIEW: r["residuals"]}, board)
     except CalibrationError as exc:
         raise CLIError(f"{where}: {exc}") from None
     timings["calibrate"] = time.perf_counter() - t

@@ -78,6 +78,8 @@ def calibrate_single_housing(args, output, log, start, board, intrinsics, start_
     from measure.calibration.housing import calibrate_camera_housing
     from measure.calibration.validation import FOLDS, cross_validate_housing
 
+    from eval.calibrate.dots import views_of_housing, with_eccentricity
+
     where = f"{args.dir} (one camera's photos)"
     camera = intrinsics["camera"]
     names, images, size, detections, timings, repeats = read_and_detect(
@@ -86,6 +88,8 @@ def calibrate_single_housing(args, output, log, start, board, intrinsics, start_
     def fit(dets):
         return calibrate_camera_housing(camera, start_port, board, dets, free,
                                         intrinsics["covariance"], args.air_uncertainty)
+
+    fit = with_eccentricity(fit, board, views_of_housing)
 
     log(f"refractive bundle adjustment of {', '.join(free)} over "
         f"{len(detections.found(VIEW))} photos …")
