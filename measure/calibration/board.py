@@ -419,12 +419,17 @@ def detector_view(image: np.ndarray) -> np.ndarray:
     image = np.asarray(image)
     if image.dtype == np.uint8:
         return image
-    a = image.astype(np.float64)
-    white = float(np.percentile(a, 99.9)) if a.size else 1.0
-    white = white if white > 0 else (float(a.max()) or 1.0)
-    x = np.clip(a / white, 0.0, 1.0)
+    x = np.clip(image.astype(np.float64) / _white(image), 0.0, 1.0)
     encoded = np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055)
     return np.rint(255 * encoded).astype(np.uint8)
+
+
+def _white(image: np.ndarray) -> float:
+    """A linear image's white: its 99.9th percentile (its maximum where that is 0; 1 when both
+    are)."""
+    a = np.asarray(image, np.float64)
+    white = float(np.percentile(a, 99.9)) if a.size else 1.0
+    return white if white > 0 else (float(a.max()) if a.size else 0.0) or 1.0
 
 
 def square_parity_contrast(gray, uv, squares) -> float:
@@ -457,10 +462,8 @@ def to_uint8(image: np.ndarray) -> np.ndarray:
     image = np.asarray(image)
     if image.dtype == np.uint8:
         return image
-    a = image.astype(np.float64)
-    white = float(np.percentile(a, 99.9)) if a.size else 1.0
-    white = white if white > 0 else (float(a.max()) or 1.0)
-    return np.clip(np.rint(a * (255.0 / white)), 0, 255).astype(np.uint8)
+    return np.clip(np.rint(image.astype(np.float64) * (255.0 / _white(image))), 0,
+                   255).astype(np.uint8)
 
 
 __all__ = ["BOARD_KINDS", "Board", "CIRCLE_KINDS", "BoardError", "DETECTION_WIDTH_PX", "LAYOUT_TOLERANCE",

@@ -165,3 +165,27 @@ def test_the_dots_eccentricity_is_taken_out_of_a_calibration():
     corrected, _ = corrected_for_eccentricity(fit, detections, board, views_of_camera((640, 480)))
     assert abs(plain["out"][1][0, 0] - 800) > 0.5
     assert corrected["out"][0] < 1e-4 and abs(corrected["out"][1][0, 0] - 800) < 0.01
+
+
+def test_underwater_the_in_air_rig_settles_the_turn():
+    """Underwater the stereo pose is the in-air calibration's: the left view's board pose
+    predicts the right view's corners, and the turn that predicts them is each pose's (the
+    prediction ignores the port, whose error is pixels, a turn's the board's size)."""
+    from measure import StereoRig
+    from measure.calibration.symmetry import relabelled, settle_by_rig
+    from measure.geometry.port import index_matched_port
+
+    board = Board("chessboard", (9, 7), 30.0)
+    detections, right = _projected_pair(board)
+    left = Camera(right.K, (640, 480))
+    rig = StereoRig(left, right, index_matched_port((0, 0, 1), np.stack([left.t, right.t])))
+    (flip, _, _) = board.symmetries()[1]
+    turned = Detections([list(v) for v in detections.ids], [list(v) for v in detections.pixels])
+    for k in (0, 5):
+        turned.pixels[k][1] = detections.pixels[k][1][np.argsort(flip)]
+    turns = settle_by_rig(rig, board, turned)
+    assert {k for k, s in turns.items() if s} == {0, 5}
+    settled = relabelled(turned, 1, turns, board)
+    for k in range(detections.n_poses):
+        order = np.argsort(settled.ids[k][1])
+        np.testing.assert_allclose(settled.pixels[k][1][order], detections.pixels[k][1])
