@@ -32,7 +32,7 @@ ALONE_FRACTION, JOINT_EXCESS_PX = 0.5, 0.5
 #: found 186 units, 0.23 px).
 ALONE_STARTS = (1.0, 3.0, 9.0)
 #: Starting port distances of :func:`uniqueness`, as factors of the design's.
-START_FACTORS = (0.25, 0.5, 2.0, 4.0)
+START_FACTORS = (0.25, 4.0)
 #: Two solutions fit alike when their RMS differ by at most this fraction of the better one's,
 #: and differ when their port distances lie this many σ (the main fit's) apart.
 SAME_FIT, DIFFERENT_SIGMAS = 0.1, 3.0
