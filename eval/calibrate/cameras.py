@@ -13,6 +13,7 @@ the reference frame is the first camera's.
 from __future__ import annotations
 
 import os
+import sys
 import time
 
 import numpy as np
@@ -76,7 +77,8 @@ def boards_source(boards):
     return SimpleNamespace(path=boards.path, images=boards.images, board=boards.board,
                            air=boards.air, names=boards.calib["names"], truth=truth,
                            size=boards.calib["size"], photos=False,
-                           own_ports=len(set(truth.ports)) > 1)
+                           own_ports=len(set(truth.ports)) > 1,
+                           captures=[f"{k:02d}" for k in range(len(boards.images))])
 
 
 def photos_source(path, names, board, air: bool, encoding: str):
@@ -85,11 +87,12 @@ def photos_source(path, names, board, air: bool, encoding: str):
     from eval.core.photos import PhotoError, read_camera_photos
 
     try:
-        images, size, _ = read_camera_photos(path, names, encoding)
+        images, size, stems = read_camera_photos(path, names, encoding)
     except PhotoError as exc:
         raise CLIError(str(exc)) from None
     return SimpleNamespace(path=path, images=images, board=board, air=air, names=names,
-                           truth=None, size=size, photos=True, own_ports=False)
+                           truth=None, size=size, photos=True, own_ports=False,
+                           captures=list(stems))
 
 
 def calibrate_cameras_main(args, output, log, start, boards, design) -> int:
@@ -155,7 +158,9 @@ def calibrate_cameras_main(args, output, log, start, boards, design) -> int:
             errors = _air_errors(rig, truth) if truth is not None else {}
             rows = [(n, errors.get(n), sigmas[n]) for n in cal.parameter_names]
             report.update({"rms_px": cal.rms_px, "joint_rms_px": cal.joint_rms_px,
-                           "poses_used": cal.poses_used})
+                           "poses_used": cal.poses_used,
+                           "left_out": {f"{names[v]}/{boards.captures[k]}": why
+                                        for (k, v), why in sorted(cal.left_out.items())}})
             rms = cal.joint_rms_px
         else:
             try:
@@ -297,6 +302,14 @@ def calibrate_cameras_main(args, output, log, start, boards, design) -> int:
               + ", ".join(f"{n} {c}" for n, c in found.items()) + port_line)
     print(f"wrote {output.path} (calib.yaml of {len(names)} cameras with its covariance, "
           f"report.json, report.md)")
+    if report.get("left_out"):
+        from synth.infra.cli import EXIT_CHECK_FAILED
+
+        print(f"failed: {where}: " + "; ".join(
+            f"{view} does not belong with the others ({why}): left out"
+            for view, why in report["left_out"].items())
+              + f" (the calibration in {output.path} is without it)", file=sys.stderr)
+        return EXIT_CHECK_FAILED
     return 0
 
 

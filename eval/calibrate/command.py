@@ -595,7 +595,7 @@ def _calibrate_photos(args, output, log, free, start) -> int:
     from eval.calibrate import report as report_lib
     from measure.calibration.housing import FIT_RMS_LIMIT_PX
 
-    from eval.calibrate.consistency import (cameras_alone, rig_inconsistency,
+    from eval.calibrate.consistency import (cameras_alone, gross_misfit, rig_inconsistency,
                                             start_from_cameras, uniqueness)
     from eval.calibrate.dots import views_of_air, views_of_housing, with_eccentricity
     from eval.calibrate.sources import repeat_lines, repeated_views, without_repeats
@@ -737,6 +737,10 @@ def _calibrate_photos(args, output, log, free, start) -> int:
     report["failures"] = trust.air_failures(report) if args.air else []
     if not args.air and report["housing"].get("uniqueness", {}).get("note"):
         report["failures"].append(report["housing"]["uniqueness"]["note"])
+    if not args.air:
+        misfit = gross_misfit(housing, board, used_detections, size, bool(pair))
+        if misfit:
+            report["failures"].append(misfit)
     report["timings_s"] = timings
     log("write the calibration, report and figures …")
     with output.staged() as tmp:

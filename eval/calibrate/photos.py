@@ -33,11 +33,11 @@ import os
 import numpy as np
 from measure.calibration.air import (LENS_MODEL_GAIN, LENS_MODEL_ORDER, STEREO_FLOOR_DEG,
                                  STEREO_FLOOR_FRACTION, STEREO_OUTLIER_FACTOR)
+from measure.calibration.outliers import (OUTLIER_FACTOR, OUTLIER_FLOOR_PX, OUTLIER_MADS,
+                                          outlier_threshold)
 
 from eval.calibrate.report import format_value as _f
 
-#: The outlier rule (module docs).
-OUTLIER_FACTOR, OUTLIER_MADS, OUTLIER_FLOOR_PX = 3.0, 5.0, 0.1
 #: Warn below these.
 RECOMMENDED_POSES, MIN_TILT_DEG, MIN_COVERAGE = 8, 15.0, 0.5
 #: Warn at or above this |correlation| between two housing parameters.
@@ -79,17 +79,6 @@ OUTLIER_RULE = (f"a pose is left out when one of its views' RMS exceeds "
                 f"neighbours' (none when more than {100 * MAX_CORNER_FRACTION:g} % of the "
                 f"corners are: then the model misfits); the fit is run again after each, until "
                 f"nothing more drops out")
-
-
-def outlier_threshold(rms_values) -> float:
-    """The RMS (px) above which a view is an outlier (module docs)."""
-    values = np.asarray(list(rms_values), dtype=np.float64)
-    if values.size == 0:
-        return float("inf")
-    median = float(np.median(values))
-    mad = float(np.median(np.abs(values - median)))
-    return max(OUTLIER_FACTOR * median, median + OUTLIER_MADS * 1.4826 * mad,
-               median + OUTLIER_FLOOR_PX)
 
 
 def outlier_poses(rms_per: dict) -> tuple[float, list[int]]:

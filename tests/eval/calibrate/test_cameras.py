@@ -167,3 +167,36 @@ def test_boards_behind_a_port_each(chain, tmp_path):
         f"cam{k}.port.distance" for k in range(4)]
     for name, entry in report["estimates"].items():
         assert abs(entry["error_in_sigma"]) <= 3.0, (name, entry)
+
+
+@pytest.mark.parametrize("spoil", ["turned", "mirrored", "another moment"])
+def test_a_photo_that_does_not_belong_is_named_and_exits_1(chain, tmp_path, capsys, spoil):
+    """One camera's photo turned by 180°, mirrored, or of another pose (another moment): the
+    run leaves that view out, names it, writes the calibration without it and exits 1; the
+    other cameras' poses and intrinsics stay within 3 σ of the truth."""
+    import cv2
+
+    photos = _photo_folder(chain / "b_air", tmp_path / "photos")
+    target = photos / "cam2" / "03.png"
+    image = cv2.imread(str(target), cv2.IMREAD_UNCHANGED)
+    if spoil == "turned":
+        cv2.imwrite(str(target), cv2.rotate(image, cv2.ROTATE_180))
+    elif spoil == "mirrored":
+        cv2.imwrite(str(target), cv2.flip(image, 1))
+    else:
+        import shutil
+
+        shutil.copy(photos / "cam2" / "07.png", target)
+    out = tmp_path / "cal"
+    assert eval_main(["calibrate", str(photos), "--air", "--squares", "7x6", "--square-mm", "60",
+                      "--out", str(out), "--no-progress"]) == 1
+    err = capsys.readouterr().err
+    assert "cam2/03 does not belong with the others" in err, err
+    report = json.loads((out / "report.json").read_text())
+    assert list(report["left_out"]) == ["cam2/03"]
+    truth, rig = (read_rig_file(f) for f in (chain / "b_air" / "calib.yaml", out / "calib.yaml"))
+    names, matrix = read_rig_covariance(out / "calib.yaml")
+    sigma = dict(zip(names, np.sqrt(np.diag(matrix))))
+    for k in range(1, 4):
+        error = np.abs(rig.cameras[k].center - truth.cameras[k].center)
+        assert np.all(error <= 3 * np.array([sigma[f"cam{k}.center[{i}]"] for i in range(3)]))

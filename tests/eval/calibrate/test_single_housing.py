@@ -31,18 +31,18 @@ FLAT = FlatPort((np.sin(TILT), 0.0, np.cos(TILT)), 100.0, (5.0,), INDICES)
 BOARD_ARGS = ["--squares", "7x6", "--square-mm", "60"]
 
 
-def _draw(camera, port, pose, rng):
+def _draw(camera, port, pose, rng, rig=None, view=0):
     """The board at ``pose`` as an 8-bit sRGB photo of ``camera`` behind ``port`` (a rig port,
-    its view 0; None: in air)."""
+    its view 0; None: in air) — or of view ``view`` of ``rig`` (``camera`` its camera)."""
     w, h = camera.size
     j, i = np.meshgrid(np.arange(SUPER * w), np.arange(SUPER * h))
     uv = np.column_stack([(j.ravel() - (SUPER - 1) / 2) / SUPER,
                           (i.ravel() - (SUPER - 1) / 2) / SUPER])
     rays = camera.rays(uv)
-    if port is None:
+    if rig is None and port is None:
         origins = np.broadcast_to(camera.center, rays.shape)
     else:
-        water = StereoRig(camera, camera, port).trace(0, rays)
+        water = (rig or StereoRig(camera, camera, port)).trace(view, rays)
         origins, rays = water.origins, water.directions
     normal = pose.R[:, 2]
     s = ((pose.t - origins) @ normal) / (rays @ normal)
