@@ -209,6 +209,11 @@ def main(args) -> int:
         print(summary)
     print(f"wrote {output.path}", file=sys.stderr if args.json else sys.stdout)
     a = report["association"]
+    if not args.pixels and a["points"] and not a["associated"]:
+        log(f"FAIL: none of the {a['points']} points lies within {a['gate_mm']:g} mm of a "
+            f"target (Chamfer {fmt(report['methods'][label]['chamfer_mm'])} mm): nothing was "
+            f"scored (the points in another unit or frame? the warnings say which)")
+        return 1
     if args.pixels and a["points"] and not a["associated"]:
         # the pixels were triangulated here and none of the points was scored
         hint = (" --method absorbed puts its points in the pinhole model's virtual frame, tens "

@@ -51,6 +51,10 @@ def _boards_or_photos(args, log):
         if boards.air:
             raise CLIError(f"--model absorbed: {args.dir} holds boards rendered in air; the "
                            f"absorbed calibration is of boards seen through the port")
+        if "rig" not in boards.calib:
+            raise CLIError(f"--model absorbed: {args.dir} holds boards of "
+                           f"{len(boards.calib['names'])} cameras; the absorbed calibration is "
+                           f"of a pair (a rig of N cameras is calibrated with its port)")
         log(f"detect the board in {len(boards.images)} pairs …")
         return (boards.board, detect_boards(boards.board, boards.images),
                 tuple(boards.calib["size"]), "boards", boards.calib["rig"],

@@ -125,6 +125,10 @@ def calibrate_cameras_main(args, output, log, start, boards, design) -> int:
         if args.intrinsics:
             raise CLIError(f"{args.dir}: in-air boards calibrate the intrinsics themselves; "
                            f"--intrinsics is for underwater boards")
+        if args.lens == "fisheye":
+            raise CLIError(f"--lens fisheye does not apply to {where}: the joint adjustment of "
+                           f"N cameras projects with OpenCV's Brown–Conrady model (standard, "
+                           f"k3, rational, radial)")
     else:
         if given(args, "lens"):
             raise CLIError("--lens does not apply underwater: the lens model is the in-air "

@@ -162,10 +162,16 @@ def measure_views_main(args, output, options, start, log) -> int:
             "| views | targets | gap RMS (mm) |", "|---|---|---|",
             *(f"| {k} | {v['targets']} | {v['gap_rms_mm']:.4g} |" for k, v in by_views.items()),
             "", *(f"**Failed:** {f}" for f in failures)]) + "\n")
+    stream = sys.stderr if getattr(args, "json", False) else sys.stdout
     print(f"{len(photos)} cameras: {report['triangulated']} targets triangulated ("
           + ", ".join(f"{v['targets']} from {k} views" for k, v in by_views.items())
-          + f"), gap RMS {report['gap_rms_mm']:.4g} mm; total {report['timings_s']['total']:.1f} s")
-    print(f"wrote {output.path}")
+          + f"), gap RMS {report['gap_rms_mm']:.4g} mm; total {report['timings_s']['total']:.1f} s",
+          file=stream)
+    print(f"wrote {output.path}", file=stream)
+    if getattr(args, "json", False):
+        import json
+
+        print(json.dumps(report, indent=2))
     for failure in failures:
         print(f"failed: {failure} (report in {output.path})", file=sys.stderr)
     return EXIT_CHECK_FAILED if failures else 0

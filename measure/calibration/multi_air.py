@@ -127,6 +127,9 @@ def calibrate_rig_in_air(board: Board, detections: Detections, size, names=None,
     no pose with the others."""
     if intrinsics not in ("fixed", "free"):
         raise CalibrationError(f"intrinsics must be fixed or free, got {intrinsics!r}")
+    if lens_model == "fisheye":
+        raise CalibrationError("the joint adjustment of N cameras projects with OpenCV's "
+                               "Brown–Conrady model: the fisheye lens model is not fitted here")
     n_views = len(detections.ids[0]) if detections.n_poses else 0
     names = default_names(n_views) if names is None else tuple(names)
     corners = board.corners().astype(np.float64)

@@ -224,17 +224,22 @@ def _theirs(run):
 ])
 def test_an_implausible_submission_gets_one_warning_naming_the_likely_cause(
         scored_run, tmp_path, capsys, name, change, cause):
-    """Scored as given (exit 0), with one warning line on stderr and in the report (issue 22:
-    a cloud in metres scored '0 of 69 points within 40 mm' with no hint, a y-flipped one
-    scored like the right one, an 80 mm offset one like a good one with 8 points fewer)."""
+    """Scored as given, with one warning line on stderr and in the report (issue 22: a cloud
+    in metres scored '0 of 69 points within 40 mm' with no hint, a y-flipped one scored like
+    the right one, an 80 mm offset one like a good one with 8 points fewer); exit 1 with a
+    FAIL line exactly when none of the points lies within the gate of a target (issue 53:
+    that was exit 0)."""
     data, run, _ = scored_run
     theirs = _submit(tmp_path / f"{name}.ply", change(_theirs(run)))
     out = tmp_path / "score"
-    assert main(["score", str(data), "--points", theirs, "--out", str(out)]) == 0
-    warnings = [line for line in capsys.readouterr().err.splitlines()
-                if line.startswith("warning:")]
+    code = main(["score", str(data), "--points", theirs, "--out", str(out)])
+    err = capsys.readouterr().err
+    warnings = [line for line in err.splitlines() if line.startswith("warning:")]
     assert len(warnings) == 1 and re.search(cause, warnings[0]), warnings
     report = json.loads((out / "report.json").read_text())
+    nothing = report["association"]["associated"] == 0
+    assert code == (1 if nothing else 0) and ("FAIL: none of the" in err) == nothing
+    assert nothing or name != "metres"
     assert len(report["warnings"]) == 1 and re.search(cause, report["warnings"][0])
     assert re.search(cause, (out / "report.md").read_text())
 
@@ -246,10 +251,15 @@ def test_a_plausible_submission_gets_no_warning(scored_run, tmp_path, capsys, me
     mm: a wrong model is not a wrong frame), are scored without a warning."""
     data, run, _ = scored_run
     out = tmp_path / "score"
-    assert main(["score", str(data), "--points", str(run / f"points_{method}.ply"), "--out",
-                 str(out)]) == 0
+    code = main(["score", str(data), "--points", str(run / f"points_{method}.ply"), "--out",
+                 str(out)])
     assert "warning:" not in capsys.readouterr().err
-    assert json.loads((out / "report.json").read_text())["warnings"] == []
+    report = json.loads((out / "report.json").read_text())
+    assert report["warnings"] == []
+    # regular triangulation, which ignores the port, misses every target by more than the
+    # gate at this scene's distance: nothing scored is exit 1 (the report says it all)
+    assert code == (1 if report["association"]["associated"] == 0 else 0)
+    assert method != "optical_path" or code == 0
 
 
 @pytest.mark.slow

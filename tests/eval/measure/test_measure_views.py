@@ -31,12 +31,16 @@ def capture(tmp_path_factory):
     return root, spec
 
 
-def test_three_photos_give_the_true_targets(capture, tmp_path):
+def test_three_photos_give_the_true_targets(capture, tmp_path, capsys):
     root, spec = capture
     photos = [str(root / "img" / f"cam{k}.png") for k in range(3)]
     out = tmp_path / "m"
     assert eval_main(["measure", "--calib", str(root / "calib.yaml"), *photos, "--out",
-                      str(out), "--no-progress"]) == 0
+                      str(out), "--no-progress", "--json"]) == 0
+    import json
+
+    printed = json.loads(capsys.readouterr().out)  # --json: the report alone on stdout
+    assert printed["triangulated"] > 0 and printed["cameras"] == ["cam0", "cam1", "cam2"]
     data = np.genfromtxt(out / "points.csv", delimiter=",", names=True)
     points = np.column_stack([data["x_mm"], data["y_mm"], data["z_mm"]])
     rig = spec.multirig
