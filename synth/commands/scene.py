@@ -195,6 +195,12 @@ def main(args) -> int:
                              write_scene)
 
     check_file_output(args.out, "--out", may_replace=_is_our_scene)
+    from synth.scene.write import scene_edited
+
+    if scene_edited(args.out):
+        raise CLIError(f"--out {args.out} was edited since synth scene wrote it (its content "
+                       f"no longer matches the seal on its last line): move it away or give "
+                       f"another --out, so that your changes are not lost")
     from_file = _rig_from_file(args) if args.rig else None
     _refuse_inapplicable(args)
     if args.lighting is None and args.layout == "surface" and args.port == "none":

@@ -12,7 +12,9 @@ Two tools:
   yields a staging directory beside the output (``.NAME.staging-PID-XXXX``), writes the marker
   into it and renames it into place; on an exception the staging directory is removed and the
   output is left as it was. Staging and trash directories left by a process that died (``kill -9``)
-  are removed by the next claim of the same output: their names carry the owner's PID.
+  are removed by the next claim of the same output: their names carry the owner's PID. Files of
+  an earlier output that changed since they were written (edited by hand) are copied to
+  ``NAME.edited/`` beside it before it is replaced, and a ``note:`` line says so.
   :meth:`OutputDir.damage` says whether every file written is still whole (a command that skips
   an up-to-date output skips only a whole one).
 * :func:`atomic_write_bytes` / :func:`atomic_write_text` — one file, written to a temporary file
@@ -236,6 +238,7 @@ class OutputDir:
             os.rmdir(path)
             os.rename(tmp, path)
             return
+        self._keep_edited()
         trash = tempfile.mkdtemp(prefix=f".{name}.trash-{os.getpid()}-", dir=parent)
         os.rename(path, os.path.join(trash, "old"))
         try:
@@ -245,6 +248,43 @@ class OutputDir:
             shutil.rmtree(trash, ignore_errors=True)
             raise
         shutil.rmtree(trash, ignore_errors=True)
+
+
+    def edited_files(self) -> list[str]:
+        """The files of this earlier output that changed since this command wrote them (their
+        size or SHA-256 differs from the marker's record; a missing file is not listed)."""
+        digests = (read_marker(self.path) or {}).get("sha256")
+        if not isinstance(digests, dict):
+            return []
+        out = []
+        for name, (size, digest) in sorted(digests.items()):
+            path = os.path.join(self.path, name)
+            if os.path.isfile(path) and (os.path.getsize(path) != size
+                                         or file_sha256(path) != digest):
+                out.append(name)
+        return out
+
+    def _keep_edited(self) -> None:
+        """Before an earlier output is replaced: its files that changed since they were
+        written (edited by hand: notes in a report, a tuned calibration) are copied to
+        ``NAME.edited/`` beside it (``NAME.edited-2/``, … when that exists) and a ``note:``
+        line says where — nothing the user wrote is lost."""
+        import sys
+
+        edited = self.edited_files()
+        if not edited:
+            return
+        parent, name = os.path.split(self.path)
+        k, keep = 1, os.path.join(parent, f"{name}.edited")
+        while os.path.lexists(keep):
+            k += 1
+            keep = os.path.join(parent, f"{name}.edited-{k}")
+        for rel in edited:
+            os.makedirs(os.path.dirname(os.path.join(keep, rel)), exist_ok=True)
+            shutil.copy2(os.path.join(self.path, rel), os.path.join(keep, rel))
+        print(f"note: {', '.join(edited)} in {self.display} changed since {self.command} wrote "
+              f"{'it' if len(edited) == 1 else 'them'}: kept in {keep} before the output was "
+              f"replaced", file=sys.stderr)
 
 
 def file_sha256(path) -> str:

@@ -160,3 +160,38 @@ def test_an_empty_output_path_is_named(tmp_path, monkeypatch, path):
         OutputDir(path, "eval run")
     with pytest.raises(OutputError, match="--out: the path is empty"):
         check_file_output(path, "--out")
+
+
+def test_files_edited_by_hand_are_kept_before_a_rerun_replaces_them(tmp_path, capsys):
+    """A rerun replaces its earlier output whole; a file the user changed since (notes added
+    to a report, a tuned calibration) is copied to ``OUT.edited/`` first, and a note says so
+    (issue 53: edited files were lost). Unchanged and missing files leave no copy."""
+    out = OutputDir(tmp_path / "out", "eval test")
+    for text in ("first", "second"):
+        with out.staged() as tmp:
+            for name in ("report.md", "calib.yaml", "sub/plot.txt"):
+                os.makedirs(os.path.dirname(os.path.join(tmp, name)), exist_ok=True)
+                with open(os.path.join(tmp, name), "w") as fh:
+                    fh.write(f"{text} {name}\n")
+        if text == "first":
+            (tmp_path / "out" / "report.md").write_text("first report.md\nmy notes\n")
+            (tmp_path / "out" / "sub" / "plot.txt").unlink()
+            capsys.readouterr()
+    assert (tmp_path / "out.edited" / "report.md").read_text() == "first report.md\nmy notes\n"
+    assert sorted(p.name for p in (tmp_path / "out.edited").rglob("*") if p.is_file()) == [
+        "report.md"]
+    assert (tmp_path / "out" / "report.md").read_text() == "second report.md\n"
+    assert "report.md in" in capsys.readouterr().err
+
+
+def test_a_scene_edited_by_hand_is_not_overwritten(tmp_path, capsys):
+    from synth.__main__ import main as synth_main
+
+    scene = tmp_path / "mine.xml"
+    argv = ["scene", "--layout", "grid", "--size", "320", "268", "--out", str(scene)]
+    assert synth_main(argv) == 0 and synth_main(argv) == 0     # its own file: replaced
+    scene.write_text(scene.read_text().replace('name="n_water" value="1.33"',
+                                               'name="n_water" value="1.34"'))
+    assert synth_main(argv) == 2
+    assert "was edited since synth scene wrote it" in capsys.readouterr().err
+    assert 'value="1.34"' in scene.read_text()
