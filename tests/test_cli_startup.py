@@ -99,3 +99,15 @@ def test_eval_run_help_through_python_m():
                              "except SystemExit as stop:\n    assert stop.code == 0, stop.code")
     assert "eval.run.command" in modules
     assert heavy_among(modules) == []
+
+
+@pytest.mark.parametrize("option", [["--depth-range", "5"], ["--sensor", "nikon"]])
+def test_eval_run_refuses_a_bad_option_before_loading_the_pipeline(option, tmp_path):
+    """An option ``eval run`` checks itself (not argparse) is refused before SciPy, Open3D or
+    Mitsuba load, and nothing is written."""
+    out = tmp_path / "out"
+    argv = ["run", "scenes/paper_plane.xml", "--out", str(out), "--no-progress", *option]
+    modules = loaded_modules("import contextlib, io\nfrom eval.cli import main\n"
+                             "with contextlib.redirect_stderr(io.StringIO()):\n"
+                             f"    assert main({argv!r}) == 2")
+    assert heavy_among(modules) == [] and not out.exists()

@@ -101,7 +101,6 @@ def main(args) -> int:
     from synth.infra.provenance import package_versions
 
     from eval.run import dense
-    from eval.run.pipeline import measure_scene
 
     quiet = args.no_progress
     log = (lambda text: None) if quiet else (lambda text: print(text, file=sys.stderr, flush=True))
@@ -116,6 +115,8 @@ def main(args) -> int:
         return multiview.main(config, args.out, args.json, log)
     config.target_methods()  # refuses an unknown --methods before any expensive work
     output = OutputDir(args.out, COMMAND).claim()  # before any expensive work
+    from eval.run.pipeline import measure_scene  # SciPy, Open3D: once the options are checked
+
     start = time.perf_counter()
     result = measure_scene(config, log)
     report = result.report
