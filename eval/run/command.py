@@ -90,8 +90,8 @@ def add_parser(subparsers):
                              "imx174; overrides full_well_e, read_noise_e, bit_depth, "
                              "dark_level_dn, exposure")
     parser.add_argument("--no-figures", action="store_true",
-                        help="do not draw the figures (the PNG files; about 2 s of a run): the "
-                             "report, PLY and CSV files are the same")
+                        help="do not draw the figures (the PNG files; 1-3 s of a run on 2 "
+                             "cores): the report, PLY and CSV files are the same")
     add_json_option(parser)
     add_progress_option(parser)
 
