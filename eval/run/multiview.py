@@ -35,7 +35,8 @@ from eval.run.config import RunConfig
 #: ignored): (config field, option).
 NOT_FOR_N_CAMERAS = (("assumptions", "--assume"),
                      ("compare_calib", "--compare-calib"), ("absorbed_calib", "--absorbed-calib"),
-                     ("self_calibrate", "--self-calibrate"), ("sensor", "--sensor"))
+                     ("self_calibrate", "--self-calibrate"), ("sensor", "--sensor"),
+                     ("no_figures", "--no-figures"))  # a run of N cameras draws no figure
 #: The one method of a run of N cameras.
 METHOD = "optical_path"
 

@@ -46,8 +46,6 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.optimize import least_squares
-from scipy.spatial.transform import Rotation
 
 from ..geometry.camera import Camera
 from ..geometry.port import RigPort
@@ -275,6 +273,8 @@ DENSE_COLUMNS, DENSE_ENTRIES = 400, 8_000_000
 def _least_squares(residuals, jacobian, x0, lower, upper, m):
     """``scipy.optimize.least_squares`` (trf, Jacobian-scaled) of the housing problem: sparse
     LSMR steps, then exact steps where those stalled (module constants)."""
+    from scipy.optimize import least_squares
+
     common = dict(method="trf", x_scale="jac", bounds=(lower, upper), xtol=1e-12, ftol=1e-12,
                   gtol=1e-12, max_nfev=300)
     fit = least_squares(residuals, x0, jac=jacobian, tr_solver="lsmr",
@@ -362,6 +362,7 @@ def _sub_covariance(covariance: RigCovariance, names) -> np.ndarray:
 def apply_air_change(rig: StereoRig, air, delta) -> StereoRig:
     """``rig`` with the in-air parameters ``air`` moved by ``delta`` (px, unitless, rad: the
     right camera's ``R → exp([φ]×) R``, mm: its centre)."""
+    from scipy.spatial.transform import Rotation
     change = dict(zip(air, np.asarray(delta, dtype=np.float64)))
     cameras = []
     for name, camera in (("left", rig.left), ("right", rig.right)):

@@ -19,6 +19,7 @@
 from __future__ import annotations
 
 import argparse
+import gc
 import math
 import os
 import re
@@ -543,6 +544,9 @@ def process_main(main) -> None:
             except (OSError, ValueError):
                 pass
         os._exit(code)
+    # The interpreter's last collections would walk every object the command made: 0.3-0.5 s
+    # after eval run (Mitsuba, Open3D, matplotlib). Frozen, they go with the process.
+    gc.freeze()
     sys.exit(code)
 
 

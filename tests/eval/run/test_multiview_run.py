@@ -59,7 +59,8 @@ def test_bad_input_names_the_camera(scene, tmp_path, capsys):
     text = calib.read_text()
     calib.write_text(text.replace("data: [ 400., 0., 0. ]", "data: [ 200., 0., 0. ]"))
     for extra, fragment in ((["--calib", str(calib)], "cameras cam1 and cam2 overlap"),
-                            (["--assume", "n_water=1.34"], "--assume does not apply")):
+                            (["--assume", "n_water=1.34"], "--assume does not apply"),
+                            (["--no-figures"], "--no-figures does not apply")):
         assert eval_main(["run", scene, "--out", str(tmp_path / "out"), "--no-progress",
                           *extra]) == 2
         err = capsys.readouterr().err.strip().splitlines()
