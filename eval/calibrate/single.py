@@ -55,7 +55,7 @@ def read_and_detect(args, board, log, size=None, size_source=""):
     one (``repeats`` names them, :func:`eval.calibrate.sources.repeated_views`).
     ``size``: the image size the photos must have (``size_source`` names where it comes from);
     CLIError when they differ or the board is found in none of them."""
-    from measure.calibration.air import Detections, detect_images
+    from measure.calibration.air import Detections
 
     from eval.calibrate.sources import read_detection_views, repeat_lines, repeated_views
     from eval.core.photos import encoding_note, photo_files, read_photo
@@ -72,44 +72,67 @@ def read_and_detect(args, board, log, size=None, size_source=""):
         return (names, None, found_size, detections, {"read": time.perf_counter() - t},
                 repeat_lines(repeats, names, ("",)))
     files = photo_files(args.dir)
-    log(f"read {len(files)} photos from {args.dir} …")
+    log(f"read {len(files)} photos from {args.dir} and detect the board …")
     note = encoding_note(files[0], args.encoding)
     if note:
         print(note, file=sys.stderr, flush=True)
     t = time.perf_counter()
-    images = [read_photo(f, args.encoding) for f in files]
-    sizes = {(im.shape[1], im.shape[0]) for im in images}
-    if len(sizes) > 1:
-        first = (images[0].shape[1], images[0].shape[0])
-        odd = next(f for f, im in zip(files, images) if (im.shape[1], im.shape[0]) != first)
-        raise CLIError(f"{odd}: {images[files.index(odd)].shape[1]}x"
-                       f"{images[files.index(odd)].shape[0]} px, but {files[0]} is "
-                       f"{first[0]}x{first[1]} px (one camera's photos must all have one size)")
-    if size is not None and tuple(size) != next(iter(sizes)):
-        got = next(iter(sizes))
-        raise CLIError(f"{size_source}: image size {size[0]}x{size[1]} px, but the photos are "
-                       f"{got[0]}x{got[1]} px")
-    size = sizes.pop()
-    timings = {"read": time.perf_counter() - t}
-    log(f"detect the board in {len(images)} photos …")
-    t = time.perf_counter()
-    found_all = detect_images(board, images)
+    shapes, found_all, kept = _read_and_detect_each(files, board, args.encoding)
+    timings = {"read_and_detect": time.perf_counter() - t}
+    size = _one_size(files, shapes, size, size_source)
     empty = (np.empty(0, int), np.empty((0, 2)))
     detections = Detections([[ids, empty[0]] for ids, _ in found_all],
                             [[px, empty[1]] for _, px in found_all])
-    timings["detect"] = time.perf_counter() - t
     names = [os.path.basename(f) for f in files]
     repeats = repeated_views(detections, views=(0,))
     detections = trust.without(detections, sorted({r["pose"] for r in repeats}))
     found = detections.found(VIEW)
     if not found:
         squares = "x".join(map(str, board.squares))
+        first = [read_photo(f, args.encoding) for f in files[:trust.HINT_PHOTOS]]
         raise CLIError(f"{where}: the {board.kind} {squares} was found in none of the "
-                       f"{len(images)} photos{trust.board_hint(board, [(im, im) for im in images])}")
-    charuco = trust.charuco_check(board, [images[k] for k in found])
+                       f"{len(files)} photos{trust.board_hint(board, [(im, im) for im in first])}")
+    charuco = trust.charuco_check(board, [kept[k] for k in found if k in kept])
     if charuco:
         raise CLIError(f"{where}: {charuco}")
-    return names, images, size, detections, timings, repeat_lines(repeats, names, ("",))
+    return names, None, size, detections, timings, repeat_lines(repeats, names, ("",))
+
+
+def _read_and_detect_each(files, board, encoding):
+    """``(shapes, [(ids, pixels)], kept)``: each photo read and the board detected in it, on a
+    thread per core (OpenCV's reading and detectors release the GIL), the photos themselves
+    not kept (a hundred 12-megapixel photos are 5 GB as float32) but the first
+    :data:`eval.calibrate.photos.HINT_PHOTOS` where the board was found (``kept``, by index:
+    what :func:`eval.calibrate.photos.charuco_check` looks at)."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    from eval.core.photos import read_photo
+
+    def one(path):
+        image = read_photo(path, encoding)
+        ids, pixels = board.detect(image)
+        return image.shape[:2], ids, pixels, image if board.kind == "charuco" else None
+
+    with ThreadPoolExecutor(max(1, min(os.cpu_count() or 1, len(files)))) as pool:
+        results = list(pool.map(one, files))
+    kept = {k: r[3] for k, r in enumerate(results) if r[3] is not None and len(r[1])}
+    kept = {k: kept[k] for k in sorted(kept)[:trust.HINT_PHOTOS]}
+    return [r[0] for r in results], [(r[1], r[2]) for r in results], kept
+
+
+def _one_size(files, shapes, size, size_source):
+    """The photos' one size (width, height); CLIError when they differ or are not ``size``
+    (``size_source`` says where that comes from)."""
+    sizes = [(w, h) for h, w in shapes]
+    odd = next((f for f, s in zip(files, sizes) if s != sizes[0]), None)
+    if odd is not None:
+        got = sizes[files.index(odd)]
+        raise CLIError(f"{odd}: {got[0]}x{got[1]} px, but {files[0]} is {sizes[0][0]}x"
+                       f"{sizes[0][1]} px (one camera's photos must all have one size)")
+    if size is not None and tuple(size) != sizes[0]:
+        raise CLIError(f"{size_source}: image size {size[0]}x{size[1]} px, but the photos are "
+                       f"{sizes[0][0]}x{sizes[0][1]} px")
+    return sizes[0]
 
 
 def calibrate_single(args, output, log, start, board) -> tuple[dict, str]:
