@@ -250,10 +250,10 @@ def main(args) -> int:
     output = OutputDir(args.out, COMMAND).claim()
     log = (lambda text: None) if args.no_progress else (
         lambda text: print(text, file=sys.stderr, flush=True))
-    photo_names, _, size, detections, timings, repeats = read_and_detect(
+    photo_names, _, size, detections, timings, aside = read_and_detect(
         args, board, log, camera.size, f"--intrinsics {args.intrinsics}")
-    for line in repeats:
-        print(f"warning: {line}: left out (a photo given twice is one pose)", file=sys.stderr)
+    for k, why in sorted(aside.items()):
+        print(f"warning: {photo_names[k]}: {why}", file=sys.stderr)
     found = detections.found(VIEW)
     if len(found) < 2:
         raise CLIError(f"{args.dir}: the board was found in {len(found)} photo(s); the "

@@ -33,7 +33,7 @@ from eval.calibrate.port_lengths import lengths_for, per_camera_lengths
 from eval.calibrate.single import single_camera_folder
 from eval.cli import CLIError, positive_float
 from eval.core.photos import add_encoding_option, encoding_note
-from synth.infra.cli import (BOARD_OPTIONS, EXIT_CHECK_FAILED, WATER_INDEX_HELP,
+from synth.infra.cli import (BOARD_OPTIONS, positive_int, EXIT_CHECK_FAILED, WATER_INDEX_HELP,
                              add_board_options, add_out_option, add_progress_option,
                              board_from_args, given, refuse_given, water_index_argument)
 
@@ -137,6 +137,10 @@ def add_parser(subparsers):
                         "in the stereo fit) or refined (the stereo fit refines both cameras' "
                         "intrinsics too, as MATLAB's stereo calibrator does)")
     add_detection_options(p)
+    p.add_argument("--max-poses", type=positive_int, default=None, metavar="N",
+                   help="photos or detections: more poses than N (default 150; the frames of a "
+                        "calibration video) are thinned by pose diversity before the fit, the "
+                        "choice reported")
     add_out_option(p, COMMAND)
     add_encoding_option(p)
     add_progress_option(p)
@@ -598,7 +602,8 @@ def _calibrate_photos(args, output, log, free, start) -> int:
     from eval.calibrate.consistency import (cameras_alone, gross_misfit, rig_inconsistency,
                                             start_from_cameras, uniqueness)
     from eval.calibrate.dots import views_of_air, views_of_housing, with_eccentricity
-    from eval.calibrate.sources import repeat_lines, repeated_views, without_repeats
+    from eval.calibrate.sources import (MAX_POSES, repeat_lines, repeated_views, thin_by_pose,
+                                        without_repeats)
 
     where = f"{args.dir} ({'detections' if args.detections else 'photos'})"
     source = "detections" if args.detections else "photos"
@@ -635,6 +640,11 @@ def _calibrate_photos(args, output, log, free, start) -> int:
                  if k not in found["left"] and k not in found["right"]]
     repeats = repeated_views(detections)
     detections_all, detections = detections, without_repeats(detections, repeats)
+    before = len(set(detections.found(0)) | set(detections.found(1)))
+    detections, thinned = thin_by_pose(detections, board, size, args.max_poses or MAX_POSES)
+    if len(thinned) < before:
+        print(f"note: the board in {before} pairs: the {len(thinned)} most different poses kept "
+              f"(--max-poses {args.max_poses or MAX_POSES})", file=sys.stderr)
     t = time.perf_counter()
 
     def fit(calibrate):  # a CalibrationError (too few poses) names the photo folder
@@ -698,6 +708,8 @@ def _calibrate_photos(args, output, log, free, start) -> int:
     report = {"photos": os.path.abspath(args.dir), "source": source, "air": bool(args.air),
               "board": board.to_dict(), "image_size": list(size), "poses": len(names),
               "repeats": repeat_lines(repeats, names),
+              "thinned": {"kept": len(thinned), "rule": f"at most {args.max_poses or MAX_POSES} "
+                          f"poses, the most different kept (--max-poses)"},
               "found": {v: len(found[v]) for v in trust.VIEWS}, "used": len(used),
               "not_found": not_found,
               "left_out": [names[k] for k in outliers["left_out"]],

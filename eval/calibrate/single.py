@@ -51,13 +51,13 @@ def single_camera_folder(path) -> bool:
 def read_and_detect(args, board, log, size=None, size_source=""):
     """One camera's photos ``args.dir`` read and the board detected in each (``--detections``:
     its detections files read): ``(names, images or None, size, detections, timings,
-    repeats)``, ``detections`` holding view 0 only, without the photos that repeat an earlier
-    one (``repeats`` names them, :func:`eval.calibrate.sources.repeated_views`).
+    aside)``, ``detections`` holding view 0 only, without the photos set aside (``aside``
+    ``{pose: status}``: :func:`_set_aside`).
     ``size``: the image size the photos must have (``size_source`` names where it comes from);
     CLIError when they differ or the board is found in none of them."""
     from measure.calibration.air import Detections
 
-    from eval.calibrate.sources import read_detection_views, repeat_lines, repeated_views
+    from eval.calibrate.sources import read_detection_views
     from eval.core.photos import encoding_note, photo_files, read_photo
 
     where = f"{args.dir} (one camera's photos)"
@@ -67,10 +67,8 @@ def read_and_detect(args, board, log, size=None, size_source=""):
         if size is not None and tuple(size) != tuple(found_size):
             raise CLIError(f"{size_source}: image size {size[0]}x{size[1]} px, but --image-size "
                            f"says {found_size[0]}x{found_size[1]} px")
-        repeats = repeated_views(detections, views=(0,))
-        detections = trust.without(detections, sorted({r["pose"] for r in repeats}))
-        return (names, None, found_size, detections, {"read": time.perf_counter() - t},
-                repeat_lines(repeats, names, ("",)))
+        detections, aside = _set_aside(detections, board, found_size, args, names)
+        return names, None, found_size, detections, {"read": time.perf_counter() - t}, aside
     files = photo_files(args.dir)
     log(f"read {len(files)} photos from {args.dir} and detect the board …")
     note = encoding_note(files[0], args.encoding)
@@ -84,8 +82,7 @@ def read_and_detect(args, board, log, size=None, size_source=""):
     detections = Detections([[ids, empty[0]] for ids, _ in found_all],
                             [[px, empty[1]] for _, px in found_all])
     names = [os.path.basename(f) for f in files]
-    repeats = repeated_views(detections, views=(0,))
-    detections = trust.without(detections, sorted({r["pose"] for r in repeats}))
+    detections, aside = _set_aside(detections, board, size, args, names)
     found = detections.found(VIEW)
     if not found:
         squares = "x".join(map(str, board.squares))
@@ -95,7 +92,29 @@ def read_and_detect(args, board, log, size=None, size_source=""):
     charuco = trust.charuco_check(board, [kept[k] for k in found if k in kept])
     if charuco:
         raise CLIError(f"{where}: {charuco}")
-    return names, None, size, detections, timings, repeat_lines(repeats, names, ("",))
+    return names, None, size, detections, timings, aside
+
+
+def _set_aside(detections, board, size, args, names):
+    """``(detections, aside {pose: status})``: the photos that repeat an earlier one
+    (:func:`eval.calibrate.sources.repeated_views`) and, of more than ``--max-poses``, the
+    least different (:func:`eval.calibrate.sources.thin_by_pose`) left out, each with the
+    status the report gives it; a ``note:`` line when poses were thinned."""
+    from eval.calibrate.sources import (MAX_POSES, repeat_lines, repeated_views, thin_by_pose)
+
+    repeats = repeated_views(detections, views=(0,))
+    aside = {r["pose"]: f"left out: {line} (a photo given twice is one pose)"
+             for r, line in zip(repeats, repeat_lines(repeats, names, ("",)))}
+    detections = trust.without(detections, sorted(aside))
+    limit = getattr(args, "max_poses", None) or MAX_POSES
+    before = detections.found(VIEW)
+    detections, kept = thin_by_pose(detections, board, size, limit)
+    if len(kept) < len(before):
+        print(f"note: the board in {len(before)} photos: the {len(kept)} most different poses "
+              f"kept (--max-poses {limit})", file=sys.stderr)
+        aside.update({k: f"left out: thinned (--max-poses {limit})"
+                      for k in set(before) - set(kept)})
+    return detections, aside
 
 
 def _read_and_detect_each(files, board, encoding):
@@ -144,7 +163,7 @@ def calibrate_single(args, output, log, start, board) -> tuple[dict, str]:
     from eval.calibrate.dots import views_of_camera, with_eccentricity
 
     where = f"{args.dir} (one camera's photos)"
-    names, images, size, detections, timings, repeats = read_and_detect(args, board, log)
+    names, images, size, detections, timings, aside = read_and_detect(args, board, log)
     lens = args.lens or DEFAULT_LENS_MODEL
     corners = board.corners().astype(np.float32)
 
@@ -181,9 +200,12 @@ def calibrate_single(args, output, log, start, board) -> tuple[dict, str]:
     timings["leave_one_out"] = time.perf_counter() - t
     report = _report(args, board, names, size, detections, used_detections, result, outliers,
                      camera, sigmas, result["problem"])
-    report["repeats"] = repeats
-    report["warnings"] += [f"{line}: left out (a photo given twice is one pose)"
-                           for line in repeats]
+    report["set_aside"] = {names[k]: why for k, why in sorted(aside.items())}
+    report["warnings"] += [f"{names[k]}: {why}" for k, why in sorted(aside.items())
+                           if "thinned" not in why]
+    for row in report["per_pose"]:
+        row["status"] = aside.get(row["pose"], row["status"])
+    report["found"] += len(aside)  # found, then set aside
     for key, value in spread.items():
         report["camera"][key]["sigma_photos"] = value
     report["timings_s"] = timings

@@ -82,7 +82,7 @@ def calibrate_single_housing(args, output, log, start, board, intrinsics, start_
 
     where = f"{args.dir} (one camera's photos)"
     camera = intrinsics["camera"]
-    names, images, size, detections, timings, repeats = read_and_detect(
+    names, images, size, detections, timings, aside = read_and_detect(
         args, board, log, camera.size, f"--intrinsics {args.intrinsics}")
 
     def fit(dets):
@@ -124,9 +124,12 @@ def calibrate_single_housing(args, output, log, start, board, intrinsics, start_
                      intrinsics, {"rms_px": float(absorbed[0]), "model": model, "tried": tried,
                                   "cross_validation": validation}, dome)
     report["in_air_dependence"] = in_air_dependence(housing, intrinsics)
-    report["repeats"] = repeats
-    report["warnings"] += [f"{line}: left out (a photo given twice is one pose)"
-                           for line in repeats]
+    report["set_aside"] = {names[k]: why for k, why in sorted(aside.items())}
+    report["warnings"] += [f"{names[k]}: {why}" for k, why in sorted(aside.items())
+                           if "thinned" not in why]
+    for row in report["per_pose"]:
+        row["status"] = aside.get(row["pose"], row["status"])
+    report["found"] += len(aside)  # found, then set aside
     report["timings_s"] = timings
     log("write the calibration, report and figures …")
     with output.staged() as tmp:

@@ -85,3 +85,29 @@ def test_circle_options_with_a_chessboard_are_refused(tmp_path, capsys):
                  "640x480", "--squares", "10x7", "--square-mm", "30", "--pitch-mm", "30",
                  "--out", str(tmp_path / "out")]) == 2
     assert "--pitch-mm does not apply to a chessboard" in capsys.readouterr().err
+
+
+def test_frames_of_a_video_are_thinned_by_pose():
+    """Ten board poses, each seen in four nearly equal frames (a video): thinned to ten, one
+    of each pose is kept; fewer poses than the limit are all kept."""
+    from eval.calibrate.sources import thin_by_pose
+    from measure.calibration.air import Detections
+
+    rng = np.random.default_rng(2)
+    corners = BOARD.corners()
+    ids, pixels, pose_of = [], [], []
+    for pose in range(10):
+        R = Rotation.from_rotvec(rng.uniform(-0.5, 0.5, 3)).as_matrix()
+        t = np.array([0, 0, 500.0]) + rng.uniform(-60, 60, 3) - R @ corners.mean(axis=0)
+        uv = cv2.projectPoints(corners @ R.T + t, np.zeros(3), np.zeros(3), K,
+                               None)[0].reshape(-1, 2)
+        for _ in range(4):  # the frames of one moment: a tenth of a pixel apart
+            ids.append([np.arange(len(uv)), np.empty(0, int)])
+            pixels.append([uv + rng.normal(0, 0.1, uv.shape), np.empty((0, 2))])
+            pose_of.append(pose)
+    detections = Detections(ids, pixels)
+    thinned, kept = thin_by_pose(detections, BOARD, (640, 480), 10)
+    assert sorted(pose_of[k] for k in kept) == list(range(10))
+    assert len(thinned.found(0)) == 10
+    same, all_kept = thin_by_pose(detections, BOARD, (640, 480), 40)
+    assert all_kept == list(range(40))
