@@ -20,6 +20,7 @@ import numpy as np
 
 from types import SimpleNamespace
 
+from eval.calibrate.causes import FIT_ERRORS, housing_failure
 from eval.cli import CLIError
 
 #: Options of a two-camera calibration that a calibration of N cameras does not take.
@@ -95,6 +96,45 @@ def photos_source(path, names, board, air: bool, encoding: str):
                            captures=list(stems))
 
 
+def read_air_rig(path, folder, names, size):
+    """``(rig, covariance)`` of the in-air ``calib.yaml`` of N cameras that ``--intrinsics``
+    names, checked against the boards of ``folder`` (``names``, image ``size``) before any
+    detection: a file of another count of cameras (a pair's calib.yaml, one camera's
+    camera.yaml), other names, another image size or one that holds a port is refused with
+    one line naming the file and the likely cause."""
+    from synth.products.dataset import DatasetError
+    from synth.products.rig_file import read_rig_covariance, read_rig_file
+
+    where = f"--intrinsics {path}"
+    if os.path.isdir(path):
+        inside = os.path.join(path, "calib.yaml")
+        raise CLIError(f"{where}: a folder; give its calibration file"
+                       + (f" ({inside})" if os.path.isfile(inside) else " (calib.yaml)"))
+    try:
+        air = read_rig_file(path)
+    except DatasetError as exc:
+        raise CLIError(f"{where}: {str(exc).removeprefix(f'{path}: ')}") from None
+    if len(air.names) != len(names):
+        raise CLIError(f"{where}: a calibration of {len(air.names)} cameras "
+                       f"({', '.join(air.names)}), but {folder} holds {len(names)} "
+                       f"({', '.join(names)}): another rig's file? Give the calib.yaml of "
+                       f"eval calibrate on in-air boards of these {len(names)} cameras")
+    if air.names != names:
+        raise CLIError(f"{where}: cameras {', '.join(air.names)}, but {folder} holds "
+                       f"{', '.join(names)}")
+    if tuple(air.cameras[0].size) != tuple(size):
+        raise CLIError(f"{where}: image size {air.cameras[0].size[0]}x{air.cameras[0].size[1]} "
+                       f"px, but the images are {size[0]}x{size[1]} px: another camera's "
+                       f"calibration?")
+    if air.refracts:
+        raise CLIError(f"{where}: already holds a port (an underwater calibration); give the "
+                       f"in-air calibration")
+    try:
+        return air, read_rig_covariance(path)
+    except DatasetError as exc:
+        raise CLIError(f"{where}: {str(exc).removeprefix(f'{path}: ')}") from None
+
+
 def calibrate_cameras_main(args, output, log, start, boards, design) -> int:
     """``eval calibrate`` of N cameras (module docs): ``boards`` from :func:`boards_source` or
     :func:`photos_source`; ``design``: the starting flat port under water (normal along the
@@ -105,8 +145,7 @@ def calibrate_cameras_main(args, output, log, start, boards, design) -> int:
     from measure.stereo.multirig import MultiRig
     from synth.infra.cli import BOARD_OPTIONS, given, refuse_given
     from synth.infra.fileio import atomic_write_json, jsonable
-    from synth.products.dataset import DatasetError
-    from synth.products.rig_file import read_rig_covariance, read_rig_file, write_rig_file
+    from synth.products.rig_file import write_rig_file
 
     names, truth = boards.names, boards.truth
     where = f"{args.dir} ({len(names)} cameras{', photos' if boards.photos else ''})"
@@ -141,6 +180,7 @@ def calibrate_cameras_main(args, output, log, start, boards, design) -> int:
         if not free or unknown:
             raise CLIError(f"--free {args.free!r}: the housing of N cameras estimates "
                            f"{', '.join(PARAMETERS)}")
+        air, air_cov = read_air_rig(args.intrinsics, args.dir, names, boards.size)
     log(f"detect the boards in {boards.path} ({len(boards.images)} poses × {len(names)} "
         f"cameras) …")
     t = time.perf_counter()
@@ -167,21 +207,6 @@ def calibrate_cameras_main(args, output, log, start, boards, design) -> int:
                                         for (k, v), why in sorted(cal.left_out.items())}})
             rms = cal.joint_rms_px
         else:
-            try:
-                air = read_rig_file(args.intrinsics)
-                air_cov = read_rig_covariance(args.intrinsics)
-            except DatasetError as exc:
-                raise CLIError(str(exc)) from None
-            if air.names != names:
-                raise CLIError(f"{args.intrinsics}: cameras {', '.join(air.names)}, but "
-                               f"{args.dir} holds {', '.join(names)}")
-            if tuple(air.cameras[0].size) != tuple(boards.size):
-                raise CLIError(f"--intrinsics {args.intrinsics}: image size "
-                               f"{air.cameras[0].size[0]}x{air.cameras[0].size[1]} px, but the "
-                               f"images are {boards.size[0]}x{boards.size[1]} px")
-            if air.refracts:
-                raise CLIError(f"{args.intrinsics}: already holds a port; give the in-air "
-                               f"calibration")
             per_camera = given(args, "port_distance") or boards.own_ports
             if per_camera:  # each camera behind its own port, ⟂ its axis, D from its centre
                 from measure import FlatPort
@@ -249,7 +274,13 @@ def calibrate_cameras_main(args, output, log, start, boards, design) -> int:
                            "design": design.describe()})
             rms = cal.rms_px
     except CalibrationError as exc:
-        raise CLIError(f"{where}: {exc}") from None
+        if boards.air:
+            raise CLIError(f"{where}: {exc}") from None
+        raise housing_failure(where, exc, args) from None
+    except FIT_ERRORS as exc:  # a port moved behind a camera, singular equations
+        if boards.air:
+            raise
+        raise housing_failure(where, exc, args) from None
     timings["calibrate"] = time.perf_counter() - t
     scored = truth is not None
     z = np.array([e / s for _, e, s in rows]) if scored else np.zeros(0)

@@ -75,6 +75,34 @@ def test_bad_input_is_one_line(chain, tmp_path, capsys):
     assert not any((tmp_path / n).exists() for n in "abcd")
 
 
+def test_a_wrong_calibration_names_the_file_and_the_cause(chain, tmp_path, capsys):
+    """Issue 53: a pair's calib.yaml given to four cameras (it said "22 names"), the folder of
+    the in-air calibration (it said "no such file"), both refused before any detection (with
+    progress on, the one line is all stderr holds: no "detect the boards" line before it);
+    and --n-water 1.0 (it said "camera centre lies on the water side …"): the file, the likely
+    cause, exit 2, nothing written."""
+    from synth.products.dataset import write_calib
+    from synth.scene.rig import paper_rig
+
+    write_calib(tmp_path / "pair.yaml", paper_rig())
+    water = str(chain / "b_water")
+    cases = [
+        (["--intrinsics", str(tmp_path / "pair.yaml")],
+         "a calibration of 2 cameras (left, right), but"),
+        (["--intrinsics", str(chain / "c_air")], "a folder; give its calibration file"),
+    ]
+    for extra, fragment in cases:
+        assert eval_main(["calibrate", water, *extra, "--out", str(tmp_path / "a")]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and err[0].startswith("error: --intrinsics") and fragment in err[0], err
+    assert eval_main(["calibrate", water, "--intrinsics", str(chain / "c_air" / "calib.yaml"),
+                      "--n-water", "1.0", "--out", str(tmp_path / "a"), "--no-progress"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--n-water 1 is no water" in err[0], err
+    assert "water side" not in err[0], err
+    assert not (tmp_path / "a").exists()
+
+
 def _photo_folder(boards, out):
     """The boards' renders as a user's photo folder of four cameras: ``camK/PP.png``."""
     import shutil
