@@ -103,6 +103,42 @@ def test_a_wrong_calibration_names_the_file_and_the_cause(chain, tmp_path, capsy
     assert not (tmp_path / "a").exists()
 
 
+def _report_rows(path) -> dict:
+    """``{parameter: cells}`` of the table of a report.md of N cameras."""
+    rows = {}
+    for line in path.read_text().splitlines():
+        cells = [c.strip() for c in line.strip("|").split("|")]
+        if line.startswith("| ") and len(cells) >= 3 and cells[0] != "parameter":
+            rows[cells[0]] = cells[1:]
+    return rows
+
+
+def test_the_report_lists_the_estimates_and_the_index_computed(chain, tmp_path, capsys):
+    """Issue 53: report.md of N cameras listed only σ. Now every estimate: each camera's focal
+    length and centre in air against the folder's truth (within 3 σ of it), and under water
+    the freed water index — started from --n-water T=12,S=35, whose index (1.34152, Quan & Fry)
+    is printed — within 3 σ of the 1.33 the boards were rendered with."""
+    truth = read_rig_file(chain / "b_air" / "calib.yaml")
+    rows = _report_rows(chain / "c_air" / "report.md")
+    names, matrix = read_rig_covariance(chain / "c_air" / "calib.yaml")
+    sigma = dict(zip(names, np.sqrt(np.diag(matrix))))
+    for k in range(4):
+        fx = float(rows[f"cam{k}.fx"][0])
+        assert abs(fx - truth.cameras[k].K[0, 0]) <= 3 * sigma[f"cam{k}.fx"], (k, fx)
+    for k in range(1, 4):
+        x = float(rows[f"cam{k}.center[0]"][0])
+        assert abs(x - truth.cameras[k].t[0]) <= 3 * sigma[f"cam{k}.center[0]"], (k, x)
+    out = tmp_path / "w"
+    capsys.readouterr()
+    assert eval_main(["calibrate", str(chain / "b_water"), "--intrinsics",
+                      str(chain / "c_air" / "calib.yaml"), "--free", "distance,normal,n_water",
+                      "--n-water", "T=12,S=35", "--out", str(out), "--no-progress"]) == 0
+    assert "n_water = 1.34152 from T=12" in capsys.readouterr().err
+    row = _report_rows(out / "report.md")["port.n_water"]
+    assert abs(float(row[0]) - 1.33) <= 3 * float(row[2]), row
+    assert "distance" in (out / "report.md").read_text().split("The port")[-1]
+
+
 def _photo_folder(boards, out):
     """The boards' renders as a user's photo folder of four cameras: ``camK/PP.png``."""
     import shutil
