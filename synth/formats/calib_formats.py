@@ -585,9 +585,35 @@ def read_colmap_rig(path):
             raise CalibFormatError(f"{path}: camera {camera_id}: {exc}") from None
         built.append(camera)
     try:
-        return MultiRig(built, ports, [f"cam{k}" for k in range(len(built))])
+        return MultiRig(built, _one_port_per_plane(ports), [f"cam{k}" for k in range(len(built))])
     except ValueError as exc:
         raise CalibFormatError(f"{path}: {exc}") from None
+
+
+def _one_port_per_plane(ports) -> list:
+    """``ports`` with the flat ports that describe one plane — the same glass seen from several
+    cameras, each FLATPORT line in its own camera's frame, equal but for round-off (1e-12 in
+    the normal, 1e-9 mm) — made the one port they share (the first of them)."""
+    out = list(ports)
+    for k, port in enumerate(out):
+        if not isinstance(port, FlatPort):
+            continue
+        for earlier in out[:k]:
+            if (isinstance(earlier, FlatPort) and earlier.indices == port.indices
+                    and np.allclose(earlier.normal, port.normal, rtol=0, atol=1e-12)
+                    and abs(earlier.distance - port.distance) <= 1e-9
+                    and np.allclose(earlier.thicknesses, port.thicknesses, rtol=0, atol=1e-9)):
+                out[k] = earlier
+                break
+    return out
+
+
+def colmap_cameras(path) -> int | None:
+    """How many cameras the COLMAP ``cameras.txt`` ``path`` lists (None: not readable as one)."""
+    try:
+        return len(_parse_cameras_txt(path))
+    except (CalibFormatError, OSError, ValueError):
+        return None
 
 
 def _parse_cameras_txt(path) -> dict:
@@ -681,7 +707,8 @@ def read_colmap(path) -> dict:
     path = os.fspath(path)
     cameras = _parse_cameras_txt(path)
     if len(cameras) != 2:
-        raise CalibFormatError(f"{path}: {len(cameras)} cameras; a stereo rig has two")
+        raise CalibFormatError(f"{path}: a rig of {len(cameras)} camera(s), not a stereo pair: "
+                               f"this reads two cameras")
     ref, poses = _read_rig_config(os.path.join(os.path.dirname(path), COLMAP_RIG_NAME), cameras)
     other = next(c for c in cameras if c != ref)
     left, right = cameras[ref], cameras[other]
@@ -905,5 +932,5 @@ __all__ = ["CALIBMAR_NAME", "COLMAP_CAMERAS_NAME", "COLMAP_MODELS", "COLMAP_PIXE
            "PYCOLMAP_WARNING", "calib_dict", "calib_format", "calibmar_partner", "colmap_camera",
            "distortion_model_of",
            "opencv_camera", "read_calibmar", "read_colmap", "read_single_camera", "stereo_extrinsics",
-           "read_colmap_rig", "read_covariance_node", "write_calibmar",
+           "colmap_cameras", "read_colmap_rig", "read_covariance_node", "write_calibmar",
            "write_calibration_formats", "write_colmap", "write_colmap_rig", "write_single_camera"]

@@ -33,6 +33,8 @@ import numpy as np
 from measure import Camera, FlatPort
 from measure.geometry.dome import DomePort
 from measure.stereo.multirig import MultiRig
+from synth.formats.calib_formats import (CalibFormatError, calib_format, colmap_cameras,
+                                         read_colmap_rig)
 from synth.products.dataset import DatasetError, not_a_file, read_calib, write_calib
 
 #: The entries of ``ports`` that are not maps.
@@ -197,6 +199,11 @@ def read_rig_file(path) -> MultiRig:
     if _is_one_camera_file(path):
         raise DatasetError(f"{path}: a calibration of one camera (camera_matrix: eval calibrate "
                            f"of one camera's folder), not of a rig: give the rig's calib.yaml")
+    if calib_format(path) == "colmap" and colmap_cameras(path) != 2:
+        try:  # the COLMAP fork's cameras.txt of N cameras, rig_config.json beside it
+            return read_colmap_rig(path)
+        except CalibFormatError as exc:
+            raise DatasetError(str(exc)) from None
     if not _is_rig_file(path):
         calib = read_calib(path)
         return MultiRig.from_stereo(calib["rig"])

@@ -1,7 +1,8 @@
-"""What a housing calibration that found no housing says (eval.calibrate.causes): the
-adjustment's reason in words a user can act on, with the likely causes — the --intrinsics file,
-water with the index of air — and the cure of two parameters the boards cannot tell apart kept
-for that case alone."""
+"""Messages of eval calibrate that name the cause. What a housing calibration that found no
+housing says (eval.calibrate.causes): the adjustment's reason in words a user can act on, with
+the likely causes — the --intrinsics file, water with the index of air — and the cure of two
+parameters the boards cannot tell apart kept for that case alone; folders that are not a pair
+given to --model absorbed."""
 
 from __future__ import annotations
 
@@ -31,3 +32,24 @@ def test_a_correlation_keeps_its_own_cure():
                                "+0.9999: these boards cannot tell them apart",
                                SimpleNamespace(intrinsics="a.yaml", n_water=1.33), "render"))
     assert "likely" not in text and "render more varied poses" in text, text
+
+
+def test_model_absorbed_names_a_folder_that_is_not_a_pair(tmp_path, capsys):
+    """``--model absorbed`` of one camera's photos or of photos of three cameras: named for
+    what they are, with the command that takes them (it said "no left and no right folder")."""
+    import cv2
+
+    from eval.cli import main as eval_main
+
+    image = np.zeros((20, 20), np.uint8)
+    for folder in ("one", "three/cam0", "three/cam1", "three/cam2"):
+        (tmp_path / folder).mkdir(parents=True)
+        cv2.imwrite(str(tmp_path / folder / "00.jpg"), image)
+    board = ["--squares", "7x6", "--square-mm", "60", "--model", "absorbed"]
+    for folder, fragment in (("one", "holds one camera's photos"),
+                             ("three", "holds photos of 3 cameras (cam0/, cam1/, cam2/)")):
+        assert eval_main(["calibrate", str(tmp_path / folder), *board, "--out",
+                          str(tmp_path / "out"), "--no-progress"]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and fragment in err[0] and "left/ and right/" in err[0], err
+    assert not (tmp_path / "out").exists()
