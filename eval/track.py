@@ -46,6 +46,7 @@ import numpy as np
 from eval.cli import CLIError, positive_float
 from eval.core.sequence import changed_frames, locate_markers, read_sequence
 from synth.infra.cli import add_json_option, add_out_option, add_progress_option
+from synth.infra.images import imread
 
 COMMAND = "eval track"
 #: Largest distance (px) between a marker's predicted pixel and the detection it is given.
@@ -334,7 +335,7 @@ def main(args) -> int:
         found = []
         for name in VIEW_NAMES:
             path = os.path.join(args.dataset, "frames", f"{int(frame):04d}_{name}.png")
-            image = cv2.imread(path, cv2.IMREAD_ANYDEPTH)
+            image = imread(path, cv2.IMREAD_ANYDEPTH)
             if image is None:
                 raise CLIError(f"{path}: missing or not an image OpenCV can read")
             t0 = time.perf_counter()

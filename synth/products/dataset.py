@@ -80,6 +80,7 @@ from synth.infra.provenance import package_versions
 from synth.rendering.render import (pass_seed, png16_scale, render_stereo, srgb_preview, to_png16,
                           write_exr, write_png)
 from synth.scene import SceneError, SceneSpec, load_scene
+from synth.infra.images import imread
 
 FORMAT_VERSION = 4  # 2: targets.ply in binary doubles (was ASCII, 6 digits); 3: hashes;
 #                    4: cameras.json, colmap/, surfaces' PFM / PNG depth and .flo (synth.formats.exchange)
@@ -659,7 +660,7 @@ class Dataset:
 def read_png16(path) -> np.ndarray:
     if not os.path.isfile(path):
         raise DatasetError(f"{path}: no such file")
-    img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    img = imread(str(path), cv2.IMREAD_UNCHANGED)
     if img is None:
         raise DatasetError(f"{path}: cannot read image")
     if img.ndim != 2 or img.dtype != np.uint16:

@@ -20,6 +20,7 @@ import os
 import re
 
 import numpy as np
+from synth.infra.images import imread
 
 PHOTO_FORMATS = ("jpg", "png")
 
@@ -104,7 +105,7 @@ def export_views(src, out_dir, fmt: str = "jpg", quality: int = 90) -> tuple[tup
         os.makedirs(os.path.join(out_dir, view), exist_ok=True)
     for name, *files in pairs:
         for view, file in zip(views, files):
-            image = cv2.imread(file, cv2.IMREAD_UNCHANGED)
+            image = imread(file, cv2.IMREAD_UNCHANGED)
             if image is None or image.dtype != np.uint16 or image.ndim != 2:
                 raise PhotoExportError(f"{file}: not a 16-bit grey rendered image")
             target = os.path.join(out_dir, view, f"{name}.{fmt}")
