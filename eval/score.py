@@ -39,7 +39,7 @@ from synth.infra.cli import add_json_option, add_out_option, add_progress_option
 from eval.core.formatting import format_number as fmt
 from eval.core.uncertainty import AUTO, add_pixel_sigma_option, parse_pixel_sigma
 from eval.core.scoring import (PIXEL_COLUMNS, UNITS, read_pixel_pairs, read_points,
-                               score_dataset)
+                               score_dataset, unassociated_text)
 # the scoring functions, where they were before eval.core.scoring held them
 from eval.core.scoring import associate_points, default_gate_mm, plausibility  # noqa: F401
 
@@ -189,7 +189,7 @@ def main(args) -> int:
     st = report["methods"][label]
     a = report["association"]
     summary = (f"{data.path}: {a['associated']} of {a['points']} points within "
-               f"{a['gate_mm']:g} mm of a target ({a['unassociated']} not); "
+               f"{a['gate_mm']:g} mm of a target ({unassociated_text(a)}); "
                f"{a['visible_in_both_scored']} of {a['visible_in_both']} targets visible in "
                f"{'two or more' if several else 'both'} views scored; RMS dP "
                f"{fmt(st['rms_dp_mm'])} mm, max dP {fmt(st['max_dp_mm'])} mm, mean dZ "
@@ -354,7 +354,7 @@ def markdown(report: dict) -> str:
              *[f"**Warning:** {warning}" for warning in report.get("warnings", [])],
              *([""] if report.get("warnings") else []),
              f"{a['associated']} of {a['points']} points associated with a target within "
-             f"{a['gate_mm']:g} mm ({a['unassociated']} not); {a['visible_in_both_scored']} of "
+             f"{a['gate_mm']:g} mm ({unassociated_text(a)}); {a['visible_in_both_scored']} of "
              f"{a['visible_in_both']} targets visible in both views scored. Errors over the "
              f"associated points (mm); Chamfer and F-scores of all points against the targets "
              f"visible in both views.", "",

@@ -159,6 +159,21 @@ def test_association_is_one_to_one_and_gated():
     assert default_gate_mm(truth) == 20.0
 
 
+def test_duplicates_are_said_to_be_duplicates_not_far():
+    """A point on a target a nearer point holds is a duplicate (the same match written twice),
+    not a point farther than the gate from every target (issue 53: "not within 40 mm")."""
+    from eval.core.scoring import score_points, unassociated_text
+
+    truth = np.array([[0.0, 0, 1000], [40, 0, 1000], [80, 0, 1000]])
+    points = np.array([[0.3, 0, 1000], [0.1, 0, 1000], [41, 0, 1000], [60, 0, 1000],
+                       [41, 0, 1000]])
+    association = score_points(points, truth, np.ones(3, bool), 5.0, 0)[2]
+    assert association["unassociated"] == 3 and association["duplicates"] == 2
+    assert unassociated_text(association) == ("3 not: 2 duplicate(s) of a target a nearer "
+                                              "point holds, 1 farther than 5 mm from every "
+                                              "target")
+
+
 def _fails(capsys, args, fragment):
     assert main(args) == 2
     err = capsys.readouterr().err.strip().splitlines()
