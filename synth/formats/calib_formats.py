@@ -127,6 +127,15 @@ def calib_dict(size, K1, D1, K2, D2, R, T, port: FlatPort, has_port: bool,
                        distortion_model=models[1])
     except ValueError as exc:
         raise CalibFormatError(f"{where}: {exc}") from None
+    centres = np.array([left.center, right.center])
+    if not has_port and isinstance(port, FlatPort) and np.any(centres @ port.normal
+                                                              >= port.distance):
+        # in air the plane bends nothing and may lie anywhere (eval rectify's virtual cameras
+        # keep the real port's plane, behind them): 1 mm beyond the cameras, as "no port" is
+        from measure.geometry.port import index_matched_port
+
+        port = index_matched_port(port.normal, centres)
+        out["port"] = port
     out["rig"] = StereoRig(left, right, port)
     return out
 
