@@ -239,6 +239,13 @@ def calibrate_cameras_main(args, output, log, start, boards, design) -> int:
         f"cameras) …")
     t = time.perf_counter()
     detections = _detect(boards.board, boards.images, names)
+    if boards.photos:  # a --squares smaller than the board: a different part of it per photo
+        from eval.calibrate import photos as trust
+
+        larger = trust.larger_board(boards.board, [views[:2] for views in boards.images],
+                                    detections.found(0))
+        if larger:
+            raise CLIError(f"{where}: {larger}")
     timings = {"detect": time.perf_counter() - t}
     found = {name: len(detections.found(v)) for v, name in enumerate(names)}
     report = {"boards": os.path.abspath(boards.path), "air": boards.air, "cameras": list(names),

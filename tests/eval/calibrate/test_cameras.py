@@ -168,6 +168,11 @@ def test_photo_folders_of_four_cameras(chain, tmp_path, capsys):
     for k in range(4):
         error = rig.cameras[k].K[0, 0] - truth.cameras[k].K[0, 0]
         assert abs(error) <= 3 * sigma[f"cam{k}.fx"], (k, error)
+    capsys.readouterr()  # a --squares one smaller than the board (issue 53: "cam2: the board
+    assert eval_main(["calibrate", str(photos), "--air", "--squares", "6x5",  # was found in 2")
+                      "--square-mm", "60", "--out", str(tmp_path / "z"), "--no-progress"]) == 2
+    err = [line for line in capsys.readouterr().err.splitlines() if not line.startswith("note:")]
+    assert len(err) == 1 and "a chessboard of at least 7x6 squares, not 6x5" in err[0], err
     water = _photo_folder(chain / "b_water", tmp_path / "water_photos")
     assert eval_main(["calibrate", str(water), "--intrinsics", str(tmp_path / "a" / "calib.yaml"),
                       *board, "--out", str(tmp_path / "w"), "--no-progress"]) == 0

@@ -228,6 +228,10 @@ def test_bad_photo_folders(drawn, tmp_path, capsys):
     # part of it in each photo; refused, naming the board the photos show
     _fails(["calibrate", src, "--air", "--squares", "6x5", "--square-mm", "60", "--out",
             str(out)], "the photos show a chessboard of at least 7x6 squares, not 6x5", capsys)
+    # the same for one camera's folder (issue 53: an internal error, a None RMS formatted)
+    _fails(["calibrate", os.path.join(src, "left"), "--air", "--squares", "6x5", "--square-mm",
+            "60", "--out", str(out)], "the photos show a chessboard of at least 7x6 squares, "
+           "not 6x5", capsys)
     # unpaired, unreadable, sizes that differ
     lonely = tmp_path / "lonely"
     _write_photos(lonely, drawn["rig"], drawn["poses"][:4])
