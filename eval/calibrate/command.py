@@ -61,10 +61,13 @@ def add_parser(subparsers):
     p = subparsers.add_parser(
         "calibrate", help="calibrate from board images (in air, or the housing underwater)",
         description="Calibrate from a folder of python -m synth boards (every estimate beside "
-                    "the rendered truth) or from your own photos, DIR/left/ and DIR/right/ "
-                    "paired by name (give the board, and --air or --intrinsics).")
-    p.add_argument("dir", help="boards folder (python -m synth boards) or photo folder "
-                               "(DIR/left/, DIR/right/)")
+                    "the rendered truth; a pair or N cameras) or from your own photos: a "
+                    "pair's DIR/left/ and DIR/right/, N cameras' DIR/cam0/ DIR/cam1/ …, paired "
+                    "by name, or one camera's folder of photos (give the board, and --air or "
+                    "--intrinsics).")
+    p.add_argument("dir", help="boards folder (python -m synth boards) or photo folder: "
+                               "DIR/left/ and DIR/right/, DIR/cam0/ DIR/cam1/ … (N cameras), or "
+                               "one camera's photos in DIR")
     p.add_argument("--model", choices=("port", "absorbed"), default="port",
                    help="port (default): the cameras in air, then the housing's port; absorbed: "
                         "underwater boards or photos calibrated as pinhole cameras, the port "

@@ -53,3 +53,13 @@ def test_model_absorbed_names_a_folder_that_is_not_a_pair(tmp_path, capsys):
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and fragment in err[0] and "left/ and right/" in err[0], err
     assert not (tmp_path / "out").exists()
+
+
+def test_the_help_names_every_kind_of_folder(capsys):
+    """``eval calibrate --help`` named a pair's folders only (issue 53): one camera's folder and
+    N cameras' cam0/ cam1/ … are read too."""
+    from eval.cli import main as eval_main
+
+    assert eval_main(["calibrate", "--help"]) == 0
+    text = " ".join(capsys.readouterr().out.split())
+    assert "DIR/cam0/ DIR/cam1/" in text and "one camera's photos in DIR" in text, text
