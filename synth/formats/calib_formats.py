@@ -128,8 +128,7 @@ def calib_dict(size, K1, D1, K2, D2, R, T, port: FlatPort, has_port: bool,
     except ValueError as exc:
         raise CalibFormatError(f"{where}: {exc}") from None
     centres = np.array([left.center, right.center])
-    if not has_port and isinstance(port, FlatPort) and np.any(centres @ port.normal
-                                                              >= port.distance):
+    if not has_port and np.any(port.view(0).water_side(centres)):
         # in air the plane bends nothing and may lie anywhere (eval rectify's virtual cameras
         # keep the real port's plane, behind them): 1 mm beyond the cameras, as "no port" is
         from measure.geometry.port import index_matched_port
@@ -574,7 +573,7 @@ def read_colmap_rig(path):
     """The rig of N cameras (:class:`measure.stereo.multirig.MultiRig`, the reference frame
     the rig configuration's reference camera's) of the COLMAP fork's ``cameras.txt`` and the
     ``rig_config.json`` beside it; CalibFormatError names the file and what is wrong."""
-    from measure.geometry.flatport_format import view_port_from_params
+    from measure.geometry.flatport_format import one_port_per_plane, view_port_from_params
     from measure.stereo.multirig import MultiRig
 
     cameras = _parse_cameras_txt(path)
@@ -594,27 +593,9 @@ def read_colmap_rig(path):
             raise CalibFormatError(f"{path}: camera {camera_id}: {exc}") from None
         built.append(camera)
     try:
-        return MultiRig(built, _one_port_per_plane(ports), [f"cam{k}" for k in range(len(built))])
+        return MultiRig(built, one_port_per_plane(ports), [f"cam{k}" for k in range(len(built))])
     except ValueError as exc:
         raise CalibFormatError(f"{path}: {exc}") from None
-
-
-def _one_port_per_plane(ports) -> list:
-    """``ports`` with the flat ports that describe one plane — the same glass seen from several
-    cameras, each FLATPORT line in its own camera's frame, equal but for round-off (1e-12 in
-    the normal, 1e-9 mm) — made the one port they share (the first of them)."""
-    out = list(ports)
-    for k, port in enumerate(out):
-        if not isinstance(port, FlatPort):
-            continue
-        for earlier in out[:k]:
-            if (isinstance(earlier, FlatPort) and earlier.indices == port.indices
-                    and np.allclose(earlier.normal, port.normal, rtol=0, atol=1e-12)
-                    and abs(earlier.distance - port.distance) <= 1e-9
-                    and np.allclose(earlier.thicknesses, port.thicknesses, rtol=0, atol=1e-9)):
-                out[k] = earlier
-                break
-    return out
 
 
 def colmap_cameras(path) -> int | None:
