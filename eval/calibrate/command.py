@@ -29,6 +29,7 @@ import os
 import sys
 import time
 
+from eval.calibrate.causes import FIT_ERRORS, housing_failure
 from eval.calibrate.port_lengths import lengths_for, per_camera_lengths
 from eval.calibrate.single import single_camera_folder
 from eval.cli import CLIError, positive_float
@@ -60,10 +61,13 @@ def add_parser(subparsers):
     p = subparsers.add_parser(
         "calibrate", help="calibrate from board images (in air, or the housing underwater)",
         description="Calibrate from a folder of python -m synth boards (every estimate beside "
-                    "the rendered truth) or from your own photos, DIR/left/ and DIR/right/ "
-                    "paired by name (give the board, and --air or --intrinsics).")
-    p.add_argument("dir", help="boards folder (python -m synth boards) or photo folder "
-                               "(DIR/left/, DIR/right/)")
+                    "the rendered truth; a pair or N cameras) or from your own photos: a "
+                    "pair's DIR/left/ and DIR/right/, N cameras' DIR/cam0/ DIR/cam1/ …, paired "
+                    "by name, or one camera's folder of photos (give the board, and --air or "
+                    "--intrinsics).")
+    p.add_argument("dir", help="boards folder (python -m synth boards) or photo folder: "
+                               "DIR/left/ and DIR/right/, DIR/cam0/ DIR/cam1/ … (N cameras), or "
+                               "one camera's photos in DIR")
     p.add_argument("--model", choices=("port", "absorbed"), default="port",
                    help="port (default): the cameras in air, then the housing's port; absorbed: "
                         "underwater boards or photos calibrated as pinhole cameras, the port "
@@ -305,7 +309,7 @@ def _in_air(path, log):
     node, when it has one)."""
     from measure.calibration.air import calibrate_in_air, detect_boards
     from synth.products.boards import read_boards
-    from synth.products.dataset import read_calib
+    from synth.products.dataset import DatasetError, read_calib
 
     if os.path.isdir(path):
         boards = read_boards(path)
@@ -316,7 +320,10 @@ def _in_air(path, log):
         detections = detect_boards(boards.board, boards.images)
         air = calibrate_in_air(boards.board, detections, boards.calib["size"])
         return air.rig, air, boards, air.covariance
-    calib = read_calib(path)
+    try:
+        calib = read_calib(path)
+    except DatasetError as exc:
+        raise CLIError(f"--intrinsics {path}: {str(exc).removeprefix(f'{path}: ')}") from None
     covariance = calib.get("covariance")
     if calib["has_port"]:  # said, not silently ignored: only its cameras are used
         log(underwater_note(path, calib))
@@ -335,7 +342,7 @@ def _in_air(path, log):
 def main(args) -> int:
 
     from measure import StereoRig
-    from measure.calibration.air import (DEFAULT_LENS_MODEL, CalibrationError, calibrate_in_air,
+    from measure.calibration.air import (DEFAULT_LENS_MODEL, calibrate_in_air,
                                          detect_boards)
     from measure.calibration.housing import HOUSINGS, calibrate_housing
     from measure.geometry.dome import DomePair
@@ -445,6 +452,8 @@ def main(args) -> int:
         pair_glass(args)  # a bad design is refused before any work
     elif not boards.air and not dome:
         design_port(args, (0.0, 0.0, 1.0))  # a bad --design-port is refused before any work
+    if not boards.air and not os.path.isdir(args.intrinsics):  # a wrong file, before detection
+        _in_air(args.intrinsics, lambda text: None)
     log(f"detect the boards in {boards.path} ({len(boards.images)} poses) …")
     t = time.perf_counter()
     detections = detect_boards(boards.board, boards.images)
@@ -492,12 +501,11 @@ def main(args) -> int:
         try:
             housing = calibrate_housing(start_rig, boards.board, detections, free,
                                         air_covariance, args.air_uncertainty)
-        except CalibrationError as exc:
-            raise CLIError(f"{args.dir}: {exc}; nothing written") from None
+        except FIT_ERRORS as exc:
+            raise housing_failure(args.dir, exc, args, "render") from None
         timings["bundle_adjustment"] = time.perf_counter() - t
         if not housing.identifiable:
-            raise CLIError(f"{args.dir}: {housing.reason}; nothing written (free fewer "
-                           f"parameters with --free, or render more varied poses)")
+            raise housing_failure(args.dir, housing.reason, args, "render")
         rig = housing.rig
         report["dome"] = dome
         report["housing"] = (report_lib.dome_summary if dome else report_lib.housing_summary)(

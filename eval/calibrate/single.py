@@ -89,6 +89,10 @@ def read_and_detect(args, board, log, size=None, size_source=""):
         first = [read_photo(f, args.encoding) for f in files[:trust.HINT_PHOTOS]]
         raise CLIError(f"{where}: the {board.kind} {squares} was found in none of the "
                        f"{len(files)} photos{trust.board_hint(board, [(im, im) for im in first])}")
+    larger = trust.larger_board(board, {k: (im, im) for k in found[:trust.LARGER_PHOTOS]
+                                        for im in [read_photo(files[k], args.encoding)]}, found)
+    if larger:  # a part of the board, a different part in each photo: a nonsense fit
+        raise CLIError(f"{where}: {larger}")
     charuco = trust.charuco_check(board, [kept[k] for k in found if k in kept])
     if charuco:
         raise CLIError(f"{where}: {charuco}")
@@ -500,7 +504,8 @@ def markdown(report: dict) -> str:
     m = report["lens_model"]
     lines += ["## Camera (OpenCV)", "",
               f"Reprojection RMS {report['rms_px']:.4f} px; lens model {m['model']} ("
-              + ", ".join(f"{k} {v:.4f} px" for k, v in m["rms_px"].items())
+              + ", ".join(f"{k} {v:.4f} px" if v is not None else f"{k} no fit"
+                          for k, v in m["rms_px"].items())
               + f"; {trust.LENS_RULE}"
               + ("; the fisheye model's RMS is listed for comparison: it is used with --lens "
                  "fisheye" if "fisheye" in m["rms_px"] and m["model"] != "fisheye" else "")

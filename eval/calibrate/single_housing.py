@@ -40,6 +40,7 @@ import os
 
 import numpy as np
 
+from eval.calibrate.causes import FIT_ERRORS, housing_failure
 from eval.calibrate import photos as trust
 from eval.calibrate import report as report_lib
 from eval.calibrate.report import format_value as _f
@@ -98,12 +99,11 @@ def calibrate_single_housing(args, output, log, start, board, intrinsics, start_
         housing, used_detections, outliers = trust.fit_without_outliers(
             fit, lambda r: r.rms_px_per, detections, lambda r: r.residuals, board,
             lambda r: r.identifiable)
-    except CalibrationError as exc:
-        raise CLIError(f"{where}: {exc}; nothing written") from None
+    except FIT_ERRORS as exc:
+        raise housing_failure(where, exc, args) from None
     timings["bundle_adjustment"] = time.perf_counter() - t
     if not housing.identifiable:
-        raise CLIError(f"{where}: {housing.reason}; nothing written (free fewer parameters "
-                       f"with --free, or photograph more varied poses)")
+        raise housing_failure(where, housing.reason, args)
     log("the pinhole fit that absorbs the port (OpenCV calibrateCamera on the same corners) …")
     t = time.perf_counter()
     used = list(housing.pose_ids)

@@ -78,7 +78,7 @@ def measure_views_main(args, output, options, start, log) -> int:
     try:
         rig = read_rig_file(args.calib)
     except DatasetError as exc:
-        raise CLIError(str(exc)) from None
+        raise CLIError(f"--calib {exc}") from None
     if len(rig.cameras) != len(photos):
         raise CLIError(f"--calib {args.calib}: {len(rig.cameras)} cameras "
                        f"({', '.join(rig.names)}), but {len(photos)} photos were given (one per "

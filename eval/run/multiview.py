@@ -140,8 +140,11 @@ def dataset_views(config: RunConfig, spec) -> tuple[list, dict]:
     except DatasetError as exc:
         raise CLIError(f"--from {exc}") from None
     if data.manifest["scene"].get("sha256") != spec.sha256:
-        raise CLIError(f"--from {config.from_dir}: the dataset was rendered from another scene "
-                       f"than {config.scene}")
+        from eval.run.inputs import another_scene
+
+        raise another_scene(config) or CLIError(
+            f"--from {config.from_dir}: the dataset was rendered from another scene than "
+            f"{config.scene}")
     difference = rig_differences(spec.multirig, data.rig)
     if difference:
         raise CLIError(f"--from {config.from_dir}: calib.yaml disagrees with the scene rendered "

@@ -413,7 +413,7 @@ def _rig_from_file(args):
     try:
         rig = read_rig_file(args.rig)
     except DatasetError as exc:
-        raise CLIError(str(exc)) from None
+        raise CLIError(f"--rig {exc}") from None
     for name, camera in zip(rig.names, rig.cameras):
         fx, fy, skew = camera.K[0, 0], camera.K[1, 1], camera.K[0, 1]
         if abs(fx - fy) > 1e-9 * fx or skew != 0:

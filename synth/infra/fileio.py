@@ -109,7 +109,8 @@ def _walk_files(directory: str) -> set[str]:
 def directory_problem(path) -> str | None:
     """Why the output directory ``path`` cannot be created or written (``"exists and is not a
     directory"``, ``"cannot be created: … is not a directory / is not writable"``), or None:
-    the nearest existing ancestor must be a writable directory."""
+    the nearest existing ancestor must be a writable directory that takes a new folder (one is
+    made and removed there: root passes ``os.access`` on ``/proc``)."""
     if os.path.lexists(path) and not os.path.isdir(path):
         return "exists and is not a directory"
     probe = os.path.dirname(path)
@@ -119,6 +120,10 @@ def directory_problem(path) -> str | None:
         return f"cannot be created: {probe} is not a directory"
     if not os.access(probe, os.W_OK | os.X_OK):
         return f"cannot be created: {probe} is not writable"
+    try:  # access() says yes to root on a file system that takes no folder (/proc, read-only)
+        os.rmdir(tempfile.mkdtemp(prefix=".refractive-stereo-probe-", dir=probe))
+    except OSError as exc:
+        return f"cannot be created in {probe} ({exc.strerror or exc})"
     return None
 
 
@@ -418,6 +423,13 @@ def check_file_output(path, option: str, may_replace=None) -> str:
         raise OutputError(f"{option} {path}: directory {os.path.dirname(path) or '.'} does not exist")
     if not os.access(parent, os.W_OK | os.X_OK):
         raise OutputError(f"{option} {path}: directory {os.path.dirname(path) or '.'} is not writable")
+    try:  # access() says yes to root on a file system that takes no file (/proc, read-only)
+        handle, probe = tempfile.mkstemp(prefix=".refractive-stereo-probe-", dir=parent)
+        os.close(handle)
+        os.unlink(probe)
+    except OSError as exc:
+        raise OutputError(f"{option} {path}: no file can be written in "
+                          f"{os.path.dirname(path) or '.'} ({exc.strerror or exc})") from None
     if os.path.lexists(full) and may_replace is not None and not may_replace(full):
         raise OutputError(f"{option} {path} exists and is not a file this command wrote")
     return path

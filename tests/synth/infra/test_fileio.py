@@ -195,3 +195,20 @@ def test_a_scene_edited_by_hand_is_not_overwritten(tmp_path, capsys):
     assert synth_main(argv) == 2
     assert "was edited since synth scene wrote it" in capsys.readouterr().err
     assert 'value="1.34"' in scene.read_text()
+
+
+@pytest.mark.skipif(not os.path.isdir("/proc/self"), reason="needs Linux's /proc")
+def test_a_folder_that_takes_no_new_files_is_refused_at_the_claim(tmp_path):
+    """``--out /proc/x``: root passes ``os.access`` there, and the refusal came only when the
+    output was written, after the work (6 s of detection, issue 53). The claim now makes (and
+    removes) a folder where the output would go, and a single file's check a file."""
+    from synth.infra.fileio import check_file_output
+
+    with pytest.raises(OutputError, match=r"--out /proc/x cannot be (created|replaced)"):
+        OutputDir("/proc/x", "eval run").claim()
+    with pytest.raises(OutputError, match=r"--out /proc/x.json: (no file can be written in "
+                                          r"/proc|directory /proc is not writable)"):
+        check_file_output("/proc/x.json", "--out")
+    OutputDir(tmp_path / "fine", "eval run").claim()  # where a folder can be made: no probe left
+    assert sorted(os.listdir(tmp_path)) == []
+    assert check_file_output(str(tmp_path / "x.json"), "--out") and os.listdir(tmp_path) == []
