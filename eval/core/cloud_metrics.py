@@ -20,12 +20,12 @@ from __future__ import annotations
 import os
 
 import numpy as np
-import open3d as o3d
-from scipy.spatial.distance import pdist
 
 
-def point_cloud(points: np.ndarray, colors: np.ndarray | None = None) -> o3d.geometry.PointCloud:
+def point_cloud(points: np.ndarray, colors: np.ndarray | None = None) -> "o3d.geometry.PointCloud":
     """An Open3D cloud from ``(N, 3)`` points (mm) and optional ``(N, 3)`` colours in [0, 1]."""
+    import open3d as o3d  # here: a run imports Open3D while it renders (eval.run.preload)
+
     cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(np.asarray(points, dtype=np.float64)))
     if colors is not None:
         cloud.colors = o3d.utility.Vector3dVector(np.asarray(colors, dtype=np.float64))
@@ -60,6 +60,8 @@ def rigid_alignment(measured: np.ndarray, truth: np.ndarray) -> dict:
     if len(measured) < 3:
         return {"rms_dp_aligned_mm": float("nan"), "rotation_deg": float("nan"),
                 "translation_mm": [float("nan")] * 3}
+    import open3d as o3d
+
     correspondences = o3d.utility.Vector2iVector(np.column_stack([np.arange(len(measured))] * 2))
     estimator = o3d.pipelines.registration.TransformationEstimationPointToPoint(False)
     transform = estimator.compute_transformation(point_cloud(measured), point_cloud(truth),
@@ -87,6 +89,8 @@ def length_errors(measured: np.ndarray, truth: np.ndarray,
     ``length_median_pct`` (signed: negative = too short), ``length_median_abs_pct``,
     ``length_p95_abs_pct``, ``length_worst_pct`` (the largest in magnitude, signed) and
     ``length_pairs``. A rigid motion of the measured points changes none of them."""
+    from scipy.spatial.distance import pdist
+
     measured = np.asarray(measured, dtype=np.float64).reshape(-1, 3)
     truth = np.asarray(truth, dtype=np.float64).reshape(-1, 3)
     step = max(1, -(-len(truth) // MAX_LENGTH_POINTS))
@@ -146,6 +150,7 @@ def flatness(points: np.ndarray, seed: int = 0, threshold_mm: float = 5.0,
 def write_colored_ply(path: str, points: np.ndarray, values: np.ndarray, vmax: float,
                       colormap: str = "viridis") -> None:
     """Write points coloured by ``values`` on ``colormap`` over [0, vmax] (clipped) as PLY."""
+    import open3d as o3d
     from matplotlib import colormaps
 
     if len(points) == 0:  # Open3D refuses to write an empty cloud; an empty PLY is still valid

@@ -278,8 +278,10 @@ def load_inputs(config: RunConfig, log) -> RunInputs:
                          extra={"from": os.path.abspath(config.from_dir),
                                 "spp_rendered": data.manifest.get("spp_rendered"),
                                 "from_seed": data.manifest.get("seed")}, **scene_part)
+    from eval.run import preload
     from synth.rendering.render import render_stereo, render_summary
 
+    preloading = preload.start(figures=not config.no_figures)
     log(f"render both views ({spec.size[0]}x{spec.size[1]} px, {config.spp or spec.spp} spp, "
         f"{'full film' if config.full_film else 'adaptive'}) …")
     start = time.perf_counter()
@@ -296,6 +298,7 @@ def load_inputs(config: RunConfig, log) -> RunInputs:
                                  for view, speed in info["samples_per_second_per_view"].items()))
     for view in ("left", "right"):
         log(f"  {view}: {render_summary(info['render'][view])}")
+    preloading.join()  # before anything forks (the figures) or imports what it imports
     return RunInputs(left=left, right=right, variant=info["variant"], spp=info["spp"],
                      render_seconds=time.perf_counter() - start,
                      extra={"render": render, "timings": timings}, **scene_part)
