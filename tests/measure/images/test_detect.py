@@ -275,7 +275,7 @@ def test_speckle_is_recognized_and_a_fractional_threshold_ignores_it_too():
     and every speckle would be a blob. The automatic threshold recognizes the speckle (specks
     outnumber blobs) and rises to a fraction of the targets' level; a given fraction of the
     way to the targets works as well."""
-    from measure.images.detect import SPECKLE_THRESHOLD_FRACTION, fractional_threshold
+    from measure.images.levels import SPECKLE_THRESHOLD_FRACTION, fractional_threshold
 
     rng = np.random.default_rng(0)
     image = np.zeros((400, 400), np.float32)
