@@ -176,27 +176,49 @@ def run_noise(rig: StereoRig, air_rig: StereoRig, trials: int, seed: int,
     Errors are ``(trials, 496, 3)`` mm. One vectorized ``triangulate`` call per method and run
     (``trials × 496`` rows). Returns ``(noise, index)``.
     """
-    from tqdm import tqdm
-
     trials = int(trials)
     if trials < 1:
         raise ValueError(f"trials must be >= 1, got {trials}")
     targets = paper_plane(z)
     n = targets.shape[0]
-    truth = np.broadcast_to(targets, (trials, n, 3))
     rng = np.random.default_rng(seed)
     # one draw per trial, target and image; the same offsets serve every noisy run
-    offset_left = pixel_noise((trials, n, 2), variance, rng)
-    offset_right = pixel_noise((trials, n, 2), variance, rng)
-
-    water_left, water_right = project_pair(rig, targets)
-    air_left, air_right = project_pair(air_rig, targets)
+    offsets = (pixel_noise((trials, n, 2), variance, rng), pixel_noise((trials, n, 2), variance, rng))
     true_port = {"simulation": deviate_port(rig.port, "n_water", index_relative),
                  "measurement": rig.port}
     assumed_rig = {"simulation": rig,
                    "measurement": rig.with_port(deviate_port(rig.port, "n_water",
                                                              index_relative))}
+    exact = {"water": project_pair(rig, targets), "air": project_pair(air_rig, targets)}
+    noise_errors, index_errors = _monte_carlo(rig, air_rig, targets, exact, offsets, true_port,
+                                              assumed_rig, progress)
+    noise_stats = {m: error_stats(e) for m, e in noise_errors.items()}
+    noise_sem = _noise_sem(rig, air_rig, targets, exact, noise_errors)
+    noise = {"z_mm": float(z), "trials": trials, "seed": int(seed), "variance_px2": variance,
+             "sigma_px": float(np.sqrt(variance)), "samples": trials * n, "targets": targets,
+             "errors": noise_errors, "stats": noise_stats,
+             "noise_sem": noise_sem,
+             "su_share_dZ_negative": float(np.nanmean(noise_errors["su"][..., 2] < 0)),
+             "optical_path_share_abs_dX_within_1mm":
+                 float(np.nanmean(np.abs(noise_errors["optical_path"][..., 0]) <= 1.0))}
+    index = _index_result(z, index_relative, index_errors, noise_errors, noise_stats, noise_sem,
+                          true_port, assumed_rig)
+    return noise, index
 
+
+def _monte_carlo(rig, air_rig, targets, exact, offsets, true_port, assumed_rig,
+                 progress) -> tuple[dict, dict]:
+    """The errors ``(trials, N, 3)`` mm of every noisy run: ``{method: errors}`` of
+    :data:`NOISE_METHODS` and ``{side: {method: errors}}`` of the water index's deviation
+    (:data:`INDEX_SIDES` × :data:`INDEX_METHODS`), the same pixel ``offsets`` (left, right;
+    ``(trials, N, 2)`` px) added to every run's exact projections (``exact``: the water rig's
+    and the air rig's pixel pairs of ``targets``)."""
+    from tqdm import tqdm
+
+    offset_left, offset_right = offsets
+    trials = offset_left.shape[0]
+    truth = np.broadcast_to(targets, (trials, targets.shape[0], 3))
+    (water_left, water_right), (air_left, air_right) = exact["water"], exact["air"]
     bar = tqdm(total=trials * (len(NOISE_METHODS) + len(INDEX_SIDES) * len(INDEX_METHODS)),
                unit="trial", desc="paper Monte Carlo", disable=not progress, file=sys.stderr,
                leave=False)
@@ -222,11 +244,16 @@ def run_noise(rig: StereoRig, air_rig: StereoRig, trials: int, seed: int,
                     assumed_rig[side], sim_left + offset_left, sim_right + offset_right, method,
                     truth)[0]
                 bar.update(trials)
+    return noise_errors, index_errors
 
-    noise_stats = {m: error_stats(e) for m, e in noise_errors.items()}
-    # The standard error of a mean caused by the pixel noise: the spread of (noisy − noise-free)
-    # errors over targets × trials, / sqrt(samples). The per-target noise-free error (Su's model
-    # error) is the same in every run and is not noise, so it is left out of this yardstick.
+
+def _noise_sem(rig, air_rig, targets, exact, noise_errors) -> dict:
+    """``{method: {component: mm}}``: the standard error of a mean caused by the pixel noise —
+    the spread of (noisy − noise-free) errors over targets × trials, / sqrt(samples). The
+    per-target noise-free error (Su's model error) is the same in every run and is not noise,
+    so it is left out of this yardstick."""
+    (water_left, water_right), (air_left, air_right) = exact["water"], exact["air"]
+    trials = noise_errors[NOISE_METHODS[0]].shape[0]
     noise_free = {
         "optical_path": triangulation_errors(rig, water_left, water_right, "optical_path",
                                              targets)[0],
@@ -236,21 +263,20 @@ def run_noise(rig: StereoRig, air_rig: StereoRig, trials: int, seed: int,
     noise_sem = {}
     for method in NOISE_METHODS:
         noisy = error_components(noise_errors[method])
-        clean = error_components(np.broadcast_to(noise_free[method], (trials, n, 3)))
+        clean = error_components(np.broadcast_to(noise_free[method], (trials, len(targets), 3)))
         noise_sem[method] = {}
         for c in COMPONENTS:
             part = noisy[c] - clean[c]
             part = part[np.isfinite(part)]
             noise_sem[method][c] = (float(np.std(part, ddof=1) / np.sqrt(part.size))
                                     if part.size > 1 else float("nan"))
-    noise = {"z_mm": float(z), "trials": trials, "seed": int(seed), "variance_px2": variance,
-             "sigma_px": float(np.sqrt(variance)), "samples": trials * n, "targets": targets,
-             "errors": noise_errors, "stats": noise_stats,
-             "noise_sem": noise_sem,
-             "su_share_dZ_negative": float(np.nanmean(noise_errors["su"][..., 2] < 0)),
-             "optical_path_share_abs_dX_within_1mm":
-                 float(np.nanmean(np.abs(noise_errors["optical_path"][..., 0]) <= 1.0))}
+    return noise_sem
 
+
+def _index_result(z, index_relative, index_errors, noise_errors, noise_stats, noise_sem,
+                  true_port, assumed_rig) -> dict:
+    """Section 3.3.3's result: per side of the deviation the statistics and the mean shift
+    against the noise-only run (mm), the side chosen (:func:`choose_index_side`) and why."""
     sem = {m: noise_sem[m] for m in INDEX_METHODS}
     shifts, stats = {}, {}
     for side in INDEX_SIDES:
@@ -264,24 +290,26 @@ def run_noise(rig: StereoRig, air_rig: StereoRig, trials: int, seed: int,
             shifts[side][method] = {"dX": float(delta[0]), "dY": float(delta[1]),
                                     "dZ": float(delta[2]), "dP": float(mean_dp_shift)}
     chosen, rule = choose_index_side(shifts, sem)
-    n_true = {side: true_port[side].n_water for side in INDEX_SIDES}
-    n_assumed = {side: assumed_rig[side].port.n_water for side in INDEX_SIDES}
-    index = {
+    return {
         "z_mm": float(z), "relative": index_relative, "chosen_side": chosen, "rule": rule,
         "sides": {side: {
-            "description": ("the simulation carries the deviation: pixels simulated with the "
-                            "true water index n3 = 1.33·(1 + 0.0015); the measurement assumes "
-                            "the calibrated 1.33 (calibrated value 0.15 % too low)"
-                            if side == "simulation" else
-                            "the measurement carries the deviation: pixels simulated with "
-                            "n3 = 1.33; the measurement assumes 1.33·(1 + 0.0015) "
-                            "(calibrated value 0.15 % too high)"),
-            "n_water_true": n_true[side], "n_water_assumed": n_assumed[side],
+            "description": INDEX_SIDE_WORDS[side],
+            "n_water_true": true_port[side].n_water,
+            "n_water_assumed": assumed_rig[side].port.n_water,
             "stats": stats[side], "mean_shift": shifts[side]} for side in INDEX_SIDES},
         "errors": index_errors,
         "noise_sem": sem,
     }
-    return noise, index
+
+
+#: What each side of the water index's deviation means (section 3.3.3).
+INDEX_SIDE_WORDS = {
+    "simulation": "the simulation carries the deviation: pixels simulated with the true water "
+                  "index n3 = 1.33·(1 + 0.0015); the measurement assumes the calibrated 1.33 "
+                  "(calibrated value 0.15 % too low)",
+    "measurement": "the measurement carries the deviation: pixels simulated with n3 = 1.33; the "
+                   "measurement assumes 1.33·(1 + 0.0015) (calibrated value 0.15 % too high)",
+}
 
 
 def run_index_in_situ(rig: StereoRig, trials: int, seed: int,
