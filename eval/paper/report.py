@@ -90,6 +90,15 @@ def claims_table(claims: list[dict]) -> str:
 
 
 def render_markdown(report: dict) -> str:
+    """The paper report's ``report.md``: the claims, the set-up and each section of the
+    paper's section 3 with its table and figures."""
+    sections = (_header_lines, _gap_lines, _ideal_lines, _noise_lines, _index_lines,
+                _in_situ_lines)
+    return "\n".join(line for section in sections for line in section(report))
+
+
+def _header_lines(report: dict) -> list[str]:
+    """The title, the claims and the set-up (port, cameras, targets, noise)."""
     s = report["settings"]
     rig = report["rig"]
     port = rig["port"]
@@ -113,7 +122,12 @@ def render_markdown(report: dict) -> str:
              f"{s['pixel_noise_sigma_px']:g} px) on u and v of both images, {s['trials']} trials "
              f"(seed {s['seed']}), {s['noise_draws']}.",
              f"- 'Near zero' / 'beyond the noise': {s['near_zero_rule']}.", ""]
+    return lines
 
+
+def _gap_lines(report: dict) -> list[str]:
+    """Section 3.2: the gap between the rays."""
+    lines = []
     gap = report["gap"]
     lines += ["## 3.2 Gap between the rays O_L A1 and O_R B1 (1 m)", "",
               f"{gap['count_above_threshold']} of {gap['n']} targets "
@@ -121,7 +135,12 @@ def render_markdown(report: dict) -> str:
               f"{100 * gap['share_above_0.6mm']:.1f} % > 0.6 mm. Gap min / median / mean / max = "
               f"{_num(gap['min'])} / {_num(gap['median'])} / {_num(gap['mean'])} / "
               f"{_num(gap['max'])} mm.", "", "![Figure 4](figure4_gap.png)", ""]
+    return lines
 
+
+def _ideal_lines(report: dict) -> list[str]:
+    """Section 3.3.1: the errors without noise."""
+    lines = []
     lines += ["## 3.3.1 Ideal conditions", "",
               "| distance | method | max \\|dX\\| | max \\|dY\\| | max \\|dZ\\| | max dP | mean dP "
               "| RMS dP |", "|---|---|---|---|---|---|---|---|"]
@@ -133,7 +152,12 @@ def render_markdown(report: dict) -> str:
                          + f" | {_num(st['max_dp_mm'])} | {_num(st['mean_dp_mm'])} | "
                            f"{_num(st['rms_dp_mm'])} |")
     lines += ["", "![Figure 5](figure5_su_1m.png)", "", "![Figure 6](figure6_su_2m.png)", ""]
+    return lines
 
+
+def _noise_lines(report: dict) -> list[str]:
+    """Section 3.3.2: the errors with pixel noise."""
+    lines = []
     noise = report["noise"]
     lines += [f"## 3.3.2 Pixel noise ({noise['trials']} trials × 496 targets = "
               f"{noise['samples']} samples per method)", "",
@@ -155,7 +179,12 @@ def render_markdown(report: dict) -> str:
               "Figure 8 pools all targets × trials.", "",
               "![Figure 7](figure7_noise_maps.png)", "", "![Figure 8](figure8_noise_hist.png)",
               ""]
+    return lines
 
+
+def _index_lines(report: dict) -> list[str]:
+    """Section 3.3.3: pixel noise and a water-index deviation."""
+    lines = []
     index = report["index_deviation"]
     lines += [f"## 3.3.3 Pixel noise and a {100 * index['relative']:g} % water-index deviation",
               "", f"Chosen side: **{index['chosen_side']}** — "
@@ -179,6 +208,12 @@ def render_markdown(report: dict) -> str:
                                          for c in ("dX", "dY", "dZ")) + " mm).", "",
               "![Figure 9](figure9_index_maps.png)", "", "![Figure 10](figure10_index_hist.png)",
               ""]
+    return lines
+
+
+def _in_situ_lines(report: dict) -> list[str]:
+    """Section 4: the water index estimated in situ, and the run time."""
+    lines = []
     s = report["index_in_situ"]
     lines += ["## 4 Future work: the water index estimated in situ", "",
               f"True n_water {s['n_true']:.7g}, assumed {s['n_assumed']:.7g}; {s['trials']} trials "
@@ -193,7 +228,7 @@ def render_markdown(report: dict) -> str:
     if report.get("wall_seconds") is not None:
         lines += [f"Run time: {report['wall_seconds']:.1f} s (experiments "
                   f"{report['compute_seconds']:.1f} s).", ""]
-    return "\n".join(lines)
+    return lines
 
 
 def write_reports(results: dict, out, figures: dict | None = None) -> list[Path]:
