@@ -151,93 +151,103 @@ def _ideal_claims():
 
 
 # --- 3.3.2: pixel noise -------------------------------------------------------------------------
+def _noise_beats(other):
+    """The check that the optical path's RMS dP is below method ``other``'s (mm)."""
+    def check(c):
+        r = c.rms
+        return (f"RMS dP {r['optical_path']:.3f} mm vs {r[other]:.3f} mm",
+                r["optical_path"] < r[other],
+                {"rms_optical_path": r["optical_path"], f"rms_{other}": r[other]})
+    return check
+
+
+def _noise_xy_minimal(c):
+    op, air = c.ns["optical_path"], c.ns["regular_in_air"]
+    names = ("dX", "dY", "dP")
+    return (", ".join(f"{n} {op.component(n).rms_mm:.3f} vs {air.component(n).rms_mm:.3f}"
+                      for n in names) + " mm RMS",
+            all(op.component(n).rms_mm < air.component(n).rms_mm for n in names), {})
+
+
+def _noise_x_within_1mm(c):
+    within = c.noise["optical_path_share_abs_dX_within_1mm"]
+    return (f"{100 * within:.2f} % of |dX| <= 1 mm (σX = {c.op.dx.std_mm:.3f} mm)",
+            within >= 0.95, {"share": within})
+
+
+def _noise_z_largest(c):
+    op = c.op
+    largest = op.dz.std_mm > max(op.dx.std_mm, op.dy.std_mm)
+    return (f"σ = {op.dx.std_mm:.3f} / {op.dy.std_mm:.3f} / {op.dz.std_mm:.3f} mm (X/Y/Z); "
+            f"max |dZ| = {op.dz.max_abs_mm:.2f} mm", largest and op.dz.max_abs_mm > 2.0,
+            {"max_abs_dZ": op.dz.max_abs_mm})
+
+
+def _noise_mean_near_zero(c):
+    op, sem = c.op, c.nsem["optical_path"]
+    ratios = {n: abs(op.component(n).mean_mm) / sem[n] for n in XYZ}
+    return ("mean " + " / ".join(f"{op.component(n).mean_mm:+.4f}" for n in XYZ) + " mm = "
+            + " / ".join(f"{ratios[n]:.1f}" for n in XYZ) + " SEM",
+            all(r < SEM_FACTOR for r in ratios.values()),
+            {**{f"mean_{n}": op.component(n).mean_mm for n in XYZ},
+             **{f"sem_{n}": sem[n] for n in XYZ}})
+
+
+def _noise_su_dz_negative(c):
+    su, sem = c.su, c.nsem["su"]["dZ"]
+    share = c.noise["su_share_dZ_negative"]
+    return (f"mean dZ = {su.dz.mean_mm:.3f} mm ({su.dz.mean_mm / sem:.0f} SEM); "
+            f"{100 * share:.1f} % of dZ < 0", su.dz.mean_mm < -SEM_FACTOR * sem,
+            {"mean_dZ": su.dz.mean_mm, "share_negative": share})
+
+
+def _noise_su_xy_near_zero(c):
+    su = c.su
+    ratios = {n: abs(su.component(n).mean_mm) / c.nsem["su"][n] for n in ("dX", "dY")}
+    return ("mean " + " / ".join(f"{su.component(n).mean_mm:+.3f}" for n in ("dX", "dY"))
+            + " mm = " + " / ".join(f"{ratios[n]:.1f}" for n in ("dX", "dY")) + " SEM",
+            all(r < SEM_FACTOR for r in ratios.values()),
+            {"mean_dX": su.dx.mean_mm, "mean_dY": su.dy.mean_mm})
+
+
+def _noise_su_model_error(c):
+    share = c.noise["su_model_error_share"]
+    return (f"noise-free mean-square dP is {100 * share:.1f} % of the noisy one",
+            share > 0.5, {"share": share})
+
+
 def _noise_claims():
-    def beats(other):
-        def check(c):
-            r = c.rms
-            return (f"RMS dP {r['optical_path']:.3f} mm vs {r[other]:.3f} mm",
-                    r["optical_path"] < r[other],
-                    {"rms_optical_path": r["optical_path"], f"rms_{other}": r[other]})
-        return check
-
-    def xy_minimal(c):
-        op, air = c.ns["optical_path"], c.ns["regular_in_air"]
-        names = ("dX", "dY", "dP")
-        return (", ".join(f"{n} {op.component(n).rms_mm:.3f} vs {air.component(n).rms_mm:.3f}"
-                          for n in names) + " mm RMS",
-                all(op.component(n).rms_mm < air.component(n).rms_mm for n in names), {})
-
-    def x_within_1mm(c):
-        within = c.noise["optical_path_share_abs_dX_within_1mm"]
-        return (f"{100 * within:.2f} % of |dX| <= 1 mm (σX = {c.op.dx.std_mm:.3f} mm)",
-                within >= 0.95, {"share": within})
-
-    def z_largest(c):
-        op = c.op
-        largest = op.dz.std_mm > max(op.dx.std_mm, op.dy.std_mm)
-        return (f"σ = {op.dx.std_mm:.3f} / {op.dy.std_mm:.3f} / {op.dz.std_mm:.3f} mm (X/Y/Z); "
-                f"max |dZ| = {op.dz.max_abs_mm:.2f} mm", largest and op.dz.max_abs_mm > 2.0,
-                {"max_abs_dZ": op.dz.max_abs_mm})
-
-    def mean_near_zero(c):
-        op, sem = c.op, c.nsem["optical_path"]
-        ratios = {n: abs(op.component(n).mean_mm) / sem[n] for n in XYZ}
-        return ("mean " + " / ".join(f"{op.component(n).mean_mm:+.4f}" for n in XYZ) + " mm = "
-                + " / ".join(f"{ratios[n]:.1f}" for n in XYZ) + " SEM",
-                all(r < SEM_FACTOR for r in ratios.values()),
-                {**{f"mean_{n}": op.component(n).mean_mm for n in XYZ},
-                 **{f"sem_{n}": sem[n] for n in XYZ}})
-
-    def su_dz_negative(c):
-        su, sem = c.su, c.nsem["su"]["dZ"]
-        share = c.noise["su_share_dZ_negative"]
-        return (f"mean dZ = {su.dz.mean_mm:.3f} mm ({su.dz.mean_mm / sem:.0f} SEM); "
-                f"{100 * share:.1f} % of dZ < 0", su.dz.mean_mm < -SEM_FACTOR * sem,
-                {"mean_dZ": su.dz.mean_mm, "share_negative": share})
-
-    def su_xy_near_zero(c):
-        su = c.su
-        ratios = {n: abs(su.component(n).mean_mm) / c.nsem["su"][n] for n in ("dX", "dY")}
-        return ("mean " + " / ".join(f"{su.component(n).mean_mm:+.3f}" for n in ("dX", "dY"))
-                + " mm = " + " / ".join(f"{ratios[n]:.1f}" for n in ("dX", "dY")) + " SEM",
-                all(r < SEM_FACTOR for r in ratios.values()),
-                {"mean_dX": su.dx.mean_mm, "mean_dY": su.dy.mean_mm})
-
-    def su_model_error(c):
-        share = c.noise["su_model_error_share"]
-        return (f"noise-free mean-square dP is {100 * share:.1f} % of the noisy one",
-                share > 0.5, {"share": share})
-
+    """Section 3.3.2's claims (pixel noise), each with its check."""
     return [
         Claim("noise.optical_path_beats_su", "3.3.2",
               "with pixel noise (variance 0.01 px²) the new model is more accurate than Su's",
-              "RMS dP(optical_path) < RMS dP(su)", beats("su")),
+              "RMS dP(optical_path) < RMS dP(su)", _noise_beats("su")),
         Claim("noise.optical_path_beats_regular_in_air", "3.3.2",
               "our method even outperforms the regular model in the air",
-              "RMS dP(optical_path) < RMS dP(regular in air)", beats("regular_in_air")),
+              "RMS dP(optical_path) < RMS dP(regular in air)", _noise_beats("regular_in_air")),
         Claim("noise.optical_path_xy_minimal", "3.3.2",
               "the deviations of the X, Y and total coordinates of the new method are minimal "
               "(compared with regular triangulation in air)",
               "RMS of dX, dY and dP each smaller for optical_path than for regular in air",
-              xy_minimal),
+              _noise_xy_minimal),
         Claim("noise.optical_path_x_within_1mm", "3.3.2",
               "the deviation in X was minimal, generally within ±1 mm",
-              "share of |dX| <= 1 mm >= 0.95 (optical_path)", x_within_1mm),
+              "share of |dX| <= 1 mm >= 0.95 (optical_path)", _noise_x_within_1mm),
         Claim("noise.optical_path_z_largest", "3.3.2",
               "the deviation in Z was the largest, exceeding ±2 mm",
-              "σZ > σX, σY and max |dZ| > 2 mm (optical_path)", z_largest),
+              "σZ > σX, σY and max |dZ| > 2 mm (optical_path)", _noise_z_largest),
         Claim("noise.optical_path_mean_near_zero", "3.3.2",
               "the means of the three coordinate deviations of our model are all close to 0",
-              f"|mean| < {SEM_FACTOR:g} SEM for dX, dY and dZ", mean_near_zero),
+              f"|mean| < {SEM_FACTOR:g} SEM for dX, dY and dZ", _noise_mean_near_zero),
         Claim("noise.su_dZ_negative", "3.3.2",
               "Su's Z coordinate deviations are all negative (systematic)",
-              f"mean dZ < -{SEM_FACTOR:g} SEM (systematically negative)", su_dz_negative),
+              f"mean dZ < -{SEM_FACTOR:g} SEM (systematically negative)", _noise_su_dz_negative),
         Claim("noise.su_xy_mean_near_zero", "3.3.2",
               "Su's X and Y coordinate deviations are also close to 0",
-              f"|mean| < {SEM_FACTOR:g} SEM for dX and dY (su)", su_xy_near_zero),
+              f"|mean| < {SEM_FACTOR:g} SEM for dX and dY (su)", _noise_su_xy_near_zero),
         Claim("noise.su_dominated_by_model_error", "3.3.2",
               "with noise, Su's results are still primarily influenced by model error",
-              "mean-square dP without noise / with noise > 0.5", su_model_error),
+              "mean-square dP without noise / with noise > 0.5", _noise_su_model_error),
     ]
 
 
