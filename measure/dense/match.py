@@ -309,14 +309,7 @@ def match_dense(rig: StereoRig, left, right, depth_range, *, model: str = "refra
     is centred more than :data:`MAX_TEXTURE_OFFSET` of its side away from its pixel
     (:func:`texture_offset`: silhouettes), a refinement that does not converge.
     """
-    if model not in MODELS:
-        raise ValueError(f"model must be one of {', '.join(MODELS)}, got {model!r}")
-    if int(window) != window or window < 3 or window % 2 == 0:
-        raise ValueError(f"window must be an odd whole number >= 3, got {window!r}")
-    if not (np.isfinite(step_px) and step_px > 0):
-        raise ValueError(f"step_px must be a positive number, got {step_px!r}")
-    if noise_sigma is not None and not (np.isfinite(noise_sigma) and noise_sigma > 0):
-        raise ValueError(f"noise_sigma must be a positive number, got {noise_sigma!r}")
+    _check_options(model, window, step_px, noise_sigma)
     window = int(window)
     near, far = _check_depth_range(rig, depth_range)
     left = _as_image(left, "left", rig.left.size)
@@ -338,13 +331,7 @@ def match_dense(rig: StereoRig, left, right, depth_range, *, model: str = "refra
                                                           progress)
     timings.update(sweep_times)
     t0 = time.perf_counter()
-    candidate = (best_index > 0) & (best_index < len(depths) - 1) & np.isfinite(before) \
-        & np.isfinite(after) & (best > 0)
-    if roi is not None:
-        u0, v0, u1, v1 = (int(v) for v in roi)
-        inside = np.zeros_like(candidate)
-        inside[max(v0, 0):max(v1, 0), max(u0, 0):max(u1, 0)] = True
-        candidate &= inside
+    candidate = _sweep_candidates(best, best_index, before, after, len(depths), roi)
     start = _start_depth(depths, best_index, best, before, after)
     timings["parabola"] = time.perf_counter() - t0
     t0 = time.perf_counter()
@@ -374,6 +361,32 @@ def match_dense(rig: StereoRig, left, right, depth_range, *, model: str = "refra
                         sigma["noise_sigma"] * scale, sigma["source"],
                         None if levels is None else (levels[0] * scale,
                                                      np.sqrt(levels[1]) * scale))
+
+
+def _check_options(model, window, step_px, noise_sigma) -> None:
+    """ValueError for an option of :func:`match_dense` outside its range."""
+    if model not in MODELS:
+        raise ValueError(f"model must be one of {', '.join(MODELS)}, got {model!r}")
+    if int(window) != window or window < 3 or window % 2 == 0:
+        raise ValueError(f"window must be an odd whole number >= 3, got {window!r}")
+    if not (np.isfinite(step_px) and step_px > 0):
+        raise ValueError(f"step_px must be a positive number, got {step_px!r}")
+    if noise_sigma is not None and not (np.isfinite(noise_sigma) and noise_sigma > 0):
+        raise ValueError(f"noise_sigma must be a positive number, got {noise_sigma!r}")
+
+
+def _sweep_candidates(best, best_index, before, after, planes: int, roi) -> np.ndarray:
+    """Bool ``(H, W)``: the pixels the refinement starts from — the sweep's best plane inside
+    the range (not at an end of its ``planes``), its neighbours' scores known, a positive
+    score, and inside ``roi`` (``(u0, v0, u1, v1)`` px, end exclusive) when given."""
+    candidate = (best_index > 0) & (best_index < planes - 1) & np.isfinite(before) \
+        & np.isfinite(after) & (best > 0)
+    if roi is not None:
+        u0, v0, u1, v1 = (int(v) for v in roi)
+        inside = np.zeros_like(candidate)
+        inside[max(v0, 0):max(v1, 0), max(u0, 0):max(u1, 0)] = True
+        candidate &= inside
+    return candidate
 
 
 def matching_sigma(fit: dict, window: int, noise_sigma: float | None = None,
