@@ -130,57 +130,91 @@ def triangulate_rows(views, pixels) -> MultiViewTriangulation:
     used = np.zeros((n, len(views)), bool)
     rays = []
     for v, view in enumerate(views):
-        seen = np.isfinite(pixels[:, v, 0]) & np.isfinite(pixels[:, v, 1])
-        if seen.all():
-            origins, dirs, reason = view.water_rays(pixels[:, v])
-            used[:, v] = reason == Reason.OK
-        else:
-            origins = np.full((n, 3), np.nan)
-            dirs = np.full((n, 3), np.nan)
-            if seen.any():
-                o, d, reason = view.water_rays(pixels[seen, v])
-                origins[seen], dirs[seen] = o, d
-                used[np.flatnonzero(seen)[reason == Reason.OK], v] = True
-        if used[:, v].all():  # every row: the rays as they are
-            weight, d, o = 1.0, dirs.T, origins.T
-        else:  # rows this view did not see (NaN) add nothing: weight 0 and a zero ray
-            weight = used[:, v].astype(np.float64)
-            d = np.where(used[:, v], dirs.T, 0.0)
-            o = np.where(used[:, v], origins.T, 0.0)
-        # in place, column by column (each intermediate one column of the piece)
-        along = d[0] * o[0]
-        along += d[1] * o[1]
-        along += d[2] * o[2]
-        for j, (p, q) in enumerate(((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))):
-            a[j] -= d[p] * d[q]
-        a[:3] += weight
-        for j in range(3):
-            rhs[j] += o[j]
-            rhs[j] -= d[j] * along
+        o, d, used[:, v] = _view_rays(view, pixels[:, v])
+        _add_ray(a, rhs, o, d, used[:, v])
         rays.append((o, d))
     count = used.sum(axis=1)
     reason = np.full(n, Reason.OK, dtype=np.int8)
     reason[count < 2] = Reason.TOO_FEW_VIEWS
+    points, parallel = _solve_normal_equations(a, rhs)
+    reason[(reason == Reason.OK) & parallel] = Reason.PARALLEL_RAYS
+    ok = reason == Reason.OK
+    points[~ok] = np.nan
+    squared, behind = _ray_residuals(np.where(ok, points.T, 0.0), rays, used)
+    reason[ok & behind] = Reason.BEHIND_CAMERA
+    ok = reason == Reason.OK
+    with np.errstate(invalid="ignore", divide="ignore"):
+        gap = np.sqrt(np.maximum(squared, 0.0) / np.maximum(count, 1))
+    points[~ok] = np.nan
+    gap[~ok] = np.nan
+    return MultiViewTriangulation(points, gap, count, used, reason)
+
+
+def _view_rays(view, pixels) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(origins (3, N), directions (3, N), used (N,))``: the water rays of one view's
+    ``pixels`` ``(N, 2)`` (NaN: not seen), as columns; the rows without a traced ray (not seen,
+    or tracing failed) a zero ray, ``used`` False."""
+    n = pixels.shape[0]
+    seen = np.isfinite(pixels[:, 0]) & np.isfinite(pixels[:, 1])
+    if seen.all():
+        origins, dirs, reason = view.water_rays(pixels)
+        used = reason == Reason.OK
+    else:
+        origins = np.full((n, 3), np.nan)
+        dirs = np.full((n, 3), np.nan)
+        used = np.zeros(n, bool)
+        if seen.any():
+            o, d, reason = view.water_rays(pixels[seen])
+            origins[seen], dirs[seen] = o, d
+            used[np.flatnonzero(seen)[reason == Reason.OK]] = True
+    if used.all():  # every row: the rays as they are
+        return origins.T, dirs.T, used
+    return np.where(used, origins.T, 0.0), np.where(used, dirs.T, 0.0), used
+
+
+def _add_ray(a, rhs, o, d, used) -> None:
+    """Add one view's rays (columns ``o``, ``d``; rows not ``used`` zero rays of weight 0) to
+    the normal equations' entries ``a`` (6, N) and right-hand side ``rhs`` (3, N), in place,
+    column by column (each intermediate one column of the piece)."""
+    weight = 1.0 if used.all() else used.astype(np.float64)
+    along = d[0] * o[0]
+    along += d[1] * o[1]
+    along += d[2] * o[2]
+    for j, (p, q) in enumerate(((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))):
+        a[j] -= d[p] * d[q]
+    a[:3] += weight
+    for j in range(3):
+        rhs[j] += o[j]
+        rhs[j] -= d[j] * along
+
+
+def _solve_normal_equations(a, rhs) -> tuple[np.ndarray, np.ndarray]:
+    """``(points (N, 3) mm, parallel (N,))``: the symmetric 3 × 3 systems solved by their
+    adjugate; ``parallel`` where the determinant is below :data:`PARALLEL_LIMIT` × the
+    trace's cube (rays nearly parallel, or none)."""
     xx, yy, zz, xy, xz, yz = a
     # the adjugate of the symmetric matrix, and its determinant
     c_xx, c_yy, c_zz = yy * zz - yz * yz, xx * zz - xz * xz, xx * yy - xy * xy
     c_xy, c_xz, c_yz = xz * yz - xy * zz, xy * yz - xz * yy, xy * xz - xx * yz
     det = xx * c_xx + xy * c_xy + xz * c_xz
     scale = (xx + yy + zz) / 3
+    points = np.full((a.shape[1], 3), np.nan)
     with np.errstate(invalid="ignore", divide="ignore"):
         parallel = ~(det > PARALLEL_LIMIT * scale ** 3)
-    reason[(reason == Reason.OK) & parallel] = Reason.PARALLEL_RAYS
-    ok = reason == Reason.OK
-    points = np.full((n, 3), np.nan)
-    with np.errstate(invalid="ignore", divide="ignore"):
         bx, by, bz = rhs
         points[:, 0] = (c_xx * bx + c_xy * by + c_xz * bz) / det
         points[:, 1] = (c_xy * bx + c_yy * by + c_yz * bz) / det
         points[:, 2] = (c_xz * bx + c_yz * by + c_zz * bz) / det
-    points[~ok] = np.nan
+    return points, parallel
+
+
+def _ray_residuals(X, rays, used) -> tuple[np.ndarray, np.ndarray]:
+    """``(squared (N,) mm², behind (N,))``: the sum over the used rays of each point's squared
+    distance to the ray, and whether the point lies behind a used ray's origin; ``X`` (3, N)
+    the points as columns (0 where none)."""
+    n = X.shape[1]
     squared = np.zeros(n)
     behind = np.zeros(n, bool)
-    X = np.where(ok, points.T, 0.0)
     for v, (o, d) in enumerate(rays):  # unused rows: zero rays, masked below
         offset = X - o
         along = d[0] * offset[0]
@@ -198,13 +232,7 @@ def triangulate_rows(views, pixels) -> MultiViewTriangulation:
             squared += square
         else:
             squared += np.where(used[:, v], square, 0.0)
-    reason[ok & behind] = Reason.BEHIND_CAMERA
-    ok = reason == Reason.OK
-    with np.errstate(invalid="ignore", divide="ignore"):
-        gap = np.sqrt(np.maximum(squared, 0.0) / np.maximum(count, 1))
-    points[~ok] = np.nan
-    gap[~ok] = np.nan
-    return MultiViewTriangulation(points, gap, count, used, reason)
+    return squared, behind
 
 
 __all__ = ["CHUNK_ROWS", "MultiViewTriangulation", "PARALLEL_LIMIT", "View", "triangulate_rows",
