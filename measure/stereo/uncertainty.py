@@ -388,46 +388,15 @@ def residual_sigma(rig: StereoRig, uv_left, uv_right, points, pixel_sigma=0.0,
     likelihood of the residuals (``|r|² ~ (σ_i² + σ₀² w²) χ²₁``), no truth needed; the result
     also holds ``"flux_exponent"`` and ``"weights"`` ``(N,)`` (``w``, 1 where the flux is not a
     positive number; NaN for the rows without a residual)."""
-    from scipy.optimize import brentq, minimize_scalar  # loaded on first use, not with measure
     points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-    observed = np.concatenate([np.asarray(uv_left, dtype=float).reshape(-1, 2),
-                               np.asarray(uv_right, dtype=float).reshape(-1, 2)], axis=1)
-    stated = pixel_sigmas(pixel_sigma, points.shape[0], allow_zero=True)
-    predicted, J, _ = pixel_jacobians(rig, points)
-    e = observed - predicted
-    ok = np.all(np.isfinite(e), axis=1) & np.all(np.isfinite(J), axis=(1, 2))
+    q, known, ok = _projected_residuals(rig, uv_left, uv_right, points, pixel_sigma)
     if not ok.any():
         return {"sigma0_px": None, "rms_residual_px": None, "n": 0}
-    e, J = e[ok], J[ok]
-    normal = np.einsum("nki,nkj->nij", J, J)
-    step = np.linalg.solve(normal, np.einsum("nki,nk->ni", J, e)[..., None])[..., 0]
-    r = e - np.einsum("nki,ni->nk", J, step)
-    q = np.einsum("nk,nk->n", r, r)
-    known = np.mean(stated[ok] ** 2, axis=1)
-
-    ones = np.ones_like(q)
-
-    def excess(variance, statistic, rows, w2):  # residuals in units of their expected size
-        with np.errstate(divide="ignore", invalid="ignore"):
-            return float(statistic(np.where(q[rows] > 0,
-                                            q[rows] / (known[rows] + variance * w2[rows]), 0.0)))
-
-    def solve(statistic, target, rows, w2=ones):
-        """The extra variance σ₀² (of weight ``w2`` per row) that brings the statistic of the
-        residuals in units of their expected size to ``target``."""
-        upper = (2.0 * float(statistic(q[rows] / w2[rows]) / target)
-                 + float(np.max(known / w2)))
-        if upper <= 0 or excess(0.0, statistic, rows, w2) <= target:
-            return 0.0
-        # the excess falls from > target at 0 to < target at ``upper``
-        return brentq(lambda v: excess(v, statistic, rows, w2) - target, 0.0, upper,
-                      xtol=1e-12 * upper)
-
     everything = np.ones(q.shape, dtype=bool)
-    robust = solve(np.median, CHI2_1_MEDIAN, everything)
+    robust = _extra_variance(q, known, np.median, CHI2_1_MEDIAN, everything)
     inliers = q <= OUTLIER_CHI2_1 * (known + robust)
     if flux is None:
-        sigma0 = float(np.sqrt(solve(np.mean, 1.0, inliers)))
+        sigma0 = float(np.sqrt(_extra_variance(q, known, np.mean, 1.0, inliers)))
         return {"sigma0_px": sigma0, "rms_residual_px": float(np.sqrt(np.mean(q))),
                 "n": int(ok.sum())}
     light = np.asarray(flux, dtype=np.float64).reshape(-1)[ok]
@@ -435,10 +404,64 @@ def residual_sigma(rig: StereoRig, uv_left, uv_right, points, pixel_sigma=0.0,
     relative = np.ones_like(light)
     if positive.any():
         relative[positive] = light[positive] / np.median(light[positive])
+    exponent, variance = _flux_exponent(q, known, inliers, relative)
+    weights = np.full(points.shape[0], np.nan)
+    weights[ok] = relative ** (-exponent)
+    return {"sigma0_px": float(np.sqrt(variance)), "flux_exponent": exponent,
+            "weights": weights, "rms_residual_px": float(np.sqrt(np.mean(q))),
+            "n": int(ok.sum())}
+
+
+def _projected_residuals(rig, uv_left, uv_right, points, pixel_sigma):
+    """``(q, known, ok)``: each point's squared residual |r|² (px², one degree of freedom) after
+    the projector that removes what a move of X explains, the mean of its four stated
+    variances (px²), for the rows ``ok`` whose residual and Jacobian are finite (``q`` and
+    ``known`` hold those rows only)."""
+    observed = np.concatenate([np.asarray(uv_left, dtype=float).reshape(-1, 2),
+                               np.asarray(uv_right, dtype=float).reshape(-1, 2)], axis=1)
+    stated = pixel_sigmas(pixel_sigma, points.shape[0], allow_zero=True)
+    predicted, J, _ = pixel_jacobians(rig, points)
+    e = observed - predicted
+    ok = np.all(np.isfinite(e), axis=1) & np.all(np.isfinite(J), axis=(1, 2))
+    e, J = e[ok], J[ok]
+    normal = np.einsum("nki,nkj->nij", J, J)
+    step = np.linalg.solve(normal, np.einsum("nki,nk->ni", J, e)[..., None])[..., 0]
+    r = e - np.einsum("nki,ni->nk", J, step)
+    return np.einsum("nk,nk->n", r, r), np.mean(stated[ok] ** 2, axis=1), ok
+
+
+def _excess(q, known, variance, statistic, rows, w2) -> float:
+    """The ``statistic`` of the residuals ``rows`` in units of their expected size with an extra
+    variance (px², of weight ``w2`` per row)."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return float(statistic(np.where(q[rows] > 0,
+                                        q[rows] / (known[rows] + variance * w2[rows]), 0.0)))
+
+
+def _extra_variance(q, known, statistic, target, rows, w2=None) -> float:
+    """The extra variance σ₀² (px², of weight ``w2`` per row, default 1) that brings the
+    statistic of the residuals ``rows`` in units of their expected size to ``target``."""
+    from scipy.optimize import brentq  # loaded on first use, not with measure
+
+    w2 = np.ones_like(q) if w2 is None else w2
+    upper = (2.0 * float(statistic(q[rows] / w2[rows]) / target)
+             + float(np.max(known / w2)))
+    if upper <= 0 or _excess(q, known, 0.0, statistic, rows, w2) <= target:
+        return 0.0
+    # the excess falls from > target at 0 to < target at ``upper``
+    return brentq(lambda v: _excess(q, known, v, statistic, rows, w2) - target, 0.0, upper,
+                  xtol=1e-12 * upper)
+
+
+def _flux_exponent(q, known, inliers, relative) -> tuple[float, float]:
+    """``(p, σ₀²)``: the exponent in [0, :data:`MAX_FLUX_EXPONENT`] of the extra noise's
+    ``(flux / median flux)^(−p)`` and its σ₀² (px²), by maximum likelihood of the inliers'
+    residuals (0 where it does not beat p = 0, or all fluxes are alike)."""
+    from scipy.optimize import minimize_scalar  # loaded on first use, not with measure
 
     def fit(p):  # σ₀² for exponent p, and the negative log-likelihood of the inliers
         w2 = relative ** (-2.0 * p)
-        variance = solve(np.mean, 1.0, inliers, w2)
+        variance = _extra_variance(q, known, np.mean, 1.0, inliers, w2)
         total = known[inliers] + variance * w2[inliers]
         with np.errstate(divide="ignore", invalid="ignore"):
             nll = float(np.sum(np.log(np.where(total > 0, total, np.inf))
@@ -451,12 +474,7 @@ def residual_sigma(rig: StereoRig, uv_left, uv_right, points, pixel_sigma=0.0,
         exponent = float(best.x) if fit(best.x)[1] < fit(0.0)[1] else 0.0
     else:
         exponent = 0.0
-    variance = fit(exponent)[0]
-    weights = np.full(points.shape[0], np.nan)
-    weights[ok] = relative ** (-exponent)
-    return {"sigma0_px": float(np.sqrt(variance)), "flux_exponent": exponent,
-            "weights": weights, "rms_residual_px": float(np.sqrt(np.mean(q))),
-            "n": int(ok.sum())}
+    return exponent, fit(exponent)[0]
 
 
 #: An oblique disk's image is an ellipse; its centre scatters more across its minor axis (the
