@@ -166,7 +166,51 @@ def self_calibrate(rig: StereoRig, uv_left, uv_right, parameters=("n_water",),
     triangulation with ``rig``); ``rig_covariance`` the calibration's covariance, propagated
     into σ (module docs). Raises ``ValueError`` for an unknown parameter or fewer
     targets than free numbers."""
-    from scipy.optimize import least_squares
+    names = _check_parameters(rig, parameters)
+    uv_left, uv_right, start = _usable_matches(rig, uv_left, uv_right, points)
+    n_free = sum(PARAMETERS[p] for p in names)
+    n = start.shape[0]
+    if 4 * n <= 3 * n + n_free or n < 2:
+        raise ValueError(f"{n} usable matched targets cannot determine {n_free} port "
+                         f"parameter(s) and their own positions")
+    port0, basis = rig.port, tilt_basis(rig.port.normal)
+    fit, rms_before = _refine(rig, port0, names, basis, uv_left, uv_right, start)
+    r = fit.fun
+    s2 = float(r @ r) / (r.size - fit.x.size)
+    schur = _parameter_normal_matrix(fit.jac, n, n_free)
+    scale = np.sqrt(np.diag(schur))
+    scale[scale == 0] = 1.0
+    eigen = np.linalg.eigvalsh(schur / np.outer(scale, scale))
+    relative = float(eigen[0] / eigen[-1]) if eigen[-1] > 0 else 0.0
+    labels = tuple(f"{name}[{k}]" if PARAMETERS[name] > 1 else name
+                   for name in names for k in range(PARAMETERS[name]))
+    base = dict(labels=labels, points=fit.x[n_free:].reshape(n, 3),
+                rms_px=float(np.sqrt(np.mean(r ** 2))), rms_px_before=rms_before,
+                converged=bool(fit.success), n_points=n, message=str(fit.message))
+    if relative < IDENTIFIABILITY_LIMIT:
+        return SelfCalibration({}, {}, np.full((n_free, n_free), np.nan), rig=rig,
+                               identifiable=False,
+                               reason=f"the normal equations are singular (relative singular "
+                                      f"value {relative:.1e})", **base)
+    covariance = s2 * np.linalg.inv(schur)
+    sig_conditional = np.sqrt(np.diag(covariance))
+    correlation = covariance / np.outer(sig_conditional, sig_conditional)
+    sig, fixed = _with_rig_covariance(rig, port0, names, basis, fit, schur, covariance,
+                                      rig_covariance)
+    off = np.abs(correlation - np.eye(n_free))
+    refined = StereoRig(rig.left, rig.right, _port_from(port0, names, fit.x[:n_free], basis))
+    if n_free > 1 and off.max() >= CORRELATION_LIMIT:
+        return SelfCalibration({}, {}, correlation, rig=rig, identifiable=False,
+                               reason=f"free parameters are correlated at {off.max():.4f}: the "
+                                      f"data cannot tell them apart", **base)
+    estimates, sigmas, conditional = _estimates(names, refined.port, sig, sig_conditional)
+    return SelfCalibration(estimates, sigmas, correlation, rig=refined, identifiable=True,
+                           reason="", sigmas_conditional=conditional, propagated=fixed, **base)
+
+
+def _check_parameters(rig, parameters) -> tuple:
+    """The names to estimate, each once; ValueError for a port that does not self-calibrate or
+    a name not in :data:`PARAMETERS`."""
     if not rig.port.self_calibrates:
         raise ValueError(f"self-calibration estimates the parameters of one flat port; "
                          f"{rig.port.rig_name} ({type(rig.port).__name__}: "
@@ -176,18 +220,26 @@ def self_calibrate(rig: StereoRig, uv_left, uv_right, parameters=("n_water",),
     if not names or unknown:
         raise ValueError(f"cannot estimate {', '.join(unknown) or 'nothing'}: the refinement "
                          f"estimates {', '.join(PARAMETERS)}")
+    return names
+
+
+def _usable_matches(rig, uv_left, uv_right, points):
+    """``(uv_left, uv_right, start)``: the matches (px) whose pixels and start point (mm; the
+    optical-path triangulation when ``points`` is None) are finite."""
     uv_left = np.asarray(uv_left, dtype=np.float64).reshape(-1, 2)
     uv_right = np.asarray(uv_right, dtype=np.float64).reshape(-1, 2)
     start = triangulate(rig, uv_left, uv_right).points if points is None else np.asarray(points, float)
     keep = np.all(np.isfinite(start), axis=1) & np.all(np.isfinite(uv_left), axis=1) & np.all(
         np.isfinite(uv_right), axis=1)
-    uv_left, uv_right, start = uv_left[keep], uv_right[keep], start[keep]
-    n_free = sum(PARAMETERS[p] for p in names)
-    n = start.shape[0]
-    if 4 * n <= 3 * n + n_free or n < 2:
-        raise ValueError(f"{n} usable matched targets cannot determine {n_free} port "
-                         f"parameter(s) and their own positions")
-    port0, basis = rig.port, tilt_basis(rig.port.normal)
+    return uv_left[keep], uv_right[keep], start[keep]
+
+
+def _refine(rig, port0, names, basis, uv_left, uv_right, start):
+    """``(fit, rms_before)``: SciPy's ``least_squares`` over the port's parameters ``names``
+    and the points (their pixels' residuals, analytic Jacobian), and the RMS (px) it started
+    from."""
+    from scipy.optimize import least_squares
+
     p0 = []
     for name in names:
         p0 += {"n_water": [port0.n_water], "port_distance": [port0.distance],
@@ -207,57 +259,44 @@ def self_calibrate(rig: StereoRig, uv_left, uv_right, parameters=("n_water",),
     fit = least_squares(residuals, x0, jac=jacobian, method="trf", x_scale="jac",
                         xtol=1e-12, ftol=1e-12, gtol=1e-12, max_nfev=200, tr_solver="lsmr",
                         tr_options={"atol": 1e-14, "btol": 1e-14})
-    r = fit.fun
-    dof = r.size - x0.size
-    s2 = float(r @ r) / dof
-    schur = _parameter_normal_matrix(fit.jac, n, n_free)
-    scale = np.sqrt(np.diag(schur))
-    scale[scale == 0] = 1.0
-    eigen = np.linalg.eigvalsh(schur / np.outer(scale, scale))
-    relative = float(eigen[0] / eigen[-1]) if eigen[-1] > 0 else 0.0
-    labels = tuple(f"{name}[{k}]" if PARAMETERS[name] > 1 else name
-                   for name in names for k in range(PARAMETERS[name]))
-    base = dict(labels=labels, points=fit.x[n_free:].reshape(n, 3),
-                rms_px=float(np.sqrt(np.mean(r ** 2))), rms_px_before=rms_before,
-                converged=bool(fit.success), n_points=n, message=str(fit.message))
-    if relative < IDENTIFIABILITY_LIMIT:
-        return SelfCalibration({}, {}, np.full((n_free, n_free), np.nan), rig=rig,
-                               identifiable=False,
-                               reason=f"the normal equations are singular (relative singular "
-                                      f"value {relative:.1e})", **base)
-    covariance = s2 * np.linalg.inv(schur)
+    return fit, rms_before
+
+
+def _with_rig_covariance(rig, port0, names, basis, fit, schur, covariance, rig_covariance):
+    """``(σ, fixed)``: the estimates' σ with the calibration's covariance of the parameters
+    held ``fixed`` propagated (module docs); the conditional σ and ``()`` without one."""
     sig = np.sqrt(np.diag(covariance))
-    correlation = covariance / np.outer(sig, sig)
-    sig_conditional, fixed = sig, ()
-    if rig_covariance is not None:
-        port = _port_from(port0, names, fit.x[:n_free], basis)
-        fixed = tuple(n for n in rig_covariance.names if n not in _estimated(names, port))
-        if fixed:
-            where = [rig_covariance.names.index(n) for n in fixed]
-            sigma_fixed = rig_covariance.matrix[np.ix_(where, where)]
-            G = _influence(fit.jac, n, n_free, schur) @ _fixed_jacobian(
-                rig, port, fit.x[n_free:].reshape(n, 3), fixed, rig_covariance.normal_axes)
-            sig = np.sqrt(np.diag(covariance + G @ sigma_fixed @ G.T))
-    off = np.abs(correlation - np.eye(n_free))
-    refined = StereoRig(rig.left, rig.right, _port_from(port0, names, fit.x[:n_free], basis))
-    if n_free > 1 and off.max() >= CORRELATION_LIMIT:
-        return SelfCalibration({}, {}, correlation, rig=rig, identifiable=False,
-                               reason=f"free parameters are correlated at {off.max():.4f}: the "
-                                      f"data cannot tell them apart", **base)
+    if rig_covariance is None:
+        return sig, ()
+    n_free = schur.shape[0]
+    n = (fit.x.size - n_free) // 3
+    port = _port_from(port0, names, fit.x[:n_free], basis)
+    fixed = tuple(name for name in rig_covariance.names if name not in _estimated(names, port))
+    if fixed:
+        where = [rig_covariance.names.index(n) for n in fixed]
+        sigma_fixed = rig_covariance.matrix[np.ix_(where, where)]
+        G = _influence(fit.jac, n, n_free, schur) @ _fixed_jacobian(
+            rig, port, fit.x[n_free:].reshape(n, 3), fixed, rig_covariance.normal_axes)
+        sig = np.sqrt(np.diag(covariance + G @ sigma_fixed @ G.T))
+    return sig, fixed
+
+
+def _estimates(names, port, sig, sig_conditional) -> tuple[dict, dict, dict]:
+    """``(estimates, σ, conditional σ)`` by name from the refined ``port`` and the σ vectors
+    (the port normal's two tilts one entry)."""
     estimates, sigmas, conditional, k = {}, {}, {}, 0
     for name in names:
         if name == "n_water":
-            estimates[name], sigmas[name] = refined.port.n_water, float(sig[k])
+            estimates[name], sigmas[name] = port.n_water, float(sig[k])
         elif name == "port_distance":
-            estimates[name], sigmas[name] = refined.port.distance, float(sig[k])
+            estimates[name], sigmas[name] = port.distance, float(sig[k])
         else:
-            estimates[name], sigmas[name] = refined.port.normal.tolist(), sig[k:k + 2].tolist()
+            estimates[name], sigmas[name] = port.normal.tolist(), sig[k:k + 2].tolist()
         w = PARAMETERS[name]
         conditional[name] = (float(sig_conditional[k]) if w == 1
                              else sig_conditional[k:k + w].tolist())
         k += w
-    return SelfCalibration(estimates, sigmas, correlation, rig=refined, identifiable=True,
-                           reason="", sigmas_conditional=conditional, propagated=fixed, **base)
+    return estimates, sigmas, conditional
 
 
 def _estimated(names, port) -> set:
