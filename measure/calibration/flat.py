@@ -47,31 +47,74 @@ def housing_problem(rig: StereoRig, board: Board, detections: Detections, names,
     has its own port's ``distance``, ``normal`` and ``thickness`` (:func:`parameters_of`; the
     same flat-port residuals and Jacobian, each camera's rows touching its own port's
     columns); ``unpack`` then returns the pair."""
-    from scipy.spatial.transform import Rotation
-    views = tuple(views)
-    table = parameters_of(views, pair)
-    starts, usable, detections = usable_poses(rig, board, detections)
-    P = len(starts)
-    n_global = sum(table[n] for n in names)
-    ports0 = [rig.port.view(v) for v in views] if pair else [rig.port]
-    slot = {v: (i if pair else 0) for i, v in enumerate(views)}  # the port each camera sees
-    S = len(ports0)
-    bases = [tilt_basis(p.normal) for p in ports0]
-    corners, obs = observations(board, detections, views)
-    m = sum(2 * o[1].size for o in obs)
+    return _FlatHousingProblem(rig, board, detections, tuple(names), tuple(views), pair)
 
-    def unpack(x):
+
+class _FlatHousingProblem:
+    """:func:`housing_problem`: the unknowns ``x`` are the free housing numbers (``names``, each
+    port's in turn: ``S`` ports, one shared or one per camera of ``views``) then 6 per usable
+    pose (rotation vector, translation, mm); ``obs`` the corners' observations (px)."""
+
+    def __init__(self, rig, board, detections, names, views, pair):
+        self.rig, self.names, self.views, self.pair = rig, names, views, pair
+        self.table = parameters_of(views, pair)
+        starts, self.usable, detections = usable_poses(rig, board, detections)
+        self.P = len(starts)
+        self.n_global = sum(self.table[n] for n in names)
+        self.ports0 = [rig.port.view(v) for v in views] if pair else [rig.port]
+        self.slot = {v: (i if pair else 0) for i, v in enumerate(views)}  # the port each sees
+        self.S = len(self.ports0)
+        self.bases = [tilt_basis(p.normal) for p in self.ports0]
+        self.corners, self.obs = observations(board, detections, views)
+        self.m = sum(2 * o[1].size for o in self.obs)
+        self.x0, self.lower, self.upper = self._start(starts)
+        self.basis = np.array(self.bases) if pair else self.bases[0]
+
+    def _start(self, starts):
+        """``(x0, lower, upper)``: the design port and the poses' starts, and bounds that keep
+        the port physical on the way (a layer, indices >= 1)."""
+        from scipy.spatial.transform import Rotation
+
+        ports0, S = self.ports0, self.S
+        x0 = []
+        for name in self.names:
+            x0 += {"distance": [p.distance for p in ports0], "normal": [0.0, 0.0] * S,
+                   "thickness": [p.thicknesses[0] for p in ports0 if p.thicknesses],
+                   "n_water": [ports0[0].n_water], "extrinsics": [0.0] * 6}[name]
+        for R, t in starts:
+            x0 += list(Rotation.from_matrix(R).as_rotvec()) + list(t)
+        x0 = np.asarray(x0, dtype=np.float64)
+        lower = np.full(x0.size, -np.inf)
+        upper = np.full(x0.size, np.inf)
+        k = 0
+        for name in self.names:
+            if name in ("distance", "thickness"):
+                lower[k:k + S] = MIN_LENGTH_MM
+            elif name == "n_water":
+                lower[k], upper[k] = 1.0, MAX_INDEX
+            k += self.table[name]
+        g = self.n_global
+        x0[:g] = np.clip(x0[:g], lower[:g] + 1e-9, upper[:g] - 1e-9)
+        return x0, lower, upper
+
+    def unpack(self, x):
+        """``(port, (left, right), Rs, ts)`` at ``x``: the port (a FlatPair with ``pair``; a
+        camera not in ``views`` keeps its port, in the same water), the cameras (the right
+        one moved with ``extrinsics``) and the poses."""
+        from scipy.spatial.transform import Rotation
+
+        rig, ports0, S = self.rig, self.ports0, self.S
         distances = [p.distance for p in ports0]
         normals = [p.normal for p in ports0]
         thick = [list(p.thicknesses) for p in ports0]
         n_water, right = None, rig.right
         k = 0
-        for name in names:
+        for name in self.names:
             if name == "distance":
                 distances = list(x[k:k + S])
             elif name == "normal":
                 normals = [p.normal + x[k + 2 * s] * b[0] + x[k + 2 * s + 1] * b[1]
-                           for s, (p, b) in enumerate(zip(ports0, bases))]
+                           for s, (p, b) in enumerate(zip(ports0, self.bases))]
             elif name == "thickness":
                 for s in range(S):
                     thick[s][0] = x[k + s]
@@ -81,75 +124,80 @@ def housing_problem(rig: StereoRig, board: Board, detections: Detections, names,
                 dR = Rotation.from_rotvec(x[k:k + 3]).as_matrix()
                 right = Camera(rig.right.K, rig.right.size, rig.right.dist,
                                dR @ rig.right.R, rig.right.t + x[k + 3:k + 6])
-            k += table[name]
+            k += self.table[name]
         water = {} if n_water is None else {"n_water": float(n_water)}
         ports = [FlatPort(normals[s], distances[s], tuple(thick[s]),
                           p.indices[:-1] + (water.get("n_water", p.indices[-1]),))
                  for s, p in enumerate(ports0)]
-        if not pair:
+        if not self.pair:
             port = ports[0]
-        else:  # a camera not in views keeps its port (in the same water)
+        else:
             both = [rig.port.view(v).assumed(water) for v in (0, 1)]
-            for v in views:
-                both[v] = ports[slot[v]]
+            for v in self.views:
+                both[v] = ports[self.slot[v]]
             port = FlatPair(*both)
-        Rs = Rotation.from_rotvec(x[n_global:].reshape(P, 6)[:, :3]).as_matrix()
-        ts = x[n_global:].reshape(P, 6)[:, 3:]
-        return port, (rig.left, right), Rs, ts
+        poses = x[self.n_global:].reshape(self.P, 6)
+        return port, (rig.left, right), Rotation.from_rotvec(poses[:, :3]).as_matrix(), \
+            poses[:, 3:]
 
-    def residuals(x):
+    def residuals(self, x):
+        """The corners' reprojection residuals (px) at ``x``; 1000 px where a ray fails."""
         try:
-            port, cameras, Rs, ts = unpack(x)
+            port, cameras, Rs, ts = self.unpack(x)
         except ValueError:  # e.g. a non-physical index or thickness on the way
-            return np.full(m, 1e3)
+            return np.full(self.m, 1e3)
         out = []
-        for view, pose_idx, ids, uv in obs:
-            world = np.einsum("nij,nj->ni", Rs[pose_idx], corners[ids]) + ts[pose_idx]
+        for view, pose_idx, ids, uv in self.obs:
+            world = np.einsum("nij,nj->ni", Rs[pose_idx], self.corners[ids]) + ts[pose_idx]
             r = (project(cameras[view], port.view(view), world) - uv).ravel()
             out.append(np.where(np.isfinite(r), r, 1e3))
         return np.concatenate(out)
 
-    def own(values, s, width=1):
+    def _own(self, values, s, width=1):
         """``values`` ``(n, 2, width)`` in port ``s``'s place among the ports' columns."""
-        out = np.zeros(values.shape[:2] + (S * width,))
+        out = np.zeros(values.shape[:2] + (self.S * width,))
         out[..., s * width:(s + 1) * width] = values
         return out
 
-    def jacobian(x):
-        """Analytic (:func:`measure.geometry.projection.project` with ``parameters=True``): a row touches
-        the free housing numbers and its pose's 6 columns (rotation vector, translation)."""
+    def _housing_columns(self, x, name, view, jac, d_points) -> list:
+        """The columns of free housing number ``name`` for the rows of camera ``view``, from
+        the projection's parameter Jacobian ``jac``."""
+        s = self.slot[view]
+        if name == "distance":
+            return [self._own(jac.distance[..., None], s)]
+        if name == "normal":  # normal = m / |m|, m = N0 + a·x_a + b·x_b
+            k = parameter_offset(self.names, name, self.table) + 2 * s
+            bases = self.bases[s]
+            length = np.linalg.norm(self.ports0[s].normal + x[k] * bases[0] + x[k + 1] * bases[1])
+            return [self._own(np.stack([jac.normal @ axis / length for axis in bases], -1), s, 2)]
+        if name == "thickness":
+            return [self._own(jac.thicknesses[..., :1], s)]
+        if name == "n_water":
+            return [jac.indices[..., -1:]]
+        if view == 1:  # the right camera: R = exp(ω) R0, t = t0 + δt
+            k = parameter_offset(self.names, name, self.table)
+            return [jac.rotation @ pose_left_jacobians(x[None, k:k + 3])[0], jac.center]
+        return [np.zeros(d_points.shape[:2] + (6,))]
+
+    def jacobian(self, x):
+        """Analytic (:func:`measure.geometry.projection.project` with ``parameters=True``): a row
+        touches the free housing numbers and its pose's 6 columns (rotation vector,
+        translation)."""
+        n_global = self.n_global
         width = n_global + 6
         try:
-            port, cameras, Rs, ts = unpack(x)
+            port, cameras, Rs, ts = self.unpack(x)
         except ValueError:  # the residuals are constant there
-            return rows_jacobian(np.zeros((m, width)), np.zeros(m, int), n_global, x.size)
-        turn = pose_left_jacobians(x[n_global:].reshape(P, 6)[:, :3])
+            return rows_jacobian(np.zeros((self.m, width)), np.zeros(self.m, int), n_global,
+                                 x.size)
+        turn = pose_left_jacobians(x[n_global:].reshape(self.P, 6)[:, :3])
         blocks, poses = [], []
-        for view, pose_idx, ids, _ in obs:
-            s = slot[view]
-            rotated = np.einsum("nij,nj->ni", Rs[pose_idx], corners[ids])
+        for view, pose_idx, ids, _ in self.obs:
+            rotated = np.einsum("nij,nj->ni", Rs[pose_idx], self.corners[ids])
             _, d_points, jac = project(cameras[view], port.view(view), rotated + ts[pose_idx],
                                        parameters=True)
-            columns = []
-            for name in names:
-                if name == "distance":
-                    columns.append(own(jac.distance[..., None], s))
-                elif name == "normal":  # normal = m / |m|, m = N0 + a·x_a + b·x_b
-                    k = parameter_offset(names, name, table) + 2 * s
-                    length = np.linalg.norm(ports0[s].normal + x[k] * bases[s][0]
-                                            + x[k + 1] * bases[s][1])
-                    columns.append(own(np.stack([jac.normal @ axis / length
-                                                 for axis in bases[s]], -1), s, 2))
-                elif name == "thickness":
-                    columns.append(own(jac.thicknesses[..., :1], s))
-                elif name == "n_water":
-                    columns.append(jac.indices[..., -1:])
-                elif view == 1:  # the right camera: R = exp(ω) R0, t = t0 + δt
-                    k = parameter_offset(names, name, table)
-                    columns.append(jac.rotation @ pose_left_jacobians(x[None, k:k + 3])[0])
-                    columns.append(jac.center)
-                else:
-                    columns.append(np.zeros(d_points.shape[:2] + (6,)))
+            columns = [c for name in self.names
+                       for c in self._housing_columns(x, name, view, jac, d_points)]
             # a pose: X = exp(ω) c + t, so dX/dω = −[R c]× J_l(ω) and dX/dt = I
             d_turn = np.einsum("nrj,njk->nrk", np.cross(rotated[:, None, :], d_points),
                                turn[pose_idx])
@@ -158,15 +206,15 @@ def housing_problem(rig: StereoRig, board: Board, detections: Detections, names,
             poses.append(np.repeat(pose_idx, 2))
         return rows_jacobian(np.concatenate(blocks), np.concatenate(poses), n_global, x.size)
 
-    def air_jacobian(x, air):
+    def air_jacobian(self, x, air):
         """Dense ``(m, len(air))``: d residuals / d the in-air parameters ``air`` (names of
         :data:`measure.calibration.covariance.AIR_NAMES`) at ``x`` (module docs of
         :mod:`measure.calibration.covariance`)."""
-        port, cameras, Rs, ts = unpack(x)
+        port, cameras, Rs, ts = self.unpack(x)
         column = {name: j for j, name in enumerate(air)}
-        out, row = np.zeros((m, len(air))), 0
-        for view, pose_idx, ids, _ in obs:
-            world = np.einsum("nij,nj->ni", Rs[pose_idx], corners[ids]) + ts[pose_idx]
+        out, row = np.zeros((self.m, len(air))), 0
+        for view, pose_idx, ids, _ in self.obs:
+            world = np.einsum("nij,nj->ni", Rs[pose_idx], self.corners[ids]) + ts[pose_idx]
             pixels, _, jac = project(cameras[view], port.view(view), world, parameters=True)
             n = 2 * pose_idx.size
             camera = ("left", "right")[view]
@@ -182,31 +230,6 @@ def housing_problem(rig: StereoRig, board: Board, detections: Detections, names,
                                 values[..., k].reshape(n))
             row += n
         return np.where(np.isfinite(out), out, 0.0)
-
-    x0 = []
-    for name in names:
-        x0 += {"distance": [p.distance for p in ports0], "normal": [0.0, 0.0] * S,
-               "thickness": [p.thicknesses[0] for p in ports0 if p.thicknesses],
-               "n_water": [ports0[0].n_water], "extrinsics": [0.0] * 6}[name]
-    for R, t in starts:
-        x0 += list(Rotation.from_matrix(R).as_rotvec()) + list(t)
-    x0 = np.asarray(x0, dtype=np.float64)
-    lower = np.full(x0.size, -np.inf)
-    upper = np.full(x0.size, np.inf)
-    k = 0
-    for name in names:  # keep the port physical on the way: a layer, indices >= 1
-        if name in ("distance", "thickness"):
-            lower[k:k + S] = MIN_LENGTH_MM
-        elif name == "n_water":
-            lower[k], upper[k] = 1.0, MAX_INDEX
-        k += table[name]
-    x0[:n_global] = np.clip(x0[:n_global], lower[:n_global] + 1e-9, upper[:n_global] - 1e-9)
-    basis = np.array(bases) if pair else bases[0]
-    return SimpleNamespace(residuals=residuals, jacobian=jacobian, unpack=unpack, x0=x0,
-                           air_jacobian=air_jacobian,
-                           lower=lower, upper=upper, obs=obs, usable=usable, P=P,
-                           n_global=n_global, basis=basis, m=m)
-
 
 
 def flat_rig_parameters(names, x, basis, start_normal, port, n_global, views=None):
