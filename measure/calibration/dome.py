@@ -12,13 +12,10 @@ import numpy as np
 
 from ..geometry.camera import Camera
 from ..geometry.dome import DomePair, DomePort
-from ..geometry.projection import project
 from ..stereo.triangulate import StereoRig
 from .air import Detections
 from .board import Board
-from .covariance import AIR_INTRINSICS, intrinsics_jacobian
-from .problem import (MAX_INDEX, observations, parameter_offset, pose_left_jacobians, rows_jacobian,
-                      usable_poses)
+from .problem import MAX_INDEX, HousingProblem, parameter_offset
 
 #: Free parameters of a rig of two domes: each camera's decentring (x, y, z in its own frame,
 #: left then right) and the water index; and the default.
@@ -41,122 +38,71 @@ def dome_problem(rig: StereoRig, board: Board, detections: Detections, names, vi
     camera's frame). ``views``: the cameras whose corners enter and whose decentring
     ``dome_center`` holds (3 numbers each; ``(0,)``: one camera inside its dome,
     :func:`measure.calibration.housing.calibrate_camera_housing`)."""
-    from scipy.spatial.transform import Rotation
-    views = tuple(views)
-    table = parameters_of(views)
-    starts, usable, detections = usable_poses(rig, board, detections)
-    P = len(starts)
-    n_global = sum(table[n] for n in names)
-    domes0 = (rig.port.left, rig.port.right)
-    corners, obs = observations(board, detections, views)
-    m = sum(2 * o[1].size for o in obs)
+    return _DomeHousingProblem(rig, board, detections, names, tuple(views))
 
-    def unpack(x):
+
+class _DomeHousingProblem(HousingProblem):
+    """:func:`dome_problem`: the free dome numbers are ``dome_center`` (3 per camera of
+    ``views``, mm in each camera's frame) and ``n_water``."""
+
+    def __init__(self, rig, board, detections, names, views):
+        super().__init__(rig, board, detections, names, views, parameters_of(views))
+        self.domes0 = (rig.port.left, rig.port.right)
+        self.x0, self.lower, self.upper = self._start()
+        self.basis = ()
+
+    def _start(self):
+        """``(x0, lower, upper)``: the starting rig's decentrings and water, the poses' starts;
+        the water index kept in [1, :data:`MAX_INDEX`]."""
+        rig, domes0, names = self.rig, self.domes0, self.names
+        x0 = []
+        for name in names:
+            x0 += (np.concatenate([dome_offset(rig.cameras[v], domes0[v])
+                                   for v in self.views]).tolist()
+                   if name == "dome_center" else [domes0[0].n_water])
+        x0 = np.asarray(x0 + self.start_poses(), dtype=np.float64)
+        lower = np.full(x0.size, -np.inf)
+        upper = np.full(x0.size, np.inf)
+        if "n_water" in names:
+            k = parameter_offset(names, "n_water", self.table)
+            lower[k], upper[k] = 1.0, MAX_INDEX
+            x0[k] = np.clip(x0[k], lower[k] + 1e-9, upper[k] - 1e-9)
+        return x0, lower, upper
+
+    def unpack(self, x):
+        """``(domes, cameras, Rs, ts)`` at ``x``: each dome moved with its camera's offset."""
+        rig, domes0 = self.rig, self.domes0
         offsets = [dome_offset(c, d) for c, d in zip(rig.cameras, domes0)]
         n_water = domes0[0].n_water
         k = 0
-        for name in names:
+        for name in self.names:
             if name == "dome_center":
-                for i, view in enumerate(views):
+                for i, view in enumerate(self.views):
                     offsets[view] = x[k + 3 * i:k + 3 * i + 3]
             else:
                 n_water = x[k]
-            k += table[name]
+            k += self.table[name]
         domes = DomePair(*(d.replace(center=c.center + c.R @ o,
                                      indices=d.indices[:-1] + (float(n_water),))
                            for c, d, o in zip(rig.cameras, domes0, offsets)))
-        Rs = Rotation.from_rotvec(x[n_global:].reshape(P, 6)[:, :3]).as_matrix()
-        ts = x[n_global:].reshape(P, 6)[:, 3:]
-        return domes, rig.cameras, Rs, ts
+        return (domes, rig.cameras, *self.poses(x))
 
-    def residuals(x):
-        try:
-            domes, cameras, Rs, ts = unpack(x)
-        except ValueError:  # e.g. a non-physical index on the way
-            return np.full(m, 1e3)
-        out = []
-        for view, pose_idx, ids, uv in obs:
-            world = np.einsum("nij,nj->ni", Rs[pose_idx], corners[ids]) + ts[pose_idx]
-            r = (project(cameras[view], domes[view], world) - uv).ravel()
-            out.append(np.where(np.isfinite(r), r, 1e3))
-        return np.concatenate(out)
+    def housing_columns(self, x, name, view, jac, d_points, cameras) -> list:
+        if name == "dome_center":  # M = C + R·o: d pixel / d o = d pixel / d M · R
+            own = jac.dome_center @ cameras[view].R
+            return [own if v == view else np.zeros_like(own) for v in self.views]
+        return [jac.indices[..., -1:]]
 
-    def jacobian(x):
-        width = n_global + 6
-        try:
-            domes, cameras, Rs, ts = unpack(x)
-        except ValueError:
-            return rows_jacobian(np.zeros((m, width)), np.zeros(m, int), n_global, x.size)
-        turn = pose_left_jacobians(x[n_global:].reshape(P, 6)[:, :3])
-        blocks, poses = [], []
-        for view, pose_idx, ids, _ in obs:
-            rotated = np.einsum("nij,nj->ni", Rs[pose_idx], corners[ids])
-            _, d_points, jac = project(cameras[view], domes[view], rotated + ts[pose_idx],
-                                       parameters=True)
-            columns = []
-            for name in names:
-                if name == "dome_center":  # M = C + R·o: d pixel / d o = d pixel / d M · R
-                    own = jac.dome_center @ cameras[view].R
-                    columns += [own if v == view else np.zeros_like(own) for v in views]
-                else:
-                    columns.append(jac.indices[..., -1:])
-            d_turn = np.einsum("nrj,njk->nrk", np.cross(rotated[:, None, :], d_points),
-                               turn[pose_idx])
-            columns += [d_turn, d_points]
-            blocks.append(np.concatenate(columns, axis=-1).reshape(-1, width))
-            poses.append(np.repeat(pose_idx, 2))
-        return rows_jacobian(np.concatenate(blocks), np.concatenate(poses), n_global, x.size)
-
-    def air_jacobian(x, air):
-        """Dense ``(m, len(air))``: d residuals / d the in-air parameters ``air`` at ``x``, as
-        :func:`housing_problem`'s. With ``dome_center`` free each dome moves with its camera
-        (the unknowns are offsets in the camera's frame, ``M = C + R·o``): the right camera's
-        ``rotation`` column adds ``d pixel / d M · (−[R·o]×)``, its ``center`` column
-        ``d pixel / d M``; otherwise the domes stay where they are."""
-        domes, cameras, Rs, ts = unpack(x)
-        column = {name: j for j, name in enumerate(air)}
-        follow = "dome_center" in names
-        out, row = np.zeros((m, len(air))), 0
-        for view, pose_idx, ids, _ in obs:
-            world = np.einsum("nij,nj->ni", Rs[pose_idx], corners[ids]) + ts[pose_idx]
-            pixels, _, jac = project(cameras[view], domes[view], world, parameters=True)
-            n = 2 * pose_idx.size
-            camera = ("left", "right")[view]
-            d_int = intrinsics_jacobian(cameras[view], pixels).reshape(n, -1)
-            for j, p in enumerate(AIR_INTRINSICS):
-                if f"{camera}.{p}" in column:
-                    out[row:row + n, column[f"{camera}.{p}"]] = d_int[:, j]
-            if view == 1:
-                rotation, center = jac.rotation, jac.center
-                if follow:
-                    rotation = rotation - jac.dome_center @ _skew(domes[1].center
-                                                                  - cameras[1].center)
-                    center = center + jac.dome_center
-                for k in range(3):
-                    for what, values in (("rotation", rotation), ("center", center)):
-                        if f"right.{what}[{k}]" in column:
-                            out[row:row + n, column[f"right.{what}[{k}]"]] = (
-                                values[..., k].reshape(n))
-            row += n
-        return np.where(np.isfinite(out), out, 0.0)
-
-    x0 = []
-    for name in names:
-        x0 += (np.concatenate([dome_offset(rig.cameras[v], domes0[v]) for v in views]).tolist()
-               if name == "dome_center" else [domes0[0].n_water])
-    for R, t in starts:
-        x0 += list(Rotation.from_matrix(R).as_rotvec()) + list(t)
-    x0 = np.asarray(x0, dtype=np.float64)
-    lower = np.full(x0.size, -np.inf)
-    upper = np.full(x0.size, np.inf)
-    if "n_water" in names:
-        k = parameter_offset(names, "n_water", table)
-        lower[k], upper[k] = 1.0, MAX_INDEX
-        x0[k] = np.clip(x0[k], lower[k] + 1e-9, upper[k] - 1e-9)
-    return SimpleNamespace(residuals=residuals, jacobian=jacobian, unpack=unpack, x0=x0,
-                           air_jacobian=air_jacobian,
-                           lower=lower, upper=upper, obs=obs, usable=usable, P=P,
-                           n_global=n_global, basis=(), m=m)
+    def right_pose_columns(self, jac, housing, cameras) -> tuple:
+        """With ``dome_center`` free each dome moves with its camera (the unknowns are offsets
+        in the camera's frame, ``M = C + R·o``): the right camera's ``rotation`` column adds
+        ``d pixel / d M · (−[R·o]×)``, its ``center`` column ``d pixel / d M``; otherwise the
+        domes stay where they are."""
+        rotation, center = jac.rotation, jac.center
+        if "dome_center" in self.names:
+            rotation = rotation - jac.dome_center @ _skew(housing[1].center - cameras[1].center)
+            center = center + jac.dome_center
+        return rotation, center
 
 
 

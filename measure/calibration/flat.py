@@ -12,13 +12,12 @@ import numpy as np
 from ..geometry.camera import Camera
 from ..geometry.flat_pair import FlatPair
 from ..geometry.port import FlatPort
-from ..geometry.projection import project
 from ..stereo.triangulate import StereoRig
 from .air import CalibrationError, Detections
 from .board import Board
-from .covariance import AIR_INTRINSICS, intrinsics_jacobian, left_jacobian
-from .problem import (MAX_INDEX, MIN_LENGTH_MM, observations, parameter_offset, pose_left_jacobians,
-                      rows_jacobian, usable_poses)
+from .covariance import left_jacobian
+from .problem import (MAX_INDEX, MIN_LENGTH_MM, HousingProblem, parameter_offset,
+                      pose_left_jacobians)
 from .selfcal import tilt_basis
 
 #: Free housing parameters and how many numbers each is.
@@ -50,40 +49,30 @@ def housing_problem(rig: StereoRig, board: Board, detections: Detections, names,
     return _FlatHousingProblem(rig, board, detections, tuple(names), tuple(views), pair)
 
 
-class _FlatHousingProblem:
-    """:func:`housing_problem`: the unknowns ``x`` are the free housing numbers (``names``, each
-    port's in turn: ``S`` ports, one shared or one per camera of ``views``) then 6 per usable
-    pose (rotation vector, translation, mm); ``obs`` the corners' observations (px)."""
+class _FlatHousingProblem(HousingProblem):
+    """:func:`housing_problem`: the free housing numbers are each port's in turn (``S`` ports:
+    one shared, or one per camera of ``views`` with ``pair``)."""
 
     def __init__(self, rig, board, detections, names, views, pair):
-        self.rig, self.names, self.views, self.pair = rig, names, views, pair
-        self.table = parameters_of(views, pair)
-        starts, self.usable, detections = usable_poses(rig, board, detections)
-        self.P = len(starts)
-        self.n_global = sum(self.table[n] for n in names)
+        super().__init__(rig, board, detections, names, views, parameters_of(views, pair))
+        self.pair = pair
         self.ports0 = [rig.port.view(v) for v in views] if pair else [rig.port]
         self.slot = {v: (i if pair else 0) for i, v in enumerate(views)}  # the port each sees
         self.S = len(self.ports0)
         self.bases = [tilt_basis(p.normal) for p in self.ports0]
-        self.corners, self.obs = observations(board, detections, views)
-        self.m = sum(2 * o[1].size for o in self.obs)
-        self.x0, self.lower, self.upper = self._start(starts)
+        self.x0, self.lower, self.upper = self._start()
         self.basis = np.array(self.bases) if pair else self.bases[0]
 
-    def _start(self, starts):
+    def _start(self):
         """``(x0, lower, upper)``: the design port and the poses' starts, and bounds that keep
         the port physical on the way (a layer, indices >= 1)."""
-        from scipy.spatial.transform import Rotation
-
         ports0, S = self.ports0, self.S
         x0 = []
         for name in self.names:
             x0 += {"distance": [p.distance for p in ports0], "normal": [0.0, 0.0] * S,
                    "thickness": [p.thicknesses[0] for p in ports0 if p.thicknesses],
                    "n_water": [ports0[0].n_water], "extrinsics": [0.0] * 6}[name]
-        for R, t in starts:
-            x0 += list(Rotation.from_matrix(R).as_rotvec()) + list(t)
-        x0 = np.asarray(x0, dtype=np.float64)
+        x0 = np.asarray(x0 + self.start_poses(), dtype=np.float64)
         lower = np.full(x0.size, -np.inf)
         upper = np.full(x0.size, np.inf)
         k = 0
@@ -136,22 +125,7 @@ class _FlatHousingProblem:
             for v in self.views:
                 both[v] = ports[self.slot[v]]
             port = FlatPair(*both)
-        poses = x[self.n_global:].reshape(self.P, 6)
-        return port, (rig.left, right), Rotation.from_rotvec(poses[:, :3]).as_matrix(), \
-            poses[:, 3:]
-
-    def residuals(self, x):
-        """The corners' reprojection residuals (px) at ``x``; 1000 px where a ray fails."""
-        try:
-            port, cameras, Rs, ts = self.unpack(x)
-        except ValueError:  # e.g. a non-physical index or thickness on the way
-            return np.full(self.m, 1e3)
-        out = []
-        for view, pose_idx, ids, uv in self.obs:
-            world = np.einsum("nij,nj->ni", Rs[pose_idx], self.corners[ids]) + ts[pose_idx]
-            r = (project(cameras[view], port.view(view), world) - uv).ravel()
-            out.append(np.where(np.isfinite(r), r, 1e3))
-        return np.concatenate(out)
+        return (port, (rig.left, right), *self.poses(x))
 
     def _own(self, values, s, width=1):
         """``values`` ``(n, 2, width)`` in port ``s``'s place among the ports' columns."""
@@ -159,9 +133,7 @@ class _FlatHousingProblem:
         out[..., s * width:(s + 1) * width] = values
         return out
 
-    def _housing_columns(self, x, name, view, jac, d_points) -> list:
-        """The columns of free housing number ``name`` for the rows of camera ``view``, from
-        the projection's parameter Jacobian ``jac``."""
+    def housing_columns(self, x, name, view, jac, d_points, cameras) -> list:
         s = self.slot[view]
         if name == "distance":
             return [self._own(jac.distance[..., None], s)]
@@ -178,58 +150,6 @@ class _FlatHousingProblem:
             k = parameter_offset(self.names, name, self.table)
             return [jac.rotation @ pose_left_jacobians(x[None, k:k + 3])[0], jac.center]
         return [np.zeros(d_points.shape[:2] + (6,))]
-
-    def jacobian(self, x):
-        """Analytic (:func:`measure.geometry.projection.project` with ``parameters=True``): a row
-        touches the free housing numbers and its pose's 6 columns (rotation vector,
-        translation)."""
-        n_global = self.n_global
-        width = n_global + 6
-        try:
-            port, cameras, Rs, ts = self.unpack(x)
-        except ValueError:  # the residuals are constant there
-            return rows_jacobian(np.zeros((self.m, width)), np.zeros(self.m, int), n_global,
-                                 x.size)
-        turn = pose_left_jacobians(x[n_global:].reshape(self.P, 6)[:, :3])
-        blocks, poses = [], []
-        for view, pose_idx, ids, _ in self.obs:
-            rotated = np.einsum("nij,nj->ni", Rs[pose_idx], self.corners[ids])
-            _, d_points, jac = project(cameras[view], port.view(view), rotated + ts[pose_idx],
-                                       parameters=True)
-            columns = [c for name in self.names
-                       for c in self._housing_columns(x, name, view, jac, d_points)]
-            # a pose: X = exp(ω) c + t, so dX/dω = −[R c]× J_l(ω) and dX/dt = I
-            d_turn = np.einsum("nrj,njk->nrk", np.cross(rotated[:, None, :], d_points),
-                               turn[pose_idx])
-            columns += [d_turn, d_points]
-            blocks.append(np.concatenate(columns, axis=-1).reshape(-1, width))
-            poses.append(np.repeat(pose_idx, 2))
-        return rows_jacobian(np.concatenate(blocks), np.concatenate(poses), n_global, x.size)
-
-    def air_jacobian(self, x, air):
-        """Dense ``(m, len(air))``: d residuals / d the in-air parameters ``air`` (names of
-        :data:`measure.calibration.covariance.AIR_NAMES`) at ``x`` (module docs of
-        :mod:`measure.calibration.covariance`)."""
-        port, cameras, Rs, ts = self.unpack(x)
-        column = {name: j for j, name in enumerate(air)}
-        out, row = np.zeros((self.m, len(air))), 0
-        for view, pose_idx, ids, _ in self.obs:
-            world = np.einsum("nij,nj->ni", Rs[pose_idx], self.corners[ids]) + ts[pose_idx]
-            pixels, _, jac = project(cameras[view], port.view(view), world, parameters=True)
-            n = 2 * pose_idx.size
-            camera = ("left", "right")[view]
-            d_int = intrinsics_jacobian(cameras[view], pixels).reshape(n, -1)
-            for j, p in enumerate(AIR_INTRINSICS):
-                if f"{camera}.{p}" in column:
-                    out[row:row + n, column[f"{camera}.{p}"]] = d_int[:, j]
-            if view == 1:
-                for k in range(3):
-                    for what, values in (("rotation", jac.rotation), ("center", jac.center)):
-                        if f"right.{what}[{k}]" in column:
-                            out[row:row + n, column[f"right.{what}[{k}]"]] = (
-                                values[..., k].reshape(n))
-            row += n
-        return np.where(np.isfinite(out), out, 0.0)
 
 
 def flat_rig_parameters(names, x, basis, start_normal, port, n_global, views=None):

@@ -121,3 +121,124 @@ def rows_jacobian(values, pose_idx, n_global: int, n_columns: int):
     return csr_matrix((data, columns.ravel(), np.arange(0, m * width + 1, width)),
                       shape=(m, n_columns))
 
+
+
+class HousingProblem:
+    """The bundle adjustment of a housing calibration (:func:`measure.calibration.flat.
+    housing_problem`, :func:`measure.calibration.dome.dome_problem`) as functions of the
+    unknowns ``x``: ``n_global`` housing numbers (``names``, of widths ``table``), then 6 per
+    usable pose (rotation vector, translation in mm). A kind of housing says how ``x`` becomes
+    the housing (:meth:`unpack`), the start and bounds, and its own Jacobian columns
+    (:meth:`housing_columns`) and the right camera's pose columns of the in-air Jacobian
+    (:meth:`right_pose_columns`); residuals and Jacobians are assembled here. ``obs`` the
+    corners' observations (px), ``usable`` the poses kept, ``m`` the residuals' count."""
+
+    def __init__(self, rig: StereoRig, board: Board, detections: Detections, names, views,
+                 table: dict):
+        self.rig, self.names, self.views, self.table = rig, tuple(names), tuple(views), table
+        self.starts, self.usable, detections = usable_poses(rig, board, detections)
+        self.P = len(self.starts)
+        self.n_global = sum(table[n] for n in self.names)
+        self.corners, self.obs = observations(board, detections, self.views)
+        self.m = sum(2 * o[1].size for o in self.obs)
+
+    def unpack(self, x):
+        """``(housing, cameras, Rs, ts)`` at ``x``: the housing (``.view(v)`` each camera's
+        port), the two cameras, the poses' rotations ``(P, 3, 3)`` and translations (mm)."""
+        raise NotImplementedError
+
+    def housing_columns(self, x, name, view, jac, d_points, cameras) -> list:
+        """The columns of free housing number ``name`` for the rows of camera ``view``."""
+        raise NotImplementedError
+
+    def right_pose_columns(self, jac, housing, cameras) -> tuple:
+        """``(rotation, center)``: d pixel / d the right camera's pose (in-air Jacobian)."""
+        return jac.rotation, jac.center
+
+    def poses(self, x) -> tuple[np.ndarray, np.ndarray]:
+        """The poses' rotations ``(P, 3, 3)`` and translations ``(P, 3)`` mm at ``x``."""
+        from scipy.spatial.transform import Rotation
+
+        poses = x[self.n_global:].reshape(self.P, 6)
+        return Rotation.from_rotvec(poses[:, :3]).as_matrix(), poses[:, 3:]
+
+    def start_poses(self) -> list:
+        """The poses' start values (rotation vector, translation), flattened."""
+        from scipy.spatial.transform import Rotation
+
+        x0 = []
+        for R, t in self.starts:
+            x0 += list(Rotation.from_matrix(R).as_rotvec()) + list(t)
+        return x0
+
+    def residuals(self, x):
+        """The corners' reprojection residuals (px) at ``x``; 1000 px where a ray fails."""
+        from ..geometry.projection import project
+
+        try:
+            housing, cameras, Rs, ts = self.unpack(x)
+        except ValueError:  # e.g. a non-physical index or thickness on the way
+            return np.full(self.m, 1e3)
+        out = []
+        for view, pose_idx, ids, uv in self.obs:
+            world = np.einsum("nij,nj->ni", Rs[pose_idx], self.corners[ids]) + ts[pose_idx]
+            r = (project(cameras[view], housing.view(view), world) - uv).ravel()
+            out.append(np.where(np.isfinite(r), r, 1e3))
+        return np.concatenate(out)
+
+    def jacobian(self, x):
+        """Analytic (:func:`measure.geometry.projection.project` with ``parameters=True``): a
+        row touches the free housing numbers and its pose's 6 columns."""
+        from ..geometry.projection import project
+
+        n_global = self.n_global
+        width = n_global + 6
+        try:
+            housing, cameras, Rs, ts = self.unpack(x)
+        except ValueError:  # the residuals are constant there
+            return rows_jacobian(np.zeros((self.m, width)), np.zeros(self.m, int), n_global,
+                                 x.size)
+        turn = pose_left_jacobians(x[n_global:].reshape(self.P, 6)[:, :3])
+        blocks, poses = [], []
+        for view, pose_idx, ids, _ in self.obs:
+            rotated = np.einsum("nij,nj->ni", Rs[pose_idx], self.corners[ids])
+            _, d_points, jac = project(cameras[view], housing.view(view),
+                                       rotated + ts[pose_idx], parameters=True)
+            columns = [c for name in self.names
+                       for c in self.housing_columns(x, name, view, jac, d_points, cameras)]
+            # a pose: X = exp(ω) c + t, so dX/dω = −[R c]× J_l(ω) and dX/dt = I
+            d_turn = np.einsum("nrj,njk->nrk", np.cross(rotated[:, None, :], d_points),
+                               turn[pose_idx])
+            columns += [d_turn, d_points]
+            blocks.append(np.concatenate(columns, axis=-1).reshape(-1, width))
+            poses.append(np.repeat(pose_idx, 2))
+        return rows_jacobian(np.concatenate(blocks), np.concatenate(poses), n_global, x.size)
+
+    def air_jacobian(self, x, air):
+        """Dense ``(m, len(air))``: d residuals / d the in-air parameters ``air`` (names of
+        :data:`measure.calibration.covariance.AIR_NAMES`) at ``x`` (module docs of
+        :mod:`measure.calibration.covariance`)."""
+        from ..geometry.projection import project
+        from .covariance import AIR_INTRINSICS, intrinsics_jacobian
+
+        housing, cameras, Rs, ts = self.unpack(x)
+        column = {name: j for j, name in enumerate(air)}
+        out, row = np.zeros((self.m, len(air))), 0
+        for view, pose_idx, ids, _ in self.obs:
+            world = np.einsum("nij,nj->ni", Rs[pose_idx], self.corners[ids]) + ts[pose_idx]
+            pixels, _, jac = project(cameras[view], housing.view(view), world, parameters=True)
+            n = 2 * pose_idx.size
+            camera = ("left", "right")[view]
+            d_int = intrinsics_jacobian(cameras[view], pixels).reshape(n, -1)
+            for j, p in enumerate(AIR_INTRINSICS):
+                if f"{camera}.{p}" in column:
+                    out[row:row + n, column[f"{camera}.{p}"]] = d_int[:, j]
+            if view == 1:
+                rotation, center = self.right_pose_columns(jac, housing, cameras)
+                for k in range(3):
+                    for what, values in (("rotation", rotation), ("center", center)):
+                        if f"right.{what}[{k}]" in column:
+                            out[row:row + n, column[f"right.{what}[{k}]"]] = (
+                                values[..., k].reshape(n))
+            row += n
+        return np.where(np.isfinite(out), out, 0.0)
