@@ -49,17 +49,53 @@ def housing_problem(rig: StereoRig, board: Board, detections: Detections, names,
     return _FlatHousingProblem(rig, board, detections, tuple(names), tuple(views), pair)
 
 
-class _FlatHousingProblem(HousingProblem):
+class FlatPortsProblem(HousingProblem):
+    """A housing of flat ports: ``S`` ports (one shared, or one per camera; camera ``v`` sees
+    port ``slot[v]``), each with its free ``distance`` (mm), ``normal`` (two tilts, rad, about
+    the axes ``bases`` ⟂ its starting normal) and first ``thickness`` (mm); one ``n_water``."""
+
+    def set_ports(self, ports0, slot) -> None:
+        """The starting ports and which one each camera sees."""
+        self.ports0, self.slot, self.S = list(ports0), slot, len(ports0)
+        self.bases = [tilt_basis(p.normal) for p in self.ports0]
+
+    def normal_vector(self, x, s) -> np.ndarray:
+        """Port ``s``'s normal at ``x`` before normalization: ``N0 + a·x_a + b·x_b``."""
+        k = parameter_offset(self.names, "normal", self.table) + 2 * s
+        return self.ports0[s].normal + x[k] * self.bases[s][0] + x[k + 1] * self.bases[s][1]
+
+    def _own(self, values, s, width=1):
+        """``values`` ``(n, 2, width)`` in port ``s``'s place among the ports' columns."""
+        out = np.zeros(values.shape[:2] + (self.S * width,))
+        out[..., s * width:(s + 1) * width] = values
+        return out
+
+    def port_columns(self, x, name, view, jac):
+        """The columns of port number ``name`` (``distance``, ``normal``, ``thickness``,
+        ``n_water``) for camera ``view``'s rows; None for another name."""
+        s = self.slot[view]
+        if name == "distance":
+            return [self._own(jac.distance[..., None], s)]
+        if name == "normal":  # normal = m / |m|, m = N0 + a·x_a + b·x_b
+            length = np.linalg.norm(self.normal_vector(x, s))
+            return [self._own(np.stack([jac.normal @ axis / length for axis in self.bases[s]],
+                                       -1), s, 2)]
+        if name == "thickness":
+            return [self._own(jac.thicknesses[..., :1], s)]
+        if name == "n_water":
+            return [jac.indices[..., -1:]]
+        return None
+
+
+class _FlatHousingProblem(FlatPortsProblem):
     """:func:`housing_problem`: the free housing numbers are each port's in turn (``S`` ports:
     one shared, or one per camera of ``views`` with ``pair``)."""
 
     def __init__(self, rig, board, detections, names, views, pair):
         super().__init__(rig, board, detections, names, views, parameters_of(views, pair))
         self.pair = pair
-        self.ports0 = [rig.port.view(v) for v in views] if pair else [rig.port]
-        self.slot = {v: (i if pair else 0) for i, v in enumerate(views)}  # the port each sees
-        self.S = len(self.ports0)
-        self.bases = [tilt_basis(p.normal) for p in self.ports0]
+        self.set_ports([rig.port.view(v) for v in views] if pair else [rig.port],
+                       {v: (i if pair else 0) for i, v in enumerate(views)})
         self.x0, self.lower, self.upper = self._start()
         self.basis = np.array(self.bases) if pair else self.bases[0]
 
@@ -127,26 +163,11 @@ class _FlatHousingProblem(HousingProblem):
             port = FlatPair(*both)
         return (port, (rig.left, right), *self.poses(x))
 
-    def _own(self, values, s, width=1):
-        """``values`` ``(n, 2, width)`` in port ``s``'s place among the ports' columns."""
-        out = np.zeros(values.shape[:2] + (self.S * width,))
-        out[..., s * width:(s + 1) * width] = values
-        return out
-
     def housing_columns(self, x, name, view, jac, d_points, cameras) -> list:
-        s = self.slot[view]
-        if name == "distance":
-            return [self._own(jac.distance[..., None], s)]
-        if name == "normal":  # normal = m / |m|, m = N0 + a·x_a + b·x_b
-            k = parameter_offset(self.names, name, self.table) + 2 * s
-            bases = self.bases[s]
-            length = np.linalg.norm(self.ports0[s].normal + x[k] * bases[0] + x[k + 1] * bases[1])
-            return [self._own(np.stack([jac.normal @ axis / length for axis in bases], -1), s, 2)]
-        if name == "thickness":
-            return [self._own(jac.thicknesses[..., :1], s)]
-        if name == "n_water":
-            return [jac.indices[..., -1:]]
-        if view == 1:  # the right camera: R = exp(ω) R0, t = t0 + δt
+        columns = self.port_columns(x, name, view, jac)
+        if columns is not None:
+            return columns
+        if view == 1:  # extrinsics, the right camera: R = exp(ω) R0, t = t0 + δt
             k = parameter_offset(self.names, name, self.table)
             return [jac.rotation @ pose_left_jacobians(x[None, k:k + 3])[0], jac.center]
         return [np.zeros(d_points.shape[:2] + (6,))]

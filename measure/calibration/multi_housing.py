@@ -32,14 +32,12 @@ from scipy.spatial.transform import Rotation
 
 from ..geometry.camera import Camera
 from ..geometry.port import FlatPort, require_flat_port
-from ..geometry.projection import project
 from ..stereo.multirig import MultiRig
 from .air import CalibrationError, Detections
 from .board import Board
 from .multi_air import DISTORTION_NAMES, INTRINSIC_NAMES
-from .problem import (MAX_INDEX, MIN_LENGTH_MM, observations, pose_left_jacobians, rows_jacobian,
-                      usable_poses)
-from .selfcal import tilt_basis
+from .flat import FlatPortsProblem
+from .problem import MAX_INDEX, MIN_LENGTH_MM, parameter_offset
 
 #: The free port parameters and how many numbers each is.
 PARAMETERS = {"distance": 1, "normal": 2, "thickness": 1, "n_water": 1}
@@ -124,21 +122,7 @@ def calibrate_rig_housing(rig: MultiRig, board: Board, detections: Detections, f
     (:class:`measure.calibration.multi_air.MultiAirCalibration`), propagated into σ.
     CalibrationError (one line) for a camera not behind a flat port, unknown free parameters,
     too few boards, or a fit that does not determine them."""
-    message = "the housing calibration of N cameras models flat ports"
-    try:
-        ports0 = [require_flat_port(p, f"{name}: {message}")
-                  for name, p in zip(rig.names, rig.ports)]
-    except ValueError as exc:
-        raise CalibrationError(str(exc)) from None
-    shared = all(p == ports0[0] for p in ports0) if per_camera is None else not per_camera
-    if shared and any(p != ports0[0] for p in ports0):
-        raise CalibrationError("one shared port asked for, but the cameras start behind "
-                               "different ports")
-    if shared:
-        ports0 = ports0[:1]
-    S = len(ports0)
-    slot = [0 if shared else v for v in range(len(rig.cameras))]
-    table = _widths(S)
+    ports0, shared = _starting_ports(rig, per_camera)
     names = tuple(dict.fromkeys(free))
     unknown = [n for n in names if n not in PARAMETERS]
     if not names or unknown:
@@ -146,111 +130,14 @@ def calibrate_rig_housing(rig: MultiRig, board: Board, detections: Detections, f
                                f"of N cameras estimates {', '.join(PARAMETERS)}")
     if "thickness" in names and not all(p.thicknesses for p in ports0):
         raise CalibrationError("--free thickness: a port has no glass layer")
-    cameras = rig.cameras
-    views = tuple(range(len(cameras)))
-    start_rig = SimpleNamespace(cameras=cameras, port=ports0[0], depth_axis=ports0[0].normal,
-                                left=cameras[0])
-    starts, usable, detections = usable_poses(start_rig, board, detections)
-    P = len(starts)
-    n_global = sum(table[n] for n in names)
-    bases = [tilt_basis(p.normal) for p in ports0]
-    corners, obs = observations(board, detections, views)
-    m = sum(2 * o[1].size for o in obs)
-    if m == 0:
-        raise CalibrationError("no camera found the board in the underwater images")
-    at = {}
-    k = 0
-    for name in names:
-        at[name] = k
-        k += table[name]
-
-    def normal_vector(x, s):
-        k = at["normal"] + 2 * s
-        return ports0[s].normal + x[k] * bases[s][0] + x[k + 1] * bases[s][1]
-
-    def unpack(x):
-        n_water = x[at["n_water"]] if "n_water" in at else ports0[0].n_water
-        ports = []
-        for s, p in enumerate(ports0):
-            thick = list(p.thicknesses)
-            if "thickness" in at:
-                thick[0] = x[at["thickness"] + s]
-            ports.append(FlatPort(normal_vector(x, s) if "normal" in at else p.normal,
-                                  x[at["distance"] + s] if "distance" in at else p.distance,
-                                  tuple(thick), p.indices[:-1] + (float(n_water),)))
-        Rs = Rotation.from_rotvec(x[n_global:].reshape(P, 6)[:, :3]).as_matrix()
-        return ports, Rs, x[n_global:].reshape(P, 6)[:, 3:]
-
-    def residuals(x, cams=cameras):
-        try:
-            ports, Rs, ts = unpack(x)
-        except ValueError:  # a non-physical index or thickness on the way
-            return np.full(m, 1e3)
-        out = []
-        for view, pose_idx, ids, uv in obs:
-            world = np.einsum("nij,nj->ni", Rs[pose_idx], corners[ids]) + ts[pose_idx]
-            r = (project(cams[view], ports[slot[view]], world) - uv).ravel()
-            out.append(np.where(np.isfinite(r), r, 1e3))
-        return np.concatenate(out)
-
-    def own(values, s, width=1):
-        """``values`` ``(n, 2, width)`` in port ``s``'s place among the ports' columns."""
-        out = np.zeros(values.shape[:2] + (S * width,))
-        out[..., s * width:(s + 1) * width] = values
-        return out
-
-    def jacobian(x):
-        width = n_global + 6
-        try:
-            ports, Rs, ts = unpack(x)
-        except ValueError:
-            return rows_jacobian(np.zeros((m, width)), np.zeros(m, int), n_global, x.size)
-        turn = pose_left_jacobians(x[n_global:].reshape(P, 6)[:, :3])
-        blocks, rows = [], []
-        for view, pose_idx, ids, _ in obs:
-            s = slot[view]
-            rotated = np.einsum("nij,nj->ni", Rs[pose_idx], corners[ids])
-            _, d_points, jac = project(cameras[view], ports[s], rotated + ts[pose_idx],
-                                       parameters=True)
-            columns = []
-            for name in names:
-                if name == "distance":
-                    columns.append(own(jac.distance[..., None], s))
-                elif name == "normal":  # normal = m / |m|, m = N0 + a·x_a + b·x_b
-                    length = np.linalg.norm(normal_vector(x, s))
-                    columns.append(own(np.stack([jac.normal @ axis / length
-                                                 for axis in bases[s]], -1), s, 2))
-                elif name == "thickness":
-                    columns.append(own(jac.thicknesses[..., :1], s))
-                else:
-                    columns.append(jac.indices[..., -1:])
-            d_turn = np.einsum("nrj,njk->nrk", np.cross(rotated[:, None, :], d_points),
-                               turn[pose_idx])
-            columns += [d_turn, d_points]
-            blocks.append(np.concatenate(columns, axis=-1).reshape(-1, width))
-            rows.append(np.repeat(pose_idx, 2))
-        return rows_jacobian(np.concatenate(blocks), np.concatenate(rows), n_global, x.size)
-
-    x0 = []
-    for name in names:
-        x0 += {"distance": [p.distance for p in ports0], "normal": [0.0, 0.0] * S,
-               "thickness": [p.thicknesses[0] for p in ports0 if p.thicknesses],
-               "n_water": [ports0[0].n_water]}[name]
-    for R, t in starts:
-        x0 += list(Rotation.from_matrix(R).as_rotvec()) + list(t)
-    x0 = np.asarray(x0, dtype=np.float64)
-    lower, upper = np.full(x0.size, -np.inf), np.full(x0.size, np.inf)
-    for name in names:  # a port per camera: D in the reference frame may be negative
-        if name == "thickness" or (name == "distance" and shared):
-            lower[at[name]:at[name] + S] = MIN_LENGTH_MM
-        elif name == "n_water":
-            lower[at[name]], upper[at[name]] = 1.0, MAX_INDEX
-    fit = least_squares(residuals, x0, jac=jacobian, method="trf", x_scale="jac",
-                        bounds=(lower, upper), xtol=1e-12, ftol=1e-12, gtol=1e-12, max_nfev=300,
-                        tr_solver="lsmr", tr_options={"atol": 1e-14, "btol": 1e-14})
+    problem = _RigHousingProblem(rig, board, detections, names, ports0, shared)
+    fit = least_squares(problem.residuals, problem.x0, jac=problem.jacobian, method="trf",
+                        x_scale="jac", bounds=(problem.lower, problem.upper), xtol=1e-12,
+                        ftol=1e-12, gtol=1e-12, max_nfev=300, tr_solver="lsmr",
+                        tr_options={"atol": 1e-14, "btol": 1e-14})
     r = fit.fun
     J = fit.jac.toarray()
-    s2 = float(r @ r) / max(r.size - x0.size, 1)
+    s2 = float(r @ r) / max(r.size - problem.x0.size, 1)
     N = J.T @ J
     try:
         conditional = s2 * np.linalg.inv(N)
@@ -264,30 +151,153 @@ def calibrate_rig_housing(rig: MultiRig, board: Board, detections: Detections, f
                                f"the corners (check the design port)")
     covariance, uncertainty = conditional, "conditional"
     if air_covariance is not None and len(air_names):
-        J_air = np.zeros((m, len(air_names)))
-        by_name = {c: i for i, c in enumerate(rig.names)}
-        for j, full in enumerate(air_names):
-            camera_name, parameter = full.split(".", 1)
-            v = by_name[camera_name]
-            h = _step(parameter)
-            plus = list(cameras)
-            minus = list(cameras)
-            plus[v] = _camera_moved(cameras[v], parameter, h)
-            minus[v] = _camera_moved(cameras[v], parameter, -h)
-            J_air[:, j] = (residuals(fit.x, plus) - residuals(fit.x, minus)) / (2 * h)
-        G = np.linalg.solve(N, J.T @ J_air)
+        G = np.linalg.solve(N, J.T @ _air_jacobian(problem, fit.x, rig.names, air_names))
         covariance = conditional + G @ np.asarray(air_covariance) @ G.T
         uncertainty = "propagate"
-    ports, Rs, ts = unpack(fit.x)
-    port_names = ["port"] if shared else [f"{n}.port" for n in rig.names]
+    return _result(problem, fit, rig.names, covariance, conditional, rms, uncertainty)
+
+
+def _starting_ports(rig: MultiRig, per_camera) -> tuple[list, bool]:
+    """``(ports, shared)``: the starting flat ports (one when they are shared) and whether
+    they are; CalibrationError for a camera not behind a flat port or a shared port asked of
+    different ones."""
+    message = "the housing calibration of N cameras models flat ports"
+    try:
+        ports0 = [require_flat_port(p, f"{name}: {message}")
+                  for name, p in zip(rig.names, rig.ports)]
+    except ValueError as exc:
+        raise CalibrationError(str(exc)) from None
+    shared = all(p == ports0[0] for p in ports0) if per_camera is None else not per_camera
+    if shared and any(p != ports0[0] for p in ports0):
+        raise CalibrationError("one shared port asked for, but the cameras start behind "
+                               "different ports")
+    return (ports0[:1] if shared else ports0), shared
+
+
+class _PortsSeen:
+    """A housing of N cameras: camera ``v`` sees ``ports[slot[v]]``."""
+
+    def __init__(self, ports, slot):
+        self.ports, self.slot = ports, slot
+
+    def view(self, view: int) -> FlatPort:
+        return self.ports[self.slot[view]]
+
+
+class _RigHousingProblem(FlatPortsProblem):
+    """The bundle adjustment of :func:`calibrate_rig_housing`: the free port numbers (each
+    port's in turn), then 6 per usable pose; every camera's corners through its port."""
+
+    def __init__(self, rig, board, detections, names, ports0, shared):
+        cameras = rig.cameras
+        start_rig = SimpleNamespace(cameras=cameras, port=ports0[0],
+                                    depth_axis=ports0[0].normal, left=cameras[0])
+        super().__init__(start_rig, board, detections, names, tuple(range(len(cameras))),
+                         _widths(len(ports0)))
+        if self.m == 0:
+            raise CalibrationError("no camera found the board in the underwater images")
+        self.cameras, self.shared = cameras, shared
+        self.set_ports(ports0, [0 if shared else v for v in range(len(cameras))])
+        self.x0, self.lower, self.upper = self._start()
+
+    def _start(self):
+        """``(x0, lower, upper)``: the starting ports and poses; a port per camera's distance
+        in the reference frame may be negative, a shared one's and thicknesses not."""
+        ports0, S, names = self.ports0, self.S, self.names
+        x0 = []
+        for name in names:
+            x0 += {"distance": [p.distance for p in ports0], "normal": [0.0, 0.0] * S,
+                   "thickness": [p.thicknesses[0] for p in ports0 if p.thicknesses],
+                   "n_water": [ports0[0].n_water]}[name]
+        x0 = np.asarray(x0 + self.start_poses(), dtype=np.float64)
+        lower, upper = np.full(x0.size, -np.inf), np.full(x0.size, np.inf)
+        for name in names:
+            at = parameter_offset(names, name, self.table)
+            if name == "thickness" or (name == "distance" and self.shared):
+                lower[at:at + S] = MIN_LENGTH_MM
+            elif name == "n_water":
+                lower[at], upper[at] = 1.0, MAX_INDEX
+        return x0, lower, upper
+
+    def ports_at(self, x) -> list:
+        """The ports at ``x`` (one n_water for all)."""
+        names, table = self.names, self.table
+        at = {name: parameter_offset(names, name, table) for name in names}
+        n_water = x[at["n_water"]] if "n_water" in at else self.ports0[0].n_water
+        ports = []
+        for s, p in enumerate(self.ports0):
+            thick = list(p.thicknesses)
+            if "thickness" in at:
+                thick[0] = x[at["thickness"] + s]
+            ports.append(FlatPort(self.normal_vector(x, s) if "normal" in at else p.normal,
+                                  x[at["distance"] + s] if "distance" in at else p.distance,
+                                  tuple(thick), p.indices[:-1] + (float(n_water),)))
+        return ports
+
+    def unpack(self, x):
+        return (_PortsSeen(self.ports_at(x), self.slot), self.cameras, *self.poses(x))
+
+    def housing_columns(self, x, name, view, jac, d_points, cameras) -> list:
+        return self.port_columns(x, name, view, jac)
+
+
+def _air_jacobian(problem, x, camera_names, air_names) -> np.ndarray:
+    """``(m, len(air_names))``: d residuals / d the in-air camera parameters (``camera.name``)
+    at ``x``, by central differences of the residuals."""
+    cameras = problem.cameras
+    J_air = np.zeros((problem.m, len(air_names)))
+    by_name = {c: i for i, c in enumerate(camera_names)}
+    for j, full in enumerate(air_names):
+        camera_name, parameter = full.split(".", 1)
+        v = by_name[camera_name]
+        h = _step(parameter)
+        plus = list(cameras)
+        minus = list(cameras)
+        plus[v] = _camera_moved(cameras[v], parameter, h)
+        minus[v] = _camera_moved(cameras[v], parameter, -h)
+        J_air[:, j] = (problem.residuals(x, plus) - problem.residuals(x, minus)) / (2 * h)
+    return J_air
+
+
+def _result(problem, fit, camera_names, covariance, conditional, rms,
+            uncertainty) -> MultiHousingCalibration:
+    """The calibration of :func:`calibrate_rig_housing` from its problem and fit."""
+    names, S, shared, n_global = problem.names, problem.S, problem.shared, problem.n_global
+    ports = problem.ports_at(fit.x)
+    Rs, ts = problem.poses(fit.x)
+    port_names = ["port"] if shared else [f"{n}.port" for n in camera_names]
     labels = []
     for name in names:
         for s in range(S if name != "n_water" else 1):
-            prefix = "" if shared or name == "n_water" else f"{rig.names[s]}."
+            prefix = "" if shared or name == "n_water" else f"{camera_names[s]}."
             labels += ([f"{prefix}normal[0]", f"{prefix}normal[1]"] if name == "normal"
                        else [f"{prefix}{name}"])
-    sig = np.sqrt(np.diag(covariance))[:n_global]
-    sig_c = np.sqrt(np.diag(conditional))[:n_global]
+    estimates, sigmas, sigmas_c = _estimates(problem, ports, covariance, conditional)
+    per, offset = {}, 0
+    for view, pose_idx, _, _ in problem.obs:
+        rv = fit.fun[offset:offset + 2 * pose_idx.size].reshape(-1, 2)
+        offset += 2 * pose_idx.size
+        if rv.size:
+            per[camera_names[view]] = float(np.sqrt(np.mean(rv ** 2) * 2))
+    cameras, bases = problem.cameras, problem.bases
+    return MultiHousingCalibration(
+        rig=MultiRig(cameras, [ports[problem.slot[v]] for v in range(len(cameras))],
+                     camera_names),
+        estimates=estimates, sigmas=sigmas, sigmas_conditional=sigmas_c, labels=tuple(labels),
+        covariance=covariance[:n_global, :n_global],
+        normal_axes=(tuple(b.tolist() for b in bases[0]) if shared
+                     else tuple(tuple(b.tolist() for b in basis) for basis in bases)),
+        rms_px=rms, rms_px_per=per,
+        poses={problem.usable[i]: (Rs[i], ts[i]) for i in range(problem.P)},
+        n_observations=problem.m // 2, uncertainty=uncertainty, port_names=tuple(port_names))
+
+
+def _estimates(problem, ports, covariance, conditional) -> tuple[dict, dict, dict]:
+    """``(estimates, σ, conditional σ)`` by free parameter: one value of a shared port or of
+    the water, else a list with one per camera."""
+    names, S, shared, table = problem.names, problem.S, problem.shared, problem.table
+    sig = np.sqrt(np.diag(covariance))[:problem.n_global]
+    sig_c = np.sqrt(np.diag(conditional))[:problem.n_global]
 
     def value(name, port):
         return {"distance": port.distance, "normal": port.normal.tolist(),
@@ -296,7 +306,7 @@ def calibrate_rig_housing(rig: MultiRig, board: Board, detections: Detections, f
 
     estimates, sigmas, sigmas_c = {}, {}, {}
     for name in names:
-        k, w = at[name], table[name] // (S if name != "n_water" else 1)
+        k, w = parameter_offset(names, name, table), table[name] // (S if name != "n_water" else 1)
         if shared or name == "n_water":
             estimates[name] = value(name, ports[0])
             sigmas[name] = float(sig[k]) if w == 1 else sig[k:k + w].tolist()
@@ -307,20 +317,7 @@ def calibrate_rig_housing(rig: MultiRig, board: Board, detections: Detections, f
                             for s in range(S)]
             sigmas_c[name] = [float(sig_c[k + s]) if w == 1
                               else sig_c[k + 2 * s:k + 2 * s + 2].tolist() for s in range(S)]
-    per, offset = {}, 0
-    for view, pose_idx, _, _ in obs:
-        rv = r[offset:offset + 2 * pose_idx.size].reshape(-1, 2)
-        offset += 2 * pose_idx.size
-        if rv.size:
-            per[rig.names[view]] = float(np.sqrt(np.mean(rv ** 2) * 2))
-    return MultiHousingCalibration(
-        rig=MultiRig(cameras, [ports[slot[v]] for v in range(len(cameras))], rig.names),
-        estimates=estimates, sigmas=sigmas, sigmas_conditional=sigmas_c, labels=tuple(labels),
-        covariance=covariance[:n_global, :n_global],
-        normal_axes=(tuple(b.tolist() for b in bases[0]) if shared
-                     else tuple(tuple(b.tolist() for b in basis) for basis in bases)),
-        rms_px=rms, rms_px_per=per, poses={usable[i]: (Rs[i], ts[i]) for i in range(P)},
-        n_observations=m // 2, uncertainty=uncertainty, port_names=tuple(port_names))
+    return estimates, sigmas, sigmas_c
 
 
 __all__ = ["DEFAULT_FREE", "MultiHousingCalibration", "PARAMETERS", "calibrate_rig_housing"]

@@ -171,14 +171,16 @@ class HousingProblem:
             x0 += list(Rotation.from_matrix(R).as_rotvec()) + list(t)
         return x0
 
-    def residuals(self, x):
-        """The corners' reprojection residuals (px) at ``x``; 1000 px where a ray fails."""
+    def residuals(self, x, cameras=None):
+        """The corners' reprojection residuals (px) at ``x``; 1000 px where a ray fails.
+        ``cameras``: others than the problem's (central differences over the in-air ones)."""
         from ..geometry.projection import project
 
         try:
-            housing, cameras, Rs, ts = self.unpack(x)
+            housing, own, Rs, ts = self.unpack(x)
         except ValueError:  # e.g. a non-physical index or thickness on the way
             return np.full(self.m, 1e3)
+        cameras = own if cameras is None else cameras
         out = []
         for view, pose_idx, ids, uv in self.obs:
             world = np.einsum("nij,nj->ni", Rs[pose_idx], self.corners[ids]) + ts[pose_idx]

@@ -413,10 +413,8 @@ def residual_sigma(rig: StereoRig, uv_left, uv_right, points, pixel_sigma=0.0,
 
 
 def _projected_residuals(rig, uv_left, uv_right, points, pixel_sigma):
-    """``(q, known, ok)``: each point's squared residual |r|² (px², one degree of freedom) after
-    the projector that removes what a move of X explains, the mean of its four stated
-    variances (px²), for the rows ``ok`` whose residual and Jacobian are finite (``q`` and
-    ``known`` hold those rows only)."""
+    """``(q, known, ok)``: the squared residuals |r|² (px², one degree of freedom each) and the
+    mean stated variances (px²) of the rows ``ok`` whose residual and Jacobian are finite."""
     observed = np.concatenate([np.asarray(uv_left, dtype=float).reshape(-1, 2),
                                np.asarray(uv_right, dtype=float).reshape(-1, 2)], axis=1)
     stated = pixel_sigmas(pixel_sigma, points.shape[0], allow_zero=True)
@@ -430,33 +428,29 @@ def _projected_residuals(rig, uv_left, uv_right, points, pixel_sigma):
     return np.einsum("nk,nk->n", r, r), np.mean(stated[ok] ** 2, axis=1), ok
 
 
-def _excess(q, known, variance, statistic, rows, w2) -> float:
-    """The ``statistic`` of the residuals ``rows`` in units of their expected size with an extra
-    variance (px², of weight ``w2`` per row)."""
-    with np.errstate(divide="ignore", invalid="ignore"):
-        return float(statistic(np.where(q[rows] > 0,
-                                        q[rows] / (known[rows] + variance * w2[rows]), 0.0)))
-
-
 def _extra_variance(q, known, statistic, target, rows, w2=None) -> float:
     """The extra variance σ₀² (px², of weight ``w2`` per row, default 1) that brings the
     statistic of the residuals ``rows`` in units of their expected size to ``target``."""
     from scipy.optimize import brentq  # loaded on first use, not with measure
 
     w2 = np.ones_like(q) if w2 is None else w2
+
+    def excess(variance):  # the statistic of the residuals in units of their expected size
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return float(statistic(np.where(q[rows] > 0,
+                                            q[rows] / (known[rows] + variance * w2[rows]), 0.0)))
+
     upper = (2.0 * float(statistic(q[rows] / w2[rows]) / target)
              + float(np.max(known / w2)))
-    if upper <= 0 or _excess(q, known, 0.0, statistic, rows, w2) <= target:
+    if upper <= 0 or excess(0.0) <= target:
         return 0.0
     # the excess falls from > target at 0 to < target at ``upper``
-    return brentq(lambda v: _excess(q, known, v, statistic, rows, w2) - target, 0.0, upper,
-                  xtol=1e-12 * upper)
+    return brentq(lambda v: excess(v) - target, 0.0, upper, xtol=1e-12 * upper)
 
 
 def _flux_exponent(q, known, inliers, relative) -> tuple[float, float]:
-    """``(p, σ₀²)``: the exponent in [0, :data:`MAX_FLUX_EXPONENT`] of the extra noise's
-    ``(flux / median flux)^(−p)`` and its σ₀² (px²), by maximum likelihood of the inliers'
-    residuals (0 where it does not beat p = 0, or all fluxes are alike)."""
+    """``(p, σ₀²)``: the extra noise's ``(flux / median flux)^(−p)`` exponent in [0,
+    :data:`MAX_FLUX_EXPONENT`] and σ₀² (px²), by maximum likelihood of the inliers' residuals."""
     from scipy.optimize import minimize_scalar  # loaded on first use, not with measure
 
     def fit(p):  # σ₀² for exponent p, and the negative log-likelihood of the inliers
