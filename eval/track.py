@@ -295,158 +295,31 @@ def track_figure(path, rows) -> None:
 
 
 def main(args) -> int:
-    import cv2
-
-    from measure import detect_targets
-    from measure.reasons import Reason
-    from measure.stereo.multiview import View
-    from measure.stereo.pose import estimate_pose, pinhole_pose, rotation_error
-    from measure.stereo.uncertainty import CHI2_3_95, mahalanobis_squared
-    from synth.infra.fileio import OutputDir, atomic_write_json, jsonable
-    from synth.products.sequence import write_tum
+    from synth.infra.fileio import OutputDir
 
     log = ((lambda text: None) if args.no_progress
            else (lambda text: print(text, file=sys.stderr, flush=True)))
     start = time.perf_counter()
     if not args.absorbed and args.absorbed_calib:
         raise CLIError("--absorbed-calib does not apply with --no-absorbed")
-    manifest, rig, obj, (frames, R_true, t_true), true_pixels = read_sequence(args.dataset)
+    sequence = read_sequence(args.dataset)
+    manifest = sequence[0]
     radius = float((manifest.get("object") or {}).get("marker_radius_mm") or 0.0)
     if args.eccentricity and radius <= 0:
         raise CLIError(f"{args.dataset}: its manifest gives no marker radius, which the "
                        f"eccentricity correction needs (--no-eccentricity measures the raw "
                        f"centroids)")
     changed = changed_frames(args.dataset, manifest)
-    absorbed = _absorbed(args, rig, log)
+    absorbed = _absorbed(args, sequence[1], log)
     output = OutputDir(args.out, COMMAND).claim()
     if changed:
         print(f"note: {len(changed)} file(s) of {args.dataset} changed since synth sequence "
               f"wrote them ({', '.join(changed[:4])}{', …' if len(changed) > 4 else ''}): "
               f"tracked as they are now, scored against the poses they were rendered with",
               file=sys.stderr)
-    if args.lock_on == "truth":  # locked on at the first frame's true pose
-        track = {"R": R_true[0], "t": t_true[0], "velocity": np.zeros(3), "fresh": True}
-    else:  # locked on from the detections (measure.stereo.lockon)
-        track = {"R": None, "t": None, "velocity": np.zeros(3), "fresh": False}
-    locks = []
-    estimates, rows = [], []
-    seconds = {"detect": 0.0, "lock_on": 0.0, "pose": 0.0, "pose_per_camera": 0.0}
-    for k, frame in enumerate(frames):
-        found = []
-        for name in VIEW_NAMES:
-            path = os.path.join(args.dataset, "frames", f"{int(frame):04d}_{name}.png")
-            image = imread(path, cv2.IMREAD_ANYDEPTH)
-            if image is None:
-                raise CLIError(f"{path}: missing or not an image OpenCV can read")
-            t0 = time.perf_counter()
-            found.append(detect_targets(image).centers)
-            seconds["detect"] += time.perf_counter() - t0
-        detected = [int(c.shape[0]) for c in found]
-        pixels, expected, associated, lost, attempt = locate_markers(
-            rig, obj, found, track, args.gate, int(frame), seconds, log)
-        if attempt is not None:
-            locks.append({"frame": int(frame), "markers": attempt.assigned,
-                          "rms_mm": attempt.rms_mm, "ambiguous": attempt.ambiguous,
-                          "position_error_mm": float(np.linalg.norm(attempt.t - t_true[k])),
-                          "rotation_error_rad": float(rotation_error(attempt.R, R_true[k]))})
-        # the baselines: the left camera's raw detections as a pinhole that ignores the port,
-        # and both views' raw detections through the absorbed calibration (pinhole cameras
-        # whose focal length and distortion absorb the port, in their own virtual frame)
-        _, t_pinhole = pinhole_pose(rig.left, obj, pixels[0])
-        absorbed_pose = (estimate_pose(absorbed.rig, obj, pixels, args.pixel_sigma)
-                         if absorbed is not None else None)
-        t0 = time.perf_counter()
-        pose = estimate_pose(rig, obj, pixels, args.pixel_sigma)
-        corrected_pixels = False  # whether the pixels hold the eccentricity correction
-        if args.eccentricity and pose.valid:
-            pixels = pixels - np.nan_to_num(eccentricity_offsets(rig, obj, pose, radius))
-            corrected_pixels = True
-            corrected = estimate_pose(rig, obj, pixels, args.pixel_sigma)
-            if corrected.valid:  # the term is what the correction leaves
-                pose = with_radial_bias(rig, obj, pixels, corrected, radius)
-        seconds["pose"] += time.perf_counter() - t0
-        t0 = time.perf_counter()  # each camera alone, through its port, on the same pixels
-        alone = [estimate_pose(View(camera, rig.view_port(v)), obj, pixels[v],
-                               args.pixel_sigma) for v, camera in enumerate(rig.cameras)]
-        if corrected_pixels:
-            alone = [with_radial_bias(View(camera, rig.view_port(v)), obj, pixels[v], p, radius)
-                     for v, (camera, p) in enumerate(zip(rig.cameras, alone))]
-        seconds["pose_per_camera"] += time.perf_counter() - t0
-        estimates.append(pose)
-        miss = (pixels - true_pixels[k]).reshape(-1, 2)
-        miss = miss[np.all(np.isfinite(miss), axis=1)]
-        row = {"frame": int(frame), "detections": detected,
-               "detection_rms_px": float(np.sqrt(np.mean(np.sum(miss ** 2, axis=1))))
-               if miss.size else None,
-               "observations": pose.observations,
-               "reason": ("NOT_LOCKED" if track["R"] is None else "LOST") if lost
-               else Reason(pose.reason).name, "locked_on": attempt is not None,
-               "markers_expected": expected, "markers_associated": associated}
-        # constant velocity from the last two frames' poses (none after a lock-on or a loss)
-        track["velocity"] = (pose.t - track["t"] if pose.valid and track["fresh"]
-                             and attempt is None else np.zeros(3))
-        track["fresh"] = bool(pose.valid)
-        if pose.valid:
-            track["R"], track["t"] = pose.R, pose.t
-            error = pose.t - t_true[k]
-            distance = float(np.linalg.norm(t_true[k]))
-            row.update({"position_error_mm": float(np.linalg.norm(error)),
-                        "position_error_pct": float(100 * np.linalg.norm(error) / distance),
-                        "distance_mm": distance,
-                        "pinhole_position_error_pct": float(
-                            100 * np.linalg.norm(t_pinhole - t_true[k]) / distance),
-                        "absorbed_t_mm": (absorbed_pose.t.tolist()
-                                          if absorbed_pose is not None and absorbed_pose.valid
-                                          else None),
-                        "absorbed_rms_px": (absorbed_pose.rms_px if absorbed_pose is not None
-                                            and absorbed_pose.valid else None),
-                        "error_mm": error.tolist(),
-                        "rotation_error_rad": float(rotation_error(pose.R, R_true[k])),
-                        "mahalanobis2": float(mahalanobis_squared(
-                            error, pose.covariance[3:, 3:])[0]),
-                        "sigma_t_mm": float(np.sqrt(np.trace(pose.covariance[3:, 3:]))),
-                        "rms_px": pose.rms_px})
-            row["per_camera"] = {
-                name: _scored(p, t_true[k], R_true[k], distance, rotation_error,
-                              mahalanobis_squared)
-                for name, p in zip(VIEW_NAMES, alone)}
-        rows.append(row)
-        log(f"frame {int(frame)}: {row['reason']}"
-            + (f", |dt| {row['position_error_mm']:.3g} mm, rotation "
-               f"{row['rotation_error_rad']:.3g} rad, {pose.observations} pixels"
-               if pose.valid else ""))
-    valid = [r for r in rows if r["reason"] == "OK"]
-    summary = {"frames": len(rows), "tracked": len(valid)}
-    if valid:
-        dt = np.array([r["position_error_mm"] for r in valid])
-        dr = np.array([r["rotation_error_rad"] for r in valid])
-        d2 = np.array([r["mahalanobis2"] for r in valid])
-        miss = [r["detection_rms_px"] for r in rows if r["detection_rms_px"] is not None]
-        pct = np.array([r["position_error_pct"] for r in valid])
-        pinhole = np.array([r["pinhole_position_error_pct"] for r in valid])
-        if absorbed is not None:
-            summary["absorbed"] = {**absorbed_errors(valid, t_true, frames),
-                                   "calibration": absorbed.summary}
-        summary.update({"detection_rms_px": {"median": float(np.median(miss)),
-                                             "max": float(np.max(miss))},
-                        "position_error_pct": {"median": float(np.median(pct)),
-                                               "max": float(pct.max())},
-                        "pinhole_position_error_pct": {"median": float(np.nanmedian(pinhole)),
-                                                       "max": float(np.nanmax(pinhole))},
-                        "position_error_mm": {"median": float(np.median(dt)),
-                                              "max": float(dt.max())},
-                        "rotation_error_rad": {"median": float(np.median(dr)),
-                                               "max": float(dr.max())},
-                        "coverage_95": float(np.mean(d2 <= CHI2_3_95)),
-                        "per_camera": _per_camera_summary(valid, CHI2_3_95),
-                        "poses_per_s": {
-                            "rig": len(rows) / seconds["pose"] if seconds["pose"] else None,
-                            "each_camera": 2 * len(rows) / seconds["pose_per_camera"]
-                            if seconds["pose_per_camera"] else None,
-                            "note": "after detection; rig: both views jointly, with the "
-                                    "eccentricity correction's second solve and the shared "
-                                    "radial term; each camera: one view, one solve and the "
-                                    "term"}})
+    estimates, rows, locks, seconds = _track(args, sequence, absorbed, radius, log)
+    frames, t_true = sequence[3][0], sequence[3][2]
+    summary = _summary(rows, absorbed, t_true, frames, seconds)
     detect = args.lock_on == "detect"  # the first lock-on started the track
     report = {"dataset": args.dataset, "sequence": {k: manifest.get(k) for k in (
         "approach_mm", "yaw_deg", "trajectory", "frames", "fps", "object", "image_size")},
@@ -457,63 +330,256 @@ def main(args) -> int:
                     "again": locks[1:] if detect else locks},
         "summary": summary,
         "frames": rows}
-    ok = np.array([p.valid for p in estimates])
     with output.staged() as tmp:
-        from scipy.spatial.transform import Rotation
-
-        # the sequence's own time stamps (a --trajectory sequence's need not be regular)
-        times = np.atleast_1d(np.genfromtxt(os.path.join(args.dataset, "poses.csv"),
-                                            delimiter=",", names=True)["time_s"]).astype(float)
-        with open(os.path.join(tmp, "poses.csv"), "w") as fh:
-            fh.write("frame,time_s,tx_mm,ty_mm,tz_mm,qx,qy,qz,qw,sigma_t_mm,rms_px,"
-                     "observations,reason\n")
-            for k, p in enumerate(estimates):
-                q = Rotation.from_matrix(p.R).as_quat() if p.valid else np.full(4, np.nan)
-                sigma = np.sqrt(np.trace(p.covariance[3:, 3:]))
-                fh.write(",".join([str(int(frames[k])), f"{times[k]:.6f}",
-                                   *(repr(float(v)) for v in p.t), *(repr(float(v)) for v in q),
-                                   repr(float(sigma)), repr(float(p.rms_px)),
-                                   str(p.observations), Reason(p.reason).name]) + "\n")
-        if ok.any():
-            write_tum(os.path.join(tmp, "poses_tum.txt"), times[ok],
-                      np.stack([p.R for p in estimates])[ok], np.stack([p.t for p in estimates])[ok])
-        if valid:
-            track_figure(os.path.join(tmp, "track.png"), rows)
-        report["timings_s"] = {**seconds, "total": time.perf_counter() - start}
-        report = jsonable(report)
-        atomic_write_json(os.path.join(tmp, "report.json"), report)
+        report = _write_outputs(tmp, args.dataset, frames, estimates, rows, report,
+                                {**seconds, "total": time.perf_counter() - start})
     stream = sys.stderr if args.json else sys.stdout
-    if valid:
-        print(f"tracked {summary['tracked']} of {summary['frames']} frames: position error "
-              f"median {summary['position_error_mm']['median']:.3g} mm (max "
-              f"{summary['position_error_mm']['max']:.3g}; max {summary['position_error_pct']['max']:.3g} % "
-              f"of the distance, the left camera as a pinhole: "
-              f"{summary['pinhole_position_error_pct']['max']:.3g} %), rotation median "
-              f"{summary['rotation_error_rad']['median']:.3g} rad (max "
-              f"{summary['rotation_error_rad']['max']:.3g}); {summary['coverage_95']:.0%} of "
-              f"the positions inside their 95 % ellipsoid; detections "
-              f"{summary['detection_rms_px']['median']:.3g} px RMS from the simulator's pixels "
-              f"(median over frames)", file=stream)
-        if summary.get("absorbed", {}).get("posed"):
-            a = summary["absorbed"]
-            print(f"absorbed baseline (pinhole cameras that absorb the port): position error "
-                  f"median {a['position_error_pct']['median']:.3g} %, max "
-                  f"{a['position_error_pct']['max']:.3g} % of the distance"
-                  + (f"; after the best rigid alignment of the whole track median "
-                     f"{a['aligned_position_error_pct']['median']:.3g} %, max "
-                     f"{a['aligned_position_error_pct']['max']:.3g} %"
-                     if "aligned_position_error_pct" in a else ""), file=stream)
-        alone = summary["per_camera"]
-        print("each camera alone through its port: " + "; ".join(
-            f"{name} {a['posed']} posed, median {a['position_error_mm']['median']:.3g} mm (max "
-            f"{a['position_error_pct']['max']:.3g} %), {a['coverage_95']:.0%} inside"
-            if a["posed"] else f"{name} 0 posed" for name, a in alone.items())
-            + f"; {summary['poses_per_s']['rig']:.0f} rig poses/s, "
-              f"{summary['poses_per_s']['each_camera']:.0f} one-camera poses/s after detection",
-            file=stream)
-    else:
-        print(f"tracked 0 of {summary['frames']} frames", file=stream)
+    _print_summary(summary, stream)
     print(f"wrote {output.path}", file=stream)
     if args.json:
         print(json.dumps(report, indent=2))
     return 0 if summary["tracked"] == summary["frames"] else 1
+
+
+def _track(args, sequence, absorbed, radius, log):
+    """``(estimates, rows, locks, seconds)``: every frame's pose and its report row, the
+    lock-ons (the first and those after a lost frame) and the seconds of each stage."""
+    from measure.stereo.pose import rotation_error
+
+    _, rig, obj, (frames, R_true, t_true), true_pixels = sequence
+    if args.lock_on == "truth":  # locked on at the first frame's true pose
+        track = {"R": R_true[0], "t": t_true[0], "velocity": np.zeros(3), "fresh": True}
+    else:  # locked on from the detections (measure.stereo.lockon)
+        track = {"R": None, "t": None, "velocity": np.zeros(3), "fresh": False}
+    locks, estimates, rows = [], [], []
+    seconds = {"detect": 0.0, "lock_on": 0.0, "pose": 0.0, "pose_per_camera": 0.0}
+    for k, frame in enumerate(frames):
+        found = _detect_frame(args.dataset, int(frame), seconds)
+        pixels, expected, associated, lost, attempt = locate_markers(
+            rig, obj, found, track, args.gate, int(frame), seconds, log)
+        if attempt is not None:
+            locks.append({"frame": int(frame), "markers": attempt.assigned,
+                          "rms_mm": attempt.rms_mm, "ambiguous": attempt.ambiguous,
+                          "position_error_mm": float(np.linalg.norm(attempt.t - t_true[k])),
+                          "rotation_error_rad": float(rotation_error(attempt.R, R_true[k]))})
+        pose, alone, t_pinhole, absorbed_pose, pixels = _frame_poses(args, rig, obj, pixels,
+                                                                     absorbed, radius, seconds)
+        estimates.append(pose)
+        row = {"frame": int(frame), "detections": [int(c.shape[0]) for c in found],
+               "detection_rms_px": _detection_rms(pixels, true_pixels[k]),
+               "observations": pose.observations,
+               "reason": ("NOT_LOCKED" if track["R"] is None else "LOST") if lost
+               else _reason_name(pose.reason), "locked_on": attempt is not None,
+               "markers_expected": expected, "markers_associated": associated}
+        # constant velocity from the last two frames' poses (none after a lock-on or a loss)
+        track["velocity"] = (pose.t - track["t"] if pose.valid and track["fresh"]
+                             and attempt is None else np.zeros(3))
+        track["fresh"] = bool(pose.valid)
+        if pose.valid:
+            track["R"], track["t"] = pose.R, pose.t
+            row.update(_scored_row(pose, alone, t_pinhole, absorbed_pose, R_true[k], t_true[k]))
+        rows.append(row)
+        log(f"frame {int(frame)}: {row['reason']}"
+            + (f", |dt| {row['position_error_mm']:.3g} mm, rotation "
+               f"{row['rotation_error_rad']:.3g} rad, {pose.observations} pixels"
+               if pose.valid else ""))
+    return estimates, rows, locks, seconds
+
+
+def _reason_name(reason) -> str:
+    from measure.reasons import Reason
+
+    return Reason(reason).name
+
+
+def _detect_frame(dataset, frame: int, seconds) -> list:
+    """The targets' centres (px) detected in each view of ``frame``; the seconds go into
+    ``seconds["detect"]``."""
+    import cv2
+
+    from measure import detect_targets
+
+    found = []
+    for name in VIEW_NAMES:
+        path = os.path.join(dataset, "frames", f"{frame:04d}_{name}.png")
+        image = imread(path, cv2.IMREAD_ANYDEPTH)
+        if image is None:
+            raise CLIError(f"{path}: missing or not an image OpenCV can read")
+        t0 = time.perf_counter()
+        found.append(detect_targets(image).centers)
+        seconds["detect"] += time.perf_counter() - t0
+    return found
+
+
+def _frame_poses(args, rig, obj, pixels, absorbed, radius, seconds):
+    """``(pose, alone, t_pinhole, absorbed_pose, pixels)`` of one frame: the rig's refractive
+    pose (its pixels corrected for the markers' eccentricity, with the radial term that the
+    correction leaves), each camera alone through its port on the same pixels, and the
+    baselines — the left camera's raw detections as a pinhole that ignores the port, and
+    both views' raw detections through the absorbed calibration (pinhole cameras whose focal
+    length and distortion absorb the port, in their own virtual frame)."""
+    from measure.stereo.multiview import View
+    from measure.stereo.pose import estimate_pose, pinhole_pose
+
+    _, t_pinhole = pinhole_pose(rig.left, obj, pixels[0])
+    absorbed_pose = (estimate_pose(absorbed.rig, obj, pixels, args.pixel_sigma)
+                     if absorbed is not None else None)
+    t0 = time.perf_counter()
+    pose = estimate_pose(rig, obj, pixels, args.pixel_sigma)
+    corrected_pixels = False  # whether the pixels hold the eccentricity correction
+    if args.eccentricity and pose.valid:
+        pixels = pixels - np.nan_to_num(eccentricity_offsets(rig, obj, pose, radius))
+        corrected_pixels = True
+        corrected = estimate_pose(rig, obj, pixels, args.pixel_sigma)
+        if corrected.valid:  # the term is what the correction leaves
+            pose = with_radial_bias(rig, obj, pixels, corrected, radius)
+    seconds["pose"] += time.perf_counter() - t0
+    t0 = time.perf_counter()  # each camera alone, through its port, on the same pixels
+    alone = [estimate_pose(View(camera, rig.view_port(v)), obj, pixels[v],
+                           args.pixel_sigma) for v, camera in enumerate(rig.cameras)]
+    if corrected_pixels:
+        alone = [with_radial_bias(View(camera, rig.view_port(v)), obj, pixels[v], p, radius)
+                 for v, (camera, p) in enumerate(zip(rig.cameras, alone))]
+    seconds["pose_per_camera"] += time.perf_counter() - t0
+    return pose, alone, t_pinhole, absorbed_pose, pixels
+
+
+def _detection_rms(pixels, true_pixels):
+    """RMS (px) of the located markers' pixels from the simulator's, None when none is."""
+    miss = (pixels - true_pixels).reshape(-1, 2)
+    miss = miss[np.all(np.isfinite(miss), axis=1)]
+    return float(np.sqrt(np.mean(np.sum(miss ** 2, axis=1)))) if miss.size else None
+
+
+def _scored_row(pose, alone, t_pinhole, absorbed_pose, R_true, t_true) -> dict:
+    """A valid pose's entries of its frame's row: its errors against the truth (mm, %, rad,
+    the Mahalanobis distance), the baselines' and each camera's alone."""
+    from measure.stereo.pose import rotation_error
+    from measure.stereo.uncertainty import mahalanobis_squared
+
+    error = pose.t - t_true
+    distance = float(np.linalg.norm(t_true))
+    absorbed_ok = absorbed_pose is not None and absorbed_pose.valid
+    return {"position_error_mm": float(np.linalg.norm(error)),
+            "position_error_pct": float(100 * np.linalg.norm(error) / distance),
+            "distance_mm": distance,
+            "pinhole_position_error_pct": float(
+                100 * np.linalg.norm(t_pinhole - t_true) / distance),
+            "absorbed_t_mm": absorbed_pose.t.tolist() if absorbed_ok else None,
+            "absorbed_rms_px": absorbed_pose.rms_px if absorbed_ok else None,
+            "error_mm": error.tolist(),
+            "rotation_error_rad": float(rotation_error(pose.R, R_true)),
+            "mahalanobis2": float(mahalanobis_squared(error, pose.covariance[3:, 3:])[0]),
+            "sigma_t_mm": float(np.sqrt(np.trace(pose.covariance[3:, 3:]))),
+            "rms_px": pose.rms_px,
+            "per_camera": {name: _scored(p, t_true, R_true, distance, rotation_error,
+                                         mahalanobis_squared)
+                           for name, p in zip(VIEW_NAMES, alone)}}
+
+
+def _summary(rows, absorbed, t_true, frames, seconds) -> dict:
+    """The report's summary: frames tracked and, over the tracked ones, the errors' median
+    and max, the 95 % coverage, each camera's and the absorbed baseline's, poses per second."""
+    from measure.stereo.uncertainty import CHI2_3_95
+
+    valid = [r for r in rows if r["reason"] == "OK"]
+    summary = {"frames": len(rows), "tracked": len(valid)}
+    if not valid:
+        return summary
+    dt = np.array([r["position_error_mm"] for r in valid])
+    dr = np.array([r["rotation_error_rad"] for r in valid])
+    d2 = np.array([r["mahalanobis2"] for r in valid])
+    miss = [r["detection_rms_px"] for r in rows if r["detection_rms_px"] is not None]
+    pct = np.array([r["position_error_pct"] for r in valid])
+    pinhole = np.array([r["pinhole_position_error_pct"] for r in valid])
+    if absorbed is not None:
+        summary["absorbed"] = {**absorbed_errors(valid, t_true, frames),
+                               "calibration": absorbed.summary}
+    summary.update({"detection_rms_px": {"median": float(np.median(miss)),
+                                         "max": float(np.max(miss))},
+                    "position_error_pct": {"median": float(np.median(pct)),
+                                           "max": float(pct.max())},
+                    "pinhole_position_error_pct": {"median": float(np.nanmedian(pinhole)),
+                                                   "max": float(np.nanmax(pinhole))},
+                    "position_error_mm": {"median": float(np.median(dt)),
+                                          "max": float(dt.max())},
+                    "rotation_error_rad": {"median": float(np.median(dr)),
+                                           "max": float(dr.max())},
+                    "coverage_95": float(np.mean(d2 <= CHI2_3_95)),
+                    "per_camera": _per_camera_summary(valid, CHI2_3_95),
+                    "poses_per_s": {
+                        "rig": len(rows) / seconds["pose"] if seconds["pose"] else None,
+                        "each_camera": 2 * len(rows) / seconds["pose_per_camera"]
+                        if seconds["pose_per_camera"] else None,
+                        "note": "after detection; rig: both views jointly, with the "
+                                "eccentricity correction's second solve and the shared "
+                                "radial term; each camera: one view, one solve and the "
+                                "term"}})
+    return summary
+
+
+def _write_outputs(tmp, dataset, frames, estimates, rows, report, timings) -> dict:
+    """``poses.csv``, ``poses_tum.txt`` (the valid poses), ``track.png`` and ``report.json``
+    (with ``timings``) into ``tmp``; returns the report as written."""
+    from scipy.spatial.transform import Rotation
+
+    from synth.infra.fileio import atomic_write_json, jsonable
+    from synth.products.sequence import write_tum
+
+    ok = np.array([p.valid for p in estimates])
+    # the sequence's own time stamps (a --trajectory sequence's need not be regular)
+    times = np.atleast_1d(np.genfromtxt(os.path.join(dataset, "poses.csv"),
+                                        delimiter=",", names=True)["time_s"]).astype(float)
+    with open(os.path.join(tmp, "poses.csv"), "w") as fh:
+        fh.write("frame,time_s,tx_mm,ty_mm,tz_mm,qx,qy,qz,qw,sigma_t_mm,rms_px,"
+                 "observations,reason\n")
+        for k, p in enumerate(estimates):
+            q = Rotation.from_matrix(p.R).as_quat() if p.valid else np.full(4, np.nan)
+            sigma = np.sqrt(np.trace(p.covariance[3:, 3:]))
+            fh.write(",".join([str(int(frames[k])), f"{times[k]:.6f}",
+                               *(repr(float(v)) for v in p.t), *(repr(float(v)) for v in q),
+                               repr(float(sigma)), repr(float(p.rms_px)),
+                               str(p.observations), _reason_name(p.reason)]) + "\n")
+    if ok.any():
+        write_tum(os.path.join(tmp, "poses_tum.txt"), times[ok],
+                  np.stack([p.R for p in estimates])[ok], np.stack([p.t for p in estimates])[ok])
+    if report["summary"]["tracked"]:
+        track_figure(os.path.join(tmp, "track.png"), rows)
+    report["timings_s"] = timings
+    report = jsonable(report)
+    atomic_write_json(os.path.join(tmp, "report.json"), report)
+    return report
+
+
+def _print_summary(summary, stream) -> None:
+    """The summary's lines on ``stream``."""
+    if not summary["tracked"]:
+        print(f"tracked 0 of {summary['frames']} frames", file=stream)
+        return
+    print(f"tracked {summary['tracked']} of {summary['frames']} frames: position error "
+          f"median {summary['position_error_mm']['median']:.3g} mm (max "
+          f"{summary['position_error_mm']['max']:.3g}; max {summary['position_error_pct']['max']:.3g} % "
+          f"of the distance, the left camera as a pinhole: "
+          f"{summary['pinhole_position_error_pct']['max']:.3g} %), rotation median "
+          f"{summary['rotation_error_rad']['median']:.3g} rad (max "
+          f"{summary['rotation_error_rad']['max']:.3g}); {summary['coverage_95']:.0%} of "
+          f"the positions inside their 95 % ellipsoid; detections "
+          f"{summary['detection_rms_px']['median']:.3g} px RMS from the simulator's pixels "
+          f"(median over frames)", file=stream)
+    if summary.get("absorbed", {}).get("posed"):
+        a = summary["absorbed"]
+        print(f"absorbed baseline (pinhole cameras that absorb the port): position error "
+              f"median {a['position_error_pct']['median']:.3g} %, max "
+              f"{a['position_error_pct']['max']:.3g} % of the distance"
+              + (f"; after the best rigid alignment of the whole track median "
+                 f"{a['aligned_position_error_pct']['median']:.3g} %, max "
+                 f"{a['aligned_position_error_pct']['max']:.3g} %"
+                 if "aligned_position_error_pct" in a else ""), file=stream)
+    alone = summary["per_camera"]
+    print("each camera alone through its port: " + "; ".join(
+        f"{name} {a['posed']} posed, median {a['position_error_mm']['median']:.3g} mm (max "
+        f"{a['position_error_pct']['max']:.3g} %), {a['coverage_95']:.0%} inside"
+        if a["posed"] else f"{name} 0 posed" for name, a in alone.items())
+        + f"; {summary['poses_per_s']['rig']:.0f} rig poses/s, "
+          f"{summary['poses_per_s']['each_camera']:.0f} one-camera poses/s after detection",
+        file=stream)
