@@ -18,11 +18,15 @@ All distances in mm, both clouds in the reference frame (the left camera's).
 from __future__ import annotations
 
 import os
+from typing import TYPE_CHECKING
 
 import numpy as np
 
+if TYPE_CHECKING:  # imported where used: a run imports Open3D while it renders
+    import open3d as o3d
 
-def point_cloud(points: np.ndarray, colors: np.ndarray | None = None) -> "o3d.geometry.PointCloud":
+
+def point_cloud(points: np.ndarray, colors: np.ndarray | None = None) -> o3d.geometry.PointCloud:
     """An Open3D cloud from ``(N, 3)`` points (mm) and optional ``(N, 3)`` colours in [0, 1]."""
     import open3d as o3d  # here: a run imports Open3D while it renders (eval.run.preload)
 

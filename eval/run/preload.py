@@ -29,7 +29,7 @@ def start(figures: bool) -> threading.Thread:
         for name in names:
             try:
                 importlib.import_module(name)
-            except Exception:  # noqa: BLE001 - the run's own import says what went wrong
+            except Exception:  # the run's own import says what went wrong
                 return
 
     thread = threading.Thread(target=run, name="preload", daemon=True)
