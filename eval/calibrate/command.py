@@ -292,7 +292,7 @@ def design_domes(args, rig):
 
 def underwater_note(path, calib) -> str | None:
     """The line that says an ``--intrinsics`` calibration is an underwater one (``calib``:
-    :func:`synth.products.dataset.read_calib` of ``path``) whose port is not used; None for an
+    :func:`synth.formats.calib_yaml.read_calib` of ``path``) whose port is not used; None for an
     in-air one."""
     if not calib["has_port"]:
         return None

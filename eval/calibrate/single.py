@@ -404,7 +404,7 @@ def write_camera_files(directory, camera, lens_model, rms_px, sigmas: dict, cova
     from measure.geometry.flatport_format import write_view_port
 
     from synth.formats.calib_formats import write_single_camera
-    from synth.products.dataset import write_node
+    from synth.formats.calib_yaml import write_node
 
     # the output folder is staged whole: its files appear together or not at all
     fs = cv2.FileStorage(os.path.join(directory, "camera.yaml"), cv2.FILE_STORAGE_WRITE)

@@ -1,7 +1,7 @@
 """``python -m eval measure --calib FILE LEFT RIGHT``: measure a user's stereo photos — no truth.
 
 LEFT RIGHT are two photos (one pair) or two folders (pairs by file name). The calibration
-(``calib.yaml`` as ``synth dataset`` writes it; :func:`synth.products.dataset.read_calib`) must be for
+(``calib.yaml`` as ``synth dataset`` writes it; :func:`synth.formats.calib_yaml.read_calib`) must be for
 the photos' size. Targets are detected (the detector options of ``eval run``), matched without
 truth (:func:`measure.stereo.matching.match_targets`) and triangulated with ``--methods`` (default
 ``optical_path``); with ``--dense --depth-range NEAR,FAR`` a speckled surface is matched per

@@ -1,5 +1,5 @@
 """What ``eval measure`` starts from, checked before any work: the calibration
-(:func:`synth.products.dataset.read_calib`) and the photo pairs (one pair of files, or two folders
+(:func:`synth.formats.calib_yaml.read_calib`) and the photo pairs (one pair of files, or two folders
 paired by file name: :func:`eval.core.photos.pair_folders`).
 
 Every problem is a :class:`eval.cli.CLIError` (one ``error:`` line, exit 2) naming the file:

@@ -253,7 +253,7 @@ def _write_flat_node(fs, name: str, port: FlatPort, present=None) -> None:
 
 
 def write_calib_port(fs, port: FlatPort | FlatPair | DomePair, has_port: bool = True) -> None:
-    """The port's node of a dataset's ``calib.yaml`` (:func:`synth.products.dataset.write_calib`)
+    """The port's node of a dataset's ``calib.yaml`` (:func:`synth.formats.calib_yaml.write_calib`)
     into the ``cv2.FileStorage`` ``fs``: ``port`` (present, normal, distance, thicknesses,
     indices), ``ports`` (two housings: ``left`` and ``right`` maps of normal, distance,
     thicknesses, indices, reference frame) or ``dome`` (per camera: center, radius, thickness,

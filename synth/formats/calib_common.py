@@ -67,7 +67,7 @@ def stereo_extrinsics(left: Camera, right: Camera) -> tuple[np.ndarray, np.ndarr
 
 def calib_dict(size, K1, D1, K2, D2, R, T, port: FlatPort, has_port: bool,
                where: str = "calibration", models=(BROWN_CONRADY, BROWN_CONRADY)) -> dict:
-    """The dictionary :func:`synth.products.dataset.read_calib` returns: ``size``, ``K1``, ``D1``, ``K2``,
+    """The dictionary :func:`synth.formats.calib_yaml.read_calib` returns: ``size``, ``K1``, ``D1``, ``K2``,
     ``D2``, ``R``, ``T`` (OpenCV's stereo pose, 3x1), ``port``, ``has_port``, ``rig`` (the
     left camera at the reference origin), ``covariance`` (None here; ``calib.yaml`` may
     hold one) and ``models``, the two cameras' distortion models (``D1``, ``D2`` are theirs);

@@ -127,7 +127,7 @@ def _calibmar_pose(values, path, required: bool):
 
 def read_calibmar(path) -> dict:
     """A calibmar stereo calibration (``path`` either of its two files) as the dictionary of
-    :func:`synth.products.dataset.read_calib`. ``non_svp_model: NONE`` in both files is an in-air
+    :func:`synth.formats.calib_yaml.read_calib`. ``non_svp_model: NONE`` in both files is an in-air
     calibration (``has_port`` False, the index-matched air port); CalibFormatError names the
     file and what is wrong."""
     first, second = calibmar_partner(path)

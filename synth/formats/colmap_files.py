@@ -238,7 +238,7 @@ def _read_rig_config(path, cameras) -> tuple[int, dict]:
 
 def read_colmap(path) -> dict:
     """The COLMAP fork's ``cameras.txt`` (two cameras) with ``rig_config.json`` beside it as the
-    dictionary of :func:`synth.products.dataset.read_calib`; the reference camera is the left one.
+    dictionary of :func:`synth.formats.calib_yaml.read_calib`; the reference camera is the left one.
     Cameras without FLATPORT are an in-air calibration. CalibFormatError names the file."""
     path = os.fspath(path)
     cameras = parse_cameras_txt(path)

@@ -1,9 +1,9 @@
 """``calib.yaml`` of a rig of N cameras (:class:`measure.stereo.multirig.MultiRig`).
 
 A rig of two cameras of today's kinds (one flat port, a flat port per camera, a dome per camera,
-all air) is written as the two-camera ``calib.yaml`` of :func:`synth.products.dataset.write_calib`
+all air) is written as the two-camera ``calib.yaml`` of :func:`synth.formats.calib_yaml.write_calib`
 — unchanged — and any two-camera file (or calibmar / COLMAP calibration that
-:func:`synth.products.dataset.read_calib` reads) reads as a rig of two. Any other rig is an
+:func:`synth.formats.calib_yaml.read_calib` reads) reads as a rig of two. Any other rig is an
 OpenCV FileStorage of (units mm, reference frame = the first camera's, OpenCV axes):
 
 * ``units``: ``mm``;
@@ -18,7 +18,7 @@ OpenCV FileStorage of (units mm, reference frame = the first camera's, OpenCV ax
   (``center`` 3x1, ``radius``, ``thickness``, ``indices``). Without ``ports`` every camera
   looks through ``port``.
 
-Anything unreadable or inconsistent raises :class:`synth.products.dataset.DatasetError` with
+Anything unreadable or inconsistent raises :class:`synth.formats.calib_yaml.DatasetError` with
 one line naming the file and the camera: cameras that overlap, a camera inside another
 camera's port glass, ``ports`` given as one value where one per camera is needed.
 """
@@ -35,7 +35,7 @@ from measure.geometry.dome import DomePort
 from measure.stereo.multirig import MultiRig
 from synth.formats.calib_formats import (CalibFormatError, calib_format, colmap_cameras,
                                          read_colmap_rig)
-from synth.products.dataset import DatasetError, not_a_file, read_calib, write_calib
+from synth.formats.calib_yaml import DatasetError, not_a_file, read_calib, write_calib
 
 #: The entries of ``ports`` that are not maps.
 SHARED, NONE = "shared", "none"
@@ -99,7 +99,7 @@ def write_rig_file(path, rig: MultiRig, covariance=None) -> None:
     if stereo is not None:
         if covariance is not None:
             raise ValueError("a two-camera calib.yaml carries its covariance as "
-                             "synth.products.dataset.write_calib writes it")
+                             "synth.formats.calib_yaml.write_calib writes it")
         write_calib(path, stereo, has_port=rig.refracts)
         return
     shared = shared_port(rig)
@@ -191,7 +191,7 @@ def _is_one_camera_file(path) -> bool:
 
 def read_rig_file(path) -> MultiRig:
     """A rig of N cameras from ``calib.yaml`` (module docs), or from any two-camera calibration
-    :func:`synth.products.dataset.read_calib` reads (as a rig of two: ``left``, ``right``).
+    :func:`synth.formats.calib_yaml.read_calib` reads (as a rig of two: ``left``, ``right``).
     :class:`DatasetError` (one line naming the file) for anything unusable."""
     path = os.fspath(path)
     if not os.path.isfile(path):

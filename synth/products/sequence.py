@@ -22,7 +22,7 @@ A sequence directory holds (units mm, reference frame = the left camera's, OpenC
   (**metres**, as TUM tools expect; the object's pose in the reference frame);
 * ``pixels.csv`` — ``frame,id,u_left,v_left,u_right,v_right``: the Fermat simulator's pixel of
   every marker (NaN where it has none; pixels outside the image are kept);
-* ``calib.yaml`` — the rig (:func:`synth.products.dataset.write_calib`); ``manifest.json``.
+* ``calib.yaml`` — the rig (:func:`synth.formats.calib_yaml.write_calib`); ``manifest.json``.
 
 The directory is written whole or not at all (:class:`synth.infra.fileio.OutputDir`).
 """

@@ -34,7 +34,7 @@ A surface scene, ``--sensor`` and a design port are refused for N cameras. Writi
 and a rerun of the same request on a whole dataset does nothing
 (:func:`synth.products.dataset.existing_output`). Reading (:func:`read_views_dataset`) checks
 the folders against the manifest (``cam3/`` with no ``cam2/``, a folder missing a file, a file
-whose SHA-256 is not the manifest's: one :class:`synth.products.dataset.DatasetError` line
+whose SHA-256 is not the manifest's: one :class:`synth.formats.calib_yaml.DatasetError` line
 naming the file or camera).
 """
 

@@ -153,7 +153,7 @@ def test_flatport_round_trips_exactly(tmp_path, name, rig):
 
 
 def test_cameras_json_names_both_conventions_and_agrees_with_the_rig():
-    from synth.products.dataset import stereo_extrinsics
+    from synth.formats.calib_formats import stereo_extrinsics
 
     _, rig = list(_rigs())[1]
     data = json.loads(json.dumps(cameras_json(rig)))

@@ -12,8 +12,9 @@ import pytest
 
 from synth.products.crosscheck import check_dataset
 from synth.__main__ import main
-from synth.products.dataset import (PIXELS_HEADER, read_dataset, read_manifest, stereo_extrinsics,
+from synth.products.dataset import (PIXELS_HEADER, read_dataset, read_manifest,
                            write_dataset)
+from synth.formats.calib_formats import stereo_extrinsics
 from measure.geometry.projection import project
 from synth.scene import load_scene
 
