@@ -241,20 +241,7 @@ def write_dataset(scene, out_dir, spp: int | None = None, defines: dict | None =
     """
     t_start = time.perf_counter()
     times = {}
-    t = time.perf_counter()
-    spec = scene if isinstance(scene, SceneSpec) else load_scene(scene, defines)
-    times["load_scene"] = time.perf_counter() - t
-    if spec.extra_cameras:  # never the first two alone
-        raise SceneError(f"{spec.path}: a scene of {len(spec.all_cameras)} cameras is written "
-                         f"a folder per camera (synth.products.views_dataset."
-                         f"write_views_dataset), not as a stereo pair")
-    left_cam = spec.rig.left
-    if not (np.allclose(left_cam.R, np.eye(3), atol=1e-12) and np.allclose(left_cam.t, 0)):
-        raise SceneError(f"{spec.path}: the left sensor must sit at the reference origin with "
-                         f"identity rotation (the reference frame is the left camera's)")
-    spp = spec.spp if spp is None else int(spp)
-    seed = spec.seed if seed is None else int(seed)
-    spec = spec.rendered_with(spp=spp, seed=seed)  # the parameters say what was rendered
+    spec, spp, seed = _stereo_spec(scene, defines, spp, seed, times)
     key = request_key(spec, spp, seed, variant, exr, sensor, adaptive, design)
 
     output, old, damage = existing_output(out_dir, key)
@@ -268,65 +255,11 @@ def write_dataset(scene, out_dir, spp: int | None = None, defines: dict | None =
         times["render_left"] = info["seconds"]["left"]
         times["render_right"] = info["seconds"]["right"]
         times["load_mitsuba"] = info["seconds"]["load"]
-
         t = time.perf_counter()
-        white = max(float(left.max()), float(right.max()))
-        if sensor is None:
-            scale, offset, sensor_info = png16_scale(left, right), 0.0, None
-            pngs = {"left": to_png16(left, scale), "right": to_png16(right, scale)}
-        else:
-            from synth.rendering.sensor_model import sensor_views
-
-            codes_left, codes_right, sensor_info = sensor_views(left, right, sensor, seed)
-            scale, offset = sensor_info["dn_per_unit"], sensor.dark_level_dn
-            pngs = {"left": codes_left, "right": codes_right}
-        for name, img in (("left", left), ("right", right)):
-            write_png(os.path.join(tmp, f"{name}.png"), pngs[name])
-            seen = img if sensor is None else (pngs[name] - offset) / scale
-            write_png(os.path.join(tmp, f"{name}_preview.png"), srgb_preview(seen, white))
-            if exr:
-                write_exr(os.path.join(tmp, f"{name}.exr"), img, info["variant"])
+        scale, offset, sensor_info = _write_images(tmp, left, right, info, sensor, seed, exr)
         times["write_images"] = time.perf_counter() - t
-
-        truth_counts = truth_formats = colmap_note = None
-        if spec.surface is not None:
-            from synth.products.truth_maps import write_truth_maps
-
-            t = time.perf_counter()
-            truth_counts = write_truth_maps(tmp, spec.rig, spec.surface.mesh_path,
-                                            spec.surface.vertices, spec.surface.triangles)
-            truth_formats = write_surface_formats(tmp, spec.rig)
-            times["truth_maps"] = time.perf_counter() - t
-        else:
-            t = time.perf_counter()
-            uv_left = project(spec.rig.left, spec.rig.view_port(0), spec.targets)
-            uv_right = project(spec.rig.right, spec.rig.view_port(1), spec.targets)
-            times["project"] = time.perf_counter() - t
-
-        t = time.perf_counter()
-        write_calib(os.path.join(tmp, "calib.yaml"), spec.rig, spec.has_port)
-        write_cameras_json(tmp, spec.rig, spec.has_port)
-        if design is not None:  # the port a user would believe, beside the truth
-            from synth.scene.design import CALIB_DESIGN, CAMERAS_DESIGN, DESIGN_NOTE, design_rig
-
-            if not spec.has_port:
-                raise SceneError(f"{spec.path}: a design port needs a scene with a port")
-            believed = design_rig(spec.rig, design.get("port", {}))
-            write_calib(os.path.join(tmp, CALIB_DESIGN), believed, True,
-                        extra={"design": {"note": DESIGN_NOTE}})
-            write_cameras_json(tmp, believed, True, name=CAMERAS_DESIGN)
-        if spec.surface is None:
-            write_targets_ply(os.path.join(tmp, "targets.ply"), spec.targets)
-            write_pixels_csv(os.path.join(tmp, "pixels.csv"), spec.target_ids, spec.targets,
-                             uv_left, uv_right)
-            colmap_note = write_colmap_model(tmp, spec.rig, spec.has_port, spec.target_ids,
-                                             spec.targets, uv_left, uv_right)
-        else:
-            colmap_note = write_colmap_model(tmp, spec.rig, spec.has_port, [], np.zeros((0, 3)),
-                                             np.zeros((0, 2)), np.zeros((0, 2)))
-        times["write_files"] = time.perf_counter() - t
+        truth = _write_truth(tmp, spec, design, times)
         times["total"] = time.perf_counter() - t_start
-
         manifest = {
             "format_version": FORMAT_VERSION,
             "created_utc": datetime.now(timezone.utc).isoformat(timespec="seconds"),
@@ -339,7 +272,7 @@ def write_dataset(scene, out_dir, spp: int | None = None, defines: dict | None =
                                   {"mesh": os.path.basename(spec.surface.mesh_path),
                                    "texture": os.path.basename(spec.surface.texture_path),
                                    "triangles": int(spec.surface.triangles.shape[0]),
-                                   "truth_pixels": truth_counts})},
+                                   "truth_pixels": truth["counts"]})},
             "variant": info["variant"], "variant_requested": variant,
             "integrator": info["integrator"],
             "spp": spp, "spp_rendered": info["spp_rendered"], "seed": seed,
@@ -356,11 +289,12 @@ def write_dataset(scene, out_dir, spp: int | None = None, defines: dict | None =
             "render": {"settings": adaptive_settings() if adaptive else None,
                        **{view: info["render"][view] for view in ("left", "right")}},
             "seconds": times,
-            "truth_formats": truth_formats,
+            "truth_formats": truth["formats"],
             **({} if design is None else {"design": design}),
             "colmap": (f"colmap/: cameras.txt ({spec.rig.port.housing}, "
                        f"metres), images.txt, points3D.txt"
-                       if colmap_note is None else f"not written: {colmap_note}"),
+                       if truth["colmap_note"] is None
+                       else f"not written: {truth['colmap_note']}"),
             "files": dataset_files(tmp) + ["manifest.json"],
             "sha256": {name: file_sha256(os.path.join(tmp, name))
                        for name in dataset_files(tmp)},
@@ -372,6 +306,94 @@ def write_dataset(scene, out_dir, spp: int | None = None, defines: dict | None =
     manifest["skipped"] = False
     manifest["rendered_again"] = damage  # why an earlier output of this request was not whole
     return manifest
+
+
+def _stereo_spec(scene, defines, spp, seed, times) -> tuple[SceneSpec, int, int]:
+    """``(spec, spp, seed)``: the scene of two cameras to render, ``spp`` and ``seed`` resolved
+    (None: the scene's) and recorded in its parameters; SceneError for N > 2 cameras or a left
+    camera off the reference origin."""
+    t = time.perf_counter()
+    spec = scene if isinstance(scene, SceneSpec) else load_scene(scene, defines)
+    times["load_scene"] = time.perf_counter() - t
+    if spec.extra_cameras:  # never the first two alone
+        raise SceneError(f"{spec.path}: a scene of {len(spec.all_cameras)} cameras is written "
+                         f"a folder per camera (synth.products.views_dataset."
+                         f"write_views_dataset), not as a stereo pair")
+    left_cam = spec.rig.left
+    if not (np.allclose(left_cam.R, np.eye(3), atol=1e-12) and np.allclose(left_cam.t, 0)):
+        raise SceneError(f"{spec.path}: the left sensor must sit at the reference origin with "
+                         f"identity rotation (the reference frame is the left camera's)")
+    spp = spec.spp if spp is None else int(spp)
+    seed = spec.seed if seed is None else int(seed)
+    # the parameters say what was rendered
+    return spec.rendered_with(spp=spp, seed=seed), spp, seed
+
+
+def _write_images(tmp, left, right, info, sensor, seed, exr) -> tuple:
+    """Both views as 16-bit PNGs (linear, or the ``sensor``'s raw codes), 8-bit sRGB previews
+    and, with ``exr``, float32 EXRs into ``tmp``; returns ``(png_scale, png_offset,
+    sensor_info)``."""
+    white = max(float(left.max()), float(right.max()))
+    if sensor is None:
+        scale, offset, sensor_info = png16_scale(left, right), 0.0, None
+        pngs = {"left": to_png16(left, scale), "right": to_png16(right, scale)}
+    else:
+        from synth.rendering.sensor_model import sensor_views
+
+        codes_left, codes_right, sensor_info = sensor_views(left, right, sensor, seed)
+        scale, offset = sensor_info["dn_per_unit"], sensor.dark_level_dn
+        pngs = {"left": codes_left, "right": codes_right}
+    for name, img in (("left", left), ("right", right)):
+        write_png(os.path.join(tmp, f"{name}.png"), pngs[name])
+        seen = img if sensor is None else (pngs[name] - offset) / scale
+        write_png(os.path.join(tmp, f"{name}_preview.png"), srgb_preview(seen, white))
+        if exr:
+            write_exr(os.path.join(tmp, f"{name}.exr"), img, info["variant"])
+    return scale, offset, sensor_info
+
+
+def _write_truth(tmp, spec: SceneSpec, design, times) -> dict:
+    """The truth and the rig's files into ``tmp``: a surface's truth maps and depth formats, or
+    the targets' PLY and simulator pixels; ``calib.yaml``, ``cameras.json`` (and the design
+    port's, with ``design``), the COLMAP model. Returns ``{counts, formats, colmap_note}``."""
+    truth = {"counts": None, "formats": None, "colmap_note": None}
+    if spec.surface is not None:
+        from synth.products.truth_maps import write_truth_maps
+
+        t = time.perf_counter()
+        truth["counts"] = write_truth_maps(tmp, spec.rig, spec.surface.mesh_path,
+                                           spec.surface.vertices, spec.surface.triangles)
+        truth["formats"] = write_surface_formats(tmp, spec.rig)
+        times["truth_maps"] = time.perf_counter() - t
+    else:
+        t = time.perf_counter()
+        uv_left = project(spec.rig.left, spec.rig.view_port(0), spec.targets)
+        uv_right = project(spec.rig.right, spec.rig.view_port(1), spec.targets)
+        times["project"] = time.perf_counter() - t
+    t = time.perf_counter()
+    write_calib(os.path.join(tmp, "calib.yaml"), spec.rig, spec.has_port)
+    write_cameras_json(tmp, spec.rig, spec.has_port)
+    if design is not None:  # the port a user would believe, beside the truth
+        from synth.scene.design import CALIB_DESIGN, CAMERAS_DESIGN, DESIGN_NOTE, design_rig
+
+        if not spec.has_port:
+            raise SceneError(f"{spec.path}: a design port needs a scene with a port")
+        believed = design_rig(spec.rig, design.get("port", {}))
+        write_calib(os.path.join(tmp, CALIB_DESIGN), believed, True,
+                    extra={"design": {"note": DESIGN_NOTE}})
+        write_cameras_json(tmp, believed, True, name=CAMERAS_DESIGN)
+    if spec.surface is None:
+        write_targets_ply(os.path.join(tmp, "targets.ply"), spec.targets)
+        write_pixels_csv(os.path.join(tmp, "pixels.csv"), spec.target_ids, spec.targets,
+                         uv_left, uv_right)
+        truth["colmap_note"] = write_colmap_model(tmp, spec.rig, spec.has_port, spec.target_ids,
+                                                  spec.targets, uv_left, uv_right)
+    else:
+        truth["colmap_note"] = write_colmap_model(tmp, spec.rig, spec.has_port, [],
+                                                  np.zeros((0, 3)), np.zeros((0, 2)),
+                                                  np.zeros((0, 2)))
+    times["write_files"] = time.perf_counter() - t
+    return truth
 
 
 def dataset_files(directory: str) -> list:
