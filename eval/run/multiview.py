@@ -194,16 +194,9 @@ def _rms(values) -> float | None:
 
 def measure(config: RunConfig, log) -> tuple[dict, dict]:
     """The run (module docs): ``(report, arrays)``."""
-    from measure import triangulate
-    from measure.images.detect import FLOOR_FRACTION
-    from measure.images.eccentricity import correct_eccentricity
     from measure.stereo.multimatch import match_views
     from synth.products.crosscheck import ASSOCIATION_GATE_PX, associate_detections
-    from synth.rendering.noise import add_pixel_noise
-    from synth.rendering.render import render_summary, render_views
 
-    from eval.core.analytic import visible_targets
-    from eval.core.detection import detect_view
     from eval.core.results import ErrorStats
     from eval.run.inputs import load_run_scene
     from eval.run.pipeline import default_depth_window
@@ -213,114 +206,39 @@ def measure(config: RunConfig, log) -> tuple[dict, dict]:
     names = spec.camera_names
     refuse_inapplicable(config, len(names))
     rig = measurement_rig(config, spec)
-    truth_rig = spec.multirig
     seed = spec.seed if config.seed is None else config.seed
-    simulated, inside = [], []
-    for k, camera in enumerate(truth_rig.cameras):
-        uv, wholly = visible_targets(camera, truth_rig.view_port(k), spec.targets,
-                                     spec.target_radius)
-        simulated.append(uv)
-        inside.append(wholly)
-    visible_views = np.sum(inside, axis=0)
+    simulated, visible_views = _simulated_views(spec)
     if not (visible_views >= 2).any():
         raise CLIError(f"{config.scene}: no target is visible in two views")
-
     t = time.perf_counter()
-    if config.from_dir:
-        images, info = dataset_views(config, spec)
-        log(f"reusing the images of {config.from_dir}")
-    else:
-        log(f"render {len(names)} views ({spec.size[0]}x{spec.size[1]} px, "
-            f"{config.spp or spec.spp} spp, {'full film' if config.full_film else 'adaptive'}) …")
-        images, info = render_views(spec, spp=config.spp, variant=config.variant,
-                                    progress=config.progress, adaptive=not config.full_film)
-        for name in names:
-            log(f"  {name}: {render_summary(info['render'][name])}")
+    images, info = _views(config, spec, log)
     timings["render"] = time.perf_counter() - t
-
     t = time.perf_counter()
-    detections = [detect_view(image, config.threshold_fraction, config.max_elongation,
-                              config.max_area_ratio, config.median_filter,
-                              floor_fraction=FLOOR_FRACTION) for image in images]
-    raw = [np.array(d.centers, dtype=float).reshape(-1, 2) for d in detections]
-    centers = raw
-    if config.noise_px > 0:
-        rng = np.random.default_rng(seed)
-        centers = [add_pixel_noise(c, variance=config.noise_px ** 2, rng=rng) for c in raw]
+    raw, centers = _detect(config, images, seed)
     timings["detect"] = time.perf_counter() - t
-
     t = time.perf_counter()
     window = (default_depth_window(spec.params, spec.targets, spec.rig.port)
               if config.depth_range_mm is None else tuple(config.depth_range_mm))
     tracks = match_views(rig, centers, gate_mm=config.gate_mm, depth_range=window)
     timings["match"] = time.perf_counter() - t
-
     t = time.perf_counter()
-    pixels = tracks.pixels(centers)
-    if config.corrects_eccentricity:
-        result, _, _ = correct_views(rig, pixels, spec.target_radius)
-    else:
-        from measure.stereo.multiview import triangulate_views
-
-        result = triangulate_views(rig.views(), pixels)
+    result = _triangulate(config, rig, tracks.pixels(centers), spec.target_radius)
     timings["triangulate"] = time.perf_counter() - t
-
     # the truth, for scoring only
     truth_of = [associate_detections(raw[k], simulated[k], ASSOCIATION_GATE_PX)[0]
                 for k in range(len(names))]
-    ids = np.full(tracks.detections.shape, -1)
-    for k in range(len(names)):
-        seen = tracks.detections[:, k] >= 0
-        ids[seen, k] = truth_of[k][tracks.detections[seen, k]]
-    target = ids.max(axis=1) if len(ids) else np.zeros(0, int)
-    correct = np.array([(row[row >= 0] == row.max()).all() and
-                        (row >= 0).sum() == (tracks.detections[i] >= 0).sum()
-                        for i, row in enumerate(ids)], dtype=bool)
-    k_views = tracks.views_per_track
-    ok = correct & result.valid
-    errors = np.full((len(target), 3), np.nan)
-    errors[ok] = result.points[ok] - spec.targets[target[ok]]
-    detected_views = np.zeros(len(spec.targets), int)
-    for k in range(len(names)):
-        np.add.at(detected_views, truth_of[k][truth_of[k] >= 0], 1)
-    matched = np.zeros(len(spec.targets), bool)
-    matched[target[correct]] = True
-    twice = visible_views >= 2
+    scored = _scored_tracks(tracks, truth_of, result, spec.targets)
+    ok, errors, target, k_views = scored["ok"], scored["errors"], scored["target"], tracks.views_per_track
     by_k = {}
     for k in range(2, len(names) + 1):
         rows = ok & (k_views == k)
         by_k[str(k)] = {"tracks": int((k_views == k).sum()), "scored": int(rows.sum()),
                         "rms_dp_mm": _rms(np.linalg.norm(errors[rows], axis=1)),
                         "stats": ErrorStats.of(errors[rows]).to_json()}
-
-    # the first two cameras as a stereo pair, from the same detections (the two-camera run)
-    pair = tracks.pairs.get((0, 1))
-    pair_report = None
-    if pair is not None and len(pair.left):
-        stereo = rig.pair(0, 1)
-        uv0, uv1 = centers[0][pair.left], centers[1][pair.right]
-        pair_result = (correct_eccentricity(stereo, uv0, uv1, spec.target_radius).triangulation
-                       if config.corrects_eccentricity else triangulate(stereo, uv0, uv1))
-        t0, t1 = truth_of[0][pair.left], truth_of[1][pair.right]
-        pair_ok = (t0 >= 0) & (t0 == t1) & pair_result.valid
-        pair_errors = pair_result.points[pair_ok] - spec.targets[t0[pair_ok]]
-        pair_report = {"cameras": [names[0], names[1]], "pairs": int(len(pair.left)),
-                       "correct": int(((t0 >= 0) & (t0 == t1)).sum()),
-                       "stats": ErrorStats.of(pair_errors).to_json(),
-                       "rms_dp_mm": _rms(np.linalg.norm(pair_errors, axis=1))}
+    pair_report = _pair_report(config, rig, tracks, centers, truth_of, spec, names)
     stats = ErrorStats.of(errors[ok])
     rms = _rms(np.linalg.norm(errors[ok], axis=1))
-    matching = {"tracks": int(len(target)), "correct": int(correct.sum()),
-                "wrong": int((~correct).sum()), "conflicts_dropped": int(tracks.n_conflicts),
-                "visible_in_two_or_more": int(twice.sum()),
-                "visible_in_two_or_more_matched": int((twice & matched).sum()),
-                "detected_in_two_or_more": int((detected_views >= 2).sum()),
-                "detected_in_two_or_more_matched": int(((detected_views >= 2) & matched).sum()),
-                "seen_once": int((visible_views == 1).sum()),
-                "gate_mm": config.gate_mm,
-                "depth_window_mm": [None if v is None else float(v) for v in window],
-                "pairs": {f"{names[i]}-{names[j]}": int(len(m.left))
-                          for (i, j), m in tracks.pairs.items()}}
+    matching = _matching(config, tracks, scored, visible_views, window, names)
     failures = []
     if matching["wrong"]:
         failures.append(f"{matching['wrong']} tracks join detections of different targets")
@@ -342,12 +260,139 @@ def measure(config: RunConfig, log) -> tuple[dict, dict]:
     per_target = np.full((len(spec.targets), 8), np.nan)
     per_target[:, 0] = spec.target_ids
     per_target[:, 1] = visible_views
-    per_target[:, 2] = detected_views
+    per_target[:, 2] = scored["detected_views"]
     per_target[:, 3] = 0
     per_target[target[ok], 3] = k_views[ok]
     per_target[target[ok], 4:7] = result.points[ok]
     per_target[target[ok], 7] = np.linalg.norm(errors[ok], axis=1)
     return report, {"targets": per_target}
+
+
+def _simulated_views(spec) -> tuple[list, np.ndarray]:
+    """``(simulated, visible_views)``: the simulator's pixels of every target in each view and
+    in how many views each target is wholly inside the image."""
+    from eval.core.analytic import visible_targets
+
+    truth_rig = spec.multirig
+    simulated, inside = [], []
+    for k, camera in enumerate(truth_rig.cameras):
+        uv, wholly = visible_targets(camera, truth_rig.view_port(k), spec.targets,
+                                     spec.target_radius)
+        simulated.append(uv)
+        inside.append(wholly)
+    return simulated, np.sum(inside, axis=0)
+
+
+def _views(config, spec, log) -> tuple[list, dict]:
+    """The views' images and how they were made: read from ``--from`` or rendered now."""
+    from synth.rendering.render import render_summary, render_views
+
+    if config.from_dir:
+        images, info = dataset_views(config, spec)
+        log(f"reusing the images of {config.from_dir}")
+        return images, info
+    log(f"render {len(spec.camera_names)} views ({spec.size[0]}x{spec.size[1]} px, "
+        f"{config.spp or spec.spp} spp, {'full film' if config.full_film else 'adaptive'}) …")
+    images, info = render_views(spec, spp=config.spp, variant=config.variant,
+                                progress=config.progress, adaptive=not config.full_film)
+    for name in spec.camera_names:
+        log(f"  {name}: {render_summary(info['render'][name])}")
+    return images, info
+
+
+def _detect(config, images, seed) -> tuple[list, list]:
+    """``(raw, centers)``: each view's detected centres (px), and the same with ``--noise-px``
+    added (seeded)."""
+    from measure.images.detect import FLOOR_FRACTION
+    from synth.rendering.noise import add_pixel_noise
+
+    from eval.core.detection import detect_view
+
+    detections = [detect_view(image, config.threshold_fraction, config.max_elongation,
+                              config.max_area_ratio, config.median_filter,
+                              floor_fraction=FLOOR_FRACTION) for image in images]
+    raw = [np.array(d.centers, dtype=float).reshape(-1, 2) for d in detections]
+    if config.noise_px <= 0:
+        return raw, raw
+    rng = np.random.default_rng(seed)
+    return raw, [add_pixel_noise(c, variance=config.noise_px ** 2, rng=rng) for c in raw]
+
+
+def _triangulate(config, rig, pixels, target_radius):
+    """The tracks' points: the optical path of every view, with the eccentricity correction
+    when the run corrects it."""
+    if config.corrects_eccentricity:
+        return correct_views(rig, pixels, target_radius)[0]
+    from measure.stereo.multiview import triangulate_views
+
+    return triangulate_views(rig.views(), pixels)
+
+
+def _scored_tracks(tracks, truth_of, result, targets) -> dict:
+    """Each track against the truth (``truth_of[k]``: the target of each detection of view k,
+    −1 none): its ``target``, whether it is ``correct`` (every detection of one target),
+    ``ok`` (correct and triangulated), ``errors`` (mm, NaN where not ok), and per target in
+    how many views it was detected and whether a correct track holds it."""
+    views = len(truth_of)
+    ids = np.full(tracks.detections.shape, -1)
+    for k in range(views):
+        seen = tracks.detections[:, k] >= 0
+        ids[seen, k] = truth_of[k][tracks.detections[seen, k]]
+    target = ids.max(axis=1) if len(ids) else np.zeros(0, int)
+    has = ids >= 0
+    correct = (((ids == target[:, None]) | ~has).all(axis=1)
+               & (has.sum(axis=1) == (tracks.detections >= 0).sum(axis=1)))
+    ok = correct & result.valid
+    errors = np.full((len(target), 3), np.nan)
+    errors[ok] = result.points[ok] - targets[target[ok]]
+    detected_views = np.zeros(len(targets), int)
+    for k in range(views):
+        np.add.at(detected_views, truth_of[k][truth_of[k] >= 0], 1)
+    matched = np.zeros(len(targets), bool)
+    matched[target[correct]] = True
+    return {"target": target, "correct": correct, "ok": ok, "errors": errors,
+            "detected_views": detected_views, "matched": matched}
+
+
+def _pair_report(config, rig, tracks, centers, truth_of, spec, names):
+    """The first two cameras as a stereo pair, from the same detections (the two-camera run);
+    None when they share no match."""
+    from measure import triangulate
+    from measure.images.eccentricity import correct_eccentricity
+
+    from eval.core.results import ErrorStats
+
+    pair = tracks.pairs.get((0, 1))
+    if pair is None or not len(pair.left):
+        return None
+    stereo = rig.pair(0, 1)
+    uv0, uv1 = centers[0][pair.left], centers[1][pair.right]
+    pair_result = (correct_eccentricity(stereo, uv0, uv1, spec.target_radius).triangulation
+                   if config.corrects_eccentricity else triangulate(stereo, uv0, uv1))
+    t0, t1 = truth_of[0][pair.left], truth_of[1][pair.right]
+    pair_ok = (t0 >= 0) & (t0 == t1) & pair_result.valid
+    pair_errors = pair_result.points[pair_ok] - spec.targets[t0[pair_ok]]
+    return {"cameras": [names[0], names[1]], "pairs": int(len(pair.left)),
+            "correct": int(((t0 >= 0) & (t0 == t1)).sum()),
+            "stats": ErrorStats.of(pair_errors).to_json(),
+            "rms_dp_mm": _rms(np.linalg.norm(pair_errors, axis=1))}
+
+
+def _matching(config, tracks, scored, visible_views, window, names) -> dict:
+    """The report's ``matching``: tracks right and wrong, targets seen and matched."""
+    correct, matched, detected = scored["correct"], scored["matched"], scored["detected_views"]
+    twice = visible_views >= 2
+    return {"tracks": int(len(scored["target"])), "correct": int(correct.sum()),
+            "wrong": int((~correct).sum()), "conflicts_dropped": int(tracks.n_conflicts),
+            "visible_in_two_or_more": int(twice.sum()),
+            "visible_in_two_or_more_matched": int((twice & matched).sum()),
+            "detected_in_two_or_more": int((detected >= 2).sum()),
+            "detected_in_two_or_more_matched": int(((detected >= 2) & matched).sum()),
+            "seen_once": int((visible_views == 1).sum()),
+            "gate_mm": config.gate_mm,
+            "depth_window_mm": [None if v is None else float(v) for v in window],
+            "pairs": {f"{names[i]}-{names[j]}": int(len(m.left))
+                      for (i, j), m in tracks.pairs.items()}}
 
 
 def report_markdown(report: dict) -> str:
