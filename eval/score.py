@@ -91,16 +91,51 @@ def _inside(path, folder) -> bool:
 
 
 def main(args) -> int:
-    from measure import triangulate
-    from synth.products.dataset import DatasetError, read_dataset
-    from synth.infra.fileio import OutputDir, atomic_write_json, atomic_write_text, jsonable
-
-    from eval.core.cloud_metrics import write_error_ply
-    from eval.core.figures import ellipses_figure, error_maps_figure, histograms_figure
-    from eval.core.uncertainty import write_uncertainty_files
+    from synth.infra.fileio import OutputDir
 
     log = lambda text: print(text, file=sys.stderr, flush=True)  # noqa: E731
     start = time.perf_counter()
+    method, pixel_sigma = _check_options(args)
+    output = OutputDir(args.out, COMMAND).claim()
+    if args.submission:
+        return score_suite_main(args, output, method, log, start)
+    data, several = _read_data(args)
+    if not several and data.is_surface:
+        if not args.points:
+            raise CLIError(f"--pixels does not apply to {args.dataset}: a surface dataset "
+                           f"(per-pixel truth maps, no targets); score its --points (eval "
+                           f"measure --dense writes points.ply)")
+        return score_surface_main(args, data, output, log, start)
+    points, uv, label, source = _points_to_score(args, data, method)
+    report, arrays, warnings = score_dataset(data, points, label, args.gate_mm,
+                                             units=source.get("units"))
+    if warnings:  # one line naming the likely cause; scored as given all the same
+        what = f"--points {args.points}" if args.points else f"--pixels {args.pixels}"
+        log(f"warning: {what}: " + "; ".join(warnings))
+    report = {"dataset": report["dataset"], "source": source, **{k: v for k, v in report.items()
+                                                               if k != "dataset"}}
+    report["uncertainty"] = (score_covariances(data, arrays, label, uv, pixel_sigma)
+                             if args.pixels else {"note": "no covariance: --points have no "
+                                                          "pixels (score --pixels for one)"})
+    summary_of = report["uncertainty"].get("summaries", {}).get(label)
+    report["methods"][label]["coverage_95"] = (summary_of["coverage"]["coverage_95"]
+                                               if summary_of else None)
+    with output.staged() as tmp:
+        report = _write_outputs(tmp, report, arrays, label, start)
+    summary = _summary_line(data, report, label, summary_of, several)
+    if args.json:
+        import json
+
+        log(summary)
+        print(json.dumps(report, indent=2, allow_nan=False))
+    else:
+        print(summary)
+    print(f"wrote {output.path}", file=sys.stderr if args.json else sys.stdout)
+    return _verdict(args, report, label, log)
+
+
+def _check_options(args) -> tuple[str, object]:
+    """``(method, pixel σ)`` to score with; CLIError for options that do not apply together."""
     if args.points and args.method is not None:
         raise CLIError("--method does not apply with --points: your points are scored as they "
                        "are (--method triangulates --pixels)")
@@ -124,9 +159,12 @@ def main(args) -> int:
         raise CLIError(f"--out {args.out}: inside the suite {args.dataset} (a suite's folder holds "
                        f"what synth suite wrote; scores there would make it refuse to resume): "
                        f"write the scores beside it")
-    output = OutputDir(args.out, COMMAND).claim()
-    if args.submission:
-        return score_suite_main(args, output, method, log, start)
+    return method, pixel_sigma
+
+
+def _read_data(args):
+    """``(dataset, several)``: the dataset (of two cameras, or of N: ``several``)."""
+    from synth.products.dataset import DatasetError, read_dataset
     from synth.products.views_dataset import is_views_dataset, read_views_dataset
 
     several = is_views_dataset(args.dataset)
@@ -135,60 +173,61 @@ def main(args) -> int:
                        f"{args.dataset} is a dataset of N cameras: score its --points (eval run "
                        f"--from measures its images with every view)")
     try:
-        data = read_views_dataset(args.dataset) if several else read_dataset(args.dataset)
+        return (read_views_dataset(args.dataset) if several else read_dataset(args.dataset)), \
+            several
     except DatasetError as exc:
         raise CLIError(str(exc)) from None
-    if not several and data.is_surface:
-        if not args.points:
-            raise CLIError(f"--pixels does not apply to {args.dataset}: a surface dataset "
-                           f"(per-pixel truth maps, no targets); score its --points (eval "
-                           f"measure --dense writes points.ply)")
-        return score_surface_main(args, data, output, log, start)
+
+
+def _points_to_score(args, data, method):
+    """``(points (N, 3) mm, uv, label, source)``: ``--points`` as given (in mm), or
+    ``--pixels`` triangulated with ``method`` and the dataset's calibration (``uv``: the valid
+    pairs' left and right pixels; None for points)."""
+    from measure import triangulate
+
     if args.points:
         units = args.units or "mm"
-        points = read_points(args.points) * UNITS[units]
-        label, source = "theirs", {"points": os.path.abspath(args.points), "units": units}
+        return (read_points(args.points) * UNITS[units], None, "theirs",
+                {"points": os.path.abspath(args.points), "units": units})
+    pairs = read_pixel_pairs(args.pixels)
+    if method == "absorbed":
+        result = triangulate(_absorbed_rig(args, data), pairs[:, :2], pairs[:, 2:],
+                             "optical_path")
     else:
-        pairs = read_pixel_pairs(args.pixels)
-        if method == "absorbed":
-            result = triangulate(_absorbed_rig(args, data), pairs[:, :2], pairs[:, 2:],
-                                 "optical_path")
-        else:
-            result = triangulate(data.rig, pairs[:, :2], pairs[:, 2:], method)
-        if not result.valid.any():
-            raise CLIError(f"--pixels {args.pixels}: no pair triangulates with {method} "
-                           f"and the dataset's calibration")
-        points = result.points[result.valid]
-        uv = (pairs[result.valid, :2], pairs[result.valid, 2:])
-        label = method
-        source = {"pixels": os.path.abspath(args.pixels), "method": method,
-                  "pairs": int(len(pairs)), "invalid": int((~result.valid).sum())}
-    report, arrays, warnings = score_dataset(data, points, label, args.gate_mm,
-                                             units=source.get("units"))
-    if warnings:  # one line naming the likely cause; scored as given all the same
-        what = f"--points {args.points}" if args.points else f"--pixels {args.pixels}"
-        log(f"warning: {what}: " + "; ".join(warnings))
-    report = {"dataset": report["dataset"], "source": source, **{k: v for k, v in report.items()
-                                                               if k != "dataset"}}
-    report["uncertainty"] = (score_covariances(data, arrays, label, uv, pixel_sigma)
-                             if args.pixels else {"note": "no covariance: --points have no "
-                                                          "pixels (score --pixels for one)"})
-    summary_of = report["uncertainty"].get("summaries", {}).get(label)
-    report["methods"][label]["coverage_95"] = (summary_of["coverage"]["coverage_95"]
-                                               if summary_of else None)
-    with output.staged() as tmp:
-        report["ply"] = write_error_ply(tmp, "points_scored.ply", arrays["points"],
-                                        arrays["errors"])
-        error_maps_figure(os.path.join(tmp, "error_maps.png"), {label: arrays})
-        histograms_figure(os.path.join(tmp, "histograms.png"), {label: arrays})
-        if "covariance" in arrays:
-            report["uncertainty"]["files"] = {label: write_uncertainty_files(
-                tmp, label, arrays["points"], arrays["covariance"], arrays["errors"])}
-            ellipses_figure(os.path.join(tmp, "ellipses.png"), {label: arrays})
-        report["timings_s"] = {"total": time.perf_counter() - start}
-        report = jsonable(report)
-        atomic_write_json(os.path.join(tmp, "report.json"), report)
-        atomic_write_text(os.path.join(tmp, "report.md"), markdown(report))
+        result = triangulate(data.rig, pairs[:, :2], pairs[:, 2:], method)
+    if not result.valid.any():
+        raise CLIError(f"--pixels {args.pixels}: no pair triangulates with {method} "
+                       f"and the dataset's calibration")
+    return (result.points[result.valid], (pairs[result.valid, :2], pairs[result.valid, 2:]),
+            method, {"pixels": os.path.abspath(args.pixels), "method": method,
+                     "pairs": int(len(pairs)), "invalid": int((~result.valid).sum())})
+
+
+def _write_outputs(tmp, report, arrays, label, start) -> dict:
+    """The scored points' PLY, the figures, the covariances' files, ``report.json`` and
+    ``report.md`` into ``tmp``; returns the report as written."""
+    from synth.infra.fileio import atomic_write_json, atomic_write_text, jsonable
+
+    from eval.core.cloud_metrics import write_error_ply
+    from eval.core.figures import ellipses_figure, error_maps_figure, histograms_figure
+    from eval.core.uncertainty import write_uncertainty_files
+
+    report["ply"] = write_error_ply(tmp, "points_scored.ply", arrays["points"], arrays["errors"])
+    error_maps_figure(os.path.join(tmp, "error_maps.png"), {label: arrays})
+    histograms_figure(os.path.join(tmp, "histograms.png"), {label: arrays})
+    if "covariance" in arrays:
+        report["uncertainty"]["files"] = {label: write_uncertainty_files(
+            tmp, label, arrays["points"], arrays["covariance"], arrays["errors"])}
+        ellipses_figure(os.path.join(tmp, "ellipses.png"), {label: arrays})
+    report["timings_s"] = {"total": time.perf_counter() - start}
+    report = jsonable(report)
+    atomic_write_json(os.path.join(tmp, "report.json"), report)
+    atomic_write_text(os.path.join(tmp, "report.md"), markdown(report))
+    return report
+
+
+def _summary_line(data, report, label, summary_of, several) -> str:
+    """The one line printed: association, scores and coverage."""
     st = report["methods"][label]
     a = report["association"]
     summary = (f"{data.path}: {a['associated']} of {a['points']} points within "
@@ -203,32 +242,30 @@ def main(args) -> int:
     if summary_of:
         summary += (f"; coverage of the 95 % ellipsoids {fmt(summary_of['coverage']['coverage_95'])}"
                     f" (median σz {fmt(summary_of['sigma']['median_sigma_mm']['z'], 4)} mm)")
-    if args.json:
-        import json
+    return summary
 
-        log(summary)
-        print(json.dumps(report, indent=2, allow_nan=False))
-    else:
-        print(summary)
-    print(f"wrote {output.path}", file=sys.stderr if args.json else sys.stdout)
+
+def _verdict(args, report, label, log) -> int:
+    """1 (with a FAIL line naming the likely cause) when none of the points was scored, else
+    0."""
     a = report["association"]
-    if not args.pixels and a["points"] and not a["associated"]:
+    if not a["points"] or a["associated"]:
+        return 0
+    if not args.pixels:
         log(f"FAIL: none of the {a['points']} points lies within {a['gate_mm']:g} mm of a "
             f"target (Chamfer {fmt(report['methods'][label]['chamfer_mm'])} mm): nothing was "
             f"scored (the points in another unit or frame? the warnings say which)")
         return 1
-    if args.pixels and a["points"] and not a["associated"]:
-        # the pixels were triangulated here and none of the points was scored
-        hint = (" --method absorbed puts its points in the pinhole model's virtual frame, tens "
-                "of mm off the targets: give a wider --gate-mm (e.g. 200) and read its length "
-                "errors" if label == "absorbed" else
-                " the pixels do not fit this dataset's calibration (another rig, or left and "
-                "right swapped), or give a wider --gate-mm")
-        log(f"FAIL: none of the {a['points']} points lies within {a['gate_mm']:g} mm of a "
-            f"target (Chamfer {fmt(report['methods'][label]['chamfer_mm'])} mm): nothing was "
-            f"scored;{hint}")
-        return 1
-    return 0
+    # the pixels were triangulated here and none of the points was scored
+    hint = (" --method absorbed puts its points in the pinhole model's virtual frame, tens "
+            "of mm off the targets: give a wider --gate-mm (e.g. 200) and read its length "
+            "errors" if label == "absorbed" else
+            " the pixels do not fit this dataset's calibration (another rig, or left and "
+            "right swapped), or give a wider --gate-mm")
+    log(f"FAIL: none of the {a['points']} points lies within {a['gate_mm']:g} mm of a "
+        f"target (Chamfer {fmt(report['methods'][label]['chamfer_mm'])} mm): nothing was "
+        f"scored;{hint}")
+    return 1
 
 
 def _absorbed_rig(args, data):
