@@ -260,45 +260,8 @@ def write_dataset(scene, out_dir, spp: int | None = None, defines: dict | None =
         times["write_images"] = time.perf_counter() - t
         truth = _write_truth(tmp, spec, design, times)
         times["total"] = time.perf_counter() - t_start
-        manifest = {
-            "format_version": FORMAT_VERSION,
-            "created_utc": datetime.now(timezone.utc).isoformat(timespec="seconds"),
-            "request_key": key,
-            "versions": package_versions(),
-            "scene": {"path": spec.path, "sha256": spec.sha256, "params": spec.params,
-                      "has_port": spec.has_port, "n_targets": int(spec.targets.shape[0]),
-                      "target_radius_mm": spec.target_radius,
-                      "surface": (None if spec.surface is None else
-                                  {"mesh": os.path.basename(spec.surface.mesh_path),
-                                   "texture": os.path.basename(spec.surface.texture_path),
-                                   "triangles": int(spec.surface.triangles.shape[0]),
-                                   "truth_pixels": truth["counts"]})},
-            "variant": info["variant"], "variant_requested": variant,
-            "integrator": info["integrator"],
-            "spp": spp, "spp_rendered": info["spp_rendered"], "seed": seed,
-            "seeds": {view: [pass_seed(seed, i, k) for k in range(len(info["passes"][view]))]
-                      for i, view in enumerate(("left", "right"))},
-            "image_size": list(spec.size),
-            "png_scale": scale,
-            "png_offset": offset,
-            "sensor": sensor_info,
-            "images": {"left": image_stats(left), "right": image_stats(right)},
-            "samples_per_second": info["samples_per_second"],
-            "samples_per_second_per_view": info["samples_per_second_per_view"],
-            "passes": info["passes"],
-            "render": {"settings": adaptive_settings() if adaptive else None,
-                       **{view: info["render"][view] for view in ("left", "right")}},
-            "seconds": times,
-            "truth_formats": truth["formats"],
-            **({} if design is None else {"design": design}),
-            "colmap": (f"colmap/: cameras.txt ({spec.rig.port.housing}, "
-                       f"metres), images.txt, points3D.txt"
-                       if truth["colmap_note"] is None
-                       else f"not written: {truth['colmap_note']}"),
-            "files": dataset_files(tmp) + ["manifest.json"],
-            "sha256": {name: file_sha256(os.path.join(tmp, name))
-                       for name in dataset_files(tmp)},
-        }
+        manifest = _manifest(tmp, spec, key, info, variant, spp, seed, (scale, offset),
+                             sensor_info, (left, right), adaptive, times, truth, design)
         manifest["manifest_sha256"] = manifest_digest(manifest)
         with open(os.path.join(tmp, "manifest.json"), "w") as fh:
             json.dump(manifest, fh, indent=2, sort_keys=False)
@@ -306,6 +269,52 @@ def write_dataset(scene, out_dir, spp: int | None = None, defines: dict | None =
     manifest["skipped"] = False
     manifest["rendered_again"] = damage  # why an earlier output of this request was not whole
     return manifest
+
+
+def _manifest(tmp, spec, key, info, variant, spp, seed, png, sensor_info, images, adaptive,
+              times, truth, design) -> dict:
+    """The dataset's manifest (without its own SHA-256): versions, the scene and how it was
+    rendered, the PNGs' ``png`` (scale, offset), the images' statistics, the times, the
+    truth's formats and every file's SHA-256."""
+    return {
+        "format_version": FORMAT_VERSION,
+        "created_utc": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+        "request_key": key,
+        "versions": package_versions(),
+        "scene": {"path": spec.path, "sha256": spec.sha256, "params": spec.params,
+                  "has_port": spec.has_port, "n_targets": int(spec.targets.shape[0]),
+                  "target_radius_mm": spec.target_radius,
+                  "surface": (None if spec.surface is None else
+                              {"mesh": os.path.basename(spec.surface.mesh_path),
+                               "texture": os.path.basename(spec.surface.texture_path),
+                               "triangles": int(spec.surface.triangles.shape[0]),
+                               "truth_pixels": truth["counts"]})},
+        "variant": info["variant"], "variant_requested": variant,
+        "integrator": info["integrator"],
+        "spp": spp, "spp_rendered": info["spp_rendered"], "seed": seed,
+        "seeds": {view: [pass_seed(seed, i, k) for k in range(len(info["passes"][view]))]
+                  for i, view in enumerate(("left", "right"))},
+        "image_size": list(spec.size),
+        "png_scale": png[0],
+        "png_offset": png[1],
+        "sensor": sensor_info,
+        "images": {"left": image_stats(images[0]), "right": image_stats(images[1])},
+        "samples_per_second": info["samples_per_second"],
+        "samples_per_second_per_view": info["samples_per_second_per_view"],
+        "passes": info["passes"],
+        "render": {"settings": adaptive_settings() if adaptive else None,
+                   **{view: info["render"][view] for view in ("left", "right")}},
+        "seconds": times,
+        "truth_formats": truth["formats"],
+        **({} if design is None else {"design": design}),
+        "colmap": (f"colmap/: cameras.txt ({spec.rig.port.housing}, "
+                   f"metres), images.txt, points3D.txt"
+                   if truth["colmap_note"] is None
+                   else f"not written: {truth['colmap_note']}"),
+        "files": dataset_files(tmp) + ["manifest.json"],
+        "sha256": {name: file_sha256(os.path.join(tmp, name))
+                   for name in dataset_files(tmp)},
+    }
 
 
 def _stereo_spec(scene, defines, spp, seed, times) -> tuple[SceneSpec, int, int]:
