@@ -133,6 +133,81 @@ def calibrate_housing(rig: StereoRig, board: Board, detections: Detections,
     flat port and for domes alike. Without it the σ is conditional on the in-air
     calibration. ``views``: the cameras whose corners enter (``(0,)``: the left camera alone,
     :func:`calibrate_camera_housing`)."""
+    housing, names = _housing_and_names(rig, views, free, uncertainty)
+    table = housing.parameters
+    turns = {}
+    if board.symmetric and tuple(views) == (0, 1):  # each pose's right numbering by the rig
+        from .symmetry import relabelled, settle_by_rig
+
+        turns = {k: s for k, s in settle_by_rig(rig, board, detections).items() if s}
+        detections = relabelled(detections, 1, turns, board)
+    problem = housing.problem(rig, board, detections, names)
+    obs, usable, P, n_global = problem.obs, problem.usable, problem.P, problem.n_global
+    rms_start = float(np.sqrt(np.mean(problem.residuals(problem.x0) ** 2)))
+    fit = _least_squares(problem.residuals, problem.jacobian, problem.x0, problem.lower,
+                         problem.upper, problem.m)
+    r = fit.fun
+    J = fit.jac.toarray() if hasattr(fit.jac, "toarray") else np.asarray(fit.jac)
+    s2 = float(r @ r) / max(r.size - problem.x0.size, 1)
+    N = J.T @ J
+    labels = tuple(f"{n}[{k}]" if table[n] > 1 else n for n in names for k in range(table[n]))
+    port, cameras, Rs, ts = problem.unpack(fit.x)
+    base = dict(labels=labels, poses=[(Rs[k], ts[k]) for k in range(P)],
+                **_residual_summary(r, obs, usable), rms_px_start=rms_start * np.sqrt(2),
+                converged=bool(fit.status > 0), n_observations=problem.m // 2,
+                nfev=int(fit.nfev), message=str(fit.message),
+                normal_axes=tuple(b.tolist() for b in problem.basis), pose_ids=tuple(usable),
+                fitted=StereoRig(cameras[0], cameras[1], port))
+    base["residuals"] = _detected_numbers(base["residuals"], turns, board)
+    covariance = s2 * np.linalg.inv(N) if _identifiable(N) else None
+    failed = _not_determined(rig, fit, N, covariance, labels, n_global, base)
+    if failed is not None:
+        return failed
+    sig = np.sqrt(np.diag(covariance))
+    correlation = covariance[:n_global, :n_global] / np.outer(sig[:n_global], sig[:n_global])
+    x, sig_conditional = fit.x, sig[:n_global].copy()
+    air = _air_parameters(air_covariance, names)
+    if air:
+        sigma_air = _sub_covariance(air_covariance, air)
+        if uncertainty == "prior":
+            rig, x, joint, r = _prior_fit(rig, board, detections, names, x, s2, air,
+                                          sigma_air, housing)
+            port, cameras, Rs, ts = housing.problem(rig, board, detections, names).unpack(x)
+            base.update(_residual_summary(r, obs, usable))
+            base["residuals"] = _detected_numbers(base["residuals"], turns, board)
+            base["poses"] = [(Rs[k], ts[k]) for k in range(P)]
+        else:
+            G = np.linalg.solve(N, J.T @ problem.air_jacobian(x, air))  # δx = −G δθ_air
+            cross = -(G @ sigma_air)
+            joint = np.block([[sigma_air, cross.T], [cross, covariance + G @ sigma_air @ G.T]])
+        sig = np.sqrt(np.diag(joint))[len(air):]
+    else:
+        joint = covariance
+    rig_names, T, axes = housing.rig_parameters(names, air, x, problem.basis, rig, port,
+                                                cameras, n_global)
+    keep = list(range(len(air) + n_global))
+    joint = T @ joint[np.ix_(keep, keep)] @ T.T
+    rig_cov = RigCovariance(tuple(air) + rig_names, 0.5 * (joint + joint.T), axes)
+    estimates, sigmas, conditional, k = {}, {}, {}, 0
+    for name in names:
+        w = table[name]
+        estimates[name] = housing.estimate(name, port, cameras)
+        sigmas[name] = float(sig[k]) if w == 1 else sig[k:k + w].tolist()
+        conditional[name] = (float(sig_conditional[k]) if w == 1
+                             else sig_conditional[k:k + w].tolist())
+        k += w
+    calibrated = StereoRig(cameras[0], cameras[1], port)
+    base["fitted"] = calibrated
+    return HousingCalibration(rig=calibrated, estimates=estimates, sigmas=sigmas,
+                              correlation=correlation, identifiable=True, reason="",
+                              covariance=rig_cov, sigmas_conditional=conditional,
+                              uncertainty=uncertainty if air else "conditional", **base)
+
+
+def _housing_and_names(rig, views, free, uncertainty):
+    """``(housing, names)``: the housing problem of ``rig``'s kind of port for ``views`` and
+    the free parameters' names (its defaults when ``free`` is None); CalibrationError for a
+    kind without one, an unknown ``uncertainty`` or free parameter."""
     housing = HOUSINGS.get(rig.port.kind)
     if housing is None:  # a kind of port without a housing problem
         raise CalibrationError(f"no housing calibration of {rig.port.rig_name} "
@@ -151,49 +226,36 @@ def calibrate_housing(rig: StereoRig, board: Board, detections: Detections,
                                f"{housing.label}estimates "
                                f"{', '.join(table)}")
     housing.check_free(rig, names)
-    turns = {}
-    if board.symmetric and tuple(views) == (0, 1):  # each pose's right numbering by the rig
-        from .symmetry import relabelled, settle_by_rig
+    return housing, names
 
-        turns = {k: s for k, s in settle_by_rig(rig, board, detections).items() if s}
-        detections = relabelled(detections, 1, turns, board)
-    problem = housing.problem(rig, board, detections, names)
-    residuals, unpack, x0, lower, upper = (problem.residuals, problem.unpack, problem.x0,
-                                           problem.lower, problem.upper)
-    obs, usable, P, n_global, basis, m = (problem.obs, problem.usable, problem.P,
-                                          problem.n_global, problem.basis, problem.m)
-    rms_start = float(np.sqrt(np.mean(residuals(x0) ** 2)))
-    fit = _least_squares(residuals, problem.jacobian, x0, lower, upper, m)
-    r = fit.fun
-    J = fit.jac.toarray() if hasattr(fit.jac, "toarray") else np.asarray(fit.jac)
-    dof = max(r.size - x0.size, 1)
-    s2 = float(r @ r) / dof
-    N = J.T @ J
+
+def _relative_eigen(N):
+    """The scaled normal matrix's eigenvalues relative to the largest, and its eigenvectors."""
     scale = np.sqrt(np.diag(N))
     scale[scale == 0] = 1.0
-    Ns = N / np.outer(scale, scale)
-    eigval, eigvec = np.linalg.eigh(Ns)
-    labels = tuple(f"{n}[{k}]" if table[n] > 1 else n for n in names for k in range(table[n]))
-    port, cameras, Rs, ts = unpack(fit.x)
-    poses = [(Rs[k], ts[k]) for k in range(P)]
-    base = dict(labels=labels, poses=poses, **_residual_summary(r, obs, usable),
-                rms_px_start=rms_start * np.sqrt(2),
-                converged=bool(fit.status > 0), n_observations=m // 2, nfev=int(fit.nfev),
-                message=str(fit.message), normal_axes=tuple(b.tolist() for b in basis),
-                pose_ids=tuple(usable), fitted=StereoRig(cameras[0], cameras[1], port))
-    base["residuals"] = _detected_numbers(base["residuals"], turns, board)
-    relative = eigval / eigval[-1] if eigval[-1] > 0 else np.zeros_like(eigval)
-    if relative[0] < IDENTIFIABILITY_LIMIT:
+    eigval, eigvec = np.linalg.eigh(N / np.outer(scale, scale))
+    return (eigval / eigval[-1] if eigval[-1] > 0 else np.zeros_like(eigval)), eigvec
+
+
+def _identifiable(N) -> bool:
+    return _relative_eigen(N)[0][0] >= IDENTIFIABILITY_LIMIT
+
+
+def _not_determined(rig, fit, N, covariance, labels, n_global, base):
+    """A HousingCalibration that says why the fit determines no housing — a parameter no
+    board determines, two parameters the boards cannot tell apart, no convergence or a fit
+    far off the corners, a parameter at its physical bound — or None when it does."""
+    nan = np.full((n_global, n_global), np.nan)
+    if covariance is None:
+        relative, eigvec = _relative_eigen(N)
         worst = int(np.argmax(np.abs(eigvec[:n_global, 0]))) if n_global else 0
         name = labels[worst] if n_global else "a board pose"
         return HousingCalibration(
-            rig=rig, estimates={}, sigmas={}, correlation=np.full((n_global, n_global), np.nan),
+            rig=rig, estimates={}, sigmas={}, correlation=nan,
             identifiable=False, reason=f"{name} is not determined by these boards (relative "
                                        f"eigenvalue {relative[0]:.1e})", **base)
-    covariance = s2 * np.linalg.inv(N)
     sig = np.sqrt(np.diag(covariance))
-    cov_g = covariance[:n_global, :n_global]
-    correlation = cov_g / np.outer(sig[:n_global], sig[:n_global])
+    correlation = covariance[:n_global, :n_global] / np.outer(sig[:n_global], sig[:n_global])
     off = np.abs(np.triu(correlation, 1))  # each pair once, named in the order of labels
     if n_global > 1 and off.max() >= CORRELATION_LIMIT:
         i, j = np.unravel_index(np.argmax(off), off.shape)
@@ -204,8 +266,7 @@ def calibrate_housing(rig: StereoRig, board: Board, detections: Detections,
                                          f"them apart", **base)
     if not base["converged"] or base["rms_px"] > FIT_RMS_LIMIT_PX:
         return HousingCalibration(
-            rig=rig, estimates={}, sigmas={}, correlation=np.full((n_global, n_global), np.nan),
-            identifiable=False, reason=(
+            rig=rig, estimates={}, sigmas={}, correlation=nan, identifiable=False, reason=(
                 f"the adjustment did not converge within {fit.nfev} evaluations (reprojection "
                 f"RMS {base['rms_px']:.3g} px): the free parameters are barely determined by "
                 f"these boards"
@@ -217,49 +278,10 @@ def calibrate_housing(rig: StereoRig, board: Board, detections: Detections,
     at_bound = np.flatnonzero(fit.active_mask[:n_global] != 0)
     if at_bound.size:
         return HousingCalibration(
-            rig=rig, estimates={}, sigmas={}, correlation=np.full((n_global, n_global), np.nan),
-            identifiable=False, reason=f"{labels[at_bound[0]]} ran into its physical bound: "
-                                       f"these boards do not determine it", **base)
-    x, sig_conditional = fit.x, sig[:n_global].copy()
-    air = _air_parameters(air_covariance, names)
-    if air:
-        sigma_air = _sub_covariance(air_covariance, air)
-        if uncertainty == "prior":
-            rig, x, joint, r = _prior_fit(rig, board, detections, names, x, s2, air,
-                                          sigma_air, housing)
-            port, cameras, Rs, ts = housing.problem(rig, board, detections, names).unpack(x)
-            base.update(_residual_summary(r, obs, usable))
-            base["residuals"] = _detected_numbers(base["residuals"], turns, board)
-            base["poses"] = [(Rs[k], ts[k]) for k in range(P)]
-        else:
-            J_air = problem.air_jacobian(x, air)
-            G = np.linalg.solve(N, J.T @ J_air)  # δx = −G δθ_air
-            cross = -(G @ sigma_air)
-            joint = np.block([[sigma_air, cross.T], [cross, covariance + G @ sigma_air @ G.T]])
-        sig = np.sqrt(np.diag(joint))[len(air):]
-    else:
-        joint = covariance
-    a = len(air)
-    rig_names, T, axes = housing.rig_parameters(names, air, x, basis, rig, port, cameras,
-                                                n_global)
-    keep = list(range(a + n_global))
-    joint = T @ joint[np.ix_(keep, keep)] @ T.T
-    rig_cov = RigCovariance(tuple(air) + rig_names, 0.5 * (joint + joint.T), axes)
-    estimates, sigmas, conditional, k = {}, {}, {}, 0
-    for name in names:
-        w = table[name]
-        estimates[name] = housing.estimate(name, port, cameras)
-        sigmas[name] = float(sig[k]) if w == 1 else sig[k:k + w].tolist()
-        conditional[name] = (float(sig_conditional[k]) if w == 1
-                             else sig_conditional[k:k + w].tolist())
-        k += w
-    calibrated = StereoRig(cameras[0], cameras[1], port)
-    base["fitted"] = calibrated
-    return HousingCalibration(rig=calibrated, estimates=estimates, sigmas=sigmas,
-                              correlation=correlation, identifiable=True, reason="",
-                              covariance=rig_cov, sigmas_conditional=conditional,
-                              uncertainty=uncertainty if air else "conditional", **base)
-
+            rig=rig, estimates={}, sigmas={}, correlation=nan, identifiable=False,
+            reason=f"{labels[at_bound[0]]} ran into its physical bound: these boards do not "
+                   f"determine it", **base)
+    return None
 
 #: A fit whose sparse (LSMR) trust-region steps stop with more than :data:`FIT_RMS_LIMIT_PX`
 #: is run again with the steps solved exactly (dense SVD), where the Jacobian has at most this
