@@ -89,7 +89,6 @@ def estimate_interface(view: View, object_points, pixels, pixel_sigma=None,
     ``camera.yaml`` carries it); the intrinsics stay held and their covariance is propagated
     into the interface's (:func:`camera_term`), else the covariance is conditional on them."""
     port = require_flat_port(view.port, "estimate_interface needs a flat port (a FlatPort)")
-    camera = view.camera
     object_points = np.asarray(object_points, dtype=np.float64)
     pixels = np.asarray(pixels, dtype=np.float64)
     if pixels.ndim != 3 or pixels.shape[1:] != (object_points.shape[0], 2):
@@ -108,7 +107,6 @@ def estimate_interface(view: View, object_points, pixels, pixel_sigma=None,
     k = active.size
     names = tuple((INTERFACE_NAMES + tuple(f"port.thickness[{j}]" for j in layers))[i]
                   for i in active)
-    design = np.concatenate([[port.distance, 0.0, 0.0], [port.thicknesses[j] for j in layers]])
     nan = InterfaceEstimate(port, np.full((frames, 3, 3), np.nan), np.full((frames, 3), np.nan),
                             np.full((k, k), np.nan), axes, np.nan, np.nan, int(Reason.OK),
                             names, np.full(pixels.shape, np.nan))
@@ -116,81 +114,18 @@ def estimate_interface(view: View, object_points, pixels, pixel_sigma=None,
     if not starts.valid.all():
         first = int(starts.reason[~starts.valid][0])
         return InterfaceEstimate(**{**nan.__dict__, "reason": first})
-    sigma = 1.0 if pixel_sigma is None else float(pixel_sigma)
-    seen = [np.flatnonzero(np.all(np.isfinite(pixels[f]), axis=1)) for f in range(frames)]
-    rows = np.concatenate([np.full(s.size, f) for f, s in enumerate(seen)])
-    points = np.concatenate([s for s in seen])
-    observed = np.concatenate([pixels[f][s] for f, s in enumerate(seen)])
-    R0 = starts.R
-    n_params = k + 6 * frames
-
-    def unpack(x):
-        g = design.copy()
-        g[active] = x[:k]
-        m = port.normal + g[1] * axes[0] + g[2] * axes[1]
-        length = np.linalg.norm(m)
-        thick = list(port.thicknesses)
-        for i, j in enumerate(layers):
-            thick[j] = g[3 + i]
-        moved = port.replace(distance=g[0], normal=m / length, thicknesses=tuple(thick))
-        phi = x[k:].reshape(frames, 6)[:, :3]
-        t = x[k:].reshape(frames, 6)[:, 3:]
-        R = np.stack([exp_so3(phi[f]) @ R0[f] for f in range(frames)])
-        return moved, length, phi, R, t
-
-    cache = {}
-
-    def evaluate(x):
-        key = x.tobytes()
-        if key not in cache:
-            moved, length, phi, R, t = unpack(x)
-            X = np.einsum("nij,nj->ni", R[rows], object_points[points]) + t[rows]
-            try:
-                uv, d_points, jac = project(camera, moved, X, parameters=True)
-            except ValueError:  # the camera on the water side, a layer of no thickness
-                uv = np.full((X.shape[0], 2), np.nan)
-                d_points = jac = None
-            cache[key] = (moved, length, phi, R, t, X, uv, d_points, jac)
-        return cache[key]
-
-    def residual(x):
-        uv = evaluate(x)[6]
-        r = ((uv - observed) / sigma).ravel()
-        return np.where(np.isfinite(r), r, 1e8)
-
-    def jacobian(x):
-        moved, length, phi, R, t, X, uv, d_points, jac = evaluate(x)
-        J = np.zeros((observed.shape[0], 2, n_params))
-        if jac is None:
-            return J.reshape(-1, n_params)
-        interface = np.zeros((observed.shape[0], 2, design.size))
-        interface[:, :, 0] = jac.distance
-        interface[:, :, 1:3] = (jac.normal / length) @ axes.T
-        for i, j in enumerate(layers):
-            interface[:, :, 3 + i] = jac.thicknesses[..., j]
-        J[:, :, :k] = interface[:, :, active]
-        d_phi = -skew(X - t[rows])  # (n, 3, 3), then J_l(φ) per frame
-        for f in range(frames):
-            mine = rows == f
-            block = d_points[mine] @ (d_phi[mine] @ left_jacobian(phi[f]))
-            J[mine, :, k + 6 * f:k + 3 + 6 * f] = block
-            J[mine, :, k + 3 + 6 * f:k + 6 + 6 * f] = d_points[mine]
-        J /= sigma
-        J = J.reshape(-1, n_params)
-        return np.where(np.isfinite(J), J, 0.0)
-
-    x0 = np.concatenate([design[active],
-                         np.column_stack([np.zeros((frames, 3)), starts.t]).ravel()])
-    lower = np.full(n_params, -np.inf)
+    problem = _InterfaceProblem(view.camera, port, object_points, pixels, axes, active, layers,
+                                starts, 1.0 if pixel_sigma is None else float(pixel_sigma))
+    lower = np.full(problem.n_params, -np.inf)
     lower[:k][active >= 3] = 0.0  # a thickness stays positive (FlatPort refuses 0)
     try:
-        result = least_squares(residual, x0, jac=jacobian, method="trf", x_scale="jac",
-                               bounds=(lower, np.inf), xtol=TOLERANCE, ftol=TOLERANCE,
-                               gtol=TOLERANCE, max_nfev=max_nfev)
+        result = least_squares(problem.residual, problem.x0, jac=problem.jacobian, method="trf",
+                               x_scale="jac", bounds=(lower, np.inf), xtol=TOLERANCE,
+                               ftol=TOLERANCE, gtol=TOLERANCE, max_nfev=max_nfev)
     except ValueError:
         return InterfaceEstimate(**{**nan.__dict__, "reason": int(Reason.NOT_CONVERGED)})
-    moved, length, phi, R, t, X, uv, _, _ = evaluate(result.x)
-    r = uv - observed
+    moved, _, phi, R, t, X, uv, _, _ = problem.evaluate(result.x)
+    r = uv - problem.observed
     if result.status <= 0 or not np.all(np.isfinite(r)):
         return InterfaceEstimate(**{**nan.__dict__, "reason": int(Reason.NOT_CONVERGED)})
     J = result.jac.copy()
@@ -208,20 +143,105 @@ def estimate_interface(view: View, object_points, pixels, pixel_sigma=None,
     covariance = inverse[:k, :k]
     rms = float(np.sqrt(np.mean(np.sum(r * r, axis=1))))
     residuals = np.full(pixels.shape, np.nan)
-    residuals[rows, points] = r
+    residuals[problem.rows, problem.points] = r
     if pixel_sigma is None:
-        dof = r.size - n_params
+        dof = r.size - problem.n_params
         sigma_px = float(np.sqrt(np.sum(r * r) / dof)) if dof > 0 else np.nan
         covariance = covariance * sigma_px ** 2
     else:
         sigma_px = float(pixel_sigma)
     if camera_covariance is not None:
-        covariance = covariance + camera_term(camera, moved, X, J, inverse, k, sigma,
-                                              camera_covariance)
+        covariance = covariance + camera_term(view.camera, moved, X, J, inverse, k,
+                                              problem.sigma, camera_covariance)
     # the tilts reported about the start normal's axes: at the solution the normal is m/|m|
     return InterfaceEstimate(moved, R, t, 0.5 * (covariance + covariance.T), axes, rms,
                              sigma_px, int(Reason.OK), names, residuals)
 
+
+class _InterfaceProblem:
+    """The refinement of :func:`estimate_interface`: the unknowns are the free interface
+    numbers (``active`` of distance, two tilts about ``axes``, the free layers' thicknesses;
+    mm, rad) then 6 per frame (a rotation vector applied on the left of the start pose, and
+    the translation, mm); the residuals the seen pixels' errors over ``sigma``."""
+
+    def __init__(self, camera, port, object_points, pixels, axes, active, layers, starts,
+                 sigma):
+        self.camera, self.port, self.object_points = camera, port, object_points
+        self.axes, self.active, self.layers, self.sigma = axes, active, layers, sigma
+        self.frames, self.k = pixels.shape[0], active.size
+        self.design = np.concatenate([[port.distance, 0.0, 0.0],
+                                      [port.thicknesses[j] for j in layers]])
+        seen = [np.flatnonzero(np.all(np.isfinite(pixels[f]), axis=1))
+                for f in range(self.frames)]
+        self.rows = np.concatenate([np.full(s.size, f) for f, s in enumerate(seen)])
+        self.points = np.concatenate([s for s in seen])
+        self.observed = np.concatenate([pixels[f][s] for f, s in enumerate(seen)])
+        self.R0 = starts.R
+        self.n_params = self.k + 6 * self.frames
+        self.x0 = np.concatenate([self.design[active],
+                                  np.column_stack([np.zeros((self.frames, 3)),
+                                                   starts.t]).ravel()])
+        self._cache = {}
+
+    def unpack(self, x):
+        """``(port, |m|, φ, R, t)`` at ``x``: the moved port (its normal ``m / |m|``), the
+        frames' rotation vectors, rotations and translations."""
+        k, port, frames = self.k, self.port, self.frames
+        g = self.design.copy()
+        g[self.active] = x[:k]
+        m = port.normal + g[1] * self.axes[0] + g[2] * self.axes[1]
+        length = np.linalg.norm(m)
+        thick = list(port.thicknesses)
+        for i, j in enumerate(self.layers):
+            thick[j] = g[3 + i]
+        moved = port.replace(distance=g[0], normal=m / length, thicknesses=tuple(thick))
+        phi = x[k:].reshape(frames, 6)[:, :3]
+        t = x[k:].reshape(frames, 6)[:, 3:]
+        R = np.stack([exp_so3(phi[f]) @ self.R0[f] for f in range(frames)])
+        return moved, length, phi, R, t
+
+    def evaluate(self, x):
+        """:meth:`unpack` and the projection of the seen points with its Jacobians (cached by
+        ``x``: the residuals and the Jacobian ask at the same ``x``)."""
+        key = x.tobytes()
+        if key not in self._cache:
+            moved, length, phi, R, t = self.unpack(x)
+            X = (np.einsum("nij,nj->ni", R[self.rows], self.object_points[self.points])
+                 + t[self.rows])
+            try:
+                uv, d_points, jac = project(self.camera, moved, X, parameters=True)
+            except ValueError:  # the camera on the water side, a layer of no thickness
+                uv = np.full((X.shape[0], 2), np.nan)
+                d_points = jac = None
+            self._cache[key] = (moved, length, phi, R, t, X, uv, d_points, jac)
+        return self._cache[key]
+
+    def residual(self, x):
+        uv = self.evaluate(x)[6]
+        r = ((uv - self.observed) / self.sigma).ravel()
+        return np.where(np.isfinite(r), r, 1e8)
+
+    def jacobian(self, x):
+        moved, length, phi, R, t, X, uv, d_points, jac = self.evaluate(x)
+        k, n_params, rows = self.k, self.n_params, self.rows
+        J = np.zeros((self.observed.shape[0], 2, n_params))
+        if jac is None:
+            return J.reshape(-1, n_params)
+        interface = np.zeros((self.observed.shape[0], 2, self.design.size))
+        interface[:, :, 0] = jac.distance
+        interface[:, :, 1:3] = (jac.normal / length) @ self.axes.T
+        for i, j in enumerate(self.layers):
+            interface[:, :, 3 + i] = jac.thicknesses[..., j]
+        J[:, :, :k] = interface[:, :, self.active]
+        d_phi = -skew(X - t[rows])  # (n, 3, 3), then J_l(φ) per frame
+        for f in range(self.frames):
+            mine = rows == f
+            block = d_points[mine] @ (d_phi[mine] @ left_jacobian(phi[f]))
+            J[mine, :, k + 6 * f:k + 3 + 6 * f] = block
+            J[mine, :, k + 3 + 6 * f:k + 6 + 6 * f] = d_points[mine]
+        J /= self.sigma
+        J = J.reshape(-1, n_params)
+        return np.where(np.isfinite(J), J, 0.0)
 
 def camera_term(camera, port, X, J, inverse, k: int, sigma: float, camera_covariance):
     """``(k, k)``: the in-air intrinsics' covariance carried into the first ``k`` estimated
