@@ -89,17 +89,8 @@ def estimate_interface(view: View, object_points, pixels, pixel_sigma=None,
     ``camera.yaml`` carries it); the intrinsics stay held and their covariance is propagated
     into the interface's (:func:`camera_term`), else the covariance is conditional on them."""
     port = require_flat_port(view.port, "estimate_interface needs a flat port (a FlatPort)")
-    object_points = np.asarray(object_points, dtype=np.float64)
-    pixels = np.asarray(pixels, dtype=np.float64)
-    if pixels.ndim != 3 or pixels.shape[1:] != (object_points.shape[0], 2):
-        raise ValueError(f"pixels must have shape (F, {object_points.shape[0]}, 2), got "
-                         f"{pixels.shape}")
-    layers = tuple(int(j) for j in free_thicknesses)
-    if len(set(layers)) != len(layers) or any(not 0 <= j < len(port.thicknesses)
-                                              for j in layers):
-        raise ValueError(f"free_thicknesses {list(layers)}: the port has "
-                         f"{len(port.thicknesses)} layer(s) with a thickness (0 … "
-                         f"{len(port.thicknesses) - 1}), each at most once")
+    object_points, pixels, layers = _checked_inputs(port, object_points, pixels,
+                                                    free_thicknesses)
     frames = pixels.shape[0]
     axes = np.array(tilt_basis(port.normal))
     active = np.array(([0] if free_distance else []) + [1, 2]
@@ -156,6 +147,23 @@ def estimate_interface(view: View, object_points, pixels, pixel_sigma=None,
     # the tilts reported about the start normal's axes: at the solution the normal is m/|m|
     return InterfaceEstimate(moved, R, t, 0.5 * (covariance + covariance.T), axes, rms,
                              sigma_px, int(Reason.OK), names, residuals)
+
+
+def _checked_inputs(port, object_points, pixels, free_thicknesses):
+    """``(object_points (M, 3), pixels (F, M, 2), layers)`` as arrays and a tuple; ValueError
+    for pixels of another shape or a free layer the port does not have."""
+    object_points = np.asarray(object_points, dtype=np.float64)
+    pixels = np.asarray(pixels, dtype=np.float64)
+    if pixels.ndim != 3 or pixels.shape[1:] != (object_points.shape[0], 2):
+        raise ValueError(f"pixels must have shape (F, {object_points.shape[0]}, 2), got "
+                         f"{pixels.shape}")
+    layers = tuple(int(j) for j in free_thicknesses)
+    if len(set(layers)) != len(layers) or any(not 0 <= j < len(port.thicknesses)
+                                              for j in layers):
+        raise ValueError(f"free_thicknesses {list(layers)}: the port has "
+                         f"{len(port.thicknesses)} layer(s) with a thickness (0 … "
+                         f"{len(port.thicknesses) - 1}), each at most once")
+    return object_points, pixels, layers
 
 
 class _InterfaceProblem:
