@@ -431,19 +431,8 @@ def run_pipeline(inputs: RunInputs, config: RunConfig, log=print) -> RunResult:
 
     corrected = None
     if config.corrects_eccentricity:
-        log("correct the targets' eccentricity and triangulate again …")
-        start = time.perf_counter()
-        corrected, eccentricity_summary = eccentricity_stage(inputs, centers, matches,
-                                                             port_methods)
-        # the absorbed baseline has no port model to correct its centroids with
-        corrected.update({m: results[m] for m in methods if m not in corrected})
-        timings["eccentricity"] = time.perf_counter() - start
-        start = time.perf_counter()
-        uv_corrected = eccentricity_summary.pop("uv")
-        covariances_corrected, uncertainty_corrected = covariance_stage(
-            inputs, config.pixel_sigma, detections, centers, matches, corrected, noise_px,
-            uv=uv_corrected)
-        timings["covariance_eccentricity"] = time.perf_counter() - start
+        corrected, eccentricity_summary, covariances_corrected, uncertainty_corrected = \
+            _corrected_run(inputs, config, detections, centers, matches, results, timings, log)
 
     budget = None
     if budget_rigs:
@@ -471,14 +460,30 @@ def run_pipeline(inputs: RunInputs, config: RunConfig, log=print) -> RunResult:
     # the headline numbers: the eccentricity corrected (the default), else the raw centroids
     primary, primary_uncertainty = ((scored_corrected, uncertainty_corrected)
                                     if corrected is not None else (scored, uncertainty))
+    report = _report(inputs, config, detections, scored, primary, primary_uncertainty,
+                     uncertainty, differs, calibration, budget,
+                     None if corrected is None else eccentricity_summary, timings)
+    return RunResult(report=report, inputs=inputs, detections=detections, centers=centers,
+                     matches=matches, correct=scored["correct"],
+                     per_method=primary["per_method"], simulated=scored["simulated"],
+                     scores=primary["scores"])
 
-    report = {
+
+def _report(inputs, config, detections, scored, primary, primary_uncertainty, uncertainty,
+            differs, calibration, budget, eccentricity_summary, timings) -> dict:
+    """The run's report (``report.json``): the headline ``methods`` from ``primary`` (the
+    eccentricity corrected, or the raw centroids), the raw ones under ``eccentricity`` when it
+    was corrected (``eccentricity_summary`` not None)."""
+    noise_px, threshold_fraction = config.noise_px, config.threshold_fraction
+    median_filter, port_methods = config.median_filter, config.port_methods
+    max_elongation = (DEFAULT_MAX_ELONGATION if config.max_elongation is None
+                      else config.max_elongation)
+    max_area_ratio = (DEFAULT_MAX_AREA_RATIO if config.max_area_ratio is None
+                      else config.max_area_ratio)
+    return {
         "scene": inputs.scene, "targets": int(len(inputs.targets)),
         "visibility": scored["visibility"],
-        "detection": {name: {"found": int(d.n_found), "rejected": int(d.n_rejected),
-                             "rejected_by_reason": {k: int(v) for k, v in d.rejected.items()},
-                             "threshold": float(d.threshold), "threshold_rule": d.threshold_rule}
-                      for name, d in detections.items()},
+        "detection": _detection_report(detections),
         "crosscheck": scored["crosscheck"],
         "matching": scored["matching"],
         "methods": _with_coverage(primary["scores"], primary_uncertainty),
@@ -490,7 +495,7 @@ def run_pipeline(inputs: RunInputs, config: RunConfig, log=print) -> RunResult:
         "absorbed": None if inputs.absorbed is None else inputs.absorbed.summary,
         "self_calibration": calibration,
         "budget": budget,
-        "eccentricity": None if corrected is None else {
+        "eccentricity": None if eccentricity_summary is None else {
             **eccentricity_summary,
             # absorbed stays on the raw centroids: its row would repeat itself
             "uncorrected": {"methods": _with_coverage(
@@ -501,10 +506,31 @@ def run_pipeline(inputs: RunInputs, config: RunConfig, log=print) -> RunResult:
         "spp_rendered": (inputs.extra.get("render") or {}).get(
             "spp_rendered", inputs.extra.get("spp_rendered")),
     }
-    return RunResult(report=report, inputs=inputs, detections=detections, centers=centers,
-                     matches=matches, correct=scored["correct"],
-                     per_method=primary["per_method"], simulated=scored["simulated"],
-                     scores=primary["scores"])
+
+
+def _corrected_run(inputs, config, detections, centers, matches, results, timings, log):
+    """The targets' eccentricity corrected and triangulated again (the absorbed baseline,
+    which has no port model to correct its centroids with, keeps its raw points), and the
+    corrected points' covariances: ``(corrected, summary, covariances, uncertainty)``."""
+    log("correct the targets' eccentricity and triangulate again …")
+    start = time.perf_counter()
+    corrected, summary = eccentricity_stage(inputs, centers, matches, config.port_methods)
+    corrected.update({m: results[m] for m in config.target_methods() if m not in corrected})
+    timings["eccentricity"] = time.perf_counter() - start
+    start = time.perf_counter()
+    covariances, uncertainty = covariance_stage(
+        inputs, config.pixel_sigma, detections, centers, matches, corrected, config.noise_px,
+        uv=summary.pop("uv"))
+    timings["covariance_eccentricity"] = time.perf_counter() - start
+    return corrected, summary, covariances, uncertainty
+
+
+def _detection_report(detections) -> dict:
+    """The report's ``detection``: per view what was found and rejected, and the threshold."""
+    return {name: {"found": int(d.n_found), "rejected": int(d.n_rejected),
+                   "rejected_by_reason": {k: int(v) for k, v in d.rejected.items()},
+                   "threshold": float(d.threshold), "threshold_rule": d.threshold_rule}
+            for name, d in detections.items()}
 
 
 def measure_scene(config: RunConfig, log=print) -> RunResult:
