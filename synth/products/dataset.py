@@ -184,6 +184,15 @@ def manifest_digest(manifest: dict) -> str:
                if k not in ("manifest_sha256", "skipped", "rendered_again")}
     return hashlib.sha256(json.dumps(content, sort_keys=True).encode()).hexdigest()
 
+def write_manifest(directory, manifest: dict) -> None:
+    """``manifest.json`` into ``directory`` with the manifest's own SHA-256 added
+    (:func:`manifest_digest`; ``manifest`` gains ``manifest_sha256``)."""
+    manifest["manifest_sha256"] = manifest_digest(manifest)
+    with open(os.path.join(directory, "manifest.json"), "w") as fh:
+        json.dump(manifest, fh, indent=2, sort_keys=False)
+        fh.write("\n")
+
+
 
 # ---------------------------------------------------------------------------------------------
 # write / read / check
@@ -262,10 +271,7 @@ def write_dataset(scene, out_dir, spp: int | None = None, defines: dict | None =
         times["total"] = time.perf_counter() - t_start
         manifest = _manifest(tmp, spec, key, info, variant, spp, seed, (scale, offset),
                              sensor_info, (left, right), adaptive, times, truth, design)
-        manifest["manifest_sha256"] = manifest_digest(manifest)
-        with open(os.path.join(tmp, "manifest.json"), "w") as fh:
-            json.dump(manifest, fh, indent=2, sort_keys=False)
-            fh.write("\n")
+        write_manifest(tmp, manifest)
     manifest["skipped"] = False
     manifest["rendered_again"] = damage  # why an earlier output of this request was not whole
     return manifest

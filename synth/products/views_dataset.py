@@ -56,8 +56,8 @@ from measure.stereo.multirig import MultiRig
 from synth.infra.fileio import file_sha256
 from synth.infra.provenance import package_versions
 from synth.products.dataset import (FORMAT_VERSION, DatasetError, adaptive_settings, check_files,
-                                    dataset_files, existing_output, image_stats, manifest_digest,
-                                    read_manifest, read_png16, request_key, write_targets_ply)
+                                    dataset_files, existing_output, image_stats, read_manifest,
+                                    read_png16, request_key, write_manifest, write_targets_ply)
 from synth.scene import SceneError, SceneSpec
 
 #: The files of one view inside its folder ``camK/``: kind → name.
@@ -155,66 +155,27 @@ def write_views_dataset(spec: SceneSpec, out_dir, spp: int | None = None,
     request was already there, whole, and nothing was done) and ``rendered_again`` (why an
     earlier output of the same request was rendered again, or None) — as
     :func:`synth.products.dataset.write_dataset`."""
-    from synth.rendering.render import (pass_seed, png16_scale, render_views, srgb_preview,
-                                        to_png16, write_exr, write_png)
-    from synth.formats.exchange import write_cameras_json, write_colmap_views
-    from synth.products.rig_file import write_rig_file
+    from synth.rendering.render import pass_seed, render_views
 
     t_start = time.perf_counter()
-    if not spec.extra_cameras:
-        raise SceneError(f"{spec.path}: a scene of two cameras is written as a stereo dataset "
-                         f"(synth.products.dataset.write_dataset)")
-    if spec.surface is not None:
-        raise SceneError(f"{spec.path}: a surface scene of {len(spec.all_cameras)} cameras: "
-                         f"synth dataset writes surfaces (their truth maps) for two cameras")
-    first = spec.all_cameras[0]
-    if not (np.allclose(first.R, np.eye(3), atol=1e-12) and np.allclose(first.t, 0)):
-        raise SceneError(f"{spec.path}: the first sensor must sit at the reference origin with "
-                         f"identity rotation (the reference frame is the first camera's)")
-    spp = spec.spp if spp is None else int(spp)
-    seed = spec.seed if seed is None else int(seed)
-    spec = spec.rendered_with(spp=spp, seed=seed)
+    spec, spp, seed = _views_spec(spec, spp, seed)
     key = request_key(spec, spp, seed, variant, exr, None, adaptive, None)
     output, old, damage = existing_output(out_dir, key)
     if old is not None:
         return old
     output.claim()
     names = list(spec.camera_names)
-    rig = spec.multirig
     times = {}
     with output.staged(extra={"request_key": key}) as tmp:
         images, info = render_views(spec, spp=spp, variant=variant, progress=progress,
                                     seed=seed, adaptive=adaptive)
         times.update({f"render_{name}": info["seconds"][name] for name in names})
         times["load_mitsuba"] = info["seconds"]["load"]
-
         t = time.perf_counter()
-        scale = png16_scale(*images)
-        white = max(float(img.max()) for img in images)
-        for name, img in zip(names, images):
-            folder = os.path.join(tmp, name)
-            os.makedirs(folder)
-            write_png(os.path.join(folder, VIEW_FILES["image"]), to_png16(img, scale))
-            write_png(os.path.join(folder, VIEW_FILES["preview"]), srgb_preview(img, white))
-            if exr:
-                write_exr(os.path.join(folder, VIEW_FILES["exr"]), img, info["variant"])
+        scale = _write_view_images(tmp, names, images, info, exr)
         times["write_images"] = time.perf_counter() - t
-
-        t = time.perf_counter()
-        pixels = simulated_pixels(rig, spec.targets)
-        times["project"] = time.perf_counter() - t
-
-        t = time.perf_counter()
-        write_rig_file(os.path.join(tmp, "calib.yaml"), rig)
-        write_cameras_json(tmp, rig)
-        colmap_note = write_colmap_views(tmp, rig, spec.target_ids, spec.targets, pixels,
-                                         [f"{name}/{VIEW_FILES['image']}" for name in names])
-        write_targets_ply(os.path.join(tmp, "targets.ply"), spec.targets)
-        write_views_pixels_csv(os.path.join(tmp, "pixels.csv"), names, spec.target_ids,
-                               spec.targets, pixels)
-        times["write_files"] = time.perf_counter() - t
+        colmap_note = _write_view_files(tmp, spec, names, times)
         times["total"] = time.perf_counter() - t_start
-
         files = dataset_files(tmp)
         manifest = {
             "format_version": FORMAT_VERSION,
@@ -248,13 +209,68 @@ def write_views_dataset(spec: SceneSpec, out_dir, spp: int | None = None,
             "files": files + ["manifest.json"],
             "sha256": {name: file_sha256(os.path.join(tmp, name)) for name in files},
         }
-        manifest["manifest_sha256"] = manifest_digest(manifest)
-        with open(os.path.join(tmp, "manifest.json"), "w") as fh:
-            json.dump(manifest, fh, indent=2, sort_keys=False)
-            fh.write("\n")
+        write_manifest(tmp, manifest)
     manifest["skipped"] = False
     manifest["rendered_again"] = damage
     return manifest
+
+
+def _views_spec(spec: SceneSpec, spp, seed) -> tuple[SceneSpec, int, int]:
+    """``(spec, spp, seed)``: the scene of N > 2 cameras to render with ``spp`` and ``seed``
+    resolved (None: the scene's) and recorded; SceneError for two cameras, a surface scene or
+    a first camera off the reference origin."""
+    if not spec.extra_cameras:
+        raise SceneError(f"{spec.path}: a scene of two cameras is written as a stereo dataset "
+                         f"(synth.products.dataset.write_dataset)")
+    if spec.surface is not None:
+        raise SceneError(f"{spec.path}: a surface scene of {len(spec.all_cameras)} cameras: "
+                         f"synth dataset writes surfaces (their truth maps) for two cameras")
+    first = spec.all_cameras[0]
+    if not (np.allclose(first.R, np.eye(3), atol=1e-12) and np.allclose(first.t, 0)):
+        raise SceneError(f"{spec.path}: the first sensor must sit at the reference origin with "
+                         f"identity rotation (the reference frame is the first camera's)")
+    spp = spec.spp if spp is None else int(spp)
+    seed = spec.seed if seed is None else int(seed)
+    return spec.rendered_with(spp=spp, seed=seed), spp, seed
+
+
+def _write_view_images(tmp, names, images, info, exr) -> float:
+    """Each camera's folder with its 16-bit linear PNG (one scale for all), sRGB preview and,
+    with ``exr``, EXR; returns the PNGs' scale."""
+    from synth.rendering.render import png16_scale, srgb_preview, to_png16, write_exr, write_png
+
+    scale = png16_scale(*images)
+    white = max(float(img.max()) for img in images)
+    for name, img in zip(names, images):
+        folder = os.path.join(tmp, name)
+        os.makedirs(folder)
+        write_png(os.path.join(folder, VIEW_FILES["image"]), to_png16(img, scale))
+        write_png(os.path.join(folder, VIEW_FILES["preview"]), srgb_preview(img, white))
+        if exr:
+            write_exr(os.path.join(folder, VIEW_FILES["exr"]), img, info["variant"])
+    return scale
+
+
+def _write_view_files(tmp, spec: SceneSpec, names, times):
+    """The rig's ``calib.yaml`` and ``cameras.json``, the COLMAP model, the targets and the
+    simulator's pixels into ``tmp``; returns why the COLMAP model was not written, or None."""
+    from synth.formats.exchange import write_cameras_json, write_colmap_views
+    from synth.products.rig_file import write_rig_file
+
+    rig = spec.multirig
+    t = time.perf_counter()
+    pixels = simulated_pixels(rig, spec.targets)
+    times["project"] = time.perf_counter() - t
+    t = time.perf_counter()
+    write_rig_file(os.path.join(tmp, "calib.yaml"), rig)
+    write_cameras_json(tmp, rig)
+    colmap_note = write_colmap_views(tmp, rig, spec.target_ids, spec.targets, pixels,
+                                     [f"{name}/{VIEW_FILES['image']}" for name in names])
+    write_targets_ply(os.path.join(tmp, "targets.ply"), spec.targets)
+    write_views_pixels_csv(os.path.join(tmp, "pixels.csv"), names, spec.target_ids,
+                           spec.targets, pixels)
+    times["write_files"] = time.perf_counter() - t
+    return colmap_note
 
 
 @dataclass(frozen=True)
