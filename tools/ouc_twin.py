@@ -2,7 +2,7 @@
 calibration, and the twin compared with the photos detector by detector.
 
     python tools/ouc_twin.py $REFSTEREO_REAL_PHOTOS/ouc_flat --out out/ouc_twin [--spp 16]
-        [--print-jitter MM] [--sag MM] [--laminate ALPHA]
+        [--exposure fixed|per-photo] [--print-jitter MM] [--sag MM] [--laminate ALPHA]
 
 What is rendered (648 × 486, the camera at the reference frame's origin): the authors'
 ``Calib_Results_export.json`` — K (fx ≠ fy: rendered on an oversampled square-pixel film and
@@ -15,7 +15,8 @@ frame line printed along its edge and the metal plate round it, all diffuse (:da
 rendered by :func:`synth.products.printed_board.render_board`. The light is **fitted to the
 photos** (:func:`fit_lamp`): one point lamp, the exposure and the black squares' reflectance
 that best give the levels of the photos' 280 squares (140 of the white ones clipped at 250),
-a matte board and a linear camera assumed. Stored as the photos were: cos⁴ vignetting, the
+a matte board and a linear camera assumed (``--exposure per-photo``: an exposure per photo,
+as an automatic exposure would set it). Stored as the photos were: cos⁴ vignetting, the
 edges' blur and the noise measured on the photos (:data:`BLUR_PX`, :data:`NOISE_DN`), the
 fitted exposure, linear levels over a dark level, clipped at 250, 8 bits. ``--print-jitter``:
 a ragged print (every square's edges moved by their own Gaussian offsets); ``--sag``: the
@@ -143,12 +144,13 @@ def square_samples(photos, poses, K, kc, square):
     """The photos' squares as the lamp fit sees them: per square of every photo's clicked
     sub-grid, its centre ``P`` (mm, camera frame), the board's normal ``n`` (towards the
     camera), cos⁴ of its ray, whether it is a black square, and the stored level (the mean of
-    25 points over its middle half, bilinear). Arrays over all squares of all photos."""
+    25 points over its middle half, bilinear) and the photo's index. Arrays over all squares
+    of all photos."""
     off = np.linspace(-0.25, 0.25, 5)
     du, dv = np.meshgrid(off, off)
     sub = np.stack([du.ravel(), dv.ravel()], 1)
-    cols = {"P": [], "n": [], "cos4": [], "dark": [], "level": []}
-    for gray, (_, R, T, (nx, ny)) in zip(photos, poses):
+    cols = {"P": [], "n": [], "cos4": [], "dark": [], "level": [], "photo": []}
+    for k, (gray, (_, R, T, (nx, ny))) in enumerate(zip(photos, poses)):
         j, i = np.mgrid[0:nx, 0:ny]
         centres = np.column_stack([j.ravel() + 0.5, i.ravel() + 0.5])
         pts = (centres[:, None, :] + sub[None]).reshape(-1, 2)
@@ -164,6 +166,7 @@ def square_samples(photos, poses, K, kc, square):
         cols["cos4"].append((P[:, 2] / np.linalg.norm(P, axis=1)) ** 4)
         cols["dark"].append(parity != brighter)
         cols["level"].append(level)
+        cols["photo"].append(np.full(len(P), k))
     return {k: np.concatenate(v) for k, v in cols.items()}
 
 
@@ -178,32 +181,42 @@ def lamp_levels(params, samples):
     return DARK_DN + np.exp(params[3]) * 1e6 * rho * cos / r ** 2 * samples["cos4"]
 
 
-def fit_lamp(samples):
+def fit_lamp(samples, per_photo: bool = False):
     """The point lamp, the exposure and the black/white ratio that best give the photos'
     square levels (least squares on their logarithms; a square clipped in the photo (≥ 245)
     only counts when the lamp leaves it below 245), from 12 starting places, the lamp within
-    :data:`LAMP_BOUND_MM`. ``(params, RMS of the log residuals)``."""
+    :data:`LAMP_BOUND_MM`. ``per_photo``: each photo its own exposure (a camera's automatic
+    exposure). ``(params, exposure of each photo relative to exp(params[3]), RMS of the log
+    residuals)``."""
     from scipy.optimize import least_squares
 
     level, clipped = samples["level"], samples["level"] >= 245
+    photo = samples["photo"]
+    n = int(photo.max()) + 1 if per_photo else 0
+
+    def model(p):
+        gains = np.exp(p[5:])[photo] if per_photo else 1.0
+        return DARK_DN + (lamp_levels(p[:5], samples) - DARK_DN) * gains
 
     def residuals(p):
-        m = lamp_levels(p, samples)
+        m = model(p)
         return np.where(clipped, np.maximum(0.0, np.log(245.0) - np.log(m)),
                         np.log(m) - np.log(level))
 
     best = None
     bound = LAMP_BOUND_MM / np.sqrt(3)
+    lower = [-bound] * 3 + [-np.inf] * (2 + n)
+    upper = [bound] * 3 + [np.inf] * (2 + n)
     for x in (-300.0, 0.0, 300.0):
         for y in (-300.0, 300.0):
             for z in (-300.0, 200.0):
-                p0 = np.array([x, y, z, 0.0, np.log(0.1)])
+                p0 = np.concatenate([[x, y, z, 0.0, np.log(0.1)], np.zeros(n)])
                 p0[3] = np.median(np.log(level - DARK_DN + 1) - np.log(lamp_levels(p0, samples)))
-                fit = least_squares(residuals, p0, bounds=([-bound] * 3 + [-np.inf] * 2,
-                                                           [bound] * 3 + [np.inf] * 2))
+                fit = least_squares(residuals, p0, bounds=(lower, upper))
                 if best is None or fit.cost < best.cost:
                     best = fit
-    return best.x, float(np.sqrt(np.mean(best.fun ** 2)))
+    gains = np.exp(best.x[5:]) if per_photo else np.ones(int(photo.max()) + 1)
+    return best.x[:5], gains, float(np.sqrt(np.mean(best.fun ** 2)))
 
 
 def render_twin(K, kc, pose, square, first_dark, lamp_mm, spp, seed, sag_mm=0.0, black=None,
@@ -338,6 +351,9 @@ def main(argv=None) -> int:
                         help="the board bent by this much along its width (default flat)")
     parser.add_argument("--print-jitter", type=float, default=0.0, metavar="MM",
                         help="a ragged print: each square's edges moved by N(0, MM^2) (default 0)")
+    parser.add_argument("--exposure", choices=("fixed", "per-photo"), default="fixed",
+                        help="one exposure for all photos (default) or one each, fitted with "
+                             "the lamp (an automatic exposure)")
     parser.add_argument("--laminate", type=float, default=None, metavar="ALPHA",
                         help="a glossy coat of this GGX roughness over the print (default matte)")
     args = parser.parse_args(argv)
@@ -352,11 +368,13 @@ def main(argv=None) -> int:
     os.makedirs(args.out, exist_ok=True)
     photos = [cv2.imread(os.path.join(args.folder, "air", f"{p[0]}.BMP"), cv2.IMREAD_GRAYSCALE)
               for p in poses]
-    params, log_rms = fit_lamp(square_samples(photos, poses, K, kc, square))
+    params, exposures, log_rms = fit_lamp(square_samples(photos, poses, K, kc, square),
+                                          args.exposure == "per-photo")
     lamp, black = params[:3], LAYOUT["white"] * float(np.exp(params[4]))
     gain = float(np.exp(params[3])) * np.pi / LAYOUT["white"]
     print(f"lamp fit: at {np.round(lamp).tolist()} mm (camera frame), black/white "
-          f"{np.exp(params[4]):.3f}, log RMS {log_rms:.3f}")
+          f"{np.exp(params[4]):.3f}, log RMS {log_rms:.3f}; exposures "
+          + " ".join(f"{e / np.median(exposures):.2f}" for e in exposures))
     vignette = cos4_map(Camera(K, (648, 486), dist=kc)).astype(np.float32)
     rng = np.random.default_rng(0)
     twins = []
@@ -364,16 +382,17 @@ def main(argv=None) -> int:
         dark = first_square_dark(photos[k], K, kc, pose[1], pose[2], square)
         linear = render_twin(K, kc, pose, square, dark, lamp, args.spp, k, args.sag, black,
                              args.print_jitter, args.laminate)
-        twins.append(stored(linear, gain, vignette, rng))
+        twins.append(stored(linear, gain * exposures[k], vignette, rng))
         cv2.imwrite(os.path.join(args.out, f"twin_{k + 1:02d}.png"), twins[-1])
     rows = [summary(n, p, K, kc, poses, square) for n, p in (("real", photos), ("twin", twins))]
     sheet = np.vstack([np.hstack([photos[k], twins[k]]) for k in (0, 4, 7)])
     cv2.imwrite(os.path.join(args.out, "compare.png"), sheet)
     with open(os.path.join(args.out, "report.json"), "w") as fh:
-        json.dump({"rows": rows, "lamp_mm": lamp.tolist(), "black_white": float(np.exp(params[4])),
-                   "log_rms": log_rms, "layout": LAYOUT, "noise_dn": NOISE_DN,
-                   "blur_px": BLUR_PX, "sag_mm": args.sag,
-                   "print_jitter_mm": args.print_jitter, "laminate_alpha": args.laminate}, fh, indent=1)
+        json.dump({"rows": rows, "lamp_mm": lamp.tolist(),
+                   "black_white": float(np.exp(params[4])), "log_rms": log_rms,
+                   "exposures": exposures.tolist(), "layout": LAYOUT, "noise_dn": NOISE_DN,
+                   "blur_px": BLUR_PX, "sag_mm": args.sag, "print_jitter_mm": args.print_jitter,
+                   "laminate_alpha": args.laminate}, fh, indent=1)
     print_table(rows)
     return 0
 
