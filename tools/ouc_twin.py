@@ -2,19 +2,25 @@
 calibration, and the twin compared with the photos detector by detector.
 
     python tools/ouc_twin.py $REFSTEREO_REAL_PHOTOS/ouc_flat --out out/ouc_twin [--spp 16]
+        [--exposure fixed|per-photo] [--print-jitter MM] [--sag MM] [--laminate ALPHA]
 
 What is rendered (648 × 486, the camera at the reference frame's origin): the authors'
 ``Calib_Results_export.json`` — K (fx ≠ fy: rendered on an oversampled square-pixel film and
 warped, as every distorted camera is, :func:`synth.rendering.render.render_view_counted`), the
 distortion kc (Bouguet's pixels are OpenCV's: the export's poses reproject onto
 ``cornerSubPix`` corners at a median 0.13–0.33 px) and every photo's pose of the sub-grid the
-authors clicked (``omc``, ``Tc``). The board as printed, approximately: the checker extended by
-:data:`EXTRA_SQUARES` square beyond the clicked sub-grid on every side (7 × 6 squares for the
-5 × 4 sub-grid; the photos show about 8 × 7, the sub-grid not always in the middle), a
-white paper margin, a thin black frame line and a grey metal plate, all
-diffuse (:data:`LAYOUT`); lit by one spot lamp beside the camera (:data:`LAMP`), no other
-light. Stored as a photo would be: exposed so that the brightest white squares reach 255
-(a few clip, like the photos' 250), sRGB-encoded, Gaussian noise of :data:`NOISE_DN`, 8 bits.
+authors clicked (``omc``, ``Tc``). The board as the photos show it, approximately: the checker
+extended by :data:`EXTRA_SQUARES` square beyond the clicked sub-grid on every side, a black
+frame line printed along its edge and the metal plate round it, all diffuse (:data:`LAYOUT`),
+rendered by :func:`synth.products.printed_board.render_board`. The light is **fitted to the
+photos** (:func:`fit_lamp`): one point lamp, the exposure and the black squares' reflectance
+that best give the levels of the photos' 280 squares (140 of the white ones clipped at 250),
+a matte board and a linear camera assumed (``--exposure per-photo``: an exposure per photo,
+as an automatic exposure would set it). Stored as the photos were: cos⁴ vignetting, the
+edges' blur and the noise measured on the photos (:data:`BLUR_PX`, :data:`NOISE_DN`), the
+fitted exposure, linear levels over a dark level, clipped at 250, 8 bits. ``--print-jitter``:
+a ragged print (every square's edges moved by their own Gaussian offsets); ``--sag``: the
+board bent along its width; ``--laminate``: a glossy coat (:mod:`synth.products.printed_board`).
 
 What is compared, on the twin and on the photos alike (``cv2.findChessboardCorners`` with the
 authors' 6 × 5 inner corners):
@@ -45,12 +51,22 @@ EXTRA_SQUARES = 1
 #: The board outside the checker, in squares from its edge: white paper to the frame line, the
 #: frame line's width, paper beyond it, then the metal plate to the board's edge; reflectances.
 #: (Multiples of 1 / TEXELS, so that every edge falls on a texel's edge: nearest-texel lookup.)
-LAYOUT = {"paper_to_line": 0.125, "line": 0.0625, "paper_after_line": 0.125, "plate": 1.0,
-          "white": 0.8, "black": 0.04, "plate_reflectance": 0.3}
-#: The lamp: position and aim, mm in the camera frame, cut-off half-angle (degrees).
-LAMP = {"position": (-150.0, -250.0, 0.0), "aim": (0.0, 0.0, 400.0), "angle": 25.0}
-NOISE_DN = 1.5
-TEXELS = 32
+#: As the photos show it: the line printed along the checker's edge, the plate a quarter as
+#: bright as the white paper, the black squares 0.12 of the white (the photos' unclipped
+#: black / white levels, :func:`fit_lamp`).
+LAYOUT = {"paper_to_line": 0.0, "line": 0.0625, "paper_after_line": 0.0, "plate": 1.0,
+          "white": 0.8, "black": 0.096, "plate_reflectance": 0.2}
+#: The photos' stored levels: a linear response (the unclipped black / white levels are
+#: 0.11–0.14, which sRGB would make 0.01–0.02 in light), a dark level of 2 DN, clipped at 250.
+DARK_DN, CLIP_DN = 2.0, 250.0
+#: Measured on the photos: the edges' blur (the Gaussian σ an edge's steepest grey-level
+#: gradient implies, median of the photos' medians 1.0 px, where the sharp twin gives 0.8 px:
+#: the twin is blurred by √(1.0² − 0.8²)) and the noise (the median RMS about a plane fitted
+#: to 7 × 7 pixels in the middle of each unclipped square, 1.3 DN).
+BLUR_PX, NOISE_DN = 0.6, 1.3
+#: Where the lamp fit may place the lamp: within this distance of the camera (mm).
+LAMP_BOUND_MM = 5000.0
+TEXELS = 128
 PATTERN = (6, 5)
 
 
@@ -68,10 +84,13 @@ def load_export(folder):
     return K, np.array(d["kc"], float), poses, d["dX"][0] * 1000.0
 
 
-def board_texture(n_sq, first_dark: bool):
+def board_texture(n_sq, first_dark: bool, black=None, jitter=0.0, seed=0):
     """The printed board (reflectance, float32 ``(H, W, 1)``) and its extent in grid
     coordinates (squares): the checker of ``n_sq`` + 2·:data:`EXTRA_SQUARES` squares, the
-    margin, the frame line, the plate (:data:`LAYOUT`)."""
+    margin, the frame line, the plate (:data:`LAYOUT`; ``black`` the black squares'
+    reflectance where given). ``jitter`` (squares): a ragged print, every black square drawn
+    with each of its four edges moved by its own Gaussian offset of this σ
+    (:func:`ragged_dark`, ``seed``: one print for every photo)."""
     L = LAYOUT
     border = L["paper_to_line"] + L["line"] + L["paper_after_line"] + L["plate"]
     lo = -EXTRA_SQUARES - border
@@ -84,14 +103,32 @@ def board_texture(n_sq, first_dark: bool):
     ex = np.maximum(np.maximum(-EXTRA_SQUARES - X, X - n_sq[0] - EXTRA_SQUARES), 0)
     ey = np.maximum(np.maximum(-EXTRA_SQUARES - Y, Y - n_sq[1] - EXTRA_SQUARES), 0)
     out = np.maximum(ex, ey)
-    dark = ((np.floor(X) + np.floor(Y)) % 2 == 0) == first_dark
-    texture = np.where(dark, L["black"], L["white"])
+    dark = (((np.floor(X) + np.floor(Y)) % 2 == 0) == first_dark if jitter == 0
+            else ragged_dark(X, Y, first_dark, jitter, seed))
+    texture = np.where(dark, L["black"] if black is None else black, L["white"])
     line_start = L["paper_to_line"]
     texture = np.where(out > 0, L["white"], texture)
     texture = np.where((out > line_start) & (out <= line_start + L["line"]), L["black"], texture)
     texture = np.where(out > line_start + L["line"] + L["paper_after_line"],
                        L["plate_reflectance"], texture)
     return texture.astype(np.float32)[..., None], (lo, lo + size[0], lo, lo + size[1])
+
+
+def ragged_dark(X, Y, first_dark: bool, jitter: float, seed: int) -> np.ndarray:
+    """Where a ragged print is black at grid points ``(X, Y)`` (squares): the union of the
+    black squares, square ``(i, j)`` spanning ``[j + l, j + 1 + r) × [i + t, i + 1 + b)`` with
+    its own offsets ``l, r, t, b`` drawn from N(0, ``jitter``²)."""
+    rng = np.random.default_rng(seed)
+    offsets = rng.normal(0.0, jitter, (64, 64, 4))
+    dark = np.zeros(X.shape, bool)
+    for di in (-1, 0, 1):
+        for dj in (-1, 0, 1):
+            i, j = np.floor(Y) + di, np.floor(X) + dj
+            o = offsets[i.astype(int) % 64, j.astype(int) % 64]
+            inside = ((X >= j + o[..., 0]) & (X < j + 1 + o[..., 1])
+                      & (Y >= i + o[..., 2]) & (Y < i + 1 + o[..., 3]))
+            dark |= inside & ((((i + j) % 2) == 0) == first_dark)
+    return dark
 
 
 def first_square_dark(photo, K, kc, R, T, square):
@@ -103,43 +140,114 @@ def first_square_dark(photo, K, kc, R, T, square):
     return values[0] < values[1]
 
 
-def render_twin(K, kc, pose, square, first_dark, spp, seed):
-    """The linear render (float32 ``(486, 648)``) of one pose."""
+def square_samples(photos, poses, K, kc, square):
+    """The photos' squares as the lamp fit sees them: per square of every photo's clicked
+    sub-grid, its centre ``P`` (mm, camera frame), the board's normal ``n`` (towards the
+    camera), cos⁴ of its ray, whether it is a black square, and the stored level (the mean of
+    25 points over its middle half, bilinear) and the photo's index. Arrays over all squares
+    of all photos."""
+    off = np.linspace(-0.25, 0.25, 5)
+    du, dv = np.meshgrid(off, off)
+    sub = np.stack([du.ravel(), dv.ravel()], 1)
+    cols = {"P": [], "n": [], "cos4": [], "dark": [], "level": [], "photo": []}
+    for k, (gray, (_, R, T, (nx, ny))) in enumerate(zip(photos, poses)):
+        j, i = np.mgrid[0:nx, 0:ny]
+        centres = np.column_stack([j.ravel() + 0.5, i.ravel() + 0.5])
+        pts = (centres[:, None, :] + sub[None]).reshape(-1, 2)
+        uv = cv2.projectPoints(np.column_stack([pts, np.zeros(len(pts))]) * square,
+                               cv2.Rodrigues(R)[0], T, K, kc)[0].reshape(-1, 2).astype(np.float32)
+        level = cv2.remap(gray.astype(np.float32), uv[:, :1], uv[:, 1:], cv2.INTER_LINEAR
+                          ).reshape(-1, 25).mean(axis=1)
+        P = (R @ (np.column_stack([centres, np.zeros(len(centres))]) * square).T).T + T
+        parity = (i.ravel() + j.ravel()) % 2
+        brighter = 0 if level[parity == 0].mean() > level[parity == 1].mean() else 1
+        cols["P"].append(P)
+        cols["n"].append(np.tile(R[:, 2] * np.sign(R[:, 2] @ -T), (len(P), 1)))
+        cols["cos4"].append((P[:, 2] / np.linalg.norm(P, axis=1)) ** 4)
+        cols["dark"].append(parity != brighter)
+        cols["level"].append(level)
+        cols["photo"].append(np.full(len(P), k))
+    return {k: np.concatenate(v) for k, v in cols.items()}
+
+
+def lamp_levels(params, samples):
+    """The stored levels a point lamp at ``params[:3]`` (mm, camera frame) gives the squares
+    before clipping: ``DARK_DN + g · ρ · cos θ / r² · cos⁴`` (white ρ = 1, black
+    ``exp(params[4])``, ``g = exp(params[3]) · 10⁶``): a matte board, a linear camera."""
+    d = params[:3] - samples["P"]
+    r = np.linalg.norm(d, axis=1)
+    cos = np.maximum(np.sum(samples["n"] * d, axis=1) / r, 1e-3)
+    rho = np.where(samples["dark"], np.exp(params[4]), 1.0)
+    return DARK_DN + np.exp(params[3]) * 1e6 * rho * cos / r ** 2 * samples["cos4"]
+
+
+def fit_lamp(samples, per_photo: bool = False):
+    """The point lamp, the exposure and the black/white ratio that best give the photos'
+    square levels (least squares on their logarithms; a square clipped in the photo (≥ 245)
+    only counts when the lamp leaves it below 245), from 12 starting places, the lamp within
+    :data:`LAMP_BOUND_MM`. ``per_photo``: each photo its own exposure (a camera's automatic
+    exposure). ``(params, exposure of each photo relative to exp(params[3]), RMS of the log
+    residuals)``."""
+    from scipy.optimize import least_squares
+
+    level, clipped = samples["level"], samples["level"] >= 245
+    photo = samples["photo"]
+    n = int(photo.max()) + 1 if per_photo else 0
+
+    def model(p):
+        gains = np.exp(p[5:])[photo] if per_photo else 1.0
+        return DARK_DN + (lamp_levels(p[:5], samples) - DARK_DN) * gains
+
+    def residuals(p):
+        m = model(p)
+        return np.where(clipped, np.maximum(0.0, np.log(245.0) - np.log(m)),
+                        np.log(m) - np.log(level))
+
+    best = None
+    bound = LAMP_BOUND_MM / np.sqrt(3)
+    lower = [-bound] * 3 + [-np.inf] * (2 + n)
+    upper = [bound] * 3 + [np.inf] * (2 + n)
+    for x in (-300.0, 0.0, 300.0):
+        for y in (-300.0, 300.0):
+            for z in (-300.0, 200.0):
+                p0 = np.concatenate([[x, y, z, 0.0, np.log(0.1)], np.zeros(n)])
+                p0[3] = np.median(np.log(level - DARK_DN + 1) - np.log(lamp_levels(p0, samples)))
+                fit = least_squares(residuals, p0, bounds=(lower, upper))
+                if best is None or fit.cost < best.cost:
+                    best = fit
+    gains = np.exp(best.x[5:]) if per_photo else np.ones(int(photo.max()) + 1)
+    return best.x[:5], gains, float(np.sqrt(np.mean(best.fun ** 2)))
+
+
+def render_twin(K, kc, pose, square, first_dark, lamp_mm, spp, seed, sag_mm=0.0, black=None,
+                jitter_mm=0.0, laminate=None):
+    """The linear render (float32 ``(486, 648)``) of one pose: the printed board
+    (:func:`board_texture`, bent by ``sag_mm``, its squares' edges ragged by ``jitter_mm``)
+    lit by a point lamp at ``lamp_mm`` (camera frame) of intensity 1e6; under a laminate of
+    GGX roughness ``laminate`` where given."""
     from measure import Camera
-    from synth.products.board_light import BoardLight
-    from synth.rendering.mitsuba_setup import import_mitsuba
-    from synth.rendering.render import render_view_counted, sensor_dict
+    from synth.products.printed_board import render_board
 
-    mi, _ = import_mitsuba(None)
     _, R, T, n_sq = pose
-    texture, (x0, x1, y0, y1) = board_texture(n_sq, first_dark)
-    camera = Camera(K, (648, 486), dist=kc)
-    square_K = np.array([[K[0, 0], 0, 323.5], [0, K[0, 0], 242.5], [0, 0, 1.0]])
-    facing = -1.0 if R[:, 2] @ -T > 0 else 1.0  # local +z must face the camera
-    local = np.array([[(x1 - x0) / 2 * square, 0, 0, (x0 + x1) / 2 * square],
-                      [0, (y1 - y0) / 2 * square, 0, (y0 + y1) / 2 * square],
-                      [0, 0, -facing, 0], [0, 0, 0, 1.0]])
-    M = np.eye(4)
-    M[:3, :3], M[:3, 3] = R, T
-    lamp = BoardLight("spot", LAMP["position"], LAMP["aim"], 1e6, LAMP["angle"])
-    scene = mi.load_dict({
-        "type": "scene", "integrator": {"type": "path", "max_depth": 3},
-        "sensor": sensor_dict(mi, Camera(square_K, (648, 486)),
-                              {"type": "multijitter", "sample_count": 4, "seed": 0}),
-        "board": {"type": "rectangle", "to_world": mi.ScalarTransform4f((M @ local).tolist()),
-                  "bsdf": {"type": "diffuse", "reflectance": {
-                      "type": "bitmap", "data": mi.TensorXf(texture), "raw": True,
-                      "filter_type": "nearest"}}},
-        "lamp": lamp.emitter_dict(mi, Camera(square_K, (648, 486)))})
-    return render_view_counted(scene, mi, 0, camera, spp, seed, adaptive=False)[0]
+    texture, (x0, x1, y0, y1) = board_texture(n_sq, first_dark, black, jitter_mm / square)
+    facing = 1.0 if R[:, 2] @ -T > 0 else -1.0   # the printed side's z must point away
+    flip = np.diag([1.0, 1.0, -facing])           # from the camera (board frame, mm)
+    emitter = {"type": "point", "position": [float(v) for v in lamp_mm],
+               "intensity": {"type": "rgb", "value": 1e6}}
+    return render_board(Camera(K, (648, 486), dist=kc), (R @ flip, T), texture,
+                        (x0 * square, x1 * square, y0 * square, y1 * square), emitter, spp,
+                        seed, sag_mm=sag_mm, laminate_alpha=laminate)
 
 
-def stored(linear, rng):
-    """A linear render as the camera would store it (module docs): uint8."""
-    white = np.percentile(linear[linear > 0], 99.5) if np.any(linear > 0) else 1.0
-    x = np.clip(linear / white, 0.0, 1.0)
-    srgb = np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055) * 255.0
-    return np.clip(np.rint(srgb + rng.normal(0.0, NOISE_DN, srgb.shape)), 0, 255).astype(np.uint8)
+def stored(linear, gain, vignette, rng):
+    """A linear render as the camera stored the photos: times cos⁴ of each pixel's ray,
+    blurred by :data:`BLUR_PX`, times ``gain`` (stored levels per unit of radiance: the lamp
+    fit's exposure), the dark level, :data:`NOISE_DN` of noise, clipped at :data:`CLIP_DN`;
+    uint8. ``vignette``: the camera's cos⁴ map
+    (:func:`synth.rendering.camera_effects.cos4_map`)."""
+    x = linear * vignette
+    x = cv2.GaussianBlur(x, (0, 0), BLUR_PX) * gain + DARK_DN
+    return np.clip(np.rint(x + rng.normal(0.0, NOISE_DN, x.shape)), 0, CLIP_DN).astype(np.uint8)
 
 
 def saddle_refine(gray, uv, spacing):
@@ -239,28 +347,57 @@ def main(argv=None) -> int:
     parser.add_argument("folder", help="the ouc_flat folder (Calib_Results_export.json, air/)")
     parser.add_argument("--out", required=True)
     parser.add_argument("--spp", type=int, default=16)
+    parser.add_argument("--sag", type=float, default=0.0, metavar="MM",
+                        help="the board bent by this much along its width (default flat)")
+    parser.add_argument("--print-jitter", type=float, default=0.0, metavar="MM",
+                        help="a ragged print: each square's edges moved by N(0, MM^2) (default 0)")
+    parser.add_argument("--exposure", choices=("fixed", "per-photo"), default="fixed",
+                        help="one exposure for all photos (default) or one each, fitted with "
+                             "the lamp (an automatic exposure)")
+    parser.add_argument("--laminate", type=float, default=None, metavar="ALPHA",
+                        help="a glossy coat of this GGX roughness over the print (default matte)")
     args = parser.parse_args(argv)
     try:
         K, kc, poses, square = load_export(args.folder)
     except (OSError, KeyError, ValueError) as exc:
         print(f"error: {args.folder}: not the ouc_flat folder ({exc})", file=sys.stderr)
         return 2
+    from measure import Camera
+    from synth.rendering.camera_effects import cos4_map
+
     os.makedirs(args.out, exist_ok=True)
+    photos = [cv2.imread(os.path.join(args.folder, "air", f"{p[0]}.BMP"), cv2.IMREAD_GRAYSCALE)
+              for p in poses]
+    params, exposures, log_rms = fit_lamp(square_samples(photos, poses, K, kc, square),
+                                          args.exposure == "per-photo")
+    lamp, black = params[:3], LAYOUT["white"] * float(np.exp(params[4]))
+    gain = float(np.exp(params[3])) * np.pi / LAYOUT["white"]
+    print(f"lamp fit: at {np.round(lamp).tolist()} mm (camera frame), black/white "
+          f"{np.exp(params[4]):.3f}, log RMS {log_rms:.3f}; exposures "
+          + " ".join(f"{e / np.median(exposures):.2f}" for e in exposures))
+    vignette = cos4_map(Camera(K, (648, 486), dist=kc)).astype(np.float32)
     rng = np.random.default_rng(0)
-    photos, twins = [], []
+    twins = []
     for k, pose in enumerate(poses):
-        name, R, T, _ = pose
-        photo = cv2.imread(os.path.join(args.folder, "air", f"{name}.BMP"), cv2.IMREAD_GRAYSCALE)
-        photos.append(photo)
-        dark = first_square_dark(photo, K, kc, R, T, square)
-        twins.append(stored(render_twin(K, kc, pose, square, dark, args.spp, k), rng))
+        dark = first_square_dark(photos[k], K, kc, pose[1], pose[2], square)
+        linear = render_twin(K, kc, pose, square, dark, lamp, args.spp, k, args.sag, black,
+                             args.print_jitter, args.laminate)
+        twins.append(stored(linear, gain * exposures[k], vignette, rng))
         cv2.imwrite(os.path.join(args.out, f"twin_{k + 1:02d}.png"), twins[-1])
     rows = [summary(n, p, K, kc, poses, square) for n, p in (("real", photos), ("twin", twins))]
     sheet = np.vstack([np.hstack([photos[k], twins[k]]) for k in (0, 4, 7)])
     cv2.imwrite(os.path.join(args.out, "compare.png"), sheet)
     with open(os.path.join(args.out, "report.json"), "w") as fh:
-        json.dump({"rows": rows, "lamp": LAMP, "layout": LAYOUT, "noise_dn": NOISE_DN}, fh,
-                  indent=1)
+        json.dump({"rows": rows, "lamp_mm": lamp.tolist(),
+                   "black_white": float(np.exp(params[4])), "log_rms": log_rms,
+                   "exposures": exposures.tolist(), "layout": LAYOUT, "noise_dn": NOISE_DN,
+                   "blur_px": BLUR_PX, "sag_mm": args.sag, "print_jitter_mm": args.print_jitter,
+                   "laminate_alpha": args.laminate}, fh, indent=1)
+    print_table(rows)
+    return 0
+
+
+def print_table(rows) -> None:
     print("| | found | plain OpenCV RMS | per photo min / median / max | saddle − cornerSubPix "
           "median / p90 / max | white max/min (8-bit) min / median / max |")
     print("|---|---|---|---|---|---|")
@@ -269,7 +406,6 @@ def main(argv=None) -> int:
               + " / ".join(f"{v:.3f}" for v in r["per_photo_rms"]) + " px | "
               + " / ".join(f"{v:.2f}" for v in r["saddle_shift"]) + f" px ({r['corners']}) | "
               + " / ".join(f"{v:.2f}" for v in r["white_ratio"]) + " |")
-    return 0
 
 
 if __name__ == "__main__":
