@@ -189,12 +189,7 @@ def write_sequence(spec: SceneSpec, out_dir, approach, frames: int, *,
     for a request that cannot work (a marker not in the water, fewer than one frame).
     ``trajectory``: ``(path, times, R, t)`` of :func:`read_trajectory` — the poses to render
     instead of the approach (``approach``, ``frames``, ``yaw_deg`` and ``fps`` then unused)."""
-    from tqdm import tqdm
-
-    from synth.products.dataset import write_calib
-    from synth.rendering.render import (check_render_request, png16_scale, render_stereo,
-                                        to_png16, write_png)
-    from synth.scene.write import scene_xml
+    from synth.rendering.render import check_render_request
 
     t_start = time.perf_counter()
     if trajectory is not None:
@@ -212,60 +207,20 @@ def write_sequence(spec: SceneSpec, out_dir, approach, frames: int, *,
         source, times, R, t = trajectory
         frames, approach, yaw_deg = len(t), None, None
     markers = np.einsum("fij,mj->fmi", R, obj) + t[:, None, :]
-    port = spec.rig.port
-    for k in range(frames):
-        inside = np.all([port.view(v).water_side(markers[k]) for v in range(2)], axis=0)
-        if not inside.all():
-            raise ValueError(f"frame {k}: marker {int(np.flatnonzero(~inside)[0])} at "
-                             f"{np.round(markers[k][~inside][0], 1).tolist()} mm is not in the "
-                             f"water (" + ("--approach starts or ends too near)" if source is None
-                                           else f"--trajectory {source} comes too near)"))
+    _check_markers_in_water(spec.rig.port, markers, source)
     rig = spec.rig
     pixels = [np.stack([project(c, rig.view_port(v), markers[k])
                         for v, c in enumerate(rig.cameras)]) for k in range(frames)]
     check_markers_in_view(rig, pixels, approach if source is None else source)
     output = OutputDir(out_dir, COMMAND).claim()
     check_render_request(spec, spp, seed, poses=frames, adaptive=adaptive)
-    normals = np.einsum("fij,j->fi", R, [0.0, 0.0, -1.0])
-    images, scales, stats = [], [], []
-    bar = tqdm(range(frames), desc=f"render sequence {spp} spp", unit="frame",
-               disable=not progress, leave=False)
     t_render = time.perf_counter()
-    with tempfile.TemporaryDirectory(prefix="synth-sequence-") as scratch:
-        for k in bar:
-            path = os.path.join(scratch, f"frame_{k:04d}.xml")
-            with open(path, "w", encoding="utf-8") as fh:
-                fh.write(scene_xml(spec.cameras, spec.port, markers[k], marker_radius_mm,
-                                   spp=spp, seed=seed + 2 * k,
-                                   target_normals=np.tile(normals[k], (len(obj), 1)),
-                                   comment=f"{COMMAND}: frame {k} of {spec.path}"))
-            left, right, info = render_stereo(load_scene(path), spp=spp, variant=variant,
-                                              progress=False, seed=seed + 2 * k,
-                                              adaptive=adaptive)
-            images.append((left, right))
-            stats.append({"variant": info["variant"], "seconds": info["seconds"]})
+    images, stats = _render_frames(spec, markers, np.einsum("fij,j->fi", R, [0.0, 0.0, -1.0]),
+                                   marker_radius_mm, spp, seed, variant, progress, adaptive)
     render_seconds = time.perf_counter() - t_render
     with output.staged() as tmp:
-        os.makedirs(os.path.join(tmp, "frames"))
-        for k, pair in enumerate(images):
-            scale = png16_scale(*pair)
-            scales.append(scale)
-            for name, image in zip(("left", "right"), pair):
-                write_png(os.path.join(tmp, "frames", f"{k:04d}_{name}.png"),
-                          to_png16(image, scale))
-        write_calib(os.path.join(tmp, "calib.yaml"), rig, spec.has_port)
-        with open(os.path.join(tmp, "object.csv"), "w", newline="") as fh:
-            writer = csv.writer(fh)
-            writer.writerow(OBJECT_HEADER)
-            for i, p in enumerate(obj):
-                writer.writerow([i, *(repr(float(v)) for v in p)])
-        write_poses(tmp, R, t, fps, times)
-        with open(os.path.join(tmp, "pixels.csv"), "w", newline="") as fh:
-            writer = csv.writer(fh)
-            writer.writerow(PIXELS_HEADER)
-            for k, uv in enumerate(pixels):
-                for i in range(len(obj)):
-                    writer.writerow([k, i, *(repr(float(v)) for v in uv[:, i].ravel())])
+        scales = _write_frames(tmp, images)
+        _write_truth(tmp, spec, obj, R, t, fps, times, pixels)
         files = sorted(os.path.relpath(os.path.join(d, f), tmp)
                        for d, _, names in os.walk(tmp) for f in names)
         manifest = {
@@ -286,6 +241,83 @@ def write_sequence(spec: SceneSpec, out_dir, approach, frames: int, *,
         manifest = jsonable(manifest)
         atomic_write_json(os.path.join(tmp, "manifest.json"), manifest)
     return manifest
+
+
+def _check_markers_in_water(port, markers, source) -> None:
+    """ValueError naming the first frame and marker (mm) not on the water side of both views'
+    ports (``source``: the trajectory file, None for an approach)."""
+    for k in range(len(markers)):
+        inside = np.all([port.view(v).water_side(markers[k]) for v in range(2)], axis=0)
+        if not inside.all():
+            raise ValueError(f"frame {k}: marker {int(np.flatnonzero(~inside)[0])} at "
+                             f"{np.round(markers[k][~inside][0], 1).tolist()} mm is not in the "
+                             f"water (" + ("--approach starts or ends too near)" if source is None
+                                           else f"--trajectory {source} comes too near)"))
+
+
+def _render_frames(spec, markers, normals, marker_radius_mm, spp, seed, variant, progress,
+                   adaptive) -> tuple[list, list]:
+    """``(images, stats)``: each frame's scene written with its markers (``(F, M, 3)`` mm,
+    facing ``normals``) and rendered (seed ``seed + 2 k``): the (left, right) linear images
+    and each render's variant and seconds."""
+    from tqdm import tqdm
+
+    from synth.rendering.render import render_stereo
+    from synth.scene.write import scene_xml
+
+    frames = len(markers)
+    images, stats = [], []
+    bar = tqdm(range(frames), desc=f"render sequence {spp} spp", unit="frame",
+               disable=not progress, leave=False)
+    with tempfile.TemporaryDirectory(prefix="synth-sequence-") as scratch:
+        for k in bar:
+            path = os.path.join(scratch, f"frame_{k:04d}.xml")
+            with open(path, "w", encoding="utf-8") as fh:
+                fh.write(scene_xml(spec.cameras, spec.port, markers[k], marker_radius_mm,
+                                   spp=spp, seed=seed + 2 * k,
+                                   target_normals=np.tile(normals[k], (markers.shape[1], 1)),
+                                   comment=f"{COMMAND}: frame {k} of {spec.path}"))
+            left, right, info = render_stereo(load_scene(path), spp=spp, variant=variant,
+                                              progress=False, seed=seed + 2 * k,
+                                              adaptive=adaptive)
+            images.append((left, right))
+            stats.append({"variant": info["variant"], "seconds": info["seconds"]})
+    return images, stats
+
+
+def _write_frames(tmp, images) -> list:
+    """Each frame's views as 16-bit linear PNGs in ``tmp/frames/`` (one scale per frame);
+    returns the scales."""
+    from synth.rendering.render import png16_scale, to_png16, write_png
+
+    os.makedirs(os.path.join(tmp, "frames"))
+    scales = []
+    for k, pair in enumerate(images):
+        scale = png16_scale(*pair)
+        scales.append(scale)
+        for name, image in zip(("left", "right"), pair):
+            write_png(os.path.join(tmp, "frames", f"{k:04d}_{name}.png"), to_png16(image, scale))
+    return scales
+
+
+def _write_truth(tmp, spec, obj, R, t, fps, times, pixels) -> None:
+    """``calib.yaml``, the object's markers, the true poses and the simulator's pixels of every
+    marker in every frame into ``tmp``."""
+    from synth.formats.calib_yaml import write_calib
+
+    write_calib(os.path.join(tmp, "calib.yaml"), spec.rig, spec.has_port)
+    with open(os.path.join(tmp, "object.csv"), "w", newline="") as fh:
+        writer = csv.writer(fh)
+        writer.writerow(OBJECT_HEADER)
+        for i, p in enumerate(obj):
+            writer.writerow([i, *(repr(float(v)) for v in p)])
+    write_poses(tmp, R, t, fps, times)
+    with open(os.path.join(tmp, "pixels.csv"), "w", newline="") as fh:
+        writer = csv.writer(fh)
+        writer.writerow(PIXELS_HEADER)
+        for k, uv in enumerate(pixels):
+            for i in range(len(obj)):
+                writer.writerow([k, i, *(repr(float(v)) for v in uv[:, i].ravel())])
 
 
 __all__ = ["COMMAND", "DEFAULT_MARKER_RADIUS_MM", "approach_poses", "read_poses",
