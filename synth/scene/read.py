@@ -269,19 +269,53 @@ def load_scene(path, defines: dict | None = None) -> SceneSpec:
     """
     path = os.fspath(path)
     label = path
-    if os.path.isdir(path):
-        raise SceneError(f"{label}: is a directory, not a scene file")
-    try:
-        with open(path, "rb") as fh:
-            data = fh.read()
-    except OSError as exc:
-        raise SceneError(f"{label}: cannot read scene file ({exc.strerror or exc})") from None
+    data = _read_bytes(path)
     params, referenced = declared_defaults(data, label)
     override_defaults(params, defines, label)
     check_params(params, label)
     mi, state = _parse_with_mitsuba(path, params, referenced, label)
     nodes = _Nodes(mi, state)
+    left, right, extra = _sensors(mi, nodes, state, params, label)
+    interfaces, targets, surfaces, spheres = _read_shapes(nodes, label)
+    surface = _read_surface(surfaces, path, label) if surfaces else None
+    if surface is not None and targets:
+        raise SceneError(f"{label}: a scene holds targets or a surface, not both")
+    if not targets and surface is None:
+        raise SceneError(f"{label}: no targets (disk shapes with an area emitter, "
+                         f"or with ids '{TARGET_ID_PREFIX}<number>')")
+    targets.sort(key=lambda item: item[0])
+    ids = np.array([t[0] for t in targets], dtype=int)
+    if np.unique(ids).size != ids.size:
+        raise SceneError(f"{label}: duplicate target ids")
+    centres = np.array([t[1] for t in targets]).reshape(-1, 3)
+    radii = np.array([t[2] for t in targets], dtype=float)
+    normals = np.array([t[3] for t in targets]).reshape(-1, 3)
+    has_port = bool(interfaces or spheres)
+    rig, extra_ports = _rig(params, interfaces, spheres, left, right, extra, surface, label)
+    _check_targets(rig, extra_ports, bool(spheres), has_port, surface, ids, centres, normals,
+                   label)
+    return SceneSpec(rig=rig, has_port=has_port, targets=centres, target_ids=ids,
+                     target_radii=radii, params=params, path=path,
+                     sha256=(hashlib.sha256(data).hexdigest() if surface is None else
+                             hashlib.sha256(data + surface.sha256.encode()).hexdigest()),
+                     referenced=referenced, target_normals=normals, surface=surface,
+                     extra_cameras=extra, extra_ports=tuple(extra_ports))
 
+
+def _read_bytes(path) -> bytes:
+    """The scene file's bytes; SceneError for a folder or a file that cannot be read."""
+    if os.path.isdir(path):
+        raise SceneError(f"{path}: is a directory, not a scene file")
+    try:
+        with open(path, "rb") as fh:
+            return fh.read()
+    except OSError as exc:
+        raise SceneError(f"{path}: cannot read scene file ({exc.strerror or exc})") from None
+
+
+def _sensors(mi, nodes, state, params, label):
+    """``(left, right, extra)``: the cameras of the scene's sensors in order (two at least, all
+    of one film size)."""
     sensors = [n for n in state.nodes if n.type == mi.ObjectType.Sensor]
     if len(sensors) < 2:
         raise SceneError(f"{label}: a stereo scene needs two sensors (left, then right), "
@@ -293,22 +327,14 @@ def load_scene(path, defines: dict | None = None) -> SceneSpec:
     extra = tuple(_read_sensor(nodes, s, params, label) for s in sensors[2:])
     if any(camera.size != left.size for camera in extra):
         raise SceneError(f"{label}: the sensors have different film sizes")
-    interfaces, targets, surfaces, spheres = _read_shapes(nodes, label)
-    surface = _read_surface(surfaces, path, label) if surfaces else None
-    if surface is not None and targets:
-        raise SceneError(f"{label}: a scene holds targets or a surface, not both")
+    return left, right, extra
 
-    if not targets and surface is None:
-        raise SceneError(f"{label}: no targets (disk shapes with an area emitter, "
-                         f"or with ids '{TARGET_ID_PREFIX}<number>')")
-    targets.sort(key=lambda item: item[0])
-    ids = np.array([t[0] for t in targets], dtype=int)
-    if np.unique(ids).size != ids.size:
-        raise SceneError(f"{label}: duplicate target ids")
-    centres = np.array([t[1] for t in targets]).reshape(-1, 3)
-    radii = np.array([t[2] for t in targets], dtype=float)
 
-    has_port = bool(interfaces or spheres)
+def _rig(params, interfaces, spheres, left, right, extra, surface, label):
+    """``(rig, extra_ports)``: the stereo rig of the first two cameras behind the scene's port
+    (domes from its spheres, flat windows from its dielectric rectangles, or none: index
+    matched) and the further cameras' own ports; SceneError for a port that contradicts the
+    ``port`` parameter, windows that overlap a field of view, domes that cut it."""
     windows = None
     if interfaces and spheres:
         raise SceneError(f"{label}: a scene holds a flat port (rectangles) or domes (spheres), "
@@ -348,6 +374,15 @@ def load_scene(path, defines: dict | None = None) -> SceneSpec:
             check_field_of_view(rig)
         except ValueError as exc:
             raise SceneError(f"{label}: {exc}") from None
+    return rig, extra_ports
+
+
+def _check_targets(rig, extra_ports, domes: bool, has_port: bool, surface, ids, centres, normals,
+                   label) -> None:
+    """SceneError for targets (or a surface) out of the water, or targets that do not face
+    the cameras."""
+    port = rig.port
+    if domes:
         in_water = port.water_side(centres)
     else:
         if surface is not None and has_port and not np.all(port.water_side(surface.vertices)):
@@ -359,20 +394,12 @@ def load_scene(path, defines: dict | None = None) -> SceneSpec:
     if not np.all(in_water):
         bad = ids[~in_water]
         raise SceneError(f"{label}: targets {bad[:5].tolist()} are not in the water")
-    normals = np.array([t[3] for t in targets]).reshape(-1, 3)
-    facing = (facing_cameras(rig, centres, normals) if spheres
+    facing = (facing_cameras(rig, centres, normals) if domes
               else np.all([normals @ p.normal < 0
                            for p in (rig.view_port(0), rig.view_port(1), *extra_ports)], axis=0))
     if not np.all(facing):
         bad = ids[~facing]
         raise SceneError(f"{label}: targets {bad[:5].tolist()} do not face the cameras")
-    return SceneSpec(rig=rig, has_port=has_port, targets=centres, target_ids=ids,
-                     target_radii=radii, params=params, path=path,
-                     sha256=(hashlib.sha256(data).hexdigest() if surface is None else
-                             hashlib.sha256(data + surface.sha256.encode()).hexdigest()),
-                     referenced=referenced, target_normals=normals, surface=surface,
-                     extra_cameras=extra, extra_ports=tuple(extra_ports))
-
 
 def _check_extra_cameras(rig, extra, extra_ports, windows, domes: bool, label) -> None:
     """A scene of more than two sensors: every camera behind the one flat port, its own window
