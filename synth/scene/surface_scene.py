@@ -201,7 +201,6 @@ def dot_pixels(points, left, port, dot_mm: float) -> np.ndarray:
 def write_surface_scene(out: str, args, left, right, port, **scene_options) -> str:
     """Write the scene ``out``, its mesh and (unless present) its texture; returns the summary
     line. ``port`` None: an all-air scene. Nothing is left behind on failure."""
-    import sys
     import tempfile
 
     from synth.products.truth_maps import MeshTracer
@@ -214,15 +213,7 @@ def write_surface_scene(out: str, args, left, right, port, **scene_options) -> s
     if port is not None and not np.all(port.water_side(mesh.vertices)):
         raise ValueError(f"the surface reaches out of the water: every vertex must lie beyond the "
                          f"port's last interface ({move})")
-    extent = texture_extent(mesh)
-    try:  # refuses an oversized texture early
-        rows, cols, _ = speckle.texture_shape(extent, args.speckle_size)
-    except ValueError as exc:
-        raise ValueError(f"--speckle-size {args.speckle_size:g}: {exc}") from None
-    if min(rows, cols) < 4 * speckle.TEXELS_PER_DOT:
-        print(f"warning: --speckle-size {args.speckle_size:g} mm: fewer than 4 dots across the "
-              f"surface's texture ({extent[0]:.0f} x {extent[1]:.0f} mm), nothing to match",
-              file=sys.stderr)
+    extent = _texture_extent(args, mesh)
     lower = (mesh.uv_extent[0] + mesh.uv_extent[1]) / 2 - extent / 2
     directory = os.path.dirname(os.path.abspath(out))
     mesh_path = companion_paths(out)
@@ -244,44 +235,14 @@ def write_surface_scene(out: str, args, left, right, port, **scene_options) -> s
     try:
         surfaces.write_ply(tmp_mesh, mesh, lower, lower + extent)
         tracer = MeshTracer(tmp_mesh, *surfaces.read_ply(tmp_mesh))
-        seen = overlap_samples(tracer, left, right, geometry_port)
-        if seen.shape[0] < MIN_OVERLAP_SAMPLES:
-            raise ValueError(f"--surface {args.surface}: the surface is not seen by both cameras "
-                             f"(fewer than {MIN_OVERLAP_SAMPLES} samples of the left image every "
-                             f"{CHECK_STEP_PX} px; {move} or make it larger)")
-        back = max(back_facing_fraction(tracer, camera, geometry_port)
-                   for camera in (left, right))
-        if back > 0.5:
-            what = (f"--mesh {args.mesh}: its triangles are wound the other way (reverse their "
-                    f"vertex order); " if args.surface == "mesh" else
-                    f"--tilt {args.tilt[0]:g} {args.tilt[1]:g}: " if args.surface == "tilted"
-                    else f"--surface {args.surface}: ")
-            raise ValueError(f"{what}the cameras see the back of the surface, which renders "
-                             f"black ({100 * back:.0f} % of the pixels that see it)")
-        if back > 0:
-            print(f"warning: --surface {args.surface}: the cameras see the back of the surface "
-                  f"in {100 * back:.1f} % of the pixels that see it (black in the images)",
-                  file=sys.stderr)
-        dot_px = dot_pixels(seen, left, geometry_port, args.speckle_size)
-        if dot_px.min() < MIN_DOT_PX:
-            print(f"warning: --speckle-size {args.speckle_size:g} mm is down to "
-                  f"{dot_px.min():.2f} px on the surface: below one pixel the speckle aliases",
-                  file=sys.stderr)
+        dot_px = _check_sight(args, tracer, left, right, geometry_port, move)
         if write_texture(texture_display, args.speckle_size, args.speckle_coverage,
                          args.speckle_seed, extent, label):
             written.append(texture_path)
         problem = mesh_problem(mesh_path, label)  # again: it may have appeared meanwhile
         if problem:
             raise ValueError(problem)
-        if os.path.lexists(mesh_path):  # an earlier mesh of ours: put back if this one fails
-            fd, kept = tempfile.mkstemp(prefix=".surface-old-", suffix=".ply", dir=directory)
-            os.close(fd)
-            try:
-                os.replace(mesh_path, kept)
-            except BaseException:
-                os.unlink(kept)
-                raise
-            old_mesh = kept
+        old_mesh = _set_aside(mesh_path, directory)
         os.replace(tmp_mesh, mesh_path)
         written.append(mesh_path)
         files = SurfaceFiles(mesh=os.path.basename(mesh_path), texture=texture_file)
@@ -300,3 +261,68 @@ def write_surface_scene(out: str, args, left, right, port, **scene_options) -> s
             f"({np.min(dot_px):.1f}-{np.max(dot_px):.1f} px) at {args.speckle_coverage:g} coverage "
             f"({texture_file}), "
             f"{'port' if port else 'no port'}, {left.size[0]}x{left.size[1]} px")
+
+
+def _texture_extent(args, mesh) -> np.ndarray:
+    """The speckle texture's extent (mm) over ``mesh``; ValueError for a texture too large, a
+    warning for one with fewer than 4 dots across."""
+    import sys
+
+    extent = texture_extent(mesh)
+    try:  # refuses an oversized texture early
+        rows, cols, _ = speckle.texture_shape(extent, args.speckle_size)
+    except ValueError as exc:
+        raise ValueError(f"--speckle-size {args.speckle_size:g}: {exc}") from None
+    if min(rows, cols) < 4 * speckle.TEXELS_PER_DOT:
+        print(f"warning: --speckle-size {args.speckle_size:g} mm: fewer than 4 dots across the "
+              f"surface's texture ({extent[0]:.0f} x {extent[1]:.0f} mm), nothing to match",
+              file=sys.stderr)
+    return extent
+
+
+def _check_sight(args, tracer, left, right, geometry_port, move) -> np.ndarray:
+    """The speckle dots' size (px) where the left camera sees the surface; ValueError for a
+    surface both cameras do not see or whose back they see, warnings for some back or dots
+    below a pixel."""
+    import sys
+
+    seen = overlap_samples(tracer, left, right, geometry_port)
+    if seen.shape[0] < MIN_OVERLAP_SAMPLES:
+        raise ValueError(f"--surface {args.surface}: the surface is not seen by both cameras "
+                         f"(fewer than {MIN_OVERLAP_SAMPLES} samples of the left image every "
+                         f"{CHECK_STEP_PX} px; {move} or make it larger)")
+    back = max(back_facing_fraction(tracer, camera, geometry_port) for camera in (left, right))
+    if back > 0.5:
+        what = (f"--mesh {args.mesh}: its triangles are wound the other way (reverse their "
+                f"vertex order); " if args.surface == "mesh" else
+                f"--tilt {args.tilt[0]:g} {args.tilt[1]:g}: " if args.surface == "tilted"
+                else f"--surface {args.surface}: ")
+        raise ValueError(f"{what}the cameras see the back of the surface, which renders "
+                         f"black ({100 * back:.0f} % of the pixels that see it)")
+    if back > 0:
+        print(f"warning: --surface {args.surface}: the cameras see the back of the surface "
+              f"in {100 * back:.1f} % of the pixels that see it (black in the images)",
+              file=sys.stderr)
+    dot_px = dot_pixels(seen, left, geometry_port, args.speckle_size)
+    if dot_px.min() < MIN_DOT_PX:
+        print(f"warning: --speckle-size {args.speckle_size:g} mm is down to "
+              f"{dot_px.min():.2f} px on the surface: below one pixel the speckle aliases",
+              file=sys.stderr)
+    return dot_px
+
+
+def _set_aside(mesh_path, directory):
+    """An earlier mesh of ours moved to a temporary name beside it (put back if the new one
+    fails); its path, or None when there was none."""
+    import tempfile
+
+    if not os.path.lexists(mesh_path):
+        return None
+    fd, kept = tempfile.mkstemp(prefix=".surface-old-", suffix=".ply", dir=directory)
+    os.close(fd)
+    try:
+        os.replace(mesh_path, kept)
+    except BaseException:
+        os.unlink(kept)
+        raise
+    return kept
