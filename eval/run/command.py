@@ -132,9 +132,21 @@ def main(args) -> int:
         atomic_write_json(os.path.join(tmp, "report.json"), report)
         atomic_write_text(os.path.join(tmp, "report.md"), report_markdown(report))
     out = output.path
+    summary_stream = sys.stderr if args.json else sys.stdout
+    _print_summary(report, summary_stream)
+    print(f"wrote {out}", file=summary_stream)
+    if report.get("budget"):
+        print(budget_table(report), file=summary_stream)
+    _print_self_calibration(report.get("self_calibration"), summary_stream)
+    if args.json:
+        print(json.dumps(report, indent=2))
+    return verdict_exit_code(report, out)
+
+
+def _print_summary(report, stream) -> None:
+    """The run's headline, its methods' table and the 95 % ellipsoids' coverage."""
     from synth.rendering.render import spp_text
 
-    summary_stream = sys.stderr if args.json else sys.stdout
     m, c = report["matching"], report["crosscheck"]
     print(f"{report['scene']}: {m['visible_in_both']} targets visible in both views, "
           f"{m['pairs']} matched ({m['correct']} correct, {m['wrong']} wrong), cross-check RMS "
@@ -143,46 +155,44 @@ def main(args) -> int:
           f"{report['variant']} {spp_text(report['spp'], report.get('spp_rendered'))}"
           f"{'; sensor ' + report['sensor']['model']['name'] if report.get('sensor') else ''}; "
           f"total {report['timings_s']['total']:.1f} s",
-          file=summary_stream)
-    print(summary_table(report), file=summary_stream)
+          file=stream)
+    print(summary_table(report), file=stream)
     coverage = {m: v["coverage_95"] for m, v in report["methods"].items()
                 if v.get("coverage_95") is not None}
     uncorrected = ((report.get("eccentricity") or {}).get("uncorrected") or {})
     raw = (uncorrected.get("uncertainty") or {}).get("summaries") or {}
     coverage.update({f"{m} {UNCORRECTED}": v["coverage"]["coverage_95"] for m, v in raw.items()
                      if (v.get("coverage") or {}).get("coverage_95") is not None})
-    if coverage:
-        print("coverage of the 95 % ellipsoids: " + ", ".join(
-            f"{m} {fmt(v, 3)}" for m, v in coverage.items()) + f" ({report['uncertainty']['rig']})",
-            file=summary_stream)
-        summaries = dict(report["uncertainty"].get("summaries") or {})
-        summaries.update({f"{m} {UNCORRECTED}": v for m, v in raw.items()})
-        for method, summary in summaries.items():
-            verdict = (summary.get("coverage") or {}).get("verdict")
-            if verdict:
-                print(f"  {method}: {verdict}", file=summary_stream)
-    print(f"wrote {out}", file=summary_stream)
-    if report.get("budget"):
-        print(budget_table(report), file=summary_stream)
-    calibration = report.get("self_calibration")
-    if calibration:
-        if calibration.get("methods"):
-            for name, value in calibration["estimates"].items():
-                sigma = calibration["sigmas"][name]
-                covered = (f"σ with the --calib covariance of "
-                           f"{len(calibration['sigma_includes'])} fixed rig parameters; without "
-                           f"{calibration['sigmas_conditional'][name]}"
-                           if calibration.get("sigma_includes") else
-                           "σ conditional on the rig, which has no covariance")
-                print(f"self-calibrated {name}: {value} ± {sigma} (truth {calibration['truth'][name]}, "
-                      f"assumed {calibration['assumed'][name]}; {covered}); reprojection RMS "
-                      f"{calibration['rms_px_before']:.4f} -> {calibration['rms_px_after']:.4f} px",
-                      file=summary_stream)
-            print(summary_table({"methods": calibration["methods"]}), file=summary_stream)
-        else:
-            print(f"self-calibration: no trusted estimate "
-                  f"({calibration['reason'] or calibration['message']})", file=summary_stream)
-    if args.json:
-        print(json.dumps(report, indent=2))
-    return verdict_exit_code(report, out)
+    if not coverage:
+        return
+    print("coverage of the 95 % ellipsoids: " + ", ".join(
+        f"{m} {fmt(v, 3)}" for m, v in coverage.items()) + f" ({report['uncertainty']['rig']})",
+        file=stream)
+    summaries = dict(report["uncertainty"].get("summaries") or {})
+    summaries.update({f"{m} {UNCORRECTED}": v for m, v in raw.items()})
+    for method, summary in summaries.items():
+        verdict = (summary.get("coverage") or {}).get("verdict")
+        if verdict:
+            print(f"  {method}: {verdict}", file=stream)
 
+
+def _print_self_calibration(calibration, stream) -> None:
+    """The self-calibrated estimates and the scores they give, or why none is trusted."""
+    if not calibration:
+        return
+    if not calibration.get("methods"):
+        print(f"self-calibration: no trusted estimate "
+              f"({calibration['reason'] or calibration['message']})", file=stream)
+        return
+    for name, value in calibration["estimates"].items():
+        sigma = calibration["sigmas"][name]
+        covered = (f"σ with the --calib covariance of "
+                   f"{len(calibration['sigma_includes'])} fixed rig parameters; without "
+                   f"{calibration['sigmas_conditional'][name]}"
+                   if calibration.get("sigma_includes") else
+                   "σ conditional on the rig, which has no covariance")
+        print(f"self-calibrated {name}: {value} ± {sigma} (truth {calibration['truth'][name]}, "
+              f"assumed {calibration['assumed'][name]}; {covered}); reprojection RMS "
+              f"{calibration['rms_px_before']:.4f} -> {calibration['rms_px_after']:.4f} px",
+              file=stream)
+    print(summary_table({"methods": calibration["methods"]}), file=stream)
