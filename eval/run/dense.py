@@ -251,29 +251,10 @@ def dense_covariances(rig, matches, points, pixel_sigma, rig_covariance=None):
 
 def measure_surface(config: RunConfig, methods, log):
     """Match, triangulate and score every method; returns ``(report, arrays)``."""
-    from measure.dense.match import match_dense
-    from measure.stereo.triangulate import triangulate
-
-    from eval.core.surface_metrics import SurfaceCase, score_surface, surface_arrays
-    from eval.core.uncertainty import rig_covariance_note, uncertainty_summary
-    from measure.dense.match import glass_depth
-
     spec, rig, rig_covariance, left, right, truth, provenance = surface_inputs(config, log)
-    rig_source = f"--calib {config.calib}" if config.calib else None
     left, right, sensor_info = develop(config, left, right,
                                        spec.seed if config.seed is None else config.seed)
-    depth_range = config.depth_range_mm
-    if depth_range is None:
-        depth_range = default_depth_range(truth)
-    elif depth_range[0] <= glass_depth(rig):
-        raise CLIError(f"--depth-range {depth_range[0]:g},{depth_range[1]:g}: NEAR must lie beyond "
-                       f"the port (the water starts at {glass_depth(rig):g} mm)")
-    else:
-        seen = truth.depth[truth.overlap]
-        if seen.size and (depth_range[1] < seen.min() or depth_range[0] > seen.max()):
-            raise CLIError(f"--depth-range {depth_range[0]:g},{depth_range[1]:g} mm excludes the "
-                           f"surface (its depths where both cameras see it: {seen.min():.1f}-"
-                           f"{seen.max():.1f} mm)")
+    depth_range = _depth_range(config, rig, truth)
     h, w = truth.valid.shape
     report = {"scene": config.scene, "kind": "surface", "variant": provenance.get("variant"),
               "spp": provenance.get("spp"), "image_size": [w, h],
@@ -286,60 +267,102 @@ def measure_surface(config: RunConfig, methods, log):
               "inputs": {k: v for k, v in provenance.items() if k in ("from", "render")}}
     arrays = {"left": left, "right": right, "per_method": {}}
     for method in methods:
-        model, triangulation = DENSE_METHODS[method]
-        search = depth_range if model == "refractive" else pinhole_depth_range(rig, depth_range)
-        log(f"{method}: dense matching ({model} model, depth {search[0]:.0f}-"
-            f"{search[1]:.0f} mm) …")
-        t = time.perf_counter()
-        try:
-            matches = match_dense(rig, left, right, search, model=model,
-                                  progress=_progress(config, method))
-        except ValueError as exc:
-            raise CLIError(f"--depth-range ({method}, searched {search[0]:.0f}-{search[1]:.0f} "
-                           f"mm): {exc}") from None
-        match_seconds = time.perf_counter() - t
-        t = time.perf_counter()
-        result = triangulate(rig, matches.uv_left, matches.uv_right, triangulation)
-        measured = np.full((h, w, 3), np.nan)
-        cols, rows = matches.uv_left[:, 0].astype(int), matches.uv_left[:, 1].astype(int)
-        measured[rows, cols] = result.points
-        triangulate_seconds = time.perf_counter() - t
-        t = time.perf_counter()
-        case = SurfaceCase(spec.surface.vertices, spec.surface.triangles, measured, truth.points,
-                           truth.overlap, spec.rig.port.normal)
-        method_arrays = surface_arrays(case)
-        report["methods"][method] = score_surface(case, arrays=method_arrays)
-        report["matching"][method] = {
-            "model": model, "triangulation": triangulation, "matched_pixels": int(rows.size),
-            "depth_range_mm": list(search),
-            "planes": int(matches.n_planes), "median_score": float(np.median(matches.score))
-            if matches.score.size else float("nan"),
-            "timings_s": {**matches.timings, "total": match_seconds}}
-        report["timings_s"][f"match_{method}"] = match_seconds
-        report["timings_s"][f"triangulate_{method}"] = triangulate_seconds
-        report["timings_s"][f"score_{method}"] = time.perf_counter() - t
-        if method in COVARIANCE_METHODS:
-            t = time.perf_counter()
-            covariance, info = dense_covariances(rig, matches, result.points, config.pixel_sigma,
-                                                 rig_covariance)
-            errors = result.points - truth.points[rows, cols]
-            errors[~truth.overlap[rows, cols]] = np.nan
-            sigma_z = np.full((h, w), np.nan, np.float32)
-            sigma_z[rows, cols] = np.sqrt(covariance.total[:, 2, 2])
-            method_arrays["sigma_z"] = sigma_z
-            # the truth point of a pixel lies on its left ray, like the measured one: with an
-            # exact rig the error has one dimension (the covariance's 1 % across is padding)
-            summary = uncertainty_summary(covariance.total, errors,
-                                          dof=1 if rig_covariance is None else 3)
-            if summary["coverage"].get("verdict"):
-                summary["coverage"]["verdict"] = dense_verdict(summary["coverage"])
-            report["uncertainty"][method] = {
-                "matching_sigma": info,
-                "rig": rig_covariance_note(rig_covariance, rig_source), **summary}
-            report["timings_s"][f"covariance_{method}"] = time.perf_counter() - t
-        arrays["per_method"][method] = method_arrays
-        log(f"{method}: {rows.size} pixels matched in {match_seconds:.1f} s")
+        _measure_method(config, method, spec, rig, rig_covariance, left, right, truth,
+                        depth_range, report, arrays, log)
     return report, arrays
+
+
+def _depth_range(config, rig, truth) -> tuple:
+    """The depths (mm) to search: ``--depth-range`` checked against the glass and the surface's
+    own depths, else the range the truth spans (:func:`default_depth_range`)."""
+    from measure.dense.match import glass_depth
+
+    depth_range = config.depth_range_mm
+    if depth_range is None:
+        return default_depth_range(truth)
+    if depth_range[0] <= glass_depth(rig):
+        raise CLIError(f"--depth-range {depth_range[0]:g},{depth_range[1]:g}: NEAR must lie beyond "
+                       f"the port (the water starts at {glass_depth(rig):g} mm)")
+    seen = truth.depth[truth.overlap]
+    if seen.size and (depth_range[1] < seen.min() or depth_range[0] > seen.max()):
+        raise CLIError(f"--depth-range {depth_range[0]:g},{depth_range[1]:g} mm excludes the "
+                       f"surface (its depths where both cameras see it: {seen.min():.1f}-"
+                       f"{seen.max():.1f} mm)")
+    return depth_range
+
+
+def _measure_method(config, method, spec, rig, rig_covariance, left, right, truth, depth_range,
+                    report, arrays, log) -> None:
+    """One method matched, triangulated and scored against the truth; its entries go into
+    ``report`` and its maps into ``arrays["per_method"]``."""
+    from measure.dense.match import match_dense
+    from measure.stereo.triangulate import triangulate
+
+    from eval.core.surface_metrics import SurfaceCase, score_surface, surface_arrays
+
+    h, w = truth.valid.shape
+    model, triangulation = DENSE_METHODS[method]
+    search = depth_range if model == "refractive" else pinhole_depth_range(rig, depth_range)
+    log(f"{method}: dense matching ({model} model, depth {search[0]:.0f}-"
+        f"{search[1]:.0f} mm) …")
+    t = time.perf_counter()
+    try:
+        matches = match_dense(rig, left, right, search, model=model,
+                              progress=_progress(config, method))
+    except ValueError as exc:
+        raise CLIError(f"--depth-range ({method}, searched {search[0]:.0f}-{search[1]:.0f} "
+                       f"mm): {exc}") from None
+    match_seconds = time.perf_counter() - t
+    t = time.perf_counter()
+    result = triangulate(rig, matches.uv_left, matches.uv_right, triangulation)
+    measured = np.full((h, w, 3), np.nan)
+    cols, rows = matches.uv_left[:, 0].astype(int), matches.uv_left[:, 1].astype(int)
+    measured[rows, cols] = result.points
+    triangulate_seconds = time.perf_counter() - t
+    t = time.perf_counter()
+    case = SurfaceCase(spec.surface.vertices, spec.surface.triangles, measured, truth.points,
+                       truth.overlap, spec.rig.port.normal)
+    method_arrays = surface_arrays(case)
+    report["methods"][method] = score_surface(case, arrays=method_arrays)
+    report["matching"][method] = {
+        "model": model, "triangulation": triangulation, "matched_pixels": int(rows.size),
+        "depth_range_mm": list(search),
+        "planes": int(matches.n_planes), "median_score": float(np.median(matches.score))
+        if matches.score.size else float("nan"),
+        "timings_s": {**matches.timings, "total": match_seconds}}
+    report["timings_s"][f"match_{method}"] = match_seconds
+    report["timings_s"][f"triangulate_{method}"] = triangulate_seconds
+    report["timings_s"][f"score_{method}"] = time.perf_counter() - t
+    if method in COVARIANCE_METHODS:
+        t = time.perf_counter()
+        method_arrays["sigma_z"], report["uncertainty"][method] = _method_uncertainty(
+            config, rig, rig_covariance, matches, result, truth, rows, cols)
+        report["timings_s"][f"covariance_{method}"] = time.perf_counter() - t
+    arrays["per_method"][method] = method_arrays
+    log(f"{method}: {rows.size} pixels matched in {match_seconds:.1f} s")
+
+
+def _method_uncertainty(config, rig, rig_covariance, matches, result, truth, rows, cols):
+    """``(sigma_z (H, W) float32 mm, report entry)``: each matched pixel's point covariance
+    (:func:`dense_covariances`) and its coverage of the errors against the truth."""
+    from eval.core.uncertainty import rig_covariance_note, uncertainty_summary
+
+    h, w = truth.valid.shape
+    covariance, info = dense_covariances(rig, matches, result.points, config.pixel_sigma,
+                                         rig_covariance)
+    errors = result.points - truth.points[rows, cols]
+    errors[~truth.overlap[rows, cols]] = np.nan
+    sigma_z = np.full((h, w), np.nan, np.float32)
+    sigma_z[rows, cols] = np.sqrt(covariance.total[:, 2, 2])
+    # the truth point of a pixel lies on its left ray, like the measured one: with an
+    # exact rig the error has one dimension (the covariance's 1 % across is padding)
+    summary = uncertainty_summary(covariance.total, errors,
+                                  dof=1 if rig_covariance is None else 3)
+    if summary["coverage"].get("verdict"):
+        summary["coverage"]["verdict"] = dense_verdict(summary["coverage"])
+    rig_source = f"--calib {config.calib}" if config.calib else None
+    return sigma_z, {"matching_sigma": info,
+                     "rig": rig_covariance_note(rig_covariance, rig_source), **summary}
 
 
 def dense_verdict(coverage: dict) -> str:
