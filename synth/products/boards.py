@@ -37,9 +37,11 @@ from scipy.spatial.transform import Rotation
 
 from measure import StereoRig
 from measure.calibration.board import PATTERN_TEXELS_PER_SQUARE, Board, BoardError
-from measure.geometry.port import index_matched_port
 from measure.geometry.projection import project
 
+from synth.products.board_poses import (DEFAULT_AIR_DISTANCE_RANGE_MM, DEFAULT_DISTANCE_RANGE_MM,
+                                        DEFAULT_MAX_TILT_DEG, BoardCameras, BoardPose, board_rig,
+                                        sample_poses)
 from synth.products.board_camera import (CameraEffects, check_band_seeds, prepared_effects,
                                          render_rolling_view, rolling_pixels, thin_lens_sensor)
 from synth.products.board_light import BoardLight, check_light, light_record
@@ -59,160 +61,15 @@ FORMAT_VERSION = 2  # 2: the manifest holds every file's SHA-256 and its own
 COMMAND = "synth boards"
 DEFAULT_POSES = 15
 DEFAULT_SPP = 16
-DEFAULT_DISTANCE_RANGE_MM = (700.0, 1400.0)
-#: In air the boards come nearer, so that their corners cover about half of each image: the
-#: in-air distortion and principal point are what the housing calibration trusts, and boards at
-#: 0.7–1.4 m (37 % of the image) left them 0.1–0.2 px off, which moved the port distance by
-#: 0.35–0.40 mm; at 0.35–0.8 m (48–52 %) the port came within 0.06 mm (docs/calibration.md).
-DEFAULT_AIR_DISTANCE_RANGE_MM = (350.0, 800.0)
 #: Scene parameters that the boards' scene does not use (it holds the scene's cameras, port and
 #: ``max_depth`` and a board; no targets, no water medium, no lights, pinhole sensors): a
 #: ``-D`` of one of them is refused, never ignored.
 NOT_RENDERED = ("target_radius", "target_z", "target_albedo", "light_intensity", "water_c",
                 "water_albedo", "water_g", "aperture_radius", "focus_distance")
-DEFAULT_MAX_TILT_DEG = 45.0
-#: Largest turn of the board about its own normal (degrees).
-MAX_ROLL_DEG = 20.0
-#: Smallest distance (px) of any board point from the image border.
-IMAGE_MARGIN_PX = 10.0
-#: Candidate poses tried per pose wanted before giving up.
-ATTEMPTS_PER_POSE = 400
 CORNERS_HEADER = ["pose", "id", "x", "y", "z", "u_left", "v_left", "u_right", "v_right"]
 POSES_HEADER = ["pose", "rx", "ry", "rz", "tx", "ty", "tz"]
 
 
-@dataclass(frozen=True)
-class BoardPose:
-    """``X_ref = R @ X_board + t`` (mm)."""
-
-    R: np.ndarray
-    t: np.ndarray
-
-    def apply(self, points_board: np.ndarray) -> np.ndarray:
-        return np.asarray(points_board, float) @ self.R.T + self.t
-
-
-@dataclass(frozen=True)
-class BoardCameras:
-    """The N > 2 cameras of a boards folder, each behind the port it looks through
-    (``ports``, one per camera: one shared flat port, an index-matched one in air, or a flat
-    port each): what :func:`sample_poses` and :func:`corner_pixels` ask of a
-    :class:`measure.StereoRig` (``cameras``, ``left``, ``view_port``, ``water_side``,
-    ``depth_axis``), and the cameras' ``names``."""
-
-    cameras: tuple
-    names: tuple
-    ports: tuple
-
-    @property
-    def left(self):
-        return self.cameras[0]
-
-    @property
-    def depth_axis(self) -> np.ndarray:
-        return self.ports[0].depth_axis(self.cameras[0])
-
-    def view_port(self, view: int):
-        return self.ports[view]
-
-    def water_side(self, points) -> np.ndarray:
-        """Whether points ``(P, 3)`` lie in the water of every camera's port."""
-        return np.all([port.water_side(points) for port in set(self.ports)], axis=0)
-
-    def multirig(self):
-        """As a :class:`measure.stereo.multirig.MultiRig` (``calib.yaml`` of N cameras)."""
-        from measure.stereo.multirig import MultiRig
-
-        return MultiRig(self.cameras, list(self.ports), self.names)
-
-
-def board_rig(spec: SceneSpec, air: bool):
-    """The scene's cameras behind their ports, or (``air``) the same cameras with no port: a
-    :class:`measure.StereoRig` for two cameras, :class:`BoardCameras` for more."""
-    if spec.extra_cameras:
-        cameras = spec.all_cameras
-        ports = ((index_matched_port(cameras[0].R[:, 2], np.stack([c.t for c in cameras])),)
-                 * len(cameras) if air else spec.multirig.ports)
-        return BoardCameras(tuple(cameras), tuple(spec.camera_names), tuple(ports))
-    if not air:
-        return spec.rig
-    left, right = spec.cameras
-    return StereoRig(left, right, index_matched_port(left.R[:, 2], np.stack([left.t, right.t])))
-
-
-def _fits(rig, board: Board, poses_R, poses_t, water: bool, anchor: int | None = None,
-          shifts=()) -> np.ndarray:
-    """Which candidate poses ``(M, 3, 3)``, ``(M, 3)`` put every board point inside both images
-    (and in the water behind a port) — of N > 2 cameras (``anchor`` given): inside the image
-    of camera ``anchor`` and of at least one other; with ``shifts`` (mm, (3,) each) also
-    every pose moved by each of them (a moving board's ends)."""
-    if len(shifts):
-        return np.all([_fits(rig, board, poses_R, poses_t + shift, water, anchor)
-                       for shift in [np.zeros(3), *shifts]], axis=0)
-    points_board = np.concatenate([board.outline(), board.corners()])
-    world = np.einsum("mij,pj->mpi", poses_R, points_board) + poses_t[:, None, :]
-    flat = world.reshape(-1, 3)
-    wet = ((rig.water_side(flat) if isinstance(rig, BoardCameras) else rig.port.water_side(flat))
-           if water else np.ones(flat.shape[0], bool))
-    inside = np.stack([camera.in_image(project(camera, rig.view_port(view), flat),
-                                       IMAGE_MARGIN_PX)
-                       for view, camera in enumerate(rig.cameras)])
-    whole = (inside & wet).reshape(len(rig.cameras), poses_R.shape[0], -1).all(axis=2)
-    if anchor is None:
-        return whole.all(axis=0)
-    return whole[anchor] & (whole.sum(axis=0) >= 2)
-
-
-def sample_poses(rig: StereoRig, board: Board, n: int, seed: int, water: bool,
-                 distance_range=DEFAULT_DISTANCE_RANGE_MM,
-                 max_tilt_deg: float = DEFAULT_MAX_TILT_DEG, shifts=()) -> list[BoardPose]:
-    """``n`` seeded random poses that keep the whole board inside both images (module docs);
-    of N > 2 cameras (:class:`BoardCameras`), pose k centred in the view of camera k mod N and
-    wholly inside it and at least one other; also when moved by each of ``shifts`` (mm: a
-    moving board's ends). Raises ``ValueError`` when the working volume cannot hold the board
-    that often."""
-    near, far = (float(v) for v in distance_range)
-    if not (0 < near < far):
-        raise ValueError(f"distance range must satisfy 0 < near < far, got {near:g}, {far:g} mm")
-    if not 0 <= max_tilt_deg < 80:
-        raise ValueError(f"maximum tilt must lie in [0, 80) degrees, got {max_tilt_deg:g}")
-    rng = np.random.default_rng(seed)
-    several = isinstance(rig, BoardCameras)
-    w, h = rig.left.size
-    half = np.array(board.size_mm + (0.0,)) / 2
-    normal = rig.depth_axis  # the port normal, or the left optical axis for domes
-    poses, tried = [], 0
-    while len(poses) < n:
-        if tried >= ATTEMPTS_PER_POSE * n:
-            raise ValueError(
-                f"only {len(poses)} of {n} board poses keep the whole {board.squares[0]}x"
-                f"{board.squares[1]} board of {board.square_mm:g} mm squares inside both "
-                f"{w}x{h} px images at {near:g}-{far:g} mm (tried {tried}): use a smaller "
-                f"board (--squares, --square-mm) or a farther distance range")
-        m = 256
-        tried += m
-        anchor = len(poses) % len(rig.cameras) if several else None
-        left = rig.cameras[anchor] if several else rig.left
-        depth = rng.uniform(near, far, m)
-        uv = np.column_stack([rng.uniform(0.2 * w, 0.8 * w, m), rng.uniform(0.2 * h, 0.8 * h, m)])
-        rays = left.rays(uv)
-        centre = left.t + rays * ((depth - normal @ left.t) / (rays @ normal))[:, None]
-        axis_angle = rng.uniform(0, 2 * np.pi, m)
-        tilt = np.radians(max_tilt_deg) * np.sqrt(rng.uniform(0, 1, m))
-        axes = np.column_stack([np.cos(axis_angle), np.sin(axis_angle), np.zeros(m)])
-        roll = np.radians(rng.uniform(-MAX_ROLL_DEG, MAX_ROLL_DEG, m))
-        R = (Rotation.from_rotvec(axes * tilt[:, None])
-             * Rotation.from_rotvec(np.column_stack([np.zeros(m), np.zeros(m), roll]))).as_matrix()
-        R = left.R @ R  # the untilted board faces the left camera
-        t = centre - R @ half
-        keep = np.flatnonzero(_fits(rig, board, R, t, water, anchor, shifts))
-        poses += [BoardPose(R[i], t[i]) for i in keep[: (1 if several else n - len(poses))]]
-    return poses
-
-
-# ---------------------------------------------------------------------------------------------
-# rendering
-# ---------------------------------------------------------------------------------------------
 def _board_local_to_board(board: Board) -> np.ndarray:
     """Mitsuba's rectangle ([-1, 1]², normal +z, uv = ((x+1)/2, (y+1)/2) with v = 0 the
     texture's first row) to the board frame, its emitting side towards −z_board (the viewer)."""
@@ -339,8 +196,6 @@ def write_boards(spec: SceneSpec, out_dir, board: Board, n_poses: int = DEFAULT_
     axis at the middle of ``distance_range``); ValueError when the
     lamp is not in the water of a port. ``effects``: vignetting, a thin lens, a rolling shutter
     (:mod:`synth.products.board_camera`; None or all off: the board of before)."""
-    from tqdm import tqdm
-
     t_start = time.perf_counter()
     if n_poses < 1:
         raise ValueError(f"--poses must be at least 1, got {n_poses}")
@@ -355,16 +210,9 @@ def write_boards(spec: SceneSpec, out_dir, board: Board, n_poses: int = DEFAULT_
     effects = prepared_effects(effects, rig, air, distance_range)  # None: the board of before
     key = request_key(spec, board, n_poses, spp, seed, air, distance_range, max_tilt_deg, variant,
                       adaptive, light, effects)
-    output = OutputDir(out_dir, COMMAND)
-    damage = None
-    if output.exists_as_output() and (read_marker(output.path) or {}).get("request_key") == key:
-        damage = output.damage()  # up to date only when every file is whole
-        try:
-            if damage is None:
-                with open(os.path.join(output.path, "manifest.json")) as fh:
-                    return {**json.load(fh), "skipped": True}
-        except (OSError, ValueError):
-            damage = "manifest.json cannot be read"
+    output, old, damage = _existing(out_dir, key)
+    if old is not None:
+        return old
     output.claim()
     n_views = len(spec.all_cameras)  # pose p renders with seed + N·p (N = 2: seed + 2p)
     check_render_request(spec, spp, seed, poses=-(-n_poses * n_views // 2), adaptive=adaptive)
@@ -378,10 +226,82 @@ def write_boards(spec: SceneSpec, out_dir, board: Board, n_poses: int = DEFAULT_
     t = time.perf_counter()
     mscene, mi, chosen = build_board_scene(spec, board, air, variant, light, effects)
     times["load_mitsuba"] = time.perf_counter() - t
-    images, stats = [], []
     t = time.perf_counter()
-    bar = tqdm(poses, desc=f"render boards {chosen} {spp} spp{' adaptive' if adaptive else ''}",
-               unit="pose", disable=not progress, leave=False)
+    images, stats = _render_poses(mscene, mi, spec, board, poses, spp, seed, adaptive, rig,
+                                  effects, f"render boards {chosen} {spp} spp"
+                                  f"{' adaptive' if adaptive else ''}", progress)
+    times["render"] = time.perf_counter() - t
+    names = tuple(spec.camera_names)
+    with output.staged(extra={"request_key": key}) as tmp:
+        scale = _write_files(tmp, images, names, rig, board, poses, air, effects)
+        times["total"] = time.perf_counter() - t_start
+        manifest = _manifest(spec, key, board, n_poses, air, light, rig, effects, names,
+                             distance_range, max_tilt_deg, (chosen, mi, mscene), spp, seed,
+                             scale, stats, adaptive, times)
+        manifest["files"] = sorted(os.listdir(tmp)) + ["manifest.json"]
+        manifest["sha256"] = {name: file_sha256(os.path.join(tmp, name))
+                              for name in sorted(os.listdir(tmp))}
+        manifest = jsonable(manifest)  # as written: the digest is of what is read back
+        manifest["manifest_sha256"] = manifest_digest(manifest)
+        atomic_write_json(os.path.join(tmp, "manifest.json"), manifest)
+    return {**manifest, "skipped": False, "rendered_again": damage}
+
+
+def _manifest(spec, key, board, n_poses, air, light, rig, effects, names, distance_range,
+              max_tilt_deg, renderer, spp, seed, scale, stats, adaptive, times) -> dict:
+    """The folder's manifest but for its files and hashes: the request, the board, its light
+    and the camera's effects, how it was rendered (``renderer``: the variant, Mitsuba and its
+    scene) and each view's render statistics."""
+    chosen, mi, mscene = renderer
+    w, h = spec.size
+    samples = sum(s["samples"] for pair in stats for s in pair)
+    return {
+        "format_version": FORMAT_VERSION, "command": COMMAND,
+        "created_utc": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+        "request_key": key, "versions": package_versions(),
+        "scene": {"path": spec.path, "sha256": spec.sha256, "params": spec.params},
+        "air": bool(air), "board": board.to_dict(), "poses": n_poses,
+        **({} if light is None else {"light": light_record(light, rig)}),
+        **({} if effects is None else {"camera_effects": effects.to_dict()}),
+        **({"cameras": list(names)} if len(names) > 2 else {}),
+        "distance_range_mm": list(distance_range), "max_tilt_deg": max_tilt_deg,
+        "variant": chosen, "integrator": integrator_name(mi, mscene), "spp": spp,
+        "seed": seed, "image_size": [w, h],
+        "png_scale": scale, "samples_per_second": samples / times["render"],
+        "render": {"settings": adaptive_settings() if adaptive else None,
+                   "samples": samples,
+                   "views": [{view: {k: s[k] for k in _POSE_STATS if k in s}
+                              for view, s in zip(names, pair)}
+                             for pair in stats]},
+        "seconds": times,
+    }
+
+
+def _existing(out_dir, key):
+    """``(output, old, damage)``: the output folder; ``old`` the manifest of an earlier output of
+    the same request that is whole (nothing to do), else None and ``damage`` why an earlier
+    output of this request is rendered again (or None)."""
+    output = OutputDir(out_dir, COMMAND)
+    damage = None
+    if output.exists_as_output() and (read_marker(output.path) or {}).get("request_key") == key:
+        damage = output.damage()  # up to date only when every file is whole
+        try:
+            if damage is None:
+                with open(os.path.join(output.path, "manifest.json")) as fh:
+                    return output, {**json.load(fh), "skipped": True}, None
+        except (OSError, ValueError):
+            damage = "manifest.json cannot be read"
+    return output, None, damage
+
+
+def _render_poses(mscene, mi, spec, board, poses, spp, seed, adaptive, rig, effects, desc,
+                  progress) -> tuple[list, list]:
+    """``(images, stats)``: every pose rendered (:func:`render_pose`), a progress bar showing
+    each pose's lit fractions."""
+    from tqdm import tqdm
+
+    images, stats = [], []
+    bar = tqdm(poses, desc=desc, unit="pose", disable=not progress, leave=False)
     for k, pose in enumerate(bar):
         pair, pair_stats = render_pose(mscene, mi, spec, board, pose, k, spp, seed, adaptive,
                                        rig, effects)
@@ -390,51 +310,25 @@ def write_boards(spec: SceneSpec, out_dir, board: Board, n_poses: int = DEFAULT_
         lit = [1.0 if v["lit_fraction"] is None else v["lit_fraction"] for v in pair_stats]
         bar.set_postfix_str("lit " + " / ".join(f"{v:.1%}" for v in lit))
     bar.close()
-    times["render"] = time.perf_counter() - t
-    w, h = spec.size
-    names = tuple(spec.camera_names)
-    samples = sum(s["samples"] for pair in stats for s in pair)
-    with output.staged(extra={"request_key": key}) as tmp:
-        scale = png16_scale(*[img for pair in images for img in pair])
-        for k, pair in enumerate(images):
-            for view, img in zip(names, pair):
-                write_png(os.path.join(tmp, f"{view}_{k:02d}.png"), to_png16(img, scale))
-        if isinstance(rig, BoardCameras):
-            from synth.products.rig_file import write_rig_file
+    return images, stats
 
-            write_rig_file(os.path.join(tmp, "calib.yaml"), rig.multirig())
-        else:
-            write_calib(os.path.join(tmp, "calib.yaml"), rig, not air)
-        atomic_write_json(os.path.join(tmp, "board.json"), board.to_dict())
-        _write_truth(tmp, rig, board, poses, names, effects)
-        times["total"] = time.perf_counter() - t_start
-        manifest = {
-            "format_version": FORMAT_VERSION, "command": COMMAND,
-            "created_utc": datetime.now(timezone.utc).isoformat(timespec="seconds"),
-            "request_key": key, "versions": package_versions(),
-            "scene": {"path": spec.path, "sha256": spec.sha256, "params": spec.params},
-            "air": bool(air), "board": board.to_dict(), "poses": n_poses,
-            **({} if light is None else {"light": light_record(light, rig)}),
-            **({} if effects is None else {"camera_effects": effects.to_dict()}),
-            **({"cameras": list(names)} if len(names) > 2 else {}),
-            "distance_range_mm": list(distance_range), "max_tilt_deg": max_tilt_deg,
-            "variant": chosen, "integrator": integrator_name(mi, mscene), "spp": spp,
-            "seed": seed, "image_size": [w, h],
-            "png_scale": scale, "samples_per_second": samples / times["render"],
-            "render": {"settings": adaptive_settings() if adaptive else None,
-                       "samples": samples,
-                       "views": [{view: {k: s[k] for k in _POSE_STATS if k in s}
-                                  for view, s in zip(names, pair)}
-                                 for pair in stats]},
-            "seconds": times,
-        }
-        manifest["files"] = sorted(os.listdir(tmp)) + ["manifest.json"]
-        manifest["sha256"] = {name: file_sha256(os.path.join(tmp, name))
-                              for name in sorted(os.listdir(tmp))}
-        manifest = jsonable(manifest)  # as written: the digest is of what is read back
-        manifest["manifest_sha256"] = manifest_digest(manifest)
-        atomic_write_json(os.path.join(tmp, "manifest.json"), manifest)
-    return {**manifest, "skipped": False, "rendered_again": damage}
+
+def _write_files(tmp, images, names, rig, board, poses, air, effects) -> float:
+    """The views' 16-bit linear PNGs (one scale for all; returned), the rig's ``calib.yaml``,
+    ``board.json`` and the corners' truth into ``tmp``."""
+    scale = png16_scale(*[img for pair in images for img in pair])
+    for k, pair in enumerate(images):
+        for view, img in zip(names, pair):
+            write_png(os.path.join(tmp, f"{view}_{k:02d}.png"), to_png16(img, scale))
+    if isinstance(rig, BoardCameras):
+        from synth.products.rig_file import write_rig_file
+
+        write_rig_file(os.path.join(tmp, "calib.yaml"), rig.multirig())
+    else:
+        write_calib(os.path.join(tmp, "calib.yaml"), rig, not air)
+    atomic_write_json(os.path.join(tmp, "board.json"), board.to_dict())
+    _write_truth(tmp, rig, board, poses, names, effects)
+    return scale
 
 
 #: What the manifest keeps of each view's render statistics.
