@@ -142,6 +142,28 @@ def pair_mismatch(rig, name: str, centers: dict, matched: int, options: TargetOp
     return f"{what}: " + "".join(f"{cause}; or " for cause in causes) + generic
 
 
+#: Targets dropped as ambiguous, as a fraction of the sparser view's detections, above which a
+#: pair measured without a depth window is warned about: where rows of targets meet the other
+#: view's at several depths, some of the pairs kept may be a row's shifted partners as well.
+AMBIGUOUS_WARNING_FRACTION = 0.1
+
+
+def ambiguity_warning(result: PairResult, options: TargetOptions) -> str | None:
+    """A warning for a pair measured without a depth window whose dropped ambiguous targets
+    exceed :data:`AMBIGUOUS_WARNING_FRACTION` (and 2) of the sparser view's detections; None
+    otherwise (or where the pair failed: its ``failed:`` line says it)."""
+    counts = result.counts
+    detected = min(counts["detected"].values())
+    ambiguous = counts.get("ambiguous", 0)
+    if (options.depth_range[0] is not None or result.problem or result.failure
+            or ambiguous <= max(2, AMBIGUOUS_WARNING_FRACTION * detected)):
+        return None
+    return (f"{result.name}: {ambiguous} of {detected} targets dropped as ambiguous (rows of "
+            f"targets along the baseline meet the other view's at several depths, and no "
+            f"--depth-range bounds them): some of the {counts['matched']} kept may be a row's "
+            f"shifted partners too; bound the depth with --depth-range NEAR,FAR")
+
+
 def measure_targets(rig, name: str, left, right, options: TargetOptions,
                     rig_covariance=None) -> PairResult:
     """Detect, match (:func:`measure.stereo.matching.match_targets`, the refractive epipolar gap
@@ -253,6 +275,6 @@ def pair_pixels(result: PairResult, method: str):
     return result.uv_left, result.uv_right
 
 
-__all__ = ["COVARIANCE_METHODS", "DenseOptions", "MIN_MATCHED_FRACTION", "PairResult",
-           "TargetOptions", "measure_dense", "measure_targets", "nothing_matched", "pair_mismatch",
-           "pair_pixels"]
+__all__ = ["AMBIGUOUS_WARNING_FRACTION", "COVARIANCE_METHODS", "DenseOptions",
+           "MIN_MATCHED_FRACTION", "PairResult", "TargetOptions", "ambiguity_warning",
+           "measure_dense", "measure_targets", "nothing_matched", "pair_mismatch", "pair_pixels"]
