@@ -113,6 +113,8 @@ def spoil_photos(root: Path) -> None:
             ("TURNH", "phouse", "left/02.jpg", turn), ("BLACK2", "ph2", "left/pair.jpg", black)):
         if not (root / name).exists():
             _edit_image(_copy(root, source, name) / photo, how)
+    if not (root / "fotos ä").exists():  # a folder name with a space and a non-ASCII letter
+        _copy(root, "p2air", "fotos ä")
     if not (root / "DUPS1").exists():
         _copy(root, "p2air/left", "DUPS1")
         for path in sorted((root / "DUPS1").glob("*.jpg")):

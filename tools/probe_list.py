@@ -501,6 +501,11 @@ PROBES += [
     ("ok", "synth render three.xml --spp 4 --out OUT --no-progress"),
     ("ok", "synth scene --size 320 268 --out RESEAL.xml"),
     ("bad", "synth scene --out EDITED.xml"),
+    # -- names with spaces and letters beyond ASCII ---------------------------------------------
+    ("ok", f"eval calibrate 'fotos ä' --air {PHOTOS} --out 'OUT ü' --no-progress"),
+    ("ok", f"eval calibrate 'fotos ä/left' --air {PHOTOS} --out OUT --no-progress"),
+    ("ok", "eval measure --calib ds2/calib.yaml ds2/left.png ds2/right.png --out 'OUT ö' "
+           "--no-progress"),
     # -- the shared real photos ----------------------------------------------------------------
     ("ok", "eval calibrate REAL/opencv_stereo --air --inner-corners 9x6 --square-mm 30 --out OUT "
            "--no-progress"),
