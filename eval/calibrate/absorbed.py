@@ -128,7 +128,8 @@ def calibrate_absorbed_main(args, output, log, start) -> int:
               "stereo_rms_px": air.stereo_rms_px, "poses": air.poses_used,
               "baseline_mm": baseline, "rotation_deg": angle,
               "repeats": repeat_lines(repeats, names),
-              "stereo_left_out": [names[k] for k in air.stereo_left_out]}
+              "stereo_left_out": [names[k] for k in air.stereo_left_out],
+              "stereo_disagreements": stereo_disagreements(air, names)}
     if truth is not None:
         report["housing"] = _housing_rms(truth, board, detections, log)
     with output.staged() as tmp:
@@ -150,14 +151,33 @@ def calibrate_absorbed_main(args, output, log, start) -> int:
     for repeat in report["repeats"]:
         print(f"warning: {repeat}: left out (a photo given twice is one pose)")
     print(f"wrote {output.path} (calib.yaml without a port: eval run --absorbed-calib)")
+    failures = report["stereo_disagreements"]
     if not np.isfinite(air.stereo_rms_px) or air.stereo_rms_px > DIVERGED_PX:
+        failures = failures + [f"the stereo fit with the {model} model diverged (stereo RMS "
+                               f"{air.stereo_rms_px:.3g} px): choose another --lens"]
+    if failures:
         from synth.infra.cli import EXIT_CHECK_FAILED
 
-        print(f"failed: {args.dir}: the stereo fit with the {model} model diverged (stereo RMS "
-              f"{air.stereo_rms_px:.3g} px): choose another --lens (report in {output.path})",
-              file=sys.stderr)
+        for failure in failures:
+            print(f"failed: {args.dir}: {failure} (report in {output.path})", file=sys.stderr)
         return EXIT_CHECK_FAILED
     return 0
+
+
+def stereo_disagreements(air, names) -> list[str]:
+    """A line for each pair left out of the stereo fit because its own stereo pose disagrees
+    with the others' (:func:`measure.calibration.air.stereo_pose_outliers`: a photo turned,
+    mirrored or of another moment)."""
+    lines = []
+    for k in air.stereo_left_out:
+        s = air.stereo_poses[k]
+        lines.append(f"pair {names[k]} disagrees with the others as a stereo pose (its right "
+                     f"camera {s['deviation_mm']:.1f} mm and {s['deviation_deg']:.2f}° from the "
+                     f"median pose; limits {s['threshold_mm']:.1f} mm, "
+                     f"{s['threshold_deg']:.2f}°): left out of the stereo fit — are left/"
+                     f"{names[k]} and right/{names[k]} one moment's photos, neither turned nor "
+                     f"mirrored?")
+    return lines
 
 
 def _housing_rms(truth, board, detections, log) -> dict:
@@ -184,6 +204,9 @@ def _markdown(report: dict) -> str:
              f"Lens model: **{report['lens_model']}** (stereo RMS of each model: {models}).", "",
              f"RMS: left {report['rms_px']['left']:.4f} px, right "
              f"{report['rms_px']['right']:.4f} px, stereo {report['stereo_rms_px']:.4f} px."]
+    if report["stereo_disagreements"]:
+        lines += ["", "Left out of the stereo fit:", ""]
+        lines += [f"- {line}" for line in report["stereo_disagreements"]]
     housing = report.get("housing")
     if housing and housing.get("rms_px") is not None:
         lines += ["", f"The port model on the same corners: RMS {housing['rms_px']:.4f} px "

@@ -48,8 +48,14 @@ def housing_failure(where: str, reason, args, what: str = "photograph") -> CLIEr
     elif "lies on the water side" in reason:  # the port check of a camera, mid-adjustment
         reason = ("the adjustment moved the port behind a camera: it found no housing that fits "
                   "the corners")
-    return CLIError(f"{where}: {reason} — likely: {likely_causes(args)} (or {cure}); "
-                    f"nothing written")
+    causes = likely_causes(args)
+    given = getattr(args, "port_distance", None)
+    if "port glass" in reason and given:
+        given = given if isinstance(given, str) else ",".join(f"{float(v):g}" for v in given)
+        causes = (f"--port-distance {given} gives each camera its own port, and a "
+                  f"camera's own port plane crosses another camera: cameras behind one shared "
+                  f"port are calibrated without --port-distance; or {causes}")
+    return CLIError(f"{where}: {reason} — likely: {causes} (or {cure}); nothing written")
 
 
 __all__ = ["FIT_ERRORS", "housing_failure", "likely_causes"]

@@ -169,7 +169,8 @@ def _progress_bar(quiet: bool):
 
 def measure_all(inputs, options, quiet: bool, log) -> list:
     """Every pair measured, in name order (a tqdm bar over several pairs)."""
-    from eval.measure.pipeline import DenseOptions, measure_dense, measure_targets
+    from eval.measure.pipeline import (DenseOptions, ambiguity_warning, measure_dense,
+                                        measure_targets)
 
     dense = isinstance(options, DenseOptions)
     indices = range(len(inputs.names))
@@ -193,6 +194,9 @@ def measure_all(inputs, options, quiet: bool, log) -> list:
         else:
             result = measure_targets(inputs.rig, name, left, right, options,
                                      inputs.rig_covariance)
+            warning = ambiguity_warning(result, options)
+            if warning:
+                print(f"warning: {warning}", file=sys.stderr)
         results.append(result)
     if len(results) > 1 and not all(r.problem for r in results):  # else the error says it
         for result in results:

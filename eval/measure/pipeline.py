@@ -103,11 +103,13 @@ def nothing_matched(name: str, found: dict, options: TargetOptions) -> str:
 MIN_MATCHED_FRACTION = 0.5
 
 
-def pair_mismatch(rig, name: str, centers: dict, matched: int, options: TargetOptions) -> str | None:
+def pair_mismatch(rig, name: str, centers: dict, matched: int, options: TargetOptions,
+                  ambiguous: int = 0) -> str | None:
     """Why the photos of a pair are not the pair the calibration describes, or None: fewer
     matches than :data:`MIN_MATCHED_FRACTION` of the targets the sparser view detected. The
     views exchanged are matched too: when that matches at least twice as many (and enough), the
-    photos are named as swapped."""
+    photos are named as swapped. Where the ``ambiguous`` detections dropped would have made up
+    the fraction, or the calibration models no port, those likelier causes come first."""
     from measure.stereo.matching import match_targets
 
     detected = min(len(centers["left"]), len(centers["right"]))
@@ -118,11 +120,48 @@ def pair_mismatch(rig, name: str, centers: dict, matched: int, options: TargetOp
     swapped = match_targets(rig, centers["right"], centers["left"], gate_mm=options.gate_mm,
                             depth_range=tuple(options.depth_range))
     n_swapped = int(len(swapped.left))
-    if n_swapped >= max(2 * matched, MIN_MATCHED_FRACTION * detected):
-        return (f"{what}: left and right look swapped ({n_swapped} match with the photos the "
-                f"other way round): give the left camera's photo first")
-    return (f"{what}: the photos do not look like the pair the calibration describes (left and "
-            f"right swapped, not a stereo pair, one photo twice, or another calibration)")
+    swap = (f"left and right look swapped ({n_swapped} match with the photos the other way "
+            f"round): give the left camera's photo first"
+            if n_swapped >= max(2 * matched, MIN_MATCHED_FRACTION * detected) else None)
+    causes = []
+    if ambiguous and matched + ambiguous >= MIN_MATCHED_FRACTION * detected:
+        near, far = options.depth_range
+        causes.append(f"{ambiguous} more were dropped as ambiguous (rows of targets along the "
+                      f"baseline meet the other view's at several depths): "
+                      + ("bound the depth with --depth-range NEAR,FAR" if near is None else
+                         f"narrow --depth-range {option_number(near)},{option_number(far)}"))
+    elif swap:
+        return f"{what}: {swap}"
+    if not getattr(rig.port, "refracts", True):
+        causes.append(f"the calibration models no port (in air, absorbed or rectified): rays it "
+                      f"only approximates may miss by more than --gate-mm "
+                      f"{option_number(options.gate_mm)}")
+    generic = swap or ("the photos do not look like the pair the calibration describes (left "
+                       "and right swapped, not a stereo pair, one photo twice, or another "
+                       "calibration)")
+    return f"{what}: " + "".join(f"{cause}; or " for cause in causes) + generic
+
+
+#: Targets dropped as ambiguous, as a fraction of the sparser view's detections, above which a
+#: pair measured without a depth window is warned about: where rows of targets meet the other
+#: view's at several depths, some of the pairs kept may be a row's shifted partners as well.
+AMBIGUOUS_WARNING_FRACTION = 0.1
+
+
+def ambiguity_warning(result: PairResult, options: TargetOptions) -> str | None:
+    """A warning for a pair measured without a depth window whose dropped ambiguous targets
+    exceed :data:`AMBIGUOUS_WARNING_FRACTION` (and 2) of the sparser view's detections; None
+    otherwise (or where the pair failed: its ``failed:`` line says it)."""
+    counts = result.counts
+    detected = min(counts["detected"].values())
+    ambiguous = counts.get("ambiguous", 0)
+    if (options.depth_range[0] is not None or result.problem or result.failure
+            or ambiguous <= max(2, AMBIGUOUS_WARNING_FRACTION * detected)):
+        return None
+    return (f"{result.name}: {ambiguous} of {detected} targets dropped as ambiguous (rows of "
+            f"targets along the baseline meet the other view's at several depths, and no "
+            f"--depth-range bounds them): some of the {counts['matched']} kept may be a row's "
+            f"shifted partners too; bound the depth with --depth-range NEAR,FAR")
 
 
 def measure_targets(rig, name: str, left, right, options: TargetOptions,
@@ -164,7 +203,8 @@ def measure_targets(rig, name: str, left, right, options: TargetOptions,
     if len(matches.left) == 0:
         result.problem = nothing_matched(name, found, options)
         return result
-    result.failure = pair_mismatch(rig, name, centers, len(matches.left), options)
+    result.failure = pair_mismatch(rig, name, centers, len(matches.left), options,
+                                   matches.n_ambiguous)
     result.uv_left = centers["left"][matches.left]
     result.uv_right = centers["right"][matches.right]
     t = time.perf_counter()
@@ -235,6 +275,6 @@ def pair_pixels(result: PairResult, method: str):
     return result.uv_left, result.uv_right
 
 
-__all__ = ["COVARIANCE_METHODS", "DenseOptions", "MIN_MATCHED_FRACTION", "PairResult",
-           "TargetOptions", "measure_dense", "measure_targets", "nothing_matched", "pair_mismatch",
-           "pair_pixels"]
+__all__ = ["AMBIGUOUS_WARNING_FRACTION", "COVARIANCE_METHODS", "DenseOptions",
+           "MIN_MATCHED_FRACTION", "PairResult", "TargetOptions", "ambiguity_warning",
+           "measure_dense", "measure_targets", "nothing_matched", "pair_mismatch", "pair_pixels"]

@@ -379,8 +379,9 @@ def calibrate_in_air(board: Board, detections: Detections, size,
         out = cv2.stereoCalibrateExtended(obj, img_l, img_r, K1, D1, K2, D2, tuple(size), None,
                                           None, flags=flags, criteria=CRITERIA)
         stereo_rms, R, T = float(out[0]), out[5], out[6].ravel()
-        if stereo_intrinsics == "refined":
-            (K1, D1), (K2, D2) = (out[1], np.ravel(out[2])), (out[3], np.ravel(out[4]))
+        if stereo_intrinsics == "refined":  # OpenCV returns 14 coefficients: the model's first
+            (K1, D1), (K2, D2) = ((out[1], np.ravel(out[2])[:len(D1)]),
+                                  (out[3], np.ravel(out[4])[:len(D2)]))
         stereo_per = {k: float(np.sqrt(np.mean(np.square(e)))) for k, e in zip(both, out[-1])}
     used["stereo"] = len(both)
     lens = FISHEYE if fisheye else BROWN_CONRADY

@@ -9,8 +9,9 @@ assignment explains the detections about as well (see :func:`match_targets`). Wh
 ambiguous is then looked at again against its neighbours: targets on a surface lie at depths
 that vary smoothly across the image, so where the clear pairs around an ambiguous detection lie
 on a plane of depth, the candidates that leave that plane (the neighbour's partner, met some
-15-20 % nearer or farther) are ruled out (:func:`resolve_by_neighbours`). Pairs that stay
-ambiguous are dropped, never guessed.
+15-20 % nearer or farther) are ruled out (:func:`resolve_by_neighbours`); before that, a clear
+pair off the plane of its clear neighbours is dropped too (a row's shifted partner the
+assignment kept as clear). Pairs that stay ambiguous are dropped, never guessed.
 
 Units: mm; pixels in the OpenCV convention; reference frame = the left camera's.
 """
@@ -160,6 +161,8 @@ def match_targets(rig: StereoRig, uv_left, uv_right, gate_mm: float = 0.5,
                                   pair_depth[members], margin, kept)
         if left_over[0].size:
             ambiguous.append(left_over)
+    if resolve_ambiguities:
+        ambiguous += _drop_off_their_neighbours(np.asarray(uv_left, float).reshape(-1, 2), kept)
     n_ambiguous = sum(len(rows) for rows, _ in ambiguous)
     if ambiguous and resolve_ambiguities:
         uv_l = np.asarray(uv_left, dtype=float).reshape(-1, 2)
@@ -217,6 +220,45 @@ def _assign_clear(pair_i, pair_j, pair_gap, pair_depth, margin, kept):
     # the rows and columns of the group that no clear pair took part in stay open (the group
     # shares no row or column with another, so its own clear pairs are all that took any)
     return np.delete(rows_in, clear_rows), np.delete(cols_in, clear_cols)
+
+
+#: Neighbours a clear pair's plane of depth may leave out (the worst first) to lie on a plane:
+#: another wrong pair nearby must not shield a wrong pair.
+NEIGHBOUR_OUTLIERS = 2
+
+
+def _drop_off_their_neighbours(uv_left, kept) -> list:
+    """Clear pairs whose depth leaves the plane of depth their clear neighbours lie on
+    (:data:`NEIGHBOURS` nearest in the left image, up to :data:`NEIGHBOUR_OUTLIERS` of them
+    left out; the tolerances of :func:`resolve_by_neighbours`) are taken out of ``kept`` and
+    returned as ambiguous groups ``[(rows, no columns)]``: the one-to-one assignment keeps a
+    row's shifted partner as clear where the shift leaves another detection unmatched (a grid
+    in rows along the baseline, noisy pixels), met 15-70 % nearer or farther than its
+    neighbours. Dropped, never reassigned."""
+    rows = np.asarray(kept["rows"], int)
+    depths = np.asarray(kept["depths"], float)
+    if len(rows) <= NEIGHBOURS:
+        return []
+    uv = uv_left[rows]
+    _, nearest = cKDTree(uv).query(uv, k=NEIGHBOURS + 1)
+    off = []
+    for p, near in enumerate(nearest):
+        near = near[near != p][:NEIGHBOURS]
+        design = np.column_stack([np.ones(len(near)), uv[near] - uv[p]])
+        values = depths[near]
+        for _ in range(NEIGHBOUR_OUTLIERS + 1):
+            solution = np.linalg.lstsq(design, values, rcond=None)[0]
+            residual = values - design @ solution
+            if np.sqrt(np.mean(residual ** 2)) <= NEIGHBOUR_PLANE_RMS * abs(solution[0]):
+                if abs(depths[p] - solution[0]) > NEIGHBOUR_DEPTH_TOLERANCE * abs(solution[0]):
+                    off.append(p)
+                break
+            worst = np.argmax(np.abs(residual))
+            design, values = np.delete(design, worst, 0), np.delete(values, worst)
+    drop = set(off)
+    for key in ("rows", "cols", "gaps", "depths"):
+        kept[key] = [v for p, v in enumerate(kept[key]) if p not in drop]
+    return [(np.array([rows[p]]), np.zeros(0, int)) for p in off]
 
 
 def resolve_by_neighbours(uv_left, clear_rows, clear_depths, pair_i, pair_depth):

@@ -63,3 +63,16 @@ def test_the_help_names_every_kind_of_folder(capsys):
     assert eval_main(["calibrate", "--help"]) == 0
     text = " ".join(capsys.readouterr().out.split())
     assert "DIR/cam0/ DIR/cam1/" in text and "one camera's photos in DIR" in text, text
+
+
+def test_own_ports_that_cross_another_camera_name_port_distance_first():
+    """N cameras behind one shared port given --port-distance (a port each): a camera's own
+    port crosses another camera (it named only another in-air calibration or the design port)."""
+    reason = ValueError("cam1 centre lies inside cam3's port glass ((199.95, 0.02, -0.17) mm)")
+    text = str(housing_failure("p4water (4 cameras, photos)", reason, SimpleNamespace(
+        intrinsics="c4air/calib.yaml", n_water=None, port_distance=(100.0,))))
+    likely = text.split("likely: ", 1)[1]
+    assert likely.startswith("--port-distance 100 gives each camera its own port")
+    assert "calibrated without --port-distance" in likely and "--intrinsics" in likely
+    plain = str(housing_failure("w", reason, SimpleNamespace(intrinsics="a.yaml", n_water=None)))
+    assert "--port-distance" not in plain

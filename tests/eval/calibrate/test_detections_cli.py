@@ -111,3 +111,46 @@ def test_frames_of_a_video_are_thinned_by_pose():
     assert len(thinned.found(0)) == 10
     same, all_kept = thin_by_pose(detections, BOARD, (640, 480), 40)
     assert all_kept == list(range(40))
+
+
+def _write_pair(folder, n_poses=8, seed=7):
+    """A pair's detections of a 7x6-inner-corner chessboard ('u v' in the board's order): two
+    cameras 120 mm apart, the right one turned 8° towards the left."""
+    rng = np.random.default_rng(seed)
+    corners = Board("chessboard", (8, 7), 30.0).corners()
+    R_lr, t_lr = Rotation.from_rotvec([0, 0.14, 0]).as_matrix(), np.array([-120.0, 0, 0])
+    for side in ("left", "right"):
+        (folder / side).mkdir(parents=True)
+    k = 0
+    while k < n_poses:
+        R = Rotation.from_rotvec(rng.uniform(-0.5, 0.5, 3)).as_matrix()
+        t = np.array([60, 0, 700.0]) + rng.uniform(-50, 50, 3) - R @ corners.mean(axis=0)
+        world = corners @ R.T + t
+        views = [world, world @ R_lr.T + t_lr]
+        uv = [cv2.projectPoints(w, np.zeros(3), np.zeros(3), K, None)[0].reshape(-1, 2)
+              for w in views]
+        if any(np.any(p < 20) or np.any(p > [620, 460]) for p in uv):
+            continue
+        for side, pixels in zip(("left", "right"), uv):
+            lines = [f"{u:.6f} {v:.6f}" for u, v in pixels]
+            (folder / side / f"view{k:02d}.txt").write_text("\n".join(lines) + "\n")
+        k += 1
+
+
+def test_an_absorbed_pair_with_one_view_turned_exits_1_naming_it(tmp_path, capsys):
+    """--model absorbed: a pair whose right view is numbered from the other end (the board
+    turned by 180° in one photo) is left out of the stereo fit, named, exit 1 (it was exit 0,
+    named only in report.json); the untouched pairs calibrate with exit 0."""
+    _write_pair(tmp_path / "dets")
+    common = [str(tmp_path / "dets"), "--detections", "--image-size", "640x480", "--model",
+              "absorbed", "--lens", "standard", "--squares", "8x7", "--square-mm", "30"]
+    assert _run(["calibrate", *common, "--out", str(tmp_path / "clean")]) == 0
+    right = tmp_path / "dets" / "right" / "view03.txt"
+    right.write_text("\n".join(right.read_text().splitlines()[::-1]) + "\n")
+    capsys.readouterr()
+    assert _run(["calibrate", *common, "--out", str(tmp_path / "turned")]) == 1
+    err = capsys.readouterr().err
+    assert "failed:" in err and "pair view03 disagrees with the others as a stereo pose" in err
+    report = json.loads((tmp_path / "turned" / "report.json").read_text())
+    assert report["stereo_left_out"] == ["view03"] and report["poses"]["stereo"] == 7
+    assert "view03" in (tmp_path / "turned" / "report.md").read_text()

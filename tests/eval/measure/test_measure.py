@@ -458,6 +458,70 @@ def test_the_right_pair_is_not_a_mismatch_and_a_swapped_one_is_named():
     assert f"{len(targets)} match with the photos the other way round" in problem
 
 
+def test_a_pair_lost_to_ambiguity_names_the_depth_range_not_the_photos():
+    """A row-aligned pair in air (a rectified one) on a grid of targets: each left target
+    meets its row's right targets at several depths, so most are dropped as ambiguous. The
+    failure says so and names --depth-range (it said only "the photos do not look like the
+    pair"); with a depth window the pair matches and is no mismatch."""
+    from eval.measure.pipeline import TargetOptions, pair_mismatch
+    from measure import Camera, StereoRig
+    from measure.geometry.port import index_matched_port
+    from measure.geometry.projection import project
+    from measure.stereo.matching import match_targets
+    from synth.scene.layouts import grid_plane
+
+    K = np.array([[220.0, 0, 159.5], [0, 220.0, 133.5], [0, 0, 1]])
+    left, right = Camera(K, (320, 268)), Camera(K, (320, 268), t=(200.0, 0, 0))
+    rig = StereoRig(left, right, index_matched_port((0, 0, 1), np.stack([left.t, right.t])))
+    targets = grid_plane(1000.0, 320.0, 80.0)
+    centers = {v: project(c, rig.port, targets) for v, c in (("left", left), ("right", right))}
+    loose = match_targets(rig, centers["left"], centers["right"], gate_mm=0.5)
+    assert len(loose.left) < len(targets) / 2 <= len(loose.left) + loose.n_ambiguous
+    problem = pair_mismatch(rig, "p", centers, len(loose.left), TargetOptions(),
+                            loose.n_ambiguous)
+    assert f"{loose.n_ambiguous} more were dropped as ambiguous" in problem
+    assert "bound the depth with --depth-range" in problem and "models no port" in problem
+    window = TargetOptions(depth_range=(800.0, 1250.0))
+    bounded = match_targets(rig, centers["left"], centers["right"], gate_mm=0.5,
+                            depth_range=(800.0, 1250.0))
+    assert len(bounded.left) == len(targets)
+    assert pair_mismatch(rig, "p", centers, len(bounded.left), window,
+                         bounded.n_ambiguous) is None
+
+
+def test_many_ambiguous_targets_without_a_depth_window_are_warned_about():
+    """The small rig on its 9 × 9 grid with 0.05 px of noise and no depth window (seed 0): more
+    than half of the targets are dropped as ambiguous and some of the pairs kept are a row's
+    shifted partners (10 of 38), with exit 0 and no word before. Now a warning names the count
+    and --depth-range; with a depth window, or few ambiguous, none."""
+    from eval.measure.pipeline import PairResult, TargetOptions, ambiguity_warning
+    from measure import StereoRig
+    from measure.geometry.projection import project
+    from measure.stereo.matching import match_targets
+    from synth.scene.layouts import grid_plane
+    from synth.scene.rig import paper_cameras, paper_port
+
+    left, right = paper_cameras((320, 268), 143.79)
+    rig = StereoRig(left, right, paper_port())
+    targets = grid_plane(1000.0, 320.0, 80.0)
+    rng = np.random.default_rng(0)
+    uv = [project(c, rig.port, targets) + rng.normal(0, 0.05, (len(targets), 2))
+          for c in (left, right)]
+    matches = match_targets(rig, *uv, gate_mm=0.5)
+    assert np.any(matches.left != matches.right)  # the case the warning is for
+
+    def result(ambiguous, matched):
+        return PairResult("p", None, None, {"detected": {"left": 81, "right": 81},
+                                            "matched": matched, "ambiguous": ambiguous})
+
+    warning = ambiguity_warning(result(matches.n_ambiguous, len(matches.left)), TargetOptions())
+    assert warning is not None and f"{matches.n_ambiguous} of 81 targets dropped" in warning
+    assert "--depth-range NEAR,FAR" in warning
+    assert ambiguity_warning(result(matches.n_ambiguous, len(matches.left)),
+                             TargetOptions(depth_range=(800.0, 1250.0))) is None
+    assert ambiguity_warning(result(2, 79), TargetOptions()) is None
+
+
 def test_when_every_pair_failed_only_the_error_is_printed(user, capsys):
     """Two pairs, nothing matched in either: one ``error:`` line, no ``warning: …; the other
     pairs are measured`` before it (there are none)."""

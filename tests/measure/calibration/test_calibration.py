@@ -137,6 +137,24 @@ def test_in_air_opencv_calibration_from_corners():
                          truth.left.size)
 
 
+@pytest.mark.parametrize("lens", ["standard", "k3", "rational"])
+def test_stereo_intrinsics_refined_keeps_the_lens_models_coefficients(lens):
+    """``stereo_intrinsics="refined"``: OpenCV's stereo fit returns 14 distortion coefficients
+    whatever the model; each camera keeps its model's own (it raised 'dist of the
+    brown_conrady model must hold 4, 5 or 8 coefficients, got 14')."""
+    truth = paper_rig()
+    air = board_rig(_Spec(truth), air=True)
+    poses = sample_poses(air, BOARD, 10, seed=6, water=False)
+    detections = _observe(air, poses, 0.05, np.random.default_rng(2))
+    fixed = calibrate_in_air(BOARD, detections, truth.left.size, lens)
+    refined = calibrate_in_air(BOARD, detections, truth.left.size, lens,
+                               stereo_intrinsics="refined")
+    for est, own in zip(refined.rig.cameras, fixed.rig.cameras):
+        assert est.dist.shape == own.dist.shape
+    baseline = np.linalg.norm(refined.rig.right.t - refined.rig.left.t)
+    assert abs(baseline - 200.0) < 0.2
+
+
 def test_in_air_fisheye_calibration_from_corners():
     """--lens fisheye: cameras with OpenCV's fisheye model, 15 in-air views with σ = 0.05 px,
     recovered by cv2.fisheye.calibrate / stereoCalibrate: focal lengths within 0.1 %, every
