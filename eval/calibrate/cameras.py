@@ -194,47 +194,12 @@ def calibrate_cameras_main(args, output, log, start, boards, design) -> int:
     :func:`photos_source`; ``design``: the starting flat port under water (normal along the
     first camera's axis; None in air)."""
     from measure.calibration.air import CalibrationError
-    from measure.calibration.multi_air import calibrate_rig_in_air
-    from measure.calibration.multi_housing import PARAMETERS, calibrate_rig_housing
-    from measure.stereo.multirig import MultiRig
-    from synth.infra.cli import BOARD_OPTIONS, given, refuse_given
     from synth.infra.fileio import atomic_write_json, jsonable
     from synth.products.rig_file import write_rig_file
 
     names, truth = boards.names, boards.truth
     where = f"{args.dir} ({len(names)} cameras{', photos' if boards.photos else ''})"
-    for dest, flag in NOT_FOR_N_CAMERAS[:-1] if boards.photos else NOT_FOR_N_CAMERAS:
-        if given(args, dest):
-            raise CLIError(f"{flag} does not apply to {where}: the calibration of N cameras "
-                           f"models one flat port they share, its σ propagates the in-air "
-                           f"covariance")
-    if not boards.photos:
-        refuse_given(args, BOARD_OPTIONS, f"to a boards folder ({args.dir}): the folder's "
-                                          f"board.json defines the board")
-    if args.air and not boards.air:
-        raise CLIError(f"--air: {args.dir} holds boards rendered underwater (its manifest says "
-                       f"so; --air is for photos)")
-    if boards.air:
-        if args.intrinsics:
-            raise CLIError(f"{args.dir}: in-air boards calibrate the intrinsics themselves; "
-                           f"--intrinsics is for underwater boards")
-        if args.lens == "fisheye":
-            raise CLIError(f"--lens fisheye does not apply to {where}: the joint adjustment of "
-                           f"N cameras projects with OpenCV's Brown–Conrady model (standard, "
-                           f"k3, rational, radial)")
-    else:
-        if given(args, "lens"):
-            raise CLIError("--lens does not apply underwater: the lens model is the in-air "
-                           "calibration's (--intrinsics)")
-        if not args.intrinsics:
-            raise CLIError(f"{where}: underwater boards need --intrinsics (the calib.yaml of "
-                           f"eval calibrate on in-air boards of the same cameras)")
-        free = tuple(n.strip() for n in args.free.split(",") if n.strip())
-        unknown = [n for n in free if n not in PARAMETERS]
-        if not free or unknown:
-            raise CLIError(f"--free {args.free!r}: the housing of N cameras estimates "
-                           f"{', '.join(PARAMETERS)}")
-        air, air_cov = read_air_rig(args.intrinsics, args.dir, names, boards.size)
+    water = _checked_options(args, boards, where)
     log(f"detect the boards in {boards.path} ({len(boards.images)} poses × {len(names)} "
         f"cameras) …")
     t = time.perf_counter()
@@ -253,87 +218,11 @@ def calibrate_cameras_main(args, output, log, start, boards, design) -> int:
     t = time.perf_counter()
     try:
         if boards.air:
-            lens = args.lens if given(args, "lens") else "standard"
-            log("calibrate every camera and pose jointly (OpenCV per camera, then one bundle "
-                "adjustment) …")
-            cal = calibrate_rig_in_air(boards.board, detections, boards.size, names,
-                                       lens_model=lens, intrinsics="free")
-            rig, sigmas = cal.rig, cal.sigmas()
-            covariance = (cal.parameter_names, cal.covariance)
-            errors = _air_errors(rig, truth) if truth is not None else {}
-            rows = [(n, errors.get(n), sigmas[n]) for n in cal.parameter_names]
-            report.update({"rms_px": cal.rms_px, "joint_rms_px": cal.joint_rms_px,
-                           "poses_used": cal.poses_used,
-                           "left_out": {f"{names[v]}/{boards.captures[k]}": why
-                                        for (k, v), why in sorted(cal.left_out.items())}})
-            rms = cal.joint_rms_px
+            cal, rig, covariance, rows, rms = _calibrate_in_air(args, boards, detections, report,
+                                                                log)
         else:
-            per_camera = given(args, "port_distance") or boards.own_ports
-            if per_camera:  # each camera behind its own port, ⟂ its axis, D from its centre
-                from measure import FlatPort
-
-                from eval.calibrate.port_lengths import lengths_for
-                from synth.scene.windows import DEFAULT_PAIR_DISTANCE_MM
-
-                distances = lengths_for(args.port_distance or (DEFAULT_PAIR_DISTANCE_MM,),
-                                        len(names))
-                starts = [FlatPort(c.R[:, 2], d + float(c.R[:, 2] @ c.center),
-                                   design.thicknesses, design.indices)
-                          for c, d in zip(air.cameras, distances)]
-            else:
-                starts = [design] * len(names)
-            start_rig = MultiRig(air.cameras, starts, names)
-            log(f"{'each camera' + chr(39) + 's own port' if per_camera else 'the shared port'}"
-                f": {', '.join(free)} from every camera's corners …")
-            air_names, air_matrix = air_cov if air_cov is not None else ((), None)
-            cal = calibrate_rig_housing(start_rig, boards.board, detections, free, air_names,
-                                        air_matrix, per_camera=bool(per_camera))
-            rig = cal.rig
-            covariance = (tuple(f"port.{n}" if cal.shared else n.replace(".", ".port.", 1)
-                                if "." in n else f"port.{n}" for n in cal.labels),
-                          cal.covariance)
-            rows = []
-            slots = [None] if cal.shared else list(range(len(names)))
-            for s_ in slots:
-                v = 0 if s_ is None else s_
-                port = rig.ports[v]
-                true_port = truth.ports[v] if truth is not None else None
-                label = "port" if s_ is None else f"{names[v]}.port"
-
-                def pick(entry, s_=s_):
-                    return entry if s_ is None else entry[s_]
-
-                def diff(value, port=port, true_port=true_port):
-                    return None if true_port is None else value(port) - value(true_port)
-
-                if "distance" in free:
-                    rows.append((f"{label}.distance", diff(lambda q: q.distance),
-                                 pick(cal.sigmas["distance"])))
-                if "normal" in free:
-                    axes = np.asarray(cal.normal_axes if s_ is None else cal.normal_axes[s_])
-                    tilt = (None if true_port is None
-                            else axes @ (port.normal - true_port.normal))
-                    rows += [(f"{label}.tilt[{k}]", None if tilt is None else float(tilt[k]),
-                              pick(cal.sigmas["normal"])[k]) for k in range(2)]
-                    if true_port is not None:
-                        report.setdefault("normal_error_deg", {})[label] = float(np.degrees(
-                            np.arctan2(np.linalg.norm(np.cross(port.normal, true_port.normal)),
-                                       port.normal @ true_port.normal)))
-                if "thickness" in free:
-                    rows.append((f"{label}.thickness", diff(lambda q: q.thicknesses[0]),
-                                 pick(cal.sigmas["thickness"])))
-            if "n_water" in free:
-                rows.append(("port.n_water", None if truth is None
-                             else rig.ports[0].n_water - truth.ports[0].n_water,
-                             cal.sigmas["n_water"]))
-            port = rig.ports[0]
-            report["port"] = (port.describe() if cal.shared else
-                              {n: p.describe() for n, p in zip(names, rig.ports)})
-            report.update({"rms_px": cal.rms_px_per, "joint_rms_px": cal.rms_px,
-                           "uncertainty": cal.uncertainty,
-                           "sigmas_conditional": cal.sigmas_conditional,
-                           "design": design.describe()})
-            rms = cal.rms_px
+            cal, rig, covariance, rows, rms = _calibrate_housing(args, boards, detections,
+                                                                 design, water, report, log)
     except CalibrationError as exc:
         if boards.air:
             raise CLIError(f"{where}: {exc}") from None
@@ -364,31 +253,8 @@ def calibrate_cameras_main(args, output, log, start, boards, design) -> int:
                                values, report))
     if getattr(args.n_water, "note", None):  # the index --n-water T=…,S=… computed
         print(args.n_water.note, file=sys.stderr, flush=True)
-    if scored:
-        print(f"{len(names)} cameras, {kind}: RMS {rms:.4f} px; {report['within_3_sigma']} of "
-              f"{len(rows)} estimates within 3 σ of the truth (largest "
-              f"{report['largest_error_in_sigma']:.2f} σ)"
-              + (f"; D {rows[0][1]:+.4f} mm (σ {rows[0][2]:.3g}), normal "
-                 f"{report['normal_error_deg']['port']:.4f}° from the truth"
-                 if not boards.air and "distance" in free and "normal" in free
-                 and "port" in report.get("normal_error_deg", {}) else "")
-              + ("; each camera's port: " + ", ".join(
-                  f"{n.split('.')[0]} D {e:+.4f} mm ({e / sg:+.2f} σ)" for n, e, sg in rows
-                  if n.endswith(".port.distance"))
-                 if not boards.air and "distance" in free and not cal.shared else ""))
-    else:
-        port_line = ""
-        if not boards.air and "distance" in free and cal.shared:
-            port_line = (f"; the port: D {report['port']['distance_mm']:.4f} ± "
-                         f"{rows[0][2]:.3g} mm, normal "
-                         + ", ".join(f"{v:.5f}" for v in report["port"]["normal"]))
-        elif not boards.air and "distance" in free:
-            port_line = "; each camera's port: " + ", ".join(
-                f"{n} D {report['port'][n]['distance_mm']:.4f} ± {sg:.3g} mm"
-                for n, (_, _, sg) in zip(names, [r for r in rows
-                                                 if r[0].endswith(".port.distance")]))
-        print(f"{len(names)} cameras, {kind}: RMS {rms:.4f} px, the board found per camera "
-              + ", ".join(f"{n} {c}" for n, c in found.items()) + port_line)
+    _print_summary(boards, names, kind, rms, rows, report, found,
+                   None if boards.air else water[0], None if boards.air else cal.shared)
     print(f"wrote {output.path} (calib.yaml of {len(names)} cameras with its covariance, "
           f"report.json, report.md)")
     if report.get("left_out"):
@@ -401,5 +267,182 @@ def calibrate_cameras_main(args, output, log, start, boards, design) -> int:
         return EXIT_CHECK_FAILED
     return 0
 
+
+def _checked_options(args, boards, where):
+    """The options refused for these boards (N cameras; a boards folder; in air or water);
+    under water ``(free, air rig, its covariance)`` read from ``--intrinsics``, in air None."""
+    from measure.calibration.multi_housing import PARAMETERS
+    from synth.infra.cli import BOARD_OPTIONS, given, refuse_given
+
+    for dest, flag in NOT_FOR_N_CAMERAS[:-1] if boards.photos else NOT_FOR_N_CAMERAS:
+        if given(args, dest):
+            raise CLIError(f"{flag} does not apply to {where}: the calibration of N cameras "
+                           f"models one flat port they share, its σ propagates the in-air "
+                           f"covariance")
+    if not boards.photos:
+        refuse_given(args, BOARD_OPTIONS, f"to a boards folder ({args.dir}): the folder's "
+                                          f"board.json defines the board")
+    if args.air and not boards.air:
+        raise CLIError(f"--air: {args.dir} holds boards rendered underwater (its manifest says "
+                       f"so; --air is for photos)")
+    if boards.air:
+        if args.intrinsics:
+            raise CLIError(f"{args.dir}: in-air boards calibrate the intrinsics themselves; "
+                           f"--intrinsics is for underwater boards")
+        if args.lens == "fisheye":
+            raise CLIError(f"--lens fisheye does not apply to {where}: the joint adjustment of "
+                           f"N cameras projects with OpenCV's Brown–Conrady model (standard, "
+                           f"k3, rational, radial)")
+        return None
+    if given(args, "lens"):
+        raise CLIError("--lens does not apply underwater: the lens model is the in-air "
+                       "calibration's (--intrinsics)")
+    if not args.intrinsics:
+        raise CLIError(f"{where}: underwater boards need --intrinsics (the calib.yaml of "
+                       f"eval calibrate on in-air boards of the same cameras)")
+    free = tuple(n.strip() for n in args.free.split(",") if n.strip())
+    unknown = [n for n in free if n not in PARAMETERS]
+    if not free or unknown:
+        raise CLIError(f"--free {args.free!r}: the housing of N cameras estimates "
+                       f"{', '.join(PARAMETERS)}")
+    air, air_cov = read_air_rig(args.intrinsics, args.dir, boards.names, boards.size)
+    return free, air, air_cov
+
+
+def _calibrate_in_air(args, boards, detections, report, log):
+    """``(cal, rig, covariance, rows, rms)`` of every camera and pose jointly in air; the
+    report gains the RMS, the poses used and the views left out."""
+    from measure.calibration.multi_air import calibrate_rig_in_air
+    from synth.infra.cli import given
+
+    names, truth = boards.names, boards.truth
+    lens = args.lens if given(args, "lens") else "standard"
+    log("calibrate every camera and pose jointly (OpenCV per camera, then one bundle "
+        "adjustment) …")
+    cal = calibrate_rig_in_air(boards.board, detections, boards.size, names,
+                               lens_model=lens, intrinsics="free")
+    rig, sigmas = cal.rig, cal.sigmas()
+    errors = _air_errors(rig, truth) if truth is not None else {}
+    rows = [(n, errors.get(n), sigmas[n]) for n in cal.parameter_names]
+    report.update({"rms_px": cal.rms_px, "joint_rms_px": cal.joint_rms_px,
+                   "poses_used": cal.poses_used,
+                   "left_out": {f"{names[v]}/{boards.captures[k]}": why
+                                for (k, v), why in sorted(cal.left_out.items())}})
+    return cal, rig, (cal.parameter_names, cal.covariance), rows, cal.joint_rms_px
+
+
+def _calibrate_housing(args, boards, detections, design, water, report, log):
+    """``(cal, rig, covariance, rows, rms)`` of the shared port, or each camera's own
+    (``--port-distance`` or the boards' truth), from every camera's corners; the report gains
+    the port(s), the RMS per camera, the uncertainty and the design."""
+    from measure.calibration.multi_housing import calibrate_rig_housing
+    from measure.stereo.multirig import MultiRig
+    from synth.infra.cli import given
+
+    names = boards.names
+    free, air, air_cov = water
+    per_camera = given(args, "port_distance") or boards.own_ports
+    if per_camera:  # each camera behind its own port, ⟂ its axis, D from its centre
+        from measure import FlatPort
+
+        from eval.calibrate.port_lengths import lengths_for
+        from synth.scene.windows import DEFAULT_PAIR_DISTANCE_MM
+
+        distances = lengths_for(args.port_distance or (DEFAULT_PAIR_DISTANCE_MM,), len(names))
+        starts = [FlatPort(c.R[:, 2], d + float(c.R[:, 2] @ c.center),
+                           design.thicknesses, design.indices)
+                  for c, d in zip(air.cameras, distances)]
+    else:
+        starts = [design] * len(names)
+    start_rig = MultiRig(air.cameras, starts, names)
+    log(f"{'each camera' + chr(39) + 's own port' if per_camera else 'the shared port'}"
+        f": {', '.join(free)} from every camera's corners …")
+    air_names, air_matrix = air_cov if air_cov is not None else ((), None)
+    cal = calibrate_rig_housing(start_rig, boards.board, detections, free, air_names,
+                                air_matrix, per_camera=bool(per_camera))
+    rig = cal.rig
+    covariance = (tuple(f"port.{n}" if cal.shared else n.replace(".", ".port.", 1)
+                        if "." in n else f"port.{n}" for n in cal.labels),
+                  cal.covariance)
+    rows = _port_rows(cal, rig, boards.truth, names, free, report)
+    port = rig.ports[0]
+    report["port"] = (port.describe() if cal.shared else
+                      {n: p.describe() for n, p in zip(names, rig.ports)})
+    report.update({"rms_px": cal.rms_px_per, "joint_rms_px": cal.rms_px,
+                   "uncertainty": cal.uncertainty,
+                   "sigmas_conditional": cal.sigmas_conditional,
+                   "design": design.describe()})
+    return cal, rig, covariance, rows, cal.rms_px
+
+
+def _port_rows(cal, rig, truth, names, free, report) -> list:
+    """``[(name, error or None, σ)]`` of every free port number (each camera's with its own
+    ports); the normals' angle from the truth goes into ``report["normal_error_deg"]``."""
+    rows = []
+    slots = [None] if cal.shared else list(range(len(names)))
+    for s_ in slots:
+        v = 0 if s_ is None else s_
+        port = rig.ports[v]
+        true_port = truth.ports[v] if truth is not None else None
+        label = "port" if s_ is None else f"{names[v]}.port"
+
+        def pick(entry, s_=s_):
+            return entry if s_ is None else entry[s_]
+
+        def diff(value, port=port, true_port=true_port):
+            return None if true_port is None else value(port) - value(true_port)
+
+        if "distance" in free:
+            rows.append((f"{label}.distance", diff(lambda q: q.distance),
+                         pick(cal.sigmas["distance"])))
+        if "normal" in free:
+            axes = np.asarray(cal.normal_axes if s_ is None else cal.normal_axes[s_])
+            tilt = (None if true_port is None
+                    else axes @ (port.normal - true_port.normal))
+            rows += [(f"{label}.tilt[{k}]", None if tilt is None else float(tilt[k]),
+                      pick(cal.sigmas["normal"])[k]) for k in range(2)]
+            if true_port is not None:
+                report.setdefault("normal_error_deg", {})[label] = float(np.degrees(
+                    np.arctan2(np.linalg.norm(np.cross(port.normal, true_port.normal)),
+                               port.normal @ true_port.normal)))
+        if "thickness" in free:
+            rows.append((f"{label}.thickness", diff(lambda q: q.thicknesses[0]),
+                         pick(cal.sigmas["thickness"])))
+    if "n_water" in free:
+        rows.append(("port.n_water", None if truth is None
+                     else rig.ports[0].n_water - truth.ports[0].n_water,
+                     cal.sigmas["n_water"]))
+    return rows
+
+
+def _print_summary(boards, names, kind, rms, rows, report, found, free, shared) -> None:
+    """The one line of the calibration: against the truth when the boards have one, else the
+    board found per camera and the port(s)."""
+    water = not boards.air
+    if boards.truth is not None:
+        print(f"{len(names)} cameras, {kind}: RMS {rms:.4f} px; {report['within_3_sigma']} of "
+              f"{len(rows)} estimates within 3 σ of the truth (largest "
+              f"{report['largest_error_in_sigma']:.2f} σ)"
+              + (f"; D {rows[0][1]:+.4f} mm (σ {rows[0][2]:.3g}), normal "
+                 f"{report['normal_error_deg']['port']:.4f}° from the truth"
+                 if water and "distance" in free and "normal" in free
+                 and "port" in report.get("normal_error_deg", {}) else "")
+              + ("; each camera's port: " + ", ".join(
+                  f"{n.split('.')[0]} D {e:+.4f} mm ({e / sg:+.2f} σ)" for n, e, sg in rows
+                  if n.endswith(".port.distance"))
+                 if water and "distance" in free and not shared else ""))
+        return
+    port_line = ""
+    if water and "distance" in free and shared:
+        port_line = (f"; the port: D {report['port']['distance_mm']:.4f} ± "
+                     f"{rows[0][2]:.3g} mm, normal "
+                     + ", ".join(f"{v:.5f}" for v in report["port"]["normal"]))
+    elif water and "distance" in free:
+        port_line = "; each camera's port: " + ", ".join(
+            f"{n} D {report['port'][n]['distance_mm']:.4f} ± {sg:.3g} mm"
+            for n, (_, _, sg) in zip(names, [r for r in rows
+                                             if r[0].endswith(".port.distance")]))
+    print(f"{len(names)} cameras, {kind}: RMS {rms:.4f} px, the board found per camera "
+          + ", ".join(f"{n} {c}" for n, c in found.items()) + port_line)
 
 __all__ = ["calibrate_cameras_main"]
