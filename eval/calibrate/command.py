@@ -11,7 +11,7 @@ the housing is estimated by refractive bundle adjustment with the in-air intrins
 (:func:`measure.calibration.housing.calibrate_housing`); ``--intrinsics`` gives them, as an in-air boards
 folder (calibrated here first) or a ``calib.yaml``. Behind two housings (each camera its own
 flat port: boards whose truth says so, or photos with ``--port-distance``) each camera's port is
-estimated, starting ``--port-distance LEFT,RIGHT`` mm from its camera (:func:`design_pair`;
+estimated, starting ``--port-distance LEFT,RIGHT`` mm from its camera (:mod:`eval.calibrate.design`;
 N cameras ``D0,D1,…``, :mod:`eval.calibrate.cameras`).
 
 Writes to ``--out``: ``calib.yaml`` (the dataset format, with an ``uncertainty`` map),
@@ -24,12 +24,13 @@ vectors per pose and view) and ``poses.png`` (the board poses in 3D).
 
 from __future__ import annotations
 
-import math
 import os
 import sys
 import time
 
 from eval.calibrate.causes import FIT_ERRORS, housing_failure
+from eval.calibrate.design import (DOME_DESIGN_OPTIONS, FLAT_DESIGN_OPTIONS, design_domes,
+                                   design_pair, design_port, pair_glass, parse_free)
 from eval.calibrate.port_lengths import lengths_for, per_camera_lengths
 from eval.calibrate.single import single_camera_folder
 from eval.cli import CLIError, positive_float
@@ -46,11 +47,6 @@ HOUSING_OPTIONS = ("free", "design_port", "start_distance", "glass_thickness", "
 COLMAP_NOTE = "upstream COLMAP and pycolmap read it without an error and drop the port"
 _LENS_UNDERWATER = ("underwater: the lens model is the in-air calibration's (--intrinsics); "
                     "give --lens to eval calibrate --air")
-#: ``--design-port`` keys and the single option each one stands for.
-DESIGN_KEYS = {"distance": "start_distance", "thickness": "glass_thickness", "n_glass": "n_glass",
-               "n_water": "n_water"}
-
-
 def add_parser(subparsers):
     from measure.calibration.air import LENS_MODELS
     from measure.calibration.dome import DOME_PARAMETERS
@@ -172,122 +168,6 @@ def _written(output, summary: str, args, has_port: bool) -> int:
     print(summary)
     print(written_line(output.path, has_port))
     return 0
-
-
-def design_port(args, normal):
-    """The starting port (:class:`measure.FlatPort`, normal ``normal``): the single options, with
-    ``--design-port`` keys over them (a key and its single option both given are refused)."""
-    from measure import FlatPort
-
-    values = {dest: getattr(args, dest) for dest in DESIGN_KEYS.values()}
-    seen = set()
-    items = (args.design_port or "").split(",")
-    if args.design_port is not None and not all(item.strip() for item in items):
-        raise CLIError(f"--design-port {args.design_port!r}: an empty item; expected KEY=VALUE "
-                       f"items separated by commas, KEY one of {', '.join(DESIGN_KEYS)}")
-    for item in filter(None, items):
-        key, sep, text = item.partition("=")
-        key = key.strip()
-        if not sep or key not in DESIGN_KEYS:
-            hint = (" (the water of a temperature and salinity: --n-water T=…,S=…)"
-                    if key in ("S", "wavelength") else "")
-            raise CLIError(f"--design-port {args.design_port!r}: expected KEY=VALUE items with KEY "
-                           f"one of {', '.join(DESIGN_KEYS)}, got {item!r}{hint}")
-        if key in seen:
-            raise CLIError(f"--design-port {args.design_port!r}: {key} is given twice")
-        seen.add(key)
-        option = given(args, DESIGN_KEYS[key])
-        if option:
-            raise CLIError(f"--design-port {key}= and {option} both give the design {key}; "
-                           f"give one")
-        try:
-            value = float(text)
-        except ValueError:
-            value = float("nan")
-        index = key.startswith("n_")
-        if not (math.isfinite(value) and (value >= 1.0 if index else value > 0.0)):
-            hint = (" (the water of a temperature and salinity: --n-water T=…,S=…)"
-                    if key == "n_water" and "=" in text else "")
-            raise CLIError(f"--design-port {key}={text}: expected "
-                           f"{'an index >= 1' if index else 'a positive length, mm'}{hint}")
-        values[DESIGN_KEYS[key]] = value
-    return FlatPort(normal, values["start_distance"], (values["glass_thickness"],),
-                    (1.0, values["n_glass"], values["n_water"]))
-
-
-def design_pair(args, rig):
-    """The starting rig of a two-housing calibration: ``rig``'s cameras, each behind its own
-    flat port ⟂ its optical axis, ``--port-distance`` from its centre
-    (:func:`synth.scene.windows.flat_pair`), the glass and water of :func:`design_port`
-    (``--design-port distance=`` and ``--start-distance`` are refused: the distances are per
-    camera)."""
-    from measure import StereoRig
-    from synth.scene.windows import DEFAULT_PAIR_DISTANCE_MM, flat_pair
-
-    shared = pair_glass(args)
-    distances = lengths_for(args.port_distance or (DEFAULT_PAIR_DISTANCE_MM,), 2)
-    try:
-        pair = flat_pair(rig.cameras, distances, [(0.0, 0.0)] * 2, shared.thicknesses * 2,
-                         shared.indices)
-    except ValueError as exc:
-        raise CLIError(f"--port-distance {','.join(f'{d:g}' for d in distances)}: {exc}") from None
-    return StereoRig(rig.left, rig.right, pair)
-
-
-def pair_glass(args, cameras: int = 2):
-    """The glass and water every port of a housing per camera shares (a :func:`design_port`);
-    the options that give one port's distance are refused (the distances are per camera; two
-    housings, or ``cameras`` > 2)."""
-    what = "two housings" if cameras == 2 else f"a port per camera ({cameras} cameras)"
-    each = ("LEFT,RIGHT" if cameras == 2
-            else ",".join(f"D{k}" for k in range(cameras)))
-    refuse_given(args, ("start_distance",), f"to {what}: give each port's distance with "
-                                            f"--port-distance {each}")
-    if any(item.partition("=")[0].strip() == "distance"
-           for item in (args.design_port or "").split(",")):
-        raise CLIError(f"--design-port distance= does not apply to {what}: give each "
-                       f"port's distance with --port-distance {each}")
-    return design_port(args, (0.0, 0.0, 1.0))
-
-
-def parse_free(text: str, dome: bool = False) -> tuple:
-    from measure.calibration.dome import DOME_PARAMETERS
-    from measure.calibration.flat import HOUSING_PARAMETERS
-
-    table = DOME_PARAMETERS if dome else HOUSING_PARAMETERS
-    listed = [n.strip() for n in text.split(",")]
-    twice = sorted({n for n in listed if n and listed.count(n) > 1})
-    if twice or (text.strip() and not all(listed)):
-        what = f"{', '.join(twice)} given twice" if twice else "an empty item"
-        raise CLIError(f"--free {text!r}: {what}; give each parameter once, separated by "
-                       f"commas (from {', '.join(table)})")
-    names = tuple(dict.fromkeys(n for n in listed if n))
-    unknown = [n for n in names if n not in table]
-    if not names or unknown:
-        kind = " of a dome rig" if dome else ""
-        raise CLIError(f"--free {text!r}: unknown parameter{kind} "
-                       f"{', '.join(unknown) or '(none)'} (choose from {', '.join(table)})")
-    return names
-
-
-#: Options of a flat port's design, refused for dome boards; the dome's own, refused otherwise.
-FLAT_DESIGN_OPTIONS = ("start_distance", "glass_thickness", "design_port")
-DOME_DESIGN_OPTIONS = ("dome_radius", "dome_thickness")
-
-
-def design_domes(args, rig):
-    """The starting rig of a dome housing calibration: ``rig``'s cameras, each inside a dome
-    centred on it (no decentring) of ``--dome-radius`` and ``--dome-thickness``, indices
-    ``(1, --n-glass, --n-water)``."""
-    from measure import StereoRig
-    from synth.scene.dome import dome_pair
-
-    try:
-        pair = dome_pair(rig.cameras, args.dome_radius, args.dome_thickness, (0.0, 0.0, 0.0),
-                         (1.0, args.n_glass, float(args.n_water)))
-    except ValueError as exc:
-        raise CLIError(f"--dome-radius / --dome-thickness: {exc}") from None
-    return StereoRig(rig.left, rig.right, pair)
 
 
 def underwater_note(path, calib) -> str | None:
@@ -548,7 +428,7 @@ def is_photo_folder(path) -> bool:
 
 
 def _n_camera_design(args, own_ports: bool = False, cameras: int = 3):
-    """The starting glass of N cameras under water: one shared port (:func:`design_port`), or
+    """The starting glass of N cameras under water: one shared port (:mod:`eval.calibrate.design`), or
     — ``--port-distance`` given, or boards whose truth has a port per camera (``own_ports``) —
     the glass and water each camera's own port has (:func:`pair_glass`: the shared distance
     options refused)."""

@@ -377,7 +377,7 @@ def test_rendered_photos_in_air_then_underwater(rendered, tmp_path, capsys):
 
 
 def test_design_port_gives_the_starting_port_in_one_option():
-    from eval.calibrate.command import design_port
+    from eval.calibrate.design import design_port
     from eval.cli import CLIError, build_parser
 
     def parsed(*extra):
@@ -408,7 +408,7 @@ def test_design_port_gives_the_starting_port_in_one_option():
                                           ("depth", "unknown parameter depth")])
 def test_free_parameters_are_named_once_each(text, message):
     """``--free normal,normal`` and ``--design-port ,`` were accepted as if they said less."""
-    from eval.calibrate.command import parse_free
+    from eval.calibrate.design import parse_free
     from eval.cli import CLIError
 
     with pytest.raises(CLIError, match=message):
