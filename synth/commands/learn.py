@@ -13,6 +13,7 @@ from __future__ import annotations
 
 from synth.infra.cli import (CLIError, add_cluster_options, add_out_option, add_progress_option,
                              refuse_given)
+from synth.scene.sea_write import DEFAULT_LEARN_SPP
 
 #: What each choice option accepts.
 CHOICES = {"ports": ("flat", "per-camera", "dome"),
@@ -42,8 +43,9 @@ def add_parser(subparsers) -> None:
                    help="seed of the first scene (default 0)")
     p.add_argument("--size", type=_size, default=(960, 768), metavar="WxH",
                    help="image size in px (default 960x768)")
-    p.add_argument("--spp", type=_count, default=16, metavar="N",
-                   help="samples per pixel (default 16)")
+    p.add_argument("--spp", type=_count, default=DEFAULT_LEARN_SPP, metavar="N",
+                   help=f"samples per pixel (default {DEFAULT_LEARN_SPP}; the render is most "
+                        f"of the time a scene takes, in proportion)")
     for name, what in (("ports", "kinds of port"), ("water", "waters"), ("light", "lights")):
         p.add_argument(f"--{name}", type=_choices(name), default=CHOICES[name],
                        metavar=",".join(CHOICES[name]),

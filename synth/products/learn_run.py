@@ -27,6 +27,7 @@ from dataclasses import dataclass
 from synth.infra import interrupt
 from synth.infra.cli import CLIError
 from synth.scene.sea_draw import LIGHTS, PORT_KINDS, WATERS, SeaRanges
+from synth.scene.sea_write import DEFAULT_LEARN_SPP
 
 
 @dataclass(frozen=True)
@@ -199,7 +200,7 @@ def read_learn_spec(data: dict, label: str, out: str) -> LearnRequest:
     check_top_keys(data, SPEC_KEYS, label)
     seed = integer(data, "seed", 0, 0, label)
     scenes = integer(data, "scenes", 10, 1, label)
-    spp = integer(data, "spp", 16, 1, label)
+    spp = integer(data, "spp", DEFAULT_LEARN_SPP, 1, label)
     w, h = _numbers(data, "size", 2, (960, 768), label, 64, 8192)
     need(w.is_integer() and h.is_integer(), label, f"size must be whole pixels, got {[w, h]}")
     distance = _numbers(data, "distance_mm", 2, (800.0, 2500.0), label, 100.0, 20000.0)

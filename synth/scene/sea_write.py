@@ -49,7 +49,7 @@ LAMP_SIDE_MM, LAMP_AHEAD_MM, LAMP_BEAM_DEG, LAMP_CUTOFF_DEG = 150.0, 30.0, 50.0,
 SUN_HEIGHT_MM = 3000.0
 #: Pixels between the rays traced to find the floor patch, and the patch's reach.
 FOOTPRINT_STEP_PX, FOOTPRINT_MARGIN, MAX_REACH = 32, 0.15, 3.5
-DEFAULT_LEARN_SPP = 16
+DEFAULT_LEARN_SPP = 8
 #: Glass beyond the outermost ray of a shared flat port's window, mm.
 WINDOW_MARGIN_MM = 20.0
 PATH_MAX_DEPTH = 5
