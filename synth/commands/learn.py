@@ -58,6 +58,9 @@ def add_parser(subparsers) -> None:
                    metavar="LOW,HIGH",
                    help="range of the rig's pitch below the horizontal, degrees (default "
                         "50,90; 90 looks straight down)")
+    p.add_argument("--object", dest="objects", action="append", default=[], metavar="FILE",
+                   help="an object mesh (PLY or OBJ, mm, z up: a rock, a pipe) to set on the "
+                        "floors, 0-3 per scene at drawn places and headings; repeatable")
     p.add_argument("--split", type=_fractions, default=(0.8, 0.1, 0.1), metavar="TRAIN,VAL,TEST",
                    help="shares of the train, val and test splits (default 0.8,0.1,0.1); a "
                         "scene's split is a function of its seed")
@@ -140,7 +143,7 @@ def _fractions(text: str) -> tuple:
 
 def main(args) -> int:
     from synth.infra.cluster import check_address
-    from synth.products.learn_run import LearnRequest, run_learn
+    from synth.products.learn_run import LearnRequest, checked_objects, run_learn
     from synth.scene.sea_draw import SeaRanges
 
     if args.scheduler is None:
@@ -153,7 +156,7 @@ def main(args) -> int:
                            "cluster's workers render the scenes")
     ranges = SeaRanges(size=tuple(args.size), ports=args.ports, waters=args.water,
                        lights=args.light, distance_mm=tuple(args.distance),
-                       pitch_deg=tuple(args.pitch))
+                       pitch_deg=tuple(args.pitch), objects=checked_objects(args.objects))
     request = LearnRequest(args.out, tuple(range(args.seed, args.seed + args.scenes)), ranges,
                            args.spp, tuple(args.split))
     return run_learn(request, args.scheduler, args.workers, args.connect_timeout,

@@ -11,8 +11,9 @@ like a suite: a killed run keeps every scene it finished.
 A learning suite spec (:func:`read_learn_spec`; ``suites/learn_sea.toml``) holds the options of
 ``synth learn`` as TOML keys: ``render = "learn"``, ``seed`` (the first scene's), ``scenes``,
 ``size = [W, H]``, ``spp``, ``ports``, ``water``, ``light`` (lists of names),
-``distance_mm = [NEAR, FAR]``, ``pitch_deg = [LOW, HIGH]``, ``split = [TRAIN, VAL, TEST]``, and
-``name``, ``description``; nothing else (an unknown key is refused, naming it).
+``distance_mm = [NEAR, FAR]``, ``pitch_deg = [LOW, HIGH]``, ``split = [TRAIN, VAL, TEST]``,
+``objects`` (mesh files relative to the spec), and ``name``, ``description``; nothing else (an
+unknown key is refused, naming it).
 """
 
 from __future__ import annotations
@@ -165,7 +166,17 @@ def _finish(request, options, previous, todo, results, where, compute, started) 
 # a suite spec of render = "learn"
 # ---------------------------------------------------------------------------------------------
 SPEC_KEYS = ("name", "description", "render", "seed", "scenes", "size", "spp", "ports", "water",
-             "light", "distance_mm", "pitch_deg", "split")
+             "light", "distance_mm", "pitch_deg", "split", "objects")
+
+
+def checked_objects(paths) -> tuple:
+    """The object files as absolute paths, each read once here (ValueError naming the file for
+    one that is not a usable mesh: before anything is written)."""
+    from synth.scene.sea_objects import read_object
+
+    for path in paths:
+        read_object(path)
+    return tuple(os.path.abspath(p) for p in paths)
 
 
 def is_learn_spec(data: dict) -> bool:
@@ -208,11 +219,17 @@ def read_learn_spec(data: dict, label: str, out: str) -> LearnRequest:
     split = _numbers(data, "split", 3, (0.8, 0.1, 0.1), label, 0.0, 1e9)
     need(distance[0] <= distance[1] and pitch[0] <= pitch[1] and sum(split) > 0, label,
          "distance_mm and pitch_deg must be [low, high], split not all 0")
+    objects = data.get("objects", [])
+    need(isinstance(objects, list) and all(isinstance(o, str) for o in objects), label,
+         f"objects must be a list of mesh files (relative to the spec), got {objects!r}")
+    base = os.path.dirname(os.path.abspath(label))
     ranges = SeaRanges(size=(int(w), int(h)), ports=_names(data, "ports", PORT_KINDS, label),
                        waters=_names(data, "water", WATERS, label),
                        lights=_names(data, "light", LIGHTS, label), distance_mm=distance,
-                       pitch_deg=pitch)
+                       pitch_deg=pitch,
+                       objects=checked_objects(os.path.join(base, o) for o in objects))
     return LearnRequest(out, tuple(range(seed, seed + scenes)), ranges, spp, split)
 
 
-__all__ = ["LearnRequest", "SPEC_KEYS", "is_learn_spec", "read_learn_spec", "run_learn"]
+__all__ = ["LearnRequest", "SPEC_KEYS", "checked_objects", "is_learn_spec", "read_learn_spec",
+           "run_learn"]

@@ -70,9 +70,19 @@ def _digest(path: str) -> str:
     return h.hexdigest()
 
 
+def object_digests(ranges: SeaRanges) -> list:
+    """The SHA-256 of each object file of ``ranges`` (their bytes, not their paths, make a
+    scene)."""
+    return [_digest(path) for path in ranges.objects]
+
+
 def request_key(seed: int, ranges: SeaRanges, spp: int) -> str:
-    """What makes a scene's folder up to date: the seed, the ranges, spp, the layout version."""
-    text = json.dumps({"seed": int(seed), "ranges": ranges.describe(), "spp": int(spp),
+    """What makes a scene's folder up to date: the seed, the ranges (the object files by their
+    bytes), spp, the layout version."""
+    described = ranges.describe()
+    if ranges.objects:
+        described["objects"] = object_digests(ranges)
+    text = json.dumps({"seed": int(seed), "ranges": described, "spp": int(spp),
                        "format": LEARN_FORMAT}, sort_keys=True)
     return hashlib.sha256(text.encode()).hexdigest()
 
@@ -312,7 +322,9 @@ def _manifest(tmp, scene, ranges, spp, floor, render, rectified, colmap, checks,
                       "mesh": {"vertices": int(floor.mesh.vertices.shape[0]),
                                "triangles": int(floor.mesh.triangles.shape[0])},
                       "texture": {"texel_mm": floor.texel_mm,
-                                  "shape": list(floor.texture_shape)}},
+                                  "shape": list(floor.texture_shape)},
+                      "objects": {"files": [os.path.basename(p) for p in ranges.objects],
+                                  "sha256": object_digests(ranges), "placed": floor.objects}},
         "image_size": list(scene.rig.left.size),
         "pixels": {"valid_left": int(left.valid.sum()), "seen_by_right": int(seen.sum()),
                    "occluded_left": int(occluded.sum())},

@@ -54,7 +54,12 @@ def scene_folder(seed: int) -> str:
 
 def options_of(seeds, ranges: SeaRanges, spp: int, fractions) -> dict:
     """The generator's options of a set (what :data:`LEARN_JSON` holds and hashes)."""
-    return {"seeds": [int(s) for s in seeds], "ranges": ranges.describe(), "spp": int(spp),
+    from synth.products.learn_scene import object_digests
+
+    described = ranges.describe()
+    if ranges.objects:
+        described["objects"] = object_digests(ranges)
+    return {"seeds": [int(s) for s in seeds], "ranges": described, "spp": int(spp),
             "split": {"names": list(SPLITS), "fractions": [float(f) for f in fractions]}}
 
 
@@ -73,7 +78,7 @@ def render_scene_task(task: dict) -> dict:
         setup_worker()
         from synth.products.learn_scene import write_learn_scene
 
-        ranges = SeaRanges(**{k: tuple(v) for k, v in task["ranges"].items()})
+        ranges = SeaRanges(**{k: tuple(v) for k, v in task["ranges"].items()})  # paths
         manifest = write_learn_scene(task["out"], task["seed"], ranges, task["spp"])
         return {"seed": task["seed"], "status": "ok", "error": None,
                 "passed": manifest["checks"]["passed"],

@@ -60,7 +60,7 @@ MAX_RIG_DRAWS = 20
 class SeaRanges:
     """What a scene may be drawn with: image ``size`` (W, H) px, the port kinds, waters and
     lights to choose from (uniformly), the range of the rig's distance to the floor (mm) and of
-    the bisector's pitch below the horizontal (degrees)."""
+    the bisector's pitch below the horizontal (degrees), the object meshes set on the floor."""
 
     size: tuple = (960, 768)
     ports: tuple = PORT_KINDS
@@ -68,9 +68,13 @@ class SeaRanges:
     lights: tuple = LIGHTS
     distance_mm: tuple = (800.0, 2500.0)
     pitch_deg: tuple = (50.0, 90.0)
+    #: Object meshes (paths: PLY or OBJ, mm, z up) set on the floors (:mod:`synth.scene.sea_objects`).
+    objects: tuple = ()
 
     def describe(self) -> dict:
-        return {k: list(v) for k, v in asdict(self).items()}
+        """Plain lists (no ``objects`` when there are none: a set without objects keeps the
+        request keys it had before objects existed)."""
+        return {k: list(v) for k, v in asdict(self).items() if k != "objects" or v}
 
 
 @dataclass(frozen=True)
@@ -89,6 +93,7 @@ class SeaScene:
     to_reference: tuple
     distance_mm: float
     drawn: dict = field(default_factory=dict)
+    objects: tuple = ()
 
 
 def seed_streams(seed: int, count: int = 4) -> list:
@@ -218,7 +223,7 @@ def draw_scene(seed: int, ranges: SeaRanges = SeaRanges()) -> SeaScene:
                   sun_azimuth_deg=float(rig_rng.uniform(-40.0, 40.0)))
     drawn.update(port_drawn, n_water=n_water, **placed)
     return SeaScene(int(seed), rig, port_kind, water, light, draw_seabed(seabed_rng),
-                    to_reference, distance, drawn)
+                    to_reference, distance, drawn, tuple(ranges.objects))
 
 
 __all__ = ["LIGHTS", "MAX_ATTENUATION_LENGTHS", "MAX_RIG_DRAWS", "PORT_KINDS", "SeaRanges",

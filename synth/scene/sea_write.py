@@ -25,7 +25,7 @@ object meshes set on it (merged into the one mesh: the truth traces what the ren
 from __future__ import annotations
 
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -33,6 +33,8 @@ from synth.rendering.water import PRESETS as WATER_PRESETS
 from synth.scene.dome import dome_placements
 from synth.scene.model import SPECKLE_ID, SURFACE_ID
 from synth.scene.sea_draw import SeaScene, seed_streams
+from synth.scene.sea_objects import (STRIP_TEXELS, object_strip, object_uv, place_objects,
+                                     read_object)
 from synth.scene.seabed import (MAX_TEXELS, MIN_TEXEL_MM, grid_axes, seabed_heights, seabed_mesh,
                                 seabed_texture)
 from synth.scene.surfaces import SurfaceMesh, write_ply
@@ -57,8 +59,9 @@ PATH_MAX_DEPTH = 5
 
 @dataclass(frozen=True)
 class SeaFloor:
-    """The floor of a scene: its ``mesh`` (reference frame), the heightfield grid ``x``, ``y``
-    (mm, seabed frame), the texture's ``lower`` corner and texel size (mm), its size (texels)."""
+    """The floor of a scene: its ``mesh`` (reference frame, objects included), the heightfield
+    grid ``x``, ``y`` (mm, seabed frame), the texture's ``lower`` corner and texel size (mm), its
+    size (texels, rows first), and what was drawn of each object placed on it."""
 
     mesh: SurfaceMesh
     x: np.ndarray
@@ -66,6 +69,7 @@ class SeaFloor:
     lower: np.ndarray
     texel_mm: float
     texture_shape: tuple
+    objects: list = field(default_factory=list)
 
 
 def _fmt(x) -> str:
@@ -119,14 +123,16 @@ def floor_patch(scene: SeaScene, depth_margin_mm: float) -> tuple[np.ndarray, np
 
 
 def build_floor(scene: SeaScene) -> tuple[SeaFloor, np.ndarray]:
-    """The floor's mesh and texture grid, and the texture itself (float reflectance, row 0 at
-    the lowest seabed ``y``)."""
-    _, seabed_rng, texture_rng, _ = seed_streams(scene.seed)
+    """The floor's mesh (the user's objects set on it and merged in,
+    :mod:`synth.scene.sea_objects`) and texture grid, and the texture itself (float
+    reflectance, row 0 at the lowest seabed ``y``; the objects' strip after the floor's rows)."""
+    _, seabed_rng, texture_rng, objects_rng = seed_streams(scene.seed)
     params = scene.seabed
     depth_margin = 3.0 * params.relief_mm + params.ripple_amplitude_mm
     lower, upper = floor_patch(scene, depth_margin)
     x, y = grid_axes(lower, upper)
-    heights, rocks = seabed_heights(seabed_rng, x, y, params, scene.drawn["look_at_mm"][:2])
+    look = scene.drawn["look_at_mm"][:2]
+    heights, rocks = seabed_heights(seabed_rng, x, y, params, look)
     mesh = seabed_mesh(x, y, heights, scene.to_reference,
                        f"generated sea floor, seed {scene.seed}")
     focal = scene.rig.left.K[0, 0] * scene.rig.port.view(0).n_water
@@ -135,8 +141,30 @@ def build_floor(scene: SeaScene) -> tuple[SeaFloor, np.ndarray]:
     texel = max(extent / MAX_TEXELS, MIN_TEXEL_MM, 0.5 * nearest / focal)
     shape = tuple(int(np.ceil(s / texel)) + 1 for s in (upper[1] - lower[1], upper[0] - lower[0]))
     texture, _ = seabed_texture(texture_rng, shape, texel, params, rocks > 1.0)
-    floor = SeaFloor(mesh, x, y, lower, texel, shape)
+    placed = place_objects(objects_rng, [read_object(p) for p in scene.objects], x, y, heights,
+                           look)
+    if placed:
+        mesh, texture = _with_objects(scene, mesh, texture, placed, lower, texel, objects_rng)
+    floor = SeaFloor(mesh, x, y, lower, texel, texture.shape, [p[2] for p in placed])
     return floor, texture
+
+
+def _with_objects(scene, mesh, texture, placed, lower, texel, rng):
+    """The floor's mesh and texture with the placed objects merged in (module docs)."""
+    strip, _ = object_strip(rng, texture.shape[1])
+    start = np.array([lower[0], lower[1] + texel * texture.shape[0]])
+    strip_mm = texel * (STRIP_TEXELS - 1)
+    R, t = scene.to_reference
+    vertices, triangles, uv = [mesh.vertices], [mesh.triangles], [mesh.uv_mm]
+    count = mesh.vertices.shape[0]
+    for sea_vertices, faces, _ in placed:
+        vertices.append(sea_vertices @ R.T + t)
+        triangles.append(faces + count)
+        uv.append(object_uv(sea_vertices - sea_vertices.min(axis=0), start, strip_mm, strip_mm))
+        count += sea_vertices.shape[0]
+    merged = SurfaceMesh(np.concatenate(vertices), np.concatenate(triangles), np.concatenate(uv),
+                         mesh.description + f" with {len(placed)} object(s)")
+    return merged, np.vstack([texture, strip])
 
 
 def _lights(scene: SeaScene, water) -> list:
@@ -299,8 +327,10 @@ def scene_xml(scene: SeaScene, spp: int = DEFAULT_LEARN_SPP) -> str:
     </texture>
     <shape type="ply" id="{SURFACE_ID}">
         <string name="filename" value="{MESH_FILE}"/>
-        <bsdf type="diffuse">
-            <ref name="reflectance" id="{SPECKLE_ID}"/>
+        <bsdf type="twosided">
+            <bsdf type="diffuse">
+                <ref name="reflectance" id="{SPECKLE_ID}"/>
+            </bsdf>
         </bsdf>
     </shape>
 </scene>
@@ -318,8 +348,8 @@ def write_sea_scene(directory: str, scene: SeaScene, spp: int = DEFAULT_LEARN_SP
     floor, texture = build_floor(scene)
     lower = floor.lower
     upper = lower + floor.texel_mm * (np.array(floor.texture_shape[::-1]) - 1)
-    # Mitsuba's bitmap: texture v = 0 is the image's top row (OpenCV row 0 at the top) — the
-    # texture's row 0 is the lowest y, so the PNG is flipped and v runs from the top
+    # Mitsuba puts a PLY's v = 0 on the bitmap's first (top) row: the texture's row 0, the
+    # lowest seabed y (seen on a render: the rock texture lies on the rocks)
     write_ply(os.path.join(directory, MESH_FILE),
               SurfaceMesh(floor.mesh.vertices, floor.mesh.triangles, floor.mesh.uv_mm,
                           floor.mesh.description), lower, upper)
@@ -331,8 +361,9 @@ def write_sea_scene(directory: str, scene: SeaScene, spp: int = DEFAULT_LEARN_SP
     vertices = floor.mesh.vertices.astype(np.float32).astype(np.float64)
     return SeaFloor(SurfaceMesh(vertices, floor.mesh.triangles, floor.mesh.uv_mm,
                                 floor.mesh.description), floor.x, floor.y, floor.lower,
-                    floor.texel_mm, floor.texture_shape)
+                    floor.texel_mm, floor.texture_shape, floor.objects)
 
 
 __all__ = ["DEFAULT_LEARN_SPP", "MESH_FILE", "SCENE_FILE", "SeaFloor", "TEXTURE_FILE",
-           "build_floor", "flat_window_half_side", "floor_patch", "port_xml", "scene_xml", "write_sea_scene"]
+           "build_floor", "flat_window_half_side", "floor_patch", "port_xml", "scene_xml",
+           "write_sea_scene"]

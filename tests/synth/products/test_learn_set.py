@@ -31,6 +31,7 @@ def test_a_scenes_split_depends_on_its_seed_alone():
     (["--scenes", "0"], "--scenes"),
     (["--connect-timeout", "3"], "--connect-timeout"),
     (["--workers", "2", "--scheduler", "tcp://127.0.0.1:1"], "--workers"),
+    (["--object", "no_such_rock.ply"], "--object no_such_rock.ply: no such file"),
 ])
 def test_bad_options_are_one_error_line(tmp_path, capsys, argv, fragment):
     out = tmp_path / "set"
