@@ -82,6 +82,23 @@ def _pool(per_scene: list) -> dict:
     return out
 
 
+def _split_seeds(folder: str, split: str) -> list:
+    """The seeds of the finished scenes of ``split``: from ``learn.json``, or — while a run is
+    still writing the set — from the scene folders that hold a manifest (their split by seed
+    with the default shares)."""
+    from synth.products.learn_set import DEFAULT_FRACTIONS, split_of
+
+    path = os.path.join(folder, "learn.json")
+    if os.path.isfile(path):
+        with open(path, encoding="utf-8") as handle:
+            learn = json.load(handle)
+        return sorted(int(s) for s, v in learn["scenes"].items()
+                      if v["split"] == split and v["status"] == "ok")
+    seeds = sorted(int(name[6:]) for name in os.listdir(folder) if name.startswith("scene_")
+                   and os.path.isfile(os.path.join(folder, name, "manifest.json")))
+    return [s for s in seeds if split_of(s, DEFAULT_FRACTIONS) == split]
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("set", help="a learning set (python -m synth learn --out DIR)")
@@ -89,10 +106,7 @@ def main() -> int:
     parser.add_argument("--limit", type=int, default=None, help="at most this many scenes")
     parser.add_argument("--out", default=None, help="folder for learn_sgbm.json")
     args = parser.parse_args()
-    with open(os.path.join(args.set, "learn.json"), encoding="utf-8") as handle:
-        learn = json.load(handle)
-    seeds = [int(s) for s, v in learn["scenes"].items()
-             if v["split"] == args.split and v["status"] == "ok"][:args.limit]
+    seeds = _split_seeds(args.set, args.split)[:args.limit]
     started, per_scene, ports = time.perf_counter(), [], []
     for seed in seeds:
         t = time.perf_counter()
