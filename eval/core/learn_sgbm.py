@@ -182,7 +182,9 @@ def score_scene(item: SceneForEval, absorbed_rig=None) -> dict:
         out[method] = {"scores": disparity_scores(disparity, truth),
                        "z": _depths(predicted, points)}
     folder = os.path.join(item.folder, "rectified")
-    warp, reals = lt.rectification_of(rig, item.manifest["rectified"]["distance_mm"])
+    rectified = item.manifest["rectified"]
+    warp, reals = lt.rectification_of(rig, rectified["distance_mm"],
+                                      rectified.get("disparity_offset_px", 0.0))
     stored = read_pfm(os.path.join(folder, "disparity.pfm")).astype(np.float64)
     hidden = cv2.imread(os.path.join(folder, "occlusion.png"), cv2.IMREAD_UNCHANGED) > 0
     truth = np.where((stored > 0) & ~hidden, stored, np.nan)

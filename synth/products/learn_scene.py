@@ -49,7 +49,7 @@ from synth.scene.sea_write import (DEFAULT_LEARN_SPP, MESH_FILE, SCENE_FILE, TEX
 
 COMMAND = "synth learn"
 #: Version of the folder's layout (in the manifest and the request key).
-LEARN_FORMAT = 1
+LEARN_FORMAT = 2
 #: Pixels sampled per view for the Fermat round trip, and per scene for the rectified check.
 CHECK_PIXELS = 2000
 #: The largest Fermat round trip (px) and disagreement between the rectified disparity and the
@@ -58,6 +58,8 @@ ROUND_TRIP_BOUND_PX, RECTIFIED_BOUND_PX = 0.01, 0.01
 #: Where the warp counts as exact (its residual, px), and the largest spread of the four
 #: disparities a bilinear sample of the disparity file may straddle (px: no depth edge).
 EXACT_RESIDUAL_PX, SMOOTH_SPREAD_PX = 0.01, 0.5
+#: Step (px) of the left-pixel grid whose points set the rectified pair's disparity offset.
+OFFSET_SAMPLE_STEP = 8
 #: Step (px) of the left-pixel grid whose points the COLMAP models list.
 COLMAP_POINT_STEP = 24
 
@@ -137,7 +139,9 @@ def _write_rectified(folder: str, rect: lt.RectifiedTruth, images, scale) -> dic
     lf.write_png(os.path.join(folder, "occlusion.png"), rect.occluded.astype(np.uint8) * 255)
     write_calib(os.path.join(folder, "calib.yaml"), rect.rectification.virtual, has_port=False)
     finite = rect.disparity[np.isfinite(rect.disparity)]
+    virtual = rect.rectification.virtual
     return {"distance_mm": rect.rectification.distance_mm, "kitti_beyond_range": beyond,
+            "disparity_offset_px": float(virtual.right.K[0, 2] - virtual.left.K[0, 2]),
             "disparity_px": [float(finite.min()), float(finite.max())] if finite.size else None,
             "residual_median_px": float(np.nanmedian(rect.residual)),
             "residual_max_px": float(np.nanmax(rect.residual)),
@@ -271,7 +275,9 @@ def write_learn_scene(out_dir: str, seed: int, ranges: SeaRanges | None = None,
                             floor.mesh.triangles)
         left, right = lt.view_truth(tracer, scene.rig, 0), lt.view_truth(tracer, scene.rig, 1)
         flow, seen, occluded = lt.flow_truth(tracer, scene.rig, left)
-        rect = lt.rectified_truth(tracer, scene.rig, median_distance(scene, left))
+        sample = left.points[::OFFSET_SAMPLE_STEP, ::OFFSET_SAMPLE_STEP].reshape(-1, 3)
+        offset = lt.disparity_offset(scene.rig, sample)
+        rect = lt.rectified_truth(tracer, scene.rig, median_distance(scene, left), offset)
         seconds["truth"] = time.perf_counter() - t
         images, render = render_pair(os.path.join(tmp, "scene"), scene, spp)
         seconds["render"] = sum(render["seconds"].values())

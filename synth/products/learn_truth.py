@@ -28,6 +28,12 @@ disparity ``q_u − q'_u`` and the row error ``q_v − q'_v`` — and the warp's
 of ``|q − P_L(X)|`` and ``|q' − P_R(X)|`` (px), ``P`` the virtual pinhole cameras. Where the
 residual is 0 the rectified pair is a pinhole pair for that pixel (depth = f·B / disparity);
 elsewhere the row error and the residual say by how much it is not.
+
+A wide or converging rig close to the floor sees disparities of hundreds of pixels; the right
+virtual camera's principal point may be moved to the right by a whole number of pixels
+(:func:`disparity_offset`: the smallest disparity down to :data:`OFFSET_MARGIN_PX`), as
+Middlebury's ``doffs``: every disparity falls by it, depth = f·B / (d + offset), and the
+rectified pair's ``calib.yaml`` holds the moved principal point.
 """
 
 from __future__ import annotations
@@ -36,6 +42,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from measure import Camera, StereoRig
 from measure.geometry.projection import project
 from measure.stereo.rectify import (Rectification, plane_points, rectified_pixels,
                                     virtual_pair)
@@ -43,6 +50,8 @@ from synth.products.truth_maps import VISIBILITY_TOLERANCE_MM, MeshTracer, pixel
 
 #: Rays per batch (bounded memory).
 BATCH = 1 << 19
+#: The smallest disparity (px) the rectified pair keeps after its offset (:func:`disparity_offset`).
+OFFSET_MARGIN_PX = 16.0
 
 
 @dataclass(frozen=True)
@@ -161,10 +170,34 @@ def real_pixels(rig, virtual, view: int, uv: np.ndarray, distance: float) -> np.
     return project(rig.cameras[view], rig.view_port(view), points)
 
 
-def rectification_of(rig, distance: float):
-    """:func:`measure.stereo.rectify.rectify` with its maps from float64 real pixels, and those
-    real pixels ``(W·H, 2)`` per view (row by row; NaN where none)."""
+def shifted_right(virtual, offset_px: float):
+    """The virtual pair with the right camera's principal point moved ``offset_px`` to the
+    right: every disparity ``u_left − u_right`` falls by ``offset_px`` (Middlebury's ``doffs``:
+    depth = f·B / (d + doffs))."""
+    right = virtual.right
+    K = right.K.copy()
+    K[0, 2] += float(offset_px)
+    return StereoRig(virtual.left, Camera(K, right.size, R=right.R, t=right.t), virtual.port)
+
+
+def disparity_offset(rig, points: np.ndarray, margin_px: float = OFFSET_MARGIN_PX) -> int:
+    """The whole-pixel offset that brings the smallest disparity of ``points`` ``(N, 3)``
+    (the virtual pinhole pair's, within the warp's residual of the truth) down to
+    ``margin_px``; 0 when it is smaller already."""
     virtual = virtual_pair(rig)
+    points = points[np.all(np.isfinite(points), axis=1)]
+    if not points.size:
+        return 0
+    d = virtual.left.project(points)[:, 0] - virtual.right.project(points)[:, 0]
+    d = d[np.isfinite(d)]
+    return int(max(0.0, np.floor(d.min() - margin_px))) if d.size else 0
+
+
+def rectification_of(rig, distance: float, offset_px: float = 0.0):
+    """:func:`measure.stereo.rectify.rectify` with its maps from float64 real pixels (the right
+    virtual camera shifted by ``offset_px``: :func:`shifted_right`), and those real pixels
+    ``(W·H, 2)`` per view (row by row; NaN where none)."""
+    virtual = shifted_right(virtual_pair(rig), offset_px)
     grid = pixel_grid(rig.left.size)
     w, h = rig.left.size
     maps, reals = [], []
@@ -200,9 +233,11 @@ def rectified_truth_at(tracer: MeshTracer, rectification: Rectification, q: np.n
     return q[:, 0] - q_right[:, 0], q[:, 1] - q_right[:, 1], residual, seen, points, depth
 
 
-def rectified_truth(tracer: MeshTracer, rig, distance: float) -> RectifiedTruth:
-    """The rectified pair's truth maps at the warp plane ``distance`` mm (module docs)."""
-    rectification, reals = rectification_of(rig, distance)
+def rectified_truth(tracer: MeshTracer, rig, distance: float,
+                    offset_px: float = 0.0) -> RectifiedTruth:
+    """The rectified pair's truth maps at the warp plane ``distance`` mm, the right virtual
+    camera shifted by ``offset_px`` (module docs)."""
+    rectification, reals = rectification_of(rig, distance, offset_px)
     w, h = rig.left.size
     disparity, rows, residual, seen, points, depth = rectified_truth_at(
         tracer, rectification, pixel_grid((w, h)), reals[0])
@@ -257,7 +292,8 @@ def bilinear(image: np.ndarray, uv: np.ndarray):
     return np.where(inside, value, np.nan), np.where(inside, spread, np.nan)
 
 
-__all__ = ["BATCH", "RectifiedTruth", "ViewTruth", "bilinear", "correspondence",
-           "fermat_round_trip", "flow_truth", "hits_and_normals", "pixel_hits", "real_pixels",
-           "rectification_of", "rectified_truth", "rectified_truth_at", "sample_pixels",
+__all__ = ["BATCH", "OFFSET_MARGIN_PX", "RectifiedTruth", "ViewTruth", "bilinear",
+           "correspondence", "disparity_offset", "fermat_round_trip", "flow_truth",
+           "hits_and_normals", "pixel_hits", "real_pixels", "rectification_of",
+           "rectified_truth", "rectified_truth_at", "sample_pixels", "shifted_right",
            "view_truth"]

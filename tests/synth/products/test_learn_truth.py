@@ -94,15 +94,20 @@ def _plane_tracer(tmp_path, axis, distance):
     return MeshTracer(path, corners.astype(np.float32).astype(float), triangles)
 
 
-@pytest.mark.parametrize("port", ["flat", "per-camera", "dome"])
-def test_on_the_warp_plane_the_rectified_pair_is_a_pinhole_pair(tmp_path, port):
+@pytest.mark.parametrize("port, offset", [("flat", 0), ("per-camera", 0), ("dome", 0),
+                                          ("flat", 37)])
+def test_on_the_warp_plane_the_rectified_pair_is_a_pinhole_pair(tmp_path, port, offset):
     """A plane at the warp's distance: the residual and the row error vanish, and the virtual
-    pinhole pair triangulates every disparity (cv2.triangulatePoints) onto the plane. A plane
-    1.5 times as far leaves a residual behind a flat port (non-central cameras)."""
+    pinhole pair (its right principal point moved by the disparity offset) triangulates every
+    disparity (cv2.triangulatePoints) onto the plane. A plane 1.5 times as far leaves a
+    residual behind a flat port (non-central cameras)."""
     scene = draw_scene(8, SeaRanges(size=SMALL, ports=(port,)))
     axis, distance = scene.rig.depth_axis, 1200.0
     tracer = _plane_tracer(tmp_path, axis, distance)
-    rect = lt.rectified_truth(tracer, scene.rig, distance)
+    rect = lt.rectified_truth(tracer, scene.rig, distance, offset)
+    if offset:
+        plain = lt.rectified_truth(tracer, scene.rig, distance)
+        np.testing.assert_allclose(rect.disparity, plain.disparity - offset, atol=1e-9)
     seen = np.isfinite(rect.disparity) & ~rect.occluded
     assert seen.mean() > 0.5
     assert np.nanmax(rect.residual[seen]) < 1e-6 and np.nanmax(np.abs(rect.row_error[seen])) < 1e-6
@@ -159,3 +164,14 @@ def test_the_renderer_agrees_with_the_correspondence_truth(tmp_path):
 
     exact, off = zncc(0.0), zncc(3.0)
     assert exact > 0.85 and off < exact - 0.2
+
+
+def test_the_disparity_offset_leaves_the_margin(drawn):
+    scene, tracer, left = drawn
+    points = left.points.reshape(-1, 3)
+    offset = lt.disparity_offset(scene.rig, points)
+    rect = lt.rectified_truth(tracer, scene.rig, 1500.0, offset)
+    virtual = rect.rectification.virtual
+    finite = points[np.all(np.isfinite(points), axis=1)]
+    d = virtual.left.project(finite)[:, 0] - virtual.right.project(finite)[:, 0]
+    assert offset == 0 or lt.OFFSET_MARGIN_PX <= d.min() < lt.OFFSET_MARGIN_PX + 1
