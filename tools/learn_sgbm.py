@@ -32,7 +32,7 @@ BINS = (0.0, 1000.0, 1500.0, 2000.0, np.inf)
 
 def absorbed_rig(item):
     """The absorbed calibration of the scene's cameras (15 boards through its port at 0.7–1.3 ×
-    its median distance, squares scaled with it; OpenCV's 5-coefficient model, the usual one),
+    its median distance, squares scaled with it; OpenCV's k1 k2 p1 p2, the usual model),
     or None when it cannot be had."""
     from eval.core.absorbed import analytic_absorbed_calibration
     from measure.calibration.board import Board

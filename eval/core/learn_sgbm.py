@@ -7,8 +7,8 @@ The three rectifications (:data:`METHODS`):
   intrinsics and pose (the port ignored): ``cv2.stereoRectify`` + ``initUndistortRectifyMap``;
 * ``absorbed`` — the same with the *absorbed* pinhole calibration (the cameras calibrated under
   water as pinholes with OpenCV's distortion, the port absorbed: :mod:`eval.core.absorbed`,
-  from boards projected through the scene's port at 0.7–1.3 × its median distance, the board's
-  squares scaled with that distance);
+  from 15 boards projected through the scene's port at 0.7–1.3 × its median distance, the
+  board's squares scaled with that distance, lens model k1 k2 p1 p2: ``tools/learn_sgbm.py``);
 * ``port-exact`` — the scene's own rectified pair (:mod:`measure.stereo.rectify`, exact on the
   plane at its median distance: ``rectified/``).
 

@@ -145,6 +145,7 @@ def _finish(request, options, previous, todo, results, where, compute, started) 
         "options_hash_without_seeds": options_hash(fixed),
         "scenes": {str(s): {"split": split_of(s, fractions),
                             "status": "ok" if s in manifests else "missing",
+                            "manifest_sha256": _manifest_digest(out, s),
                             "error": failed.get(s, {}).get("error")} for s in seeds},
         "runs": runs})
     rate = f" ({3600 * len(todo) / compute:.0f} pairs/hour)" if todo and compute > 0 else ""
@@ -160,6 +161,19 @@ def _finish(request, options, previous, todo, results, where, compute, started) 
     for seed, result in list(failed.items())[:5]:
         print(f"  seed {seed}: {result['error']}", file=sys.stderr)
     return 1 if failed or missed else 0
+
+
+def _manifest_digest(out: str, seed: int) -> str | None:
+    """The SHA-256 of a scene's ``manifest.json`` (None when there is none)."""
+    import hashlib
+
+    from synth.products.learn_set import scene_folder
+
+    path = os.path.join(out, scene_folder(seed), "manifest.json")
+    if not os.path.isfile(path):
+        return None
+    with open(path, "rb") as handle:
+        return hashlib.sha256(handle.read()).hexdigest()
 
 
 # ---------------------------------------------------------------------------------------------

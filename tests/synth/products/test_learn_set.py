@@ -72,6 +72,7 @@ def test_a_small_set_end_to_end(tmp_path, capsys):
                     "colmap/depth_maps/left.png.geometric.bin", "colmap_pinhole/cameras.txt",
                     "scene/scene.xml", "scene/seabed.ply", "scene/seabed_texture.png"):
             assert rel in manifest["files"], rel
+        _exchange_files_hold_the_rig(folder)
         split = split_of(seed, (0.5, 0, 0.5))
         line = f"scene_{seed:06d}/rectified/left.png"
         assert line in (out / "lists" / f"{split}_sceneflow.txt").read_text()
@@ -89,6 +90,8 @@ def test_a_small_set_end_to_end(tmp_path, capsys):
     learn = json.loads((out / "learn.json").read_text())
     assert sorted(learn["scenes"]) == ["7", "8", "9"]
     assert np.all([s["status"] == "ok" for s in learn["scenes"].values()])
+    for seed, entry in learn["scenes"].items():
+        assert entry["manifest_sha256"] == _sha(out / f"scene_{int(seed):06d}" / "manifest.json")
 
 
 def test_the_committed_learning_suite_is_synth_learns_defaults(tmp_path):
@@ -122,3 +125,29 @@ def test_a_bad_learning_suite_is_one_error_line(tmp_path, capsys, text, fragment
     err = capsys.readouterr().err.strip().splitlines()
     assert code == 2 and len(err) == 1 and fragment in err[0]
     assert not (tmp_path / "out").exists()
+
+
+def _exchange_files_hold_the_rig(folder):
+    """``calib.yaml`` and the COLMAP fork's ``cameras.txt`` read back as rigs that project the
+    truth points onto their pixels (float32 points: within 1e-3 px), and the COLMAP depth map is
+    the truth's z in metres."""
+    import cv2
+
+    from measure.geometry.projection import project
+    from synth.formats.exchange import read_pfm
+    from synth.formats.learn_formats import read_colmap_depth
+    from synth.products.dataset import read_calib
+    from synth.formats.calib_formats import read_colmap
+
+    points = np.load(folder / "truth" / "left_points.npy").astype(np.float64)
+    valid = cv2.imread(str(folder / "truth" / "left_valid.png"), cv2.IMREAD_UNCHANGED) > 0
+    rows, cols = np.nonzero(valid)
+    pick = np.linspace(0, rows.size - 1, 50).astype(int)
+    uv = np.column_stack([cols[pick], rows[pick]]).astype(float)
+    for rig in (read_calib(str(folder / "calib.yaml"))["rig"],
+                read_colmap(str(folder / "colmap" / "cameras.txt"))["rig"]):
+        found = project(rig.left, rig.view_port(0), points[rows[pick], cols[pick]])
+        assert np.max(np.abs(found - uv)) < 1e-3
+    z = read_pfm(str(folder / "truth" / "left_depth_z.pfm"))
+    colmap = read_colmap_depth(str(folder / "colmap" / "depth_maps" / "left.png.geometric.bin"))
+    np.testing.assert_allclose(colmap[valid], z[valid] / 1000.0, rtol=1e-6)
