@@ -58,7 +58,8 @@ ROUND_TRIP_BOUND_PX, RECTIFIED_BOUND_PX = 0.01, 0.01
 #: Where the warp counts as exact (its residual, px), and the largest spread of the four
 #: disparities a bilinear sample of the disparity file may straddle (px: no depth edge).
 EXACT_RESIDUAL_PX, SMOOTH_SPREAD_PX = 0.01, 0.5
-#: Step (px) of the left-pixel grid whose points set the rectified pair's disparity offset.
+#: Step (px) of the left-pixel grid whose points set the rectified pair's disparity offset
+#: (:func:`synth.products.learn_truth.disparity_offset`).
 OFFSET_SAMPLE_STEP = 8
 #: Step (px) of the left-pixel grid whose points the COLMAP models list.
 COLMAP_POINT_STEP = 24

@@ -31,9 +31,11 @@ elsewhere the row error and the residual say by how much it is not.
 
 A wide or converging rig close to the floor sees disparities of hundreds of pixels; the right
 virtual camera's principal point may be moved to the right by a whole number of pixels
-(:func:`disparity_offset`: the smallest disparity down to :data:`OFFSET_MARGIN_PX`), as
-Middlebury's ``doffs``: every disparity falls by it, depth = f·B / (d + offset), and the
-rectified pair's ``calib.yaml`` holds the moved principal point.
+(:func:`disparity_offset`: the smallest pinhole disparity of the points given — what the left
+camera sees — down to :data:`OFFSET_MARGIN_PX`; the rectified crop sees less of the floor, so
+its smallest disparity is that or more), as Middlebury's ``doffs``: every disparity falls by
+it, depth = f·B / (d + offset), and the rectified pair's ``calib.yaml`` holds the moved
+principal point.
 """
 
 from __future__ import annotations
