@@ -7,7 +7,9 @@ package ``eval/<name>/`` whose ``command.py`` is the command — exposing
 * ``main(args) -> int`` — run it; raise :class:`CLIError` for a user error,
 
 and add the module to :data:`SUBCOMMANDS`. Keep heavy imports (Open3D, Mitsuba,
-matplotlib) inside ``main`` so that ``--help`` and the other subcommands stay fast.
+matplotlib, SciPy, Dask) inside ``main`` so that ``--help``, argument errors and the other
+subcommands stay fast: every command module is imported to build the parser
+(``tests/test_cli_startup.py`` checks what that loads).
 
 Errors and exit codes follow :mod:`synth.infra.cli`, shared with ``python -m synth``: one line
 ``error: …`` and exit 2 for bad input, 1 for a check that fails, 130 when interrupted.

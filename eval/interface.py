@@ -59,6 +59,10 @@ POSES_HEADER = ["photo", "name", "tx_mm", "ty_mm", "tz_mm", "qx", "qy", "qz", "q
                 "rms_px"]
 
 
+#: A free thickness at or below this (mm) ran into its bound at 0: not determined.
+THICKNESS_BOUND_MM = 1e-6
+
+
 def parse_media(text: str) -> tuple[tuple, tuple, tuple]:
     """``(names, indices, thicknesses)`` of ``--media`` (module docs); CLIError naming the
     item that is not one."""
@@ -246,10 +250,10 @@ def main(args) -> int:
     output = OutputDir(args.out, COMMAND).claim()
     log = (lambda text: None) if args.no_progress else (
         lambda text: print(text, file=sys.stderr, flush=True))
-    photo_names, _, size, detections, timings, repeats = read_and_detect(
+    photo_names, _, size, detections, timings, aside = read_and_detect(
         args, board, log, camera.size, f"--intrinsics {args.intrinsics}")
-    for line in repeats:
-        print(f"warning: {line}: left out (a photo given twice is one pose)", file=sys.stderr)
+    for k, why in sorted(aside.items()):
+        print(f"warning: {photo_names[k]}: {why}", file=sys.stderr)
     found = detections.found(VIEW)
     if len(found) < 2:
         raise CLIError(f"{args.dir}: the board was found in {len(found)} photo(s); the "
@@ -346,6 +350,11 @@ def _report(args, board, names, indices, photo_names, found, pixels, start_port,
                                       if indices[0] == indices[-1] else "not in --free; ")
                                   + ("--distance" if args.distance else "the start's")
                                   + ")"}
+        for key, value in values.items():
+            if key.startswith("thickness:") and value["estimate"] <= THICKNESS_BOUND_MM:
+                failures.append(f"{key} ({value['medium']}) ran into its bound at 0 mm: these "
+                                f"photos do not determine it (free fewer thicknesses, or give "
+                                f"its value in --media)")
         if estimate.rms_px > pinhole:
             failures.append(f"the interface fit leaves a reprojection RMS of "
                             f"{estimate.rms_px:.4f} px, more than a pinhole pose with no "
@@ -455,8 +464,9 @@ def summary(report: dict, out) -> str:
                          f"{max(v['sigma_deg']):.4f}°)")
         elif v.get("sigma") is not None:
             parts.append(f"{name} {v['estimate']:.3f} ± {v['sigma']:.3f} mm")
+    verdict = "FAILED (below)" if report["failures"] else report["reason"]
     head = (f"wrote {out}: {report['photos_found']}/{report['photos_total']} photos, "
-            f"{report['reason']}")
+            f"{verdict}")
     lines = [head + (": " + ", ".join(parts) if parts else "")]
     lines.append(f"RMS {r['interface']:.4f} px through the layers, {r['pinhole_no_interface']:.4f}"
                  f" px as a pinhole with no interface"

@@ -27,6 +27,7 @@ import numpy as np
 
 from eval.cli import CLIError, positive_float
 from synth.infra.cli import add_json_option, add_out_option, add_progress_option
+from synth.infra.images import imread
 
 COMMAND = "eval rectify"
 #: The distances of the error map, as multiples of ``--distance``, when none are given.
@@ -79,7 +80,7 @@ def read_image(path):
 
     if not os.path.isfile(path):
         raise CLIError(f"{path}: no such file")
-    image = cv2.imread(path, cv2.IMREAD_ANYDEPTH | cv2.IMREAD_ANYCOLOR)
+    image = imread(path, cv2.IMREAD_ANYDEPTH | cv2.IMREAD_ANYCOLOR)
     if image is None:
         raise CLIError(f"{path}: not an image OpenCV can read")
     return image

@@ -39,7 +39,7 @@ from synth.infra.cli import add_json_option, add_out_option, add_progress_option
 from eval.core.formatting import format_number as fmt
 from eval.core.uncertainty import AUTO, add_pixel_sigma_option, parse_pixel_sigma
 from eval.core.scoring import (PIXEL_COLUMNS, UNITS, read_pixel_pairs, read_points,
-                               score_dataset)
+                               score_dataset, unassociated_text)
 # the scoring functions, where they were before eval.core.scoring held them
 from eval.core.scoring import associate_points, default_gate_mm, plausibility  # noqa: F401
 
@@ -139,8 +139,11 @@ def main(args) -> int:
     except DatasetError as exc:
         raise CLIError(str(exc)) from None
     if not several and data.is_surface:
-        raise CLIError(f"{args.dataset}: a surface dataset (per-pixel truth maps, no targets); "
-                       f"eval score scores target datasets")
+        if not args.points:
+            raise CLIError(f"--pixels does not apply to {args.dataset}: a surface dataset "
+                           f"(per-pixel truth maps, no targets); score its --points (eval "
+                           f"measure --dense writes points.ply)")
+        return score_surface_main(args, data, output, log, start)
     if args.points:
         units = args.units or "mm"
         points = read_points(args.points) * UNITS[units]
@@ -189,7 +192,7 @@ def main(args) -> int:
     st = report["methods"][label]
     a = report["association"]
     summary = (f"{data.path}: {a['associated']} of {a['points']} points within "
-               f"{a['gate_mm']:g} mm of a target ({a['unassociated']} not); "
+               f"{a['gate_mm']:g} mm of a target ({unassociated_text(a)}); "
                f"{a['visible_in_both_scored']} of {a['visible_in_both']} targets visible in "
                f"{'two or more' if several else 'both'} views scored; RMS dP "
                f"{fmt(st['rms_dp_mm'])} mm, max dP {fmt(st['max_dp_mm'])} mm, mean dZ "
@@ -209,6 +212,11 @@ def main(args) -> int:
         print(summary)
     print(f"wrote {output.path}", file=sys.stderr if args.json else sys.stdout)
     a = report["association"]
+    if not args.pixels and a["points"] and not a["associated"]:
+        log(f"FAIL: none of the {a['points']} points lies within {a['gate_mm']:g} mm of a "
+            f"target (Chamfer {fmt(report['methods'][label]['chamfer_mm'])} mm): nothing was "
+            f"scored (the points in another unit or frame? the warnings say which)")
+        return 1
     if args.pixels and a["points"] and not a["associated"]:
         # the pixels were triangulated here and none of the points was scored
         hint = (" --method absorbed puts its points in the pinhole model's virtual frame, tens "
@@ -338,6 +346,49 @@ def score_suite_main(args, output, method, log, start) -> int:
     return EXIT_CHECK_FAILED if failed else 0
 
 
+def score_surface_main(args, data, output, log, start) -> int:
+    """``--points`` scored against a surface dataset (``eval measure --dense``'s ``points.ply``
+    outside a suite): every point against the true mesh and its pixel's true point
+    (:func:`eval.core.suite_scores.score_surface_points`, the suite's scores); ``report.json``,
+    ``report.md``; exit 1 when no point lies within 5 mm of the surface."""
+    from eval.core.suite_scores import SURFACE_GATE_MM, SURFACE_METRICS, score_surface_points
+    from synth.infra.fileio import atomic_write_json, atomic_write_text, jsonable
+
+    units = args.units or "mm"
+    points = read_points(args.points) * UNITS[units]
+    if args.gate_mm is not None:
+        raise CLIError(f"--gate-mm does not apply to {args.dataset}: a surface dataset's points "
+                       f"are scored against its mesh, not associated with targets")
+    scores, warnings = score_surface_points(data, points)
+    if warnings:
+        log(f"warning: --points {args.points}: " + "; ".join(warnings))
+    report = jsonable({"dataset": os.path.abspath(data.path), "kind": "surface",
+                       "source": {"points": os.path.abspath(args.points), "units": units},
+                       "warnings": warnings, "scores": scores,
+                       "timings_s": {"total": time.perf_counter() - start}})
+    lines = [f"# Score of {args.points} against the surface of {data.path}", "",
+             *[f"**Warning:** {w}" for w in warnings], *([""] if warnings else []),
+             f"{len(points)} points against the true mesh and each point's pixel's true point "
+             f"(mm):", "", "| " + " | ".join(SURFACE_METRICS) + " |",
+             "|" + "---|" * len(SURFACE_METRICS),
+             "| " + " | ".join(fmt(scores.get(k)) for k in SURFACE_METRICS) + " |"]
+    with output.staged() as tmp:
+        atomic_write_json(os.path.join(tmp, "report.json"), report)
+        atomic_write_text(os.path.join(tmp, "report.md"), "\n".join(lines) + "\n")
+    print(f"{data.path} (a surface): {len(points)} points; point to mesh RMS "
+          f"{fmt(scores.get('p2m_rms_mm'))} mm, median {fmt(scores.get('p2m_median_mm'))} mm; "
+          f"depth RMS {fmt(scores.get('depth_rms_mm'))} mm; F@1mm "
+          f"{fmt(scores.get('fscore_1mm'))}; {fmt(scores.get('measured_fraction'))} of the "
+          f"overlap pixels measured")
+    print(f"wrote {output.path}")
+    near = scores.get(f"precision_{SURFACE_GATE_MM:g}mm")
+    if not len(points) or near == 0:
+        print(f"FAIL: none of the {len(points)} points lies within {SURFACE_GATE_MM:g} mm of the "
+              f"surface", file=sys.stderr)
+        return 1
+    return 0
+
+
 def markdown(report: dict) -> str:
     """``report.md``: the association and one table of the metrics."""
 
@@ -349,7 +400,7 @@ def markdown(report: dict) -> str:
              *[f"**Warning:** {warning}" for warning in report.get("warnings", [])],
              *([""] if report.get("warnings") else []),
              f"{a['associated']} of {a['points']} points associated with a target within "
-             f"{a['gate_mm']:g} mm ({a['unassociated']} not); {a['visible_in_both_scored']} of "
+             f"{a['gate_mm']:g} mm ({unassociated_text(a)}); {a['visible_in_both_scored']} of "
              f"{a['visible_in_both']} targets visible in both views scored. Errors over the "
              f"associated points (mm); Chamfer and F-scores of all points against the targets "
              f"visible in both views.", "",

@@ -15,7 +15,11 @@ detections with no guess (:func:`measure.stereo.lockon.lock_on`: the detections 
 the views, triangulated and registered to the object's shape; a frame where that fails is
 ``NOT_LOCKED`` and the next one tries again); an object symmetric under turns (the docking frame
 under quarter turns) takes the turn nearest upright. ``--lock-on truth`` starts at the first
-frame's true pose instead. A frame without a pose keeps the last pose for the next prediction.
+frame's true pose instead. The same lock-on runs again whenever the track is lost — in the frame
+after one without a pose (a black frame), and in a frame whose prediction finds too few markers
+(a jump) — taking the turn nearest the last pose's (:func:`eval.core.sequence.locate_markers`).
+Frames changed since ``synth sequence`` wrote them (their SHA-256 is not the manifest's) are
+named and tracked as they are; a changed truth file is refused.
 
 Writes to ``--out``: ``poses.csv`` (the estimated poses, the columns of the sequence's
 ``poses.csv`` plus ``sigma_t_mm`` = sqrt(trace) of the position covariance, ``rms_px``,
@@ -40,7 +44,9 @@ import time
 import numpy as np
 
 from eval.cli import CLIError, positive_float
+from eval.core.sequence import changed_frames, locate_markers, read_sequence
 from synth.infra.cli import add_json_option, add_out_option, add_progress_option
+from synth.infra.images import imread
 
 COMMAND = "eval track"
 #: Largest distance (px) between a marker's predicted pixel and the detection it is given.
@@ -84,68 +90,7 @@ def add_parser(subparsers):
     return p
 
 
-def read_sequence(path):
-    """``(manifest, rig, object_points (M, 3), truth (frames, R, t), pixels (F, 2, M, 2))`` of a
-    sequence folder (``pixels``: the Fermat simulator's, for the detections' error);
-    CLIError naming the file for anything missing or malformed."""
-    from synth.products.dataset import DatasetError, read_calib
-    from synth.products.sequence import COMMAND as SEQUENCE, read_poses
 
-    if not os.path.isdir(path):
-        raise CLIError(f"{path}: no such folder")
-    manifest_path = os.path.join(path, "manifest.json")
-    try:
-        with open(manifest_path) as fh:
-            manifest = json.load(fh)
-    except (OSError, ValueError) as exc:
-        raise CLIError(f"{manifest_path}: cannot be read ({exc})") from None
-    if manifest.get("command") != SEQUENCE:
-        raise CLIError(f"{path}: not a folder written by python -m {SEQUENCE}")
-    try:
-        rig = read_calib(os.path.join(path, "calib.yaml"))["rig"]
-    except DatasetError as exc:
-        raise CLIError(str(exc)) from None
-    object_path = os.path.join(path, "object.csv")
-    try:
-        data = np.genfromtxt(object_path, delimiter=",", names=True, ndmin=1)
-        obj = np.column_stack([data["x_mm"], data["y_mm"], data["z_mm"]])
-    except (OSError, ValueError, KeyError) as exc:
-        raise CLIError(f"{object_path}: not an object.csv ({exc})") from None
-    try:
-        truth = read_poses(os.path.join(path, "poses.csv"))
-    except ValueError as exc:
-        raise CLIError(str(exc)) from None
-    pixels_path = os.path.join(path, "pixels.csv")
-    try:
-        data = np.genfromtxt(pixels_path, delimiter=",", names=True, ndmin=1)
-        pixels = np.full((len(truth[0]), 2, obj.shape[0], 2), np.nan)
-        f, i = np.asarray(data["frame"], dtype=int), np.asarray(data["id"], dtype=int)
-        pixels[f, 0, i] = np.column_stack([data["u_left"], data["v_left"]])
-        pixels[f, 1, i] = np.column_stack([data["u_right"], data["v_right"]])
-    except (OSError, ValueError, KeyError, IndexError) as exc:
-        raise CLIError(f"{pixels_path}: not a sequence's pixels.csv ({exc})") from None
-    return manifest, rig, obj, truth, pixels
-
-
-def associate(predicted, detections, gate_px: float) -> np.ndarray:
-    """``(M, 2)``: for each marker's predicted pixel ``(M, 2)`` the detection ``(D, 2)`` the
-    optimal assignment gives it within ``gate_px`` (NaN: none)."""
-    from scipy.optimize import linear_sum_assignment
-
-    out = np.full(predicted.shape, np.nan)
-    ok = np.flatnonzero(np.all(np.isfinite(predicted), axis=1))
-    if ok.size == 0 or detections.shape[0] == 0:
-        return out
-    cost = np.linalg.norm(predicted[ok, None, :] - detections[None, :, :], axis=2)
-    rows, cols = linear_sum_assignment(np.where(cost <= gate_px, cost, 1e9))
-    keep = cost[rows, cols] <= gate_px
-    out[ok[rows[keep]]] = detections[cols[keep]]
-    return out
-
-
-#: A frame whose detections meet fewer than this share of the markers the last pose puts inside
-#: the images is lost (no pose; the run exits 1): a pose from the few left could be anywhere.
-LOST_FRACTION = 0.5
 #: The markers' normal in the object frame (the docking frame faces the cameras: −z).
 MARKER_NORMAL = np.array([0.0, 0.0, -1.0])
 
@@ -353,9 +298,7 @@ def main(args) -> int:
     import cv2
 
     from measure import detect_targets
-    from measure.geometry.projection import project
     from measure.reasons import Reason
-    from measure.stereo.lockon import lock_on
     from measure.stereo.multiview import View
     from measure.stereo.pose import estimate_pose, pinhole_pose, rotation_error
     from measure.stereo.uncertainty import CHI2_3_95, mahalanobis_squared
@@ -373,53 +316,39 @@ def main(args) -> int:
         raise CLIError(f"{args.dataset}: its manifest gives no marker radius, which the "
                        f"eccentricity correction needs (--no-eccentricity measures the raw "
                        f"centroids)")
+    changed = changed_frames(args.dataset, manifest)
     absorbed = _absorbed(args, rig, log)
     output = OutputDir(args.out, COMMAND).claim()
-    if args.lock_on == "truth":
-        R_prev, t_prev = R_true[0], t_true[0]  # locked on at the first frame's true pose
-    else:
-        R_prev = t_prev = None  # locked on from the detections (measure.stereo.lockon)
-    lock = None
-    velocity = np.zeros(3)  # mm per frame, of the last two poses
+    if changed:
+        print(f"note: {len(changed)} file(s) of {args.dataset} changed since synth sequence "
+              f"wrote them ({', '.join(changed[:4])}{', …' if len(changed) > 4 else ''}): "
+              f"tracked as they are now, scored against the poses they were rendered with",
+              file=sys.stderr)
+    if args.lock_on == "truth":  # locked on at the first frame's true pose
+        track = {"R": R_true[0], "t": t_true[0], "velocity": np.zeros(3), "fresh": True}
+    else:  # locked on from the detections (measure.stereo.lockon)
+        track = {"R": None, "t": None, "velocity": np.zeros(3), "fresh": False}
+    locks = []
     estimates, rows = [], []
     seconds = {"detect": 0.0, "lock_on": 0.0, "pose": 0.0, "pose_per_camera": 0.0}
     for k, frame in enumerate(frames):
-        pixels = np.full((2, obj.shape[0], 2), np.nan)
         found = []
         for name in VIEW_NAMES:
             path = os.path.join(args.dataset, "frames", f"{int(frame):04d}_{name}.png")
-            image = cv2.imread(path, cv2.IMREAD_ANYDEPTH)
+            image = imread(path, cv2.IMREAD_ANYDEPTH)
             if image is None:
                 raise CLIError(f"{path}: missing or not an image OpenCV can read")
             t0 = time.perf_counter()
             found.append(detect_targets(image).centers)
             seconds["detect"] += time.perf_counter() - t0
-        detected, expected = [int(c.shape[0]) for c in found], 0
-        if R_prev is None:  # not locked on yet: the object's identities from its shape
-            t0 = time.perf_counter()
-            attempt = lock_on(rig, obj, found[0], found[1])
-            seconds["lock_on"] += time.perf_counter() - t0
-            log(f"frame {int(frame)}: lock-on "
-                + (attempt.reason if attempt.reason else
-                   f"{attempt.assigned} markers, fit RMS {attempt.rms_mm:.3g} mm, "
-                   f"{attempt.ambiguous} equally good turn(s)"))
-            if attempt.reason is None:
-                lock = {"frame": int(frame), "markers": attempt.assigned,
-                        "rms_mm": attempt.rms_mm, "ambiguous": attempt.ambiguous,
-                        "position_error_mm": float(np.linalg.norm(attempt.t - t_true[k])),
-                        "rotation_error_rad": float(rotation_error(attempt.R, R_true[k]))}
-                R_prev, t_prev = attempt.R, attempt.t
-        for v in range(2):
-            if R_prev is None:
-                continue
-            predicted = project(rig.cameras[v], rig.view_port(v),
-                                obj @ R_prev.T + t_prev + velocity)
-            pixels[v] = associate(predicted, found[v], args.gate)
-            expected += int(rig.cameras[v].in_image(predicted).sum())
-        associated = int(np.all(np.isfinite(pixels), axis=2).sum())
-        lost = R_prev is None or associated < LOST_FRACTION * expected
-        if lost:  # most markers found no detection where the last pose put them
-            pixels = np.full_like(pixels, np.nan)
+        detected = [int(c.shape[0]) for c in found]
+        pixels, expected, associated, lost, attempt = locate_markers(
+            rig, obj, found, track, args.gate, int(frame), seconds, log)
+        if attempt is not None:
+            locks.append({"frame": int(frame), "markers": attempt.assigned,
+                          "rms_mm": attempt.rms_mm, "ambiguous": attempt.ambiguous,
+                          "position_error_mm": float(np.linalg.norm(attempt.t - t_true[k])),
+                          "rotation_error_rad": float(rotation_error(attempt.R, R_true[k]))})
         # the baselines: the left camera's raw detections as a pinhole that ignores the port,
         # and both views' raw detections through the absorbed calibration (pinhole cameras
         # whose focal length and distortion absorb the port, in their own virtual frame)
@@ -450,12 +379,15 @@ def main(args) -> int:
                "detection_rms_px": float(np.sqrt(np.mean(np.sum(miss ** 2, axis=1))))
                if miss.size else None,
                "observations": pose.observations,
-               "reason": ("NOT_LOCKED" if R_prev is None else "LOST") if lost
-               else Reason(pose.reason).name,
+               "reason": ("NOT_LOCKED" if track["R"] is None else "LOST") if lost
+               else Reason(pose.reason).name, "locked_on": attempt is not None,
                "markers_expected": expected, "markers_associated": associated}
+        # constant velocity from the last two frames' poses (none after a lock-on or a loss)
+        track["velocity"] = (pose.t - track["t"] if pose.valid and track["fresh"]
+                             and attempt is None else np.zeros(3))
+        track["fresh"] = bool(pose.valid)
         if pose.valid:
-            velocity = pose.t - t_prev if k > 0 else np.zeros(3)
-            R_prev, t_prev = pose.R, pose.t
+            track["R"], track["t"] = pose.R, pose.t
             error = pose.t - t_true[k]
             distance = float(np.linalg.norm(t_true[k]))
             row.update({"position_error_mm": float(np.linalg.norm(error)),
@@ -515,10 +447,14 @@ def main(args) -> int:
                                     "eccentricity correction's second solve and the shared "
                                     "radial term; each camera: one view, one solve and the "
                                     "term"}})
+    detect = args.lock_on == "detect"  # the first lock-on started the track
     report = {"dataset": args.dataset, "sequence": {k: manifest.get(k) for k in (
         "approach_mm", "yaw_deg", "trajectory", "frames", "fps", "object", "image_size")},
         "pixel_sigma_px": args.pixel_sigma, "gate_px": args.gate,
-        "eccentricity": bool(args.eccentricity), "lock_on": {"mode": args.lock_on, **(lock or {})},
+        "changed_since_written": changed, "eccentricity": bool(args.eccentricity),
+        # the lock-on that started the track, and those after a lost frame ("again")
+        "lock_on": {"mode": args.lock_on, **(locks[0] if locks and detect else {}),
+                    "again": locks[1:] if detect else locks},
         "summary": summary,
         "frames": rows}
     ok = np.array([p.valid for p in estimates])

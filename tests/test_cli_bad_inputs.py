@@ -606,3 +606,31 @@ def test_random_scene_options(tmp_path_factory, option, value):
         assert list(root.iterdir()) == []
     else:
         assert [p.name for p in root.iterdir()] == ["s.xml"]
+
+
+def test_a_broken_photo_is_one_error_line_and_nothing_before_it(workdir):
+    """A JPEG cut short and a PNG that is no PNG: libjpeg's "Premature end of JPEG file",
+    libpng's "libpng error" and OpenCV's "[ WARN:0…] imread_" used to precede the ``error:`` line
+    (they write to the process's stderr, past Python): the one line naming the file is all a
+    new process prints (issue 53)."""
+    import cv2
+    import numpy as np
+
+    from synth.products.dataset import write_calib
+    from synth.scene.rig import paper_rig
+
+    image = (np.indices((240, 320)).sum(axis=0) % 255).astype(np.uint8)
+    ok, data = cv2.imencode(".jpg", image)
+    (workdir / "cut.jpg").write_bytes(data.tobytes()[:1500])
+    (workdir / "bad.png").write_bytes(b"\x89PNG\r\n\x1a\n" + b"\0" * 40)
+    cv2.imwrite(str(workdir / "good.png"), image)
+    write_calib(workdir / "calib.yaml", paper_rig())
+    env = dict(os.environ, PYTHONPATH=str(REPO))
+    for left, name in (("cut.jpg", "cut.jpg: a truncated JPEG"), ("bad.png", "bad.png")):
+        proc = subprocess.run([sys.executable, "-m", "eval", "measure", "--calib", "calib.yaml",
+                               left, "good.png", "--out", "out", "--no-progress"], cwd=workdir,
+                              env=env, capture_output=True, text=True, timeout=120)
+        lines = proc.stderr.strip().splitlines()
+        assert proc.returncode == 2 and len(lines) == 1, proc.stderr
+        assert lines[0].startswith("error:") and name in lines[0], proc.stderr
+    assert not (workdir / "out").exists()

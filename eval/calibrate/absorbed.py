@@ -51,6 +51,10 @@ def _boards_or_photos(args, log):
         if boards.air:
             raise CLIError(f"--model absorbed: {args.dir} holds boards rendered in air; the "
                            f"absorbed calibration is of boards seen through the port")
+        if "rig" not in boards.calib:
+            raise CLIError(f"--model absorbed: {args.dir} holds boards of "
+                           f"{len(boards.calib['names'])} cameras; the absorbed calibration is "
+                           f"of a pair (a rig of N cameras is calibrated with its port)")
         log(f"detect the board in {len(boards.images)} pairs …")
         return (boards.board, detect_boards(boards.board, boards.images),
                 tuple(boards.calib["size"]), "boards", boards.calib["rig"],
@@ -59,6 +63,7 @@ def _boards_or_photos(args, log):
                                                        is None or args.square_mm is None):
         raise CLIError(f"{args.dir} (photos): give the board: --squares COLSxROWS (or "
                        f"--inner-corners) and --square-mm")
+    _refuse_other_photo_folders(args.dir)
     board = board_from_args(args)
     try:
         pairs = photo_folder(args.dir)
@@ -68,6 +73,30 @@ def _boards_or_photos(args, log):
         raise CLIError(str(exc)) from None
     log(f"detect the board in {len(images)} pairs …")
     return board, detect_boards(board, images), tuple(size), "photos", None, list(pairs.names)
+
+
+def _refuse_other_photo_folders(path) -> None:
+    """A photo folder that is not a pair's, named for what it is: photos of N cameras
+    (``cam0/``, …) or one camera's photos (it said "no left and no right folder")."""
+    from eval.calibrate.single import single_camera_folder
+    from eval.core.photos import PhotoError, camera_folder_names
+
+    if any(os.path.isdir(os.path.join(path, sub)) for sub in ("left", "right")):
+        return
+    try:
+        cameras = camera_folder_names(path)
+    except PhotoError:
+        cameras = ()
+    if cameras:
+        raise CLIError(f"--model absorbed: {path} holds photos of {len(cameras)} cameras "
+                       f"({', '.join(c + '/' for c in cameras)}); the absorbed calibration is of "
+                       f"a pair, left/ and right/ (a rig of N cameras is calibrated with its "
+                       f"port: --intrinsics)")
+    if single_camera_folder(path):
+        raise CLIError(f"--model absorbed: {path} holds one camera's photos; the absorbed "
+                       f"calibration is of a pair, left/ and right/ (one camera's underwater "
+                       f"photos as a pinhole camera that absorbs the port: eval calibrate "
+                       f"{path} --air …; its housing: --intrinsics camera.yaml)")
 
 
 def calibrate_absorbed_main(args, output, log, start) -> int:

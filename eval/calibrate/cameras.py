@@ -13,12 +13,14 @@ the reference frame is the first camera's.
 from __future__ import annotations
 
 import os
+import sys
 import time
 
 import numpy as np
 
 from types import SimpleNamespace
 
+from eval.calibrate.causes import FIT_ERRORS, housing_failure
 from eval.cli import CLIError
 
 #: Options of a two-camera calibration that a calibration of N cameras does not take.
@@ -63,10 +65,64 @@ def _air_errors(rig, truth) -> dict:
     return out
 
 
-def _table(rows) -> str:
-    lines = ["| parameter | estimate − truth | σ | error / σ |", "|---|---|---|---|"]
-    lines += [f"| {n} | {e:+.4g} | {s:.3g} | {e / s:+.2f} |" for n, e, s in rows]
-    return "\n".join(lines)
+def estimate_value(rig, name: str):
+    """The estimate a parameter name of the covariance stands for (``cam1.rotation[0]``: the
+    rotation vector of camera-to-reference, rad; ``cam1.center[2]``: mm; ``cam0.fx``: px;
+    ``cam0.k1``; ``port.distance``, ``cam2.port.thickness`` mm; ``port.n_water``); None for a
+    tilt (the normal is reported whole)."""
+    from scipy.spatial.transform import Rotation
+
+    from measure.calibration.multi_air import DISTORTION_NAMES
+
+    owner, _, param = name.partition(".")
+    if owner == "port" or param.startswith("port."):
+        port = rig.ports[0 if owner == "port" else rig.names.index(owner)]
+        key = param.removeprefix("port.")
+        return {"distance": port.distance, "n_water": port.n_water,
+                "thickness": port.thicknesses[0] if port.thicknesses else None}.get(key)
+    camera = rig.cameras[rig.names.index(owner)]
+    key, _, index = param.partition("[")
+    if key in ("rotation", "center"):
+        vector = Rotation.from_matrix(camera.R).as_rotvec() if key == "rotation" else camera.t
+        return float(vector[int(index.rstrip("]"))])
+    if key in ("fx", "fy", "cx", "cy"):
+        return float(camera.K[{"fx": (0, 0), "fy": (1, 1), "cx": (0, 2), "cy": (1, 2)}[key]])
+    dist = np.zeros(8) if camera.dist is None else np.ravel(camera.dist)
+    k = DISTORTION_NAMES.index(key)
+    return float(dist[k]) if k < dist.size else 0.0
+
+
+def _value(v) -> str:
+    return "—" if v is None else f"{v:.6g}"
+
+
+def _markdown(folder, names, kind, poses, found, rms, rows, values, report) -> str:
+    """``report.md`` of N cameras: every estimate with its σ (against the truth where the
+    folder has one) and, under water, the port(s) whole."""
+    head = (f"# eval calibrate: {len(names)} cameras, {kind}\n\n"
+            f"Boards: `{folder}` ({poses} poses); found per camera: "
+            + ", ".join(f"{n} {c}" for n, c in found.items())
+            + f". Reprojection RMS {rms:.4f} px.\n\n")
+    units = ("rotation: the rotation vector of camera-to-reference, rad; centre, distance, "
+             "thickness: mm; focal, principal point: px")
+    if report.get("within_3_sigma") is not None:
+        table = (f"Every estimate against the folder's truth ({units}):\n\n"
+                 "| parameter | estimate | estimate − truth | σ | error / σ |\n|---|---|---|---|---|\n"
+                 + "".join(f"| {n} | {_value(values[n])} | {e:+.4g} | {s:.3g} | {e / s:+.2f} |\n"
+                           for n, e, s in rows)
+                 + f"\n{report['within_3_sigma']} of {len(rows)} within 3 σ.\n")
+    else:
+        table = (f"No truth (photos): every estimate and its σ ({units}):\n\n"
+                 "| parameter | estimate | σ |\n|---|---|---|\n"
+                 + "".join(f"| {n} | {_value(values[n])} | {s:.3g} |\n" for n, _, s in rows))
+    port = report.get("port")
+    ports = {"port": port} if port and "normal" in port else (port or {})
+    lines = "".join(f"- {n}: distance {p['distance_mm']:.4f} mm, normal "
+                    + ", ".join(f"{v:.6f}" for v in p["normal"])
+                    + (f", n_water {p['indices'][-1]:.6f}" if "indices" in p else "") + "\n"
+                    for n, p in ports.items() if isinstance(p, dict) and "normal" in p)
+    return head + table + (f"\nThe port{'s' if len(ports) > 1 else ''}:\n\n{lines}" if lines
+                           else "")
 
 
 def boards_source(boards):
@@ -76,7 +132,8 @@ def boards_source(boards):
     return SimpleNamespace(path=boards.path, images=boards.images, board=boards.board,
                            air=boards.air, names=boards.calib["names"], truth=truth,
                            size=boards.calib["size"], photos=False,
-                           own_ports=len(set(truth.ports)) > 1)
+                           own_ports=len(set(truth.ports)) > 1,
+                           captures=[f"{k:02d}" for k in range(len(boards.images))])
 
 
 def photos_source(path, names, board, air: bool, encoding: str):
@@ -85,11 +142,51 @@ def photos_source(path, names, board, air: bool, encoding: str):
     from eval.core.photos import PhotoError, read_camera_photos
 
     try:
-        images, size, _ = read_camera_photos(path, names, encoding)
+        images, size, stems = read_camera_photos(path, names, encoding)
     except PhotoError as exc:
         raise CLIError(str(exc)) from None
     return SimpleNamespace(path=path, images=images, board=board, air=air, names=names,
-                           truth=None, size=size, photos=True, own_ports=False)
+                           truth=None, size=size, photos=True, own_ports=False,
+                           captures=list(stems))
+
+
+def read_air_rig(path, folder, names, size):
+    """``(rig, covariance)`` of the in-air ``calib.yaml`` of N cameras that ``--intrinsics``
+    names, checked against the boards of ``folder`` (``names``, image ``size``) before any
+    detection: a file of another count of cameras (a pair's calib.yaml, one camera's
+    camera.yaml), other names, another image size or one that holds a port is refused with
+    one line naming the file and the likely cause."""
+    from synth.products.dataset import DatasetError
+    from synth.products.rig_file import read_rig_covariance, read_rig_file
+
+    where = f"--intrinsics {path}"
+    if os.path.isdir(path):
+        inside = os.path.join(path, "calib.yaml")
+        raise CLIError(f"{where}: a folder; give its calibration file"
+                       + (f" ({inside})" if os.path.isfile(inside) else " (calib.yaml)"))
+    try:
+        air = read_rig_file(path)
+    except DatasetError as exc:
+        raise CLIError(f"{where}: {str(exc).removeprefix(f'{path}: ')}") from None
+    if len(air.names) != len(names):
+        raise CLIError(f"{where}: a calibration of {len(air.names)} cameras "
+                       f"({', '.join(air.names)}), but {folder} holds {len(names)} "
+                       f"({', '.join(names)}): another rig's file? Give the calib.yaml of "
+                       f"eval calibrate on in-air boards of these {len(names)} cameras")
+    if air.names != names:
+        raise CLIError(f"{where}: cameras {', '.join(air.names)}, but {folder} holds "
+                       f"{', '.join(names)}")
+    if tuple(air.cameras[0].size) != tuple(size):
+        raise CLIError(f"{where}: image size {air.cameras[0].size[0]}x{air.cameras[0].size[1]} "
+                       f"px, but the images are {size[0]}x{size[1]} px: another camera's "
+                       f"calibration?")
+    if air.refracts:
+        raise CLIError(f"{where}: already holds a port (an underwater calibration); give the "
+                       f"in-air calibration")
+    try:
+        return air, read_rig_covariance(path)
+    except DatasetError as exc:
+        raise CLIError(f"{where}: {str(exc).removeprefix(f'{path}: ')}") from None
 
 
 def calibrate_cameras_main(args, output, log, start, boards, design) -> int:
@@ -102,8 +199,7 @@ def calibrate_cameras_main(args, output, log, start, boards, design) -> int:
     from measure.stereo.multirig import MultiRig
     from synth.infra.cli import BOARD_OPTIONS, given, refuse_given
     from synth.infra.fileio import atomic_write_json, jsonable
-    from synth.products.dataset import DatasetError
-    from synth.products.rig_file import read_rig_covariance, read_rig_file, write_rig_file
+    from synth.products.rig_file import write_rig_file
 
     names, truth = boards.names, boards.truth
     where = f"{args.dir} ({len(names)} cameras{', photos' if boards.photos else ''})"
@@ -122,6 +218,10 @@ def calibrate_cameras_main(args, output, log, start, boards, design) -> int:
         if args.intrinsics:
             raise CLIError(f"{args.dir}: in-air boards calibrate the intrinsics themselves; "
                            f"--intrinsics is for underwater boards")
+        if args.lens == "fisheye":
+            raise CLIError(f"--lens fisheye does not apply to {where}: the joint adjustment of "
+                           f"N cameras projects with OpenCV's Brown–Conrady model (standard, "
+                           f"k3, rational, radial)")
     else:
         if given(args, "lens"):
             raise CLIError("--lens does not apply underwater: the lens model is the in-air "
@@ -134,10 +234,18 @@ def calibrate_cameras_main(args, output, log, start, boards, design) -> int:
         if not free or unknown:
             raise CLIError(f"--free {args.free!r}: the housing of N cameras estimates "
                            f"{', '.join(PARAMETERS)}")
+        air, air_cov = read_air_rig(args.intrinsics, args.dir, names, boards.size)
     log(f"detect the boards in {boards.path} ({len(boards.images)} poses × {len(names)} "
         f"cameras) …")
     t = time.perf_counter()
     detections = _detect(boards.board, boards.images, names)
+    if boards.photos:  # a --squares smaller than the board: a different part of it per photo
+        from eval.calibrate import photos as trust
+
+        larger = trust.larger_board(boards.board, [views[:2] for views in boards.images],
+                                    detections.found(0))
+        if larger:
+            raise CLIError(f"{where}: {larger}")
     timings = {"detect": time.perf_counter() - t}
     found = {name: len(detections.found(v)) for v, name in enumerate(names)}
     report = {"boards": os.path.abspath(boards.path), "air": boards.air, "cameras": list(names),
@@ -155,24 +263,11 @@ def calibrate_cameras_main(args, output, log, start, boards, design) -> int:
             errors = _air_errors(rig, truth) if truth is not None else {}
             rows = [(n, errors.get(n), sigmas[n]) for n in cal.parameter_names]
             report.update({"rms_px": cal.rms_px, "joint_rms_px": cal.joint_rms_px,
-                           "poses_used": cal.poses_used})
+                           "poses_used": cal.poses_used,
+                           "left_out": {f"{names[v]}/{boards.captures[k]}": why
+                                        for (k, v), why in sorted(cal.left_out.items())}})
             rms = cal.joint_rms_px
         else:
-            try:
-                air = read_rig_file(args.intrinsics)
-                air_cov = read_rig_covariance(args.intrinsics)
-            except DatasetError as exc:
-                raise CLIError(str(exc)) from None
-            if air.names != names:
-                raise CLIError(f"{args.intrinsics}: cameras {', '.join(air.names)}, but "
-                               f"{args.dir} holds {', '.join(names)}")
-            if tuple(air.cameras[0].size) != tuple(boards.size):
-                raise CLIError(f"--intrinsics {args.intrinsics}: image size "
-                               f"{air.cameras[0].size[0]}x{air.cameras[0].size[1]} px, but the "
-                               f"images are {boards.size[0]}x{boards.size[1]} px")
-            if air.refracts:
-                raise CLIError(f"{args.intrinsics}: already holds a port; give the in-air "
-                               f"calibration")
             per_camera = given(args, "port_distance") or boards.own_ports
             if per_camera:  # each camera behind its own port, ⟂ its axis, D from its centre
                 from measure import FlatPort
@@ -240,13 +335,20 @@ def calibrate_cameras_main(args, output, log, start, boards, design) -> int:
                            "design": design.describe()})
             rms = cal.rms_px
     except CalibrationError as exc:
-        raise CLIError(f"{where}: {exc}") from None
+        if boards.air:
+            raise CLIError(f"{where}: {exc}") from None
+        raise housing_failure(where, exc, args) from None
+    except FIT_ERRORS as exc:  # a port moved behind a camera, singular equations
+        if boards.air:
+            raise
+        raise housing_failure(where, exc, args) from None
     timings["calibrate"] = time.perf_counter() - t
     scored = truth is not None
     z = np.array([e / s for _, e, s in rows]) if scored else np.zeros(0)
+    values = {n: estimate_value(rig, n) for n, _, _ in rows}
     report.update({
-        "estimates": {n: ({"error": e, "sigma": s, "error_in_sigma": e / s} if scored
-                          else {"sigma": s}) for n, e, s in rows},
+        "estimates": {n: ({"value": values[n], "error": e, "sigma": s, "error_in_sigma": e / s}
+                          if scored else {"value": values[n], "sigma": s}) for n, e, s in rows},
         "within_3_sigma": int(np.sum(np.abs(z) <= 3)) if scored else None,
         "parameters": len(rows),
         "largest_error_in_sigma": float(np.abs(z).max()) if z.size else None,
@@ -258,18 +360,10 @@ def calibrate_cameras_main(args, output, log, start, boards, design) -> int:
         write_rig_file(os.path.join(tmp, "calib.yaml"), rig, covariance)
         atomic_write_json(os.path.join(tmp, "report.json"), report)
         with open(os.path.join(tmp, "report.md"), "w") as fh:
-            fh.write(f"# eval calibrate: {len(names)} cameras, {kind}\n\n"
-                     f"Boards: `{args.dir}` ({len(boards.images)} poses); found per camera: "
-                     + ", ".join(f"{n} {c}" for n, c in found.items())
-                     + f". Reprojection RMS {rms:.4f} px.\n\n"
-                     + ("Every estimate against the folder's truth (rotation: rad about the "
-                        "reference axes; centre, distance: mm; focal, principal point: px):"
-                        "\n\n" + _table(rows) + "\n\n"
-                        f"{report['within_3_sigma']} of {len(rows)} within 3 σ.\n" if scored else
-                        "No truth (photos): σ of every estimate (rotation rad, centre and "
-                        "distance mm, focal and principal point px):\n\n"
-                        "| parameter | σ |\n|---|---|\n"
-                        + "".join(f"| {n} | {s:.3g} |\n" for n, _, s in rows)))
+            fh.write(_markdown(args.dir, names, kind, len(boards.images), found, rms, rows,
+                               values, report))
+    if getattr(args.n_water, "note", None):  # the index --n-water T=…,S=… computed
+        print(args.n_water.note, file=sys.stderr, flush=True)
     if scored:
         print(f"{len(names)} cameras, {kind}: RMS {rms:.4f} px; {report['within_3_sigma']} of "
               f"{len(rows)} estimates within 3 σ of the truth (largest "
@@ -297,6 +391,14 @@ def calibrate_cameras_main(args, output, log, start, boards, design) -> int:
               + ", ".join(f"{n} {c}" for n, c in found.items()) + port_line)
     print(f"wrote {output.path} (calib.yaml of {len(names)} cameras with its covariance, "
           f"report.json, report.md)")
+    if report.get("left_out"):
+        from synth.infra.cli import EXIT_CHECK_FAILED
+
+        print(f"failed: {where}: " + "; ".join(
+            f"{view} does not belong with the others ({why}): left out"
+            for view, why in report["left_out"].items())
+              + f" (the calibration in {output.path} is without it)", file=sys.stderr)
+        return EXIT_CHECK_FAILED
     return 0
 
 

@@ -29,11 +29,12 @@ import os
 import sys
 import time
 
+from eval.calibrate.causes import FIT_ERRORS, housing_failure
 from eval.calibrate.port_lengths import lengths_for, per_camera_lengths
 from eval.calibrate.single import single_camera_folder
 from eval.cli import CLIError, positive_float
 from eval.core.photos import add_encoding_option, encoding_note
-from synth.infra.cli import (BOARD_OPTIONS, EXIT_CHECK_FAILED, WATER_INDEX_HELP,
+from synth.infra.cli import (BOARD_OPTIONS, positive_int, EXIT_CHECK_FAILED, WATER_INDEX_HELP,
                              add_board_options, add_out_option, add_progress_option,
                              board_from_args, given, refuse_given, water_index_argument)
 
@@ -60,10 +61,13 @@ def add_parser(subparsers):
     p = subparsers.add_parser(
         "calibrate", help="calibrate from board images (in air, or the housing underwater)",
         description="Calibrate from a folder of python -m synth boards (every estimate beside "
-                    "the rendered truth) or from your own photos, DIR/left/ and DIR/right/ "
-                    "paired by name (give the board, and --air or --intrinsics).")
-    p.add_argument("dir", help="boards folder (python -m synth boards) or photo folder "
-                               "(DIR/left/, DIR/right/)")
+                    "the rendered truth; a pair or N cameras) or from your own photos: a "
+                    "pair's DIR/left/ and DIR/right/, N cameras' DIR/cam0/ DIR/cam1/ …, paired "
+                    "by name, or one camera's folder of photos (give the board, and --air or "
+                    "--intrinsics).")
+    p.add_argument("dir", help="boards folder (python -m synth boards) or photo folder: "
+                               "DIR/left/ and DIR/right/, DIR/cam0/ DIR/cam1/ … (N cameras), or "
+                               "one camera's photos in DIR")
     p.add_argument("--model", choices=("port", "absorbed"), default="port",
                    help="port (default): the cameras in air, then the housing's port; absorbed: "
                         "underwater boards or photos calibrated as pinhole cameras, the port "
@@ -137,6 +141,10 @@ def add_parser(subparsers):
                         "in the stereo fit) or refined (the stereo fit refines both cameras' "
                         "intrinsics too, as MATLAB's stereo calibrator does)")
     add_detection_options(p)
+    p.add_argument("--max-poses", type=positive_int, default=None, metavar="N",
+                   help="photos or detections: more poses than N (default 150; the frames of a "
+                        "calibration video) are thinned by pose diversity before the fit, the "
+                        "choice reported")
     add_out_option(p, COMMAND)
     add_encoding_option(p)
     add_progress_option(p)
@@ -301,7 +309,7 @@ def _in_air(path, log):
     node, when it has one)."""
     from measure.calibration.air import calibrate_in_air, detect_boards
     from synth.products.boards import read_boards
-    from synth.products.dataset import read_calib
+    from synth.products.dataset import DatasetError, read_calib
 
     if os.path.isdir(path):
         boards = read_boards(path)
@@ -312,7 +320,10 @@ def _in_air(path, log):
         detections = detect_boards(boards.board, boards.images)
         air = calibrate_in_air(boards.board, detections, boards.calib["size"])
         return air.rig, air, boards, air.covariance
-    calib = read_calib(path)
+    try:
+        calib = read_calib(path)
+    except DatasetError as exc:
+        raise CLIError(f"--intrinsics {path}: {str(exc).removeprefix(f'{path}: ')}") from None
     covariance = calib.get("covariance")
     if calib["has_port"]:  # said, not silently ignored: only its cameras are used
         log(underwater_note(path, calib))
@@ -331,7 +342,7 @@ def _in_air(path, log):
 def main(args) -> int:
 
     from measure import StereoRig
-    from measure.calibration.air import (DEFAULT_LENS_MODEL, CalibrationError, calibrate_in_air,
+    from measure.calibration.air import (DEFAULT_LENS_MODEL, calibrate_in_air,
                                          detect_boards)
     from measure.calibration.housing import HOUSINGS, calibrate_housing
     from measure.geometry.dome import DomePair
@@ -441,6 +452,8 @@ def main(args) -> int:
         pair_glass(args)  # a bad design is refused before any work
     elif not boards.air and not dome:
         design_port(args, (0.0, 0.0, 1.0))  # a bad --design-port is refused before any work
+    if not boards.air and not os.path.isdir(args.intrinsics):  # a wrong file, before detection
+        _in_air(args.intrinsics, lambda text: None)
     log(f"detect the boards in {boards.path} ({len(boards.images)} poses) …")
     t = time.perf_counter()
     detections = detect_boards(boards.board, boards.images)
@@ -488,12 +501,11 @@ def main(args) -> int:
         try:
             housing = calibrate_housing(start_rig, boards.board, detections, free,
                                         air_covariance, args.air_uncertainty)
-        except CalibrationError as exc:
-            raise CLIError(f"{args.dir}: {exc}; nothing written") from None
+        except FIT_ERRORS as exc:
+            raise housing_failure(args.dir, exc, args, "render") from None
         timings["bundle_adjustment"] = time.perf_counter() - t
         if not housing.identifiable:
-            raise CLIError(f"{args.dir}: {housing.reason}; nothing written (free fewer "
-                           f"parameters with --free, or render more varied poses)")
+            raise housing_failure(args.dir, housing.reason, args, "render")
         rig = housing.rig
         report["dome"] = dome
         report["housing"] = (report_lib.dome_summary if dome else report_lib.housing_summary)(
@@ -595,9 +607,11 @@ def _calibrate_photos(args, output, log, free, start) -> int:
     from eval.calibrate import report as report_lib
     from measure.calibration.housing import FIT_RMS_LIMIT_PX
 
-    from eval.calibrate.consistency import (cameras_alone, rig_inconsistency,
+    from eval.calibrate.consistency import (cameras_alone, gross_misfit, rig_inconsistency,
                                             start_from_cameras, uniqueness)
-    from eval.calibrate.sources import repeat_lines, repeated_views, without_repeats
+    from eval.calibrate.dots import views_of_air, views_of_housing, with_eccentricity
+    from eval.calibrate.sources import (MAX_POSES, repeat_lines, repeated_views, thin_by_pose,
+                                        without_repeats)
 
     where = f"{args.dir} ({'detections' if args.detections else 'photos'})"
     source = "detections" if args.detections else "photos"
@@ -634,6 +648,11 @@ def _calibrate_photos(args, output, log, free, start) -> int:
                  if k not in found["left"] and k not in found["right"]]
     repeats = repeated_views(detections)
     detections_all, detections = detections, without_repeats(detections, repeats)
+    before = len(set(detections.found(0)) | set(detections.found(1)))
+    detections, thinned = thin_by_pose(detections, board, size, args.max_poses or MAX_POSES)
+    if len(thinned) < before:
+        print(f"note: the board in {before} pairs: the {len(thinned)} most different poses kept "
+              f"(--max-poses {args.max_poses or MAX_POSES})", file=sys.stderr)
     t = time.perf_counter()
 
     def fit(calibrate):  # a CalibrationError (too few poses) names the photo folder
@@ -647,7 +666,9 @@ def _calibrate_photos(args, output, log, free, start) -> int:
     if args.air:
         log("calibrate in air (OpenCV calibrateCamera, stereoCalibrate) …")
         result, used_detections, outliers = fit(
-            lambda d: calibrate_in_air(board, d, size, args.lens or DEFAULT_LENS_MODEL))
+            with_eccentricity(lambda d: calibrate_in_air(board, d, size,
+                                                         args.lens or DEFAULT_LENS_MODEL),
+                              board, views_of_air))
         rig, housing, rms_per = result.rig, None, result.rms_px_per
         air_covariance = result.covariance
         poses = {k: result.board_poses.get((k, 0), pose)  # the left camera's where it has one
@@ -661,8 +682,9 @@ def _calibrate_photos(args, output, log, free, start) -> int:
                                   design_port(args, air_rig.left.R[:, 2]))
         log(f"refractive bundle adjustment of {', '.join(free)} …")
         result, used_detections, outliers = fit(
-            lambda d: calibrate_housing(start_rig, board, d, free, air_covariance,
-                                        args.air_uncertainty))
+            with_eccentricity(lambda d: calibrate_housing(start_rig, board, d, free,
+                                                          air_covariance, args.air_uncertainty),
+                              board, views_of_housing))
         housing, alone = result, None
         if not housing.identifiable and housing.rms_px > FIT_RMS_LIMIT_PX:
             log("the design start failed: again from each camera's own port …")
@@ -670,8 +692,9 @@ def _calibrate_photos(args, output, log, free, start) -> int:
             better = start_from_cameras(start_rig, alone)
             if better is not None:
                 again, again_used, again_outliers = fit(
-                    lambda d: calibrate_housing(better, board, d, free, air_covariance,
-                                                args.air_uncertainty))
+                    with_eccentricity(lambda d: calibrate_housing(
+                        better, board, d, free, air_covariance, args.air_uncertainty),
+                        board, views_of_housing))
                 if again.identifiable or again.rms_px < housing.rms_px:
                     start_rig, housing = better, again
                     result, used_detections, outliers = again, again_used, again_outliers
@@ -693,6 +716,8 @@ def _calibrate_photos(args, output, log, free, start) -> int:
     report = {"photos": os.path.abspath(args.dir), "source": source, "air": bool(args.air),
               "board": board.to_dict(), "image_size": list(size), "poses": len(names),
               "repeats": repeat_lines(repeats, names),
+              "thinned": {"kept": len(thinned), "rule": f"at most {args.max_poses or MAX_POSES} "
+                          f"poses, the most different kept (--max-poses)"},
               "found": {v: len(found[v]) for v in trust.VIEWS}, "used": len(used),
               "not_found": not_found,
               "left_out": [names[k] for k in outliers["left_out"]],
@@ -732,6 +757,10 @@ def _calibrate_photos(args, output, log, free, start) -> int:
     report["failures"] = trust.air_failures(report) if args.air else []
     if not args.air and report["housing"].get("uniqueness", {}).get("note"):
         report["failures"].append(report["housing"]["uniqueness"]["note"])
+    if not args.air:
+        misfit = gross_misfit(housing, board, used_detections, size, bool(pair))
+        if misfit:
+            report["failures"].append(misfit)
     report["timings_s"] = timings
     log("write the calibration, report and figures …")
     with output.staged() as tmp:

@@ -32,7 +32,7 @@ ALONE_FRACTION, JOINT_EXCESS_PX = 0.5, 0.5
 #: found 186 units, 0.23 px).
 ALONE_STARTS = (1.0, 3.0, 9.0)
 #: Starting port distances of :func:`uniqueness`, as factors of the design's.
-START_FACTORS = (0.25, 0.5, 2.0, 4.0)
+START_FACTORS = (0.25, 4.0)
 #: Two solutions fit alike when their RMS differ by at most this fraction of the better one's,
 #: and differ when their port distances lie this many σ (the main fit's) apart.
 SAME_FIT, DIFFERENT_SIGMAS = 0.1, 3.0
@@ -75,6 +75,38 @@ def _alone(rig, board, detections, view: int):
     normal = placed.R @ own.normal
     return float(fit.rms_px), own.replace(normal=normal,
                                           distance=float(own.distance + normal @ placed.t))
+
+
+#: A pair's housing that leaves more than this many times the worse camera's absorbed pinhole
+#: RMS plus this margin (px) does not describe the photos at all (photos behind two housings
+#: fitted as one shared port: 1.88 px against 0.035 px).
+GROSS_FACTOR, GROSS_MARGIN_PX = 3.0, 0.15
+
+
+def gross_misfit(housing, board, detections, size, two_housings: bool) -> str | None:
+    """Why a pair's housing fit cannot be the photos' (its RMS far above what each camera
+    calibrated as a pinhole that absorbs the port leaves, :data:`GROSS_FACTOR`), or None.
+    ``two_housings``: the fit had a port per camera (else the hint says to try that)."""
+    from measure.calibration.air import CalibrationError, calibrate_camera
+
+    corners = board.corners().astype(np.float32)
+    absorbed = []
+    for view in (0, 1):
+        poses = detections.found(view)
+        try:
+            out = calibrate_camera([corners[detections.ids[k][view]] for k in poses],
+                                   [detections.pixels[k][view].astype(np.float32) for k in poses],
+                                   size, "standard")[0]
+        except (CalibrationError, ValueError):
+            return None
+        absorbed.append(float(out[0]))
+    if housing.rms_px <= GROSS_FACTOR * max(absorbed) + GROSS_MARGIN_PX:
+        return None
+    hint = ("" if two_housings else " — photos behind two housings? give --port-distance "
+            "LEFT,RIGHT (a port per camera)")
+    return (f"the housing fit leaves {housing.rms_px:.3g} px where each camera calibrated as a "
+            f"pinhole that absorbs the port leaves {absorbed[0]:.3g} / {absorbed[1]:.3g} px: "
+            f"the port model does not describe these photos{hint}")
 
 
 def cameras_alone(rig, board, detections) -> list:
@@ -220,4 +252,5 @@ def _scaled_start(rig, factor: float):
     return StereoRig(rig.left, rig.right, port)
 
 
-__all__ = ["cameras_alone", "rig_inconsistency", "start_from_cameras", "uniqueness"]
+__all__ = ["GROSS_FACTOR", "GROSS_MARGIN_PX", "cameras_alone", "gross_misfit",
+           "rig_inconsistency", "start_from_cameras", "uniqueness"]

@@ -33,11 +33,11 @@ import os
 import numpy as np
 from measure.calibration.air import (LENS_MODEL_GAIN, LENS_MODEL_ORDER, STEREO_FLOOR_DEG,
                                  STEREO_FLOOR_FRACTION, STEREO_OUTLIER_FACTOR)
+from measure.calibration.outliers import (OUTLIER_FACTOR, OUTLIER_FLOOR_PX, OUTLIER_MADS,
+                                          outlier_threshold)
 
 from eval.calibrate.report import format_value as _f
 
-#: The outlier rule (module docs).
-OUTLIER_FACTOR, OUTLIER_MADS, OUTLIER_FLOOR_PX = 3.0, 5.0, 0.1
 #: Warn below these.
 RECOMMENDED_POSES, MIN_TILT_DEG, MIN_COVERAGE = 8, 15.0, 0.5
 #: Warn at or above this |correlation| between two housing parameters.
@@ -79,17 +79,6 @@ OUTLIER_RULE = (f"a pose is left out when one of its views' RMS exceeds "
                 f"neighbours' (none when more than {100 * MAX_CORNER_FRACTION:g} % of the "
                 f"corners are: then the model misfits); the fit is run again after each, until "
                 f"nothing more drops out")
-
-
-def outlier_threshold(rms_values) -> float:
-    """The RMS (px) above which a view is an outlier (module docs)."""
-    values = np.asarray(list(rms_values), dtype=np.float64)
-    if values.size == 0:
-        return float("inf")
-    median = float(np.median(values))
-    mad = float(np.median(np.abs(values - median)))
-    return max(OUTLIER_FACTOR * median, median + OUTLIER_MADS * 1.4826 * mad,
-               median + OUTLIER_FLOOR_PX)
 
 
 def outlier_poses(rms_per: dict) -> tuple[float, list[int]]:
@@ -487,8 +476,12 @@ def stereo_rms_failure(rms_px: dict, stereo_rms_px: float, what: str) -> list[st
     words."""
     worst = max(rms_px.values())
     if stereo_rms_px > STEREO_RMS_FACTOR * worst + STEREO_RMS_MARGIN_PX:
-        return [f"the stereo RMS {stereo_rms_px:.3g} px is {stereo_rms_px / worst:.1f}× the "
-                f"cameras' own ({worst:.3g} px): the {what} do not fit one rigid pair of cameras"]
+        diverged = stereo_rms_px > 1e4 * worst  # no pair of photos is that far from rigid
+        return [f"the stereo RMS {stereo_rms_px:.3g} px is {stereo_rms_px / worst:.3g}× the "
+                f"cameras' own ({worst:.3g} px): "
+                + ("the stereo fit diverged — a lens model with more coefficients than these "
+                   "poses determine (try a simpler --lens: k3 or standard)" if diverged else
+                   f"the {what} do not fit one rigid pair of cameras")]
     return []
 
 
@@ -545,8 +538,9 @@ def underwater_hint(cameras: dict, models: dict | None = None) -> str | None:
     """A warning when every camera's k1 (``{name: {"k1": {"estimate": …}}}``) is at least
     :data:`PORT_LIKE_K1`: underwater photos calibrated with ``--air`` (a calibration that absorbs
     the port). Not for the fisheye model (``models`` ``{name: lens model}``): its k1 is on the
-    angle, and a plain pinhole lens has k1 = 1/3 there."""
-    if models and "fisheye" in models.values():
+    angle, and a plain pinhole lens has k1 = 1/3 there; nor for the rational model, whose k1
+    is divided by a polynomial of its own (k4–k6): k1 alone says nothing of the distortion."""
+    if models and {"fisheye", "rational"} & set(models.values()):
         return None
     k1 = {name: v["k1"]["estimate"] for name, v in cameras.items() if "k1" in v}
     if not k1 or min(k1.values()) < PORT_LIKE_K1:
@@ -666,9 +660,10 @@ def board_hint(board, images) -> str:
     seen = [cr for cr in candidates if found[cr]]
     if seen:
         c, r = max(seen, key=lambda cr: (cr[0] * cr[1], found[cr]))
-        return (f"; the photos show a {c}x{r} chessboard, not {cols}x{rows} (found in "
-                f"{found[(c, r)]} of the first {len(smalls)} left photos with --squares "
-                f"{c}x{r})")
+        return (f"; the photos show a chessboard of {c}x{r} squares ({c - 1}x{r - 1} inner "
+                f"corners), not {cols}x{rows} squares ({cols - 1}x{rows - 1} inner corners; "
+                f"found in {found[(c, r)]} of the first {len(smalls)} left photos with "
+                f"--squares {c}x{r}, that is --inner-corners {c - 1}x{r - 1})")
     return (f" (no chessboard of {cols}x{rows} squares, nor one square more or fewer, in the "
             f"first {len(smalls)} left photos: check --board and --squares)")
 

@@ -40,6 +40,7 @@ import os
 
 import numpy as np
 
+from eval.calibrate.causes import FIT_ERRORS, housing_failure
 from eval.calibrate import photos as trust
 from eval.calibrate import report as report_lib
 from eval.calibrate.report import format_value as _f
@@ -78,14 +79,18 @@ def calibrate_single_housing(args, output, log, start, board, intrinsics, start_
     from measure.calibration.housing import calibrate_camera_housing
     from measure.calibration.validation import FOLDS, cross_validate_housing
 
+    from eval.calibrate.dots import views_of_housing, with_eccentricity
+
     where = f"{args.dir} (one camera's photos)"
     camera = intrinsics["camera"]
-    names, images, size, detections, timings, repeats = read_and_detect(
+    names, images, size, detections, timings, aside = read_and_detect(
         args, board, log, camera.size, f"--intrinsics {args.intrinsics}")
 
     def fit(dets):
         return calibrate_camera_housing(camera, start_port, board, dets, free,
                                         intrinsics["covariance"], args.air_uncertainty)
+
+    fit = with_eccentricity(fit, board, views_of_housing)
 
     log(f"refractive bundle adjustment of {', '.join(free)} over "
         f"{len(detections.found(VIEW))} photos …")
@@ -94,12 +99,11 @@ def calibrate_single_housing(args, output, log, start, board, intrinsics, start_
         housing, used_detections, outliers = trust.fit_without_outliers(
             fit, lambda r: r.rms_px_per, detections, lambda r: r.residuals, board,
             lambda r: r.identifiable)
-    except CalibrationError as exc:
-        raise CLIError(f"{where}: {exc}; nothing written") from None
+    except FIT_ERRORS as exc:
+        raise housing_failure(where, exc, args) from None
     timings["bundle_adjustment"] = time.perf_counter() - t
     if not housing.identifiable:
-        raise CLIError(f"{where}: {housing.reason}; nothing written (free fewer parameters "
-                       f"with --free, or photograph more varied poses)")
+        raise housing_failure(where, housing.reason, args)
     log("the pinhole fit that absorbs the port (OpenCV calibrateCamera on the same corners) …")
     t = time.perf_counter()
     used = list(housing.pose_ids)
@@ -120,9 +124,12 @@ def calibrate_single_housing(args, output, log, start, board, intrinsics, start_
                      intrinsics, {"rms_px": float(absorbed[0]), "model": model, "tried": tried,
                                   "cross_validation": validation}, dome)
     report["in_air_dependence"] = in_air_dependence(housing, intrinsics)
-    report["repeats"] = repeats
-    report["warnings"] += [f"{line}: left out (a photo given twice is one pose)"
-                           for line in repeats]
+    report["set_aside"] = {names[k]: why for k, why in sorted(aside.items())}
+    report["warnings"] += [f"{names[k]}: {why}" for k, why in sorted(aside.items())
+                           if "thinned" not in why]
+    for row in report["per_pose"]:
+        row["status"] = aside.get(row["pose"], row["status"])
+    report["found"] += len(aside)  # found, then set aside
     report["timings_s"] = timings
     log("write the calibration, report and figures …")
     with output.staged() as tmp:

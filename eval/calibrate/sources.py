@@ -160,3 +160,49 @@ def without_repeats(detections, repeats):
 __all__ = ["DETECTION_OPTIONS", "add_detection_options", "check_detection_options",
            "image_size", "read_detection_views", "repeat_lines", "repeated_views",
            "without_repeats"]
+
+
+#: ``--max-poses``' default: more poses than this (the frames of a calibration video) are
+#: thinned by pose diversity before the fit.
+MAX_POSES = 150
+
+
+def thin_by_pose(detections, board, size, max_poses: int = MAX_POSES):
+    """``(detections, kept)``: at most ``max_poses`` poses, chosen to differ most (farthest-point
+    sampling, from the pose with the most corners): each pose is described by where the
+    homography of its detected corners puts the board's four outer corners in every view
+    (pixels over the image's diagonal), so poses that repeat a position and tilt — a video's
+    consecutive frames — go first. ``kept`` the poses kept (all when there are not more)."""
+    import cv2
+
+    found = sorted(set().union(*[detections.found(v) for v in range(len(detections.ids[0]))]))
+    if len(found) <= max_poses:
+        return detections, found
+    corners = board.corners()[:, :2]
+    outline = np.array([corners.min(axis=0), [corners[:, 0].max(), corners[:, 1].min()],
+                        corners.max(axis=0), [corners[:, 0].min(), corners[:, 1].max()]])
+    diagonal = float(np.hypot(*size))
+    features = []
+    for k in found:
+        row = []
+        for v in range(len(detections.ids[k])):
+            ids = detections.ids[k][v]
+            if len(ids) >= 4:
+                H, _ = cv2.findHomography(corners[ids], detections.pixels[k][v], 0)
+            else:
+                H = None
+            row.append(np.full(8, -1.0) if H is None else cv2.perspectiveTransform(
+                outline.reshape(-1, 1, 2), H).ravel() / diagonal)
+        features.append(np.concatenate(row))
+    features = np.array(features)
+    counts = np.array([sum(len(i) for i in detections.ids[k]) for k in found])
+    chosen = [int(np.argmax(counts))]
+    distance = np.linalg.norm(features - features[chosen[0]], axis=1)
+    while len(chosen) < max_poses:
+        nxt = int(np.argmax(distance))
+        chosen.append(nxt)
+        distance = np.minimum(distance, np.linalg.norm(features - features[nxt], axis=1))
+    kept = sorted(found[i] for i in chosen)
+    from eval.calibrate.photos import without
+
+    return without(detections, sorted(set(found) - set(kept))), kept

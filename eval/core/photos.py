@@ -25,6 +25,7 @@ import re
 from dataclasses import dataclass
 
 import numpy as np
+from synth.infra.images import imread
 
 #: File extensions taken as photos (lower case); anything else in a folder is ignored.
 PHOTO_EXTENSIONS = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp", ".pgm", ".ppm")
@@ -70,7 +71,7 @@ def read_photo(path, encoding: str = "auto") -> np.ndarray:
         raise PhotoError(f"{path}: no such file")
     # ANYDEPTH | ANYCOLOR: 16-bit and float kept, and the EXIF orientation applied as
     # cv2.imread's defaults apply it (IMREAD_UNCHANGED would ignore it)
-    image = cv2.imread(path, cv2.IMREAD_ANYDEPTH | cv2.IMREAD_ANYCOLOR)
+    image = imread(path, cv2.IMREAD_ANYDEPTH | cv2.IMREAD_ANYCOLOR)
     if image is None or image.size == 0:
         raise PhotoError(f"{path}: not an image OpenCV can read")
     truncated = jpeg_truncation(path)
@@ -150,7 +151,7 @@ def encoding_note(path, encoding: str) -> str | None:
 
     if encoding != "auto":
         return None
-    image = cv2.imread(os.fspath(path), cv2.IMREAD_ANYDEPTH | cv2.IMREAD_ANYCOLOR)
+    image = imread(os.fspath(path), cv2.IMREAD_ANYDEPTH | cv2.IMREAD_ANYCOLOR)
     if image is None or image.dtype != np.uint16:
         return None
     return (f"note: 16-bit photos ({os.path.basename(os.fspath(path))} …) are read as linear "

@@ -98,6 +98,17 @@ def associate_points(points: np.ndarray, truth: np.ndarray, gate_mm: float) -> n
     return result
 
 
+def unassociated_text(association: dict) -> str:
+    """``"N not"`` of an association, with how many of those lie on a target a nearer point
+    holds (duplicates: the same match written twice, not points far from every target)."""
+    a = association
+    far = a["unassociated"] - a.get("duplicates", 0)
+    if not a.get("duplicates"):
+        return f"{a['unassociated']} not"
+    return (f"{a['unassociated']} not: {a['duplicates']} duplicate(s) of a target a nearer point "
+            f"holds, {far} farther than {a['gate_mm']:g} mm from every target")
+
+
 def default_gate_mm(truth: np.ndarray) -> float:
     """Half the smallest distance between two of the targets ``truth`` ``(M, 3)`` (mm): a point
     closer than that to a target is closer to it than to any other."""
@@ -127,8 +138,14 @@ def score_points(points: np.ndarray, truth: np.ndarray, visible_both: np.ndarray
                           lengths=length_errors(points[ok], truth[target[ok]]))
     arrays = {"points": points[ok], "truth": truth[target[ok]], "errors": errors,
               "all_points": points, "associated": ok}
+    from scipy.spatial import cKDTree
+
+    near = (np.isfinite(cKDTree(truth).query(points, distance_upper_bound=gate_mm)[0])
+            if len(truth) and len(points) else np.zeros(len(points), dtype=bool))
     association = {"points": int(len(points)), "associated": int(ok.sum()),
                    "unassociated": int((~ok).sum()), "gate_mm": gate_mm,
+                   # within the gate of a target a nearer point holds: a match written twice
+                   "duplicates": int((~ok & near).sum()),
                    "visible_in_both": int(visible_both.sum()),
                    "visible_in_both_scored": int(np.isin(np.flatnonzero(visible_both),
                                                          target[ok]).sum())}
@@ -245,4 +262,4 @@ def score_dataset(data, points: np.ndarray, label: str, gate_mm: float | None = 
 
 __all__ = ["DUPLICATE_MM", "FRAMES", "PIXEL_COLUMNS", "PLAUSIBILITY_POINTS", "UNITS",
            "associate_points", "default_gate_mm", "mesh_faces", "plausibility", "read_pixel_pairs",
-           "read_points", "score_dataset", "score_points"]
+           "read_points", "score_dataset", "score_points", "unassociated_text"]

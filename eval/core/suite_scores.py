@@ -239,7 +239,7 @@ SURFACE_GATE_MM = 5.0
 
 
 def _score_surface(data, kind: str, path: str) -> dict:
-    from eval.core.surface_metrics import SurfaceCase, score_surface, score_surface_cloud
+    from eval.core.surface_metrics import SurfaceCase, score_surface
     from synth.scene.surfaces import read_ply
     from synth.products.truth_maps import SURFACE_FILE, read_truth_maps
 
@@ -250,20 +250,39 @@ def _score_surface(data, kind: str, path: str) -> dict:
         scores = score_surface(SurfaceCase(vertices, triangles, measured, truth.points,
                                            truth.overlap, data.rig.port.normal))
         return {**{k: scores.get(k) for k in SURFACE_METRICS}, "scores": scores}
-    from measure.geometry.projection import project
-
-    from eval.core.scoring import plausibility, read_points
+    from eval.core.scoring import read_points
 
     points = read_points(path)
+    scores, warnings = score_surface_points(data, points, truth, (vertices, triangles))
+    return {"warnings": _suite_warnings(warnings),
+            "points": int(len(points)),
+            **{k: scores.get(k) for k in SURFACE_METRICS}, "scores": scores}
+
+
+def score_surface_points(data, points, truth=None, mesh=None) -> tuple[dict, list]:
+    """``(scores, warnings)`` of a cloud ``points`` ``(N, 3)`` mm against the surface dataset
+    ``data``: every point against the true mesh and, through the pixel it projects to in the
+    left view, against that pixel's true point
+    (:func:`eval.core.surface_metrics.score_surface_cloud`); the plausibility warnings
+    (metres, another frame) against the true points of the overlap pixels. ``truth`` (the left
+    truth maps) and ``mesh`` (vertices, triangles) are read when not given."""
+    from measure.geometry.projection import project
+
+    from eval.core.scoring import plausibility
+    from eval.core.surface_metrics import score_surface_cloud
+    from synth.products.truth_maps import SURFACE_FILE, read_truth_maps
+    from synth.scene.surfaces import read_ply
+
+    if truth is None:
+        truth = read_truth_maps(data.path, "left", data.rig.left.size)
+    vertices, triangles = mesh or read_ply(os.path.join(data.path, SURFACE_FILE))
     on_surface = truth.points[truth.overlap]
     on_surface = on_surface[np.isfinite(on_surface).all(axis=1)]
     warnings = plausibility(points, on_surface, SURFACE_GATE_MM)
     pixels = project(data.rig.left, data.rig.port, points)
     scores = score_surface_cloud(vertices, triangles, points, pixels, truth.points,
                                  truth.overlap, data.rig.port.normal)
-    return {"warnings": _suite_warnings(warnings),
-            "points": int(len(points)),
-            **{k: scores.get(k) for k in SURFACE_METRICS}, "scores": scores}
+    return scores, warnings
 
 
 def score_suite(suite_dir: str, sub_dir: str, method: str = "optical_path",
@@ -431,5 +450,6 @@ def write_figures(directory: str, rows: list, swept: list) -> list:
 __all__ = ["FAILURES", "HEADLINE", "INTERNAL_ERROR", "PLAUSIBLE_DEPTH_MM", "SURFACE_METRICS",
            "TARGET_METRICS", "aggregate", "depth_points",
            "SURFACE_GATE_MM", "distinct_values", "find_submission",
-           "read_suite", "score_entry", "score_suite", "summary_markdown", "write_figures",
+           "read_suite", "score_entry", "score_suite", "score_surface_points", "summary_markdown",
+           "write_figures",
            "write_summary"]

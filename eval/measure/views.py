@@ -12,9 +12,10 @@ alone saw is counted, never triangulated.
 Writes into ``--out``: ``points.ply`` (mm, binary), ``points.csv`` (``track,x_mm,y_mm,z_mm,
 gap_mm,views`` and ``u_NAME,v_NAME`` per camera, NaN where a camera did not see it),
 ``report.json`` and ``report.md`` (detections per camera, tracks and how many views each has,
-the gap RMS by the number of views). Exit 1 (everything written, a ``failed:`` line) when fewer
-than half of the sparsest camera's detections end in a track: photos that are not the rig's
-capture (cameras swapped, another rig). Units mm, px; the reference frame is the first
+the gap RMS by the number of views). Exit 1 (everything written, a ``failed:`` line per camera)
+when a camera's photo has no target, or fewer than half of a camera's detections end in a
+track: photos that are not the rig's capture (cameras swapped, another moment, another rig;
+:func:`capture_failures` checks every camera). Units mm, px; the reference frame is the first
 camera's.
 """
 
@@ -30,6 +31,27 @@ from eval.cli import CLIError
 
 #: The options of a stereo pair's measurement that a capture of N cameras does not take.
 NOT_FOR_N_CAMERAS = (("dense", "--dense"), ("pixel_sigma", "--pixel-sigma"))
+
+
+#: A camera whose detections end in a track less often than this is not this capture's.
+MIN_IN_TRACKS = 0.5
+
+
+def capture_failures(names, photos, centers, in_tracks) -> list[str]:
+    """Why the photos are not one capture of the rig, camera by camera: a photo with no target
+    detected (black, covered, of another scene), or a camera fewer than :data:`MIN_IN_TRACKS`
+    of whose detections end in a track with the others (cameras swapped, a photo of another
+    moment, another rig)."""
+    out = []
+    for name, photo, found, used in zip(names, photos, centers, in_tracks):
+        if len(found) == 0:
+            out.append(f"{name} ({photo}): no target detected in its photo (black, covered, or "
+                       f"of another scene)")
+        elif used < MIN_IN_TRACKS * len(found):
+            out.append(f"{name} ({photo}): {used} of its {len(found)} detections in a track "
+                       f"with the other cameras: this photo is not this rig's capture (cameras "
+                       f"swapped, a photo of another moment, or another rig)")
+    return out
 
 
 def measure_views_main(args, output, options, start, log) -> int:
@@ -56,7 +78,7 @@ def measure_views_main(args, output, options, start, log) -> int:
     try:
         rig = read_rig_file(args.calib)
     except DatasetError as exc:
-        raise CLIError(str(exc)) from None
+        raise CLIError(f"--calib {exc}") from None
     if len(rig.cameras) != len(photos):
         raise CLIError(f"--calib {args.calib}: {len(rig.cameras)} cameras "
                        f"({', '.join(rig.names)}), but {len(photos)} photos were given (one per "
@@ -97,12 +119,7 @@ def measure_views_main(args, output, options, start, log) -> int:
                        f"(detections per camera: "
                        + ", ".join(f"{n} {len(c)}" for n, c in zip(rig.names, centers)) + ")")
     in_tracks = [int((tracks.detections[ok, v] >= 0).sum()) for v in range(len(photos))]
-    sparsest = int(np.argmin([len(c) for c in centers]))
-    failures = []
-    if in_tracks[sparsest] < 0.5 * len(centers[sparsest]):
-        failures.append(f"{rig.names[sparsest]}: {in_tracks[sparsest]} of its "
-                        f"{len(centers[sparsest])} detections in a track: these photos are "
-                        f"not this rig's capture (cameras swapped, or another rig)")
+    failures = capture_failures(rig.names, photos, centers, in_tracks)
     by_views = {}
     for k in sorted(set(result.views[ok].tolist())):
         sel = ok & (result.views == k)
@@ -145,10 +162,16 @@ def measure_views_main(args, output, options, start, log) -> int:
             "| views | targets | gap RMS (mm) |", "|---|---|---|",
             *(f"| {k} | {v['targets']} | {v['gap_rms_mm']:.4g} |" for k, v in by_views.items()),
             "", *(f"**Failed:** {f}" for f in failures)]) + "\n")
+    stream = sys.stderr if getattr(args, "json", False) else sys.stdout
     print(f"{len(photos)} cameras: {report['triangulated']} targets triangulated ("
           + ", ".join(f"{v['targets']} from {k} views" for k, v in by_views.items())
-          + f"), gap RMS {report['gap_rms_mm']:.4g} mm; total {report['timings_s']['total']:.1f} s")
-    print(f"wrote {output.path}")
+          + f"), gap RMS {report['gap_rms_mm']:.4g} mm; total {report['timings_s']['total']:.1f} s",
+          file=stream)
+    print(f"wrote {output.path}", file=stream)
+    if getattr(args, "json", False):
+        import json
+
+        print(json.dumps(report, indent=2))
     for failure in failures:
         print(f"failed: {failure} (report in {output.path})", file=sys.stderr)
     return EXIT_CHECK_FAILED if failures else 0

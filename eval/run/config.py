@@ -34,7 +34,8 @@ class RunConfig:
     the scene's kind (targets: :data:`DEFAULT_METHODS`; surfaces: both dense methods);
     ``depth_range_mm``: ``(near, far)`` along the port normal or None for the default;
     ``sensor``: a :class:`synth.rendering.sensor_model.SensorModel` or None; ``assumption_notes``: how
-    an assumed value was computed (``n_water`` from temperature and salinity), to show once."""
+    an assumed value was computed (``n_water`` from temperature and salinity), to show once;
+    ``no_figures``: write the report and point clouds without the PNG figures."""
 
     scene: str
     defines: tuple = ()
@@ -61,6 +62,7 @@ class RunConfig:
     progress: bool = True
     assumption_notes: tuple = ()
     pixel_sigma: object = "auto"
+    no_figures: bool = False
 
     def target_methods(self) -> tuple:
         """The triangulation methods of a target run; CLIError names an unknown one."""
@@ -129,7 +131,8 @@ class RunConfig:
                    max_elongation=args.max_elongation, max_area_ratio=args.max_area_ratio,
                    median_filter=args.median_filter, sensor=parse_sensor(args.sensor),
                    progress=not args.no_progress, assumption_notes=tuple(notes),
-                   pixel_sigma=parse_pixel_sigma(getattr(args, "pixel_sigma", "auto")))
+                   pixel_sigma=parse_pixel_sigma(getattr(args, "pixel_sigma", "auto")),
+                   no_figures=getattr(args, "no_figures", False))
         config.refuse_inapplicable()
         return config
 

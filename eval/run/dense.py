@@ -13,7 +13,7 @@ Options that apply: ``--from``, ``--spp`` and ``--variant`` (without ``--from``)
 ``-D``, ``--depth-range``,
 ``--assume`` / ``--calib`` (what the measurement believes), ``--sensor`` and ``--median-filter``
 (the images the matcher sees), ``--methods`` (``optical_path``, ``regular``), ``--pixel-sigma``
-(the matching σ, below), ``--json``; the target-only options are refused with one ``error:``
+(the matching σ, below), ``--json``, ``--no-figures``; the target-only options are refused with one ``error:``
 line.
 
 Uncertainty (``optical_path`` only; ``regular`` ignores the port and gets none, like the
@@ -26,7 +26,8 @@ has one; the report gives the σ summary and, against the truth maps, the covera
 Writes ``report.json``, ``report.md``, ``views.png`` (both images), per method
 ``depth_error_<method>.png`` and ``points_<method>.ply`` (coloured by point-to-mesh distance),
 and ``distances.png`` (histograms); for ``optical_path`` also ``sigma_z_optical_path.npy``
-(``(H, W)`` float32 mm, NaN unmatched) and ``sigma_z_optical_path.png``.
+(``(H, W)`` float32 mm, NaN unmatched) and ``sigma_z_optical_path.png``. ``--no-figures``:
+none of the PNG files.
 """
 
 from __future__ import annotations
@@ -376,31 +377,41 @@ def _progress(config: RunConfig, method):
     return update
 
 
-def write_outputs(tmp: str, report: dict, arrays: dict) -> None:
-    """Figures and coloured point clouds of a surface run into ``tmp`` (entries in the report)."""
+def write_outputs(tmp: str, report: dict, arrays: dict, figures: bool = True) -> None:
+    """Figures and coloured point clouds of a surface run into ``tmp`` (entries in the report:
+    ``files``, and ``figures``, the PNG files written); ``figures=False``: the point clouds
+    and ``sigma_z_*.npy`` only."""
     from synth.infra.fileio import atomic_write_bytes
 
-    from eval.run import dense_figures as figures
+    from eval.run import dense_figures
     from eval.run.figures import views_pair
 
-    views_pair(os.path.join(tmp, "views.png"), arrays["left"], arrays["right"])
+    drawn = []
+
+    def draw(function, name, *args):
+        if figures:
+            function(os.path.join(tmp, name), *args)
+            drawn.append(name)
+
+    draw(views_pair, "views.png", arrays["left"], arrays["right"])
     distances = {}
     report["files"] = {}
     for method, data in arrays["per_method"].items():
-        figures.write_error_map(os.path.join(tmp, f"depth_error_{method}.png"),
-                                data["depth_error"], f"{method}: measured − true depth [mm]")
+        draw(dense_figures.write_error_map, f"depth_error_{method}.png", data["depth_error"],
+             f"{method}: measured − true depth [mm]")
         if "sigma_z" in data:
             buffer = io.BytesIO()
             np.save(buffer, data["sigma_z"], allow_pickle=False)
             atomic_write_bytes(os.path.join(tmp, f"sigma_z_{method}.npy"), buffer.getvalue())
-            figures.write_sigma_map(os.path.join(tmp, f"sigma_z_{method}.png"), data["sigma_z"],
-                                    f"{method}: σ_z of each point [mm]")
+            draw(dense_figures.write_sigma_map, f"sigma_z_{method}.png", data["sigma_z"],
+                 f"{method}: σ_z of each point [mm]")
         vmax = float(np.nanpercentile(data["distance"], 99)) if data["distance"].size else 1.0
-        report["files"][method] = figures.write_colored_cloud(
+        report["files"][method] = dense_figures.write_colored_cloud(
             os.path.join(tmp, f"points_{method}.ply"), data["measured"], data["distance"],
             max(vmax, 1e-6))
         distances[method] = data["distance"]
-    figures.write_distance_histogram(os.path.join(tmp, "distances.png"), distances)
+    draw(dense_figures.write_distance_histogram, "distances.png", distances)
+    report["figures"] = drawn
 
 
 def report_markdown(report: dict) -> str:
@@ -427,20 +438,23 @@ def report_markdown(report: dict) -> str:
     for method, m in report["matching"].items():
         lines.append(f"| {method} | {m['model']} | {m['planes']} | {m['matched_pixels']} | "
                      f"{fmt(m['median_score'])} | {fmt(m['timings_s']['total'], 1)} |")
+    figures = report.get("figures") is None or bool(report["figures"])  # None: from before
     for method, u in report.get("uncertainty", {}).items():
-        lines += ["", f"## Uncertainty ({method})", "", *uncertainty_lines(u)]
+        lines += ["", f"## Uncertainty ({method})", "", *uncertainty_lines(u, figures)]
     lines += ["", "Time per stage (s): " + "; ".join(
         f"{method}: " + ", ".join(f"{k} {v:.2f}" for k, v in m["timings_s"].items())
         for method, m in report["matching"].items()), "",
-        "## Files", "", "- `views.png`, `distances.png`",
-        *[f"- `depth_error_{m}.png`, `points_{m}.ply` (colour = point-to-mesh distance, "
-          f"0 to {f['vmax_mm']:.3g} mm)" for m, f in report.get("files", {}).items()], "",
+        "## Files", "", *(["- `views.png`, `distances.png`"] if figures else []),
+        *[f"- {f'`depth_error_{m}.png`, ' if figures else ''}`points_{m}.ply` (colour = "
+          f"point-to-mesh distance, 0 to {f['vmax_mm']:.3g} mm)"
+          for m, f in report.get("files", {}).items()], "",
         "## Timings (s)", "", " · ".join(f"{k} {v:.2f}" for k, v in t.items())]
     return "\n".join(lines) + "\n"
 
 
-def uncertainty_lines(u: dict) -> list:
-    """report.md's lines on one method's covariances (``report["uncertainty"][method]``)."""
+def uncertainty_lines(u: dict, figures: bool = True) -> list:
+    """report.md's lines on one method's covariances (``report["uncertainty"][method]``);
+    ``figures``: whether the run drew ``sigma_z_*.png``."""
     m, sig = u["matching_sigma"], u["sigma"]
     noise = (f"; image noise σ_n {fmt(m['noise_sigma'], 4)} (the images' units)"
              if m.get("noise_sigma") is not None else "")
@@ -451,7 +465,8 @@ def uncertainty_lines(u: dict) -> list:
         lines += ["", f"σ of the {sig['n']} points: median σx, σy, σz "
                       f"{fmt(sig['median_sigma_mm']['x'], 4)}, {fmt(sig['median_sigma_mm']['y'], 4)}, "
                       f"{fmt(sig['median_sigma_mm']['z'], 4)} mm; largest σ_P "
-                      f"{fmt(sig['max_sigma_p_mm'], 4)} mm (`sigma_z_*.npy`, `sigma_z_*.png`)."]
+                      f"{fmt(sig['max_sigma_p_mm'], 4)} mm (`sigma_z_*.npy`"
+                      f"{', `sigma_z_*.png`' if figures else ''})."]
     cov = u.get("coverage") or {}
     if cov.get("n"):
         z = cov["normalized"]["z"]
@@ -499,7 +514,7 @@ def main(config: RunConfig, out: str, print_json: bool, log) -> int:
     with output.staged() as tmp:
         t = time.perf_counter()
         report["versions"] = package_versions()
-        write_outputs(tmp, report, arrays)
+        write_outputs(tmp, report, arrays, figures=not config.no_figures)
         report["timings_s"]["report"] = time.perf_counter() - t
         report["timings_s"]["total"] = time.perf_counter() - start
         report = jsonable(report)

@@ -144,14 +144,45 @@ def load_run_scene(config: RunConfig):
     """The scene of a run with ``-D`` and the seed applied. With ``--from`` the dataset's own
     parameters are used (a conflicting ``-D`` is an error) and the seed seeds only the run's
     noise, but a ``-D seed`` contradicting it is still refused."""
-    from synth.scene import apply_seed, apply_spp, load_scene
+    from synth.scene import SceneError, apply_seed, apply_spp, load_scene
 
     defines = dict(config.defines)
     if config.from_dir:
         apply_seed(dict(defines), config.seed)
-        return load_scene(config.scene, dataset_params(config.from_dir, defines))
+        params = dataset_params(config.from_dir, defines)
+        try:
+            return load_scene(config.scene, params)
+        except SceneError as exc:  # the dataset's parameters are another scene's
+            raise another_scene(config, exc) or exc from None
     defines = apply_spp(apply_seed(defines, config.seed), config.spp)
     return load_scene(config.scene, defines).rendered_with(spp=config.spp)
+
+
+def another_scene(config: RunConfig, exc=None) -> CLIError | None:
+    """The error of a ``--from`` dataset rendered from another scene file than ``config.scene``
+    (its manifest's scene SHA-256 is not the file's): the scene it was rendered from and its
+    cameras named, and ``exc`` (the scene could not be loaded with the dataset's parameters:
+    "unknown parameter -D cam3_dist") said; None when the files agree."""
+    import hashlib
+
+    from synth.products.dataset import read_manifest
+
+    try:
+        with open(config.scene, "rb") as fh:
+            digest = hashlib.sha256(fh.read()).hexdigest()
+        manifest = read_manifest(config.from_dir)
+        scene = manifest["scene"]
+    except (OSError, KeyError, TypeError, ValueError):
+        return None
+    if scene.get("sha256") == digest:
+        return None
+    cameras = manifest.get("cameras")
+    why = ("" if exc is None else ", whose parameters it does not fit ("
+           + str(exc).removeprefix(f"{config.scene}: ").split(" (the scene's defaults")[0] + ")")
+    return CLIError(f"--from {config.from_dir}: the dataset was rendered from another scene "
+                    f"({scene.get('path')}, "
+                    + (f"{len(cameras)} cameras" if isinstance(cameras, list) else "a pair")
+                    + f") than {config.scene}{why}")
 
 
 def read_run_dataset(config: RunConfig, spec):
@@ -160,8 +191,9 @@ def read_run_dataset(config: RunConfig, spec):
 
     data = read_dataset(config.from_dir)
     if data.manifest["scene"].get("sha256") != spec.sha256:
-        raise CLIError(f"--from {config.from_dir}: the dataset was rendered from another scene "
-                       f"than {config.scene}")
+        raise another_scene(config) or CLIError(
+            f"--from {config.from_dir}: the dataset was rendered from another scene than "
+            f"{config.scene}")
     from eval.core.assumption import rig_difference
 
     difference = rig_difference(spec.rig, data.rig)
@@ -293,6 +325,6 @@ def expose_on_sensor(inputs: RunInputs, sensor, log):
     return sensor_info
 
 
-__all__ = ["RunInputs", "budget_rigs", "dataset_params", "expose_on_sensor", "expose_views",
+__all__ = ["RunInputs", "another_scene", "budget_rigs", "dataset_params", "expose_on_sensor", "expose_views",
            "load_inputs", "refuse_flat_only", "load_run_scene", "measurement_calibration",
            "read_run_dataset", "same_value"]

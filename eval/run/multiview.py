@@ -35,7 +35,8 @@ from eval.run.config import RunConfig
 #: ignored): (config field, option).
 NOT_FOR_N_CAMERAS = (("assumptions", "--assume"),
                      ("compare_calib", "--compare-calib"), ("absorbed_calib", "--absorbed-calib"),
-                     ("self_calibrate", "--self-calibrate"), ("sensor", "--sensor"))
+                     ("self_calibrate", "--self-calibrate"), ("sensor", "--sensor"),
+                     ("no_figures", "--no-figures"))  # a run of N cameras draws no figure
 #: The one method of a run of N cameras.
 METHOD = "optical_path"
 
@@ -139,8 +140,11 @@ def dataset_views(config: RunConfig, spec) -> tuple[list, dict]:
     except DatasetError as exc:
         raise CLIError(f"--from {exc}") from None
     if data.manifest["scene"].get("sha256") != spec.sha256:
-        raise CLIError(f"--from {config.from_dir}: the dataset was rendered from another scene "
-                       f"than {config.scene}")
+        from eval.run.inputs import another_scene
+
+        raise another_scene(config) or CLIError(
+            f"--from {config.from_dir}: the dataset was rendered from another scene than "
+            f"{config.scene}")
     difference = rig_differences(spec.multirig, data.rig)
     if difference:
         raise CLIError(f"--from {config.from_dir}: calib.yaml disagrees with the scene rendered "

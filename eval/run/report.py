@@ -4,6 +4,7 @@ PLY files coloured by dP and the figures (:mod:`eval.run.figures`)."""
 from __future__ import annotations
 
 import contextlib
+import gc
 import os
 import sys
 
@@ -51,6 +52,9 @@ def summary_table(report: dict) -> str:
     return "\n".join(lines)
 
 
+#: The figures of every target run (``ellipses.png`` too where points have covariances), unless
+#: ``--no-figures``.
+FIGURES = ("views.png", "error_maps.png", "histograms.png")
 #: The label of a method's numbers on the raw centroids, when the run corrected the
 #: eccentricity (its headline numbers are the corrected ones).
 UNCORRECTED = "(raw centroids)"
@@ -139,8 +143,8 @@ def report_markdown(report: dict) -> str:
                  "(matching, triangulation and scoring repeated):", "", "```",
                  budget_table(report), "```", ""] if report.get("budget") else []),
               "## Files", "",
-              "- `views.png`, `error_maps.png`, `histograms.png`"
-              + (", `ellipses.png`" if (report.get("uncertainty") or {}).get("files") else ""),
+              *(["- " + ", ".join(f"`{name}`" for name in figure_names(report))]
+                if figure_names(report) else []),
               *[f"- `{f['ply']}`, `{f['csv']}`: each correctly matched point with σx, σy, σz "
                 f"(mm) and its covariance (mm²), its error and Mahalanobis distance²"
                 for f in ((report.get("uncertainty") or {}).get("files") or {}).values()],
@@ -187,14 +191,13 @@ def uncertainty_lines(report: dict) -> list:
     return lines
 
 
-def write_outputs(tmp: str, result) -> None:
+def write_outputs(tmp: str, result, figures: bool = True) -> None:
     """The PLY files (their entries go into ``result.report["ply"]``; ``points_<method>_all.ply``
     every valid point, wrong matches included) and figures of a run
-    (:class:`eval.run.pipeline.RunResult`), into directory ``tmp``."""
+    (:class:`eval.run.pipeline.RunResult`), into directory ``tmp``; ``figures=False``: no
+    figure (and no matplotlib). The figures written go into ``result.report["figures"]``."""
     from eval.core.cloud_metrics import write_error_ply  # Open3D: only when writing
-    from eval.core.figures import ellipses_figure, error_maps_figure, histograms_figure
     from eval.core.uncertainty import write_uncertainty_files
-    from eval.run.figures import views_figure
 
     from synth.products.dataset import write_targets_ply
 
@@ -213,11 +216,22 @@ def write_outputs(tmp: str, result) -> None:
              for method, data in result.per_method.items() if "covariance" in data}
     if files:
         uncertainty["files"] = files
+    result.report["figures"] = (FIGURES + (("ellipses.png",) if files else ())) if figures else ()
+    if figures:
+        _write_figures(tmp, result, bool(files))
+
+
+def _write_figures(tmp: str, result, ellipses: bool) -> None:
+    """:data:`FIGURES` (and ``ellipses.png`` with ``ellipses``) of a run into ``tmp``: the views
+    here while the others are drawn in forked processes (:func:`_beside`)."""
+    from eval.core.figures import ellipses_figure, error_maps_figure, histograms_figure
+    from eval.run.figures import views_figure
+
     maps = os.path.join(tmp, "error_maps.png")
     histograms = os.path.join(tmp, "histograms.png")
     extra = ([(ellipses_figure, os.path.join(tmp, "ellipses.png"),
                {m: d for m, d in result.per_method.items() if "covariance" in d})]
-             if files else [])
+             if ellipses else [])
     with _beside((error_maps_figure, maps, result.per_method),
                  (histograms_figure, histograms, result.per_method), *extra):
         views_figure(os.path.join(tmp, "views.png"), result.inputs.left, result.inputs.right,
@@ -239,10 +253,24 @@ def _beside(*calls):
     from concurrent.futures import ProcessPoolExecutor
 
     with ProcessPoolExecutor(len(calls), mp_context=multiprocessing.get_context("fork")) as pool:
-        futures = [pool.submit(function, *args) for function, *args in calls]
+        # frozen, what the children inherit is not walked by their collections (each child's
+        # first full collection took 0.4-0.5 s of CPU over Mitsuba's, Open3D's and matplotlib's
+        # objects; the documented use of gc.freeze before a fork)
+        gc.freeze()
+        try:
+            futures = [pool.submit(function, *args) for function, *args in calls]
+        finally:
+            gc.unfreeze()
         yield
         for future in futures:
             future.result()
+
+
+def figure_names(report: dict) -> tuple:
+    """The figures a run wrote (``report["figures"]``; a report from before that key: all)."""
+    if report.get("figures") is not None:
+        return tuple(report["figures"])
+    return FIGURES + (("ellipses.png",) if (report.get("uncertainty") or {}).get("files") else ())
 
 
 def verdict_lines(report: dict) -> list:
@@ -265,7 +293,7 @@ def verdict_exit_code(report: dict, out: str) -> int:
     return EXIT_CHECK_FAILED
 
 
-__all__ = ["SUMMARY_COLUMNS", "budget_table", "report_markdown", "summary_table",
+__all__ = ["FIGURES", "SUMMARY_COLUMNS", "budget_table", "figure_names", "report_markdown", "summary_table",
            "uncertainty_lines", "verdict_exit_code",
            "verdict_lines",
            "write_outputs"]

@@ -100,7 +100,7 @@ def _saved_files(result, save) -> dict:
     inputs = result.inputs
     with tempfile.TemporaryDirectory(prefix="refstereo-cell-") as tmp:
         if "ply" in save or "figures" in save:
-            write_outputs(tmp, result)
+            write_outputs(tmp, result, figures="figures" in save)
         if "images" in save:
             scale = png16_scale(inputs.left, inputs.right)
             for view in ("left", "right"):

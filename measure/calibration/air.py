@@ -16,7 +16,6 @@ from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from ..geometry.camera import BROWN_CONRADY, FISHEYE, Camera
 from ..geometry.port import index_matched_port
@@ -263,6 +262,7 @@ def stereo_pose_outliers(R, T) -> dict:
     (module constants): the median pose is the component-wise median of ``T`` and the medoid
     of the rotations; returns ``{"deviation_mm" (P,), "deviation_deg" (P,),
     "threshold_mm", "threshold_deg", "outliers" [indices], "baseline_mm" (P,)}``."""
+    from scipy.spatial.transform import Rotation
     T = np.asarray(T, dtype=np.float64)
     angles = np.degrees(Rotation.from_matrix(
         np.einsum("pij,qkj->pqik", R, R).reshape(-1, 3, 3)).magnitude()).reshape(len(R), len(R))
@@ -296,6 +296,7 @@ def calibrate_in_air(board: Board, detections: Detections, size,
     others' (:func:`stereo_pose_outliers`) are left out of the stereo fit and named.
     ``stereo_intrinsics``: :data:`STEREO_INTRINSICS` (``refined``: no covariance, and not with
     the fisheye model)."""
+    from scipy.spatial.transform import Rotation
     if stereo_intrinsics not in STEREO_INTRINSICS:
         raise CalibrationError(f"stereo intrinsics {stereo_intrinsics!r}: choose from "
                                f"{', '.join(STEREO_INTRINSICS)}")

@@ -9,7 +9,6 @@ from functools import partial
 from types import SimpleNamespace
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from ..geometry.camera import Camera
 from ..geometry.dome import DomePair, DomePort
@@ -42,6 +41,7 @@ def dome_problem(rig: StereoRig, board: Board, detections: Detections, names, vi
     camera's frame). ``views``: the cameras whose corners enter and whose decentring
     ``dome_center`` holds (3 numbers each; ``(0,)``: one camera inside its dome,
     :func:`measure.calibration.housing.calibrate_camera_housing`)."""
+    from scipy.spatial.transform import Rotation
     views = tuple(views)
     table = parameters_of(views)
     starts, usable, detections = usable_poses(rig, board, detections)

@@ -8,7 +8,6 @@ from functools import partial
 from types import SimpleNamespace
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from ..geometry.camera import Camera
 from ..geometry.flat_pair import FlatPair
@@ -48,6 +47,7 @@ def housing_problem(rig: StereoRig, board: Board, detections: Detections, names,
     has its own port's ``distance``, ``normal`` and ``thickness`` (:func:`parameters_of`; the
     same flat-port residuals and Jacobian, each camera's rows touching its own port's
     columns); ``unpack`` then returns the pair."""
+    from scipy.spatial.transform import Rotation
     views = tuple(views)
     table = parameters_of(views, pair)
     starts, usable, detections = usable_poses(rig, board, detections)

@@ -18,7 +18,7 @@ Units: mm, pixels in the OpenCV convention; poses camera-to-reference ``X_ref = 
 from __future__ import annotations
 
 from collections import deque
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
@@ -27,7 +27,9 @@ from scipy.spatial.transform import Rotation
 
 from ..geometry.camera import Camera
 from ..stereo.multirig import MultiRig, default_names
-from .air import LENS_MODELS, MIN_POSES, CalibrationError, Detections, calibrate_camera
+from .air import (LENS_MODELS, MIN_POSES, CalibrationError, Detections, calibrate_camera,
+                  stereo_pose_outliers)
+from .outliers import outlier_threshold
 from .board import Board
 from .covariance import left_jacobian
 
@@ -40,7 +42,10 @@ class MultiAirCalibration:
     ``board_poses`` ``{pose: (R, t)}`` (board to the reference frame, mm); ``parameter_names``
     and ``covariance`` (:func:`camera_parameter_names`: every camera's pose but the first's and,
     with free intrinsics, every camera's intrinsics; the board poses marginalized),
-    ``s² (JᵀJ)⁻¹`` of the joint adjustment with ``s² = Σr² / (m − n)``."""
+    ``s² (JᵀJ)⁻¹`` of the joint adjustment with ``s² = Σr² / (m − n)``; ``rms_px_per``
+    ``{(pose, view): rms}`` and ``residuals`` ``{view: (pose, id, du, dv) rows}`` of the joint
+    adjustment; ``left_out`` ``{(pose, view): why}`` the views screened out before it
+    (:func:`screen_views`)."""
 
     rig: MultiRig
     rms_px: dict
@@ -49,6 +54,9 @@ class MultiAirCalibration:
     board_poses: dict
     parameter_names: tuple = ()
     covariance: np.ndarray | None = None
+    rms_px_per: dict = field(default_factory=dict)
+    residuals: dict = field(default_factory=dict)
+    left_out: dict = field(default_factory=dict)
 
     def sigmas(self) -> dict:
         """``{name: σ}`` of :attr:`parameter_names` (px, rad, mm)."""
@@ -119,18 +127,17 @@ def calibrate_rig_in_air(board: Board, detections: Detections, size, names=None,
     no pose with the others."""
     if intrinsics not in ("fixed", "free"):
         raise CalibrationError(f"intrinsics must be fixed or free, got {intrinsics!r}")
+    if lens_model == "fisheye":
+        raise CalibrationError("the joint adjustment of N cameras projects with OpenCV's "
+                               "Brown–Conrady model: the fisheye lens model is not fitted here")
     n_views = len(detections.ids[0]) if detections.n_poses else 0
     names = default_names(n_views) if names is None else tuple(names)
     corners = board.corners().astype(np.float64)
+    detections, left_out = screen_views(board, detections, size, names, lens_model)
     cams, own, rms, used = [], [], {}, {}
     for v, name in enumerate(names):
         found = detections.found(v)
-        if len(found) < MIN_POSES:
-            raise CalibrationError(f"{name}: the board was found in {len(found)} image(s); a "
-                                   f"calibration needs at least {MIN_POSES}")
-        obj = [corners[detections.ids[k][v]].astype(np.float32) for k in found]
-        img = [detections.pixels[k][v].astype(np.float32) for k in found]
-        out, model, _, _ = calibrate_camera(obj, img, size, lens_model)
+        out, model = _own_calibration(corners, detections, v, size, lens_model, name)
         n_dist = max(LENS_MODELS[model][1], 5)
         cams.append((np.asarray(out[1], float), np.asarray(out[2], float).ravel()[:n_dist]))
         own.append({k: _pose_matrix(r, t) for k, r, t in zip(found, out[3], out[4])})
@@ -193,10 +200,22 @@ def calibrate_rig_in_air(board: Board, detections: Detections, size, names=None,
         return np.concatenate(out)
 
     x0 = pack()
-    # dense forward differences: a few hundred parameters, each a pass over the corners
-    fit = least_squares(residuals, x0, method="lm", x_scale="jac", xtol=1e-12, ftol=1e-12)
+    # dense forward differences: a few hundred parameters, each a pass over the corners; at
+    # most JOINT_ITERATIONS Jacobians (a clean rig converges in a handful; without a limit a bad
+    # view kept the adjustment going for more than ten minutes)
+    fit = least_squares(residuals, x0, method="lm", x_scale="jac", xtol=1e-12, ftol=1e-12,
+                        max_nfev=JOINT_ITERATIONS * (x0.size + 1))
     r = fit.fun.reshape(-1, 2)
     joint = float(np.sqrt(np.mean(np.sum(r * r, axis=1))))
+    per, rows, offset = {}, {}, 0
+    for k, v in observations:
+        n = len(detections.ids[k][v])
+        block = r[offset:offset + n]
+        offset += n
+        per[(k, v)] = float(np.sqrt(np.mean(np.sum(block * block, axis=1))))
+        rows.setdefault(v, []).append(np.column_stack([np.full(n, k), detections.ids[k][v],
+                                                       block]))
+    rows = {v: np.vstack(b) for v, b in rows.items()}
     cameras = []
     for v in range(n_views):
         R, t, K, D = unpack_camera(fit.x, v)
@@ -216,7 +235,70 @@ def calibrate_rig_in_air(board: Board, detections: Detections, size, names=None,
     covariance = T @ full[np.ix_(keep, keep)] @ T.T
     return MultiAirCalibration(MultiRig(cameras, [None] * n_views, names), rms, joint, used,
                                poses, camera_parameter_names(names, n_intr - 4, free),
-                               0.5 * (covariance + covariance.T))
+                               0.5 * (covariance + covariance.T), per, rows, left_out)
 
 
-__all__ = ["MultiAirCalibration", "calibrate_rig_in_air", "camera_parameter_names"]
+#: Jacobians of the joint adjustment at most (:func:`calibrate_rig_in_air`).
+JOINT_ITERATIONS = 30
+
+
+def _own_calibration(corners, detections, v, size, lens_model, name):
+    """Camera ``v``'s own OpenCV calibration over the poses it found the board in: ``(out,
+    model)``; CalibrationError naming the camera when they are too few."""
+    found = detections.found(v)
+    if len(found) < MIN_POSES:
+        raise CalibrationError(f"{name}: the board was found in {len(found)} image(s); a "
+                               f"calibration needs at least {MIN_POSES}")
+    obj = [corners[detections.ids[k][v]].astype(np.float32) for k in found]
+    img = [detections.pixels[k][v].astype(np.float32) for k in found]
+    out, model, _, _ = calibrate_camera(obj, img, size, lens_model)
+    return out, model
+
+
+def screen_views(board: Board, detections: Detections, size, names, lens_model):
+    """``(detections, left_out {(pose, view): why})``: the views that do not belong left out
+    before the joint adjustment — by each camera's own calibration, a view whose RMS exceeds
+    :func:`measure.calibration.outliers.outlier_threshold` of that camera's views (a photo
+    turned, mirrored or of another board), again until none does; then, for each camera and the
+    first camera, a pose whose own relative pose disagrees with theirs
+    (:func:`measure.calibration.air.stereo_pose_outliers`: a photo of another moment), that
+    camera's view of it."""
+    corners = board.corners().astype(np.float64)
+    ids = [list(v) for v in detections.ids]
+    pixels = [list(v) for v in detections.pixels]
+    empty = (np.empty(0, int), np.empty((0, 2)))
+    left_out, own = {}, []
+    for v, name in enumerate(names):
+        while True:
+            current = Detections(ids, pixels)
+            out, _ = _own_calibration(corners, current, v, size, lens_model, name)
+            found = current.found(v)
+            errors = dict(zip(found, np.ravel(out[7])))
+            limit = outlier_threshold(errors.values())
+            bad = [k for k, e in errors.items() if e > limit]
+            if not bad:
+                break
+            for k in bad:
+                left_out[(k, v)] = (f"its RMS in {name}'s own calibration, {errors[k]:.3g} px, "
+                                    f"exceeds {limit:.3g} px")
+                ids[k][v], pixels[k][v] = empty
+        own.append({k: _pose_matrix(r, t) for k, r, t in zip(found, out[3], out[4])})
+    for v in range(1, len(names)):
+        shared = sorted(set(own[0]) & set(own[v]))
+        if len(shared) < MIN_POSES:
+            continue
+        R_k = np.array([own[v][k][0] @ own[0][k][0].T for k in shared])
+        T_k = np.array([own[v][k][1] - R @ own[0][k][1] for k, R in zip(shared, R_k)])
+        check = stereo_pose_outliers(R_k, T_k)
+        for i in check["outliers"]:
+            k = shared[i]
+            left_out[(k, v)] = (f"its pose relative to {names[0]} lies "
+                                f"{check['deviation_mm'][i]:.3g} mm and "
+                                f"{check['deviation_deg'][i]:.3g}° from the median (limits "
+                                f"{check['threshold_mm']:.3g} mm, {check['threshold_deg']:.3g}°)")
+            ids[k][v], pixels[k][v] = empty
+    return Detections(ids, pixels), left_out
+
+
+__all__ = ["JOINT_ITERATIONS", "MultiAirCalibration", "calibrate_rig_in_air",
+           "camera_parameter_names", "screen_views"]

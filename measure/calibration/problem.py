@@ -5,8 +5,6 @@ from __future__ import annotations
 
 import cv2
 import numpy as np
-from scipy.sparse import csr_matrix
-from scipy.spatial.transform import Rotation
 
 from ..stereo.triangulate import StereoRig
 from .air import MIN_POSES, CalibrationError, Detections
@@ -38,6 +36,7 @@ def observations(board: Board, detections: Detections, views=(0, 1)):
 def _start_poses(rig: StereoRig, board: Board, detections: Detections):
     """Per pose (R, t) board-to-reference from ``cv2.solvePnP`` on the left view (the right
     view, moved to the reference frame, where the left has no board)."""
+    from scipy.spatial.transform import Rotation
     corners = board.corners()
     poses = []
     for k in range(detections.n_poses):
@@ -114,6 +113,7 @@ def pose_left_jacobians(rotvecs) -> np.ndarray:
 def rows_jacobian(values, pose_idx, n_global: int, n_columns: int):
     """CSR Jacobian from per-row values ``(m, n_global + 6)``: the free housing numbers, then
     the row's pose's 6 columns. Non-finite values (corners with no image) become 0."""
+    from scipy.sparse import csr_matrix
     m, width = values.shape
     columns = np.concatenate([np.broadcast_to(np.arange(n_global), (m, n_global)),
                               n_global + 6 * pose_idx[:, None] + np.arange(6)], axis=1)

@@ -29,7 +29,6 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.optimize import least_squares
 
 from ..geometry.port import FlatPort
 from ..stereo.reprojection import (block_arrow_jacobian, reprojection_points, stereo_projections,
@@ -167,6 +166,7 @@ def self_calibrate(rig: StereoRig, uv_left, uv_right, parameters=("n_water",),
     triangulation with ``rig``); ``rig_covariance`` the calibration's covariance, propagated
     into σ (module docs). Raises ``ValueError`` for an unknown parameter or fewer
     targets than free numbers."""
+    from scipy.optimize import least_squares
     if not rig.port.self_calibrates:
         raise ValueError(f"self-calibration estimates the parameters of one flat port; "
                          f"{rig.port.rig_name} ({type(rig.port).__name__}: "

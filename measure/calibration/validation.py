@@ -33,7 +33,7 @@ from ..stereo.pose import estimate_pose
 from .air import CalibrationError, Detections, calibrate_camera
 
 #: Groups of photos held out in turn (fewer photos: one each).
-FOLDS = 10
+FOLDS = 5
 #: The housing predicts worse than the pinhole when the mean per-photo difference of the
 #: squared errors exceeds this many of its standard errors and the housing's prediction RMS
 #: exceeds the pinhole's by more than this fraction (a difference that matters).

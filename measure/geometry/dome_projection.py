@@ -43,7 +43,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import elementwise
 
 from ..batching import map_row_chunks
 from .camera import Camera
@@ -250,6 +249,8 @@ def _shooting_residual(phi1, cu, cv, p, u0, u1, u2, v0, v1, v2, *, camera_center
 def _solve_shooting(camera: Camera, dome: DomePort, plane: _Plane):
     """The root φ1 of :func:`_shooting_residual`, bracketed from the straight line's angle;
     returns the angles (φ1, φ2), converged and the iterations."""
+    from scipy.optimize import elementwise
+
     start = _straight_angles(plane, dome.radii)[0]
     args = (plane.cu, plane.cv, plane.p, *plane.u.T, *plane.v.T)
 

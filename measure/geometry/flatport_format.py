@@ -145,7 +145,26 @@ def parse_flatport_text(text: str) -> dict:
     return out
 
 
+def one_port_per_plane(ports) -> list:
+    """``ports`` with the flat ports that describe one plane — the same glass seen from several
+    cameras, each FLATPORT line in its own camera's frame, equal but for round-off (1e-12 in
+    the normal, 1e-9 mm) — made the one port they share (the first of them)."""
+    out = list(ports)
+    for k, port in enumerate(out):
+        if not isinstance(port, FlatPort):
+            continue
+        for earlier in out[:k]:
+            if (isinstance(earlier, FlatPort) and earlier.indices == port.indices
+                    and np.allclose(earlier.normal, port.normal, rtol=0, atol=1e-12)
+                    and abs(earlier.distance - port.distance) <= 1e-9
+                    and np.allclose(earlier.thicknesses, port.thicknesses, rtol=0, atol=1e-9)):
+                out[k] = earlier
+                break
+    return out
+
+
 __all__ = ["DOMEPORT_NAMES", "FLATPORT_NAMES", "METRES_PER_MM", "flatport_text", "from_domeport",
+           "one_port_per_plane",
            "from_flatport", "parse_flatport_text", "to_domeport", "to_flatport"]
 
 

@@ -28,7 +28,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import elementwise
 
 from ..batching import map_row_chunks
 from .camera import Camera
@@ -358,6 +357,8 @@ def _solve_fermat(problem: _PlaneProblem, start=None, max_iterations: int = 60):
 
 def _solve_snell(problem: _PlaneProblem):
     """Root of ``Σ h_i p / sqrt(n_i² − p²) = lateral`` for the invariant p = n_i sin θ_i."""
+    from scipy.optimize import elementwise
+
     n = problem.indices
     heights = problem.heights
     upper = n.min() * (1.0 - 1e-13)

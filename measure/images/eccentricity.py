@@ -55,11 +55,15 @@ def disk_basis(normals: np.ndarray):
 
 
 def outline_centroid_offsets(camera: Camera, port: FlatPort | None, centres, normals,
-                             radius_mm, n_points: int = OUTLINE_POINTS) -> np.ndarray:
+                             radius_mm, n_points: int = OUTLINE_POINTS,
+                             shading: bool = True) -> np.ndarray:
     """Eccentricity offsets ``(N, 2)`` px: the centroid of each disk's image (its outline's
     area centroid, moved by the flat port's transmittance gradient: module docs) minus the
     centre's pixel. ``centres`` ``(N, 3)`` mm, ``normals`` ``(N, 3)`` (any sign),
-    ``radius_mm`` scalar or ``(N,)``. NaN where the centre or any outline point has no image."""
+    ``radius_mm`` scalar or ``(N,)``. NaN where the centre or any outline point has no image.
+    ``shading`` False: the area centroid alone (a dot measured against the board's own
+    brightness round it, :mod:`measure.calibration.circles`, does not see the port's
+    transmittance)."""
     centres = np.asarray(centres, dtype=np.float64).reshape(-1, 3)
     normals = np.broadcast_to(np.asarray(normals, dtype=np.float64), centres.shape)
     radius = np.broadcast_to(np.asarray(radius_mm, dtype=np.float64), centres.shape[:1])
@@ -88,7 +92,7 @@ def outline_centroid_offsets(camera: Camera, port: FlatPort | None, centres, nor
                / (24.0 * area) - cx * cy)
     steps = np.array([[1.0, 0.0], [-1.0, 0.0], [0.0, 1.0], [0.0, -1.0]])
     around = (centre_px[:, None, :] + steps[None]).reshape(-1, 2)
-    transmittance = None if port is None else port.transmittance(camera, around)
+    transmittance = None if port is None or not shading else port.transmittance(camera, around)
     if transmittance is not None:
         log_t = np.log(transmittance).reshape(n, 4)
         gx, gy = 0.5 * (log_t[:, 0] - log_t[:, 1]), 0.5 * (log_t[:, 2] - log_t[:, 3])

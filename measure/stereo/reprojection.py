@@ -5,8 +5,6 @@ maximum-likelihood point for Gaussian pixel noise. Units mm, pixels in the OpenC
 from __future__ import annotations
 
 import numpy as np
-from scipy.optimize import least_squares
-from scipy.sparse import csr_matrix, lil_matrix
 
 from ..geometry.projection import project
 
@@ -48,6 +46,8 @@ def block_arrow_jacobian(d_points, d_parameters=None):
     touches the P shared parameter columns, which come first), as a CSR matrix
     ``(N·R) × (P + 3N)`` with the structure of :func:`point_block_sparsity`. Non-finite entries
     (rows of points with no image, whose residual is a constant) become 0."""
+    from scipy.sparse import csr_matrix
+
     n, rows, _ = d_points.shape
     n_params = 0 if d_parameters is None else d_parameters.shape[2]
     point_columns = n_params + 3 * np.arange(n)[:, None, None] + np.arange(3)
@@ -67,6 +67,8 @@ def block_arrow_jacobian(d_points, d_parameters=None):
 def point_block_sparsity(n: int, n_params: int = 0):
     """Jacobian structure of :func:`stereo_residuals` over ``n_params`` shared parameters (all
     rows) followed by the points' coordinates (each point's 3 columns touch its 4 rows)."""
+    from scipy.sparse import lil_matrix
+
     sparsity = lil_matrix((4 * n, n_params + 3 * n), dtype=np.int8)
     if n_params:
         sparsity[:, :n_params] = 1
@@ -83,6 +85,8 @@ def reprojection_points(rig, uv_left, uv_right, start):
     starting from ``start`` ``(N, 3)`` (e.g. the optical-path triangulation). Also returns the
     per-point reprojection RMS ``(N,)`` px and whether the fit converged. Rows with non-finite
     input or start stay NaN."""
+    from scipy.optimize import least_squares
+
     uv_left = np.asarray(uv_left, dtype=np.float64).reshape(-1, 2)
     uv_right = np.asarray(uv_right, dtype=np.float64).reshape(-1, 2)
     start = np.asarray(start, dtype=np.float64).reshape(-1, 3)

@@ -37,8 +37,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import brentq, minimize_scalar
-from scipy.stats import chi2
 
 from ..geometry.camera import Camera
 from ..geometry.projection import project
@@ -390,6 +388,7 @@ def residual_sigma(rig: StereoRig, uv_left, uv_right, points, pixel_sigma=0.0,
     likelihood of the residuals (``|r|² ~ (σ_i² + σ₀² w²) χ²₁``), no truth needed; the result
     also holds ``"flux_exponent"`` and ``"weights"`` ``(N,)`` (``w``, 1 where the flux is not a
     positive number; NaN for the rows without a residual)."""
+    from scipy.optimize import brentq, minimize_scalar  # loaded on first use, not with measure
     points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     observed = np.concatenate([np.asarray(uv_left, dtype=float).reshape(-1, 2),
                                np.asarray(uv_right, dtype=float).reshape(-1, 2)], axis=1)
@@ -524,7 +523,12 @@ def coverage_summary(errors, covariance, dof: int = 3) -> dict:
     if not ok.any():
         return {"n": 0, "coverage_95": None, "mahalanobis2_mean": None, "normalized": None}
     z = errors[ok] / np.sqrt(np.einsum("nii->ni", covariance[ok]))
-    threshold = CHI2_3_95 if dof == 3 else float(chi2.ppf(0.95, dof))
+    if dof == 3:
+        threshold = CHI2_3_95
+    else:
+        from scipy.stats import chi2
+
+        threshold = float(chi2.ppf(0.95, dof))
     return {"n": int(ok.sum()), "dof": int(dof),
             "coverage_95": float(np.mean(d2[ok] <= threshold)),
             "mahalanobis2_mean": float(np.mean(d2[ok])),

@@ -195,6 +195,12 @@ def main(args) -> int:
                              write_scene)
 
     check_file_output(args.out, "--out", may_replace=_is_our_scene)
+    from synth.scene.write import scene_edited
+
+    if scene_edited(args.out):
+        raise CLIError(f"--out {args.out} was edited since synth scene wrote it (its content "
+                       f"no longer matches the seal on its last line): move it away or give "
+                       f"another --out, so that your changes are not lost")
     from_file = _rig_from_file(args) if args.rig else None
     _refuse_inapplicable(args)
     if args.lighting is None and args.layout == "surface" and args.port == "none":
@@ -407,7 +413,7 @@ def _rig_from_file(args):
     try:
         rig = read_rig_file(args.rig)
     except DatasetError as exc:
-        raise CLIError(str(exc)) from None
+        raise CLIError(f"--rig {exc}") from None
     for name, camera in zip(rig.names, rig.cameras):
         fx, fy, skew = camera.K[0, 0], camera.K[1, 1], camera.K[0, 1]
         if abs(fx - fy) > 1e-9 * fx or skew != 0:

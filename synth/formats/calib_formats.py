@@ -127,6 +127,14 @@ def calib_dict(size, K1, D1, K2, D2, R, T, port: FlatPort, has_port: bool,
                        distortion_model=models[1])
     except ValueError as exc:
         raise CalibFormatError(f"{where}: {exc}") from None
+    centres = np.array([left.center, right.center])
+    if not has_port and np.any(port.view(0).water_side(centres)):
+        # in air the plane bends nothing and may lie anywhere (eval rectify's virtual cameras
+        # keep the real port's plane, behind them): 1 mm beyond the cameras, as "no port" is
+        from measure.geometry.port import index_matched_port
+
+        port = index_matched_port(port.normal, centres)
+        out["port"] = port
     out["rig"] = StereoRig(left, right, port)
     return out
 
@@ -565,7 +573,7 @@ def read_colmap_rig(path):
     """The rig of N cameras (:class:`measure.stereo.multirig.MultiRig`, the reference frame
     the rig configuration's reference camera's) of the COLMAP fork's ``cameras.txt`` and the
     ``rig_config.json`` beside it; CalibFormatError names the file and what is wrong."""
-    from measure.geometry.flatport_format import view_port_from_params
+    from measure.geometry.flatport_format import one_port_per_plane, view_port_from_params
     from measure.stereo.multirig import MultiRig
 
     cameras = _parse_cameras_txt(path)
@@ -585,9 +593,17 @@ def read_colmap_rig(path):
             raise CalibFormatError(f"{path}: camera {camera_id}: {exc}") from None
         built.append(camera)
     try:
-        return MultiRig(built, ports, [f"cam{k}" for k in range(len(built))])
+        return MultiRig(built, one_port_per_plane(ports), [f"cam{k}" for k in range(len(built))])
     except ValueError as exc:
         raise CalibFormatError(f"{path}: {exc}") from None
+
+
+def colmap_cameras(path) -> int | None:
+    """How many cameras the COLMAP ``cameras.txt`` ``path`` lists (None: not readable as one)."""
+    try:
+        return len(_parse_cameras_txt(path))
+    except (CalibFormatError, OSError, ValueError):
+        return None
 
 
 def _parse_cameras_txt(path) -> dict:
@@ -681,7 +697,8 @@ def read_colmap(path) -> dict:
     path = os.fspath(path)
     cameras = _parse_cameras_txt(path)
     if len(cameras) != 2:
-        raise CalibFormatError(f"{path}: {len(cameras)} cameras; a stereo rig has two")
+        raise CalibFormatError(f"{path}: a rig of {len(cameras)} camera(s), not a stereo pair: "
+                               f"this reads two cameras")
     ref, poses = _read_rig_config(os.path.join(os.path.dirname(path), COLMAP_RIG_NAME), cameras)
     other = next(c for c in cameras if c != ref)
     left, right = cameras[ref], cameras[other]
@@ -905,5 +922,5 @@ __all__ = ["CALIBMAR_NAME", "COLMAP_CAMERAS_NAME", "COLMAP_MODELS", "COLMAP_PIXE
            "PYCOLMAP_WARNING", "calib_dict", "calib_format", "calibmar_partner", "colmap_camera",
            "distortion_model_of",
            "opencv_camera", "read_calibmar", "read_colmap", "read_single_camera", "stereo_extrinsics",
-           "read_colmap_rig", "read_covariance_node", "write_calibmar",
+           "colmap_cameras", "read_colmap_rig", "read_covariance_node", "write_calibmar",
            "write_calibration_formats", "write_colmap", "write_colmap_rig", "write_single_camera"]

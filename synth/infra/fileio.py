@@ -12,7 +12,9 @@ Two tools:
   yields a staging directory beside the output (``.NAME.staging-PID-XXXX``), writes the marker
   into it and renames it into place; on an exception the staging directory is removed and the
   output is left as it was. Staging and trash directories left by a process that died (``kill -9``)
-  are removed by the next claim of the same output: their names carry the owner's PID.
+  are removed by the next claim of the same output: their names carry the owner's PID. Files of
+  an earlier output that changed since they were written (edited by hand) are copied to
+  ``NAME.edited/`` beside it before it is replaced, and a ``note:`` line says so.
   :meth:`OutputDir.damage` says whether every file written is still whole (a command that skips
   an up-to-date output skips only a whole one).
 * :func:`atomic_write_bytes` / :func:`atomic_write_text` — one file, written to a temporary file
@@ -107,7 +109,8 @@ def _walk_files(directory: str) -> set[str]:
 def directory_problem(path) -> str | None:
     """Why the output directory ``path`` cannot be created or written (``"exists and is not a
     directory"``, ``"cannot be created: … is not a directory / is not writable"``), or None:
-    the nearest existing ancestor must be a writable directory."""
+    the nearest existing ancestor must be a writable directory that takes a new folder (one is
+    made and removed there: root passes ``os.access`` on ``/proc``)."""
     if os.path.lexists(path) and not os.path.isdir(path):
         return "exists and is not a directory"
     probe = os.path.dirname(path)
@@ -117,6 +120,10 @@ def directory_problem(path) -> str | None:
         return f"cannot be created: {probe} is not a directory"
     if not os.access(probe, os.W_OK | os.X_OK):
         return f"cannot be created: {probe} is not writable"
+    try:  # access() says yes to root on a file system that takes no folder (/proc, read-only)
+        os.rmdir(tempfile.mkdtemp(prefix=".refractive-stereo-probe-", dir=probe))
+    except OSError as exc:
+        return f"cannot be created in {probe} ({exc.strerror or exc})"
     return None
 
 
@@ -236,6 +243,7 @@ class OutputDir:
             os.rmdir(path)
             os.rename(tmp, path)
             return
+        self._keep_edited()
         trash = tempfile.mkdtemp(prefix=f".{name}.trash-{os.getpid()}-", dir=parent)
         os.rename(path, os.path.join(trash, "old"))
         try:
@@ -245,6 +253,43 @@ class OutputDir:
             shutil.rmtree(trash, ignore_errors=True)
             raise
         shutil.rmtree(trash, ignore_errors=True)
+
+
+    def edited_files(self) -> list[str]:
+        """The files of this earlier output that changed since this command wrote them (their
+        size or SHA-256 differs from the marker's record; a missing file is not listed)."""
+        digests = (read_marker(self.path) or {}).get("sha256")
+        if not isinstance(digests, dict):
+            return []
+        out = []
+        for name, (size, digest) in sorted(digests.items()):
+            path = os.path.join(self.path, name)
+            if os.path.isfile(path) and (os.path.getsize(path) != size
+                                         or file_sha256(path) != digest):
+                out.append(name)
+        return out
+
+    def _keep_edited(self) -> None:
+        """Before an earlier output is replaced: its files that changed since they were
+        written (edited by hand: notes in a report, a tuned calibration) are copied to
+        ``NAME.edited/`` beside it (``NAME.edited-2/``, … when that exists) and a ``note:``
+        line says where — nothing the user wrote is lost."""
+        import sys
+
+        edited = self.edited_files()
+        if not edited:
+            return
+        parent, name = os.path.split(self.path)
+        k, keep = 1, os.path.join(parent, f"{name}.edited")
+        while os.path.lexists(keep):
+            k += 1
+            keep = os.path.join(parent, f"{name}.edited-{k}")
+        for rel in edited:
+            os.makedirs(os.path.dirname(os.path.join(keep, rel)), exist_ok=True)
+            shutil.copy2(os.path.join(self.path, rel), os.path.join(keep, rel))
+        print(f"note: {', '.join(edited)} in {self.display} changed since {self.command} wrote "
+              f"{'it' if len(edited) == 1 else 'them'}: kept in {keep} before the output was "
+              f"replaced", file=sys.stderr)
 
 
 def file_sha256(path) -> str:
@@ -378,6 +423,13 @@ def check_file_output(path, option: str, may_replace=None) -> str:
         raise OutputError(f"{option} {path}: directory {os.path.dirname(path) or '.'} does not exist")
     if not os.access(parent, os.W_OK | os.X_OK):
         raise OutputError(f"{option} {path}: directory {os.path.dirname(path) or '.'} is not writable")
+    try:  # access() says yes to root on a file system that takes no file (/proc, read-only)
+        handle, probe = tempfile.mkstemp(prefix=".refractive-stereo-probe-", dir=parent)
+        os.close(handle)
+        os.unlink(probe)
+    except OSError as exc:
+        raise OutputError(f"{option} {path}: no file can be written in "
+                          f"{os.path.dirname(path) or '.'} ({exc.strerror or exc})") from None
     if os.path.lexists(full) and may_replace is not None and not may_replace(full):
         raise OutputError(f"{option} {path} exists and is not a file this command wrote")
     return path

@@ -53,6 +53,7 @@ from synth.rendering.render import (check_render_request, png16_scale, render_vi
                           to_png16, write_png)
 from synth.scene import SceneSpec
 from synth.scene.write import port_shapes
+from synth.infra.images import imread
 
 FORMAT_VERSION = 2  # 2: the manifest holds every file's SHA-256 and its own
 COMMAND = "synth boards"
@@ -550,7 +551,7 @@ def read_boards(path) -> BoardImages:
         pair = []
         for view in names:
             file = os.path.join(path, f"{view}_{k:02d}.png")
-            img = cv2.imread(file, cv2.IMREAD_UNCHANGED)
+            img = imread(file, cv2.IMREAD_UNCHANGED)
             if img is None or img.ndim != 2:
                 raise DatasetError(f"{file}: missing or not a single-channel image")
             if img.shape[::-1] != tuple(calib["size"]):

@@ -80,6 +80,7 @@ from synth.infra.provenance import package_versions
 from synth.rendering.render import (pass_seed, png16_scale, render_stereo, srgb_preview, to_png16,
                           write_exr, write_png)
 from synth.scene import SceneError, SceneSpec, load_scene
+from synth.infra.images import imread
 
 FORMAT_VERSION = 4  # 2: targets.ply in binary doubles (was ASCII, 6 digits); 3: hashes;
 #                    4: cameras.json, colmap/, surfaces' PFM / PNG depth and .flo (synth.formats.exchange)
@@ -184,13 +185,40 @@ def read_calib(path) -> dict:
         raise DatasetError(f"{path}: not a valid calibration file ({message[:200]})") from None
 
 
+def not_a_file(path) -> str:
+    """What to say of a calibration ``path`` that is not a file: a folder (and the calibration
+    file inside it, when there is one) or nothing at all."""
+    if os.path.isdir(path):
+        inside = [n for n in ("calib.yaml", "camera.yaml") if os.path.isfile(os.path.join(path, n))]
+        return (f"{path}: a folder, not a calibration file"
+                + (f" (give {os.path.join(path, inside[0])})" if inside else ""))
+    return f"{path}: no such file"
+
+
+def other_calibration(fs, path) -> str | None:
+    """Why the OpenCV FileStorage ``fs`` of ``path`` is not a stereo pair's calibration when it
+    is another one: one camera's ``camera.yaml`` (``camera_matrix``) or a rig of N cameras
+    (``cameras``); None otherwise."""
+    if fs.getNode("K1").empty() and not fs.getNode("camera_matrix").empty():
+        return (f"{path}: a calibration of one camera (camera_matrix: eval calibrate of one "
+                f"camera's folder), not of a stereo pair (K1, K2, R, T): give the rig's calib.yaml")
+    cameras = fs.getNode("cameras")
+    if fs.getNode("K1").empty() and cameras.isSeq():
+        return (f"{path}: a calibration of {cameras.size()} cameras, not of a stereo pair "
+                f"(K1, K2, R, T): this reads two cameras")
+    return None
+
+
 def _read_calib(path) -> dict:
     if not os.path.isfile(path):
-        raise DatasetError(f"{path}: no such file")
+        raise DatasetError(not_a_file(path))
     fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_READ)
     if not fs.isOpened():
         raise DatasetError(f"{path}: cannot open as OpenCV FileStorage")
     try:
+        other = other_calibration(fs, path)
+        if other:
+            raise DatasetError(other)
         units = fs.getNode("units")
         if not units.empty() and not (units.isString() and units.string().strip() == "mm"):
             said = units.string() if units.isString() else units.real()
@@ -632,7 +660,7 @@ class Dataset:
 def read_png16(path) -> np.ndarray:
     if not os.path.isfile(path):
         raise DatasetError(f"{path}: no such file")
-    img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    img = imread(str(path), cv2.IMREAD_UNCHANGED)
     if img is None:
         raise DatasetError(f"{path}: cannot read image")
     if img.ndim != 2 or img.dtype != np.uint16:

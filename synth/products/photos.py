@@ -3,9 +3,10 @@ where they came from.
 
 :func:`export_photos` takes a ``synth boards`` folder (``left_PP.png`` / ``right_PP.png``) or a
 ``synth dataset`` (``left.png`` / ``right.png``) and writes ``OUT/left/NAME.EXT`` and
-``OUT/right/NAME.EXT`` (``NAME`` the pose number ``PP``, or ``pair`` for a dataset) — for a
-dataset of N > 2 cameras (``cam0/image.png``, …) ``OUT/cam0/image.EXT``,
-``OUT/cam1/image.EXT``, … — and nothing else: no calibration, no truth, no manifest — the
+``OUT/right/NAME.EXT`` (``NAME`` the pose number ``PP``, or ``pair`` for a dataset) — for
+boards of N > 2 cameras (``cam0_PP.png``, …) ``OUT/cam0/PP.EXT``, …, for a dataset of N > 2
+cameras (``cam0/image.png``, …) ``OUT/cam0/image.EXT``, ``OUT/cam1/image.EXT``, … — and nothing
+else: no calibration, no truth, no manifest — the
 layout ``eval calibrate`` and ``eval measure`` read from a user. Each 16-bit linear image is
 divided by 65535 (its folder's one exposure, the brightest rendered pixel at white),
 sRGB-encoded (:func:`synth.rendering.render.srgb_preview`) and written as JPEG (``quality``,
@@ -19,6 +20,7 @@ import os
 import re
 
 import numpy as np
+from synth.infra.images import imread
 
 PHOTO_FORMATS = ("jpg", "png")
 
@@ -44,10 +46,10 @@ def rendered_views(src) -> tuple[tuple[str, ...], list[tuple]]:
 
     views = ("left", "right")
     if command == "synth boards":
+        views = _board_views(src)
         names = sorted(m.group(1) for f in os.listdir(src)
-                       if (m := re.fullmatch(r"left_(\d+)\.png", f)))
-        pairs = [(n, os.path.join(src, f"left_{n}.png"), os.path.join(src, f"right_{n}.png"))
-                 for n in names]
+                       if (m := re.fullmatch(rf"{views[0]}_(\d+)\.png", f)))
+        pairs = [(n, *(os.path.join(src, f"{view}_{n}.png") for view in views)) for n in names]
     elif is_views_dataset(src):
         from synth.products.dataset import DatasetError
         from synth.products.views_dataset import read_views_dataset
@@ -62,8 +64,19 @@ def rendered_views(src) -> tuple[tuple[str, ...], list[tuple]]:
         pairs = [("pair", os.path.join(src, "left.png"), os.path.join(src, "right.png"))]
     missing = [p for pair in pairs for p in pair[1:] if not os.path.isfile(p)]
     if not pairs or missing:
-        raise PhotoExportError(f"{src}: no rendered image {missing[0] if missing else 'left_PP.png'}")
+        raise PhotoExportError(f"{src}: no rendered image "
+                               f"{missing[0] if missing else views[0] + '_PP.png'}")
     return tuple(views), pairs
+
+
+def _board_views(src) -> tuple[str, ...]:
+    """The views of a ``synth boards`` folder: ``left``, ``right``, or ``cam0``, ``cam1``, …
+    of a scene of N cameras (``cam0_PP.png``, …)."""
+    cameras = sorted({int(m.group(1)) for f in os.listdir(src)
+                      if (m := re.fullmatch(r"cam(\d+)_\d+\.png", f))})
+    if cameras and not any(re.fullmatch(r"left_\d+\.png", f) for f in os.listdir(src)):
+        return tuple(f"cam{k}" for k in range(max(cameras) + 1))
+    return ("left", "right")
 
 
 def to_photo(png16: np.ndarray) -> np.ndarray:
@@ -92,7 +105,7 @@ def export_views(src, out_dir, fmt: str = "jpg", quality: int = 90) -> tuple[tup
         os.makedirs(os.path.join(out_dir, view), exist_ok=True)
     for name, *files in pairs:
         for view, file in zip(views, files):
-            image = cv2.imread(file, cv2.IMREAD_UNCHANGED)
+            image = imread(file, cv2.IMREAD_UNCHANGED)
             if image is None or image.dtype != np.uint16 or image.ndim != 2:
                 raise PhotoExportError(f"{file}: not a 16-bit grey rendered image")
             target = os.path.join(out_dir, view, f"{name}.{fmt}")

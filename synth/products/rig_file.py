@@ -33,7 +33,9 @@ import numpy as np
 from measure import Camera, FlatPort
 from measure.geometry.dome import DomePort
 from measure.stereo.multirig import MultiRig
-from synth.products.dataset import DatasetError, read_calib, write_calib
+from synth.formats.calib_formats import (CalibFormatError, calib_format, colmap_cameras,
+                                         read_colmap_rig)
+from synth.products.dataset import DatasetError, not_a_file, read_calib, write_calib
 
 #: The entries of ``ports`` that are not maps.
 SHARED, NONE = "shared", "none"
@@ -174,13 +176,34 @@ def _is_rig_file(path) -> bool:
         fs.release()
 
 
+def _is_one_camera_file(path) -> bool:
+    """Whether ``path`` is one camera's ``camera.yaml`` (a ``camera_matrix``, no ``K1``)."""
+    try:
+        fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_READ)
+    except (cv2.error, SystemError):
+        return False
+    try:
+        return (fs.isOpened() and not fs.getNode("camera_matrix").empty()
+                and fs.getNode("K1").empty())
+    finally:
+        fs.release()
+
+
 def read_rig_file(path) -> MultiRig:
     """A rig of N cameras from ``calib.yaml`` (module docs), or from any two-camera calibration
     :func:`synth.products.dataset.read_calib` reads (as a rig of two: ``left``, ``right``).
     :class:`DatasetError` (one line naming the file) for anything unusable."""
     path = os.fspath(path)
     if not os.path.isfile(path):
-        raise DatasetError(f"{path}: no such file")
+        raise DatasetError(not_a_file(path))
+    if _is_one_camera_file(path):
+        raise DatasetError(f"{path}: a calibration of one camera (camera_matrix: eval calibrate "
+                           f"of one camera's folder), not of a rig: give the rig's calib.yaml")
+    if calib_format(path) == "colmap" and colmap_cameras(path) != 2:
+        try:  # the COLMAP fork's cameras.txt of N cameras, rig_config.json beside it
+            return read_colmap_rig(path)
+        except CalibFormatError as exc:
+            raise DatasetError(str(exc)) from None
     if not _is_rig_file(path):
         calib = read_calib(path)
         return MultiRig.from_stereo(calib["rig"])

@@ -31,6 +31,7 @@ import numpy as np
 from measure import Camera, FlatPort
 from measure.geometry.projection import project
 from measure.geometry.refraction import trace_through_port
+from synth.infra.images import imread
 
 #: A point seen by the other camera is the first hit of that camera's ray within this, mm
 #: (float32 hit search, float64 refinement: agreement is ~1e-9 mm; occluders are mm away).
@@ -196,7 +197,7 @@ def read_truth_maps(directory: str, view: str, size) -> TruthMaps:
             except ValueError as exc:
                 raise ValueError(f"{path}: not a NumPy array file ({exc})") from None
         else:
-            value = cv2.imread(path, cv2.IMREAD_UNCHANGED)
+            value = imread(path, cv2.IMREAD_UNCHANGED)
             if value is None:
                 raise ValueError(f"{path}: cannot read the mask")
             value = value > 0

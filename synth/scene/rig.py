@@ -10,7 +10,6 @@ left image height. Experiments, tests and scene files all take their numbers fro
 from __future__ import annotations
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from measure import Camera, FlatPort, StereoRig
 
@@ -25,12 +24,14 @@ PAPER_INDICES = (1.0, 1.54, 1.33)  # air, glass, water
 
 def rotation_y(angle_rad: float) -> np.ndarray:
     """Rotation matrix about the y axis (right-handed, OpenCV axes)."""
+    from scipy.spatial.transform import Rotation
     return Rotation.from_rotvec([0.0, angle_rad, 0.0]).as_matrix()
 
 
 def tilted_port_normal(about_x_deg: float, about_y_deg: float) -> np.ndarray:
     """The unit normal of a port tilted from the left optical axis (0, 0, 1) by ``about_y_deg``
     about y, then ``about_x_deg`` about x (degrees; ``python -m synth scene --port-tilt``)."""
+    from scipy.spatial.transform import Rotation
     ax, ay = np.radians([about_x_deg, about_y_deg])
     return Rotation.from_rotvec([ax, 0.0, 0.0]).apply(
         Rotation.from_rotvec([0.0, ay, 0.0]).apply([0.0, 0.0, 1.0]))
@@ -89,6 +90,7 @@ def ring_cameras(count: int, size=PAPER_IMAGE_SIZE, focal_px=PAPER_FOCAL_PX, dis
     centre's axis (about the circle's tangent), so that all look in at the targets ahead."""
     if count < 3:
         raise ValueError(f"a ring holds a centre camera and at least two round it, got {count}")
+    from scipy.spatial.transform import Rotation
     K = paper_intrinsics(size, focal_px)
     cameras = [Camera(K, size, dist=dist)]
     for k in range(1, count):

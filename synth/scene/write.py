@@ -583,9 +583,40 @@ def _perpendicular(n) -> np.ndarray:
     return v / np.linalg.norm(v)
 
 
+#: The last line of a scene file ``write_scene`` wrote: the SHA-256 of the lines above it
+#: (:func:`scene_edited`).
+SEAL_PREFIX = "<!-- content sha256 "
+
+
+def seal(text: str) -> str:
+    """``text`` (ending in a newline) with :data:`SEAL_PREFIX` and its SHA-256 appended."""
+    import hashlib
+
+    text = text if text.endswith("\n") else text + "\n"
+    return f"{text}{SEAL_PREFIX}{hashlib.sha256(text.encode('utf-8')).hexdigest()} -->\n"
+
+
+def scene_edited(path) -> bool:
+    """Whether a scene file ``write_scene`` wrote was changed since (its content no longer
+    matches its seal); False for a file without a seal (written before the seal existed)."""
+    import hashlib
+
+    try:
+        with open(path, encoding="utf-8", errors="replace") as fh:
+            text = fh.read()
+    except OSError:
+        return False
+    head, _, last = text.rstrip("\n").rpartition("\n")
+    if not last.startswith(SEAL_PREFIX):
+        return False
+    digest = last[len(SEAL_PREFIX):].split()[0]
+    return hashlib.sha256((head + "\n").encode("utf-8")).hexdigest() != digest
+
+
 def write_scene(path, cameras, port, targets, target_radius, **kwargs) -> str:
-    """Write :func:`scene_xml` atomically (temporary file + rename) to ``path``; returns path."""
-    text = scene_xml(cameras, port, targets, target_radius, **kwargs)
+    """Write :func:`scene_xml` atomically (temporary file + rename) to ``path``, sealed
+    (:func:`seal`); returns path."""
+    text = seal(scene_xml(cameras, port, targets, target_radius, **kwargs))
     path = os.fspath(path)
     directory = os.path.dirname(os.path.abspath(path))
     os.makedirs(directory, exist_ok=True)

@@ -41,6 +41,30 @@ def test_writes_the_rectified_pair_maps_calibration_and_error_map(tmp_path, caps
     assert cv2.imread(str(out / "left_rectified.png"), cv2.IMREAD_UNCHANGED).dtype == np.uint8
 
 
+def test_the_rectified_calibration_is_read_by_the_commands(tmp_path):
+    """calib_rectified.yaml (no port; the real port's plane kept, behind the virtual cameras)
+    is read as the pinhole pair it is (issue 53: eval measure refused it, "left camera centre
+    lies on the water side"): a point projected with OpenCV's pinhole model through its two
+    cameras is triangulated back to itself."""
+    from measure import triangulate
+    from synth.products.dataset import read_calib
+
+    calib, (left, right) = _inputs(tmp_path)
+    out = tmp_path / "out"
+    assert main(["rectify", "--calib", calib, "--distance", "1000", left, right, "--out", str(out),
+                 "--no-progress"]) == 0
+    read = read_calib(str(out / "calib_rectified.yaml"))
+    assert not read["has_port"]
+    point = np.array([[30.0, -20.0, 1000.0]])
+    uv = []
+    for K, D, R, T in ((read["K1"], read["D1"], np.eye(3), np.zeros(3)),
+                       (read["K2"], read["D2"], read["R"], read["T"].ravel())):
+        pixels, _ = cv2.projectPoints(point, cv2.Rodrigues(R)[0], T, K, D)
+        uv.append(pixels.reshape(1, 2))
+    result = triangulate(read["rig"], uv[0], uv[1], "optical_path")
+    np.testing.assert_allclose(result.points, point, atol=1e-6)
+
+
 def test_refusals_are_one_line_and_write_nothing(tmp_path, capsys):
     calib, (left, right) = _inputs(tmp_path)
     air_dir = tmp_path / "air"

@@ -159,6 +159,21 @@ def test_association_is_one_to_one_and_gated():
     assert default_gate_mm(truth) == 20.0
 
 
+def test_duplicates_are_said_to_be_duplicates_not_far():
+    """A point on a target a nearer point holds is a duplicate (the same match written twice),
+    not a point farther than the gate from every target (issue 53: "not within 40 mm")."""
+    from eval.core.scoring import score_points, unassociated_text
+
+    truth = np.array([[0.0, 0, 1000], [40, 0, 1000], [80, 0, 1000]])
+    points = np.array([[0.3, 0, 1000], [0.1, 0, 1000], [41, 0, 1000], [60, 0, 1000],
+                       [41, 0, 1000]])
+    association = score_points(points, truth, np.ones(3, bool), 5.0, 0)[2]
+    assert association["unassociated"] == 3 and association["duplicates"] == 2
+    assert unassociated_text(association) == ("3 not: 2 duplicate(s) of a target a nearer "
+                                              "point holds, 1 farther than 5 mm from every "
+                                              "target")
+
+
 def _fails(capsys, args, fragment):
     assert main(args) == 2
     err = capsys.readouterr().err.strip().splitlines()
@@ -224,17 +239,22 @@ def _theirs(run):
 ])
 def test_an_implausible_submission_gets_one_warning_naming_the_likely_cause(
         scored_run, tmp_path, capsys, name, change, cause):
-    """Scored as given (exit 0), with one warning line on stderr and in the report (issue 22:
-    a cloud in metres scored '0 of 69 points within 40 mm' with no hint, a y-flipped one
-    scored like the right one, an 80 mm offset one like a good one with 8 points fewer)."""
+    """Scored as given, with one warning line on stderr and in the report (issue 22: a cloud
+    in metres scored '0 of 69 points within 40 mm' with no hint, a y-flipped one scored like
+    the right one, an 80 mm offset one like a good one with 8 points fewer); exit 1 with a
+    FAIL line exactly when none of the points lies within the gate of a target (issue 53:
+    that was exit 0)."""
     data, run, _ = scored_run
     theirs = _submit(tmp_path / f"{name}.ply", change(_theirs(run)))
     out = tmp_path / "score"
-    assert main(["score", str(data), "--points", theirs, "--out", str(out)]) == 0
-    warnings = [line for line in capsys.readouterr().err.splitlines()
-                if line.startswith("warning:")]
+    code = main(["score", str(data), "--points", theirs, "--out", str(out)])
+    err = capsys.readouterr().err
+    warnings = [line for line in err.splitlines() if line.startswith("warning:")]
     assert len(warnings) == 1 and re.search(cause, warnings[0]), warnings
     report = json.loads((out / "report.json").read_text())
+    nothing = report["association"]["associated"] == 0
+    assert code == (1 if nothing else 0) and ("FAIL: none of the" in err) == nothing
+    assert nothing or name != "metres"
     assert len(report["warnings"]) == 1 and re.search(cause, report["warnings"][0])
     assert re.search(cause, (out / "report.md").read_text())
 
@@ -246,10 +266,15 @@ def test_a_plausible_submission_gets_no_warning(scored_run, tmp_path, capsys, me
     mm: a wrong model is not a wrong frame), are scored without a warning."""
     data, run, _ = scored_run
     out = tmp_path / "score"
-    assert main(["score", str(data), "--points", str(run / f"points_{method}.ply"), "--out",
-                 str(out)]) == 0
+    code = main(["score", str(data), "--points", str(run / f"points_{method}.ply"), "--out",
+                 str(out)])
     assert "warning:" not in capsys.readouterr().err
-    assert json.loads((out / "report.json").read_text())["warnings"] == []
+    report = json.loads((out / "report.json").read_text())
+    assert report["warnings"] == []
+    # regular triangulation, which ignores the port, misses every target by more than the
+    # gate at this scene's distance: nothing scored is exit 1 (the report says it all)
+    assert code == (1 if report["association"]["associated"] == 0 else 0)
+    assert method != "optical_path" or code == 0
 
 
 @pytest.mark.slow
@@ -318,3 +343,39 @@ def test_a_suggested_option_value_reads_as_typed():
 
     text = nothing_matched("p", {"left": 3, "right": 4}, TargetOptions(gate_mm=1e9))
     assert "--gate-mm 1e9" in text and "e+" not in text
+
+
+@pytest.mark.slow
+def test_dense_points_of_eval_measure_are_scored_against_the_surface(tmp_path, capsys):
+    """``eval measure --dense``'s points.ply scored by ``eval score`` outside a suite (issue
+    53: "a surface dataset …; eval score scores target datasets"): the point-to-mesh RMS is the
+    RMS distance of the points from the plane the dataset's mesh lies in (computed here from
+    the mesh's vertices); the same points in metres are exit 1 with the hint."""
+    import open3d as o3d
+
+    from synth.__main__ import main as synth_main
+    from synth.scene.surfaces import read_ply
+
+    data = tmp_path / "plane"
+    assert synth_main(["dataset", "scenes/speckle_plane.xml", "-D", "width=320", "-D",
+                       "height=268", "--spp", "16", "--out", str(data), "--no-progress"]) == 0
+    measured = tmp_path / "measured"
+    assert main(["measure", "--calib", str(data / "calib.yaml"), str(data / "left.png"),
+                 str(data / "right.png"), "--dense", "--depth-range", "900,1100", "--out",
+                 str(measured), "--no-progress"]) == 0
+    out = tmp_path / "score"
+    assert main(["score", str(data), "--points", str(measured / "points.ply"), "--out",
+                 str(out)]) == 0
+    scores = json.loads((out / "report.json").read_text())["scores"]
+    vertices, _ = read_ply(str(data / "surface.ply"))
+    centre = vertices.mean(axis=0)
+    normal = np.linalg.svd(vertices - centre)[2][-1]
+    points = np.asarray(o3d.io.read_point_cloud(str(measured / "points.ply")).points)
+    rms = float(np.sqrt(np.mean(((points - centre) @ normal) ** 2)))
+    assert scores["p2m_rms_mm"] == pytest.approx(rms, rel=1e-4) and rms < 5.0
+    np.savetxt(tmp_path / "metres.xyz", points / 1000.0)
+    capsys.readouterr()
+    assert main(["score", str(data), "--points", str(tmp_path / "metres.xyz"), "--out",
+                 str(tmp_path / "m")]) == 1
+    err = capsys.readouterr().err
+    assert "looks like metres" in err and "FAIL: none of the" in err, err

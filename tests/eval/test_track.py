@@ -88,19 +88,64 @@ def test_refusals_are_one_line(tmp_path, capsys):
 
 
 @pytest.mark.slow
-def test_a_frame_that_loses_its_markers_is_lost_not_posed(tmp_path):
+def test_a_jump_is_locked_on_again_not_posed_from_the_few_left(tmp_path):
     """A jump of 1 m between two frames: the last pose predicts the markers far from where
-    they are, few detections associate, and the frame is lost (no pose, exit 1) rather than
-    posed from the few left (a pose 1.28 m off passed as OK before)."""
+    they are and few detections associate. The frame is not posed from the few left (a pose
+    1.28 m off passed as OK once); the object is found again with no guess and the frame
+    tracked (it was LOST, exit 1: the lock-on never ran again)."""
     seq = tmp_path / "jump"
     assert synth_main(["sequence", *SEQUENCE[:5], "--approach", "2000,1000", "--frames", "2",
                        "--spp", "4", "--marker-radius-mm", "15", "--no-progress",
                        "--out", str(seq)]) == 0
     out = tmp_path / "track"
-    assert eval_main(["track", str(seq), "--out", str(out), "--no-progress"]) == 1
-    frames = json.loads((out / "report.json").read_text())["frames"]
-    assert frames[0]["reason"] == "OK" and frames[1]["reason"] == "LOST"
-    assert frames[1]["markers_associated"] < 0.5 * frames[1]["markers_expected"]
+    assert eval_main(["track", str(seq), "--out", str(out), "--no-progress",
+                      "--no-absorbed"]) == 0
+    report = json.loads((out / "report.json").read_text())
+    frames = report["frames"]
+    assert [f["reason"] for f in frames] == ["OK", "OK"]
+    assert frames[0]["locked_on"] and frames[1]["locked_on"]  # the lock-on ran again
+    assert [a["frame"] for a in report["lock_on"]["again"]] == [1]
+    assert frames[1]["markers_associated"] == frames[1]["markers_expected"] >= 20
+    assert frames[1]["position_error_mm"] <= 0.5, frames[1]
+
+
+@pytest.mark.slow
+def test_a_black_frame_loses_one_frame_not_the_rest(tmp_path, capsys):
+    """A frame made black after ``synth sequence`` wrote it (both views), in a coarse approach
+    (2000 → 1000 mm in 4 frames, 333 mm a frame): that frame is LOST and the lock-on finds the
+    object again in the next one, so 3 of 4 are tracked (1 of 4 before: every later frame was
+    predicted from frame 0's pose). The changed frames are named, not read as untouched; a
+    changed truth file is refused."""
+    import cv2
+
+    seq = tmp_path / "black"
+    assert synth_main(["sequence", *SEQUENCE[:5], "--approach", "2000,1000", "--frames", "4",
+                       "--spp", "4", "--marker-radius-mm", "15", "--no-progress",
+                       "--out", str(seq)]) == 0
+    for view in ("left", "right"):
+        path = str(seq / "frames" / f"0001_{view}.png")
+        cv2.imwrite(path, np.zeros_like(cv2.imread(path, cv2.IMREAD_ANYDEPTH)))
+    capsys.readouterr()
+    out = tmp_path / "track"
+    assert eval_main(["track", str(seq), "--out", str(out), "--no-progress",
+                      "--no-absorbed"]) == 1
+    captured = capsys.readouterr()
+    notes = [line for line in captured.err.splitlines() if line.startswith("note:")]
+    assert len(notes) == 1 and "frames/0001_left.png" in notes[0], captured.err
+    assert "tracked 3 of 4" in captured.out, captured.out
+    report = json.loads((out / "report.json").read_text())
+    assert report["changed_since_written"] == ["frames/0001_left.png", "frames/0001_right.png"]
+    frames = report["frames"]
+    assert [f["reason"] for f in frames] == ["OK", "LOST", "OK", "OK"]
+    assert frames[2]["locked_on"] and [a["frame"] for a in report["lock_on"]["again"]] == [2, 3]
+    for frame in (frames[0], *frames[2:]):
+        assert frame["position_error_mm"] <= 0.5, frame
+    poses = seq / "poses.csv"
+    poses.write_text(poses.read_text().replace("2000.0", "2001.0", 1))
+    assert eval_main(["track", str(seq), "--out", str(tmp_path / "no"), "--no-progress"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "poses.csv: changed since synth sequence wrote it" in err[0], err
+    assert not (tmp_path / "no").exists()
 
 
 def test_sequences_that_cannot_be_tracked_are_refused(tmp_path, capsys):

@@ -217,11 +217,21 @@ def test_bad_photo_folders(drawn, tmp_path, capsys):
             "30", "--out", str(out)], "--marker-mm does not apply", capsys)
     # the wrong number of squares: the photos say which board they show
     _fails(["calibrate", src, "--air", "--squares", "8x7", "--square-mm", "60", "--out",
-            str(out)], "the photos show a 7x6 chessboard, not 8x7", capsys)
+            str(out)], "the photos show a chessboard of 7x6 squares (6x5 inner corners), not "
+           "8x7 squares", capsys)
+    # the squares given as inner corners (issue 53: it named an 8x7 board only): both counts
+    _fails(["calibrate", src, "--air", "--inner-corners", "7x6", "--square-mm", "60", "--out",
+            str(out)], "not 8x7 squares (7x6 inner corners; found in", capsys)
+    _fails(["calibrate", src, "--air", "--inner-corners", "7x6", "--square-mm", "60", "--out",
+            str(out)], "that is --inner-corners 6x5)", capsys)
     # one square fewer each way: OpenCV finds the smaller pattern inside the board, a different
     # part of it in each photo; refused, naming the board the photos show
     _fails(["calibrate", src, "--air", "--squares", "6x5", "--square-mm", "60", "--out",
             str(out)], "the photos show a chessboard of at least 7x6 squares, not 6x5", capsys)
+    # the same for one camera's folder (issue 53: an internal error, a None RMS formatted)
+    _fails(["calibrate", os.path.join(src, "left"), "--air", "--squares", "6x5", "--square-mm",
+            "60", "--out", str(out)], "the photos show a chessboard of at least 7x6 squares, "
+           "not 6x5", capsys)
     # unpaired, unreadable, sizes that differ
     lonely = tmp_path / "lonely"
     _write_photos(lonely, drawn["rig"], drawn["poses"][:4])
@@ -436,3 +446,17 @@ def test_absorbed_model_refuses_the_port_models_options(tmp_path, capsys):
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and err[0].startswith("error:") and fragment in err[0], err
         assert not out.exists()
+
+
+def test_the_rational_model_is_not_said_to_look_underwater():
+    """k1 ≥ 0.1 on every camera is what a flat port does to a Brown–Conrady lens; the rational
+    model divides k1 by its own polynomial (k4–k6), so its k1 alone says nothing (issue 53:
+    --lens rational on in-air photos warned they looked underwater)."""
+    from eval.calibrate.photos import stereo_rms_failure, underwater_hint
+
+    cameras = {"left": {"k1": {"estimate": 0.31}}, "right": {"k1": {"estimate": 0.29}}}
+    assert "flat port" in underwater_hint(cameras, {"left": "k3", "right": "k3"})
+    assert underwater_hint(cameras, {"left": "rational", "right": "rational"}) is None
+    # a stereo fit 1e10 × the cameras' own RMS diverged; 10 × is photos that are no rigid pair
+    assert "diverged" in stereo_rms_failure({"left": 0.16, "right": 0.17}, 1.4e10, "photos")[0]
+    assert "do not fit one rigid pair" in stereo_rms_failure({"left": 0.16}, 1.6, "photos")[0]

@@ -31,18 +31,18 @@ FLAT = FlatPort((np.sin(TILT), 0.0, np.cos(TILT)), 100.0, (5.0,), INDICES)
 BOARD_ARGS = ["--squares", "7x6", "--square-mm", "60"]
 
 
-def _draw(camera, port, pose, rng):
+def _draw(camera, port, pose, rng, rig=None, view=0):
     """The board at ``pose`` as an 8-bit sRGB photo of ``camera`` behind ``port`` (a rig port,
-    its view 0; None: in air)."""
+    its view 0; None: in air) — or of view ``view`` of ``rig`` (``camera`` its camera)."""
     w, h = camera.size
     j, i = np.meshgrid(np.arange(SUPER * w), np.arange(SUPER * h))
     uv = np.column_stack([(j.ravel() - (SUPER - 1) / 2) / SUPER,
                           (i.ravel() - (SUPER - 1) / 2) / SUPER])
     rays = camera.rays(uv)
-    if port is None:
+    if rig is None and port is None:
         origins = np.broadcast_to(camera.center, rays.shape)
     else:
-        water = StereoRig(camera, camera, port).trace(0, rays)
+        water = (rig or StereoRig(camera, camera, port)).trace(view, rays)
         origins, rays = water.origins, water.directions
     normal = pose.R[:, 2]
     s = ((pose.t - origins) @ normal) / (rays @ normal)
@@ -185,6 +185,17 @@ def test_the_water_of_a_tank_from_photos_of_a_board_beyond_it(drawn, tmp_path, c
     found = np.column_stack([rows["tx_mm"], rows["ty_mm"], rows["tz_mm"]])
     assert np.max(np.linalg.norm(found - truth[rows["photo"]], axis=1)) < 5.0
     assert "port" in (out / "camera.yaml").read_text()
+    # the first glass freed too: the photos cannot tell it from the water (issue 53: it ran
+    # to 0 mm and the run said OK); exit 1 naming it, or a fit that determines it
+    capsys.readouterr()
+    code = _run(["interface", str(folder), "--intrinsics", str(drawn["camera_yaml"]),
+                 *BOARD_ARGS, "--media", media, "--free", "normal,thickness:water,thickness:0",
+                 "--out", str(tmp_path / "glass")])
+    glass = json.loads((tmp_path / "glass" / "report.json").read_text())
+    at_bound = glass["estimates"].get("thickness:0", {}).get("estimate", 1.0) <= 1e-6
+    assert code == (1 if at_bound or glass["failures"] else 0)
+    assert not at_bound or any("ran into its bound" in f for f in glass["failures"])
+    assert ("OK" in capsys.readouterr().out.splitlines()[0]) == (code == 0)
     # the distance of a tank with air on both sides: refused, with the reason
     assert _run(["interface", str(folder), "--intrinsics", str(drawn["camera_yaml"]),
                  *BOARD_ARGS, "--media", media, "--free", "normal,distance",

@@ -31,12 +31,16 @@ def capture(tmp_path_factory):
     return root, spec
 
 
-def test_three_photos_give_the_true_targets(capture, tmp_path):
+def test_three_photos_give_the_true_targets(capture, tmp_path, capsys):
     root, spec = capture
     photos = [str(root / "img" / f"cam{k}.png") for k in range(3)]
     out = tmp_path / "m"
     assert eval_main(["measure", "--calib", str(root / "calib.yaml"), *photos, "--out",
-                      str(out), "--no-progress"]) == 0
+                      str(out), "--no-progress", "--json"]) == 0
+    import json
+
+    printed = json.loads(capsys.readouterr().out)  # --json: the report alone on stdout
+    assert printed["triangulated"] > 0 and printed["cameras"] == ["cam0", "cam1", "cam2"]
     data = np.genfromtxt(out / "points.csv", delimiter=",", names=True)
     points = np.column_stack([data["x_mm"], data["y_mm"], data["z_mm"]])
     rig = spec.multirig
@@ -70,3 +74,24 @@ def test_bad_captures_are_refused(capture, tmp_path, capsys):
     swapped = [photos[2], photos[1], photos[0]]  # not the rig's capture: never exit 0
     assert eval_main(["measure", "--calib", calib, *swapped, "--out", str(tmp_path / "s"),
                       "--no-progress"]) in (1, 2)
+
+
+def test_every_camera_of_the_capture_is_checked(capture, tmp_path, capsys):
+    """A black photo in one camera, and two cameras' photos swapped: exit 1 (everything
+    written), the failing camera named — not only the one with the fewest detections."""
+    import cv2
+
+    root, _ = capture
+    photos = [str(root / "img" / f"cam{k}.png") for k in range(3)]
+    black = tmp_path / "black.png"
+    cv2.imwrite(str(black), np.zeros((268, 320), np.uint8))
+    calib = str(root / "calib.yaml")
+    assert eval_main(["measure", "--calib", calib, photos[0], photos[1], str(black), "--out",
+                      str(tmp_path / "b"), "--no-progress"]) == 1
+    err = capsys.readouterr().err
+    assert "cam2" in err and "no target detected" in err, err
+    swapped = [photos[0], photos[2], photos[1]]
+    assert eval_main(["measure", "--calib", calib, *swapped, "--out", str(tmp_path / "s"),
+                      "--no-progress"]) in (1, 2)
+    err = capsys.readouterr().err
+    assert "cam1" in err or "cam2" in err, err

@@ -252,4 +252,6 @@ def test_out_rule_refuses_a_strangers_directory_and_replaces_its_own(paper_run, 
     (own / "report.json").write_text("{}")
     assert cli.main(["paper", "--out", str(own), "--trials", "2", "--no-progress"]) == 0
     assert json.loads((own / "report.json").read_text())["settings"]["trials"] == 2
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["out", "own"]
+    # its report.json was changed since it was written: kept beside it before the replacement
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out", "own", "own.edited"]
+    assert (tmp_path / "own.edited" / "report.json").read_text() == "{}"

@@ -64,6 +64,19 @@ def test_dense_run_measures_the_plane_and_shows_what_ignoring_refraction_costs(p
     sigma_z = np.load(os.path.join(out, "sigma_z_optical_path.npy"))
     assert sigma_z.shape == (268, 320) and np.isfinite(sigma_z).sum() == uncertainty["sigma"]["n"]
     assert uncertainty["coverage"]["n"] > 0.9 * uncertainty["sigma"]["n"]
+    assert report["figures"] == ["views.png", "depth_error_optical_path.png",
+                                 "sigma_z_optical_path.png", "depth_error_regular.png",
+                                 "distances.png"]
+    # --no-figures: the same numbers, clouds and σ map, no PNG file
+    bare = str(root / "run_no_figures")
+    assert eval_main(["run", scene, "--from", ds, "--out", bare, "--no-progress",
+                      "--no-figures"]) == 0
+    without = json.load(open(os.path.join(bare, "report.json")))
+    assert without["figures"] == [] and without["methods"] == report["methods"]
+    assert sorted(n for n in os.listdir(bare) if not n.startswith(".")) == [
+        "points_optical_path.ply", "points_regular.ply", "report.json", "report.md",
+        "sigma_z_optical_path.npy"]
+    assert ".png" not in open(os.path.join(bare, "report.md")).read()
 
 
 @pytest.mark.slow
@@ -232,8 +245,9 @@ def test_mesh_without_surface_mesh_and_score_of_a_surface_dataset(plane_case, tm
     assert code == 2 and "--mesh needs --layout surface --surface mesh" in capsys.readouterr().err
     code = eval_main(["score", ds, "--points", str(mesh), "--out", str(tmp_path / "score")])
     err = capsys.readouterr().err
-    assert code == 2 and "a surface dataset" in err and "Traceback" not in err
-    assert not (tmp_path / "score").exists()
+    # a surface dataset's points are scored against its true mesh; a mesh file is not a cloud
+    assert code == 2 and err.count("error:") == 1 and str(mesh) in err and "no points" in err
+    assert "Traceback" not in err and not (tmp_path / "score").exists()
 
 
 @pytest.mark.slow

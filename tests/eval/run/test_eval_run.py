@@ -160,6 +160,40 @@ def test_identical_runs_give_identical_reports(small_scene, tmp_path):
 
 
 @pytest.mark.slow
+def test_no_figures_writes_the_same_report_and_clouds_and_no_png(small_scene, tmp_path):
+    """``--no-figures``: no PNG file and no matplotlib, the report's numbers, the PLY and CSV
+    files of a run with the figures; report.json and report.md say which figures exist."""
+    data = tmp_path / "data"
+    write_dataset(small_scene, data, spp=4, progress=False)
+    outs = {}
+    for name, extra in (("figures", []), ("none", ["--no-figures"])):
+        outs[name] = tmp_path / name
+        assert main(["run", small_scene, "--from", str(data), "--out", str(outs[name]),
+                     "--no-progress", *extra]) == 0
+    with_figures, without = (json.loads((outs[k] / "report.json").read_text())
+                             for k in ("figures", "none"))
+    assert with_figures["figures"] == ["views.png", "error_maps.png", "histograms.png",
+                                       "ellipses.png"] and without["figures"] == []
+    for name in with_figures["figures"]:
+        assert (outs["figures"] / name).stat().st_size > 1000
+    assert not list(outs["none"].glob("*.png")) and ".png" not in (outs["none"] / "report.md"
+                                                                   ).read_text()
+    for report in (with_figures, without):
+        for key in ("timings_s", "figures"):
+            report.pop(key)
+    assert json.dumps(with_figures, sort_keys=True).replace(str(outs["figures"]), "OUT") == \
+        json.dumps(without, sort_keys=True).replace(str(outs["none"]), "OUT")
+    def files(out):
+        return sorted(p.name for p in out.iterdir() if p.suffix != ".png")
+
+    assert files(outs["figures"]) == files(outs["none"])
+    others = [name for name in files(outs["none"]) if name.endswith((".ply", ".csv"))]
+    assert len(others) == 8  # points (correct, all) of 3 methods, covariances of optical_path
+    for name in others:
+        assert (outs["figures"] / name).read_bytes() == (outs["none"] / name).read_bytes(), name
+
+
+@pytest.mark.slow
 def test_seed_option_and_scene_parameter_mean_the_same(small_scene, tmp_path):
     """--seed 7 and -D seed=7 render the same images (one seed, one meaning)."""
     from synth.__main__ import main as synth_main

@@ -59,7 +59,8 @@ def test_bad_input_names_the_camera(scene, tmp_path, capsys):
     text = calib.read_text()
     calib.write_text(text.replace("data: [ 400., 0., 0. ]", "data: [ 200., 0., 0. ]"))
     for extra, fragment in ((["--calib", str(calib)], "cameras cam1 and cam2 overlap"),
-                            (["--assume", "n_water=1.34"], "--assume does not apply")):
+                            (["--assume", "n_water=1.34"], "--assume does not apply"),
+                            (["--no-figures"], "--no-figures does not apply")):
         assert eval_main(["run", scene, "--out", str(tmp_path / "out"), "--no-progress",
                           *extra]) == 2
         err = capsys.readouterr().err.strip().splitlines()
@@ -142,6 +143,15 @@ def test_from_a_dataset_of_three_cameras_measures_its_images(scene, tmp_path, ca
     assert np.sqrt(np.mean(errors ** 2)) < 1.0
     assert set(report["scores"]["by_views"]) == {"2", "3"}
 
+    four = tmp_path / "four.xml"  # another scene, of four cameras (it said "unknown
+    assert synth_main(["scene", "--cameras", "4", "--size", "320", "268",  # parameter -D …")
+                       "--out", str(four)]) == 0
+    capsys.readouterr()
+    assert eval_main(["run", str(four), "--from", str(data), "--out", str(tmp_path / "bad"),
+                      "--no-progress"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "rendered from another scene" in err[0] and "3 cameras" in err[0], err
+    assert not (tmp_path / "bad").exists()
     (data / "cam2" / "preview.png").write_bytes(b"not the preview")
     for argv, fragment in ((["--from", str(data)], "cam2/preview.png"),
                            (["--from", str(data), "--spp", "4"], "--spp does not apply")):
@@ -150,3 +160,4 @@ def test_from_a_dataset_of_three_cameras_measures_its_images(scene, tmp_path, ca
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and err[0].startswith("error:") and fragment in err[0], err
     assert not (tmp_path / "bad").exists()
+

@@ -222,6 +222,31 @@ def test_render_cell_equals_eval_run(local_run, small_scene, tmp_path):
 
 
 @pytest.mark.slow
+def test_a_render_cell_keeps_what_save_asks_for_and_draws_no_figure_for_ply(small_scene,
+                                                                           tmp_path,
+                                                                           monkeypatch):
+    """``save = ["ply"]``: the point clouds and covariance tables, and no figure drawn for
+    nothing; ``save = ["figures"]``: the figures only."""
+    import eval.run.figures
+    from eval.sweep.cells import render_cell
+
+    text = 'scenes = ["{scene}"]\n[fixed]\nkind = "render"\nspp = 4\n'
+    cell = load_spec(_spec(tmp_path, small_scene, text)).cells[0]
+    record = {"params": cell.params, "seed": 1, "methods": ["optical_path"], "defines": {},
+              "scene": small_scene}
+    drawn, views = [], eval.run.figures.views_figure
+    monkeypatch.setattr(eval.run.figures, "views_figure",
+                        lambda path, *args: drawn.append(path) or views(path, *args))
+    _, ply = render_cell(record, small_scene, ("ply",))
+    assert drawn == []
+    assert sorted(ply) == ["points_optical_path.ply", "points_optical_path_all.ply",
+                           "uncertainty_optical_path.csv", "uncertainty_optical_path.ply"]
+    _, figures = render_cell(record, small_scene, ("figures",))
+    assert len(drawn) == 1
+    assert sorted(figures) == ["ellipses.png", "error_maps.png", "histograms.png", "views.png"]
+
+
+@pytest.mark.slow
 def test_rerun_does_nothing_and_changed_spec_is_refused(local_run, spec_file, small_scene,
                                                         tmp_path, capsys):
     out, _ = local_run

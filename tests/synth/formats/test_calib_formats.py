@@ -311,7 +311,7 @@ def test_three_cameras_are_not_a_stereo_rig(tmp_path):
     text = (folder / COLMAP_CAMERAS_NAME).read_text()
     last = text.strip().splitlines()[-1]
     (folder / COLMAP_CAMERAS_NAME).write_text(text + "3" + last[1:] + "\n")
-    with pytest.raises(DatasetError, match="3 cameras"):
+    with pytest.raises(DatasetError, match=r"a rig of 3 camera\(s\), not a stereo pair"):
         read_calib(folder / COLMAP_CAMERAS_NAME)
 
 
@@ -546,3 +546,27 @@ def test_a_rig_of_four_cameras_in_the_colmap_forks_files(tmp_path):
         np.testing.assert_allclose(a.normal, b.normal, atol=1e-12)
         assert a.distance == pytest.approx(b.distance, abs=1e-9)
     np.testing.assert_allclose(back.ports[3].center, dome.center, atol=1e-9)
+
+
+def test_a_colmap_rig_of_three_cameras_becomes_a_scene(tmp_path, capsys):
+    """``synth scene --rig cameras.txt`` of three cameras (the COLMAP fork's files): the scene
+    holds the three cameras where the files put them (it said "a stereo rig has two", issue
+    53); a pair's reader says the file is a rig of three, not a pair."""
+    from measure.stereo.multirig import MultiRig
+    from synth.__main__ import main as synth_main
+    from synth.formats.calib_formats import write_colmap_rig
+    from synth.products.dataset import DatasetError, read_calib
+    from synth.scene import load_scene
+    from synth.scene.rig import paper_port, row_cameras
+
+    cameras = row_cameras(3)
+    write_colmap_rig(tmp_path / "cameras.txt", MultiRig(cameras, [paper_port()] * 3))
+    scene = tmp_path / "three.xml"
+    assert synth_main(["scene", "--rig", str(tmp_path / "cameras.txt"), "--out", str(scene)]) == 0
+    rig = load_scene(str(scene)).multirig
+    assert len(rig.cameras) == 3
+    for got, want in zip(rig.cameras, cameras):
+        np.testing.assert_allclose(got.t, want.t, atol=1e-3)
+    with pytest.raises(DatasetError, match=r"cameras.txt: a rig of 3 camera\(s\), not a stereo "
+                                           r"pair"):
+        read_calib(str(tmp_path / "cameras.txt"))

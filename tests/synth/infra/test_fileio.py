@@ -160,3 +160,55 @@ def test_an_empty_output_path_is_named(tmp_path, monkeypatch, path):
         OutputDir(path, "eval run")
     with pytest.raises(OutputError, match="--out: the path is empty"):
         check_file_output(path, "--out")
+
+
+def test_files_edited_by_hand_are_kept_before_a_rerun_replaces_them(tmp_path, capsys):
+    """A rerun replaces its earlier output whole; a file the user changed since (notes added
+    to a report, a tuned calibration) is copied to ``OUT.edited/`` first, and a note says so
+    (issue 53: edited files were lost). Unchanged and missing files leave no copy."""
+    out = OutputDir(tmp_path / "out", "eval test")
+    for text in ("first", "second"):
+        with out.staged() as tmp:
+            for name in ("report.md", "calib.yaml", "sub/plot.txt"):
+                os.makedirs(os.path.dirname(os.path.join(tmp, name)), exist_ok=True)
+                with open(os.path.join(tmp, name), "w") as fh:
+                    fh.write(f"{text} {name}\n")
+        if text == "first":
+            (tmp_path / "out" / "report.md").write_text("first report.md\nmy notes\n")
+            (tmp_path / "out" / "sub" / "plot.txt").unlink()
+            capsys.readouterr()
+    assert (tmp_path / "out.edited" / "report.md").read_text() == "first report.md\nmy notes\n"
+    assert sorted(p.name for p in (tmp_path / "out.edited").rglob("*") if p.is_file()) == [
+        "report.md"]
+    assert (tmp_path / "out" / "report.md").read_text() == "second report.md\n"
+    assert "report.md in" in capsys.readouterr().err
+
+
+def test_a_scene_edited_by_hand_is_not_overwritten(tmp_path, capsys):
+    from synth.__main__ import main as synth_main
+
+    scene = tmp_path / "mine.xml"
+    argv = ["scene", "--layout", "grid", "--size", "320", "268", "--out", str(scene)]
+    assert synth_main(argv) == 0 and synth_main(argv) == 0     # its own file: replaced
+    scene.write_text(scene.read_text().replace('name="n_water" value="1.33"',
+                                               'name="n_water" value="1.34"'))
+    assert synth_main(argv) == 2
+    assert "was edited since synth scene wrote it" in capsys.readouterr().err
+    assert 'value="1.34"' in scene.read_text()
+
+
+@pytest.mark.skipif(not os.path.isdir("/proc/self"), reason="needs Linux's /proc")
+def test_a_folder_that_takes_no_new_files_is_refused_at_the_claim(tmp_path):
+    """``--out /proc/x``: root passes ``os.access`` there, and the refusal came only when the
+    output was written, after the work (6 s of detection, issue 53). The claim now makes (and
+    removes) a folder where the output would go, and a single file's check a file."""
+    from synth.infra.fileio import check_file_output
+
+    with pytest.raises(OutputError, match=r"--out /proc/x cannot be (created|replaced)"):
+        OutputDir("/proc/x", "eval run").claim()
+    with pytest.raises(OutputError, match=r"--out /proc/x.json: (no file can be written in "
+                                          r"/proc|directory /proc is not writable)"):
+        check_file_output("/proc/x.json", "--out")
+    OutputDir(tmp_path / "fine", "eval run").claim()  # where a folder can be made: no probe left
+    assert sorted(os.listdir(tmp_path)) == []
+    assert check_file_output(str(tmp_path / "x.json"), "--out") and os.listdir(tmp_path) == []

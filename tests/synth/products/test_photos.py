@@ -39,6 +39,24 @@ def test_boards_become_jpeg_pairs_and_nothing_else(tmp_path):
     assert visible == ["left/00.jpg", "left/01.jpg", "right/00.jpg", "right/01.jpg"]
 
 
+def test_boards_of_three_cameras_become_a_folder_per_camera(tmp_path):
+    """``synth boards`` of a scene of N cameras (``cam0_PP.png``, …) becomes ``cam0/PP.jpg``, …
+    — what ``eval calibrate`` reads as photos of N cameras (it said "no rendered image
+    left_PP.png", issue 53); a camera's missing pose is named."""
+    names = [f"cam{k}_{p:02d}.png" for k in range(3) for p in range(2)]
+    _fake(tmp_path / "b", "synth boards", names)
+    out = tmp_path / "p"
+    run = _photos(tmp_path / "b", "--out", out)
+    assert run.returncode == 0, run.stderr
+    visible = sorted(os.path.relpath(os.path.join(d, f), out) for d, _, fs in os.walk(out)
+                     for f in fs if not f.startswith("."))
+    assert visible == [f"cam{k}/{p:02d}.jpg" for k in range(3) for p in range(2)]
+    (tmp_path / "b" / "cam2_01.png").unlink()
+    run = _photos(tmp_path / "b", "--out", tmp_path / "q")
+    assert run.returncode == 2 and "cam2_01.png" in run.stderr, run.stderr
+    assert not (tmp_path / "q").exists()
+
+
 def test_dataset_png_is_the_srgb_of_the_linear_image(tmp_path):
     ramp = _fake(tmp_path / "d", "synth dataset", ["left.png", "right.png"])
     run = _photos(tmp_path / "d", "--out", tmp_path / "p", "--format", "png")

@@ -66,3 +66,32 @@ def test_bad_files_name_the_camera(tmp_path):
     path.write_text(text.replace("data: [ 400., 0., 0. ]", "data: [ 400., 0., 103. ]"))
     with pytest.raises(DatasetError, match=r"cam2 centre lies on the water side"):
         read_rig_file(path)
+
+
+def test_another_kind_of_calibration_is_named_not_misread(tmp_path):
+    """A calibration of the wrong kind is named for what it is (issue 53): one camera's
+    camera.yaml where a pair or a rig is expected (it said "units: 'px …': only mm is read"),
+    a file of N cameras where a pair is expected ("no matrix K1"), and the folder of a
+    calibration rather than its file ("no such file")."""
+    from eval.calibrate.single import write_camera_files
+    from synth.products.dataset import read_calib
+
+    one = tmp_path / "one"
+    one.mkdir()
+    write_camera_files(one, _cameras(1)[0], "standard", 0.1, {}, other_formats=False)
+    for read in (read_calib, read_rig_file):
+        with pytest.raises(DatasetError, match=r"camera.yaml: a calibration of one camera "
+                                               r"\(camera_matrix"):
+            read(str(one / "camera.yaml"))
+    four = tmp_path / "four.yaml"
+    write_rig_file(four, MultiRig(_cameras(4), [paper_port()] * 4))
+    with pytest.raises(DatasetError, match=r"four.yaml: a calibration of 4 cameras, not of a "
+                                           r"stereo pair"):
+        read_calib(str(four))
+    pair = tmp_path / "pair"
+    pair.mkdir()
+    write_calib(pair / "calib.yaml", paper_rig())
+    for read in (read_calib, read_rig_file):
+        with pytest.raises(DatasetError, match=r"pair: a folder, not a calibration file \(give "
+                                               r".*pair/calib.yaml\)"):
+            read(str(pair))
