@@ -24,8 +24,10 @@ matches with the true rig through its port (``optical_path``), as a port-aware t
 
 ``StereoSGBM`` (``MODE_SGBM_3WAY``, block 5, P1 = 8·25, P2 = 32·25, uniqueness 10, speckle
 window 100 / range 2) searches the disparities of the frame's truth ± 16 px (rounded to a
-multiple of 16) for every method alike: an oracle range, so that the scores are the
-rectification's and not the search's.
+multiple of 16; at most :data:`MAX_DISPARITIES`, around the truth's median, and no more than
+the image's width leaves: a frame whose matches lie off its right image gets no disparity) for
+every method alike: an oracle range, so that the scores are the rectification's and not the
+search's.
 """
 
 from __future__ import annotations
@@ -48,6 +50,8 @@ from synth.scene.surfaces import read_ply
 
 METHODS = ("pinhole", "absorbed", "port-exact", "port-exact + refractive")
 BLOCK = 5
+#: The widest search (px): a frame whose truth spans more is searched around its median.
+MAX_DISPARITIES = 512
 #: Every this many rectified pixels (in both directions) are kept for the depth statistics.
 DEPTH_STEP = 2
 
@@ -112,11 +116,23 @@ def pinhole_truth(item: SceneForEval, rect: dict):
 
 
 def sgbm(left8: np.ndarray, right8: np.ndarray, truth: np.ndarray) -> np.ndarray:
-    """``StereoSGBM`` (module docs) over the truth's disparities ± 16 px; NaN where it gave
-    none."""
+    """``StereoSGBM`` (module docs) over the truth's disparities ± 16 px (px; at most
+    :data:`MAX_DISPARITIES` of them, around the truth's median, and only those the image's
+    width leaves room for); NaN where it gave none, everywhere when the truth has none."""
     finite = truth[np.isfinite(truth)]
+    if not finite.size:
+        return np.full(left8.shape, np.nan)
     low = int(np.floor((finite.min() - 16) / 16.0) * 16)
     count = int(np.ceil((finite.max() + 16 - low) / 16.0) * 16)
+    if count > MAX_DISPARITIES:  # a span no matcher searches: the middle of it
+        low = int(np.floor((np.median(finite) - MAX_DISPARITIES / 2) / 16.0) * 16)
+        count = MAX_DISPARITIES
+    # OpenCV fails (an allocation of ~2^64 bytes, or a crash) unless the search ends at a
+    # disparity of 16 or more and leaves the block room within the image's width.
+    count = max(count, int(np.ceil((16 - low) / 16.0) * 16))
+    count = min(count, MAX_DISPARITIES, (left8.shape[1] - max(low, 0) - 2 * BLOCK) // 16 * 16)
+    if count < 16 or low + count < 16:  # the matches lie off the right image: none to find
+        return np.full(left8.shape, np.nan)
     matcher = cv2.StereoSGBM_create(minDisparity=low, numDisparities=count, blockSize=BLOCK,
                                     P1=8 * BLOCK ** 2, P2=32 * BLOCK ** 2, uniquenessRatio=10,
                                     speckleWindowSize=100, speckleRange=2,

@@ -70,3 +70,43 @@ def test_sgbm_finds_a_known_shift():
     right = texture[:, 52:252].astype(np.uint8)  # left pixel u is right pixel u - 12
     found = learn_sgbm.sgbm(left, right, np.full(left.shape, 12.0))
     assert np.nanmedian(found) == pytest.approx(12.0, abs=0.1)
+
+
+def _spy_on_the_matcher(monkeypatch):
+    """The (minDisparity, numDisparities) of every StereoSGBM made while the test runs."""
+    made, create = [], cv2.StereoSGBM_create
+
+    def recording(**kwargs):
+        made.append((kwargs["minDisparity"], kwargs["numDisparities"]))
+        return create(**kwargs)
+
+    monkeypatch.setattr(cv2, "StereoSGBM_create", recording)
+    return made
+
+
+def test_sgbm_searches_a_wide_truth_around_its_median(monkeypatch):
+    """A truth spanning more than MAX_DISPARITIES (a few far outliers) is searched over
+    MAX_DISPARITIES around its median, and the shift most pixels have is still found (a search
+    of the whole span would not fit the image: OpenCV fails on it)."""
+    made = _spy_on_the_matcher(monkeypatch)
+    rng = np.random.default_rng(1)
+    texture = cv2.GaussianBlur(rng.uniform(0, 255, (80, 1000)), (0, 0), 1.2).astype(np.uint8)
+    left, right = texture[:, :700], texture[:, 300:]  # left pixel u is right pixel u - 300
+    truth = np.full(left.shape, 300.0)
+    truth[0, :3] = [0.0, 900.0, 5.0]
+    found = learn_sgbm.sgbm(left, right, truth)
+    assert made == [(32, learn_sgbm.MAX_DISPARITIES)]
+    assert np.nanmedian(found[:, 350:]) == pytest.approx(300.0, abs=0.1)
+
+
+def test_sgbm_gives_nothing_where_no_search_fits(monkeypatch):
+    """No truth, a truth beyond the image's width, or one entirely at negative disparities
+    (both of which OpenCV cannot search): all NaN, and no matcher made."""
+    made = _spy_on_the_matcher(monkeypatch)
+    image = np.random.default_rng(2).integers(0, 255, (40, 200), dtype=np.uint8)
+    for value in (np.nan, 300.0, -600.0):
+        found = learn_sgbm.sgbm(image, image, np.full(image.shape, value))
+        assert found.shape == image.shape and np.isnan(found).all()
+    assert made == []
+    found = learn_sgbm.sgbm(image, image, np.full(image.shape, -40.0))  # reaches 16: searched
+    assert made == [(-64, 80)] and np.isfinite(found).any()
