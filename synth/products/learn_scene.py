@@ -113,6 +113,21 @@ def render_pair(directory: str, scene: SeaScene, spp: int):
     return images, info
 
 
+class _Clock:
+    """Seconds of each part of a scene: wall clock into ``seconds``, CPU into ``cpu`` (this
+    process's, every thread's: Mitsuba's render threads too), each part from the end of the
+    one before."""
+
+    def __init__(self, seconds: dict, cpu: dict):
+        self.seconds, self.cpu = seconds, cpu
+        self.wall, self.process = time.perf_counter(), time.process_time()
+
+    def lap(self, part: str) -> None:
+        wall, process = time.perf_counter(), time.process_time()
+        self.seconds[part], self.cpu[part] = wall - self.wall, process - self.process
+        self.wall, self.process = wall, process
+
+
 def _write_view_truth(folder: str, name: str, truth: lt.ViewTruth) -> None:
     write_pfm(os.path.join(folder, f"{name}_depth_z.pfm"), truth.z.astype(np.float32))
     write_pfm(os.path.join(folder, f"{name}_range.pfm"), truth.range.astype(np.float32))
@@ -262,16 +277,15 @@ def write_learn_scene(out_dir: str, seed: int, ranges: SeaRanges | None = None,
     from synth.infra.fileio import OutputDir
 
     ranges = SeaRanges() if ranges is None else ranges
-    started = time.perf_counter()
+    started, cpu_started = time.perf_counter(), time.process_time()
     scene = draw_scene(seed, ranges)
     out = OutputDir(out_dir, COMMAND).claim()
     with out.staged({"request_key": request_key(seed, ranges, spp)}) as tmp:
-        seconds = {}
+        seconds, cpu = {}, {}
         os.makedirs(os.path.join(tmp, "scene"))
-        t = time.perf_counter()
+        clock = _Clock(seconds, cpu)
         floor = write_sea_scene(os.path.join(tmp, "scene"), scene, spp)
-        seconds["scene"] = time.perf_counter() - t
-        t = time.perf_counter()
+        clock.lap("scene")
         tracer = MeshTracer(os.path.join(tmp, "scene", MESH_FILE), floor.mesh.vertices,
                             floor.mesh.triangles)
         left, right = lt.view_truth(tracer, scene.rig, 0), lt.view_truth(tracer, scene.rig, 1)
@@ -279,10 +293,9 @@ def write_learn_scene(out_dir: str, seed: int, ranges: SeaRanges | None = None,
         sample = left.points[::OFFSET_SAMPLE_STEP, ::OFFSET_SAMPLE_STEP].reshape(-1, 3)
         offset = lt.disparity_offset(scene.rig, sample)
         rect = lt.rectified_truth(tracer, scene.rig, median_distance(scene, left), offset)
-        seconds["truth"] = time.perf_counter() - t
+        clock.lap("truth")
         images, render = render_pair(os.path.join(tmp, "scene"), scene, spp)
-        seconds["render"] = sum(render["seconds"].values())
-        t = time.perf_counter()
+        clock.lap("render")
         images = [lf.remove_fireflies(image) for image in images]
         scale = lf.exposure(*images)
         for view, name in enumerate(("left", "right")):
@@ -296,20 +309,21 @@ def write_learn_scene(out_dir: str, seed: int, ranges: SeaRanges | None = None,
                      occluded.astype(np.uint8) * 255)
         rectified = _write_rectified(os.path.join(tmp, "rectified"), rect, images, scale)
         colmap = _write_exchange(tmp, scene, left, right, flow, seen, rect)
-        seconds["write"] = time.perf_counter() - t
-        t = time.perf_counter()
+        clock.lap("write")
         checks = scene_checks(scene, tracer, left, right, flow, seen, rect,
                               np.random.default_rng(seed))
-        seconds["checks"] = time.perf_counter() - t
+        clock.lap("checks")
         seconds["total"] = time.perf_counter() - started
+        cpu["total"] = time.process_time() - cpu_started
         manifest = _manifest(tmp, scene, ranges, spp, floor, render, rectified, colmap, checks,
-                             seconds, left, seen, occluded)
+                             (seconds, cpu), left, seen, occluded)
     return manifest
 
 
-def _manifest(tmp, scene, ranges, spp, floor, render, rectified, colmap, checks, seconds,
+def _manifest(tmp, scene, ranges, spp, floor, render, rectified, colmap, checks, timings,
               left, seen, occluded) -> dict:
-    """``manifest.json`` of a scene folder (module docs), written into ``tmp``."""
+    """``manifest.json`` of a scene folder (module docs), written into ``tmp``; ``timings``
+    the wall-clock and CPU seconds of each part (:class:`_Clock`)."""
     from synth.infra.fileio import atomic_write_json
 
     files = {}
@@ -337,7 +351,7 @@ def _manifest(tmp, scene, ranges, spp, floor, render, rectified, colmap, checks,
                    "occluded_left": int(occluded.sum())},
         "render": render, "rectified": rectified,
         "colmap": colmap or "written (colmap/: the refractive fork's model)",
-        "checks": checks, "seconds": seconds, "files": files,
+        "checks": checks, "seconds": timings[0], "cpu_seconds": timings[1], "files": files,
         "scene_files": [f"scene/{SCENE_FILE}", f"scene/{MESH_FILE}", f"scene/{TEXTURE_FILE}"]}
     atomic_write_json(os.path.join(tmp, "manifest.json"), manifest)
     return manifest

@@ -9,7 +9,7 @@ the workers must see it), and, rebuilt after every run from the scenes' manifest
   set of options for the same ``DIR`` is refused), every scene's split, status and manifest
   SHA-256, and each run;
 * ``index.csv`` — one row per scene: seed, split, port, water, light, distance, what was drawn,
-  the checks, the timings;
+  the checks, the timings (wall clock and CPU seconds);
 * ``lists/<split>_sceneflow.txt`` (``left right disparity.pfm`` per line) and
   ``lists/<split>_kitti.txt`` (``left right disp_occ disp_noc``), paths relative to ``DIR``, of
   the rectified pairs; ``lists/<split>_raw.txt`` (``left right flow occlusion``) of the raw pairs;
@@ -124,12 +124,13 @@ INDEX_COLUMNS = ("seed", "split", "folder", "port", "water", "light", "distance_
                  "baseline_mm", "convergence_deg", "hfov_air_deg", "pitch_deg",
                  "rectified_distance_mm", "disparity_min_px", "disparity_max_px",
                  "residual_max_px", "exact_fraction", "occluded_left", "round_trip_max_px",
-                 "rectified_vs_flow_max_px", "passed", "render_seconds", "total_seconds")
+                 "rectified_vs_flow_max_px", "passed", "render_seconds", "total_seconds",
+                 "render_cpu_seconds", "total_cpu_seconds")
 
 
 def index_row(seed: int, manifest: dict, fractions) -> dict:
     g, r, c = manifest["generator"], manifest["rectified"], manifest["checks"]
-    drawn, seconds = g["drawn"], manifest["seconds"]
+    drawn, seconds, cpu = g["drawn"], manifest["seconds"], manifest.get("cpu_seconds", {})
     span = r["disparity_px"] or [None, None]
     return {"seed": seed, "split": split_of(seed, fractions), "folder": scene_folder(seed),
             "port": g["port"], "water": g["water"], "light": g["light"],
@@ -141,7 +142,8 @@ def index_row(seed: int, manifest: dict, fractions) -> dict:
             "occluded_left": manifest["pixels"]["occluded_left"],
             "round_trip_max_px": max(c["left_round_trip_max_px"], c["right_round_trip_max_px"]),
             "rectified_vs_flow_max_px": c["rectified_vs_flow_max_px"], "passed": c["passed"],
-            "render_seconds": seconds["render"], "total_seconds": seconds["total"]}
+            "render_seconds": seconds["render"], "total_seconds": seconds["total"],
+            "render_cpu_seconds": cpu.get("render"), "total_cpu_seconds": cpu.get("total")}
 
 
 def _link(source: str, target: str) -> None:

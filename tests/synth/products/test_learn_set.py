@@ -65,6 +65,8 @@ def test_a_small_set_end_to_end(tmp_path, capsys):
         folder = out / f"scene_{seed:06d}"
         manifest = json.loads((folder / "manifest.json").read_text())
         assert manifest["checks"]["passed"] and manifest["seed"] == seed
+        cpu = manifest["cpu_seconds"]  # each part's CPU seconds beside its wall clock
+        assert set(cpu) == set(manifest["seconds"]) and cpu["total"] >= cpu["render"] > 0
         for rel, entry in manifest["files"].items():
             assert _sha(folder / rel) == entry["sha256"], rel
         for rel in ("left.png", "truth/flow_left_to_right.flo", "rectified/disparity.pfm",
@@ -80,6 +82,7 @@ def test_a_small_set_end_to_end(tmp_path, capsys):
         assert kitti.read_bytes() == (folder / "rectified" / "disparity_occ.png").read_bytes()
     rows = (out / "index.csv").read_text().splitlines()
     assert len(rows) == 3 and rows[0].startswith("seed,split,folder,port")
+    assert rows[0].endswith(",render_cpu_seconds,total_cpu_seconds")
     # a rerun renders nothing; one more scene renders one; other options are refused
     assert synth_main(argv) == 0 and "0 rendered now" in capsys.readouterr().out
     assert synth_main(argv[:4] + ["3"] + argv[5:]) == 0
