@@ -83,20 +83,19 @@ def _pool(per_scene: list) -> dict:
 
 
 def _split_seeds(folder: str, split: str) -> list:
-    """The seeds of the finished scenes of ``split``: from ``learn.json``, or — while a run is
-    still writing the set — from the scene folders that hold a manifest (their split by seed
-    with the default shares)."""
+    """The seeds of the finished scenes of ``split``: the scene folders that hold a manifest
+    (a folder is renamed into place whole, so a set still being written is scored from what it
+    finished), their split by seed with the shares of ``learn.json`` (the default shares
+    without one)."""
     from synth.products.learn_set import DEFAULT_FRACTIONS, split_of
 
-    path = os.path.join(folder, "learn.json")
+    fractions, path = DEFAULT_FRACTIONS, os.path.join(folder, "learn.json")
     if os.path.isfile(path):
         with open(path, encoding="utf-8") as handle:
-            learn = json.load(handle)
-        return sorted(int(s) for s, v in learn["scenes"].items()
-                      if v["split"] == split and v["status"] == "ok")
+            fractions = tuple(json.load(handle)["options"]["split"]["fractions"])
     seeds = sorted(int(name[6:]) for name in os.listdir(folder) if name.startswith("scene_")
                    and os.path.isfile(os.path.join(folder, name, "manifest.json")))
-    return [s for s in seeds if split_of(s, DEFAULT_FRACTIONS) == split]
+    return [s for s in seeds if split_of(s, fractions) == split]
 
 
 def main() -> int:

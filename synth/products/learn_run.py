@@ -73,6 +73,8 @@ def run_learn(request: LearnRequest, scheduler, workers, connect_timeout, progre
     options = options_of(request.seeds, request.ranges, request.spp, request.fractions)
     previous = _claim(request.out, options)
     os.makedirs(request.out, exist_ok=True)
+    if previous is None:  # claimed before the first scene: a killed first run is resumed too
+        _write_learn_json(request.out, options, {}, [])
     todo = [s for s in request.seeds
             if not scene_done(request.out, s, request.ranges, request.spp)]
     if progress:
@@ -124,9 +126,9 @@ def _render(request, todo, scheduler, workers, timeout, progress) -> tuple[dict,
 
 def _finish(request, options, previous, todo, results, where, compute, started) -> int:
     """Rebuild ``learn.json``, ``index.csv``, the lists and the README; print the summary."""
-    from synth.infra.fileio import atomic_write_json, atomic_write_text
-    from synth.products.learn_set import (LEARN_JSON, options_hash, read_manifests,
-                                          readme_text, split_of, write_index, write_lists)
+    from synth.infra.fileio import atomic_write_text
+    from synth.products.learn_set import (read_manifests, readme_text, split_of, write_index,
+                                          write_lists)
 
     interrupt.check()
     out, seeds, fractions = request.out, request.seeds, request.fractions
@@ -139,15 +141,10 @@ def _finish(request, options, previous, todo, results, where, compute, started) 
     runs = list((previous or {}).get("runs", []))
     runs.append({"run_id": uuid.uuid4().hex[:12], "where": where, "scenes_rendered": len(todo),
                  "compute_seconds": compute, "seconds": time.perf_counter() - started})
-    fixed = {k: v for k, v in options.items() if k != "seeds"}
-    atomic_write_json(os.path.join(out, LEARN_JSON), {
-        "command": "synth learn", "options": options,
-        "options_hash_without_seeds": options_hash(fixed),
-        "scenes": {str(s): {"split": split_of(s, fractions),
-                            "status": "ok" if s in manifests else "missing",
-                            "manifest_sha256": _manifest_digest(out, s),
-                            "error": failed.get(s, {}).get("error")} for s in seeds},
-        "runs": runs})
+    _write_learn_json(out, options, {
+        str(s): {"split": split_of(s, fractions), "status": "ok" if s in manifests else "missing",
+                 "manifest_sha256": _manifest_digest(out, s),
+                 "error": failed.get(s, {}).get("error")} for s in seeds}, runs)
     rate = f" ({3600 * len(todo) / compute:.0f} pairs/hour)" if todo and compute > 0 else ""
     print(f"learn: {len(seeds)} scenes ({', '.join(f'{counts[k]} {k}' for k in counts)}): "
           f"{len(seeds) - len(todo)} done before, {len(todo) - len(failed)} rendered now on "
@@ -161,6 +158,18 @@ def _finish(request, options, previous, todo, results, where, compute, started) 
     for seed, result in list(failed.items())[:5]:
         print(f"  seed {seed}: {result['error']}", file=sys.stderr)
     return 1 if failed or missed else 0
+
+
+def _write_learn_json(out: str, options: dict, scenes: dict, runs: list) -> None:
+    """``learn.json``: the options, their hash without the seeds (what a rerun must match),
+    each scene's split and status, the runs."""
+    from synth.infra.fileio import atomic_write_json
+    from synth.products.learn_set import LEARN_JSON, options_hash
+
+    fixed = {k: v for k, v in options.items() if k != "seeds"}
+    atomic_write_json(os.path.join(out, LEARN_JSON), {
+        "command": "synth learn", "options": options,
+        "options_hash_without_seeds": options_hash(fixed), "scenes": scenes, "runs": runs})
 
 
 def _manifest_digest(out: str, seed: int) -> str | None:

@@ -49,6 +49,31 @@ def test_a_folder_of_someone_else_is_refused(tmp_path, capsys):
     assert sorted(os.listdir(tmp_path)) == ["mine.txt"]
 
 
+def test_a_first_run_killed_before_its_end_is_resumed(tmp_path, capsys, monkeypatch):
+    """learn.json is written before the first scene: a first run killed while rendering (its
+    finished scene folders kept) is taken up by a rerun, not refused as someone else's."""
+    from synth.infra.cli import CLIError
+    from synth.products import learn_run
+
+    out = tmp_path / "set"
+    argv = ["learn", "--out", str(out), "--scenes", "2", "--size", "64x64", "--spp", "1",
+            "--no-progress"]
+
+    def killed(*args):
+        (out / "scene_000000").mkdir()  # what a worker had finished
+        raise CLIError("interrupted")
+
+    monkeypatch.setattr(learn_run, "_render", killed)
+    assert synth_main(argv) == 2
+    assert json.loads((out / "learn.json").read_text())["runs"] == []
+    capsys.readouterr()
+    monkeypatch.setattr(learn_run, "_render", lambda *args: ({}, "nowhere", 0.0))
+    assert synth_main(argv) == 0
+    assert "did not write" not in capsys.readouterr().err
+    spp = argv.index("--spp") + 1  # other options are still refused
+    assert synth_main(argv[:spp] + ["2"] + argv[spp + 1:]) == 2
+
+
 def _sha(path) -> str:
     return hashlib.sha256(path.read_bytes()).hexdigest()
 
