@@ -124,7 +124,8 @@ INDEX_COLUMNS = ("seed", "split", "folder", "port", "water", "light", "distance_
                  "baseline_mm", "convergence_deg", "hfov_air_deg", "pitch_deg",
                  "rectified_distance_mm", "disparity_min_px", "disparity_max_px",
                  "residual_max_px", "exact_fraction", "occluded_left", "round_trip_max_px",
-                 "rectified_vs_flow_max_px", "passed", "render_seconds", "total_seconds",
+                 "rectified_vs_flow_max_px", "exact_pixels_compared",
+                 "exact_rectified_vs_flow_max_px", "passed", "render_seconds", "total_seconds",
                  "render_cpu_seconds", "total_cpu_seconds")
 
 
@@ -141,7 +142,10 @@ def index_row(seed: int, manifest: dict, fractions) -> dict:
             "residual_max_px": r["residual_max_px"], "exact_fraction": r["exact_fraction"],
             "occluded_left": manifest["pixels"]["occluded_left"],
             "round_trip_max_px": max(c["left_round_trip_max_px"], c["right_round_trip_max_px"]),
-            "rectified_vs_flow_max_px": c["rectified_vs_flow_max_px"], "passed": c["passed"],
+            "rectified_vs_flow_max_px": c["rectified_vs_flow_max_px"],
+            "exact_pixels_compared": c["exact_pixels_compared"],
+            "exact_rectified_vs_flow_max_px": c["exact_rectified_vs_flow_max_px"],
+            "passed": c["passed"],
             "render_seconds": seconds["render"], "total_seconds": seconds["total"],
             "render_cpu_seconds": cpu.get("render"), "total_cpu_seconds": cpu.get("total")}
 

@@ -86,6 +86,7 @@ def test_a_small_set_end_to_end(tmp_path, capsys):
     assert synth_main(argv) == 0
     printed = capsys.readouterr().out
     assert "2 rendered now" in printed and "0 failed" in printed
+    assert "sampled pixels where the warp is exact" in printed
     for seed in (7, 8):
         folder = out / f"scene_{seed:06d}"
         manifest = json.loads((folder / "manifest.json").read_text())
