@@ -146,6 +146,10 @@ def _smooth_upsample(field: np.ndarray, shape) -> np.ndarray:
                       interpolation=cv2.INTER_LINEAR).astype(np.float64)
 
 
+#: Texture rows the stones' Voronoi is computed over at a time (the same texels, in cache).
+VORONOI_STRIP = 32
+
+
 def _voronoi_stones(rng, shape, texel_mm: float, stone_mm: float):
     """A jittered-grid Voronoi of stones over a texture ``shape`` of ``texel_mm`` texels: the
     albedo of each texel's stone (log-normal, median 0.3) darkened in the gaps between stones."""
@@ -154,8 +158,21 @@ def _voronoi_stones(rng, shape, texel_mm: float, stone_mm: float):
     gh, gw = int(np.ceil(h / cell)) + 2, int(np.ceil(w / cell)) + 2
     jitter = rng.uniform(0.1, 0.9, size=(gh, gw, 2))
     albedo = np.clip(0.3 * np.exp(0.45 * rng.standard_normal((gh, gw))), 0.03, 0.9)
-    rows, cols = np.mgrid[0:h, 0:w].astype(np.float32) / np.float32(cell)
+    cols = np.arange(w, dtype=np.float32)[None, :] / np.float32(cell)
+    out = np.empty(shape)
+    for top in range(0, h, VORONOI_STRIP):
+        rows = np.arange(top, min(top + VORONOI_STRIP, h), dtype=np.float32)[:, None]
+        out[top:top + rows.shape[0]] = _voronoi_strip(rows / np.float32(cell), cols, jitter,
+                                                      albedo)
+    return out
+
+
+def _voronoi_strip(rows, cols, jitter, albedo):
+    """:func:`_voronoi_stones` on the texels of ``rows`` ``(S, 1)`` × ``cols`` ``(1, W)`` (in
+    cells)."""
+    gh, gw = albedo.shape
     ci, cj = np.floor(rows).astype(np.int32), np.floor(cols).astype(np.int32)
+    shape = (rows.shape[0], cols.shape[1])
     best = np.full(shape, np.inf, np.float32)
     second = np.full(shape, np.inf, np.float32)
     value = np.zeros(shape, np.float32)

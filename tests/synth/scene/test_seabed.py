@@ -108,3 +108,38 @@ def test_mesh_normals_point_up_in_any_pose():
     normals = np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])
     assert np.all(normals @ (R @ [0, 0, 1.0]) > 0)
     np.testing.assert_allclose(mesh.uv_mm[:, 0], np.tile(x, y.size))
+
+
+def _voronoi_whole(rng, shape, texel_mm, stone_mm):
+    """The stones' Voronoi computed over the whole texture at once (as it was before it went
+    strip by strip)."""
+    h, w = shape
+    cell = max(stone_mm / texel_mm, 2.0)
+    gh, gw = int(np.ceil(h / cell)) + 2, int(np.ceil(w / cell)) + 2
+    jitter = rng.uniform(0.1, 0.9, size=(gh, gw, 2))
+    albedo = np.clip(0.3 * np.exp(0.45 * rng.standard_normal((gh, gw))), 0.03, 0.9)
+    rows, cols = np.mgrid[0:h, 0:w].astype(np.float32) / np.float32(cell)
+    ci, cj = np.floor(rows).astype(np.int32), np.floor(cols).astype(np.int32)
+    best = np.full(shape, np.inf, np.float32)
+    second = np.full(shape, np.inf, np.float32)
+    value = np.zeros(shape, np.float32)
+    for di in (-1, 0, 1):
+        for dj in (-1, 0, 1):
+            i, j = np.clip(ci + di, 0, gh - 1), np.clip(cj + dj, 0, gw - 1)
+            d = (rows - (i + jitter[i, j, 0])) ** 2 + (cols - (j + jitter[i, j, 1])) ** 2
+            closer = d < best
+            second = np.where(closer, best, np.minimum(second, d))
+            value = np.where(closer, albedo[i, j], value)
+            best = np.where(closer, d, best)
+    return value * np.clip((np.sqrt(second) - np.sqrt(best)) / 0.12, 0.25, 1.0)
+
+
+@pytest.mark.parametrize("shape, stone_mm", [((70, 50), 9.0), ((32, 41), 3.0), ((5, 300), 40.0)])
+def test_the_stones_strip_by_strip_are_the_stones_at_once(shape, stone_mm):
+    """Strips of VORONOI_STRIP rows give the whole texture's Voronoi bit for bit (a seed's
+    texture does not depend on how it is computed)."""
+    from synth.scene.seabed import _voronoi_stones
+
+    strips = _voronoi_stones(np.random.default_rng(4), shape, 1.5, stone_mm)
+    whole = _voronoi_whole(np.random.default_rng(4), shape, 1.5, stone_mm)
+    assert strips.dtype == whole.dtype and np.array_equal(strips, whole)
