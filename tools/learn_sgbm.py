@@ -6,13 +6,15 @@ depth error by distance, pooled over the scenes, overall and per kind of port.
 
     python tools/learn_sgbm.py SET_DIR [--split test] [--limit N] [--out DIR]
 
-Prints a Markdown table (for docs/learning.md) and writes ``DIR/learn_sgbm.json``. Nothing is
-asserted: a benchmark.
+Prints a Markdown table (for docs/learning.md) and writes ``DIR/learn_sgbm.json`` and each
+scene's scores and depths (``DIR/scenes/scene_<seed>.npz``, kept: a rerun — the set grown by
+then — scores only the scenes it has not). Nothing is asserted: a benchmark.
 """
 
 from __future__ import annotations
 
 import argparse
+import hashlib
 import json
 import os
 import sys
@@ -98,23 +100,67 @@ def _split_seeds(folder: str, split: str) -> list:
     return [s for s in seeds if split_of(s, fractions) == split]
 
 
+def _manifest_sha(folder: str) -> str:
+    with open(os.path.join(folder, "manifest.json"), "rb") as handle:
+        return hashlib.sha256(handle.read()).hexdigest()
+
+
+def _cached(path, folder):
+    """``(result, port, water)`` of a scene scored before into ``path`` (an ``.npz`` beside
+    ``learn_sgbm.json``), or Nones when there is none or its scene's manifest changed since."""
+    if not path or not os.path.isfile(path):
+        return None, None, None
+    with np.load(path) as data:
+        meta = json.loads(str(data["meta"]))
+        if meta["manifest_sha256"] != _manifest_sha(folder):
+            return None, None, None
+        result = {m: {"scores": meta["scores"][m], "z": (data[f"z{k}_pred"], data[f"z{k}_true"])}
+                  for k, m in enumerate(ROWS) if m in meta["scores"]}
+    return result, meta["port"], meta["water"]
+
+
+def _cache(path, folder, result, port, water) -> None:
+    """Keep a scene's scores and depths in ``path`` (written whole: a temporary file renamed)."""
+    os.makedirs(os.path.dirname(path), exist_ok=True)
+    meta = {"manifest_sha256": _manifest_sha(folder), "port": port, "water": water,
+            "scores": {m: r["scores"] for m, r in result.items()}}
+    arrays = {}
+    for k, method in enumerate(ROWS):
+        if method in result:
+            arrays[f"z{k}_pred"], arrays[f"z{k}_true"] = result[method]["z"]
+    tmp = path + ".tmp.npz"
+    np.savez(tmp, meta=np.array(json.dumps(meta)), **arrays)
+    os.replace(tmp, path)
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("set", help="a learning set (python -m synth learn --out DIR)")
     parser.add_argument("--split", default="test", help="the split to score (default test)")
     parser.add_argument("--limit", type=int, default=None, help="at most this many scenes")
-    parser.add_argument("--out", default=None, help="folder for learn_sgbm.json")
+    parser.add_argument("--out", default=None,
+                        help="folder for learn_sgbm.json and each scene's scores (scenes/: a "
+                             "rerun scores only the scenes it has not, or whose manifest "
+                             "changed)")
     args = parser.parse_args()
     seeds = _split_seeds(args.set, args.split)[:args.limit]
     started, per_scene, ports = time.perf_counter(), [], []
     for seed in seeds:
         t = time.perf_counter()
-        item = load_scene(os.path.join(args.set, f"scene_{seed:06d}"))
-        absorbed = absorbed_rig(item)
-        per_scene.append(score_scene(item, None if absorbed is None else absorbed.rig))
-        ports.append(item.scene.port_kind)
-        print(f"  scene {seed} ({item.scene.port_kind}, {item.scene.water}): "
-              f"{time.perf_counter() - t:.1f} s", file=sys.stderr, flush=True)
+        folder = os.path.join(args.set, f"scene_{seed:06d}")
+        cache = args.out and os.path.join(args.out, "scenes", f"scene_{seed:06d}.npz")
+        result, port, water = _cached(cache, folder)
+        if result is None:
+            item = load_scene(folder)
+            absorbed = absorbed_rig(item)
+            result = score_scene(item, None if absorbed is None else absorbed.rig)
+            port, water = item.scene.port_kind, item.scene.water
+            if cache:
+                _cache(cache, folder, result, port, water)
+        per_scene.append(result)
+        ports.append(port)
+        print(f"  scene {seed} ({port}, {water}): {time.perf_counter() - t:.1f} s",
+              file=sys.stderr, flush=True)
     report = {"set": os.path.abspath(args.set), "split": args.split, "scenes": seeds,
               "all": _pool(per_scene)}
     lines = _table(report["all"], f"all {len(seeds)} {args.split} scenes")
