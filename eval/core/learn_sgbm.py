@@ -52,7 +52,8 @@ METHODS = ("pinhole", "absorbed", "port-exact", "port-exact + refractive")
 BLOCK = 5
 #: The widest search (px): a frame whose truth spans more is searched around its median.
 MAX_DISPARITIES = 512
-#: Every this many rectified pixels (in both directions) are kept for the depth statistics.
+#: Every this many rectified pixels (in raster order: every second pixel of each row of an
+#: even width) are kept for the depth statistics.
 DEPTH_STEP = 2
 
 
