@@ -13,7 +13,7 @@ from synth.infra.cli import DEFINE_HELP, JSON_HELP, NO_PROGRESS_HELP, SCENE_HELP
 WITH_PROGRESS = {("eval", "run"), ("eval", "paper"), ("eval", "sweep"), ("eval", "calibrate"),
                  ("eval", "bench"), ("eval", "render-bench"), ("eval", "measure"),
                  ("synth", "render"),
-                 ("synth", "dataset"), ("synth", "suite"), ("synth", "boards"),
+                 ("synth", "dataset"), ("synth", "suite"), ("synth", "learn"), ("synth", "boards"),
                  ("synth", "sequence"), ("eval", "track"), ("eval", "interface")}
 #: Subcommands that read a scene file: each takes it as the positional ``scene``.
 WITH_SCENE = {("eval", "run"), ("eval", "render-bench"), ("synth", "render"),
@@ -43,7 +43,7 @@ SUBCOMMANDS = list(_subcommands())
 def test_every_subcommand_is_walked():
     names = {(prog, name) for prog, name, _ in SUBCOMMANDS}
     assert WITH_PROGRESS <= names and WITH_SCENE <= names
-    assert len(names) == 19
+    assert len(names) == 20
 
 
 @pytest.mark.parametrize("prog, name, parser", SUBCOMMANDS,

@@ -6,6 +6,7 @@ Subcommands::
     python -m synth render  SCENE --out DIR [--spp N] [--variant V] [--exr] [-D name=value ...]
     python -m synth dataset SCENE --out DIR [--spp N] [--variant V] [--exr] [-D name=value ...]
     python -m synth suite   SPEC.toml --out DIR [--workers N | --scheduler tcp://HOST:PORT]
+    python -m synth learn   --out DIR --scenes N [--seed S] [--size WxH] [--spp N] [--ports …]
     python -m synth boards  SCENE --out DIR [--poses 15] [--board chessboard|charuco]
                             [--squares 11x8] [--square-mm 40] [--seed S] [--air]
     python -m synth sequence SCENE --approach FROM,TO --frames N --out DIR [--yaw DEG]
@@ -30,11 +31,12 @@ matplotlib, SciPy) stay inside the functions so that ``--help`` stays fast.
 from __future__ import annotations
 
 from synth.infra.cli import Parser, command_parser, process_main, run_command
-from synth.commands import boards, check, dataset, photos, render, scene, sequence, suite
+from synth.commands import (boards, check, dataset, learn, photos, render, scene, sequence,
+                            suite)
 
 PROG = "python -m synth"
 #: The command modules, in the order ``--help`` lists them.
-COMMANDS = (scene, render, dataset, suite, boards, sequence, photos, check)
+COMMANDS = (scene, render, dataset, suite, learn, boards, sequence, photos, check)
 
 
 def build_parser() -> Parser:

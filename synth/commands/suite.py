@@ -4,7 +4,9 @@ render a benchmark suite — one dataset per entry of the spec — on Dask worke
 :mod:`synth.infra.cluster`).
 
 Resumable: a rerun does only the entries without a whole dataset; each dataset appears whole
-(written by :func:`synth.products.dataset.write_dataset`). A write that fails (a full disk) or an
+(written by :func:`synth.products.dataset.write_dataset`). A spec with ``render = "learn"`` is a
+learning set of generated sea scenes instead (:mod:`synth.products.learn_run`, what
+``python -m synth learn`` writes). A write that fails (a full disk) or an
 unreachable scheduler ends with one ``error:`` line; the datasets finished are kept."""
 
 from __future__ import annotations
@@ -49,6 +51,12 @@ def main(args) -> int:
         if args.workers is not None:
             raise CLIError("--workers sets the size of the local cluster; with --scheduler the "
                            "cluster's workers render the datasets")
+    learn = _learn_request(args)
+    if learn is not None:  # a learning set (render = "learn"): synth learn's runner
+        from synth.products.learn_run import run_learn
+
+        return run_learn(learn, args.scheduler, args.workers, args.connect_timeout,
+                         not args.no_progress)
     spec = load_suite_spec(args.spec)
     out = SuiteDir(args.out)
     previous = out.check()
@@ -109,6 +117,21 @@ def main(args) -> int:
     for row in failed[:5]:
         print(f"  {row['folder']}: {row['error']}", file=sys.stderr)
     return 1 if failed else 0
+
+
+def _learn_request(args):
+    """The learning set of a spec with ``render = "learn"`` (:mod:`synth.products.learn_run`),
+    or None for any other spec."""
+    from synth.infra.grid import read_toml
+    from synth.products.learn_run import is_learn_spec, read_learn_spec
+
+    data, _, label = read_toml(args.spec)
+    if not is_learn_spec(data):
+        return None
+    if args.retry_failed:
+        raise CLIError("--retry-failed does not apply to a learning suite (render = \"learn\"): "
+                       "every scene without a whole folder is rendered again by a rerun")
+    return read_learn_spec(data, label, args.out)
 
 
 #: Datasets to render above which the suite warns of the hours it will take; progress lines

@@ -24,6 +24,13 @@ def check_address(address: str) -> str:
 
 #: Largest local cluster, in single-threaded workers per usable core (more only costs memory).
 MAX_WORKERS_PER_CORE = 4
+#: Dask configuration the local cluster's workers start under: without the
+#: ``MALLOC_TRIM_THRESHOLD_`` Dask's nanny sets for them (65536). Set, it turns off glibc's
+#: dynamic mmap threshold, so that every NumPy array of 128 KiB or more is mapped and unmapped
+#: afresh and its pages faulted in each time: a 960 x 768 scene of ``synth learn`` took 13.7
+#: CPU seconds for its truth and 12.5 for its render with it, 5.8 and 11.5 without (the same
+#: process, one thread). The numbers computed do not change.
+LOCAL_WORKER_ENVIRON = {"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None}
 
 
 def _ignore_client_finalizer_errors() -> None:
@@ -71,6 +78,7 @@ def connect(scheduler: str | None, workers: int | None, timeout: float, probe, w
 
     for name in ("distributed", "distributed.client", "distributed.comm", "tornado", "asyncio"):
         logging.getLogger(name).setLevel(logging.CRITICAL)
+    import dask
     from distributed import Client, LocalCluster
 
     if scheduler:
@@ -116,7 +124,7 @@ def connect(scheduler: str | None, workers: int | None, timeout: float, probe, w
     # render cut short are no longer possible).
     cluster = client = None
     try:
-        with interrupt.deferred(processes=True):
+        with interrupt.deferred(processes=True), dask.config.set(LOCAL_WORKER_ENVIRON):
             cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
                                    dashboard_address=":0", silence_logs=logging.CRITICAL)
             client = Client(cluster, set_as_default=False)

@@ -41,7 +41,7 @@ from synth.rendering.sensor import sensor_parameters
 
 #: Half side (mm) of the square port interfaces: covers both fields of view far beyond 2 m.
 INTERFACE_HALF_SIZE_MM = 2000.0
-#: Distance (mm) of a sensor's ``lookat`` target from its origin (see :func:`_sensor_xml`).
+#: Distance (mm) of a sensor's ``lookat`` target from its origin (see :func:`sensor_xml`).
 LOOKAT_DISTANCE_MM = 1000.0
 #: Smallest max_depth of a scene with a participating medium (scattering events count).
 WATER_MAX_DEPTH = 32
@@ -76,7 +76,7 @@ def _vec(v) -> str:
     return ", ".join(_num(x) for x in v)
 
 
-def _sensor_xml(name: str, camera: Camera, width_param: bool, thin_lens: bool = False) -> str:
+def sensor_xml(name: str, camera: Camera, width_param: bool, thin_lens: bool = False) -> str:
     try:
         p = sensor_parameters(camera.K, camera.size, camera.R, camera.t)
     except ValueError as exc:
@@ -255,7 +255,7 @@ def scene_xml(cameras, port: FlatPort | None, targets, target_radius: float, *,
         </phase>
     </medium>""")
     for name, cam in zip(names, cameras):
-        parts.append(_sensor_xml(name, cam, True, thin_lens is not None))
+        parts.append(sensor_xml(name, cam, True, thin_lens is not None))
     if lighting == "lit":
         for k, (origin, target) in enumerate(light_placements(left, right, port, targets)):
             parts.append(f"""
