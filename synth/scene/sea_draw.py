@@ -32,7 +32,6 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass, field
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from measure import Camera, FlatPort, StereoRig
 from synth.rendering.water import PRESETS as WATER_PRESETS
@@ -115,6 +114,8 @@ def _rig_cameras(rng, size, port_kind: str, distance: float):
     """The two cameras in the rig frame (bisector along z, baseline along x) and what was
     drawn: left at ``(-B/2, 0, 0)`` turned ``+c/2`` about y, right at ``(B/2, 0, 0)`` turned
     ``-c/2`` and by a small misalignment."""
+    from scipy.spatial.transform import Rotation  # here: synth learn --help loads no SciPy
+
     K, hfov = _intrinsics(rng, size)
     baseline = rng.uniform(100.0, 360.0)
     widest = 10.0 if port_kind == "flat" else 34.0
@@ -136,6 +137,8 @@ def _rig_cameras(rng, size, port_kind: str, distance: float):
 
 def _port(rng, kind: str, cameras, n_water: float):
     """The port of ``kind`` for ``cameras`` (reference frame) and what was drawn."""
+    from scipy.spatial.transform import Rotation  # here: synth learn --help loads no SciPy
+
     if kind == "per-camera":
         distances = rng.uniform(18.0, 25.0, size=2)
         tilts = [_small_tilt(rng, 0.4, 2.0) for _ in range(2)]
@@ -176,6 +179,8 @@ def _check_port(rig: StereoRig, kind: str) -> None:
 
 def _placement(rng, ranges: SeaRanges, rig_pose, distance: float):
     """``(R, t)`` taking seabed-frame points into the reference frame, and what was drawn."""
+    from scipy.spatial.transform import Rotation  # here: synth learn --help loads no SciPy
+
     pitch = np.radians(rng.uniform(*ranges.pitch_deg))
     roll = np.radians(rng.uniform(-10.0, 10.0))
     ahead = np.array([np.cos(pitch), 0.0, -np.sin(pitch)])     # the bisector (rig z)

@@ -150,7 +150,7 @@ def _smooth_upsample(field: np.ndarray, shape) -> np.ndarray:
 VORONOI_STRIP = 32
 
 
-def _voronoi_stones(rng, shape, texel_mm: float, stone_mm: float):
+def voronoi_stones(rng, shape, texel_mm: float, stone_mm: float):
     """A jittered-grid Voronoi of stones over a texture ``shape`` of ``texel_mm`` texels: the
     albedo of each texel's stone (log-normal, median 0.3) darkened in the gaps between stones."""
     h, w = shape
@@ -168,7 +168,7 @@ def _voronoi_stones(rng, shape, texel_mm: float, stone_mm: float):
 
 
 def _voronoi_strip(rows, cols, jitter, albedo):
-    """:func:`_voronoi_stones` on the texels of ``rows`` ``(S, 1)`` × ``cols`` ``(1, W)`` (in
+    """:func:`voronoi_stones` on the texels of ``rows`` ``(S, 1)`` × ``cols`` ``(1, W)`` (in
     cells)."""
     gh, gw = albedo.shape
     ci, cj = np.floor(rows).astype(np.int32), np.floor(cols).astype(np.int32)
@@ -203,7 +203,7 @@ def seabed_texture(rng: np.random.Generator, shape, texel_mm: float, params: Sea
     selector = _smooth_upsample(selector, shape)
     threshold = np.quantile(selector, 1.0 - params.gravel_fraction) if params.gravel_fraction else np.inf
     gravel_here = selector > threshold
-    stones = _voronoi_stones(rng, shape, texel_mm, params.stone_size_mm) * np.exp(0.12 * grain)
+    stones = voronoi_stones(rng, shape, texel_mm, params.stone_size_mm) * np.exp(0.12 * grain)
     rock = 0.22 * np.exp(0.35 * fractal_noise(shape, 2.0, rng))
     pits = fractal_noise(shape, 1.5, rng) > 1.6
     rock = np.where(pits, rock * 0.35, rock)

@@ -138,8 +138,8 @@ def _voronoi_whole(rng, shape, texel_mm, stone_mm):
 def test_the_stones_strip_by_strip_are_the_stones_at_once(shape, stone_mm):
     """Strips of VORONOI_STRIP rows give the whole texture's Voronoi bit for bit (a seed's
     texture does not depend on how it is computed)."""
-    from synth.scene.seabed import _voronoi_stones
+    from synth.scene.seabed import voronoi_stones
 
-    strips = _voronoi_stones(np.random.default_rng(4), shape, 1.5, stone_mm)
+    strips = voronoi_stones(np.random.default_rng(4), shape, 1.5, stone_mm)
     whole = _voronoi_whole(np.random.default_rng(4), shape, 1.5, stone_mm)
     assert strips.dtype == whole.dtype and np.array_equal(strips, whole)
