@@ -11,7 +11,7 @@ setup:
 lint: setup
 	$(PY) -m ruff check .
 
-# the whole suite, the renders included, on two processes (about 9 minutes on 2 cores)
+# the whole suite, the renders included, on two processes (about 8 minutes on 2 cores)
 test: lint
 	$(PY) -m pytest -n 2
 
