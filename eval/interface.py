@@ -324,47 +324,11 @@ def _report(args, board, names, indices, photo_names, found, pixels, start_port,
     from measure import Reason
 
     in_air = intrinsics["rms_px"]
-    axis = intrinsics["camera"].R[:, 2]  # the optical axis, reference frame
-    failures, warnings = [], []
-    values = {}
+    failures, warnings, values = [], [], {}
     if estimate.valid:
-        sigma = np.sqrt(np.diag(estimate.covariance))
-        port = estimate.port
-        for name, s in zip(estimate.names, sigma):
-            if name == "port.distance":
-                values["distance"] = {"estimate": port.distance, "sigma": s, "unit": "mm"}
-            elif name.startswith("port.thickness"):
-                j = int(name[len("port.thickness["):-1])
-                values[f"thickness:{j}"] = {"estimate": port.thicknesses[j], "sigma": s,
-                                            "unit": "mm", "medium": names[1 + j]}
-        tilt = sigma[[i for i, n in enumerate(estimate.names) if n.startswith("port.tilt")]]
-        values["normal"] = {"estimate": port.normal, "unit": "unit vector (camera frame)",
-                            "tilt_from_axis_deg": float(np.degrees(np.arccos(np.clip(
-                                port.normal @ axis, -1.0, 1.0)))),
-                            "sigma_deg": np.degrees(tilt)}
-        if not free_distance:
-            values["distance"] = {"estimate": port.distance, "sigma": None, "unit": "mm",
-                                  "held": "not estimated (" + (
-                                      "equal media on both sides: no photo fixes it, any value "
-                                      "gives the same pixels; "
-                                      if indices[0] == indices[-1] else "not in --free; ")
-                                  + ("--distance" if args.distance else "the start's")
-                                  + ")"}
-        for key, value in values.items():
-            if key.startswith("thickness:") and value["estimate"] <= THICKNESS_BOUND_MM:
-                failures.append(f"{key} ({value['medium']}) ran into its bound at 0 mm: these "
-                                f"photos do not determine it (free fewer thicknesses, or give "
-                                f"its value in --media)")
-        if estimate.rms_px > pinhole:
-            failures.append(f"the interface fit leaves a reprojection RMS of "
-                            f"{estimate.rms_px:.4f} px, more than a pinhole pose with no "
-                            f"interface ({pinhole:.4f} px): the layers given do not fit these "
-                            f"photos")
-        if in_air is not None and estimate.rms_px > in_air + RMS_MARGIN_PX:
-            failures.append(f"the interface fit leaves a reprojection RMS of "
-                            f"{estimate.rms_px:.4f} px, more than the in-air calibration's "
-                            f"{in_air:.4f} px + {RMS_MARGIN_PX:g} px: the media, their indices "
-                            f"or thicknesses, or the in-air calibration do not fit these photos")
+        values = _estimates(args, estimate, names, indices, intrinsics["camera"].R[:, 2],
+                            free_distance)
+        failures = _fit_failures(estimate, values, pinhole, in_air)
     else:
         failures.append(f"no interface: {Reason(estimate.reason).name} "
                         f"({_reason_text(estimate.reason)})")
@@ -412,6 +376,58 @@ def _report(args, board, names, indices, photo_names, found, pixels, start_port,
         "photos_found": len(found), "photos_total": len(photo_names),
         "per_photo": per_photo, "failures": failures, "warnings": warnings,
     }
+
+
+def _estimates(args, estimate, names, indices, axis, free_distance) -> dict:
+    """The report's ``estimates``: distance (mm; held when not free, and why), the free
+    layers' thicknesses (mm) and the normal (its tilt from the optical ``axis``), each with
+    its σ."""
+    sigma = np.sqrt(np.diag(estimate.covariance))
+    port = estimate.port
+    values = {}
+    for name, s in zip(estimate.names, sigma):
+        if name == "port.distance":
+            values["distance"] = {"estimate": port.distance, "sigma": s, "unit": "mm"}
+        elif name.startswith("port.thickness"):
+            j = int(name[len("port.thickness["):-1])
+            values[f"thickness:{j}"] = {"estimate": port.thicknesses[j], "sigma": s,
+                                        "unit": "mm", "medium": names[1 + j]}
+    tilt = sigma[[i for i, n in enumerate(estimate.names) if n.startswith("port.tilt")]]
+    values["normal"] = {"estimate": port.normal, "unit": "unit vector (camera frame)",
+                        "tilt_from_axis_deg": float(np.degrees(np.arccos(np.clip(
+                            port.normal @ axis, -1.0, 1.0)))),
+                        "sigma_deg": np.degrees(tilt)}
+    if not free_distance:
+        values["distance"] = {"estimate": port.distance, "sigma": None, "unit": "mm",
+                              "held": "not estimated (" + (
+                                  "equal media on both sides: no photo fixes it, any value "
+                                  "gives the same pixels; "
+                                  if indices[0] == indices[-1] else "not in --free; ")
+                              + ("--distance" if args.distance else "the start's")
+                              + ")"}
+    return values
+
+
+def _fit_failures(estimate, values, pinhole, in_air) -> list:
+    """Why the fit is not to be trusted: a thickness at its bound, an RMS above a pinhole pose
+    with no interface or above the in-air calibration's by more than :data:`RMS_MARGIN_PX`."""
+    failures = []
+    for key, value in values.items():
+        if key.startswith("thickness:") and value["estimate"] <= THICKNESS_BOUND_MM:
+            failures.append(f"{key} ({value['medium']}) ran into its bound at 0 mm: these "
+                            f"photos do not determine it (free fewer thicknesses, or give "
+                            f"its value in --media)")
+    if estimate.rms_px > pinhole:
+        failures.append(f"the interface fit leaves a reprojection RMS of "
+                        f"{estimate.rms_px:.4f} px, more than a pinhole pose with no "
+                        f"interface ({pinhole:.4f} px): the layers given do not fit these "
+                        f"photos")
+    if in_air is not None and estimate.rms_px > in_air + RMS_MARGIN_PX:
+        failures.append(f"the interface fit leaves a reprojection RMS of "
+                        f"{estimate.rms_px:.4f} px, more than the in-air calibration's "
+                        f"{in_air:.4f} px + {RMS_MARGIN_PX:g} px: the media, their indices "
+                        f"or thicknesses, or the in-air calibration do not fit these photos")
+    return failures
 
 
 def _reason_text(reason: int) -> str:
