@@ -31,6 +31,7 @@ import time
 import numpy as np
 
 from eval.calibrate import photos as trust
+from eval.calibrate.board_size import LARGER_PHOTOS
 from eval.calibrate import report as report_lib
 from eval.calibrate.report import format_value as _f
 from eval.cli import CLIError
@@ -89,7 +90,7 @@ def read_and_detect(args, board, log, size=None, size_source=""):
         first = [read_photo(f, args.encoding) for f in files[:trust.HINT_PHOTOS]]
         raise CLIError(f"{where}: the {board.kind} {squares} was found in none of the "
                        f"{len(files)} photos{trust.board_hint(board, [(im, im) for im in first])}")
-    larger = trust.larger_board(board, {k: (im, im) for k in found[:trust.LARGER_PHOTOS]
+    larger = trust.larger_board(board, {k: (im, im) for k in found[:LARGER_PHOTOS]
                                         for im in [read_photo(files[k], args.encoding)]}, found)
     if larger:  # a part of the board, a different part in each photo: a nonsense fit
         raise CLIError(f"{where}: {larger}")
