@@ -484,6 +484,7 @@ def _calibrate_photos(args, output, log, free, start) -> int:
     from measure.calibration.housing import calibrate_housing
 
     from eval.calibrate import photos as trust
+    from eval.calibrate import photos_report
     from eval.calibrate import report as report_lib
     from measure.calibration.housing import FIT_RMS_LIMIT_PX
 
@@ -647,9 +648,9 @@ def _calibrate_photos(args, output, log, free, start) -> int:
         _write_calibrations(tmp, rig, housing, report, None if args.air else start_rig,
                             air_covariance)
         report_lib.residual_figure(tmp, used_detections, residuals, size)
-        trust.coverage_figure(tmp, detections, set(used), size, report)
-        report = report_lib.write_report(tmp, report, trust.markdown, start)
-    code = _written(output, trust.summary_lines(report), args, housing is not None)
+        photos_report.coverage_figure(tmp, detections, set(used), size, report)
+        report = report_lib.write_report(tmp, report, photos_report.markdown, start)
+    code = _written(output, photos_report.summary_lines(report), args, housing is not None)
     return _failed(args.dir, report["failures"], output.path) or code
 
 

@@ -31,6 +31,7 @@ import time
 import numpy as np
 
 from eval.calibrate import photos as trust
+from eval.calibrate import photos_report
 from eval.calibrate.board_size import LARGER_PHOTOS
 from eval.calibrate import report as report_lib
 from eval.calibrate.report import format_value as _f
@@ -222,7 +223,7 @@ def calibrate_single(args, output, log, start, board) -> tuple[dict, str]:
                            extra_covariances={"covariance_photos": spread_covariance})
         report_lib.residual_figure(tmp, used_detections, {VIEW: result["residuals"]}, size,
                                    views=("camera",))
-        trust.coverage_figure(tmp, detections, set(result["poses"]), size,
+        photos_report.coverage_figure(tmp, detections, set(result["poses"]), size,
                               {"coverage": {"camera": report["coverage"]}}, views=("camera",))
         report = report_lib.write_report(tmp, report, markdown, start)
     return report, summary_lines(report)

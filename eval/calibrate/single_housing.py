@@ -42,6 +42,7 @@ import numpy as np
 
 from eval.calibrate.causes import FIT_ERRORS, housing_failure
 from eval.calibrate import photos as trust
+from eval.calibrate import photos_report
 from eval.calibrate import report as report_lib
 from eval.calibrate.report import format_value as _f
 from eval.calibrate.single import (VIEW, photo_lines, photo_rows, read_and_detect,
@@ -141,7 +142,7 @@ def calibrate_single_housing(args, output, log, start, board, intrinsics, start_
                            {"housing": _housing_node(report)})
         report_lib.residual_figure(tmp, used_detections, {VIEW: housing.residuals[VIEW]}, size,
                                    views=("camera",))
-        trust.coverage_figure(tmp, detections, set(used), size,
+        photos_report.coverage_figure(tmp, detections, set(used), size,
                               {"coverage": {"camera": report["coverage"]}}, views=("camera",))
         report = report_lib.write_report(tmp, report, markdown, start)
     return report, summary_lines(report)
