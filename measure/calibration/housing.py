@@ -188,20 +188,28 @@ def calibrate_housing(rig: StereoRig, board: Board, detections: Detections,
     keep = list(range(len(air) + n_global))
     joint = T @ joint[np.ix_(keep, keep)] @ T.T
     rig_cov = RigCovariance(tuple(air) + rig_names, 0.5 * (joint + joint.T), axes)
-    estimates, sigmas, conditional, k = {}, {}, {}, 0
-    for name in names:
-        w = table[name]
-        estimates[name] = housing.estimate(name, port, cameras)
-        sigmas[name] = float(sig[k]) if w == 1 else sig[k:k + w].tolist()
-        conditional[name] = (float(sig_conditional[k]) if w == 1
-                             else sig_conditional[k:k + w].tolist())
-        k += w
+    estimates, sigmas, conditional = _estimates(housing, names, port, cameras, sig,
+                                                sig_conditional)
     calibrated = StereoRig(cameras[0], cameras[1], port)
     base["fitted"] = calibrated
     return HousingCalibration(rig=calibrated, estimates=estimates, sigmas=sigmas,
                               correlation=correlation, identifiable=True, reason="",
                               covariance=rig_cov, sigmas_conditional=conditional,
                               uncertainty=uncertainty if air else "conditional", **base)
+
+
+def _estimates(housing, names, port, cameras, sig, sig_conditional) -> tuple[dict, dict, dict]:
+    """``(estimates, σ, conditional σ)`` by free parameter (a number, or a list for the
+    parameters of several numbers)."""
+    estimates, sigmas, conditional, k = {}, {}, {}, 0
+    for name in names:
+        w = housing.parameters[name]
+        estimates[name] = housing.estimate(name, port, cameras)
+        sigmas[name] = float(sig[k]) if w == 1 else sig[k:k + w].tolist()
+        conditional[name] = (float(sig_conditional[k]) if w == 1
+                             else sig_conditional[k:k + w].tolist())
+        k += w
+    return estimates, sigmas, conditional
 
 
 def _housing_and_names(rig, views, free, uncertainty):

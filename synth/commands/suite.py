@@ -37,20 +37,13 @@ def add_parser(subparsers) -> None:
 
 
 def main(args) -> int:
-    from synth.infra.cluster import check_address, connect
+    from synth.infra.cluster import connect
     from synth.products.suite import load_suite_spec
     from synth.products.suite_folder import (SuiteDir, probe, write_index, write_readme,
                                              write_suite_json)
 
     start = time.perf_counter()
-    if args.scheduler is None:
-        refuse_given(args, ["connect_timeout"], "without --scheduler (the local cluster is "
-                                                "started here, nothing is connected to)")
-    else:
-        check_address(args.scheduler)
-        if args.workers is not None:
-            raise CLIError("--workers sets the size of the local cluster; with --scheduler the "
-                           "cluster's workers render the datasets")
+    _check_cluster_options(args)
     learn = _learn_request(args)
     if learn is not None:  # a learning set (render = "learn"): synth learn's runner
         from synth.products.learn_run import run_learn
@@ -66,13 +59,7 @@ def main(args) -> int:
     todo = [e for e in spec.entries if e.key not in records
             or (args.retry_failed and records[e.key].get("status") != "ok")]
     if not args.no_progress:
-        print(f"suite {spec.name}: {len(spec.entries)} datasets, {len(todo)} to render now "
-              f"({len(spec.entries) - len(todo)} done before)", file=sys.stderr, flush=True)
-        if len(todo) > LARGE_SUITE:
-            print(f"warning: {len(todo)} datasets to render: at 5–60 s each on a 2-core machine "
-                  f"(docs/suites.md) that is {len(todo) * 5 / 3600:.0f}–"
-                  f"{len(todo) * 60 / 3600:.0f} hours; Ctrl-C stops it and a rerun resumes",
-                  file=sys.stderr, flush=True)
+        _announce(spec, todo)
     token = uuid.uuid4().hex
     client = cluster = None
     where, ran, compute = "nothing to render", 0, 0.0
@@ -117,6 +104,32 @@ def main(args) -> int:
     for row in failed[:5]:
         print(f"  {row['folder']}: {row['error']}", file=sys.stderr)
     return 1 if failed else 0
+
+
+def _check_cluster_options(args) -> None:
+    """CLIError for ``--connect-timeout`` without ``--scheduler``, a bad scheduler address, or
+    ``--workers`` with one (the cluster's own workers render)."""
+    from synth.infra.cluster import check_address
+
+    if args.scheduler is None:
+        refuse_given(args, ["connect_timeout"], "without --scheduler (the local cluster is "
+                                                "started here, nothing is connected to)")
+        return
+    check_address(args.scheduler)
+    if args.workers is not None:
+        raise CLIError("--workers sets the size of the local cluster; with --scheduler the "
+                       "cluster's workers render the datasets")
+
+
+def _announce(spec, todo) -> None:
+    """What the run will render, on stderr; a warning for a suite of many hours."""
+    print(f"suite {spec.name}: {len(spec.entries)} datasets, {len(todo)} to render now "
+          f"({len(spec.entries) - len(todo)} done before)", file=sys.stderr, flush=True)
+    if len(todo) > LARGE_SUITE:
+        print(f"warning: {len(todo)} datasets to render: at 5–60 s each on a 2-core machine "
+              f"(docs/suites.md) that is {len(todo) * 5 / 3600:.0f}–"
+              f"{len(todo) * 60 / 3600:.0f} hours; Ctrl-C stops it and a rerun resumes",
+              file=sys.stderr, flush=True)
 
 
 def _learn_request(args):
