@@ -73,8 +73,6 @@ def read_single_camera(path) -> dict:
     node), calibmar's one-camera YAML (``non_svp_model: NONE``) or a COLMAP ``cameras.txt`` of
     one camera with no housing, told apart by content. CalibFormatError names the file and
     what is wrong (a stereo calibration, a file that already holds a housing)."""
-    import cv2
-
     path = os.fspath(path)
     if not os.path.isfile(path):
         raise CalibFormatError(f"{path}: no such file")
@@ -82,64 +80,11 @@ def read_single_camera(path) -> dict:
     out = {"rms_px": None, "lens_model": None, "covariance": None, "covariance_photos": None,
            "format": kind}
     if kind == "calibmar":
-        values = parse_calibmar(path)
-        if str(values["non_svp_model"]) != "NONE":
-            raise CalibFormatError(f"{path}: non_svp_model {values['non_svp_model']}: already "
-                                   f"a housing calibration; give the camera's in-air "
-                                   f"calibration (non_svp_model: NONE)")
-        if values.get("cam_to_world_translation") and np.any(values["cam_to_world_translation"]):
-            raise CalibFormatError(f"{path}: the second camera of a calibmar stereo "
-                                   f"calibration; give one camera's file")
-        K, D = opencv_camera(str(values["model"]), values["parameters"], path)
-        size = values["size"]
-        model = distortion_model_of(str(values["model"]))
+        K, D, size, model = _calibmar_camera(path)
     elif kind == "colmap":
-        cameras = parse_cameras_txt(path)
-        if len(cameras) != 1:
-            raise CalibFormatError(f"{path}: {len(cameras)} cameras; one camera's housing is "
-                                   f"calibrated from a cameras.txt of one camera")
-        (only,) = cameras.values()
-        if only["housing"] is not None:
-            raise CalibFormatError(f"{path}: the camera has a {only['housing']}: already a "
-                                   f"housing calibration; give the camera's in-air calibration")
-        K, D, size, model = only["K"], only["D"], only["size"], only["model"]
+        K, D, size, model = _colmap_camera(path)
     else:
-        try:
-            fs = cv2.FileStorage(path, cv2.FILE_STORAGE_READ)
-        except (cv2.error, SystemError):
-            raise CalibFormatError(f"{path}: not a valid OpenCV FileStorage, calibmar or COLMAP "
-                                   f"camera file") from None
-        if not fs.isOpened():
-            raise CalibFormatError(f"{path}: cannot open as OpenCV FileStorage")
-        try:
-            if not fs.getNode("K1").empty():
-                raise CalibFormatError(f"{path}: a stereo calibration (K1, K2); give one "
-                                       f"camera's in-air calibration (camera.yaml of eval "
-                                       f"calibrate PHOTOS --air)")
-            if not (fs.getNode("port").empty() and fs.getNode("dome").empty()):
-                raise CalibFormatError(f"{path}: already a housing calibration (a port or dome "
-                                       f"node); give the camera's in-air calibration")
-            missing = [n for n in CAMERA_FILE_NODES if fs.getNode(n).empty()]
-            if missing:
-                raise CalibFormatError(f"{path}: no {', '.join(missing)} (expected an OpenCV "
-                                       f"camera file: {', '.join(CAMERA_FILE_NODES)})")
-            K = fs.getNode("camera_matrix").mat()
-            D = fs.getNode("distortion_coefficients").mat()
-            size = (int(fs.getNode("image_width").real()), int(fs.getNode("image_height").real()))
-            node = fs.getNode("rms_px")
-            out["rms_px"] = None if node.empty() else float(node.real())
-            node = fs.getNode("lens_model")
-            out["lens_model"] = None if node.empty() else node.string()
-            node = fs.getNode("distortion_model")
-            model = BROWN_CONRADY if node.empty() else node.string()
-            out["covariance"] = read_covariance_node(path, fs.getNode("covariance"))
-            out["covariance_photos"] = read_covariance_node(path,
-                                                            fs.getNode("covariance_photos"))
-        finally:
-            fs.release()
-        if K is None or np.shape(K) != (3, 3) or D is None or not np.all(np.isfinite(K)):
-            raise CalibFormatError(f"{path}: camera_matrix must be 3x3 and "
-                                   f"distortion_coefficients a row of numbers")
+        K, D, size, model = _opencv_camera(path, out)
     dist = np.asarray(D, dtype=np.float64).ravel()
     try:
         out["camera"] = Camera(np.asarray(K, dtype=np.float64), size,
@@ -149,6 +94,77 @@ def read_single_camera(path) -> dict:
         raise CalibFormatError(f"{path}: {exc}") from None
     out["size"] = tuple(size)
     return out
+
+
+def _calibmar_camera(path):
+    """``(K, D, size, model)`` of calibmar's one-camera YAML in air (``non_svp_model: NONE``,
+    not the second camera of a stereo pair)."""
+    values = parse_calibmar(path)
+    if str(values["non_svp_model"]) != "NONE":
+        raise CalibFormatError(f"{path}: non_svp_model {values['non_svp_model']}: already "
+                               f"a housing calibration; give the camera's in-air "
+                               f"calibration (non_svp_model: NONE)")
+    if values.get("cam_to_world_translation") and np.any(values["cam_to_world_translation"]):
+        raise CalibFormatError(f"{path}: the second camera of a calibmar stereo "
+                               f"calibration; give one camera's file")
+    K, D = opencv_camera(str(values["model"]), values["parameters"], path)
+    return K, D, values["size"], distortion_model_of(str(values["model"]))
+
+
+def _colmap_camera(path):
+    """``(K, D, size, model)`` of a COLMAP ``cameras.txt`` of one camera with no housing."""
+    cameras = parse_cameras_txt(path)
+    if len(cameras) != 1:
+        raise CalibFormatError(f"{path}: {len(cameras)} cameras; one camera's housing is "
+                               f"calibrated from a cameras.txt of one camera")
+    (only,) = cameras.values()
+    if only["housing"] is not None:
+        raise CalibFormatError(f"{path}: the camera has a {only['housing']}: already a "
+                               f"housing calibration; give the camera's in-air calibration")
+    return only["K"], only["D"], only["size"], only["model"]
+
+
+def _opencv_camera(path, out):
+    """``(K, D, size, model)`` of an OpenCV ``camera.yaml`` (:data:`CAMERA_FILE_NODES`); its
+    ``rms_px``, ``lens_model`` and covariances go into ``out``."""
+    import cv2
+
+    try:
+        fs = cv2.FileStorage(path, cv2.FILE_STORAGE_READ)
+    except (cv2.error, SystemError):
+        raise CalibFormatError(f"{path}: not a valid OpenCV FileStorage, calibmar or COLMAP "
+                               f"camera file") from None
+    if not fs.isOpened():
+        raise CalibFormatError(f"{path}: cannot open as OpenCV FileStorage")
+    try:
+        if not fs.getNode("K1").empty():
+            raise CalibFormatError(f"{path}: a stereo calibration (K1, K2); give one "
+                                   f"camera's in-air calibration (camera.yaml of eval "
+                                   f"calibrate PHOTOS --air)")
+        if not (fs.getNode("port").empty() and fs.getNode("dome").empty()):
+            raise CalibFormatError(f"{path}: already a housing calibration (a port or dome "
+                                   f"node); give the camera's in-air calibration")
+        missing = [n for n in CAMERA_FILE_NODES if fs.getNode(n).empty()]
+        if missing:
+            raise CalibFormatError(f"{path}: no {', '.join(missing)} (expected an OpenCV "
+                                   f"camera file: {', '.join(CAMERA_FILE_NODES)})")
+        K = fs.getNode("camera_matrix").mat()
+        D = fs.getNode("distortion_coefficients").mat()
+        size = (int(fs.getNode("image_width").real()), int(fs.getNode("image_height").real()))
+        node = fs.getNode("rms_px")
+        out["rms_px"] = None if node.empty() else float(node.real())
+        node = fs.getNode("lens_model")
+        out["lens_model"] = None if node.empty() else node.string()
+        node = fs.getNode("distortion_model")
+        model = BROWN_CONRADY if node.empty() else node.string()
+        out["covariance"] = read_covariance_node(path, fs.getNode("covariance"))
+        out["covariance_photos"] = read_covariance_node(path, fs.getNode("covariance_photos"))
+    finally:
+        fs.release()
+    if K is None or np.shape(K) != (3, 3) or D is None or not np.all(np.isfinite(K)):
+        raise CalibFormatError(f"{path}: camera_matrix must be 3x3 and "
+                               f"distortion_coefficients a row of numbers")
+    return K, D, size, model
 
 
 def read_covariance_node(path, node, error=CalibFormatError):
