@@ -435,73 +435,9 @@ def markdown(report: dict) -> str:
     for view in ("left", "right", "both"):
         lines.append(f"| {view} | {d[view]['n']} | {_f(d[view]['rms_px'])} | {_f(d[view]['max_px'])} |")
     if "in_air" in report:
-        a = report["in_air"]
-        lines += ["", "## In-air calibration (OpenCV)", "",
-                  f"Reprojection RMS: left {a['rms_px']['left']:.4f} px, right "
-                  f"{a['rms_px']['right']:.4f} px, stereo {a['stereo_rms_px']:.4f} px.", "",
-                  "| camera | parameter | estimate | truth | error | σ | error / σ |",
-                  "|---|---|---|---|---|---|---|"]
-        for cam, values in a["cameras"].items():
-            for key in ("fx", "fy", "cx", "cy"):
-                v = values[key]
-                lines.append(f"| {cam} | {key} (px) | {v['estimate']:.4f} | {v['truth']:.4f} | "
-                             f"{v['error']:+.4f} | {_f(v['sigma'])} | {_f(v['error_in_sigma'], 3)} |")
-        for cam, values in a["cameras"].items():
-            if values.get("dist_sigma"):
-                lines.append(f"| {cam} | k1 k2 p1 p2 | {_f(values['dist'][:4] if values['dist'] else None)} "
-                             f"| – | – | {_f(list(values['dist_sigma'].values()), 3)} | – |")
-        b = a["baseline_mm"]
-        lines += ["", f"Baseline {b['estimate']:.4f} mm (truth {b['truth']:.4f}, error "
-                  f"{b['error']:+.4f} mm, σ {_f(a.get('baseline_sigma_mm'), 3)} mm); right "
-                  f"camera rotation error {a['right_rotation_error_deg']:.5f}° (σ "
-                  f"{_f(a.get('right_rotation_sigma_deg'), 3)}° about x, y, z), position error "
-                  f"{a['right_position_error_mm']:.4f} mm (σ "
-                  f"{_f(a.get('right_center_sigma_mm'), 3)} mm; error / σ "
-                  f"{_f(a.get('right_position_error_in_sigma'), 3)}). Every correlation "
-                  f"is in calib.yaml's `covariance`."]
+        lines += _in_air_lines(report["in_air"])
     if "housing" in report:
-        hs = report["housing"]
-        lines += ["", "## Housing calibration (refractive bundle adjustment)", "",
-                  f"Free: {', '.join(hs['free'])}; {hs['observations']} corner observations in "
-                  f"{len(hs['poses_used'])} poses; reprojection RMS {hs['rms_px_start']:.3f} px "
-                  f"at the start, {hs['rms_px']:.4f} px after ({hs['evaluations']} evaluations).",
-                  "", sigma_note(hs.get("uncertainty", "conditional")), "",
-                  "| parameter | estimate | truth | error | σ | error / σ | σ (conditional) |",
-                  "|---|---|---|---|---|---|---|"]
-        for name, p in hs["parameters"].items():
-            if name.endswith("normal"):
-                lines.append(f"| {name.replace('_', ' ')} | {_f(p['estimate'], 7)} | {_f(p['truth'], 7)} | "
-                             f"{p['error_deg'] * 3600:.2f}″ | {_f([s * 3600 for s in p['sigma_deg']], 3)}″ "
-                             f"(two tilts) | {_f(p['error_in_sigma'], 3)} | "
-                             f"{_f([s * 3600 for s in p['sigma_conditional_deg']], 3)}″ |")
-            elif name == "extrinsics":
-                lines.append(f"| right camera | rotation error {p['rotation_error_deg']:.5f}° | "
-                             f"– | position {_f(p['position_error_mm'])} mm | "
-                             f"{_f(p['sigma_position_mm'])} mm, "
-                             f"{_f(p['sigma_rotation_deg'], 3)}° | {_f(p['error_in_sigma'], 3)} | "
-                             f"{_f(p['sigma_conditional'][3:])} mm |")
-            elif name.endswith(("_dome_x", "_dome_y", "_dome_z")):
-                lines.append(f"| {name.replace('_', ' ')} (mm, camera frame) | "
-                             f"{p['estimate']:.4f} | {p['truth']:.4f} | {p['error']:+.4f} | "
-                             f"{_f(p['sigma'])} | {_f(p['error_in_sigma'], 3)} | "
-                             f"{_f(p.get('sigma_conditional'))} |")
-            else:
-                lines.append(f"| {name} | {p['estimate']:.6f} | {p['truth']:.6f} | "
-                             f"{p['error']:+.6f} | {_f(p['sigma'])} | {_f(p['error_in_sigma'], 3)} "
-                             f"| {_f(p.get('sigma_conditional'))} |")
-                if "from_camera" in p:  # two housings: D from the camera's centre
-                    c = p["from_camera"]
-                    lines.append(f"| {name} from its camera | {c['estimate']:.6f} | "
-                                 f"{c['truth']:.6f} | {c['error']:+.6f} | – | – | – |")
-        if hs.get("in_air_refined"):
-            lines += ["", "In-air parameters refined by the underwater boards (the prior fit; "
-                      "change from the in-air value, σ): " + ", ".join(
-                          f"{name} {v['change']:+.3g} ({_f(v['sigma'], 2)})"
-                          for name, v in hs["in_air_refined"].items()) + "."]
-        lines += ["", "Correlations of the free numbers (" + ", ".join(hs["labels"])
-                  + "; of the housing adjustment alone — the joint ones are in calib.yaml's "
-                    "covariance):", ""]
-        lines += ["    " + " ".join(f"{v:+.3f}" for v in row) for row in hs["correlation"]]
+        lines += _housing_lines(report["housing"])
     lines += ["", "## Files", "", "- `calib.yaml`: the calibration in the dataset format"
               + (" (with an `uncertainty` map), `calib_in_air_only.yaml` (the in-air calibration "
                  "with the design port), "
@@ -512,6 +448,85 @@ def markdown(report: dict) -> str:
               + "`poses.png`", "", "## Timings (s)", "",
               " · ".join(f"{k} {v:.2f}" for k, v in report["timings_s"].items())]
     return "\n".join(lines) + "\n"
+
+
+def _in_air_lines(a: dict) -> list:
+    """The in-air calibration's section: RMS, each camera's intrinsics against the truth, the
+    distortion's σ, the baseline and the right camera's pose errors."""
+    lines = []
+    lines += ["", "## In-air calibration (OpenCV)", "",
+              f"Reprojection RMS: left {a['rms_px']['left']:.4f} px, right "
+              f"{a['rms_px']['right']:.4f} px, stereo {a['stereo_rms_px']:.4f} px.", "",
+              "| camera | parameter | estimate | truth | error | σ | error / σ |",
+              "|---|---|---|---|---|---|---|"]
+    for cam, values in a["cameras"].items():
+        for key in ("fx", "fy", "cx", "cy"):
+            v = values[key]
+            lines.append(f"| {cam} | {key} (px) | {v['estimate']:.4f} | {v['truth']:.4f} | "
+                         f"{v['error']:+.4f} | {_f(v['sigma'])} | {_f(v['error_in_sigma'], 3)} |")
+    for cam, values in a["cameras"].items():
+        if values.get("dist_sigma"):
+            lines.append(f"| {cam} | k1 k2 p1 p2 | {_f(values['dist'][:4] if values['dist'] else None)} "
+                         f"| – | – | {_f(list(values['dist_sigma'].values()), 3)} | – |")
+    b = a["baseline_mm"]
+    lines += ["", f"Baseline {b['estimate']:.4f} mm (truth {b['truth']:.4f}, error "
+              f"{b['error']:+.4f} mm, σ {_f(a.get('baseline_sigma_mm'), 3)} mm); right "
+              f"camera rotation error {a['right_rotation_error_deg']:.5f}° (σ "
+              f"{_f(a.get('right_rotation_sigma_deg'), 3)}° about x, y, z), position error "
+              f"{a['right_position_error_mm']:.4f} mm (σ "
+              f"{_f(a.get('right_center_sigma_mm'), 3)} mm; error / σ "
+              f"{_f(a.get('right_position_error_in_sigma'), 3)}). Every correlation "
+              f"is in calib.yaml's `covariance`."]
+    return lines
+
+
+def _housing_lines(hs: dict) -> list:
+    """The housing calibration's section: the fit, each free number against the truth with σ
+    (and σ conditional on the in-air calibration), the in-air numbers a prior fit refined, the
+    correlations."""
+    lines = []
+    lines += ["", "## Housing calibration (refractive bundle adjustment)", "",
+              f"Free: {', '.join(hs['free'])}; {hs['observations']} corner observations in "
+              f"{len(hs['poses_used'])} poses; reprojection RMS {hs['rms_px_start']:.3f} px "
+              f"at the start, {hs['rms_px']:.4f} px after ({hs['evaluations']} evaluations).",
+              "", sigma_note(hs.get("uncertainty", "conditional")), "",
+              "| parameter | estimate | truth | error | σ | error / σ | σ (conditional) |",
+              "|---|---|---|---|---|---|---|"]
+    for name, p in hs["parameters"].items():
+        if name.endswith("normal"):
+            lines.append(f"| {name.replace('_', ' ')} | {_f(p['estimate'], 7)} | {_f(p['truth'], 7)} | "
+                         f"{p['error_deg'] * 3600:.2f}″ | {_f([s * 3600 for s in p['sigma_deg']], 3)}″ "
+                         f"(two tilts) | {_f(p['error_in_sigma'], 3)} | "
+                         f"{_f([s * 3600 for s in p['sigma_conditional_deg']], 3)}″ |")
+        elif name == "extrinsics":
+            lines.append(f"| right camera | rotation error {p['rotation_error_deg']:.5f}° | "
+                         f"– | position {_f(p['position_error_mm'])} mm | "
+                         f"{_f(p['sigma_position_mm'])} mm, "
+                         f"{_f(p['sigma_rotation_deg'], 3)}° | {_f(p['error_in_sigma'], 3)} | "
+                         f"{_f(p['sigma_conditional'][3:])} mm |")
+        elif name.endswith(("_dome_x", "_dome_y", "_dome_z")):
+            lines.append(f"| {name.replace('_', ' ')} (mm, camera frame) | "
+                         f"{p['estimate']:.4f} | {p['truth']:.4f} | {p['error']:+.4f} | "
+                         f"{_f(p['sigma'])} | {_f(p['error_in_sigma'], 3)} | "
+                         f"{_f(p.get('sigma_conditional'))} |")
+        else:
+            lines.append(f"| {name} | {p['estimate']:.6f} | {p['truth']:.6f} | "
+                         f"{p['error']:+.6f} | {_f(p['sigma'])} | {_f(p['error_in_sigma'], 3)} "
+                         f"| {_f(p.get('sigma_conditional'))} |")
+            if "from_camera" in p:  # two housings: D from the camera's centre
+                c = p["from_camera"]
+                lines.append(f"| {name} from its camera | {c['estimate']:.6f} | "
+                             f"{c['truth']:.6f} | {c['error']:+.6f} | – | – | – |")
+    if hs.get("in_air_refined"):
+        lines += ["", "In-air parameters refined by the underwater boards (the prior fit; "
+                  "change from the in-air value, σ): " + ", ".join(
+                      f"{name} {v['change']:+.3g} ({_f(v['sigma'], 2)})"
+                      for name, v in hs["in_air_refined"].items()) + "."]
+    lines += ["", "Correlations of the free numbers (" + ", ".join(hs["labels"])
+              + "; of the housing adjustment alone — the joint ones are in calib.yaml's "
+                "covariance):", ""]
+    lines += ["    " + " ".join(f"{v:+.3f}" for v in row) for row in hs["correlation"]]
+    return lines
 
 
 #: What the σ of a calibration file covers, by how it was obtained (calib.yaml's
