@@ -434,13 +434,7 @@ def run_pipeline(inputs: RunInputs, config: RunConfig, log=print) -> RunResult:
         corrected, eccentricity_summary, covariances_corrected, uncertainty_corrected = \
             _corrected_run(inputs, config, detections, centers, matches, results, timings, log)
 
-    budget = None
-    if budget_rigs:
-        log(f"error budget: measure again with {', '.join(budget_rigs)} …")
-        start = time.perf_counter()
-        budget = budget_stage(inputs, detections, centers, budget_rigs, port_methods, gate_mm,
-                              depth_window)
-        timings["budget"] = time.perf_counter() - start
+    budget = _budget(inputs, detections, centers, config, timings, log) if budget_rigs else None
 
     log("score against the ground truth (Open3D) …")
     start = time.perf_counter()
@@ -506,6 +500,16 @@ def _report(inputs, config, detections, scored, primary, primary_uncertainty, un
         "spp_rendered": (inputs.extra.get("render") or {}).get(
             "spp_rendered", inputs.extra.get("spp_rendered")),
     }
+
+
+def _budget(inputs, detections, centers, config, timings, log):
+    """The error budget: the same detections measured again with each of the budget's rigs."""
+    log(f"error budget: measure again with {', '.join(inputs.budget_rigs)} …")
+    start = time.perf_counter()
+    budget = budget_stage(inputs, detections, centers, inputs.budget_rigs, config.port_methods,
+                          config.gate_mm, config.depth_range_mm)
+    timings["budget"] = time.perf_counter() - start
+    return budget
 
 
 def _corrected_run(inputs, config, detections, centers, matches, results, timings, log):
