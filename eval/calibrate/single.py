@@ -101,6 +101,18 @@ def read_and_detect(args, board, log, size=None, size_source=""):
     return names, None, size, detections, timings, aside
 
 
+def note_set_aside(report: dict, aside: dict, names) -> None:
+    """One camera's photos set aside before the fit (``aside`` ``{pose: why}``: repeats,
+    thinned) into ``report``: named, warned of (but thinning), their status in the per-pose
+    table, and counted among the photos the board was found in."""
+    report["set_aside"] = {names[k]: why for k, why in sorted(aside.items())}
+    report["warnings"] += [f"{names[k]}: {why}" for k, why in sorted(aside.items())
+                           if "thinned" not in why]
+    for row in report["per_pose"]:
+        row["status"] = aside.get(row["pose"], row["status"])
+    report["found"] += len(aside)  # found, then set aside
+
+
 def _set_aside(detections, board, size, args, names):
     """``(detections, aside {pose: status})``: the photos that repeat an earlier one
     (:func:`eval.calibrate.sources.repeated_views`) and, of more than ``--max-poses``, the
@@ -206,12 +218,7 @@ def calibrate_single(args, output, log, start, board) -> tuple[dict, str]:
     timings["leave_one_out"] = time.perf_counter() - t
     report = _report(args, board, names, size, detections, used_detections, result, outliers,
                      camera, sigmas, result["problem"])
-    report["set_aside"] = {names[k]: why for k, why in sorted(aside.items())}
-    report["warnings"] += [f"{names[k]}: {why}" for k, why in sorted(aside.items())
-                           if "thinned" not in why]
-    for row in report["per_pose"]:
-        row["status"] = aside.get(row["pose"], row["status"])
-    report["found"] += len(aside)  # found, then set aside
+    note_set_aside(report, aside, names)
     for key, value in spread.items():
         report["camera"][key]["sigma_photos"] = value
     report["timings_s"] = timings

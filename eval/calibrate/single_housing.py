@@ -45,7 +45,7 @@ from eval.calibrate import photos as trust
 from eval.calibrate import photos_report
 from eval.calibrate import report as report_lib
 from eval.calibrate.report import format_value as _f
-from eval.calibrate.single import (VIEW, photo_lines, photo_rows, read_and_detect,
+from eval.calibrate.single import (VIEW, note_set_aside, photo_lines, photo_rows, read_and_detect,
                                    write_camera_files)
 from eval.cli import CLIError
 
@@ -125,12 +125,7 @@ def calibrate_single_housing(args, output, log, start, board, intrinsics, start_
                      intrinsics, {"rms_px": float(absorbed[0]), "model": model, "tried": tried,
                                   "cross_validation": validation}, dome)
     report["in_air_dependence"] = in_air_dependence(housing, intrinsics)
-    report["set_aside"] = {names[k]: why for k, why in sorted(aside.items())}
-    report["warnings"] += [f"{names[k]}: {why}" for k, why in sorted(aside.items())
-                           if "thinned" not in why]
-    for row in report["per_pose"]:
-        row["status"] = aside.get(row["pose"], row["status"])
-    report["found"] += len(aside)  # found, then set aside
+    note_set_aside(report, aside, names)
     report["timings_s"] = timings
     log("write the calibration, report and figures …")
     with output.staged() as tmp:
