@@ -219,12 +219,53 @@ def fit_lamp(samples, per_photo: bool = False):
     return best.x[:5], gains, float(np.sqrt(np.mean(best.fun ** 2)))
 
 
-def render_twin(K, kc, pose, square, first_dark, lamp_mm, spp, seed, sag_mm=0.0, black=None,
+def lamp_emitter(lamp) -> dict:
+    """The Mitsuba emitter (camera frame, intensity 10⁶) of a fitted lamp: ``lamp`` a point
+    lamp's position (3,) mm, or a spot's ``(x, y, z, azimuth, elevation, cut-off rad,
+    beam / cut-off)`` (:mod:`ouc_light_models`)."""
+    lamp = np.asarray(lamp, float)
+    intensity = {"type": "rgb", "value": 1e6}
+    if lamp.size == 3:
+        return {"type": "point", "position": lamp.tolist(), "intensity": intensity}
+    from ouc_light_models import axis_vector
+
+    from synth.rendering.mitsuba_setup import import_mitsuba
+
+    mi, _ = import_mitsuba(None)
+    axis = axis_vector(lamp[3], lamp[4])
+    up = np.cross(axis, [1.0, 0.0, 0.0] if abs(axis[0]) < 0.9 else [0.0, 1.0, 0.0])
+    cutoff = float(np.degrees(lamp[5]))
+    return {"type": "spot", "intensity": intensity, "cutoff_angle": cutoff,
+            "beam_width": cutoff * float(lamp[6]),
+            "to_world": mi.ScalarTransform4f().look_at(
+                origin=lamp[:3].tolist(), target=(lamp[:3] + axis).tolist(), up=up.tolist())}
+
+
+def fitted_light(samples, kind: str, per_photo: bool):
+    """The light fitted to the photos' squares: ``(lamp, gain, black/white, exposures, log
+    RMS)``, ``lamp`` as :func:`lamp_emitter` takes it, ``gain`` the stored levels per unit of
+    rendered radiance (white paper of :data:`LAYOUT`), ``exposures`` each photo's factor on it.
+    ``kind`` ``"point"`` (:func:`fit_lamp`) or ``"spot"``
+    (:func:`ouc_light_models.fit_light`: a spot lamp's beam; exposures per photo bounded)."""
+    if kind == "point":
+        params, exposures, log_rms = fit_lamp(samples, per_photo)
+        lamp, log_gain, log_black = params[:3], params[3], params[4]
+    else:
+        from ouc_light_models import LIGHT_PARAMS, fit_light
+
+        params, exposures, log_rms = fit_light(samples, kind, per_photo)
+        m = LIGHT_PARAMS[kind]
+        lamp, log_gain, log_black = params[:m], params[m], params[m + 1]
+    gain = float(np.exp(log_gain)) * np.pi / LAYOUT["white"]
+    return lamp, gain, float(np.exp(log_black)), exposures, log_rms
+
+
+def render_twin(K, kc, pose, square, first_dark, lamp, spp, seed, sag_mm=0.0, black=None,
                 jitter_mm=0.0, laminate=None):
     """The linear render (float32 ``(486, 648)``) of one pose: the printed board
     (:func:`board_texture`, bent by ``sag_mm``, its squares' edges ragged by ``jitter_mm``)
-    lit by a point lamp at ``lamp_mm`` (camera frame) of intensity 1e6; under a laminate of
-    GGX roughness ``laminate`` where given."""
+    lit by the fitted lamp (:func:`lamp_emitter`: a point lamp at ``lamp`` mm, camera frame,
+    or a spot) of intensity 1e6; under a laminate of GGX roughness ``laminate`` where given."""
     from measure import Camera
     from synth.products.printed_board import render_board
 
@@ -232,8 +273,7 @@ def render_twin(K, kc, pose, square, first_dark, lamp_mm, spp, seed, sag_mm=0.0,
     texture, (x0, x1, y0, y1) = board_texture(n_sq, first_dark, black, jitter_mm / square)
     facing = 1.0 if R[:, 2] @ -T > 0 else -1.0   # the printed side's z must point away
     flip = np.diag([1.0, 1.0, -facing])           # from the camera (board frame, mm)
-    emitter = {"type": "point", "position": [float(v) for v in lamp_mm],
-               "intensity": {"type": "rgb", "value": 1e6}}
+    emitter = lamp_emitter(lamp)
     return render_board(Camera(K, (648, 486), dist=kc), (R @ flip, T), texture,
                         (x0 * square, x1 * square, y0 * square, y1 * square), emitter, spp,
                         seed, sag_mm=sag_mm, laminate_alpha=laminate)
@@ -354,6 +394,9 @@ def main(argv=None) -> int:
     parser.add_argument("--exposure", choices=("fixed", "per-photo"), default="fixed",
                         help="one exposure for all photos (default) or one each, fitted with "
                              "the lamp (an automatic exposure)")
+    parser.add_argument("--light", choices=("point", "spot"), default="point",
+                        help="the fitted lamp: a point lamp (default) or a spot lamp with a "
+                             "beam (its aim, cut-off and beam fitted too, tools/ouc_light_models.py)")
     parser.add_argument("--laminate", type=float, default=None, metavar="ALPHA",
                         help="a glossy coat of this GGX roughness over the print (default matte)")
     args = parser.parse_args(argv)
@@ -368,12 +411,11 @@ def main(argv=None) -> int:
     os.makedirs(args.out, exist_ok=True)
     photos = [cv2.imread(os.path.join(args.folder, "air", f"{p[0]}.BMP"), cv2.IMREAD_GRAYSCALE)
               for p in poses]
-    params, exposures, log_rms = fit_lamp(square_samples(photos, poses, K, kc, square),
-                                          args.exposure == "per-photo")
-    lamp, black = params[:3], LAYOUT["white"] * float(np.exp(params[4]))
-    gain = float(np.exp(params[3])) * np.pi / LAYOUT["white"]
-    print(f"lamp fit: at {np.round(lamp).tolist()} mm (camera frame), black/white "
-          f"{np.exp(params[4]):.3f}, log RMS {log_rms:.3f}; exposures "
+    lamp, gain, black_white, exposures, log_rms = fitted_light(
+        square_samples(photos, poses, K, kc, square), args.light, args.exposure == "per-photo")
+    black = LAYOUT["white"] * black_white
+    print(f"lamp fit ({args.light}): {np.round(lamp, 3).tolist()} (mm, camera frame), "
+          f"black/white {black_white:.3f}, log RMS {log_rms:.3f}; exposures "
           + " ".join(f"{e / np.median(exposures):.2f}" for e in exposures))
     vignette = cos4_map(Camera(K, (648, 486), dist=kc)).astype(np.float32)
     rng = np.random.default_rng(0)
@@ -388,8 +430,8 @@ def main(argv=None) -> int:
     sheet = np.vstack([np.hstack([photos[k], twins[k]]) for k in (0, 4, 7)])
     cv2.imwrite(os.path.join(args.out, "compare.png"), sheet)
     with open(os.path.join(args.out, "report.json"), "w") as fh:
-        json.dump({"rows": rows, "lamp_mm": lamp.tolist(),
-                   "black_white": float(np.exp(params[4])), "log_rms": log_rms,
+        json.dump({"rows": rows, "light": args.light, "lamp_mm": np.asarray(lamp).tolist(),
+                   "black_white": black_white, "log_rms": log_rms,
                    "exposures": exposures.tolist(), "layout": LAYOUT, "noise_dn": NOISE_DN,
                    "blur_px": BLUR_PX, "sag_mm": args.sag, "print_jitter_mm": args.print_jitter,
                    "laminate_alpha": args.laminate}, fh, indent=1)
