@@ -2,7 +2,8 @@
 calibration, and the twin compared with the photos detector by detector.
 
     python tools/ouc_twin.py $REFSTEREO_REAL_PHOTOS/ouc_flat --out out/ouc_twin [--spp 16]
-        [--exposure fixed|per-photo] [--print-jitter MM] [--sag MM] [--laminate ALPHA]
+        [--exposure fixed|per-photo] [--light point|spot] [--print-jitter MM] [--sag MM]
+        [--laminate ALPHA]
 
 What is rendered (648 × 486, the camera at the reference frame's origin): the authors'
 ``Calib_Results_export.json`` — K (fx ≠ fy: rendered on an oversampled square-pixel film and
@@ -16,7 +17,8 @@ rendered by :func:`synth.products.printed_board.render_board`. The light is **fi
 photos** (:func:`fit_lamp`): one point lamp, the exposure and the black squares' reflectance
 that best give the levels of the photos' 280 squares (140 of the white ones clipped at 250),
 a matte board and a linear camera assumed (``--exposure per-photo``: an exposure per photo,
-as an automatic exposure would set it). Stored as the photos were: cos⁴ vignetting, the
+as an automatic exposure would set it; ``--light spot``: a spot lamp whose aim, cut-off and
+beam are fitted too, :mod:`ouc_light_models`). Stored as the photos were: cos⁴ vignetting, the
 edges' blur and the noise measured on the photos (:data:`BLUR_PX`, :data:`NOISE_DN`), the
 fitted exposure, linear levels over a dark level, clipped at 250, 8 bits. ``--print-jitter``:
 a ragged print (every square's edges moved by their own Gaussian offsets); ``--sag``: the
