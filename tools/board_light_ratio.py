@@ -16,9 +16,12 @@ bits: the views' median white square at W DN, clipped at 255
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 
 import numpy as np
+
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))  # the repository
 
 
 def white_levels(folder) -> list:

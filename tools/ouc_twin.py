@@ -10,17 +10,18 @@ What is rendered (648 × 486, the camera at the reference frame's origin): the a
 warped, as every distorted camera is, :func:`synth.rendering.render.render_view_counted`), the
 distortion kc (Bouguet's pixels are OpenCV's: the export's poses reproject onto
 ``cornerSubPix`` corners at a median 0.13–0.33 px) and every photo's pose of the sub-grid the
-authors clicked (``omc``, ``Tc``). The board as the photos show it, approximately: the checker
-extended by :data:`EXTRA_SQUARES` square beyond the clicked sub-grid on every side, a black
-frame line printed along its edge and the metal plate round it, all diffuse (:data:`LAYOUT`),
-rendered by :func:`synth.products.printed_board.render_board`. The light is **fitted to the
-photos** (:func:`fit_lamp`): one point lamp, the exposure and the black squares' reflectance
-that best give the levels of the photos' 280 squares (140 of the white ones clipped at 250),
-a matte board and a linear camera assumed (``--exposure per-photo``: an exposure per photo,
-as an automatic exposure would set it; ``--light spot``: a spot lamp whose aim, cut-off and
-beam are fitted too, :mod:`ouc_light_models`). Stored as the photos were: cos⁴ vignetting, the
-edges' blur and the noise measured on the photos (:data:`BLUR_PX`, :data:`NOISE_DN`), the
-fitted exposure, linear levels over a dark level, clipped at 250, 8 bits. ``--print-jitter``:
+authors clicked (``omc``, ``Tc``). The board as the photos show it: the checker of full
+squares extending :data:`EXTRA_SQUARES` square beyond the clicked sub-grid on every side, a
+sliver of the next squares round it where the print was cut, and the metal plate, all diffuse
+(:data:`LAYOUT`), rendered by :func:`synth.products.printed_board.render_board`. The light is
+**fitted to the photos** (:func:`fit_lamp`): one point lamp, the exposure and the black
+squares' reflectance that best give the levels of the photos' 280 squares (91 of the 140 white
+ones clipped, at 245 or above), a matte board and a linear camera assumed (``--exposure
+per-photo``: an exposure per photo, as an automatic exposure would set it; ``--light spot``: a
+spot lamp whose aim, cut-off and beam are fitted too, :mod:`ouc_light_models`). Stored as
+the photos were: cos⁴ vignetting, the edges' blur and the noise measured on the photos
+(:data:`BLUR_PX`, :data:`NOISE_DN`), the fitted exposure, linear levels over a dark level,
+clipped at 250, 8 bits. ``--print-jitter``:
 a ragged print (every square's edges moved by their own Gaussian offsets); ``--sag``: the
 board bent along its width; ``--laminate``: a glossy coat (:mod:`synth.products.printed_board`).
 
@@ -48,16 +49,22 @@ import sys
 import cv2
 import numpy as np
 
-#: Squares of the printed checker beyond the authors' clicked sub-grid, on each side.
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))  # the repository
+
+#: Full squares of the printed checker beyond the authors' clicked sub-grid, on each side (the
+#: photos: a checker of 7 × 6 full squares round the 5 × 4 clicked ones, one on every side).
 EXTRA_SQUARES = 1
-#: The board outside the checker, in squares from its edge: white paper to the frame line, the
-#: frame line's width, paper beyond it, then the metal plate to the board's edge; reflectances.
-#: (Multiples of 1 / TEXELS, so that every edge falls on a texel's edge: nearest-texel lookup.)
-#: As the photos show it: the line printed along the checker's edge, the plate a quarter as
-#: bright as the white paper, the black squares 0.12 of the white (the photos' unclipped
-#: black / white levels, :func:`fit_lamp`).
-LAYOUT = {"paper_to_line": 0.0, "line": 0.0625, "paper_after_line": 0.0, "plate": 1.0,
-          "white": 0.8, "black": 0.096, "plate_reflectance": 0.2}
+#: The board outside the full squares, in squares from their edge, and the reflectances. As
+#: the photos show it: the print cut through the next row and column of squares, so that a
+#: sliver of them (black beside white, white beside black) runs round the checker, 0.16 of a
+#: square wide on every side (the median over the photos' white slivers, where their level
+#: falls half-way to the plate's: 0.14–0.20); then the bare metal plate, a quarter as bright
+#: as the white paper; the black squares 0.12 of the white (the photos' unclipped black /
+#: white levels, :func:`fit_lamp`). (Multiples of 1 / TEXELS, so that every edge falls on a
+#: texel's edge: nearest-texel lookup.) Not in it: one full white square (a label written on)
+#: beside a corner of the sliver ring.
+LAYOUT = {"sliver": 0.15625, "plate": 1.0, "white": 0.8, "black": 0.096,
+          "plate_reflectance": 0.2}
 #: The photos' stored levels: a linear response (the unclipped black / white levels are
 #: 0.11–0.14, which sRGB would make 0.01–0.02 in light), a dark level of 2 DN, clipped at 250.
 DARK_DN, CLIP_DN = 2.0, 250.0
@@ -88,31 +95,26 @@ def load_export(folder):
 
 def board_texture(n_sq, first_dark: bool, black=None, jitter=0.0, seed=0):
     """The printed board (reflectance, float32 ``(H, W, 1)``) and its extent in grid
-    coordinates (squares): the checker of ``n_sq`` + 2·:data:`EXTRA_SQUARES` squares, the
-    margin, the frame line, the plate (:data:`LAYOUT`; ``black`` the black squares'
-    reflectance where given). ``jitter`` (squares): a ragged print, every black square drawn
-    with each of its four edges moved by its own Gaussian offset of this σ
+    coordinates (squares): the checker of ``n_sq`` + 2·:data:`EXTRA_SQUARES` full squares,
+    the sliver of the next squares round it, the plate (:data:`LAYOUT`; ``black`` the black
+    squares' reflectance where given). ``jitter`` (squares): a ragged print, every black
+    square drawn with each of its four edges moved by its own Gaussian offset of this σ
     (:func:`ragged_dark`, ``seed``: one print for every photo)."""
     L = LAYOUT
-    border = L["paper_to_line"] + L["line"] + L["paper_after_line"] + L["plate"]
+    border = L["sliver"] + L["plate"]
     lo = -EXTRA_SQUARES - border
     size = (n_sq[0] + 2 * EXTRA_SQUARES + 2 * border, n_sq[1] + 2 * EXTRA_SQUARES + 2 * border)
     w, h = (int(round(v * TEXELS)) for v in size)
     x = lo + (np.arange(w) + 0.5) / TEXELS
     y = lo + (np.arange(h) + 0.5) / TEXELS
     X, Y = np.meshgrid(x, y)
-    # distance outside the checker (squares), 0 inside
+    # distance outside the full squares (squares), 0 inside
     ex = np.maximum(np.maximum(-EXTRA_SQUARES - X, X - n_sq[0] - EXTRA_SQUARES), 0)
     ey = np.maximum(np.maximum(-EXTRA_SQUARES - Y, Y - n_sq[1] - EXTRA_SQUARES), 0)
-    out = np.maximum(ex, ey)
     dark = (((np.floor(X) + np.floor(Y)) % 2 == 0) == first_dark if jitter == 0
             else ragged_dark(X, Y, first_dark, jitter, seed))
     texture = np.where(dark, L["black"] if black is None else black, L["white"])
-    line_start = L["paper_to_line"]
-    texture = np.where(out > 0, L["white"], texture)
-    texture = np.where((out > line_start) & (out <= line_start + L["line"]), L["black"], texture)
-    texture = np.where(out > line_start + L["line"] + L["paper_after_line"],
-                       L["plate_reflectance"], texture)
+    texture = np.where(np.maximum(ex, ey) > L["sliver"], L["plate_reflectance"], texture)
     return texture.astype(np.float32)[..., None], (lo, lo + size[0], lo, lo + size[1])
 
 
@@ -398,7 +400,8 @@ def main(argv=None) -> int:
                              "the lamp (an automatic exposure)")
     parser.add_argument("--light", choices=("point", "spot"), default="point",
                         help="the fitted lamp: a point lamp (default) or a spot lamp with a "
-                             "beam (its aim, cut-off and beam fitted too, tools/ouc_light_models.py)")
+                             "beam (its aim, cut-off and beam fitted too, "
+                             "tools/ouc_light_models.py)")
     parser.add_argument("--laminate", type=float, default=None, metavar="ALPHA",
                         help="a glossy coat of this GGX roughness over the print (default matte)")
     args = parser.parse_args(argv)
