@@ -2,23 +2,26 @@
 calibration, and the twin compared with the photos detector by detector.
 
     python tools/ouc_twin.py $REFSTEREO_REAL_PHOTOS/ouc_flat --out out/ouc_twin [--spp 16]
-        [--exposure fixed|per-photo] [--print-jitter MM] [--sag MM] [--laminate ALPHA]
+        [--exposure fixed|per-photo] [--light point|spot] [--print-jitter MM] [--sag MM]
+        [--laminate ALPHA]
 
 What is rendered (648 × 486, the camera at the reference frame's origin): the authors'
 ``Calib_Results_export.json`` — K (fx ≠ fy: rendered on an oversampled square-pixel film and
 warped, as every distorted camera is, :func:`synth.rendering.render.render_view_counted`), the
 distortion kc (Bouguet's pixels are OpenCV's: the export's poses reproject onto
 ``cornerSubPix`` corners at a median 0.13–0.33 px) and every photo's pose of the sub-grid the
-authors clicked (``omc``, ``Tc``). The board as the photos show it, approximately: the checker
-extended by :data:`EXTRA_SQUARES` square beyond the clicked sub-grid on every side, a black
-frame line printed along its edge and the metal plate round it, all diffuse (:data:`LAYOUT`),
-rendered by :func:`synth.products.printed_board.render_board`. The light is **fitted to the
-photos** (:func:`fit_lamp`): one point lamp, the exposure and the black squares' reflectance
-that best give the levels of the photos' 280 squares (140 of the white ones clipped at 250),
-a matte board and a linear camera assumed (``--exposure per-photo``: an exposure per photo,
-as an automatic exposure would set it). Stored as the photos were: cos⁴ vignetting, the
-edges' blur and the noise measured on the photos (:data:`BLUR_PX`, :data:`NOISE_DN`), the
-fitted exposure, linear levels over a dark level, clipped at 250, 8 bits. ``--print-jitter``:
+authors clicked (``omc``, ``Tc``). The board as the photos show it: the checker of full
+squares extending :data:`EXTRA_SQUARES` square beyond the clicked sub-grid on every side, a
+sliver of the next squares round it where the print was cut, and the metal plate, all diffuse
+(:data:`LAYOUT`), rendered by :func:`synth.products.printed_board.render_board`. The light is
+**fitted to the photos** (:func:`fit_lamp`): one point lamp, the exposure and the black
+squares' reflectance that best give the levels of the photos' 280 squares (91 of the 140 white
+ones clipped, at 245 or above), a matte board and a linear camera assumed (``--exposure
+per-photo``: an exposure per photo, as an automatic exposure would set it; ``--light spot``: a
+spot lamp whose aim, cut-off and beam are fitted too, :mod:`ouc_light_models`). Stored as
+the photos were: cos⁴ vignetting, the edges' blur and the noise measured on the photos
+(:data:`BLUR_PX`, :data:`NOISE_DN`), the fitted exposure, linear levels over a dark level,
+clipped at 250, 8 bits. ``--print-jitter``:
 a ragged print (every square's edges moved by their own Gaussian offsets); ``--sag``: the
 board bent along its width; ``--laminate``: a glossy coat (:mod:`synth.products.printed_board`).
 
@@ -46,16 +49,22 @@ import sys
 import cv2
 import numpy as np
 
-#: Squares of the printed checker beyond the authors' clicked sub-grid, on each side.
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))  # the repository
+
+#: Full squares of the printed checker beyond the authors' clicked sub-grid, on each side (the
+#: photos: a checker of 7 × 6 full squares round the 5 × 4 clicked ones, one on every side).
 EXTRA_SQUARES = 1
-#: The board outside the checker, in squares from its edge: white paper to the frame line, the
-#: frame line's width, paper beyond it, then the metal plate to the board's edge; reflectances.
-#: (Multiples of 1 / TEXELS, so that every edge falls on a texel's edge: nearest-texel lookup.)
-#: As the photos show it: the line printed along the checker's edge, the plate a quarter as
-#: bright as the white paper, the black squares 0.12 of the white (the photos' unclipped
-#: black / white levels, :func:`fit_lamp`).
-LAYOUT = {"paper_to_line": 0.0, "line": 0.0625, "paper_after_line": 0.0, "plate": 1.0,
-          "white": 0.8, "black": 0.096, "plate_reflectance": 0.2}
+#: The board outside the full squares, in squares from their edge, and the reflectances. As
+#: the photos show it: the print cut through the next row and column of squares, so that a
+#: sliver of them (black beside white, white beside black) runs round the checker, 0.16 of a
+#: square wide on every side (the median over the photos' white slivers, where their level
+#: falls half-way to the plate's: 0.14–0.20); then the bare metal plate, a quarter as bright
+#: as the white paper; the black squares 0.12 of the white (the photos' unclipped black /
+#: white levels, :func:`fit_lamp`). (Multiples of 1 / TEXELS, so that every edge falls on a
+#: texel's edge: nearest-texel lookup.) Not in it: one full white square (a label written on)
+#: beside a corner of the sliver ring.
+LAYOUT = {"sliver": 0.15625, "plate": 1.0, "white": 0.8, "black": 0.096,
+          "plate_reflectance": 0.2}
 #: The photos' stored levels: a linear response (the unclipped black / white levels are
 #: 0.11–0.14, which sRGB would make 0.01–0.02 in light), a dark level of 2 DN, clipped at 250.
 DARK_DN, CLIP_DN = 2.0, 250.0
@@ -86,31 +95,26 @@ def load_export(folder):
 
 def board_texture(n_sq, first_dark: bool, black=None, jitter=0.0, seed=0):
     """The printed board (reflectance, float32 ``(H, W, 1)``) and its extent in grid
-    coordinates (squares): the checker of ``n_sq`` + 2·:data:`EXTRA_SQUARES` squares, the
-    margin, the frame line, the plate (:data:`LAYOUT`; ``black`` the black squares'
-    reflectance where given). ``jitter`` (squares): a ragged print, every black square drawn
-    with each of its four edges moved by its own Gaussian offset of this σ
+    coordinates (squares): the checker of ``n_sq`` + 2·:data:`EXTRA_SQUARES` full squares,
+    the sliver of the next squares round it, the plate (:data:`LAYOUT`; ``black`` the black
+    squares' reflectance where given). ``jitter`` (squares): a ragged print, every black
+    square drawn with each of its four edges moved by its own Gaussian offset of this σ
     (:func:`ragged_dark`, ``seed``: one print for every photo)."""
     L = LAYOUT
-    border = L["paper_to_line"] + L["line"] + L["paper_after_line"] + L["plate"]
+    border = L["sliver"] + L["plate"]
     lo = -EXTRA_SQUARES - border
     size = (n_sq[0] + 2 * EXTRA_SQUARES + 2 * border, n_sq[1] + 2 * EXTRA_SQUARES + 2 * border)
     w, h = (int(round(v * TEXELS)) for v in size)
     x = lo + (np.arange(w) + 0.5) / TEXELS
     y = lo + (np.arange(h) + 0.5) / TEXELS
     X, Y = np.meshgrid(x, y)
-    # distance outside the checker (squares), 0 inside
+    # distance outside the full squares (squares), 0 inside
     ex = np.maximum(np.maximum(-EXTRA_SQUARES - X, X - n_sq[0] - EXTRA_SQUARES), 0)
     ey = np.maximum(np.maximum(-EXTRA_SQUARES - Y, Y - n_sq[1] - EXTRA_SQUARES), 0)
-    out = np.maximum(ex, ey)
     dark = (((np.floor(X) + np.floor(Y)) % 2 == 0) == first_dark if jitter == 0
             else ragged_dark(X, Y, first_dark, jitter, seed))
     texture = np.where(dark, L["black"] if black is None else black, L["white"])
-    line_start = L["paper_to_line"]
-    texture = np.where(out > 0, L["white"], texture)
-    texture = np.where((out > line_start) & (out <= line_start + L["line"]), L["black"], texture)
-    texture = np.where(out > line_start + L["line"] + L["paper_after_line"],
-                       L["plate_reflectance"], texture)
+    texture = np.where(np.maximum(ex, ey) > L["sliver"], L["plate_reflectance"], texture)
     return texture.astype(np.float32)[..., None], (lo, lo + size[0], lo, lo + size[1])
 
 
@@ -219,12 +223,53 @@ def fit_lamp(samples, per_photo: bool = False):
     return best.x[:5], gains, float(np.sqrt(np.mean(best.fun ** 2)))
 
 
-def render_twin(K, kc, pose, square, first_dark, lamp_mm, spp, seed, sag_mm=0.0, black=None,
+def lamp_emitter(lamp) -> dict:
+    """The Mitsuba emitter (camera frame, intensity 10⁶) of a fitted lamp: ``lamp`` a point
+    lamp's position (3,) mm, or a spot's ``(x, y, z, azimuth, elevation, cut-off rad,
+    beam / cut-off)`` (:mod:`ouc_light_models`)."""
+    lamp = np.asarray(lamp, float)
+    intensity = {"type": "rgb", "value": 1e6}
+    if lamp.size == 3:
+        return {"type": "point", "position": lamp.tolist(), "intensity": intensity}
+    from ouc_light_models import axis_vector
+
+    from synth.rendering.mitsuba_setup import import_mitsuba
+
+    mi, _ = import_mitsuba(None)
+    axis = axis_vector(lamp[3], lamp[4])
+    up = np.cross(axis, [1.0, 0.0, 0.0] if abs(axis[0]) < 0.9 else [0.0, 1.0, 0.0])
+    cutoff = float(np.degrees(lamp[5]))
+    return {"type": "spot", "intensity": intensity, "cutoff_angle": cutoff,
+            "beam_width": cutoff * float(lamp[6]),
+            "to_world": mi.ScalarTransform4f().look_at(
+                origin=lamp[:3].tolist(), target=(lamp[:3] + axis).tolist(), up=up.tolist())}
+
+
+def fitted_light(samples, kind: str, per_photo: bool):
+    """The light fitted to the photos' squares: ``(lamp, gain, black/white, exposures, log
+    RMS)``, ``lamp`` as :func:`lamp_emitter` takes it, ``gain`` the stored levels per unit of
+    rendered radiance (white paper of :data:`LAYOUT`), ``exposures`` each photo's factor on it.
+    ``kind`` ``"point"`` (:func:`fit_lamp`) or ``"spot"``
+    (:func:`ouc_light_models.fit_light`: a spot lamp's beam; exposures per photo bounded)."""
+    if kind == "point":
+        params, exposures, log_rms = fit_lamp(samples, per_photo)
+        lamp, log_gain, log_black = params[:3], params[3], params[4]
+    else:
+        from ouc_light_models import LIGHT_PARAMS, fit_light
+
+        params, exposures, log_rms = fit_light(samples, kind, per_photo)
+        m = LIGHT_PARAMS[kind]
+        lamp, log_gain, log_black = params[:m], params[m], params[m + 1]
+    gain = float(np.exp(log_gain)) * np.pi / LAYOUT["white"]
+    return lamp, gain, float(np.exp(log_black)), exposures, log_rms
+
+
+def render_twin(K, kc, pose, square, first_dark, lamp, spp, seed, sag_mm=0.0, black=None,
                 jitter_mm=0.0, laminate=None):
     """The linear render (float32 ``(486, 648)``) of one pose: the printed board
     (:func:`board_texture`, bent by ``sag_mm``, its squares' edges ragged by ``jitter_mm``)
-    lit by a point lamp at ``lamp_mm`` (camera frame) of intensity 1e6; under a laminate of
-    GGX roughness ``laminate`` where given."""
+    lit by the fitted lamp (:func:`lamp_emitter`: a point lamp at ``lamp`` mm, camera frame,
+    or a spot) of intensity 1e6; under a laminate of GGX roughness ``laminate`` where given."""
     from measure import Camera
     from synth.products.printed_board import render_board
 
@@ -232,8 +277,7 @@ def render_twin(K, kc, pose, square, first_dark, lamp_mm, spp, seed, sag_mm=0.0,
     texture, (x0, x1, y0, y1) = board_texture(n_sq, first_dark, black, jitter_mm / square)
     facing = 1.0 if R[:, 2] @ -T > 0 else -1.0   # the printed side's z must point away
     flip = np.diag([1.0, 1.0, -facing])           # from the camera (board frame, mm)
-    emitter = {"type": "point", "position": [float(v) for v in lamp_mm],
-               "intensity": {"type": "rgb", "value": 1e6}}
+    emitter = lamp_emitter(lamp)
     return render_board(Camera(K, (648, 486), dist=kc), (R @ flip, T), texture,
                         (x0 * square, x1 * square, y0 * square, y1 * square), emitter, spp,
                         seed, sag_mm=sag_mm, laminate_alpha=laminate)
@@ -354,6 +398,10 @@ def main(argv=None) -> int:
     parser.add_argument("--exposure", choices=("fixed", "per-photo"), default="fixed",
                         help="one exposure for all photos (default) or one each, fitted with "
                              "the lamp (an automatic exposure)")
+    parser.add_argument("--light", choices=("point", "spot"), default="point",
+                        help="the fitted lamp: a point lamp (default) or a spot lamp with a "
+                             "beam (its aim, cut-off and beam fitted too, "
+                             "tools/ouc_light_models.py)")
     parser.add_argument("--laminate", type=float, default=None, metavar="ALPHA",
                         help="a glossy coat of this GGX roughness over the print (default matte)")
     args = parser.parse_args(argv)
@@ -368,12 +416,11 @@ def main(argv=None) -> int:
     os.makedirs(args.out, exist_ok=True)
     photos = [cv2.imread(os.path.join(args.folder, "air", f"{p[0]}.BMP"), cv2.IMREAD_GRAYSCALE)
               for p in poses]
-    params, exposures, log_rms = fit_lamp(square_samples(photos, poses, K, kc, square),
-                                          args.exposure == "per-photo")
-    lamp, black = params[:3], LAYOUT["white"] * float(np.exp(params[4]))
-    gain = float(np.exp(params[3])) * np.pi / LAYOUT["white"]
-    print(f"lamp fit: at {np.round(lamp).tolist()} mm (camera frame), black/white "
-          f"{np.exp(params[4]):.3f}, log RMS {log_rms:.3f}; exposures "
+    lamp, gain, black_white, exposures, log_rms = fitted_light(
+        square_samples(photos, poses, K, kc, square), args.light, args.exposure == "per-photo")
+    black = LAYOUT["white"] * black_white
+    print(f"lamp fit ({args.light}): {np.round(lamp, 3).tolist()} (mm, camera frame), "
+          f"black/white {black_white:.3f}, log RMS {log_rms:.3f}; exposures "
           + " ".join(f"{e / np.median(exposures):.2f}" for e in exposures))
     vignette = cos4_map(Camera(K, (648, 486), dist=kc)).astype(np.float32)
     rng = np.random.default_rng(0)
@@ -388,8 +435,8 @@ def main(argv=None) -> int:
     sheet = np.vstack([np.hstack([photos[k], twins[k]]) for k in (0, 4, 7)])
     cv2.imwrite(os.path.join(args.out, "compare.png"), sheet)
     with open(os.path.join(args.out, "report.json"), "w") as fh:
-        json.dump({"rows": rows, "lamp_mm": lamp.tolist(),
-                   "black_white": float(np.exp(params[4])), "log_rms": log_rms,
+        json.dump({"rows": rows, "light": args.light, "lamp_mm": np.asarray(lamp).tolist(),
+                   "black_white": black_white, "log_rms": log_rms,
                    "exposures": exposures.tolist(), "layout": LAYOUT, "noise_dn": NOISE_DN,
                    "blur_px": BLUR_PX, "sag_mm": args.sag, "print_jitter_mm": args.print_jitter,
                    "laminate_alpha": args.laminate}, fh, indent=1)

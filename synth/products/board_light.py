@@ -204,8 +204,8 @@ def light_record(light: BoardLight, rig) -> dict:
 
 __all__ = ["BoardLight", "DEFAULT_AIR_LIGHT_POSITION_MM", "DEFAULT_LIGHT_INTENSITY",
            "DEFAULT_LIGHT_POSITION_MM", "LIGHT_KINDS",
-           "board_radiance", "check_light", "light_record", "spot_falloff", "white_square_centres",
-           "white_square_levels"]
+           "board_radiance", "check_light", "light_record", "spot_falloff", "stored_white_ratios",
+           "white_square_centres", "white_square_levels"]
 
 
 def white_square_centres(board) -> np.ndarray:
@@ -244,3 +244,18 @@ def white_square_levels(image, camera, port, board, pose) -> np.ndarray:
     inside = camera.in_image(uv, 1.0).reshape(-1, offsets.shape[0]).all(axis=1)
     levels = values.reshape(-1, offsets.shape[0]).mean(axis=1)
     return np.where(inside, levels, np.nan)
+
+
+def stored_white_ratios(levels, white_dn: float, clip_dn: float = 255.0):
+    """The white squares as a camera with one exposure for every view would store them: the
+    linear ``levels`` (a sequence of ``(S,)`` arrays, one per view, the rendered values; NaN
+    for a square outside the image) scaled so that the median over the views of each view's
+    median white square is ``white_dn``, rounded and clipped at ``clip_dn`` (an 8-bit linear
+    camera that saturates). ``(max/min of the stored levels per view, whether each view has a
+    clipped white square)``, arrays over the views."""
+    medians = [np.nanmedian(v) for v in levels]
+    scale = float(white_dn) / float(np.median(medians))
+    stored = [np.clip(np.rint(np.asarray(v, float) * scale), 0.0, clip_dn) for v in levels]
+    ratio = np.array([np.nanmax(v) / np.nanmin(v) for v in stored])
+    clipped = np.array([bool(np.nanmax(v) >= clip_dn) for v in stored])
+    return ratio, clipped

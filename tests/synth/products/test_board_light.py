@@ -14,7 +14,8 @@ from measure import FlatPort
 from measure.calibration.board import Board
 from synth.__main__ import main as synth_main
 from synth.products.board_light import (BoardLight, board_radiance, spot_falloff,
-                                        white_square_centres, white_square_levels)
+                                        stored_white_ratios, white_square_centres,
+                                        white_square_levels)
 from synth.products.boards import BoardPose, read_boards, write_boards
 from synth.scene import load_scene, write_scene
 from synth.scene.rig import paper_cameras
@@ -28,6 +29,17 @@ def test_spot_falloff_is_full_in_the_beam_linear_to_the_cutoff_and_zero_beyond()
     angles = np.radians([0.0, 30.0, 37.5, 45.0, 50.0])
     np.testing.assert_allclose(spot_falloff(np.cos(angles), 40.0, 30.0),
                                [1.0, 1.0, 0.25, 0.0, 0.0], atol=1e-12)
+
+
+def test_stored_white_ratios_expose_the_median_view_at_the_level_and_clip():
+    """Three views' white squares (linear): the median view's median square lands at 200 DN,
+    the brightest view clips at 255 and its ratio shrinks, a square outside the image (NaN) is
+    left out."""
+    views = [np.array([1.0, 1.0, 2.0]), np.array([2.0, 3.0, 4.0]), np.array([3.0, 9.0, np.nan])]
+    ratio, clipped = stored_white_ratios(views, 200.0)
+    # medians 1, 3, 6 -> the middle one (3) at 200 DN: scale 200 / 3
+    np.testing.assert_allclose(ratio, [133.0 / 67.0, 255.0 / 133.0, 255.0 / 200.0])
+    np.testing.assert_array_equal(clipped, [False, True, True])
 
 
 def test_closed_form_radiance_of_white_paper_facing_the_lamp():
