@@ -296,13 +296,72 @@ def calibrate_in_air(board: Board, detections: Detections, size,
     others' (:func:`stereo_pose_outliers`) are left out of the stereo fit and named.
     ``stereo_intrinsics``: :data:`STEREO_INTRINSICS` (``refined``: no covariance, and not with
     the fisheye model)."""
-    from scipy.spatial.transform import Rotation
     if stereo_intrinsics not in STEREO_INTRINSICS:
         raise CalibrationError(f"stereo intrinsics {stereo_intrinsics!r}: choose from "
                                f"{', '.join(STEREO_INTRINSICS)}")
     corners = board.corners().astype(np.float32)
-    cameras, rms, sigmas, used, per, extrinsics = [], {}, {}, {}, {}, {}
-    views, s2, left_poses, models, own, residuals = [], [], {}, {}, {}, {}
+    fits = _fit_each_camera(corners, detections, size, lens_model)
+    if board.symmetric:  # the right camera's numbering of each pose settled by the rig
+        detections = _settle_turns(board, detections, fits.own, fits.extrinsics)
+    both, stereo_poses, left_out = _stereo_poses_checked(detections, fits.own)
+    shared = _shared_corners(detections, corners, both)
+    stereo_rms, R, T, stereo_per, cameras, fisheye = _stereo_fit(fits, shared, both, size,
+                                                                 stereo_intrinsics)
+    fits.used["stereo"] = len(both)
+    (K1, D1), (K2, D2) = cameras
+    lens = FISHEYE if fisheye else BROWN_CONRADY
+    left = Camera(K1, size, dist=D1, distortion_model=lens)
+    right = Camera(K2, size, dist=D2, R=_orthonormal(R).T, t=-_orthonormal(R).T @ T,
+                   distortion_model=lens)
+    port = index_matched_port(left.R[:, 2], np.stack([left.t, right.t]))
+    board_poses = {}
+    for (k, view), (R_cam, t_cam) in fits.extrinsics.items():
+        camera = (left, right)[view]
+        board_poses[(k, view)] = (camera.R @ R_cam, camera.R @ t_cam + camera.t)
+    covariance = None
+    if stereo_intrinsics == "fixed" and all(m["model"] == "standard"
+                                            for m in fits.models.values()):
+        # linearized at the left camera's own board poses (stereoCalibrate's refinement of
+        # them moves the Jacobian by nothing that matters)
+        obj, _, _, keys = shared
+        covariance = air_covariance(
+            fits.views, {"obj": obj, "keys": keys,
+                         "rvecs": [fits.left_poses[k][0] for k in both],
+                         "tvecs": [fits.left_poses[k][1] for k in both],
+                         "om": cv2.Rodrigues(R)[0], "T": T}, fits.s2)
+    return AirCalibration(StereoRig(left, right, port), fits.rms, fits.sigmas, stereo_rms,
+                          fits.used, fits.per, board_poses, covariance, fits.models,
+                          stereo_poses, left_out, stereo_per, fits.residuals)
+
+
+@dataclass
+class _CameraFits:
+    """Each camera's own OpenCV calibration (views 0 left, 1 right; names ``left``, ``right``):
+    ``cameras`` ``[(K, D)]``; per name ``rms`` (px), ``sigmas``, ``used`` (poses), ``models``;
+    per ``(pose, view)`` ``per`` (RMS px) and ``extrinsics`` (board → camera ``(R, t)``, mm);
+    ``own`` per view ``{pose: (R, t)}``; ``views`` and ``s2`` for
+    :func:`measure.calibration.covariance.air_covariance`; ``left_poses`` the left camera's
+    ``{pose: (rvec, tvec)}``; ``residuals`` per view."""
+
+    cameras: list = field(default_factory=list)
+    rms: dict = field(default_factory=dict)
+    sigmas: dict = field(default_factory=dict)
+    used: dict = field(default_factory=dict)
+    per: dict = field(default_factory=dict)
+    extrinsics: dict = field(default_factory=dict)
+    views: list = field(default_factory=list)
+    s2: list = field(default_factory=list)
+    left_poses: dict = field(default_factory=dict)
+    models: dict = field(default_factory=dict)
+    own: dict = field(default_factory=dict)
+    residuals: dict = field(default_factory=dict)
+
+
+def _fit_each_camera(corners, detections: Detections, size, lens_model) -> _CameraFits:
+    """Both cameras calibrated on their own (:func:`calibrate_camera`); CalibrationError where
+    one found the board in fewer than :data:`MIN_POSES` images."""
+    from scipy.spatial.transform import Rotation
+    fits = _CameraFits()
     for view, name in enumerate(("left", "right")):
         poses = detections.found(view)
         if len(poses) < MIN_POSES:
@@ -312,28 +371,36 @@ def calibrate_in_air(board: Board, detections: Detections, size,
         img = [detections.pixels[k][view].astype(np.float32) for k in poses]
         out, model, tried, problem = calibrate_camera(obj, img, size, lens_model)
         n_dist = LENS_MODELS[model][1]
-        models[name] = {"model": model, "rms_px": tried, "problem": problem}
-        rms[name], K, std = float(out[0]), out[1], out[5].ravel()
+        fits.models[name] = {"model": model, "rms_px": tried, "problem": problem}
+        fits.rms[name], K, std = float(out[0]), out[1], out[5].ravel()
         D = np.ravel(lens_camera(out, model, size).dist if model == "fisheye"
                      else out[2].ravel()[:max(n_dist, 5)])
         for k, error, rvec, tvec in zip(poses, out[7].ravel(), out[3], out[4]):
-            per[(k, view)] = float(error)
-            extrinsics[(k, view)] = (Rotation.from_rotvec(np.ravel(rvec)).as_matrix(),
-                                     np.ravel(tvec).astype(np.float64))
-        sigmas[name] = dict(zip(intrinsic_names(model), (float(s) for s in std)))
-        residuals[view] = camera_residuals(obj, img, out, poses, detections.ids, view, model)
-        cameras.append((K, D))
+            fits.per[(k, view)] = float(error)
+            fits.extrinsics[(k, view)] = (Rotation.from_rotvec(np.ravel(rvec)).as_matrix(),
+                                          np.ravel(tvec).astype(np.float64))
+        fits.sigmas[name] = dict(zip(intrinsic_names(model), (float(s) for s in std)))
+        fits.residuals[view] = camera_residuals(obj, img, out, poses, detections.ids, view,
+                                                model)
+        fits.cameras.append((K, D))
         n = sum(len(o) for o in obj)  # OpenCV's RMS is per corner of the 2D residual length
-        s2.append(rms[name] ** 2 * n / max(2 * n - 4 - n_dist - 6 * len(poses), 1))
-        views.append({"obj": obj, "keys": [[(k, i) for i in detections.ids[k][view]]
-                                           for k in poses],
-                      "rvecs": out[3], "tvecs": out[4], "K": K, "dist": D})
+        fits.s2.append(fits.rms[name] ** 2 * n
+                       / max(2 * n - 4 - n_dist - 6 * len(poses), 1))
+        fits.views.append({"obj": obj, "keys": [[(k, i) for i in detections.ids[k][view]]
+                                                for k in poses],
+                           "rvecs": out[3], "tvecs": out[4], "K": K, "dist": D})
         if view == 0:
-            left_poses = {k: (rv, tv) for k, rv, tv in zip(poses, out[3], out[4])}
-        own[view] = {k: extrinsics[(k, view)] for k in poses}
-        used[name] = len(poses)
-    if board.symmetric:  # the right camera's numbering of each pose settled by the rig
-        detections = _settle_turns(board, detections, own, extrinsics)
+            fits.left_poses = {k: (rv, tv) for k, rv, tv in zip(poses, out[3], out[4])}
+        fits.own[view] = {k: fits.extrinsics[(k, view)] for k in poses}
+        fits.used[name] = len(poses)
+    return fits
+
+
+def _stereo_poses_checked(detections: Detections, own: dict):
+    """``(poses, {pose: its own stereo pose's check}, left out)``: the poses both cameras
+    found, less those whose own stereo pose disagrees with the others'
+    (:func:`stereo_pose_outliers`); CalibrationError where fewer than :data:`MIN_POSES`
+    remain."""
     both = [k for k in detections.found(0) if k in set(detections.found(1))]
     stereo_poses, left_out = {}, ()
     if len(both) >= MIN_POSES:
@@ -352,16 +419,29 @@ def calibrate_in_air(board: Board, detections: Detections, size,
                     if left_out else "")
         raise CalibrationError(f"the board was found in both views of {len(both)} pose(s)"
                                f"{disagree}; the stereo calibration needs at least {MIN_POSES}")
+    return both, stereo_poses, left_out
+
+
+def _shared_corners(detections: Detections, corners, poses):
+    """``(board points, left pixels, right pixels, [(pose, id)…])`` per pose of the corners
+    both views found (float32, as OpenCV's stereo fit takes them)."""
     obj, img_l, img_r, keys = [], [], [], []
-    for k in both:
+    for k in poses:
         common, il, ir = np.intersect1d(detections.ids[k][0], detections.ids[k][1],
                                         return_indices=True)
         obj.append(corners[common])
         keys.append([(k, i) for i in common])
         img_l.append(detections.pixels[k][0][il].astype(np.float32))
         img_r.append(detections.pixels[k][1][ir].astype(np.float32))
-    (K1, D1), (K2, D2) = cameras
-    kinds = {m["model"] == "fisheye" for m in models.values()}
+    return obj, img_l, img_r, keys
+
+
+def _stereo_fit(fits: _CameraFits, shared, poses, size, stereo_intrinsics):
+    """The stereo pose from the shared corners: ``(rms, R, T, {pose: rms}, [(K, D)…],
+    fisheye)`` (OpenCV's stereo convention; the intrinsics refined where asked)."""
+    obj, img_l, img_r, keys = shared
+    (K1, D1), (K2, D2) = fits.cameras
+    kinds = {m["model"] == "fisheye" for m in fits.models.values()}
     if len(kinds) > 1:
         raise CalibrationError("one camera fitted with the fisheye model and the other not: "
                                "give both the same --lens")
@@ -370,40 +450,20 @@ def calibrate_in_air(board: Board, detections: Detections, size,
         raise CalibrationError("the fisheye model's stereo fit holds the intrinsics: "
                                "stereo intrinsics 'refined' is for the Brown–Conrady models")
     if fisheye:
-        stereo_rms, R, T, stereo_per = _fisheye_stereo(obj, img_l, img_r, cameras, size, both,
-                                                       [[i for _, i in k] for k in keys])
-    else:
-        flags = cv2.CALIB_FIX_INTRINSIC
-        if stereo_intrinsics == "refined":
-            flags = LENS_MODELS[models["left"]["model"]][0] | cv2.CALIB_USE_INTRINSIC_GUESS
-        out = cv2.stereoCalibrateExtended(obj, img_l, img_r, K1, D1, K2, D2, tuple(size), None,
-                                          None, flags=flags, criteria=CRITERIA)
-        stereo_rms, R, T = float(out[0]), out[5], out[6].ravel()
-        if stereo_intrinsics == "refined":  # OpenCV returns 14 coefficients: the model's first
-            (K1, D1), (K2, D2) = ((out[1], np.ravel(out[2])[:len(D1)]),
-                                  (out[3], np.ravel(out[4])[:len(D2)]))
-        stereo_per = {k: float(np.sqrt(np.mean(np.square(e)))) for k, e in zip(both, out[-1])}
-    used["stereo"] = len(both)
-    lens = FISHEYE if fisheye else BROWN_CONRADY
-    left = Camera(K1, size, dist=D1, distortion_model=lens)
-    right = Camera(K2, size, dist=D2, R=_orthonormal(R).T, t=-_orthonormal(R).T @ T,
-                   distortion_model=lens)
-    port = index_matched_port(left.R[:, 2], np.stack([left.t, right.t]))
-    board_poses = {}
-    for (k, view), (R_cam, t_cam) in extrinsics.items():
-        camera = (left, right)[view]
-        board_poses[(k, view)] = (camera.R @ R_cam, camera.R @ t_cam + camera.t)
-    covariance = None
-    if stereo_intrinsics == "fixed" and all(m["model"] == "standard" for m in models.values()):
-        # linearized at the left camera's own board poses (stereoCalibrate's refinement of
-        # them moves the Jacobian by nothing that matters)
-        covariance = air_covariance(
-            views, {"obj": obj, "keys": keys, "rvecs": [left_poses[k][0] for k in both],
-                    "tvecs": [left_poses[k][1] for k in both], "om": cv2.Rodrigues(R)[0],
-                    "T": T}, s2)
-    return AirCalibration(StereoRig(left, right, port), rms, sigmas, stereo_rms, used, per,
-                          board_poses, covariance, models, stereo_poses, left_out, stereo_per,
-                          residuals)
+        stereo_rms, R, T, stereo_per = _fisheye_stereo(obj, img_l, img_r, fits.cameras, size,
+                                                       poses, [[i for _, i in k] for k in keys])
+        return stereo_rms, R, T, stereo_per, [(K1, D1), (K2, D2)], fisheye
+    flags = cv2.CALIB_FIX_INTRINSIC
+    if stereo_intrinsics == "refined":
+        flags = LENS_MODELS[fits.models["left"]["model"]][0] | cv2.CALIB_USE_INTRINSIC_GUESS
+    out = cv2.stereoCalibrateExtended(obj, img_l, img_r, K1, D1, K2, D2, tuple(size), None,
+                                      None, flags=flags, criteria=CRITERIA)
+    stereo_rms, R, T = float(out[0]), out[5], out[6].ravel()
+    if stereo_intrinsics == "refined":  # OpenCV returns 14 coefficients: the model's first
+        (K1, D1), (K2, D2) = ((out[1], np.ravel(out[2])[:len(D1)]),
+                              (out[3], np.ravel(out[4])[:len(D2)]))
+    stereo_per = {k: float(np.sqrt(np.mean(np.square(e)))) for k, e in zip(poses, out[-1])}
+    return stereo_rms, R, T, stereo_per, [(K1, D1), (K2, D2)], fisheye
 
 
 def _settle_turns(board, detections, own, extrinsics):

@@ -143,99 +143,154 @@ def calibrate_rig_in_air(board: Board, detections: Detections, size, names=None,
         own.append({k: _pose_matrix(r, t) for k, r, t in zip(found, out[3], out[4])})
         rms[name], used[name] = float(out[0]), len(found)
     camera_poses = _chain_poses(own, n_views, names)
+    board_poses = _board_poses_in_reference(own, camera_poses, detections.n_poses)
+    joint = _JointAdjustment.of(corners, detections, cams, own, sorted(board_poses),
+                                intrinsics == "free")
+    x0 = joint.pack(camera_poses, board_poses)
+    # dense forward differences: a few hundred parameters, each a pass over the corners; at
+    # most JOINT_ITERATIONS Jacobians (a clean rig converges in a handful; without a limit a bad
+    # view kept the adjustment going for more than ten minutes)
+    fit = least_squares(joint.residuals, x0, method="lm", x_scale="jac", xtol=1e-12,
+                        ftol=1e-12, max_nfev=JOINT_ITERATIONS * (x0.size + 1))
+    joint_rms, per, rows = joint.residuals_per_view(fit.fun)
+    cameras = []
+    for v in range(n_views):
+        R, t, K, D = joint.camera(fit.x, v)
+        cameras.append(Camera(K, size, dist=D, R=None if v == 0 else R, t=None if v == 0 else t))
+    return MultiAirCalibration(MultiRig(cameras, [None] * n_views, names), rms, joint_rms, used,
+                               joint.board_poses(fit.x),
+                               camera_parameter_names(names, joint.n_intrinsics - 4, joint.free),
+                               joint.covariance(fit), per, rows, left_out)
+
+
+def _board_poses_in_reference(own: list[dict], camera_poses: list, n_poses: int) -> dict:
+    """``{pose: (R, t)}`` board to the reference frame, from the first camera (in order) that
+    found each pose (``own[v]``: board → camera v; ``camera_poses[v]``: camera v → reference)."""
     board_poses = {}
-    for k in range(detections.n_poses):
-        for v in range(n_views):
+    for k in range(n_poses):
+        for v in range(len(own)):
             if k in own[v]:
                 R_v, t_v = camera_poses[v]
                 R_b, t_b = own[v][k]
                 board_poses[k] = (R_v @ R_b, R_v @ t_b + t_v)
                 break
-    pose_ids = sorted(board_poses)
-    observations = [(k, v) for k in pose_ids for v in range(n_views) if k in own[v]]
+    return board_poses
 
-    n_cam = 6 * (n_views - 1)
-    n_intr = 4 + len(cams[0][1])
-    free = intrinsics == "free"
 
-    def pack():
+@dataclass(frozen=True)
+class _JointAdjustment:
+    """The parameters of the joint adjustment and its residuals: per camera but the first its
+    pose (rotation vector, centre: 6), per board pose its pose (6), and with ``free``
+    intrinsics per camera fx fy cx cy and its distortion; ``cams`` each camera's own ``(K, D)``,
+    ``observations`` the ``(pose, view)`` pairs in residual order."""
+
+    corners: np.ndarray
+    detections: Detections
+    cams: list
+    pose_ids: list
+    observations: list
+    free: bool
+
+    @classmethod
+    def of(cls, corners, detections, cams, own, pose_ids, free):
+        observations = [(k, v) for k in pose_ids for v in range(len(cams)) if k in own[v]]
+        return cls(corners, detections, cams, pose_ids, observations, free)
+
+    @property
+    def n_views(self) -> int:
+        return len(self.cams)
+
+    @property
+    def n_intrinsics(self) -> int:
+        return 4 + len(self.cams[0][1])
+
+    @property
+    def board_at(self) -> dict:
+        n_cam = 6 * (self.n_views - 1)
+        return {k: n_cam + 6 * i for i, k in enumerate(self.pose_ids)}
+
+    @property
+    def intrinsics_at(self) -> int:
+        return 6 * (self.n_views - 1) + 6 * len(self.pose_ids)
+
+    def pack(self, camera_poses, board_poses) -> np.ndarray:
         x = [np.concatenate([Rotation.from_matrix(R).as_rotvec(), t])
              for R, t in camera_poses[1:]]
         x += [np.concatenate([Rotation.from_matrix(board_poses[k][0]).as_rotvec(),
-                              board_poses[k][1]]) for k in pose_ids]
-        if free:
-            x += [np.concatenate([[K[0, 0], K[1, 1], K[0, 2], K[1, 2]], D]) for K, D in cams]
+                              board_poses[k][1]]) for k in self.pose_ids]
+        if self.free:
+            x += [np.concatenate([[K[0, 0], K[1, 1], K[0, 2], K[1, 2]], D]) for K, D in self.cams]
         return np.concatenate(x) if x else np.zeros(0)
 
-    board_at = {k: n_cam + 6 * i for i, k in enumerate(pose_ids)}
-    intr_at = n_cam + 6 * len(pose_ids)
-
-    def unpack_camera(x, v):
+    def camera(self, x, v):
+        """Camera ``v``'s ``(R, t, K, D)`` at parameters ``x`` (camera → reference, mm)."""
         if v == 0:
             R, t = np.eye(3), np.zeros(3)
         else:
             p = x[6 * (v - 1):6 * v]
             R, t = Rotation.from_rotvec(p[:3]).as_matrix(), p[3:]
-        if free:
-            q = x[intr_at + n_intr * v:intr_at + n_intr * (v + 1)]
+        if self.free:
+            n, at = self.n_intrinsics, self.intrinsics_at
+            q = x[at + n * v:at + n * (v + 1)]
             K = np.array([[q[0], 0, q[2]], [0, q[1], q[3]], [0, 0, 1.0]])
             D = q[4:]
         else:
-            K, D = cams[v]
+            K, D = self.cams[v]
         return R, t, K, D
 
-    def residuals(x):
-        out = []
-        cameras = [unpack_camera(x, v) for v in range(n_views)]
-        for (k, v) in observations:
+    def residuals(self, x) -> np.ndarray:
+        """Every observed corner's projection − detection (px), ``(du, dv)`` interleaved."""
+        out, board_at = [], self.board_at
+        cameras = [self.camera(x, v) for v in range(self.n_views)]
+        for (k, v) in self.observations:
             p = x[board_at[k]:board_at[k] + 6]
             R_b, t_b = Rotation.from_rotvec(p[:3]).as_matrix(), p[3:]
             R_c, t_c, K, D = cameras[v]
             # board → camera: X_cam = R_cᵀ (R_b X + t_b − t_c)
             R = R_c.T @ R_b
             t = R_c.T @ (t_b - t_c)
-            uv = cv2.projectPoints(corners[detections.ids[k][v]], cv2.Rodrigues(R)[0], t, K,
-                                   D)[0].reshape(-1, 2)
-            out.append((uv - detections.pixels[k][v]).ravel())
+            uv = cv2.projectPoints(self.corners[self.detections.ids[k][v]], cv2.Rodrigues(R)[0],
+                                   t, K, D)[0].reshape(-1, 2)
+            out.append((uv - self.detections.pixels[k][v]).ravel())
         return np.concatenate(out)
 
-    x0 = pack()
-    # dense forward differences: a few hundred parameters, each a pass over the corners; at
-    # most JOINT_ITERATIONS Jacobians (a clean rig converges in a handful; without a limit a bad
-    # view kept the adjustment going for more than ten minutes)
-    fit = least_squares(residuals, x0, method="lm", x_scale="jac", xtol=1e-12, ftol=1e-12,
-                        max_nfev=JOINT_ITERATIONS * (x0.size + 1))
-    r = fit.fun.reshape(-1, 2)
-    joint = float(np.sqrt(np.mean(np.sum(r * r, axis=1))))
-    per, rows, offset = {}, {}, 0
-    for k, v in observations:
-        n = len(detections.ids[k][v])
-        block = r[offset:offset + n]
-        offset += n
-        per[(k, v)] = float(np.sqrt(np.mean(np.sum(block * block, axis=1))))
-        rows.setdefault(v, []).append(np.column_stack([np.full(n, k), detections.ids[k][v],
-                                                       block]))
-    rows = {v: np.vstack(b) for v, b in rows.items()}
-    cameras = []
-    for v in range(n_views):
-        R, t, K, D = unpack_camera(fit.x, v)
-        cameras.append(Camera(K, size, dist=D, R=None if v == 0 else R, t=None if v == 0 else t))
-    poses = {k: (Rotation.from_rotvec(fit.x[board_at[k]:board_at[k] + 3]).as_matrix(),
-                 fit.x[board_at[k] + 3:board_at[k] + 6].copy()) for k in pose_ids}
-    # σ: s² (JᵀJ)⁻¹ at the solution (the forward-difference Jacobian of the fit), the board
-    # poses marginalized; rotation vectors turned into reference-axes angles (φ = J_l(ω) δω)
-    J = np.asarray(fit.jac)
-    s2 = float(fit.fun @ fit.fun) / max(fit.fun.size - fit.x.size, 1)
-    full = s2 * np.linalg.pinv(J.T @ J)
-    keep = np.r_[np.arange(n_cam), np.arange(intr_at, fit.x.size) if free else []].astype(int)
-    T = np.eye(keep.size)
-    for v in range(1, n_views):
-        i = 6 * (v - 1)
-        T[i:i + 3, i:i + 3] = left_jacobian(fit.x[i:i + 3])
-    covariance = T @ full[np.ix_(keep, keep)] @ T.T
-    return MultiAirCalibration(MultiRig(cameras, [None] * n_views, names), rms, joint, used,
-                               poses, camera_parameter_names(names, n_intr - 4, free),
-                               0.5 * (covariance + covariance.T), per, rows, left_out)
+    def residuals_per_view(self, fun):
+        """``(joint RMS, {(pose, view): RMS}, {view: (pose, id, du, dv) rows})`` of the
+        residuals ``fun`` (px)."""
+        r = fun.reshape(-1, 2)
+        joint = float(np.sqrt(np.mean(np.sum(r * r, axis=1))))
+        per, rows, offset = {}, {}, 0
+        for k, v in self.observations:
+            n = len(self.detections.ids[k][v])
+            block = r[offset:offset + n]
+            offset += n
+            per[(k, v)] = float(np.sqrt(np.mean(np.sum(block * block, axis=1))))
+            rows.setdefault(v, []).append(np.column_stack([np.full(n, k),
+                                                           self.detections.ids[k][v], block]))
+        return joint, per, {v: np.vstack(b) for v, b in rows.items()}
+
+    def board_poses(self, x) -> dict:
+        """``{pose: (R, t)}`` board to the reference frame at parameters ``x``."""
+        board_at = self.board_at
+        return {k: (Rotation.from_rotvec(x[board_at[k]:board_at[k] + 3]).as_matrix(),
+                    x[board_at[k] + 3:board_at[k] + 6].copy()) for k in self.pose_ids}
+
+    def covariance(self, fit) -> np.ndarray:
+        """σ: s² (JᵀJ)⁻¹ at the solution (the forward-difference Jacobian of the fit), the
+        board poses marginalized; rotation vectors turned into reference-axes angles
+        (φ = J_l(ω) δω)."""
+        J = np.asarray(fit.jac)
+        s2 = float(fit.fun @ fit.fun) / max(fit.fun.size - fit.x.size, 1)
+        full = s2 * np.linalg.pinv(J.T @ J)
+        n_cam = 6 * (self.n_views - 1)
+        keep = np.r_[np.arange(n_cam),
+                     np.arange(self.intrinsics_at, fit.x.size) if self.free else []].astype(int)
+        T = np.eye(keep.size)
+        for v in range(1, self.n_views):
+            i = 6 * (v - 1)
+            T[i:i + 3, i:i + 3] = left_jacobian(fit.x[i:i + 3])
+        covariance = T @ full[np.ix_(keep, keep)] @ T.T
+        return 0.5 * (covariance + covariance.T)
 
 
 #: Jacobians of the joint adjustment at most (:func:`calibrate_rig_in_air`).

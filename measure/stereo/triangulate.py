@@ -261,72 +261,10 @@ def _optical_path_rows(rig: StereoRig, uv_left, uv_right, out=None):
         out = (np.empty((n_rows, 3)), np.empty(n_rows), np.empty(n_rows, dtype=np.int8))
     points, length, reason = out
     with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
-        (offset, o11, o12), (A1, u1, v1), a, n1, reason1 = _water_line(rig.left, rig.port, basis,
-                                                                       uv_left)
-        (_, o21, o22), (A2, u2, v2), c, n2, reason2 = _water_line(rig.right, rig.port, basis,
-                                                                  uv_right)
-        w1 = o11 - o21  # origin difference (its normal component is 0)
-        w2 = o12 - o22
-        # common perpendicular (lines.common_perpendicular) of p1 + s1 d1 and p2 + s2 d2:
-        # k = d1 × d2, Δ = |k|², s1 = (b e − c d)/Δ, s2 = (a e − b d)/Δ
-        k0 = u1 * v2
-        k0 -= v1 * u2
-        k1 = v1 * A2
-        k1 -= A1 * v2
-        k2 = A1 * u2
-        k2 -= u1 * A2
-        determinant = k0 * k0
-        determinant += k1 * k1
-        determinant += k2 * k2
-        b = A1 * A2
-        b += u1 * u2
-        b += v1 * v2
-        d = u1 * w1
-        d += v1 * w2
-        e = u2 * w1
-        e += v2 * w2
-        half = 0.5 / determinant
-        h1 = b * e
-        h1 -= c * d
-        h1 *= half  # s1 / 2
-        h2 = a * e
-        h2 -= b * d
-        h2 *= half  # s2 / 2
-        np.multiply(k1, w1, out=length)
-        length += k2 * w2
-        np.abs(length, out=length)
-        length /= np.sqrt(determinant)
-        # midpoint (p1 + s1 d1 + p2 + s2 d2) / 2
-        middle0 = h1 * A1
-        middle0 += h2 * A2
-        middle0 += offset
-        middle1 = o11 + o21
-        middle1 *= 0.5
-        middle1 += h1 * u1
-        middle1 += h2 * u2
-        middle2 = o12 + o22
-        middle2 *= 0.5
-        middle2 += h1 * v1
-        middle2 += h2 * v2
-        for j in range(3):
-            _combine([(middle0, basis[0, j]), (middle1, basis[1, j]), (middle2, basis[2, j])],
-                     out=points[:, j])
-        # one pass each (NaN anywhere fails them; not parallel: Δ > 1e-28 |d1|² |d2|², here
-        # with the largest |d1|², |d2|²): the row mask only where something may be wrong
-        plain = (min(np.min(n1, initial=1.0), np.min(n2, initial=1.0)) > 0
-                 and min(h1.min(initial=0.0), h2.min(initial=0.0)) >= 0
-                 and determinant.min(initial=np.inf) > 1e-28 * (a.max(initial=0.0)
-                                                                * c.max(initial=0.0))
-                 and np.isfinite(length.sum()))
-        if plain:
-            good = None
-        else:
-            good = ((n1 > 0) & (n2 > 0) & (h1 >= 0) & (h2 >= 0)
-                    & (determinant > 1e-28 * a * c) & np.isfinite(length))
-    for camera_reason in (reason1, reason2):
-        if camera_reason is not None and (good is not None or np.any(camera_reason)):
-            camera_ok = camera_reason == Reason.OK
-            good = camera_ok if good is None else good & camera_ok
+        line1 = _water_line(rig.left, rig.port, basis, uv_left)
+        line2 = _water_line(rig.right, rig.port, basis, uv_right)
+        h1, h2, determinant = _fused_midpoints(basis, line1[:3], line2[:3], points, length)
+        good = _rows_not_plain(line1, line2, h1, h2, determinant, length)
     reason[...] = Reason.OK
     if good is not None and not good.all():
         bad = np.flatnonzero(~good)
@@ -334,6 +272,86 @@ def _optical_path_rows(rig: StereoRig, uv_left, uv_right, out=None):
                                                                  "optical_path")
         points[bad], length[bad], reason[bad] = slow_points, slow_gap, slow_reason
     return points, length, reason
+
+
+def _fused_midpoints(basis, line1, line2, points, length):
+    """The midpoints of the two water lines' common perpendicular into ``points`` (mm, world
+    frame) and its length into ``length`` (mm); each line ``(origin, direction, |d|²)`` in
+    the port basis (:func:`_water_line`). Returns ``(s1 / 2, s2 / 2, |d1 × d2|²)``."""
+    (offset, o11, o12), (A1, u1, v1), a = line1
+    (_, o21, o22), (A2, u2, v2), c = line2
+    w1 = o11 - o21  # origin difference (its normal component is 0)
+    w2 = o12 - o22
+    # common perpendicular (lines.common_perpendicular) of p1 + s1 d1 and p2 + s2 d2:
+    # k = d1 × d2, Δ = |k|², s1 = (b e − c d)/Δ, s2 = (a e − b d)/Δ
+    k0 = u1 * v2
+    k0 -= v1 * u2
+    k1 = v1 * A2
+    k1 -= A1 * v2
+    k2 = A1 * u2
+    k2 -= u1 * A2
+    determinant = k0 * k0
+    determinant += k1 * k1
+    determinant += k2 * k2
+    b = A1 * A2
+    b += u1 * u2
+    b += v1 * v2
+    d = u1 * w1
+    d += v1 * w2
+    e = u2 * w1
+    e += v2 * w2
+    half = 0.5 / determinant
+    h1 = b * e
+    h1 -= c * d
+    h1 *= half  # s1 / 2
+    h2 = a * e
+    h2 -= b * d
+    h2 *= half  # s2 / 2
+    np.multiply(k1, w1, out=length)
+    length += k2 * w2
+    np.abs(length, out=length)
+    length /= np.sqrt(determinant)
+    # midpoint (p1 + s1 d1 + p2 + s2 d2) / 2
+    middle0 = h1 * A1
+    middle0 += h2 * A2
+    middle0 += offset
+    middle1 = o11 + o21
+    middle1 *= 0.5
+    middle1 += h1 * u1
+    middle1 += h2 * u2
+    middle2 = o12 + o22
+    middle2 *= 0.5
+    middle2 += h1 * v1
+    middle2 += h2 * v2
+    for j in range(3):
+        _combine([(middle0, basis[0, j]), (middle1, basis[1, j]), (middle2, basis[2, j])],
+                 out=points[:, j])
+    return h1, h2, determinant
+
+
+def _rows_not_plain(line1, line2, h1, h2, determinant, length):
+    """None where every row is plainly valid, else the mask of the rows that are (the others
+    are recomputed for their reasons): a camera reason, a ray that misses the port or is
+    reflected (``w_n ≤ 0``), a point behind a ray start, parallel rays, a NaN."""
+    a, n1, reason1 = line1[2], line1[3], line1[4]
+    c, n2, reason2 = line2[2], line2[3], line2[4]
+    # one pass each (NaN anywhere fails them; not parallel: Δ > 1e-28 |d1|² |d2|², here
+    # with the largest |d1|², |d2|²): the row mask only where something may be wrong
+    plain = (min(np.min(n1, initial=1.0), np.min(n2, initial=1.0)) > 0
+             and min(h1.min(initial=0.0), h2.min(initial=0.0)) >= 0
+             and determinant.min(initial=np.inf) > 1e-28 * (a.max(initial=0.0)
+                                                            * c.max(initial=0.0))
+             and np.isfinite(length.sum()))
+    if plain:
+        good = None
+    else:
+        good = ((n1 > 0) & (n2 > 0) & (h1 >= 0) & (h2 >= 0)
+                & (determinant > 1e-28 * a * c) & np.isfinite(length))
+    for camera_reason in (reason1, reason2):
+        if camera_reason is not None and (good is not None or np.any(camera_reason)):
+            camera_ok = camera_reason == Reason.OK
+            good = camera_ok if good is None else good & camera_ok
+    return good
 
 
 def _triangulate_pixels(rig, left, right, method):
