@@ -31,8 +31,12 @@ import time
 from eval.calibrate.causes import FIT_ERRORS, housing_failure
 from eval.calibrate.design import (DOME_DESIGN_OPTIONS, FLAT_DESIGN_OPTIONS, design_domes,
                                    design_pair, design_port, pair_glass, parse_free)
+from eval.calibrate.intrinsics import (intrinsics_for_photos, is_photo_folder, read_in_air,
+                                        refuse_calibration_folder, underwater_note)
 from eval.calibrate.options import (COMMAND, HOUSING_OPTIONS, LENS_UNDERWATER,
                                     add_calibrate_parser, require_board)
+from eval.calibrate.outputs import (COLMAP_NOTE, failed, print_n_water_note, print_written,
+                                    write_calibrations)
 from eval.calibrate.port_lengths import lengths_for
 from eval.calibrate.single import single_camera_folder
 from eval.cli import CLIError
@@ -40,87 +44,11 @@ from eval.core.photos import encoding_note
 from synth.infra.cli import (BOARD_OPTIONS, EXIT_CHECK_FAILED, board_from_args, given,
                              refuse_given)
 
-#: What the printed summary says of ``cameras.txt`` (its header says it too).
-COLMAP_NOTE = "upstream COLMAP and pycolmap read it without an error and drop the port"
-
 
 def add_parser(subparsers):
     """The ``calibrate`` subcommand's parser (:mod:`eval.calibrate.options`: its options by
     group)."""
     add_calibrate_parser(subparsers)
-
-
-def _write_calibrations(directory, rig, housing, report: dict, start_rig,
-                        air_covariance=None) -> None:
-    """The calibration files (:func:`eval.calibrate.report.write_calibration`) into
-    ``directory``; underwater (``start_rig`` given: the in-air cameras with the design port)
-    also ``calib_in_air_only.yaml`` (with the in-air covariance, the port exact).
-    ``air_covariance``: the in-air calibration's (in air: written to calib.yaml)."""
-    from eval.calibrate import report as report_lib
-
-    report_lib.write_calibration(directory, rig, start_rig is not None, housing, report,
-                                 covariance=air_covariance if housing is None else None)
-    if housing is not None:
-        report_lib.write_calibration(os.path.join(directory, "calib_in_air_only.yaml"),
-                                     start_rig, True, None, None, single=True,
-                                     covariance=air_covariance)
-
-
-def _written(output, summary: str, args, has_port: bool) -> int:
-    """Print the water index's note, the summary and what was written; exit code 0."""
-    _print_n_water_note(args)
-    print(summary)
-    print(written_line(output.path, has_port))
-    return 0
-
-
-def underwater_note(path, calib) -> str | None:
-    """The line that says an ``--intrinsics`` calibration is an underwater one (``calib``:
-    :func:`synth.formats.calib_yaml.read_calib` of ``path``) whose port is not used; None for an
-    in-air one."""
-    if not calib["has_port"]:
-        return None
-    housing = getattr(calib["port"], "housing", "port")
-    return (f"note: --intrinsics {path} is an underwater calibration (it holds a {housing}): its "
-            f"cameras' intrinsics and stereo pose are used, its {housing} and the {housing}'s "
-            f"part of its covariance are not (the housing is estimated here, from the design "
-            f"options)")
-
-
-def _in_air(path, log):
-    """``(rig, air calibration or None, boards or None, covariance or None)`` from
-    ``--intrinsics``: a boards folder (calibrated here) or a calibration file (its covariance
-    node, when it has one)."""
-    from measure.calibration.air import calibrate_in_air, detect_boards
-    from synth.products.boards import read_boards
-    from synth.products.dataset import DatasetError, read_calib
-
-    if os.path.isdir(path):
-        boards = read_boards(path)
-        if not boards.air:
-            raise CLIError(f"--intrinsics {path}: these boards were rendered underwater; the "
-                           f"in-air calibration needs --air boards")
-        log(f"detect the boards in {path} and calibrate in air (OpenCV) …")
-        detections = detect_boards(boards.board, boards.images)
-        air = calibrate_in_air(boards.board, detections, boards.calib["size"])
-        return air.rig, air, boards, air.covariance
-    try:
-        calib = read_calib(path)
-    except DatasetError as exc:
-        raise CLIError(f"--intrinsics {path}: {str(exc).removeprefix(f'{path}: ')}") from None
-    covariance = calib.get("covariance")
-    if calib["has_port"]:  # said, not silently ignored: only its cameras are used
-        log(underwater_note(path, calib))
-        if covariance is not None:  # the cameras' part of it: the port's is not a prior here
-            import numpy as np
-
-            from measure.stereo.rig_covariance import RigCovariance
-
-            keep = [i for i, n in enumerate(covariance.names) if not n.startswith("port.")
-                    and ".dome_center" not in n]
-            covariance = (RigCovariance([covariance.names[i] for i in keep],
-                                        covariance.matrix[np.ix_(keep, keep)]) if keep else None)
-    return calib["rig"], None, None, covariance
 
 
 def main(args) -> int:
@@ -237,7 +165,7 @@ def main(args) -> int:
     elif not boards.air and not dome:
         design_port(args, (0.0, 0.0, 1.0))  # a bad --design-port is refused before any work
     if not boards.air and not os.path.isdir(args.intrinsics):  # a wrong file, before detection
-        _in_air(args.intrinsics, lambda text: None)
+        read_in_air(args.intrinsics, lambda text: None)
     log(f"detect the boards in {boards.path} ({len(boards.images)} poses) …")
     t = time.perf_counter()
     detections = detect_boards(boards.board, boards.images)
@@ -257,8 +185,8 @@ def main(args) -> int:
         housing = None
     else:
         t = time.perf_counter()
-        _refuse_calibration_folder(args.intrinsics)
-        air_rig, air, air_boards, air_covariance = _in_air(args.intrinsics, log)
+        refuse_calibration_folder(args.intrinsics)
+        air_rig, air, air_boards, air_covariance = read_in_air(args.intrinsics, log)
         timings["calibrate_in_air"] = time.perf_counter() - t
         if tuple(air_rig.left.size) != tuple(boards.calib["size"]):
             raise CLIError(f"--intrinsics {args.intrinsics}: image size "
@@ -297,38 +225,17 @@ def main(args) -> int:
     report["timings_s"] = timings
     log("write the calibration, report and figures …")
     with output.staged() as tmp:
-        _write_calibrations(tmp, rig, housing, report, None if boards.air else start_rig,
+        write_calibrations(tmp, rig, housing, report, None if boards.air else start_rig,
                             air_covariance)
         report_lib.figures(tmp, boards, detections, housing, rig)
         report = report_lib.write_report(tmp, report, report_lib.markdown, start)
-    code = _written(output, report_lib.summary_lines(report), args, housing is not None)
+    code = print_written(output, report_lib.summary_lines(report), args, housing is not None)
     if boards.air:  # a stereo fit the cameras' own fits contradict (e.g. --lens rational)
         from eval.calibrate import photos as trust
 
-        return _failed(args.dir, trust.stereo_rms_failure(
+        return failed(args.dir, trust.stereo_rms_failure(
             air.rms_px, air.stereo_rms_px, "boards (with this lens model)"), output.path) or code
     return code
-
-
-def written_line(path, has_port: bool) -> str:
-    """The last printed line: what was written; the COLMAP caveat only when there is a port to
-    drop (an in-air cameras.txt holds none)."""
-    colmap = (f"the refractive COLMAP fork — {COLMAP_NOTE}" if has_port else
-              "COLMAP (in air: no port)")
-    return (f"wrote {path} (calib.yaml; calibmar.yaml + calibmar_stereo.yaml; cameras.txt + "
-            f"rig_config.json for {colmap})")
-
-
-def _print_n_water_note(args) -> None:
-    """The index computed from ``--n-water T=…,S=…`` (on stderr), once the calibration is
-    written: a refused command prints its one ``error:`` line and nothing else."""
-    if getattr(args.n_water, "note", None):
-        print(args.n_water.note, file=sys.stderr, flush=True)
-
-
-def is_photo_folder(path) -> bool:
-    """Whether ``path`` is a photo folder (it holds ``left/`` and ``right/``)."""
-    return all(os.path.isdir(os.path.join(path, sub)) for sub in ("left", "right"))
 
 
 def _n_camera_design(args, own_ports: bool = False, cameras: int = 3):
@@ -421,7 +328,7 @@ def _calibrate_photos(args, output, log, free, start) -> int:
         design_port(args, (0.0, 0.0, 1.0))  # a bad --design-port is refused before any work
     air_rig = air_covariance = None
     if not args.air:
-        air_rig, air_covariance = _intrinsics_for_photos(args.intrinsics, log)
+        air_rig, air_covariance = intrinsics_for_photos(args.intrinsics, log)
     names, images, size, detections, timings = _pair_corners(args, board, log, where)
     if air_rig is not None and tuple(air_rig.left.size) != tuple(size):
         raise CLIError(f"--intrinsics {args.intrinsics}: image size "
@@ -549,13 +456,13 @@ def _calibrate_photos(args, output, log, free, start) -> int:
     report["timings_s"] = timings
     log("write the calibration, report and figures …")
     with output.staged() as tmp:
-        _write_calibrations(tmp, rig, housing, report, None if args.air else start_rig,
+        write_calibrations(tmp, rig, housing, report, None if args.air else start_rig,
                             air_covariance)
         report_lib.residual_figure(tmp, used_detections, residuals, size)
         photos_report.coverage_figure(tmp, detections, set(used), size, report)
         report = report_lib.write_report(tmp, report, photos_report.markdown, start)
-    code = _written(output, photos_report.summary_lines(report), args, housing is not None)
-    return _failed(args.dir, report["failures"], output.path) or code
+    code = print_written(output, photos_report.summary_lines(report), args, housing is not None)
+    return failed(args.dir, report["failures"], output.path) or code
 
 
 def _pair_corners(args, board, log, where):
@@ -613,15 +520,6 @@ def _calibrate_detections(args, output, log, start, free) -> int:
     return _calibrate_photos(args, output, log, parse_free(free), start)
 
 
-def _failed(where, failures, out) -> int:
-    """0, or — the calibration being known wrong — one line ``failed: …`` on stderr and 1 (the
-    report in ``out`` says the same under its verdict)."""
-    if not failures:
-        return 0
-    print(f"failed: {where}: {'; '.join(failures)} (report in {out})", file=sys.stderr)
-    return EXIT_CHECK_FAILED
-
-
 def _calibrate_single(args, output, log, start) -> int:
     """``eval calibrate`` of one camera's photo folder: in air (:mod:`eval.calibrate.single`)
     or, with ``--intrinsics``, its housing (:mod:`eval.calibrate.single_housing`)."""
@@ -642,7 +540,7 @@ def _calibrate_single(args, output, log, start) -> int:
     report, summary = calibrate_single(args, output, log, start, board_from_args(args))
     print(summary)
     print(f"wrote {output.path} (camera.yaml for OpenCV; calibmar.yaml; cameras.txt for COLMAP)")
-    return _failed(args.dir, report["failures"], output.path)
+    return failed(args.dir, report["failures"], output.path)
 
 
 def _calibrate_single_housing(args, output, log, start, where) -> int:
@@ -681,28 +579,8 @@ def _calibrate_single_housing(args, output, log, start, where) -> int:
         start_port = design_port(args, camera.R[:, 2])
     report, summary = calibrate_single_housing(args, output, log, start, board, intrinsics,
                                                start_port, free, dome)
-    _print_n_water_note(args)
+    print_n_water_note(args)
     print(summary)
     print(f"wrote {output.path} (camera.yaml for OpenCV; calibmar.yaml; cameras.txt for the "
           f"refractive COLMAP fork — {COLMAP_NOTE})")
-    return _failed(args.dir, report["failures"], output.path)
-
-
-def _intrinsics_for_photos(path, log):
-    """The in-air rig of ``--intrinsics`` for underwater photos and its covariance (or None): a
-    calib.yaml, or an in-air boards folder (calibrated here)."""
-    if os.path.isdir(path) and is_photo_folder(path):
-        raise CLIError(f"--intrinsics {path}: a photo folder; calibrate it first (python -m eval "
-                       f"calibrate {path} --air …) and give its calib.yaml")
-    _refuse_calibration_folder(path)
-    rig, _, _, covariance = _in_air(path, log)
-    return rig, covariance
-
-
-def _refuse_calibration_folder(path) -> None:
-    """``--intrinsics OUT``, the folder of a calibration rather than its file: named, with the
-    file to give (it read as 'not a boards folder (… manifest.json)')."""
-    if (os.path.isdir(path) and not os.path.exists(os.path.join(path, "manifest.json"))
-            and os.path.isfile(os.path.join(path, "calib.yaml"))):
-        raise CLIError(f"--intrinsics {path}: a folder holding a calibration; give the file, "
-                       f"--intrinsics {os.path.join(path, 'calib.yaml')}")
+    return failed(args.dir, report["failures"], output.path)
