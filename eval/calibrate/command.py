@@ -20,6 +20,11 @@ team that skips the housing calibration measures with), ``flatport.txt`` (the po
 refractive COLMAP fork and calibmar write it), ``report.json``, ``report.md`` (every estimate
 beside the truth with its error in σ) and figures ``residuals.png`` (reprojection residual
 vectors per pose and view) and ``poses.png`` (the board poses in 3D).
+
+This module routes a folder to its calibration; the parser is :mod:`eval.calibrate.options`, a
+pair's boards :mod:`eval.calibrate.pair_boards`, ``--intrinsics``
+:mod:`eval.calibrate.intrinsics`, and the files and lines at the end
+:mod:`eval.calibrate.outputs`.
 """
 
 from __future__ import annotations
@@ -28,21 +33,19 @@ import os
 import sys
 import time
 
-from eval.calibrate.causes import FIT_ERRORS, housing_failure
 from eval.calibrate.design import (DOME_DESIGN_OPTIONS, FLAT_DESIGN_OPTIONS, design_domes,
                                    design_pair, design_port, pair_glass, parse_free)
-from eval.calibrate.intrinsics import (intrinsics_for_photos, is_photo_folder, read_in_air,
-                                        refuse_calibration_folder, underwater_note)
+from eval.calibrate.intrinsics import intrinsics_for_photos, is_photo_folder, underwater_note
 from eval.calibrate.options import (COMMAND, HOUSING_OPTIONS, LENS_UNDERWATER,
                                     add_calibrate_parser, require_board)
 from eval.calibrate.outputs import (COLMAP_NOTE, failed, print_n_water_note, print_written,
                                     write_calibrations)
+from eval.calibrate.pair_boards import calibrate_pair_boards
 from eval.calibrate.port_lengths import lengths_for
 from eval.calibrate.single import single_camera_folder
 from eval.cli import CLIError
 from eval.core.photos import encoding_note
-from synth.infra.cli import (BOARD_OPTIONS, EXIT_CHECK_FAILED, board_from_args, given,
-                             refuse_given)
+from synth.infra.cli import EXIT_CHECK_FAILED, board_from_args, given, refuse_given
 
 
 def add_parser(subparsers):
@@ -52,50 +55,22 @@ def add_parser(subparsers):
 
 
 def main(args) -> int:
-
-    from measure import StereoRig
-    from measure.calibration.air import (DEFAULT_LENS_MODEL, calibrate_in_air,
-                                         detect_boards)
-    from measure.calibration.housing import HOUSINGS, calibrate_housing
-    from measure.geometry.dome import DomePair
-    from synth.products.boards import read_boards
+    """``eval calibrate DIR`` (module docs): the folder's kind says which calibration runs —
+    ``--model absorbed``, detections, photos of N cameras, of a pair or of one camera, or a
+    ``synth boards`` folder."""
     from synth.infra.fileio import OutputDir
-
-    from eval.calibrate import report as report_lib
 
     log = (lambda text: None) if args.no_progress else (
         lambda text: print(text, file=sys.stderr, flush=True))
-    free = args.free
     output = OutputDir(args.out, COMMAND).claim()
     start = time.perf_counter()
-    if not os.path.isdir(args.dir):
-        what = "a file, not a folder" if os.path.exists(args.dir) else "no such folder"
-        raise CLIError(f"{args.dir}: {what} (give a photo folder, DIR/left/ and DIR/right/, or a "
-                       f"synth boards folder)")
-    from eval.calibrate.sources import check_detection_options
-
-    check_detection_options(args)
-    if args.model != "absorbed":
-        refuse_given(args, ("stereo_intrinsics",), "without --model absorbed (the port model's "
-                                                   "stereo fit holds the in-air intrinsics)")
+    _check_folder_and_model(args)
     if args.model == "absorbed":
-        from eval.calibrate.absorbed import calibrate_absorbed_main
-
-        if args.air or args.intrinsics:
-            raise CLIError(f"--model absorbed: {'--air' if args.air else '--intrinsics'} does not "
-                           f"apply: the underwater photos themselves calibrate the cameras")
-        refuse_given(args, HOUSING_OPTIONS + DOME_DESIGN_OPTIONS,
-                     "with --model absorbed: it has no port")
-        return calibrate_absorbed_main(args, output, log, start)
+        return _calibrate_absorbed(args, output, log, start)
     if args.detections:
-        return _calibrate_detections(args, output, log, start, free)
+        return _calibrate_detections(args, output, log, start, args.free)
     if not os.path.exists(os.path.join(args.dir, "manifest.json")):
-        from eval.core.photos import PhotoError, camera_folder_names
-
-        try:
-            cameras = camera_folder_names(args.dir)
-        except PhotoError as exc:
-            raise CLIError(str(exc)) from None
+        cameras = _camera_folders(args.dir)
         if cameras:
             return _calibrate_camera_photos(args, output, log, start, cameras)
     if is_photo_folder(args.dir) or (
@@ -103,13 +78,61 @@ def main(args) -> int:
             and not os.path.exists(os.path.join(args.dir, "manifest.json"))):
         refuse_given(args, DOME_DESIGN_OPTIONS, f"to photos ({args.dir}): the housing "
                                                 "calibration of photos models a flat port")
-        return _calibrate_photos(args, output, log, parse_free(free), start)
+        return _calibrate_photos(args, output, log, parse_free(args.free), start)
     if not os.path.isfile(os.path.join(args.dir, "manifest.json")) and single_camera_folder(
             args.dir):
         return _calibrate_single(args, output, log, start)
     if not os.path.isfile(os.path.join(args.dir, "manifest.json")) and os.path.isdir(args.dir):
         raise CLIError(f"{args.dir}: not a boards folder (no manifest.json) nor a photo folder "
                        f"(no left/ and right/ folders, no photos)")
+    return _calibrate_boards(args, output, log, start)
+
+
+def _check_folder_and_model(args) -> None:
+    """CLIError when ``DIR`` is no folder, a detection option is given without
+    ``--detections`` (or wrongly), or ``--stereo-intrinsics`` without ``--model absorbed``."""
+    from eval.calibrate.sources import check_detection_options
+
+    if not os.path.isdir(args.dir):
+        what = "a file, not a folder" if os.path.exists(args.dir) else "no such folder"
+        raise CLIError(f"{args.dir}: {what} (give a photo folder, DIR/left/ and DIR/right/, or a "
+                       f"synth boards folder)")
+    check_detection_options(args)
+    if args.model != "absorbed":
+        refuse_given(args, ("stereo_intrinsics",), "without --model absorbed (the port model's "
+                                                   "stereo fit holds the in-air intrinsics)")
+
+
+def _calibrate_absorbed(args, output, log, start) -> int:
+    """``--model absorbed`` (:mod:`eval.calibrate.absorbed`): the underwater photos calibrate
+    the cameras themselves, so ``--air``, ``--intrinsics`` and the port's options are
+    refused."""
+    from eval.calibrate.absorbed import calibrate_absorbed_main
+
+    if args.air or args.intrinsics:
+        raise CLIError(f"--model absorbed: {'--air' if args.air else '--intrinsics'} does not "
+                       f"apply: the underwater photos themselves calibrate the cameras")
+    refuse_given(args, HOUSING_OPTIONS + DOME_DESIGN_OPTIONS,
+                 "with --model absorbed: it has no port")
+    return calibrate_absorbed_main(args, output, log, start)
+
+
+def _camera_folders(path) -> list:
+    """The camera folders (``cam0/``, ``cam1/``, …) of a photo folder of N cameras; empty for
+    any other folder."""
+    from eval.core.photos import PhotoError, camera_folder_names
+
+    try:
+        return camera_folder_names(path)
+    except PhotoError as exc:
+        raise CLIError(str(exc)) from None
+
+
+def _calibrate_boards(args, output, log, start) -> int:
+    """A ``synth boards`` folder: of N > 2 cameras (:mod:`eval.calibrate.cameras`) or of a pair
+    (:mod:`eval.calibrate.pair_boards`)."""
+    from synth.products.boards import read_boards
+
     boards = read_boards(args.dir)
     if "multirig" in boards.calib:  # a folder of N > 2 cameras
         from eval.calibrate.cameras import boards_source, calibrate_cameras_main
@@ -121,121 +144,7 @@ def main(args) -> int:
         design = None if boards.air else _n_camera_design(args, source.own_ports,
                                                             len(source.names))
         return calibrate_cameras_main(args, output, log, start, source, design)
-    truth = boards.calib["rig"]
-    if not boards.air and truth.port.kind not in HOUSINGS:  # a kind without a housing problem
-        raise CLIError(f"{args.dir}: boards behind {truth.port.description}: no housing "
-                       f"calibration of {truth.port.rig_name} yet")
-    dome = not boards.air and isinstance(truth.port, DomePair)
-    pair = not boards.air and truth.port.kind == "flat pair"  # two housings: --port-distance
-    if not pair and not boards.air:
-        refuse_given(args, ("port_distance",), f"to {args.dir}: its boards are not behind two "
-                                               f"housings (the design distance is "
-                                               f"--start-distance)")
-    if dome:
-        from measure.calibration.housing import DEFAULT_DOME_FREE
-
-        refuse_given(args, FLAT_DESIGN_OPTIONS, f"to boards behind domes ({args.dir}): the "
-                                                f"design is --dome-radius, --dome-thickness, "
-                                                f"--n-glass, --n-water")
-        free = parse_free(free if given(args, "free") else ",".join(DEFAULT_DOME_FREE), True)
-    else:
-        refuse_given(args, DOME_DESIGN_OPTIONS, f"to {args.dir}: its boards are not behind "
-                                                f"domes")
-        free = parse_free(free)
-    refuse_given(args, ("encoding",), f"to a boards folder ({args.dir}): its images are "
-                                      f"16-bit linear renders")
-    refuse_given(args, BOARD_OPTIONS, f"to a boards folder ({args.dir}): the folder's "
-                                      f"board.json defines the board")
-    if args.air and not boards.air:
-        raise CLIError(f"--air: {args.dir} holds boards rendered underwater (its manifest says "
-                       f"so; --air is for photos)")
-    if boards.air:
-        refuse_given(args, HOUSING_OPTIONS, f"to in-air boards ({args.dir}): they calibrate the "
-                                            f"cameras, no housing")
-    else:
-        refuse_given(args, ("lens",), LENS_UNDERWATER)
-    if boards.air and args.intrinsics:
-        raise CLIError(f"{args.dir}: in-air boards calibrate the intrinsics themselves; "
-                       f"--intrinsics is for underwater boards")
-    if not boards.air and not args.intrinsics:
-        raise CLIError(f"{args.dir}: underwater boards need --intrinsics (an --air boards "
-                       f"folder or a calib.yaml)")
-    if pair:
-        pair_glass(args)  # a bad design is refused before any work
-    elif not boards.air and not dome:
-        design_port(args, (0.0, 0.0, 1.0))  # a bad --design-port is refused before any work
-    if not boards.air and not os.path.isdir(args.intrinsics):  # a wrong file, before detection
-        read_in_air(args.intrinsics, lambda text: None)
-    log(f"detect the boards in {boards.path} ({len(boards.images)} poses) …")
-    t = time.perf_counter()
-    detections = detect_boards(boards.board, boards.images)
-    timings = {"detect": time.perf_counter() - t}
-    report = {"boards": os.path.abspath(boards.path), "air": boards.air,
-              "board": boards.board.to_dict(), "poses": len(boards.images),
-              "found": {"left": len(detections.found(0)), "right": len(detections.found(1))},
-              "detection": report_lib.detection_accuracy(boards, detections)}
-    if boards.air:
-        log("calibrate in air (OpenCV calibrateCamera, stereoCalibrate) …")
-        t = time.perf_counter()
-        air = calibrate_in_air(boards.board, detections, boards.calib["size"],
-                               args.lens or DEFAULT_LENS_MODEL)
-        timings["calibrate"] = time.perf_counter() - t
-        rig, air_covariance = air.rig, air.covariance
-        report["in_air"] = report_lib.air_summary(air, truth)
-        housing = None
-    else:
-        t = time.perf_counter()
-        refuse_calibration_folder(args.intrinsics)
-        air_rig, air, air_boards, air_covariance = read_in_air(args.intrinsics, log)
-        timings["calibrate_in_air"] = time.perf_counter() - t
-        if tuple(air_rig.left.size) != tuple(boards.calib["size"]):
-            raise CLIError(f"--intrinsics {args.intrinsics}: image size "
-                           f"{air_rig.left.size[0]}x{air_rig.left.size[1]} px, but the boards "
-                           f"are {boards.calib['size'][0]}x{boards.calib['size'][1]} px")
-        if air is not None:
-            report["in_air"] = report_lib.air_summary(air, air_boards.calib["rig"])
-        if dome:
-            start_rig = design_domes(args, air_rig)
-        elif pair:
-            if any(len(truth.view_port(v).thicknesses) != 1 for v in (0, 1)):
-                raise CLIError(f"{args.dir}: the housing calibration models one glass layer "
-                               f"per port")
-            start_rig = design_pair(args, air_rig)
-        else:
-            if len(truth.port.thicknesses) != 1:
-                raise CLIError(f"{args.dir}: the housing calibration models one glass layer; "
-                               f"the truth has {len(truth.port.thicknesses)}")
-            design = design_port(args, air_rig.left.R[:, 2])
-            start_rig = StereoRig(air_rig.left, air_rig.right, design)
-        log(f"refractive bundle adjustment of {', '.join(free)} over "
-            f"{len(detections.found(0))} + {len(detections.found(1))} board views …")
-        t = time.perf_counter()
-        try:
-            housing = calibrate_housing(start_rig, boards.board, detections, free,
-                                        air_covariance, args.air_uncertainty)
-        except FIT_ERRORS as exc:
-            raise housing_failure(args.dir, exc, args, "render") from None
-        timings["bundle_adjustment"] = time.perf_counter() - t
-        if not housing.identifiable:
-            raise housing_failure(args.dir, housing.reason, args, "render")
-        rig = housing.rig
-        report["dome"] = dome
-        report["housing"] = (report_lib.dome_summary if dome else report_lib.housing_summary)(
-            housing, truth, start_rig)
-    report["timings_s"] = timings
-    log("write the calibration, report and figures …")
-    with output.staged() as tmp:
-        write_calibrations(tmp, rig, housing, report, None if boards.air else start_rig,
-                            air_covariance)
-        report_lib.figures(tmp, boards, detections, housing, rig)
-        report = report_lib.write_report(tmp, report, report_lib.markdown, start)
-    code = print_written(output, report_lib.summary_lines(report), args, housing is not None)
-    if boards.air:  # a stereo fit the cameras' own fits contradict (e.g. --lens rational)
-        from eval.calibrate import photos as trust
-
-        return failed(args.dir, trust.stereo_rms_failure(
-            air.rms_px, air.stereo_rms_px, "boards (with this lens model)"), output.path) or code
-    return code
+    return calibrate_pair_boards(args, output, log, start, boards)
 
 
 def _n_camera_design(args, own_ports: bool = False, cameras: int = 3):
