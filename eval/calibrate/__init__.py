@@ -1,4 +1,5 @@
 """``python -m eval calibrate DIR``: in-air and housing calibration from rendered boards.
 
-:mod:`.command` (parser and main), :mod:`.report` (summaries, calib.yaml, figures, report.md).
+:mod:`.command` (main: which calibration a folder gets; its parser in :mod:`.options`),
+:mod:`.report` (summaries, calib.yaml, figures, report.md).
 """

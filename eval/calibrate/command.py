@@ -20,6 +20,11 @@ team that skips the housing calibration measures with), ``flatport.txt`` (the po
 refractive COLMAP fork and calibmar write it), ``report.json``, ``report.md`` (every estimate
 beside the truth with its error in σ) and figures ``residuals.png`` (reprojection residual
 vectors per pose and view) and ``poses.png`` (the board poses in 3D).
+
+This module routes a folder to its calibration; the parser is :mod:`eval.calibrate.options`, a
+pair's boards :mod:`eval.calibrate.pair_boards`, a pair's photos or detections
+:mod:`eval.calibrate.pair_photos`, ``--intrinsics`` :mod:`eval.calibrate.intrinsics`, and the
+files and lines at the end :mod:`eval.calibrate.outputs`.
 """
 
 from __future__ import annotations
@@ -28,242 +33,44 @@ import os
 import sys
 import time
 
-from eval.calibrate.causes import FIT_ERRORS, housing_failure
 from eval.calibrate.design import (DOME_DESIGN_OPTIONS, FLAT_DESIGN_OPTIONS, design_domes,
-                                   design_pair, design_port, pair_glass, parse_free)
-from eval.calibrate.port_lengths import lengths_for, per_camera_lengths
+                                   design_port, pair_glass, parse_free)
+from eval.calibrate.intrinsics import is_photo_folder
+from eval.calibrate.options import (COMMAND, HOUSING_OPTIONS, LENS_UNDERWATER,
+                                    add_calibrate_parser, require_board)
+from eval.calibrate.outputs import COLMAP_NOTE, failed, print_n_water_note
+from eval.calibrate.pair_boards import calibrate_pair_boards
+from eval.calibrate.pair_photos import calibrate_pair_photos
+from eval.calibrate.port_lengths import lengths_for
 from eval.calibrate.single import single_camera_folder
-from eval.cli import CLIError, positive_float
-from eval.core.photos import add_encoding_option, encoding_note
-from synth.infra.cli import (BOARD_OPTIONS, positive_int, EXIT_CHECK_FAILED, WATER_INDEX_HELP,
-                             add_board_options, add_out_option, add_progress_option,
-                             board_from_args, given, refuse_given, water_index_argument)
+from eval.cli import CLIError
+from eval.core.photos import encoding_note
+from synth.infra.cli import board_from_args, given, refuse_given
 
-COMMAND = "eval calibrate"
-#: Options of the housing calibration (underwater boards): refused with in-air boards.
-HOUSING_OPTIONS = ("free", "design_port", "start_distance", "glass_thickness", "n_glass",
-                   "n_water", "air_uncertainty", "port_distance")
-#: What the printed summary says of ``cameras.txt`` (its header says it too).
-COLMAP_NOTE = "upstream COLMAP and pycolmap read it without an error and drop the port"
-_LENS_UNDERWATER = ("underwater: the lens model is the in-air calibration's (--intrinsics); "
-                    "give --lens to eval calibrate --air")
+
 def add_parser(subparsers):
-    from measure.calibration.air import LENS_MODELS
-    from measure.calibration.dome import DOME_PARAMETERS
-    from measure.calibration.flat import HOUSING_PARAMETERS
-    from measure.calibration.housing import DEFAULT_DOME_FREE, DEFAULT_FREE, DEFAULT_UNCERTAINTY, UNCERTAINTY
-    from synth.scene.rig import PAPER_GLASS_THICKNESS_MM, PAPER_INDICES, PAPER_PORT_DISTANCE_MM
-
-    p = subparsers.add_parser(
-        "calibrate", help="calibrate from board images (in air, or the housing underwater)",
-        description="Calibrate from a folder of python -m synth boards (every estimate beside "
-                    "the rendered truth; a pair or N cameras) or from your own photos: a "
-                    "pair's DIR/left/ and DIR/right/, N cameras' DIR/cam0/ DIR/cam1/ …, paired "
-                    "by name, or one camera's folder of photos (give the board, and --air or "
-                    "--intrinsics).")
-    p.add_argument("dir", help="boards folder (python -m synth boards) or photo folder: "
-                               "DIR/left/ and DIR/right/, DIR/cam0/ DIR/cam1/ … (N cameras), or "
-                               "one camera's photos in DIR")
-    p.add_argument("--model", choices=("port", "absorbed"), default="port",
-                   help="port (default): the cameras in air, then the housing's port; absorbed: "
-                        "underwater boards or photos calibrated as pinhole cameras, the port "
-                        "absorbed by focal length and distortion (docs/absorbed.md)")
-    p.add_argument("--air", action="store_true",
-                   help="photos: taken in air (OpenCV calibrates both cameras and the stereo "
-                        "pose); a boards folder says it itself")
-    p.add_argument("--intrinsics", metavar="AIR_DIR_or_calib.yaml",
-                   help="underwater boards or photos: the in-air calibration, as an --air "
-                        "boards folder (calibrated here with OpenCV) or a file: calib.yaml, "
-                        "calibmar's YAML or the COLMAP fork's cameras.txt; one camera's photos: "
-                        "that camera's camera.yaml (eval calibrate PHOTOS --air), calibmar's "
-                        "one-camera YAML or a one-camera cameras.txt")
-    add_board_options(p, defaults=False, circles=True,
-                      needed="photos: required; a boards folder's board.json defines it")
-    p.add_argument("--free", default=",".join(DEFAULT_FREE),
-                   help=f"housing parameters to estimate, comma list of "
-                        f"{', '.join(HOUSING_PARAMETERS)} (default {','.join(DEFAULT_FREE)}); "
-                        f"behind domes: {', '.join(DOME_PARAMETERS)} (default "
-                        f"{','.join(DEFAULT_DOME_FREE)}: each camera's decentring)")
-    p.add_argument("--air-uncertainty", choices=UNCERTAINTY, default=DEFAULT_UNCERTAINTY,
-                   help=f"how the in-air calibration's covariance (--intrinsics: its calib.yaml's "
-                        f"covariance node) enters the housing's σ: propagate (intrinsics and "
-                        f"stereo pose held, their covariance propagated) or prior (freed, the "
-                        f"in-air result as a prior); default {DEFAULT_UNCERTAINTY} "
-                        f"(docs/calibration.md says why)")
-    p.add_argument("--start-distance", type=positive_float, default=PAPER_PORT_DISTANCE_MM,
-                   help=f"starting port distance D, mm (the design value; default "
-                        f"{PAPER_PORT_DISTANCE_MM:g})")
-    p.add_argument("--glass-thickness", type=positive_float, default=PAPER_GLASS_THICKNESS_MM,
-                   help=f"design glass thickness, mm (default {PAPER_GLASS_THICKNESS_MM:g}; "
-                        f"the start when --free thickness)")
-    p.add_argument("--n-glass", type=positive_float, default=PAPER_INDICES[1],
-                   help=f"design glass index (default {PAPER_INDICES[1]:g})")
-    p.add_argument("--n-water", type=water_index_argument, default=PAPER_INDICES[2],
-                   help=f"design {WATER_INDEX_HELP}; default {PAPER_INDICES[2]:g}; the start "
-                        f"when --free n_water")
-    p.add_argument("--port-distance", type=per_camera_lengths, metavar="LEFT,RIGHT",
-                   help="a port per camera (two housings; N cameras D0,D1,…): the design "
-                        "distance of each port from its camera's centre along the camera's "
-                        "optical axis, mm, as python -m synth scene --port per-camera gives it "
-                        "(default 40 each; one number: every camera); the start of each port's "
-                        "D and normal (each ⟂ its camera); photos: giving it says that the "
-                        "photos were taken behind a housing per camera. --glass-thickness, --n-glass, "
-                        "--n-water (or --design-port without distance=) give both ports' glass "
-                        "and water")
-    p.add_argument("--dome-radius", type=positive_float, default=50.0,
-                   help="boards behind domes: the design inner radius of each dome, mm (default "
-                        "50); the start is a dome centred on each camera. One camera's photos: "
-                        "giving it (or --dome-thickness) says the camera is inside a dome")
-    p.add_argument("--dome-thickness", type=positive_float, default=8.0,
-                   help="boards behind domes: the design glass thickness of each dome, mm "
-                        "(default 8)")
-    p.add_argument("--design-port", metavar="KEY=VALUE,…",
-                   help="the starting port in one option, from the housing's drawing: any of "
-                        "distance=MM, thickness=MM, n_glass=N, n_water=N (e.g. "
-                        "distance=120,thickness=8,n_glass=1.49); the keys not given keep the "
-                        "defaults above")
-    p.add_argument("--lens", choices=("auto", *LENS_MODELS), default=None,
-                   help="in air: the lens model OpenCV fits — standard (k1 k2 p1 p2), k3, "
-                        "rational (k1…k6 p1 p2: wide and action-camera lenses), fisheye "
-                        "(OpenCV's fisheye model, k1…k4 on the ray's angle) or auto "
-                        "(default: the richer model only where it lowers the RMS by 2 %%; the "
-                        "report lists each model's RMS)")
-    from measure.calibration.air import STEREO_INTRINSICS
-
-    from eval.calibrate.sources import add_detection_options
-
-    p.add_argument("--stereo-intrinsics", choices=STEREO_INTRINSICS, default=None,
-                   help="--model absorbed: fixed (default: each camera's own calibration held "
-                        "in the stereo fit) or refined (the stereo fit refines both cameras' "
-                        "intrinsics too, as MATLAB's stereo calibrator does)")
-    add_detection_options(p)
-    p.add_argument("--max-poses", type=positive_int, default=None, metavar="N",
-                   help="photos or detections: more poses than N (default 150; the frames of a "
-                        "calibration video) are thinned by pose diversity before the fit, the "
-                        "choice reported")
-    add_out_option(p, COMMAND)
-    add_encoding_option(p)
-    add_progress_option(p)
-
-
-def _write_calibrations(directory, rig, housing, report: dict, start_rig,
-                        air_covariance=None) -> None:
-    """The calibration files (:func:`eval.calibrate.report.write_calibration`) into
-    ``directory``; underwater (``start_rig`` given: the in-air cameras with the design port)
-    also ``calib_in_air_only.yaml`` (with the in-air covariance, the port exact).
-    ``air_covariance``: the in-air calibration's (in air: written to calib.yaml)."""
-    from eval.calibrate import report as report_lib
-
-    report_lib.write_calibration(directory, rig, start_rig is not None, housing, report,
-                                 covariance=air_covariance if housing is None else None)
-    if housing is not None:
-        report_lib.write_calibration(os.path.join(directory, "calib_in_air_only.yaml"),
-                                     start_rig, True, None, None, single=True,
-                                     covariance=air_covariance)
-
-
-def _written(output, summary: str, args, has_port: bool) -> int:
-    """Print the water index's note, the summary and what was written; exit code 0."""
-    _print_n_water_note(args)
-    print(summary)
-    print(written_line(output.path, has_port))
-    return 0
-
-
-def underwater_note(path, calib) -> str | None:
-    """The line that says an ``--intrinsics`` calibration is an underwater one (``calib``:
-    :func:`synth.formats.calib_yaml.read_calib` of ``path``) whose port is not used; None for an
-    in-air one."""
-    if not calib["has_port"]:
-        return None
-    housing = getattr(calib["port"], "housing", "port")
-    return (f"note: --intrinsics {path} is an underwater calibration (it holds a {housing}): its "
-            f"cameras' intrinsics and stereo pose are used, its {housing} and the {housing}'s "
-            f"part of its covariance are not (the housing is estimated here, from the design "
-            f"options)")
-
-
-def _in_air(path, log):
-    """``(rig, air calibration or None, boards or None, covariance or None)`` from
-    ``--intrinsics``: a boards folder (calibrated here) or a calibration file (its covariance
-    node, when it has one)."""
-    from measure.calibration.air import calibrate_in_air, detect_boards
-    from synth.products.boards import read_boards
-    from synth.products.dataset import DatasetError, read_calib
-
-    if os.path.isdir(path):
-        boards = read_boards(path)
-        if not boards.air:
-            raise CLIError(f"--intrinsics {path}: these boards were rendered underwater; the "
-                           f"in-air calibration needs --air boards")
-        log(f"detect the boards in {path} and calibrate in air (OpenCV) …")
-        detections = detect_boards(boards.board, boards.images)
-        air = calibrate_in_air(boards.board, detections, boards.calib["size"])
-        return air.rig, air, boards, air.covariance
-    try:
-        calib = read_calib(path)
-    except DatasetError as exc:
-        raise CLIError(f"--intrinsics {path}: {str(exc).removeprefix(f'{path}: ')}") from None
-    covariance = calib.get("covariance")
-    if calib["has_port"]:  # said, not silently ignored: only its cameras are used
-        log(underwater_note(path, calib))
-        if covariance is not None:  # the cameras' part of it: the port's is not a prior here
-            import numpy as np
-
-            from measure.stereo.rig_covariance import RigCovariance
-
-            keep = [i for i, n in enumerate(covariance.names) if not n.startswith("port.")
-                    and ".dome_center" not in n]
-            covariance = (RigCovariance([covariance.names[i] for i in keep],
-                                        covariance.matrix[np.ix_(keep, keep)]) if keep else None)
-    return calib["rig"], None, None, covariance
+    """The ``calibrate`` subcommand's parser (:mod:`eval.calibrate.options`: its options by
+    group)."""
+    add_calibrate_parser(subparsers)
 
 
 def main(args) -> int:
-
-    from measure import StereoRig
-    from measure.calibration.air import (DEFAULT_LENS_MODEL, calibrate_in_air,
-                                         detect_boards)
-    from measure.calibration.housing import HOUSINGS, calibrate_housing
-    from measure.geometry.dome import DomePair
-    from synth.products.boards import read_boards
+    """``eval calibrate DIR`` (module docs): the folder's kind says which calibration runs —
+    ``--model absorbed``, detections, photos of N cameras, of a pair or of one camera, or a
+    ``synth boards`` folder."""
     from synth.infra.fileio import OutputDir
-
-    from eval.calibrate import report as report_lib
 
     log = (lambda text: None) if args.no_progress else (
         lambda text: print(text, file=sys.stderr, flush=True))
-    free = args.free
     output = OutputDir(args.out, COMMAND).claim()
     start = time.perf_counter()
-    if not os.path.isdir(args.dir):
-        what = "a file, not a folder" if os.path.exists(args.dir) else "no such folder"
-        raise CLIError(f"{args.dir}: {what} (give a photo folder, DIR/left/ and DIR/right/, or a "
-                       f"synth boards folder)")
-    from eval.calibrate.sources import check_detection_options
-
-    check_detection_options(args)
-    if args.model != "absorbed":
-        refuse_given(args, ("stereo_intrinsics",), "without --model absorbed (the port model's "
-                                                   "stereo fit holds the in-air intrinsics)")
+    _check_folder_and_model(args)
     if args.model == "absorbed":
-        from eval.calibrate.absorbed import calibrate_absorbed_main
-
-        if args.air or args.intrinsics:
-            raise CLIError(f"--model absorbed: {'--air' if args.air else '--intrinsics'} does not "
-                           f"apply: the underwater photos themselves calibrate the cameras")
-        refuse_given(args, HOUSING_OPTIONS + DOME_DESIGN_OPTIONS,
-                     "with --model absorbed: it has no port")
-        return calibrate_absorbed_main(args, output, log, start)
+        return _calibrate_absorbed(args, output, log, start)
     if args.detections:
-        return _calibrate_detections(args, output, log, start, free)
+        return _calibrate_detections(args, output, log, start, args.free)
     if not os.path.exists(os.path.join(args.dir, "manifest.json")):
-        from eval.core.photos import PhotoError, camera_folder_names
-
-        try:
-            cameras = camera_folder_names(args.dir)
-        except PhotoError as exc:
-            raise CLIError(str(exc)) from None
+        cameras = _camera_folders(args.dir)
         if cameras:
             return _calibrate_camera_photos(args, output, log, start, cameras)
     if is_photo_folder(args.dir) or (
@@ -271,13 +78,61 @@ def main(args) -> int:
             and not os.path.exists(os.path.join(args.dir, "manifest.json"))):
         refuse_given(args, DOME_DESIGN_OPTIONS, f"to photos ({args.dir}): the housing "
                                                 "calibration of photos models a flat port")
-        return _calibrate_photos(args, output, log, parse_free(free), start)
+        return calibrate_pair_photos(args, output, log, parse_free(args.free), start)
     if not os.path.isfile(os.path.join(args.dir, "manifest.json")) and single_camera_folder(
             args.dir):
         return _calibrate_single(args, output, log, start)
     if not os.path.isfile(os.path.join(args.dir, "manifest.json")) and os.path.isdir(args.dir):
         raise CLIError(f"{args.dir}: not a boards folder (no manifest.json) nor a photo folder "
                        f"(no left/ and right/ folders, no photos)")
+    return _calibrate_boards(args, output, log, start)
+
+
+def _check_folder_and_model(args) -> None:
+    """CLIError when ``DIR`` is no folder, a detection option is given without
+    ``--detections`` (or wrongly), or ``--stereo-intrinsics`` without ``--model absorbed``."""
+    from eval.calibrate.sources import check_detection_options
+
+    if not os.path.isdir(args.dir):
+        what = "a file, not a folder" if os.path.exists(args.dir) else "no such folder"
+        raise CLIError(f"{args.dir}: {what} (give a photo folder, DIR/left/ and DIR/right/, or a "
+                       f"synth boards folder)")
+    check_detection_options(args)
+    if args.model != "absorbed":
+        refuse_given(args, ("stereo_intrinsics",), "without --model absorbed (the port model's "
+                                                   "stereo fit holds the in-air intrinsics)")
+
+
+def _calibrate_absorbed(args, output, log, start) -> int:
+    """``--model absorbed`` (:mod:`eval.calibrate.absorbed`): the underwater photos calibrate
+    the cameras themselves, so ``--air``, ``--intrinsics`` and the port's options are
+    refused."""
+    from eval.calibrate.absorbed import calibrate_absorbed_main
+
+    if args.air or args.intrinsics:
+        raise CLIError(f"--model absorbed: {'--air' if args.air else '--intrinsics'} does not "
+                       f"apply: the underwater photos themselves calibrate the cameras")
+    refuse_given(args, HOUSING_OPTIONS + DOME_DESIGN_OPTIONS,
+                 "with --model absorbed: it has no port")
+    return calibrate_absorbed_main(args, output, log, start)
+
+
+def _camera_folders(path) -> list:
+    """The camera folders (``cam0/``, ``cam1/``, …) of a photo folder of N cameras; empty for
+    any other folder."""
+    from eval.core.photos import PhotoError, camera_folder_names
+
+    try:
+        return camera_folder_names(path)
+    except PhotoError as exc:
+        raise CLIError(str(exc)) from None
+
+
+def _calibrate_boards(args, output, log, start) -> int:
+    """A ``synth boards`` folder: of N > 2 cameras (:mod:`eval.calibrate.cameras`) or of a pair
+    (:mod:`eval.calibrate.pair_boards`)."""
+    from synth.products.boards import read_boards
+
     boards = read_boards(args.dir)
     if "multirig" in boards.calib:  # a folder of N > 2 cameras
         from eval.calibrate.cameras import boards_source, calibrate_cameras_main
@@ -289,142 +144,7 @@ def main(args) -> int:
         design = None if boards.air else _n_camera_design(args, source.own_ports,
                                                             len(source.names))
         return calibrate_cameras_main(args, output, log, start, source, design)
-    truth = boards.calib["rig"]
-    if not boards.air and truth.port.kind not in HOUSINGS:  # a kind without a housing problem
-        raise CLIError(f"{args.dir}: boards behind {truth.port.description}: no housing "
-                       f"calibration of {truth.port.rig_name} yet")
-    dome = not boards.air and isinstance(truth.port, DomePair)
-    pair = not boards.air and truth.port.kind == "flat pair"  # two housings: --port-distance
-    if not pair and not boards.air:
-        refuse_given(args, ("port_distance",), f"to {args.dir}: its boards are not behind two "
-                                               f"housings (the design distance is "
-                                               f"--start-distance)")
-    if dome:
-        from measure.calibration.housing import DEFAULT_DOME_FREE
-
-        refuse_given(args, FLAT_DESIGN_OPTIONS, f"to boards behind domes ({args.dir}): the "
-                                                f"design is --dome-radius, --dome-thickness, "
-                                                f"--n-glass, --n-water")
-        free = parse_free(free if given(args, "free") else ",".join(DEFAULT_DOME_FREE), True)
-    else:
-        refuse_given(args, DOME_DESIGN_OPTIONS, f"to {args.dir}: its boards are not behind "
-                                                f"domes")
-        free = parse_free(free)
-    refuse_given(args, ("encoding",), f"to a boards folder ({args.dir}): its images are "
-                                      f"16-bit linear renders")
-    refuse_given(args, BOARD_OPTIONS, f"to a boards folder ({args.dir}): the folder's "
-                                      f"board.json defines the board")
-    if args.air and not boards.air:
-        raise CLIError(f"--air: {args.dir} holds boards rendered underwater (its manifest says "
-                       f"so; --air is for photos)")
-    if boards.air:
-        refuse_given(args, HOUSING_OPTIONS, f"to in-air boards ({args.dir}): they calibrate the "
-                                            f"cameras, no housing")
-    else:
-        refuse_given(args, ("lens",), _LENS_UNDERWATER)
-    if boards.air and args.intrinsics:
-        raise CLIError(f"{args.dir}: in-air boards calibrate the intrinsics themselves; "
-                       f"--intrinsics is for underwater boards")
-    if not boards.air and not args.intrinsics:
-        raise CLIError(f"{args.dir}: underwater boards need --intrinsics (an --air boards "
-                       f"folder or a calib.yaml)")
-    if pair:
-        pair_glass(args)  # a bad design is refused before any work
-    elif not boards.air and not dome:
-        design_port(args, (0.0, 0.0, 1.0))  # a bad --design-port is refused before any work
-    if not boards.air and not os.path.isdir(args.intrinsics):  # a wrong file, before detection
-        _in_air(args.intrinsics, lambda text: None)
-    log(f"detect the boards in {boards.path} ({len(boards.images)} poses) …")
-    t = time.perf_counter()
-    detections = detect_boards(boards.board, boards.images)
-    timings = {"detect": time.perf_counter() - t}
-    report = {"boards": os.path.abspath(boards.path), "air": boards.air,
-              "board": boards.board.to_dict(), "poses": len(boards.images),
-              "found": {"left": len(detections.found(0)), "right": len(detections.found(1))},
-              "detection": report_lib.detection_accuracy(boards, detections)}
-    if boards.air:
-        log("calibrate in air (OpenCV calibrateCamera, stereoCalibrate) …")
-        t = time.perf_counter()
-        air = calibrate_in_air(boards.board, detections, boards.calib["size"],
-                               args.lens or DEFAULT_LENS_MODEL)
-        timings["calibrate"] = time.perf_counter() - t
-        rig, air_covariance = air.rig, air.covariance
-        report["in_air"] = report_lib.air_summary(air, truth)
-        housing = None
-    else:
-        t = time.perf_counter()
-        _refuse_calibration_folder(args.intrinsics)
-        air_rig, air, air_boards, air_covariance = _in_air(args.intrinsics, log)
-        timings["calibrate_in_air"] = time.perf_counter() - t
-        if tuple(air_rig.left.size) != tuple(boards.calib["size"]):
-            raise CLIError(f"--intrinsics {args.intrinsics}: image size "
-                           f"{air_rig.left.size[0]}x{air_rig.left.size[1]} px, but the boards "
-                           f"are {boards.calib['size'][0]}x{boards.calib['size'][1]} px")
-        if air is not None:
-            report["in_air"] = report_lib.air_summary(air, air_boards.calib["rig"])
-        if dome:
-            start_rig = design_domes(args, air_rig)
-        elif pair:
-            if any(len(truth.view_port(v).thicknesses) != 1 for v in (0, 1)):
-                raise CLIError(f"{args.dir}: the housing calibration models one glass layer "
-                               f"per port")
-            start_rig = design_pair(args, air_rig)
-        else:
-            if len(truth.port.thicknesses) != 1:
-                raise CLIError(f"{args.dir}: the housing calibration models one glass layer; "
-                               f"the truth has {len(truth.port.thicknesses)}")
-            design = design_port(args, air_rig.left.R[:, 2])
-            start_rig = StereoRig(air_rig.left, air_rig.right, design)
-        log(f"refractive bundle adjustment of {', '.join(free)} over "
-            f"{len(detections.found(0))} + {len(detections.found(1))} board views …")
-        t = time.perf_counter()
-        try:
-            housing = calibrate_housing(start_rig, boards.board, detections, free,
-                                        air_covariance, args.air_uncertainty)
-        except FIT_ERRORS as exc:
-            raise housing_failure(args.dir, exc, args, "render") from None
-        timings["bundle_adjustment"] = time.perf_counter() - t
-        if not housing.identifiable:
-            raise housing_failure(args.dir, housing.reason, args, "render")
-        rig = housing.rig
-        report["dome"] = dome
-        report["housing"] = (report_lib.dome_summary if dome else report_lib.housing_summary)(
-            housing, truth, start_rig)
-    report["timings_s"] = timings
-    log("write the calibration, report and figures …")
-    with output.staged() as tmp:
-        _write_calibrations(tmp, rig, housing, report, None if boards.air else start_rig,
-                            air_covariance)
-        report_lib.figures(tmp, boards, detections, housing, rig)
-        report = report_lib.write_report(tmp, report, report_lib.markdown, start)
-    code = _written(output, report_lib.summary_lines(report), args, housing is not None)
-    if boards.air:  # a stereo fit the cameras' own fits contradict (e.g. --lens rational)
-        from eval.calibrate import photos as trust
-
-        return _failed(args.dir, trust.stereo_rms_failure(
-            air.rms_px, air.stereo_rms_px, "boards (with this lens model)"), output.path) or code
-    return code
-
-
-def written_line(path, has_port: bool) -> str:
-    """The last printed line: what was written; the COLMAP caveat only when there is a port to
-    drop (an in-air cameras.txt holds none)."""
-    colmap = (f"the refractive COLMAP fork — {COLMAP_NOTE}" if has_port else
-              "COLMAP (in air: no port)")
-    return (f"wrote {path} (calib.yaml; calibmar.yaml + calibmar_stereo.yaml; cameras.txt + "
-            f"rig_config.json for {colmap})")
-
-
-def _print_n_water_note(args) -> None:
-    """The index computed from ``--n-water T=…,S=…`` (on stderr), once the calibration is
-    written: a refused command prints its one ``error:`` line and nothing else."""
-    if getattr(args.n_water, "note", None):
-        print(args.n_water.note, file=sys.stderr, flush=True)
-
-
-def is_photo_folder(path) -> bool:
-    """Whether ``path`` is a photo folder (it holds ``left/`` and ``right/``)."""
-    return all(os.path.isdir(os.path.join(path, sub)) for sub in ("left", "right"))
+    return calibrate_pair_boards(args, output, log, start, boards)
 
 
 def _n_camera_design(args, own_ports: bool = False, cameras: int = 3):
@@ -455,7 +175,7 @@ def _calibrate_camera_photos(args, output, log, start, cameras) -> int:
     elif not args.intrinsics:
         raise CLIError(f"{where}: say --air (photos taken in air) or --intrinsics calib.yaml "
                        f"(photos taken underwater, with the in-air calibration of these cameras)")
-    _require_board(args, where)
+    require_board(args, where)
     board = board_from_args(args)
     if board.symmetric:
         raise CLIError(f"{where}: a {board.squares[0]}x{board.squares[1]} chessboard looks the "
@@ -477,222 +197,6 @@ def _calibrate_camera_photos(args, output, log, start, cameras) -> int:
     return calibrate_cameras_main(args, output, log, start, source, design)
 
 
-def _calibrate_photos(args, output, log, free, start) -> int:
-    """``eval calibrate`` of a user's photo folder (module docs, :mod:`eval.calibrate.photos`)."""
-    from measure import StereoRig
-    from measure.calibration.air import (DEFAULT_LENS_MODEL, CalibrationError, calibrate_in_air)
-    from measure.calibration.housing import calibrate_housing
-
-    from eval.calibrate import photos as trust
-    from eval.calibrate import photos_report
-    from eval.calibrate import report as report_lib
-    from measure.calibration.housing import FIT_RMS_LIMIT_PX
-
-    from eval.calibrate.consistency import (cameras_alone, gross_misfit, rig_inconsistency,
-                                            start_from_cameras, uniqueness)
-    from eval.calibrate.dots import views_of_air, views_of_housing, with_eccentricity
-    from eval.calibrate.sources import (MAX_POSES, repeat_lines, repeated_views, thin_by_pose,
-                                        without_repeats)
-
-    where = f"{args.dir} ({'detections' if args.detections else 'photos'})"
-    source = "detections" if args.detections else "photos"
-    if args.air:
-        refuse_given(args, HOUSING_OPTIONS, "to in-air photos (--air): they calibrate the "
-                                            "cameras, no housing")
-        if args.intrinsics:
-            raise CLIError("--intrinsics does not apply with --air: in-air photos calibrate the "
-                           "intrinsics themselves")
-    elif not args.intrinsics:
-        raise CLIError(f"{where}: say --air (photos taken in air) or --intrinsics calib.yaml "
-                       f"(photos taken underwater, with the in-air calibration)")
-    else:
-        refuse_given(args, ("lens",), _LENS_UNDERWATER)
-    _require_board(args, where)
-    board = board_from_args(args)
-    pair = given(args, "port_distance")  # two housings: a port per camera
-    if pair and not args.air:
-        pair_glass(args)  # a bad design is refused before any work
-        lengths_for(args.port_distance, 2)
-    elif not args.air:
-        design_port(args, (0.0, 0.0, 1.0))  # a bad --design-port is refused before any work
-    air_rig = air_covariance = None
-    if not args.air:
-        air_rig, air_covariance = _intrinsics_for_photos(args.intrinsics, log)
-    names, images, size, detections, timings = _pair_corners(args, board, log, where)
-    if air_rig is not None and tuple(air_rig.left.size) != tuple(size):
-        raise CLIError(f"--intrinsics {args.intrinsics}: image size "
-                       f"{air_rig.left.size[0]}x{air_rig.left.size[1]} px, but the "
-                       f"{'detections are' if args.detections else 'photos are'} "
-                       f"{size[0]}x{size[1]} px")
-    found = {v: detections.found(i) for i, v in enumerate(trust.VIEWS)}
-    not_found = [names[k] for k in range(len(names))
-                 if k not in found["left"] and k not in found["right"]]
-    repeats = repeated_views(detections)
-    detections_all, detections = detections, without_repeats(detections, repeats)
-    before = len(set(detections.found(0)) | set(detections.found(1)))
-    detections, thinned = thin_by_pose(detections, board, size, args.max_poses or MAX_POSES)
-    if len(thinned) < before:
-        print(f"note: the board in {before} pairs: the {len(thinned)} most different poses kept "
-              f"(--max-poses {args.max_poses or MAX_POSES})", file=sys.stderr)
-    t = time.perf_counter()
-
-    def fit(calibrate):  # a CalibrationError (too few poses) names the photo folder
-        try:
-            return trust.fit_without_outliers(
-                calibrate, lambda r: r.rms_px_per, detections, lambda r: r.residuals, board,
-                lambda r: getattr(r, "identifiable", True))
-        except CalibrationError as exc:
-            raise CLIError(f"{where}: {exc}") from None
-
-    if args.air:
-        log("calibrate in air (OpenCV calibrateCamera, stereoCalibrate) …")
-        result, used_detections, outliers = fit(
-            with_eccentricity(lambda d: calibrate_in_air(board, d, size,
-                                                         args.lens or DEFAULT_LENS_MODEL),
-                              board, views_of_air))
-        rig, housing, rms_per = result.rig, None, result.rms_px_per
-        air_covariance = result.covariance
-        poses = {k: result.board_poses.get((k, 0), pose)  # the left camera's where it has one
-                 for (k, _), pose in result.board_poses.items()}
-        timings["calibrate"] = time.perf_counter() - t
-    else:
-        if pair:
-            start_rig = design_pair(args, air_rig)
-        else:
-            start_rig = StereoRig(air_rig.left, air_rig.right,
-                                  design_port(args, air_rig.left.R[:, 2]))
-        log(f"refractive bundle adjustment of {', '.join(free)} …")
-        result, used_detections, outliers = fit(
-            with_eccentricity(lambda d: calibrate_housing(start_rig, board, d, free,
-                                                          air_covariance, args.air_uncertainty),
-                              board, views_of_housing))
-        housing, alone = result, None
-        if not housing.identifiable and housing.rms_px > FIT_RMS_LIMIT_PX:
-            log("the design start failed: again from each camera's own port …")
-            alone = cameras_alone(start_rig, board, detections)  # the design far off
-            better = start_from_cameras(start_rig, alone)
-            if better is not None:
-                again, again_used, again_outliers = fit(
-                    with_eccentricity(lambda d: calibrate_housing(
-                        better, board, d, free, air_covariance, args.air_uncertainty),
-                        board, views_of_housing))
-                if again.identifiable or again.rms_px < housing.rms_px:
-                    start_rig, housing = better, again
-                    result, used_detections, outliers = again, again_used, again_outliers
-        timings["bundle_adjustment"] = time.perf_counter() - t
-        if not housing.identifiable:
-            inconsistent = rig_inconsistency(housing, start_rig, board, detections, free, alone)
-            if inconsistent is None and "extrinsics" in free:
-                inconsistent = uniqueness(housing, start_rig, board, detections, free,
-                                          air_covariance, args.air_uncertainty)["note"]
-            if inconsistent:
-                print(f"failed: {where}: {inconsistent}; nothing written", file=sys.stderr)
-                return EXIT_CHECK_FAILED
-            raise CLIError(f"{where}: {housing.reason}; nothing written (free fewer parameters "
-                           f"with --free, or photograph more varied poses)")
-        rig, rms_per = housing.rig, housing.rms_px_per
-        poses = dict(zip(housing.pose_ids, housing.poses))
-    used = sorted({k for k, _ in rms_per})
-    geometry = trust.pose_geometry(board, {k: poses[k] for k in used if k in poses}, rig)
-    report = {"photos": os.path.abspath(args.dir), "source": source, "air": bool(args.air),
-              "board": board.to_dict(), "image_size": list(size), "poses": len(names),
-              "repeats": repeat_lines(repeats, names),
-              "thinned": {"kept": len(thinned), "rule": f"at most {args.max_poses or MAX_POSES} "
-                          f"poses, the most different kept (--max-poses)"},
-              "found": {v: len(found[v]) for v in trust.VIEWS}, "used": len(used),
-              "not_found": not_found,
-              "left_out": [names[k] for k in outliers["left_out"]],
-              "outlier_rule": trust.OUTLIER_RULE, "outliers": outliers,
-              "per_pose": trust.per_pose_table(
-                  names, detections_all, used_detections, rms_per, outliers, geometry,
-                  (result.stereo_poses, result.stereo_left_out) if args.air else None,
-                  {r["pose"] for r in repeats}),
-              "coverage": trust.coverage(used_detections, size),
-              "geometry": {"distance_mm": trust.stats_range(g["distance_mm"]
-                                                            for g in geometry.values()),
-                           "tilt_deg": trust.stats_range(g["tilt_deg"] for g in geometry.values())}}
-    if args.air:
-        report["in_air"] = trust.air_estimates(result, used)
-        residuals = result.residuals
-    else:
-        report["housing"] = trust.housing_estimates(housing, start_rig)
-        report["sigma_note"] = report_lib.sigma_note(housing.uncertainty)
-        residuals = housing.residuals
-        if "extrinsics" in free:  # the rig's own pose freed: is the port determined at all?
-            log("the same fit from other starting port distances …")
-            report["housing"]["uniqueness"] = uniqueness(
-                housing, start_rig, board, used_detections, free, air_covariance,
-                args.air_uncertainty)
-    report["worst_corners"] = trust.worst_corners(residuals, names)
-    report["warnings"] = trust.warnings_for(report) + [
-        f"{line}: left out (a photo given twice is one pose)" for line in report["repeats"]]
-    if args.intrinsics and os.path.isfile(args.intrinsics):
-        from synth.products.dataset import read_calib
-
-        said = underwater_note(args.intrinsics, read_calib(args.intrinsics))
-        if said:
-            report["warnings"].append(said[len("note: "):])
-    edge = trust.unseen_edge(board, detections, (0, 1))
-    if edge:
-        report["warnings"].append(edge)
-    report["failures"] = trust.air_failures(report) if args.air else []
-    if not args.air and report["housing"].get("uniqueness", {}).get("note"):
-        report["failures"].append(report["housing"]["uniqueness"]["note"])
-    if not args.air:
-        misfit = gross_misfit(housing, board, used_detections, size, bool(pair))
-        if misfit:
-            report["failures"].append(misfit)
-    report["timings_s"] = timings
-    log("write the calibration, report and figures …")
-    with output.staged() as tmp:
-        _write_calibrations(tmp, rig, housing, report, None if args.air else start_rig,
-                            air_covariance)
-        report_lib.residual_figure(tmp, used_detections, residuals, size)
-        photos_report.coverage_figure(tmp, detections, set(used), size, report)
-        report = report_lib.write_report(tmp, report, photos_report.markdown, start)
-    code = _written(output, photos_report.summary_lines(report), args, housing is not None)
-    return _failed(args.dir, report["failures"], output.path) or code
-
-
-def _pair_corners(args, board, log, where):
-    """``(names, images or None, size, detections, timings)`` of a pair's photos (read and
-    detected) or, ``--detections``, of its detection files; CLIError where the board is in no
-    photo, or the photos show another board (photos only: the checks need the images)."""
-    from measure.calibration.air import detect_boards
-
-    from eval.calibrate import photos as trust
-    from eval.calibrate.sources import read_detection_views
-    from eval.core.photos import photo_folder, read_pairs
-
-    t = time.perf_counter()
-    if args.detections:
-        names, detections, size = read_detection_views(args, board, 2)
-        return names, None, size, detections, {"read": time.perf_counter() - t}
-    pairs = photo_folder(args.dir)
-    log(f"read {len(pairs.names)} photo pairs from {args.dir} …")
-    note = encoding_note(pairs.left[0], args.encoding) if pairs.left else None
-    if note:
-        print(note, file=sys.stderr, flush=True)
-    images, size = read_pairs(pairs, args.encoding)
-    timings = {"read": time.perf_counter() - t}
-    log(f"detect the board in {len(images)} photo pairs …")
-    t = time.perf_counter()
-    detections = detect_boards(board, images)
-    timings["detect"] = time.perf_counter() - t
-    found = {v: detections.found(i) for i, v in enumerate(trust.VIEWS)}
-    if not found["left"] and not found["right"]:
-        squares = "x".join(map(str, board.squares))
-        raise CLIError(f"{where}: the {board.kind} {squares} was found in none of the "
-                       f"{len(images)} photo pairs{trust.board_hint(board, images)}")
-    larger = trust.larger_board(board, images, found["left"])
-    if larger:
-        raise CLIError(f"{where}: {larger}")
-    charuco = trust.charuco_check(board, [images[k][0] for k in found["left"]])
-    if charuco:
-        raise CLIError(f"{where}: {charuco}")
-    return list(pairs.names), images, size, detections, timings
-
-
 def _calibrate_detections(args, output, log, start, free) -> int:
     """``--detections``: one camera's files, or a pair's in ``left/`` and ``right/``, through
     the paths of photos (:mod:`eval.calibrate.sources`)."""
@@ -706,16 +210,7 @@ def _calibrate_detections(args, output, log, start, free) -> int:
         return _calibrate_single(args, output, log, start)
     refuse_given(args, DOME_DESIGN_OPTIONS, f"to a pair's detections ({args.dir}): the housing "
                                             "calibration of a pair's photos models flat ports")
-    return _calibrate_photos(args, output, log, parse_free(free), start)
-
-
-def _failed(where, failures, out) -> int:
-    """0, or — the calibration being known wrong — one line ``failed: …`` on stderr and 1 (the
-    report in ``out`` says the same under its verdict)."""
-    if not failures:
-        return 0
-    print(f"failed: {where}: {'; '.join(failures)} (report in {out})", file=sys.stderr)
-    return EXIT_CHECK_FAILED
+    return calibrate_pair_photos(args, output, log, parse_free(free), start)
 
 
 def _calibrate_single(args, output, log, start) -> int:
@@ -734,11 +229,11 @@ def _calibrate_single(args, output, log, start) -> int:
                        "intrinsics themselves")
     refuse_given(args, HOUSING_OPTIONS + DOME_DESIGN_OPTIONS + ("intrinsics",),
                  "to one camera's in-air photos (--air): they calibrate the camera, no housing")
-    _require_board(args, where)
+    require_board(args, where)
     report, summary = calibrate_single(args, output, log, start, board_from_args(args))
     print(summary)
     print(f"wrote {output.path} (camera.yaml for OpenCV; calibmar.yaml; cameras.txt for COLMAP)")
-    return _failed(args.dir, report["failures"], output.path)
+    return failed(args.dir, report["failures"], output.path)
 
 
 def _calibrate_single_housing(args, output, log, start, where) -> int:
@@ -750,7 +245,7 @@ def _calibrate_single_housing(args, output, log, start, where) -> int:
 
     from eval.calibrate.single_housing import calibrate_single_housing, read_intrinsics
 
-    refuse_given(args, ("lens",), _LENS_UNDERWATER)
+    refuse_given(args, ("lens",), LENS_UNDERWATER)
     refuse_given(args, ("port_distance",), f"to one camera's photos ({args.dir}): it is the "
                                            f"design of two housings (one camera's port: "
                                            f"--start-distance)")
@@ -765,7 +260,7 @@ def _calibrate_single_housing(args, output, log, start, where) -> int:
     if "extrinsics" in free:
         raise CLIError(f"--free {args.free}: extrinsics is the stereo pose; {args.dir} holds one "
                        f"camera's photos")
-    _require_board(args, where)
+    require_board(args, where)
     board = board_from_args(args)
     if not dome:
         design_port(args, (0.0, 0.0, 1.0))  # a bad --design-port is refused before any work
@@ -777,43 +272,10 @@ def _calibrate_single_housing(args, output, log, start, where) -> int:
         start_port = design_port(args, camera.R[:, 2])
     report, summary = calibrate_single_housing(args, output, log, start, board, intrinsics,
                                                start_port, free, dome)
-    _print_n_water_note(args)
+    print_n_water_note(args)
     print(summary)
     print(f"wrote {output.path} (camera.yaml for OpenCV; calibmar.yaml; cameras.txt for the "
           f"refractive COLMAP fork — {COLMAP_NOTE})")
-    return _failed(args.dir, report["failures"], output.path)
+    return failed(args.dir, report["failures"], output.path)
 
 
-def _require_board(args, where) -> None:
-    """CLIError when a photo folder's board is not on the command line (a circle grid's
-    options are checked where it is made)."""
-    if args.board in ("circles", "acircles"):
-        return
-    missing = [option for dest, option in (("squares", "--squares COLSxROWS (or "
-                                                       "--inner-corners)"),
-                                           ("square_mm", "--square-mm S"))
-               if getattr(args, dest) is None
-               and not (dest == "squares" and args.inner_corners is not None)]
-    if missing:
-        raise CLIError(f"{where}: a photo folder needs the board on the command line: "
-                       f"{' and '.join(missing)} (and --board charuco for a ChArUco board)")
-
-
-def _intrinsics_for_photos(path, log):
-    """The in-air rig of ``--intrinsics`` for underwater photos and its covariance (or None): a
-    calib.yaml, or an in-air boards folder (calibrated here)."""
-    if os.path.isdir(path) and is_photo_folder(path):
-        raise CLIError(f"--intrinsics {path}: a photo folder; calibrate it first (python -m eval "
-                       f"calibrate {path} --air …) and give its calib.yaml")
-    _refuse_calibration_folder(path)
-    rig, _, _, covariance = _in_air(path, log)
-    return rig, covariance
-
-
-def _refuse_calibration_folder(path) -> None:
-    """``--intrinsics OUT``, the folder of a calibration rather than its file: named, with the
-    file to give (it read as 'not a boards folder (… manifest.json)')."""
-    if (os.path.isdir(path) and not os.path.exists(os.path.join(path, "manifest.json"))
-            and os.path.isfile(os.path.join(path, "calib.yaml"))):
-        raise CLIError(f"--intrinsics {path}: a folder holding a calibration; give the file, "
-                       f"--intrinsics {os.path.join(path, 'calib.yaml')}")

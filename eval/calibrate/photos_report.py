@@ -1,6 +1,6 @@
 """The report of a pair's own photos (``report.md``) and the lines ``eval calibrate`` prints,
-from the report dict :mod:`eval.calibrate.command` builds (:mod:`eval.calibrate.photos`: what can
-be trusted without truth). Lengths mm, angles degrees, pixels px."""
+from the report dict :mod:`eval.calibrate.pair_photos` builds (:mod:`eval.calibrate.photos`: what
+can be trusted without truth). Lengths mm, angles degrees, pixels px."""
 
 from __future__ import annotations
 

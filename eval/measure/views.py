@@ -57,24 +57,54 @@ def capture_failures(names, photos, centers, in_tracks) -> list[str]:
 def measure_views_main(args, output, options, start, log) -> int:
     """``eval measure`` of one capture of N cameras (module docs); ``options`` the target
     options (:func:`eval.measure.command.options_of`)."""
-    from measure.stereo.multimatch import match_views
-    from measure.stereo.multiview import triangulate_views
-    from synth.infra.cli import EXIT_CHECK_FAILED, given
-    from synth.infra.fileio import atomic_write_json, atomic_write_text, jsonable
-    from synth.products.dataset import DatasetError
-    from synth.products.rig_file import read_rig_file
-
-    from eval.core.detection import detect_view
-    from eval.core.photos import PhotoError, encoding_note, read_photo
-    from eval.measure.report import write_cloud
+    from synth.infra.cli import EXIT_CHECK_FAILED
 
     photos = [args.left, args.right, *args.more]
+    _refuse_for_n_cameras(args, options, photos)
+    rig = _read_rig(args, photos)
+    images = _read_photos(args, rig, photos)
+    log(f"detect the targets in {len(photos)} photos …")
+    timings = {}
+    t = time.perf_counter()
+    centers = [_centers(image, options) for image in images]
+    timings["detect"] = time.perf_counter() - t
+    t = time.perf_counter()
+    tracks, pixels, result = _match_and_triangulate(rig, centers, options)
+    timings["match_and_triangulate"] = time.perf_counter() - t
+    ok = result.valid
+    if not ok.any():
+        raise CLIError(f"{', '.join(photos)}: no target was matched in two or more views "
+                       f"(detections per camera: "
+                       + ", ".join(f"{n} {len(c)}" for n, c in zip(rig.names, centers)) + ")")
+    in_tracks = [int((tracks.detections[ok, v] >= 0).sum()) for v in range(len(photos))]
+    failures = capture_failures(rig.names, photos, centers, in_tracks)
+    report = _report(args, options, rig, photos, centers, in_tracks, tracks, result, failures)
+    by_views = report["by_views"]  # as computed (the report is written as plain JSON types)
+    report = _write(output, args, rig, photos, result, pixels, report, timings, start)
+    _print_summary(args, output, photos, report, by_views)
+    for failure in failures:
+        print(f"failed: {failure} (report in {output.path})", file=sys.stderr)
+    return EXIT_CHECK_FAILED if failures else 0
+
+
+def _refuse_for_n_cameras(args, options, photos) -> None:
+    """The options of a stereo pair's measurement that a capture of N cameras refuses, and any
+    method but the optical path of N views."""
+    from synth.infra.cli import given
+
     for dest, flag in NOT_FOR_N_CAMERAS:
         if given(args, dest):
             raise CLIError(f"{flag} does not apply to a capture of {len(photos)} cameras")
     if tuple(options.methods) != ("optical_path",):
         raise CLIError(f"--methods {args.methods}: a capture of {len(photos)} cameras is "
                        f"measured with the optical path of N views (optical_path)")
+
+
+def _read_rig(args, photos):
+    """The rig of ``--calib``, one camera per photo."""
+    from synth.products.dataset import DatasetError
+    from synth.products.rig_file import read_rig_file
+
     try:
         rig = read_rig_file(args.calib)
     except DatasetError as exc:
@@ -83,6 +113,14 @@ def measure_views_main(args, output, options, start, log) -> int:
         raise CLIError(f"--calib {args.calib}: {len(rig.cameras)} cameras "
                        f"({', '.join(rig.names)}), but {len(photos)} photos were given (one per "
                        f"camera, in that order)")
+    return rig
+
+
+def _read_photos(args, rig, photos) -> list:
+    """Each camera's photo (``--encoding``), of the size of its camera (px); the encoding's note
+    on stderr."""
+    from eval.core.photos import PhotoError, encoding_note, read_photo
+
     images = []
     for name, camera, photo in zip(rig.names, rig.cameras, photos):
         if os.path.isdir(photo):
@@ -99,69 +137,107 @@ def measure_views_main(args, output, options, start, log) -> int:
     note = encoding_note(photos[0], args.encoding)
     if note:
         print(note, file=sys.stderr, flush=True)
-    log(f"detect the targets in {len(photos)} photos …")
-    timings = {}
-    t = time.perf_counter()
-    centers = [np.asarray(detect_view(image, options.threshold_fraction, options.max_elongation,
-                                      options.max_area_ratio, options.median_filter,
-                                      floor_fraction=options.floor_fraction).centers,
-                          dtype=float).reshape(-1, 2) for image in images]
-    timings["detect"] = time.perf_counter() - t
-    t = time.perf_counter()
+    return images
+
+
+def _centers(image, options) -> np.ndarray:
+    """The targets' centres detected in one photo, ``(n, 2)`` px."""
+    from eval.core.detection import detect_view
+
+    return np.asarray(detect_view(image, options.threshold_fraction, options.max_elongation,
+                                  options.max_area_ratio, options.median_filter,
+                                  floor_fraction=options.floor_fraction).centers,
+                      dtype=float).reshape(-1, 2)
+
+
+def _match_and_triangulate(rig, centers, options):
+    """``(tracks, pixels, result)``: the detections matched across all views, each track's
+    pixels per view and its triangulation from all its views (mm)."""
+    from measure.stereo.multimatch import match_views
+    from measure.stereo.multiview import triangulate_views
+
     tracks = match_views(rig, centers, gate_mm=options.gate_mm,
                          depth_range=tuple(options.depth_range))
     pixels = tracks.pixels(centers)
-    result = triangulate_views(rig.views(), pixels)
-    timings["match_and_triangulate"] = time.perf_counter() - t
+    return tracks, pixels, triangulate_views(rig.views(), pixels)
+
+
+def _report(args, options, rig, photos, centers, in_tracks, tracks, result, failures) -> dict:
+    """The report: detections and tracks per camera, the targets and gap RMS (mm) by the
+    number of views, the failures."""
     ok = result.valid
-    if not ok.any():
-        raise CLIError(f"{', '.join(photos)}: no target was matched in two or more views "
-                       f"(detections per camera: "
-                       + ", ".join(f"{n} {len(c)}" for n, c in zip(rig.names, centers)) + ")")
-    in_tracks = [int((tracks.detections[ok, v] >= 0).sum()) for v in range(len(photos))]
-    failures = capture_failures(rig.names, photos, centers, in_tracks)
     by_views = {}
     for k in sorted(set(result.views[ok].tolist())):
         sel = ok & (result.views == k)
         by_views[str(k)] = {"targets": int(sel.sum()),
                             "gap_rms_mm": float(np.sqrt(np.mean(result.gap[sel] ** 2)))}
-    report = {"command": "eval measure", "calib": args.calib, "cameras": list(rig.names),
-              "photos": photos, "encoding": args.encoding, "image_size": list(rig.cameras[0].size),
-              "methods": ["optical_path"],
-              "options": {"gate_mm": options.gate_mm,
-                          "depth_range_mm": [None if v is None else float(v)
-                                             for v in options.depth_range]},
-              "detections": {n: len(c) for n, c in zip(rig.names, centers)},
-              "in_tracks": dict(zip(rig.names, in_tracks)),
-              "tracks": int(len(tracks.detections)), "triangulated": int(ok.sum()),
-              "in_no_track": {n: int(len(a)) for n, a in zip(rig.names, tracks.alone)},
-              "conflicts_dropped": int(tracks.n_conflicts), "by_views": by_views,
-              "gap_rms_mm": float(np.sqrt(np.mean(result.gap[ok] ** 2))),
-              "failures": failures}
+    return {"command": "eval measure", "calib": args.calib, "cameras": list(rig.names),
+            "photos": photos, "encoding": args.encoding, "image_size": list(rig.cameras[0].size),
+            "methods": ["optical_path"],
+            "options": {"gate_mm": options.gate_mm,
+                        "depth_range_mm": [None if v is None else float(v)
+                                           for v in options.depth_range]},
+            "detections": {n: len(c) for n, c in zip(rig.names, centers)},
+            "in_tracks": dict(zip(rig.names, in_tracks)),
+            "tracks": int(len(tracks.detections)), "triangulated": int(ok.sum()),
+            "in_no_track": {n: int(len(a)) for n, a in zip(rig.names, tracks.alone)},
+            "conflicts_dropped": int(tracks.n_conflicts), "by_views": by_views,
+            "gap_rms_mm": float(np.sqrt(np.mean(result.gap[ok] ** 2))),
+            "failures": failures}
+
+
+def _write(output, args, rig, photos, result, pixels, report, timings, start) -> dict:
+    """``points.ply``, ``points.csv``, ``report.json`` (its timings, s) and ``report.md`` into
+    ``output``; the report as written."""
+    from synth.infra.fileio import atomic_write_json, atomic_write_text, jsonable
+
+    from eval.measure.report import write_cloud
+
+    ok, by_views = result.valid, report["by_views"]
     with output.staged() as tmp:
         write_cloud(os.path.join(tmp, "points.ply"), result.points[ok])
-        header = ["track", "x_mm", "y_mm", "z_mm", "gap_mm", "views"] + [
-            f"{a}_{n}" for n in rig.names for a in ("u", "v")]
-        lines = [",".join(header)]
-        for i in np.flatnonzero(ok):
-            lines.append(",".join([str(int(i)), *(repr(float(v)) for v in result.points[i]),
-                                   repr(float(result.gap[i])), str(int(result.views[i])),
-                                   *(repr(float(v)) for v in pixels[i].ravel())]))
-        atomic_write_text(os.path.join(tmp, "points.csv"), "\n".join(lines) + "\n")
+        atomic_write_text(os.path.join(tmp, "points.csv"), _points_csv(rig, result, pixels))
         report["timings_s"] = {**timings, "total": time.perf_counter() - start}
         report = jsonable(report)
         atomic_write_json(os.path.join(tmp, "report.json"), report)
-        atomic_write_text(os.path.join(tmp, "report.md"), "\n".join([
-            f"# eval measure: one capture of {len(photos)} cameras", "",
-            f"Calibration `{args.calib}`. Detections per camera: "
-            + ", ".join(f"{n} {c}" for n, c in report["detections"].items()) + ".", "",
-            f"{report['triangulated']} targets triangulated (optical path of N views); "
-            f"detections in no track (seen by one view, or ambiguous; not triangulated): "
-            + ", ".join(f"{n} {c}" for n, c in report["in_no_track"].items())
-            + f"; {report['conflicts_dropped']} ambiguous tracks dropped.", "",
-            "| views | targets | gap RMS (mm) |", "|---|---|---|",
-            *(f"| {k} | {v['targets']} | {v['gap_rms_mm']:.4g} |" for k, v in by_views.items()),
-            "", *(f"**Failed:** {f}" for f in failures)]) + "\n")
+        atomic_write_text(os.path.join(tmp, "report.md"),
+                          _markdown(args, photos, report, by_views))
+    return report
+
+
+def _points_csv(rig, result, pixels) -> str:
+    """``points.csv``: per triangulated track its point and gap (mm), views, and its pixels in
+    every camera (NaN where a camera did not see it)."""
+    header = ["track", "x_mm", "y_mm", "z_mm", "gap_mm", "views"] + [
+        f"{a}_{n}" for n in rig.names for a in ("u", "v")]
+    lines = [",".join(header)]
+    for i in np.flatnonzero(result.valid):
+        lines.append(",".join([str(int(i)), *(repr(float(v)) for v in result.points[i]),
+                               repr(float(result.gap[i])), str(int(result.views[i])),
+                               *(repr(float(v)) for v in pixels[i].ravel())]))
+    return "\n".join(lines) + "\n"
+
+
+def _markdown(args, photos, report, by_views) -> str:
+    """``report.md``: detections per camera, the tracks, gap RMS by the number of views (mm),
+    the failures."""
+    return "\n".join([
+        f"# eval measure: one capture of {len(photos)} cameras", "",
+        f"Calibration `{args.calib}`. Detections per camera: "
+        + ", ".join(f"{n} {c}" for n, c in report["detections"].items()) + ".", "",
+        f"{report['triangulated']} targets triangulated (optical path of N views); "
+        f"detections in no track (seen by one view, or ambiguous; not triangulated): "
+        + ", ".join(f"{n} {c}" for n, c in report["in_no_track"].items())
+        + f"; {report['conflicts_dropped']} ambiguous tracks dropped.", "",
+        "| views | targets | gap RMS (mm) |", "|---|---|---|",
+        *(f"| {k} | {v['targets']} | {v['gap_rms_mm']:.4g} |"
+          for k, v in by_views.items()),
+        "", *(f"**Failed:** {f}" for f in report["failures"])]) + "\n"
+
+
+def _print_summary(args, output, photos, report, by_views) -> None:
+    """The summary lines (on stderr with ``--json``, which prints the report alone on
+    stdout)."""
     stream = sys.stderr if getattr(args, "json", False) else sys.stdout
     print(f"{len(photos)} cameras: {report['triangulated']} targets triangulated ("
           + ", ".join(f"{v['targets']} from {k} views" for k, v in by_views.items())
@@ -172,9 +248,6 @@ def measure_views_main(args, output, options, start, log) -> int:
         import json
 
         print(json.dumps(report, indent=2))
-    for failure in failures:
-        print(f"failed: {failure} (report in {output.path})", file=sys.stderr)
-    return EXIT_CHECK_FAILED if failures else 0
 
 
 __all__ = ["measure_views_main"]
