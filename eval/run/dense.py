@@ -41,7 +41,6 @@ from dataclasses import fields
 
 import numpy as np
 
-from measure.geometry.dome import DomePair
 from eval.cli import CLIError
 from eval.core.formatting import format_number as fmt
 from eval.run.config import COMMAND, RunConfig
@@ -151,28 +150,28 @@ def pinhole_depth_range(rig, depth_range) -> tuple[float, float]:
     """The search range of the pinhole baseline: where the refractive range ``depth_range``
     *appears* to it, its near end lowered by :data:`PINHOLE_NEAR_MARGIN` — so the baseline finds
     the surface where the pinhole model sees it and is scored on what it then measures. Behind a
-    flat port the paraxial apparent depths (:meth:`measure.FlatPort.apparent_depth`; off-axis
-    points appear nearer still, hence the margin). Behind domes, measured from the rig
-    (:func:`_apparent_depths_through_domes`): exactly the range through centred domes, nearer
+    flat port the paraxial apparent depths (the port's closed form,
+    :meth:`measure.geometry.port.RigPort.apparent_depths`; off-axis points appear nearer still,
+    hence the margin). Behind each camera's own port (domes, two housings), measured from the
+    rig (:func:`_apparent_depths_traced`): exactly the range through centred domes, nearer
     through decentred ones (domes 2.5–4.6 mm off centre show a plane at 900 mm as near as
     624 mm).
     The near end stays beyond the glass (:func:`measure.dense.match.glass_depth`, + 1 mm), where the
     matcher's depth planes must lie."""
     from measure.dense.match import glass_depth
 
-    if isinstance(rig.port, DomePair):
-        near, far = _apparent_depths_through_domes(rig, depth_range)
-    else:
-        near, far = (rig.port.apparent_depth(d) for d in depth_range)
+    closed_form = rig.port.apparent_depths(depth_range)
+    near, far = (closed_form if closed_form is not None
+                 else _apparent_depths_traced(rig, depth_range))
     return float(max(near * (1 - PINHOLE_NEAR_MARGIN), glass_depth(rig) + 1.0)), float(far)
 
 
-def _apparent_depths_through_domes(rig, depth_range, grid: int = 9) -> tuple[float, float]:
+def _apparent_depths_traced(rig, depth_range, grid: int = 9) -> tuple[float, float]:
     """``(nearest, farthest)`` depth (mm along :attr:`measure.StereoRig.depth_axis` from the
     left camera's centre) at which the pinhole model triangulates the points that lie at the
     two ends of ``depth_range`` on the water rays of a ``grid`` × ``grid`` lattice of left
-    pixels, each projected through the right camera's dome. The nearest is at most
-    ``depth_range``'s near end (a near end the right camera does not see at all would otherwise
+    pixels, each projected through the right camera's own port (a dome, a housing). The
+    nearest is at most ``depth_range``'s near end (a near end the right camera does not see at all would otherwise
     leave only the far end's points); ``depth_range`` itself where the right camera sees none
     of them."""
     from measure.geometry.projection import project
@@ -189,7 +188,7 @@ def _apparent_depths_through_domes(rig, depth_range, grid: int = 9) -> tuple[flo
         with np.errstate(divide="ignore", invalid="ignore"):
             step = (depth - (rays.origins - center) @ axis) / along
         points = rays.origins + step[:, None] * rays.directions
-        uv_right = project(rig.right, rig.port.right, points)
+        uv_right = project(rig.right, rig.port.view(1), points)
         ok = (np.isfinite(step) & (step > 0) & np.all(np.isfinite(uv_right), axis=1)
               & rig.right.in_image(np.nan_to_num(uv_right, nan=-1.0)))
         if ok.any():

@@ -61,6 +61,10 @@ class RigPort:
     #: Where the glass ends, in messages, and the axis depths are measured along.
     glass_name = ""
     axis_name = ""
+    #: Whether both cameras' water rays leave one plane (one port both look through): then the
+    #: optical-path triangulation has a fused closed form over pixel rows
+    #: (:func:`measure.stereo.triangulate.triangulate`); otherwise each view is traced.
+    one_water_plane = False
 
     def view(self, view: int):
         """The port camera ``view`` (0 left, 1 right) looks through."""
@@ -75,6 +79,12 @@ class RigPort:
     def check_cameras(self, left, right) -> None:
         """Raise ``ValueError`` unless both cameras' centres are on the air side."""
         raise NotImplementedError
+
+    def apparent_depths(self, depths) -> tuple | None:
+        """Where points at ``depths`` (mm along :meth:`depth_axis`) appear to a pinhole that
+        ignores the port, where a closed form gives it (one flat port: paraxially); None where
+        it must be traced through the rig (each camera's own port)."""
+        return None
 
     def depth_axis(self, left) -> np.ndarray:
         """The unit axis along which depths are measured (reference frame), given the left
@@ -248,6 +258,11 @@ class FlatPort(RigPort, ValueEquality):
     self_calibrates = True
     glass_name = "the port's last interface"
     axis_name = "the port normal"
+    one_water_plane = True
+
+    def apparent_depths(self, depths) -> tuple:
+        """:meth:`apparent_depth` of each of ``depths``."""
+        return tuple(self.apparent_depth(d) for d in depths)
 
     def view(self, view: int) -> FlatPort:
         """Both cameras look through this one port."""

@@ -390,7 +390,7 @@ def triangulate(rig: StereoRig, uv_left, uv_right, method: str = "optical_path")
         reason = start.reason.copy()
         points[reason != Reason.OK] = np.nan
         return Triangulation(points, start.gap, reason, method)
-    if method == "optical_path" and isinstance(rig.port, FlatPort):  # the fused flat-port form
+    if method == "optical_path" and rig.port.one_water_plane:  # the fused flat-port form
         n_rows = uv_left.shape[0]
         points, gap, reason = map_row_chunks(
             lambda left, right, out: _optical_path_rows(rig, left, right, out),

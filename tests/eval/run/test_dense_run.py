@@ -350,3 +350,25 @@ def test_the_pinhole_search_range_brackets_where_the_pinhole_model_sees_the_surf
     # a near end close to the glass: clamped 1 mm beyond it, for domes and the flat port
     for rig, requested in ((decentred, 70.0), (base, 120.0)):
         assert pinhole_depth_range(rig, (requested, 1100.0))[0] == glass_depth(rig) + 1.0
+
+
+def test_the_pinhole_search_range_behind_two_housings_is_traced(monkeypatch):
+    """Two housings (each camera its own flat port; before, an AttributeError: the range asked
+    for the shared port's closed form): two ports in the place of the paper's shared one give
+    the range traced through them — the same, to 1e-9, as the same lattice traced through the
+    shared port itself, and its near end no farther than the closed form's (off-axis points
+    appear nearer than the paraxial depth)."""
+    from measure import StereoRig
+    from measure.geometry.flat_pair import FlatPair
+    from measure.geometry.port import FlatPort
+    from synth.scene.rig import paper_rig
+
+    from eval.run.dense import pinhole_depth_range
+
+    shared = paper_rig(size=(320, 268))
+    housings = StereoRig(shared.left, shared.right, FlatPair(shared.port, shared.port))
+    traced = pinhole_depth_range(housings, (900.0, 1100.0))
+    closed_form = pinhole_depth_range(shared, (900.0, 1100.0))
+    monkeypatch.setattr(FlatPort, "apparent_depths", lambda self, depths: None)
+    np.testing.assert_allclose(traced, pinhole_depth_range(shared, (900.0, 1100.0)), rtol=1e-9)
+    assert traced[0] <= closed_form[0]
