@@ -171,9 +171,9 @@ def _apparent_depths_traced(rig, depth_range, grid: int = 9) -> tuple[float, flo
     left camera's centre) at which the pinhole model triangulates the points that lie at the
     two ends of ``depth_range`` on the water rays of a ``grid`` × ``grid`` lattice of left
     pixels, each projected through the right camera's own port (a dome, a housing). The
-    nearest is at most ``depth_range``'s near end (a near end the right camera does not see at all would otherwise
-    leave only the far end's points); ``depth_range`` itself where the right camera sees none
-    of them."""
+    nearest is at most ``depth_range``'s near end (a near end the right camera does not see at
+    all would otherwise leave only the far end's points); ``depth_range`` itself where the
+    right camera sees none of them."""
     from measure.geometry.projection import project
     from measure.stereo.triangulate import triangulate
 
