@@ -48,7 +48,7 @@ def contact_sheet(folder, path, columns: int = 4) -> None:
     import cv2
 
     from synth.products.boards import read_boards
-    from synth.rendering.render import srgb_preview
+    from synth.rendering.image_files import srgb_preview
 
     images = [srgb_preview(pair[0]) for pair in read_boards(folder).images]
     blank = np.zeros_like(images[0])

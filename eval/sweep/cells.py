@@ -92,7 +92,7 @@ def render_cell(cell: dict, scene_path: str, save: tuple):
 
 
 def _saved_files(result, save) -> dict:
-    from synth.rendering.render import png16_scale, to_png16, write_png
+    from synth.rendering.image_files import png16_scale, to_png16, write_png
 
     from eval.run.report import write_outputs
 

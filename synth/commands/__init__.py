@@ -24,7 +24,8 @@ One module per command (``synth/commands/<name>.py``, listed in ``--help`` order
 * ``add_parser(subparsers)`` -- ``subparsers.add_parser("<name>", …)`` and its arguments,
 * ``main(args) -> int`` -- run it; raise :class:`synth.infra.cli.CLIError` for a user error.
 
-What several commands share is in :mod:`synth.commands.common`. Heavy imports (Mitsuba, Open3D,
+What several commands share is in :mod:`synth.commands.common`; the cameras and port of
+``scene``'s options are in :mod:`synth.commands.scene_rig`. Heavy imports (Mitsuba, Open3D,
 matplotlib, SciPy) stay inside the functions so that ``--help`` stays fast.
 """
 

@@ -20,8 +20,8 @@ def main(args) -> int:
     """Render every view of the scene into ``--out`` (``left``, ``right``; a scene of N
     cameras ``cam0``, ``cam1``, …)."""
     from synth.infra.fileio import OutputDir
-    from synth.rendering.render import (png16_scale, render_summary, render_views, srgb_preview,
-                              to_png16, write_exr, write_png)
+    from synth.rendering.image_files import png16_scale, srgb_preview, to_png16, write_exr, write_png
+    from synth.rendering.render import render_summary, render_views
 
     output = OutputDir(args.out, "synth render").claim()
     spec = scene_from_args(args)

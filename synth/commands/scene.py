@@ -5,8 +5,9 @@ write a Mitsuba scene of the paper's rig, a port (or none) and targets or a spec
 from __future__ import annotations
 
 import os
-import sys
 
+from synth.commands.scene_rig import (cameras_from_options, dome_comment, port_from_options,
+                                     rig_from_file)
 from synth.infra.cli import (WATER_INDEX_HELP, CLIError, add_out_option, any_float,
                        non_negative_float, non_negative_int, positive_float, positive_int,
                        refuse_given, scene_seed, water_index_argument)
@@ -27,7 +28,8 @@ def _coverage(text: str) -> float:
 def _per_camera(base):
     """An argparse type: one number (``base``), or one per camera separated by commas —
     ``LEFT,RIGHT``, or ``V0,V1,…`` for N cameras (``--port per-camera``); a tuple. Whether the
-    count fits the cameras is checked where the cameras are known (:func:`_each`)."""
+    count fits the cameras is checked where the cameras are known
+    (:func:`synth.commands.scene_rig.each_value`)."""
 
     def parse(text: str) -> tuple:
         return tuple(base(part) for part in str(text).split(","))
@@ -45,12 +47,23 @@ def _camera_count(text: str) -> int:
 
 
 def add_parser(subparsers) -> None:
+    """The ``scene`` subparser: ``--out`` and the named groups of options, in ``--help`` order."""
     p = subparsers.add_parser("scene",
                               help="write a Mitsuba scene of the rig, the port and targets")
     add_out_option(p, "synth scene", what="file",
                    rule="the scene (.xml; --layout surface also writes its mesh and speckle "
                         "texture beside it); an existing file is replaced only if python -m synth "
                         "scene wrote it")
+    _add_layout_options(p)
+    _add_target_options(p)
+    _add_port_options(p)
+    _add_rig_options(p)
+    _add_look_options(p)
+
+
+def _add_layout_options(p) -> None:
+    """What the scene holds: ``--layout`` (targets or a speckled surface) and the
+    surface's shape and speckle."""
     p.add_argument("--layout", choices=("paper", "grid", "random", "tilted", "cylinder", "sphere",
                                         "surface"),
                    default="paper",
@@ -75,6 +88,11 @@ def add_parser(subparsers) -> None:
                    help="--surface wavy: amplitude, mm (default 20)")
     p.add_argument("--wavelength", type=positive_float, default=300.0,
                    help="--surface wavy: wavelength, mm (default 300)")
+
+
+def _add_target_options(p) -> None:
+    """Where the targets are: the plane's depth, the grid, the tilt, the convex
+    surface, the random volume (mm, degrees)."""
     p.add_argument("--z", type=positive_float, default=1000.0,
                    help="target plane Z, mm (paper, grid; tilted: its centre; cylinder, "
                         "sphere: the nearest point of the surface)")
@@ -93,6 +111,11 @@ def add_parser(subparsers) -> None:
     p.add_argument("--z-range", type=positive_float, nargs=2, default=(600.0, 2000.0),
                    metavar=("ZMIN", "ZMAX"), help="random targets' depth range, mm")
     p.add_argument("--layout-seed", type=non_negative_int, default=0, help="seed of the random layout")
+
+
+def _add_port_options(p) -> None:
+    """The port: one flat port, a flat port per camera, a dome per camera or none,
+    and its numbers (indices, distances, thicknesses, layers, tilt)."""
     p.add_argument("--port", choices=("paper", "per-camera", "dome", "none"), default="paper",
                    help="the paper's air-glass-water port; per-camera: a housing per camera, "
                         "each camera behind its own flat port (a finite window; --port-distance, "
@@ -128,6 +151,11 @@ def add_parser(subparsers) -> None:
                         "and about y (default 0 0); --port per-camera: each LEFT,RIGHT (N cameras "
                         "one value per camera), each port's from its own camera's optical axis "
                         "(e.g. 0,0 0,2)")
+
+
+def _add_rig_options(p) -> None:
+    """The cameras: ``--rig FILE``, or how many, their arrangement, baseline,
+    toe-in, image size, focal length and distortion."""
     p.add_argument("--rig", metavar="FILE",
                    help="render exactly the rig of a calibration file — calib.yaml of two or N "
                         "cameras, calibmar's stereo YAML or the COLMAP fork's cameras.txt: its "
@@ -155,6 +183,11 @@ def add_parser(subparsers) -> None:
     p.add_argument("--focal", type=positive_float, help="focal length, px (default 1100·W/2448)")
     p.add_argument("--dist", type=any_float, nargs="+", metavar="K",
                    help="OpenCV distortion coefficients of both cameras (4, 5 or 8)")
+
+
+def _add_look_options(p) -> None:
+    """How the scene looks and renders: target radius, samples and seed, the
+    water, the lighting, a thin lens."""
     p.add_argument("--target-radius", type=positive_float, help="target disk radius, mm (default 2.5)")
     p.add_argument("--spp", type=positive_int, help="default samples per pixel written into the scene")
     p.add_argument("--seed", type=scene_seed, default=0, help="default sampler seed of the scene")
@@ -182,27 +215,57 @@ def _is_our_scene(path: str) -> bool:
         return False
     return f"<!-- {SCENE_COMMENT_PREFIX}" in head
 
-
 def main(args) -> int:
     """Write the scene file ``--out`` (a disk-target or a surface layout)."""
-    import numpy as np
+    from synth.scene import DEFAULT_TARGET_RADIUS_MM
 
-    from measure import FlatPort
+    _check_out(args)
+    from_file = rig_from_file(args) if args.rig else None
+    _refuse_inapplicable(args)
+    _check_layout_options(args)
+    size, focal, baseline, toe_in = _rig_numbers(args)
+    if from_file is not None:
+        cameras, port = from_file
+        size = tuple(cameras[0].size)
+    else:
+        cameras, port = cameras_from_options(args, size, focal, baseline, toe_in), None
+    left = cameras[0]
+    _check_port_options(args)
+    pair_comment = ""
+    if from_file is None:
+        port, pair_comment = port_from_options(args, cameras)
+    if args.layout == "surface":
+        return _surface_scene(args, left, cameras[1], port)
+    targets, normals = _targets(args)
+    radius = args.target_radius if args.target_radius else DEFAULT_TARGET_RADIUS_MM
+    _check_targets_seen(args, cameras, port, targets, radius)
+    thin_lens = _thin_lens(args, port, targets)
+    comment = _targets_comment(args, port, left, pair_comment, (baseline, toe_in), radius,
+                               thin_lens)
+    _write_targets_scene(args, cameras, port, targets, normals, radius, thin_lens, comment)
+    print(f"wrote {args.out}: {targets.shape[0]} targets of radius {radius:g} mm, "
+          f"{_port_words(args.port, len(cameras))}, "
+          + (f"{args.cameras} cameras, " if args.cameras != 2 else "")
+          + f"{size[0]}x{size[1]} px")
+    return 0
 
-    from synth.scene import layouts, rig as rigs
+
+def _check_out(args) -> None:
+    """CLIError unless ``--out`` may be written: a new file, or one this command wrote and
+    nobody edited since (its seal still matches)."""
     from synth.infra.fileio import check_file_output
-    from synth.scene import (DEFAULT_FULL_FILM_SPP, DEFAULT_SPP, DEFAULT_TARGET_RADIUS_MM,
-                             write_scene)
-
-    check_file_output(args.out, "--out", may_replace=_is_our_scene)
     from synth.scene.write import scene_edited
 
+    check_file_output(args.out, "--out", may_replace=_is_our_scene)
     if scene_edited(args.out):
         raise CLIError(f"--out {args.out} was edited since synth scene wrote it (its content "
                        f"no longer matches the seal on its last line): move it away or give "
                        f"another --out, so that your changes are not lost")
-    from_file = _rig_from_file(args) if args.rig else None
-    _refuse_inapplicable(args)
+
+
+def _check_layout_options(args) -> None:
+    """CLIError for layout options that do not fit together (and ``--lighting`` set to its
+    default: lit for a surface, led for targets)."""
     if args.lighting is None and args.layout == "surface" and args.port == "none":
         raise CLIError("--port none: a surface in air needs --lighting led (the default, lit, "
                        "puts the spot lights in the water)")
@@ -219,26 +282,24 @@ def main(args) -> int:
     if args.layout == "grid" and args.half_width / args.spacing > 1000:
         raise CLIError(f"--half-width / --spacing gives more than 2001 x 2001 grid targets "
                        f"({args.half_width:g} / {args.spacing:g})")
+
+
+def _rig_numbers(args) -> tuple:
+    """``(image size px, focal length px, baseline mm, toe-in degrees)`` of the rig options, the
+    paper's where not given (the focal length scales with the width)."""
+    from synth.scene import rig as rigs
+
     size = tuple(args.size) if args.size else rigs.PAPER_IMAGE_SIZE
     focal = args.focal if args.focal else rigs.PAPER_FOCAL_PX * size[0] / rigs.PAPER_IMAGE_SIZE[0]
     baseline = rigs.PAPER_BASELINE_MM if args.baseline is None else args.baseline
     toe_in = rigs.PAPER_TOE_IN_DEG if args.toe_in is None else args.toe_in
     if not abs(toe_in) < 45:
         raise CLIError(f"--toe-in must stay below 45 degrees, got {toe_in:g}")
-    if from_file is not None:
-        cameras, port = from_file
-        size = tuple(cameras[0].size)
-    else:
-        if args.arrangement == "ring":
-            if args.cameras < 3:
-                raise CLIError(f"--arrangement ring needs --cameras 3 or more (a centre camera "
-                               f"and two or more round it), got {args.cameras}")
-            cameras = rigs.ring_cameras(args.cameras, size, focal, args.dist, baseline, toe_in)
-        else:
-            cameras = rigs.row_cameras(args.cameras, size, focal, args.dist, baseline, toe_in)
-        port = None
-    left, right = cameras[:2]
-    pair_comment = ""
+    return size, focal, baseline, toe_in
+
+
+def _check_port_options(args) -> None:
+    """CLIError for port options that do not fit together (layers, thin lens, no port)."""
     if args.layer and (args.n_glass is not None or args.glass_thickness is not None):
         raise CLIError("--layer replaces --n-glass and --glass-thickness; give one or the other")
     if args.layer and any(index < 1 for index, _ in args.layer):
@@ -248,56 +309,40 @@ def main(args) -> int:
         raise CLIError("--focus-distance needs --aperture-radius (the thin lens)")
     if args.port == "none" and (args.layer or args.lighting == "lit"):
         raise CLIError(f"{'--layer' if args.layer else '--lighting lit'} needs a port (--port paper)")
-    if from_file is not None:
-        pass  # the file's port, as it is
-    elif args.port == "paper":
-        n = _indices(args)
-        port_tilt = [_one(v, "--port-tilt") for v in args.port_tilt]
-        tilt = np.radians(port_tilt)
-        if np.any(np.abs(tilt) >= np.radians(30)):
-            raise CLIError(f"--port-tilt must stay below 30 degrees, got {port_tilt}")
-        normal = rigs.tilted_port_normal(*port_tilt)
-        distance = _one(args.port_distance, "--port-distance")
-        distance = distance if distance is not None else rigs.PAPER_PORT_DISTANCE_MM
-        if args.layer:
-            thicknesses = tuple(t for _, t in args.layer)
-            n = [n[0], *(index for index, _ in args.layer), n[2]]
-        else:
-            thickness = _one(args.glass_thickness, "--glass-thickness")
-            thicknesses = (thickness if thickness is not None else rigs.PAPER_GLASS_THICKNESS_MM,)
-        port = FlatPort(normal, distance, thicknesses, tuple(n))
-    elif args.port == "per-camera":
-        port, pair_comment = _own_ports(args, cameras)
-    elif args.port == "dome":
-        port = _dome_port(args, left, right)
-    if args.layout == "surface":
-        return _surface_scene(args, left, right, port)
-    normals = None
+
+
+def _targets(args) -> tuple:
+    """``(targets (N, 3) mm, their normals (N, 3) or None: facing the cameras)`` of the
+    disk-target layout (:mod:`synth.scene.layouts`)."""
+    import numpy as np
+
+    from synth.scene import layouts
+
     if args.layout == "paper":
-        targets = layouts.paper_plane(args.z)
-    elif args.layout == "grid":
-        targets = layouts.grid_plane(args.z, args.half_width, args.spacing)
-    elif args.layout == "random":
-        targets = layouts.random_volume(args.n, args.layout_seed, tuple(args.z_range))
-    else:
-        try:
-            if args.layout == "tilted":
-                ax, ay = np.radians(args.tilt)
-                combined = np.degrees(np.arccos(np.clip(np.cos(ax) * np.cos(ay), -1.0, 1.0)))
-                if np.any(np.abs(args.tilt) >= 80) or combined >= 80:
-                    raise ValueError(f"--tilt must keep the plane within 80 degrees of facing the "
-                                     f"cameras, got {args.tilt[0]:g} {args.tilt[1]:g} "
-                                     f"({combined:.1f} degrees in all)")
-                targets, normals = layouts.tilted_plane(args.z, args.tilt)
-            elif args.layout == "cylinder":
-                targets, normals = layouts.cylinder(args.z, args.surface_radius, args.half_angle,
-                                                    2 * args.surface_radius, args.spacing)
-            else:
-                targets, normals = layouts.sphere_cap(args.z, args.surface_radius,
-                                                      args.half_angle, args.spacing)
-        except ValueError as exc:
-            raise CLIError(str(exc).replace("half_angle_deg", "--half-angle")) from None
-    radius = args.target_radius if args.target_radius else DEFAULT_TARGET_RADIUS_MM
+        return layouts.paper_plane(args.z), None
+    if args.layout == "grid":
+        return layouts.grid_plane(args.z, args.half_width, args.spacing), None
+    if args.layout == "random":
+        return layouts.random_volume(args.n, args.layout_seed, tuple(args.z_range)), None
+    try:
+        if args.layout == "tilted":
+            ax, ay = np.radians(args.tilt)
+            combined = np.degrees(np.arccos(np.clip(np.cos(ax) * np.cos(ay), -1.0, 1.0)))
+            if np.any(np.abs(args.tilt) >= 80) or combined >= 80:
+                raise ValueError(f"--tilt must keep the plane within 80 degrees of facing the "
+                                 f"cameras, got {args.tilt[0]:g} {args.tilt[1]:g} "
+                                 f"({combined:.1f} degrees in all)")
+            return layouts.tilted_plane(args.z, args.tilt)
+        if args.layout == "cylinder":
+            return layouts.cylinder(args.z, args.surface_radius, args.half_angle,
+                                    2 * args.surface_radius, args.spacing)
+        return layouts.sphere_cap(args.z, args.surface_radius, args.half_angle, args.spacing)
+    except ValueError as exc:
+        raise CLIError(str(exc).replace("half_angle_deg", "--half-angle")) from None
+
+
+def _check_targets_seen(args, cameras, port, targets, radius: float) -> None:
+    """CLIError for targets inside a dome, or none seen wholly by two cameras."""
     if args.port == "dome":
         from synth.scene.dome import check_targets
 
@@ -306,34 +351,55 @@ def main(args) -> int:
         except ValueError as exc:
             raise CLIError(f"--layout {args.layout}: {exc}") from None
     _check_visible(cameras, port, targets, radius, args.layout)
-    thin_lens = None
-    if args.aperture_radius is not None:
-        focus = (args.focus_distance if args.focus_distance is not None
-                 else _apparent_distance(port, float(np.mean(targets[:, 2]))))
-        thin_lens = (args.aperture_radius, focus)
-    comment = (f"{SCENE_COMMENT_PREFIX}: layout {args.layout}"
-               + (f", z {args.z:g} mm" if args.layout != "random" else "")
-               + (f", tilt {args.tilt[0]:g} {args.tilt[1]:g} deg" if args.layout == "tilted" else "")
-               + (f", surface radius {args.surface_radius:g} mm"
-                  if args.layout in ("cylinder", "sphere") else "")
-               + f", port {args.port}"
-               + (f", the rig of {os.path.basename(args.rig)}" if args.rig else "")
-               + (_dome_comment(port, left) if args.port == "dome" else "")
-               + (pair_comment if args.port == "per-camera" else "")
-               + (f" tilted {args.port_tilt[0][0]:g} deg about x, {args.port_tilt[1][0]:g} deg "
-                  f"about y" if args.port == "paper" and any(sum(args.port_tilt, ())) else "")
-               + (f" of {len(args.layer)} layers" if args.layer else "")
-               + (f", {args.cameras} cameras {baseline:g} mm apart, each turned {toe_in:g} deg "
-                  f"more" if args.cameras != 2 and not args.rig and args.arrangement != "ring"
-                  else "")
-               + (f", {args.cameras} cameras: cam0 in the centre, {args.cameras - 1} on a ring "
-                  f"of radius {baseline:g} mm, each turned {toe_in:g} deg towards its axis"
-                  if args.arrangement == "ring" else "")
-               + f", target radius {radius:g} mm"
-               + (", lit targets" if args.lighting == "lit" else "")
-               + (f", thin lens aperture {thin_lens[0]:g} mm focus {thin_lens[1]:.6g} mm"
-                  if thin_lens else ""))
+
+
+def _thin_lens(args, port, targets):
+    """``(aperture radius mm, focus distance mm)`` of ``--aperture-radius`` (focused where the
+    targets' mean depth appears through the port unless ``--focus-distance``), or None."""
+    import numpy as np
+
+    if args.aperture_radius is None:
+        return None
+    focus = (args.focus_distance if args.focus_distance is not None
+             else _apparent_distance(port, float(np.mean(targets[:, 2]))))
+    return (args.aperture_radius, focus)
+
+
+def _targets_comment(args, port, left, pair_comment: str, row: tuple, radius: float,
+                     thin_lens) -> str:
+    """The first comment of a disk-target scene: its options in words (``row``: the cameras'
+    baseline mm and toe-in degrees)."""
+    baseline, toe_in = row
+    return (f"{SCENE_COMMENT_PREFIX}: layout {args.layout}"
+            + (f", z {args.z:g} mm" if args.layout != "random" else "")
+            + (f", tilt {args.tilt[0]:g} {args.tilt[1]:g} deg" if args.layout == "tilted" else "")
+            + (f", surface radius {args.surface_radius:g} mm"
+               if args.layout in ("cylinder", "sphere") else "")
+            + f", port {args.port}"
+            + (f", the rig of {os.path.basename(args.rig)}" if args.rig else "")
+            + (dome_comment(port, left) if args.port == "dome" else "")
+            + (pair_comment if args.port == "per-camera" else "")
+            + (f" tilted {args.port_tilt[0][0]:g} deg about x, {args.port_tilt[1][0]:g} deg "
+               f"about y" if args.port == "paper" and any(sum(args.port_tilt, ())) else "")
+            + (f" of {len(args.layer)} layers" if args.layer else "")
+            + (f", {args.cameras} cameras {baseline:g} mm apart, each turned {toe_in:g} deg "
+               f"more" if args.cameras != 2 and not args.rig and args.arrangement != "ring"
+               else "")
+            + (f", {args.cameras} cameras: cam0 in the centre, {args.cameras - 1} on a ring "
+               f"of radius {baseline:g} mm, each turned {toe_in:g} deg towards its axis"
+               if args.arrangement == "ring" else "")
+            + f", target radius {radius:g} mm"
+            + (", lit targets" if args.lighting == "lit" else "")
+            + (f", thin lens aperture {thin_lens[0]:g} mm focus {thin_lens[1]:.6g} mm"
+               if thin_lens else ""))
+
+
+def _write_targets_scene(args, cameras, port, targets, normals, radius: float, thin_lens,
+                         comment: str) -> None:
+    """Write the disk-target scene ``--out`` in the water of ``--water`` (its haze rendered on
+    the full film: more samples by default); CLIError for what the writer refuses."""
     from synth.rendering.water import PRESETS as WATERS
+    from synth.scene import DEFAULT_FULL_FILM_SPP, DEFAULT_SPP, write_scene
 
     water = WATERS.get(args.water)
     if water is not None and port is None:
@@ -348,11 +414,6 @@ def main(args) -> int:
                     thin_lens=thin_lens)
     except ValueError as exc:
         raise CLIError(str(exc)) from None
-    print(f"wrote {args.out}: {targets.shape[0]} targets of radius {radius:g} mm, "
-          f"{_port_words(args.port, len(cameras))}, "
-          + (f"{args.cameras} cameras, " if args.cameras != 2 else "")
-          + f"{size[0]}x{size[1]} px")
-    return 0
 
 
 def _surface_scene(args, left, right, port) -> int:
@@ -389,63 +450,6 @@ def _surface_scene(args, left, right, port) -> int:
     except ValueError as exc:
         raise CLIError(str(exc)) from None
     return 0
-
-
-#: The options that describe the rig, which ``--rig FILE`` gives instead (refused with it).
-RIG_OPTIONS = ("cameras", "arrangement", "baseline", "toe_in", "size", "focal", "dist", "port",
-               "dome_radius", "dome_thickness", "dome_offset", "n_water", "n_glass", "port_distance",
-               "glass_thickness", "layer", "port_tilt")
-
-
-def _rig_from_file(args):
-    """``(cameras, port)`` of ``--rig FILE`` (:func:`synth.products.rig_file.read_rig_file`),
-    with ``args.port`` and ``args.cameras`` set to what the file holds (the kind of port
-    decides which layout options apply). CLIError (one line naming the file) for a file that is
-    not a calibration, or a rig of more than two cameras with a port of each its own."""
-    from synth.infra.cli import given
-    from synth.products.dataset import DatasetError
-    from synth.products.rig_file import read_rig_file
-
-    taken = [f"--{d.replace('_', '-')}" for d in RIG_OPTIONS if given(args, d)]
-    if taken:
-        raise CLIError(f"{taken[0]} does not apply with --rig {args.rig}: the file gives the "
-                       f"cameras and the port")
-    try:
-        rig = read_rig_file(args.rig)
-    except DatasetError as exc:
-        raise CLIError(f"--rig {exc}") from None
-    for name, camera in zip(rig.names, rig.cameras):
-        fx, fy, skew = camera.K[0, 0], camera.K[1, 1], camera.K[0, 1]
-        if abs(fx - fy) > 1e-9 * fx or skew != 0:
-            raise CLIError(f"--rig {args.rig}: {name} has fx = {fx:.6g}, fy = {fy:.6g} px"
-                           f"{f', skew {skew:g}' if skew else ''}; Mitsuba's perspective sensor "
-                           f"renders square pixels only (fx = fy, no skew), so this rig cannot "
-                           f"be rendered exactly")
-    stereo = rig.stereo()
-    if stereo is not None:
-        port = stereo.port if stereo.port is not None and stereo.port.refracts else None
-        kind = {"flat": "paper", "flat pair": "per-camera", "dome": "dome"}.get(
-            port.kind if port is not None else "", "none")
-    elif all(p is None for p in rig.ports) or not rig.refracts:
-        port, kind = None, "none"
-    elif all(p == rig.ports[0] for p in rig.ports):
-        port, kind = rig.ports[0], "paper"
-    else:  # a window per camera: each port must be flat (a precondition, no other path)
-        from measure.geometry.port import require_flat_port
-
-        from synth.scene.windows import check_windows, fit_windows
-
-        try:
-            for name, each in zip(rig.names, rig.ports):
-                require_flat_port(each, f"{len(rig.cameras)} cameras with ports of their own, "
-                                        f"{name}'s not flat; a scene of more than two cameras has "
-                                        f"them behind one flat port, a flat port each, or none")
-            check_windows(rig, fit_windows(rig))
-        except ValueError as exc:
-            raise CLIError(f"--rig {args.rig}: {exc}") from None
-        port, kind = list(rig.ports), "per-camera"
-    args.port, args.cameras = kind, len(rig.cameras)
-    return list(rig.cameras), port
 
 
 def _refuse_inapplicable(args) -> None:
@@ -513,119 +517,6 @@ def _refuse_inapplicable(args) -> None:
                            "targets)")
 
 
-def _dome_port(args, left, right):
-    """The DomePair of ``--port dome``: ``--dome-radius``, ``--dome-thickness``,
-    ``--dome-offset`` (in each camera's frame), the glass index ``--n-glass`` and the water's
-    ``--n-water``; CLIError for a camera outside its dome or a field of view that does not fit
-    through the domes."""
-    from measure import StereoRig
-
-    from synth.infra.cli import option_number
-    from synth.scene.dome import (DEFAULT_DOME_RADIUS_MM, DEFAULT_DOME_THICKNESS_MM,
-                                  check_dome_size, check_field_of_view, dome_pair)
-
-    n = _indices(args)
-    radius = args.dome_radius if args.dome_radius is not None else DEFAULT_DOME_RADIUS_MM
-    thickness = (args.dome_thickness if args.dome_thickness is not None
-                 else DEFAULT_DOME_THICKNESS_MM)
-    offset = tuple(args.dome_offset) if args.dome_offset is not None else (0.0, 0.0, 0.0)
-    try:
-        check_dome_size(radius, thickness)
-    except ValueError as exc:
-        raise CLIError(f"--dome-radius {option_number(radius)} --dome-thickness "
-                       f"{option_number(thickness)}: {exc}") from None
-    try:
-        pair = dome_pair((left, right), radius, thickness, offset, tuple(n))
-    except ValueError as exc:
-        raise CLIError(f"--dome-offset {' '.join(f'{v:g}' for v in offset)}: {exc}") from None
-    try:
-        check_field_of_view(StereoRig(left, right, pair))
-    except ValueError as exc:
-        raise CLIError(f"--dome-radius {radius:g} --dome-thickness {thickness:g}: {exc}") from None
-    return pair
-
-
-def _one(values, option: str):
-    """The single value of a ``LEFT,RIGHT`` option where there is one port (None: not given)."""
-    if values is None or len(values) == 1:
-        return None if values is None else values[0]
-    raise CLIError(f"{option} {','.join(f'{v:g}' for v in values)}: {len(values)} values are for "
-                   f"--port per-camera (a port per camera); this port is one: give one value")
-
-
-def _each(values, option: str, default: float, count: int) -> tuple:
-    """One value per camera of a ``LEFT,RIGHT`` (``V0,V1,…``) option of ``--port per-camera``;
-    any other count — one value too — is refused (a port per camera needs a value per
-    camera)."""
-    if values is None:
-        return (default,) * count
-    if len(values) != count:
-        each = ",".join([f"{values[0]:g}"] * count)
-        example = f"{option} {each} {each}" if option == "--port-tilt" else f"{option} {each}"
-        which = "LEFT,RIGHT" if count == 2 else f"{count} values, V0,…,V{count - 1}"
-        raise CLIError(f"{option} {','.join(f'{v:g}' for v in values)}: --port per-camera needs "
-                       f"one value per camera, {which} (e.g. {example})")
-    return tuple(values)
-
-
-def _own_ports(args, cameras) -> tuple:
-    """The ports of ``--port per-camera``: per camera ``--port-distance``,
-    ``--glass-thickness`` and ``--port-tilt`` (each ``LEFT,RIGHT``, or one per camera of N; the
-    tilt from that camera's own optical axis, in its frame), the glass index ``--n-glass`` and
-    the water's ``--n-water``; a FlatPair of two cameras, a list of N flat ports of more.
-    CLIError for a camera in another's glass, or windows that cannot keep the fields of view
-    apart (:func:`synth.scene.windows.check_windows`). Returns ``(port, comment)``."""
-    import numpy as np
-
-    from measure import StereoRig
-    from measure.stereo.multirig import MultiRig
-
-    from synth.infra.cli import given
-    from synth.scene.windows import (DEFAULT_PAIR_DISTANCE_MM, DEFAULT_PAIR_THICKNESS_MM,
-                                     check_windows, fit_windows, flat_pair, flat_ports)
-
-    count = len(cameras)
-    distances = _each(args.port_distance, "--port-distance", DEFAULT_PAIR_DISTANCE_MM, count)
-    thicknesses = _each(args.glass_thickness, "--glass-thickness", DEFAULT_PAIR_THICKNESS_MM,
-                        count)
-    if given(args, "port_tilt"):
-        tilt_x, tilt_y = (_each(v, "--port-tilt", 0.0, count) for v in args.port_tilt)
-    else:
-        tilt_x = tilt_y = (0.0,) * count
-    if np.any(np.abs([tilt_x, tilt_y]) >= 30):
-        raise CLIError(f"--port-tilt must stay below 30 degrees, got {_csv(tilt_x)} "
-                       f"{_csv(tilt_y)}")
-    what = f"--port per-camera --port-distance {_csv(distances)}"
-    indices = tuple(_indices(args))
-    try:
-        if count == 2:
-            port = flat_pair(cameras, distances, list(zip(tilt_x, tilt_y)), thicknesses, indices)
-            rig = StereoRig(cameras[0], cameras[1], port)
-        else:
-            port = flat_ports(cameras, distances, list(zip(tilt_x, tilt_y)), thicknesses,
-                              indices)
-            rig = MultiRig(cameras, port)
-        check_windows(rig, fit_windows(rig))
-    except ValueError as exc:
-        raise CLIError(f"{what}: {exc}") from None
-    comment = (f" distances {_csv(distances)} mm, glass {_csv(thicknesses)} mm, tilts "
-               f"{_csv(tilt_x)} {_csv(tilt_y)} deg about x and y (each port from its own camera)")
-    return port, comment
-
-
-def _csv(values) -> str:
-    return ",".join(f"{v:g}" for v in values)
-
-
-def _dome_comment(pair, left) -> str:
-    """The dome's numbers for the scene file's first comment (the offset in the left camera's
-    frame)."""
-    dome = pair.left
-    offset = left.R.T @ (dome.center - left.center)
-    return (f" radius {dome.radius:g} mm thickness {dome.thickness:g} mm offset "
-            f"{offset[0]:g} {offset[1]:g} {offset[2]:g} mm")
-
-
 #: How the line ``wrote …`` names each ``--port``.
 PORT_WORDS = {"paper": "port", "per-camera": "two ports", "dome": "two domes", "none": "no port"}
 
@@ -681,18 +572,3 @@ def _apparent_distance(port, depth_mm: float) -> float:
     """The focus distance of a lens in air that images a point ``depth_mm`` along the axis
     sharply: :meth:`measure.FlatPort.apparent_depth`, or ``depth_mm`` itself without a port."""
     return depth_mm if port is None else port.apparent_depth(depth_mm)
-
-
-def _indices(args) -> list:
-    """``[n_air, n_glass, n_water]``: the paper's, with ``--n-glass`` and ``--n-water`` applied
-    (a water index from temperature and salinity prints how it was computed)."""
-    from synth.scene import rig as rigs
-
-    n = list(rigs.PAPER_INDICES)
-    if args.n_glass is not None:
-        n[1] = args.n_glass
-    if args.n_water is not None:
-        n[2] = float(args.n_water)
-        if getattr(args.n_water, "note", None):
-            print(args.n_water.note, file=sys.stderr)
-    return n

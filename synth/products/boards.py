@@ -51,8 +51,8 @@ from synth.products.dataset import (DatasetError, adaptive_settings, check_files
 from synth.infra.fileio import OutputDir, atomic_write_json, file_sha256, jsonable, read_marker
 from synth.rendering.integrator import RENDERER, integrator_name
 from synth.infra.provenance import package_versions
-from synth.rendering.render import (check_render_request, png16_scale, render_view_counted, sensor_dict,
-                          to_png16, write_png)
+from synth.rendering.image_files import png16_scale, to_png16, write_png
+from synth.rendering.render import check_render_request, render_view_counted, sensor_dict
 from synth.scene import SceneSpec
 from synth.scene.write import port_shapes
 from synth.infra.images import imread

@@ -71,8 +71,8 @@ from synth.formats.exchange import write_cameras_json, write_colmap_model, write
 from synth.infra.fileio import OutputDir, file_sha256, read_marker
 from synth.rendering.integrator import RENDERER
 from synth.infra.provenance import package_versions
-from synth.rendering.render import (pass_seed, png16_scale, render_stereo, srgb_preview, to_png16,
-                          write_exr, write_png)
+from synth.rendering.image_files import png16_scale, srgb_preview, to_png16, write_exr, write_png
+from synth.rendering.render import pass_seed, render_stereo
 from synth.scene import SceneError, SceneSpec, load_scene
 from synth.infra.images import imread
 from synth.formats.calib_yaml import DatasetError, read_calib, write_calib

@@ -9,7 +9,7 @@ cameras (``cam0/image.png``, …) ``OUT/cam0/image.EXT``, ``OUT/cam1/image.EXT``
 else: no calibration, no truth, no manifest — the
 layout ``eval calibrate`` and ``eval measure`` read from a user. Each 16-bit linear image is
 divided by 65535 (its folder's one exposure, the brightest rendered pixel at white),
-sRGB-encoded (:func:`synth.rendering.render.srgb_preview`) and written as JPEG (``quality``,
+sRGB-encoded (:func:`synth.rendering.image_files.srgb_preview`) and written as JPEG (``quality``,
 OpenCV's default 4:2:0 grey) or 8-bit PNG.
 """
 
@@ -81,7 +81,7 @@ def _board_views(src) -> tuple[str, ...]:
 
 def to_photo(png16: np.ndarray) -> np.ndarray:
     """8-bit sRGB of a 16-bit linear image (65535 is white)."""
-    from synth.rendering.render import srgb_preview
+    from synth.rendering.image_files import srgb_preview
 
     return srgb_preview(np.asarray(png16, dtype=np.float64), white=65535.0)
 

@@ -288,7 +288,7 @@ def _render_frames(spec, markers, normals, marker_radius_mm, spp, seed, variant,
 def _write_frames(tmp, images) -> list:
     """Each frame's views as 16-bit linear PNGs in ``tmp/frames/`` (one scale per frame);
     returns the scales."""
-    from synth.rendering.render import png16_scale, to_png16, write_png
+    from synth.rendering.image_files import png16_scale, to_png16, write_png
 
     os.makedirs(os.path.join(tmp, "frames"))
     scales = []

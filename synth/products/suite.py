@@ -185,75 +185,23 @@ def _read_sources(data: dict, base_dir: str, label: str) -> dict:
 
 
 def parse_suite_spec(data: dict, base_dir: str, label: str) -> SuiteSpec:
-    from synth.scene.design import ERRORS
-    from synth.products.suite_scenes import generate, option_names
+    """The suite spec of ``data`` (the TOML's tables; scene files relative to ``base_dir``,
+    ``label`` naming the spec in messages), checked and expanded into its entries;
+    :class:`SpecError` for anything wrong."""
+    from synth.products.suite_scenes import option_names
 
     check_top_keys(data, TOP_KEYS, label)
-    seed = integer(data, "seed", 0, 0, label)
-    repeats = integer(data, "repeats", 1, 1, label)
-    name = str(data.get("name", os.path.splitext(os.path.basename(label))[0]))
-    description = data.get("description", "")
-    need(isinstance(description, str), label, "description must be a string")
-    render = data.get("render", "targets")
-    need(render in RENDERS, label, f"render must be one of {', '.join(RENDERS)} (what each "
-                                   f"dataset holds), got {render!r}")
+    seed, repeats, name, description, render = _top_values(data, label)
     sources = _read_sources(data, base_dir, label)
     files = {k: v for k, v in sources.items() if isinstance(v, Scene)}
     made = {k: v for k, v in sources.items() if not isinstance(v, Scene)}
     known_options = option_names() if made else ()
     for scene in files.values():
         _check_render(scene, render, label)
-    width = data.get("render_width", DEFAULT_RENDER_WIDTH)
-    if width == "scene":
-        width = None
-    else:
-        need(isinstance(width, int) and not isinstance(width, bool) and width >= 16, label,
-             f'render_width must be an integer >= 16 or "scene", got {width!r}')
+    width = _render_width(data, label)
 
     def check_name(key, section):
-        if render == "boards" and key in ("sensor", "exr"):
-            raise SpecError(f"{label}: [{section}] {key}: board sequences have no {key}")
-        if key in PLAIN_PARAMETERS:
-            return
-        if key in BOARD_PARAMETERS:
-            need(render == "boards", label, f"[{section}] {key}: a parameter of board sequences "
-                                            f"(render = \"boards\")")
-            return
-        if key.startswith(SCENE_PREFIX):
-            option = key[len(SCENE_PREFIX):]
-            need(made and not files, label,
-                 f"[{section}] {key}: varies the options of generated scenes (tables in "
-                 f"scenes), and the spec lists the scene file(s) "
-                 f"{', '.join(files) or '(none generated)'}")
-            need(option in known_options, label,
-                 f"[{section}] unknown parameter {key!r} (scene.<option> takes the options of "
-                 f"python -m synth scene, with _ for -: {', '.join(known_options)})")
-            return
-        if key.startswith(ERROR_PREFIX):
-            error = key[len(ERROR_PREFIX):]
-            need(error in ERRORS, label,
-                 f"[{section}] unknown parameter {key!r} (port deviations, truth - design: "
-                 f"{', '.join(ERROR_PREFIX + e for e in ERRORS)})")
-            need(render != "boards", label, f"[{section}] {key}: board sequences state no "
-                                            f"design port")
-            need(error == "n_water" or not files, label,
-                 f"[{section}] {key}: the port of a scene file is drawn in its geometry; this "
-                 f"deviation needs generated scenes (tables in scenes), and the spec lists "
-                 f"{', '.join(files)}")
-            return
-        if key.startswith("D.") and len(key) > 2:
-            if render == "boards":
-                from synth.products.boards import NOT_RENDERED
-
-                need(key[2:] not in NOT_RENDERED, label,
-                     f"[{section}] {key} does not apply to board sequences (no targets, water "
-                     f"medium, lights or thin lens are rendered)")
-            check_scene_parameter(key, files, label, section)
-            return
-        raise SpecError(f"{label}: [{section}] unknown parameter {key!r} (a suite's "
-                        f"parameters: {', '.join(PLAIN_PARAMETERS)}, D.<scene default>, "
-                        f"scene.<synth scene option> of generated scenes, error.<port "
-                        f"deviation>; board sequences also {', '.join(BOARD_PARAMETERS)})")
+        _check_parameter_name(key, section, render, (files, made, known_options), label)
 
     sections = parse_sections(data, seed, label, check_name)
     spec = SuiteSpec(path=label, name=name, description=description, seed=seed, repeats=repeats,
@@ -269,51 +217,156 @@ def parse_suite_spec(data: dict, base_dir: str, label: str) -> SuiteSpec:
             params = dict(sorted((k, _check_value(k, v, label)) for k, v in values.items()))
             errors = {k[len(ERROR_PREFIX):]: v for k, v in params.items()
                       if k.startswith(ERROR_PREFIX)}
-            if isinstance(source, Scene):
-                scene, scene_id, design_port = source, source.sha256, {}
-            else:
-                options = {**source, **{k[len(SCENE_PREFIX):]: v for k, v in params.items()
-                                        if k.startswith(SCENE_PREFIX)}}
-                truth_options, design_port = _deviate(options, errors, source_label, label)
-                signature = canonical_json([source_label, truth_options])
-                if signature not in cache:
-                    cache[signature] = generate(source_label, truth_options, base_dir, label)
-                made_scene = cache[signature]
-                scene, scene_id = made_scene.scene, made_scene.digest
-                spec.generated[scene_id] = made_scene
-                _check_render(scene, render, label)
-                for key in params:
-                    need(not key.startswith("D.") or key[2:] in scene.defaults, label,
-                         f"unknown parameter {key}: scene {source_label!r} has no default "
-                         f"{key[2:]!r} (its defaults: {', '.join(sorted(scene.defaults))})")
+            scene, scene_id, design_port = _concrete_scene(spec, source_label, source, params,
+                                                           errors, (base_dir, label, cache))
             spec.scene_files[scene_id] = scene
             defines = scene_defines(params, scene, width)
             if "n_water" in errors:
-                need("n_water" in scene.defaults, label,
-                     f"error.n_water: scene {source_label} has no port (no water index)")
-                need(not _is_dome(scene), label,
-                     f"error.n_water: scene {source_label} looks through domes; a design "
-                     f"port deviates a flat port")
-                base = float(defines.get("n_water", scene.defaults["n_water"]))
-                defines["n_water"] = d_text(base + errors["n_water"])
-                design_port["n_water"] = base
+                _water_index_error(defines, design_port, scene, source_label, errors, label)
             check_defines(scene, defines, label, checked)
             design = ({"error": errors, "port": design_port} if errors else None)
-            for repeat in range(repeats):
-                payload = {"render": render, "scene": scene_id, "params": params,
-                           "defines": defines, "repeat": repeat, "suite_seed": seed}
-                if sample is not None:
-                    payload["sample"] = sample
-                if design is not None:
-                    payload["design"] = design
-                key = entry_key(payload)
-                folder = f"{len(entries):03d}_{stem}_{key[:8]}"
-                entries.append(Entry(key, folder, source_label, render, params, defines, repeat,
-                                     entry_seed(seed, key), sample, scene_id, design))
+            _add_repeats(entries, spec, stem, (source_label, scene_id, sample, params, defines,
+                                               design))
     need(len({e.key for e in entries}) == len(entries), label,
          "two entries of the spec are the same (a value is listed twice?)")
     spec.entries = entries
     return spec
+
+
+def _top_values(data: dict, label: str) -> tuple:
+    """``(seed, repeats, name, description, render)`` of the spec's top level."""
+    seed = integer(data, "seed", 0, 0, label)
+    repeats = integer(data, "repeats", 1, 1, label)
+    name = str(data.get("name", os.path.splitext(os.path.basename(label))[0]))
+    description = data.get("description", "")
+    need(isinstance(description, str), label, "description must be a string")
+    render = data.get("render", "targets")
+    need(render in RENDERS, label, f"render must be one of {', '.join(RENDERS)} (what each "
+                                   f"dataset holds), got {render!r}")
+    return seed, repeats, name, description, render
+
+
+def _render_width(data: dict, label: str):
+    """``render_width`` (px, an integer >= 16), or None for ``"scene"`` (the scenes' own)."""
+    width = data.get("render_width", DEFAULT_RENDER_WIDTH)
+    if width == "scene":
+        return None
+    need(isinstance(width, int) and not isinstance(width, bool) and width >= 16, label,
+         f'render_width must be an integer >= 16 or "scene", got {width!r}')
+    return width
+
+
+def _check_parameter_name(key: str, section: str, render: str, scenes: tuple, label: str) -> None:
+    """SpecError unless ``key`` (in ``[section]``) is a parameter of this suite: a plain one, a
+    board sequence's, ``scene.<option>`` of generated scenes, ``error.<deviation>`` or
+    ``D.<default>`` of its scenes. ``scenes``: ``(scene files, generated scenes, the options
+    of python -m synth scene)``."""
+    from synth.scene.design import ERRORS
+
+    files, made, known_options = scenes
+    if render == "boards" and key in ("sensor", "exr"):
+        raise SpecError(f"{label}: [{section}] {key}: board sequences have no {key}")
+    if key in PLAIN_PARAMETERS:
+        return
+    if key in BOARD_PARAMETERS:
+        need(render == "boards", label, f"[{section}] {key}: a parameter of board sequences "
+                                        f"(render = \"boards\")")
+        return
+    if key.startswith(SCENE_PREFIX):
+        option = key[len(SCENE_PREFIX):]
+        need(made and not files, label,
+             f"[{section}] {key}: varies the options of generated scenes (tables in "
+             f"scenes), and the spec lists the scene file(s) "
+             f"{', '.join(files) or '(none generated)'}")
+        need(option in known_options, label,
+             f"[{section}] unknown parameter {key!r} (scene.<option> takes the options of "
+             f"python -m synth scene, with _ for -: {', '.join(known_options)})")
+        return
+    if key.startswith(ERROR_PREFIX):
+        error = key[len(ERROR_PREFIX):]
+        need(error in ERRORS, label,
+             f"[{section}] unknown parameter {key!r} (port deviations, truth - design: "
+             f"{', '.join(ERROR_PREFIX + e for e in ERRORS)})")
+        need(render != "boards", label, f"[{section}] {key}: board sequences state no "
+                                        f"design port")
+        need(error == "n_water" or not files, label,
+             f"[{section}] {key}: the port of a scene file is drawn in its geometry; this "
+             f"deviation needs generated scenes (tables in scenes), and the spec lists "
+             f"{', '.join(files)}")
+        return
+    if key.startswith("D.") and len(key) > 2:
+        if render == "boards":
+            from synth.products.boards import NOT_RENDERED
+
+            need(key[2:] not in NOT_RENDERED, label,
+                 f"[{section}] {key} does not apply to board sequences (no targets, water "
+                 f"medium, lights or thin lens are rendered)")
+        check_scene_parameter(key, files, label, section)
+        return
+    raise SpecError(f"{label}: [{section}] unknown parameter {key!r} (a suite's "
+                    f"parameters: {', '.join(PLAIN_PARAMETERS)}, D.<scene default>, "
+                    f"scene.<synth scene option> of generated scenes, error.<port "
+                    f"deviation>; board sequences also {', '.join(BOARD_PARAMETERS)})")
+
+
+def _concrete_scene(spec: SuiteSpec, source_label: str, source, params: dict, errors: dict,
+                    where: tuple) -> tuple:
+    """``(scene, scene_id, design port values)`` of one entry: a scene file as it is, or a
+    generated scene of the source's options varied by ``scene.<option>`` parameters with the
+    port deviations ``errors`` applied (one scene per set of options: ``cache``; recorded in
+    ``spec.generated``). ``where``: ``(base_dir, label, cache)``."""
+    from synth.products.suite_scenes import generate
+
+    base_dir, label, cache = where
+    if isinstance(source, Scene):
+        return source, source.sha256, {}
+    options = {**source, **{k[len(SCENE_PREFIX):]: v for k, v in params.items()
+                            if k.startswith(SCENE_PREFIX)}}
+    truth_options, design_port = _deviate(options, errors, source_label, label)
+    signature = canonical_json([source_label, truth_options])
+    if signature not in cache:
+        cache[signature] = generate(source_label, truth_options, base_dir, label)
+    made_scene = cache[signature]
+    scene, scene_id = made_scene.scene, made_scene.digest
+    spec.generated[scene_id] = made_scene
+    _check_render(scene, spec.render, label)
+    for key in params:
+        need(not key.startswith("D.") or key[2:] in scene.defaults, label,
+             f"unknown parameter {key}: scene {source_label!r} has no default "
+             f"{key[2:]!r} (its defaults: {', '.join(sorted(scene.defaults))})")
+    return scene, scene_id, design_port
+
+
+def _water_index_error(defines: dict, design_port: dict, scene, source_label: str, errors: dict,
+                       label: str) -> None:
+    """``error.n_water``: the rendered water index (``defines``) deviates from the design's
+    (``design_port``) by ``errors["n_water"]``; SpecError for a scene without a flat port."""
+    need("n_water" in scene.defaults, label,
+         f"error.n_water: scene {source_label} has no port (no water index)")
+    need(not _is_dome(scene), label,
+         f"error.n_water: scene {source_label} looks through domes; a design "
+         f"port deviates a flat port")
+    base = float(defines.get("n_water", scene.defaults["n_water"]))
+    defines["n_water"] = d_text(base + errors["n_water"])
+    design_port["n_water"] = base
+
+
+def _add_repeats(entries: list, spec: SuiteSpec, stem: str, entry: tuple) -> None:
+    """Append the spec's repeats of one combination to ``entries``, each keyed by its payload
+    (:func:`entry_key`) and numbered in its folder. ``entry``: ``(source label, scene id,
+    random sample, params, defines, design)``."""
+    source_label, scene_id, sample, params, defines, design = entry
+    for repeat in range(spec.repeats):
+        payload = {"render": spec.render, "scene": scene_id, "params": params,
+                   "defines": defines, "repeat": repeat, "suite_seed": spec.seed}
+        if sample is not None:
+            payload["sample"] = sample
+        if design is not None:
+            payload["design"] = design
+        key = entry_key(payload)
+        folder = f"{len(entries):03d}_{stem}_{key[:8]}"
+        entries.append(Entry(key, folder, source_label, spec.render, params, defines, repeat,
+                             entry_seed(spec.seed, key), sample, scene_id, design))
 
 
 def _check_render(scene, render: str, label: str) -> None:

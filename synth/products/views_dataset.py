@@ -237,7 +237,7 @@ def _views_spec(spec: SceneSpec, spp, seed) -> tuple[SceneSpec, int, int]:
 def _write_view_images(tmp, names, images, info, exr) -> float:
     """Each camera's folder with its 16-bit linear PNG (one scale for all), sRGB preview and,
     with ``exr``, EXR; returns the PNGs' scale."""
-    from synth.rendering.render import png16_scale, srgb_preview, to_png16, write_exr, write_png
+    from synth.rendering.image_files import png16_scale, srgb_preview, to_png16, write_exr, write_png
 
     scale = png16_scale(*images)
     white = max(float(img.max()) for img in images)

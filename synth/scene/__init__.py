@@ -7,6 +7,8 @@ job:
 * :mod:`synth.scene.model` -- what a scene says (:class:`SceneSpec`), :class:`SceneError`, the
   defaults and ids shared by writer and reader;
 * :mod:`synth.scene.write` -- :func:`write_scene`: the XML of cameras, port, targets or surface;
+* :mod:`synth.scene.glass` -- how a scene holds the glass of a port per camera (domes,
+  windows): checks, XML, Mitsuba shapes; :mod:`synth.scene.xml_text` -- the text of its numbers;
 * :mod:`synth.scene.params` -- the ``<default>`` parameters and their ``-D`` overrides;
 * :mod:`synth.scene.read` -- :func:`load_scene`: the rig, port and targets read back through
   Mitsuba's own parser;

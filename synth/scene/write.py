@@ -25,8 +25,6 @@ from __future__ import annotations
 
 import os
 import tempfile
-from dataclasses import dataclass
-from collections.abc import Callable
 
 import numpy as np
 
@@ -34,9 +32,8 @@ from measure import Camera, FlatPort, StereoRig
 from measure.geometry.port import require_flat_port
 from synth.scene.model import (DEFAULT_MAX_DEPTH, DEFAULT_SEED, DEFAULT_SPP, SPECKLE_ID,
                                SURFACE_ID, TARGET_ID_PREFIX, SurfaceFiles)
-from synth.scene.dome import (check_field_of_view, check_targets, dome_placements,
-                              facing_cameras)
-from synth.scene.windows import camera_names, check_windows, fit_windows, window_placements
+from synth.scene.glass import PER_CAMERA_GLASS, glass_of, glass_rig
+from synth.scene.xml_text import number_text, vector_text
 from synth.rendering.sensor import sensor_parameters
 
 #: Half side (mm) of the square port interfaces: covers both fields of view far beyond 2 m.
@@ -62,20 +59,6 @@ LIGHT_BEAM_WIDTH_DEG, LIGHT_CUTOFF_DEG = 45.0, 60.0
 LIGHT_SIDE_OFFSET_MM, LIGHT_DEPTH_BEYOND_PORT_MM = 400.0, 20.0
 
 
-def _num(x: float) -> str:
-    """Shortest round-trip text of a float (``1.0`` -> ``"1"``)."""
-    x = float(x)
-    if x == 0:
-        return "0"
-    if x.is_integer() and abs(x) < 1e15:
-        return str(int(x))
-    return repr(x)
-
-
-def _vec(v) -> str:
-    return ", ".join(_num(x) for x in v)
-
-
 def sensor_xml(name: str, camera: Camera, width_param: bool, thin_lens: bool = False) -> str:
     try:
         p = sensor_parameters(camera.K, camera.size, camera.R, camera.t)
@@ -99,16 +82,16 @@ def sensor_xml(name: str, camera: Camera, width_param: bool, thin_lens: bool = F
         <float name="focus_distance" value="$focus_distance"/>"""
     else:
         lens = f"""
-        <float name="principal_point_offset_x" value="{_num(ppx)}"/>
-        <float name="principal_point_offset_y" value="{_num(ppy)}"/>"""
+        <float name="principal_point_offset_x" value="{number_text(ppx)}"/>
+        <float name="principal_point_offset_y" value="{number_text(ppy)}"/>"""
     return f"""
     <sensor type="{'thinlens' if thin_lens else 'perspective'}" id="{name}">
-        <float name="fov" value="{_num(fov)}"/>
+        <float name="fov" value="{number_text(fov)}"/>
         <string name="fov_axis" value="x"/>{lens}
         <float name="near_clip" value="1"/>
         <float name="far_clip" value="1000000"/>
         <transform name="to_world">
-            <lookat origin="{_vec(t)}" target="{_vec(target)}" up="{_vec(up)}"/>
+            <lookat origin="{vector_text(t)}" target="{vector_text(target)}" up="{vector_text(up)}"/>
         </transform>
         <sampler type="multijitter">
             <integer name="sample_count" value="$spp"/>
@@ -156,6 +139,36 @@ def scene_xml(cameras, port: FlatPort | None, targets, target_radius: float, *,
     (self-luminous).
     """
     cameras = tuple(cameras)
+    names = _checked_names(cameras, port, surface, thin_lens)
+    targets, target_radius, target_normals = _checked_targets(
+        targets, target_radius, target_normals, port, lighting, surface)
+    glass = glass_of(port)
+    rig = _checked_port(cameras, names, port, glass, targets, target_radius, target_normals,
+                        (water, lighting, thin_lens, surface))
+    plane = surface is None and bool(np.all(targets[:, 2] == targets[0, 2]))
+    defaults = _defaults(cameras, names, port, targets, target_radius, plane, spp=spp, seed=seed,
+                         max_depth=max_depth, water=water, lighting=lighting, thin_lens=thin_lens,
+                         surface=surface)
+    parts = _head_xml(comment, defaults, water)
+    for name, cam in zip(names, cameras):
+        parts.append(sensor_xml(name, cam, True, thin_lens is not None))
+    if lighting == "lit":
+        parts += _lights_xml(cameras[0], cameras[1], port, targets)
+    if glass is not None:
+        parts.append(glass.xml(rig))
+    elif port is not None:
+        parts += _flat_port_xml(port, interface_half_size, water)
+    if surface is not None:
+        parts.append(_surface_xml(surface, lighting))
+    else:
+        parts += _targets_xml(targets, target_normals, plane, lighting)
+    parts.append("</scene>\n")
+    return "\n".join(parts)
+
+
+def _checked_names(cameras, port, surface, thin_lens) -> tuple:
+    """The sensors' ids of ``cameras`` (``left``, ``right``; ``cam0``, ``cam1``, … of N > 2);
+    ValueError for cameras a scene cannot hold (see :func:`_check_more_cameras`)."""
     left, right = cameras[:2]
     if left.size != right.size:
         raise ValueError(f"both cameras must have the same image size, got {left.size} and "
@@ -163,6 +176,14 @@ def scene_xml(cameras, port: FlatPort | None, targets, target_radius: float, *,
     names = ("left", "right") if len(cameras) == 2 else tuple(f"cam{k}" for k in range(len(cameras)))
     if len(cameras) > 2:
         _check_more_cameras(cameras, names, port, surface, thin_lens)
+    return names
+
+
+def _checked_targets(targets, target_radius, target_normals, port, lighting: str,
+                     surface) -> tuple:
+    """``(targets (N, 3), target radius, unit normals (N, 3))``, mm, reference frame, as
+    :func:`scene_xml` writes them (a surface's radius is 0); ValueError for targets, a radius,
+    normals or a ``lighting`` it cannot write."""
     targets = np.asarray(targets, dtype=np.float64).reshape(-1, 3)
     if not np.all(np.isfinite(targets)) or targets.shape[0] == 0:
         raise ValueError("targets must be a non-empty finite (N, 3) array")
@@ -180,13 +201,24 @@ def scene_xml(cameras, port: FlatPort | None, targets, target_radius: float, *,
     if target_normals.shape != targets.shape or not np.all(np.isfinite(target_normals)):
         raise ValueError("target_normals must be a finite (N, 3) array like targets")
     target_normals = target_normals / np.linalg.norm(target_normals, axis=1, keepdims=True)
-    glass = _glass_of(port)
+    return targets, target_radius, target_normals
+
+
+def _checked_port(cameras, names, port, glass, targets, target_radius, target_normals,
+                  looks: tuple):
+    """The rig of a port whose cameras each have their own glass (``glass``, checked with its
+    targets), else None (a shared flat port checked here: cameras on its air side, targets in
+    the water facing it). ``looks``: ``(water, lighting, thin_lens, surface)`` of
+    :func:`scene_xml`, which glass per camera refuses. ValueError for what does not fit."""
+    water, lighting, thin_lens, surface = looks
+    left, right = cameras[:2]
+    rig = None
     if glass is not None:
         if water is not None or lighting == "lit" or thin_lens is not None or surface is not None:
             raise ValueError(f"a {glass.name} scene holds LED disk targets seen by pinhole "
                              f"cameras in clear water (no water medium, lit targets, thin lens "
                              f"or surface)")
-        rig = _glass_rig(cameras, port, names)  # each camera behind or inside its own glass
+        rig = glass_rig(cameras, port, names)  # each camera behind or inside its own glass
         glass.check(rig, targets, target_radius, target_normals)
     elif port is not None:
         StereoRig(left, right, port)  # cameras on the air side
@@ -196,41 +228,52 @@ def scene_xml(cameras, port: FlatPort | None, targets, target_radius: float, *,
             raise ValueError("targets closer to the port than their radius")
         if surface is None and np.any(target_normals @ port.normal >= 0):
             raise ValueError("every target must face the cameras (its normal towards the port)")
-    w, h = left.size
-    plane = surface is None and bool(np.all(targets[:, 2] == targets[0, 2]))
+    return rig
+
+
+def _defaults(cameras, names, port, targets, target_radius, plane: bool, *, spp, seed, max_depth,
+              water, lighting, thin_lens, surface) -> list:
+    """The scene's ``<default>`` parameters, ``[(name, text), …]`` (:func:`scene_xml`'s
+    arguments; ``max_depth`` raised for water and for the port's interfaces)."""
+    w, h = cameras[0].size
     defaults = [("spp", str(int(spp))), ("seed", str(int(seed))), ("width", str(w)),
                 ("height", str(h))]
     if port is not None:
-        defaults.append(("n_water", _num(_views_of(port, len(cameras))[0].n_water)))
+        defaults.append(("n_water", number_text(_views_of(port, len(cameras))[0].n_water)))
     else:
         defaults.append(("port", "none"))
     if water is not None:
         if port is None:
             raise ValueError("a participating medium needs a port (the water is behind it)")
-        defaults += [("water_c", _num(water.c_per_m)), ("water_albedo", _num(water.albedo)),
-                     ("water_g", _num(water.g))]
+        defaults += [("water_c", number_text(water.c_per_m)), ("water_albedo", number_text(water.albedo)),
+                     ("water_g", number_text(water.g))]
         max_depth = max(int(max_depth), WATER_MAX_DEPTH)
     if port is not None:  # a path crosses every interface once: room for them and a few more
         crossed = max(p.n_interfaces for p in _views_of(port, len(cameras)))
         max_depth = max(int(max_depth), 2 * crossed + 4)
     if surface is None:
-        defaults.append(("target_radius", _num(target_radius)))
+        defaults.append(("target_radius", number_text(target_radius)))
     if lighting == "lit":
-        defaults += [("target_albedo", _num(LIT_TARGET_ALBEDO)),
-                     ("light_intensity", _num(LIGHT_INTENSITY))]
+        defaults += [("target_albedo", number_text(LIT_TARGET_ALBEDO)),
+                     ("light_intensity", number_text(LIGHT_INTENSITY))]
     if thin_lens is not None:
         aperture, focus = (float(v) for v in thin_lens)
         if not (aperture > 0 and focus > 0 and np.isfinite(aperture) and np.isfinite(focus)):
             raise ValueError(f"thin lens aperture radius and focus distance must be positive, "
                              f"got {thin_lens}")
-        defaults += [("aperture_radius", _num(aperture)), ("focus_distance", _num(focus))]
+        defaults += [("aperture_radius", number_text(aperture)), ("focus_distance", number_text(focus))]
     if plane:
-        defaults.append(("target_z", _num(targets[0, 2])))
+        defaults.append(("target_z", number_text(targets[0, 2])))
     defaults.append(("max_depth", str(int(max_depth))))
     for name, cam in zip(names, cameras):
         dist = np.zeros(5) if cam.dist is None else cam.dist
-        defaults.append((f"{name}_dist", " ".join(_num(c) for c in dist)))
+        defaults.append((f"{name}_dist", " ".join(number_text(c) for c in dist)))
+    return defaults
 
+
+def _head_xml(comment: str, defaults: list, water) -> list:
+    """The first parts of the scene: the XML declaration, the ``comment``, ``<scene>``, the
+    ``defaults``, the integrator and the water's medium."""
     parts = ['<?xml version="1.0" encoding="utf-8"?>']
     if comment:
         parts.append(f"<!-- {comment.replace('--', '-')} -->")
@@ -254,76 +297,84 @@ def scene_xml(cameras, port: FlatPort | None, targets, target_radius: float, *,
             <float name="g" value="$water_g"/>
         </phase>
     </medium>""")
-    for name, cam in zip(names, cameras):
-        parts.append(sensor_xml(name, cam, True, thin_lens is not None))
-    if lighting == "lit":
-        for k, (origin, target) in enumerate(light_placements(left, right, port, targets)):
-            parts.append(f"""
+    return parts
+
+
+def _lights_xml(left: Camera, right: Camera, port, targets) -> list:
+    """The two spot lights of a lit scene (:func:`light_placements`)."""
+    parts = []
+    for k, (origin, target) in enumerate(light_placements(left, right, port, targets)):
+        parts.append(f"""
     <emitter type="spot" id="light_{k}">
         <transform name="to_world">
-            <lookat origin="{_vec(origin)}" target="{_vec(target)}" up="{_vec(_perpendicular(target - origin))}"/>
+            <lookat origin="{vector_text(origin)}" target="{vector_text(target)}" up="{vector_text(_perpendicular(target - origin))}"/>
         </transform>
         <rgb name="intensity" value="$light_intensity"/>
-        <float name="cutoff_angle" value="{_num(LIGHT_CUTOFF_DEG)}"/>
-        <float name="beam_width" value="{_num(LIGHT_BEAM_WIDTH_DEG)}"/>
+        <float name="cutoff_angle" value="{number_text(LIGHT_CUTOFF_DEG)}"/>
+        <float name="beam_width" value="{number_text(LIGHT_BEAM_WIDTH_DEG)}"/>
     </emitter>""")
+    return parts
 
-    if glass is not None:
-        parts.append(glass.xml(rig))
-    elif port is not None:
-        for k, centre, target, up, ext_ior, int_ior in interface_placements(port):
-            ext = _num(ext_ior)
-            last = k == port.n_interfaces - 1
-            inner = "$n_water" if last else _num(int_ior)
-            medium = ('\n        <ref name="interior" id="water"/>'
-                      if last and water is not None else "")
-            parts.append(f"""
+
+def _flat_port_xml(port: FlatPort, interface_half_size: float, water) -> list:
+    """One ``rectangle`` per interface of a shared flat port, camera side first; the last
+    looks into ``$n_water`` (and holds the water's medium)."""
+    parts = []
+    for k, centre, target, up, ext_ior, int_ior in interface_placements(port):
+        ext = number_text(ext_ior)
+        last = k == port.n_interfaces - 1
+        inner = "$n_water" if last else number_text(int_ior)
+        medium = ('\n        <ref name="interior" id="water"/>'
+                  if last and water is not None else "")
+        parts.append(f"""
     <shape type="rectangle" id="interface_{k}">
         <transform name="to_world">
-            <scale x="{_num(interface_half_size)}" y="{_num(interface_half_size)}"/>
-            <lookat origin="{_vec(centre)}" target="{_vec(target)}" up="{_vec(up)}"/>
+            <scale x="{number_text(interface_half_size)}" y="{number_text(interface_half_size)}"/>
+            <lookat origin="{vector_text(centre)}" target="{vector_text(target)}" up="{vector_text(up)}"/>
         </transform>
         <bsdf type="dielectric">
             <float name="ext_ior" value="{ext}"/>
             <float name="int_ior" value="{inner}"/>
         </bsdf>{medium}
     </shape>""")
+    return parts
 
-    if surface is not None:
-        parts.append(_surface_xml(surface, lighting))
-        parts.append("</scene>\n")
-        return "\n".join(parts)
+
+def _targets_xml(targets, target_normals, plane: bool, lighting: str) -> list:
+    """The disk targets: their BSDF (LED: black, an area emitter; lit: white diffuse) and one
+    ``disk`` per target, facing the cameras or turned to its normal; ``plane``: all share
+    ``$target_z``."""
+    parts = []
     if lighting == "led":
         parts.append("""
     <bsdf type="diffuse" id="target_back">
         <rgb name="reflectance" value="0"/>
     </bsdf>""")
-        surface = ("        <ref id=\"target_back\"/>\n        <emitter type=\"area\"><rgb "
-                   f"name=\"radiance\" value=\"{_num(TARGET_RADIANCE)}\"/></emitter>")
+        look = ("        <ref id=\"target_back\"/>\n        <emitter type=\"area\"><rgb "
+                f"name=\"radiance\" value=\"{number_text(TARGET_RADIANCE)}\"/></emitter>")
     else:
         parts.append("""
     <bsdf type="diffuse" id="target_white">
         <rgb name="reflectance" value="$target_albedo"/>
     </bsdf>""")
-        surface = "        <ref id=\"target_white\"/>"
+        look = "        <ref id=\"target_white\"/>"
     facing = np.all(target_normals == [0.0, 0.0, -1.0], axis=1)
     for k, (x, y, z) in enumerate(targets):
-        zval = "$target_z" if plane else _num(z)
+        zval = "$target_z" if plane else number_text(z)
         if facing[k]:
             orient = '<rotate x="1" angle="180"/>\n            <scale value="$target_radius"/>'
         else:
             n = target_normals[k]
             orient = (f'<scale value="$target_radius"/>\n            <lookat origin="0, 0, 0" '
-                      f'target="{_vec(n)}" up="{_vec(_perpendicular(n))}"/>')
+                      f'target="{vector_text(n)}" up="{vector_text(_perpendicular(n))}"/>')
         parts.append(f"""    <shape type="disk" id="{TARGET_ID_PREFIX}{k}">
         <transform name="to_world">
             {orient}
-            <translate x="{_num(x)}" y="{_num(y)}" z="{zval}"/>
+            <translate x="{number_text(x)}" y="{number_text(y)}" z="{zval}"/>
         </transform>
-{surface}
+{look}
     </shape>""")
-    parts.append("</scene>\n")
-    return "\n".join(parts)
+    return parts
 
 
 def _check_more_cameras(cameras, names, port, surface, thin_lens) -> None:
@@ -354,144 +405,11 @@ def _check_more_cameras(cameras, names, port, surface, thin_lens) -> None:
         MultiRig(cameras, ports, names)
 
 
-def _glass_of(port):
-    """How a scene holds ``port``'s glass (:data:`PER_CAMERA_GLASS`), or None for one shared
-    flat port or none; a list of flat ports (one per camera) is held as windows."""
-    if port is None:
-        return None
-    if isinstance(port, (list, tuple)):
-        return PER_CAMERA_GLASS["flat pair"]
-    return PER_CAMERA_GLASS.get(port.kind)
-
-
-def _glass_rig(cameras, port, names=None):
-    """The rig whose cameras each have their own glass: a StereoRig of two cameras and their
-    FlatPair or DomePair, or a MultiRig of N cameras and a list of their flat ports."""
-    from measure.stereo.multirig import MultiRig
-
-    if isinstance(port, (list, tuple)):
-        return MultiRig(tuple(cameras), list(port), names)
-    return StereoRig(cameras[0], cameras[1], port)
-
-
 def _views_of(port, count: int) -> list:
     """The port each of ``count`` cameras looks through (a shared port, a pair's, or a list's)."""
     if isinstance(port, (list, tuple)):
         return list(port)
     return [port.view(min(v, 1)) for v in range(count)]
-
-
-def _dome_xml(rig: StereoRig) -> str:
-    """The spheres of a dome scene (:func:`synth.scene.dome.dome_placements`)."""
-    parts = ["\n    <!-- The domes: per camera two concentric spheres (normals outwards, "
-             "ext_ior outside): air inside the inner one, glass between, water outside. -->"]
-    for sid, centre, radius, ext_ior, int_ior in dome_placements(rig.port):
-        outer = sid.endswith("outer")  # its ext_ior is the water's: $n_water
-        parts.append(f"""    <shape type="sphere" id="{sid}">
-        <point name="center" value="{_vec(centre)}"/>
-        <float name="radius" value="{_num(radius)}"/>
-        <bsdf type="dielectric">
-            <float name="ext_ior" value="{'$n_water' if outer else _num(ext_ior)}"/>
-            <float name="int_ior" value="{_num(int_ior)}"/>
-        </bsdf>
-    </shape>""")
-    return "\n".join(parts)
-
-
-def _check_domes(rig: StereoRig, targets, target_radius, target_normals) -> None:
-    check_field_of_view(rig)
-    check_targets(rig.port, targets, target_radius)
-    if not np.all(facing_cameras(rig, targets, target_normals)):
-        raise ValueError("every target must face the cameras (its normal towards them)")
-
-
-def _dome_shapes(mi, port, cameras, half_side_mm: float) -> dict:
-    return {sid: {"type": "sphere", "center": [float(c) for c in centre],
-                  "radius": float(radius),
-                  "bsdf": {"type": "dielectric", "ext_ior": float(ext_ior),
-                           "int_ior": float(int_ior)}}
-            for sid, centre, radius, ext_ior, int_ior in dome_placements(port)}
-
-
-def _window_xml(rig) -> str:
-    """The windows of a scene of a port per camera (:mod:`synth.scene.windows`); the last
-    interface of each looks into ``$n_water``."""
-    names = camera_names(rig)
-    ports = [rig.view_port(k) for k in range(len(rig.cameras))]
-    waters = {p.n_water for p in ports}
-    if len(waters) > 1:
-        raise ValueError(f"the ports look into different water (n_water "
-                         f"{', '.join(f'{p.n_water:g}' for p in ports)})")
-    parts = [f"\n    <!-- {'Two housings' if len(ports) == 2 else f'{len(ports)} housings'}: each "
-             f"camera behind its own flat port, a finite window (one rectangle per interface, "
-             f"normal towards the cameras, ext_ior on their side). -->"]
-    windows = fit_windows(rig)
-    last = {f"{name}_interface_{w.port.n_interfaces - 1}" for name, w in zip(names, windows)}
-    for sid, centre, target, up, half, ext_ior, int_ior in window_placements(windows, names):
-        parts.append(f"""    <shape type="rectangle" id="{sid}">
-        <transform name="to_world">
-            <scale x="{_num(half[0])}" y="{_num(half[1])}"/>
-            <lookat origin="{_vec(centre)}" target="{_vec(target)}" up="{_vec(up)}"/>
-        </transform>
-        <bsdf type="dielectric">
-            <float name="ext_ior" value="{_num(ext_ior)}"/>
-            <float name="int_ior" value="{'$n_water' if sid in last else _num(int_ior)}"/>
-        </bsdf>
-    </shape>""")
-    return "\n".join(parts)
-
-
-def _check_windows(rig, targets, target_radius, target_normals) -> None:
-    check_windows(rig, fit_windows(rig))
-    for k, name in enumerate(camera_names(rig)):
-        port = rig.view_port(k)
-        beyond = targets @ port.normal - port.offsets[-1]
-        if np.any(beyond <= 0):
-            raise ValueError(f"every target must lie in the water, beyond the {name} port's last "
-                             f"interface")
-        if np.any(beyond <= target_radius):
-            raise ValueError(f"targets closer to the {name} port than their radius")
-        if np.any(target_normals @ port.normal >= 0):
-            raise ValueError(f"every target must face the cameras (its normal towards the {name} "
-                             f"port)")
-
-
-def _window_shapes(mi, port, cameras, half_side_mm: float) -> dict:
-    if cameras is None:
-        raise ValueError("the windows of a port per camera are sized to the cameras: pass "
-                         "cameras")
-    rig = _glass_rig(cameras, port)
-    windows = fit_windows(rig)
-    shapes = {}
-    for sid, centre, target, up, half, ext_ior, int_ior in window_placements(
-            windows, camera_names(rig)):
-        to_world = (mi.ScalarTransform4f().look_at(origin=centre.tolist(), target=target.tolist(),
-                                                   up=up.tolist())
-                    @ mi.ScalarTransform4f().scale([float(half[0]), float(half[1]), 1.0]))
-        shapes[sid] = {"type": "rectangle", "to_world": to_world,
-                       "bsdf": {"type": "dielectric", "ext_ior": float(ext_ior),
-                                "int_ior": float(int_ior)}}
-    return shapes
-
-
-@dataclass(frozen=True)
-class PerCameraGlass:
-    """How a scene holds a port whose glass is per camera: its name in messages, the check of
-    a rig and its targets, the XML of its shapes, its Mitsuba dictionary shapes."""
-
-    name: str
-    check: Callable
-    xml: Callable
-    shapes: Callable
-
-
-#: The kinds of port (:attr:`measure.geometry.port.RigPort.kind`) whose cameras each have
-#: their own glass, and how a scene holds them; the shared flat port is the rest of
-#: :func:`scene_xml` and :func:`port_shapes`.
-PER_CAMERA_GLASS = {
-    "dome": PerCameraGlass("dome", _check_domes, _dome_xml, _dome_shapes),
-    "flat pair": PerCameraGlass("two-housing", _check_windows, _window_xml, _window_shapes),
-}
 
 
 def _surface_xml(surface: SurfaceFiles, lighting: str) -> str:
@@ -549,7 +467,7 @@ def port_shapes(mi, port, half_side_mm: float = 2000.0, cameras=None) -> dict:
     their flat ports), whose fields of view size them), or one ``rectangle`` of half side ``half_side_mm`` per flat interface
     (:func:`interface_placements`), each a ``dielectric`` whose ``ext_ior`` is the camera
     side's. ``{shape id: shape}``."""
-    glass = _glass_of(port)
+    glass = glass_of(port)
     if glass is not None:
         return glass.shapes(mi, port, cameras, half_side_mm)
     shapes = {}

@@ -9,7 +9,8 @@ from measure import Camera
 from measure.images.detect import detect_targets
 from synth.scene.layouts import grid_plane
 from measure.geometry.projection import project
-from synth.rendering.render import png16_scale, render_stereo, srgb_preview, to_png16
+from synth.rendering.image_files import png16_scale, srgb_preview, to_png16
+from synth.rendering.render import render_stereo
 from synth.scene.rig import paper_cameras
 from synth.scene import load_scene, write_scene
 
