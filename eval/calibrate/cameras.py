@@ -272,19 +272,15 @@ def _checked_options(args, boards, where):
     """The options refused for these boards (N cameras; a boards folder; in air or water);
     under water ``(free, air rig, its covariance)`` read from ``--intrinsics``, in air None."""
     from measure.calibration.multi_housing import PARAMETERS
-    from synth.infra.cli import BOARD_OPTIONS, given, refuse_given
+    from eval.calibrate.options import refuse_for_boards_folder
+    from synth.infra.cli import given
 
     for dest, flag in NOT_FOR_N_CAMERAS[:-1] if boards.photos else NOT_FOR_N_CAMERAS:
         if given(args, dest):
             raise CLIError(f"{flag} does not apply to {where}: the calibration of N cameras "
                            f"models one flat port they share, its σ propagates the in-air "
                            f"covariance")
-    if not boards.photos:
-        refuse_given(args, BOARD_OPTIONS, f"to a boards folder ({args.dir}): the folder's "
-                                          f"board.json defines the board")
-    if args.air and not boards.air:
-        raise CLIError(f"--air: {args.dir} holds boards rendered underwater (its manifest says "
-                       f"so; --air is for photos)")
+    refuse_for_boards_folder(args, boards, board_options=not boards.photos)
     if boards.air:
         if args.intrinsics:
             raise CLIError(f"{args.dir}: in-air boards calibrate the intrinsics themselves; "

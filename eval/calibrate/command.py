@@ -37,7 +37,8 @@ from eval.calibrate.design import (DOME_DESIGN_OPTIONS, FLAT_DESIGN_OPTIONS, des
                                    design_port, pair_glass, parse_free)
 from eval.calibrate.intrinsics import is_photo_folder
 from eval.calibrate.options import (COMMAND, HOUSING_OPTIONS, LENS_UNDERWATER,
-                                    add_calibrate_parser, require_board)
+                                    add_calibrate_parser, require_air_or_intrinsics,
+                                    require_board)
 from eval.calibrate.outputs import COLMAP_NOTE, failed, print_n_water_note
 from eval.calibrate.pair_boards import calibrate_pair_boards
 from eval.calibrate.pair_photos import calibrate_pair_photos
@@ -166,15 +167,7 @@ def _calibrate_camera_photos(args, output, log, start, cameras) -> int:
     if len(cameras) == 2:
         raise CLIError(f"{args.dir}: two camera folders (cam0/, cam1/); a stereo pair's photos "
                        f"are left/ and right/ (the two-camera calibration)")
-    if args.air:
-        refuse_given(args, HOUSING_OPTIONS, "to in-air photos (--air): they calibrate the "
-                                            "cameras, no housing")
-        if args.intrinsics:
-            raise CLIError("--intrinsics does not apply with --air: in-air photos calibrate the "
-                           "intrinsics themselves")
-    elif not args.intrinsics:
-        raise CLIError(f"{where}: say --air (photos taken in air) or --intrinsics calib.yaml "
-                       f"(photos taken underwater, with the in-air calibration of these cameras)")
+    require_air_or_intrinsics(args, where, "the in-air calibration of these cameras")
     require_board(args, where)
     board = board_from_args(args)
     if board.symmetric:

@@ -153,3 +153,34 @@ def require_board(args, where) -> None:
     if missing:
         raise CLIError(f"{where}: a photo folder needs the board on the command line: "
                        f"{' and '.join(missing)} (and --board charuco for a ChArUco board)")
+
+
+def require_air_or_intrinsics(args, where: str, underwater: str) -> None:
+    """The medium of a photo folder of two or more cameras: ``--air`` (then the housing's
+    options and ``--intrinsics`` are refused) or ``--intrinsics`` (``underwater``: what the
+    message says that file is); CLIError naming ``where`` when neither is given."""
+    from synth.infra.cli import refuse_given
+
+    if args.air:
+        refuse_given(args, HOUSING_OPTIONS, "to in-air photos (--air): they calibrate the "
+                                            "cameras, no housing")
+        if args.intrinsics:
+            raise CLIError("--intrinsics does not apply with --air: in-air photos calibrate the "
+                           "intrinsics themselves")
+    elif not args.intrinsics:
+        raise CLIError(f"{where}: say --air (photos taken in air) or --intrinsics calib.yaml "
+                       f"(photos taken underwater, with {underwater})")
+
+
+def refuse_for_boards_folder(args, boards, board_options: bool = True) -> None:
+    """What a folder of rendered boards refuses: the board's options (``board_options``: the
+    folder's board.json defines the board) and ``--air`` where its manifest says the boards were
+    rendered underwater."""
+    from synth.infra.cli import BOARD_OPTIONS, refuse_given
+
+    if board_options:
+        refuse_given(args, BOARD_OPTIONS, f"to a boards folder ({args.dir}): the folder's "
+                                          f"board.json defines the board")
+    if args.air and not boards.air:
+        raise CLIError(f"--air: {args.dir} holds boards rendered underwater (its manifest says "
+                       f"so; --air is for photos)")

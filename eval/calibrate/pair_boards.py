@@ -20,10 +20,10 @@ from eval.calibrate.causes import FIT_ERRORS, housing_failure
 from eval.calibrate.design import (DOME_DESIGN_OPTIONS, FLAT_DESIGN_OPTIONS, design_domes,
                                    design_pair, design_port, pair_glass, parse_free)
 from eval.calibrate.intrinsics import read_in_air, refuse_calibration_folder
-from eval.calibrate.options import HOUSING_OPTIONS, LENS_UNDERWATER
+from eval.calibrate.options import HOUSING_OPTIONS, LENS_UNDERWATER, refuse_for_boards_folder
 from eval.calibrate.outputs import failed, print_written, write_calibrations
 from eval.cli import CLIError
-from synth.infra.cli import BOARD_OPTIONS, given, refuse_given
+from synth.infra.cli import given, refuse_given
 
 
 def calibrate_pair_boards(args, output, log, start, boards) -> int:
@@ -98,11 +98,7 @@ def _refuse_for_boards(args, boards) -> None:
     water, and ``--intrinsics`` where it does not apply or is missing."""
     refuse_given(args, ("encoding",), f"to a boards folder ({args.dir}): its images are "
                                       f"16-bit linear renders")
-    refuse_given(args, BOARD_OPTIONS, f"to a boards folder ({args.dir}): the folder's "
-                                      f"board.json defines the board")
-    if args.air and not boards.air:
-        raise CLIError(f"--air: {args.dir} holds boards rendered underwater (its manifest says "
-                       f"so; --air is for photos)")
+    refuse_for_boards_folder(args, boards)
     if boards.air:
         refuse_given(args, HOUSING_OPTIONS, f"to in-air boards ({args.dir}): they calibrate the "
                                             f"cameras, no housing")

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 
 from eval.calibrate.design import design_pair, design_port, pair_glass
 from eval.calibrate.intrinsics import intrinsics_for_photos, underwater_note
-from eval.calibrate.options import HOUSING_OPTIONS, LENS_UNDERWATER, require_board
+from eval.calibrate.options import LENS_UNDERWATER, require_air_or_intrinsics, require_board
 from eval.calibrate.outputs import failed, print_written, write_calibrations
 from eval.calibrate.port_lengths import lengths_for
 from eval.cli import CLIError
@@ -117,16 +117,8 @@ def _checked_options(args, where):
     """``(board, pair)``: the options checked before any photo is read — ``--air`` or
     ``--intrinsics`` and what each refuses, the board, and the design (``pair``: two housings,
     a port per camera, ``--port-distance``)."""
-    if args.air:
-        refuse_given(args, HOUSING_OPTIONS, "to in-air photos (--air): they calibrate the "
-                                            "cameras, no housing")
-        if args.intrinsics:
-            raise CLIError("--intrinsics does not apply with --air: in-air photos calibrate the "
-                           "intrinsics themselves")
-    elif not args.intrinsics:
-        raise CLIError(f"{where}: say --air (photos taken in air) or --intrinsics calib.yaml "
-                       f"(photos taken underwater, with the in-air calibration)")
-    else:
+    require_air_or_intrinsics(args, where, "the in-air calibration")
+    if not args.air:
         refuse_given(args, ("lens",), LENS_UNDERWATER)
     require_board(args, where)
     board = board_from_args(args)

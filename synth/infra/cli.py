@@ -538,11 +538,7 @@ def process_main(main) -> None:
         code = EXIT_INTERRUPTED
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     if code == EXIT_INTERRUPTED:
-        for stream in (sys.stdout, sys.stderr):
-            try:
-                stream.flush()
-            except (OSError, ValueError):
-                pass
+        _flush_streams()
         os._exit(code)
     # The interpreter's last collections would walk every object the command made: 0.3-0.5 s
     # after eval run (Mitsuba, Open3D, matplotlib). Frozen, they go with the process.
@@ -573,12 +569,17 @@ def _leave(code: int) -> None:
             if t is not threading.main_thread()):
         sys.exit(code)
     atexit._run_exitfuncs()
+    _flush_streams()
+    os._exit(code)
+
+
+def _flush_streams() -> None:
+    """Standard output and error flushed before ``os._exit`` (a closed stream is let be)."""
     for stream in (sys.stdout, sys.stderr):
         try:
             stream.flush()
         except (OSError, ValueError):
             pass
-    os._exit(code)
 
 
 __all__ = ["BOARD_OPTIONS", "DEFAULT_BOARD", "add_board_options", "add_cluster_options", "board_from_args",
