@@ -48,6 +48,10 @@ def add_parser(subparsers):
     p.add_argument("--calib", required=True, metavar="FILE",
                    help="the rig's calibration with its port (calib.yaml, calibmar's stereo "
                         "YAML or the COLMAP fork's cameras.txt)")
+    p.add_argument("--cameras", metavar="A,B", default=None,
+                   help="two cameras of a rig of N cameras (their names in --calib, e.g. "
+                        "cam0,cam2, or 0-based indices): LEFT is A's photo, RIGHT is B's; "
+                        "default: the pair of a two-camera calibration")
     p.add_argument("--distance", required=True, type=positive_float, metavar="Z_MM",
                    help="the distance (mm, along the port normal from the left camera) at "
                         "which the warp is exact")
@@ -142,6 +146,68 @@ def error_figure(path, rectification, uv, grids) -> None:
     plt.close(fig)
 
 
+def rig_to_rectify(args):
+    """``(rig, has_port, names)``: the pair of a two-camera ``--calib`` (``names`` None), or
+    ``--cameras A,B`` of a rig of N cameras (:meth:`measure.stereo.multirig.MultiRig.pair`:
+    behind the port they share or each behind its own; ``names`` theirs). CLIError for a rig
+    of N cameras without ``--cameras`` and for names it does not hold."""
+    from synth.products.dataset import DatasetError
+    from synth.products.rig_file import read_rig_file
+
+    from eval.measure.inputs import read_calibration
+
+    if args.cameras is None:
+        try:
+            rig, _, has_port, _ = read_calibration(args.calib)
+        except CLIError:
+            _refuse_rig_without_cameras(args.calib)
+            raise
+        return rig, has_port, None
+    try:
+        multi = read_rig_file(args.calib)
+    except DatasetError as exc:
+        raise CLIError(f"--calib {exc}") from None
+    i, j = camera_pair(args.cameras, multi.names)
+    rig = multi.pair(i, j)
+    return rig, rig.port is not None and rig.port.refracts, (multi.names[i], multi.names[j])
+
+
+def _refuse_rig_without_cameras(path) -> None:
+    """CLIError saying to pick two cameras where ``path`` is a rig of more than two (the pair's
+    reader refused it); nothing otherwise."""
+    from synth.products.dataset import DatasetError
+    from synth.products.rig_file import read_rig_file
+
+    try:
+        multi = read_rig_file(path)
+    except (DatasetError, ValueError, OSError):
+        return
+    if len(multi.cameras) > 2:
+        raise CLIError(f"--calib {path}: a rig of {len(multi.cameras)} cameras "
+                       f"({', '.join(multi.names)}): give the pair to rectify, --cameras "
+                       f"{multi.names[0]},{multi.names[1]}")
+
+
+def camera_pair(text: str, names) -> tuple[int, int]:
+    """The indices of ``--cameras A,B`` (names of ``names`` or 0-based indices)."""
+    parts = [part.strip() for part in text.split(",")]
+    if len(parts) != 2 or not all(parts):
+        raise CLIError(f"--cameras {text}: give two cameras, e.g. --cameras "
+                       f"{names[0]},{names[-1]}")
+    indices = []
+    for part in parts:
+        if part in names:
+            indices.append(names.index(part))
+        elif part.isdigit() and int(part) < len(names):
+            indices.append(int(part))
+        else:
+            raise CLIError(f"--cameras {text}: no camera {part!r} in the calibration (its "
+                           f"cameras: {', '.join(names)})")
+    if indices[0] == indices[1]:
+        raise CLIError(f"--cameras {text}: two different cameras")
+    return indices[0], indices[1]
+
+
 def main(args) -> int:
     import cv2
 
@@ -149,22 +215,24 @@ def main(args) -> int:
     from synth.infra.fileio import OutputDir, atomic_write_json, jsonable
     from synth.products.dataset import write_calib
 
-    from eval.measure.inputs import read_calibration
-
     log = ((lambda text: None) if args.no_progress
            else (lambda text: print(text, file=sys.stderr, flush=True)))
     start = time.perf_counter()
     distances = parse_distances(args.error_distances, args.distance)
     output = OutputDir(args.out, COMMAND).claim()
-    rig, size, has_port, _ = read_calibration(args.calib)
+    rig, has_port, names = rig_to_rectify(args)
+    size = rig.left.size
     if not has_port:
         raise CLIError(f"--calib {args.calib}: a calibration without a port: its photos need "
                        f"no warp to a pinhole camera (cv2.stereoRectify does the rest)")
     images = [read_image(path) for path in (args.left, args.right)]
-    for path, image in zip((args.left, args.right), images):
-        if (image.shape[1], image.shape[0]) != tuple(size):
+    for path, image, camera, name in zip((args.left, args.right), images,
+                                         (rig.left, rig.right), names or (None, None)):
+        if (image.shape[1], image.shape[0]) != tuple(camera.size):
+            whose = f" camera {name}" if name else ""
             raise CLIError(f"{path}: {image.shape[1]}x{image.shape[0]} px, but --calib "
-                           f"{args.calib} is for {size[0]}x{size[1]} px images")
+                           f"{args.calib}{whose} is for {camera.size[0]}x{camera.size[1]} px "
+                           f"images")
     glass = rig.port.glass_depth(rig.left)
     if args.distance <= glass:  # refused before any work or progress line
         raise CLIError(f"--distance {args.distance:g}: distance must lie in the water, beyond "
@@ -176,7 +244,8 @@ def main(args) -> int:
         raise CLIError(f"--distance {args.distance:g}: {exc}") from None
     log(f"the warp's error at {', '.join(f'{z:g}' for z in distances)} mm …")
     uv, grids = error_grid(rectification, distances)
-    report = {"calib": args.calib, "left": args.left, "right": args.right,
+    report = {"calib": args.calib, **({"cameras": list(names)} if names else {}),
+              "left": args.left, "right": args.right,
               "distance_mm": args.distance, "size": list(size),
               "virtual": {"left_K": rectification.virtual.left.K.tolist(),
                           "right_K": rectification.virtual.right.K.tolist(),

@@ -72,6 +72,11 @@ class DomePort(ValueEquality):
         """Number of spherical interfaces (2: inner, outer)."""
         return 2
 
+    def glass_reach(self, origin, axis) -> float:
+        """How far the glass reaches along the unit ``axis`` from ``origin`` (mm): the outer
+        sphere's farthest point along it."""
+        return float(np.asarray(axis) @ (self.center - np.asarray(origin))) + float(self.radii[1])
+
     @property
     def n_water(self) -> float:
         """Refractive index of the last medium (the water)."""

@@ -284,6 +284,12 @@ class FlatPort(RigPort, ValueEquality):
         """The port's last interface."""
         return self.offsets[-1] - float(self.normal @ left.center)
 
+    def glass_reach(self, origin, axis) -> float:
+        """How far the glass reaches along the unit ``axis`` from ``origin`` (mm): where the
+        line meets the last interface."""
+        return float((self.offsets[-1] - self.normal @ np.asarray(origin))
+                     / (self.normal @ np.asarray(axis)))
+
     def describe(self) -> dict:
         return {"normal": self.normal.tolist(), "distance_mm": self.distance,
                 "thicknesses_mm": list(self.thicknesses), "indices": list(self.indices)}

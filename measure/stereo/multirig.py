@@ -94,6 +94,12 @@ class ViewPorts(RigPort, ValueEquality):
     def water_side(self, points: np.ndarray) -> np.ndarray:
         return self.left.water_side(points) & self.right.water_side(points)
 
+    def glass_depth(self, left) -> float:
+        """The farther of the two ports' glass along :meth:`depth_axis` from the first camera's
+        centre (mm)."""
+        axis = self.depth_axis(left)
+        return max(port.glass_reach(left.center, axis) for port in (self.left, self.right))
+
 
 @dataclass(frozen=True, eq=False)
 class MultiRig(ValueEquality):

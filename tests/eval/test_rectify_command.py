@@ -79,3 +79,59 @@ def test_refusals_are_one_line_and_write_nothing(tmp_path, capsys):
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and err[0].startswith("error:") and fragment in err[0], err
         assert not out.exists()
+
+
+def _three_cameras(tmp_path):
+    """A row of three cameras: the pair's two behind the paper's one flat port and one more,
+    200 mm beyond the right one, inside its own dome (1 mm off its centre), written as a rig
+    file of N cameras; and a photo."""
+    from measure import Camera
+    from measure.geometry.dome import DomePort
+    from measure.stereo.multirig import MultiRig
+    from synth.products.rig_file import write_rig_file
+
+    pair = paper_rig(size=SIZE, focal_px=75.0)
+    third = Camera(pair.right.K, SIZE, R=pair.right.R, t=pair.right.t + np.array([200.0, 0, 0]))
+    dome = DomePort(third.center + np.array([1.0, 0, 0]), 50.0, 8.0, pair.port.indices)
+    rig = MultiRig([pair.left, pair.right, third], [pair.port, pair.port, dome])
+    calib = tmp_path / "rig.yaml"
+    write_rig_file(calib, rig)
+    image = tmp_path / "photo.png"
+    cv2.imwrite(str(image), np.tile(np.arange(SIZE[0], dtype=np.uint8), (SIZE[1], 1)))
+    return rig, str(calib), str(image)
+
+
+def test_any_pair_of_a_rig_of_n_cameras(tmp_path, capsys):
+    """--cameras A,B rectifies two cameras of a rig of N: cam0,cam1 (the port they share) the
+    same maps as the pair's own calibration of those two cameras; cam1,cam2 (the shared flat
+    port and a dome, its left camera away from the reference origin) exact on the plane at
+    --distance (the warp's error there below 1e-6 px, growing off it); a rig of three without
+    --cameras, or a camera it does not hold: one line, exit 2."""
+    rig, calib, photo = _three_cameras(tmp_path)
+    pair_calib = tmp_path / "pair.yaml"
+    write_calib(pair_calib, rig.pair(0, 1), has_port=True)
+    outs = {}
+    for name, extra in (("rig", ["--calib", calib, "--cameras", "cam0,cam1"]),
+                        ("pair", ["--calib", str(pair_calib)]),
+                        ("right", ["--calib", calib, "--cameras", "cam1,cam2"])):
+        outs[name] = tmp_path / name
+        assert main(["rectify", photo, photo, *extra, "--distance", "1000", "--error-distances",
+                     "1000,1500", "--out", str(outs[name]), "--no-progress"]) == 0, name
+    capsys.readouterr()
+    rig_maps, pair_maps = np.load(outs["rig"] / "maps.npz"), np.load(outs["pair"] / "maps.npz")
+    for key in pair_maps.files:
+        np.testing.assert_array_equal(rig_maps[key], pair_maps[key])
+    report = json.loads((outs["right"] / "errors.json").read_text())
+    assert report["cameras"] == ["cam1", "cam2"]
+    exact, off = report["errors"]["1000"], report["errors"]["1500"]
+    assert exact["left_px"]["max"] < 1e-6 and exact["right_px"]["max"] < 1e-6
+    assert off["left_px"]["median"] > 1e-3  # the flat port: no central camera
+    for extra, fragment in ((["--calib", calib], "--cameras cam0,cam1"),
+                            (["--calib", calib, "--cameras", "cam0,cam7"], "no camera 'cam7'"),
+                            (["--calib", calib, "--cameras", "cam1,cam1"], "two different")):
+        out = tmp_path / "refused"
+        assert main(["rectify", photo, photo, *extra, "--distance", "1000", "--out", str(out),
+                     "--no-progress"]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and err[0].startswith("error:") and fragment in err[0], err
+        assert not out.exists()
