@@ -95,32 +95,75 @@ def write_targets_ply(path, points: np.ndarray) -> None:
 
 def write_pixels_csv(path, ids, points, uv_left, uv_right) -> None:
     """``pixels.csv`` with header :data:`PIXELS_HEADER`; reals with 17 significant digits."""
+    write_pixel_rows(path, PIXELS_HEADER, ids, np.column_stack(
+        [np.asarray(points, np.float64), np.asarray(uv_left, np.float64),
+         np.asarray(uv_right, np.float64)]))
+
+
+def write_pixel_rows(path, header, ids, rows) -> None:
+    """A ``pixels.csv``: ``header``, then per target its id and ``rows`` (reals with 17
+    significant digits) — a pair's (:data:`PIXELS_HEADER`) and N views'
+    (:func:`synth.products.views_dataset.pixels_header`) alike."""
     with open(path, "w", newline="") as fh:
         writer = csv.writer(fh)
-        writer.writerow(PIXELS_HEADER)
-        for i, p, a, b in zip(ids, points, uv_left, uv_right):
-            writer.writerow([int(i)] + [f"{v:.17g}" for v in (*p, *a, *b)])
+        writer.writerow(header)
+        for i, row in zip(ids, rows):
+            writer.writerow([int(i)] + [f"{v:.17g}" for v in row])
 
 
 def read_pixels_csv(path) -> dict:
     """``{"id": (N,), "points": (N, 3), "left": (N, 2), "right": (N, 2)}`` from ``pixels.csv``."""
+    rows = read_pixel_rows(path, PIXELS_HEADER)
+    return {"id": rows[:, 0].astype(int), "points": rows[:, 1:4], "left": rows[:, 4:6],
+            "right": rows[:, 6:8]}
+
+
+def read_pixel_rows(path, header) -> np.ndarray:
+    """The rows ``(N, len(header))`` of a ``pixels.csv`` whose first line is ``header`` (a
+    byte-order mark before it is read past); DatasetError naming the file for another header,
+    a row of another length, a value that is not a number or a last row cut short."""
     with open(path, newline="", encoding="utf-8-sig") as fh:
         text = fh.read()
     reader = csv.reader(text.splitlines())
-    header = next(reader, None)
-    if header != PIXELS_HEADER:
-        raise DatasetError(f"{path}: header is {header}, expected {PIXELS_HEADER}")
+    found = next(reader, None)
+    if found != header:
+        raise DatasetError(f"{path}: header is {found}, expected {header}")
     values = []
     for line, row in enumerate(reader, start=2):
-        if len(row) != len(PIXELS_HEADER):
+        if len(row) != len(header):
             raise DatasetError(f"{path}: line {line} has {len(row)} values, the header "
-                               f"{len(PIXELS_HEADER)}: truncated or malformed")
-        values.append([float(v) for v in row])
+                               f"{len(header)}: truncated or malformed")
+        try:
+            values.append([float(v) for v in row])
+        except ValueError:
+            raise DatasetError(f"{path}: line {line}: not a number") from None
     if values and not text.endswith("\n"):  # the writer ends every row: cut mid-row
         raise DatasetError(f"{path}: the last line is not complete: truncated")
-    rows = np.array(values, dtype=np.float64).reshape(-1, len(PIXELS_HEADER))
-    return {"id": rows[:, 0].astype(int), "points": rows[:, 1:4], "left": rows[:, 4:6],
-            "right": rows[:, 6:8]}
+    return np.array(values, dtype=np.float64).reshape(-1, len(header))
+
+
+def read_truth_targets(path, manifest: dict, n_pixel_rows: int) -> np.ndarray:
+    """The true target centres ``(T, 3)`` mm of a dataset folder ``path`` (``targets.ply``,
+    whole or refused), checked against the manifest's count and ``pixels.csv``'s rows
+    (``n_pixel_rows``): DatasetError naming the file — a pair's dataset and N views' alike."""
+    from synth.formats.cloudfile import CloudFileError, read_cloud_points
+
+    targets_path = os.path.join(path, "targets.ply")
+    if not os.path.isfile(targets_path):
+        raise DatasetError(f"{targets_path}: no such file")
+    try:  # whole or refused: Open3D reads a truncated PLY as far as it goes
+        targets = read_cloud_points(targets_path)
+    except CloudFileError as exc:
+        raise DatasetError(str(exc)) from None
+    n_targets = manifest["scene"].get("n_targets")
+    for name, count in (("targets.ply", targets.shape[0]), ("pixels.csv", n_pixel_rows)):
+        if n_targets is not None and count != n_targets:
+            raise DatasetError(f"{path}/{name}: {count} targets, but manifest.json says "
+                               f"{n_targets}")
+    if targets.shape[0] != n_pixel_rows:
+        raise DatasetError(f"{path}: targets.ply has {targets.shape[0]} points but pixels.csv "
+                           f"{n_pixel_rows} rows")
+    return targets
 
 
 def image_stats(image: np.ndarray) -> dict:
@@ -551,26 +594,12 @@ def read_dataset(path) -> Dataset:
                        manifest=manifest)
     try:
         pixels = read_pixels_csv(os.path.join(path, "pixels.csv"))
+    except DatasetError:  # it names the file
+        raise
     except (OSError, ValueError) as exc:
         reason = exc.strerror if isinstance(exc, OSError) else exc
         raise DatasetError(f"{path}/pixels.csv: {reason}") from None
-    targets_path = os.path.join(path, "targets.ply")
-    if not os.path.isfile(targets_path):
-        raise DatasetError(f"{targets_path}: no such file")
-    from synth.formats.cloudfile import CloudFileError, read_cloud_points
-
-    try:  # whole or refused: Open3D reads a truncated PLY as far as it goes
-        targets = read_cloud_points(targets_path)
-    except CloudFileError as exc:
-        raise DatasetError(str(exc)) from None
-    n_targets = manifest["scene"].get("n_targets")
-    for name, count in (("targets.ply", targets.shape[0]), ("pixels.csv", pixels["id"].shape[0])):
-        if n_targets is not None and count != n_targets:
-            raise DatasetError(f"{path}/{name}: {count} targets, but manifest.json says "
-                               f"{n_targets}")
-    if targets.shape[0] != pixels["id"].shape[0]:
-        raise DatasetError(f"{path}: targets.ply has {targets.shape[0]} points but pixels.csv "
-                           f"{pixels['id'].shape[0]} rows")
+    targets = read_truth_targets(path, manifest, len(pixels["id"]))
     check_files(path, manifest)  # last: the readers above say more precisely what is wrong
     return Dataset(path=path, left=left, right=right, rig=calib["rig"],
                    has_port=calib["has_port"], targets=targets, ids=pixels["id"],

@@ -40,7 +40,6 @@ naming the file or camera).
 
 from __future__ import annotations
 
-import csv
 import json
 import os
 import re
@@ -57,7 +56,8 @@ from synth.infra.fileio import file_sha256
 from synth.infra.provenance import package_versions
 from synth.products.dataset import (FORMAT_VERSION, DatasetError, adaptive_settings, check_files,
                                     dataset_files, existing_output, image_stats, read_manifest,
-                                    read_png16, request_key, write_manifest, write_targets_ply)
+                                    read_pixel_rows, read_png16, read_truth_targets, request_key,
+                                    write_manifest, write_pixel_rows, write_targets_ply)
 from synth.scene import SceneError, SceneSpec
 
 #: The files of one view inside its folder ``camK/``: kind → name.
@@ -103,37 +103,15 @@ def write_views_pixels_csv(path, names, ids, points, pixels) -> None:
     digits."""
     pixels = np.asarray(pixels, dtype=np.float64)
     rows = np.column_stack([np.asarray(points, np.float64), pixels.reshape(len(points), -1)])
-    with open(path, "w", newline="") as fh:
-        writer = csv.writer(fh)
-        writer.writerow(pixels_header(names))
-        for i, row in zip(ids, rows):
-            writer.writerow([int(i)] + [f"{v:.17g}" for v in row])
+    write_pixel_rows(path, pixels_header(names), ids, rows)
 
 
 def read_views_pixels_csv(path, names) -> dict:
     """``{"id": (T,), "points": (T, 3), "pixels": (T, V, 2)}`` from a ``pixels.csv`` of the
     cameras ``names``; DatasetError (naming the file) for another header or a cut row."""
-    header = pixels_header(names)
     if not os.path.isfile(path):
         raise DatasetError(f"{path}: no such file")
-    with open(path, newline="", encoding="utf-8-sig") as fh:
-        text = fh.read()
-    reader = csv.reader(text.splitlines())
-    found = next(reader, None)
-    if found != header:
-        raise DatasetError(f"{path}: header is {found}, expected {header}")
-    values = []
-    for line, row in enumerate(reader, start=2):
-        if len(row) != len(header):
-            raise DatasetError(f"{path}: line {line} has {len(row)} values, the header "
-                               f"{len(header)}: truncated or malformed")
-        try:
-            values.append([float(v) for v in row])
-        except ValueError:
-            raise DatasetError(f"{path}: line {line}: not a number") from None
-    if values and not text.endswith("\n"):
-        raise DatasetError(f"{path}: the last line is not complete: truncated")
-    rows = np.array(values, dtype=np.float64).reshape(-1, len(header))
+    rows = read_pixel_rows(path, pixels_header(names))
     return {"id": rows[:, 0].astype(int), "points": rows[:, 1:4],
             "pixels": rows[:, 4:].reshape(len(rows), len(names), 2)}
 
@@ -319,7 +297,6 @@ def _check_folders(path: str, names: list) -> None:
 def read_views_dataset(path) -> ViewsDataset:
     """Read a dataset of N cameras written by :func:`write_views_dataset`; DatasetError (one
     line naming the file or camera) for anything missing, inconsistent or changed."""
-    from synth.formats.cloudfile import CloudFileError, read_cloud_points
     from synth.products.rig_file import read_rig_file
 
     path = os.fspath(path)
@@ -348,18 +325,7 @@ def read_views_dataset(path) -> ViewsDataset:
                                f"says {camera.size[0]:g}x{camera.size[1]:g} for {name}")
         images.append(image)
     pixels = read_views_pixels_csv(os.path.join(path, "pixels.csv"), names)
-    targets_path = os.path.join(path, "targets.ply")
-    if not os.path.isfile(targets_path):
-        raise DatasetError(f"{targets_path}: no such file")
-    try:
-        targets = read_cloud_points(targets_path)
-    except CloudFileError as exc:
-        raise DatasetError(str(exc)) from None
-    n_targets = manifest["scene"].get("n_targets")
-    for name, count in (("targets.ply", targets.shape[0]), ("pixels.csv", pixels["id"].shape[0])):
-        if n_targets is not None and count != n_targets:
-            raise DatasetError(f"{path}/{name}: {count} targets, but manifest.json says "
-                               f"{n_targets}")
+    targets = read_truth_targets(path, manifest, len(pixels["id"]))
     check_files(path, manifest)  # last: the readers above say more precisely what is wrong
     return ViewsDataset(path=path, names=tuple(names), images=tuple(images), rig=rig,
                         targets=targets, ids=pixels["id"], pixels=pixels["pixels"],
