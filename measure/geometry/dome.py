@@ -41,6 +41,10 @@ class DomePort(ValueEquality):
     thickness: float
     indices: tuple[float, ...]
 
+    #: The kind, as the scene writer's table of glass per camera names it (a FlatPort's is
+    #: ``"flat"``; the DomePair of two domes is ``"dome"`` too).
+    kind = "dome"
+
     def __init__(self, center, radius, thickness, indices):
         center = np.asarray(as_vector(center, "center"))
         if center.shape != (3,) or not np.all(np.isfinite(center)):
@@ -231,14 +235,6 @@ class DomePair(RigPort, ValueEquality):
         axis = self.depth_axis(left)
         return max(float(axis @ (dome.center - left.center)) + dome.radii[1]
                    for dome in (self.left, self.right))
-
-
-def require_dome_pair(port, message: str) -> DomePair:
-    """``port`` if it is a :class:`DomePair`, else ``ValueError(message)``: the precondition of
-    what is defined on two domes only (their field of view, their spheres in a scene)."""
-    if not isinstance(port, DomePair):
-        raise ValueError(message)
-    return port
 
 
 def _exit_parameter(origins, directions, center, radius):
