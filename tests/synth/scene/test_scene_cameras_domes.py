@@ -89,19 +89,21 @@ def test_mitsuba_sees_each_camera_through_its_own_dome(ring):
 
 @pytest.mark.slow
 def test_eval_run_renders_and_measures_every_camera(ring, tmp_path):
-    """16 spp at 320 px: every target two views see matched, none wrongly; every camera's
-    detections where the Fermat forward model through its own dome puts them."""
+    """64 spp at 320 px: every target two views see matched, none wrongly; every camera's
+    detections where the Fermat forward model through its own dome puts them. (At 16 spp the
+    centroids' noise, ~0.04 px, is ~0.3 mm at 1 m through an unmagnifying dome at f = 144 px,
+    and 12–24 of the 81 tracks' rays miss the 0.5 mm gate: dropped as ambiguous, none wrong.)"""
     from eval.cli import main as eval_main
 
     out = tmp_path / "run"
-    assert eval_main(["run", str(ring), "--out", str(out), "--spp", "16", "--no-progress"]) == 0
+    assert eval_main(["run", str(ring), "--out", str(out), "--spp", "64", "--no-progress"]) == 0
     report = json.loads((out / "report.json").read_text())
     m, c = report["matching"], report["crosscheck"]
     assert report["cameras"] == ["cam0", "cam1", "cam2", "cam3"]
     assert m["wrong"] == 0 and m["visible_in_two_or_more"] > 40
     assert m["visible_in_two_or_more_matched"] == m["visible_in_two_or_more"]
     for name in report["cameras"]:
-        assert c[name]["associated"] > 20 and c[name]["rms_px"] < 0.2, (name, c[name])
+        assert c[name]["associated"] > 40 and c[name]["rms_px"] < 0.05, (name, c[name])
     # at 320 px a target's depth error through the domes is a fraction of a millimetre
     assert report["scores"]["rms_dp_mm"] < 1.0
 
