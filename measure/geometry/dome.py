@@ -88,6 +88,19 @@ class DomePort(ValueEquality):
         values.update(changes)
         return DomePort(**values)
 
+    def difference(self, other, differs, diff, prefix: str = "") -> None:
+        """``other`` − this dome as named entries into ``diff`` (``{prefix}dome_center_mm``,
+        ``…_radius_mm``, ``…_thickness_mm``, ``…_index_k``), those where ``differs(a, b)``."""
+        if differs(other.center, self.center):
+            diff[f"{prefix}dome_center_mm"] = (other.center - self.center).tolist()
+        if differs(other.radius, self.radius):
+            diff[f"{prefix}dome_radius_mm"] = other.radius - self.radius
+        if differs(other.thickness, self.thickness):
+            diff[f"{prefix}dome_thickness_mm"] = other.thickness - self.thickness
+        for k, (x, y) in enumerate(zip(other.indices, self.indices)):
+            if differs(x, y):
+                diff[f"{prefix}dome_index_{k}"] = x - y
+
     def transmittance(self, camera, uv) -> None:
         """Not modelled for a dome (None): its rays cross the glass near normal incidence when
         the camera sits near the centre, so the Fresnel gradient a flat port has is small."""
@@ -175,16 +188,7 @@ class DomePair(RigPort, ValueEquality):
 
     def difference(self, other, differs, diff) -> None:
         for view in ("left", "right"):
-            a, b = getattr(other, view), getattr(self, view)
-            if differs(a.center, b.center):
-                diff[f"{view}_dome_center_mm"] = (a.center - b.center).tolist()
-            if differs(a.radius, b.radius):
-                diff[f"{view}_dome_radius_mm"] = a.radius - b.radius
-            if differs(a.thickness, b.thickness):
-                diff[f"{view}_dome_thickness_mm"] = a.thickness - b.thickness
-            for k, (x, y) in enumerate(zip(a.indices, b.indices)):
-                if differs(x, y):
-                    diff[f"{view}_dome_index_{k}"] = x - y
+            getattr(self, view).difference(getattr(other, view), differs, diff, f"{view}_")
 
     assumable = ("n_water", "n_glass")
     rig_name = "a dome rig"

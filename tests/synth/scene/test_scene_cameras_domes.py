@@ -146,3 +146,60 @@ def test_a_mix_of_flat_ports_and_domes_is_refused_by_the_writer(ring, tmp_path):
     with pytest.raises(ValueError, match="a mix of flat ports and domes is not written"):
         write_scene(tmp_path / "mix.xml", spec.all_cameras, ports, spec.targets,
                     spec.target_radius)
+
+
+def test_a_calibration_file_of_domes_is_rendered_as_it_is(ring, tmp_path):
+    """``synth scene --rig calib.yaml`` of a MultiRig whose cameras are each inside their own
+    dome: the scene's rig is the file's, dome by dome."""
+    from synth.products.rig_file import write_rig_file
+
+    rig = load_scene(ring).multirig
+    calib = tmp_path / "calib.yaml"
+    write_rig_file(calib, rig)
+    out = tmp_path / "again.xml"
+    assert synth_main(["scene", "--rig", str(calib), "--layout", "grid", "--spacing", "150",
+                       "--half-width", "600", "--target-radius", "10", "--out", str(out)]) == 0
+    again = load_scene(out).multirig
+    assert again.names == rig.names
+    for k in range(len(rig)):
+        a, b = rig.view_port(k), again.view_port(k)
+        np.testing.assert_allclose(b.center, a.center, rtol=0, atol=1e-9)
+        assert (b.radius, b.indices) == (a.radius, a.indices)
+        assert b.thickness == pytest.approx(a.thickness, abs=1e-12)
+
+
+def test_rig_differences_name_the_camera_whose_dome_moved(ring):
+    """What ``eval run --from`` compares a dataset's ``calib.yaml`` with: each camera's dome."""
+    from eval.run.multiview import rig_differences
+    from measure.stereo.multirig import MultiRig
+
+    rig = load_scene(ring).multirig
+    assert rig_differences(rig, rig) == []
+    ports = list(rig.ports)
+    ports[2] = ports[2].replace(center=ports[2].center + [0.5, 0.0, 0.0],
+                                indices=(1.0, 1.54, 1.34))
+    moved = MultiRig(rig.cameras, ports, rig.names)
+    assert rig_differences(rig, moved) == ["cam2 dome_center_mm", "cam2 dome_index_2"]
+
+
+@pytest.mark.slow
+def test_a_dataset_of_domes_is_checked_and_measured_from_its_files(tmp_path):
+    """``synth dataset`` of three cameras in domes: ``synth check`` finds every target in every
+    view where the forward model puts it; ``eval run --from`` measures the files."""
+    from eval.cli import main as eval_main
+    from synth.products.crosscheck import check_dataset
+
+    scene = tmp_path / "row.xml"
+    assert synth_main(["scene", "--cameras", "3", "--port", "dome", "--dome-offset", "2", "0",
+                       "0", "--layout", "grid", "--spacing", "150", "--half-width", "600",
+                       "--target-radius", "10", "--size", *map(str, SMALL),
+                       "--out", str(scene)]) == 0
+    data = tmp_path / "ds"
+    assert synth_main(["dataset", str(scene), "--out", str(data), "--spp", "64"]) == 0
+    report = check_dataset(data, rms_px=0.05, max_px=0.15)
+    assert report["views"] == ["cam0", "cam1", "cam2"] and report["passed"], report
+    out = tmp_path / "run"
+    assert eval_main(["run", str(scene), "--from", str(data), "--out", str(out)]) == 0
+    run = json.loads((out / "report.json").read_text())
+    assert run["matching"]["wrong"] == 0 and run["matching"]["visible_in_two_or_more_matched"] \
+        == run["matching"]["visible_in_two_or_more"] == 81
