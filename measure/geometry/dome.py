@@ -88,6 +88,11 @@ class DomePort(ValueEquality):
         values.update(changes)
         return DomePort(**values)
 
+    def depth_axis(self, left) -> np.ndarray:
+        """The axis depths are measured along when the rig's first camera ``left`` sits in
+        this dome: that camera's optical axis (a dome has no normal; as :class:`DomePair`)."""
+        return left.R[:, 2].copy()
+
     def difference(self, other, differs, diff, prefix: str = "") -> None:
         """``other`` − this dome as named entries into ``diff`` (``{prefix}dome_center_mm``,
         ``…_radius_mm``, ``…_thickness_mm``, ``…_index_k``), those where ``differs(a, b)``."""

@@ -203,3 +203,20 @@ def test_a_dataset_of_domes_is_checked_and_measured_from_its_files(tmp_path):
     run = json.loads((out / "report.json").read_text())
     assert run["matching"]["wrong"] == 0 and run["matching"]["visible_in_two_or_more_matched"] \
         == run["matching"]["visible_in_two_or_more"] == 81
+
+
+@pytest.mark.slow
+def test_boards_in_domes_render_and_their_housing_calibration_is_refused(ring, tmp_path, capsys):
+    """``synth boards`` of N cameras in domes renders every camera through its own dome;
+    ``eval calibrate`` of them is one ``error:`` line (the housing of N cameras is flat)."""
+    from eval.cli import main as eval_main
+
+    boards = tmp_path / "boards"
+    assert synth_main(["boards", str(ring), "--out", str(boards), "--poses", "2", "--spp", "4",
+                       "--no-progress"]) == 0
+    assert sorted(p.name for p in boards.glob("cam*_00.png")) == [f"cam{k}_00.png"
+                                                                  for k in range(4)]
+    capsys.readouterr()
+    assert eval_main(["calibrate", str(boards), "--out", str(tmp_path / "cal")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "cam0's port is not flat" in err, err
