@@ -112,7 +112,8 @@ SCENE_BAD = {
     "camera outside its dome": (["--dome-offset", "0", "0", "60"],
                                 "--dome-offset 0 0 60: cam0 centre lies outside its dome"),
     "domes overlap": (["--baseline", "100"], "the cam0 and cam1 domes overlap"),
-    "field of view": (["--dome-offset", "0", "0", "45"], "camera's field of view"),
+    "field of view": (["--dome-offset", "0", "0", "45"],
+                      "the cam1 camera's field of view reaches the cam0 dome"),
     "flat option": (["--port-distance", "90"], "--port-distance"),
     "targets inside a dome": (["--layout", "grid", "--z", "30"], "inside the cam0 dome"),
 }
