@@ -221,3 +221,13 @@ def test_boards_in_domes_render_and_their_housing_calibration_is_refused(ring, t
     assert eval_main(["calibrate", str(boards), "--out", str(tmp_path / "cal")]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "cam0's port is not flat" in err, err
+
+
+@pytest.mark.parametrize("port", ["paper", "per-camera", "none"])
+def test_dome_options_are_refused_without_domes(tmp_path, capsys, port):
+    out = tmp_path / "s.xml"
+    assert synth_main(["scene", "--cameras", "3", "--port", port, "--dome-radius", "40",
+                       "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "--dome-radius" in err and f"--port {port}" in err, err
+    assert not out.exists()
