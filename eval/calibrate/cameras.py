@@ -293,6 +293,7 @@ def _checked_options(args, boards, where):
     if given(args, "lens"):
         raise CLIError("--lens does not apply underwater: the lens model is the in-air "
                        "calibration's (--intrinsics)")
+    _require_flat_truth(boards, where)
     if not args.intrinsics:
         raise CLIError(f"{where}: underwater boards need --intrinsics (the calib.yaml of "
                        f"eval calibrate on in-air boards of the same cameras)")
@@ -303,6 +304,24 @@ def _checked_options(args, boards, where):
                        f"{', '.join(PARAMETERS)}")
     air, air_cov = read_air_rig(args.intrinsics, args.dir, boards.names, boards.size)
     return free, air, air_cov
+
+
+def _require_flat_truth(boards, where) -> None:
+    """CLIError for underwater boards whose truth is not behind flat ports (N cameras each in
+    its own dome, ``synth scene --cameras N --port dome``): the housing of N cameras is one
+    flat port they share or a flat port each."""
+    from measure.geometry.port import require_flat_port
+
+    if boards.truth is None:
+        return
+    try:
+        for name, port in zip(boards.names, boards.truth.ports):
+            if port is not None:
+                require_flat_port(port, f"{name}'s port is not flat; the housing calibration "
+                                        f"of N cameras fits one flat port they share or a "
+                                        f"flat port each (no domes yet)")
+    except ValueError as exc:
+        raise CLIError(f"{where}: {exc}") from None
 
 
 def _calibrate_in_air(args, boards, detections, report, log):

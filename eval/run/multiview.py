@@ -9,8 +9,10 @@ triangulated from all its views with the optical path (:func:`measure.stereo.mul
 triangulate_views`), after the disk targets' eccentricity is removed from every view's centre
 (as the two-camera run does, :func:`correct_views`). Only then is the truth used: each
 detection is associated with the simulator's pixel of a target (the cross-check's mutual
-nearest neighbours), a track is correct when all its detections belong to one target, and the
-points are scored against the targets. The report gives, per target, how many views saw it
+nearest neighbours; the report's ``crosscheck``, per camera and over all, is the two-camera
+run's cross-check of those detections against the simulator), a track is correct when all its
+detections belong to one target, and the points are scored against the targets. The report
+gives, per target, how many views saw it
 (the simulator: wholly inside the image), how many its track joined, and its error; the RMS
 error against the number of views k; and, from the same detections, the first two cameras
 measured as a stereo pair (the two-camera run's optical path) for comparison.
@@ -195,7 +197,6 @@ def _rms(values) -> float | None:
 def measure(config: RunConfig, log) -> tuple[dict, dict]:
     """The run (module docs): ``(report, arrays)``."""
     from measure.stereo.multimatch import match_views
-    from synth.products.crosscheck import ASSOCIATION_GATE_PX, associate_detections
 
     from eval.core.results import ErrorStats
     from eval.run.inputs import load_run_scene
@@ -225,8 +226,7 @@ def measure(config: RunConfig, log) -> tuple[dict, dict]:
     result = _triangulate(config, rig, tracks.pixels(centers), spec.target_radius)
     timings["triangulate"] = time.perf_counter() - t
     # the truth, for scoring only
-    truth_of = [associate_detections(raw[k], simulated[k], ASSOCIATION_GATE_PX)[0]
-                for k in range(len(names))]
+    truth_of, crosscheck = _crosscheck(spec, raw, simulated)
     scored = _scored_tracks(tracks, truth_of, result, spec.targets)
     ok, errors, target, k_views = scored["ok"], scored["errors"], scored["target"], tracks.views_per_track
     by_k = {}
@@ -249,7 +249,7 @@ def measure(config: RunConfig, log) -> tuple[dict, dict]:
         "seed": seed, "noise_px": config.noise_px,
         "eccentricity": bool(config.corrects_eccentricity),
         "detections": {name: int(len(c)) for name, c in zip(names, centers)},
-        "matching": matching,
+        "matching": matching, "crosscheck": crosscheck,
         "scores": {"n": stats.n, "rms_dp_mm": rms, "stats": stats.to_json(), "by_views": by_k},
         "stereo_pair": pair_report,
         "ratio_to_pair": (rms / pair_report["rms_dp_mm"] if pair_report and rms
@@ -281,6 +281,35 @@ def _simulated_views(spec) -> tuple[list, np.ndarray]:
         simulated.append(uv)
         inside.append(wholly)
     return simulated, np.sum(inside, axis=0)
+
+
+def _crosscheck(spec, raw, simulated) -> tuple[list, dict]:
+    """``(truth_of, crosscheck)``: per view the target of each detection (−1 none) and the
+    two-camera run's cross-check for every camera (:func:`synth.products.crosscheck.
+    crosscheck_view`: ``associated``, ``rms_px``, ``max_px`` against the simulator's pixel of
+    the target's centre, ``rms_px_outline``, ``max_px_outline`` against its outline's
+    centroid), then over all cameras."""
+    from synth.products.crosscheck import crosscheck_view, distance_stats
+
+    rig = spec.multirig
+    targets = (spec.targets, spec.target_normals, spec.target_radius)
+    truth_of, crosscheck, distances, outline = [], {}, [], []
+    for k, name in enumerate(spec.camera_names):
+        index, d, d_outline = crosscheck_view(rig.cameras[k], rig.view_port(k), targets, raw[k],
+                                              simulated[k])
+        truth_of.append(index)
+        distances.append(d)
+        outline.append(d_outline)
+        stats, stats_outline = distance_stats(d), distance_stats(d_outline)
+        crosscheck[name] = {"associated": stats["n"], "rms_px": stats["rms_px"],
+                            "max_px": stats["max_px"], "rms_px_outline": stats_outline["rms_px"],
+                            "max_px_outline": stats_outline["max_px"]}
+    every, every_outline = distance_stats(np.concatenate(distances)), distance_stats(
+        np.concatenate(outline))
+    crosscheck.update({"rms_px": every["rms_px"], "max_px": every["max_px"],
+                       "rms_px_outline": every_outline["rms_px"],
+                       "max_px_outline": every_outline["max_px"]})
+    return truth_of, crosscheck
 
 
 def _views(config, spec, log) -> tuple[list, dict]:
@@ -411,6 +440,16 @@ def report_markdown(report: dict) -> str:
     for k, row in s["by_views"].items():
         lines.append(f"| {k} | {row['tracks']} | {mm(row['rms_dp_mm'])} |")
     lines.append(f"| all | {s['n']} | {mm(s['rms_dp_mm'])} |")
+    c = report.get("crosscheck")
+    if c:
+        lines += ["", "| camera | detections associated | cross-check RMS / max (px) | "
+                      "outline RMS / max (px) |", "|---|---|---|---|"]
+        for name in report["cameras"]:
+            r = c[name]
+            lines.append(f"| {name} | {r['associated']} | {r['rms_px']:.4f} / {r['max_px']:.4f} "
+                         f"| {r['rms_px_outline']:.4f} / {r['max_px_outline']:.4f} |")
+        lines.append(f"| all | | {c['rms_px']:.4f} / {c['max_px']:.4f} | "
+                     f"{c['rms_px_outline']:.4f} / {c['max_px_outline']:.4f} |")
     pair = report.get("stereo_pair")
     if pair:
         lines += ["", f"Stereo pair {pair['cameras'][0]}–{pair['cameras'][1]} from the same "
@@ -454,7 +493,7 @@ def main(config: RunConfig, out: str, print_json: bool, log) -> int:
           f"{m['visible_in_two_or_more']} targets visible in two or more views, "
           f"{m['visible_in_two_or_more_matched']} matched ({m['correct']} tracks correct, "
           f"{m['wrong']} wrong, {m['conflicts_dropped']} dropped), {m['seen_once']} seen once; "
-          f"RMS dP {s['rms_dp_mm']:.4f} mm"
+          f"cross-check RMS {report['crosscheck']['rms_px']:.4f} px; RMS dP {s['rms_dp_mm']:.4f} mm"
           + (f" (stereo pair {pair['cameras'][0]}-{pair['cameras'][1]}: "
              f"{pair['rms_dp_mm']:.4f} mm, ratio {report['ratio_to_pair']:.3f})"
              if pair.get("rms_dp_mm") and report.get("ratio_to_pair") else "")

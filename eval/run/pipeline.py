@@ -17,9 +17,9 @@ import numpy as np
 from measure import triangulate
 from measure.images.detect import (FLOOR_FRACTION, MERGE_AREA_RATIO as DEFAULT_MAX_AREA_RATIO,
                             MERGE_ELONGATION as DEFAULT_MAX_ELONGATION)
-from measure.images.eccentricity import correct_eccentricity, outline_centroid_offsets
+from measure.images.eccentricity import correct_eccentricity
 from measure.stereo.matching import match_targets
-from synth.products.crosscheck import ASSOCIATION_GATE_PX, associate_detections, distance_stats
+from synth.products.crosscheck import ASSOCIATION_GATE_PX, crosscheck_view, distance_stats
 from synth.rendering.noise import add_pixel_noise
 
 from eval.core.detection import detect_view
@@ -175,14 +175,10 @@ def crosscheck_stage(inputs: RunInputs, detections):
         simulated[name], inside[name] = visible_targets(camera, port, inputs.targets,
                                                         inputs.target_radius)
         centers = np.asarray(detections[name].centers).reshape(-1, 2)
-        index, distance = associate_detections(centers, simulated[name], ASSOCIATION_GATE_PX)
+        index, d, d_outline = crosscheck_view(camera, port, (inputs.targets, normals,
+                                                              inputs.target_radius),
+                                              centers, simulated[name])
         truth_of[name] = index
-        found = index >= 0
-        d = distance[found]
-        offsets = outline_centroid_offsets(camera, port, inputs.targets[index[found]],
-                                           np.broadcast_to(normals, inputs.targets.shape)[index[found]],
-                                           inputs.target_radius)
-        d_outline = np.linalg.norm(centers[found] - simulated[name][index[found]] - offsets, axis=1)
         distances.append(d)
         outline_distances.append(d_outline)
         stats, outline = distance_stats(d), distance_stats(d_outline)

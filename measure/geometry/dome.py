@@ -41,6 +41,10 @@ class DomePort(ValueEquality):
     thickness: float
     indices: tuple[float, ...]
 
+    #: The kind, as the scene writer's table of glass per camera names it (a FlatPort's is
+    #: ``"flat"``; the DomePair of two domes is ``"dome"`` too).
+    kind = "dome"
+
     def __init__(self, center, radius, thickness, indices):
         center = np.asarray(as_vector(center, "center"))
         if center.shape != (3,) or not np.all(np.isfinite(center)):
@@ -88,6 +92,24 @@ class DomePort(ValueEquality):
                       indices=self.indices)
         values.update(changes)
         return DomePort(**values)
+
+    def depth_axis(self, left) -> np.ndarray:
+        """The axis depths are measured along when the rig's first camera ``left`` sits in
+        this dome: that camera's optical axis (a dome has no normal; as :class:`DomePair`)."""
+        return left.R[:, 2].copy()
+
+    def difference(self, other, differs, diff, prefix: str = "") -> None:
+        """``other`` − this dome as named entries into ``diff`` (``{prefix}dome_center_mm``,
+        ``…_radius_mm``, ``…_thickness_mm``, ``…_index_k``), those where ``differs(a, b)``."""
+        if differs(other.center, self.center):
+            diff[f"{prefix}dome_center_mm"] = (other.center - self.center).tolist()
+        if differs(other.radius, self.radius):
+            diff[f"{prefix}dome_radius_mm"] = other.radius - self.radius
+        if differs(other.thickness, self.thickness):
+            diff[f"{prefix}dome_thickness_mm"] = other.thickness - self.thickness
+        for k, (x, y) in enumerate(zip(other.indices, self.indices)):
+            if differs(x, y):
+                diff[f"{prefix}dome_index_{k}"] = x - y
 
     def transmittance(self, camera, uv) -> None:
         """Not modelled for a dome (None): its rays cross the glass near normal incidence when
@@ -176,16 +198,7 @@ class DomePair(RigPort, ValueEquality):
 
     def difference(self, other, differs, diff) -> None:
         for view in ("left", "right"):
-            a, b = getattr(other, view), getattr(self, view)
-            if differs(a.center, b.center):
-                diff[f"{view}_dome_center_mm"] = (a.center - b.center).tolist()
-            if differs(a.radius, b.radius):
-                diff[f"{view}_dome_radius_mm"] = a.radius - b.radius
-            if differs(a.thickness, b.thickness):
-                diff[f"{view}_dome_thickness_mm"] = a.thickness - b.thickness
-            for k, (x, y) in enumerate(zip(a.indices, b.indices)):
-                if differs(x, y):
-                    diff[f"{view}_dome_index_{k}"] = x - y
+            getattr(self, view).difference(getattr(other, view), differs, diff, f"{view}_")
 
     assumable = ("n_water", "n_glass")
     rig_name = "a dome rig"
@@ -236,14 +249,6 @@ class DomePair(RigPort, ValueEquality):
         axis = self.depth_axis(left)
         return max(float(axis @ (dome.center - left.center)) + dome.radii[1]
                    for dome in (self.left, self.right))
-
-
-def require_dome_pair(port, message: str) -> DomePair:
-    """``port`` if it is a :class:`DomePair`, else ``ValueError(message)``: the precondition of
-    what is defined on two domes only (their field of view, their spheres in a scene)."""
-    if not isinstance(port, DomePair):
-        raise ValueError(message)
-    return port
 
 
 def _exit_parameter(origins, directions, center, radius):

@@ -129,7 +129,7 @@ def _add_port_options(p) -> None:
                    help="--port dome: glass thickness of each dome, mm (default 8)")
     p.add_argument("--dome-offset", type=any_float, nargs=3, metavar=("X", "Y", "Z"),
                    help="--port dome: the dome centre relative to each camera's centre, mm, in "
-                        "that camera's frame (the same for both cameras; default 0 0 0: centred)")
+                        "that camera's frame (the same for every camera; default 0 0 0: centred)")
     p.add_argument("--n-water", type=water_index_argument,
                    help=f"{WATER_INDEX_HELP}; default 1.33")
     p.add_argument("--n-glass", type=positive_float, help="glass index (default 1.54)")
@@ -166,7 +166,8 @@ def _add_rig_options(p) -> None:
                    help="how many cameras (default 2: left, right): a row of N, --baseline "
                         "apart along x, camera k turned k × --toe-in about y towards the "
                         "targets, all behind the one flat port (--port paper), each behind its own "
-                        "(--port per-camera) or none; their sensors are cam0, cam1, …")
+                        "(--port per-camera), each inside its own dome (--port dome) or none; "
+                        "their sensors are cam0, cam1, …")
     p.add_argument("--arrangement", choices=("row", "ring"), default=None,
                    help="--cameras N: row (default: a row along x, --baseline apart) or ring "
                         "(cam0 in the centre, the others evenly on a circle of radius "
@@ -490,10 +491,6 @@ def _refuse_inapplicable(args) -> None:
             raise CLIError("--lighting lit does not apply to --port per-camera (scenes of a "
                            "housing per camera hold LED targets)")
     if args.cameras != 2:
-        if args.port not in ("paper", "per-camera", "none"):
-            raise CLIError(f"--cameras {args.cameras}: the cameras share one flat port "
-                           f"(--port paper), have one each (--port per-camera) or none "
-                           f"(--port none), not --port {args.port}")
         if layout == "surface":
             raise CLIError(f"--layout surface does not apply to --cameras {args.cameras} "
                            f"(scenes of more cameras hold disk targets)")
@@ -522,8 +519,11 @@ PORT_WORDS = {"paper": "port", "per-camera": "two ports", "dome": "two domes", "
 
 
 def _port_words(kind: str, cameras: int) -> str:
-    """:data:`PORT_WORDS` for a rig of ``cameras`` (``4 ports`` for four housings)."""
-    return f"{cameras} ports" if kind == "per-camera" and cameras != 2 else PORT_WORDS[kind]
+    """:data:`PORT_WORDS` for a rig of ``cameras`` (``4 ports`` for four housings, ``4 domes``
+    for four cameras in domes)."""
+    if cameras != 2 and kind in ("per-camera", "dome"):
+        return f"{cameras} {'ports' if kind == 'per-camera' else 'domes'}"
+    return PORT_WORDS[kind]
 #: Most targets a scene may hold (its XML grows by ~400 bytes per target).
 MAX_TARGETS = 100_000
 

@@ -27,14 +27,15 @@ def cameras_from_options(args, size, focal: float, baseline: float, toe_in: floa
 def port_from_options(args, cameras) -> tuple:
     """``(port, comment)`` of the port options for ``cameras``: ``--port paper`` one flat port
     (:func:`flat_port`), ``per-camera`` a flat port each (:func:`own_ports`; its numbers are the
-    comment), ``dome`` a dome each (:func:`dome_port`), ``none`` None; the comment is empty but
+    comment), ``dome`` a dome each (:func:`dome_port`: a DomePair of two cameras, a list of N
+    domes of more), ``none`` None; the comment is empty but
     for ``per-camera``."""
     if args.port == "paper":
         return flat_port(args), ""
     if args.port == "per-camera":
         return own_ports(args, cameras)
     if args.port == "dome":
-        return dome_port(args, cameras[0], cameras[1]), ""
+        return dome_port(args, cameras), ""
     return None, ""
 
 
@@ -104,35 +105,49 @@ def rig_from_file(args):
         port, kind = None, "none"
     elif all(p == rig.ports[0] for p in rig.ports):
         port, kind = rig.ports[0], "paper"
-    else:  # a window per camera: each port must be flat (a precondition, no other path)
-        from measure.geometry.port import require_flat_port
-
-        from synth.scene.windows import check_windows, fit_windows
-
-        try:
-            for name, each in zip(rig.names, rig.ports):
-                require_flat_port(each, f"{len(rig.cameras)} cameras with ports of their own, "
-                                        f"{name}'s not flat; a scene of more than two cameras has "
-                                        f"them behind one flat port, a flat port each, or none")
-            check_windows(rig, fit_windows(rig))
-        except ValueError as exc:
-            raise CLIError(f"--rig {args.rig}: {exc}") from None
-        port, kind = list(rig.ports), "per-camera"
+    else:  # a port per camera: a dome each, or a window each (then each port must be flat)
+        port, kind = list(rig.ports), _own_ports_kind(args, rig)
     args.port, args.cameras = kind, len(rig.cameras)
     return list(rig.cameras), port
 
 
 
-def dome_port(args, left, right):
-    """The DomePair of ``--port dome``: ``--dome-radius``, ``--dome-thickness``,
-    ``--dome-offset`` (in each camera's frame), the glass index ``--n-glass`` and the water's
-    ``--n-water``; CLIError for a camera outside its dome or a field of view that does not fit
-    through the domes."""
+def _own_ports_kind(args, rig) -> str:
+    """``dome`` for a rig file of N cameras each inside its own dome, ``per-camera`` for one
+    of N cameras each behind its own flat port; CLIError for a field of view that does not
+    fit, or ports that are neither all domes nor all flat."""
+    from measure.geometry.port import require_flat_port
+
+    from synth.scene.dome import check_field_of_view
+    from synth.scene.windows import check_windows, fit_windows
+
+    domes = {getattr(p, "kind", None) for p in rig.ports} == {"dome"}
+    try:
+        if domes:
+            check_field_of_view(rig)
+            return "dome"
+        for name, each in zip(rig.names, rig.ports):
+            require_flat_port(each, f"{len(rig.cameras)} cameras with ports of their own, "
+                                    f"{name}'s not flat; a scene of more than two cameras has "
+                                    f"them behind one flat port, a flat port each, a dome each "
+                                    f"or none")
+        check_windows(rig, fit_windows(rig))
+    except ValueError as exc:
+        raise CLIError(f"--rig {args.rig}: {exc}") from None
+    return "per-camera"
+
+
+def dome_port(args, cameras):
+    """The domes of ``--port dome``: ``--dome-radius``, ``--dome-thickness``, ``--dome-offset``
+    (in each camera's frame), the glass index ``--n-glass`` and the water's ``--n-water``; a
+    DomePair of two cameras, a list of one DomePort per camera of more. CLIError for a camera
+    outside its dome or a field of view that does not fit through the domes."""
     from measure import StereoRig
+    from measure.stereo.multirig import MultiRig
 
     from synth.infra.cli import option_number
     from synth.scene.dome import (DEFAULT_DOME_RADIUS_MM, DEFAULT_DOME_THICKNESS_MM,
-                                  check_dome_size, check_field_of_view, dome_pair)
+                                  camera_domes, check_dome_size, check_field_of_view, dome_pair)
 
     n = port_indices(args)
     radius = args.dome_radius if args.dome_radius is not None else DEFAULT_DOME_RADIUS_MM
@@ -145,14 +160,18 @@ def dome_port(args, left, right):
         raise CLIError(f"--dome-radius {option_number(radius)} --dome-thickness "
                        f"{option_number(thickness)}: {exc}") from None
     try:
-        pair = dome_pair((left, right), radius, thickness, offset, tuple(n))
+        if len(cameras) == 2:
+            port = dome_pair(cameras, radius, thickness, offset, tuple(n))
+        else:
+            port = camera_domes(cameras, radius, thickness, offset, tuple(n))
     except ValueError as exc:
         raise CLIError(f"--dome-offset {' '.join(f'{v:g}' for v in offset)}: {exc}") from None
     try:
-        check_field_of_view(StereoRig(left, right, pair))
+        check_field_of_view(StereoRig(*cameras, port) if len(cameras) == 2
+                            else MultiRig(cameras, port))
     except ValueError as exc:
         raise CLIError(f"--dome-radius {radius:g} --dome-thickness {thickness:g}: {exc}") from None
-    return pair
+    return port
 
 
 def one_value(values, option: str):
@@ -227,10 +246,11 @@ def comma_text(values) -> str:
     return ",".join(f"{v:g}" for v in values)
 
 
-def dome_comment(pair, left) -> str:
+def dome_comment(port, left) -> str:
     """The dome's numbers for the scene file's first comment (the offset in the left camera's
-    frame)."""
-    dome = pair.left
+    frame): ``port`` a DomePair or a list of one DomePort per camera (the first is
+    ``left``'s)."""
+    dome = port[0]
     offset = left.R.T @ (dome.center - left.center)
     return (f" radius {dome.radius:g} mm thickness {dome.thickness:g} mm offset "
             f"{offset[0]:g} {offset[1]:g} {offset[2]:g} mm")

@@ -58,6 +58,25 @@ def wholly_in_image(camera: Camera, uv, points, radius_mm: float) -> np.ndarray:
     return camera.in_image(uv, target_image_margin_px(camera, points, radius_mm))
 
 
+def crosscheck_view(camera, port, targets, centers, simulated):
+    """One view's cross-check: ``(index, distances, outline distances)`` — the target of each
+    detected centre ``centers`` ``(M, 2)`` px (−1 none: mutual nearest neighbours of the
+    simulator's pixels ``simulated`` within :data:`ASSOCIATION_GATE_PX`), and for the
+    associated ones their distance (px) to the simulator's pixel of the target's centre and to
+    the area centroid of the image of its outline. ``targets`` ``(centres (N, 3) mm, normals
+    (N, 3) or one (3,), radius mm)``."""
+    from measure.images.eccentricity import outline_centroid_offsets
+
+    points, normals, radius = targets
+    index, distance = associate_detections(centers, simulated, ASSOCIATION_GATE_PX)
+    found = index >= 0
+    offsets = outline_centroid_offsets(camera, port, points[index[found]],
+                                       np.broadcast_to(normals, points.shape)[index[found]],
+                                       radius)
+    d_outline = np.linalg.norm(centers[found] - simulated[index[found]] - offsets, axis=1)
+    return index, distance[found], d_outline
+
+
 def distance_stats(distances) -> dict:
     """``{"n", "rms_px", "max_px"}`` of distances in px (NaN when there are none)."""
     d = np.asarray(distances, float).ravel()
@@ -67,7 +86,7 @@ def distance_stats(distances) -> dict:
 
 
 __all__ = ["ASSOCIATION_GATE_PX", "CHECK_MAX_PX", "CHECK_RMS_PX", "associate_detections",
-           "check_dataset", "check_view", "distance_stats",
+           "check_dataset", "check_view", "crosscheck_view", "distance_stats",
            "target_image_margin_px", "wholly_in_image"]
 
 

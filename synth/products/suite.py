@@ -153,8 +153,9 @@ def _is_surface(scene) -> bool:
 
 
 def _is_dome(scene) -> bool:
-    """Whether a scene file puts each camera inside a dome (``synth scene --port dome``)."""
-    return b"dome_left_inner" in scene.data
+    """Whether a scene file puts each camera inside a dome (``synth scene --port dome``; of N
+    cameras ``dome_cam0_inner``, …)."""
+    return b'id="dome_left_inner"' in scene.data or b'id="dome_cam0_inner"' in scene.data
 
 
 def _read_sources(data: dict, base_dir: str, label: str) -> dict:

@@ -1,8 +1,11 @@
-"""Dome ports in scene files: the rig's two domes, the check that the fields of view fit through
-them, and the Mitsuba spheres that model them.
+"""Dome ports in scene files: a dome around each camera of a rig (two: a
+:class:`measure.geometry.dome.DomePair`; N > 2: a list of :class:`measure.geometry.dome.DomePort`,
+one per camera), the check that the fields of view fit through them, and the Mitsuba spheres
+that model them.
 
-Units mm, reference frame = the left camera's (OpenCV axes). A dome scene holds, per camera
-(``left``, ``right``), two concentric Mitsuba ``sphere`` shapes (analytic spheres, not meshes)
+Units mm, reference frame = the left (first) camera's (OpenCV axes). A dome scene holds, per
+camera (``left``, ``right``; of N > 2 cameras ``cam0``, ``cam1``, …), two concentric Mitsuba
+``sphere`` shapes (analytic spheres, not meshes)
 with ``dielectric`` BSDFs: ``dome_<camera>_inner`` (radius ``R``) and ``dome_<camera>_outer``
 (radius ``R + T``). A Mitsuba sphere's normal points outwards and a ``dielectric``'s exterior
 (``ext_ior``) is on the normal side, so with no ``flip_normals``: inner sphere ``int_ior`` = the
@@ -17,7 +20,8 @@ from __future__ import annotations
 import numpy as np
 
 from measure import StereoRig
-from measure.geometry.dome import DomePair, DomePort, require_dome_pair, trace_through_dome
+from measure.geometry.dome import DomePair, DomePort, trace_through_dome
+from measure.stereo.multirig import MultiRig, default_names
 from synth.infra.cli import option_number
 
 #: Defaults of ``synth scene --port dome``: inner radius and glass thickness, mm. With the
@@ -51,43 +55,80 @@ def check_dome_size(radius: float, thickness: float) -> None:
                          f"{MIN_DOME_THICKNESS_MM:g} mm (the glass of a dome port is mm thick)")
 
 
-def dome_pair(cameras, radius: float, thickness: float, offset, indices) -> DomePair:
-    """The two domes of a rig: each camera inside its own dome whose centre is ``offset`` (mm,
-    in that camera's frame) from the camera's centre — the same offset for both cameras;
-    ``indices`` ``(n_air, n_glass, n_water)``. Raises ``ValueError`` for a radius or thickness
-    that is not positive, or a camera outside its dome."""
+def camera_domes(cameras, radius: float, thickness: float, offset, indices) -> list:
+    """A dome around each camera: its centre ``offset`` (mm, in that camera's frame) from the
+    camera's centre — the same offset for every camera; ``indices`` ``(n_air, n_glass,
+    n_water)``. Raises ``ValueError`` for a radius or thickness below the minimum, a camera
+    outside its own dome or inside another's glass (:class:`measure.stereo.multirig.MultiRig`;
+    two cameras: :func:`dome_pair`)."""
     check_dome_size(radius, thickness)
     offset = np.asarray(offset, dtype=np.float64).reshape(3)
     domes = [DomePort(cam.center + cam.R @ offset, radius, thickness, indices) for cam in cameras]
-    pair = DomePair(*domes)
+    if len(domes) > 2:
+        MultiRig(cameras, domes)  # each camera inside its dome, none in another's glass
+    return domes
+
+
+def dome_pair(cameras, radius: float, thickness: float, offset, indices) -> DomePair:
+    """The two domes of a rig (:func:`camera_domes` of its two cameras) as a DomePair. Raises
+    ``ValueError`` for a radius or thickness that is not positive, or a camera outside its
+    dome."""
+    pair = DomePair(*camera_domes(cameras[:2], radius, thickness, offset, indices))
     StereoRig(cameras[0], cameras[1], pair)  # each camera inside its dome
     return pair
 
 
-def check_field_of_view(rig: StereoRig, step_px: int = FOV_CHECK_STEP_PX) -> None:
-    """Raise ``ValueError`` unless each camera's whole field of view fits through its own dome
-    and misses the other camera's dome.
+def named_domes(port) -> list:
+    """``[(camera name, DomePort), …]`` of a DomePair (``left``, ``right``) or of a list of one
+    DomePort per camera (``cam0``, ``cam1``, …; :func:`measure.stereo.multirig.default_names`)."""
+    if isinstance(port, (list, tuple)):
+        return list(zip(default_names(len(port)), port))
+    return list(zip(CAMERA_NAMES, (port.left, port.right)))
 
-    The rays of a grid of pixels (every ``step_px`` and the image border) are traced through
-    the camera's dome (:func:`measure.geometry.dome.trace_through_dome`); each must reach the water (no
-    total internal reflection) and its water ray must not meet the other dome's outer sphere.
-    The two domes must not overlap.
+
+def rig_domes(rig) -> list:
+    """``[(camera name, DomePort), …]`` of a rig whose cameras are each inside their own dome:
+    a StereoRig with a DomePair or a MultiRig of DomePorts; ``ValueError`` for any other."""
+    names = getattr(rig, "names", CAMERA_NAMES)
+    domes = [rig.view_port(k) for k in range(len(rig.cameras))]
+    if any(getattr(d, "kind", None) != "dome" for d in domes):
+        raise ValueError("check_field_of_view needs a rig of cameras each inside its own dome")
+    return list(zip(names, domes))
+
+
+def _overlap_text(names, i: int, j: int) -> str:
+    return "the two domes" if len(names) == 2 else f"the {names[i]} and {names[j]} domes"
+
+
+def check_field_of_view(rig, step_px: int = FOV_CHECK_STEP_PX) -> None:
+    """Raise ``ValueError`` unless each camera's whole field of view fits through its own dome
+    and misses every other camera's dome.
+
+    ``rig``: a StereoRig with a DomePair, or a MultiRig of one DomePort per camera. The rays of
+    a grid of pixels (every ``step_px`` and the image border) are traced through the camera's
+    dome (:func:`measure.geometry.dome.trace_through_dome`); each must reach the water (no
+    total internal reflection) and its water ray must not meet another dome's outer sphere.
+    No two domes may overlap.
     """
-    require_dome_pair(rig.port, "check_field_of_view needs a rig with a DomePair")
-    left, right = rig.port.left, rig.port.right
-    gap = np.linalg.norm(left.center - right.center) - left.radii[1] - right.radii[1]
-    if gap <= 0:
-        raise ValueError(f"the two domes overlap (their outer spheres are "
-                         f"{-gap:.6g} mm into each other): move the cameras apart or make the "
-                         f"domes smaller")
+    named = rig_domes(rig)
+    names = [name for name, _ in named]
+    domes = [dome for _, dome in named]
+    for i in range(len(domes)):
+        for j in range(i + 1, len(domes)):
+            gap = (np.linalg.norm(domes[i].center - domes[j].center) - domes[i].radii[1]
+                   - domes[j].radii[1])
+            if gap <= 0:
+                raise ValueError(f"{_overlap_text(names, i, j)} overlap (their outer spheres are "
+                                 f"{-gap:.6g} mm into each other): move the cameras apart or "
+                                 f"make the domes smaller")
     for view, camera in enumerate(rig.cameras):
-        name, other_name = CAMERA_NAMES[view], CAMERA_NAMES[1 - view]
+        name = names[view]
         w, h = camera.size
         # pixel centres every step_px and the image's outer edges (OpenCV: [-0.5, W - 0.5])
         u, v = np.meshgrid(np.r_[-0.5, np.arange(0, w, step_px), w - 0.5],
                            np.r_[-0.5, np.arange(0, h, step_px), h - 0.5])
         uv = np.column_stack([u.ravel(), v.ravel()])
-        water = trace_through_dome(camera.center, camera.rays(uv), rig.view_port(view),
+        water = trace_through_dome(camera.center, camera.rays(uv), domes[view],
                                    keep_interface_points=False)
         lost = ~np.all(np.isfinite(water.directions), axis=1)
         if lost.any():
@@ -95,14 +136,17 @@ def check_field_of_view(rig: StereoRig, step_px: int = FOV_CHECK_STEP_PX) -> Non
             raise ValueError(f"the {name} camera's field of view does not fit through its dome "
                              f"(the ray of pixel ({worst[0]:g}, {worst[1]:g}) does not reach "
                              f"the water)")
-        other = rig.view_port(1 - view)
-        hits = _ray_meets_sphere(water.origins, water.directions, other.center, other.radii[1])
-        if hits.any():
-            worst = uv[np.flatnonzero(hits)[0]]
-            raise ValueError(f"the {name} camera's field of view reaches the {other_name} dome "
-                             f"(the ray of pixel ({worst[0]:g}, {worst[1]:g})): the field of "
-                             f"view does not fit past it; move the cameras apart or make the "
-                             f"domes smaller")
+        for other_view, other in enumerate(domes):
+            if other_view == view:
+                continue
+            hits = _ray_meets_sphere(water.origins, water.directions, other.center,
+                                     other.radii[1])
+            if hits.any():
+                worst = uv[np.flatnonzero(hits)[0]]
+                raise ValueError(f"the {name} camera's field of view reaches the "
+                                 f"{names[other_view]} dome (the ray of pixel ({worst[0]:g}, "
+                                 f"{worst[1]:g})): the field of view does not fit past it; move "
+                                 f"the cameras apart or make the domes smaller")
 
 
 def _ray_meets_sphere(origins, directions, center, radius) -> np.ndarray:
@@ -116,12 +160,12 @@ def _ray_meets_sphere(origins, directions, center, radius) -> np.ndarray:
     return (disc >= 0) & (far > 0)
 
 
-def check_targets(pair: DomePair, targets, target_radius: float) -> None:
+def check_targets(port, targets, target_radius: float) -> None:
     """Raise ``ValueError`` unless every target ``(N, 3)`` (mm) lies in the water, at least its
-    radius outside both domes' outer spheres (a target inside a dome or in its glass is
-    refused)."""
+    radius outside every dome's outer sphere (a target inside a dome or in its glass is
+    refused); ``port`` a DomePair or a list of one DomePort per camera."""
     targets = np.asarray(targets, dtype=np.float64).reshape(-1, 3)
-    for name, dome in zip(CAMERA_NAMES, (pair.left, pair.right)):
+    for name, dome in named_domes(port):
         distance = np.linalg.norm(targets - dome.center, axis=1)
         inside = distance <= dome.radii[1]
         if inside.any():
@@ -133,17 +177,19 @@ def check_targets(pair: DomePair, targets, target_radius: float) -> None:
             raise ValueError(f"targets closer to the {name} dome than their radius")
 
 
-def facing_cameras(rig: StereoRig, targets, normals) -> np.ndarray:
+def facing_cameras(cameras, targets, normals) -> np.ndarray:
     """Whether each target's normal ``(N, 3)`` points back towards the cameras (negative dot
-    product with the direction from the midpoint of the two camera centres to the target)."""
-    middle = 0.5 * (rig.left.center + rig.right.center)
+    product with the direction from the mean of the camera centres — of two cameras their
+    midpoint — to the target)."""
+    middle = np.mean([camera.center for camera in cameras], axis=0)
     return np.einsum("ij,ij->i", np.asarray(normals, float), np.asarray(targets, float) - middle) < 0
 
 
-def dome_placements(pair: DomePair):
-    """Per sphere, left dome first, inner sphere first: ``(shape id, centre, radius, ext_ior,
+def dome_placements(port):
+    """Per sphere of a DomePair or a list of one DomePort per camera (:func:`named_domes`),
+    first camera's dome first, inner sphere first: ``(shape id, centre, radius, ext_ior,
     int_ior)``; the outer sphere's ``ext_ior`` is the water's index."""
-    for camera, dome in zip(CAMERA_NAMES, (pair.left, pair.right)):
+    for camera, dome in named_domes(port):
         n_air, n_glass, n_water = dome.indices
         yield DOME_ID.format(camera=camera, sphere="inner"), dome.center, dome.radii[0], \
             n_glass, n_air
@@ -152,17 +198,23 @@ def dome_placements(pair: DomePair):
 
 
 def pair_from_spheres(spheres: dict) -> DomePair:
-    """The DomePair of a scene's spheres: ``{shape id: (centre, radius, ext_ior, int_ior)}`` with
-    the four ids of :data:`DOME_ID`. Raises ``ValueError`` naming what does not fit (a missing
-    sphere, spheres that are not concentric, an outer sphere not larger than the inner one,
-    indices that do not chain air → glass → water, different water on the two domes)."""
+    """The DomePair of a scene's spheres (:func:`domes_from_spheres` of ``left``, ``right``)."""
+    return DomePair(*domes_from_spheres(spheres, CAMERA_NAMES))
+
+
+def domes_from_spheres(spheres: dict, names) -> list:
+    """The domes of cameras ``names`` (in order) from a scene's spheres: ``{shape id: (centre,
+    radius, ext_ior, int_ior)}`` with the two ids of :data:`DOME_ID` per camera. Raises
+    ``ValueError`` naming what does not fit (a missing sphere, spheres that are not concentric,
+    an outer sphere not larger than the inner one, indices that do not chain air → glass →
+    water, domes in different water)."""
     domes = []
-    known = [DOME_ID.format(camera=c, sphere=s) for c in CAMERA_NAMES for s in SPHERE_NAMES]
-    every = ", ".join(known)
+    known = [DOME_ID.format(camera=c, sphere=s) for c in names for s in SPHERE_NAMES]
+    every = ", ".join(known) if len(names) == 2 else f"{known[0]}, … {known[-1]}"
     extra = sorted(set(spheres) - set(known))
     if extra:
         raise ValueError(f"sphere {extra[0]!r} is not a dome sphere (a dome scene holds {every})")
-    for camera in CAMERA_NAMES:
+    for camera in names:
         ids = [DOME_ID.format(camera=camera, sphere=s) for s in SPHERE_NAMES]
         missing = [i for i in ids if i not in spheres]
         if missing:
@@ -179,12 +231,15 @@ def pair_from_spheres(spheres: dict) -> DomePair:
             raise ValueError(f"the glass of the {camera} dome has two indices: ext_ior "
                              f"{ext_in:g} of {ids[0]!r}, int_ior {int_out:g} of {ids[1]!r}")
         domes.append(DomePort(c_in, r_in, r_out - r_in, (int_in, ext_in, ext_out)))
-    if abs(domes[0].n_water - domes[1].n_water) > 1e-12:
-        raise ValueError(f"the two domes are in different water (ext_ior {domes[0].n_water:g} "
-                         f"and {domes[1].n_water:g})")
-    return DomePair(*domes)
+    waters = [d.n_water for d in domes]
+    if max(waters) - min(waters) > 1e-12:
+        what = "the two domes are" if len(domes) == 2 else "the domes are"
+        raise ValueError(f"{what} in different water (ext_ior "
+                         f"{' and '.join(f'{n:g}' for n in waters)})")
+    return domes
 
 
 __all__ = ["CAMERA_NAMES", "DEFAULT_DOME_RADIUS_MM", "DEFAULT_DOME_THICKNESS_MM", "DOME_ID",
-           "FOV_CHECK_STEP_PX", "check_field_of_view", "check_targets", "dome_pair",
-           "dome_placements", "facing_cameras", "pair_from_spheres"]
+           "FOV_CHECK_STEP_PX", "camera_domes", "check_field_of_view", "check_targets",
+           "dome_pair", "dome_placements", "domes_from_spheres", "facing_cameras", "named_domes",
+           "pair_from_spheres", "rig_domes"]

@@ -1,9 +1,10 @@
-"""The glass of a port whose cameras each have their own — a dome per camera
-(:class:`measure.geometry.dome.DomePair`), a flat window per camera (a
-:class:`measure.geometry.flat_pair.FlatPair`, or a list of one :class:`measure.FlatPort` per camera
-of N > 2) — and how a scene holds it (:data:`PER_CAMERA_GLASS`): the check of a rig and its
-targets, the XML of its shapes (:func:`synth.scene.write.scene_xml`) and its Mitsuba dictionary
-shapes (:func:`synth.scene.write.port_shapes`). Units mm, the left camera's frame."""
+"""The glass of a port whose cameras each have their own — a dome per camera (a
+:class:`measure.geometry.dome.DomePair`, or a list of one :class:`measure.geometry.dome.DomePort`
+per camera of N > 2), a flat window per camera (a :class:`measure.geometry.flat_pair.FlatPair`,
+or a list of one :class:`measure.FlatPort` per camera of N > 2) — and how a scene holds it
+(:data:`PER_CAMERA_GLASS`): the check of a rig and its targets, the XML of its shapes
+(:func:`synth.scene.write.scene_xml`) and its Mitsuba dictionary shapes
+(:func:`synth.scene.write.port_shapes`). Units mm, the left camera's frame."""
 
 from __future__ import annotations
 
@@ -21,17 +22,20 @@ from synth.scene.xml_text import number_text, vector_text
 
 def glass_of(port):
     """How a scene holds ``port``'s glass (:data:`PER_CAMERA_GLASS`), or None for one shared
-    flat port or none; a list of flat ports (one per camera) is held as windows."""
+    flat port or none; a list of one port per camera is held as domes when every one is a
+    DomePort, else as windows (flat ports)."""
     if port is None:
         return None
     if isinstance(port, (list, tuple)):
-        return PER_CAMERA_GLASS["flat pair"]
+        kinds = {getattr(p, "kind", None) for p in port}
+        return PER_CAMERA_GLASS["dome" if kinds == {"dome"} else "flat pair"]
     return PER_CAMERA_GLASS.get(port.kind)
 
 
 def glass_rig(cameras, port, names=None):
     """The rig whose cameras each have their own glass: a StereoRig of two cameras and their
-    FlatPair or DomePair, or a MultiRig of N cameras and a list of their flat ports."""
+    FlatPair or DomePair, or a MultiRig of N cameras and a list of their flat ports or
+    domes."""
     from measure.stereo.multirig import MultiRig
 
     if isinstance(port, (list, tuple)):
@@ -40,11 +44,17 @@ def glass_rig(cameras, port, names=None):
 
 
 
-def _dome_xml(rig: StereoRig) -> str:
+def _rig_port(rig):
+    """What the dome functions take as a rig's domes: a StereoRig's DomePair, a MultiRig's list
+    of DomePorts."""
+    return rig.port if isinstance(rig, StereoRig) else list(rig.ports)
+
+
+def _dome_xml(rig) -> str:
     """The spheres of a dome scene (:func:`synth.scene.dome.dome_placements`)."""
     parts = ["\n    <!-- The domes: per camera two concentric spheres (normals outwards, "
              "ext_ior outside): air inside the inner one, glass between, water outside. -->"]
-    for sid, centre, radius, ext_ior, int_ior in dome_placements(rig.port):
+    for sid, centre, radius, ext_ior, int_ior in dome_placements(_rig_port(rig)):
         outer = sid.endswith("outer")  # its ext_ior is the water's: $n_water
         parts.append(f"""    <shape type="sphere" id="{sid}">
         <point name="center" value="{vector_text(centre)}"/>
@@ -57,10 +67,10 @@ def _dome_xml(rig: StereoRig) -> str:
     return "\n".join(parts)
 
 
-def _check_domes(rig: StereoRig, targets, target_radius, target_normals) -> None:
+def _check_domes(rig, targets, target_radius, target_normals) -> None:
     check_field_of_view(rig)
-    check_targets(rig.port, targets, target_radius)
-    if not np.all(facing_cameras(rig, targets, target_normals)):
+    check_targets(_rig_port(rig), targets, target_radius)
+    if not np.all(facing_cameras(rig.cameras, targets, target_normals)):
         raise ValueError("every target must face the cameras (its normal towards them)")
 
 

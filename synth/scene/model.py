@@ -89,8 +89,10 @@ class SceneSpec:
     #: :attr:`multirig`.
     extra_cameras: tuple = ()
     #: In a scene of N cameras each behind its own flat port (``--cameras N --port
-    #: per-camera``): the ports of :attr:`extra_cameras` (``rig.port`` is then the
-    #: :class:`measure.geometry.flat_pair.FlatPair` of the first two); empty otherwise.
+    #: per-camera``) or inside its own dome (``--cameras N --port dome``): the ports of
+    #: :attr:`extra_cameras` (``rig.port`` is then the
+    #: :class:`measure.geometry.flat_pair.FlatPair` or the
+    #: :class:`measure.geometry.dome.DomePair` of the first two); empty otherwise.
     extra_ports: tuple = ()
 
     @property
@@ -141,8 +143,8 @@ class SceneSpec:
     @property
     def camera_ports(self):
         """What the scene writer takes as the port (:func:`synth.scene.write.scene_xml`): the
-        list of every camera's flat port in a scene of N cameras each behind its own, else
-        :attr:`port`."""
+        list of every camera's flat port or dome in a scene of N cameras each behind its own,
+        else :attr:`port`."""
         if self.extra_ports:
             return list(self.multirig.ports)
         return self.port

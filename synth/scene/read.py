@@ -19,9 +19,10 @@ import re
 import numpy as np
 
 from measure import Camera, FlatPort, StereoRig
+from measure.geometry.dome import DomePair
 from measure.geometry.flat_pair import FlatPair
 from measure.geometry.port import index_matched_port
-from synth.scene.dome import check_field_of_view, facing_cameras, pair_from_spheres
+from synth.scene.dome import check_field_of_view, domes_from_spheres, facing_cameras
 from synth.scene.model import (SPECKLE_ID, SURFACE_ID, TARGET_ID_PREFIX, SceneError, SceneSpec,
                                SceneSurface)
 from synth.scene.params import check_params, declared_defaults, override_defaults
@@ -292,8 +293,8 @@ def load_scene(path, defines: dict | None = None) -> SceneSpec:
     normals = np.array([t[3] for t in targets]).reshape(-1, 3)
     has_port = bool(interfaces or spheres)
     rig, extra_ports = _rig(params, interfaces, spheres, left, right, extra, surface, label)
-    _check_targets(rig, extra_ports, bool(spheres), has_port, surface, ids, centres, normals,
-                   label)
+    _check_targets(rig, (extra, extra_ports), bool(spheres), has_port, surface, ids, centres,
+                   normals, label)
     return SceneSpec(rig=rig, has_port=has_port, targets=centres, target_ids=ids,
                      target_radii=radii, params=params, path=path,
                      sha256=(hashlib.sha256(data).hexdigest() if surface is None else
@@ -342,8 +343,10 @@ def _rig(params, interfaces, spheres, left, right, extra, surface, label):
     if spheres:
         if params.get("port") == "none":
             raise SceneError(f"{label}: port=none but the scene has dome spheres")
+        from measure.stereo.multirig import default_names
+
         try:
-            port = pair_from_spheres(spheres)
+            port = tuple(domes_from_spheres(spheres, default_names(2 + len(extra))))
         except ValueError as exc:
             raise SceneError(f"{label}: {exc}") from None
     elif not interfaces:
@@ -357,19 +360,19 @@ def _rig(params, interfaces, spheres, left, right, extra, surface, label):
             raise SceneError(f"{label}: port=none but the scene has port interfaces")
         port, windows = _ports_from_interfaces(interfaces, (left, right) + extra, label)
     extra_ports = ()
-    if isinstance(port, tuple):  # N > 2 cameras, each behind its own window
-        port, extra_ports = FlatPair(*port[:2]), port[2:]
+    if isinstance(port, tuple):  # each camera behind its own window or inside its own dome
+        port, extra_ports = (DomePair if spheres else FlatPair)(*port[:2]), port[2:]
     try:
         rig = StereoRig(left, right, port)
         if windows is not None and not extra_ports:
             check_windows(rig, windows)
     except ValueError as exc:
         raise SceneError(f"{label}: {exc}") from None
+    if spheres and surface is not None:
+        raise SceneError(f"{label}: a dome scene holds disk targets, not a surface")
     if extra:
         _check_extra_cameras(rig, extra, extra_ports, windows, bool(spheres), label)
-    if spheres:
-        if surface is not None:
-            raise SceneError(f"{label}: a dome scene holds disk targets, not a surface")
+    elif spheres:
         try:
             check_field_of_view(rig)
         except ValueError as exc:
@@ -377,24 +380,22 @@ def _rig(params, interfaces, spheres, left, right, extra, surface, label):
     return rig, extra_ports
 
 
-def _check_targets(rig, extra_ports, domes: bool, has_port: bool, surface, ids, centres, normals,
+def _check_targets(rig, extra, domes: bool, has_port: bool, surface, ids, centres, normals,
                    label) -> None:
     """SceneError for targets (or a surface) out of the water, or targets that do not face
-    the cameras."""
+    the cameras; ``extra`` ``(extra cameras, their ports)`` (:attr:`SceneSpec.extra_ports`)."""
     port = rig.port
-    if domes:
-        in_water = port.water_side(centres)
-    else:
-        if surface is not None and has_port and not np.all(port.water_side(surface.vertices)):
-            raise SceneError(f"{label}: the surface mesh reaches out of the water (through the "
-                             f"port)")
-        in_water = port.water_side(centres) if has_port else np.ones(len(centres), dtype=bool)
-        for extra_port in extra_ports:
-            in_water &= extra_port.water_side(centres)
+    extra_cameras, extra_ports = extra
+    if surface is not None and has_port and not np.all(port.water_side(surface.vertices)):
+        raise SceneError(f"{label}: the surface mesh reaches out of the water (through the "
+                         f"port)")
+    in_water = port.water_side(centres) if has_port else np.ones(len(centres), dtype=bool)
+    for extra_port in extra_ports:
+        in_water &= extra_port.water_side(centres)
     if not np.all(in_water):
         bad = ids[~in_water]
         raise SceneError(f"{label}: targets {bad[:5].tolist()} are not in the water")
-    facing = (facing_cameras(rig, centres, normals) if domes
+    facing = (facing_cameras(rig.cameras + tuple(extra_cameras), centres, normals) if domes
               else np.all([normals @ p.normal < 0
                            for p in (rig.view_port(0), rig.view_port(1), *extra_ports)], axis=0))
     if not np.all(facing):
@@ -403,20 +404,22 @@ def _check_targets(rig, extra_ports, domes: bool, has_port: bool, surface, ids, 
 
 def _check_extra_cameras(rig, extra, extra_ports, windows, domes: bool, label) -> None:
     """A scene of more than two sensors: every camera behind the one flat port, its own window
-    (``extra_ports`` the ports of the cameras after the first two, ``windows`` every camera's)
-    or none, none at another's centre or inside another's glass
-    (:class:`measure.stereo.multirig.MultiRig`, :func:`synth.scene.windows.check_windows`)."""
+    or inside its own dome (``extra_ports`` the ports of the cameras after the first two,
+    ``windows`` every camera's window) or none, none at another's centre or inside another's
+    glass (:class:`measure.stereo.multirig.MultiRig`), every field of view through its own
+    window (:func:`synth.scene.windows.check_windows`) or dome and past every other
+    (:func:`synth.scene.dome.check_field_of_view`)."""
     from measure.stereo.multirig import MultiRig
 
     count = 2 + len(extra)
-    if domes:
-        raise SceneError(f"{label}: a scene of {count} cameras has one flat port for all of them, "
-                         f"a window each, or none; not a dome per camera")
     try:
         if extra_ports:
             multirig = MultiRig((rig.left, rig.right) + extra,
                                 [rig.view_port(0), rig.view_port(1), *extra_ports])
-            check_windows(multirig, windows)
+            if domes:
+                check_field_of_view(multirig)
+            else:
+                check_windows(multirig, windows)
         else:
             MultiRig((rig.left, rig.right) + extra, [rig.port] * count)
     except ValueError as exc:

@@ -11,8 +11,10 @@ the ``<default>`` parameters of :mod:`synth.scene.params` and holds:
 * the port: one ``rectangle`` per interface with a ``dielectric`` BSDF, its normal (local +z)
   turned towards the cameras so that ``ext_ior`` is the camera-side index: air-glass
   ``int_ior = n2, ext_ior = n1``, glass-water ``int_ior = $n_water, ext_ior = n2``.
-* or, for a dome port (a :class:`measure.geometry.dome.DomePair`), per camera two concentric analytic
-  ``sphere`` shapes with ``dielectric`` BSDFs (:mod:`synth.scene.dome`);
+* or, for a dome port (a :class:`measure.geometry.dome.DomePair` — and for N > 2 cameras each
+  inside its own dome, a list of :class:`measure.geometry.dome.DomePort`, one per camera), per
+  camera two concentric analytic ``sphere`` shapes with ``dielectric`` BSDFs
+  (:mod:`synth.scene.dome`);
 * or, for two housings (a :class:`measure.geometry.flat_pair.FlatPair`) — and for N > 2 cameras
   each behind its own flat port (a list of :class:`measure.FlatPort`, one per camera) — per
   camera a finite window: one ``rectangle`` per interface of its own port, sized to its field
@@ -118,7 +120,8 @@ def scene_xml(cameras, port: FlatPort | None, targets, target_radius: float, *,
     of them (``cam0``, ``cam1``, …);
     ``port`` a :class:`measure.FlatPort`, a :class:`measure.geometry.dome.DomePair` (a dome around each
     camera: :mod:`synth.scene.dome`), a FlatPair (a window per camera), a list of one
-    FlatPort per camera of N > 2 (a window each) or None for an all-air scene; ``targets`` ``(N, 3)`` mm,
+    FlatPort per camera of N > 2 (a window each) or of one DomePort per camera (a dome each),
+    or None for an all-air scene; ``targets`` ``(N, 3)`` mm,
     reference frame, all in the water; ``target_radius`` mm. When all targets share one ``z``,
     it becomes the ``target_z`` default. ``comment`` goes into an XML comment (for people only).
     ``water`` (a :class:`synth.rendering.water.Water`, needs a port): the water behind the port becomes a
@@ -379,8 +382,9 @@ def _targets_xml(targets, target_normals, plane: bool, lighting: str) -> list:
 
 def _check_more_cameras(cameras, names, port, surface, thin_lens) -> None:
     """A scene of more than two cameras: the same film for all, all behind one flat port, each
-    behind its own flat port (a list of them, one per camera) or none, no camera at another's
-    centre or inside another's glass; LED disk targets seen by pinholes."""
+    behind its own flat port or inside its own dome (a list of them, one per camera, all flat
+    or all domes) or none, no camera at another's centre or inside another's glass; LED disk
+    targets seen by pinholes."""
     from measure.stereo.multirig import MultiRig
 
     for name, camera in zip(names, cameras):
@@ -389,14 +393,18 @@ def _check_more_cameras(cameras, names, port, surface, thin_lens) -> None:
                              f"{camera.size} and {cameras[0].size}")
     if isinstance(port, (list, tuple)):
         message = (f"a port per camera of {len(cameras)} cameras is a list of {len(cameras)} "
-                   f"flat ports (a window each), got {len(port)} values")
+                   f"flat ports (a window each) or of {len(cameras)} domes, got {len(port)} "
+                   f"values")
         if len(port) != len(cameras):
             raise ValueError(message)
-        for each in port:
-            require_flat_port(each, message)
+        if {getattr(each, "kind", None) for each in port} != {"dome"}:
+            for each in port:
+                require_flat_port(each, message + " (a mix of flat ports and domes is not "
+                                                  "written)")
     elif port is not None and PER_CAMERA_GLASS.get(port.kind) is not None:
         raise ValueError(f"a scene of {len(cameras)} cameras has one flat port for all of them, "
-                         f"a flat port each, or none; not {port.description}")
+                         f"a flat port or a dome each (a list of one per camera), or none; not "
+                         f"{port.description}")
     if surface is not None or thin_lens is not None:
         raise ValueError(f"a scene of {len(cameras)} cameras holds disk targets seen by pinhole "
                          f"cameras (no surface, no thin lens)")

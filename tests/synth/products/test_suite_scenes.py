@@ -110,6 +110,8 @@ speckle_size = 20
      "port deviations need a port"),
     ('render = "boards"\nscenes = [{layout = "grid"}]\n[grid]\n"error.n_water" = [0.01]',
      "board sequences state no design port"),
+    ('scenes = [{layout = "grid", port = "dome", cameras = 3, size = [320, 268]}]\n[grid]\n'
+     '"error.n_water" = [0.01]', "error.n_water: scene grid looks through domes"),
     ('scenes = [{layout = "surface", speckle_size = 20}]',
      "render = 'targets' but scene surface_plane is a surface"),
 ])

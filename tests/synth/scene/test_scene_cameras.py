@@ -26,8 +26,8 @@ def test_cameras_option_writes_a_row_behind_one_port(tmp_path, capsys):
         np.testing.assert_allclose(axis, [-np.sin(np.radians(4 * k)), 0, np.cos(np.radians(4 * k))],
                                    atol=1e-7)
         assert rig.view_port(k) == spec.rig.port
-    assert main(["scene", "--cameras", "3", "--port", "dome",
-                 "--out", str(tmp_path / "x.xml")]) == 2
+    assert main(["scene", "--cameras", "3", "--port", "dome", "--dome-radius", "120",
+                 "--out", str(tmp_path / "x.xml")]) == 2  # domes that overlap
     assert main(["scene", "--cameras", "1", "--out", str(tmp_path / "x.xml")]) == 2
     assert capsys.readouterr().err.count("error:") == 2
 
