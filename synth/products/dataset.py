@@ -53,7 +53,6 @@ marker's sizes and SHA-256, :meth:`synth.infra.fileio.OutputDir.damage`); otherw
 
 from __future__ import annotations
 
-import csv
 import hashlib
 import json
 import os
@@ -76,10 +75,10 @@ from synth.rendering.render import pass_seed, render_stereo
 from synth.scene import SceneError, SceneSpec, load_scene
 from synth.infra.images import imread
 from synth.formats.calib_yaml import DatasetError, read_calib, write_calib
+from synth.formats.pixels_csv import read_pixels_csv, write_pixels_csv
 
 FORMAT_VERSION = 4  # 2: targets.ply in binary doubles (was ASCII, 6 digits); 3: hashes;
 #                    4: cameras.json, colmap/, surfaces' PFM / PNG depth and .flo (synth.formats.exchange)
-PIXELS_HEADER = ["id", "x", "y", "z", "u_left", "v_left", "u_right", "v_right"]
 
 
 
@@ -91,55 +90,6 @@ def write_targets_ply(path, points: np.ndarray) -> None:
     cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(np.asarray(points, np.float64)))
     if not o3d.io.write_point_cloud(str(path), cloud, write_ascii=False):
         raise OSError(f"Open3D could not write {path}")
-
-
-def write_pixels_csv(path, ids, points, uv_left, uv_right) -> None:
-    """``pixels.csv`` with header :data:`PIXELS_HEADER`; reals with 17 significant digits."""
-    write_pixel_rows(path, PIXELS_HEADER, ids, np.column_stack(
-        [np.asarray(points, np.float64), np.asarray(uv_left, np.float64),
-         np.asarray(uv_right, np.float64)]))
-
-
-def write_pixel_rows(path, header, ids, rows) -> None:
-    """A ``pixels.csv``: ``header``, then per target its id and ``rows`` (reals with 17
-    significant digits) — a pair's (:data:`PIXELS_HEADER`) and N views'
-    (:func:`synth.products.views_dataset.pixels_header`) alike."""
-    with open(path, "w", newline="") as fh:
-        writer = csv.writer(fh)
-        writer.writerow(header)
-        for i, row in zip(ids, rows):
-            writer.writerow([int(i)] + [f"{v:.17g}" for v in row])
-
-
-def read_pixels_csv(path) -> dict:
-    """``{"id": (N,), "points": (N, 3), "left": (N, 2), "right": (N, 2)}`` from ``pixels.csv``."""
-    rows = read_pixel_rows(path, PIXELS_HEADER)
-    return {"id": rows[:, 0].astype(int), "points": rows[:, 1:4], "left": rows[:, 4:6],
-            "right": rows[:, 6:8]}
-
-
-def read_pixel_rows(path, header) -> np.ndarray:
-    """The rows ``(N, len(header))`` of a ``pixels.csv`` whose first line is ``header`` (a
-    byte-order mark before it is read past); DatasetError naming the file for another header,
-    a row of another length, a value that is not a number or a last row cut short."""
-    with open(path, newline="", encoding="utf-8-sig") as fh:
-        text = fh.read()
-    reader = csv.reader(text.splitlines())
-    found = next(reader, None)
-    if found != header:
-        raise DatasetError(f"{path}: header is {found}, expected {header}")
-    values = []
-    for line, row in enumerate(reader, start=2):
-        if len(row) != len(header):
-            raise DatasetError(f"{path}: line {line} has {len(row)} values, the header "
-                               f"{len(header)}: truncated or malformed")
-        try:
-            values.append([float(v) for v in row])
-        except ValueError:
-            raise DatasetError(f"{path}: line {line}: not a number") from None
-    if values and not text.endswith("\n"):  # the writer ends every row: cut mid-row
-        raise DatasetError(f"{path}: the last line is not complete: truncated")
-    return np.array(values, dtype=np.float64).reshape(-1, len(header))
 
 
 def read_truth_targets(path, manifest: dict, n_pixel_rows: int) -> np.ndarray:

@@ -56,8 +56,9 @@ from synth.infra.fileio import file_sha256
 from synth.infra.provenance import package_versions
 from synth.products.dataset import (FORMAT_VERSION, DatasetError, adaptive_settings, check_files,
                                     dataset_files, existing_output, image_stats, read_manifest,
-                                    read_pixel_rows, read_png16, read_truth_targets, request_key,
-                                    write_manifest, write_pixel_rows, write_targets_ply)
+                                    read_png16, read_truth_targets, request_key, write_manifest,
+                                    write_targets_ply)
+from synth.formats.pixels_csv import read_pixel_rows, write_pixel_rows
 from synth.scene import SceneError, SceneSpec
 
 #: The files of one view inside its folder ``camK/``: kind → name.

@@ -12,8 +12,8 @@ import pytest
 
 from synth.products.crosscheck import check_dataset
 from synth.__main__ import main
-from synth.products.dataset import (PIXELS_HEADER, read_dataset, read_manifest,
-                           write_dataset)
+from synth.formats.pixels_csv import PIXELS_HEADER
+from synth.products.dataset import read_dataset, read_manifest, write_dataset
 from synth.formats.calib_formats import stereo_extrinsics
 from measure.geometry.projection import project
 from synth.scene import load_scene
@@ -262,7 +262,7 @@ def test_targets_ply_keeps_every_bit(tmp_path):
 
 def test_pixels_csv_with_a_byte_order_mark_is_read(tmp_path):
     """A pixels.csv saved by Excel ("CSV UTF-8") starts with a byte-order mark: same values."""
-    from synth.products.dataset import read_pixels_csv, write_pixels_csv
+    from synth.formats.pixels_csv import read_pixels_csv, write_pixels_csv
 
     plain = tmp_path / "pixels.csv"
     write_pixels_csv(plain, [0, 1], [[1.0, 2.0, 3.0], [4.0, 5.0, 6.5]], [[10.0, 11.0], [12, 13]],
