@@ -121,9 +121,14 @@ def add_camera_options(p) -> None:
     p.add_argument("--readout-ms", type=positive_float, default=None, metavar="MS",
                    help="rolling shutter: the time from the first row to the last (ms); needs "
                         "--board-velocity; the truth follows each corner's row")
+    p.add_argument("--exposure-ms", type=positive_float, default=None, metavar="MS",
+                   help="motion blur: a global shutter's exposure time (ms) during which the "
+                        "board moves at --board-velocity; the truth is the board at "
+                        "mid-exposure (not with --readout-ms)")
     p.add_argument("--board-velocity", type=numbers(3, "VX,VY,VZ in mm/s"), default=None,
-                   metavar="VX,VY,VZ", help="with --readout-ms: the board's velocity during "
-                                            "the readout, mm/s in the reference frame")
+                   metavar="VX,VY,VZ", help="with --readout-ms or --exposure-ms: the board's "
+                                            "velocity while the image is taken, mm/s in the "
+                                            "reference frame")
 
 
 def effects_from_args(args):
@@ -134,15 +139,21 @@ def effects_from_args(args):
     if args.aperture_radius is None:
         refuse_given(args, ("focus_distance",), "without --aperture-radius (a pinhole has no "
                                                 "focus)")
-    if (args.readout_ms is None) != (args.board_velocity is None):
-        raise CLIError("--readout-ms and --board-velocity go together (a rolling shutter shows "
-                       "nothing on a still board, and a moving board needs a readout time)")
+    if args.readout_ms is not None and args.exposure_ms is not None:
+        raise CLIError("--readout-ms and --exposure-ms are not rendered together here (a "
+                       "rolling shutter, or motion blur in a global shutter): give one of them")
+    timed = args.readout_ms is not None or args.exposure_ms is not None
+    if timed != (args.board_velocity is not None):
+        raise CLIError("--readout-ms or --exposure-ms and --board-velocity go together (a "
+                       "rolling shutter or an exposure shows nothing on a still board, and a "
+                       "moving board needs a readout or exposure time)")
     effects = CameraEffects(
         cos4=args.vignetting, lens_falloff=args.lens_falloff or 0.0,
         aperture_radius_mm=args.aperture_radius or 0.0,
         focus_distance_mm=args.focus_distance or 0.0,
         readout_s=(args.readout_ms or 0.0) / 1000.0,
-        velocity_mm_s=args.board_velocity or (0.0, 0.0, 0.0))
+        velocity_mm_s=args.board_velocity or (0.0, 0.0, 0.0),
+        exposure_s=(args.exposure_ms or 0.0) / 1000.0)
     return None if effects == CameraEffects() else effects
 
 

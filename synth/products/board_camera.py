@@ -8,6 +8,12 @@ byte for byte as before).
   place of the pinholes. Mitsuba's thin lens has no principal-point offset and the renderer
   has no distorted thin lens: a camera whose principal point is off the image centre, or that
   has lens distortion, is refused. The truth stays the pinhole's (the chief ray).
+* **Motion blur** (``exposure_s``, ``velocity_mm_s``): the board moves at a constant
+  velocity during a global shutter's exposure; the image is the mean of :func:`exposure_slices`
+  renders at the midpoints of equal slices of the exposure (as many as keep the board's image
+  moving at most :data:`SLICE_MOTION_PX` within a slice, at most :data:`MAX_BANDS`), each with
+  ``ceil(spp / slices)`` samples a pixel. The truth is the board at mid-exposure (the pose of
+  ``poses.csv``). Not together with a rolling shutter.
 * **Rolling shutter** (``readout_s``, ``velocity_mm_s``): the board moves at a constant
   velocity (mm/s, reference frame) and image row ``v`` (a pixel-centre row, 0 at the top) is
   exposed at ``t(v) = readout · (v / (H − 1) − ½)`` s, so the pose of ``poses.csv`` is the
@@ -31,6 +37,10 @@ import numpy as np
 BAND_MOTION_PX = 0.05
 #: Most bands of one rolling-shutter view (each band is one render call).
 MAX_BANDS = 512
+#: Largest motion (px) of the board's image within one slice of a motion-blurred exposure: the
+#: blur is the mean of the slices' images, steps of at most this much along the motion (the
+#: atlas's motion blur: 8 images over 4 px, 0.5 px).
+SLICE_MOTION_PX = 0.25
 #: The image of a moving board moves a little faster at one end of the readout than on average
 #: (perspective): the bands allow for this much more than the average.
 SPEED_MARGIN = 1.1
@@ -41,7 +51,9 @@ class CameraEffects:
     """The camera effects of a boards folder (module docs): ``cos4`` (bool), ``lens_falloff``
     (fraction lost at the farthest corner, [0, 1)), ``aperture_radius_mm`` and
     ``focus_distance_mm`` (thin lens; 0: a pinhole), ``readout_s`` (rolling shutter's readout,
-    s; 0: a global shutter) and ``velocity_mm_s`` (3,) the board's velocity during it."""
+    s; 0: a global shutter), ``velocity_mm_s`` (3,) the board's velocity during it, and
+    ``exposure_s`` (a global shutter's exposure, s, during which the board moves: motion blur;
+    0: none)."""
 
     cos4: bool = False
     lens_falloff: float = 0.0
@@ -49,6 +61,7 @@ class CameraEffects:
     focus_distance_mm: float = 0.0
     readout_s: float = 0.0
     velocity_mm_s: tuple = (0.0, 0.0, 0.0)
+    exposure_s: float = 0.0
 
     def __post_init__(self):
         if not 0.0 <= self.lens_falloff < 1.0:
@@ -57,6 +70,11 @@ class CameraEffects:
             raise ValueError("a thin lens needs a positive aperture radius and focus distance")
         if self.readout_s < 0:
             raise ValueError(f"readout time must not be negative, got {self.readout_s!r}")
+        if self.exposure_s < 0:
+            raise ValueError(f"exposure time must not be negative, got {self.exposure_s!r}")
+        if self.exposure_s > 0 and self.readout_s > 0:
+            raise ValueError("motion blur (an exposure time) and a rolling shutter are not "
+                             "rendered together here: give one of them")
         velocity = tuple(float(v) for v in self.velocity_mm_s)
         if len(velocity) != 3 or not np.all(np.isfinite(velocity)):
             raise ValueError(f"board velocity must be three finite numbers (mm/s), got "
@@ -66,6 +84,22 @@ class CameraEffects:
     @property
     def rolling(self) -> bool:
         return self.readout_s > 0
+
+    @property
+    def blurred(self) -> bool:
+        """Whether the board moves during a global shutter's exposure."""
+        return self.exposure_s > 0
+
+    @property
+    def moving(self) -> bool:
+        """A rolling shutter or motion blur: the board moves while the image is taken."""
+        return self.rolling or self.blurred
+
+    @property
+    def motion_s(self) -> float:
+        """How long the board moves while the image is taken (s): the readout or the
+        exposure."""
+        return self.readout_s if self.rolling else self.exposure_s
 
     @property
     def vignetting(self) -> bool:
@@ -84,8 +118,12 @@ class CameraEffects:
         return replace(self, focus_distance_mm=float(focus))
 
     def to_dict(self) -> dict:
+        """The effects as plain numbers (without an exposure time where there is none: the
+        request keys of folders made before motion blur stay theirs)."""
         data = asdict(self)
         data["velocity_mm_s"] = list(self.velocity_mm_s)
+        if not self.exposure_s:
+            del data["exposure_s"]
         return data
 
     def row_time(self, v, height: int) -> np.ndarray:
@@ -101,7 +139,7 @@ class CameraEffects:
 def check_effects(effects: CameraEffects, cameras) -> None:
     """ValueError (one line) for an effect the cameras cannot have: a thin lens on a camera
     whose principal point is off the image centre or that has lens distortion, a rolling
-    shutter on a distorted camera (rendered on an oversampled pinhole film whose rows are not
+    shutter or motion blur on a distorted camera (rendered on an oversampled pinhole film whose rows are not
     the image's)."""
     for k, camera in enumerate(cameras):
         if effects.aperture_radius_mm > 0:
@@ -118,6 +156,10 @@ def check_effects(effects: CameraEffects, cameras) -> None:
             raise ValueError(f"camera {k}: a rolling shutter is rendered on the image's own "
                              f"rows, which a camera with lens distortion does not have here "
                              f"(set the coefficients to 0)")
+        if effects.blurred and camera.dist is not None:
+            raise ValueError(f"camera {k}: motion blur is rendered on the image's own pixels, "
+                             f"which a camera with lens distortion does not have here (set the "
+                             f"coefficients to 0)")
 
 
 def prepared_effects(effects: CameraEffects | None, rig, air: bool, distance_range):
@@ -214,6 +256,48 @@ def render_rolling_view(mscene, mi, view: int, camera, port, points_board, pose,
     return image, taken, stats
 
 
+def exposure_slices(camera, port, points_board, pose, effects: CameraEffects) -> int:
+    """The slices of a motion-blurred exposure: as many as keep the image of ``points_board``
+    (the board's corners and outline) moving at most :data:`SLICE_MOTION_PX` within one, at
+    least 2, at most :data:`MAX_BANDS`."""
+    from measure.geometry.projection import project
+
+    still = pose.apply(points_board)
+    ends = [project(camera, port, still + effects.board_shift(t))
+            for t in (-effects.exposure_s / 2, effects.exposure_s / 2)]
+    motion = float(np.nanmax(np.linalg.norm(ends[1] - ends[0], axis=1)))
+    return int(min(MAX_BANDS, max(2, np.ceil(SPEED_MARGIN * motion / SLICE_MOTION_PX))))
+
+
+def render_blurred_view(mscene, mi, view: int, camera, port, points_board, pose,
+                        effects: CameraEffects, spp: int, seed: int, place):
+    """One view with motion blur: ``(image (H, W) float32, spp taken, stats)``. Slice k of
+    :func:`exposure_slices` renders every pixel with ``ceil(spp / slices)`` samples and the
+    sampler seed of pass ``1 + k`` of the view, the board at ``pose`` moved by
+    ``place(shift)`` to where it is at the slice's middle instant; the image is their mean,
+    each weighted by the samples it took."""
+    from synth.infra import interrupt
+    from synth.rendering.integrator import render_integrator
+    from synth.rendering.render import pass_seed, render_pixels
+
+    w, h = camera.size
+    slices = exposure_slices(camera, port, points_board, pose, effects)
+    integrator = render_integrator(mi, mscene)
+    total, weight = np.zeros(w * h, np.float64), 0
+    for k in range(slices):
+        interrupt.check()
+        place(effects.board_shift(effects.exposure_s * ((k + 0.5) / slices - 0.5)))
+        values, taken = render_pixels(mi, mscene, view, integrator, np.arange(w * h),
+                                      -(-int(spp) // slices), pass_seed(seed, view, 1 + k))
+        total += np.asarray(values, np.float64).ravel() * taken
+        weight += taken
+    stats = {"mode": "motion blur", "bands": slices, "film_pixels": w * h,
+             "mask_pixels": w * h, "lit_fraction": None, "samples_on_mask": w * h * weight,
+             "samples_off_mask": 0, "samples": w * h * weight, "spp_on_mask": weight,
+             "spp_off_mask": weight}
+    return (total / weight).astype(np.float32).reshape(h, w), weight, stats
+
+
 def check_band_seeds(seed: int, n_poses: int, n_views: int) -> None:
     """ValueError unless every sampler seed of a rolling-shutter render fits 32 bits: band b of
     view i of pose p renders with ``seed + N·p + i + 2^21·(1 + b)``, b < ``MAX_BANDS``."""
@@ -227,5 +311,7 @@ def check_band_seeds(seed: int, n_poses: int, n_views: int) -> None:
                          f"seed is {largest}")
 
 
-__all__ = ["BAND_MOTION_PX", "CameraEffects", "MAX_BANDS", "check_band_seeds", "check_effects",
-           "prepared_effects", "rolling_pixels", "render_rolling_view", "row_bands", "thin_lens_sensor"]
+__all__ = ["BAND_MOTION_PX", "CameraEffects", "MAX_BANDS", "SLICE_MOTION_PX", "check_band_seeds",
+           "check_effects",
+           "exposure_slices", "prepared_effects", "render_blurred_view", "rolling_pixels",
+           "render_rolling_view", "row_bands", "thin_lens_sensor"]

@@ -43,7 +43,8 @@ from synth.products.board_poses import (DEFAULT_AIR_DISTANCE_RANGE_MM, DEFAULT_D
                                         DEFAULT_MAX_TILT_DEG, BoardCameras, BoardPose, board_rig,
                                         sample_poses)
 from synth.products.board_camera import (CameraEffects, check_band_seeds, prepared_effects,
-                                         render_rolling_view, rolling_pixels, thin_lens_sensor)
+                                         render_blurred_view, render_rolling_view, rolling_pixels,
+                                         thin_lens_sensor)
 from synth.products.board_light import BoardLight, check_light, light_record
 from synth.rendering.camera_effects import vignetting_map
 from synth.products.dataset import (DatasetError, adaptive_settings, check_files, manifest_digest,
@@ -134,11 +135,12 @@ def render_pose(mscene, mi, spec: SceneSpec, board: Board, pose: BoardPose, inde
     (:func:`synth.rendering.render.render_view_counted`): ``([left, right], [stats_left, stats_right])``;
     pose ``index`` renders with the scene seeds ``seed + 2·index`` (view 0) and ``+ 1``
     (view 1) — of N cameras ``seed + N·index + view``. ``effects``: a rolling shutter (needs
-    ``rig``) and vignetting (:mod:`synth.products.board_camera`)."""
+    ``rig``), motion blur (needs ``rig``) and vignetting (:mod:`synth.products.board_camera`)."""
     cameras = spec.all_cameras
     scene_seed = seed + len(cameras) * index
-    if effects is not None and effects.rolling:
-        views = [render_rolling_view(
+    if effects is not None and effects.moving:
+        render_moving = render_rolling_view if effects.rolling else render_blurred_view
+        views = [render_moving(
             mscene, mi, view, camera, rig.view_port(view),
             np.concatenate([board.outline(), board.corners()]), pose, effects, spp, scene_seed,
             lambda shift: place_board(mscene, mi, board, BoardPose(pose.R, pose.t + shift)))
@@ -216,8 +218,8 @@ def write_boards(spec: SceneSpec, out_dir, board: Board, n_poses: int = DEFAULT_
     output.claim()
     n_views = len(spec.all_cameras)  # pose p renders with seed + N·p (N = 2: seed + 2p)
     check_render_request(spec, spp, seed, poses=-(-n_poses * n_views // 2), adaptive=adaptive)
-    shifts = ([effects.board_shift(s * effects.readout_s / 2) for s in (-1.0, 1.0)]
-              if effects is not None and effects.rolling else ())
+    shifts = ([effects.board_shift(s * effects.motion_s / 2) for s in (-1.0, 1.0)]
+              if effects is not None and effects.moving else ())
     poses = sample_poses(rig, board, n_poses, seed, not air, distance_range, max_tilt_deg,
                          shifts)
     if shifts:

@@ -1,7 +1,8 @@
 """Cameras as they are on rendered boards (``synth boards --vignetting --lens-falloff
---aperture-radius --readout-ms --board-velocity``): a rolling shutter's shear against motion ×
-readout time, its truth round trip, vignetting as the closed-form factor, a thin lens's blur,
-and the options refused where they cannot apply."""
+--aperture-radius --readout-ms --exposure-ms --board-velocity``): a rolling shutter's shear
+against motion × readout time, its truth round trip, vignetting as the closed-form factor, a
+thin lens's blur, motion blur as the still board smeared along its motion, and the options
+refused where they cannot apply."""
 
 from __future__ import annotations
 
@@ -180,8 +181,66 @@ def test_camera_options_are_refused_where_they_cannot_apply(scene, tmp_path, cap
 
     fails(["--focus-distance", "800"], "--focus-distance does not apply without --aperture")
     fails(["--readout-ms", "30"], "go together")
+    fails(["--exposure-ms", "10"], "go together")
+    fails(["--exposure-ms", "10", "--readout-ms", "30", "--board-velocity", "1,0,0"],
+          "not rendered together")
+    fails(["--exposure-ms", "10", "--board-velocity", "1000,0,0"], "motion blur", distorted)
     fails(["--board-velocity", "1,0,0"], "go together")
     fails(["--lens-falloff", "1"], "lens falloff")
     fails(["--readout-ms", "30", "--board-velocity", "1000,0,0"], "rolling shutter",
           distorted)
     fails(["--aperture-radius", "2"], "thin lens", distorted)
+
+
+def _box(width: float, shift: float) -> np.ndarray:
+    """A motion's box kernel on whole pixels: each offset j weighted by the overlap of its
+    pixel [j - 1/2, j + 1/2] with [shift - width/2, shift + width/2]."""
+    reach = int(np.ceil(abs(shift) + width / 2)) + 1
+    j = np.arange(-reach, reach + 1, dtype=float)
+    weights = np.clip(np.minimum(j + 0.5, shift + width / 2)
+                      - np.maximum(j - 0.5, shift - width / 2), 0.0, None)
+    return weights / weights.sum()
+
+
+@pytest.mark.slow
+def test_motion_blur_is_the_still_board_smeared_along_its_motion(scene, tmp_path):
+    """A board moving sideways at 1.5 m/s during a 10 ms exposure (about 6 px on these 20-px
+    squares): over the board's middle, the render is the still board's (same pose at
+    mid-exposure, same samples) convolved along u with a box as wide as the forward model's
+    motion of the board's centre — what is left is under a quarter of the blur's own change —
+    and that box is centred on the still board (mid-exposure: half a pixel either way fits
+    worse); rows along the motion keep their sharp edges (the steepest gradient along v stays
+    above 0.7 of the still board's)."""
+    effects = CameraEffects(exposure_s=0.01, velocity_mm_s=(1500.0, 0.0, 0.0))
+    spec = load_scene(scene)
+    manifest = write_boards(spec, tmp_path / "blur", BOARD, n_poses=1, spp=64, seed=4, air=True,
+                            distance_range=DISTANCE, progress=False, effects=effects)
+    assert manifest["render"]["views"][0]["left"]["mode"] == "motion blur"
+    assert manifest["camera_effects"]["exposure_s"] == 0.01
+    data = read_boards(tmp_path / "blur")
+    rig, pose = data.calib["rig"], data.poses[0]
+    mscene, mi, _ = build_board_scene(spec, BOARD, True)
+    still = render_pose(mscene, mi, spec, BOARD, pose, 0, 64, 4)[0]
+    centre = pose.apply(BOARD.corners()).mean(axis=0, keepdims=True)
+    for view, camera in enumerate(rig.cameras):
+        blurred, sharp = data.images[0][view], still[view]
+        ends = [project(camera, rig.port, centre + effects.board_shift(t))
+                for t in (-0.005, 0.005)]
+        width = float(abs(ends[1] - ends[0])[0, 0])
+        assert 4.0 < width < 9.0
+        uv = project(camera, rig.port, pose.apply(BOARD.corners()))
+        rows = slice(int(np.percentile(uv[:, 1], 30)), int(np.percentile(uv[:, 1], 70)))
+        cols = slice(int(uv[:, 0].min()), int(uv[:, 0].max()))
+        scale = float(sharp.max())
+
+        def misfit(shift):
+            smeared = np.array([np.convolve(row, _box(width, shift), mode="same")
+                                for row in sharp[rows]])
+            return np.sqrt(np.mean(((blurred[rows] - smeared)[:, cols] / scale) ** 2))
+
+        change = np.sqrt(np.mean(((blurred - sharp)[rows, cols] / scale) ** 2))
+        assert misfit(0.0) < 0.25 * change
+        assert misfit(0.0) < min(misfit(-0.5), misfit(0.5))
+        along = [np.percentile(np.abs(np.diff(img, axis=0)) / img.max(), 99.9)
+                 for img in (sharp, blurred)]
+        assert along[1] > 0.7 * along[0]
