@@ -289,27 +289,17 @@ def _crosscheck(spec, raw, simulated) -> tuple[list, dict]:
     crosscheck_view`: ``associated``, ``rms_px``, ``max_px`` against the simulator's pixel of
     the target's centre, ``rms_px_outline``, ``max_px_outline`` against its outline's
     centroid), then over all cameras."""
-    from synth.products.crosscheck import crosscheck_view, distance_stats
+    from synth.products.crosscheck import crosscheck_summary, crosscheck_view
 
     rig = spec.multirig
     targets = (spec.targets, spec.target_normals, spec.target_radius)
-    truth_of, crosscheck, distances, outline = [], {}, [], []
+    truth_of, distances = [], {}
     for k, name in enumerate(spec.camera_names):
         index, d, d_outline = crosscheck_view(rig.cameras[k], rig.view_port(k), targets, raw[k],
                                               simulated[k])
         truth_of.append(index)
-        distances.append(d)
-        outline.append(d_outline)
-        stats, stats_outline = distance_stats(d), distance_stats(d_outline)
-        crosscheck[name] = {"associated": stats["n"], "rms_px": stats["rms_px"],
-                            "max_px": stats["max_px"], "rms_px_outline": stats_outline["rms_px"],
-                            "max_px_outline": stats_outline["max_px"]}
-    every, every_outline = distance_stats(np.concatenate(distances)), distance_stats(
-        np.concatenate(outline))
-    crosscheck.update({"rms_px": every["rms_px"], "max_px": every["max_px"],
-                       "rms_px_outline": every_outline["rms_px"],
-                       "max_px_outline": every_outline["max_px"]})
-    return truth_of, crosscheck
+        distances[name] = (d, d_outline)
+    return truth_of, crosscheck_summary(distances)
 
 
 def _views(config, spec, log) -> tuple[list, dict]:

@@ -19,7 +19,7 @@ from measure.images.detect import (FLOOR_FRACTION, MERGE_AREA_RATIO as DEFAULT_M
                             MERGE_ELONGATION as DEFAULT_MAX_ELONGATION)
 from measure.images.eccentricity import correct_eccentricity
 from measure.stereo.matching import match_targets
-from synth.products.crosscheck import ASSOCIATION_GATE_PX, crosscheck_view, distance_stats
+from synth.products.crosscheck import ASSOCIATION_GATE_PX, crosscheck_summary, crosscheck_view
 from synth.rendering.noise import add_pixel_noise
 
 from eval.core.detection import detect_view
@@ -165,8 +165,7 @@ def crosscheck_stage(inputs: RunInputs, detections):
     The cross-check compares each detected centre with the simulator's pixel of its target's
     centre (``rms_px``, ``max_px``) and with the area centroid of the image of its outline
     (``rms_px_outline``, ``max_px_outline``: what remains is the renderer's noise alone)."""
-    simulated, inside, truth_of, crosscheck = {}, {}, {}, {}
-    distances, outline_distances = [], []
+    simulated, inside, truth_of, distances = {}, {}, {}, {}
     rig = inputs.true_rig  # the simulator predicts what was rendered
     normals = (inputs.target_normals if inputs.target_normals is not None
                else np.array([0.0, 0.0, -1.0]))
@@ -179,18 +178,8 @@ def crosscheck_stage(inputs: RunInputs, detections):
                                                               inputs.target_radius),
                                               centers, simulated[name])
         truth_of[name] = index
-        distances.append(d)
-        outline_distances.append(d_outline)
-        stats, outline = distance_stats(d), distance_stats(d_outline)
-        crosscheck[name] = {"associated": stats["n"], "rms_px": stats["rms_px"],
-                            "max_px": stats["max_px"], "rms_px_outline": outline["rms_px"],
-                            "max_px_outline": outline["max_px"]}
-    both = distance_stats(np.concatenate(distances))
-    both_outline = distance_stats(np.concatenate(outline_distances))
-    crosscheck.update({"rms_px": both["rms_px"], "max_px": both["max_px"],
-                       "rms_px_outline": both_outline["rms_px"],
-                       "max_px_outline": both_outline["max_px"]})
-    return simulated, inside, truth_of, crosscheck
+        distances[name] = (d, d_outline)
+    return simulated, inside, truth_of, crosscheck_summary(distances)
 
 
 def score_stage(inputs: RunInputs, detections, matches, window, results, gate_mm: float):

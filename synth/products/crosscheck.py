@@ -86,7 +86,8 @@ def distance_stats(distances) -> dict:
 
 
 __all__ = ["ASSOCIATION_GATE_PX", "CHECK_MAX_PX", "CHECK_RMS_PX", "associate_detections",
-           "check_dataset", "check_view", "crosscheck_view", "distance_stats",
+           "check_dataset", "check_view", "crosscheck_summary", "crosscheck_view",
+           "distance_stats",
            "target_image_margin_px", "wholly_in_image"]
 
 
@@ -96,6 +97,24 @@ __all__ = ["ASSOCIATION_GATE_PX", "CHECK_MAX_PX", "CHECK_RMS_PX", "associate_det
 #: Bounds of ``python -m synth check``: RMS and max centre distance, px.
 CHECK_RMS_PX = 0.05
 CHECK_MAX_PX = 0.15
+
+
+def crosscheck_summary(distances: dict) -> dict:
+    """A run's cross-check: per view ``name`` (``distances[name]``: the centres' and the
+    outlines' distances from the simulator, px, :func:`crosscheck_view`) the associated count
+    and the RMS and largest distance of both; then the same over every view."""
+    summary = {}
+    for name, (d, d_outline) in distances.items():
+        stats, outline = distance_stats(d), distance_stats(d_outline)
+        summary[name] = {"associated": stats["n"], "rms_px": stats["rms_px"],
+                         "max_px": stats["max_px"], "rms_px_outline": outline["rms_px"],
+                         "max_px_outline": outline["max_px"]}
+    every = distance_stats(np.concatenate([d for d, _ in distances.values()]))
+    every_outline = distance_stats(np.concatenate([d for _, d in distances.values()]))
+    summary.update({"rms_px": every["rms_px"], "max_px": every["max_px"],
+                    "rms_px_outline": every_outline["rms_px"],
+                    "max_px_outline": every_outline["max_px"]})
+    return summary
 
 
 def check_view(image, camera: Camera, expected, targets, ids, radius_mm: float,
