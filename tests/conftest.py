@@ -103,3 +103,29 @@ def rotation(rx: float, ry: float, rz: float) -> np.ndarray:
     from scipy.spatial.transform import Rotation
 
     return Rotation.from_euler("ZYX", [rz, ry, rx]).as_matrix()
+
+
+def assert_mitsuba_follows(mi, scene, camera, directions, want, atol_mm: float, label="") -> None:
+    """Camera rays (``directions`` ``(N, 3)`` from its centre) followed through Mitsuba's
+    ``scene`` — ``ray_intersect`` and the dielectric's delta transmission, twice — cross the
+    port's two interfaces where ``want`` (the port's own trace with its interface points) says
+    within ``atol_mm`` (float32), leave in its water directions within 2e-6, and then hit a
+    target near z = 1 m or nothing (never another camera's glass)."""
+    ctx = mi.BSDFContext()
+    ctx.type_mask = mi.BSDFFlags.DeltaTransmission
+    d = directions
+    ray = mi.Ray3f(mi.Point3f(*(float(c) for c in camera.center)),
+                   mi.Vector3f(d[:, 0], d[:, 1], d[:, 2]))
+    for k in range(2):
+        si = scene.ray_intersect(ray)
+        hit = np.array(si.p).reshape(3, -1).T
+        np.testing.assert_allclose(hit, want.interface_points[k], rtol=0, atol=atol_mm)
+        sample, weight = si.bsdf().sample(ctx, si, 0.5, mi.Point2f(0.5, 0.5))
+        assert np.all(np.array(weight).reshape(3, -1) > 0)
+        out = si.to_world(sample.wo)
+        ray = mi.Ray3f(si.p + out * 1e-3, out)
+    np.testing.assert_allclose(np.array(ray.d).reshape(3, -1).T, want.directions, rtol=0,
+                               atol=2e-6)
+    si = scene.ray_intersect(ray)
+    valid = np.array(si.is_valid()).ravel()
+    assert np.all(np.array(si.p).reshape(3, -1).T[valid, 2] > 990.0), label

@@ -15,6 +15,7 @@ from measure.geometry.dome import DomePort, trace_through_dome
 from synth.__main__ import main as synth_main
 from synth.scene import SceneError, load_scene, write_scene
 from synth.scene.dome import camera_domes
+from tests.conftest import assert_mitsuba_follows
 
 SMALL = (320, 268)
 OFFSET = (2.0, -1.0, 1.5)
@@ -65,26 +66,10 @@ def test_mitsuba_sees_each_camera_through_its_own_dome(ring):
     scene = mi.load_file(str(ring))
     u, v = np.meshgrid(np.linspace(-0.5, SMALL[0] - 0.5, 17), np.linspace(-0.5, SMALL[1] - 0.5, 13))
     uv = np.column_stack([u.ravel(), v.ravel()])
-    ctx = mi.BSDFContext()
-    ctx.type_mask = mi.BSDFFlags.DeltaTransmission
     for view, camera in enumerate(rig.cameras):
         d = camera.rays(uv)
         want = trace_through_dome(camera.center, d, rig.view_port(view))
-        ray = mi.Ray3f(mi.Point3f(*(float(c) for c in camera.center)),
-                       mi.Vector3f(d[:, 0], d[:, 1], d[:, 2]))
-        for k in range(2):
-            si = scene.ray_intersect(ray)
-            hit = np.array(si.p).reshape(3, -1).T
-            np.testing.assert_allclose(hit, want.interface_points[k], rtol=0, atol=3e-4)
-            sample, weight = si.bsdf().sample(ctx, si, 0.5, mi.Point2f(0.5, 0.5))
-            assert np.all(np.array(weight).reshape(3, -1) > 0)
-            out = si.to_world(sample.wo)
-            ray = mi.Ray3f(si.p + out * 1e-3, out)
-        np.testing.assert_allclose(np.array(ray.d).reshape(3, -1).T, want.directions, rtol=0,
-                                   atol=2e-6)
-        si = scene.ray_intersect(ray)
-        valid = np.array(si.is_valid()).ravel()
-        assert np.all(np.array(si.p).reshape(3, -1).T[valid, 2] > 990.0), view
+        assert_mitsuba_follows(mi, scene, camera, d, want, 3e-4, view)
 
 
 @pytest.mark.slow

@@ -9,6 +9,7 @@ import pytest
 
 from synth.__main__ import main as synth_main
 from synth.scene import load_scene
+from tests.conftest import assert_mitsuba_follows
 
 SMALL = (320, 268)
 
@@ -53,23 +54,7 @@ def test_mitsuba_sees_each_camera_through_its_own_window(pair_scene):
     uv = np.concatenate([np.column_stack([edge_u, np.full_like(edge_u, y)]) for y in (-0.5, h - 0.5)]
                         + [np.column_stack([np.full_like(edge_v, x), edge_v]) for x in (-0.5, w - 0.5)]
                         + [np.column_stack([u.ravel(), v.ravel()])])
-    ctx = mi.BSDFContext()
-    ctx.type_mask = mi.BSDFFlags.DeltaTransmission
     for view, camera in enumerate(spec.rig.cameras):
         d = camera.rays(uv)
         want = spec.rig.view_port(view).trace(camera.center, d)
-        ray = mi.Ray3f(mi.Point3f(*(float(c) for c in camera.center)),
-                       mi.Vector3f(d[:, 0], d[:, 1], d[:, 2]))
-        for k in range(2):
-            si = scene.ray_intersect(ray)
-            hit = np.array(si.p).reshape(3, -1).T
-            np.testing.assert_allclose(hit, want.interface_points[k], rtol=0, atol=2e-4)
-            sample, weight = si.bsdf().sample(ctx, si, 0.5, mi.Point2f(0.5, 0.5))
-            assert np.all(np.array(weight).reshape(3, -1) > 0)
-            out = si.to_world(sample.wo)
-            ray = mi.Ray3f(si.p + out * 1e-3, out)
-        np.testing.assert_allclose(np.array(ray.d).reshape(3, -1).T, want.directions, rtol=0,
-                                   atol=2e-6)
-        si = scene.ray_intersect(ray)
-        valid = np.array(si.is_valid()).ravel()
-        assert np.all(np.array(si.p).reshape(3, -1).T[valid, 2] > 990.0)
+        assert_mitsuba_follows(mi, scene, camera, d, want, 2e-4)
