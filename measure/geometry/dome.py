@@ -247,8 +247,7 @@ class DomePair(RigPort, ValueEquality):
     def glass_depth(self, left) -> float:
         """The farther of the two domes' outer spheres."""
         axis = self.depth_axis(left)
-        return max(float(axis @ (dome.center - left.center)) + dome.radii[1]
-                   for dome in (self.left, self.right))
+        return max(dome.glass_reach(left.center, axis) for dome in (self.left, self.right))
 
 
 def _exit_parameter(origins, directions, center, radius):

@@ -100,8 +100,7 @@ class FlatPair(RigPort, ValueEquality):
         """The farther of the two ports' last interfaces where the depth axis through the left
         camera's centre meets them (mm from that centre)."""
         axis = self.depth_axis(left)
-        return max((port.offsets[-1] - float(port.normal @ left.center)) / float(port.normal @ axis)
-                   for port in (self.left, self.right))
+        return max(port.glass_reach(left.center, axis) for port in (self.left, self.right))
 
     def describe(self) -> dict:
         return {"kind": self.kind, "left": self.left.describe(), "right": self.right.describe()}

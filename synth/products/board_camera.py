@@ -249,11 +249,7 @@ def render_rolling_view(mscene, mi, view: int, camera, port, points_board, pose,
                                       np.arange(first * w, end * w), spp,
                                       pass_seed(seed, view, 1 + b))
         image[first:end] = values.reshape(end - first, w)
-    stats = {"mode": "rolling shutter", "bands": len(bands), "film_pixels": w * h,
-             "mask_pixels": w * h, "lit_fraction": None, "samples_on_mask": w * h * taken,
-             "samples_off_mask": 0, "samples": w * h * taken, "spp_on_mask": taken,
-             "spp_off_mask": taken}
-    return image, taken, stats
+    return image, taken, _whole_film_stats("rolling shutter", len(bands), w * h, taken)
 
 
 def exposure_slices(camera, port, points_board, pose, effects: CameraEffects) -> int:
@@ -291,11 +287,16 @@ def render_blurred_view(mscene, mi, view: int, camera, port, points_board, pose,
                                       -(-int(spp) // slices), pass_seed(seed, view, 1 + k))
         total += np.asarray(values, np.float64).ravel() * taken
         weight += taken
-    stats = {"mode": "motion blur", "bands": slices, "film_pixels": w * h,
-             "mask_pixels": w * h, "lit_fraction": None, "samples_on_mask": w * h * weight,
-             "samples_off_mask": 0, "samples": w * h * weight, "spp_on_mask": weight,
-             "spp_off_mask": weight}
-    return (total / weight).astype(np.float32).reshape(h, w), weight, stats
+    return ((total / weight).astype(np.float32).reshape(h, w), weight,
+            _whole_film_stats("motion blur", slices, w * h, weight))
+
+
+def _whole_film_stats(mode: str, calls: int, pixels: int, spp: int) -> dict:
+    """The render statistics of a view rendered on every pixel in ``calls`` render calls (bands
+    of rows or slices of an exposure) with ``spp`` samples a pixel in all."""
+    return {"mode": mode, "bands": calls, "film_pixels": pixels, "mask_pixels": pixels,
+            "lit_fraction": None, "samples_on_mask": pixels * spp, "samples_off_mask": 0,
+            "samples": pixels * spp, "spp_on_mask": spp, "spp_off_mask": spp}
 
 
 def check_band_seeds(seed: int, n_poses: int, n_views: int) -> None:
