@@ -138,12 +138,7 @@ def _corners(args, board, log, where, air_rig) -> _Corners:
     from eval.calibrate import photos as trust
     from eval.calibrate.sources import MAX_POSES, repeated_views, thin_by_pose, without_repeats
 
-    names, _, size, detections, timings = _read_corners(args, board, log, where)
-    if air_rig is not None and tuple(air_rig.left.size) != tuple(size):
-        raise CLIError(f"--intrinsics {args.intrinsics}: image size "
-                       f"{air_rig.left.size[0]}x{air_rig.left.size[1]} px, but the "
-                       f"{'detections are' if args.detections else 'photos are'} "
-                       f"{size[0]}x{size[1]} px")
+    names, _, size, detections, timings = _read_corners(args, board, log, where, air_rig)
     found = {v: detections.found(i) for i, v in enumerate(trust.VIEWS)}
     not_found = [names[k] for k in range(len(names))
                  if k not in found["left"] and k not in found["right"]]
@@ -158,10 +153,21 @@ def _corners(args, board, log, where, air_rig) -> _Corners:
                     timings)
 
 
-def _read_corners(args, board, log, where):
+def _check_intrinsics_size(args, air_rig, size) -> None:
+    """CLIError where the in-air calibration ``air_rig`` (None: ``--air``) is of another image
+    size than the photos or detections (``size``, px): said before any board is detected."""
+    if air_rig is not None and tuple(air_rig.left.size) != tuple(size):
+        raise CLIError(f"--intrinsics {args.intrinsics}: image size "
+                       f"{air_rig.left.size[0]}x{air_rig.left.size[1]} px, but the "
+                       f"{'detections are' if args.detections else 'photos are'} "
+                       f"{size[0]}x{size[1]} px")
+
+
+def _read_corners(args, board, log, where, air_rig):
     """``(names, images or None, size, detections, timings)`` of a pair's photos (read and
     detected) or, ``--detections``, of its detection files; CLIError where the board is in no
-    photo, or the photos show another board (photos only: the checks need the images)."""
+    photo, the photos show another board (photos only: the checks need the images) or are of
+    another size than the in-air calibration ``air_rig`` (checked before the detection)."""
     from measure.calibration.air import detect_boards
 
     from eval.calibrate import photos as trust
@@ -171,6 +177,7 @@ def _read_corners(args, board, log, where):
     t = time.perf_counter()
     if args.detections:
         names, detections, size = read_detection_views(args, board, 2)
+        _check_intrinsics_size(args, air_rig, size)
         return names, None, size, detections, {"read": time.perf_counter() - t}
     pairs = photo_folder(args.dir)
     log(f"read {len(pairs.names)} photo pairs from {args.dir} …")
@@ -178,6 +185,7 @@ def _read_corners(args, board, log, where):
     if note:
         print(note, file=sys.stderr, flush=True)
     images, size = read_pairs(pairs, args.encoding)
+    _check_intrinsics_size(args, air_rig, size)
     timings = {"read": time.perf_counter() - t}
     log(f"detect the board in {len(images)} photo pairs …")
     t = time.perf_counter()
