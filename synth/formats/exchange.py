@@ -109,11 +109,11 @@ def cameras_json_views(rig) -> dict:
 
 
 def write_cameras_json(directory: str, rig, has_port: bool = True,
-                       name: str = CAMERAS_JSON) -> str:
-    """``directory/name``: :func:`cameras_json` of a stereo rig, or :func:`cameras_json_views`
-    of a rig of N cameras (a MultiRig)."""
+                       name: str = CAMERAS_JSON, views: bool = False) -> str:
+    """``directory/name``: :func:`cameras_json` of a stereo pair, or with ``views``
+    :func:`cameras_json_views` of a rig of N cameras (a folder per camera)."""
     path = os.path.join(directory, name)
-    data = cameras_json_views(rig) if hasattr(rig, "names") else cameras_json(rig, has_port)
+    data = cameras_json_views(rig) if views else cameras_json(rig, has_port)
     with open(path, "w", encoding="utf-8") as handle:
         json.dump(data, handle, indent=1)
         handle.write("\n")

@@ -242,7 +242,7 @@ def _write_view_files(tmp, spec: SceneSpec, names, times):
     times["project"] = time.perf_counter() - t
     t = time.perf_counter()
     write_rig_file(os.path.join(tmp, "calib.yaml"), rig)
-    write_cameras_json(tmp, rig)
+    write_cameras_json(tmp, rig, views=True)
     colmap_note = write_colmap_views(tmp, rig, spec.target_ids, spec.targets, pixels,
                                      [f"{name}/{VIEW_FILES['image']}" for name in names])
     write_targets_ply(os.path.join(tmp, "targets.ply"), spec.targets)

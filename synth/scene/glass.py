@@ -45,9 +45,9 @@ def glass_rig(cameras, port, names=None):
 
 
 def _rig_port(rig):
-    """What the dome functions take as a rig's domes: a StereoRig's DomePair, a MultiRig's list
-    of DomePorts."""
-    return rig.port if isinstance(rig, StereoRig) else list(rig.ports)
+    """What the dome functions take as a rig's domes: the list of its cameras' DomePorts (of a
+    pair behind a DomePair: its two domes, named ``left`` and ``right`` as the DomePair's)."""
+    return list(rig.ports)
 
 
 def _dome_xml(rig) -> str:
