@@ -10,7 +10,7 @@ import os
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from measure import Camera, StereoRig
+from measure import Camera, Rig
 from measure.geometry.flatport_format import METRES_PER_MM
 
 from synth.infra.fileio import atomic_write_text
@@ -40,7 +40,7 @@ def _colmap_header(count: int, which: str, poses: str) -> list:
             f"# WARNING: {PYCOLMAP_WARNING}."]
 
 
-def write_colmap(path, rig: StereoRig, has_port: bool = True,
+def write_colmap(path, rig: Rig, has_port: bool = True,
                  model: str | None = None) -> tuple[str, str]:
     """Write ``rig`` as the COLMAP fork's ``cameras.txt`` at ``path`` (camera 1 = left,
     2 = right, each with its FLATPORT unless ``has_port`` is False) and ``rig_config.json``

@@ -27,7 +27,7 @@ import os
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from measure import StereoRig
+from measure import Rig
 from measure.geometry.flatport_format import METRES_PER_MM, cameras_json_port
 
 from synth.formats.calib_formats import (COLMAP_PIXEL_OFFSET, CalibFormatError, stereo_extrinsics,
@@ -46,7 +46,7 @@ def _list(matrix) -> list:
     return np.asarray(matrix, dtype=np.float64).tolist()
 
 
-def cameras_json(rig: StereoRig, has_port: bool = True) -> dict:
+def cameras_json(rig: Rig, has_port: bool = True) -> dict:
     """The rig as plain JSON (module docs)."""
     R, T = stereo_extrinsics(rig.left, rig.right)
     cameras = {}
@@ -137,7 +137,7 @@ def _inside(uv: np.ndarray, size) -> np.ndarray:
             & (uv[:, 1] >= -0.5) & (uv[:, 1] <= h - 0.5))
 
 
-def write_colmap_model(directory: str, rig: StereoRig, has_port: bool, ids, points, uv_left,
+def write_colmap_model(directory: str, rig: Rig, has_port: bool, ids, points, uv_left,
                        uv_right, image_names=("left.png", "right.png")) -> str | None:
     """``directory/colmap/``: ``cameras.txt`` (+ ``rig_config.json``), ``images.txt``,
     ``points3D.txt`` and ``README.txt`` (module docs). Points: the targets whose pixel in both
@@ -330,7 +330,7 @@ def camera_z(points: np.ndarray, camera) -> np.ndarray:
     return (np.asarray(points, np.float64) - camera.t) @ camera.R[:, 2]
 
 
-def write_surface_formats(directory: str, rig: StereoRig) -> dict:
+def write_surface_formats(directory: str, rig: Rig) -> dict:
     """The common-format truth of a surface dataset (module docs), from its ``.npy`` maps in
     ``directory``; returns what the manifest records (the depth PNG scale, the files)."""
     import cv2

@@ -11,7 +11,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from measure import Camera, StereoRig
+from measure import Camera, Rig
 
 #: Defaults written into every scene unless given. ``spp`` is what a lit pixel gets: target
 #: scenes render adaptively (synth.rendering.render), where 144 spp on the lit pixels costs about as much
@@ -63,7 +63,7 @@ class SceneError(ValueError):
 class SceneSpec:
     """What a scene file says, after ``<default>`` values and ``-D`` overrides are applied.
 
-    ``rig`` is a :class:`measure.StereoRig`. In a scene with no port (``has_port`` False) its port
+    ``rig`` is a :class:`measure.Rig` of two. In a scene with no port (``has_port`` False) its port
     is an index-matched stand-in: ``FlatPort(N = left optical axis, D = 1 mm beyond the farther
     camera centre, no layers, indices (1, 1))``, through which every projection and triangulation
     reduces to the pinhole one. ``targets`` ``(N, 3)`` ground-truth centres (mm, reference frame)
@@ -73,7 +73,7 @@ class SceneSpec:
     bytes.
     """
 
-    rig: StereoRig
+    rig: Rig
     has_port: bool
     targets: np.ndarray
     target_ids: np.ndarray
