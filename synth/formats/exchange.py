@@ -76,7 +76,7 @@ def cameras_json(rig: Rig, has_port: bool = True) -> dict:
 
 
 def cameras_json_views(rig) -> dict:
-    """A rig of N cameras (:class:`measure.stereo.multirig.MultiRig`) as plain JSON: per camera
+    """A rig of N cameras (:class:`measure.stereo.rig.Rig`) as plain JSON: per camera
     (by name, in order) ``K``, distortion, image size, pose ``X_ref = R·X_cam + t`` and the port
     it looks through (its own flat port, a share of one, a dome, or none); ``shared_port``
     says whether every camera looks through the same flat port."""
@@ -199,7 +199,7 @@ def write_colmap_model(directory: str, rig: Rig, has_port: bool, ids, points, uv
 
 
 def write_colmap_views(directory: str, rig, ids, points, pixels, image_names) -> str | None:
-    """``directory/colmap/`` of a rig of N cameras (a MultiRig): ``cameras.txt`` with each
+    """``directory/colmap/`` of a rig of N cameras (a Rig): ``cameras.txt`` with each
     camera's own FLATPORT or DOMEPORT and ``rig_config.json``
     (:func:`synth.formats.calib_formats.write_colmap_rig`), ``images.txt`` (one image per
     camera, world-to-camera, the world the first camera's frame, metres), ``points3D.txt`` (the

@@ -73,10 +73,10 @@ class BoardCameras:
         return np.all([port.water_side(points) for port in set(self.ports)], axis=0)
 
     def multirig(self):
-        """As a :class:`measure.stereo.multirig.MultiRig` (``calib.yaml`` of N cameras)."""
-        from measure.stereo.multirig import MultiRig
+        """As a :class:`measure.stereo.rig.Rig` (``calib.yaml`` of N cameras)."""
+        from measure.stereo.rig import Rig
 
-        return MultiRig(self.cameras, list(self.ports), self.names)
+        return Rig(self.cameras, list(self.ports), self.names)
 
 
 def board_rig(spec: SceneSpec, air: bool):

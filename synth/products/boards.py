@@ -390,7 +390,7 @@ class BoardImages:
     """A boards folder read back: ``images`` ``[(left, right), …]`` float32 linear per pose,
     ``board``, ``calib`` (the truth, :func:`synth.formats.calib_yaml.read_calib`), ``poses`` (truth),
     ``corners`` truth rows ``(M, 9)`` in :data:`CORNERS_HEADER` order, ``air``, ``manifest``.
-    Of N > 2 cameras: ``images`` ``[(cam0, cam1, …), …]``, ``calib`` ``{"multirig": MultiRig,
+    Of N > 2 cameras: ``images`` ``[(cam0, cam1, …), …]``, ``calib`` ``{"multirig": Rig,
     "size", "names"}``, ``corners`` in :func:`corners_header` order."""
 
     path: str

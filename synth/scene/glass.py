@@ -34,12 +34,12 @@ def glass_of(port):
 
 def glass_rig(cameras, port, names=None):
     """The rig whose cameras each have their own glass: a StereoRig of two cameras and their
-    FlatPair or DomePair, or a MultiRig of N cameras and a list of their flat ports or
+    FlatPair or DomePair, or a Rig of N cameras and a list of their flat ports or
     domes."""
-    from measure.stereo.multirig import MultiRig
+    from measure.stereo.rig import Rig
 
     if isinstance(port, (list, tuple)):
-        return MultiRig(tuple(cameras), list(port), names)
+        return Rig(tuple(cameras), list(port), names)
     return StereoRig(cameras[0], cameras[1], port)
 
 

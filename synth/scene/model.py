@@ -123,22 +123,22 @@ class SceneSpec:
     @property
     def camera_names(self) -> tuple:
         """``left``, ``right`` — or ``cam0``, ``cam1``, … in a scene of more cameras."""
-        from measure.stereo.multirig import default_names
+        from measure.stereo.rig import default_names
 
         return default_names(len(self.all_cameras))
 
     @property
     def multirig(self):
-        """The scene's rig as a :class:`measure.stereo.multirig.MultiRig` (every camera, each
+        """The scene's rig as a :class:`measure.stereo.rig.Rig` (every camera, each
         with the port it looks through)."""
-        from measure.stereo.multirig import MultiRig
+        from measure.stereo.rig import Rig
 
         if not self.extra_cameras:
-            return MultiRig.from_stereo(self.rig)
+            return Rig.from_stereo(self.rig)
         if self.extra_ports:
-            return MultiRig(self.all_cameras, [self.rig.view_port(0), self.rig.view_port(1),
+            return Rig(self.all_cameras, [self.rig.view_port(0), self.rig.view_port(1),
                                                *self.extra_ports])
-        return MultiRig(self.all_cameras, [self.rig.port] * len(self.all_cameras))
+        return Rig(self.all_cameras, [self.rig.port] * len(self.all_cameras))
 
     @property
     def camera_ports(self):

@@ -16,7 +16,7 @@ the cameras for their baseline, so two fields of view already overlap at the gla
 
 A rig here is anything with ``cameras`` and ``view_port(k)``: a :class:`measure.Rig` of two
 with a :class:`measure.geometry.flat_pair.FlatPair` (cameras ``left``, ``right``) or a
-:class:`measure.stereo.multirig.MultiRig` whose cameras each have their own flat port (named
+:class:`measure.stereo.rig.Rig` whose cameras each have their own flat port (named
 by its ``names``).
 """
 
@@ -122,7 +122,7 @@ def _axes(normal: np.ndarray, camera) -> np.ndarray:
 
 
 def camera_names(rig) -> tuple:
-    """The names of ``rig``'s cameras in messages and shape ids: a MultiRig's ``names``, or
+    """The names of ``rig``'s cameras in messages and shape ids: a Rig's ``names``, or
     ``left``, ``right``."""
     return tuple(getattr(rig, "names", VIEWS))
 
