@@ -148,7 +148,7 @@ def error_figure(path, rectification, uv, grids) -> None:
 
 def rig_to_rectify(args):
     """``(rig, has_port, names)``: the pair of a two-camera ``--calib`` (``names`` None), or
-    ``--cameras A,B`` of a rig of N cameras (:meth:`measure.stereo.multirig.MultiRig.pair`:
+    ``--cameras A,B`` of a rig of N cameras (:meth:`measure.stereo.rig.Rig.pair`:
     behind the port they share or each behind its own; ``names`` theirs). CLIError for a rig
     of N cameras without ``--cameras`` and for names it does not hold."""
     from synth.products.dataset import DatasetError

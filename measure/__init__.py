@@ -21,13 +21,14 @@ _PUBLIC = {
     "Reason": ".reasons",
     "WaterRays": ".geometry.refraction", "intersect_plane": ".geometry.refraction",
     "refract": ".geometry.refraction", "trace_through_port": ".geometry.refraction",
-    "METHODS": ".stereo.triangulate", "StereoRig": ".stereo.triangulate",
+    "Rig": ".stereo.rig", "StereoRig": ".stereo.rig",
+    "METHODS": ".stereo.triangulate",
     "Triangulation": ".stereo.triangulate", "triangulate": ".stereo.triangulate",
     "triangulate_rays": ".stereo.triangulate",
 }
 
 __all__ = [
-    "Camera", "FlatPort", "StereoRig", "Triangulation", "triangulate", "triangulate_rays",
+    "Camera", "FlatPort", "Rig", "StereoRig", "Triangulation", "triangulate", "triangulate_rays",
     "METHODS", "Reason", "refract", "intersect_plane", "trace_through_port",
     "WaterRays", "common_perpendicular", "CommonPerpendicular", "detect_targets", "Detections",
     "REJECTION_REASONS", "Rejection",

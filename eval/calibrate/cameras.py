@@ -351,7 +351,7 @@ def _calibrate_housing(args, boards, detections, design, water, report, log):
     (``--port-distance`` or the boards' truth), from every camera's corners; the report gains
     the port(s), the RMS per camera, the uncertainty and the design."""
     from measure.calibration.multi_housing import calibrate_rig_housing
-    from measure.stereo.multirig import MultiRig
+    from measure.stereo.rig import Rig
     from synth.infra.cli import given
 
     names = boards.names
@@ -369,7 +369,7 @@ def _calibrate_housing(args, boards, detections, design, water, report, log):
                   for c, d in zip(air.cameras, distances)]
     else:
         starts = [design] * len(names)
-    start_rig = MultiRig(air.cameras, starts, names)
+    start_rig = Rig(air.cameras, starts, names)
     log(f"{'each camera' + chr(39) + 's own port' if per_camera else 'the shared port'}"
         f": {', '.join(free)} from every camera's corners …")
     air_names, air_matrix = air_cov if air_cov is not None else ((), None)

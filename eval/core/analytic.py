@@ -10,19 +10,19 @@ from __future__ import annotations
 
 import numpy as np
 
-from measure import StereoRig, triangulate
+from measure import Rig, triangulate
 from measure.geometry.projection import project
 from synth.products.crosscheck import wholly_in_image
 
 
-def project_pair(rig: StereoRig, points: np.ndarray, port=None):
+def project_pair(rig: Rig, points: np.ndarray, port=None):
     """The forward model: the pixels ``(left, right)`` of ``points`` ``(..., 3)`` mm through
     ``port`` (default the rig's; each camera through its own, :meth:`RigPort.view`)."""
     port = rig.port if port is None else port
     return project(rig.left, port.view(0), points), project(rig.right, port.view(1), points)
 
 
-def triangulation_errors(rig: StereoRig, uv_left, uv_right, method: str, truth: np.ndarray):
+def triangulation_errors(rig: Rig, uv_left, uv_right, method: str, truth: np.ndarray):
     """``(errors, Triangulation)``: ``method`` on pixels ``(..., 2)``, errors measured − true
     ``(..., 3)`` mm."""
     result = triangulate(rig, uv_left.reshape(-1, 2), uv_right.reshape(-1, 2), method)
@@ -31,7 +31,7 @@ def triangulation_errors(rig: StereoRig, uv_left, uv_right, method: str, truth: 
     return errors, result
 
 
-def air_copy(rig: StereoRig) -> StereoRig:
+def air_copy(rig: Rig) -> Rig:
     """The same cameras behind an index-matched port (every index 1): the paper's all-air rig."""
     return rig.with_port(rig.port.replace(indices=(1.0,) * len(rig.port.indices)))
 

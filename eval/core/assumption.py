@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from measure import Camera, StereoRig
+from measure import Camera, Rig, StereoRig
 from measure.geometry.dome import DomePair
 
 ASSUMABLE = ("n_water", "n_glass", "port_distance", "glass_thickness", "port_normal", "focal",
@@ -79,8 +79,8 @@ def _with_focal(camera: Camera, focal: float) -> Camera:
     return Camera(K, camera.size, camera.dist, camera.R, camera.t, camera.distortion_model)
 
 
-def assumed_rig(truth: StereoRig, has_port: bool, assumptions: dict,
-                base: StereoRig | None = None) -> StereoRig:
+def assumed_rig(truth: Rig, has_port: bool, assumptions: dict,
+                base: Rig | None = None) -> Rig:
     """The rig the measurement believes: ``base`` (default the truth; e.g. a ``--calib`` rig)
     with ``assumptions`` (:func:`parse_assumptions`) applied."""
     rig = truth if base is None else base
@@ -127,7 +127,7 @@ def _assumed_cameras(name: str, value, left: Camera, right: Camera):
     return left, right
 
 
-def describe_rig(rig: StereoRig) -> dict:
+def describe_rig(rig: Rig) -> dict:
     """The rig as plain numbers: per camera ``K``, ``dist``, ``R``, ``t_mm``; the port."""
     def camera(c: Camera):
         return {"K": c.K.tolist(), "dist": None if c.dist is None else c.dist.tolist(),
@@ -140,7 +140,7 @@ def describe_rig(rig: StereoRig) -> dict:
 ROUND_OFF = 1e-9
 
 
-def rig_difference(truth: StereoRig, assumed: StereoRig) -> dict:
+def rig_difference(truth: Rig, assumed: Rig) -> dict:
     """Assumed − true for every quantity that differs by more than :data:`ROUND_OFF`."""
     diff = {}
     def differs(a, b) -> bool:
@@ -154,7 +154,7 @@ def rig_difference(truth: StereoRig, assumed: StereoRig) -> dict:
     return diff
 
 
-def _camera_difference(truth: StereoRig, assumed: StereoRig, differs, diff) -> None:
+def _camera_difference(truth: Rig, assumed: Rig, differs, diff) -> None:
     """The cameras' entries of :func:`rig_difference` (assumed − true), into ``diff``."""
     for view in ("left", "right"):
         a, b = getattr(assumed, view), getattr(truth, view)

@@ -18,7 +18,7 @@ from eval.cli import CLIError
 @dataclass(frozen=True)
 class MeasureInputs:
     """The calibration and the pairs to measure: ``calib_path``, ``rig``
-    (:class:`measure.StereoRig`), ``size`` ``(width, height)`` px, and per pair its ``names``
+    (:class:`measure.Rig` of two), ``size`` ``(width, height)`` px, and per pair its ``names``
     (the file stems), ``left`` and ``right`` file paths; ``encoding`` how the stored values
     are read (:data:`eval.core.photos.PHOTO_ENCODINGS`); ``rig_covariance`` the calibration's
     :class:`measure.stereo.rig_covariance.RigCovariance` (None: it holds none)."""

@@ -33,7 +33,7 @@ import time
 import numpy as np
 from scipy.stats import spearmanr
 
-from measure import StereoRig, triangulate
+from measure import Rig, triangulate
 from synth.scene.layouts import paper_plane
 from synth.rendering.noise import deviate_port, pixel_noise
 from synth.scene.rig import paper_rig
@@ -70,7 +70,7 @@ def error_stats(errors: np.ndarray) -> ErrorStats:
 # experiments
 
 
-def rig_description(rig: StereoRig, air_rig: StereoRig) -> dict:
+def rig_description(rig: Rig, air_rig: Rig) -> dict:
     """The rig as plain numbers (mm, px, degrees) for the report."""
     def camera(cam):
         return {"K": cam.K.tolist(), "size_px": list(cam.size), "R": cam.R.tolist(),
@@ -89,7 +89,7 @@ def rig_description(rig: StereoRig, air_rig: StereoRig) -> dict:
     }
 
 
-def run_gap(rig: StereoRig, z: float = DISTANCES_MM[0]) -> dict:
+def run_gap(rig: Rig, z: float = DISTANCES_MM[0]) -> dict:
     """Section 3.2: the gap between rays O_L A1 and O_R B1 for the 496 targets at ``z`` mm."""
     targets = paper_plane(z)
     uv_left, uv_right = project_pair(rig, targets)
@@ -113,7 +113,7 @@ def run_gap(rig: StereoRig, z: float = DISTANCES_MM[0]) -> dict:
     }
 
 
-def run_ideal(rig: StereoRig, air_rig: StereoRig, distances=DISTANCES_MM) -> dict:
+def run_ideal(rig: Rig, air_rig: Rig, distances=DISTANCES_MM) -> dict:
     """Section 3.3.1: errors (496, 3) per method per distance, no noise, exact parameters."""
     out = {}
     for z in distances:
@@ -168,7 +168,7 @@ def choose_index_side(shifts: dict, sem: dict) -> tuple[str, str]:
     return side, rule
 
 
-def run_noise(rig: StereoRig, air_rig: StereoRig, trials: int, seed: int,
+def run_noise(rig: Rig, air_rig: Rig, trials: int, seed: int,
               variance: float = NOISE_VARIANCE_PX2, index_relative: float = INDEX_RELATIVE,
               z: float = DISTANCES_MM[0], progress: bool = False) -> tuple[dict, dict]:
     """Sections 3.3.2 and 3.3.3: Monte Carlo over ``trials`` draws of pixel noise.
@@ -312,7 +312,7 @@ INDEX_SIDE_WORDS = {
 }
 
 
-def run_index_in_situ(rig: StereoRig, trials: int, seed: int,
+def run_index_in_situ(rig: Rig, trials: int, seed: int,
                       variance: float = NOISE_VARIANCE_PX2,
                       index_relative: float = INDEX_RELATIVE, z: float = DISTANCES_MM[0],
                       progress: bool = False) -> dict:

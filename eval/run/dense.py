@@ -167,7 +167,7 @@ def pinhole_depth_range(rig, depth_range) -> tuple[float, float]:
 
 
 def _apparent_depths_traced(rig, depth_range, grid: int = 9) -> tuple[float, float]:
-    """``(nearest, farthest)`` depth (mm along :attr:`measure.StereoRig.depth_axis` from the
+    """``(nearest, farthest)`` depth (mm along :attr:`measure.Rig.depth_axis` from the
     left camera's centre) at which the pinhole model triangulates the points that lie at the
     two ends of ``depth_range`` on the water rays of a ``grid`` × ``grid`` lattice of left
     pixels, each projected through the right camera's own port (a dome, a housing). The

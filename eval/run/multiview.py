@@ -93,7 +93,7 @@ def measurement_rig(config: RunConfig, spec):
 
 def rig_differences(truth, other) -> list[str]:
     """What differs (beyond :data:`eval.core.assumption.ROUND_OFF`) between two rigs of N
-    cameras (:class:`measure.stereo.multirig.MultiRig`): per camera its name, intrinsics,
+    cameras (:class:`measure.stereo.rig.Rig`): per camera its name, intrinsics,
     distortion, pose and port, as ``camK K``, ``camK port normal`` …; ``[]`` when they agree."""
     from eval.core.assumption import ROUND_OFF
 

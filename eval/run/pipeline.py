@@ -290,7 +290,7 @@ def self_calibration_stage(inputs: RunInputs, centers, matches, parameters, meth
 def budget_stage(inputs: RunInputs, detections, centers, rigs: dict, methods, gate_mm: float,
                  depth_window):
     """The error budget: the same detections matched, triangulated and scored with each rig of
-    ``rigs`` ``{label: StereoRig}`` (e.g. the exact calibration, the in-air calibration with the
+    ``rigs`` ``{label: Rig}`` (e.g. the exact calibration, the in-air calibration with the
     design port). Returns ``{label: {"matching": …, "methods": {method: stats}}}``."""
     from dataclasses import replace
 

@@ -19,7 +19,7 @@ import numpy as np
 
 from ..geometry.camera import BROWN_CONRADY, FISHEYE, Camera
 from ..geometry.port import index_matched_port
-from ..stereo.triangulate import StereoRig
+from ..stereo.rig import Rig, StereoRig
 from .board import MIN_CORNERS, Board
 from .covariance import air_covariance
 from ..stereo.rig_covariance import RigCovariance
@@ -130,7 +130,7 @@ class AirCalibration:
     ``residuals`` per view ``(pose, id, du, dv)`` rows of each camera's own fit (projected −
     detected, px), as :class:`HousingCalibration`'s."""
 
-    rig: StereoRig
+    rig: Rig
     rms_px: dict
     sigmas: dict
     stereo_rms_px: float

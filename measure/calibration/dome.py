@@ -12,7 +12,7 @@ import numpy as np
 
 from ..geometry.camera import Camera
 from ..geometry.dome import DomePair, DomePort
-from ..stereo.triangulate import StereoRig
+from ..stereo.rig import Rig
 from .air import Detections
 from .board import Board
 from .problem import MAX_INDEX, HousingProblem, parameter_offset
@@ -28,7 +28,7 @@ def dome_offset(camera: Camera, dome: DomePort) -> np.ndarray:
     return camera.R.T @ (dome.center - camera.center)
 
 
-def dome_problem(rig: StereoRig, board: Board, detections: Detections, names, views=(0, 1)):
+def dome_problem(rig: Rig, board: Board, detections: Detections, names, views=(0, 1)):
     """:func:`housing_problem` of a rig of two domes (:data:`DOME_PARAMETERS`): the unknowns are
     the free dome numbers — ``dome_center``: each camera's decentring in its own frame (left
     x, y, z, then right), mm; ``n_water`` — then 6 per usable pose. Radius, thickness, glass
@@ -152,7 +152,7 @@ def _skew(v) -> np.ndarray:
 
 
 
-def check_free(rig: StereoRig, names) -> None:
+def check_free(rig: Rig, names) -> None:
     """Every parameter of :data:`DOME_PARAMETERS` applies to every rig of two domes."""
 
 
@@ -164,7 +164,7 @@ def estimate(name, domes, cameras, views=(0, 1)):
     return domes.n_water
 
 
-def rig_parameters(names, air, x, basis, rig: StereoRig, port, cameras, n_global):
+def rig_parameters(names, air, x, basis, rig: Rig, port, cameras, n_global):
     """:func:`dome_rig_parameters` (the housing calibration's common signature)."""
     return dome_rig_parameters(names, air, cameras, port)
 

@@ -12,7 +12,7 @@ import numpy as np
 from ..geometry.camera import Camera
 from ..geometry.flat_pair import FlatPair
 from ..geometry.port import FlatPort
-from ..stereo.triangulate import StereoRig
+from ..stereo.rig import Rig
 from .air import CalibrationError, Detections
 from .board import Board
 from .covariance import left_jacobian
@@ -35,7 +35,7 @@ def parameters_of(views=(0, 1), pair: bool = False) -> dict:
     return table
 
 
-def housing_problem(rig: StereoRig, board: Board, detections: Detections, names,
+def housing_problem(rig: Rig, board: Board, detections: Detections, names,
                     views=(0, 1), pair: bool = False):
     """The bundle adjustment of :func:`calibrate_housing` as functions of the unknowns ``x``
     (free housing numbers, then 6 per usable pose): ``residuals``, its analytic ``jacobian``,
@@ -222,7 +222,7 @@ def flat_rig_parameters(names, x, basis, start_normal, port, n_global, views=Non
 
 
 
-def check_free(rig: StereoRig, names) -> None:
+def check_free(rig: Rig, names) -> None:
     """CalibrationError for a free parameter this port does not have (two housings: each
     port)."""
     if "thickness" in names and not all(rig.port.view(v).thicknesses for v in (0, 1)):
@@ -269,7 +269,7 @@ def for_views(views, pair: bool = False):
                            views=views, for_views=partial(for_views, pair=pair))
 
 
-def rig_parameters(names, air, x, basis, rig: StereoRig, port, cameras, n_global, views=None):
+def rig_parameters(names, air, x, basis, rig: Rig, port, cameras, n_global, views=None):
     """:func:`flat_rig_parameters` as the ``(a + g, a + g)`` Jacobian of (in-air parameters
     ``air``, the names) with respect to (``air``, the free numbers). ``views``: two housings,
     the cameras whose ports are free."""

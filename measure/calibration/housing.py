@@ -49,7 +49,7 @@ import numpy as np
 
 from ..geometry.camera import Camera
 from ..geometry.port import RigPort
-from ..stereo.triangulate import StereoRig
+from ..stereo.rig import Rig, StereoRig
 from .air import CalibrationError, Detections
 from .board import Board
 from .covariance import AIR_INTRINSICS, AIR_NAMES, POSE_NAMES
@@ -95,7 +95,7 @@ class HousingCalibration:
     adjustment stopped (also when not identifiable: ``rig`` is then the start). RMS values are
     per corner, of the 2D residual length."""
 
-    rig: StereoRig
+    rig: Rig
     estimates: dict
     sigmas: dict
     labels: tuple
@@ -116,11 +116,11 @@ class HousingCalibration:
     covariance: RigCovariance | None = None
     sigmas_conditional: dict = field(default_factory=dict)
     uncertainty: str = "conditional"
-    fitted: StereoRig | None = None
+    fitted: Rig | None = None
 
 
 
-def calibrate_housing(rig: StereoRig, board: Board, detections: Detections,
+def calibrate_housing(rig: Rig, board: Board, detections: Detections,
                       free=None, air_covariance: RigCovariance | None = None,
                       uncertainty: str = DEFAULT_UNCERTAINTY, views=(0, 1)) -> HousingCalibration:
     """Refractive bundle adjustment of the housing (module docs). ``rig``: the in-air cameras
@@ -389,7 +389,7 @@ def _sub_covariance(covariance: RigCovariance, names) -> np.ndarray:
     return covariance.matrix[np.ix_(where, where)]
 
 
-def apply_air_change(rig: StereoRig, air, delta) -> StereoRig:
+def apply_air_change(rig: Rig, air, delta) -> Rig:
     """``rig`` with the in-air parameters ``air`` moved by ``delta`` (px, unitless, rad: the
     right camera's ``R → exp([φ]×) R``, mm: its centre)."""
     from scipy.spatial.transform import Rotation

@@ -259,7 +259,7 @@ def camera_term(camera, port, X, J, inverse, k: int, sigma: float, camera_covari
     ``(n, 3)`` (mm) through ``port`` per intrinsic, by central differences of
     :func:`measure.geometry.projection.project` over steps of 1e-4 σ
     (:func:`measure.stereo.uncertainty.perturbed_rig`'s definition of each name)."""
-    from ..stereo.triangulate import StereoRig
+    from ..stereo.rig import StereoRig
     from ..stereo.uncertainty import perturbed_rig
 
     names = list(camera_covariance.names)

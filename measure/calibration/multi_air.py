@@ -26,7 +26,7 @@ from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
 
 from ..geometry.camera import Camera
-from ..stereo.multirig import MultiRig, default_names
+from ..stereo.rig import Rig, default_names
 from .air import (LENS_MODELS, MIN_POSES, CalibrationError, Detections, calibrate_camera,
                   stereo_pose_outliers)
 from .outliers import outlier_threshold
@@ -36,7 +36,7 @@ from .covariance import left_jacobian
 
 @dataclass(frozen=True)
 class MultiAirCalibration:
-    """``rig`` (a :class:`measure.stereo.multirig.MultiRig`, every camera in air: no port),
+    """``rig`` (a :class:`measure.stereo.rig.Rig`, every camera in air: no port),
     ``rms_px`` per camera of its own calibration, ``joint_rms_px`` of the bundle adjustment
     (RMS of the residual length over all corners, px), ``poses_used`` per camera, and
     ``board_poses`` ``{pose: (R, t)}`` (board to the reference frame, mm); ``parameter_names``
@@ -47,7 +47,7 @@ class MultiAirCalibration:
     adjustment; ``left_out`` ``{(pose, view): why}`` the views screened out before it
     (:func:`screen_views`)."""
 
-    rig: MultiRig
+    rig: Rig
     rms_px: dict
     joint_rms_px: float
     poses_used: dict
@@ -157,7 +157,7 @@ def calibrate_rig_in_air(board: Board, detections: Detections, size, names=None,
     for v in range(n_views):
         R, t, K, D = joint.camera(fit.x, v)
         cameras.append(Camera(K, size, dist=D, R=None if v == 0 else R, t=None if v == 0 else t))
-    return MultiAirCalibration(MultiRig(cameras, [None] * n_views, names), rms, joint_rms, used,
+    return MultiAirCalibration(Rig(cameras, [None] * n_views, names), rms, joint_rms, used,
                                joint.board_poses(fit.x),
                                camera_parameter_names(names, joint.n_intrinsics - 4, joint.free),
                                joint.covariance(fit), per, rows, left_out)

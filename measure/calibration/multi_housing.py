@@ -32,7 +32,7 @@ from scipy.spatial.transform import Rotation
 
 from ..geometry.camera import Camera
 from ..geometry.port import FlatPort, require_flat_port
-from ..stereo.multirig import MultiRig
+from ..stereo.rig import Rig
 from .air import CalibrationError, Detections
 from .board import Board
 from .multi_air import DISTORTION_NAMES, INTRINSIC_NAMES
@@ -58,7 +58,7 @@ class MultiHousingCalibration:
     (board to reference), ``n_observations`` corners, ``uncertainty`` (``propagate`` or
     ``conditional``)."""
 
-    rig: MultiRig
+    rig: Rig
     estimates: dict
     sigmas: dict
     sigmas_conditional: dict
@@ -110,7 +110,7 @@ def _widths(S: int) -> dict:
     return {"distance": S, "normal": 2 * S, "thickness": S, "n_water": 1}
 
 
-def calibrate_rig_housing(rig: MultiRig, board: Board, detections: Detections, free=DEFAULT_FREE,
+def calibrate_rig_housing(rig: Rig, board: Board, detections: Detections, free=DEFAULT_FREE,
                           air_names=(), air_covariance=None,
                           per_camera: bool | None = None) -> MultiHousingCalibration:
     """The flat port(s) of ``rig`` (its cameras in air behind the starting ports: the design
@@ -157,7 +157,7 @@ def calibrate_rig_housing(rig: MultiRig, board: Board, detections: Detections, f
     return _result(problem, fit, rig.names, covariance, conditional, rms, uncertainty)
 
 
-def _starting_ports(rig: MultiRig, per_camera) -> tuple[list, bool]:
+def _starting_ports(rig: Rig, per_camera) -> tuple[list, bool]:
     """``(ports, shared)``: the starting flat ports (one when they are shared) and whether
     they are; CalibrationError for a camera not behind a flat port or a shared port asked of
     different ones."""
@@ -281,7 +281,7 @@ def _result(problem, fit, camera_names, covariance, conditional, rms,
             per[camera_names[view]] = float(np.sqrt(np.mean(rv ** 2) * 2))
     cameras, bases = problem.cameras, problem.bases
     return MultiHousingCalibration(
-        rig=MultiRig(cameras, [ports[problem.slot[v]] for v in range(len(cameras))],
+        rig=Rig(cameras, [ports[problem.slot[v]] for v in range(len(cameras))],
                      camera_names),
         estimates=estimates, sigmas=sigmas, sigmas_conditional=sigmas_c, labels=tuple(labels),
         covariance=covariance[:n_global, :n_global],

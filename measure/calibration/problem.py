@@ -6,7 +6,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from ..stereo.triangulate import StereoRig
+from ..stereo.rig import Rig
 from .air import MIN_POSES, CalibrationError, Detections
 from .board import MIN_CORNERS, Board
 
@@ -33,7 +33,7 @@ def observations(board: Board, detections: Detections, views=(0, 1)):
     return corners, obs
 
 
-def _start_poses(rig: StereoRig, board: Board, detections: Detections):
+def _start_poses(rig: Rig, board: Board, detections: Detections):
     """Per pose (R, t) board-to-reference from ``cv2.solvePnP`` on the left view (the right
     view, moved to the reference frame, where the left has no board)."""
     from scipy.spatial.transform import Rotation
@@ -55,7 +55,7 @@ def _start_poses(rig: StereoRig, board: Board, detections: Detections):
     return poses
 
 
-def usable_poses(rig: StereoRig, board: Board, detections: Detections):
+def usable_poses(rig: Rig, board: Board, detections: Detections):
     """``(starts, usable, detections)``: the starting board poses that ``cv2.solvePnP`` found,
     the numbers of those poses, and the detections of those poses only (in that order);
     CalibrationError when fewer than :data:`MIN_POSES` remain."""
@@ -70,7 +70,7 @@ def usable_poses(rig: StereoRig, board: Board, detections: Detections):
     return [starts[k] for k in usable], usable, detections
 
 
-def _check_boards_in_water(rig: StereoRig, board: Board, starts) -> None:
+def _check_boards_in_water(rig: Rig, board: Board, starts) -> None:
     """CalibrationError when the starting port puts most boards on the camera side of its
     glass (their centres, at the pinhole starting poses): a design distance or thickness that
     cannot be the housing's. The adjustment then has no path through the port to fit, and said
@@ -133,7 +133,7 @@ class HousingProblem:
     (:meth:`right_pose_columns`); residuals and Jacobians are assembled here. ``obs`` the
     corners' observations (px), ``usable`` the poses kept, ``m`` the residuals' count."""
 
-    def __init__(self, rig: StereoRig, board: Board, detections: Detections, names, views,
+    def __init__(self, rig: Rig, board: Board, detections: Detections, names, views,
                  table: dict):
         self.rig, self.names, self.views, self.table = rig, tuple(names), tuple(views), table
         self.starts, self.usable, detections = usable_poses(rig, board, detections)

@@ -33,7 +33,8 @@ import numpy as np
 from ..geometry.port import FlatPort
 from ..stereo.reprojection import (block_arrow_jacobian, reprojection_points, stereo_projections,
                            stereo_residuals)
-from ..stereo.triangulate import StereoRig, triangulate
+from ..stereo.rig import Rig, StereoRig
+from ..stereo.triangulate import triangulate
 
 #: Port parameters the refinement can estimate, and how many numbers each one is.
 PARAMETERS = {"n_water": 1, "port_distance": 1, "port_normal": 2}
@@ -60,7 +61,7 @@ class SelfCalibration:
     sigmas: dict
     correlation: np.ndarray
     labels: tuple
-    rig: StereoRig
+    rig: Rig
     points: np.ndarray
     rms_px: float
     rms_px_before: float
@@ -159,7 +160,7 @@ def refinement_jacobian(rig, port0, names, basis, x):
     return block_arrow_jacobian(d_points, np.stack(columns, axis=-1))
 
 
-def self_calibrate(rig: StereoRig, uv_left, uv_right, parameters=("n_water",),
+def self_calibrate(rig: Rig, uv_left, uv_right, parameters=("n_water",),
                    points=None, rig_covariance=None) -> SelfCalibration:
     """Estimate ``parameters`` (names of :data:`PARAMETERS`) of ``rig.port`` from matched pixels
     ``(N, 2)`` of unknown points. ``points`` ``(N, 3)`` start values (default: the optical-path

@@ -83,7 +83,7 @@ def settle_in_air(board: Board, left: dict, right: dict) -> dict:
 
 def settle_by_rig(rig, board: Board, detections) -> dict:
     """``{pose: symmetry index}`` of the right view's numbering that the rig ``rig`` (a
-    :class:`measure.StereoRig`, its in-air cameras) predicts best from the left view's corners
+    :class:`measure.Rig` of two, its in-air cameras) predicts best from the left view's corners
     (module docs); poses without both views are left out."""
     symmetries = board.symmetries()
     corners = board.corners()

@@ -29,7 +29,7 @@ half a window beyond it, so they give the whole image's result (up to the roundi
 filters' running sums).
 
 The result per pixel is the refined depth parameter d (the depth map, mm along the rig's
-:attr:`~measure.StereoRig.depth_axis` — the port normal, or the left optical axis for domes —
+:attr:`~measure.Rig.depth_axis` — the port normal, or the left optical axis for domes —
 from the left camera centre) and the exact right pixel of the left ray's point at that depth;
 triangulating the pair with the same model (``optical_path`` for ``"refractive"``, ``regular``
 for ``"pinhole"``) gives back that point.
@@ -71,7 +71,7 @@ from .blocks import (MIN_WINDOW_VARIANCE, RIGHT_MARGIN_PX, row_bands, window_mea
                      worker_count)
 from .refine import refine_depths
 from .warp import MODELS, PlaneWarp
-from ..stereo.triangulate import StereoRig
+from ..stereo.rig import Rig
 
 #: Most sweep planes :func:`match_dense` accepts by default (the widest committed search, a
 #: tilted plane over 693-1500 mm at full size, needs 692; each plane costs ~0.1 s at full size).
@@ -134,7 +134,7 @@ def _as_image(image, name: str, size) -> np.ndarray:
     return image
 
 
-def _check_depth_range(rig: StereoRig, depth_range) -> tuple[float, float]:
+def _check_depth_range(rig: Rig, depth_range) -> tuple[float, float]:
     try:
         near, far = (float(v) for v in depth_range)
     except (TypeError, ValueError):
@@ -149,8 +149,8 @@ def _check_depth_range(rig: StereoRig, depth_range) -> tuple[float, float]:
     return near, far
 
 
-def glass_depth(rig: StereoRig) -> float:
-    """How far the glass reaches along :attr:`StereoRig.depth_axis` from the left camera's
+def glass_depth(rig: Rig) -> float:
+    """How far the glass reaches along :attr:`measure.Rig.depth_axis` from the left camera's
     centre (mm): the port's last interface, or the farther of the two domes' outer spheres. A
     depth plane of the sweep must lie beyond it."""
     return rig.port.glass_depth(rig.left)
@@ -281,7 +281,7 @@ def _sweep(warp: PlaneWarp, left, right, depths, window, progress):
     return gather("best"), gather("best_index"), gather("before"), gather("after"), times
 
 
-def match_dense(rig: StereoRig, left, right, depth_range, *, model: str = "refractive",
+def match_dense(rig: Rig, left, right, depth_range, *, model: str = "refractive",
                 window: int = 11, min_score: float = 0.8, step_px: float = 0.5, roi=None,
                 progress=None, max_planes: int | None = None,
                 noise_sigma: float | None = None, slanted: bool = True) -> DenseMatches:

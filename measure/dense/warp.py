@@ -1,10 +1,10 @@
 """Plane-sweep warps for dense stereo through a flat port or two domes: left pixel → right pixel
 via a plane.
 
-A depth plane is ``N · (X − C_left) = d`` (N the rig's :attr:`~measure.StereoRig.depth_axis`:
+A depth plane is ``N · (X − C_left) = d`` (N the rig's :attr:`~measure.Rig.depth_axis`:
 the port normal, or the left optical axis for domes; C_left the left camera centre, d in mm).
 For one plane the warp map sends every left pixel along its water ray (``Camera.rays`` →
-:meth:`~measure.StereoRig.trace`) to the plane and projects the point into the right camera
+:meth:`~measure.Rig.trace`) to the plane and projects the point into the right camera
 through its port (:func:`project`, the exact Fermat forward model). The map is smooth, so it is computed
 exactly on a coarse grid of left pixels and interpolated to full resolution (``cv2.resize``,
 bilinear: OpenCV's bicubic kernel (a = −0.75) does not even reproduce a linear ramp and misses
@@ -23,7 +23,7 @@ import numpy as np
 
 from ..geometry.port import index_matched_port
 from ..geometry.projection import project
-from ..stereo.triangulate import StereoRig
+from ..stereo.rig import Rig
 
 MODELS = ("refractive", "pinhole")
 #: Bilinear interpolation error of the warp map (px) is about ``WARP_CURVATURE · step² / f``
@@ -50,7 +50,7 @@ class PlaneWarp:
     """Left pixel → right pixel through depth planes, for ``model`` ``"refractive"`` (through
     ``rig.port``) or ``"pinhole"`` (straight rays, the port ignored)."""
 
-    def __init__(self, rig: StereoRig, model: str = "refractive",
+    def __init__(self, rig: Rig, model: str = "refractive",
                  grid_step_px: int | None = None):
         if model not in MODELS:
             raise ValueError(f"model must be one of {', '.join(MODELS)}, got {model!r}")

@@ -36,7 +36,8 @@ from scipy.spatial import cKDTree
 from ..geometry.camera import Camera
 from ..geometry.port import FlatPort
 from ..geometry.projection import project
-from ..stereo.triangulate import StereoRig, Triangulation, triangulate
+from ..stereo.rig import Rig
+from ..stereo.triangulate import Triangulation, triangulate
 
 #: Points on each disk outline. The polygon's centroid converges quadratically: for the paper's
 #: targets 64 points differ from 512 by up to 1e-5 px, 128 points by ~2.5e-6 px.
@@ -137,7 +138,7 @@ class EccentricityCorrection:
     iterations: int
 
 
-def correct_eccentricity(rig: StereoRig, uv_left, uv_right, radius_mm, method: str = "optical_path",
+def correct_eccentricity(rig: Rig, uv_left, uv_right, radius_mm, method: str = "optical_path",
                          normals=None, iterations: int = 2) -> EccentricityCorrection:
     """Remove the eccentricity offsets from matched detections and triangulate again.
 

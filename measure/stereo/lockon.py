@@ -26,7 +26,8 @@ import numpy as np
 from scipy.optimize import linear_sum_assignment
 
 from .matching import match_targets
-from .triangulate import StereoRig, triangulate
+from .rig import Rig
+from .triangulate import triangulate
 
 #: Object triplets used as bases: at least this smallest height per longest side (no
 #: near-collinear ones, whose rotation about their line is not determined).
@@ -145,7 +146,7 @@ def register(object_points, points, gate_mm: float, prefer=None):
     return chosen[2], chosen[3], chosen[4], chosen[1], len(distinct)
 
 
-def lock_on(rig: StereoRig, object_points, uv_left, uv_right, gate_mm: float = 20.0,
+def lock_on(rig: Rig, object_points, uv_left, uv_right, gate_mm: float = 20.0,
             match_gate_mm: float = 2.0, prefer=None) -> LockOn:
     """The first pose of ``object_points`` ``(M, 3)`` from the detections ``uv_left``
     ``(A, 2)``, ``uv_right`` ``(B, 2)`` of ``rig`` (module docs): ``match_gate_mm`` the

@@ -28,7 +28,7 @@ from scipy.spatial import cKDTree
 
 from ..geometry.lines import common_perpendicular
 from ..reasons import Reason
-from .triangulate import StereoRig
+from .rig import Rig
 
 _NO_PAIR = 1e12  # cost of an impossible pair in the assignment
 #: Candidate pairs evaluated at once (memory: about 200 bytes each).
@@ -62,22 +62,22 @@ class Matches:
     unmatched_right: np.ndarray
 
 
-def _water_rays(rig: StereoRig, view: int, uv):
+def _water_rays(rig: Rig, view: int, uv):
     water = rig.trace(view, rig.cameras[view].rays(uv))
     return water.origins, water.directions, water.reason == Reason.OK
 
 
-def candidate_pairs(rig: StereoRig, uv_left, uv_right, gate_mm: float,
+def candidate_pairs(rig: Rig, uv_left, uv_right, gate_mm: float,
                     depth_range=(None, None), return_depth: bool = False):
     """``(i, j, gap)``: the pairs (left row i, right row j) whose common-perpendicular length
     (mm) is at most ``gate_mm`` and that are possible, computed in chunks of
     :data:`PAIRS_PER_CHUNK` pairs, so that memory stays bounded by the pairs kept. With
     ``return_depth`` also each pair's depth ``a · X`` of the midpoint (mm; ``a`` =
-    :attr:`StereoRig.depth_axis`: the port normal, or the left optical axis for domes).
+    :attr:`measure.Rig.depth_axis`: the port normal, or the left optical axis for domes).
 
     A pair is impossible when a ray has no path into the water, the rays meet behind a camera,
     or the midpoint's depth ``a · X`` is outside ``depth_range``. Either port: the rays are
-    traced by :meth:`StereoRig.trace` (a flat port or each camera's dome).
+    traced by :meth:`measure.Rig.trace` (a flat port or each camera's dome).
     """
     uv_left = np.asarray(uv_left, dtype=float).reshape(-1, 2)
     uv_right = np.asarray(uv_right, dtype=float).reshape(-1, 2)
@@ -118,14 +118,14 @@ def _assign(cost: np.ndarray, candidate: np.ndarray):
     return rows, cols, float(cost[rows, cols].sum())
 
 
-def match_targets(rig: StereoRig, uv_left, uv_right, gate_mm: float = 0.5,
+def match_targets(rig: Rig, uv_left, uv_right, gate_mm: float = 0.5,
                   depth_range=(None, None), ambiguity_margin_mm: float | None = None,
                   resolve_ambiguities: bool = True) -> Matches:
     """Match left and right detections one to one with the refractive epipolar constraint.
 
     ``gate_mm``: the largest common-perpendicular length of an accepted pair (mm); a few times
     the gap that pixel noise produces at the working distance. ``depth_range``: ``(near, far)``
-    bounds on ``a · X`` (mm, ``a`` = :attr:`StereoRig.depth_axis`) of the triangulated point,
+    bounds on ``a · X`` (mm, ``a`` = :attr:`measure.Rig.depth_axis`) of the triangulated point,
     ``None`` for no bound.
 
     The candidate pairs form a bipartite graph; within each connected group the assignment

@@ -2,7 +2,7 @@
 
 Every pair of views (i < j) is matched with the refractive epipolar constraint
 (:func:`measure.stereo.matching.match_targets` on the pair's rig,
-:meth:`measure.stereo.multirig.MultiRig.pair`). The pairwise matches are edges between
+:meth:`measure.stereo.rig.Rig.pair`). The pairwise matches are edges between
 detections; a *track* is a connected group of them (the union of the pairwise matches,
 ``scipy.sparse.csgraph.connected_components``). A track that holds two detections of one view
 is a conflict — some pairwise match is wrong, and which cannot be told — and is dropped as
@@ -62,7 +62,7 @@ class Tracks:
 def match_views(rig, centers, gate_mm: float = 0.5, depth_range=(None, None),
                 **options) -> Tracks:
     """Tracks of the detections ``centers`` (one ``(M_v, 2)`` array per camera of the
-    :class:`measure.stereo.multirig.MultiRig` ``rig``) across all views (module docs).
+    :class:`measure.stereo.rig.Rig` ``rig``) across all views (module docs).
     ``gate_mm``, ``depth_range`` and ``options`` go to every pairwise
     :func:`measure.stereo.matching.match_targets`."""
     centers = [np.asarray(c, dtype=float).reshape(-1, 2) for c in centers]

@@ -33,8 +33,8 @@ of :func:`measure.geometry.projection.project` (``jacobian=True``) chained with
 reference-frame axes applied on the left (``R → exp([φ]×) R``, as the rig's
 ``right.rotation[k]``), ``t`` the object origin: first order, ``Σ_pix = (JᵀWJ)⁻¹`` with ``W =
 diag(1/σ²)``; with a :class:`measure.stereo.rig_covariance.RigCovariance` of the rig (views
-given as a :class:`StereoRig`) also ``A Σ_θ Aᵀ``, ``A = −(JᵀWJ)⁻¹ JᵀW J_θ``, ``J_θ`` the pixels'
-derivatives with respect to the rig's named parameters
+given as a pair, :class:`measure.stereo.rig.Rig` of two) also ``A Σ_θ Aᵀ``, ``A =
+−(JᵀWJ)⁻¹ JᵀW J_θ``, ``J_θ`` the pixels' derivatives with respect to the rig's named parameters
 (:func:`measure.stereo.uncertainty.pixel_jacobians`): the pose an error of the calibration
 causes. Without a stated σ the pixel part is scaled by the residuals' own variance
 ``σ̂² = Σ r² / (2n − 6)`` (``sigma_px`` in the result).
@@ -60,7 +60,7 @@ from ..geometry.projection import project
 from ..reasons import Reason
 from .multiview import View
 from .rig_covariance import RigCovariance
-from .triangulate import StereoRig
+from .rig import Rig
 from .uncertainty import pixel_jacobians
 
 #: A start candidate whose refractive reprojection cost is within this factor of the best
@@ -152,18 +152,19 @@ def _failed(reason: Reason, observations: int = 0, rms_px: float = np.nan) -> Po
 
 
 def as_views(views) -> tuple[View, ...]:
-    """``views`` as a tuple of :class:`View`: a :class:`StereoRig` (left, right — each with its
-    port), one :class:`View`, or a sequence of them."""
-    if isinstance(views, StereoRig):
-        return tuple(View(camera, views.view_port(v)) for v, camera in enumerate(views.cameras))
+    """``views`` as a tuple of :class:`View`: a :class:`measure.stereo.rig.Rig` (its cameras
+    in order — a pair's left, right —, each with its port), one :class:`View`, or a sequence of
+    them."""
+    if isinstance(views, Rig):
+        return tuple(views.views())
     if isinstance(views, View):
         return (views,)
     try:
         views = tuple(views)
     except TypeError:
-        raise ValueError("views must be a StereoRig, a View or a sequence of Views") from None
+        raise ValueError("views must be a Rig, a View or a sequence of Views") from None
     if not views or not all(isinstance(v, View) for v in views):
-        raise ValueError("views must be a StereoRig, a View or a sequence of Views")
+        raise ValueError("views must be a Rig, a View or a sequence of Views")
     return views
 
 
@@ -329,7 +330,7 @@ def _cost(problem: _Problem, R, t) -> float:
     return float(np.sum(r * r)) if np.all(np.isfinite(r)) else np.inf
 
 
-def _rig_jacobian(rig: StereoRig, problem: _Problem, X, rig_covariance: RigCovariance):
+def _rig_jacobian(rig: Rig, problem: _Problem, X, rig_covariance: RigCovariance):
     """d pixel / d rig parameters ``(n, 2, P)`` of the observations."""
     _, _, d_parameters = pixel_jacobians(rig, X, rig_covariance.names,
                                          rig_covariance.normal_axes)
@@ -440,17 +441,17 @@ def estimate_poses(views, object_points, pixels, pixel_sigma=None,
                    max_nfev: int = 100) -> Poses:
     """The pose of a known object in each of F frames (module docs).
 
-    ``views``: a :class:`StereoRig` (both cameras, each through its port), one
+    ``views``: a :class:`measure.stereo.rig.Rig` (every camera, each through its port), one
     :class:`measure.stereo.multiview.View` or a sequence of them (V views). ``object_points``
     ``(M, 3)`` mm in the object frame. ``pixels`` ``(F, V, M, 2)`` (``(F, M, 2)`` for one
     view), NaN where a view did not see a point. ``pixel_sigma`` px: a number, ``(V, M)`` or
     ``(F, V, M)``; None: estimated from each frame's residuals. ``rig_covariance``: the rig's
-    :class:`RigCovariance` (views given as a StereoRig only). ``max_rms_px``: the largest RMS
-    reprojection error of an accepted pose.
+    :class:`RigCovariance` (views given as a pair, ``StereoRig``, only). ``max_rms_px``: the
+    largest RMS reprojection error of an accepted pose.
 
     Bad arguments raise ``ValueError``; a frame without a pose is NaN with its reason, and the
     batch goes on."""
-    rig = views if isinstance(views, StereoRig) else None
+    rig = views if isinstance(views, Rig) and views.port is not None else None
     views = as_views(views)
     if rig_covariance is not None:
         if rig is None:

@@ -3,7 +3,7 @@ stereo matchers): exact for points on one plane, with the error they leave elsew
 
 A flat port (or a decentred dome) makes each camera non-central: no warp of its image can turn
 it into a pinhole camera for every depth. :func:`rectify` chooses the plane ``n · X = distance``
-(``n`` the rig's depth axis, :attr:`measure.stereo.triangulate.StereoRig.depth_axis`; mm,
+(``n`` the rig's depth axis, :attr:`measure.Rig.depth_axis`; mm,
 reference frame = the left camera's) and builds, per view, the ``cv2.remap`` maps that send each
 pixel of a virtual pinhole camera — where the camera seems to be from the water (its apparent
 centre and focal length near the principal point), no distortion, rotated for a row-aligned
@@ -25,7 +25,8 @@ import numpy as np
 from ..geometry.camera import Camera
 from ..geometry.port import index_matched_port
 from ..geometry.projection import project
-from .triangulate import StereoRig, triangulate
+from .rig import Rig, StereoRig
+from .triangulate import triangulate
 
 #: The pixel offset from the principal point at which the port's apparent focal length is
 #: measured (px): far enough for round-off to vanish, near enough to be paraxial.
@@ -39,9 +40,9 @@ class Rectification:
     row-aligned), ``maps`` per view ``(map_x, map_y)`` float32 ``(H, W)`` for ``cv2.remap``
     (−1 where the virtual pixel's point has no real pixel inside the real image)."""
 
-    rig: StereoRig
+    rig: Rig
     distance_mm: float
-    virtual: StereoRig
+    virtual: Rig
     maps: tuple
 
     def warp(self, view: int, image: np.ndarray) -> np.ndarray:
@@ -68,7 +69,7 @@ def plane_points(camera: Camera, uv: np.ndarray, axis: np.ndarray, distance: flo
     return _meet_plane(np.broadcast_to(camera.center, rays.shape), rays, axis, distance)
 
 
-def apparent_camera(rig: StereoRig, view: int):
+def apparent_camera(rig: Rig, view: int):
     """Where camera ``view`` seems to be from the water, and how much the port magnifies it,
     near its principal point: ``(centre (3,) mm, focal scale)``. The centre is the point
     nearest to the water rays of the principal point and of two pixels
@@ -93,7 +94,7 @@ def apparent_camera(rig: StereoRig, view: int):
     return centre, float(np.mean(ratios))
 
 
-def virtual_pair(rig: StereoRig) -> StereoRig:
+def virtual_pair(rig: Rig) -> Rig:
     """The virtual pinhole pair of :func:`rectify`: each camera where it seems to be from the
     water (:func:`apparent_camera`), its intrinsics without distortion and with the port's
     apparent focal length, rotated by ``cv2.stereoRectify`` (``alpha = 0``) into a row-aligned
@@ -119,7 +120,7 @@ def virtual_pair(rig: StereoRig) -> StereoRig:
     return StereoRig(cameras[0], cameras[1], port)
 
 
-def rectify(rig: StereoRig, distance: float) -> Rectification:
+def rectify(rig: Rig, distance: float) -> Rectification:
     """The maps that warp both views of ``rig`` to its virtual pinhole pair, exact on the
     plane ``rig.depth_axis · X = distance`` mm (module docs)."""
     distance = float(distance)

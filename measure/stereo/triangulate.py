@@ -11,7 +11,7 @@
   gap of the pixels). Statistically optimal for Gaussian pixel noise; slower.
 
 Every method also takes a rig of two domes (``port`` a :class:`measure.geometry.dome.DomePair`): the
-rays are traced through each camera's own dome (:meth:`StereoRig.trace`); ``regular`` is exact
+rays are traced through each camera's own dome (:meth:`measure.stereo.rig.Rig.trace`); ``regular`` is exact
 there when each camera sits at its dome's centre (no ray through the centre is bent).
 
 Frames and units: reference frame = left camera frame (OpenCV axes), millimetres, pixels in the
@@ -24,65 +24,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..geometry.camera import Camera, ValueEquality
+from ..geometry.camera import Camera
 from ..geometry.lines import common_perpendicular
-from ..geometry.port import FlatPort, RigPort, index_matched_port
+from ..geometry.port import FlatPort
 from ..batching import map_row_chunks
 from ..reasons import Reason
 from .reprojection import reprojection_points
+from .rig import Rig, StereoRig  # noqa: F401  (StereoRig: its former home)
 
 METHODS = ("optical_path", "su", "regular", "reprojection")
-
-
-@dataclass(frozen=True, eq=False)
-class StereoRig(ValueEquality):
-    """Two cameras behind one flat port, or each inside its own dome (``port`` a
-    :class:`measure.geometry.dome.DomePair`). Both centres must be on the air side of the port (inside
-    their domes). Every triangulation method takes either kind (:meth:`trace` back-projects
-    through the port of each view).
-
-    ``port=None`` means no port (all air): it is replaced by :func:`index_matched_port` along
-    the left camera's optical axis, through which everything reduces to the pinhole model."""
-
-    left: Camera
-    right: Camera
-    port: FlatPort
-
-    def __post_init__(self):
-        if not isinstance(self.left, Camera) or not isinstance(self.right, Camera):
-            raise ValueError("left and right must be measure.Camera instances")
-        if self.port is None:
-            object.__setattr__(self, "port", index_matched_port(
-                self.left.R[:, 2], np.stack([self.left.center, self.right.center])))
-        if not isinstance(self.port, RigPort):
-            raise ValueError("port must be a measure.FlatPort, a measure.geometry.dome.DomePair or None")
-        self.port.check_cameras(self.left, self.right)
-
-    def view_port(self, view: int):
-        """The port camera ``view`` (0 left, 1 right) looks through: the shared FlatPort, or
-        that camera's DomePort (:meth:`measure.geometry.port.RigPort.view`)."""
-        return self.port.view(view)
-
-    @property
-    def depth_axis(self) -> np.ndarray:
-        """The unit axis along which depths are measured (reference frame): the port normal
-        of a flat port, the left camera's optical axis for domes (no shared normal)."""
-        return self.port.depth_axis(self.left)
-
-    def trace(self, view: int, directions: np.ndarray, keep_interface_points: bool = False):
-        """Water rays (:class:`measure.WaterRays`) of unit camera rays ``directions``
-        ``(N, 3)`` (reference frame) from camera ``view``'s centre through its port:
-        :func:`measure.trace_through_port` or :func:`measure.geometry.dome.trace_through_dome`."""
-        return self.view_port(view).trace(self.cameras[view].center, directions,
-                                          keep_interface_points=keep_interface_points)
-
-    @property
-    def cameras(self) -> tuple[Camera, Camera]:
-        return self.left, self.right
-
-    def with_port(self, port: FlatPort) -> StereoRig:
-        """The same cameras behind another port (e.g. a deviated water index)."""
-        return StereoRig(self.left, self.right, port)
 
 
 @dataclass(frozen=True)
@@ -131,7 +81,7 @@ def _finish(perp, reason, method) -> Triangulation:
     return Triangulation(points, gap, reason, method)
 
 
-def triangulate_rays(rig: StereoRig, rays_left: np.ndarray, rays_right: np.ndarray,
+def triangulate_rays(rig: Rig, rays_left: np.ndarray, rays_right: np.ndarray,
                      method: str = "optical_path") -> Triangulation:
     """Triangulate from unit camera rays ``(N, 3)`` (reference frame) instead of pixels."""
     if method not in METHODS or method == "reprojection":
@@ -247,7 +197,7 @@ def _water_line(camera: Camera, port: FlatPort, basis, uv):
     return origin, (along, w1, w2), square, w_n, reason
 
 
-def _optical_path_rows(rig: StereoRig, uv_left, uv_right, out=None):
+def _optical_path_rows(rig: Rig, uv_left, uv_right, out=None):
     """The optical-path triangulation of pixel rows, column by column in the port basis (the
     same equations as :func:`triangulate_rays`, fused: both water rays start on the last
     interface, so their difference has no normal component; the gap is ``|w·(d1×d2)| /
@@ -366,7 +316,7 @@ def _triangulate_pixels(rig, left, right, method):
     return result.points, result.gap, reason
 
 
-def triangulate(rig: StereoRig, uv_left, uv_right, method: str = "optical_path") -> Triangulation:
+def triangulate(rig: Rig, uv_left, uv_right, method: str = "optical_path") -> Triangulation:
     """Triangulate matched pixels ``(N, 2)`` of the left and right images.
 
     ``method``: ``"optical_path"`` (the paper's model), ``"su"`` or ``"regular"``. Lens

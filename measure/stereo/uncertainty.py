@@ -41,7 +41,7 @@ import numpy as np
 from ..geometry.camera import Camera
 from ..geometry.projection import project
 from .rig_covariance import RigCovariance
-from .triangulate import StereoRig
+from .rig import Rig, StereoRig
 
 #: χ²₃(0.95): a point lies inside its 95 % ellipsoid when its Mahalanobis distance² to the truth
 #: is at most this (``scipy.stats.chi2.ppf(0.95, 3)``).
@@ -101,7 +101,7 @@ def _distortion_terms(camera: Camera, pixels: np.ndarray):
     return out
 
 
-def pixel_jacobians(rig: StereoRig, points, names=(), normal_axes=None):
+def pixel_jacobians(rig: Rig, points, names=(), normal_axes=None):
     """The forward model of both views and its derivatives at ``points`` ``(N, 3)`` mm.
 
     Returns ``pixels`` ``(N, 4)`` (u_L, v_L, u_R, v_R), ``d_points`` ``(N, 4, 3)`` px/mm and
@@ -181,7 +181,7 @@ def _port_column(jac, name: str, normal_axes, label: str):
     return None
 
 
-def perturbed_rig(rig: StereoRig, names, delta, normal_axes=None) -> StereoRig:
+def perturbed_rig(rig: Rig, names, delta, normal_axes=None) -> Rig:
     """``rig`` with the named parameters (:mod:`measure.stereo.rig_covariance`) moved by ``delta``
     ``(P,)`` in their units: the definition :func:`pixel_jacobians` differentiates (used by the
     tests and by Monte Carlo checks). A rig of two domes: ``left/right.dome_center[k]`` move
@@ -238,7 +238,7 @@ def pixel_sigmas(pixel_sigma, n: int, allow_zero: bool = False) -> np.ndarray:
     return np.repeat(sigma, 2, axis=1)
 
 
-def point_covariances(rig: StereoRig, points, pixel_sigma, rig_covariance: RigCovariance | None
+def point_covariances(rig: Rig, points, pixel_sigma, rig_covariance: RigCovariance | None
                       = None) -> PointCovariance:
     """First-order covariance ``(N, 3, 3)`` mm² of triangulated ``points`` ``(N, 3)`` (module
     docs), with its pixel and rig parts. ``pixel_sigma``: px, see :func:`pixel_sigmas`.
@@ -248,7 +248,7 @@ def point_covariances(rig: StereoRig, points, pixel_sigma, rig_covariance: RigCo
     return _covariances(rig, points, 1.0 / (sigma * sigma), rig_covariance)
 
 
-def point_covariances_full(rig: StereoRig, points, pixel_covariance,
+def point_covariances_full(rig: Rig, points, pixel_covariance,
                            rig_covariance: RigCovariance | None = None) -> PointCovariance:
     """:func:`point_covariances` with a full ``(N, 4, 4)`` px² covariance of each point's four
     pixel coordinates ``(u_L, v_L, u_R, v_R)`` (positive definite; correlated coordinates, a
@@ -286,7 +286,7 @@ def dense_pixel_covariance(sigma_px, direction, isotropic_px=None) -> np.ndarray
     return out
 
 
-def dense_point_covariances(rig: StereoRig, points, sigma_px, direction,
+def dense_point_covariances(rig: Rig, points, sigma_px, direction,
                             rig_covariance: RigCovariance | None = None) -> PointCovariance:
     """:func:`point_covariances_full` with :func:`dense_pixel_covariance` (its default
     isotropic part), the weights written in closed form (no 4 × 4 inverse per point): the left
@@ -337,7 +337,7 @@ def _covariances(rig, points, weight, rig_covariance) -> PointCovariance:
     return PointCovariance(total, pixel, rig_part)
 
 
-def point_covariance(rig: StereoRig, uv_left, uv_right, points, pixel_sigma,
+def point_covariance(rig: Rig, uv_left, uv_right, points, pixel_sigma,
                      rig_covariance: RigCovariance | None = None) -> np.ndarray:
     """``(N, 3, 3)`` mm²: the covariance of each point triangulated from ``uv_left``,
     ``uv_right`` ``(N, 2)`` px (rows whose pixels or point are not finite are NaN). The
@@ -363,7 +363,7 @@ OUTLIER_CHI2_1 = 20.0
 MAX_FLUX_EXPONENT = 2.0
 
 
-def residual_sigma(rig: StereoRig, uv_left, uv_right, points, pixel_sigma=0.0,
+def residual_sigma(rig: Rig, uv_left, uv_right, points, pixel_sigma=0.0,
                    flux=None) -> dict:
     """The pixel noise the data show beyond ``pixel_sigma`` (px; a number, ``(N,)`` or
     ``(N, 2)``): the a-posteriori variance factor of the triangulation, no truth needed.

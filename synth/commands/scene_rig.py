@@ -143,7 +143,7 @@ def dome_port(args, cameras):
     DomePair of two cameras, a list of one DomePort per camera of more. CLIError for a camera
     outside its dome or a field of view that does not fit through the domes."""
     from measure import StereoRig
-    from measure.stereo.multirig import MultiRig
+    from measure.stereo.rig import Rig
 
     from synth.infra.cli import option_number
     from synth.scene.dome import (DEFAULT_DOME_RADIUS_MM, DEFAULT_DOME_THICKNESS_MM,
@@ -168,7 +168,7 @@ def dome_port(args, cameras):
         raise CLIError(f"--dome-offset {' '.join(f'{v:g}' for v in offset)}: {exc}") from None
     try:
         check_field_of_view(StereoRig(*cameras, port) if len(cameras) == 2
-                            else MultiRig(cameras, port))
+                            else Rig(cameras, port))
     except ValueError as exc:
         raise CLIError(f"--dome-radius {radius:g} --dome-thickness {thickness:g}: {exc}") from None
     return port
@@ -207,7 +207,7 @@ def own_ports(args, cameras) -> tuple:
     import numpy as np
 
     from measure import StereoRig
-    from measure.stereo.multirig import MultiRig
+    from measure.stereo.rig import Rig
 
     from synth.infra.cli import given
     from synth.scene.windows import (DEFAULT_PAIR_DISTANCE_MM, DEFAULT_PAIR_THICKNESS_MM,
@@ -233,7 +233,7 @@ def own_ports(args, cameras) -> tuple:
         else:
             port = flat_ports(cameras, distances, list(zip(tilt_x, tilt_y)), thicknesses,
                               indices)
-            rig = MultiRig(cameras, port)
+            rig = Rig(cameras, port)
         check_windows(rig, fit_windows(rig))
     except ValueError as exc:
         raise CLIError(f"{what}: {exc}") from None

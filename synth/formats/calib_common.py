@@ -10,7 +10,7 @@ import re
 
 import numpy as np
 
-from measure import Camera, FlatPort, StereoRig
+from measure import Camera, FlatPort, Rig, StereoRig
 from measure.geometry.camera import BROWN_CONRADY, FISHEYE
 from measure.geometry.dome import DomePair
 from measure.geometry.flat_pair import FlatPair
@@ -99,7 +99,7 @@ def calib_dict(size, K1, D1, K2, D2, R, T, port: FlatPort, has_port: bool,
     return out
 
 
-def relative_pose(rig: StereoRig):
+def relative_pose(rig: Rig):
     """The right camera's camera-to-left pose ``(R, t mm)`` of any rig."""
     left, right = rig.left, rig.right
     return left.R.T @ right.R, left.R.T @ (right.t - left.t)
@@ -261,7 +261,7 @@ def flat_ports_from_params(params_left, params_right, left: Camera, right: Camer
     return port
 
 
-def rig_port_params(rig: StereoRig) -> tuple[str, list, list]:
+def rig_port_params(rig: Rig) -> tuple[str, list, list]:
     """``(housing, left parameters, right parameters)``: FLATPORT or DOMEPORT (metres)."""
     return housing_params(rig.port, rig.left, rig.right, CalibFormatError)
 

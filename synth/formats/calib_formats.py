@@ -44,7 +44,7 @@ from __future__ import annotations
 
 import os
 
-from measure import StereoRig
+from measure import Rig
 
 # the formats' modules; their public names are this module's (read and written from here)
 from synth.formats.calib_common import (CALIBMAR_NAME, COLMAP_CAMERAS_NAME, COLMAP_MODELS,
@@ -59,7 +59,7 @@ from synth.formats.colmap_files import (colmap_cameras, read_colmap, read_colmap
                                         write_colmap, write_colmap_rig)
 
 
-def write_calibration_formats(directory, rig: StereoRig, has_port: bool = True) -> list[str]:
+def write_calibration_formats(directory, rig: Rig, has_port: bool = True) -> list[str]:
     """Write ``rig`` beside a ``calib.yaml`` in ``directory`` as calibmar's stereo pair
     (:data:`CALIBMAR_NAME` and its ``_stereo`` partner) and the COLMAP fork's ``cameras.txt``
     with ``rig_config.json``; every file atomically. Returns the paths written (4)."""

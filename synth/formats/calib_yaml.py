@@ -1,5 +1,5 @@
 """A rig's ``calib.yaml`` (OpenCV FileStorage; :mod:`synth.products.dataset` documents its
-nodes): written from a :class:`measure.StereoRig` and read back — a flat port, two housings or
+nodes): written from a :class:`measure.Rig` of two and read back — a flat port, two housings or
 two domes, an optional covariance — and, by their content, calibmar's and the COLMAP fork's
 files read into the same dictionary (:mod:`synth.formats.calib_formats`). Units mm; the
 reference frame is the left camera's; OpenCV's stereo convention ``X_right = R·X_left + T``."""
@@ -11,7 +11,7 @@ import os
 import cv2
 import numpy as np
 
-from measure import Camera, FlatPort, StereoRig
+from measure import Camera, FlatPort, Rig
 from measure.geometry.camera import BROWN_CONRADY
 from measure.geometry.dome import DomePair, DomePort
 from measure.geometry.flat_pair import FlatPair
@@ -50,7 +50,7 @@ def write_node(fs, name: str, value) -> None:
         fs.write(name, float(value))
 
 
-def write_calib(path, rig: StereoRig, has_port: bool = True, extra: dict | None = None,
+def write_calib(path, rig: Rig, has_port: bool = True, extra: dict | None = None,
                 covariance=None) -> None:
     """Write ``calib.yaml`` (see module docs) with ``cv2.FileStorage``; ``extra`` adds maps
     (e.g. ``uncertainty``) of numbers, strings, lists and maps after the standard nodes;
@@ -96,7 +96,7 @@ def _seq(node) -> list[float]:
 def read_calib(path) -> dict:
     """Read a stereo calibration: a dict with ``size``, ``K1``, ``D1``, ``K2``, ``D2``, ``R``,
     ``T``, ``port`` (:class:`measure.FlatPort`, a FlatPair or a DomePair), ``has_port`` and ``rig``
-    (:class:`measure.StereoRig`, the left camera at the reference origin). The file is this
+    (:class:`measure.Rig` of two, the left camera at the reference origin). The file is this
     project's ``calib.yaml``, a calibmar stereo calibration (either of its two YAML files) or
     the COLMAP fork's ``cameras.txt`` with ``rig_config.json`` beside it, told apart by content
     (:mod:`synth.formats.calib_formats`). Anything unreadable or inconsistent raises

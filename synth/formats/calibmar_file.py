@@ -9,7 +9,7 @@ import re
 
 import numpy as np
 
-from measure import Camera, StereoRig
+from measure import Camera, Rig
 from measure.geometry.flatport_format import METRES_PER_MM
 
 from synth.infra.fileio import atomic_write_text
@@ -52,7 +52,7 @@ def calibmar_text(camera: Camera, port_params, size, pose, model,
     return "\n".join(lines) + "\n"
 
 
-def write_calibmar(path, rig: StereoRig, has_port: bool = True,
+def write_calibmar(path, rig: Rig, has_port: bool = True,
                    model: str | None = None) -> tuple[str, str]:
     """Write ``rig`` as calibmar's stereo pair ``path`` (left) and ``<stem>_stereo.yaml``
     (right), atomically; ``has_port=False`` writes ``non_svp_model: NONE`` (in air). Returns the

@@ -10,7 +10,7 @@ import os
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from measure import Camera, StereoRig
+from measure import Camera, Rig
 from measure.geometry.flatport_format import METRES_PER_MM
 
 from synth.infra.fileio import atomic_write_text
@@ -40,7 +40,7 @@ def _colmap_header(count: int, which: str, poses: str) -> list:
             f"# WARNING: {PYCOLMAP_WARNING}."]
 
 
-def write_colmap(path, rig: StereoRig, has_port: bool = True,
+def write_colmap(path, rig: Rig, has_port: bool = True,
                  model: str | None = None) -> tuple[str, str]:
     """Write ``rig`` as the COLMAP fork's ``cameras.txt`` at ``path`` (camera 1 = left,
     2 = right, each with its FLATPORT unless ``has_port`` is False) and ``rig_config.json``
@@ -75,7 +75,7 @@ def write_colmap(path, rig: StereoRig, has_port: bool = True,
 
 
 def write_colmap_rig(path, rig) -> tuple[str, str]:
-    """Write a rig of N cameras (:class:`measure.stereo.multirig.MultiRig`) as the COLMAP
+    """Write a rig of N cameras (:class:`measure.stereo.rig.Rig`) as the COLMAP
     fork's ``cameras.txt`` at ``path`` (camera k + 1 = the rig's camera k, each with its own
     FLATPORT or DOMEPORT in its frame, none for a camera in air) and ``rig_config.json`` beside
     it (every camera's ``cam_from_rig`` pose; the rig frame is the first camera's, the reference
@@ -116,11 +116,11 @@ def write_colmap_rig(path, rig) -> tuple[str, str]:
 
 
 def read_colmap_rig(path):
-    """The rig of N cameras (:class:`measure.stereo.multirig.MultiRig`, the reference frame
+    """The rig of N cameras (:class:`measure.stereo.rig.Rig`, the reference frame
     the rig configuration's reference camera's) of the COLMAP fork's ``cameras.txt`` and the
     ``rig_config.json`` beside it; CalibFormatError names the file and what is wrong."""
     from measure.geometry.flatport_format import one_port_per_plane, view_port_from_params
-    from measure.stereo.multirig import MultiRig
+    from measure.stereo.rig import Rig
 
     cameras = parse_cameras_txt(path)
     ref, poses = _read_rig_config(os.path.join(os.path.dirname(os.fspath(path)),
@@ -139,7 +139,7 @@ def read_colmap_rig(path):
             raise CalibFormatError(f"{path}: camera {camera_id}: {exc}") from None
         built.append(camera)
     try:
-        return MultiRig(built, one_port_per_plane(ports), [f"cam{k}" for k in range(len(built))])
+        return Rig(built, one_port_per_plane(ports), [f"cam{k}" for k in range(len(built))])
     except ValueError as exc:
         raise CalibFormatError(f"{path}: {exc}") from None
 

@@ -27,7 +27,7 @@ import os
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from measure import StereoRig
+from measure import Rig
 from measure.geometry.flatport_format import METRES_PER_MM, cameras_json_port
 
 from synth.formats.calib_formats import (COLMAP_PIXEL_OFFSET, CalibFormatError, stereo_extrinsics,
@@ -46,7 +46,7 @@ def _list(matrix) -> list:
     return np.asarray(matrix, dtype=np.float64).tolist()
 
 
-def cameras_json(rig: StereoRig, has_port: bool = True) -> dict:
+def cameras_json(rig: Rig, has_port: bool = True) -> dict:
     """The rig as plain JSON (module docs)."""
     R, T = stereo_extrinsics(rig.left, rig.right)
     cameras = {}
@@ -76,7 +76,7 @@ def cameras_json(rig: StereoRig, has_port: bool = True) -> dict:
 
 
 def cameras_json_views(rig) -> dict:
-    """A rig of N cameras (:class:`measure.stereo.multirig.MultiRig`) as plain JSON: per camera
+    """A rig of N cameras (:class:`measure.stereo.rig.Rig`) as plain JSON: per camera
     (by name, in order) ``K``, distortion, image size, pose ``X_ref = R·X_cam + t`` and the port
     it looks through (its own flat port, a share of one, a dome, or none); ``shared_port``
     says whether every camera looks through the same flat port."""
@@ -109,11 +109,11 @@ def cameras_json_views(rig) -> dict:
 
 
 def write_cameras_json(directory: str, rig, has_port: bool = True,
-                       name: str = CAMERAS_JSON) -> str:
-    """``directory/name``: :func:`cameras_json` of a stereo rig, or :func:`cameras_json_views`
-    of a rig of N cameras (a MultiRig)."""
+                       name: str = CAMERAS_JSON, views: bool = False) -> str:
+    """``directory/name``: :func:`cameras_json` of a stereo pair, or with ``views``
+    :func:`cameras_json_views` of a rig of N cameras (a folder per camera)."""
     path = os.path.join(directory, name)
-    data = cameras_json_views(rig) if hasattr(rig, "names") else cameras_json(rig, has_port)
+    data = cameras_json_views(rig) if views else cameras_json(rig, has_port)
     with open(path, "w", encoding="utf-8") as handle:
         json.dump(data, handle, indent=1)
         handle.write("\n")
@@ -137,7 +137,7 @@ def _inside(uv: np.ndarray, size) -> np.ndarray:
             & (uv[:, 1] >= -0.5) & (uv[:, 1] <= h - 0.5))
 
 
-def write_colmap_model(directory: str, rig: StereoRig, has_port: bool, ids, points, uv_left,
+def write_colmap_model(directory: str, rig: Rig, has_port: bool, ids, points, uv_left,
                        uv_right, image_names=("left.png", "right.png")) -> str | None:
     """``directory/colmap/``: ``cameras.txt`` (+ ``rig_config.json``), ``images.txt``,
     ``points3D.txt`` and ``README.txt`` (module docs). Points: the targets whose pixel in both
@@ -199,7 +199,7 @@ def write_colmap_model(directory: str, rig: StereoRig, has_port: bool, ids, poin
 
 
 def write_colmap_views(directory: str, rig, ids, points, pixels, image_names) -> str | None:
-    """``directory/colmap/`` of a rig of N cameras (a MultiRig): ``cameras.txt`` with each
+    """``directory/colmap/`` of a rig of N cameras (a Rig): ``cameras.txt`` with each
     camera's own FLATPORT or DOMEPORT and ``rig_config.json``
     (:func:`synth.formats.calib_formats.write_colmap_rig`), ``images.txt`` (one image per
     camera, world-to-camera, the world the first camera's frame, metres), ``points3D.txt`` (the
@@ -330,7 +330,7 @@ def camera_z(points: np.ndarray, camera) -> np.ndarray:
     return (np.asarray(points, np.float64) - camera.t) @ camera.R[:, 2]
 
 
-def write_surface_formats(directory: str, rig: StereoRig) -> dict:
+def write_surface_formats(directory: str, rig: Rig) -> dict:
     """The common-format truth of a surface dataset (module docs), from its ``.npy`` maps in
     ``directory``; returns what the manifest records (the depth PNG scale, the files)."""
     import cv2

@@ -10,7 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from measure import StereoRig
+from measure import Rig, StereoRig
 from measure.calibration.board import Board
 from measure.geometry.port import index_matched_port
 from measure.geometry.projection import project
@@ -50,7 +50,7 @@ class BoardCameras:
     """The N > 2 cameras of a boards folder, each behind the port it looks through
     (``ports``, one per camera: one shared flat port, an index-matched one in air, or a flat
     port each): what :func:`sample_poses` and :func:`corner_pixels` ask of a
-    :class:`measure.StereoRig` (``cameras``, ``left``, ``view_port``, ``water_side``,
+    :class:`measure.Rig` of two (``cameras``, ``left``, ``view_port``, ``water_side``,
     ``depth_axis``), and the cameras' ``names``."""
 
     cameras: tuple
@@ -73,15 +73,15 @@ class BoardCameras:
         return np.all([port.water_side(points) for port in set(self.ports)], axis=0)
 
     def multirig(self):
-        """As a :class:`measure.stereo.multirig.MultiRig` (``calib.yaml`` of N cameras)."""
-        from measure.stereo.multirig import MultiRig
+        """As a :class:`measure.stereo.rig.Rig` (``calib.yaml`` of N cameras)."""
+        from measure.stereo.rig import Rig
 
-        return MultiRig(self.cameras, list(self.ports), self.names)
+        return Rig(self.cameras, list(self.ports), self.names)
 
 
 def board_rig(spec: SceneSpec, air: bool):
     """The scene's cameras behind their ports, or (``air``) the same cameras with no port: a
-    :class:`measure.StereoRig` for two cameras, :class:`BoardCameras` for more."""
+    a pair (:class:`measure.Rig` of two) for two cameras, :class:`BoardCameras` for more."""
     if spec.extra_cameras:
         cameras = spec.all_cameras
         ports = ((index_matched_port(cameras[0].R[:, 2], np.stack([c.t for c in cameras])),)
@@ -116,7 +116,7 @@ def _fits(rig, board: Board, poses_R, poses_t, water: bool, anchor: int | None =
     return whole[anchor] & (whole.sum(axis=0) >= 2)
 
 
-def sample_poses(rig: StereoRig, board: Board, n: int, seed: int, water: bool,
+def sample_poses(rig: Rig, board: Board, n: int, seed: int, water: bool,
                  distance_range=DEFAULT_DISTANCE_RANGE_MM,
                  max_tilt_deg: float = DEFAULT_MAX_TILT_DEG, shifts=()) -> list[BoardPose]:
     """``n`` seeded random poses that keep the whole board inside both images (module docs);

@@ -35,7 +35,7 @@ from datetime import datetime, timezone
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from measure import StereoRig
+from measure import Rig
 from measure.calibration.board import PATTERN_TEXELS_PER_SQUARE, Board, BoardError
 from measure.geometry.projection import project
 
@@ -338,7 +338,7 @@ _POSE_STATS = ("mode", "reason", "lit_fraction", "mask_pixels", "samples_on_mask
                "samples_off_mask", "spp_on_mask", "spp_off_mask", "bands")
 
 
-def corner_pixels(rig: StereoRig, board: Board, poses, effects: CameraEffects | None = None):
+def corner_pixels(rig: Rig, board: Board, poses, effects: CameraEffects | None = None):
     """Per pose ``(corners (M, 3) mm, (left pixels, right pixels) (M, 2))``: every corner of
     ``board`` at that :class:`BoardPose` in the reference frame and where each camera sees it
     through its port (the Fermat forward model); with a rolling shutter (``effects``) where
@@ -390,7 +390,7 @@ class BoardImages:
     """A boards folder read back: ``images`` ``[(left, right), …]`` float32 linear per pose,
     ``board``, ``calib`` (the truth, :func:`synth.formats.calib_yaml.read_calib`), ``poses`` (truth),
     ``corners`` truth rows ``(M, 9)`` in :data:`CORNERS_HEADER` order, ``air``, ``manifest``.
-    Of N > 2 cameras: ``images`` ``[(cam0, cam1, …), …]``, ``calib`` ``{"multirig": MultiRig,
+    Of N > 2 cameras: ``images`` ``[(cam0, cam1, …), …]``, ``calib`` ``{"multirig": Rig,
     "size", "names"}``, ``corners`` in :func:`corners_header` order."""
 
     path: str

@@ -63,7 +63,7 @@ from datetime import datetime, timezone
 import cv2
 import numpy as np
 
-from measure import StereoRig
+from measure import Rig
 from measure.geometry.projection import project
 
 from synth.formats.exchange import write_cameras_json, write_colmap_model, write_surface_formats
@@ -429,7 +429,7 @@ class Dataset:
     path: str
     left: np.ndarray
     right: np.ndarray
-    rig: StereoRig
+    rig: Rig
     has_port: bool
     targets: np.ndarray
     ids: np.ndarray

@@ -2,7 +2,7 @@
 port — never from the renderer's samples.
 
 Every pixel centre's ray (OpenCV pixels; :meth:`measure.Camera.rays`) is traced through its own
-port in float64 (:meth:`measure.StereoRig.trace`: one flat port, a flat port per camera or a
+port in float64 (:meth:`measure.Rig.trace`: one flat port, a flat port per camera or a
 dome per camera alike) and cut with the scene's mesh (Mitsuba finds the triangle, float64 finds
 the point on its plane: :class:`synth.products.truth_maps.MeshTracer`). Frames and units:
 millimetres, the reference frame (the left camera's, OpenCV axes) unless a name says otherwise.

@@ -1,4 +1,4 @@
-"""``calib.yaml`` of a rig of N cameras (:class:`measure.stereo.multirig.MultiRig`).
+"""``calib.yaml`` of a rig of N cameras (:class:`measure.stereo.rig.Rig`).
 
 A rig of two cameras of today's kinds (one flat port, a flat port per camera, a dome per camera,
 all air) is written as the two-camera ``calib.yaml`` of :func:`synth.formats.calib_yaml.write_calib`
@@ -32,7 +32,7 @@ import numpy as np
 
 from measure import Camera, FlatPort
 from measure.geometry.dome import DomePort
-from measure.stereo.multirig import MultiRig
+from measure.stereo.rig import Rig
 from synth.formats.calib_formats import (CalibFormatError, calib_format, colmap_cameras,
                                          read_colmap_rig)
 from synth.formats.calib_yaml import DatasetError, not_a_file, read_calib, write_calib
@@ -82,7 +82,7 @@ PORT_WRITERS = {"FlatPort": lambda fs, port: _write_flat(fs, "", port, True),
                 "DomePort": lambda fs, port: _write_dome(fs, "", port)}
 
 
-def shared_port(rig: MultiRig):
+def shared_port(rig: Rig):
     """The port that two or more cameras share (the first such), or None."""
     for k, port in enumerate(rig.ports):
         if port is not None and any(port == other for other in rig.ports[k + 1:]):
@@ -90,7 +90,7 @@ def shared_port(rig: MultiRig):
     return None
 
 
-def write_rig_file(path, rig: MultiRig, covariance=None) -> None:
+def write_rig_file(path, rig: Rig, covariance=None) -> None:
     """Write ``calib.yaml`` (module docs): today's two-camera file for a rig that is one.
     ``covariance`` ``(names, matrix)`` (a rig of more than two cameras): the calibration's
     covariance of the named parameters (px, mm, rad), as the map ``uncertainty`` {``names``
@@ -189,7 +189,7 @@ def _is_one_camera_file(path) -> bool:
         fs.release()
 
 
-def read_rig_file(path) -> MultiRig:
+def read_rig_file(path) -> Rig:
     """A rig of N cameras from ``calib.yaml`` (module docs), or from any two-camera calibration
     :func:`synth.formats.calib_yaml.read_calib` reads (as a rig of two: ``left``, ``right``).
     :class:`DatasetError` (one line naming the file) for anything unusable."""
@@ -206,7 +206,7 @@ def read_rig_file(path) -> MultiRig:
             raise DatasetError(str(exc)) from None
     if not _is_rig_file(path):
         calib = read_calib(path)
-        return MultiRig.from_stereo(calib["rig"])
+        return Rig.from_stereo(calib["rig"])
     fs = cv2.FileStorage(path, cv2.FILE_STORAGE_READ)
     try:
         units = fs.getNode("units")
@@ -229,7 +229,7 @@ def read_rig_file(path) -> MultiRig:
     finally:
         fs.release()
     try:
-        return MultiRig(cameras, ports, names)
+        return Rig(cameras, ports, names)
     except ValueError as exc:
         raise DatasetError(f"{path}: {exc}") from None
 

@@ -50,7 +50,7 @@ from datetime import datetime, timezone
 import numpy as np
 
 from measure.geometry.projection import project
-from measure.stereo.multirig import MultiRig
+from measure.stereo.rig import Rig
 
 from synth.infra.fileio import file_sha256
 from synth.infra.provenance import package_versions
@@ -117,7 +117,7 @@ def read_views_pixels_csv(path, names) -> dict:
             "pixels": rows[:, 4:].reshape(len(rows), len(names), 2)}
 
 
-def simulated_pixels(rig: MultiRig, targets) -> np.ndarray:
+def simulated_pixels(rig: Rig, targets) -> np.ndarray:
     """The Fermat simulator's pixel of every target in every camera, ``(T, V, 2)`` px (NaN where
     none): :func:`measure.geometry.projection.project` through the port each camera looks
     through. ``targets`` ``(T, 3)`` mm, reference frame."""
@@ -242,7 +242,7 @@ def _write_view_files(tmp, spec: SceneSpec, names, times):
     times["project"] = time.perf_counter() - t
     t = time.perf_counter()
     write_rig_file(os.path.join(tmp, "calib.yaml"), rig)
-    write_cameras_json(tmp, rig)
+    write_cameras_json(tmp, rig, views=True)
     colmap_note = write_colmap_views(tmp, rig, spec.target_ids, spec.targets, pixels,
                                      [f"{name}/{VIEW_FILES['image']}" for name in names])
     write_targets_ply(os.path.join(tmp, "targets.ply"), spec.targets)
@@ -257,7 +257,7 @@ class ViewsDataset:
     """A dataset of N cameras read back (module docs).
 
     ``names`` the cameras (``cam0``, …); ``images`` one float32 linear image ``(H, W)`` per
-    camera (``png / png_scale``); ``rig`` the :class:`measure.stereo.multirig.MultiRig` of
+    camera (``png / png_scale``); ``rig`` the :class:`measure.stereo.rig.Rig` of
     ``calib.yaml`` (mm, reference frame ``cam0``'s); ``targets`` ``(T, 3)`` mm from
     ``targets.ply``; ``ids`` ``(T,)`` and ``pixels`` ``(T, V, 2)`` px, the simulator's, from
     ``pixels.csv``; ``manifest`` the dict."""
@@ -265,7 +265,7 @@ class ViewsDataset:
     path: str
     names: tuple
     images: tuple
-    rig: MultiRig
+    rig: Rig
     targets: np.ndarray
     ids: np.ndarray
     pixels: np.ndarray

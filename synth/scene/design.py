@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from measure import FlatPort, StereoRig
+from measure import FlatPort, Rig, StereoRig
 from measure.geometry.port import require_flat_port
 
 #: The deviations a suite may give (``error.<name>``), with their units.
@@ -35,7 +35,7 @@ CALIB_DESIGN = "calib_design.yaml"
 CAMERAS_DESIGN = "cameras_design.json"
 
 
-def design_rig(truth: StereoRig, port: dict) -> StereoRig:
+def design_rig(truth: Rig, port: dict) -> Rig:
     """The rig a user would believe: ``truth``'s cameras with its port's quantities replaced by
     ``port`` (``{name: value}``, names of :data:`DESIGN_PORT`; ``port_normal`` 3 numbers, the
     others numbers in mm or index units). ValueError for an unknown name, a glass quantity of a

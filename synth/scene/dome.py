@@ -21,7 +21,7 @@ import numpy as np
 
 from measure import StereoRig
 from measure.geometry.dome import DomePair, DomePort, trace_through_dome
-from measure.stereo.multirig import MultiRig, default_names
+from measure.stereo.rig import Rig, default_names
 from synth.infra.cli import option_number
 
 #: Defaults of ``synth scene --port dome``: inner radius and glass thickness, mm. With the
@@ -59,13 +59,13 @@ def camera_domes(cameras, radius: float, thickness: float, offset, indices) -> l
     """A dome around each camera: its centre ``offset`` (mm, in that camera's frame) from the
     camera's centre — the same offset for every camera; ``indices`` ``(n_air, n_glass,
     n_water)``. Raises ``ValueError`` for a radius or thickness below the minimum, a camera
-    outside its own dome or inside another's glass (:class:`measure.stereo.multirig.MultiRig`;
+    outside its own dome or inside another's glass (:class:`measure.stereo.rig.Rig`;
     two cameras: :func:`dome_pair`)."""
     check_dome_size(radius, thickness)
     offset = np.asarray(offset, dtype=np.float64).reshape(3)
     domes = [DomePort(cam.center + cam.R @ offset, radius, thickness, indices) for cam in cameras]
     if len(domes) > 2:
-        MultiRig(cameras, domes)  # each camera inside its dome, none in another's glass
+        Rig(cameras, domes)  # each camera inside its dome, none in another's glass
     return domes
 
 
@@ -80,7 +80,7 @@ def dome_pair(cameras, radius: float, thickness: float, offset, indices) -> Dome
 
 def named_domes(port) -> list:
     """``[(camera name, DomePort), …]`` of a DomePair (``left``, ``right``) or of a list of one
-    DomePort per camera (``cam0``, ``cam1``, …; :func:`measure.stereo.multirig.default_names`)."""
+    DomePort per camera (``cam0``, ``cam1``, …; :func:`measure.stereo.rig.default_names`)."""
     if isinstance(port, (list, tuple)):
         return list(zip(default_names(len(port)), port))
     return list(zip(CAMERA_NAMES, (port.left, port.right)))
@@ -88,7 +88,7 @@ def named_domes(port) -> list:
 
 def rig_domes(rig) -> list:
     """``[(camera name, DomePort), …]`` of a rig whose cameras are each inside their own dome:
-    a StereoRig with a DomePair or a MultiRig of DomePorts; ``ValueError`` for any other."""
+    a StereoRig with a DomePair or a Rig of DomePorts; ``ValueError`` for any other."""
     names = getattr(rig, "names", CAMERA_NAMES)
     domes = [rig.view_port(k) for k in range(len(rig.cameras))]
     if any(getattr(d, "kind", None) != "dome" for d in domes):
@@ -104,7 +104,7 @@ def check_field_of_view(rig, step_px: int = FOV_CHECK_STEP_PX) -> None:
     """Raise ``ValueError`` unless each camera's whole field of view fits through its own dome
     and misses every other camera's dome.
 
-    ``rig``: a StereoRig with a DomePair, or a MultiRig of one DomePort per camera. The rays of
+    ``rig``: a StereoRig with a DomePair, or a Rig of one DomePort per camera. The rays of
     a grid of pixels (every ``step_px`` and the image border) are traced through the camera's
     dome (:func:`measure.geometry.dome.trace_through_dome`); each must reach the water (no
     total internal reflection) and its water ray must not meet another dome's outer sphere.

@@ -34,20 +34,20 @@ def glass_of(port):
 
 def glass_rig(cameras, port, names=None):
     """The rig whose cameras each have their own glass: a StereoRig of two cameras and their
-    FlatPair or DomePair, or a MultiRig of N cameras and a list of their flat ports or
+    FlatPair or DomePair, or a Rig of N cameras and a list of their flat ports or
     domes."""
-    from measure.stereo.multirig import MultiRig
+    from measure.stereo.rig import Rig
 
     if isinstance(port, (list, tuple)):
-        return MultiRig(tuple(cameras), list(port), names)
+        return Rig(tuple(cameras), list(port), names)
     return StereoRig(cameras[0], cameras[1], port)
 
 
 
 def _rig_port(rig):
-    """What the dome functions take as a rig's domes: a StereoRig's DomePair, a MultiRig's list
-    of DomePorts."""
-    return rig.port if isinstance(rig, StereoRig) else list(rig.ports)
+    """What the dome functions take as a rig's domes: the list of its cameras' DomePorts (of a
+    pair behind a DomePair: its two domes, named ``left`` and ``right`` as the DomePair's)."""
+    return list(rig.ports)
 
 
 def _dome_xml(rig) -> str:

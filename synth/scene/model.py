@@ -11,7 +11,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from measure import Camera, StereoRig
+from measure import Camera, Rig
 
 #: Defaults written into every scene unless given. ``spp`` is what a lit pixel gets: target
 #: scenes render adaptively (synth.rendering.render), where 144 spp on the lit pixels costs about as much
@@ -63,7 +63,7 @@ class SceneError(ValueError):
 class SceneSpec:
     """What a scene file says, after ``<default>`` values and ``-D`` overrides are applied.
 
-    ``rig`` is a :class:`measure.StereoRig`. In a scene with no port (``has_port`` False) its port
+    ``rig`` is a :class:`measure.Rig` of two. In a scene with no port (``has_port`` False) its port
     is an index-matched stand-in: ``FlatPort(N = left optical axis, D = 1 mm beyond the farther
     camera centre, no layers, indices (1, 1))``, through which every projection and triangulation
     reduces to the pinhole one. ``targets`` ``(N, 3)`` ground-truth centres (mm, reference frame)
@@ -73,7 +73,7 @@ class SceneSpec:
     bytes.
     """
 
-    rig: StereoRig
+    rig: Rig
     has_port: bool
     targets: np.ndarray
     target_ids: np.ndarray
@@ -123,22 +123,22 @@ class SceneSpec:
     @property
     def camera_names(self) -> tuple:
         """``left``, ``right`` — or ``cam0``, ``cam1``, … in a scene of more cameras."""
-        from measure.stereo.multirig import default_names
+        from measure.stereo.rig import default_names
 
         return default_names(len(self.all_cameras))
 
     @property
     def multirig(self):
-        """The scene's rig as a :class:`measure.stereo.multirig.MultiRig` (every camera, each
+        """The scene's rig as a :class:`measure.stereo.rig.Rig` (every camera, each
         with the port it looks through)."""
-        from measure.stereo.multirig import MultiRig
+        from measure.stereo.rig import Rig
 
         if not self.extra_cameras:
-            return MultiRig.from_stereo(self.rig)
+            return Rig.from_stereo(self.rig)
         if self.extra_ports:
-            return MultiRig(self.all_cameras, [self.rig.view_port(0), self.rig.view_port(1),
+            return Rig(self.all_cameras, [self.rig.view_port(0), self.rig.view_port(1),
                                                *self.extra_ports])
-        return MultiRig(self.all_cameras, [self.rig.port] * len(self.all_cameras))
+        return Rig(self.all_cameras, [self.rig.port] * len(self.all_cameras))
 
     @property
     def camera_ports(self):

@@ -343,7 +343,7 @@ def _rig(params, interfaces, spheres, left, right, extra, surface, label):
     if spheres:
         if params.get("port") == "none":
             raise SceneError(f"{label}: port=none but the scene has dome spheres")
-        from measure.stereo.multirig import default_names
+        from measure.stereo.rig import default_names
 
         try:
             port = tuple(domes_from_spheres(spheres, default_names(2 + len(extra))))
@@ -406,22 +406,22 @@ def _check_extra_cameras(rig, extra, extra_ports, windows, domes: bool, label) -
     """A scene of more than two sensors: every camera behind the one flat port, its own window
     or inside its own dome (``extra_ports`` the ports of the cameras after the first two,
     ``windows`` every camera's window) or none, none at another's centre or inside another's
-    glass (:class:`measure.stereo.multirig.MultiRig`), every field of view through its own
+    glass (:class:`measure.stereo.rig.Rig`), every field of view through its own
     window (:func:`synth.scene.windows.check_windows`) or dome and past every other
     (:func:`synth.scene.dome.check_field_of_view`)."""
-    from measure.stereo.multirig import MultiRig
+    from measure.stereo.rig import Rig
 
     count = 2 + len(extra)
     try:
         if extra_ports:
-            multirig = MultiRig((rig.left, rig.right) + extra,
+            multirig = Rig((rig.left, rig.right) + extra,
                                 [rig.view_port(0), rig.view_port(1), *extra_ports])
             if domes:
                 check_field_of_view(multirig)
             else:
                 check_windows(multirig, windows)
         else:
-            MultiRig((rig.left, rig.right) + extra, [rig.port] * count)
+            Rig((rig.left, rig.right) + extra, [rig.port] * count)
     except ValueError as exc:
         raise SceneError(f"{label}: {exc}") from None
 
@@ -432,7 +432,7 @@ def _ports_from_interfaces(interfaces, cameras, label):
     ``cam0_interface_<k>``, …: :mod:`synth.scene.windows`) — a
     :class:`measure.geometry.flat_pair.FlatPair` (of N > 2 cameras a tuple of their flat
     ports) and the finite windows its rectangles make, one per camera."""
-    from measure.stereo.multirig import default_names
+    from measure.stereo.rig import default_names
 
     names = default_names(len(cameras))
     own = {name: [i for i in interfaces if i[0].startswith(name + "_")] for name in names}

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from measure import Camera, FlatPort, StereoRig
+from measure import Camera, FlatPort, Rig, StereoRig
 
 PAPER_IMAGE_SIZE = (2448, 2048)  # (width, height), px
 PAPER_FOCAL_PX = 1100.0
@@ -103,7 +103,7 @@ def ring_cameras(count: int, size=PAPER_IMAGE_SIZE, focal_px=PAPER_FOCAL_PX, dis
 
 
 def paper_rig(in_air: bool = False, size=PAPER_IMAGE_SIZE, focal_px=None, dist=None,
-              n_water: float = PAPER_INDICES[2]) -> StereoRig:
+              n_water: float = PAPER_INDICES[2]) -> Rig:
     """The full stereo rig behind the paper's port (``in_air=True``: the all-air copy)."""
     if focal_px is None:
         focal_px = PAPER_FOCAL_PX * size[0] / PAPER_IMAGE_SIZE[0]

@@ -33,7 +33,7 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
-from measure import Camera, FlatPort, StereoRig
+from measure import Camera, FlatPort, Rig, StereoRig
 from synth.rendering.water import PRESETS as WATER_PRESETS
 from synth.scene.dome import check_field_of_view, dome_pair
 from synth.scene.rig import tilted_port_normal
@@ -84,7 +84,7 @@ class SeaScene:
     numbers for the manifest)."""
 
     seed: int
-    rig: StereoRig
+    rig: Rig
     port_kind: str
     water: str
     light: str
@@ -170,7 +170,7 @@ def _small_tilt(rng, low: float, high: float) -> list:
     return [float(amount * np.cos(direction)), float(amount * np.sin(direction))]
 
 
-def _check_port(rig: StereoRig, kind: str) -> None:
+def _check_port(rig: Rig, kind: str) -> None:
     if kind == "dome":
         check_field_of_view(rig)
     elif kind == "per-camera":

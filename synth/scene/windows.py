@@ -14,9 +14,9 @@ camera's rays leave its window, or where they pass through another camera's wind
 air before their own port, or in the water after it (the usual cause: the ports too far from
 the cameras for their baseline, so two fields of view already overlap at the glass).
 
-A rig here is anything with ``cameras`` and ``view_port(k)``: a :class:`measure.StereoRig`
+A rig here is anything with ``cameras`` and ``view_port(k)``: a :class:`measure.Rig` of two
 with a :class:`measure.geometry.flat_pair.FlatPair` (cameras ``left``, ``right``) or a
-:class:`measure.stereo.multirig.MultiRig` whose cameras each have their own flat port (named
+:class:`measure.stereo.rig.Rig` whose cameras each have their own flat port (named
 by its ``names``).
 """
 
@@ -87,7 +87,7 @@ def flat_ports(cameras, distances, tilts, thicknesses, indices) -> list:
 
 def flat_pair(cameras, distances, tilts, thicknesses, indices) -> FlatPair:
     """The two ports of a rig of two housings (:func:`flat_ports`). ValueError (from
-    :class:`measure.StereoRig`) for a camera on the water side of its port or inside the
+    :class:`measure.Rig` of two) for a camera on the water side of its port or inside the
     other's glass."""
     pair = FlatPair(*flat_ports(cameras[:2], distances, tilts, thicknesses, indices))
     StereoRig(cameras[0], cameras[1], pair)
@@ -122,7 +122,7 @@ def _axes(normal: np.ndarray, camera) -> np.ndarray:
 
 
 def camera_names(rig) -> tuple:
-    """The names of ``rig``'s cameras in messages and shape ids: a MultiRig's ``names``, or
+    """The names of ``rig``'s cameras in messages and shape ids: a Rig's ``names``, or
     ``left``, ``right``."""
     return tuple(getattr(rig, "names", VIEWS))
 

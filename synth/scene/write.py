@@ -385,7 +385,7 @@ def _check_more_cameras(cameras, names, port, surface, thin_lens) -> None:
     behind its own flat port or inside its own dome (a list of them, one per camera, all flat
     or all domes) or none, no camera at another's centre or inside another's glass; LED disk
     targets seen by pinholes."""
-    from measure.stereo.multirig import MultiRig
+    from measure.stereo.rig import Rig
 
     for name, camera in zip(names, cameras):
         if camera.size != cameras[0].size:
@@ -410,7 +410,7 @@ def _check_more_cameras(cameras, names, port, surface, thin_lens) -> None:
                          f"cameras (no surface, no thin lens)")
     if port is not None:
         ports = list(port) if isinstance(port, (list, tuple)) else [port] * len(cameras)
-        MultiRig(cameras, ports, names)
+        Rig(cameras, ports, names)
 
 
 def _views_of(port, count: int) -> list:
