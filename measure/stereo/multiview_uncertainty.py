@@ -104,4 +104,72 @@ def view_point_covariances(views, pixels, pixel_sigma) -> tuple[np.ndarray, np.n
     return points, covariance
 
 
-__all__ = ["STEP_PX", "point_jacobians", "view_pixel_sigmas", "view_point_covariances"]
+#: A point's residual per degree of freedom beyond this many times the robust level (the
+#: median's) is an outlier (a wrong match) for :func:`view_residual_sigma`.
+OUTLIER_FACTOR = 20.0
+
+
+def view_residuals(views, pixels, points) -> tuple[np.ndarray, np.ndarray]:
+    """``(q (N,) px², dof (N,))``: each point's squared first-order maximum-likelihood residual
+    over the pixels of the views that saw it — ``e = m − f(X)`` (``f`` the Fermat forward model
+    of each view, :func:`measure.geometry.projection.project`), ``r = (I − J (JᵀJ)⁻¹ Jᵀ) e``
+    with ``J`` its point Jacobian, ``q = |r|²`` — and its degrees of freedom ``2k − 3`` for k
+    views (``q ~ σ² χ²(2k − 3)`` for a pixel noise of σ per coordinate); NaN where the point or
+    a projection is not finite."""
+    from ..geometry.projection import project
+
+    pixels = np.asarray(pixels, dtype=np.float64)
+    points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    n = points.shape[0]
+    e = np.zeros((n, len(views), 2))
+    J = np.zeros((n, len(views), 2, 3))
+    seen = np.all(np.isfinite(pixels), axis=2)
+    for v, view in enumerate(views):
+        predicted, d_point = project(view.camera, view.port, points, jacobian=True)[:2]
+        e[:, v] = np.where(seen[:, v, None], pixels[:, v] - predicted, 0.0)
+        J[:, v] = np.where(seen[:, v, None, None], d_point, 0.0)
+    e, J = e.reshape(n, -1), J.reshape(n, -1, 3)
+    dof = 2 * seen.sum(axis=1) - 3
+    ok = (dof > 0) & np.all(np.isfinite(e), axis=1) & np.all(np.isfinite(J), axis=(1, 2))
+    q = np.full(n, np.nan)
+    if ok.any():
+        normal = np.einsum("nki,nkj->nij", J[ok], J[ok])
+        step = np.linalg.solve(normal, np.einsum("nki,nk->ni", J[ok], e[ok])[..., None])[..., 0]
+        r = e[ok] - np.einsum("nki,ni->nk", J[ok], step)
+        q[ok] = np.einsum("nk,nk->n", r, r)
+    return q, np.where(ok, dof, 0)
+
+
+def view_residual_sigma(views, pixels, points, pixel_sigma=0.0) -> dict:
+    """The pixel noise the points' residuals show beyond the stated ``pixel_sigma`` (px: a
+    number, ``(N,)`` or ``(N, V)``; 0 allowed), no truth needed: with ``q`` and ``dof`` of
+    :func:`view_residuals` and ``s²`` each point's mean stated variance over its views, the
+    extra σ₀ of every detection is ``σ₀² = max(0, mean(q / dof − s²))`` over the points whose
+    ``q / dof`` lies within :data:`OUTLIER_FACTOR` times the robust level (``s²`` plus the
+    median of ``q / dof − s²``): a wrong match does not inflate it. What it cannot see: an
+    error every view of a target shares (the disks' eccentricity, a calibration error along
+    the rays). Returns ``{"sigma0_px", "rms_residual_px", "n"}`` (``rms_residual_px`` the RMS of
+    ``q / dof``'s root)."""
+    pixels = np.asarray(pixels, dtype=np.float64)
+    q, dof = view_residuals(views, pixels, points)
+    ok = np.isfinite(q) & (dof > 0)
+    if not ok.any():
+        return {"sigma0_px": None, "rms_residual_px": None, "n": 0}
+    sigma = np.asarray(pixel_sigma, dtype=np.float64)
+    if np.all(sigma == 0):
+        sigma = np.full(pixels.shape[:2], 0.0)
+    stated = view_pixel_sigmas(np.where(sigma == 0, np.nan, sigma), *pixels.shape[:2])
+    stated = np.where(np.isfinite(stated), stated, 0.0)
+    seen = np.all(np.isfinite(pixels), axis=2)
+    known = (np.sum(np.where(seen, stated ** 2, 0.0), axis=1)
+             / np.maximum(seen.sum(axis=1), 1))[ok]
+    per_dof = q[ok] / dof[ok]
+    robust = max(float(np.median(per_dof - known)), 0.0)
+    inliers = per_dof <= OUTLIER_FACTOR * (known + robust)
+    variance = max(float(np.mean(per_dof[inliers] - known[inliers])), 0.0)
+    return {"sigma0_px": float(np.sqrt(variance)),
+            "rms_residual_px": float(np.sqrt(np.mean(per_dof))), "n": int(ok.sum())}
+
+
+__all__ = ["OUTLIER_FACTOR", "STEP_PX", "point_jacobians", "view_pixel_sigmas",
+           "view_point_covariances", "view_residual_sigma", "view_residuals"]
