@@ -32,6 +32,8 @@ import numpy as np
 
 from eval.cli import CLIError
 from eval.run.config import RunConfig
+from eval.run.views_uncertainty import (uncertainty_lines, views_uncertainty,
+                                        write_views_uncertainty)
 
 #: The options of a two-camera run that a run of N cameras does not take (refused, never
 #: ignored): (config field, option).
@@ -58,11 +60,6 @@ def refuse_inapplicable(config: RunConfig, cameras: int) -> None:
         if getattr(config, field_name):
             raise CLIError(f"{option} does not apply to {config.scene}, a scene of {cameras} "
                            f"cameras")
-    from eval.core.uncertainty import AUTO
-
-    if config.pixel_sigma != AUTO:  # accepted by eval run, used by its covariances only
-        raise CLIError(f"--pixel-sigma does not apply to {config.scene}, a scene of {cameras} "
-                       f"cameras: its points get no covariance yet")
     if config.methods is not None and tuple(config.methods) != (METHOD,):
         raise CLIError(f"--methods: a scene of {cameras} cameras is measured with {METHOD} only "
                        f"(the optical path of N views)")
@@ -215,7 +212,7 @@ def measure(config: RunConfig, log) -> tuple[dict, dict]:
     images, info = _views(config, spec, log)
     timings["render"] = time.perf_counter() - t
     t = time.perf_counter()
-    raw, centers = _detect(config, images, seed)
+    raw, centers, detections = _detect(config, images, seed)
     timings["detect"] = time.perf_counter() - t
     t = time.perf_counter()
     window = (default_depth_window(spec.params, spec.targets, spec.rig.port)
@@ -223,11 +220,15 @@ def measure(config: RunConfig, log) -> tuple[dict, dict]:
     tracks = match_views(rig, centers, gate_mm=config.gate_mm, depth_range=window)
     timings["match"] = time.perf_counter() - t
     t = time.perf_counter()
-    result = _triangulate(config, rig, tracks.pixels(centers), spec.target_radius)
+    result, pixels = _triangulate(config, rig, tracks.pixels(centers), spec.target_radius)
     timings["triangulate"] = time.perf_counter() - t
     # the truth, for scoring only
     truth_of, crosscheck = _crosscheck(spec, raw, simulated)
     scored = _scored_tracks(tracks, truth_of, result, spec.targets)
+    t = time.perf_counter()
+    covariance, uncertainty = views_uncertainty(config.pixel_sigma, config.noise_px, rig,
+                                                detections, tracks, pixels, result, scored, METHOD)
+    timings["covariance"] = time.perf_counter() - t
     ok, errors, target, k_views = scored["ok"], scored["errors"], scored["target"], tracks.views_per_track
     by_k = {}
     for k in range(2, len(names) + 1):
@@ -254,7 +255,7 @@ def measure(config: RunConfig, log) -> tuple[dict, dict]:
         "stereo_pair": pair_report,
         "ratio_to_pair": (rms / pair_report["rms_dp_mm"] if pair_report and rms
                           and pair_report["rms_dp_mm"] else None),
-        "timings_s": timings, "render": info,
+        "uncertainty": uncertainty, "timings_s": timings, "render": info,
         "verdict": {"passed": not failures, "failures": failures},
     }
     per_target = np.full((len(spec.targets), 8), np.nan)
@@ -265,7 +266,7 @@ def measure(config: RunConfig, log) -> tuple[dict, dict]:
     per_target[target[ok], 3] = k_views[ok]
     per_target[target[ok], 4:7] = result.points[ok]
     per_target[target[ok], 7] = np.linalg.norm(errors[ok], axis=1)
-    return report, {"targets": per_target}
+    return report, {"targets": per_target, "uncertainty": (result, covariance, scored)}
 
 
 def _simulated_views(spec) -> tuple[list, np.ndarray]:
@@ -319,9 +320,9 @@ def _views(config, spec, log) -> tuple[list, dict]:
     return images, info
 
 
-def _detect(config, images, seed) -> tuple[list, list]:
-    """``(raw, centers)``: each view's detected centres (px), and the same with ``--noise-px``
-    added (seeded)."""
+def _detect(config, images, seed) -> tuple[list, list, list]:
+    """``(raw, centers, detections)``: each view's detected centres (px), the same with
+    ``--noise-px`` added (seeded), and its :class:`measure.images.detect.Detections`."""
     from measure.images.detect import FLOOR_FRACTION
     from synth.rendering.noise import add_pixel_noise
 
@@ -332,19 +333,22 @@ def _detect(config, images, seed) -> tuple[list, list]:
                               floor_fraction=FLOOR_FRACTION) for image in images]
     raw = [np.array(d.centers, dtype=float).reshape(-1, 2) for d in detections]
     if config.noise_px <= 0:
-        return raw, raw
+        return raw, raw, detections
     rng = np.random.default_rng(seed)
-    return raw, [add_pixel_noise(c, variance=config.noise_px ** 2, rng=rng) for c in raw]
+    return raw, [add_pixel_noise(c, variance=config.noise_px ** 2, rng=rng) for c in raw], \
+        detections
 
 
 def _triangulate(config, rig, pixels, target_radius):
-    """The tracks' points: the optical path of every view, with the eccentricity correction
-    when the run corrects it."""
+    """``(points, pixels)``: the tracks' points — the optical path of every view, with the
+    eccentricity correction when the run corrects it — and the pixels they were triangulated
+    from (corrected)."""
     if config.corrects_eccentricity:
-        return correct_views(rig, pixels, target_radius)[0]
+        result, corrected, _ = correct_views(rig, pixels, target_radius)
+        return result, corrected
     from measure.stereo.multiview import triangulate_views
 
-    return triangulate_views(rig.views(), pixels)
+    return triangulate_views(rig.views(), pixels), pixels
 
 
 def _scored_tracks(tracks, truth_of, result, targets) -> dict:
@@ -430,6 +434,7 @@ def report_markdown(report: dict) -> str:
     for k, row in s["by_views"].items():
         lines.append(f"| {k} | {row['tracks']} | {mm(row['rms_dp_mm'])} |")
     lines.append(f"| all | {s['n']} | {mm(s['rms_dp_mm'])} |")
+    lines += uncertainty_lines(report)
     c = report.get("crosscheck")
     if c:
         lines += ["", "| camera | detections associated | cross-check RMS / max (px) | "
@@ -469,6 +474,7 @@ def main(config: RunConfig, out: str, print_json: bool, log) -> int:
     report, arrays = measure(config, log)
     with output.staged() as tmp:
         report["versions"] = package_versions()
+        write_views_uncertainty(tmp, METHOD, *arrays["uncertainty"], report["uncertainty"])
         report["timings_s"]["total"] = time.perf_counter() - start
         report = jsonable(report)
         atomic_write_json(os.path.join(tmp, "report.json"), report)
@@ -492,6 +498,8 @@ def main(config: RunConfig, out: str, print_json: bool, log) -> int:
         f"k={k}: {row['tracks']} tracks, RMS dP "
         + ("–" if row["rms_dp_mm"] is None else f"{row['rms_dp_mm']:.4f} mm")
         for k, row in s["by_views"].items()), file=stream)
+    for line in filter(None, uncertainty_lines(report)):
+        print("  " + line, file=stream)
     print(f"wrote {output.path}", file=stream)
     if print_json:
         print(json.dumps(report, indent=2))

@@ -1,0 +1,115 @@
+"""Point covariances of ``python -m eval run`` on a scene of N cameras: the σ of every detection
+of every track (``--pixel-sigma``), each track's point covariance
+(:func:`measure.stereo.multiview_uncertainty.view_point_covariances`), and the report's
+``uncertainty`` entry in the two-camera run's schema — ``methods``, ``rig``, ``pixel_sigma``,
+``summaries.<method>`` (``sigma``; against the truth ``coverage``) and ``files``.
+
+``--pixel-sigma auto`` (default): each detection's σ from the detector (its SNR and size,
+:func:`measure.stereo.uncertainty.detection_sigma`) and, for all, the extra σ₀ the tracks'
+reprojection residuals show beyond it (:func:`measure.stereo.multiview_uncertainty.
+view_residual_sigma`: added noise, render noise on a black background, no truth needed); a
+number: that σ, with ``--noise-px`` in quadrature. The rig is taken as exact: a calibration's
+covariance of N cameras is not read (the pixels' part only).
+
+Units: px (σ), mm and mm² (points, covariances); frame: the first camera's.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+#: What the report says of the rig's part of the covariances.
+RIG_NOTE = "none: the rig is taken as exact (the pixels' part only)"
+
+
+def track_sigmas(mode, detections, tracks, noise_px: float = 0.0) -> tuple[np.ndarray, dict]:
+    """``((T, V) px, info)``: the σ per coordinate of each track's detection in each view (NaN
+    where the view has none) — ``mode`` a number: that σ and ``noise_px`` in quadrature;
+    ``auto``: the detector's σ of each detection (the residuals' part is added by
+    :func:`views_uncertainty`)."""
+    from measure.stereo.uncertainty import detection_sigma
+
+    from eval.core.uncertainty import AUTO
+
+    index = np.asarray(tracks.detections)
+    seen = index >= 0
+    sigma = np.full(index.shape, np.nan)
+    if mode != AUTO:
+        sigma[seen] = float(np.hypot(float(mode), noise_px))
+        return sigma, {"source": "stated (--pixel-sigma)", "stated_px": float(mode),
+                       "added_noise_px": noise_px}
+    for v, found in enumerate(detections):
+        rows = seen[:, v]
+        sigma[rows, v] = detection_sigma(found)[index[rows, v]]
+    finite = sigma[np.isfinite(sigma)]
+    return sigma, {"source": "detector (SNR and size) + reprojection residuals",
+                   "detector_median_px": float(np.median(finite)) if finite.size else None}
+
+
+def views_uncertainty(mode, noise_px, rig, detections, tracks, pixels, result, scored,
+                      method: str) -> tuple[np.ndarray, dict]:
+    """``(covariances (T, 3, 3) mm², report entry)`` of the tracks' points ``result``
+    (:class:`measure.stereo.multiview.MultiViewTriangulation`) triangulated from ``pixels``
+    ``(T, V, 2)``; ``scored`` the tracks against the truth (``ok``, ``errors``) for the
+    coverage. Module docs for σ."""
+    from measure.stereo.multiview_uncertainty import view_point_covariances, view_residual_sigma
+
+    from eval.core.uncertainty import AUTO, uncertainty_summary
+
+    views = rig.views()
+    sigma, info = track_sigmas(mode, detections, tracks, noise_px)
+    if mode == AUTO:
+        ok = result.valid
+        found = view_residual_sigma(views, pixels[ok], result.points[ok],
+                                    np.nan_to_num(sigma[ok]))
+        sigma0 = found["sigma0_px"] or 0.0
+        sigma = np.sqrt(np.nan_to_num(sigma) ** 2 + sigma0 ** 2)
+        sigma[~np.all(np.isfinite(pixels), axis=2)] = np.nan
+        sigma[sigma == 0] = np.nan  # exact pixels and a noise-free background: no σ
+        info.update(residual_sigma0_px=found["sigma0_px"],
+                    rms_residual_px=found["rms_residual_px"])
+    finite = sigma[np.isfinite(sigma)]
+    info.update(median_px=float(np.median(finite)) if finite.size else None,
+                max_px=float(finite.max()) if finite.size else None)
+    _, covariance = view_point_covariances(views, pixels, sigma)
+    ok = scored["ok"] & np.all(np.isfinite(covariance), axis=(1, 2))
+    summary = uncertainty_summary(covariance[ok], scored["errors"][ok])
+    return covariance, {"methods": [method], "rig": RIG_NOTE, "pixel_sigma": info,
+                        "summaries": {method: summary}}
+
+
+def write_views_uncertainty(directory, method, result, covariance, scored, entry) -> None:
+    """``uncertainty_<method>.ply`` / ``.csv`` of the correctly matched, triangulated tracks
+    (:func:`eval.core.uncertainty.write_uncertainty_files`, with their errors), their names
+    into ``entry["files"]``."""
+    from eval.core.uncertainty import write_uncertainty_files
+
+    ok = scored["ok"] & np.all(np.isfinite(covariance), axis=(1, 2))
+    entry["files"] = {method: write_uncertainty_files(directory, method, result.points[ok],
+                                                      covariance[ok], scored["errors"][ok])}
+
+
+def uncertainty_lines(report: dict) -> list:
+    """The report's covariances in a sentence (report.md and the printed summary); empty
+    for a report without them (one from before they were computed)."""
+    entry = report.get("uncertainty") or {}
+    lines = []
+    for method, summary in (entry.get("summaries") or {}).items():
+        sigma = summary.get("sigma") or {}
+        coverage = summary.get("coverage") or {}
+        if not sigma.get("n"):
+            continue
+        text = (f"{method}: point σ_P median {sigma['median_sigma_p_mm']:.4f} mm, largest "
+                f"{sigma['max_sigma_p_mm']:.4f} mm (pixel σ median "
+                f"{entry['pixel_sigma']['median_px']:.3f} px; {entry['rig']})")
+        if coverage.get("coverage_95") is not None:
+            text += (f"; {100 * coverage['coverage_95']:.1f} % of {coverage['n']} correct "
+                     f"points inside their 95 % ellipsoid")
+        if coverage.get("verdict"):
+            text += f" — {coverage['verdict']}"
+        lines.append(text)
+    return ["", *lines] if lines else []
+
+
+__all__ = ["RIG_NOTE", "track_sigmas", "uncertainty_lines", "views_uncertainty",
+           "write_views_uncertainty"]
