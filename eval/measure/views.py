@@ -12,11 +12,13 @@ alone saw is counted, never triangulated.
 Writes into ``--out``: ``points.ply`` (mm, binary), ``points.csv`` (``track,x_mm,y_mm,z_mm,
 gap_mm,views`` and ``u_NAME,v_NAME`` per camera, NaN where a camera did not see it),
 ``report.json`` and ``report.md`` (detections per camera, tracks and how many views each has,
-the gap RMS by the number of views). Exit 1 (everything written, a ``failed:`` line per camera)
-when a camera's photo has no target, or fewer than half of a camera's detections end in a
-track: photos that are not the rig's capture (cameras swapped, another moment, another rig;
-:func:`capture_failures` checks every camera). Units mm, px; the reference frame is the first
-camera's.
+the gap RMS by the number of views, the points' σ: ``uncertainty`` as for a pair) and
+``uncertainty_optical_path.ply`` / ``.csv`` (every point's covariance in its pixels' noise,
+:mod:`eval.core.views_uncertainty`; ``--pixel-sigma``). Exit 1 (everything written, a
+``failed:`` line per camera) when a camera's photo has no target, or fewer than half of a
+camera's detections end in a track: photos that are not the rig's capture (cameras swapped,
+another moment, another rig; :func:`capture_failures` checks every camera). Units mm, px; the
+reference frame is the first camera's.
 """
 
 from __future__ import annotations
@@ -28,9 +30,11 @@ import time
 import numpy as np
 
 from eval.cli import CLIError
+from eval.core.views_uncertainty import (uncertainty_lines, views_uncertainty,
+                                         write_views_uncertainty)
 
 #: The options of a stereo pair's measurement that a capture of N cameras does not take.
-NOT_FOR_N_CAMERAS = (("dense", "--dense"), ("pixel_sigma", "--pixel-sigma"))
+NOT_FOR_N_CAMERAS = (("dense", "--dense"),)
 
 
 #: A camera whose detections end in a track less often than this is not this capture's.
@@ -66,11 +70,16 @@ def measure_views_main(args, output, options, start, log) -> int:
     log(f"detect the targets in {len(photos)} photos …")
     timings = {}
     t = time.perf_counter()
-    centers = [_centers(image, options) for image in images]
+    detections = [_detections(image, options) for image in images]
+    centers = [np.asarray(d.centers, dtype=float).reshape(-1, 2) for d in detections]
     timings["detect"] = time.perf_counter() - t
     t = time.perf_counter()
     tracks, pixels, result = _match_and_triangulate(rig, centers, options)
     timings["match_and_triangulate"] = time.perf_counter() - t
+    t = time.perf_counter()
+    covariance, uncertainty = views_uncertainty(options.pixel_sigma, 0.0, rig, detections,
+                                                tracks, pixels, result, "optical_path")
+    timings["covariance"] = time.perf_counter() - t
     ok = result.valid
     if not ok.any():
         raise CLIError(f"{', '.join(photos)}: no target was matched in two or more views "
@@ -79,8 +88,10 @@ def measure_views_main(args, output, options, start, log) -> int:
     in_tracks = [int((tracks.detections[ok, v] >= 0).sum()) for v in range(len(photos))]
     failures = capture_failures(rig.names, photos, centers, in_tracks)
     report = _report(args, options, rig, photos, centers, in_tracks, tracks, result, failures)
+    report["uncertainty"] = uncertainty
     by_views = report["by_views"]  # as computed (the report is written as plain JSON types)
-    report = _write(output, args, rig, photos, result, pixels, report, timings, start)
+    report = _write(output, args, rig, photos, (result, covariance), pixels, report, timings,
+                    start)
     _print_summary(args, output, photos, report, by_views)
     for failure in failures:
         print(f"failed: {failure} (report in {output.path})", file=sys.stderr)
@@ -140,14 +151,13 @@ def _read_photos(args, rig, photos) -> list:
     return images
 
 
-def _centers(image, options) -> np.ndarray:
-    """The targets' centres detected in one photo, ``(n, 2)`` px."""
+def _detections(image, options):
+    """The targets detected in one photo (:class:`measure.images.detect.Detections`)."""
     from eval.core.detection import detect_view
 
-    return np.asarray(detect_view(image, options.threshold_fraction, options.max_elongation,
-                                  options.max_area_ratio, options.median_filter,
-                                  floor_fraction=options.floor_fraction).centers,
-                      dtype=float).reshape(-1, 2)
+    return detect_view(image, options.threshold_fraction, options.max_elongation,
+                       options.max_area_ratio, options.median_filter,
+                       floor_fraction=options.floor_fraction)
 
 
 def _match_and_triangulate(rig, centers, options):
@@ -186,17 +196,21 @@ def _report(args, options, rig, photos, centers, in_tracks, tracks, result, fail
             "failures": failures}
 
 
-def _write(output, args, rig, photos, result, pixels, report, timings, start) -> dict:
-    """``points.ply``, ``points.csv``, ``report.json`` (its timings, s) and ``report.md`` into
-    ``output``; the report as written."""
+def _write(output, args, rig, photos, measured, pixels, report, timings, start) -> dict:
+    """``points.ply``, ``points.csv``, the uncertainty files, ``report.json`` (its timings, s)
+    and ``report.md`` into ``output``; ``measured`` the triangulation and its covariances; the
+    report as written."""
     from synth.infra.fileio import atomic_write_json, atomic_write_text, jsonable
 
     from eval.measure.report import write_cloud
 
+    result, covariance = measured
     ok, by_views = result.valid, report["by_views"]
     with output.staged() as tmp:
         write_cloud(os.path.join(tmp, "points.ply"), result.points[ok])
         atomic_write_text(os.path.join(tmp, "points.csv"), _points_csv(rig, result, pixels))
+        write_views_uncertainty(tmp, "optical_path", result, covariance, None,
+                                report["uncertainty"])
         report["timings_s"] = {**timings, "total": time.perf_counter() - start}
         report = jsonable(report)
         atomic_write_json(os.path.join(tmp, "report.json"), report)
@@ -232,6 +246,7 @@ def _markdown(args, photos, report, by_views) -> str:
         "| views | targets | gap RMS (mm) |", "|---|---|---|",
         *(f"| {k} | {v['targets']} | {v['gap_rms_mm']:.4g} |"
           for k, v in by_views.items()),
+        *uncertainty_lines(report),
         "", *(f"**Failed:** {f}" for f in report["failures"])]) + "\n"
 
 
@@ -243,6 +258,8 @@ def _print_summary(args, output, photos, report, by_views) -> None:
           + ", ".join(f"{v['targets']} from {k} views" for k, v in by_views.items())
           + f"), gap RMS {report['gap_rms_mm']:.4g} mm; total {report['timings_s']['total']:.1f} s",
           file=stream)
+    for line in filter(None, uncertainty_lines(report)):
+        print("  " + line, file=stream)
     print(f"wrote {output.path}", file=stream)
     if getattr(args, "json", False):
         import json

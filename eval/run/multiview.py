@@ -32,8 +32,8 @@ import numpy as np
 
 from eval.cli import CLIError
 from eval.run.config import RunConfig
-from eval.run.views_uncertainty import (uncertainty_lines, views_uncertainty,
-                                        write_views_uncertainty)
+from eval.core.views_uncertainty import (uncertainty_lines, views_uncertainty,
+                                         write_views_uncertainty)
 
 #: The options of a two-camera run that a run of N cameras does not take (refused, never
 #: ignored): (config field, option).
@@ -227,7 +227,7 @@ def measure(config: RunConfig, log) -> tuple[dict, dict]:
     scored = _scored_tracks(tracks, truth_of, result, spec.targets)
     t = time.perf_counter()
     covariance, uncertainty = views_uncertainty(config.pixel_sigma, config.noise_px, rig,
-                                                detections, tracks, pixels, result, scored, METHOD)
+                                                detections, tracks, pixels, result, METHOD, scored)
     timings["covariance"] = time.perf_counter() - t
     ok, errors, target, k_views = scored["ok"], scored["errors"], scored["target"], tracks.views_per_track
     by_k = {}

@@ -56,6 +56,22 @@ def test_three_photos_give_the_true_targets(capture, tmp_path, capsys):
     baseline = np.linalg.norm(rig.cameras[1].center - rig.cameras[0].center)
     assert distance.max() < 0.1 * z ** 2 / (focal * baseline), distance.max()
     assert set(np.unique(data["views"])) <= {2.0, 3.0}
+    # every point's covariance in its pixels' noise (the σ its residuals show: no truth), in
+    # the pair's schema, and its file row by row
+    entry = printed["uncertainty"]
+    assert entry["methods"] == ["optical_path"] and entry["pixel_sigma"]["median_px"] > 0
+    assert entry["summaries"]["optical_path"]["sigma"]["n"] == printed["triangulated"]
+    assert "coverage" not in entry["summaries"]["optical_path"]  # no truth here
+    rows = np.genfromtxt(out / "uncertainty_optical_path.csv", delimiter=",", names=True)
+    np.testing.assert_allclose(np.column_stack([rows["x"], rows["y"], rows["z"]]), points)
+    assert np.all(rows["sigma_z"] > rows["sigma_x"])  # depth is the least certain axis
+    # a stated σ scales every covariance by its square
+    stated = tmp_path / "stated"
+    assert eval_main(["measure", "--calib", str(root / "calib.yaml"), *photos, "--out",
+                      str(stated), "--no-progress", "--pixel-sigma", "0.2"]) == 0
+    rows2 = np.genfromtxt(stated / "uncertainty_optical_path.csv", delimiter=",", names=True)
+    ratio = 0.2 / entry["pixel_sigma"]["median_px"]
+    np.testing.assert_allclose(rows2["sigma_z"], rows["sigma_z"] * ratio, rtol=1e-6)
 
 
 def test_bad_captures_are_refused(capture, tmp_path, capsys):

@@ -1,8 +1,9 @@
-"""Point covariances of ``python -m eval run`` on a scene of N cameras: the σ of every detection
-of every track (``--pixel-sigma``), each track's point covariance
-(:func:`measure.stereo.multiview_uncertainty.view_point_covariances`), and the report's
-``uncertainty`` entry in the two-camera run's schema — ``methods``, ``rig``, ``pixel_sigma``,
-``summaries.<method>`` (``sigma``; against the truth ``coverage``) and ``files``.
+"""Point covariances of N cameras' tracks (``eval run`` of a scene of N cameras, ``eval measure``
+of one capture of N): the σ of every detection of every track (``--pixel-sigma``), each track's
+point covariance (:func:`measure.stereo.multiview_uncertainty.view_point_covariances`), and the
+report's ``uncertainty`` entry in the two-camera commands' schema — ``methods``, ``rig``,
+``pixel_sigma``, ``summaries.<method>`` (``sigma``; against the truth, where it is known,
+``coverage``) and ``files``.
 
 ``--pixel-sigma auto`` (default): each detection's σ from the detector (its SNR and size,
 :func:`measure.stereo.uncertainty.detection_sigma`) and, for all, the extra σ₀ the tracks'
@@ -46,12 +47,12 @@ def track_sigmas(mode, detections, tracks, noise_px: float = 0.0) -> tuple[np.nd
                    "detector_median_px": float(np.median(finite)) if finite.size else None}
 
 
-def views_uncertainty(mode, noise_px, rig, detections, tracks, pixels, result, scored,
-                      method: str) -> tuple[np.ndarray, dict]:
+def views_uncertainty(mode, noise_px, rig, detections, tracks, pixels, result, method: str,
+                      scored=None) -> tuple[np.ndarray, dict]:
     """``(covariances (T, 3, 3) mm², report entry)`` of the tracks' points ``result``
     (:class:`measure.stereo.multiview.MultiViewTriangulation`) triangulated from ``pixels``
     ``(T, V, 2)``; ``scored`` the tracks against the truth (``ok``, ``errors``) for the
-    coverage. Module docs for σ."""
+    coverage, None without truth (every valid point summarized). Module docs for σ."""
     from measure.stereo.multiview_uncertainty import view_point_covariances, view_residual_sigma
 
     from eval.core.uncertainty import AUTO, uncertainty_summary
@@ -72,21 +73,26 @@ def views_uncertainty(mode, noise_px, rig, detections, tracks, pixels, result, s
     info.update(median_px=float(np.median(finite)) if finite.size else None,
                 max_px=float(finite.max()) if finite.size else None)
     _, covariance = view_point_covariances(views, pixels, sigma)
-    ok = scored["ok"] & np.all(np.isfinite(covariance), axis=(1, 2))
-    summary = uncertainty_summary(covariance[ok], scored["errors"][ok])
+    ok = (result.valid if scored is None else scored["ok"]) & np.all(np.isfinite(covariance),
+                                                                      axis=(1, 2))
+    summary = uncertainty_summary(covariance[ok],
+                                  None if scored is None else scored["errors"][ok])
     return covariance, {"methods": [method], "rig": RIG_NOTE, "pixel_sigma": info,
                         "summaries": {method: summary}}
 
 
 def write_views_uncertainty(directory, method, result, covariance, scored, entry) -> None:
-    """``uncertainty_<method>.ply`` / ``.csv`` of the correctly matched, triangulated tracks
-    (:func:`eval.core.uncertainty.write_uncertainty_files`, with their errors), their names
-    into ``entry["files"]``."""
+    """``uncertainty_<method>.ply`` / ``.csv`` of the triangulated tracks — with ``scored``
+    the correctly matched ones and their errors —
+    (:func:`eval.core.uncertainty.write_uncertainty_files`), their names into
+    ``entry["files"]``."""
     from eval.core.uncertainty import write_uncertainty_files
 
-    ok = scored["ok"] & np.all(np.isfinite(covariance), axis=(1, 2))
+    ok = (result.valid if scored is None else scored["ok"]) & np.all(np.isfinite(covariance),
+                                                                      axis=(1, 2))
+    errors = None if scored is None else scored["errors"][ok]
     entry["files"] = {method: write_uncertainty_files(directory, method, result.points[ok],
-                                                      covariance[ok], scored["errors"][ok])}
+                                                      covariance[ok], errors)}
 
 
 def uncertainty_lines(report: dict) -> list:
