@@ -35,12 +35,17 @@ from .triangulate import METHODS, triangulate
 
 #: The methods of a rig of any number of views other than two.
 VIEW_METHODS = ("optical_path", "reprojection")
-#: A point's fit stops when its step is below this times ``|X| + 1 mm`` (relative, as
-#: ``scipy.optimize.least_squares``'s ``xtol``).
-STEP_TOLERANCE = 1e-13
+#: A point's fit has converged when its Gauss–Newton step is below this times ``|X| + 1 mm``
+#: (relative, as ``scipy.optimize.least_squares``'s ``xtol``).
+STEP_TOLERANCE = 1e-12
 #: At most this many Levenberg–Marquardt iterations per point (a point still moving then is
 #: ``NOT_CONVERGED``).
 MAX_ITERATIONS = 60
+#: Within this Gauss–Newton step (relative, as :data:`STEP_TOLERANCE`) of the minimum the
+#: plain Gauss–Newton step is taken without a test of the cost: there the cost changes less
+#: than its own rounding (the forward model solves each path iteratively), and the steps
+#: shrink quadratically.
+NEWTON_REGION = 1e-7
 #: Damping the fit starts with, and its bounds (Marquardt's λ, relative to ``diag(JᵀJ)``).
 START_DAMPING, MIN_DAMPING, MAX_DAMPING = 1e-3, 1e-12, 1e12
 
@@ -116,8 +121,9 @@ def reprojection_views(views, pixels, start, used=None) -> tuple[np.ndarray, np.
     a finite pixel). Batched Levenberg–Marquardt on the 3 unknowns of every point at once: one
     analytic Jacobian (``project(..., jacobian=True)``) per view and iteration, the 3 × 3
     normal equations solved for all points together; the points are independent (the result
-    of a point does not depend on the others). Also returns ``converged`` ``(N,)``; rows with
-    a non-finite start, or fewer than two views, stay NaN (converged False)."""
+    of a point does not depend on the others). Also returns ``converged`` ``(N,)`` (the
+    Gauss–Newton step below :data:`STEP_TOLERANCE`); rows with a non-finite start, or fewer
+    than two views, stay NaN (converged False)."""
     pixels = np.asarray(pixels, dtype=np.float64)
     start = np.asarray(start, dtype=np.float64).reshape(-1, 3)
     views = list(views)
@@ -130,25 +136,29 @@ def reprojection_views(views, pixels, start, used=None) -> tuple[np.ndarray, np.
     cost, normal, gradient = _normal_equations(views, pixels[rows], used[rows], x)
     damping = np.full(rows.size, START_DAMPING)
     active = np.isfinite(cost)
-    for _ in range(MAX_ITERATIONS):
+    for iteration in range(MAX_ITERATIONS + 1):
         live = np.flatnonzero(active)
-        if live.size == 0:
+        # converged where the Gauss–Newton step from here is below the tolerance
+        newton = _lm_step(normal[live], gradient[live], np.full(live.size, MIN_DAMPING))
+        size = np.linalg.norm(newton, axis=1) / (np.linalg.norm(x[live], axis=1) + 1.0)
+        done = size <= STEP_TOLERANCE
+        converged[rows[live[done]]] = True
+        active[live[done]] = False
+        live, newton, near = live[~done], newton[~done], size[~done] <= NEWTON_REGION
+        if live.size == 0 or iteration == MAX_ITERATIONS:
             break
         step = _lm_step(normal[live], gradient[live], damping[live])
-        trial = x[live] + step
+        trial = x[live] + np.where(near[:, None], newton, step)
         trial_cost, trial_normal, trial_gradient = _normal_equations(
             views, pixels[rows[live]], used[rows[live]], trial)
-        better = trial_cost <= cost[live]  # NaN (no image) is not better
+        # a Gauss–Newton step near the minimum is taken (the cost cannot resolve it); other
+        # steps where the cost does not rise; NaN (a trial point with no image) is a rise
+        better = (trial_cost <= cost[live]) | (near & np.isfinite(trial_cost))
         take = live[better]
         x[take], cost[take] = trial[better], trial_cost[better]
         normal[take], gradient[take] = trial_normal[better], trial_gradient[better]
         damping[take] = np.maximum(damping[take] / 10, MIN_DAMPING)
         damping[live[~better]] *= 10
-        small = np.linalg.norm(step, axis=1) <= STEP_TOLERANCE * (
-            np.linalg.norm(x[live], axis=1) + 1.0)
-        done = live[(better & small) | (gradient[live] == 0).all(axis=1)]
-        converged[rows[done]] = True
-        active[done] = False
         active[live[damping[live] > MAX_DAMPING]] = False  # stuck: no step lowers the cost
     points[rows] = x
     return points, converged
