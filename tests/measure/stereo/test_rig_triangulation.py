@@ -15,7 +15,8 @@ import numpy as np
 import pytest
 
 from measure import Rig, triangulate, triangulate_rig
-from measure.geometry.camera import FISHEYE, BROWN_CONRADY
+from measure.geometry.camera import BROWN_CONRADY, FISHEYE, Camera
+from measure.geometry.dome import DomePair, DomePort
 from measure.geometry.port import FlatPort
 from measure.geometry.projection import project
 from measure.reasons import Reason
@@ -78,27 +79,30 @@ def test_a_rig_gives_its_views():
         assert by_rig.valid.mean() > 0.9
 
 
-def _pair_rig(rng):
-    """A pair (the left camera at the origin) behind one flat port, with its ideal pixels."""
+def _pair_rig(rng, kind="flat"):
+    """A pair (the left camera at the origin) behind one flat port (``kind`` "flat") or a
+    decentred dome each ("dome"), with its ideal pixels."""
     left, right = _ring(2, rng)
     to_left = lambda X: (X - left.center) @ left.R  # noqa: E731
-    from measure.geometry.camera import Camera
-
-    port = FlatPort([0.0, 0.0, 1.0], 520.0, (8.0,), GLASS)
-    rig = Rig.stereo_pair(Camera(left.K, SIZE, dist=left.dist),
-                          Camera(right.K, SIZE, dist=right.dist, R=left.R.T @ right.R,
-                                 t=to_left(right.center[None])[0]),
-                          FlatPort(left.R.T @ port.normal,
-                                   port.distance - port.normal @ left.center,
-                                   port.thicknesses, port.indices))
+    cameras = (Camera(left.K, SIZE, dist=left.dist),
+               Camera(right.K, SIZE, dist=right.dist, R=left.R.T @ right.R,
+                      t=to_left(right.center[None])[0]))
+    if kind == "dome":
+        port = DomePair(*(DomePort(c.center + rng.normal(0, 1.5, 3), 60.0, 9.0, GLASS)
+                          for c in cameras))
+    else:
+        port = FlatPort(left.R.T @ np.array([0.0, 0.0, 1.0]), 520.0 - left.center[2], (8.0,),
+                        GLASS)
+    rig = Rig.stereo_pair(*cameras, port)
     points = to_left(_targets(rng, 200))
     return rig, points, _seen_pixels(rig.views(), points)
 
 
+@pytest.mark.parametrize("kind", ["flat", "dome"])
 @pytest.mark.parametrize("method", ["optical_path", "su", "regular", "reprojection"])
-def test_a_rig_of_two_gives_the_pair_methods_exactly(method):
+def test_a_rig_of_two_gives_the_pair_methods_exactly(method, kind):
     rng = np.random.default_rng(22)
-    rig, _, pixels = _pair_rig(rng)
+    rig, _, pixels = _pair_rig(rng, kind)
     pixels = pixels + rng.normal(0.0, 0.3, pixels.shape)  # rays that do not meet
     pixels[:5, 1] = np.nan  # seen by the left camera only
     both = np.isfinite(pixels[..., 0]).all(axis=1)
