@@ -122,8 +122,9 @@ def reprojection_views(views, pixels, start, used=None) -> tuple[np.ndarray, np.
     analytic Jacobian (``project(..., jacobian=True)``) per view and iteration, the 3 × 3
     normal equations solved for all points together; the points are independent (the result
     of a point does not depend on the others). Also returns ``converged`` ``(N,)`` (the
-    Gauss–Newton step below :data:`STEP_TOLERANCE`); rows with a non-finite start, or fewer
-    than two views, stay NaN (converged False)."""
+    Gauss–Newton step below :data:`STEP_TOLERANCE`; a row that is not holds its last iterate,
+    which :func:`triangulate_rig` reports as NaN, ``NOT_CONVERGED``); rows with a non-finite
+    start, or fewer than two views, stay NaN (converged False)."""
     pixels = np.asarray(pixels, dtype=np.float64)
     start = np.asarray(start, dtype=np.float64).reshape(-1, 3)
     views = list(views)
