@@ -25,10 +25,12 @@ _PUBLIC = {
     "METHODS": ".stereo.triangulate",
     "Triangulation": ".stereo.triangulate", "triangulate": ".stereo.triangulate",
     "triangulate_rays": ".stereo.triangulate",
+    "RigTriangulation": ".stereo.rig_triangulation", "triangulate_rig": ".stereo.rig_triangulation",
 }
 
 __all__ = [
     "Camera", "FlatPort", "Rig", "StereoRig", "Triangulation", "triangulate", "triangulate_rays",
+    "RigTriangulation", "triangulate_rig",
     "METHODS", "Reason", "refract", "intersect_plane", "trace_through_port",
     "WaterRays", "common_perpendicular", "CommonPerpendicular", "detect_targets", "Detections",
     "REJECTION_REASONS", "Rejection",
