@@ -30,7 +30,10 @@ def port_from_options(args, cameras) -> tuple:
     comment), ``dome`` a dome each (:func:`dome_port`: a DomePair of two cameras, a list of N
     domes of more), ``none`` None; the comment is empty but
     for ``per-camera``."""
-    if args.port == "paper" and args.ports is None:
+    if args.ports is not None and args.port != "mixed":
+        raise CLIError(f"--ports {args.ports} needs --port mixed (a port of its kind for "
+                       f"each camera)")
+    if args.port == "paper":
         return flat_port(args), ""
     if args.port == "per-camera":
         return own_ports(args, cameras)
@@ -38,9 +41,6 @@ def port_from_options(args, cameras) -> tuple:
         return dome_port(args, cameras), ""
     if args.port == "mixed":
         return mixed_ports(args, cameras), ""
-    if args.ports is not None:
-        raise CLIError(f"--ports {args.ports} needs --port mixed (a port of its kind for "
-                       f"each camera)")
     return None, ""
 
 
@@ -222,8 +222,8 @@ def mixed_ports(args, cameras):
     kinds, what = (args.ports or "").split(","), f"--ports {args.ports}"
     bad = [k for k in kinds if k not in MIXED_KINDS]
     if args.ports is None or bad or len(kinds) != len(cameras):
-        why = (f"{bad[0]!r} is not a kind of port" if bad else
-               f"{len(kinds)} kinds for {len(cameras)} cameras" if args.ports else "not given")
+        why = ("not given" if args.ports is None else f"{bad[0]!r} is not a kind of port"
+               if bad else f"{len(kinds)} kinds for {len(cameras)} cameras")
         raise CLIError(f"{what if args.ports else '--ports'}: {why}; "
                        f"--port mixed needs one kind per camera, each "
                        f"{', '.join(MIXED_KINDS)} (e.g. --ports "
@@ -267,8 +267,8 @@ def _refuse_unused(args, kinds, what: str) -> None:
                      f"defaults of --port per-camera)")
     if args.layout == "surface" or args.water != "clear" or args.lighting == "lit" \
             or args.aperture_radius is not None:
-        raise CLIError(f"--port mixed holds LED disk targets seen by pinhole cameras in clear "
-                       f"water (no --layout surface, --water, --lighting lit or thin lens)")
+        raise CLIError("--port mixed holds LED disk targets seen by pinhole cameras in clear "
+                       "water (no --layout surface, --water, --lighting lit or thin lens)")
 
 
 def one_value(values, option: str):
