@@ -15,11 +15,11 @@ import numpy as np
 
 from measure import StereoRig
 from synth.scene.dome import (check_field_of_view, check_targets, dome_placements,
-                              facing_cameras)
+                              facing_cameras, sphere_xml)
 from synth.scene.mixed import (check_mixed, check_mixed_targets, glass_of_rig, is_mixed,
                                mixed_shapes, mixed_xml)
-from synth.scene.windows import camera_names, check_windows, fit_windows, window_placements
-from synth.scene.xml_text import number_text, vector_text
+from synth.scene.windows import (camera_names, check_windows, fit_windows, window_placements,
+                                 window_xml)
 
 
 def glass_of(port):
@@ -52,19 +52,6 @@ def _rig_port(rig):
     """What the dome functions take as a rig's domes: the list of its cameras' DomePorts (of a
     pair behind a DomePair: its two domes, named ``left`` and ``right`` as the DomePair's)."""
     return list(rig.ports)
-
-
-def sphere_xml(sid: str, centre, radius: float, ext_ior: float, int_ior: float,
-               outer: bool) -> str:
-    """The XML of one dome sphere (mm): ``outer`` its ``ext_ior`` is ``$n_water``."""
-    return f"""    <shape type="sphere" id="{sid}">
-        <point name="center" value="{vector_text(centre)}"/>
-        <float name="radius" value="{number_text(radius)}"/>
-        <bsdf type="dielectric">
-            <float name="ext_ior" value="{'$n_water' if outer else number_text(ext_ior)}"/>
-            <float name="int_ior" value="{number_text(int_ior)}"/>
-        </bsdf>
-    </shape>"""
 
 
 def _dome_xml(rig) -> str:
@@ -106,25 +93,6 @@ def _window_xml(rig) -> str:
              f"normal towards the cameras, ext_ior on their side). -->"]
     parts += window_xml(fit_windows(rig), names)
     return "\n".join(parts)
-
-
-def window_xml(windows, names) -> list:
-    """The rectangles of ``windows`` (camera ``names[k]``'s, :func:`window_placements`), one
-    per interface; the last interface of each looks into ``$n_water``."""
-    last = {f"{name}_interface_{w.port.n_interfaces - 1}" for name, w in zip(names, windows)}
-    parts = []
-    for sid, centre, target, up, half, ext_ior, int_ior in window_placements(windows, names):
-        parts.append(f"""    <shape type="rectangle" id="{sid}">
-        <transform name="to_world">
-            <scale x="{number_text(half[0])}" y="{number_text(half[1])}"/>
-            <lookat origin="{vector_text(centre)}" target="{vector_text(target)}" up="{vector_text(up)}"/>
-        </transform>
-        <bsdf type="dielectric">
-            <float name="ext_ior" value="{number_text(ext_ior)}"/>
-            <float name="int_ior" value="{'$n_water' if sid in last else number_text(int_ior)}"/>
-        </bsdf>
-    </shape>""")
-    return parts
 
 
 def _check_windows(rig, targets, target_radius, target_normals) -> None:

@@ -19,11 +19,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from measure.geometry.dome import DomePort
-from synth.scene.dome import DOME_ID, SPHERE_NAMES, domes_from_spheres
+from synth.scene.dome import DOME_ID, SPHERE_NAMES, domes_from_spheres, sphere_xml
 from synth.scene.windows import (BORDER_STEP_PX, CLEARANCE_MM, GRID_STEP_PX, WINDOW_ID,
-                                 WINDOW_MARGIN_MM, Window, _axes, _boxes_overlap, _hits,
-                                 _pixels, window_from_rectangles)
+                                 WINDOW_MARGIN_MM, Window, boxes_overlap, image_pixels,
+                                 window_axes, window_from_rectangles, window_hits, window_xml)
 
 #: The kinds of port ``--ports`` names, one per camera (``synth scene --port`` values).
 MIXED_KINDS = ("paper", "per-camera", "dome", "none")
@@ -33,6 +32,12 @@ class MixedPorts(tuple):
     """Every camera's port in a rig of different kinds of port, in camera order: a FlatPort
     (equal ones are one shared window), a DomePort, or None (in air). What
     :func:`synth.scene.write.scene_xml` takes as the port of such a rig."""
+
+
+def _domed(port) -> bool:
+    """Whether a camera's ``port`` is a dome: the scene writes its glass as spheres (the kind
+    of :data:`synth.scene.glass.PER_CAMERA_GLASS`)."""
+    return getattr(port, "kind", None) == "dome"
 
 
 def is_mixed(port) -> bool:
@@ -54,11 +59,11 @@ def groups(rig) -> list:
     for k, port in enumerate(rig.ports):
         if port is None:
             continue
-        if isinstance(port, DomePort):
+        if _domed(port):
             found.append([rig.names[k], [k], port])
             continue
         for entry in found:
-            if not isinstance(entry[2], DomePort) and entry[2] == port:
+            if not _domed(entry[2]) and entry[2] == port:
                 entry[1].append(k)
                 entry[0] += f"_{rig.names[k]}"
                 break
@@ -77,11 +82,11 @@ def fit_window(rig, views, port, margin: float = WINDOW_MARGIN_MM) -> Window:
     first camera's image axes, the smallest rectangle holding the footprints of all their
     images on every interface, plus ``margin`` mm. ValueError for a ray that does not reach the
     water."""
-    axes = _axes(port.normal, rig.cameras[views[0]])
+    axes = window_axes(port.normal, rig.cameras[views[0]])
     foot = port.normal * port.offsets[0]
     coords = []
     for view in views:
-        uv = _pixels(rig.cameras[view], BORDER_STEP_PX, None)
+        uv = image_pixels(rig.cameras[view], BORDER_STEP_PX, None)
         water = _trace(rig, view, uv)
         _refuse_lost(water, uv, rig.names[view], "port")
         coords.append(((water.interface_points - foot) @ axes.T).reshape(-1, 2))
@@ -100,11 +105,11 @@ def _refuse_lost(water, uv, name: str, what: str) -> None:
 
 def glass_of_rig(rig) -> list:
     """``[(shape name, camera indices, Window or DomePort)]`` of :func:`groups`, windows fitted."""
-    return [(name, views, port if isinstance(port, DomePort) else fit_window(rig, views, port))
+    return [(name, views, port if _domed(port) else fit_window(rig, views, port))
             for name, views, port in groups(rig)]
 
 
-def _meets_sphere(origins, directions, longest, dome: DomePort, clearance: float):
+def _meets_sphere(origins, directions, longest, dome, clearance: float):
     """Whether segments ``origins + s·directions`` (unit, ``0 < s < longest``) come within
     ``clearance`` of ``dome``'s outer sphere."""
     offset = origins - dome.center
@@ -117,20 +122,20 @@ def _meets_sphere(origins, directions, longest, dome: DomePort, clearance: float
 
 
 def _meets(origins, directions, longest, glass) -> np.ndarray:
-    if isinstance(glass, DomePort):
-        return _meets_sphere(origins, directions, longest, glass, CLEARANCE_MM)
-    return _hits(origins, directions, glass, longest, CLEARANCE_MM)
+    if isinstance(glass, Window):
+        return window_hits(origins, directions, glass, longest, CLEARANCE_MM)
+    return _meets_sphere(origins, directions, longest, glass, CLEARANCE_MM)
 
 
 def _glass_overlap(a, b) -> bool:
-    if isinstance(a, DomePort) and isinstance(b, DomePort):
+    if not isinstance(a, Window) and not isinstance(b, Window):  # two domes
         return np.linalg.norm(a.center - b.center) <= a.radii[1] + b.radii[1] + CLEARANCE_MM
-    if isinstance(a, DomePort) or isinstance(b, DomePort):
-        dome, window = (a, b) if isinstance(a, DomePort) else (b, a)
+    if not isinstance(a, Window) or not isinstance(b, Window):
+        dome, window = (b, a) if isinstance(a, Window) else (a, b)
         centre, axes, half = window.box()
         local = np.clip(axes @ (dome.center - centre), -half, half)
         return np.linalg.norm(centre + local @ axes - dome.center) <= dome.radii[1] + CLEARANCE_MM
-    return _boxes_overlap(a.box(), b.box(), CLEARANCE_MM)
+    return boxes_overlap(a.box(), b.box(), CLEARANCE_MM)
 
 
 def check_mixed(rig, glass) -> None:
@@ -148,7 +153,7 @@ def check_mixed(rig, glass) -> None:
                                  f"apart or the ports nearer the cameras")
     own = {k: g for g in glass for k in g[1]}
     for view, (name, camera) in enumerate(zip(rig.names, rig.cameras)):
-        uv = _pixels(camera, BORDER_STEP_PX, GRID_STEP_PX)
+        uv = image_pixels(camera, BORDER_STEP_PX, GRID_STEP_PX)
         water = _trace(rig, view, uv)
         mine = own.get(view)
         _refuse_lost(water, uv, name, "glass" if mine is None else _what(mine))
@@ -173,7 +178,7 @@ def check_mixed(rig, glass) -> None:
 
 def _what(entry) -> str:
     name, views, glass = entry
-    if isinstance(glass, DomePort):
+    if not isinstance(glass, Window):
         return f"{name} dome"
     return f"{name} window" if len(views) == 1 else f"window {name.replace('_', ', ')} share"
 
@@ -198,7 +203,7 @@ def check_mixed_targets(rig, targets, target_radius: float, target_normals) -> N
         port = rig.view_port(k)
         if not np.all(port.water_side(targets)):
             raise ValueError(f"every target must lie in the water, beyond the {name} port")
-        if isinstance(port, DomePort):
+        if _domed(port):
             if np.any(np.linalg.norm(targets - port.center, axis=1)
                       <= port.radii[1] + target_radius):
                 raise ValueError(f"targets inside the {name} dome or nearer it than their radius")
@@ -215,8 +220,6 @@ def check_mixed_targets(rig, targets, target_radius: float, target_normals) -> N
 def mixed_xml(rig) -> str:
     """The glass of a scene of mixed ports: per dome its two spheres, per window (shared or
     own) one rectangle per interface, the last looking into ``$n_water``."""
-    from synth.scene.glass import sphere_xml, window_xml
-
     glass = glass_of_rig(rig)
     waters = {p.n_water for p in rig.ports if p is not None}
     if len(waters) > 1:
@@ -228,7 +231,7 @@ def mixed_xml(rig) -> str:
              f"cameras, ext_ior on their side; a window its cameras share is one)"
              f"{'; in air: ' + ', '.join(air) if air else ''}. -->"]
     for name, _, piece in glass:
-        if isinstance(piece, DomePort):
+        if not isinstance(piece, Window):
             n_air, n_glass, n_water = piece.indices
             parts.append(sphere_xml(DOME_ID.format(camera=name, sphere="inner"), piece.center,
                                     piece.radii[0], n_glass, n_air, False))
@@ -243,7 +246,7 @@ def mixed_shapes(mi, rig) -> dict:
     """The glass of a rig of mixed ports as Mitsuba dictionary shapes (:func:`mixed_xml`'s)."""
     shapes = {}
     for name, _, piece in glass_of_rig(rig):
-        if isinstance(piece, DomePort):
+        if not isinstance(piece, Window):
             n_air, n_glass, n_water = piece.indices
             for sphere, radius, ext, inner in zip(SPHERE_NAMES, piece.radii, (n_glass, n_water),
                                                   (n_air, n_glass)):
