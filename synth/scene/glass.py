@@ -1,7 +1,8 @@
 """The glass of a port whose cameras each have their own — a dome per camera (a
 :class:`measure.geometry.dome.DomePair`, or a list of one :class:`measure.geometry.dome.DomePort`
 per camera of N > 2), a flat window per camera (a :class:`measure.geometry.flat_pair.FlatPair`,
-or a list of one :class:`measure.FlatPort` per camera of N > 2) — and how a scene holds it
+or a list of one :class:`measure.FlatPort` per camera of N > 2), a mix of them and cameras in
+air (:mod:`synth.scene.mixed`) — and how a scene holds it
 (:data:`PER_CAMERA_GLASS`): the check of a rig and its targets, the XML of its shapes
 (:func:`synth.scene.write.scene_xml`) and its Mitsuba dictionary shapes
 (:func:`synth.scene.write.port_shapes`). Units mm, the left camera's frame."""
@@ -24,8 +25,9 @@ from synth.scene.windows import (camera_names, check_windows, fit_windows, windo
 
 def glass_of(port):
     """How a scene holds ``port``'s glass (:data:`PER_CAMERA_GLASS`), or None for one shared
-    flat port or none; a list of one port per camera is held as domes when every one is a
-    DomePort, else as windows (flat ports)."""
+    flat port or none; a list of one port per camera is held as a mix when
+    :func:`synth.scene.mixed.is_mixed`, as domes when every one is a DomePort, else as windows
+    (flat ports)."""
     if port is None:
         return None
     if is_mixed(port):

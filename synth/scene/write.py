@@ -18,7 +18,11 @@ the ``<default>`` parameters of :mod:`synth.scene.params` and holds:
 * or, for two housings (a :class:`measure.geometry.flat_pair.FlatPair`) — and for N > 2 cameras
   each behind its own flat port (a list of :class:`measure.FlatPort`, one per camera) — per
   camera a finite window: one ``rectangle`` per interface of its own port, sized to its field
-  of view and clear of every other camera's (:mod:`synth.scene.windows`).
+  of view and clear of every other camera's (:mod:`synth.scene.windows`);
+* or, for cameras with different kinds of port (a :class:`synth.scene.mixed.MixedPorts`, or a
+  list of one port per camera holding domes and flat ports or a None: a camera in air), each
+  glass once — a dome's spheres, a window per flat port, shared by the cameras whose ports are
+  equal — and ``<default name="port" value="mixed"/>`` (:mod:`synth.scene.mixed`).
 * the targets: ``disk`` shapes with an ``area`` emitter, facing the cameras (normal −z), shape
   ``id = "target_<k>"`` for target number ``k``; radius = the disk's scale.
 """
