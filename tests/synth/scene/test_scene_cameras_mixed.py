@@ -194,3 +194,41 @@ def test_ports_without_port_mixed_is_refused(tmp_path, capsys):
     assert synth_main(["scene", "--cameras", "4", "--port", "dome", "--ports", "dome,none",
                        "--out", str(tmp_path / "x.xml")]) == 2
     assert "--ports dome,none needs --port mixed" in capsys.readouterr().err
+
+
+def test_the_board_scenes_shapes_are_the_files_glass(shared_dome_own):
+    """``port_shapes`` (the board scenes' Mitsuba dictionary shapes) holds the glass the file
+    holds: the same ids, and every camera's rays meet it where they meet the file's (within
+    float32 of the dictionary's transforms)."""
+    from synth.rendering.mitsuba_setup import import_mitsuba
+    from synth.scene.write import port_shapes
+
+    mi, _ = import_mitsuba()
+    spec = load_scene(shared_dome_own)
+    shapes = port_shapes(mi, spec.camera_ports, cameras=spec.all_cameras)
+    text = shared_dome_own.read_text()
+    assert all(f'id="{sid}"' in text for sid in shapes)
+    assert len(shapes) == text.count("dielectric")
+    built, read = mi.load_dict({"type": "scene", **shapes}), mi.load_file(str(shared_dome_own))
+    uv = _border_and_grid()
+    for camera in spec.all_cameras:
+        d = camera.rays(uv)
+        ray = mi.Ray3f(mi.Point3f(*(float(c) for c in camera.center)),
+                       mi.Vector3f(d[:, 0], d[:, 1], d[:, 2]))
+        a, b = built.ray_intersect(ray), read.ray_intersect(ray)
+        assert np.all(np.array(a.is_valid())) and np.all(np.array(b.is_valid()))
+        # the dictionary's look_at is composed in float32 (the file's in double): the window's
+        # normal, target − origin at ~600 mm, is off by ~600 · 6e-8 rad, ~2e-3 mm at its edge
+        np.testing.assert_allclose(np.array(a.p), np.array(b.p), rtol=0, atol=5e-3)
+
+
+def test_two_cameras_of_two_kinds(tmp_path):
+    """A pair of mixed ports: the left camera in a dome, the right behind its own window."""
+    path = tmp_path / "pair.xml"
+    assert synth_main(["scene", "--port", "mixed", "--ports", "dome,per-camera", *GRID,
+                       "--out", str(path)]) == 0
+    spec = load_scene(path)
+    assert spec.multirig.names == ("left", "right") and not spec.extra_cameras
+    assert [type(p) for p in spec.ports] == [DomePort, FlatPort]
+    assert 'id="dome_left_outer"' in path.read_text()
+    assert 'id="right_interface_1"' in path.read_text()
