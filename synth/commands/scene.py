@@ -116,13 +116,21 @@ def _add_target_options(p) -> None:
 def _add_port_options(p) -> None:
     """The port: one flat port, a flat port per camera, a dome per camera or none,
     and its numbers (indices, distances, thicknesses, layers, tilt)."""
-    p.add_argument("--port", choices=("paper", "per-camera", "dome", "none"), default="paper",
+    p.add_argument("--port", choices=("paper", "per-camera", "dome", "mixed", "none"),
+                   default="paper",
                    help="the paper's air-glass-water port; per-camera: a housing per camera, "
                         "each camera behind its own flat port (a finite window; --port-distance, "
                         "--port-tilt, --glass-thickness take LEFT,RIGHT values — N cameras: "
                         "V0,V1,… —, each port relative to its own camera); dome: each camera inside its own "
                         "glass dome (two concentric spheres, --dome-radius, --dome-thickness, "
-                        "--dome-offset); or none (all air)")
+                        "--dome-offset); mixed: the kind of --ports for each camera; or none "
+                        "(all air)")
+    p.add_argument("--ports", metavar="K0,K1,…",
+                   help="--port mixed: each camera's kind of port, in camera order: paper (the "
+                        "one flat port they share; --port-distance, --glass-thickness, "
+                        "--port-tilt, --layer), per-camera (its own flat window, the defaults), "
+                        "dome (its own dome; the --dome-* options) or none (in air); e.g. "
+                        "paper,paper,dome,dome")
     p.add_argument("--dome-radius", type=positive_float,
                    help="--port dome: inner radius of each dome, mm (default 50)")
     p.add_argument("--dome-thickness", type=positive_float,
@@ -380,6 +388,7 @@ def _targets_comment(args, port, left, pair_comment: str, row: tuple, radius: fl
             + (f", the rig of {os.path.basename(args.rig)}" if args.rig else "")
             + (dome_comment(port, left) if args.port == "dome" else "")
             + (pair_comment if args.port == "per-camera" else "")
+            + (f" {args.ports}" if args.port == "mixed" else "")
             + (f" tilted {args.port_tilt[0][0]:g} deg about x, {args.port_tilt[1][0]:g} deg "
                f"about y" if args.port == "paper" and any(sum(args.port_tilt, ())) else "")
             + (f" of {len(args.layer)} layers" if args.layer else "")
@@ -515,7 +524,8 @@ def _refuse_inapplicable(args) -> None:
 
 
 #: How the line ``wrote …`` names each ``--port``.
-PORT_WORDS = {"paper": "port", "per-camera": "two ports", "dome": "two domes", "none": "no port"}
+PORT_WORDS = {"paper": "port", "per-camera": "two ports", "dome": "two domes", "none": "no port",
+              "mixed": "mixed ports"}
 
 
 def _port_words(kind: str, cameras: int) -> str:
@@ -559,7 +569,7 @@ def _check_visible(cameras, port, targets, radius: float, layout: str) -> None:
 
     seen = np.zeros(len(targets), dtype=int)
     for view, camera in enumerate(cameras):
-        through = (None if port is None else port[view] if isinstance(port, list)
+        through = (None if port is None else port[view] if isinstance(port, (list, tuple))
                    else port.view(min(view, 1)))
         uv = project(camera, through, targets)
         seen += wholly_in_image(camera, uv, targets, radius)

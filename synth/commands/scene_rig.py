@@ -30,12 +30,17 @@ def port_from_options(args, cameras) -> tuple:
     comment), ``dome`` a dome each (:func:`dome_port`: a DomePair of two cameras, a list of N
     domes of more), ``none`` None; the comment is empty but
     for ``per-camera``."""
+    if args.ports is not None and args.port != "mixed":
+        raise CLIError(f"--ports {args.ports} needs --port mixed (a port of its kind for "
+                       f"each camera)")
     if args.port == "paper":
         return flat_port(args), ""
     if args.port == "per-camera":
         return own_ports(args, cameras)
     if args.port == "dome":
         return dome_port(args, cameras), ""
+    if args.port == "mixed":
+        return mixed_ports(args, cameras), ""
     return None, ""
 
 
@@ -69,7 +74,7 @@ def flat_port(args):
 #: The options that describe the rig, which ``--rig FILE`` gives instead (refused with it).
 RIG_OPTIONS = ("cameras", "arrangement", "baseline", "toe_in", "size", "focal", "dist", "port",
                "dome_radius", "dome_thickness", "dome_offset", "n_water", "n_glass", "port_distance",
-               "glass_thickness", "layer", "port_tilt")
+               "glass_thickness", "layer", "port_tilt", "ports")
 
 
 def rig_from_file(args):
@@ -80,6 +85,7 @@ def rig_from_file(args):
     from synth.infra.cli import given
     from synth.products.dataset import DatasetError
     from synth.products.rig_file import read_rig_file
+    from synth.scene.mixed import is_mixed
 
     taken = [f"--{d.replace('_', '-')}" for d in RIG_OPTIONS if given(args, d)]
     if taken:
@@ -105,11 +111,34 @@ def rig_from_file(args):
         port, kind = None, "none"
     elif all(p == rig.ports[0] for p in rig.ports):
         port, kind = rig.ports[0], "paper"
+    elif is_mixed(rig.ports):
+        port, kind = _mixed_from_file(args, rig), "mixed"
     else:  # a port per camera: a dome each, or a window each (then each port must be flat)
         port, kind = list(rig.ports), _own_ports_kind(args, rig)
     args.port, args.cameras = kind, len(rig.cameras)
     return list(rig.cameras), port
 
+
+
+def _mixed_from_file(args, rig):
+    """The :class:`synth.scene.mixed.MixedPorts` of a rig file whose cameras have different
+    kinds of port, with ``args.ports`` set to their kinds (a flat port two cameras share
+    ``paper``); CLIError for glass that does not fit."""
+    from synth.scene.mixed import MixedPorts, check_mixed, glass_of_rig
+
+    def kind(port) -> str:
+        if port is None:
+            return "none"
+        if port.kind == "dome":
+            return "dome"
+        return "paper" if sum(p == port for p in rig.ports) > 1 else "per-camera"
+
+    try:
+        check_mixed(rig, glass_of_rig(rig))
+    except ValueError as exc:
+        raise CLIError(f"--rig {args.rig}: {exc}") from None
+    args.ports = ",".join(kind(p) for p in rig.ports)
+    return MixedPorts(rig.ports)
 
 
 def _own_ports_kind(args, rig) -> str:
@@ -172,6 +201,74 @@ def dome_port(args, cameras):
     except ValueError as exc:
         raise CLIError(f"--dome-radius {radius:g} --dome-thickness {thickness:g}: {exc}") from None
     return port
+
+
+def mixed_ports(args, cameras):
+    """The ports of ``--port mixed --ports K0,K1,…`` (one kind per camera, in camera order):
+    ``paper`` the one flat port those cameras share (:func:`flat_port`: ``--port-distance``,
+    ``--glass-thickness``, ``--port-tilt``, ``--layer``), ``per-camera`` the camera's own flat
+    window (its optical axis the normal, the defaults of ``--port per-camera``), ``dome`` its own
+    dome (:func:`dome_port`'s options), ``none`` in air; a
+    :class:`synth.scene.mixed.MixedPorts`. CLIError (one line naming ``--ports``) for a bad
+    list, options no camera's port takes, or glass that does not fit
+    (:func:`synth.scene.mixed.check_mixed`)."""
+    from measure.stereo.rig import Rig
+
+    from synth.scene.dome import DEFAULT_DOME_RADIUS_MM, DEFAULT_DOME_THICKNESS_MM, camera_domes
+    from synth.scene.mixed import MIXED_KINDS, MixedPorts, check_mixed, glass_of_rig
+    from synth.scene.windows import (DEFAULT_PAIR_DISTANCE_MM, DEFAULT_PAIR_THICKNESS_MM,
+                                     flat_ports)
+
+    kinds, what = (args.ports or "").split(","), f"--ports {args.ports}"
+    bad = [k for k in kinds if k not in MIXED_KINDS]
+    if args.ports is None or bad or len(kinds) != len(cameras):
+        why = ("not given" if args.ports is None else f"{bad[0]!r} is not a kind of port"
+               if bad else f"{len(kinds)} kinds for {len(cameras)} cameras")
+        raise CLIError(f"{what if args.ports else '--ports'}: {why}; "
+                       f"--port mixed needs one kind per camera, each "
+                       f"{', '.join(MIXED_KINDS)} (e.g. --ports "
+                       f"{','.join((['paper', 'dome', 'per-camera', 'none'] * 9)[:len(cameras)])})")
+    _refuse_unused(args, kinds, what)
+    n = tuple(port_indices(args))
+    ports = [None] * len(cameras)
+    shared = flat_port(args) if "paper" in kinds else None
+    own = [k for k, kind in enumerate(kinds) if kind == "per-camera"]
+    domed = [k for k, kind in enumerate(kinds) if kind == "dome"]
+    radius = args.dome_radius if args.dome_radius is not None else DEFAULT_DOME_RADIUS_MM
+    thickness = args.dome_thickness if args.dome_thickness is not None \
+        else DEFAULT_DOME_THICKNESS_MM
+    offset = tuple(args.dome_offset) if args.dome_offset is not None else (0.0, 0.0, 0.0)
+    try:
+        windows = flat_ports([cameras[k] for k in own], [DEFAULT_PAIR_DISTANCE_MM] * len(own),
+                             [(0.0, 0.0)] * len(own), [DEFAULT_PAIR_THICKNESS_MM] * len(own), n)
+        domes = camera_domes([cameras[k] for k in domed], radius, thickness, offset, n) \
+            if domed else []
+        for k, port in [*zip(own, windows), *zip(domed, domes)]:
+            ports[k] = port
+        for k, kind in enumerate(kinds):
+            ports[k] = shared if kind == "paper" else ports[k]
+        rig = Rig(cameras, ports)
+        check_mixed(rig, glass_of_rig(rig))
+    except ValueError as exc:
+        raise CLIError(f"--port mixed {what}: {exc}") from None
+    return MixedPorts(ports)
+
+
+def _refuse_unused(args, kinds, what: str) -> None:
+    """CLIError for a port option that no camera's kind of port in ``kinds`` takes."""
+    from synth.infra.cli import refuse_given
+
+    if "dome" not in kinds:
+        refuse_given(args, ["dome_radius", "dome_thickness", "dome_offset"],
+                     f"to {what} (no dome)")
+    if "paper" not in kinds:
+        refuse_given(args, ["port_distance", "glass_thickness", "port_tilt", "layer"],
+                     f"to {what} (no shared flat port: the cameras' own windows take the "
+                     f"defaults of --port per-camera)")
+    if args.layout == "surface" or args.water != "clear" or args.lighting == "lit" \
+            or args.aperture_radius is not None:
+        raise CLIError("--port mixed holds LED disk targets seen by pinhole cameras in clear "
+                       "water (no --layout surface, --water, --lighting lit or thin lens)")
 
 
 def one_value(values, option: str):

@@ -197,6 +197,21 @@ def dome_placements(port):
             n_water, n_glass
 
 
+def sphere_xml(sid: str, centre, radius: float, ext_ior: float, int_ior: float,
+               outer: bool) -> str:
+    """The XML of one dome sphere (mm): ``outer`` its ``ext_ior`` is ``$n_water``."""
+    from synth.scene.xml_text import number_text, vector_text
+
+    return f"""    <shape type="sphere" id="{sid}">
+        <point name="center" value="{vector_text(centre)}"/>
+        <float name="radius" value="{number_text(radius)}"/>
+        <bsdf type="dielectric">
+            <float name="ext_ior" value="{'$n_water' if outer else number_text(ext_ior)}"/>
+            <float name="int_ior" value="{number_text(int_ior)}"/>
+        </bsdf>
+    </shape>"""
+
+
 def pair_from_spheres(spheres: dict) -> DomePair:
     """The DomePair of a scene's spheres (:func:`domes_from_spheres` of ``left``, ``right``)."""
     return DomePair(*domes_from_spheres(spheres, CAMERA_NAMES))
@@ -242,4 +257,4 @@ def domes_from_spheres(spheres: dict, names) -> list:
 __all__ = ["CAMERA_NAMES", "DEFAULT_DOME_RADIUS_MM", "DEFAULT_DOME_THICKNESS_MM", "DOME_ID",
            "FOV_CHECK_STEP_PX", "camera_domes", "check_field_of_view", "check_targets",
            "dome_pair", "dome_placements", "domes_from_spheres", "facing_cameras", "named_domes",
-           "pair_from_spheres", "rig_domes"]
+           "pair_from_spheres", "rig_domes", "sphere_xml"]

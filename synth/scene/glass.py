@@ -1,7 +1,8 @@
 """The glass of a port whose cameras each have their own — a dome per camera (a
 :class:`measure.geometry.dome.DomePair`, or a list of one :class:`measure.geometry.dome.DomePort`
 per camera of N > 2), a flat window per camera (a :class:`measure.geometry.flat_pair.FlatPair`,
-or a list of one :class:`measure.FlatPort` per camera of N > 2) — and how a scene holds it
+or a list of one :class:`measure.FlatPort` per camera of N > 2), a mix of them and cameras in
+air (:mod:`synth.scene.mixed`) — and how a scene holds it
 (:data:`PER_CAMERA_GLASS`): the check of a rig and its targets, the XML of its shapes
 (:func:`synth.scene.write.scene_xml`) and its Mitsuba dictionary shapes
 (:func:`synth.scene.write.port_shapes`). Units mm, the left camera's frame."""
@@ -15,17 +16,22 @@ import numpy as np
 
 from measure import StereoRig
 from synth.scene.dome import (check_field_of_view, check_targets, dome_placements,
-                              facing_cameras)
-from synth.scene.windows import camera_names, check_windows, fit_windows, window_placements
-from synth.scene.xml_text import number_text, vector_text
+                              facing_cameras, sphere_xml)
+from synth.scene.mixed import (check_mixed, check_mixed_targets, glass_of_rig, is_mixed,
+                               mixed_shapes, mixed_xml)
+from synth.scene.windows import (camera_names, check_windows, fit_windows, window_placements,
+                                 window_xml)
 
 
 def glass_of(port):
     """How a scene holds ``port``'s glass (:data:`PER_CAMERA_GLASS`), or None for one shared
-    flat port or none; a list of one port per camera is held as domes when every one is a
-    DomePort, else as windows (flat ports)."""
+    flat port or none; a list of one port per camera is held as a mix when
+    :func:`synth.scene.mixed.is_mixed`, as domes when every one is a DomePort, else as windows
+    (flat ports)."""
     if port is None:
         return None
+    if is_mixed(port):
+        return PER_CAMERA_GLASS["mixed"]
     if isinstance(port, (list, tuple)):
         kinds = {getattr(p, "kind", None) for p in port}
         return PER_CAMERA_GLASS["dome" if kinds == {"dome"} else "flat pair"]
@@ -55,15 +61,8 @@ def _dome_xml(rig) -> str:
     parts = ["\n    <!-- The domes: per camera two concentric spheres (normals outwards, "
              "ext_ior outside): air inside the inner one, glass between, water outside. -->"]
     for sid, centre, radius, ext_ior, int_ior in dome_placements(_rig_port(rig)):
-        outer = sid.endswith("outer")  # its ext_ior is the water's: $n_water
-        parts.append(f"""    <shape type="sphere" id="{sid}">
-        <point name="center" value="{vector_text(centre)}"/>
-        <float name="radius" value="{number_text(radius)}"/>
-        <bsdf type="dielectric">
-            <float name="ext_ior" value="{'$n_water' if outer else number_text(ext_ior)}"/>
-            <float name="int_ior" value="{number_text(int_ior)}"/>
-        </bsdf>
-    </shape>""")
+        # the outer sphere's ext_ior is the water's: $n_water
+        parts.append(sphere_xml(sid, centre, radius, ext_ior, int_ior, sid.endswith("outer")))
     return "\n".join(parts)
 
 
@@ -94,19 +93,7 @@ def _window_xml(rig) -> str:
     parts = [f"\n    <!-- {'Two housings' if len(ports) == 2 else f'{len(ports)} housings'}: each "
              f"camera behind its own flat port, a finite window (one rectangle per interface, "
              f"normal towards the cameras, ext_ior on their side). -->"]
-    windows = fit_windows(rig)
-    last = {f"{name}_interface_{w.port.n_interfaces - 1}" for name, w in zip(names, windows)}
-    for sid, centre, target, up, half, ext_ior, int_ior in window_placements(windows, names):
-        parts.append(f"""    <shape type="rectangle" id="{sid}">
-        <transform name="to_world">
-            <scale x="{number_text(half[0])}" y="{number_text(half[1])}"/>
-            <lookat origin="{vector_text(centre)}" target="{vector_text(target)}" up="{vector_text(up)}"/>
-        </transform>
-        <bsdf type="dielectric">
-            <float name="ext_ior" value="{number_text(ext_ior)}"/>
-            <float name="int_ior" value="{'$n_water' if sid in last else number_text(int_ior)}"/>
-        </bsdf>
-    </shape>""")
+    parts += window_xml(fit_windows(rig), names)
     return "\n".join(parts)
 
 
@@ -143,6 +130,17 @@ def _window_shapes(mi, port, cameras, half_side_mm: float) -> dict:
     return shapes
 
 
+def _check_mixed(rig, targets, target_radius, target_normals) -> None:
+    check_mixed(rig, glass_of_rig(rig))
+    check_mixed_targets(rig, targets, target_radius, target_normals)
+
+
+def _mixed_shapes(mi, port, cameras, half_side_mm: float) -> dict:
+    if cameras is None:
+        raise ValueError("the glass of mixed ports is sized to the cameras: pass cameras")
+    return mixed_shapes(mi, glass_rig(cameras, port))
+
+
 @dataclass(frozen=True)
 class PerCameraGlass:
     """How a scene holds a port whose glass is per camera: its name in messages, the check of
@@ -160,4 +158,5 @@ class PerCameraGlass:
 PER_CAMERA_GLASS = {
     "dome": PerCameraGlass("dome", _check_domes, _dome_xml, _dome_shapes),
     "flat pair": PerCameraGlass("two-housing", _check_windows, _window_xml, _window_shapes),
+    "mixed": PerCameraGlass("mixed-port", _check_mixed, mixed_xml, _mixed_shapes),
 }

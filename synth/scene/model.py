@@ -94,6 +94,9 @@ class SceneSpec:
     #: :class:`measure.geometry.flat_pair.FlatPair` or the
     #: :class:`measure.geometry.dome.DomePair` of the first two); empty otherwise.
     extra_ports: tuple = ()
+    #: In a scene of cameras with different kinds of port (``--port mixed``): every camera's
+    #: port, a :class:`synth.scene.mixed.MixedPorts` (None: a camera in air); empty otherwise.
+    ports: tuple = ()
 
     @property
     def mitsuba_params(self) -> dict:
@@ -133,6 +136,8 @@ class SceneSpec:
         with the port it looks through)."""
         from measure.stereo.rig import Rig
 
+        if self.ports:
+            return Rig(self.all_cameras, list(self.ports))
         if not self.extra_cameras:
             return Rig.from_stereo(self.rig)
         if self.extra_ports:
@@ -145,6 +150,8 @@ class SceneSpec:
         """What the scene writer takes as the port (:func:`synth.scene.write.scene_xml`): the
         list of every camera's flat port or dome in a scene of N cameras each behind its own,
         else :attr:`port`."""
+        if self.ports:
+            return self.ports
         if self.extra_ports:
             return list(self.multirig.ports)
         return self.port

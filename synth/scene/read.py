@@ -292,15 +292,21 @@ def load_scene(path, defines: dict | None = None) -> SceneSpec:
     radii = np.array([t[2] for t in targets], dtype=float)
     normals = np.array([t[3] for t in targets]).reshape(-1, 3)
     has_port = bool(interfaces or spheres)
-    rig, extra_ports = _rig(params, interfaces, spheres, left, right, extra, surface, label)
-    _check_targets(rig, (extra, extra_ports), bool(spheres), has_port, surface, ids, centres,
-                   normals, label)
+    if params.get("port") == "mixed":
+        rig, extra_ports, ports = _mixed_rig(interfaces, spheres, (left, right) + extra,
+                                             surface, label)
+        _check_mixed_targets(ports, (left, right) + extra, centres, radii, normals, label)
+    else:
+        rig, extra_ports = _rig(params, interfaces, spheres, left, right, extra, surface, label)
+        _check_targets(rig, (extra, extra_ports), bool(spheres), has_port, surface, ids,
+                       centres, normals, label)
+        ports = ()
     return SceneSpec(rig=rig, has_port=has_port, targets=centres, target_ids=ids,
                      target_radii=radii, params=params, path=path,
                      sha256=(hashlib.sha256(data).hexdigest() if surface is None else
                              hashlib.sha256(data + surface.sha256.encode()).hexdigest()),
                      referenced=referenced, target_normals=normals, surface=surface,
-                     extra_cameras=extra, extra_ports=tuple(extra_ports))
+                     extra_cameras=extra, extra_ports=tuple(extra_ports), ports=ports)
 
 
 def _read_bytes(path) -> bytes:
@@ -378,6 +384,39 @@ def _rig(params, interfaces, spheres, left, right, extra, surface, label):
         except ValueError as exc:
             raise SceneError(f"{label}: {exc}") from None
     return rig, extra_ports
+
+
+def _mixed_rig(interfaces, spheres, cameras, surface, label):
+    """``(pair rig, extra ports, ports)`` of a scene of mixed ports (``port=mixed``,
+    :mod:`synth.scene.mixed`): the first two cameras as a pair, the ports the others look
+    through, every camera's port (None: in air); SceneError for shapes that name no camera or
+    glass that overlaps a field of view."""
+    from measure.stereo.rig import Rig, default_names
+
+    from synth.scene.mixed import check_mixed, read_mixed
+
+    if surface is not None:
+        raise SceneError(f"{label}: a scene of mixed ports holds disk targets, not a surface")
+    names = default_names(len(cameras))
+    try:
+        ports, glass = read_mixed(interfaces, spheres, cameras, names, lambda items, centre, what:
+                                  _port_from_interfaces(items, label, centre, what))
+        rig = Rig(cameras, ports, names)
+        check_mixed(rig, glass)
+    except ValueError as exc:
+        raise SceneError(f"{label}: {exc}") from None
+    return rig.pair(0, 1), tuple(rig.view_port(k) for k in range(2, len(cameras))), ports
+
+
+def _check_mixed_targets(ports, cameras, centres, radii, normals, label) -> None:
+    from measure.stereo.rig import Rig
+
+    from synth.scene.mixed import check_mixed_targets
+
+    try:
+        check_mixed_targets(Rig(cameras, ports), centres, float(np.max(radii)), normals)
+    except ValueError as exc:
+        raise SceneError(f"{label}: {exc}") from None
 
 
 def _check_targets(rig, extra, domes: bool, has_port: bool, surface, ids, centres, normals,

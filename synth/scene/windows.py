@@ -94,7 +94,7 @@ def flat_pair(cameras, distances, tilts, thicknesses, indices) -> FlatPair:
     return pair
 
 
-def _pixels(camera, border_step: int, grid_step: int | None) -> np.ndarray:
+def image_pixels(camera, border_step: int, grid_step: int | None) -> np.ndarray:
     """Pixels ``(N, 2)`` on the image's outer edges (OpenCV: ``[-0.5, W - 0.5]``) every
     ``border_step`` px and, with ``grid_step``, a grid inside."""
     w, h = camera.size
@@ -113,7 +113,7 @@ def _trace(rig, view: int, uv):
     return rig.view_port(view).trace(camera.center, camera.rays(uv), keep_interface_points=True)
 
 
-def _axes(normal: np.ndarray, camera) -> np.ndarray:
+def window_axes(normal: np.ndarray, camera) -> np.ndarray:
     """In-plane unit axes ``(2, 3)`` of a window: the camera's x axis made ⟂ ``normal``, and
     ``normal × u`` (the camera's y, roughly)."""
     u = camera.R[:, 0] - normal * (normal @ camera.R[:, 0])
@@ -134,10 +134,10 @@ def fit_windows(rig, margin: float = WINDOW_MARGIN_MM) -> tuple:
     windows = []
     for view, (name, camera) in enumerate(zip(camera_names(rig), rig.cameras)):
         port = rig.view_port(view)
-        uv = _pixels(camera, BORDER_STEP_PX, None)
+        uv = image_pixels(camera, BORDER_STEP_PX, None)
         water = _trace(rig, view, uv)
         _refuse_lost(water, uv, name)
-        axes = _axes(port.normal, camera)
+        axes = window_axes(port.normal, camera)
         foot = port.normal * port.offsets[0]
         coords = (water.interface_points - foot) @ axes.T  # (K, N, 2)
         low, high = coords.reshape(-1, 2).min(axis=0), coords.reshape(-1, 2).max(axis=0)
@@ -154,7 +154,7 @@ def _refuse_lost(water, uv, name: str) -> None:
                          f"its port (the ray of pixel ({u:g}, {v:g}))")
 
 
-def _boxes_overlap(a, b, clearance: float) -> bool:
+def boxes_overlap(a, b, clearance: float) -> bool:
     """Whether two oriented boxes (:meth:`Window.box`) come nearer than ``clearance``
     (separating-axis test: the 3 + 3 face axes and their 9 cross products)."""
     (ca, A, ha), (cb, B, hb) = a, b
@@ -170,7 +170,7 @@ def _boxes_overlap(a, b, clearance: float) -> bool:
     return True
 
 
-def _hits(origins, directions, window: Window, longest, clearance: float) -> np.ndarray:
+def window_hits(origins, directions, window: Window, longest, clearance: float) -> np.ndarray:
     """Whether rays ``origins + s·directions`` (``0 < s < longest``) cross any interface
     rectangle of ``window`` grown by ``clearance``."""
     normal = window.port.normal
@@ -195,13 +195,13 @@ def check_windows(rig, windows) -> None:
     names = camera_names(rig)
     for i in range(len(windows)):
         for j in range(i + 1, len(windows)):
-            if _boxes_overlap(windows[i].box(), windows[j].box(), CLEARANCE_MM):
+            if boxes_overlap(windows[i].box(), windows[j].box(), CLEARANCE_MM):
                 raise ValueError(f"the {names[i]} and {names[j]} windows overlap (their glass "
                                  f"comes nearer than {CLEARANCE_MM:g} mm): move the ports nearer "
                                  f"the cameras or the cameras apart")
     for view, camera in enumerate(rig.cameras):
         name, own = names[view], windows[view]
-        uv = _pixels(camera, BORDER_STEP_PX, GRID_STEP_PX)
+        uv = image_pixels(camera, BORDER_STEP_PX, GRID_STEP_PX)
         water = _trace(rig, view, uv)
         _refuse_lost(water, uv, name)
         points = water.interface_points  # (K, N, 3)
@@ -216,9 +216,9 @@ def check_windows(rig, windows) -> None:
         for other_view, other in enumerate(windows):
             if other_view == view:
                 continue
-            crossing = (_hits(np.broadcast_to(camera.center, air.shape), air / length[:, None],
+            crossing = (window_hits(np.broadcast_to(camera.center, air.shape), air / length[:, None],
                               other, length, CLEARANCE_MM)
-                        | _hits(water.origins, water.directions, other, np.inf, CLEARANCE_MM))
+                        | window_hits(water.origins, water.directions, other, np.inf, CLEARANCE_MM))
             if crossing.any():
                 u, v = uv[np.flatnonzero(crossing)[0]]
                 raise ValueError(f"the {name} camera's field of view passes through the "
@@ -240,6 +240,28 @@ def window_placements(windows, names=VIEWS):
                    window.axes[1], window.half, n[k], n[k + 1])
 
 
+def window_xml(windows, names) -> list:
+    """The XML of the rectangles of ``windows`` (camera ``names[k]``'s,
+    :func:`window_placements`), one per interface; the last interface of each looks into
+    ``$n_water``."""
+    from synth.scene.xml_text import number_text, vector_text
+
+    last = {f"{name}_interface_{w.port.n_interfaces - 1}" for name, w in zip(names, windows)}
+    parts = []
+    for sid, centre, target, up, half, ext_ior, int_ior in window_placements(windows, names):
+        parts.append(f"""    <shape type="rectangle" id="{sid}">
+        <transform name="to_world">
+            <scale x="{number_text(half[0])}" y="{number_text(half[1])}"/>
+            <lookat origin="{vector_text(centre)}" target="{vector_text(target)}" up="{vector_text(up)}"/>
+        </transform>
+        <bsdf type="dielectric">
+            <float name="ext_ior" value="{number_text(ext_ior)}"/>
+            <float name="int_ior" value="{'$n_water' if sid in last else number_text(int_ior)}"/>
+        </bsdf>
+    </shape>""")
+    return parts
+
+
 def window_from_rectangles(port: FlatPort, name: str, matrices) -> Window:
     """The window of ``port`` from its interfaces' ``to_world`` matrices (camera side first,
     as read from a scene): each rectangle's local x and y columns are its half sides. ValueError
@@ -258,7 +280,8 @@ def window_from_rectangles(port: FlatPort, name: str, matrices) -> Window:
     return window
 
 
-__all__ = ["BORDER_STEP_PX", "CLEARANCE_MM", "camera_names", "DEFAULT_PAIR_DISTANCE_MM",
+__all__ = ["BORDER_STEP_PX", "CLEARANCE_MM", "boxes_overlap", "camera_names", "image_pixels",
+           "window_axes", "window_hits", "window_xml", "DEFAULT_PAIR_DISTANCE_MM",
            "DEFAULT_PAIR_THICKNESS_MM", "GRID_STEP_PX", "WINDOW_ID", "WINDOW_MARGIN_MM", "Window",
            "check_windows", "fit_windows", "flat_pair", "flat_ports", "window_from_rectangles",
            "window_placements"]

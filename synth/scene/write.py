@@ -18,7 +18,11 @@ the ``<default>`` parameters of :mod:`synth.scene.params` and holds:
 * or, for two housings (a :class:`measure.geometry.flat_pair.FlatPair`) — and for N > 2 cameras
   each behind its own flat port (a list of :class:`measure.FlatPort`, one per camera) — per
   camera a finite window: one ``rectangle`` per interface of its own port, sized to its field
-  of view and clear of every other camera's (:mod:`synth.scene.windows`).
+  of view and clear of every other camera's (:mod:`synth.scene.windows`);
+* or, for cameras with different kinds of port (a :class:`synth.scene.mixed.MixedPorts`, or a
+  list of one port per camera holding domes and flat ports or a None: a camera in air), each
+  glass once — a dome's spheres, a window per flat port, shared by the cameras whose ports are
+  equal — and ``<default name="port" value="mixed"/>`` (:mod:`synth.scene.mixed`).
 * the targets: ``disk`` shapes with an ``area`` emitter, facing the cameras (normal −z), shape
   ``id = "target_<k>"`` for target number ``k``; radius = the disk's scale.
 """
@@ -35,6 +39,7 @@ from measure.geometry.port import require_flat_port
 from synth.scene.model import (DEFAULT_MAX_DEPTH, DEFAULT_SEED, DEFAULT_SPP, SPECKLE_ID,
                                SURFACE_ID, TARGET_ID_PREFIX, SurfaceFiles)
 from synth.scene.glass import PER_CAMERA_GLASS, glass_of, glass_rig
+from synth.scene.mixed import is_mixed
 from synth.scene.xml_text import number_text, vector_text
 from synth.rendering.sensor import sensor_parameters
 
@@ -243,6 +248,8 @@ def _defaults(cameras, names, port, targets, target_radius, plane: bool, *, spp,
                 ("height", str(h))]
     if port is not None:
         defaults.append(("n_water", number_text(_views_of(port, len(cameras))[0].n_water)))
+        if is_mixed(port):  # the reader's sign of a scene of mixed ports
+            defaults.append(("port", "mixed"))
     else:
         defaults.append(("port", "none"))
     if water is not None:
@@ -383,7 +390,7 @@ def _targets_xml(targets, target_normals, plane: bool, lighting: str) -> list:
 def _check_more_cameras(cameras, names, port, surface, thin_lens) -> None:
     """A scene of more than two cameras: the same film for all, all behind one flat port, each
     behind its own flat port or inside its own dome (a list of them, one per camera, all flat
-    or all domes) or none, no camera at another's centre or inside another's glass; LED disk
+    or all domes), a mix (:mod:`synth.scene.mixed`) or none, no camera at another's centre or inside another's glass; LED disk
     targets seen by pinholes."""
     from measure.stereo.rig import Rig
 
@@ -397,7 +404,7 @@ def _check_more_cameras(cameras, names, port, surface, thin_lens) -> None:
                    f"values")
         if len(port) != len(cameras):
             raise ValueError(message)
-        if {getattr(each, "kind", None) for each in port} != {"dome"}:
+        if not is_mixed(port) and {getattr(each, "kind", None) for each in port} != {"dome"}:
             for each in port:
                 require_flat_port(each, message + " (a mix of flat ports and domes is not "
                                                   "written)")
@@ -416,7 +423,7 @@ def _check_more_cameras(cameras, names, port, surface, thin_lens) -> None:
 def _views_of(port, count: int) -> list:
     """The port each of ``count`` cameras looks through (a shared port, a pair's, or a list's)."""
     if isinstance(port, (list, tuple)):
-        return list(port)
+        return [p for p in port if p is not None]  # a camera in air (a mix) has none
     return [port.view(min(v, 1)) for v in range(count)]
 
 

@@ -13,7 +13,7 @@ import pytest
 
 from measure.geometry.dome import DomePort, trace_through_dome
 from synth.__main__ import main as synth_main
-from synth.scene import SceneError, load_scene, write_scene
+from synth.scene import SceneError, load_scene
 from synth.scene.dome import camera_domes
 from tests.conftest import assert_mitsuba_follows
 
@@ -121,17 +121,6 @@ def test_a_scene_file_missing_a_camera_dome_is_refused(ring, tmp_path):
     bad.write_text(text.replace('id="dome_cam3_inner"', 'id="dome_cam3_other"'))
     with pytest.raises(SceneError, match="'dome_cam3_other' is not a dome sphere"):
         load_scene(bad)
-
-
-def test_a_mix_of_flat_ports_and_domes_is_refused_by_the_writer(ring, tmp_path):
-    from measure import FlatPort
-
-    spec = load_scene(ring)
-    ports = spec.camera_ports
-    ports[1] = FlatPort((0, 0, 1), 40.0, (5.0,), INDICES)
-    with pytest.raises(ValueError, match="a mix of flat ports and domes is not written"):
-        write_scene(tmp_path / "mix.xml", spec.all_cameras, ports, spec.targets,
-                    spec.target_radius)
 
 
 def test_a_calibration_file_of_domes_is_rendered_as_it_is(ring, tmp_path):
