@@ -54,6 +54,18 @@ def cameras(count: int, lens: str) -> list[Camera]:
     return out
 
 
+#: The port of the benchmarks: the paper's flat port (520 mm, 8 mm of glass).
+BENCH_PORT = FlatPort([0.0, 0.0, 1.0], 520.0, (8.0,), (1.0, 1.54, 1.33))
+
+
+def bench_targets(n: int, rng=None) -> np.ndarray:
+    """``n`` points (mm) in a box 700 × 600 mm wide, 1.1–2 m ahead of the cameras, drawn from
+    ``rng`` (default: seeded with 0)."""
+    rng = np.random.default_rng(0) if rng is None else rng
+    return np.column_stack([rng.uniform(-350, 350, n), rng.uniform(-300, 300, n),
+                            rng.uniform(1100, 2000, n)])
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--points", type=float, default=1e6)
@@ -63,10 +75,7 @@ def main(argv=None) -> int:
     p.add_argument("--lenses", default=",".join(LENSES))
     args = p.parse_args(argv)
     n = int(args.points)
-    port = FlatPort([0.0, 0.0, 1.0], 520.0, (8.0,), (1.0, 1.54, 1.33))
-    rng = np.random.default_rng(0)
-    truth = np.column_stack([rng.uniform(-350, 350, n), rng.uniform(-300, 300, n),
-                             rng.uniform(1100, 2000, n)])
+    port, truth = BENCH_PORT, bench_targets(n)
     print(f"{platform.processor() or platform.machine()}, {os.cpu_count()} CPUs; "
           f"load average before {os.getloadavg()[0]:.2f}; {n} points, {args.views} views")
     for lens in args.lenses.split(","):

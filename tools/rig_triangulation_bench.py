@@ -25,9 +25,8 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from measure import Rig, triangulate, triangulate_rig
-from measure.geometry.port import FlatPort
 from measure.geometry.projection import project
-from tools.multiview_bench import cameras
+from tools.multiview_bench import BENCH_PORT, bench_targets, cameras
 
 
 def _best(run, repeat: int):
@@ -50,10 +49,8 @@ def main(argv=None) -> int:
     p.add_argument("--repeat", type=int, default=3)
     args = p.parse_args(argv)
     n = int(args.points)
-    port = FlatPort([0.0, 0.0, 1.0], 520.0, (8.0,), (1.0, 1.54, 1.33))
     rng = np.random.default_rng(0)
-    truth = np.column_stack([rng.uniform(-350, 350, n), rng.uniform(-300, 300, n),
-                             rng.uniform(1100, 2000, n)])
+    port, truth = BENCH_PORT, bench_targets(n, rng)
     ring = cameras(args.views, "brown_conrady")
     rig = Rig(ring, [port] * len(ring))
     pixels = np.stack([project(c, port, truth) for c in ring], axis=1)
