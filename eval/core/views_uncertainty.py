@@ -77,8 +77,25 @@ def views_uncertainty(mode, noise_px, rig, detections, tracks, pixels, result, m
                                                                       axis=(1, 2))
     summary = uncertainty_summary(covariance[ok],
                                   None if scored is None else scored["errors"][ok])
+    _name_what_n_views_miss(summary.get("coverage") or {})
     return covariance, {"methods": [method], "rig": RIG_NOTE, "pixel_sigma": info,
                         "summaries": {method: summary}}
+
+
+def _name_what_n_views_miss(coverage: dict) -> None:
+    """An understated σ's verdict (:func:`eval.core.uncertainty.coverage_verdict`) in the words
+    of N views: what the pixels' covariance cannot hold."""
+    from eval.core.uncertainty import HONEST_COVERAGE
+
+    fraction = coverage.get("coverage_95")
+    if not coverage.get("verdict") or fraction is None or fraction >= HONEST_COVERAGE[0]:
+        return
+    coverage["verdict"] = (
+        f"σ understates the errors: {fraction:.3f} of the points inside their 95 % ellipsoid "
+        f"(< {HONEST_COVERAGE[0]:.2f}); not in it: an error every view of a target shares (the "
+        f"disks' eccentricity with --no-eccentricity, the rig's error with --calib) and the "
+        f"noise of the tracks the matcher left out (a --gate-mm tight against the noise keeps "
+        f"the tracks whose rays it left close, whose residuals then understate it)")
 
 
 def write_views_uncertainty(directory, method, result, covariance, scored, entry) -> None:

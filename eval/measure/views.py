@@ -76,15 +76,15 @@ def measure_views_main(args, output, options, start, log) -> int:
     t = time.perf_counter()
     tracks, pixels, result = _match_and_triangulate(rig, centers, options)
     timings["match_and_triangulate"] = time.perf_counter() - t
-    t = time.perf_counter()
-    covariance, uncertainty = views_uncertainty(options.pixel_sigma, 0.0, rig, detections,
-                                                tracks, pixels, result, "optical_path")
-    timings["covariance"] = time.perf_counter() - t
     ok = result.valid
     if not ok.any():
         raise CLIError(f"{', '.join(photos)}: no target was matched in two or more views "
                        f"(detections per camera: "
                        + ", ".join(f"{n} {len(c)}" for n, c in zip(rig.names, centers)) + ")")
+    t = time.perf_counter()
+    covariance, uncertainty = views_uncertainty(options.pixel_sigma, 0.0, rig, detections,
+                                                tracks, pixels, result, "optical_path")
+    timings["covariance"] = time.perf_counter() - t
     in_tracks = [int((tracks.detections[ok, v] >= 0).sum()) for v in range(len(photos))]
     failures = capture_failures(rig.names, photos, centers, in_tracks)
     report = _report(args, options, rig, photos, centers, in_tracks, tracks, result, failures)

@@ -97,8 +97,9 @@ def view_point_covariances(views, pixels, pixel_sigma) -> tuple[np.ndarray, np.n
     points, G = point_jacobians(views, pixels)
     variance = np.where(np.isfinite(pixels[..., 0]), sigma * sigma, 0.0)  # (N, V)
     weighted = G * variance[:, None, :, None]
-    flat_g = G.reshape(G.shape[0], 3, -1)
-    covariance = np.matmul(weighted.reshape(G.shape[0], 3, -1), np.swapaxes(flat_g, 1, 2))
+    flat_g = G.reshape(G.shape[0], 3, 2 * len(views))
+    covariance = np.matmul(weighted.reshape(G.shape[0], 3, 2 * len(views)),
+                           np.swapaxes(flat_g, 1, 2))
     no_sigma = ~np.all(np.isfinite(sigma) | ~np.isfinite(pixels[..., 0]), axis=1)
     covariance[no_sigma] = np.nan
     return points, covariance
@@ -128,7 +129,7 @@ def view_residuals(views, pixels, points) -> tuple[np.ndarray, np.ndarray]:
         predicted, d_point = project(view.camera, view.port, points, jacobian=True)[:2]
         e[:, v] = np.where(seen[:, v, None], pixels[:, v] - predicted, 0.0)
         J[:, v] = np.where(seen[:, v, None, None], d_point, 0.0)
-    e, J = e.reshape(n, -1), J.reshape(n, -1, 3)
+    e, J = e.reshape(n, 2 * len(views)), J.reshape(n, 2 * len(views), 3)
     dof = 2 * seen.sum(axis=1) - 3
     ok = (dof > 0) & np.all(np.isfinite(e), axis=1) & np.all(np.isfinite(J), axis=(1, 2))
     q = np.full(n, np.nan)

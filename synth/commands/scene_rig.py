@@ -112,6 +112,9 @@ def rig_from_file(args):
     elif all(p == rig.ports[0] for p in rig.ports):
         port, kind = rig.ports[0], "paper"
     elif is_mixed(rig.ports):
+        if len(rig.cameras) == 2:
+            raise CLIError(f"--rig {args.rig}: a pair whose cameras have different kinds of "
+                           f"port ({MIXED_PAIR})")
         port, kind = _mixed_from_file(args, rig), "mixed"
     else:  # a port per camera: a dome each, or a window each (then each port must be flat)
         port, kind = list(rig.ports), _own_ports_kind(args, rig)
@@ -203,6 +206,13 @@ def dome_port(args, cameras):
     return port
 
 
+#: Why a pair of two kinds of port is refused (its commands take one port, two windows or two
+#: domes).
+MIXED_PAIR = ("not measured as a pair yet: eval run, synth dataset and eval calibrate take a "
+              "pair behind one port, a window each or a dome each, --port paper, per-camera or "
+              "dome")
+
+
 def mixed_ports(args, cameras):
     """The ports of ``--port mixed --ports K0,K1,…`` (one kind per camera, in camera order):
     ``paper`` the one flat port those cameras share (:func:`flat_port`: ``--port-distance``,
@@ -220,6 +230,11 @@ def mixed_ports(args, cameras):
                                      flat_ports)
 
     kinds, what = (args.ports or "").split(","), f"--ports {args.ports}"
+    if len(cameras) == 2:
+        raise CLIError(f"--port mixed: a pair of two kinds of port ({MIXED_PAIR}); give "
+                       f"--cameras 3 or more")
+    if set(kinds) == {"none"}:
+        raise CLIError(f"{what}: every camera in air: that is --port none")
     bad = [k for k in kinds if k not in MIXED_KINDS]
     if args.ports is None or bad or len(kinds) != len(cameras):
         why = ("not given" if args.ports is None else f"{bad[0]!r} is not a kind of port"

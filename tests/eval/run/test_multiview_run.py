@@ -191,3 +191,11 @@ def test_points_of_three_cameras_carry_covariances_that_cover_their_errors(scene
             rows = list(csv.DictReader(fh))
         assert len(rows) == coverage["n"]
         assert all(float(r["sigma_z"]) > 0 for r in rows)
+    # at the default gate the matcher keeps the tracks the noise left close: σ understated, and
+    # the report says what the pixels' covariance cannot hold
+    out = tmp_path / "gate"
+    assert eval_main(["run", scene, "--out", str(out), "--spp", "16", "--no-progress",
+                      "--noise-px", "0.1"]) == 0
+    coverage = json.loads((out / "report.json").read_text())["uncertainty"]["summaries"][
+        "optical_path"]["coverage"]
+    assert coverage["coverage_95"] < 0.9 and "--gate-mm" in coverage["verdict"], coverage

@@ -103,6 +103,9 @@ def test_unseen_views_add_nothing_and_shapes_are_checked():
     np.testing.assert_allclose(covariance[0], two[0], rtol=1e-6)
     with pytest.raises(ValueError, match=r"shape \(N, 3, 2\)"):
         view_point_covariances(views, pixels[:, :2], SIGMA_PX)
+    # no target at all: empty answers, not an error
+    assert view_point_covariances(views, np.zeros((0, 3, 2)), SIGMA_PX)[1].shape == (0, 3, 3)
+    assert view_residual_sigma(views, np.zeros((0, 3, 2)), np.zeros((0, 3)))["n"] == 0
     with pytest.raises(ValueError, match="positive"):
         view_pixel_sigmas(-1.0, 4, 3)
     with pytest.raises(ValueError, match=r"\(4,\) or \(4, 3\)"):

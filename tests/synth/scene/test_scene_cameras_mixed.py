@@ -222,13 +222,29 @@ def test_the_board_scenes_shapes_are_the_files_glass(shared_dome_own):
         np.testing.assert_allclose(np.array(a.p), np.array(b.p), rtol=0, atol=5e-3)
 
 
-def test_two_cameras_of_two_kinds(tmp_path):
-    """A pair of mixed ports: the left camera in a dome, the right behind its own window."""
-    path = tmp_path / "pair.xml"
-    assert synth_main(["scene", "--port", "mixed", "--ports", "dome,per-camera", *GRID,
-                       "--out", str(path)]) == 0
-    spec = load_scene(path)
-    assert spec.multirig.names == ("left", "right") and not spec.extra_cameras
-    assert [type(p) for p in spec.ports] == [DomePort, FlatPort]
-    assert 'id="dome_left_outer"' in path.read_text()
-    assert 'id="right_interface_1"' in path.read_text()
+def test_two_cameras_of_two_kinds_are_refused(tmp_path, capsys):
+    """A pair of mixed ports (a dome and a window), or every camera in air: one error line,
+    no file — the pair's commands take one port, a window each or a dome each."""
+    for argv, fragment in ((["--ports", "dome,per-camera"], "a pair of two kinds of port"),
+                           (["--cameras", "3", "--ports", "none,none,none"],
+                            "that is --port none")):
+        path = tmp_path / "pair.xml"
+        assert synth_main(["scene", "--port", "mixed", *argv, *GRID, "--out", str(path)]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and err[0].startswith("error:") and fragment in err[0], err
+        assert not path.exists()
+    # the same pair from a calibration file (a window and a dome)
+    from measure.stereo.rig import Rig
+    from synth.products.rig_file import write_rig_file
+    from synth.scene.rig import paper_cameras
+
+    left, right = paper_cameras((320, 268), 150.0)
+    axis = left.R[:, 2]
+    write_rig_file(tmp_path / "mix2.yaml", Rig((left, right), [
+        FlatPort(axis, float(axis @ left.center) + 40.0, (5.0,), INDICES),
+        DomePort(right.center, 60.0, 9.0, INDICES)]))
+    assert synth_main(["scene", "--rig", str(tmp_path / "mix2.yaml"), "--out",
+                       str(tmp_path / "pair.xml")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "a pair whose cameras have different kinds of port" in err[0], err
+    assert not (tmp_path / "pair.xml").exists()
