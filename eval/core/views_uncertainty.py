@@ -73,13 +73,19 @@ def views_uncertainty(mode, noise_px, rig, detections, tracks, pixels, result, m
     info.update(median_px=float(np.median(finite)) if finite.size else None,
                 max_px=float(finite.max()) if finite.size else None)
     _, covariance = view_point_covariances(views, pixels, sigma)
-    ok = (result.valid if scored is None else scored["ok"]) & np.all(np.isfinite(covariance),
-                                                                      axis=(1, 2))
+    ok = _reported(result, covariance, scored)
     summary = uncertainty_summary(covariance[ok],
                                   None if scored is None else scored["errors"][ok])
     _name_what_n_views_miss(summary.get("coverage") or {})
     return covariance, {"methods": [method], "rig": RIG_NOTE, "pixel_sigma": info,
                         "summaries": {method: summary}}
+
+
+def _reported(result, covariance, scored) -> np.ndarray:
+    """The tracks the report and the files hold: triangulated (with ``scored``: correctly
+    matched) and with a finite covariance."""
+    ok = result.valid if scored is None else scored["ok"]
+    return ok & np.all(np.isfinite(covariance), axis=(1, 2))
 
 
 def _name_what_n_views_miss(coverage: dict) -> None:
@@ -105,8 +111,7 @@ def write_views_uncertainty(directory, method, result, covariance, scored, entry
     ``entry["files"]``."""
     from eval.core.uncertainty import write_uncertainty_files
 
-    ok = (result.valid if scored is None else scored["ok"]) & np.all(np.isfinite(covariance),
-                                                                      axis=(1, 2))
+    ok = _reported(result, covariance, scored)
     errors = None if scored is None else scored["errors"][ok]
     entry["files"] = {method: write_uncertainty_files(directory, method, result.points[ok],
                                                       covariance[ok], errors)}

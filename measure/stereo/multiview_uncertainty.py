@@ -29,15 +29,17 @@ from __future__ import annotations
 import numpy as np
 
 from .multiview import triangulate_views
+from .rig_triangulation import reprojection_normal_equations
 
 #: The step (px) of the central differences of :func:`view_point_covariances`.
 STEP_PX = 1e-3
 
 
-def view_pixel_sigmas(pixel_sigma, n: int, n_views: int) -> np.ndarray:
+def view_pixel_sigmas(pixel_sigma, n: int, n_views: int, allow_zero: bool = False) -> np.ndarray:
     """``(N, V)`` px: σ of each point's pixel in each view from one number, ``(N,)`` (per
     point) or ``(N, V)`` (per point and view); ValueError for another shape or a σ that is not
-    positive (NaN allowed: a point without a σ gets no covariance)."""
+    positive (0 too unless ``allow_zero``; NaN allowed: a point without a σ gets no
+    covariance)."""
     sigma = np.asarray(pixel_sigma, dtype=np.float64)
     if sigma.ndim == 1 and sigma.shape == (n,):
         sigma = sigma[:, None]
@@ -46,8 +48,8 @@ def view_pixel_sigmas(pixel_sigma, n: int, n_views: int) -> np.ndarray:
     except ValueError:
         raise ValueError(f"pixel_sigma must be a number, ({n},) or ({n}, {n_views}), got shape "
                          f"{sigma.shape}") from None
-    finite = np.isfinite(sigma)
-    if np.any(sigma[finite] <= 0):
+    finite = sigma[np.isfinite(sigma)]
+    if np.any(finite < 0) or (not allow_zero and np.any(finite == 0)):
         raise ValueError("pixel_sigma must be positive")
     return sigma
 
@@ -116,28 +118,20 @@ def view_residuals(views, pixels, points) -> tuple[np.ndarray, np.ndarray]:
     of each view, :func:`measure.geometry.projection.project`), ``r = (I − J (JᵀJ)⁻¹ Jᵀ) e``
     with ``J`` its point Jacobian, ``q = |r|²`` — and its degrees of freedom ``2k − 3`` for k
     views (``q ~ σ² χ²(2k − 3)`` for a pixel noise of σ per coordinate); NaN where the point or
-    a projection is not finite."""
-    from ..geometry.projection import project
-
+    a projection is not finite. ``|r|² = |e|² − (Jᵀe)ᵀ (JᵀJ)⁻¹ Jᵀe``, from the reprojection's
+    normal equations (:func:`measure.stereo.rig_triangulation.reprojection_normal_equations`)."""
     pixels = np.asarray(pixels, dtype=np.float64)
     points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-    n = points.shape[0]
-    e = np.zeros((n, len(views), 2))
-    J = np.zeros((n, len(views), 2, 3))
     seen = np.all(np.isfinite(pixels), axis=2)
-    for v, view in enumerate(views):
-        predicted, d_point = project(view.camera, view.port, points, jacobian=True)[:2]
-        e[:, v] = np.where(seen[:, v, None], pixels[:, v] - predicted, 0.0)
-        J[:, v] = np.where(seen[:, v, None, None], d_point, 0.0)
-    e, J = e.reshape(n, 2 * len(views)), J.reshape(n, 2 * len(views), 3)
     dof = 2 * seen.sum(axis=1) - 3
-    ok = (dof > 0) & np.all(np.isfinite(e), axis=1) & np.all(np.isfinite(J), axis=(1, 2))
-    q = np.full(n, np.nan)
-    if ok.any():
-        normal = np.einsum("nki,nkj->nij", J[ok], J[ok])
-        step = np.linalg.solve(normal, np.einsum("nki,nk->ni", J[ok], e[ok])[..., None])[..., 0]
-        r = e[ok] - np.einsum("nki,ni->nk", J[ok], step)
-        q[ok] = np.einsum("nk,nk->n", r, r)
+    ok = (dof > 0) & np.all(np.isfinite(points), axis=1)
+    q = np.full(points.shape[0], np.nan)
+    cost, normal, gradient = reprojection_normal_equations(views, pixels[ok], seen[ok], points[ok])
+    fits = np.isfinite(cost) & np.all(np.isfinite(normal), axis=(1, 2))
+    explained = np.einsum("ni,ni->n", gradient[fits],
+                          np.linalg.solve(normal[fits], gradient[fits][..., None])[..., 0])
+    q[np.flatnonzero(ok)[fits]] = np.maximum(cost[fits] - explained, 0.0)
+    ok = np.isfinite(q)
     return q, np.where(ok, dof, 0)
 
 
@@ -156,11 +150,7 @@ def view_residual_sigma(views, pixels, points, pixel_sigma=0.0) -> dict:
     ok = np.isfinite(q) & (dof > 0)
     if not ok.any():
         return {"sigma0_px": None, "rms_residual_px": None, "n": 0}
-    sigma = np.asarray(pixel_sigma, dtype=np.float64)
-    if np.all(sigma == 0):
-        sigma = np.full(pixels.shape[:2], 0.0)
-    stated = view_pixel_sigmas(np.where(sigma == 0, np.nan, sigma), *pixels.shape[:2])
-    stated = np.where(np.isfinite(stated), stated, 0.0)
+    stated = np.nan_to_num(view_pixel_sigmas(pixel_sigma, *pixels.shape[:2], allow_zero=True))
     seen = np.all(np.isfinite(pixels), axis=2)
     known = (np.sum(np.where(seen, stated ** 2, 0.0), axis=1)
              / np.maximum(seen.sum(axis=1), 1))[ok]

@@ -134,7 +134,7 @@ def reprojection_views(views, pixels, start, used=None) -> tuple[np.ndarray, np.
     converged = np.zeros(start.shape[0], bool)
     rows = np.flatnonzero(np.all(np.isfinite(start), axis=1) & (used.sum(axis=1) >= 2))
     x = start[rows].copy()
-    cost, normal, gradient = _normal_equations(views, pixels[rows], used[rows], x)
+    cost, normal, gradient = reprojection_normal_equations(views, pixels[rows], used[rows], x)
     damping = np.full(rows.size, START_DAMPING)
     active = np.isfinite(cost)
     for iteration in range(MAX_ITERATIONS + 1):
@@ -150,7 +150,7 @@ def reprojection_views(views, pixels, start, used=None) -> tuple[np.ndarray, np.
             break
         step = _lm_step(normal[live], gradient[live], damping[live])
         trial = x[live] + np.where(near[:, None], newton, step)
-        trial_cost, trial_normal, trial_gradient = _normal_equations(
+        trial_cost, trial_normal, trial_gradient = reprojection_normal_equations(
             views, pixels[rows[live]], used[rows[live]], trial)
         # a Gauss–Newton step near the minimum is taken (the cost cannot resolve it); other
         # steps where the cost does not rise; NaN (a trial point with no image) is a rise
@@ -172,7 +172,7 @@ def _lm_step(normal, gradient, damping) -> np.ndarray:
     return -np.linalg.solve(damped, gradient[:, :, None])[:, :, 0]
 
 
-def _normal_equations(views, pixels, used, points):
+def reprojection_normal_equations(views, pixels, used, points):
     """The reprojection cost ``Σ |r|²`` (px², NaN where a used view has no image of the point),
     ``JᵀJ`` ``(n, 3, 3)`` and ``Jᵀr`` ``(n, 3)`` of ``points`` ``(n, 3)`` over the ``used``
     views; ``r`` = projection − pixel (px), ``J`` = d r / d point (px/mm)."""
@@ -193,4 +193,4 @@ def _normal_equations(views, pixels, used, points):
 
 
 __all__ = ["MAX_ITERATIONS", "RigTriangulation", "STEP_TOLERANCE", "VIEW_METHODS",
-           "reprojection_views", "triangulate_rig"]
+           "reprojection_normal_equations", "reprojection_views", "triangulate_rig"]
