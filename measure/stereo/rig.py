@@ -308,14 +308,12 @@ class Rig(ValueEquality):
         from ..geometry.flat_pair import FlatPair
 
         left, right = self.cameras
-        a, b = self.ports
-        if a is None and b is None:
-            return Rig.stereo_pair(left, right, None)
-        if a is not None and a == b and isinstance(a, RigPort):
-            return Rig.stereo_pair(left, right, a)
+        port = self._pair_port(0, 1)
+        if not isinstance(port, ViewPorts):  # one shared flat port, or all air
+            return Rig.stereo_pair(left, right, port)
         for pair in (FlatPair, DomePair):
             try:
-                return Rig.stereo_pair(left, right, pair(a, b))
+                return Rig.stereo_pair(left, right, pair(*self.ports))
             except ValueError:
                 continue
         return None
