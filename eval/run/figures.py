@@ -11,9 +11,8 @@ import numpy as np
 
 from eval.core.figures import new_figure, save_figure
 
-#: Width (figure pixels) the two views are shrunk to before they are drawn: about the width of
-#: the axes in the 16-inch figure, so that matplotlib does not resample 10^7 pixels itself.
-VIEWS_WIDTH_PX = 1700
+#: Margins of the views' figure (figure fractions): set before the views are sized to the axes.
+VIEWS_MARGINS = dict(left=0.045, right=0.99, bottom=0.08, top=0.95)
 
 
 def _display(image: np.ndarray) -> np.ndarray:
@@ -24,16 +23,23 @@ def _display(image: np.ndarray) -> np.ndarray:
 
 def _side_by_side(ax, left, right) -> None:
     """Both views side by side on ``ax`` in pixel coordinates (OpenCV: pixel centres on
-    integers), area-averaged down to about :data:`VIEWS_WIDTH_PX` before drawing."""
+    integers), area-averaged (``cv2.INTER_AREA``) down to the size the axes give them in the
+    saved figure and drawn as 8-bit RGB: matplotlib then neither normalizes nor resamples
+    millions of float pixels itself (0.6 s of the figure's 1 s of CPU)."""
     import cv2
 
     pair = np.hstack([np.asarray(left, np.float32), np.asarray(right, np.float32)])
     h, w = pair.shape
-    factor = max(1, int(w // VIEWS_WIDTH_PX))
-    if factor > 1:
-        pair = cv2.resize(pair, (w // factor, h // factor), interpolation=cv2.INTER_AREA)
-    ax.imshow(_display(pair), cmap="gray", interpolation="nearest",
-              extent=(-0.5, (w // factor) * factor - 0.5, (h // factor) * factor - 0.5, -0.5))
+    box = ax.get_position()
+    fig = ax.figure
+    scale = min(1.0, box.width * fig.get_figwidth() * fig.dpi / w,
+                box.height * fig.get_figheight() * fig.dpi / h)
+    size = (max(1, round(w * scale)), max(1, round(h * scale)))
+    if size != (w, h):
+        pair = cv2.resize(pair, size, interpolation=cv2.INTER_AREA)
+    gray = (_display(pair) * 255 + 0.5).astype(np.uint8)
+    ax.imshow(np.repeat(gray[..., None], 3, axis=2), interpolation="nearest",
+              extent=(-0.5, w - 0.5, h - 0.5, -0.5))
 
 
 def views_figure(path, left, right, result) -> None:
@@ -44,6 +50,7 @@ def views_figure(path, left, right, result) -> None:
     from matplotlib.collections import LineCollection
 
     fig = new_figure(16, 7.2, layout=None)
+    fig.subplots_adjust(**VIEWS_MARGINS)
     ax = fig.add_subplot()
     _side_by_side(ax, left, right)
     for offset, name in ((0, "left"), (width, "right")):
@@ -69,17 +76,16 @@ def views_figure(path, left, right, result) -> None:
     ax.set_xlabel("u [px]")
     ax.set_ylabel("v [px]")
     ax.legend(loc="lower center", ncol=4, fontsize=8)
-    fig.subplots_adjust(left=0.045, right=0.99, bottom=0.08, top=0.95)
     save_figure(fig, path)
 
 
 def views_pair(path, left, right) -> None:
     """Both views side by side (a surface scene: nothing detected to mark)."""
     fig = new_figure(16, 7.2, layout=None)
+    fig.subplots_adjust(**VIEWS_MARGINS)
     ax = fig.add_subplot()
     _side_by_side(ax, left, right)
     ax.set_title("left | right", y=1.0)
     ax.set_xlabel("u [px]")
     ax.set_ylabel("v [px]")
-    fig.subplots_adjust(left=0.045, right=0.99, bottom=0.08, top=0.95)
     save_figure(fig, path)
