@@ -55,7 +55,6 @@ class PairLayout:
     """A stereo pair's files (module docs)."""
 
     names = ("left", "right")
-    first = "left"
 
     @staticmethod
     def image(name: str) -> str:
@@ -147,8 +146,6 @@ def _write_design(tmp, spec: SceneSpec, design: dict) -> None:
 
 class ViewsLayout:
     """The files of N > 2 cameras, a folder per camera (module docs)."""
-
-    first = "first"
 
     def __init__(self, names) -> None:
         self.names = tuple(names)
