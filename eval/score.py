@@ -164,8 +164,7 @@ def _check_options(args) -> tuple[str, object]:
 
 def _read_data(args):
     """``(dataset, several)``: the dataset (of two cameras, or of N: ``several``)."""
-    from synth.products.dataset import DatasetError, read_dataset
-    from synth.products.views_dataset import is_views_dataset, read_views_dataset
+    from synth.products.dataset import DatasetError, is_views_dataset, read_dataset
 
     several = is_views_dataset(args.dataset)
     if several and not args.points:
@@ -173,8 +172,7 @@ def _read_data(args):
                        f"{args.dataset} is a dataset of N cameras: score its --points (eval run "
                        f"--from measures its images with every view)")
     try:
-        return (read_views_dataset(args.dataset) if several else read_dataset(args.dataset)), \
-            several
+        return read_dataset(args.dataset), several
     except DatasetError as exc:
         raise CLIError(str(exc)) from None
 

@@ -240,7 +240,7 @@ def score_dataset(data, points: np.ndarray, label: str, gate_mm: float | None = 
                   units: str | None = None) -> tuple[dict, dict, list]:
     """``(report, arrays, warnings)``: ``points`` (N, 3) mm scored against the target dataset
     ``data`` (:class:`synth.products.dataset.Dataset`, or a dataset of N cameras,
-    :class:`synth.products.views_dataset.ViewsDataset`: the targets inside two or more images
+    :class:`synth.products.dataset.ViewsDataset`: the targets inside two or more images
     count as visible) as ``eval score`` does — the association, the
     metrics under ``report["methods"][label]``, the plausibility warnings (``units`` of the
     points as given: None or "mm", or "m")."""

@@ -151,8 +151,7 @@ def score_entry(suite_dir: str, sub_dir: str, row: dict, method: str, gate_mm) -
     """One row of the summary: the index row's folder and parameters, ``status`` (``ok``,
     ``missing``, ``failed``), ``error``, ``submission`` (the file), ``warnings`` and the
     metrics."""
-    from synth.products.dataset import DatasetError, read_dataset
-    from synth.products.views_dataset import is_views_dataset, read_views_dataset
+    from synth.products.dataset import DatasetError, is_views_dataset, read_dataset
 
     out = {"status": "ok", "error": None, "submission": None, "warnings": ""}
     if row.get("status") != "ok":
@@ -176,9 +175,7 @@ def score_entry(suite_dir: str, sub_dir: str, row: dict, method: str, gate_mm) -
             if kind != "points":
                 raise ValueError(f"{row['folder']}: a dataset of N cameras; pairs of pixels are "
                                  f"two views: submit points.ply")
-            data = read_views_dataset(folder)
-        else:
-            data = read_dataset(folder)
+        data = read_dataset(folder)
         if row["render"] == "targets":
             out.update(_score_targets(data, kind, path, method, gate_mm))
         else:

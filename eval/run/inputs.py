@@ -186,10 +186,16 @@ def another_scene(config: RunConfig, exc=None) -> CLIError | None:
 
 
 def read_run_dataset(config: RunConfig, spec):
-    """The ``--from`` dataset, refused when it was rendered from another scene than ``spec``."""
-    from synth.products.dataset import read_dataset
+    """The ``--from`` dataset, refused when it holds more than two cameras or was rendered from
+    another scene than ``spec``."""
+    from synth.products.dataset import DatasetError, ViewsDataset, read_dataset
 
     data = read_dataset(config.from_dir)
+    if isinstance(data, ViewsDataset):
+        raise DatasetError(f"{config.from_dir}: a dataset of {len(data.names)} cameras "
+                           f"({', '.join(f'{c}/' for c in data.names)}), not a stereo pair "
+                           f"(left.png, right.png): this reads two views (synth check, synth "
+                           f"photos and eval run --from read every camera)")
     if data.manifest["scene"].get("sha256") != spec.sha256:
         raise another_scene(config) or CLIError(
             f"--from {config.from_dir}: the dataset was rendered from another scene than "

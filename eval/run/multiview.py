@@ -1,7 +1,7 @@
 """``python -m eval run`` on a scene of more than two cameras (``synth scene --cameras N``).
 
 Every view is rendered (:func:`synth.rendering.render.render_views`) — or read from a ``--from``
-dataset of N cameras (:mod:`synth.products.views_dataset`, :func:`dataset_views`) — and its
+dataset of N cameras (:mod:`synth.products.dataset_layout`, :func:`dataset_views`) — and its
 targets detected (the two-camera run's detector and options); the detections are matched across all views
 without ground truth (:func:`measure.stereo.multimatch.match_views`: pairwise refractive
 epipolar matching, tracks from their union, a track with a conflict dropped); every track is
@@ -127,15 +127,14 @@ def dataset_views(config: RunConfig, spec) -> tuple[list, dict]:
     (variant, spp, seed, the per-view render entries, as the manifest recorded them); CLIError
     (exit 2, one line) for a dataset that is not one of this scene, or whose ``calib.yaml``
     disagrees with the scene rendered with the manifest's parameters."""
-    from synth.products.dataset import DatasetError
-    from synth.products.views_dataset import is_views_dataset, read_views_dataset
+    from synth.products.dataset import DatasetError, is_views_dataset, read_dataset
 
     if not is_views_dataset(config.from_dir):
         raise CLIError(f"--from {config.from_dir}: not a dataset of {len(spec.all_cameras)} "
                        f"cameras (cam0/, cam1/, …), but {config.scene} is a scene of "
                        f"{len(spec.all_cameras)}")
     try:
-        data = read_views_dataset(config.from_dir)
+        data = read_dataset(config.from_dir)
     except DatasetError as exc:
         raise CLIError(f"--from {exc}") from None
     if data.manifest["scene"].get("sha256") != spec.sha256:

@@ -25,10 +25,8 @@ def main(args) -> int:
     from synth.products.crosscheck import CHECK_MAX_PX, CHECK_RMS_PX, check_dataset
     from synth.products.dataset import read_dataset
 
-    from synth.products.views_dataset import is_views_dataset
-
-    data = None if is_views_dataset(args.dir) else read_dataset(args.dir)
-    if data is not None and data.is_surface:
+    data = read_dataset(args.dir)
+    if data.is_surface:
         refuse_given(args, ["rms", "max"], f"to the surface dataset {args.dir}: its truth maps "
                                            f"are checked, no detection")
         return _check_surface(args, data)

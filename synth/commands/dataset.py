@@ -1,6 +1,6 @@
 """``python -m synth dataset SCENE --out DIR [--spp N] [--variant V] [--exr] [--sensor PRESET]
 [-D name=value ...]``: render and write a benchmark dataset, atomically (:mod:`synth.products.dataset`;
-a scene of more than two cameras: one folder per camera, :mod:`synth.products.views_dataset`)."""
+a scene of more than two cameras: one folder per camera, :mod:`synth.products.dataset_layout`)."""
 
 from __future__ import annotations
 
@@ -27,12 +27,12 @@ def main(args) -> int:
     except SensorError as exc:
         raise CLIError(f"--sensor {args.sensor}: {exc}") from None
     spec = scene_from_args(args)
-    if spec.extra_cameras:
-        manifest = _write_views(args, spec, sensor)
-    else:
-        manifest = write_dataset(spec, args.out, spp=args.spp, variant=args.variant,
-                                 exr=args.exr, progress=not args.no_progress, sensor=sensor,
-                                 adaptive=not args.full_film)
+    if spec.extra_cameras and spec.surface is not None:
+        raise CLIError(f"{args.scene}: a surface scene of {len(spec.all_cameras)} cameras; synth "
+                       f"dataset writes a surface's truth maps for two cameras")
+    manifest = write_dataset(spec, args.out, spp=args.spp, variant=args.variant, exr=args.exr,
+                             progress=not args.no_progress, sensor=sensor,
+                             adaptive=not args.full_film)
     if manifest.get("skipped"):
         print(f"{args.out}: up to date (same scene, parameters and options); nothing to do")
         return 0
@@ -51,18 +51,3 @@ def main(args) -> int:
         print(f"  {name}: {render_summary(manifest['render'][name])}")
     return 0
 
-
-def _write_views(args, spec, sensor) -> dict:
-    """The dataset of a scene of more than two cameras (one folder per camera); a surface scene
-    and ``--sensor`` are refused (one line)."""
-    from synth.products.views_dataset import write_views_dataset
-
-    cameras = len(spec.all_cameras)
-    if spec.surface is not None:
-        raise CLIError(f"{args.scene}: a surface scene of {cameras} cameras; synth dataset "
-                       f"writes a surface's truth maps for two cameras")
-    if sensor is not None:
-        raise CLIError(f"--sensor does not apply to {args.scene}, a scene of {cameras} cameras "
-                       f"(the sensor model exposes a stereo pair)")
-    return write_views_dataset(spec, args.out, spp=args.spp, variant=args.variant, exr=args.exr,
-                               progress=not args.no_progress, adaptive=not args.full_film)

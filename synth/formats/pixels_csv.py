@@ -1,6 +1,6 @@
 """``pixels.csv``: the truth's pixel of every target in every view of a dataset — a pair's
 (header :data:`PIXELS_HEADER`: ``id,x,y,z,u_left,v_left,u_right,v_right``) and N views'
-(``u_<name>,v_<name>`` per camera, :func:`synth.products.views_dataset.pixels_header`) alike.
+(``u_<name>,v_<name>`` per camera, :func:`synth.products.dataset_layout.pixels_header`) alike.
 Points in mm (reference frame), pixels in the OpenCV convention (integer coordinates are pixel
 centres); reals written with 17 significant digits, so that they read back exactly.
 """
@@ -26,7 +26,7 @@ def write_pixels_csv(path, ids, points, uv_left, uv_right) -> None:
 def write_pixel_rows(path, header, ids, rows) -> None:
     """A ``pixels.csv``: ``header``, then per target its id and ``rows`` (reals with 17
     significant digits) — a pair's (:data:`PIXELS_HEADER`) and N views'
-    (:func:`synth.products.views_dataset.pixels_header`) alike."""
+    (:func:`synth.products.dataset_layout.pixels_header`) alike."""
     with open(path, "w", newline="") as fh:
         writer = csv.writer(fh)
         writer.writerow(header)

@@ -154,25 +154,15 @@ def check_dataset(path, rms_px: float = CHECK_RMS_PX, max_px: float = CHECK_MAX_
     image can reach (:func:`target_image_margin_px`): those must all be found. Detections are
     paired with simulated pixels by :func:`associate_detections`. Returns a dict: ``views``
     (the views' names: ``left``, ``right``, or ``cam0``, ``cam1``, … of a dataset of N cameras,
-    :mod:`synth.products.views_dataset`) and per view (:func:`check_view`) ``in_image``,
+    :mod:`synth.products.dataset_layout`) and per view (:func:`check_view`) ``in_image``,
     ``found``, ``missed`` (ids), ``detected``, ``unmatched_detections``, ``rejected``
     {reason: count}, ``rms_px``, ``max_px``, ``mean_px`` (mean offset detected − simulated,
     (du, dv)); over all views ``rms_px``, ``max_px``; the bounds and ``passed``.
     """
-    from synth.products.views_dataset import is_views_dataset
+    from synth.products.dataset import read_dataset
 
-    if is_views_dataset(path):
-        from synth.products.views_dataset import read_views_dataset
-
-        data = read_views_dataset(path)
-        views = [(name, image, camera, data.pixels[:, k]) for k, (name, image, camera)
-                 in enumerate(zip(data.names, data.images, data.rig.cameras))]
-    else:
-        from synth.products.dataset import read_dataset
-
-        data = read_dataset(path)
-        views = [("left", data.left, data.rig.left, data.pixels_left),
-                 ("right", data.right, data.rig.right, data.pixels_right)]
+    data = read_dataset(path)
+    views = data.views
     radius = float(data.manifest.get("scene", {}).get("target_radius_mm", 0.0))
     report = {"path": str(path), "views": [v[0] for v in views],
               "bounds": {"rms_px": rms_px, "max_px": max_px}}

@@ -32,7 +32,7 @@ class PhotoExportError(ValueError):
 def rendered_views(src) -> tuple[tuple[str, ...], list[tuple]]:
     """``(views, [(name, file of view 0, file of view 1, …), …])`` of a boards folder or a
     dataset: ``views`` ``("left", "right")``, or ``("cam0", "cam1", …)`` for a dataset of more
-    than two cameras (:mod:`synth.products.views_dataset`, its images ``camK/image.png``, the
+    than two cameras (:mod:`synth.products.dataset_layout`, its images ``camK/image.png``, the
     name ``image``)."""
     src = os.fspath(src)
     try:
@@ -42,7 +42,7 @@ def rendered_views(src) -> tuple[tuple[str, ...], list[tuple]]:
     except (OSError, ValueError, AttributeError):
         raise PhotoExportError(f"{src}: not a synth boards folder or dataset (no readable "
                                f"manifest.json)") from None
-    from synth.products.views_dataset import VIEW_FILES, is_views_dataset
+    from synth.products.dataset_layout import VIEW_FILES, is_views_dataset
 
     views = ("left", "right")
     if command == "synth boards":
@@ -51,11 +51,10 @@ def rendered_views(src) -> tuple[tuple[str, ...], list[tuple]]:
                        if (m := re.fullmatch(rf"{views[0]}_(\d+)\.png", f)))
         pairs = [(n, *(os.path.join(src, f"{view}_{n}.png") for view in views)) for n in names]
     elif is_views_dataset(src):
-        from synth.products.dataset import DatasetError
-        from synth.products.views_dataset import read_views_dataset
+        from synth.products.dataset import DatasetError, read_dataset
 
         try:  # the folders, the manifest and every file's SHA-256
-            views = read_views_dataset(src).names
+            views = read_dataset(src).names
         except DatasetError as exc:
             raise PhotoExportError(str(exc)) from None
         stem = os.path.splitext(VIEW_FILES["image"])[0]

@@ -47,24 +47,11 @@ def render_task(task: dict) -> dict:
         target = task["out"] if direct else os.path.join(
             tmp := tempfile.mkdtemp(prefix="refstereo-suite-"), "dataset")
         spec = load_scene(scene, task["defines"])
-        if spec.extra_cameras:  # every camera, a folder each — never the first two alone
-            from synth.products.views_dataset import write_views_dataset
-
-            for given, what in ((sensor, "a sensor model (it exposes a stereo pair)"),
-                                (task.get("design"), "a design port")):
-                if given is not None:
-                    raise ValueError(f"{spec.path}: a scene of {len(spec.all_cameras)} cameras "
-                                     f"is written without {what}")
-            manifest = write_views_dataset(spec, target, spp=params.get("spp"),
-                                           exr=bool(params.get("exr", False)), progress=False,
-                                           seed=task["seed"],
-                                           adaptive=not params.get("full_film", False))
-        else:
-            manifest = write_dataset(spec, target, spp=params.get("spp"),
-                                     exr=bool(params.get("exr", False)), progress=False,
-                                     seed=task["seed"], sensor=sensor,
-                                     adaptive=not params.get("full_film", False),
-                                     design=task.get("design"))
+        manifest = write_dataset(spec, target, spp=params.get("spp"),
+                                 exr=bool(params.get("exr", False)), progress=False,
+                                 seed=task["seed"], sensor=sensor,
+                                 adaptive=not params.get("full_film", False),
+                                 design=task.get("design"))
         files = None if direct else _read_files(target)
         return {"key": task["key"], "status": "ok", "error": None, "files": files,
                 "request_key": manifest["request_key"],

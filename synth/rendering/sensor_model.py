@@ -145,26 +145,37 @@ def to_radiance(dn: np.ndarray, sensor: SensorModel, electrons_per_unit: float) 
             / electrons_per_unit).astype(np.float32)
 
 
-def view_generator(seed: int, view: str) -> np.random.Generator:
-    """The sensor noise generator of one view, derived from the run's seed."""
-    return np.random.default_rng([int(seed), 0x5E5, ("left", "right").index(view)])
+def view_generator(seed: int, view: str | int) -> np.random.Generator:
+    """The sensor noise generator of one view, derived from the run's seed: ``view`` its index
+    in the rig (0, 1, …) or a pair's ``left`` (0) / ``right`` (1)."""
+    index = ("left", "right").index(view) if isinstance(view, str) else int(view)
+    return np.random.default_rng([int(seed), 0x5E5, index])
 
 
 __all__ = ["BIT_DEPTH_RANGE", "PRESETS", "SensorError", "SensorModel", "expose",
-           "sensor_from_spec", "sensor_views", "to_radiance", "view_generator"]
+           "sensor_from_spec", "sensor_images", "sensor_views", "to_radiance", "view_generator"]
 
 
 def sensor_views(left: np.ndarray, right: np.ndarray, sensor: SensorModel, seed: int):
-    """Both views through ``sensor`` with one exposure (a synchronized pair with equal
-    settings: the brightest pixel of either view at ``sensor.exposure`` of the full well) and
-    each view's own seeded noise. Returns ``(left_dn, right_dn, info)``: uint16 codes, and
+    """Both views of a pair through ``sensor`` (:func:`sensor_images`): ``(left_dn, right_dn,
+    info)``."""
+    codes, info = sensor_images((left, right), ("left", "right"), sensor, seed)
+    return codes[0], codes[1], info
+
+
+def sensor_images(images, names, sensor: SensorModel, seed: int) -> tuple[list, dict]:
+    """Every view through ``sensor`` with one exposure (synchronized cameras with equal
+    settings: the brightest pixel of any view at ``sensor.exposure`` of the full well) and each
+    view's own seeded noise (view k's: :func:`view_generator` of ``k``). ``images`` float32
+    linear ``(H, W)``, ``names`` theirs. Returns ``(codes, info)``: uint16 codes per view, and
     ``info`` = the sensor's settings, ``electrons_per_unit``, ``peak``, ``dn_per_unit``
-    (``(DN − dark_level) / radiance``) and per view ``saturated_pixels``."""
-    peak = max(float(np.max(left)), float(np.max(right)))
-    codes, info = {}, {"model": sensor.to_dict()}
-    for view, image in (("left", left), ("right", right)):
-        codes[view], view_info = expose(image, sensor, view_generator(seed, view), peak=peak)
+    (``(DN − dark_level) / radiance``) and per view name ``saturated_pixels``."""
+    peak = max(float(np.max(image)) for image in images)
+    codes, info = [], {"model": sensor.to_dict()}
+    for k, (name, image) in enumerate(zip(names, images)):
+        code, view_info = expose(image, sensor, view_generator(seed, k), peak=peak)
+        codes.append(code)
         info.update(electrons_per_unit=view_info["electrons_per_unit"], peak=peak)
-        info[view] = {"saturated_pixels": view_info["saturated_pixels"]}
+        info[name] = {"saturated_pixels": view_info["saturated_pixels"]}
     info["dn_per_unit"] = info["electrons_per_unit"] / sensor.gain_e_per_dn
-    return codes["left"], codes["right"], info
+    return codes, info

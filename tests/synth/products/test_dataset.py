@@ -199,7 +199,7 @@ def test_failed_write_leaves_nothing(small_scene, tmp_path, monkeypatch):
     def boom(*args, **kwargs):
         raise RuntimeError("render failed")
 
-    monkeypatch.setattr(ds, "render_stereo", boom)
+    monkeypatch.setattr(ds, "render_views", boom)
     with pytest.raises(RuntimeError):
         write_dataset(small_scene, tmp_path / "ds", progress=False)
     assert list(tmp_path.iterdir()) == []

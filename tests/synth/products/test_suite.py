@@ -266,7 +266,7 @@ def test_a_suite_of_a_scene_of_three_cameras_renders_every_camera(tmp_path):
     """A scene of three cameras (each behind its own port): each entry is a dataset of three
     camera folders with the truth of all three — never the first two as a stereo pair — and
     the index says how many cameras."""
-    from synth.products.views_dataset import read_views_dataset
+    from synth.products.dataset import read_dataset
 
     scene = tmp_path / "three.xml"
     assert main(["scene", "--cameras", "3", "--port", "per-camera", "--layout", "grid",
@@ -279,7 +279,7 @@ def test_a_suite_of_a_scene_of_three_cameras_renders_every_camera(tmp_path):
     rows = pq.read_table(out / "index.parquet").to_pylist()
     assert [r["cameras"] for r in rows] == [3, 3] and all(r["status"] == "ok" for r in rows)
     for row in rows:
-        data = read_views_dataset(out / row["folder"])
+        data = read_dataset(out / row["folder"])
         assert data.names == ("cam0", "cam1", "cam2") and len(data.images) == 3
         assert data.targets[0, 2] == row["D.target_z"]
 

@@ -84,10 +84,10 @@ def test_a_render_puts_every_target_where_its_own_port_says(four_ports, tmp_path
     within 0.2 px RMS of the Fermat forward model through that camera's own port."""
     from synth.products.crosscheck import check_dataset
     from synth.products.rig_file import read_rig_file
-    from synth.products.views_dataset import write_views_dataset
+    from synth.products.dataset import write_dataset
 
     out = tmp_path / "ds"
-    write_views_dataset(load_scene(four_ports), out, spp=16, progress=False)
+    write_dataset(load_scene(four_ports), out, spp=16, progress=False)
     assert read_rig_file(out / "calib.yaml") == load_scene(four_ports).multirig
     report = check_dataset(out, rms_px=0.2, max_px=0.5)
     assert report["views"] == ["cam0", "cam1", "cam2", "cam3"]

@@ -19,7 +19,7 @@ from synth.__main__ import main
 from synth.products.crosscheck import check_dataset
 from synth.products.photos import to_photo
 from synth.products.rig_file import read_rig_file
-from synth.products.views_dataset import read_views_dataset, write_views_dataset
+from synth.products.dataset import read_dataset, write_dataset
 from synth.scene import load_scene
 
 SIZE = (320, 268)
@@ -38,7 +38,7 @@ def scene(tmp_path_factory):
 @pytest.fixture(scope="module")
 def dataset(scene, tmp_path_factory):
     out = tmp_path_factory.mktemp("ds") / "ds"
-    manifest = write_views_dataset(load_scene(scene), out, spp=SPP, progress=False)
+    manifest = write_dataset(load_scene(scene), out, spp=SPP, progress=False)
     assert manifest["skipped"] is False
     return out
 
@@ -84,7 +84,7 @@ def test_one_folder_per_camera_and_the_truth(scene, dataset):
         np.testing.assert_allclose(camera.K, truth.K, atol=1e-12)
         np.testing.assert_allclose(camera.R, truth.R, atol=1e-12)
         np.testing.assert_allclose(camera.t, truth.t, atol=1e-12)
-    data = read_views_dataset(dataset)
+    data = read_dataset(dataset)
     np.testing.assert_array_equal(data.targets, spec.targets)
     np.testing.assert_array_equal(data.ids, spec.target_ids)
     for k, camera in enumerate(spec.all_cameras):  # the simulator through the one port
@@ -240,12 +240,48 @@ def test_a_surface_scene_of_three_cameras_is_refused(tmp_path, capsys):
     assert not out.exists()
 
 
-def test_sensor_is_refused_for_three_cameras(scene, tmp_path, capsys):
-    out = tmp_path / "ds"
-    assert main(["dataset", scene, "--out", str(out), "--sensor", "imx174",
-                 "--no-progress"]) == 2
-    assert "--sensor does not apply" in _one_error(capsys)
-    assert not out.exists()
+@pytest.mark.slow
+def test_a_sensor_and_exr_for_three_cameras(scene, dataset, tmp_path, capsys):
+    """``--sensor`` and ``--exr`` of a scene of three cameras: every camera's PNG holds the
+    sensor's raw codes of its noise-free EXR, one exposure for all (the brightest pixel of any
+    view), each camera's noise its own; read back linear, as bright as the plain dataset's;
+    the same command again does nothing."""
+    from synth.rendering.sensor_model import PRESETS, expose, view_generator
+
+    out = tmp_path / "noisy"
+    command = ["dataset", scene, "--out", str(out), "--spp", str(SPP), "--sensor", "imx174",
+               "--exr", "--no-progress"]
+    assert main(command) == 0
+    capsys.readouterr()
+    manifest = json.loads((out / "manifest.json").read_text())
+    sensor = PRESETS["imx174"]
+    assert manifest["png_offset"] == sensor.dark_level_dn
+    assert manifest["sensor"]["model"]["name"] == "imx174"
+    assert sorted(manifest["view_files"]) == ["exr", "image", "preview"]
+    radiance = [_read_exr(out / name / "image.exr") for name in ("cam0", "cam1", "cam2")]
+    peak = max(float(image.max()) for image in radiance)
+    assert manifest["sensor"]["peak"] == pytest.approx(peak, rel=1e-6)
+    codes = []
+    for k, name in enumerate(("cam0", "cam1", "cam2")):
+        png = cv2.imread(str(out / name / "image.png"), cv2.IMREAD_UNCHANGED)
+        expected, _ = expose(radiance[k], sensor, view_generator(load_scene(scene).seed, k), peak=peak)
+        assert png.dtype == np.uint16 and np.array_equal(png, expected), name
+        assert set(manifest["sensor"][name]) == {"saturated_pixels"}
+        codes.append(png)
+    assert not np.array_equal(codes[0], codes[1])  # each camera's own noise
+    noisy, plain = read_dataset(out), read_dataset(dataset)
+    for a, b in zip(noisy.images, plain.images):
+        assert a.max() == pytest.approx(b.max(), rel=0.05)
+    assert main(command) == 0
+    assert "up to date" in capsys.readouterr().out
+
+
+def _read_exr(path) -> np.ndarray:
+    """A single-channel float32 EXR, ``(H, W)``, read with Mitsuba's Bitmap."""
+    from synth.rendering.mitsuba_setup import import_mitsuba
+
+    mi, _ = import_mitsuba(None)
+    return np.array(mi.Bitmap(str(path)), dtype=np.float32).reshape(SIZE[1], SIZE[0])
 
 
 @pytest.mark.slow
@@ -255,7 +291,7 @@ def test_eval_score_takes_points_of_a_dataset_of_three_cameras(dataset, tmp_path
     (pairs of two views) is refused in one line."""
     from eval.cli import main as eval_main
 
-    data = read_views_dataset(dataset)
+    data = read_dataset(dataset)
     offset = np.array([0.03, -0.04, 0.12])  # |offset| = 0.13 mm
     ply = tmp_path / "mine.ply"
     lines = ["ply", "format ascii 1.0", f"element vertex {len(data.targets)}",
