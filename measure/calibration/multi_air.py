@@ -293,9 +293,10 @@ def screen_views(board: Board, detections: Detections, size, names, lens_model):
     before the joint adjustment — by each camera's own calibration, a view whose RMS exceeds
     :func:`measure.calibration.outliers.outlier_threshold` of that camera's views (a photo
     turned, mirrored or of another board), again until none does; then, for each camera and the
-    first camera, a pose whose own relative pose disagrees with theirs
-    (:func:`measure.calibration.air.stereo_pose_outliers`: a photo of another moment), that
-    camera's view of it."""
+    first camera (or, where those share fewer than :data:`MIN_POSES` poses, the first camera
+    before it that shares as many), a pose whose own relative pose disagrees with theirs
+    (the pair's check, :func:`measure.calibration.outliers.relative_pose_check`: a photo of
+    another moment), that camera's view of it."""
     corners = board.corners().astype(np.float32)
     ids = [list(v) for v in detections.ids]
     pixels = [list(v) for v in detections.pixels]
@@ -315,17 +316,21 @@ def screen_views(board: Board, detections: Detections, size, names, lens_model):
                 ids[k][v], pixels[k][v] = empty
         own.append(fit.own)
     for v in range(1, len(names)):
-        shared = sorted(set(own[0]) & set(own[v]))
-        if len(shared) < MIN_POSES:
+        # the pair's check against the first camera, or where they share too few poses the
+        # first camera before it that shares enough (a rig whose cameras see the board in turn)
+        u = next((u for u in range(v) if len(set(own[u]) & set(own[v])) >= MIN_POSES), None)
+        if u is None:
             continue
-        checked, outliers = relative_pose_check(own[0], own[v], shared)
+        shared = sorted(set(own[u]) & set(own[v]))
+        checked, outliers = relative_pose_check(own[u], own[v], shared)
         for k in outliers:
             c = checked[k]
-            left_out[(k, v)] = (f"its pose relative to {names[0]} lies "
+            left_out[(k, v)] = (f"its pose relative to {names[u]} lies "
                                 f"{c['deviation_mm']:.3g} mm and "
                                 f"{c['deviation_deg']:.3g}° from the median (limits "
                                 f"{c['threshold_mm']:.3g} mm, {c['threshold_deg']:.3g}°)")
             ids[k][v], pixels[k][v] = empty
+            del own[v][k]
     return Detections(ids, pixels), left_out
 
 
