@@ -175,8 +175,8 @@ def _one_size(files, shapes, size, size_source):
 def calibrate_single(args, output, log, start, board) -> tuple[dict, str]:
     """Calibrate the camera of the photo folder ``args.dir``; returns ``(report, summary)``
     after writing everything into ``output`` (module docs)."""
-    from measure.calibration.air import (DEFAULT_LENS_MODEL, CalibrationError, calibrate_camera,
-                                         calibrate_fisheye, camera_residuals)
+    from measure.calibration.air import DEFAULT_LENS_MODEL, CalibrationError, calibrate_fisheye
+    from measure.calibration.air import fit_camera
 
     from eval.calibrate.dots import views_of_camera, with_eccentricity
 
@@ -186,22 +186,17 @@ def calibrate_single(args, output, log, start, board) -> tuple[dict, str]:
     corners = board.corners().astype(np.float32)
 
     def fit(dets):
-        poses = dets.found(VIEW)
-        if len(poses) < 3:
-            raise CalibrationError(f"the board was found in {len(poses)} photo(s); a camera "
-                                   f"calibration needs at least 3")
-        obj = [corners[dets.ids[k][VIEW]] for k in poses]
-        img = [dets.pixels[k][VIEW].astype(np.float32) for k in poses]
-        out, model, tried, problem = calibrate_camera(obj, img, size, lens)
+        own = fit_camera(corners, dets, VIEW, "camera", size, lens)
+        out, model, tried = own.out, own.model, dict(own.tried)
         if lens == "auto":  # the fisheye model's RMS beside them, for the user to choose
             try:
-                tried["fisheye"] = float(calibrate_fisheye(obj, img, size)[0])
+                tried["fisheye"] = float(calibrate_fisheye(own.obj, own.img, size)[0])
             except CalibrationError:
                 tried["fisheye"] = float("nan")
-        return {"out": out, "model": model, "tried": tried, "problem": problem, "poses": poses,
-                "residuals": camera_residuals(obj, img, out, poses, dets.ids, VIEW, model),
-                "rms_px_per": {(k, VIEW): float(e) for k, e in zip(poses, out[7].ravel())},
-                "covariance": camera_covariance(obj, out) if model == "standard" else None}
+        return {"out": out, "model": model, "tried": tried, "problem": own.problem,
+                "poses": own.poses, "residuals": own.residuals,
+                "rms_px_per": {(k, VIEW): e for k, e in own.rms_px_per.items()},
+                "covariance": camera_covariance(own.obj, out) if model == "standard" else None}
 
     t = time.perf_counter()
     log("calibrate the camera (OpenCV calibrateCamera) …")

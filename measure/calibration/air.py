@@ -5,8 +5,12 @@
 with k3 fixed at 0 by default; k3; OpenCV's rational model) and ``cv2.stereoCalibrate`` with the
 intrinsics fixed give K1, D1, K2, D2 and the stereo pose — OpenCV does it, nothing is
 re-implemented; poses whose own stereo pose disagrees with the others' are left out of the
-stereo fit (:func:`stereo_pose_outliers`). The housing underwater:
-:mod:`measure.calibration.housing`.
+stereo fit (:func:`measure.calibration.outliers.relative_pose_check`). Every camera's own fit,
+:func:`fit_camera` / :func:`fit_each_camera`, is the one first step of every in-air
+calibration: one camera (``eval calibrate``'s one-camera folder), the pair
+(:func:`calibrate_in_air`) and N cameras (:func:`measure.calibration.multi_air.calibrate_rig_in_air`,
+which checks every camera's board poses against the first's with the pair's rule). The housing
+underwater: :mod:`measure.calibration.housing`.
 """
 
 from __future__ import annotations
@@ -22,6 +26,8 @@ from ..geometry.port import index_matched_port
 from ..stereo.rig import Rig, StereoRig
 from .board import MIN_CORNERS, Board
 from .covariance import air_covariance
+from .outliers import (STEREO_FLOOR_DEG, STEREO_FLOOR_FRACTION, STEREO_OUTLIER_FACTOR,
+                       relative_pose_check, relative_poses, stereo_pose_outliers)
 from ..stereo.rig_covariance import RigCovariance
 
 #: Fewest board poses a calibration accepts.
@@ -103,13 +109,6 @@ CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 200, 1e-12)
 INTRINSIC_NAMES = ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6")
 #: Those of the fisheye model (:func:`calibrate_fisheye`).
 FISHEYE_INTRINSIC_NAMES = ("fx", "fy", "cx", "cy", "k1", "k2", "k3", "k4")
-#: A pose whose own stereo pose (from the two cameras' board poses) lies farther than
-#: max(:data:`STEREO_OUTLIER_FACTOR` × the median distance, :data:`STEREO_FLOOR_FRACTION` ×
-#: the baseline) or turned by more than max(factor × the median angle,
-#: :data:`STEREO_FLOOR_DEG`) from the poses' median stereo pose is left out of the stereo fit
-#: (:func:`stereo_pose_outliers`): a swapped, turned or mirrored photo, or a pair not taken at
-#: one moment.
-STEREO_OUTLIER_FACTOR, STEREO_FLOOR_FRACTION, STEREO_FLOOR_DEG = 5.0, 0.02, 0.5
 
 
 @dataclass(frozen=True)
@@ -245,41 +244,6 @@ def lens_problem(out, model: str, size) -> str | None:
     return lens_camera(out, model, size).distortion_problem()
 
 
-def relative_poses(left_extrinsics, right_extrinsics):
-    """Per pose the stereo pose seen through that pose alone, in OpenCV's stereo convention
-    (``X_right = R X_left + T``): ``(R (P, 3, 3), T (P, 3) mm)`` from each camera's
-    board-to-camera ``(R, t)`` pairs."""
-    R_l = np.stack([R for R, _ in left_extrinsics])
-    R_r = np.stack([R for R, _ in right_extrinsics])
-    t_l = np.stack([t for _, t in left_extrinsics])
-    t_r = np.stack([t for _, t in right_extrinsics])
-    R = R_r @ np.transpose(R_l, (0, 2, 1))
-    return R, t_r - np.einsum("pij,pj->pi", R, t_l)
-
-
-def stereo_pose_outliers(R, T) -> dict:
-    """The poses whose own stereo pose ``(R (P, 3, 3), T (P, 3))`` disagrees with the others
-    (module constants): the median pose is the component-wise median of ``T`` and the medoid
-    of the rotations; returns ``{"deviation_mm" (P,), "deviation_deg" (P,),
-    "threshold_mm", "threshold_deg", "outliers" [indices], "baseline_mm" (P,)}``."""
-    from scipy.spatial.transform import Rotation
-    T = np.asarray(T, dtype=np.float64)
-    angles = np.degrees(Rotation.from_matrix(
-        np.einsum("pij,qkj->pqik", R, R).reshape(-1, 3, 3)).magnitude()).reshape(len(R), len(R))
-    medoid = int(np.argmin(np.median(angles, axis=1)))
-    deviation_deg = angles[:, medoid]
-    deviation_mm = np.linalg.norm(T - np.median(T, axis=0), axis=1)
-    baseline = float(np.linalg.norm(np.median(T, axis=0)))
-    threshold_mm = max(STEREO_OUTLIER_FACTOR * float(np.median(deviation_mm)),
-                       STEREO_FLOOR_FRACTION * baseline)
-    threshold_deg = max(STEREO_OUTLIER_FACTOR * float(np.median(deviation_deg)), STEREO_FLOOR_DEG)
-    bad = (deviation_mm > threshold_mm) | (deviation_deg > threshold_deg)
-    return {"deviation_mm": deviation_mm, "deviation_deg": deviation_deg,
-            "threshold_mm": threshold_mm, "threshold_deg": threshold_deg,
-            "outliers": [int(i) for i in np.flatnonzero(bad)],
-            "baseline_mm": np.linalg.norm(T, axis=1)}
-
-
 #: How the stereo fit treats the cameras' intrinsics: ``fixed`` (each camera's own fit held;
 #: the default) or ``refined`` (``stereoCalibrate`` refines both cameras' intrinsics with the
 #: stereo pose from those fits, as MATLAB's stereo calibrator and OpenCV's stereo sample do: on
@@ -300,7 +264,7 @@ def calibrate_in_air(board: Board, detections: Detections, size,
         raise CalibrationError(f"stereo intrinsics {stereo_intrinsics!r}: choose from "
                                f"{', '.join(STEREO_INTRINSICS)}")
     corners = board.corners().astype(np.float32)
-    fits = _fit_each_camera(corners, detections, size, lens_model)
+    fits = fit_each_camera(corners, detections, size, lens_model)
     if board.symmetric:  # the right camera's numbering of each pose settled by the rig
         detections = _settle_turns(board, detections, fits.own, fits.extrinsics)
     both, stereo_poses, left_out = _stereo_poses_checked(detections, fits.own)
@@ -326,22 +290,76 @@ def calibrate_in_air(board: Board, detections: Detections, size,
         obj, _, _, keys = shared
         covariance = air_covariance(
             fits.views, {"obj": obj, "keys": keys,
-                         "rvecs": [fits.left_poses[k][0] for k in both],
-                         "tvecs": [fits.left_poses[k][1] for k in both],
+                         "rvecs": [fits.vectors[0][k][0] for k in both],
+                         "tvecs": [fits.vectors[0][k][1] for k in both],
                          "om": cv2.Rodrigues(R)[0], "T": T}, fits.s2)
     return AirCalibration(StereoRig(left, right, port), fits.rms, fits.sigmas, stereo_rms,
                           fits.used, fits.per, board_poses, covariance, fits.models,
                           stereo_poses, left_out, stereo_per, fits.residuals)
 
 
+@dataclass(frozen=True)
+class CameraFit:
+    """One camera's own OpenCV calibration (:func:`fit_camera`): ``out`` in
+    ``cv2.calibrateCameraExtended``'s layout, the lens ``model`` used, ``tried`` ``{model: RMS
+    px}``, its ``problem`` (:func:`lens_problem`), the ``poses`` it found the board in, per pose
+    ``obj`` (board corners, mm) and ``img`` (detected pixels, px; both float32, as OpenCV
+    takes them) and ``residuals`` ``(pose, id, du, dv)`` rows (projected − detected, px)."""
+
+    out: tuple
+    model: str
+    tried: dict
+    problem: str | None
+    poses: list
+    obj: list
+    img: list
+    residuals: np.ndarray
+
+    @property
+    def rms_px_per(self) -> dict:
+        """``{pose: RMS px}`` (OpenCV's per-view errors)."""
+        return {k: float(e) for k, e in zip(self.poses, np.ravel(self.out[7]))}
+
+    @property
+    def own(self) -> dict:
+        """``{pose: (R, t)}`` board → camera (mm), from the fit's extrinsics."""
+        from scipy.spatial.transform import Rotation
+        return {k: (Rotation.from_rotvec(np.ravel(rvec)).as_matrix(),
+                    np.ravel(tvec).astype(np.float64))
+                for k, rvec, tvec in zip(self.poses, self.out[3], self.out[4])}
+
+    def distortion(self, size) -> np.ndarray:
+        """The lens model's distortion coefficients (at least k1 k2 p1 p2 k3 for
+        Brown–Conrady; k1…k4 for the fisheye model)."""
+        if self.model == "fisheye":
+            return np.ravel(lens_camera(self.out, self.model, size).dist)
+        return np.ravel(self.out[2].ravel()[:max(LENS_MODELS[self.model][1], 5)])
+
+
+def fit_camera(corners, detections: Detections, view: int, name: str, size,
+               lens_model) -> CameraFit:
+    """Camera ``view``'s own calibration (:func:`calibrate_camera`) over the poses it found
+    the board in; ``corners`` the board's (float32, mm). CalibrationError naming the camera
+    where it found the board in fewer than :data:`MIN_POSES` images."""
+    poses = detections.found(view)
+    if len(poses) < MIN_POSES:
+        raise CalibrationError(f"the board was found in {len(poses)} {name} image(s); an "
+                               f"in-air calibration needs at least {MIN_POSES}")
+    obj = [corners[detections.ids[k][view]] for k in poses]
+    img = [detections.pixels[k][view].astype(np.float32) for k in poses]
+    out, model, tried, problem = calibrate_camera(obj, img, size, lens_model)
+    return CameraFit(out, model, tried, problem, poses, obj, img,
+                     camera_residuals(obj, img, out, poses, detections.ids, view, model))
+
+
 @dataclass
-class _CameraFits:
-    """Each camera's own OpenCV calibration (views 0 left, 1 right; names ``left``, ``right``):
-    ``cameras`` ``[(K, D)]``; per name ``rms`` (px), ``sigmas``, ``used`` (poses), ``models``;
-    per ``(pose, view)`` ``per`` (RMS px) and ``extrinsics`` (board → camera ``(R, t)``, mm);
-    ``own`` per view ``{pose: (R, t)}``; ``views`` and ``s2`` for
-    :func:`measure.calibration.covariance.air_covariance`; ``left_poses`` the left camera's
-    ``{pose: (rvec, tvec)}``; ``residuals`` per view."""
+class CameraFits:
+    """Every camera's own OpenCV calibration (:func:`fit_each_camera`; views 0, 1, … named
+    ``names``): ``cameras`` ``[(K, D)]``; per name ``rms`` (px), ``sigmas``, ``used`` (poses),
+    ``models``; per ``(pose, view)`` ``per`` (RMS px) and ``extrinsics`` (board → camera
+    ``(R, t)``, mm); ``own`` per view ``{pose: (R, t)}``; ``views`` and ``s2`` for
+    :func:`measure.calibration.covariance.air_covariance`; ``vectors`` per view ``{pose:
+    (rvec, tvec)}`` (OpenCV's); ``residuals`` per view."""
 
     cameras: list = field(default_factory=list)
     rms: dict = field(default_factory=dict)
@@ -351,47 +369,38 @@ class _CameraFits:
     extrinsics: dict = field(default_factory=dict)
     views: list = field(default_factory=list)
     s2: list = field(default_factory=list)
-    left_poses: dict = field(default_factory=dict)
+    vectors: dict = field(default_factory=dict)
     models: dict = field(default_factory=dict)
     own: dict = field(default_factory=dict)
     residuals: dict = field(default_factory=dict)
 
 
-def _fit_each_camera(corners, detections: Detections, size, lens_model) -> _CameraFits:
-    """Both cameras calibrated on their own (:func:`calibrate_camera`); CalibrationError where
-    one found the board in fewer than :data:`MIN_POSES` images."""
-    from scipy.spatial.transform import Rotation
-    fits = _CameraFits()
-    for view, name in enumerate(("left", "right")):
-        poses = detections.found(view)
-        if len(poses) < MIN_POSES:
-            raise CalibrationError(f"the board was found in {len(poses)} {name} image(s); an "
-                                   f"in-air calibration needs at least {MIN_POSES}")
-        obj = [corners[detections.ids[k][view]] for k in poses]
-        img = [detections.pixels[k][view].astype(np.float32) for k in poses]
-        out, model, tried, problem = calibrate_camera(obj, img, size, lens_model)
+def fit_each_camera(corners, detections: Detections, size, lens_model,
+                    names=("left", "right")) -> CameraFits:
+    """Every camera (view v named ``names[v]``) calibrated on its own (:func:`fit_camera`);
+    the one first step of every in-air calibration, whatever the number of cameras."""
+    fits = CameraFits()
+    for view, name in enumerate(names):
+        fit = fit_camera(corners, detections, view, name, size, lens_model)
+        out, model, poses = fit.out, fit.model, fit.poses
         n_dist = LENS_MODELS[model][1]
-        fits.models[name] = {"model": model, "rms_px": tried, "problem": problem}
+        fits.models[name] = {"model": model, "rms_px": fit.tried, "problem": fit.problem}
         fits.rms[name], K, std = float(out[0]), out[1], out[5].ravel()
-        D = np.ravel(lens_camera(out, model, size).dist if model == "fisheye"
-                     else out[2].ravel()[:max(n_dist, 5)])
-        for k, error, rvec, tvec in zip(poses, out[7].ravel(), out[3], out[4]):
-            fits.per[(k, view)] = float(error)
-            fits.extrinsics[(k, view)] = (Rotation.from_rotvec(np.ravel(rvec)).as_matrix(),
-                                          np.ravel(tvec).astype(np.float64))
+        D = fit.distortion(size)
+        fits.own[view] = fit.own
+        for k, error in fit.rms_px_per.items():
+            fits.per[(k, view)] = error
+            fits.extrinsics[(k, view)] = fits.own[view][k]
         fits.sigmas[name] = dict(zip(intrinsic_names(model), (float(s) for s in std)))
-        fits.residuals[view] = camera_residuals(obj, img, out, poses, detections.ids, view,
-                                                model)
+        fits.residuals[view] = fit.residuals
         fits.cameras.append((K, D))
-        n = sum(len(o) for o in obj)  # OpenCV's RMS is per corner of the 2D residual length
+        n = sum(len(o) for o in fit.obj)  # OpenCV's RMS is per corner of the 2D residual length
         fits.s2.append(fits.rms[name] ** 2 * n
                        / max(2 * n - 4 - n_dist - 6 * len(poses), 1))
-        fits.views.append({"obj": obj, "keys": [[(k, i) for i in detections.ids[k][view]]
-                                                for k in poses],
+        fits.views.append({"obj": fit.obj, "keys": [[(k, i) for i in detections.ids[k][view]]
+                                                    for k in poses],
                            "rvecs": out[3], "tvecs": out[4], "K": K, "dist": D})
-        if view == 0:
-            fits.left_poses = {k: (rv, tv) for k, rv, tv in zip(poses, out[3], out[4])}
-        fits.own[view] = {k: fits.extrinsics[(k, view)] for k in poses}
+        fits.vectors[view] = {k: (rv, tv) for k, rv, tv in zip(poses, out[3], out[4])}
         fits.used[name] = len(poses)
     return fits
 
@@ -399,20 +408,12 @@ def _fit_each_camera(corners, detections: Detections, size, lens_model) -> _Came
 def _stereo_poses_checked(detections: Detections, own: dict):
     """``(poses, {pose: its own stereo pose's check}, left out)``: the poses both cameras
     found, less those whose own stereo pose disagrees with the others'
-    (:func:`stereo_pose_outliers`); CalibrationError where fewer than :data:`MIN_POSES`
+    (:func:`relative_pose_check`); CalibrationError where fewer than :data:`MIN_POSES`
     remain."""
     both = [k for k in detections.found(0) if k in set(detections.found(1))]
     stereo_poses, left_out = {}, ()
     if len(both) >= MIN_POSES:
-        R_k, T_k = relative_poses([own[0][k] for k in both], [own[1][k] for k in both])
-        check = stereo_pose_outliers(R_k, T_k)
-        left_out = tuple(both[i] for i in check["outliers"])
-        stereo_poses = {k: {"baseline_mm": float(check["baseline_mm"][i]),
-                            "deviation_mm": float(check["deviation_mm"][i]),
-                            "deviation_deg": float(check["deviation_deg"][i]),
-                            "threshold_mm": check["threshold_mm"],
-                            "threshold_deg": check["threshold_deg"]}
-                        for i, k in enumerate(both)}
+        stereo_poses, left_out = relative_pose_check(own[0], own[1], both)
         both = [k for k in both if k not in set(left_out)]
     if len(both) < MIN_POSES:
         disagree = (f" ({len(left_out)} more left out: their own stereo poses disagree)"
@@ -436,7 +437,7 @@ def _shared_corners(detections: Detections, corners, poses):
     return obj, img_l, img_r, keys
 
 
-def _stereo_fit(fits: _CameraFits, shared, poses, size, stereo_intrinsics):
+def _stereo_fit(fits: CameraFits, shared, poses, size, stereo_intrinsics):
     """The stereo pose from the shared corners: ``(rms, R, T, {pose: rms}, [(K, D)…],
     fisheye)`` (OpenCV's stereo convention; the intrinsics refined where asked)."""
     obj, img_l, img_r, keys = shared
@@ -538,11 +539,13 @@ def _orthonormal(R) -> np.ndarray:
     return u @ vt
 
 
-__all__ = ["AirCalibration", "CalibrationError", "DEFAULT_LENS_MODEL", "Detections",
+__all__ = ["AirCalibration", "CalibrationError", "CameraFit", "CameraFits", "DEFAULT_LENS_MODEL",
+           "Detections",
            "FISHEYE_FLAGS", "FISHEYE_INTRINSIC_NAMES", "INTRINSIC_NAMES", "LENS_MODELS",
            "LENS_MODEL_GAIN", "LENS_MODEL_ORDER", "LIBRARY_LENS_MODEL", "MIN_POSES",
            "STEREO_FLOOR_DEG", "STEREO_FLOOR_FRACTION", "STEREO_INTRINSICS",
            "STEREO_OUTLIER_FACTOR",
            "calibrate_camera", "calibrate_fisheye", "calibrate_in_air", "camera_residuals",
-           "detect_boards", "detect_images", "intrinsic_names", "lens_camera", "lens_problem",
+           "detect_boards", "detect_images", "fit_camera", "fit_each_camera",
+           "intrinsic_names", "lens_camera", "lens_problem",
            "project_board", "relative_poses", "stereo_pose_outliers"]

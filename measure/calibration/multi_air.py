@@ -27,11 +27,10 @@ from scipy.spatial.transform import Rotation
 
 from ..geometry.camera import Camera
 from ..stereo.rig import Rig, default_names
-from .air import (LENS_MODELS, MIN_POSES, CalibrationError, Detections, calibrate_camera,
-                  stereo_pose_outliers)
-from .outliers import outlier_threshold
+from .air import MIN_POSES, CalibrationError, Detections, fit_camera, fit_each_camera
 from .board import Board
 from .covariance import left_jacobian
+from .outliers import outlier_threshold, relative_pose_check
 
 
 @dataclass(frozen=True)
@@ -84,10 +83,6 @@ def camera_parameter_names(names, n_dist: int, free_intrinsics: bool) -> tuple:
     return tuple(out)
 
 
-def _pose_matrix(rvec, tvec):
-    return Rotation.from_rotvec(np.ravel(rvec)).as_matrix(), np.ravel(tvec).astype(np.float64)
-
-
 def _chain_poses(own: list[dict], n_views: int, names) -> list:
     """Camera-to-reference poses ``[(R, t)…]`` from each camera's board poses ``own[v]``
     ``{pose: (R board→camera, t)}``, breadth-first from camera 0."""
@@ -134,14 +129,9 @@ def calibrate_rig_in_air(board: Board, detections: Detections, size, names=None,
     names = default_names(n_views) if names is None else tuple(names)
     corners = board.corners().astype(np.float64)
     detections, left_out = screen_views(board, detections, size, names, lens_model)
-    cams, own, rms, used = [], [], {}, {}
-    for v, name in enumerate(names):
-        found = detections.found(v)
-        out, model = _own_calibration(corners, detections, v, size, lens_model, name)
-        n_dist = max(LENS_MODELS[model][1], 5)
-        cams.append((np.asarray(out[1], float), np.asarray(out[2], float).ravel()[:n_dist]))
-        own.append({k: _pose_matrix(r, t) for k, r, t in zip(found, out[3], out[4])})
-        rms[name], used[name] = float(out[0]), len(found)
+    fits = fit_each_camera(corners.astype(np.float32), detections, size, lens_model, names)
+    cams = [(np.asarray(K, float), np.asarray(D, float)) for K, D in fits.cameras]
+    own = [fits.own[v] for v in range(n_views)]
     camera_poses = _chain_poses(own, n_views, names)
     board_poses = _board_poses_in_reference(own, camera_poses, detections.n_poses)
     joint = _JointAdjustment.of(corners, detections, cams, own, sorted(board_poses),
@@ -157,7 +147,8 @@ def calibrate_rig_in_air(board: Board, detections: Detections, size, names=None,
     for v in range(n_views):
         R, t, K, D = joint.camera(fit.x, v)
         cameras.append(Camera(K, size, dist=D, R=None if v == 0 else R, t=None if v == 0 else t))
-    return MultiAirCalibration(Rig(cameras, [None] * n_views, names), rms, joint_rms, used,
+    return MultiAirCalibration(Rig(cameras, [None] * n_views, names), fits.rms, joint_rms,
+                               fits.used,
                                joint.board_poses(fit.x),
                                camera_parameter_names(names, joint.n_intrinsics - 4, joint.free),
                                joint.covariance(fit), per, rows, left_out)
@@ -297,38 +288,24 @@ class _JointAdjustment:
 JOINT_ITERATIONS = 30
 
 
-def _own_calibration(corners, detections, v, size, lens_model, name):
-    """Camera ``v``'s own OpenCV calibration over the poses it found the board in: ``(out,
-    model)``; CalibrationError naming the camera when they are too few."""
-    found = detections.found(v)
-    if len(found) < MIN_POSES:
-        raise CalibrationError(f"{name}: the board was found in {len(found)} image(s); a "
-                               f"calibration needs at least {MIN_POSES}")
-    obj = [corners[detections.ids[k][v]].astype(np.float32) for k in found]
-    img = [detections.pixels[k][v].astype(np.float32) for k in found]
-    out, model, _, _ = calibrate_camera(obj, img, size, lens_model)
-    return out, model
-
-
 def screen_views(board: Board, detections: Detections, size, names, lens_model):
     """``(detections, left_out {(pose, view): why})``: the views that do not belong left out
     before the joint adjustment — by each camera's own calibration, a view whose RMS exceeds
     :func:`measure.calibration.outliers.outlier_threshold` of that camera's views (a photo
     turned, mirrored or of another board), again until none does; then, for each camera and the
-    first camera, a pose whose own relative pose disagrees with theirs
-    (:func:`measure.calibration.air.stereo_pose_outliers`: a photo of another moment), that
-    camera's view of it."""
-    corners = board.corners().astype(np.float64)
+    first camera (or, where those share fewer than :data:`MIN_POSES` poses, the first camera
+    before it that shares as many), a pose whose own relative pose disagrees with theirs
+    (the pair's check, :func:`measure.calibration.outliers.relative_pose_check`: a photo of
+    another moment), that camera's view of it."""
+    corners = board.corners().astype(np.float32)
     ids = [list(v) for v in detections.ids]
     pixels = [list(v) for v in detections.pixels]
     empty = (np.empty(0, int), np.empty((0, 2)))
     left_out, own = {}, []
     for v, name in enumerate(names):
         while True:
-            current = Detections(ids, pixels)
-            out, _ = _own_calibration(corners, current, v, size, lens_model, name)
-            found = current.found(v)
-            errors = dict(zip(found, np.ravel(out[7])))
+            fit = fit_camera(corners, Detections(ids, pixels), v, name, size, lens_model)
+            errors = fit.rms_px_per
             limit = outlier_threshold(errors.values())
             bad = [k for k, e in errors.items() if e > limit]
             if not bad:
@@ -337,21 +314,23 @@ def screen_views(board: Board, detections: Detections, size, names, lens_model):
                 left_out[(k, v)] = (f"its RMS in {name}'s own calibration, {errors[k]:.3g} px, "
                                     f"exceeds {limit:.3g} px")
                 ids[k][v], pixels[k][v] = empty
-        own.append({k: _pose_matrix(r, t) for k, r, t in zip(found, out[3], out[4])})
+        own.append(fit.own)
     for v in range(1, len(names)):
-        shared = sorted(set(own[0]) & set(own[v]))
-        if len(shared) < MIN_POSES:
+        # the pair's check against the first camera, or where they share too few poses the
+        # first camera before it that shares enough (a rig whose cameras see the board in turn)
+        u = next((u for u in range(v) if len(set(own[u]) & set(own[v])) >= MIN_POSES), None)
+        if u is None:
             continue
-        R_k = np.array([own[v][k][0] @ own[0][k][0].T for k in shared])
-        T_k = np.array([own[v][k][1] - R @ own[0][k][1] for k, R in zip(shared, R_k)])
-        check = stereo_pose_outliers(R_k, T_k)
-        for i in check["outliers"]:
-            k = shared[i]
-            left_out[(k, v)] = (f"its pose relative to {names[0]} lies "
-                                f"{check['deviation_mm'][i]:.3g} mm and "
-                                f"{check['deviation_deg'][i]:.3g}° from the median (limits "
-                                f"{check['threshold_mm']:.3g} mm, {check['threshold_deg']:.3g}°)")
+        shared = sorted(set(own[u]) & set(own[v]))
+        checked, outliers = relative_pose_check(own[u], own[v], shared)
+        for k in outliers:
+            c = checked[k]
+            left_out[(k, v)] = (f"its pose relative to {names[u]} lies "
+                                f"{c['deviation_mm']:.3g} mm and "
+                                f"{c['deviation_deg']:.3g}° from the median (limits "
+                                f"{c['threshold_mm']:.3g} mm, {c['threshold_deg']:.3g}°)")
             ids[k][v], pixels[k][v] = empty
+            del own[v][k]
     return Detections(ids, pixels), left_out
 
 

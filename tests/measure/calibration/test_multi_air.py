@@ -96,8 +96,36 @@ def test_a_camera_without_boards_is_named():
     detections = _views(board, _poses(rng, 6), _rig(3), rng)
     for row_ids, row_px in zip(detections.ids, detections.pixels):
         row_ids[2], row_px[2] = np.zeros(0, int), np.zeros((0, 2))
-    with pytest.raises(CalibrationError, match="cam2: the board was found in 0 image"):
+    with pytest.raises(CalibrationError, match="the board was found in 0 cam2 image"):
         calibrate_rig_in_air(board, detections, SIZE)
+
+
+def test_a_view_of_another_moment_is_left_out_by_the_camera_it_shares_poses_with():
+    """A rig whose cameras see the board in turn: cam2 shares 2 poses with cam0 (too few for
+    the pair's check) and 8 with cam1, and its view of pose 8 was taken with cam2 40 mm off
+    (another moment). The pair's per-pose check against cam1 leaves that view out: the rig is
+    the one calibrated without that view."""
+    rng = np.random.default_rng(12)
+    board = Board("chessboard", (9, 6), 50.0)
+    rig, poses = _rig(3), _poses(rng, 12)
+    detections = _views(board, poses, rig, rng)
+    moved = [(R, t + (np.array([0, 40.0, 0]) if v == 2 else 0)) for v, (R, t) in enumerate(rig)]
+    other = _views(board, poses, moved, np.random.default_rng(13))
+    assert all(len(detections.ids[k][v]) for k in range(12) for v in range(3))
+    empty = (np.zeros(0, int), np.zeros((0, 2)))
+    for k in range(6, 12):
+        detections.ids[k][0], detections.pixels[k][0] = empty
+    for k in range(4):
+        detections.ids[k][2], detections.pixels[k][2] = empty
+    detections.ids[8][2], detections.pixels[8][2] = other.ids[8][2], other.pixels[8][2]
+    result = calibrate_rig_in_air(board, detections, SIZE)
+    assert list(result.left_out) == [(8, 2)]
+    assert "relative to cam1" in result.left_out[(8, 2)]
+    detections.ids[8][2], detections.pixels[8][2] = empty
+    without = calibrate_rig_in_air(board, detections, SIZE)
+    assert not without.left_out
+    for mine, clean in zip(result.rig.cameras, without.rig.cameras):
+        assert np.array_equal(mine.t, clean.t) and np.array_equal(mine.R, clean.R)
 
 
 def _errors(result, rig):
