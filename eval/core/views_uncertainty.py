@@ -48,11 +48,13 @@ def track_sigmas(mode, detections, tracks, noise_px: float = 0.0) -> tuple[np.nd
 
 
 def views_uncertainty(mode, noise_px, rig, detections, tracks, pixels, result, method: str,
-                      scored=None) -> tuple[np.ndarray, dict]:
+                      scored=None, rig_differs=None) -> tuple[np.ndarray, dict]:
     """``(covariances (T, 3, 3) mm², report entry)`` of the tracks' points ``result``
     (:class:`measure.stereo.multiview.MultiViewTriangulation`) triangulated from ``pixels``
     ``(T, V, 2)``; ``scored`` the tracks against the truth (``ok``, ``errors``) for the
-    coverage, None without truth (every valid point summarized). Module docs for σ."""
+    coverage, None without truth (every valid point summarized); ``rig_differs`` what of the
+    measurement's rig differs from the truth (names; an understated σ's verdict puts it down to
+    that first, as the pair's does). Module docs for σ."""
     from measure.stereo.multiview_uncertainty import view_point_covariances, view_residual_sigma
 
     from eval.core.uncertainty import AUTO, uncertainty_summary
@@ -75,8 +77,10 @@ def views_uncertainty(mode, noise_px, rig, detections, tracks, pixels, result, m
     _, covariance = view_point_covariances(views, pixels, sigma)
     ok = _reported(result, covariance, scored)
     summary = uncertainty_summary(covariance[ok],
-                                  None if scored is None else scored["errors"][ok])
-    _name_what_n_views_miss(summary.get("coverage") or {})
+                                  None if scored is None else scored["errors"][ok],
+                                  rig_differs=rig_differs)
+    if not rig_differs:
+        _name_what_n_views_miss(summary.get("coverage") or {})
     return covariance, {"methods": [method], "rig": RIG_NOTE, "pixel_sigma": info,
                         "summaries": {method: summary}}
 

@@ -195,7 +195,6 @@ def measure(config: RunConfig, log) -> tuple[dict, dict]:
     """The run (module docs): ``(report, arrays)``."""
     from measure.stereo.multimatch import match_views
 
-    from eval.core.results import ErrorStats
     from eval.run.inputs import load_run_scene
     from eval.run.pipeline import default_depth_window
 
@@ -226,19 +225,19 @@ def measure(config: RunConfig, log) -> tuple[dict, dict]:
     truth_of, crosscheck = _crosscheck(spec, raw, simulated)
     scored = _scored_tracks(tracks, truth_of, result, spec.targets)
     t = time.perf_counter()
+    # how a --calib rig differs from the truth: an understated σ's verdict names it
+    differs = rig_differences(spec.multirig, rig) if config.calib else []
     covariance, uncertainty = views_uncertainty(config.pixel_sigma, config.noise_px, rig,
-                                                detections, tracks, pixels, result, METHOD, scored)
+                                                detections, tracks, pixels, result, METHOD, scored,
+                                                rig_differs=differs)
     timings["covariance"] = time.perf_counter() - t
     ok, errors, target, k_views = scored["ok"], scored["errors"], scored["target"], tracks.views_per_track
-    by_k = {}
-    for k in range(2, len(names) + 1):
-        rows = ok & (k_views == k)
-        by_k[str(k)] = {"tracks": int((k_views == k).sum()), "scored": int(rows.sum()),
-                        "rms_dp_mm": _rms(np.linalg.norm(errors[rows], axis=1)),
-                        "stats": ErrorStats.of(errors[rows]).to_json()}
+    t = time.perf_counter()
+    methods = _methods(tracks, scored, result, spec.targets[visible_views >= 2], seed,
+                       uncertainty, len(names))
+    timings["evaluate"] = time.perf_counter() - t
     pair_report = _pair_report(config, rig, tracks, centers, truth_of, spec, names)
-    stats = ErrorStats.of(errors[ok])
-    rms = _rms(np.linalg.norm(errors[ok], axis=1))
+    rms = methods[METHOD]["rms_dp_mm"]
     matching = _matching(config, tracks, scored, visible_views, window, names)
     failures = []
     if matching["wrong"]:
@@ -251,7 +250,7 @@ def measure(config: RunConfig, log) -> tuple[dict, dict]:
         "eccentricity": bool(config.corrects_eccentricity),
         "detections": {name: int(len(c)) for name, c in zip(names, centers)},
         "matching": matching, "crosscheck": crosscheck,
-        "scores": {"n": stats.n, "rms_dp_mm": rms, "stats": stats.to_json(), "by_views": by_k},
+        "methods": methods,
         "stereo_pair": pair_report,
         "ratio_to_pair": (rms / pair_report["rms_dp_mm"] if pair_report and rms
                           and pair_report["rms_dp_mm"] else None),
@@ -267,6 +266,36 @@ def measure(config: RunConfig, log) -> tuple[dict, dict]:
     per_target[target[ok], 4:7] = result.points[ok]
     per_target[target[ok], 7] = np.linalg.norm(errors[ok], axis=1)
     return report, {"targets": per_target, "uncertainty": (result, covariance, scored)}
+
+
+def _methods(tracks, scored, result, truth_visible, seed, uncertainty, n_views) -> dict:
+    """The report's ``methods``, in the pair's schema (:func:`eval.run.pipeline.score_method`:
+    the error statistics ``n``, ``rms_dp_mm`` …, the cloud, alignment, flatness, lengths,
+    ``coverage_95``) for :data:`METHOD`, with the N views' addition ``by_views``: per number
+    of views k the tracks, those scored and their RMS dP and statistics."""
+    from eval.core.results import ErrorStats
+    from eval.run.pipeline import methods_with_coverage, score_method
+
+    scores, _ = score_method(result, scored["correct"], scored["target"],
+                             scored["targets"], truth_visible, seed)
+    entry = methods_with_coverage({METHOD: scores}, uncertainty)[METHOD]
+    ok, errors, k_views = scored["ok"], scored["errors"], tracks.views_per_track
+    by_k = {}
+    for k in range(2, n_views + 1):
+        rows = ok & (k_views == k)
+        by_k[str(k)] = {"tracks": int((k_views == k).sum()), "scored": int(rows.sum()),
+                        "rms_dp_mm": _rms(np.linalg.norm(errors[rows], axis=1)),
+                        "stats": ErrorStats.of(errors[rows]).to_json()}
+    entry["by_views"] = by_k
+    return {METHOD: entry}
+
+
+def view_scores(report: dict) -> dict:
+    """``{n, rms_dp_mm, by_views}`` of a report of N cameras, where it holds them: since one
+    report schema, ``methods.<method>`` (``method`` the report's); before, ``scores``."""
+    entry = (report["scores"] if "scores" in report
+             else report["methods"][report.get("method", METHOD)])
+    return {key: entry[key] for key in ("n", "rms_dp_mm", "by_views")}
 
 
 def _simulated_views(spec) -> tuple[list, np.ndarray]:
@@ -374,7 +403,7 @@ def _scored_tracks(tracks, truth_of, result, targets) -> dict:
     matched = np.zeros(len(targets), bool)
     matched[target[correct]] = True
     return {"target": target, "correct": correct, "ok": ok, "errors": errors,
-            "detected_views": detected_views, "matched": matched}
+            "detected_views": detected_views, "matched": matched, "targets": targets}
 
 
 def _pair_report(config, rig, tracks, centers, truth_of, spec, names):
@@ -419,7 +448,7 @@ def _matching(config, tracks, scored, visible_views, window, names) -> dict:
 
 
 def report_markdown(report: dict) -> str:
-    m, s = report["matching"], report["scores"]
+    m, s = report["matching"], view_scores(report)
 
     def mm(v):
         return "–" if v is None else f"{v:.4f}"
@@ -483,7 +512,7 @@ def main(config: RunConfig, out: str, print_json: bool, log) -> int:
                    header="id,views_visible,views_detected,views_triangulated,x,y,z,dp_mm",
                    comments="", fmt="%.10g")
     stream = sys.stderr if print_json else sys.stdout
-    m, s = report["matching"], report["scores"]
+    m, s = report["matching"], view_scores(report)
     pair = report.get("stereo_pair") or {}
     print(f"{report['scene']}: {len(report['cameras'])} cameras, "
           f"{m['visible_in_two_or_more']} targets visible in two or more views, "
@@ -511,4 +540,4 @@ def main(config: RunConfig, out: str, print_json: bool, log) -> int:
 
 
 __all__ = ["correct_views", "dataset_views", "is_multiview_scene", "main", "measure",
-           "report_markdown", "rig_differences"]
+           "report_markdown", "rig_differences", "view_scores"]

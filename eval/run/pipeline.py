@@ -18,7 +18,7 @@ from measure import triangulate
 from measure.images.detect import (FLOOR_FRACTION, MERGE_AREA_RATIO as DEFAULT_MAX_AREA_RATIO,
                             MERGE_ELONGATION as DEFAULT_MAX_ELONGATION)
 from measure.images.eccentricity import correct_eccentricity
-from measure.stereo.matching import match_targets
+from measure.stereo.multimatch import match_views
 from synth.products.crosscheck import ASSOCIATION_GATE_PX, crosscheck_summary, crosscheck_view
 from synth.rendering.noise import add_pixel_noise
 
@@ -81,12 +81,14 @@ def detect_stage(inputs: RunInputs, noise_px: float, threshold_fraction: float |
 
 
 def match_stage(inputs: RunInputs, centers, gate_mm: float, depth_window):
-    """Left–right pairs without ground truth (refractive epipolar gap, depth window)."""
+    """Left–right pairs without ground truth (refractive epipolar gap, depth window): the
+    one matcher of every count, :func:`measure.stereo.multimatch.match_views`, on two views
+    (whose one pair is :func:`measure.stereo.matching.match_targets` of the rig)."""
     window = (default_depth_window(inputs.params, inputs.targets, inputs.true_rig.port)
               if depth_window is None else tuple(depth_window))
-    matches = match_targets(inputs.rig, centers["left"], centers["right"], gate_mm=gate_mm,
-                            depth_range=window)
-    return matches, window
+    tracks = match_views(inputs.rig, [centers["left"], centers["right"]], gate_mm=gate_mm,
+                         depth_range=window)
+    return tracks.pairs[(0, 1)], window
 
 
 def triangulate_stage(inputs: RunInputs, centers, matches, methods):
@@ -208,20 +210,31 @@ def score_stage(inputs: RunInputs, detections, matches, window, results, gate_mm
     truth_visible = inputs.targets[visible_both]
     scores, per_method = {}, {}
     for method, result in results.items():
-        ok = correct & result.valid
-        truth = inputs.targets[pair_truth_left[ok]]
-        errors = result.points[ok] - truth
-        measured_all = result.points[result.valid]
-        scores[method] = MethodScores(
-            errors=ErrorStats.of(errors), cloud=cloud_distances(measured_all, truth_visible),
-            alignment=rigid_alignment(result.points[ok], truth),
-            flatness=flatness(measured_all, seed=inputs.seed),
-            invalid=int((~result.valid).sum()), lengths=length_errors(result.points[ok], truth))
-        per_method[method] = {"points": result.points[ok], "truth": truth, "errors": errors,
-                              "all_points": measured_all}
+        scores[method], per_method[method] = score_method(
+            result, correct, pair_truth_left, inputs.targets, truth_visible, inputs.seed)
     return {"matching": matching, "visibility": visibility, "crosscheck": crosscheck,
             "scores": scores, "per_method": per_method, "correct": correct,
             "simulated": simulated}
+
+
+def score_method(result, correct, truth_index, targets, truth_visible, seed):
+    """``(MethodScores, arrays)`` of one method's points ``result`` (a triangulation of pairs or
+    of N views' tracks: ``points`` (T, 3) mm, ``valid``) against the truth: ``correct`` (T,)
+    the rows matched right, ``truth_index`` (T,) their target in ``targets``, ``truth_visible``
+    the targets the matching could have found (the cloud's reference), ``seed`` the plane
+    fit's; ``arrays`` ``{points, truth, errors, all_points}`` (the correct and valid rows, and
+    every valid point)."""
+    ok = correct & result.valid
+    truth = targets[truth_index[ok]]
+    errors = result.points[ok] - truth
+    measured_all = result.points[result.valid]
+    scores = MethodScores(
+        errors=ErrorStats.of(errors), cloud=cloud_distances(measured_all, truth_visible),
+        alignment=rigid_alignment(result.points[ok], truth),
+        flatness=flatness(measured_all, seed=seed),
+        invalid=int((~result.valid).sum()), lengths=length_errors(result.points[ok], truth))
+    return scores, {"points": result.points[ok], "truth": truth, "errors": errors,
+                    "all_points": measured_all}
 
 
 def eccentricity_stage(inputs: RunInputs, centers, matches, methods, iterations: int = 2):
@@ -334,7 +347,7 @@ def _rigs_report(inputs: RunInputs, difference: dict) -> dict:
             "difference": difference}
 
 
-def _with_coverage(scores, uncertainty) -> dict:
+def methods_with_coverage(scores, uncertainty) -> dict:
     """``report.json``'s ``methods``: each method's scores with ``coverage_95`` (None for a
     method without covariances) — the fraction of its correctly matched points inside their
     95 % ellipsoid."""
@@ -465,7 +478,7 @@ def _report(inputs, config, detections, scored, primary, primary_uncertainty, un
         "detection": _detection_report(detections),
         "crosscheck": scored["crosscheck"],
         "matching": scored["matching"],
-        "methods": _with_coverage(primary["scores"], primary_uncertainty),
+        "methods": methods_with_coverage(primary["scores"], primary_uncertainty),
         "uncertainty": primary_uncertainty,
         "noise_px": noise_px, "seed": inputs.seed, "threshold_fraction": threshold_fraction,
         "max_elongation": max_elongation, "max_area_ratio": max_area_ratio,
@@ -477,7 +490,7 @@ def _report(inputs, config, detections, scored, primary, primary_uncertainty, un
         "eccentricity": None if eccentricity_summary is None else {
             **eccentricity_summary,
             # absorbed stays on the raw centroids: its row would repeat itself
-            "uncorrected": {"methods": _with_coverage(
+            "uncorrected": {"methods": methods_with_coverage(
                 {m: v for m, v in scored["scores"].items() if m in port_methods}, uncertainty),
                 "uncertainty": uncertainty}},
         "timings_s": timings,
@@ -578,5 +591,5 @@ def run_failures(report: dict) -> list:
 __all__ = ["NothingMatched", "RunResult", "budget_stage", "crosscheck_stage",
            "COVARIANCE_METHODS", "attach_covariances", "covariance_stage",
            "default_depth_window", "detect_stage", "eccentricity_stage", "match_stage",
-           "measure_scene", "run_failures", "run_pipeline", "score_stage", "self_calibration_stage",
-           "triangulate_stage"]
+           "measure_scene", "methods_with_coverage", "run_failures", "run_pipeline", "score_method",
+           "score_stage", "self_calibration_stage", "triangulate_stage"]

@@ -45,9 +45,9 @@ def test_three_cameras_match_and_report_views(scene, tmp_path):
     used = np.array([float(r["views_triangulated"]) for r in rows])
     np.testing.assert_array_equal(visible, seen)
     assert np.all(used[seen == 1] == 0)  # seen once: reported, never triangulated
-    assert set(report["scores"]["by_views"]) == {"2", "3"}
+    assert set(report["methods"]["optical_path"]["by_views"]) == {"2", "3"}
     # at 320 px a target's depth error through the port is a fraction of a millimetre
-    assert report["scores"]["rms_dp_mm"] < 1.0
+    assert report["methods"]["optical_path"]["rms_dp_mm"] < 1.0
 
 
 def test_bad_input_names_the_camera(scene, tmp_path, capsys):
@@ -141,7 +141,7 @@ def test_from_a_dataset_of_three_cameras_measures_its_images(scene, tmp_path, ca
     errors = np.linalg.norm(points[used] - spec.targets[used], axis=1)  # the true targets
     assert used.sum() == m["visible_in_two_or_more"] and errors.max() < 3.0
     assert np.sqrt(np.mean(errors ** 2)) < 1.0
-    assert set(report["scores"]["by_views"]) == {"2", "3"}
+    assert set(report["methods"]["optical_path"]["by_views"]) == {"2", "3"}
 
     four = tmp_path / "four.xml"  # another scene, of four cameras (it said "unknown
     assert synth_main(["scene", "--cameras", "4", "--size", "320", "268",  # parameter -D …")
@@ -183,7 +183,7 @@ def test_points_of_three_cameras_carry_covariances_that_cover_their_errors(scene
         assert entry["methods"] == ["optical_path"] and "exact" in entry["rig"]
         assert abs(entry["pixel_sigma"]["median_px"] - sigma_px) <= 0.1 * sigma_px, entry
         coverage = entry["summaries"]["optical_path"]["coverage"]
-        assert coverage["n"] == report["scores"]["n"] >= 30
+        assert coverage["n"] == report["methods"]["optical_path"]["n"] >= 30
         spread = [coverage["normalized"][a]["std"] for a in "xyz"]
         assert all(0.75 <= s <= 1.25 for s in spread), coverage
         assert coverage["coverage_95"] >= 0.85, coverage
@@ -199,3 +199,24 @@ def test_points_of_three_cameras_carry_covariances_that_cover_their_errors(scene
     coverage = json.loads((out / "report.json").read_text())["uncertainty"]["summaries"][
         "optical_path"]["coverage"]
     assert coverage["coverage_95"] < 0.9 and "--gate-mm" in coverage["verdict"], coverage
+
+
+def test_a_report_from_before_one_schema_is_read_where_its_scores_were():
+    """The N views' scores moved from ``scores`` to ``methods.optical_path`` (the pair's
+    schema): a report of either place gives the same scores and the same report.md."""
+    from eval.run.multiview import report_markdown, view_scores
+
+    by_views = {"2": {"tracks": 3, "scored": 3, "rms_dp_mm": 0.5, "stats": {}},
+                "3": {"tracks": 7, "scored": 6, "rms_dp_mm": 0.25, "stats": {}}}
+    common = {"scene": "three.xml", "cameras": ["cam0", "cam1", "cam2"],
+              "method": "optical_path", "verdict": {"passed": True, "failures": []},
+              "matching": {"tracks": 10, "correct": 9, "wrong": 1, "conflicts_dropped": 0,
+                           "visible_in_two_or_more": 10, "visible_in_two_or_more_matched": 9,
+                           "seen_once": 2}}
+    old = {**common, "scores": {"n": 9, "rms_dp_mm": 0.3, "stats": {}, "by_views": by_views}}
+    new = {**common, "methods": {"optical_path": {"n": 9, "rms_dp_mm": 0.3,
+                                                  "coverage_95": None, "by_views": by_views}}}
+    assert view_scores(old) == view_scores(new) == {"n": 9, "rms_dp_mm": 0.3,
+                                                    "by_views": by_views}
+    text = report_markdown(new)
+    assert text == report_markdown(old) and "| all | 9 | 0.3000 |" in text
