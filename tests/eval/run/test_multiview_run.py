@@ -201,6 +201,27 @@ def test_points_of_three_cameras_carry_covariances_that_cover_their_errors(scene
     assert coverage["coverage_95"] < 0.9 and "--gate-mm" in coverage["verdict"], coverage
 
 
+@pytest.mark.slow
+def test_a_calibration_off_the_truth_is_named_in_the_verdict(scene, tmp_path):
+    """--calib with cam2 1 mm farther along the baseline than rendered: its points share the
+    rig's error, σ understates it, and the verdict puts it down to the calibration's rig (what
+    differs, named as the pair's verdict names it), not to the pixels."""
+    from synth.products.rig_file import write_rig_file
+
+    calib = tmp_path / "calib.yaml"
+    write_rig_file(calib, load_scene(scene).multirig)
+    text = calib.read_text()
+    assert text.count("data: [ 400., 0., 0. ]") == 1
+    calib.write_text(text.replace("data: [ 400., 0., 0. ]", "data: [ 401., 0., 0. ]"))
+    out = tmp_path / "off"
+    assert eval_main(["run", scene, "--out", str(out), "--spp", "16", "--no-progress",
+                      "--calib", str(calib)]) == 0
+    coverage = json.loads((out / "report.json").read_text())["uncertainty"]["summaries"][
+        "optical_path"]["coverage"]
+    assert coverage["n"] >= 30 and coverage["coverage_95"] < 0.9, coverage
+    assert "differs from the truth (cam2 pose: --assume or --calib)" in coverage["verdict"]
+
+
 def test_a_report_from_before_one_schema_is_read_where_its_scores_were():
     """The N views' scores moved from ``scores`` to ``methods.optical_path`` (the pair's
     schema): a report of either place gives the same scores and the same report.md."""
