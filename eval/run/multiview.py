@@ -192,11 +192,10 @@ def _rms(values) -> float | None:
 
 
 def measure(config: RunConfig, log) -> tuple[dict, dict]:
-    """The run (module docs): ``(report, arrays)``."""
-    from measure.stereo.multimatch import match_views
-
+    """The run (module docs): ``(report, arrays)``. Detection, matching and the cross-check are
+    the two-camera run's stages over every view (:mod:`eval.run.pipeline`)."""
     from eval.run.inputs import load_run_scene
-    from eval.run.pipeline import default_depth_window
+    from eval.run.pipeline import crosscheck_stage, detect_stage, match_stage
 
     timings = {}
     spec = load_run_scene(config)
@@ -204,25 +203,29 @@ def measure(config: RunConfig, log) -> tuple[dict, dict]:
     refuse_inapplicable(config, len(names))
     rig = measurement_rig(config, spec)
     seed = spec.seed if config.seed is None else config.seed
-    simulated, visible_views = _simulated_views(spec)
+    visible_views = _visible_views(spec)
     if not (visible_views >= 2).any():
         raise CLIError(f"{config.scene}: no target is visible in two views")
     t = time.perf_counter()
     images, info = _views(config, spec, log)
     timings["render"] = time.perf_counter() - t
+    inputs = _run_inputs(config, spec, rig, images, info, seed, timings["render"])
     t = time.perf_counter()
-    raw, centers, detections = _detect(config, images, seed)
+    detections, centers = detect_stage(inputs, config.noise_px, config.threshold_fraction,
+                                       config.max_elongation, config.max_area_ratio,
+                                       config.median_filter)
+    detections, centers = list(detections.values()), list(centers.values())
     timings["detect"] = time.perf_counter() - t
     t = time.perf_counter()
-    window = (default_depth_window(spec.params, spec.targets, spec.rig.port)
-              if config.depth_range_mm is None else tuple(config.depth_range_mm))
-    tracks = match_views(rig, centers, gate_mm=config.gate_mm, depth_range=window)
+    tracks, window = match_stage(inputs, dict(zip(names, centers)), config.gate_mm,
+                                 config.depth_range_mm)
     timings["match"] = time.perf_counter() - t
     t = time.perf_counter()
     result, pixels = _triangulate(config, rig, tracks.pixels(centers), spec.target_radius)
     timings["triangulate"] = time.perf_counter() - t
     # the truth, for scoring only
-    truth_of, crosscheck = _crosscheck(spec, raw, simulated)
+    _, _, truth_of, crosscheck = crosscheck_stage(inputs, dict(zip(names, detections)))
+    truth_of = list(truth_of.values())
     scored = _scored_tracks(tracks, truth_of, result, spec.targets)
     t = time.perf_counter()
     # how a --calib rig differs from the truth: an understated σ's verdict names it
@@ -298,38 +301,28 @@ def view_scores(report: dict) -> dict:
     return {key: entry[key] for key in ("n", "rms_dp_mm", "by_views")}
 
 
-def _simulated_views(spec) -> tuple[list, np.ndarray]:
-    """``(simulated, visible_views)``: the simulator's pixels of every target in each view and
-    in how many views each target is wholly inside the image."""
+def _run_inputs(config, spec, rig, images, info, seed, render_seconds):
+    """The pipeline's :class:`eval.run.inputs.RunInputs` of N views: the measurement's ``rig``
+    and the scene's rig of N as the truth, every view's image by camera name, the default
+    depth window along the scene's first pair's port."""
+    from eval.run.inputs import RunInputs
+
+    return RunInputs(scene=config.scene, rig=rig, has_port=spec.has_port, targets=spec.targets,
+                     target_ids=spec.target_ids, target_radius=spec.target_radius,
+                     left=images[0], right=images[1], params=spec.params,
+                     variant=info["variant"], spp=info["spp"], render_seconds=render_seconds,
+                     seed=seed, target_normals=spec.target_normals, truth_rig=spec.multirig,
+                     views=dict(zip(spec.camera_names, images)), depth_port=spec.rig.port)
+
+
+def _visible_views(spec) -> np.ndarray:
+    """In how many views each target is wholly inside the image (the simulator's count)."""
     from eval.core.analytic import visible_targets
 
     truth_rig = spec.multirig
-    simulated, inside = [], []
-    for k, camera in enumerate(truth_rig.cameras):
-        uv, wholly = visible_targets(camera, truth_rig.view_port(k), spec.targets,
-                                     spec.target_radius)
-        simulated.append(uv)
-        inside.append(wholly)
-    return simulated, np.sum(inside, axis=0)
-
-
-def _crosscheck(spec, raw, simulated) -> tuple[list, dict]:
-    """``(truth_of, crosscheck)``: per view the target of each detection (−1 none) and the
-    two-camera run's cross-check for every camera (:func:`synth.products.crosscheck.
-    crosscheck_view`: ``associated``, ``rms_px``, ``max_px`` against the simulator's pixel of
-    the target's centre, ``rms_px_outline``, ``max_px_outline`` against its outline's
-    centroid), then over all cameras."""
-    from synth.products.crosscheck import crosscheck_summary, crosscheck_view
-
-    rig = spec.multirig
-    targets = (spec.targets, spec.target_normals, spec.target_radius)
-    truth_of, distances = [], {}
-    for k, name in enumerate(spec.camera_names):
-        index, d, d_outline = crosscheck_view(rig.cameras[k], rig.view_port(k), targets, raw[k],
-                                              simulated[k])
-        truth_of.append(index)
-        distances[name] = (d, d_outline)
-    return truth_of, crosscheck_summary(distances)
+    return np.sum([visible_targets(camera, truth_rig.view_port(k), spec.targets,
+                                   spec.target_radius)[1]
+                   for k, camera in enumerate(truth_rig.cameras)], axis=0)
 
 
 def _views(config, spec, log) -> tuple[list, dict]:
@@ -347,25 +340,6 @@ def _views(config, spec, log) -> tuple[list, dict]:
     for name in spec.camera_names:
         log(f"  {name}: {render_summary(info['render'][name])}")
     return images, info
-
-
-def _detect(config, images, seed) -> tuple[list, list, list]:
-    """``(raw, centers, detections)``: each view's detected centres (px), the same with
-    ``--noise-px`` added (seeded), and its :class:`measure.images.detect.Detections`."""
-    from measure.images.detect import FLOOR_FRACTION
-    from synth.rendering.noise import add_pixel_noise
-
-    from eval.core.detection import detect_view
-
-    detections = [detect_view(image, config.threshold_fraction, config.max_elongation,
-                              config.max_area_ratio, config.median_filter,
-                              floor_fraction=FLOOR_FRACTION) for image in images]
-    raw = [np.array(d.centers, dtype=float).reshape(-1, 2) for d in detections]
-    if config.noise_px <= 0:
-        return raw, raw, detections
-    rng = np.random.default_rng(seed)
-    return raw, [add_pixel_noise(c, variance=config.noise_px ** 2, rng=rng) for c in raw], \
-        detections
 
 
 def _triangulate(config, rig, pixels, target_radius):

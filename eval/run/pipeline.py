@@ -2,6 +2,8 @@
 
 Each stage is one function: :func:`detect_stage`, :func:`match_stage`,
 :func:`triangulate_stage`, :func:`score_stage`; :func:`run_pipeline` chains them.
+:func:`detect_stage`, :func:`match_stage`, :func:`crosscheck_stage` and :func:`score_method`
+take any number of views; the run of N cameras (:mod:`eval.run.multiview`) goes through them.
 
 Frames and units: the reference frame is the left camera's (OpenCV axes), millimetres, pixels
 in the OpenCV convention. Ground truth is used only after matching, to score.
@@ -28,7 +30,8 @@ from eval.core.cloud_metrics import cloud_distances, flatness, length_errors, ri
 from eval.core.results import ErrorStats, MethodScores
 from eval.run.config import RunConfig
 from eval.core.analytic import visible_targets
-from eval.run.inputs import RunInputs, expose_on_sensor, load_inputs
+from eval.run.inputs import (RunInputs, expose_on_sensor, load_inputs,
+                             nothing_matched_message)
 
 #: The default working range around the scene's ``target_z``: ``(near, far)`` factors.
 DEPTH_WINDOW_FACTORS = (0.8, 1.25)
@@ -59,8 +62,9 @@ def default_depth_window(params: dict, targets=None, port=None):
 def detect_stage(inputs: RunInputs, noise_px: float, threshold_fraction: float | None = None,
                  max_elongation: float = DEFAULT_MAX_ELONGATION,
                  max_area_ratio: float = DEFAULT_MAX_AREA_RATIO, median_filter: int = 0):
-    """Detections per view and their centres ``(M, 2)`` px, with Gaussian noise of σ
-    ``noise_px`` added (seeded by ``inputs.seed``). Blobs more elongated than
+    """Detections per view (``{name: …}``, every view of ``inputs.view_images()``) and their
+    centres ``(M, 2)`` px, with Gaussian noise of σ ``noise_px`` added (seeded by
+    ``inputs.seed``, one generator through the views in order). Blobs more elongated than
     ``max_elongation``, or larger than ``max_area_ratio`` times the median blob, are taken for
     merged targets (raise them for targets seen obliquely, or over a wide range of depths).
     ``median_filter`` 3 or 5: each view is median-filtered first (``cv2.medianBlur``), which
@@ -70,25 +74,29 @@ def detect_stage(inputs: RunInputs, noise_px: float, threshold_fraction: float |
         return detect_view(image, threshold_fraction, max_elongation, max_area_ratio,
                            median_filter, floor_fraction=FLOOR_FRACTION)
 
-    detections = {"left": detect(inputs.left), "right": detect(inputs.right)}
+    detections = {name: detect(image) for name, image in inputs.view_images().items()}
     centers = {name: np.array(d.centers, dtype=float).reshape(-1, 2)
                for name, d in detections.items()}
     if noise_px > 0:
         rng = np.random.default_rng(inputs.seed)
-        for name in ("left", "right"):
+        for name in centers:
             centers[name] = add_pixel_noise(centers[name], variance=noise_px ** 2, rng=rng)
     return detections, centers
 
 
 def match_stage(inputs: RunInputs, centers, gate_mm: float, depth_window):
-    """Left–right pairs without ground truth (refractive epipolar gap, depth window): the
-    one matcher of every count, :func:`measure.stereo.multimatch.match_views`, on two views
-    (whose one pair is :func:`measure.stereo.matching.match_targets` of the rig)."""
-    window = (default_depth_window(inputs.params, inputs.targets, inputs.true_rig.port)
+    """``(matches, window)``: the views' detections ``centers`` matched without ground truth
+    (refractive epipolar gap, depth window) by the one matcher of every count,
+    :func:`measure.stereo.multimatch.match_views`: for two views its one pair's
+    :class:`measure.stereo.matching.Matches` (exactly
+    :func:`measure.stereo.matching.match_targets` of the rig), for N its
+    :class:`measure.stereo.multimatch.Tracks`."""
+    port = inputs.true_rig.port if inputs.depth_port is None else inputs.depth_port
+    window = (default_depth_window(inputs.params, inputs.targets, port)
               if depth_window is None else tuple(depth_window))
-    tracks = match_views(inputs.rig, [centers["left"], centers["right"]], gate_mm=gate_mm,
+    tracks = match_views(inputs.rig, list(centers.values()), gate_mm=gate_mm,
                          depth_range=window)
-    return tracks.pairs[(0, 1)], window
+    return (tracks.pairs[(0, 1)] if len(centers) == 2 else tracks), window
 
 
 def triangulate_stage(inputs: RunInputs, centers, matches, methods):
@@ -162,7 +170,8 @@ def attach_covariances(covariances, results, scored, info, rig_differs=None) -> 
 
 
 def crosscheck_stage(inputs: RunInputs, detections):
-    """Per view: simulator pixels, visibility, truth index per detection, cross-check stats.
+    """Per view (every view of ``detections``, in camera order): simulator pixels, visibility,
+    truth index per detection, cross-check stats (per view and over all).
 
     The cross-check compares each detected centre with the simulator's pixel of its target's
     centre (``rms_px``, ``max_px``) and with the area centroid of the image of its outline
@@ -171,8 +180,8 @@ def crosscheck_stage(inputs: RunInputs, detections):
     rig = inputs.true_rig  # the simulator predicts what was rendered
     normals = (inputs.target_normals if inputs.target_normals is not None
                else np.array([0.0, 0.0, -1.0]))
-    for view, (name, camera) in enumerate((("left", rig.left), ("right", rig.right))):
-        port = rig.view_port(view)
+    for view, name in enumerate(detections):
+        camera, port = rig.cameras[view], rig.view_port(view)
         simulated[name], inside[name] = visible_targets(camera, port, inputs.targets,
                                                         inputs.target_radius)
         centers = np.asarray(detections[name].centers).reshape(-1, 2)
@@ -321,21 +330,6 @@ def budget_stage(inputs: RunInputs, detections, centers, rigs: dict, methods, ga
                                                          "visible_in_both")},
                          "methods": {k: v.to_json() for k, v in scored["scores"].items()}}
     return budget
-
-
-def nothing_matched_message(inputs: RunInputs, detections, window) -> str:
-    near, far = window
-    window_text = ("no depth window" if near is None
-                   else f"the depth window {near:g}-{far:g} mm")
-    found = {name: detections[name].n_found for name in ("left", "right")}
-    if min(found.values()) == 0:
-        cause = ("check that targets are lit and large enough (target_radius), that the scene "
-                 "renders (max_depth >= 2 through a port) and spp")
-    else:
-        cause = (f"check the water index (n_water) and port the measurement assumes, "
-                 f"{window_text} (--depth-range) and --gate-mm")
-    return (f"{inputs.scene}: no target was matched between the views (detected {found['left']} "
-            f"left, {found['right']} right): {cause}")
 
 
 def _rigs_report(inputs: RunInputs, difference: dict) -> dict:
