@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from measure import triangulate
+from measure import triangulate, triangulate_rig
 from measure.images.detect import (FLOOR_FRACTION, MERGE_AREA_RATIO as DEFAULT_MAX_AREA_RATIO,
                             MERGE_ELONGATION as DEFAULT_MAX_ELONGATION)
 from measure.images.eccentricity import correct_eccentricity
@@ -100,7 +100,12 @@ def match_stage(inputs: RunInputs, centers, gate_mm: float, depth_window):
 
 
 def triangulate_stage(inputs: RunInputs, centers, matches, methods):
-    """``{method: Triangulation}`` of the matched pairs."""
+    """``{method: Triangulation}`` of the matched pairs, or of the tracks of N views
+    (``matches`` :class:`measure.stereo.multimatch.Tracks`: :func:`measure.triangulate_rig`
+    from every view of each track)."""
+    if hasattr(matches, "detections"):
+        pixels = matches.pixels(list(centers.values()))
+        return {m: triangulate_rig(inputs.rig, pixels, m) for m in methods}
     uv_left = centers["left"][matches.left]
     uv_right = centers["right"][matches.right]
     return {m: triangulate_method(inputs, uv_left, uv_right, m) for m in methods}

@@ -241,3 +241,35 @@ def test_a_report_from_before_one_schema_is_read_where_its_scores_were():
                                                     "by_views": by_views}
     text = report_markdown(new)
     assert text == report_markdown(old) and "| all | 9 | 0.3000 |" in text
+
+
+@pytest.mark.slow
+def test_three_cameras_with_the_reprojection_method_of_n_views(scene, tmp_path, capsys):
+    """--methods optical_path,reprojection: both in ``methods`` in the pair's schema, the same
+    tracks scored, the optical path's numbers those of a run of it alone, the reprojection's
+    point (triangulate_rig) as close to the truth, each with its covariance files; a pair
+    method is refused."""
+    runs = {}
+    for name, methods in (("both", "optical_path,reprojection"), ("alone", "optical_path")):
+        out = tmp_path / name
+        assert eval_main(["run", scene, "--out", str(out), "--spp", "16", "--no-progress",
+                          "--noise-px", "0.1", "--gate-mm", "5", "--methods", methods]) == 0
+        runs[name] = json.loads((out / "report.json").read_text())
+    both = runs["both"]
+    assert both["method"] == "optical_path" and list(both["methods"]) == ["optical_path",
+                                                                          "reprojection"]
+    assert both["methods"]["optical_path"] == runs["alone"]["methods"]["optical_path"]
+    optical, reprojection = both["methods"]["optical_path"], both["methods"]["reprojection"]
+    assert reprojection["n"] == optical["n"] >= 30 and reprojection["invalid"] == 0
+    assert set(reprojection["by_views"]) == {"2", "3"}
+    assert reprojection["rms_dp_mm"] < 1.2 * optical["rms_dp_mm"]
+    assert reprojection["rms_dp_mm"] != optical["rms_dp_mm"]
+    assert both["uncertainty"]["methods"] == ["optical_path", "reprojection"]
+    assert reprojection["coverage_95"] >= 0.85
+    assert (tmp_path / "both" / "uncertainty_reprojection.csv").exists()
+    assert "reprojection: RMS dP" in (tmp_path / "both" / "report.md").read_text()
+    capsys.readouterr()
+    assert eval_main(["run", scene, "--out", str(tmp_path / "su"), "--no-progress",
+                      "--methods", "optical_path,su"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "optical_path or reprojection" in err[0] and "not su" in err[0]
