@@ -48,14 +48,16 @@ def track_sigmas(mode, detections, tracks, noise_px: float = 0.0) -> tuple[np.nd
 
 
 def views_uncertainty(mode, noise_px, rig, detections, tracks, pixels, result, method: str,
-                      scored=None) -> tuple[np.ndarray, dict]:
+                      scored=None, rig_differs=None) -> tuple[np.ndarray, dict]:
     """``(covariances (T, 3, 3) mm², report entry)`` of the tracks' points ``result``
     (:class:`measure.stereo.multiview.MultiViewTriangulation`) triangulated from ``pixels``
     ``(T, V, 2)``; ``scored`` the tracks against the truth (``ok``, ``errors``) for the
-    coverage, None without truth (every valid point summarized). Module docs for σ."""
+    coverage, None without truth (every valid point summarized); ``rig_differs`` what of the
+    measurement's rig differs from the truth (names; an understated σ's verdict puts it down to
+    that first, as the pair's does). Module docs for σ."""
     from measure.stereo.multiview_uncertainty import view_point_covariances, view_residual_sigma
 
-    from eval.core.uncertainty import AUTO, uncertainty_summary
+    from eval.core.uncertainty import AUTO
 
     views = rig.views()
     sigma, info = track_sigmas(mode, detections, tracks, noise_px)
@@ -73,12 +75,32 @@ def views_uncertainty(mode, noise_px, rig, detections, tracks, pixels, result, m
     info.update(median_px=float(np.median(finite)) if finite.size else None,
                 max_px=float(finite.max()) if finite.size else None)
     _, covariance = view_point_covariances(views, pixels, sigma)
+    return covariance, {"methods": [method], "rig": RIG_NOTE, "pixel_sigma": info,
+                        "summaries": {method: _summary(covariance, result, scored, rig_differs)}}
+
+
+def add_method(entry, method: str, covariance, result, scored=None, rig_differs=None) -> None:
+    """Another method's points ``result`` of the same tracks into ``entry``
+    (:func:`views_uncertainty`'s): the same covariances — they hold the pixels and their σ
+    only, to first order those of every consistent estimator of the point (the optical path
+    and the reprojection-optimal point, as for two views) — summarized against its own
+    errors (``scored``)."""
+    entry["methods"].append(method)
+    entry["summaries"][method] = _summary(covariance, result, scored, rig_differs)
+
+
+def _summary(covariance, result, scored, rig_differs) -> dict:
+    """One method's ``summaries`` entry: σ of its reported points and, with ``scored``, the
+    coverage and its verdict."""
+    from eval.core.uncertainty import uncertainty_summary
+
     ok = _reported(result, covariance, scored)
     summary = uncertainty_summary(covariance[ok],
-                                  None if scored is None else scored["errors"][ok])
-    _name_what_n_views_miss(summary.get("coverage") or {})
-    return covariance, {"methods": [method], "rig": RIG_NOTE, "pixel_sigma": info,
-                        "summaries": {method: summary}}
+                                  None if scored is None else scored["errors"][ok],
+                                  rig_differs=rig_differs)
+    if not rig_differs:
+        _name_what_n_views_miss(summary.get("coverage") or {})
+    return summary
 
 
 def _reported(result, covariance, scored) -> np.ndarray:
@@ -108,13 +130,13 @@ def write_views_uncertainty(directory, method, result, covariance, scored, entry
     """``uncertainty_<method>.ply`` / ``.csv`` of the triangulated tracks — with ``scored``
     the correctly matched ones and their errors —
     (:func:`eval.core.uncertainty.write_uncertainty_files`), their names into
-    ``entry["files"]``."""
+    ``entry["files"][method]``."""
     from eval.core.uncertainty import write_uncertainty_files
 
     ok = _reported(result, covariance, scored)
     errors = None if scored is None else scored["errors"][ok]
-    entry["files"] = {method: write_uncertainty_files(directory, method, result.points[ok],
-                                                      covariance[ok], errors)}
+    entry.setdefault("files", {})[method] = write_uncertainty_files(
+        directory, method, result.points[ok], covariance[ok], errors)
 
 
 def uncertainty_lines(report: dict) -> list:
@@ -139,5 +161,5 @@ def uncertainty_lines(report: dict) -> list:
     return ["", *lines] if lines else []
 
 
-__all__ = ["RIG_NOTE", "track_sigmas", "uncertainty_lines", "views_uncertainty",
+__all__ = ["RIG_NOTE", "add_method", "track_sigmas", "uncertainty_lines", "views_uncertainty",
            "write_views_uncertainty"]

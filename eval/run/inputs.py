@@ -29,7 +29,10 @@ class RunInputs:
     ``{label: rig}``: also measure with these rigs (the error budget); ``rig_covariance`` the
     ``--calib`` file's covariance (:class:`measure.stereo.rig_covariance.RigCovariance`) or None;
     ``absorbed`` the absorbed baseline's calibration
-    (:class:`eval.core.absorbed.AbsorbedCalibration`) when the run measures with it."""
+    (:class:`eval.core.absorbed.AbsorbedCalibration`) when the run measures with it; for a rig
+    of N cameras (``rig``, ``truth_rig`` of N) ``views`` ``{name: image}`` every view and
+    ``depth_port`` the port whose reference axis the default depth window takes (None: the true
+    rig's)."""
 
     scene: str
     rig: object
@@ -51,11 +54,18 @@ class RunInputs:
     rig_covariance: object = None
     rig_covariance_source: str | None = None
     absorbed: object = None
+    views: dict | None = None
+    depth_port: object = None
 
     @property
     def true_rig(self):
         """The rig the images were rendered with (``rig`` is what the measurement believes)."""
         return self.rig if self.truth_rig is None else self.truth_rig
+
+    def view_images(self) -> dict:
+        """``{view name: image}`` in camera order: ``views`` for N cameras (``cam0``, …;
+        ``left``/``right`` are then its first two), else ``{"left", "right"}``."""
+        return self.views if self.views is not None else {"left": self.left, "right": self.right}
 
 
 def same_value(a: str, b: str) -> bool:
@@ -334,6 +344,22 @@ def expose_on_sensor(inputs: RunInputs, sensor, log):
     return sensor_info
 
 
+def nothing_matched_message(inputs: RunInputs, detections, window) -> str:
+    """The error of a pair run with no match: what was detected and what to check."""
+    near, far = window
+    window_text = ("no depth window" if near is None
+                   else f"the depth window {near:g}-{far:g} mm")
+    found = {name: detections[name].n_found for name in ("left", "right")}
+    if min(found.values()) == 0:
+        cause = ("check that targets are lit and large enough (target_radius), that the scene "
+                 "renders (max_depth >= 2 through a port) and spp")
+    else:
+        cause = (f"check the water index (n_water) and port the measurement assumes, "
+                 f"{window_text} (--depth-range) and --gate-mm")
+    return (f"{inputs.scene}: no target was matched between the views (detected {found['left']} "
+            f"left, {found['right']} right): {cause}")
+
+
 __all__ = ["RunInputs", "another_scene", "budget_rigs", "dataset_params", "expose_on_sensor", "expose_views",
            "load_inputs", "refuse_flat_only", "load_run_scene", "measurement_calibration",
-           "read_run_dataset", "same_value"]
+           "nothing_matched_message", "read_run_dataset", "same_value"]

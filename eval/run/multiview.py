@@ -1,13 +1,16 @@
 """``python -m eval run`` on a scene of more than two cameras (``synth scene --cameras N``).
 
 Every view is rendered (:func:`synth.rendering.render.render_views`) — or read from a ``--from``
-dataset of N cameras (:mod:`synth.products.dataset_layout`, :func:`dataset_views`) — and its
-targets detected (the two-camera run's detector and options); the detections are matched across all views
-without ground truth (:func:`measure.stereo.multimatch.match_views`: pairwise refractive
-epipolar matching, tracks from their union, a track with a conflict dropped); every track is
-triangulated from all its views with the optical path (:func:`measure.stereo.multiview.
-triangulate_views`), after the disk targets' eccentricity is removed from every view's centre
-(as the two-camera run does, :func:`correct_views`). Only then is the truth used: each
+dataset of N cameras (:mod:`synth.products.dataset_layout`, :func:`dataset_views`) — and goes
+through the two-camera run's stages (:mod:`eval.run.pipeline`, over every view): its targets
+detected (:func:`~eval.run.pipeline.detect_stage`); the detections matched across all views
+without ground truth (:func:`~eval.run.pipeline.match_stage`:
+:func:`measure.stereo.multimatch.match_views`, pairwise refractive epipolar matching, tracks
+from their union, a track with a conflict dropped); every track triangulated from all its
+views with each method (``optical_path``, ``reprojection``:
+:func:`~eval.run.pipeline.triangulate_stage`, :func:`measure.triangulate_rig`), after the disk
+targets' eccentricity is removed from every view's centre (as the two-camera run does,
+:func:`correct_views`). Only then is the truth used: each
 detection is associated with the simulator's pixel of a target (the cross-check's mutual
 nearest neighbours; the report's ``crosscheck``, per camera and over all, is the two-camera
 run's cross-check of those detections against the simulator), a track is correct when all its
@@ -32,8 +35,9 @@ import numpy as np
 
 from eval.cli import CLIError
 from eval.run.config import RunConfig
-from eval.core.views_uncertainty import (uncertainty_lines, views_uncertainty,
+from eval.core.views_uncertainty import (add_method, uncertainty_lines, views_uncertainty,
                                          write_views_uncertainty)
+from measure.stereo.rig_triangulation import VIEW_METHODS
 
 #: The options of a two-camera run that a run of N cameras does not take (refused, never
 #: ignored): (config field, option).
@@ -41,7 +45,8 @@ NOT_FOR_N_CAMERAS = (("assumptions", "--assume"),
                      ("compare_calib", "--compare-calib"), ("absorbed_calib", "--absorbed-calib"),
                      ("self_calibrate", "--self-calibrate"), ("sensor", "--sensor"),
                      ("no_figures", "--no-figures"))  # a run of N cameras draws no figure
-#: The one method of a run of N cameras.
+#: The default method of a run of N cameras (``--methods``: any of
+#: :data:`measure.stereo.rig_triangulation.VIEW_METHODS`, the first the headline).
 METHOD = "optical_path"
 
 
@@ -60,9 +65,16 @@ def refuse_inapplicable(config: RunConfig, cameras: int) -> None:
         if getattr(config, field_name):
             raise CLIError(f"{option} does not apply to {config.scene}, a scene of {cameras} "
                            f"cameras")
-    if config.methods is not None and tuple(config.methods) != (METHOD,):
-        raise CLIError(f"--methods: a scene of {cameras} cameras is measured with {METHOD} only "
-                       f"(the optical path of N views)")
+    other = set(view_methods(config)) - set(VIEW_METHODS)
+    if other:
+        raise CLIError(f"--methods: a scene of {cameras} cameras is measured with "
+                       f"{' or '.join(VIEW_METHODS)} (N views), not {', '.join(sorted(other))}")
+
+
+def view_methods(config: RunConfig) -> tuple:
+    """The run's methods: ``--methods`` or :data:`METHOD`; the first is the headline
+    (``report.json``'s ``method``, ``targets.csv``, the ratio to the pair)."""
+    return tuple(config.methods) if config.methods else (METHOD,)
 
 
 def measurement_rig(config: RunConfig, spec):
@@ -191,12 +203,10 @@ def _rms(values) -> float | None:
 
 
 def measure(config: RunConfig, log) -> tuple[dict, dict]:
-    """The run (module docs): ``(report, arrays)``."""
-    from measure.stereo.multimatch import match_views
-
-    from eval.core.results import ErrorStats
+    """The run (module docs): ``(report, arrays)``. Detection, matching and the cross-check are
+    the two-camera run's stages over every view (:mod:`eval.run.pipeline`)."""
     from eval.run.inputs import load_run_scene
-    from eval.run.pipeline import default_depth_window
+    from eval.run.pipeline import crosscheck_stage, detect_stage, match_stage
 
     timings = {}
     spec = load_run_scene(config)
@@ -204,59 +214,74 @@ def measure(config: RunConfig, log) -> tuple[dict, dict]:
     refuse_inapplicable(config, len(names))
     rig = measurement_rig(config, spec)
     seed = spec.seed if config.seed is None else config.seed
-    simulated, visible_views = _simulated_views(spec)
+    visible_views = _visible_views(spec)
     if not (visible_views >= 2).any():
         raise CLIError(f"{config.scene}: no target is visible in two views")
     t = time.perf_counter()
     images, info = _views(config, spec, log)
     timings["render"] = time.perf_counter() - t
+    inputs = _run_inputs(config, spec, rig, images, info, seed, timings["render"])
     t = time.perf_counter()
-    raw, centers, detections = _detect(config, images, seed)
+    detections, centers = detect_stage(inputs, config.noise_px, config.threshold_fraction,
+                                       config.max_elongation, config.max_area_ratio,
+                                       config.median_filter)
+    detections, centers = list(detections.values()), list(centers.values())
     timings["detect"] = time.perf_counter() - t
     t = time.perf_counter()
-    window = (default_depth_window(spec.params, spec.targets, spec.rig.port)
-              if config.depth_range_mm is None else tuple(config.depth_range_mm))
-    tracks = match_views(rig, centers, gate_mm=config.gate_mm, depth_range=window)
+    tracks, window = match_stage(inputs, dict(zip(names, centers)), config.gate_mm,
+                                 config.depth_range_mm)
     timings["match"] = time.perf_counter() - t
+    methods, head = view_methods(config), view_methods(config)[0]
     t = time.perf_counter()
-    result, pixels = _triangulate(config, rig, tracks.pixels(centers), spec.target_radius)
+    results, pixels = _triangulate(config, inputs, centers, tracks, methods)
     timings["triangulate"] = time.perf_counter() - t
     # the truth, for scoring only
-    truth_of, crosscheck = _crosscheck(spec, raw, simulated)
-    scored = _scored_tracks(tracks, truth_of, result, spec.targets)
+    _, _, truth_of, crosscheck = crosscheck_stage(inputs, dict(zip(names, detections)))
+    truth_of = list(truth_of.values())
+    scored = {m: _scored_tracks(tracks, truth_of, r, spec.targets) for m, r in results.items()}
     t = time.perf_counter()
+    # how a --calib rig differs from the truth: an understated σ's verdict names it
+    differs = rig_differences(spec.multirig, rig) if config.calib else []
     covariance, uncertainty = views_uncertainty(config.pixel_sigma, config.noise_px, rig,
-                                                detections, tracks, pixels, result, METHOD, scored)
+                                                detections, tracks, pixels, results[head], head,
+                                                scored[head], rig_differs=differs)
+    for method in methods[1:]:
+        add_method(uncertainty, method, covariance, results[method], scored[method], differs)
     timings["covariance"] = time.perf_counter() - t
-    ok, errors, target, k_views = scored["ok"], scored["errors"], scored["target"], tracks.views_per_track
-    by_k = {}
-    for k in range(2, len(names) + 1):
-        rows = ok & (k_views == k)
-        by_k[str(k)] = {"tracks": int((k_views == k).sum()), "scored": int(rows.sum()),
-                        "rms_dp_mm": _rms(np.linalg.norm(errors[rows], axis=1)),
-                        "stats": ErrorStats.of(errors[rows]).to_json()}
+    t = time.perf_counter()
+    entries = {m: _method_entry(tracks, scored[m], results[m], spec.targets[visible_views >= 2],
+                                seed, uncertainty, m, len(names)) for m in methods}
+    timings["evaluate"] = time.perf_counter() - t
     pair_report = _pair_report(config, rig, tracks, centers, truth_of, spec, names)
-    stats = ErrorStats.of(errors[ok])
-    rms = _rms(np.linalg.norm(errors[ok], axis=1))
-    matching = _matching(config, tracks, scored, visible_views, window, names)
+    rms = entries[head]["rms_dp_mm"]
+    matching = _matching(config, tracks, scored[head], visible_views, window, names)
     failures = []
     if matching["wrong"]:
         failures.append(f"{matching['wrong']} tracks join detections of different targets")
     report = {
-        "scene": config.scene, "cameras": list(names), "method": METHOD,
+        "scene": config.scene, "cameras": list(names), "method": head,
         "rig": "--calib " + config.calib if config.calib else "the scene's rig",
         "variant": info["variant"], "spp": info["spp"], "spp_rendered": info["spp_rendered"],
         "seed": seed, "noise_px": config.noise_px,
         "eccentricity": bool(config.corrects_eccentricity),
         "detections": {name: int(len(c)) for name, c in zip(names, centers)},
         "matching": matching, "crosscheck": crosscheck,
-        "scores": {"n": stats.n, "rms_dp_mm": rms, "stats": stats.to_json(), "by_views": by_k},
+        "methods": entries,
         "stereo_pair": pair_report,
         "ratio_to_pair": (rms / pair_report["rms_dp_mm"] if pair_report and rms
                           and pair_report["rms_dp_mm"] else None),
         "uncertainty": uncertainty, "timings_s": timings, "render": info,
         "verdict": {"passed": not failures, "failures": failures},
     }
+    return report, {"targets": _per_target(spec, visible_views, scored[head], results[head],
+                                           tracks.views_per_track),
+                    "uncertainty": [(m, results[m], covariance, scored[m]) for m in methods]}
+
+
+def _per_target(spec, visible_views, scored, result, k_views) -> np.ndarray:
+    """``targets.csv``'s rows: per target its id, the views it is visible in, detected in and
+    triangulated from (0: not), the headline method's point and its error dP (mm)."""
+    ok, target, errors = scored["ok"], scored["target"], scored["errors"]
     per_target = np.full((len(spec.targets), 8), np.nan)
     per_target[:, 0] = spec.target_ids
     per_target[:, 1] = visible_views
@@ -265,41 +290,63 @@ def measure(config: RunConfig, log) -> tuple[dict, dict]:
     per_target[target[ok], 3] = k_views[ok]
     per_target[target[ok], 4:7] = result.points[ok]
     per_target[target[ok], 7] = np.linalg.norm(errors[ok], axis=1)
-    return report, {"targets": per_target, "uncertainty": (result, covariance, scored)}
+    return per_target
 
 
-def _simulated_views(spec) -> tuple[list, np.ndarray]:
-    """``(simulated, visible_views)``: the simulator's pixels of every target in each view and
-    in how many views each target is wholly inside the image."""
+def _method_entry(tracks, scored, result, truth_visible, seed, uncertainty, method,
+                  n_views) -> dict:
+    """The report's ``methods.<method>``, in the pair's schema
+    (:func:`eval.run.pipeline.score_method`: the error statistics ``n``, ``rms_dp_mm`` …, the
+    cloud, alignment, flatness, lengths, ``coverage_95``), with the N views' addition
+    ``by_views``: per number of views k the tracks, those scored and their RMS dP and
+    statistics."""
+    from eval.core.results import ErrorStats
+    from eval.run.pipeline import methods_with_coverage, score_method
+
+    scores, _ = score_method(result, scored["correct"], scored["target"],
+                             scored["targets"], truth_visible, seed)
+    entry = methods_with_coverage({method: scores}, uncertainty)[method]
+    ok, errors, k_views = scored["ok"], scored["errors"], tracks.views_per_track
+    by_k = {}
+    for k in range(2, n_views + 1):
+        rows = ok & (k_views == k)
+        by_k[str(k)] = {"tracks": int((k_views == k).sum()), "scored": int(rows.sum()),
+                        "rms_dp_mm": _rms(np.linalg.norm(errors[rows], axis=1)),
+                        "stats": ErrorStats.of(errors[rows]).to_json()}
+    entry["by_views"] = by_k
+    return entry
+
+
+def view_scores(report: dict) -> dict:
+    """``{n, rms_dp_mm, by_views}`` of a report of N cameras, where it holds them: since one
+    report schema, ``methods.<method>`` (``method`` the report's); before, ``scores``."""
+    entry = (report["scores"] if "scores" in report
+             else report["methods"][report.get("method", METHOD)])
+    return {key: entry[key] for key in ("n", "rms_dp_mm", "by_views")}
+
+
+def _run_inputs(config, spec, rig, images, info, seed, render_seconds):
+    """The pipeline's :class:`eval.run.inputs.RunInputs` of N views: the measurement's ``rig``
+    and the scene's rig of N as the truth, every view's image by camera name, the default
+    depth window along the scene's first pair's port."""
+    from eval.run.inputs import RunInputs
+
+    return RunInputs(scene=config.scene, rig=rig, has_port=spec.has_port, targets=spec.targets,
+                     target_ids=spec.target_ids, target_radius=spec.target_radius,
+                     left=images[0], right=images[1], params=spec.params,
+                     variant=info["variant"], spp=info["spp"], render_seconds=render_seconds,
+                     seed=seed, target_normals=spec.target_normals, truth_rig=spec.multirig,
+                     views=dict(zip(spec.camera_names, images)), depth_port=spec.rig.port)
+
+
+def _visible_views(spec) -> np.ndarray:
+    """In how many views each target is wholly inside the image (the simulator's count)."""
     from eval.core.analytic import visible_targets
 
     truth_rig = spec.multirig
-    simulated, inside = [], []
-    for k, camera in enumerate(truth_rig.cameras):
-        uv, wholly = visible_targets(camera, truth_rig.view_port(k), spec.targets,
-                                     spec.target_radius)
-        simulated.append(uv)
-        inside.append(wholly)
-    return simulated, np.sum(inside, axis=0)
-
-
-def _crosscheck(spec, raw, simulated) -> tuple[list, dict]:
-    """``(truth_of, crosscheck)``: per view the target of each detection (−1 none) and the
-    two-camera run's cross-check for every camera (:func:`synth.products.crosscheck.
-    crosscheck_view`: ``associated``, ``rms_px``, ``max_px`` against the simulator's pixel of
-    the target's centre, ``rms_px_outline``, ``max_px_outline`` against its outline's
-    centroid), then over all cameras."""
-    from synth.products.crosscheck import crosscheck_summary, crosscheck_view
-
-    rig = spec.multirig
-    targets = (spec.targets, spec.target_normals, spec.target_radius)
-    truth_of, distances = [], {}
-    for k, name in enumerate(spec.camera_names):
-        index, d, d_outline = crosscheck_view(rig.cameras[k], rig.view_port(k), targets, raw[k],
-                                              simulated[k])
-        truth_of.append(index)
-        distances[name] = (d, d_outline)
-    return truth_of, crosscheck_summary(distances)
+    return np.sum([visible_targets(camera, truth_rig.view_port(k), spec.targets,
+                                   spec.target_radius)[1]
+                   for k, camera in enumerate(truth_rig.cameras)], axis=0)
 
 
 def _views(config, spec, log) -> tuple[list, dict]:
@@ -319,35 +366,23 @@ def _views(config, spec, log) -> tuple[list, dict]:
     return images, info
 
 
-def _detect(config, images, seed) -> tuple[list, list, list]:
-    """``(raw, centers, detections)``: each view's detected centres (px), the same with
-    ``--noise-px`` added (seeded), and its :class:`measure.images.detect.Detections`."""
-    from measure.images.detect import FLOOR_FRACTION
-    from synth.rendering.noise import add_pixel_noise
+def _triangulate(config, inputs, centers, tracks, methods):
+    """``({method: points}, pixels)``: the tracks triangulated from every view with each
+    method (:func:`eval.run.pipeline.triangulate_stage`) — with the eccentricity correction
+    when the run corrects it (the offsets from the optical path, :func:`correct_views`, then
+    each method on the corrected pixels, as for two views) — and the pixels they were
+    triangulated from (corrected)."""
+    from measure import triangulate_rig
 
-    from eval.core.detection import detect_view
+    from eval.run.pipeline import triangulate_stage
 
-    detections = [detect_view(image, config.threshold_fraction, config.max_elongation,
-                              config.max_area_ratio, config.median_filter,
-                              floor_fraction=FLOOR_FRACTION) for image in images]
-    raw = [np.array(d.centers, dtype=float).reshape(-1, 2) for d in detections]
-    if config.noise_px <= 0:
-        return raw, raw, detections
-    rng = np.random.default_rng(seed)
-    return raw, [add_pixel_noise(c, variance=config.noise_px ** 2, rng=rng) for c in raw], \
-        detections
-
-
-def _triangulate(config, rig, pixels, target_radius):
-    """``(points, pixels)``: the tracks' points — the optical path of every view, with the
-    eccentricity correction when the run corrects it — and the pixels they were triangulated
-    from (corrected)."""
     if config.corrects_eccentricity:
-        result, corrected, _ = correct_views(rig, pixels, target_radius)
-        return result, corrected
-    from measure.stereo.multiview import triangulate_views
-
-    return triangulate_views(rig.views(), pixels), pixels
+        result, corrected, _ = correct_views(inputs.rig, tracks.pixels(centers),
+                                             inputs.target_radius)
+        return {m: result if m == "optical_path" else triangulate_rig(inputs.rig, corrected, m)
+                for m in methods}, corrected
+    views = dict(zip(inputs.view_images(), centers))
+    return triangulate_stage(inputs, views, tracks, methods), tracks.pixels(centers)
 
 
 def _scored_tracks(tracks, truth_of, result, targets) -> dict:
@@ -373,7 +408,7 @@ def _scored_tracks(tracks, truth_of, result, targets) -> dict:
     matched = np.zeros(len(targets), bool)
     matched[target[correct]] = True
     return {"target": target, "correct": correct, "ok": ok, "errors": errors,
-            "detected_views": detected_views, "matched": matched}
+            "detected_views": detected_views, "matched": matched, "targets": targets}
 
 
 def _pair_report(config, rig, tracks, centers, truth_of, spec, names):
@@ -418,7 +453,7 @@ def _matching(config, tracks, scored, visible_views, window, names) -> dict:
 
 
 def report_markdown(report: dict) -> str:
-    m, s = report["matching"], report["scores"]
+    m, s = report["matching"], view_scores(report)
 
     def mm(v):
         return "–" if v is None else f"{v:.4f}"
@@ -433,6 +468,11 @@ def report_markdown(report: dict) -> str:
     for k, row in s["by_views"].items():
         lines.append(f"| {k} | {row['tracks']} | {mm(row['rms_dp_mm'])} |")
     lines.append(f"| all | {s['n']} | {mm(s['rms_dp_mm'])} |")
+    others = {m: e for m, e in (report.get("methods") or {}).items() if m != report["method"]}
+    if others:
+        lines += ["", f"The table is {report['method']}'s; the same tracks by "
+                  + ", ".join(f"{m}: RMS dP {mm(e['rms_dp_mm'])} mm ({e['n']} scored)"
+                              for m, e in others.items()) + "."]
     lines += uncertainty_lines(report)
     c = report.get("crosscheck")
     if c:
@@ -473,7 +513,8 @@ def main(config: RunConfig, out: str, print_json: bool, log) -> int:
     report, arrays = measure(config, log)
     with output.staged() as tmp:
         report["versions"] = package_versions()
-        write_views_uncertainty(tmp, METHOD, *arrays["uncertainty"], report["uncertainty"])
+        for method, *found in arrays["uncertainty"]:
+            write_views_uncertainty(tmp, method, *found, report["uncertainty"])
         report["timings_s"]["total"] = time.perf_counter() - start
         report = jsonable(report)
         atomic_write_json(os.path.join(tmp, "report.json"), report)
@@ -482,7 +523,7 @@ def main(config: RunConfig, out: str, print_json: bool, log) -> int:
                    header="id,views_visible,views_detected,views_triangulated,x,y,z,dp_mm",
                    comments="", fmt="%.10g")
     stream = sys.stderr if print_json else sys.stdout
-    m, s = report["matching"], report["scores"]
+    m, s = report["matching"], view_scores(report)
     pair = report.get("stereo_pair") or {}
     print(f"{report['scene']}: {len(report['cameras'])} cameras, "
           f"{m['visible_in_two_or_more']} targets visible in two or more views, "
@@ -510,4 +551,4 @@ def main(config: RunConfig, out: str, print_json: bool, log) -> int:
 
 
 __all__ = ["correct_views", "dataset_views", "is_multiview_scene", "main", "measure",
-           "report_markdown", "rig_differences"]
+           "report_markdown", "rig_differences", "view_scores"]

@@ -2,6 +2,8 @@
 
 Each stage is one function: :func:`detect_stage`, :func:`match_stage`,
 :func:`triangulate_stage`, :func:`score_stage`; :func:`run_pipeline` chains them.
+:func:`detect_stage`, :func:`match_stage`, :func:`crosscheck_stage` and :func:`score_method`
+take any number of views; the run of N cameras (:mod:`eval.run.multiview`) goes through them.
 
 Frames and units: the reference frame is the left camera's (OpenCV axes), millimetres, pixels
 in the OpenCV convention. Ground truth is used only after matching, to score.
@@ -14,11 +16,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from measure import triangulate
+from measure import triangulate, triangulate_rig
 from measure.images.detect import (FLOOR_FRACTION, MERGE_AREA_RATIO as DEFAULT_MAX_AREA_RATIO,
                             MERGE_ELONGATION as DEFAULT_MAX_ELONGATION)
 from measure.images.eccentricity import correct_eccentricity
-from measure.stereo.matching import match_targets
+from measure.stereo.multimatch import match_views
 from synth.products.crosscheck import ASSOCIATION_GATE_PX, crosscheck_summary, crosscheck_view
 from synth.rendering.noise import add_pixel_noise
 
@@ -28,7 +30,8 @@ from eval.core.cloud_metrics import cloud_distances, flatness, length_errors, ri
 from eval.core.results import ErrorStats, MethodScores
 from eval.run.config import RunConfig
 from eval.core.analytic import visible_targets
-from eval.run.inputs import RunInputs, expose_on_sensor, load_inputs
+from eval.run.inputs import (RunInputs, expose_on_sensor, load_inputs,
+                             nothing_matched_message)
 
 #: The default working range around the scene's ``target_z``: ``(near, far)`` factors.
 DEPTH_WINDOW_FACTORS = (0.8, 1.25)
@@ -59,8 +62,9 @@ def default_depth_window(params: dict, targets=None, port=None):
 def detect_stage(inputs: RunInputs, noise_px: float, threshold_fraction: float | None = None,
                  max_elongation: float = DEFAULT_MAX_ELONGATION,
                  max_area_ratio: float = DEFAULT_MAX_AREA_RATIO, median_filter: int = 0):
-    """Detections per view and their centres ``(M, 2)`` px, with Gaussian noise of σ
-    ``noise_px`` added (seeded by ``inputs.seed``). Blobs more elongated than
+    """Detections per view (``{name: …}``, every view of ``inputs.view_images()``) and their
+    centres ``(M, 2)`` px, with Gaussian noise of σ ``noise_px`` added (seeded by
+    ``inputs.seed``, one generator through the views in order). Blobs more elongated than
     ``max_elongation``, or larger than ``max_area_ratio`` times the median blob, are taken for
     merged targets (raise them for targets seen obliquely, or over a wide range of depths).
     ``median_filter`` 3 or 5: each view is median-filtered first (``cv2.medianBlur``), which
@@ -70,27 +74,38 @@ def detect_stage(inputs: RunInputs, noise_px: float, threshold_fraction: float |
         return detect_view(image, threshold_fraction, max_elongation, max_area_ratio,
                            median_filter, floor_fraction=FLOOR_FRACTION)
 
-    detections = {"left": detect(inputs.left), "right": detect(inputs.right)}
+    detections = {name: detect(image) for name, image in inputs.view_images().items()}
     centers = {name: np.array(d.centers, dtype=float).reshape(-1, 2)
                for name, d in detections.items()}
     if noise_px > 0:
         rng = np.random.default_rng(inputs.seed)
-        for name in ("left", "right"):
+        for name in centers:
             centers[name] = add_pixel_noise(centers[name], variance=noise_px ** 2, rng=rng)
     return detections, centers
 
 
 def match_stage(inputs: RunInputs, centers, gate_mm: float, depth_window):
-    """Left–right pairs without ground truth (refractive epipolar gap, depth window)."""
-    window = (default_depth_window(inputs.params, inputs.targets, inputs.true_rig.port)
+    """``(matches, window)``: the views' detections ``centers`` matched without ground truth
+    (refractive epipolar gap, depth window) by the one matcher of every count,
+    :func:`measure.stereo.multimatch.match_views`: for two views its one pair's
+    :class:`measure.stereo.matching.Matches` (exactly
+    :func:`measure.stereo.matching.match_targets` of the rig), for N its
+    :class:`measure.stereo.multimatch.Tracks`."""
+    port = inputs.true_rig.port if inputs.depth_port is None else inputs.depth_port
+    window = (default_depth_window(inputs.params, inputs.targets, port)
               if depth_window is None else tuple(depth_window))
-    matches = match_targets(inputs.rig, centers["left"], centers["right"], gate_mm=gate_mm,
-                            depth_range=window)
-    return matches, window
+    tracks = match_views(inputs.rig, list(centers.values()), gate_mm=gate_mm,
+                         depth_range=window)
+    return (tracks.pairs[(0, 1)] if len(centers) == 2 else tracks), window
 
 
 def triangulate_stage(inputs: RunInputs, centers, matches, methods):
-    """``{method: Triangulation}`` of the matched pairs."""
+    """``{method: Triangulation}`` of the matched pairs, or of the tracks of N views
+    (``matches`` :class:`measure.stereo.multimatch.Tracks`: :func:`measure.triangulate_rig`
+    from every view of each track)."""
+    if hasattr(matches, "detections"):
+        pixels = matches.pixels(list(centers.values()))
+        return {m: triangulate_rig(inputs.rig, pixels, m) for m in methods}
     uv_left = centers["left"][matches.left]
     uv_right = centers["right"][matches.right]
     return {m: triangulate_method(inputs, uv_left, uv_right, m) for m in methods}
@@ -160,7 +175,8 @@ def attach_covariances(covariances, results, scored, info, rig_differs=None) -> 
 
 
 def crosscheck_stage(inputs: RunInputs, detections):
-    """Per view: simulator pixels, visibility, truth index per detection, cross-check stats.
+    """Per view (every view of ``detections``, in camera order): simulator pixels, visibility,
+    truth index per detection, cross-check stats (per view and over all).
 
     The cross-check compares each detected centre with the simulator's pixel of its target's
     centre (``rms_px``, ``max_px``) and with the area centroid of the image of its outline
@@ -169,8 +185,8 @@ def crosscheck_stage(inputs: RunInputs, detections):
     rig = inputs.true_rig  # the simulator predicts what was rendered
     normals = (inputs.target_normals if inputs.target_normals is not None
                else np.array([0.0, 0.0, -1.0]))
-    for view, (name, camera) in enumerate((("left", rig.left), ("right", rig.right))):
-        port = rig.view_port(view)
+    for view, name in enumerate(detections):
+        camera, port = rig.cameras[view], rig.view_port(view)
         simulated[name], inside[name] = visible_targets(camera, port, inputs.targets,
                                                         inputs.target_radius)
         centers = np.asarray(detections[name].centers).reshape(-1, 2)
@@ -208,20 +224,31 @@ def score_stage(inputs: RunInputs, detections, matches, window, results, gate_mm
     truth_visible = inputs.targets[visible_both]
     scores, per_method = {}, {}
     for method, result in results.items():
-        ok = correct & result.valid
-        truth = inputs.targets[pair_truth_left[ok]]
-        errors = result.points[ok] - truth
-        measured_all = result.points[result.valid]
-        scores[method] = MethodScores(
-            errors=ErrorStats.of(errors), cloud=cloud_distances(measured_all, truth_visible),
-            alignment=rigid_alignment(result.points[ok], truth),
-            flatness=flatness(measured_all, seed=inputs.seed),
-            invalid=int((~result.valid).sum()), lengths=length_errors(result.points[ok], truth))
-        per_method[method] = {"points": result.points[ok], "truth": truth, "errors": errors,
-                              "all_points": measured_all}
+        scores[method], per_method[method] = score_method(
+            result, correct, pair_truth_left, inputs.targets, truth_visible, inputs.seed)
     return {"matching": matching, "visibility": visibility, "crosscheck": crosscheck,
             "scores": scores, "per_method": per_method, "correct": correct,
             "simulated": simulated}
+
+
+def score_method(result, correct, truth_index, targets, truth_visible, seed):
+    """``(MethodScores, arrays)`` of one method's points ``result`` (a triangulation of pairs or
+    of N views' tracks: ``points`` (T, 3) mm, ``valid``) against the truth: ``correct`` (T,)
+    the rows matched right, ``truth_index`` (T,) their target in ``targets``, ``truth_visible``
+    the targets the matching could have found (the cloud's reference), ``seed`` the plane
+    fit's; ``arrays`` ``{points, truth, errors, all_points}`` (the correct and valid rows, and
+    every valid point)."""
+    ok = correct & result.valid
+    truth = targets[truth_index[ok]]
+    errors = result.points[ok] - truth
+    measured_all = result.points[result.valid]
+    scores = MethodScores(
+        errors=ErrorStats.of(errors), cloud=cloud_distances(measured_all, truth_visible),
+        alignment=rigid_alignment(result.points[ok], truth),
+        flatness=flatness(measured_all, seed=seed),
+        invalid=int((~result.valid).sum()), lengths=length_errors(result.points[ok], truth))
+    return scores, {"points": result.points[ok], "truth": truth, "errors": errors,
+                    "all_points": measured_all}
 
 
 def eccentricity_stage(inputs: RunInputs, centers, matches, methods, iterations: int = 2):
@@ -310,21 +337,6 @@ def budget_stage(inputs: RunInputs, detections, centers, rigs: dict, methods, ga
     return budget
 
 
-def nothing_matched_message(inputs: RunInputs, detections, window) -> str:
-    near, far = window
-    window_text = ("no depth window" if near is None
-                   else f"the depth window {near:g}-{far:g} mm")
-    found = {name: detections[name].n_found for name in ("left", "right")}
-    if min(found.values()) == 0:
-        cause = ("check that targets are lit and large enough (target_radius), that the scene "
-                 "renders (max_depth >= 2 through a port) and spp")
-    else:
-        cause = (f"check the water index (n_water) and port the measurement assumes, "
-                 f"{window_text} (--depth-range) and --gate-mm")
-    return (f"{inputs.scene}: no target was matched between the views (detected {found['left']} "
-            f"left, {found['right']} right): {cause}")
-
-
 def _rigs_report(inputs: RunInputs, difference: dict) -> dict:
     """The report's ``rigs``: what was rendered, what the measurement assumed, and
     ``difference`` (:func:`eval.core.assumption.rig_difference`, computed once per run)."""
@@ -334,7 +346,7 @@ def _rigs_report(inputs: RunInputs, difference: dict) -> dict:
             "difference": difference}
 
 
-def _with_coverage(scores, uncertainty) -> dict:
+def methods_with_coverage(scores, uncertainty) -> dict:
     """``report.json``'s ``methods``: each method's scores with ``coverage_95`` (None for a
     method without covariances) — the fraction of its correctly matched points inside their
     95 % ellipsoid."""
@@ -465,7 +477,7 @@ def _report(inputs, config, detections, scored, primary, primary_uncertainty, un
         "detection": _detection_report(detections),
         "crosscheck": scored["crosscheck"],
         "matching": scored["matching"],
-        "methods": _with_coverage(primary["scores"], primary_uncertainty),
+        "methods": methods_with_coverage(primary["scores"], primary_uncertainty),
         "uncertainty": primary_uncertainty,
         "noise_px": noise_px, "seed": inputs.seed, "threshold_fraction": threshold_fraction,
         "max_elongation": max_elongation, "max_area_ratio": max_area_ratio,
@@ -477,7 +489,7 @@ def _report(inputs, config, detections, scored, primary, primary_uncertainty, un
         "eccentricity": None if eccentricity_summary is None else {
             **eccentricity_summary,
             # absorbed stays on the raw centroids: its row would repeat itself
-            "uncorrected": {"methods": _with_coverage(
+            "uncorrected": {"methods": methods_with_coverage(
                 {m: v for m, v in scored["scores"].items() if m in port_methods}, uncertainty),
                 "uncertainty": uncertainty}},
         "timings_s": timings,
@@ -578,5 +590,5 @@ def run_failures(report: dict) -> list:
 __all__ = ["NothingMatched", "RunResult", "budget_stage", "crosscheck_stage",
            "COVARIANCE_METHODS", "attach_covariances", "covariance_stage",
            "default_depth_window", "detect_stage", "eccentricity_stage", "match_stage",
-           "measure_scene", "run_failures", "run_pipeline", "score_stage", "self_calibration_stage",
-           "triangulate_stage"]
+           "measure_scene", "methods_with_coverage", "run_failures", "run_pipeline", "score_method",
+           "score_stage", "self_calibration_stage", "triangulate_stage"]

@@ -11,6 +11,11 @@ pairwise gate (RMS distance of the optical-path point from its rays above ``gate
 joined through a chain of pairs that do not agree). A detection that no pair matched stays
 alone: it is reported (seen once, or not matched), never triangulated.
 
+Two views are the pair's matching: the rig's one pair is matched with the rig itself (even
+with no detection in a view), every match is a track, and no chain check applies (a pair's
+track is one match within the gate) — so the tracks' ``pairs[(0, 1)]`` is exactly
+:func:`measure.stereo.matching.match_targets` of the rig (what ``eval run`` of a pair uses).
+
 Units: mm; pixels in the OpenCV convention.
 """
 
@@ -74,10 +79,10 @@ def match_views(rig, centers, gate_mm: float = 0.5, depth_range=(None, None),
     edges_a, edges_b = [], []
     for i in range(n_views):
         for j in range(i + 1, n_views):
-            if not (len(centers[i]) and len(centers[j])):
+            if n_views > 2 and not (len(centers[i]) and len(centers[j])):
                 continue
-            m = match_targets(rig.pair(i, j), centers[i], centers[j], gate_mm=gate_mm,
-                              depth_range=depth_range, **options)
+            m = match_targets(rig if n_views == 2 else rig.pair(i, j), centers[i], centers[j],
+                              gate_mm=gate_mm, depth_range=depth_range, **options)
             pairs[(i, j)] = m
             edges_a.append(offsets[i] + m.left)
             edges_b.append(offsets[j] + m.right)
@@ -109,7 +114,7 @@ def match_views(rig, centers, gate_mm: float = 0.5, depth_range=(None, None),
     n_conflicts = int(conflict.sum())
     # a track joined through a chain (a–b, b–c) must also meet as a whole: its rays within
     # the pairwise gate of one point (a pair's RMS gap is half its common perpendicular)
-    if len(detections):
+    if len(detections) and n_views > 2:
         partial = Tracks(detections, pairs, 0, [], alone)
         gap = triangulate_views(rig.views(), partial.pixels(centers)).gap
         apart = ~(gap <= 0.5 * gate_mm)

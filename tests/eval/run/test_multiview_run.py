@@ -45,9 +45,9 @@ def test_three_cameras_match_and_report_views(scene, tmp_path):
     used = np.array([float(r["views_triangulated"]) for r in rows])
     np.testing.assert_array_equal(visible, seen)
     assert np.all(used[seen == 1] == 0)  # seen once: reported, never triangulated
-    assert set(report["scores"]["by_views"]) == {"2", "3"}
+    assert set(report["methods"]["optical_path"]["by_views"]) == {"2", "3"}
     # at 320 px a target's depth error through the port is a fraction of a millimetre
-    assert report["scores"]["rms_dp_mm"] < 1.0
+    assert report["methods"]["optical_path"]["rms_dp_mm"] < 1.0
 
 
 def test_bad_input_names_the_camera(scene, tmp_path, capsys):
@@ -141,7 +141,7 @@ def test_from_a_dataset_of_three_cameras_measures_its_images(scene, tmp_path, ca
     errors = np.linalg.norm(points[used] - spec.targets[used], axis=1)  # the true targets
     assert used.sum() == m["visible_in_two_or_more"] and errors.max() < 3.0
     assert np.sqrt(np.mean(errors ** 2)) < 1.0
-    assert set(report["scores"]["by_views"]) == {"2", "3"}
+    assert set(report["methods"]["optical_path"]["by_views"]) == {"2", "3"}
 
     four = tmp_path / "four.xml"  # another scene, of four cameras (it said "unknown
     assert synth_main(["scene", "--cameras", "4", "--size", "320", "268",  # parameter -D …")
@@ -183,7 +183,7 @@ def test_points_of_three_cameras_carry_covariances_that_cover_their_errors(scene
         assert entry["methods"] == ["optical_path"] and "exact" in entry["rig"]
         assert abs(entry["pixel_sigma"]["median_px"] - sigma_px) <= 0.1 * sigma_px, entry
         coverage = entry["summaries"]["optical_path"]["coverage"]
-        assert coverage["n"] == report["scores"]["n"] >= 30
+        assert coverage["n"] == report["methods"]["optical_path"]["n"] >= 30
         spread = [coverage["normalized"][a]["std"] for a in "xyz"]
         assert all(0.75 <= s <= 1.25 for s in spread), coverage
         assert coverage["coverage_95"] >= 0.85, coverage
@@ -199,3 +199,77 @@ def test_points_of_three_cameras_carry_covariances_that_cover_their_errors(scene
     coverage = json.loads((out / "report.json").read_text())["uncertainty"]["summaries"][
         "optical_path"]["coverage"]
     assert coverage["coverage_95"] < 0.9 and "--gate-mm" in coverage["verdict"], coverage
+
+
+@pytest.mark.slow
+def test_a_calibration_off_the_truth_is_named_in_the_verdict(scene, tmp_path):
+    """--calib with cam2 1 mm farther along the baseline than rendered: its points share the
+    rig's error, σ understates it, and the verdict puts it down to the calibration's rig (what
+    differs, named as the pair's verdict names it), not to the pixels."""
+    from synth.products.rig_file import write_rig_file
+
+    calib = tmp_path / "calib.yaml"
+    write_rig_file(calib, load_scene(scene).multirig)
+    text = calib.read_text()
+    assert text.count("data: [ 400., 0., 0. ]") == 1
+    calib.write_text(text.replace("data: [ 400., 0., 0. ]", "data: [ 401., 0., 0. ]"))
+    out = tmp_path / "off"
+    assert eval_main(["run", scene, "--out", str(out), "--spp", "16", "--no-progress",
+                      "--calib", str(calib)]) == 0
+    coverage = json.loads((out / "report.json").read_text())["uncertainty"]["summaries"][
+        "optical_path"]["coverage"]
+    assert coverage["n"] >= 30 and coverage["coverage_95"] < 0.9, coverage
+    assert "differs from the truth (cam2 pose: --assume or --calib)" in coverage["verdict"]
+
+
+def test_a_report_from_before_one_schema_is_read_where_its_scores_were():
+    """The N views' scores moved from ``scores`` to ``methods.optical_path`` (the pair's
+    schema): a report of either place gives the same scores and the same report.md."""
+    from eval.run.multiview import report_markdown, view_scores
+
+    by_views = {"2": {"tracks": 3, "scored": 3, "rms_dp_mm": 0.5, "stats": {}},
+                "3": {"tracks": 7, "scored": 6, "rms_dp_mm": 0.25, "stats": {}}}
+    common = {"scene": "three.xml", "cameras": ["cam0", "cam1", "cam2"],
+              "method": "optical_path", "verdict": {"passed": True, "failures": []},
+              "matching": {"tracks": 10, "correct": 9, "wrong": 1, "conflicts_dropped": 0,
+                           "visible_in_two_or_more": 10, "visible_in_two_or_more_matched": 9,
+                           "seen_once": 2}}
+    old = {**common, "scores": {"n": 9, "rms_dp_mm": 0.3, "stats": {}, "by_views": by_views}}
+    new = {**common, "methods": {"optical_path": {"n": 9, "rms_dp_mm": 0.3,
+                                                  "coverage_95": None, "by_views": by_views}}}
+    assert view_scores(old) == view_scores(new) == {"n": 9, "rms_dp_mm": 0.3,
+                                                    "by_views": by_views}
+    text = report_markdown(new)
+    assert text == report_markdown(old) and "| all | 9 | 0.3000 |" in text
+
+
+@pytest.mark.slow
+def test_three_cameras_with_the_reprojection_method_of_n_views(scene, tmp_path, capsys):
+    """--methods optical_path,reprojection: both in ``methods`` in the pair's schema, the same
+    tracks scored, the optical path's numbers those of a run of it alone, the reprojection's
+    point (triangulate_rig) as close to the truth, each with its covariance files; a pair
+    method is refused."""
+    runs = {}
+    for name, methods in (("both", "optical_path,reprojection"), ("alone", "optical_path")):
+        out = tmp_path / name
+        assert eval_main(["run", scene, "--out", str(out), "--spp", "16", "--no-progress",
+                          "--noise-px", "0.1", "--gate-mm", "5", "--methods", methods]) == 0
+        runs[name] = json.loads((out / "report.json").read_text())
+    both = runs["both"]
+    assert both["method"] == "optical_path" and list(both["methods"]) == ["optical_path",
+                                                                          "reprojection"]
+    assert both["methods"]["optical_path"] == runs["alone"]["methods"]["optical_path"]
+    optical, reprojection = both["methods"]["optical_path"], both["methods"]["reprojection"]
+    assert reprojection["n"] == optical["n"] >= 30 and reprojection["invalid"] == 0
+    assert set(reprojection["by_views"]) == {"2", "3"}
+    assert reprojection["rms_dp_mm"] < 1.2 * optical["rms_dp_mm"]
+    assert reprojection["rms_dp_mm"] != optical["rms_dp_mm"]
+    assert both["uncertainty"]["methods"] == ["optical_path", "reprojection"]
+    assert reprojection["coverage_95"] >= 0.85
+    assert (tmp_path / "both" / "uncertainty_reprojection.csv").exists()
+    assert "reprojection: RMS dP" in (tmp_path / "both" / "report.md").read_text()
+    capsys.readouterr()
+    assert eval_main(["run", scene, "--out", str(tmp_path / "su"), "--no-progress",
+                      "--methods", "optical_path,su"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "optical_path or reprojection" in err[0] and "not su" in err[0]

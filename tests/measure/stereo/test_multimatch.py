@@ -99,3 +99,33 @@ def test_conflicts_and_chains_that_do_not_meet_are_dropped(monkeypatch):
     # and target 2's do not meet: dropped
     np.testing.assert_array_equal(tracks.detections, [[0, 0, 0]])
     assert tracks.n_conflicts == 1 and sorted(tracks.alone[2]) == [1, 2]
+
+
+def test_two_views_are_the_pairs_matching():
+    """A pair is N = 2 of tracks: match_views of two views gives match_targets' matches, the
+    same arrays, the tracks its pairs in the left detections' order — with noise that leaves
+    some pairs near the gate and some ambiguous, and with an empty view."""
+    from measure.stereo.matching import match_targets
+
+    cameras = _row(2)
+    rig = MultiRig(cameras, [PORT] * 2)
+    points = _paper_targets()
+    rng = np.random.default_rng(5)
+    centers = []
+    for camera in cameras:
+        uv = project(camera, PORT, points)
+        inside = np.flatnonzero(np.all((uv >= 0) & (uv <= np.array(SIZE) - 1), axis=1))
+        ids = rng.permutation(inside)
+        centers.append(uv[ids] + rng.normal(0, 0.4, (len(ids), 2)))
+    options = dict(gate_mm=0.5, depth_range=(800.0, 1250.0))
+    pair = match_targets(rig, centers[0], centers[1], **options)
+    tracks = match_views(rig, centers, **options)
+    assert 0 < pair.n_ambiguous and 300 < len(pair.left) and pair.gap.max() > 0.45
+    ours = tracks.pairs[(0, 1)]
+    for name in ("left", "right", "gap", "unmatched_left", "unmatched_right"):
+        np.testing.assert_array_equal(getattr(ours, name), getattr(pair, name), err_msg=name)
+    assert (ours.n_candidates, ours.n_ambiguous) == (pair.n_candidates, pair.n_ambiguous)
+    np.testing.assert_array_equal(tracks.detections, np.column_stack([pair.left, pair.right]))
+    assert tracks.n_conflicts == 0
+    empty = match_views(rig, [centers[0], np.zeros((0, 2))], **options)
+    assert len(empty.detections) == 0 and len(empty.pairs[(0, 1)].left) == 0

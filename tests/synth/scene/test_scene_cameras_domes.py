@@ -90,7 +90,7 @@ def test_eval_run_renders_and_measures_every_camera(ring, tmp_path):
     for name in report["cameras"]:
         assert c[name]["associated"] > 40 and c[name]["rms_px"] < 0.05, (name, c[name])
     # at 320 px a target's depth error through the domes is a fraction of a millimetre
-    assert report["scores"]["rms_dp_mm"] < 1.0
+    assert report["methods"]["optical_path"]["rms_dp_mm"] < 1.0
 
 
 SCENE_BAD = {

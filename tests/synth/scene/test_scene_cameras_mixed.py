@@ -136,7 +136,7 @@ def test_eval_run_renders_and_measures_every_camera(request, which, tmp_path):
     assert m["visible_in_two_or_more_matched"] == m["visible_in_two_or_more"]
     for name in report["cameras"]:
         assert c[name]["associated"] > 40 and c[name]["rms_px"] < 0.05, (name, c[name])
-    assert report["scores"]["rms_dp_mm"] < 1.0
+    assert report["methods"]["optical_path"]["rms_dp_mm"] < 1.0
 
 
 def test_a_calibration_file_of_mixed_ports_is_rendered_as_it_is(dome_own_paper_air, tmp_path):
