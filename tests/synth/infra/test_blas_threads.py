@@ -1,5 +1,5 @@
 """A command's BLAS runs on one thread unless the user says otherwise
-(:func:`synth.infra.cli.one_blas_thread`, called by every command's ``process_main``)."""
+(:func:`synth.infra.blas.one_blas_thread`, called by every command's ``process_main``)."""
 
 from __future__ import annotations
 
@@ -10,12 +10,12 @@ import sys
 
 import pytest
 
-from synth.infra.cli import BLAS_THREAD_VARIABLES
+from synth.infra.blas import BLAS_THREAD_VARIABLES
 
 #: After NumPy has loaded OpenBLAS (as ``synth.commands`` does on import): the threads each
 #: BLAS library reports, as threadpoolctl reads them from the library itself.
 PROBE = ("import json, numpy\n"
-         "from synth.infra.cli import one_blas_thread\n"
+         "from synth.infra.blas import one_blas_thread\n"
          "from threadpoolctl import threadpool_info\n"
          "one_blas_thread()\n"
          "print(json.dumps([i['num_threads'] for i in threadpool_info() "
