@@ -136,3 +136,26 @@ def assert_mitsuba_follows(mi, scene, camera, directions, want, atol_mm: float, 
     si = scene.ray_intersect(ray)
     valid = np.array(si.is_valid()).ravel()
     assert np.all(np.array(si.p).reshape(3, -1).T[valid, 2] > 990.0), label
+
+
+@pytest.fixture
+def surface_scene_of_three_cameras(tmp_path) -> Path:
+    """The committed speckled plane (``scenes/speckle_plane.xml``) with a third sensor added by
+    hand (``cam2``, 400 mm along x; the two others renamed ``cam0``, ``cam1``), written into
+    ``tmp_path`` with the files it reads: a surface scene of three cameras, which
+    ``synth scene`` does not write."""
+    import re
+    import shutil
+
+    scenes = REPO / "scenes"
+    text = (scenes / "speckle_plane.xml").read_text()
+    for name in re.findall(r'(?:filename|value)="([^"]+\.(?:ply|png))"', text):
+        shutil.copy(scenes / Path(name).name, tmp_path / Path(name).name)
+    third = re.findall(r"<sensor.*?</sensor>", text, re.S)[1]
+    third = third.replace('id="right"', 'id="cam2"').replace('origin="200, 0, 0"',
+                                                            'origin="400, 0, 0"')
+    text = text.replace('id="left"', 'id="cam0"').replace('id="right"', 'id="cam1"')
+    at = text.rindex("</sensor>") + len("</sensor>")
+    path = tmp_path / "three.xml"
+    path.write_text(text[:at] + "\n    " + third + text[at:])
+    return path

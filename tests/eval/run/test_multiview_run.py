@@ -85,25 +85,12 @@ def test_commands_of_a_stereo_pair_refuse_more_cameras(scene, tmp_path, capsys):
         assert not out.exists()
 
 
-def test_a_surface_scene_of_three_cameras_is_refused_by_dense_matching(tmp_path, capsys):
+def test_a_surface_scene_of_three_cameras_is_refused_by_dense_matching(
+        surface_scene_of_three_cameras, tmp_path, capsys):
     """``eval run`` on a speckled surface seen by three sensors (the committed plane with a
     third camera added by hand): dense matching is a two-view method — one error line, nothing
     measured (it measured cam0 and cam1 as a pair before)."""
-    import re
-    import shutil
-    from pathlib import Path
-
-    scenes = Path(__file__).resolve().parents[3] / "scenes"
-    text = (scenes / "speckle_plane.xml").read_text()
-    for name in re.findall(r'(?:filename|value)="([^"]+\.(?:ply|png))"', text):
-        shutil.copy(scenes / Path(name).name, tmp_path / Path(name).name)
-    third = re.findall(r"<sensor.*?</sensor>", text, re.S)[1]
-    third = third.replace('id="right"', 'id="cam2"').replace('origin="200, 0, 0"',
-                                                            'origin="400, 0, 0"')
-    text = text.replace('id="left"', 'id="cam0"').replace('id="right"', 'id="cam1"')
-    at = text.rindex("</sensor>") + len("</sensor>")
-    scene = tmp_path / "three.xml"
-    scene.write_text(text[:at] + "\n    " + third + text[at:])
+    scene = surface_scene_of_three_cameras
     out = tmp_path / "run"
     assert eval_main(["run", str(scene), "--out", str(out), "--no-progress"]) == 2
     err = capsys.readouterr().err.strip().splitlines()

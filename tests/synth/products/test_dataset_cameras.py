@@ -216,23 +216,11 @@ def test_a_bad_folder_is_one_line_naming_it(dataset, tmp_path, capsys, damage):
         assert out is None or not out.exists()
 
 
-def test_a_surface_scene_of_three_cameras_is_refused(tmp_path, capsys):
+def test_a_surface_scene_of_three_cameras_is_refused(surface_scene_of_three_cameras, tmp_path,
+                                                     capsys):
     """The committed speckled plane with a third sensor added by hand: one line, nothing
     written (a surface's truth maps are written for two cameras)."""
-    import re
-    from pathlib import Path
-
-    scenes = Path(__file__).resolve().parents[3] / "scenes"
-    text = (scenes / "speckle_plane.xml").read_text()
-    for name in re.findall(r'(?:filename|value)="([^"]+\.(?:ply|png))"', text):
-        shutil.copy(scenes / Path(name).name, tmp_path / Path(name).name)
-    third = re.findall(r"<sensor.*?</sensor>", text, re.S)[1]
-    third = third.replace('id="right"', 'id="cam2"').replace('origin="200, 0, 0"',
-                                                            'origin="400, 0, 0"')
-    text = text.replace('id="left"', 'id="cam0"').replace('id="right"', 'id="cam1"')
-    at = text.rindex("</sensor>") + len("</sensor>")
-    path = tmp_path / "three.xml"
-    path.write_text(text[:at] + "\n    " + third + text[at:])
+    path = surface_scene_of_three_cameras
     out = tmp_path / "ds"
     assert main(["dataset", str(path), "--out", str(out), "--no-progress"]) == 2
     line = _one_error(capsys)
