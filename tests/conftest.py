@@ -11,12 +11,13 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
+from synth.infra.blas import one_blas_thread
+
 # One BLAS thread per test process, set before NumPy loads OpenBLAS (and inherited by the
-# commands the tests start): the suite runs a process per core (``-n 2``), and OpenBLAS's own
-# threads, spinning while they wait, then take the cores from the other process — a housing fit
-# of the real Minions rig took 41.8 s of CPU with them and 17.6 s without.
-for _variable in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
-    os.environ.setdefault(_variable, "1")
+# commands the tests start), as the commands do: the suite runs a process per core (``-n 2``),
+# and OpenBLAS's own threads, spinning while they wait, then take the cores from the other
+# process — a housing fit of the real Minions rig took 41.8 s of CPU with them and 17.6 s without.
+one_blas_thread()
 
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402

@@ -20,7 +20,7 @@ from measure import triangulate, triangulate_rig
 from measure.images.detect import (FLOOR_FRACTION, MERGE_AREA_RATIO as DEFAULT_MAX_AREA_RATIO,
                             MERGE_ELONGATION as DEFAULT_MAX_ELONGATION)
 from measure.images.eccentricity import correct_eccentricity
-from measure.stereo.multimatch import match_views
+from measure.stereo.multimatch import Tracks, match_views
 from synth.products.crosscheck import ASSOCIATION_GATE_PX, crosscheck_summary, crosscheck_view
 from synth.rendering.noise import add_pixel_noise
 
@@ -103,7 +103,7 @@ def triangulate_stage(inputs: RunInputs, centers, matches, methods):
     """``{method: Triangulation}`` of the matched pairs, or of the tracks of N views
     (``matches`` :class:`measure.stereo.multimatch.Tracks`: :func:`measure.triangulate_rig`
     from every view of each track)."""
-    if hasattr(matches, "detections"):
+    if isinstance(matches, Tracks):
         pixels = matches.pixels(list(centers.values()))
         return {m: triangulate_rig(inputs.rig, pixels, m) for m in methods}
     uv_left = centers["left"][matches.left]

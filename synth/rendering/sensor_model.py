@@ -145,11 +145,10 @@ def to_radiance(dn: np.ndarray, sensor: SensorModel, electrons_per_unit: float) 
             / electrons_per_unit).astype(np.float32)
 
 
-def view_generator(seed: int, view: str | int) -> np.random.Generator:
+def view_generator(seed: int, view: int) -> np.random.Generator:
     """The sensor noise generator of one view, derived from the run's seed: ``view`` its index
-    in the rig (0, 1, …) or a pair's ``left`` (0) / ``right`` (1)."""
-    index = ("left", "right").index(view) if isinstance(view, str) else int(view)
-    return np.random.default_rng([int(seed), 0x5E5, index])
+    in the rig (0, 1, …; a pair's left 0, right 1)."""
+    return np.random.default_rng([int(seed), 0x5E5, int(view)])
 
 
 __all__ = ["BIT_DEPTH_RANGE", "PRESETS", "SensorError", "SensorModel", "expose",
